@@ -1,0 +1,47 @@
+"""The streaming :class:`Predictor` contract every predictor implements.
+
+The runner alone drives a predictor: it calls ``reset()`` once per drive, then
+feeds observations in time order (``observe_*``), and between them asks
+``position_at(t)`` for a time ``t`` at or after the last observation. A
+predictor never sees an observation stamped after a query's time.
+
+Units and frames: t in seconds from the drive's start; x, y in local metres
+(ENU: x east, y north); ax, ay in the vehicle frame (x forward, y left, m/s^2);
+yaw in radians (ENU, 0 = east, counter-clockwise); yaw_rate in rad/s; v in m/s.
+Missing values are passed as NaN.
+"""
+
+from __future__ import annotations
+
+from abc import ABC, abstractmethod
+from typing import ClassVar
+
+
+class Predictor(ABC):
+    """Base class: override ``reset``, ``observe_gps`` and ``position_at``; IMU and
+    speed observations are ignored unless a subclass overrides their methods."""
+
+    #: registry name, set by subclasses
+    name: ClassVar[str] = ""
+
+    @abstractmethod
+    def reset(self) -> None:
+        """Forget everything: a new drive starts."""
+
+    @abstractmethod
+    def observe_gps(self, t: float, x: float, y: float) -> None:
+        """A GNSS fix at time t [s], position (x, y) [m, ENU]."""
+
+    def observe_imu(self, t: float, ax: float, ay: float, yaw: float, yaw_rate: float) -> None:
+        """An IMU sample at t [s]: ax, ay [m/s^2, vehicle frame], yaw [rad], yaw_rate [rad/s]."""
+
+    def observe_speed(self, t: float, v: float) -> None:
+        """A wheel / CAN speed sample at t [s], v [m/s]."""
+
+    @abstractmethod
+    def position_at(self, t: float) -> tuple[float, float]:
+        """Estimated (x, y) [m] at time t [s] >= the last observation; (nan, nan) if unknown."""
+
+    def config(self) -> dict:
+        """The predictor's configuration, recorded in results for reproducibility."""
+        return {}

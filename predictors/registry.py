@@ -1,0 +1,65 @@
+"""Names -> predictor factories with their default configuration.
+
+Entries are imported lazily (``module:Class``) so that listing or running one
+predictor does not pay for the imports of the others (filterpy ~2 s).
+"""
+
+from __future__ import annotations
+
+import importlib
+from dataclasses import dataclass, field
+from typing import Any
+
+from predictors.base import Predictor
+
+
+@dataclass(frozen=True)
+class Entry:
+    """A registered predictor: where its class lives, its defaults, a one-line description."""
+
+    target: str
+    description: str
+    defaults: dict[str, Any] = field(default_factory=dict)
+
+
+_REGISTRY: dict[str, Entry] = {
+    "cv": Entry("predictors.cv:ConstantVelocity",
+                "constant velocity from the last two fixes"),
+    "poly": Entry("predictors.poly:PolyExtrapolator",
+                  "the paper's cubic regression over recent fixes, extrapolated"),
+    "kf": Entry("predictors.kf:LinearKalman",
+                "linear Kalman filter, constant-acceleration state, IMU accel as control (tuned)"),
+    "kf-paper": Entry("predictors.kf_paper:PaperKalman",
+                      "the paper's Kalman baseline as its authors published it"),
+    "ekf": Entry("predictors.ekf:CtraEkf",
+                 "extended Kalman filter, CTRA model with IMU yaw rate/accel and wheel speed"),
+    "lstm": Entry("predictors.lstm.predictor:LstmPredictor",
+                  "the paper's system: cubic resampling + MLP-LSTM-MLP (ONNX) + cubic"),
+    "lstm-authors": Entry("predictors.lstm.authors:AuthorsLstmPredictor",
+                          "the paper authors' published ONNX network (needs --model PATH)"),
+}
+
+
+def register(name: str, target: str, description: str, **defaults: Any) -> None:
+    """Add (or replace) a predictor under ``name``; ``target`` is ``"module:Class"``."""
+    _REGISTRY[name] = Entry(target, description, dict(defaults))
+
+
+def available() -> dict[str, Entry]:
+    """All registered names and entries."""
+    return dict(_REGISTRY)
+
+
+def predictor_class(name: str) -> type[Predictor]:
+    """The class registered under ``name`` (raises KeyError listing the known names)."""
+    if name not in _REGISTRY:
+        raise KeyError(f"unknown predictor {name!r}; known: {', '.join(sorted(_REGISTRY))}")
+    module, cls = _REGISTRY[name].target.split(":")
+    return getattr(importlib.import_module(module), cls)
+
+
+def create(name: str, **config: Any) -> Predictor:
+    """A new predictor ``name`` with its defaults overridden by ``config``."""
+    cls = predictor_class(name)
+    kwargs = {**_REGISTRY[name].defaults, **config}
+    return cls(**kwargs)

@@ -1,0 +1,10 @@
+"""The data side of posbench: drives, loaders, synthetic data, scenarios, GPS degradation."""
+
+from scenarios.drive import Drive, DriveMeta, GpsStream, ImuStream, SpeedStream, TruthStream
+from scenarios.errors import DataError
+from scenarios.loaders import find_recordings, iter_load, load, load_many
+
+__all__ = [
+    "DataError", "Drive", "DriveMeta", "GpsStream", "ImuStream", "SpeedStream", "TruthStream",
+    "find_recordings", "iter_load", "load", "load_many",
+]

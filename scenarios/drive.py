@@ -1,0 +1,196 @@
+"""The :class:`Drive` model: one recording as time-stamped numpy streams.
+
+Conventions (all streams):
+- times ``t`` are float64 seconds from the drive's start (``meta.epoch_s`` is
+  the absolute Unix time of t = 0), strictly increasing;
+- positions are local metres in the drive's projection (default ENU about the
+  first fix: x east, y north);
+- vehicle-frame accelerations: x forward, y left, m/s^2;
+- yaw in radians, ENU convention (0 = east, counter-clockwise positive);
+- optional columns are ``None`` when the source does not have them.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field, replace
+from typing import Any
+
+import numpy as np
+
+from scenarios.errors import DataError
+
+
+def _f64(a: Any) -> np.ndarray:
+    return np.ascontiguousarray(np.asarray(a, dtype=np.float64))
+
+
+def _opt(a: Any) -> np.ndarray | None:
+    return None if a is None else _f64(a)
+
+
+def _check(name: str, t: np.ndarray, cols: dict[str, np.ndarray | None]) -> None:
+    if t.ndim != 1:
+        raise ValueError(f"{name}.t must be 1-D")
+    for key, col in cols.items():
+        if col is not None and col.shape != t.shape:
+            raise ValueError(f"{name}.{key} has shape {col.shape}, expected {t.shape}")
+    if t.size and not np.all(np.isfinite(t)):
+        raise ValueError(f"{name}.t has non-finite times")
+    if t.size > 1 and not np.all(np.diff(t) > 0):
+        raise ValueError(f"{name}.t is not strictly increasing")
+
+
+@dataclass(frozen=True)
+class GpsStream:
+    """GNSS fixes. t [s], x/y [m, local frame], lat/lon [deg], accuracy [m, horizontal]."""
+
+    t: np.ndarray
+    x: np.ndarray
+    y: np.ndarray
+    lat: np.ndarray | None = None
+    lon: np.ndarray | None = None
+    accuracy: np.ndarray | None = None
+
+    def __post_init__(self) -> None:
+        for k in ("t", "x", "y"):
+            object.__setattr__(self, k, _f64(getattr(self, k)))
+        for k in ("lat", "lon", "accuracy"):
+            object.__setattr__(self, k, _opt(getattr(self, k)))
+        _check("gps", self.t, {"x": self.x, "y": self.y, "lat": self.lat, "lon": self.lon,
+                               "accuracy": self.accuracy})
+
+    def __len__(self) -> int:
+        return int(self.t.size)
+
+    def take(self, idx: np.ndarray) -> GpsStream:
+        """A sub-stream of the fixes selected by a boolean mask or index array."""
+        return GpsStream(self.t[idx], self.x[idx], self.y[idx],
+                         None if self.lat is None else self.lat[idx],
+                         None if self.lon is None else self.lon[idx],
+                         None if self.accuracy is None else self.accuracy[idx])
+
+
+@dataclass(frozen=True)
+class ImuStream:
+    """IMU samples. ax/ay [m/s^2, vehicle frame x fwd, y left], yaw [rad, ENU], yaw_rate [rad/s]."""
+
+    t: np.ndarray
+    ax: np.ndarray
+    ay: np.ndarray
+    yaw: np.ndarray | None = None
+    yaw_rate: np.ndarray | None = None
+
+    def __post_init__(self) -> None:
+        for k in ("t", "ax", "ay"):
+            object.__setattr__(self, k, _f64(getattr(self, k)))
+        for k in ("yaw", "yaw_rate"):
+            object.__setattr__(self, k, _opt(getattr(self, k)))
+        _check("imu", self.t, {"ax": self.ax, "ay": self.ay, "yaw": self.yaw,
+                               "yaw_rate": self.yaw_rate})
+
+    def __len__(self) -> int:
+        return int(self.t.size)
+
+
+@dataclass(frozen=True)
+class SpeedStream:
+    """Vehicle speed (CAN / wheel), v [m/s]."""
+
+    t: np.ndarray
+    v: np.ndarray
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "t", _f64(self.t))
+        object.__setattr__(self, "v", _f64(self.v))
+        _check("speed", self.t, {"v": self.v})
+
+    def __len__(self) -> int:
+        return int(self.t.size)
+
+
+@dataclass(frozen=True)
+class TruthStream:
+    """Independent reference track: x/y [m, local frame], yaw [rad, ENU], v [m/s]."""
+
+    t: np.ndarray
+    x: np.ndarray
+    y: np.ndarray
+    yaw: np.ndarray | None = None
+    v: np.ndarray | None = None
+    accuracy: np.ndarray | None = None
+
+    def __post_init__(self) -> None:
+        for k in ("t", "x", "y"):
+            object.__setattr__(self, k, _f64(getattr(self, k)))
+        for k in ("yaw", "v", "accuracy"):
+            object.__setattr__(self, k, _opt(getattr(self, k)))
+        _check("truth", self.t, {"x": self.x, "y": self.y, "yaw": self.yaw, "v": self.v,
+                                 "accuracy": self.accuracy})
+
+    def __len__(self) -> int:
+        return int(self.t.size)
+
+
+@dataclass
+class DriveMeta:
+    """Where a drive came from and what a loader did to it.
+
+    ``epoch_s`` is the Unix time [s] of t = 0 (NaN when unknown); ``origin_lat`` /
+    ``origin_lon`` [deg] the local frame's origin (NaN for sources already in metres);
+    ``projection`` is ``"enu"`` or ``"mercator"`` (or ``"source"`` when the data came
+    in metres); ``warnings`` counts everything a loader removed, re-ordered or doubts.
+    """
+
+    name: str
+    source: str
+    format: str
+    epoch_s: float = float("nan")
+    origin_lat: float = float("nan")
+    origin_lon: float = float("nan")
+    projection: str = "enu"
+    time_source: str = ""
+    warnings: list[str] = field(default_factory=list)
+    extra: dict[str, Any] = field(default_factory=dict)
+
+
+@dataclass(frozen=True)
+class Drive:
+    """One recording: GPS (required), IMU, speed and truth streams, plus metadata."""
+
+    meta: DriveMeta
+    gps: GpsStream
+    imu: ImuStream | None = None
+    speed: SpeedStream | None = None
+    truth: TruthStream | None = None
+
+    def __post_init__(self) -> None:
+        if len(self.gps) == 0 and self.truth is None:
+            raise DataError(self.meta.source, "drive has no GPS fixes")
+
+    @property
+    def name(self) -> str:
+        return self.meta.name
+
+    @property
+    def duration_s(self) -> float:
+        """Time span [s] covered by any stream."""
+        ends = [s.t[-1] for s in (self.gps, self.imu, self.speed, self.truth)
+                if s is not None and len(s)]
+        starts = [s.t[0] for s in (self.gps, self.imu, self.speed, self.truth)
+                  if s is not None and len(s)]
+        return float(max(ends) - min(starts)) if ends else 0.0
+
+    @property
+    def truth_median_accuracy_m(self) -> float | None:
+        """Median horizontal accuracy [m] of the truth, if the source reports one."""
+        if self.truth is None or self.truth.accuracy is None:
+            return None
+        acc = self.truth.accuracy[np.isfinite(self.truth.accuracy)]
+        return float(np.median(acc)) if acc.size else None
+
+    def with_gps(self, gps: GpsStream, note: str | None = None) -> Drive:
+        """A copy with another GPS stream (e.g. degraded), noting why in the warnings."""
+        meta = replace(self.meta, warnings=list(self.meta.warnings))
+        if note:
+            meta.warnings.append(note)
+        return replace(self, gps=gps, meta=meta)

@@ -1,0 +1,46 @@
+"""Shared fixtures. Tests that need ``../shared`` use :func:`shared_dir`: they skip on a
+machine without it, but fail when the ``CI`` environment variable is set."""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import pytest
+
+SHARED = Path(__file__).resolve().parents[1].parent / "shared"
+
+
+def _need(path: Path) -> Path:
+    if not path.exists():
+        msg = f"shared data not found at {path}"
+        if os.environ.get("CI"):
+            pytest.fail(msg + " (CI is set: data tests must run)")
+        pytest.skip(msg)
+    return path
+
+
+@pytest.fixture(scope="session")
+def shared_dir() -> Path:
+    """``../shared`` relative to the project root."""
+    return _need(SHARED)
+
+
+@pytest.fixture(scope="session")
+def kitti_dir(shared_dir: Path) -> Path:
+    return _need(shared_dir / "data" / "kitti_raw")
+
+
+@pytest.fixture(scope="session")
+def comma_dir(shared_dir: Path) -> Path:
+    return _need(shared_dir / "data" / "comma2k19")
+
+
+@pytest.fixture(scope="session")
+def aslan_dir(shared_dir: Path) -> Path:
+    return _need(shared_dir / "data" / "aslan")
+
+
+@pytest.fixture(scope="session")
+def authors_models_dir(shared_dir: Path) -> Path:
+    return _need(shared_dir / "models" / "authors")
