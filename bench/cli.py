@@ -1,0 +1,284 @@
+"""The ``bench`` command line: thin commands over scenarios, predictors, metrics and bench.
+
+Bad user input (missing file, unknown format, unknown predictor, ...) prints one
+line naming what is wrong and exits with status 2, never a traceback.
+"""
+
+from __future__ import annotations
+
+import json
+import shlex
+import sys
+from pathlib import Path
+from typing import Annotated
+
+import typer
+from rich.console import Console
+
+from scenarios.errors import DataError
+
+app = typer.Typer(
+    help="posbench: benchmark real-time vehicle position predictors on your drives.\n\n"
+         "Start with `bench run` (built-in synthetic drives, no data needed), then point it at "
+         "your recordings: `bench run --data PATH... --predictors lstm,kf`.",
+    no_args_is_help=True, add_completion=False, pretty_exceptions_enable=False,
+    rich_markup_mode=None)
+data_app = typer.Typer(help="Look at recordings before benchmarking them.", no_args_is_help=True,
+                       rich_markup_mode=None)
+app.add_typer(data_app, name="data")
+
+console = Console()
+err_console = Console(stderr=True)
+
+DEFAULT_PREDICTORS = "cv,poly,kf,kf-paper,ekf,lstm"
+MULTI_VALUE_OPTIONS = ("--data", "--topic", "--model")
+
+
+class UsageError(Exception):
+    """A command-line mistake: reported in one line, exit status 2."""
+
+
+def _fail(msg: str) -> typer.Exit:
+    err_console.print(f"[bold red]error:[/] {msg}", highlight=False, soft_wrap=True)
+    return typer.Exit(2)
+
+
+def _parse_pairs(values: list[str] | None, what: str) -> dict[str, str]:
+    out: dict[str, str] = {}
+    for v in values or []:
+        if "=" not in v:
+            raise UsageError(f"{what} expects ROLE=VALUE, got {v!r}")
+        k, val = v.split("=", 1)
+        out[k.strip()] = val.strip()
+    return out
+
+
+def _parse_topics(values: list[str] | None) -> dict[str, str] | None:
+    topics = _parse_pairs(values, "--topic")
+    bad = set(topics) - {"gps", "imu", "speed", "truth"}
+    if bad:
+        raise UsageError(f"--topic roles are gps, imu, speed, truth; got {', '.join(sorted(bad))}")
+    return topics or None
+
+
+def _load_drives(paths: list[Path] | None, projection: str, topics: dict[str, str] | None,
+                 seed: int = 0):
+    from scenarios.loaders import iter_load
+
+    if not paths:
+        from scenarios.synthetic import default_drives
+
+        return default_drives(seed=seed)
+    drives = []
+    with console.status("loading drives...") as status:
+        for p in paths:
+            for d in iter_load(p, projection=projection, topics=topics):
+                drives.append(d)
+                status.update(f"loading drives... {len(drives)} ({d.name})")
+    return drives
+
+
+DataOpt = Annotated[list[Path] | None, typer.Option(
+    "--data", "-d", help="Recordings or folders of them (any mix of ROS 1/2 bags, KITTI raw, "
+    "comma2k19 segments, the paper's route pickles, CSV/Parquet). Several paths may follow one "
+    "--data. Default: the built-in synthetic drives.")]
+TopicOpt = Annotated[list[str] | None, typer.Option(
+    "--topic", help="Pick bag topics by role when ambiguous: gps=/name imu=/name speed=/name "
+    "truth=/name.")]
+ProjectionOpt = Annotated[str, typer.Option(
+    help="Local frame for lat/lon sources: 'enu' (true metres, default) or 'mercator' (the paper's "
+         "spherical Mercator, for parity only: +1/cos(lat) scale error, ~+52 %% at 49 deg N).")]
+
+
+@app.command()
+def run(
+    data: DataOpt = None,
+    predictors: Annotated[str, typer.Option(
+        "--predictors", "-p", help="Comma-separated predictor names (see `bench predictors`).")
+    ] = DEFAULT_PREDICTORS,
+    horizon: Annotated[float, typer.Option(help="Future-point horizon after each fix [s].")] = 0.2,
+    gps_profile: Annotated[str, typer.Option(
+        help="GPS input for drives with truth: native (their own fixes), none (exact), rtk (~2 cm), "
+             "consumer (~1 m, correlated).")] = "rtk",
+    gps_latency: Annotated[float, typer.Option(help="Receiver latency of drawn fixes [s].")] = 0.0,
+    dropouts: Annotated[str, typer.Option(
+        help="GPS dropouts: none, random:P, outages (0.5/1/2/5 s), outage:L.")] = "none",
+    seed: Annotated[int, typer.Option(help="Master seed (GPS draws, dropouts, synthetic data).")] = 0,
+    out: Annotated[Path, typer.Option("--out", "-o", help="Output folder.")] = Path("bench-out"),
+    workers: Annotated[int, typer.Option(help="Parallel processes (one drive each).")] = 2,
+    model: Annotated[list[str] | None, typer.Option(
+        "--model", help="Model file per predictor, e.g. lstm-authors=PATH.onnx or lstm=DIR.")] = None,
+    topic: TopicOpt = None,
+    projection: ProjectionOpt = "enu",
+    include_poor_truth: Annotated[bool, typer.Option(
+        help="Also score drives whose truth is poor (median accuracy > 1 m).")] = False,
+) -> None:
+    """Replay drives through predictors and write report.md, results.json, traces and plots.
+
+    Example: bench run --predictors lstm,kf --data ../shared/data/kitti_raw
+    """
+    from bench.config import GPS_PROFILES, RunConfig
+    from predictors.registry import available
+
+    try:
+        names = tuple(p.strip() for p in predictors.split(",") if p.strip())
+        unknown = [n for n in names if n not in available()]
+        if unknown:
+            raise UsageError(f"unknown predictor(s) {', '.join(unknown)}; known: "
+                             f"{', '.join(sorted(available()))}")
+        if gps_profile not in GPS_PROFILES:
+            raise UsageError(f"--gps-profile must be one of {', '.join(GPS_PROFILES)}")
+        options = {k: {"model": v} for k, v in _parse_pairs(model, "--model").items()}
+        if "lstm-authors" in names and "lstm-authors" not in options:
+            raise UsageError("lstm-authors needs the authors' network: --model lstm-authors=PATH.onnx "
+                             "(e.g. ../shared/models/authors/gps_interpolation_model2.onnx)")
+        cfg = RunConfig(predictors=names, horizon_s=horizon, gps_profile=gps_profile,
+                        gps_latency_s=gps_latency, dropouts=dropouts, seed=seed,
+                        exclude_poor_truth=not include_poor_truth, predictor_options=options)
+        drives = _load_drives(data, projection, _parse_topics(topic), seed=seed)
+        _run(drives, cfg, data, out, workers)
+    except (DataError, UsageError) as e:
+        raise _fail(str(e)) from None
+
+
+def _run(drives, cfg, data, out: Path, workers: int) -> None:
+    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
+    from rich.table import Table
+
+    from bench.report import SUMMARY_HEADER, summary_rows, write_report
+    from bench.results import aggregate, all_traces, tree_hash
+    from bench.runner import run as run_drives
+
+    command = "bench " + " ".join(shlex.quote(a) for a in sys.argv[1:])
+    with Progress(TextColumn("[bold]{task.description}"), BarColumn(), MofNCompleteColumn(),
+                  TimeElapsedColumn(), TextColumn("{task.fields[last]}"), console=console) as prog:
+        task = prog.add_task(f"{len(drives)} drives x {len(cfg.predictors)} predictors",
+                             total=len(drives), last="")
+        runs = run_drives(drives, cfg, workers=workers,
+                          on_done=lambda r: prog.update(task, advance=1, last=r.name))
+    manifest = ([tree_hash(p) for p in data] if data else
+                [{"path": "built-in synthetic drives", "files": 0, "bytes": 0,
+                  "sha256": f"generator seed {cfg.seed}"}])
+    res = aggregate(runs, cfg, manifest, command)
+    write_report(res, all_traces(runs), out)
+    table = Table(title=f"{len(runs)} drives - errors in metres, latency in microseconds")
+    for h in SUMMARY_HEADER:
+        table.add_column(h, justify="left" if h == "predictor" else "right")
+    for row in summary_rows(res):
+        table.add_row(*row)
+    console.print(table)
+    skipped = [r for r in runs if r.skipped]
+    if skipped:
+        console.print(f"skipped {len(skipped)} drives: " + "; ".join(
+            f"{r.name} ({r.skipped})" for r in skipped))
+    console.print(f"wrote {out / 'report.md'}, results.json, traces.parquet and plots")
+
+
+@data_app.command("inspect")
+def inspect(
+    paths: Annotated[list[Path] | None, typer.Argument(
+        help="Recordings or folders (default: the built-in synthetic drives).")] = None,
+    as_json: Annotated[bool, typer.Option("--json", help="Print a JSON list, one object per drive.")
+                       ] = False,
+    topic: TopicOpt = None,
+    projection: ProjectionOpt = "enu",
+) -> None:
+    """Show what is in each drive: duration, distance, fix intervals, IMU rate, speeds, truth."""
+    from rich.table import Table
+
+    from scenarios.summary import summarize_drive
+
+    try:
+        drives = _load_drives(paths, projection, _parse_topics(topic))
+    except (DataError, UsageError) as e:
+        raise _fail(str(e)) from None
+    rows = [summarize_drive(d) for d in drives]
+    if as_json:
+        print(json.dumps(rows, indent=2, default=float))
+        return
+    t = Table(title=f"{len(rows)} drives")
+    for h in ("drive", "format", "dur [s]", "dist [m]", "fixes", "fix dt p5/p50/p95/max [ms]",
+              "IMU [Hz]", "speed [m/s]", "stopped", "truth (acc.)", "warnings"):
+        t.add_column(h, overflow="fold")
+    for r in rows:
+        q = r["gps_interval_ms"]
+        acc = r["truth_median_accuracy_m"]
+        truth = ("yes" + (f" ({acc:.2f} m)" if acc is not None else "")) if r["has_truth"] else "no"
+        t.add_row(r["name"], r["format"], f"{r['duration_s']:.1f}", f"{r['distance_m']:.0f}",
+                  str(r["gps_count"]), f"{q['p5']:.0f}/{q['p50']:.0f}/{q['p95']:.0f}/{q['max']:.0f}",
+                  f"{r['imu_rate_hz']:.0f}", f"{r['speed_mps']['min']:.1f}-{r['speed_mps']['max']:.1f}",
+                  f"{100 * r['fraction_stopped']:.0f}%", truth, "; ".join(r["warnings"]) or "-")
+    console.print(t)
+
+
+@app.command("predictors")
+def list_predictors() -> None:
+    """List the registered predictors."""
+    from predictors.registry import available
+
+    for name, e in available().items():
+        console.print(f"[bold]{name:13s}[/] {e.description}")
+
+
+@app.command()
+def train(
+    data: DataOpt = None,
+    out: Annotated[Path, typer.Option("--out", "-o", help="Folder for model.onnx and model.json.")
+                   ] = Path("model-out"),
+    epochs: Annotated[int, typer.Option(help="Maximum epochs (early stopping may end sooner).")] = 40,
+    seed: Annotated[int, typer.Option(help="Seed for split, sampling and initialisation.")] = 0,
+    synthetic: Annotated[int, typer.Option(help="Number of synthetic drives to add.")] = 0,
+) -> None:
+    """Train the LSTM predictor (needs the `train` extra: pip install 'posbench[train]')."""
+    try:
+        import torch  # noqa: F401
+    except ImportError:
+        raise _fail("bench train needs PyTorch: pip install 'posbench[train]'") from None
+    from predictors.lstm.train import run_training
+    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
+
+    command = "bench " + " ".join(shlex.quote(a) for a in sys.argv[1:])
+    try:
+        with Progress(TextColumn("[bold]training"), BarColumn(), MofNCompleteColumn(),
+                      TimeElapsedColumn(), TextColumn("{task.fields[loss]}"), console=console) as prog:
+            task = prog.add_task("train", total=epochs, loss="")
+
+            def progress(epoch: int, n_epochs: int, train_loss: float, val_loss: float) -> None:
+                prog.update(task, completed=epoch, total=n_epochs,
+                            loss=f"train {train_loss:.4f} val {val_loss:.4f}")
+
+            info = run_training([str(p) for p in data or []], out, epochs=epochs, seed=seed,
+                                synthetic=synthetic, progress=progress, command=command)
+    except (DataError, UsageError) as e:
+        raise _fail(str(e)) from None
+    console.print(json.dumps(info.get("validation", info), indent=2, default=float))
+    console.print(f"wrote {out / 'model.onnx'} and {out / 'model.json'}")
+
+
+def _normalise_argv(argv: list[str]) -> list[str]:
+    """Let multi-value options take several values after one flag (``--data a b``)."""
+    out: list[str] = []
+    current: str | None = None
+    for a in argv:
+        if a.startswith("-"):
+            current = a if a in MULTI_VALUE_OPTIONS else None
+            out.append(a)
+            continue
+        if current is not None and out and out[-1] != current:
+            out.append(current)
+        out.append(a)
+    return out
+
+
+def main() -> None:
+    """Console-script entry point."""
+    argv = _normalise_argv(sys.argv[1:])
+    try:
+        app(args=argv, prog_name="bench")
+    except KeyboardInterrupt:
+        err_console.print("interrupted")
+        sys.exit(130)
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,230 @@
+"""Write a run's outputs: ``report.md`` (tables a person reads first), ``results.json``,
+per-query traces (Parquet) and PNG plots."""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+from bench.prepare import LABELS
+from metrics.accuracy import error_cdf, speed_bin_order
+
+PAPER_TABLE_CM = {"straight": 16.6, "turn": 12.1, "roundabout": 9.7, "start_stop": 4.2}
+PAPER_OVERALL_CM = {"lstm": 11.0, "kf-paper": 46.0}
+LABEL_TITLES = {"straight": "Straight path / full speed", "turn": "Turn",
+                "roundabout": "Roundabout", "start_stop": "Starting / stopping"}
+
+
+def _fmt_m(v: float, digits: int = 3) -> str:
+    return "-" if v is None or (isinstance(v, float) and math.isnan(v)) else f"{v:.{digits}f}"
+
+
+def _fmt_cm(s: dict[str, Any]) -> str:
+    if not s or s.get("count", 0) == 0:
+        return "- (0)"
+    return f"{100 * s['mean_m']:.1f} ({s['count']})"
+
+
+def _table(header: list[str], rows: list[list[str]]) -> str:
+    lines = ["| " + " | ".join(header) + " |", "|" + "|".join("---" for _ in header) + "|"]
+    lines += ["| " + " | ".join(r) + " |" for r in rows]
+    return "\n".join(lines)
+
+
+def summary_rows(res: dict[str, Any]) -> list[list[str]]:
+    """Rows of the headline table: per predictor, future and now errors [m], latency [us]."""
+    rows = []
+    for name, p in res["predictors"].items():
+        f, n = p["future"], p["now"]
+        rows.append([name, _fmt_m(f["mean_m"]), _fmt_m(f["median_m"]), _fmt_m(f["rmse_m"]),
+                     _fmt_m(f["p95_m"]), _fmt_m(f["max_m"]), str(f["count"]),
+                     _fmt_m(n["mean_m"]), _fmt_m(n["p95_m"]), str(n["count"]),
+                     _fmt_m(p["latency_us"]["p50"], 1), _fmt_m(p["latency_us"]["p99"], 1),
+                     _fmt_m(p["query_us"]["p50"], 1)])
+    return rows
+
+
+SUMMARY_HEADER = ["predictor", "future mean [m]", "median", "RMSE", "p95", "max", "n",
+                  "now mean [m]", "now p95", "n", "step p50 [us]", "step p99 [us]", "query p50 [us]"]
+
+
+def label_table(res: dict[str, Any], dataset: str, kind: str) -> str:
+    """The paper's Table I layout: route type x mean error [cm] (query count), one column
+    per predictor, the paper's LSTM figure beside."""
+    preds = list(res["predictors"])
+    header = ["route type"] + [f"{p} [cm] (n)" for p in preds] + ["paper LSTM [cm]"]
+    rows = []
+    for lab in LABELS:
+        row = [LABEL_TITLES[lab]]
+        for p in preds:
+            row.append(_fmt_cm(res["by_label"].get(dataset, {}).get(p, {}).get(kind, {}).get(lab, {})))
+        row.append(f"{PAPER_TABLE_CM[lab]:.1f}")
+        rows.append(row)
+    overall = ["all"] + [_fmt_cm(res["by_dataset"].get(dataset, {}).get(p, {}).get(kind, {}))
+                         for p in preds] + ["11 (LSTM), 46 (Kalman)"]
+    rows.append(overall)
+    return _table(header, rows)
+
+
+def write_report(res: dict[str, Any], traces: pd.DataFrame, out: Path) -> list[Path]:
+    """Write every output file into ``out``; return the paths written."""
+    out.mkdir(parents=True, exist_ok=True)
+    written = []
+    (out / "results.json").write_text(json.dumps(res, indent=2, default=_json_default) + "\n")
+    written.append(out / "results.json")
+    if not traces.empty:
+        traces.to_parquet(out / "traces.parquet", index=False)
+        written.append(out / "traces.parquet")
+        written += write_plots(traces, res, out)
+    (out / "report.md").write_text(render_markdown(res, [p.name for p in written if p.suffix == ".png"]))
+    written.append(out / "report.md")
+    return written
+
+
+def _json_default(o: Any) -> Any:
+    if isinstance(o, np.integer):
+        return int(o)
+    if isinstance(o, np.floating):
+        return float(o)
+    if isinstance(o, np.ndarray):
+        return o.tolist()
+    return str(o)
+
+
+def render_markdown(res: dict[str, Any], plots: list[str]) -> str:
+    cfg = res["config"]
+    lines = ["# posbench report", "",
+             f"Command: `{res['command']}`", "",
+             f"posbench {res['versions'].get('posbench')} at commit `{res.get('git_commit')}`; "
+             f"horizon {cfg['horizon_s']} s; now-queries every {cfg['now_step_s']} s; "
+             f"GPS profile `{cfg['gps_profile']}` (drives with truth); dropouts `{cfg['dropouts']}`; "
+             f"seed {cfg['seed']}.", "",
+             "Errors are Euclidean distances in metres in a local ENU frame (true metres). "
+             "`future` = position at fix time + horizon, asked at the fix; `now` = current position, "
+             "asked every now-step between fixes. Latency: `step` = one `observe_gps` plus the "
+             "future query, `query` = one between-fix `position_at`, single process.", "",
+             "## All drives", "", _table(SUMMARY_HEADER, summary_rows(res)), ""]
+    for ds in res["by_dataset"]:
+        drives = [d for d in res["drives"] if d["dataset"] == ds]
+        refs = sorted({d["reference"] for d in drives if d["reference"]})
+        lines += [f"## Data set `{ds}`", "",
+                  f"{len(drives)} drives; reference: {', '.join(refs) or '-'}.", ""]
+        rows = []
+        for name, s in res["by_dataset"][ds].items():
+            f, n = s["future"], s["now"]
+            rows.append([name, _fmt_m(f["mean_m"]), _fmt_m(f["median_m"]), _fmt_m(f["p95_m"]),
+                         str(f["count"]), _fmt_m(n["mean_m"]), _fmt_m(n["p95_m"]), str(n["count"])])
+        lines += [_table(["predictor", "future mean [m]", "median", "p95", "n", "now mean [m]",
+                          "now p95", "n"], rows), ""]
+        lines += ["### Route type (paper's Table I layout), future point, mean error in cm (queries)",
+                  "", label_table(res, ds, "future"), ""]
+        lines += ["### Route type, current position (now), mean error in cm (queries)", "",
+                  label_table(res, ds, "now"), ""]
+    if res.get("by_speed"):
+        lines += ["## Future-point error by speed, mean [m] (queries)", ""]
+        bins = [b for b in speed_bin_order() + ["unknown"]
+                if any(res["by_speed"][p]["future"].get(b, {}).get("count", 0)
+                       for p in res["by_speed"])]
+        rows = []
+        for p, s in res["by_speed"].items():
+            rows.append([p] + [f"{_fmt_m(s['future'][b]['mean_m'])} ({s['future'][b]['count']})"
+                               for b in bins])
+        lines += [_table(["predictor"] + bins, rows), ""]
+    lines += ["## Drives", ""]
+    preds = list(res["predictors"])
+    rows = []
+    for d in res["drives"]:
+        if d["skipped"]:
+            rows.append([d["name"], d["dataset"], f"skipped: {d['skipped']}"] + ["-"] * len(preds))
+            continue
+        rows.append([d["name"], d["dataset"], d["reference"]] + [
+            _fmt_m(d["predictors"].get(p, {}).get("future", {}).get("mean_m", float("nan")))
+            for p in preds])
+    lines += [_table(["drive", "data set", "reference"] + [f"{p} future mean [m]" for p in preds],
+                     rows), ""]
+    warn = [(d["name"], w) for d in res["drives"] for w in d["warnings"]]
+    if warn:
+        lines += ["## Loader warnings", ""] + [f"- `{n}`: {w}" for n, w in warn] + [""]
+    if plots:
+        lines += ["## Plots", ""] + [f"![{p}]({p})" for p in plots] + [""]
+    lines += ["## Data", ""] + [f"- `{m['path']}`: {m['files']} files, {m['bytes']} bytes, "
+                                f"sha256 `{m['sha256'][:16]}...`" for m in res["data"]] + [""]
+    return "\n".join(lines)
+
+
+def write_plots(traces: pd.DataFrame, res: dict[str, Any], out: Path) -> list[Path]:
+    """error_cdf.png, error_vs_speed.png, path.png."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    paths = []
+    preds = list(res["predictors"])
+    fig, axes = plt.subplots(1, 2, figsize=(11, 4), sharey=True)
+    for ax, kind in zip(axes, ("future", "now"), strict=True):
+        for p in preds:
+            e, c = error_cdf(traces.loc[(traces.predictor == p) & (traces.kind == kind), "error_m"]
+                             .to_numpy())
+            if e.size:
+                ax.plot(e, c, label=p)
+        ax.set_xscale("log")
+        ax.set_xlabel("error [m]")
+        ax.set_title(f"{kind} error CDF")
+        ax.grid(True, which="both", alpha=0.3)
+    axes[0].set_ylabel("fraction of queries")
+    axes[0].legend()
+    fig.tight_layout()
+    paths.append(out / "error_cdf.png")
+    fig.savefig(paths[-1], dpi=110)
+    plt.close(fig)
+
+    fig, ax = plt.subplots(figsize=(8, 4))
+    bins = speed_bin_order()
+    for p in preds:
+        s = res["by_speed"].get(p, {}).get("future", {})
+        ys = [s.get(b, {}).get("mean_m", np.nan) for b in bins]
+        ax.plot(range(len(bins)), ys, marker="o", label=p)
+    ax.set_xticks(range(len(bins)), bins, rotation=20)
+    ax.set_ylabel("mean future error [m]")
+    ax.set_yscale("log")
+    ax.set_title("future-point error vs speed")
+    ax.grid(True, alpha=0.3)
+    ax.legend()
+    fig.tight_layout()
+    paths.append(out / "error_vs_speed.png")
+    fig.savefig(paths[-1], dpi=110)
+    plt.close(fig)
+
+    # path plot: the drive with the most turn queries (first drive if unlabelled), a 40 s window
+    fut = traces[traces.kind == "future"]
+    turns = fut[fut.label.isin(["turn", "roundabout"])].groupby("drive").size()
+    drive = turns.idxmax() if not turns.empty else fut.drive.iloc[0]
+    dfd = fut[fut.drive == drive]
+    if not turns.empty:
+        tc = dfd.loc[dfd.label.isin(["turn", "roundabout"]), "t_issue"].median()
+    else:
+        tc = dfd.t_issue.median()
+    win = dfd[(dfd.t_issue > tc - 20) & (dfd.t_issue < tc + 20)]
+    fig, ax = plt.subplots(figsize=(7, 7))
+    ref = win[win.predictor == preds[0]].sort_values("t_query")
+    ax.plot(ref.x_ref, ref.y_ref, "k-", lw=1, label="reference")
+    for p in preds:
+        w = win[win.predictor == p]
+        ax.plot(w.x, w.y, ".", ms=4, label=f"{p} future")
+    ax.set_aspect("equal", adjustable="datalim")
+    ax.set_xlabel("east [m]")
+    ax.set_ylabel("north [m]")
+    ax.set_title(f"{drive}: 40 s around a turn")
+    ax.legend(fontsize=8)
+    ax.grid(True, alpha=0.3)
+    fig.tight_layout()
+    paths.append(out / "path.png")
+    fig.savefig(paths[-1], dpi=110)
+    plt.close(fig)
+    return paths

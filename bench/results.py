@@ -1,0 +1,126 @@
+"""Combine per-drive runs into the figures of ``results.json`` (per drive first, then combined)."""
+
+from __future__ import annotations
+
+import hashlib
+import platform
+import subprocess
+from collections.abc import Sequence
+from importlib import metadata
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+from bench.config import RunConfig
+from bench.prepare import LABELS
+from bench.runner import DriveRun
+from metrics.accuracy import speed_bin_labels, speed_bin_order, summarize, summarize_groups
+from metrics.latency import latency_summary
+
+KINDS = ("future", "now")
+VERSIONED = ("posbench", "numpy", "scipy", "pandas", "filterpy", "onnxruntime", "rosbags", "pymap3d")
+
+
+def package_versions() -> dict[str, str]:
+    out = {"python": platform.python_version()}
+    for name in VERSIONED:
+        try:
+            out[name] = metadata.version(name)
+        except metadata.PackageNotFoundError:
+            out[name] = "not installed"
+    return out
+
+
+def git_commit() -> str | None:
+    """The commit of the posbench checkout, with ``-dirty`` if it has changes; None outside git."""
+    root = Path(__file__).resolve().parents[1]
+    try:
+        rev = subprocess.run(["git", "rev-parse", "HEAD"], cwd=root, capture_output=True, text=True,
+                             timeout=5, check=True).stdout.strip()
+        dirty = subprocess.run(["git", "status", "--porcelain", "--untracked-files=no"], cwd=root,
+                               capture_output=True, text=True, timeout=5).stdout.strip()
+        return rev + ("-dirty" if dirty else "")
+    except (OSError, subprocess.SubprocessError):
+        return None
+
+
+def tree_hash(path: str | Path) -> dict[str, Any]:
+    """sha256 over the sorted relative paths and contents of every file at or under ``path``."""
+    p = Path(path)
+    files = [p] if p.is_file() else sorted(f for f in p.rglob("*") if f.is_file())
+    h = hashlib.sha256()
+    size = 0
+    for f in files:
+        h.update(str(f.relative_to(p) if f != p else f.name).encode())
+        with open(f, "rb") as fh:
+            while chunk := fh.read(1 << 20):
+                h.update(chunk)
+                size += len(chunk)
+    return {"path": str(path), "files": len(files), "bytes": size, "sha256": h.hexdigest()}
+
+
+def all_traces(runs: Sequence[DriveRun]) -> pd.DataFrame:
+    frames = [r.traces for r in runs if not r.traces.empty]
+    return pd.concat(frames, ignore_index=True) if frames else pd.DataFrame()
+
+
+def _kind_summaries(df: pd.DataFrame) -> dict[str, Any]:
+    return {k: summarize(df.loc[df["kind"] == k, "error_m"].to_numpy()) for k in KINDS}
+
+
+def aggregate(runs: Sequence[DriveRun], cfg: RunConfig, data_manifest: list[dict[str, Any]],
+              command: str) -> dict[str, Any]:
+    """The content of ``results.json``."""
+    traces = all_traces(runs)
+    preds = list(cfg.predictors)
+    res: dict[str, Any] = {
+        "command": command,
+        "config": cfg.to_dict(),
+        "versions": package_versions(),
+        "git_commit": git_commit(),
+        "data": data_manifest,
+        "predictors": {},
+        "by_dataset": {},
+        "by_label": {},
+        "by_speed": {},
+        "drives": [],
+    }
+    for name in preds:
+        df = traces[traces["predictor"] == name] if not traces.empty else traces
+        entry = _kind_summaries(df) if not df.empty else {k: summarize(np.empty(0)) for k in KINDS}
+        steps = np.concatenate([r.step_ns[name] for r in runs if name in r.step_ns] or [np.empty(0)])
+        queries = np.concatenate([r.query_ns[name] for r in runs if name in r.query_ns] or [np.empty(0)])
+        entry["latency_us"] = latency_summary(steps)
+        entry["query_us"] = latency_summary(queries)
+        res["predictors"][name] = entry
+        if df.empty:
+            continue
+        for kind in KINDS:
+            dk = df[df["kind"] == kind]
+            bins = speed_bin_labels(dk["speed_mps"].to_numpy())
+            res["by_speed"].setdefault(name, {})[kind] = summarize_groups(
+                dk["error_m"].to_numpy(), bins, order=speed_bin_order() + ["unknown"])
+    if not traces.empty:
+        for ds, dfd in traces.groupby("dataset", sort=True):
+            res["by_dataset"][ds] = {}
+            res["by_label"][ds] = {}
+            for name in preds:
+                dfp = dfd[dfd["predictor"] == name]
+                res["by_dataset"][ds][name] = _kind_summaries(dfp)
+                res["by_label"][ds][name] = {
+                    kind: summarize_groups(dfp.loc[dfp["kind"] == kind, "error_m"].to_numpy(),
+                                           dfp.loc[dfp["kind"] == kind, "label"].to_numpy(),
+                                           order=list(LABELS))
+                    for kind in KINDS}
+    for r in runs:
+        d: dict[str, Any] = {"name": r.name, "dataset": r.dataset, "reference": r.reference,
+                             "duration_s": r.duration_s, "gps_fed": r.gps_count,
+                             "notes": r.notes, "warnings": r.warnings, "skipped": r.skipped,
+                             "predictors": {}}
+        if not r.traces.empty:
+            for name in preds:
+                d["predictors"][name] = _kind_summaries(r.traces[r.traces["predictor"] == name])
+        res["drives"].append(d)
+    return res

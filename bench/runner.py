@@ -1,0 +1,97 @@
+"""Run predictors over drives: prepare, replay, score. Drives run in parallel
+processes; results are merged in drive order, so they are identical for any
+number of workers."""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Callable, Sequence
+from concurrent.futures import ProcessPoolExecutor
+from dataclasses import dataclass, field
+
+import numpy as np
+import pandas as pd
+
+from bench.config import RunConfig
+from bench.prepare import PreparedDrive, prepare_drive
+from bench.replay import replay
+from metrics.accuracy import euclidean_error
+from predictors.registry import create
+from scenarios.drive import Drive
+
+
+@dataclass
+class DriveRun:
+    """One drive's outcome: per-query traces and per-predictor call durations [ns]."""
+
+    name: str
+    dataset: str
+    reference: str
+    notes: list[str]
+    warnings: list[str]
+    traces: pd.DataFrame
+    step_ns: dict[str, np.ndarray] = field(default_factory=dict)
+    query_ns: dict[str, np.ndarray] = field(default_factory=dict)
+    outages: list[tuple[float, float]] = field(default_factory=list)
+    skipped: str | None = None
+    gps_count: int = 0
+    duration_s: float = 0.0
+
+
+def _trace_frame(prep: PreparedDrive, predictor: str, kind: str, q, xy: np.ndarray) -> pd.DataFrame:
+    err = euclidean_error(xy, q.ref_xy)
+    return pd.DataFrame({
+        "dataset": prep.dataset, "drive": prep.drive.name, "predictor": predictor, "kind": kind,
+        "t_issue": q.t_issue, "t_query": q.t_query,
+        "x": xy[:, 0], "y": xy[:, 1], "x_ref": q.ref_xy[:, 0], "y_ref": q.ref_xy[:, 1],
+        "error_m": err, "label": q.label, "speed_mps": q.speed_mps, "since_fix_s": q.since_fix_s,
+    })
+
+
+def run_drive(drive: Drive, cfg: RunConfig) -> DriveRun:
+    """Prepare one drive and replay it through every configured predictor."""
+    if cfg.exclude_poor_truth and drive.meta.extra.get("truth_poor"):
+        return DriveRun(drive.name, drive.meta.format, "", [], list(drive.meta.warnings),
+                        pd.DataFrame(), skipped="poor truth accuracy (median > 1 m)")
+    prep = prepare_drive(drive, cfg)
+    frames, step_ns, query_ns = [], {}, {}
+    for name in cfg.predictors:
+        pred = create(name, **cfg.predictor_options.get(name, {}))
+        res = replay(pred, prep, cfg.horizon_s)
+        frames.append(_trace_frame(prep, name, "future", prep.future, res.future_xy))
+        frames.append(_trace_frame(prep, name, "now", prep.now, res.now_xy))
+        step_ns[name] = res.step_ns
+        query_ns[name] = res.query_ns
+    traces = pd.concat(frames, ignore_index=True) if frames else pd.DataFrame()
+    return DriveRun(drive.name, prep.dataset, prep.reference, prep.notes, list(drive.meta.warnings),
+                    traces, step_ns, query_ns, prep.outages, gps_count=len(prep.gps),
+                    duration_s=drive.duration_s)
+
+
+def _init_worker() -> None:
+    # one thread per worker process: onnxruntime / BLAS must not oversubscribe the cores
+    for var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
+        os.environ[var] = "1"
+
+
+def run(drives: Sequence[Drive], cfg: RunConfig, workers: int = 1,
+        on_done: Callable[[DriveRun], None] | None = None) -> list[DriveRun]:
+    """Run all drives; ``on_done`` is called as each finishes (for a progress bar).
+    The returned list is in the order of ``drives`` whatever ``workers`` is."""
+    out: list[DriveRun | None] = [None] * len(drives)
+    if workers <= 1 or len(drives) <= 1:
+        for i, d in enumerate(drives):
+            out[i] = run_drive(d, cfg)
+            if on_done:
+                on_done(out[i])
+        return [r for r in out if r is not None]
+    with ProcessPoolExecutor(max_workers=workers, initializer=_init_worker) as pool:
+        futures = {pool.submit(run_drive, d, cfg): i for i, d in enumerate(drives)}
+        from concurrent.futures import as_completed
+
+        for fut in as_completed(futures):
+            i = futures[fut]
+            out[i] = fut.result()
+            if on_done:
+                on_done(out[i])
+    return [r for r in out if r is not None]

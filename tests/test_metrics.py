@@ -1,0 +1,45 @@
+"""Metrics against hand-computed values."""
+
+import numpy as np
+import pytest
+
+from metrics import euclidean_error, latency_summary, speed_bin_labels, summarize, summarize_groups
+
+
+def test_euclidean_error_345():
+    pred = np.array([[3.0, 4.0], [0.0, 0.0], [1.0, 1.0]])
+    ref = np.array([[0.0, 0.0], [0.0, 0.0], [np.nan, 1.0]])
+    e = euclidean_error(pred, ref)
+    assert e[0] == 5.0 and e[1] == 0.0 and np.isnan(e[2])
+
+
+def test_summarize_hand_values():
+    s = summarize(np.array([1.0, 2.0, 3.0, 4.0, np.nan]))
+    assert s["count"] == 4 and s["missing"] == 1
+    assert s["mean_m"] == pytest.approx(2.5)
+    assert s["median_m"] == pytest.approx(2.5)
+    assert s["rmse_m"] == pytest.approx(np.sqrt(30 / 4))
+    assert s["p95_m"] == pytest.approx(3.85)  # linear interpolation: 3 + 0.85 * (4 - 3)
+    assert s["max_m"] == 4.0
+
+
+def test_summarize_empty_is_nan_not_zero():
+    s = summarize(np.array([np.nan]))
+    assert s["count"] == 0 and s["missing"] == 1 and np.isnan(s["mean_m"])
+
+
+def test_groups_and_order():
+    g = summarize_groups(np.array([1.0, 3.0, 10.0]), np.array(["a", "a", "b"]), order=["b", "a", "c"])
+    assert list(g) == ["b", "a", "c"]
+    assert g["a"]["mean_m"] == 2.0 and g["b"]["count"] == 1 and g["c"]["count"] == 0
+
+
+def test_speed_bins():
+    lab = speed_bin_labels(np.array([0.1, 4.9, 5.0, 35.0, np.nan]))
+    assert lab.tolist() == ["<0.5 m/s", "0.5-5 m/s", "5-10 m/s", ">=30 m/s", "unknown"]
+
+
+def test_latency_summary_us():
+    s = latency_summary(np.arange(1, 101) * 1000)  # 1..100 us
+    assert s["count"] == 100 and s["max"] == 100.0
+    assert s["p50"] == pytest.approx(50.5) and s["p99"] == pytest.approx(99.01)
