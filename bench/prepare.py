@@ -37,6 +37,7 @@ class PreparedDrive:
     drive: Drive
     dataset: str
     gps: GpsStream  # the fixes fed to predictors
+    gps_all: GpsStream  # the fixes before dropouts (received + dropped)
     reference: str  # TRUTH or FIX_CUBIC
     future: Queries
     now: Queries
@@ -98,6 +99,7 @@ def prepare_drive(drive: Drive, cfg: RunConfig) -> PreparedDrive:
     """Draw the input GPS, apply dropouts, place the queries and their references."""
     seed = drive_seed(cfg.seed, drive.name)
     gps, notes = _input_gps(drive, cfg, seed)
+    gps_all = gps
     outages: list[tuple[float, float]] = []
     if cfg.dropouts != "none":
         from scenarios.degrade import apply_dropouts
@@ -131,4 +133,5 @@ def prepare_drive(drive: Drive, cfg: RunConfig) -> PreparedDrive:
 
     future = queries(f_issue, f_query)
     now = queries(n_query, n_query)
-    return PreparedDrive(drive, drive.meta.format, gps, reference, future, now, outages, notes)
+    return PreparedDrive(drive, drive.meta.format, gps, gps_all, reference, future, now, outages,
+                         notes)

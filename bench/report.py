@@ -135,6 +135,22 @@ def render_markdown(res: dict[str, Any], plots: list[str]) -> str:
             rows.append([p] + [f"{_fmt_m(s['future'][b]['mean_m'])} ({s['future'][b]['count']})"
                                for b in bins])
         lines += [_table(["predictor"] + bins, rows), ""]
+    if res.get("outages"):
+        lines += ["## GPS outages", "",
+                  "Current-position (now) error by time since the last received fix, mean [m] "
+                  "(queries within 0.05 s of each checkpoint), and per outage: ADE (mean error "
+                  "over the outage), FDE (error just before the fix returns), miss rate (share of "
+                  "outages with FDE > 2 m).", ""]
+        cps = list(next(iter(res["outages"].values()))["since_fix"])
+        rows = []
+        for p, o in res["outages"].items():
+            sc = o["scores"]
+            rows.append([p] + [f"{_fmt_m(o['since_fix'][c]['mean_m'])} ({o['since_fix'][c]['count']})"
+                               for c in cps]
+                        + [str(sc["outages"]), _fmt_m(sc["ade_mean_m"]), _fmt_m(sc["fde_mean_m"]),
+                           _fmt_m(sc["fde_p95_m"]), _fmt_m(sc["miss_rate"], 2)])
+        lines += [_table(["predictor"] + [f"{c} after fix" for c in cps]
+                         + ["outages", "ADE [m]", "FDE [m]", "FDE p95 [m]", "miss rate"], rows), ""]
     lines += ["## Drives", ""]
     preds = list(res["predictors"])
     rows = []
@@ -200,6 +216,29 @@ def write_plots(traces: pd.DataFrame, res: dict[str, Any], out: Path) -> list[Pa
     paths.append(out / "error_vs_speed.png")
     fig.savefig(paths[-1], dpi=110)
     plt.close(fig)
+
+    now = traces[traces.kind == "now"]
+    if (now["outage"] >= 0).any():
+        fig, ax = plt.subplots(figsize=(8, 4))
+        edges = np.array([0, 0.1, 0.2, 0.3, 0.5, 0.75, 1, 1.5, 2, 3, 4, 5, 6])
+        mid = 0.5 * (edges[:-1] + edges[1:])
+        for p in preds:
+            dn = now[now.predictor == p]
+            b = np.digitize(dn.since_fix_s.to_numpy(), edges) - 1
+            e = dn.error_m.to_numpy()
+            ys = [np.nanmean(e[b == i]) if np.any((b == i) & np.isfinite(e)) else np.nan
+                  for i in range(mid.size)]
+            ax.plot(mid, ys, marker="o", label=p)
+        ax.set_xlabel("time since last fix [s]")
+        ax.set_ylabel("mean current-position error [m]")
+        ax.set_yscale("log")
+        ax.set_title("error vs time since last fix")
+        ax.grid(True, which="both", alpha=0.3)
+        ax.legend()
+        fig.tight_layout()
+        paths.append(out / "error_vs_since_fix.png")
+        fig.savefig(paths[-1], dpi=110)
+        plt.close(fig)
 
     # path plot: the drive with the most turn queries (first drive if unlabelled), a 40 s window
     fut = traces[traces.kind == "future"]

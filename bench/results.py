@@ -18,6 +18,7 @@ from bench.prepare import LABELS
 from bench.runner import DriveRun
 from metrics.accuracy import speed_bin_labels, speed_bin_order, summarize, summarize_groups
 from metrics.latency import latency_summary
+from metrics.outages import error_vs_since_fix, outage_scores
 
 KINDS = ("future", "now")
 VERSIONED = ("posbench", "numpy", "scipy", "pandas", "filterpy", "onnxruntime", "rosbags", "pymap3d")
@@ -85,6 +86,7 @@ def aggregate(runs: Sequence[DriveRun], cfg: RunConfig, data_manifest: list[dict
         "by_dataset": {},
         "by_label": {},
         "by_speed": {},
+        "outages": {},
         "drives": [],
     }
     for name in preds:
@@ -102,6 +104,15 @@ def aggregate(runs: Sequence[DriveRun], cfg: RunConfig, data_manifest: list[dict
             bins = speed_bin_labels(dk["speed_mps"].to_numpy())
             res["by_speed"].setdefault(name, {})[kind] = summarize_groups(
                 dk["error_m"].to_numpy(), bins, order=speed_bin_order() + ["unknown"])
+    if not traces.empty and (traces["outage"] >= 0).any():
+        for name in preds:
+            dn = traces[(traces["predictor"] == name) & (traces["kind"] == "now")]
+            code = pd.factorize(dn["drive"])[0].astype(np.int64)
+            ids = np.where(dn["outage"].to_numpy() >= 0, code * 1_000_000 + dn["outage"].to_numpy(), -1)
+            res["outages"][name] = {
+                "since_fix": error_vs_since_fix(dn["error_m"].to_numpy(), dn["since_fix_s"].to_numpy()),
+                "scores": outage_scores(dn["error_m"].to_numpy(), dn["t_query"].to_numpy(), ids),
+            }
     if not traces.empty:
         for ds, dfd in traces.groupby("dataset", sort=True):
             res["by_dataset"][ds] = {}

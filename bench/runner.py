@@ -16,6 +16,7 @@ from bench.config import RunConfig
 from bench.prepare import PreparedDrive, prepare_drive
 from bench.replay import replay
 from metrics.accuracy import euclidean_error
+from metrics.outages import outage_ids
 from predictors.registry import create
 from scenarios.drive import Drive
 
@@ -36,15 +37,38 @@ class DriveRun:
     skipped: str | None = None
     gps_count: int = 0
     duration_s: float = 0.0
+    fixes: pd.DataFrame | None = None  # t, x, y, received (False = removed by dropouts)
+    track: pd.DataFrame | None = None  # t, x, y of the reference (truth or fix cubic), 10 Hz
+
+
+def _fixes_frame(prep: PreparedDrive) -> pd.DataFrame:
+    received = np.isin(prep.gps_all.t, prep.gps.t)
+    return pd.DataFrame({"t": prep.gps_all.t, "x": prep.gps_all.x, "y": prep.gps_all.y,
+                         "received": received})
+
+
+def _track_frame(prep: PreparedDrive) -> pd.DataFrame:
+    d = prep.drive
+    if d.truth is not None:
+        tr = d.truth
+        step = max(1, int(round(0.1 / np.median(np.diff(tr.t))))) if len(tr) > 1 else 1
+        return pd.DataFrame({"t": tr.t[::step], "x": tr.x[::step], "y": tr.y[::step]})
+    from bench.reference import cubic_through_fixes
+
+    t = np.arange(d.gps.t[0], d.gps.t[-1], 0.1)
+    xy = cubic_through_fixes(d.gps.t, d.gps.x, d.gps.y, t)
+    return pd.DataFrame({"t": t, "x": xy[:, 0], "y": xy[:, 1]})
 
 
 def _trace_frame(prep: PreparedDrive, predictor: str, kind: str, q, xy: np.ndarray) -> pd.DataFrame:
     err = euclidean_error(xy, q.ref_xy)
+    outage = outage_ids(q.t_query, prep.outages)
     return pd.DataFrame({
         "dataset": prep.dataset, "drive": prep.drive.name, "predictor": predictor, "kind": kind,
         "t_issue": q.t_issue, "t_query": q.t_query,
         "x": xy[:, 0], "y": xy[:, 1], "x_ref": q.ref_xy[:, 0], "y_ref": q.ref_xy[:, 1],
         "error_m": err, "label": q.label, "speed_mps": q.speed_mps, "since_fix_s": q.since_fix_s,
+        "outage": outage,
     })
 
 
@@ -65,7 +89,7 @@ def run_drive(drive: Drive, cfg: RunConfig) -> DriveRun:
     traces = pd.concat(frames, ignore_index=True) if frames else pd.DataFrame()
     return DriveRun(drive.name, prep.dataset, prep.reference, prep.notes, list(drive.meta.warnings),
                     traces, step_ns, query_ns, prep.outages, gps_count=len(prep.gps),
-                    duration_s=drive.duration_s)
+                    duration_s=drive.duration_s, fixes=_fixes_frame(prep), track=_track_frame(prep))
 
 
 def _init_worker() -> None:

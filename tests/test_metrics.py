@@ -43,3 +43,19 @@ def test_latency_summary_us():
     s = latency_summary(np.arange(1, 101) * 1000)  # 1..100 us
     assert s["count"] == 100 and s["max"] == 100.0
     assert s["p50"] == pytest.approx(50.5) and s["p99"] == pytest.approx(99.01)
+
+
+def test_outage_ids_and_scores():
+    from metrics.outages import error_vs_since_fix, outage_ids, outage_scores
+
+    t = np.array([0.0, 1.0, 1.5, 2.0, 3.0, 10.5, 11.0, 12.0])
+    ids = outage_ids(t, [(0.9, 2.5), (10.0, 11.5)])
+    assert ids.tolist() == [-1, 0, 0, 0, -1, 1, 1, -1]
+    err = np.array([9, 0.5, 1.0, 3.0, 9, 1.0, 1.5, 9])
+    s = outage_scores(err, t, ids)
+    assert s["outages"] == 2
+    assert s["ade_mean_m"] == pytest.approx((1.5 + 1.25) / 2)
+    assert s["fde_mean_m"] == pytest.approx((3.0 + 1.5) / 2)
+    assert s["miss_rate"] == pytest.approx(0.5)
+    c = error_vs_since_fix(np.array([1.0, 2.0, 3.0]), np.array([0.2, 0.98, 1.2]))
+    assert c["0.2s"]["count"] == 1 and c["1s"]["mean_m"] == 2.0 and c["5s"]["count"] == 0
