@@ -1,0 +1,368 @@
+"""CSV / Parquet tables: the format users export their own drives to.
+
+Long format: one row per sample, the column ``stream`` says which stream it
+belongs to; columns a stream does not use are left empty. Column names are
+case-insensitive; surrounding spaces are ignored.
+
+=============  ====================  =========  =====================================
+column         used by stream        unit       required?
+=============  ====================  =========  =====================================
+``stream``     all                   -          yes: one of gps, imu, speed, truth
+``t``          all                   s          ``t`` or ``t_ns`` (any origin)
+``t_ns``       all                   int ns     preferred over ``t`` when both exist
+``lat``        gps, truth            deg        ``lat`` + ``lon`` or ``x`` + ``y``
+``lon``        gps, truth            deg        (WGS-84)
+``x``          gps, truth            m          local metres (east-like, e.g. ENU)
+``y``          gps, truth            m          local metres (north-like)
+``accuracy``   gps, truth            m          optional (horizontal, 1 sigma)
+``ax``         imu                   m/s^2      yes for imu rows (vehicle x forward)
+``ay``         imu                   m/s^2      yes for imu rows (vehicle y left)
+``yaw``        imu, truth            rad        optional (ENU: 0 = east, CCW +)
+``yaw_rate``   imu                   rad/s      optional (CCW +, about up)
+``v``          speed, truth          m/s        yes for speed rows, optional for truth
+=============  ====================  =========  =====================================
+
+Wide GPS-only files: without a ``stream`` column every row is a GPS fix
+(columns ``t`` or ``t_ns``, ``lat``/``lon`` or ``x``/``y``, optional ``accuracy``).
+
+Positions: if every gps and truth row has ``lat`` and ``lon``, they are projected
+(``projection``, about the first GPS fix, else the first truth row) and
+``meta.projection`` is that projection; otherwise, if every such row has ``x`` and
+``y``, those metres are used as given (``meta.projection = "source"``; GPS lat/lon,
+where complete, are kept as attributes). Times: t = 0 is the earliest row of any
+stream; ``meta.epoch_s`` is that time if it looks like Unix time (> 1e8 s, i.e.
+after 1973), else NaN. Rows of a stream are sorted by time and exact duplicate
+stamps dropped, with a warning (:func:`scenarios.cleaning.clean_times`). Blank CSV
+lines are dropped with a warning. Unknown columns are ignored with a warning.
+
+Errors (:class:`DataError`, naming the file): empty file, missing required columns,
+unknown ``stream`` values, non-numeric or missing required cells, truncated /
+malformed CSV. Rows are named by CSV line number (header = line 1) or, for
+Parquet, by 1-based data row.
+"""
+
+from __future__ import annotations
+
+import re
+from pathlib import Path
+
+import numpy as np
+
+from scenarios.cleaning import clean_times
+from scenarios.drive import Drive, DriveMeta, GpsStream, ImuStream, SpeedStream, TruthStream
+from scenarios.errors import DataError
+from scenarios.projection import to_local, validate_latlon
+
+STREAMS = ("gps", "imu", "speed", "truth")
+NUMERIC = ("t", "t_ns", "lat", "lon", "x", "y", "accuracy", "ax", "ay", "yaw", "yaw_rate", "v")
+KNOWN = ("stream", *NUMERIC)
+REQUIRED = {"imu": ("ax", "ay"), "speed": ("v",)}
+UNIX_MIN_S = 1e8
+
+
+class _Table:
+    """A read table with its file and a way to name rows."""
+
+    def __init__(self, path: Path, df, is_csv: bool) -> None:
+        self.path = path
+        self.df = df
+        self.is_csv = is_csv
+
+    def where(self, i: int) -> str:
+        """Name data row ``i`` (0-based) as the user sees it."""
+        return f"line {i + 2}" if self.is_csv else f"row {i + 1}"
+
+
+def _read(path: Path) -> _Table:
+    import pandas as pd
+
+    if not path.is_file():
+        raise DataError(path, "file missing")
+    if path.stat().st_size == 0:
+        raise DataError(path, "empty file")
+    suffix = path.suffix.lower()
+    if suffix in (".parquet", ".pq"):
+        try:
+            df = pd.read_parquet(path)
+        except Exception as e:  # pyarrow raises several types for damaged files
+            raise DataError(path, f"cannot read Parquet: {str(e).splitlines()[0]}") from None
+        is_csv = False
+    else:
+        try:
+            df = pd.read_csv(path, skip_blank_lines=False, dtype={"stream": str},
+                             low_memory=False)
+        except pd.errors.EmptyDataError:
+            raise DataError(path, "empty file") from None
+        except pd.errors.ParserError as e:
+            raise DataError(path, _parser_error(str(e))) from None
+        except UnicodeDecodeError as e:
+            raise DataError(path, f"not a text CSV file: {e}") from None
+        is_csv = True
+    df.columns = [str(c).strip().lower() for c in df.columns]
+    dup = sorted({c for c in df.columns if list(df.columns).count(c) > 1})
+    if dup:
+        raise DataError(path, f"duplicate columns: {', '.join(dup)}")
+    return _Table(path, df, is_csv)
+
+
+def _parser_error(msg: str) -> str:
+    """Turn a pandas ParserError into 'line N: ...' (file line numbers, header = 1)."""
+    msg = msg.strip().replace("Error tokenizing data. C error: ", "")
+    m = re.search(r"in line (\d+), saw (\d+)", msg)
+    if m:
+        exp = re.search(r"Expected (\d+) fields", msg)
+        n_exp = exp.group(1) if exp else "?"
+        return (f"line {m.group(1)}: malformed CSV, expected {n_exp} fields, saw {m.group(2)} "
+                "(truncated or damaged file?)")
+    m = re.search(r"starting at row (\d+)", msg)
+    if m:  # pandas counts rows from 0 including the header
+        return f"line {int(m.group(1)) + 1}: malformed CSV, quoted field never closed ({msg})"
+    return f"malformed CSV: {msg}"
+
+
+def _numeric(tab: _Table, col: str) -> np.ndarray:
+    """Column as float64; raise naming the first non-numeric cell."""
+    import pandas as pd
+
+    s = tab.df[col]
+    if pd.api.types.is_bool_dtype(s.dtype):
+        raise DataError(tab.path, f"column {col!r}: booleans, expected numbers")
+    if pd.api.types.is_numeric_dtype(s.dtype):
+        return s.to_numpy(dtype=np.float64, na_value=np.nan)
+    txt = s.astype("string").str.strip()
+    num = pd.to_numeric(txt, errors="coerce")
+    bad = num.isna() & txt.notna() & (txt != "")
+    if bad.any():
+        i = int(np.flatnonzero(bad.to_numpy())[0])
+        raise DataError(tab.path, f"{tab.where(i)}, column {col!r}: not a number: "
+                                  f"{s.iloc[i]!r}")
+    return num.to_numpy(dtype=np.float64, na_value=np.nan)
+
+
+def _times(tab: _Table, rows: np.ndarray) -> tuple[np.ndarray, float]:
+    """Times [s] relative to the earliest selected row and that row's absolute time [s].
+
+    An integer ``t_ns`` column is differenced in int64 so Unix-epoch stamps keep ns
+    precision (a ``t_ns`` column with empty cells is read as float: ~0.4 us steps).
+    """
+    import pandas as pd
+
+    df = tab.df
+    if "t_ns" in df.columns:
+        col = "t_ns"
+        if pd.api.types.is_integer_dtype(df["t_ns"].dtype):
+            ns = df["t_ns"].to_numpy(dtype=np.int64)[rows]
+            ns0 = int(ns.min())
+            return (ns - ns0).astype(np.float64) / 1e9, ns0 / 1e9
+        t = _numeric(tab, col)[rows] / 1e9
+    else:
+        col = "t"
+        t = _numeric(tab, col)[rows]
+    _need_cells(tab, rows, ~np.isfinite(t), col)
+    t0 = float(t.min())
+    return t - t0, t0
+
+
+def _need_cells(tab: _Table, rows: np.ndarray, missing: np.ndarray, col: str,
+                what: str = "") -> None:
+    if np.any(missing):
+        i = int(rows[np.flatnonzero(missing)[0]])
+        extra = f" (required for {what} rows)" if what else ""
+        raise DataError(tab.path, f"{tab.where(i)}, column {col!r}: missing or non-finite "
+                                  f"value{extra}; {int(missing.sum())} such rows in all")
+
+
+def _stream_labels(tab: _Table, warnings: list[str]) -> tuple[np.ndarray, np.ndarray]:
+    """(labels per row, mask of rows kept); blank CSV lines are dropped with a warning."""
+    df = tab.df
+    blank = df.isna().all(axis=1).to_numpy()
+    if blank.any():
+        warnings.append(f"table: dropped {int(blank.sum())} blank lines")
+    if "stream" not in df.columns:
+        labels = np.full(len(df), "gps", dtype=object)
+        warnings.append("table: no 'stream' column, every row read as a GPS fix")
+        return labels, ~blank
+    raw = df["stream"].astype("string").str.strip().str.lower()
+    labels = raw.fillna("").to_numpy(dtype=object)
+    unknown = ~np.isin(labels, STREAMS) & ~blank
+    if unknown.any():
+        i = int(np.flatnonzero(unknown)[0])
+        raise DataError(tab.path, f"{tab.where(i)}, column 'stream': unknown stream "
+                                  f"{df['stream'].iloc[i]!r} (expected one of "
+                                  f"{', '.join(STREAMS)}); {int(unknown.sum())} such rows")
+    return labels, ~blank
+
+
+def _check_columns(tab: _Table, present_streams: set[str]) -> None:
+    cols = set(tab.df.columns)
+    missing: list[str] = []
+    if not ({"t", "t_ns"} & cols):
+        missing.append("t (or t_ns)")
+    for s in ("imu", "speed"):
+        if s in present_streams:
+            missing += [f"{c} (for {s} rows)" for c in REQUIRED[s] if c not in cols]
+    pos = present_streams & {"gps", "truth"}
+    if pos and not ({"lat", "lon"} <= cols or {"x", "y"} <= cols):
+        missing.append(f"lat and lon, or x and y (for {' and '.join(sorted(pos))} rows)")
+    if missing:
+        raise DataError(tab.path, f"missing required column(s): {'; '.join(missing)}")
+
+
+def _position_frame(tab: _Table, rows: np.ndarray, num: dict[str, np.ndarray]) -> str:
+    """'latlon' or 'xy': which columns every gps/truth row fills."""
+    def complete(a: str, b: str) -> np.ndarray:
+        if a not in num or b not in num:
+            return np.zeros(rows.size, dtype=bool)
+        return np.isfinite(num[a][rows]) & np.isfinite(num[b][rows])
+
+    ll, xy = complete("lat", "lon"), complete("x", "y")
+    if ll.all():
+        return "latlon"
+    if xy.all():
+        return "xy"
+    neither = ~ll & ~xy
+    if neither.any():
+        i = int(rows[np.flatnonzero(neither)[0]])
+        raise DataError(tab.path, f"{tab.where(i)}: position row has neither lat/lon nor x/y")
+    i = int(rows[np.flatnonzero(~ll)[0]])
+    raise DataError(tab.path, f"{tab.where(i)}: some position rows give only x/y and others "
+                              "only lat/lon; use one frame for all gps and truth rows")
+
+
+def _opt(a: np.ndarray | None) -> np.ndarray | None:
+    return None if a is None or not np.any(np.isfinite(a)) else a
+
+
+def load_table(path: Path, projection: str = "enu") -> Drive:
+    """Load a long-format (or wide GPS-only) CSV / Parquet table; see the module docstring."""
+    path = Path(path)
+    warnings: list[str] = []
+    tab = _read(path)
+    df = tab.df
+    if len(df) == 0:
+        raise DataError(path, "no data rows (only a header)")
+    labels, keep = _stream_labels(tab, warnings)
+    if not keep.any():
+        raise DataError(path, "no data rows (only blank lines)")
+    present = {s for s in STREAMS if np.any((labels == s) & keep)}
+    _check_columns(tab, present)
+    ignored = [c for c in df.columns if c not in KNOWN]
+    if ignored:
+        warnings.append(f"table: ignored unknown columns {', '.join(ignored)}")
+
+    num = {c: _numeric(tab, c) for c in NUMERIC if c in df.columns and c != "t_ns"}
+    all_rows = np.flatnonzero(keep)
+    t_all, t_origin = _times(tab, all_rows)
+    t_full = np.full(len(df), np.nan)
+    t_full[all_rows] = t_all
+
+    def rows_of(s: str) -> np.ndarray:
+        return np.flatnonzero((labels == s) & keep)
+
+    def col(c: str, rows: np.ndarray) -> np.ndarray | None:
+        return num[c][rows] if c in num else None
+
+    for s, req in REQUIRED.items():
+        r = rows_of(s)
+        for c in req:
+            if r.size:
+                _need_cells(tab, r, ~np.isfinite(num[c][r]), c, s)
+
+    pos_rows = np.flatnonzero(np.isin(labels, ("gps", "truth")) & keep)
+    frame = _position_frame(tab, pos_rows, num) if pos_rows.size else "xy"
+    origin_lat = origin_lon = float("nan")
+    proj = "source"
+    xs: dict[str, tuple[np.ndarray, np.ndarray]] = {}
+    if frame == "latlon":
+        for s in ("gps", "truth"):
+            r = rows_of(s)
+            if r.size:
+                validate_latlon(num["lat"][r], num["lon"][r], str(path), what=f"{s} row")
+        first = rows_of("gps") if rows_of("gps").size else rows_of("truth")
+        i0 = first[np.argmin(t_full[first])]
+        origin_lat, origin_lon = float(num["lat"][i0]), float(num["lon"][i0])
+        proj = projection
+        for s in ("gps", "truth"):
+            r = rows_of(s)
+            xs[s] = to_local(num["lat"][r], num["lon"][r], origin_lat, origin_lon, projection)
+    else:
+        for s in ("gps", "truth"):
+            r = rows_of(s)
+            xs[s] = (num["x"][r], num["y"][r]) if r.size else (np.empty(0), np.empty(0))
+
+    def clean(s: str, cols: dict[str, np.ndarray | None]):
+        r = rows_of(s)
+        return clean_times(t_full[r], cols, f"table {s}", warnings)
+
+    r = rows_of("gps")
+    lat_g, lon_g = col("lat", r), col("lon", r)
+    if lat_g is None or lon_g is None or not (np.all(np.isfinite(lat_g))
+                                              and np.all(np.isfinite(lon_g))):
+        lat_g = lon_g = None  # kept only when every fix has them
+    t, c = clean("gps", {"x": xs["gps"][0], "y": xs["gps"][1], "lat": lat_g, "lon": lon_g,
+                         "accuracy": col("accuracy", r)})
+    gps = GpsStream(t, c["x"], c["y"], lat=c["lat"], lon=c["lon"], accuracy=_opt(c["accuracy"]))
+
+    imu = speed = truth = None
+    r = rows_of("imu")
+    if r.size:
+        t, c = clean("imu", {"ax": num["ax"][r], "ay": num["ay"][r], "yaw": col("yaw", r),
+                             "yaw_rate": col("yaw_rate", r)})
+        imu = ImuStream(t, c["ax"], c["ay"], yaw=_opt(c["yaw"]), yaw_rate=_opt(c["yaw_rate"]))
+    r = rows_of("speed")
+    if r.size:
+        t, c = clean("speed", {"v": num["v"][r]})
+        speed = SpeedStream(t, c["v"])
+    r = rows_of("truth")
+    if r.size:
+        t, c = clean("truth", {"x": xs["truth"][0], "y": xs["truth"][1], "yaw": col("yaw", r),
+                               "v": col("v", r), "accuracy": col("accuracy", r)})
+        truth = TruthStream(t, c["x"], c["y"], yaw=_opt(c["yaw"]), v=_opt(c["v"]),
+                            accuracy=_opt(c["accuracy"]))
+
+    epoch = t_origin if t_origin > UNIX_MIN_S else float("nan")
+    meta = DriveMeta(name=path.stem, source=str(path), format="table", epoch_s=epoch,
+                     origin_lat=origin_lat, origin_lon=origin_lon, projection=proj,
+                     time_source="t_ns column" if "t_ns" in df.columns else "t column",
+                     warnings=warnings, extra={"rows": int(keep.sum())})
+    return Drive(meta=meta, gps=gps, imu=imu, speed=speed, truth=truth)
+
+
+def drive_to_frame(drive: Drive):
+    """A :class:`Drive` as a long-format ``pandas.DataFrame`` (the schema above).
+
+    Times are written as ``t`` [s] from the drive start; positions as ``x``/``y`` in
+    the drive's frame, plus ``lat``/``lon`` for GPS rows when the drive has them.
+    """
+    import pandas as pd
+
+    parts = []
+
+    def add(name: str, t: np.ndarray, **cols: np.ndarray | None) -> None:
+        d = {"stream": np.full(t.size, name, dtype=object), "t": t}
+        d.update({k: v for k, v in cols.items() if v is not None})
+        parts.append(pd.DataFrame(d))
+
+    g = drive.gps
+    add("gps", g.t, x=g.x, y=g.y, lat=g.lat, lon=g.lon, accuracy=g.accuracy)
+    if drive.imu is not None:
+        m = drive.imu
+        add("imu", m.t, ax=m.ax, ay=m.ay, yaw=m.yaw, yaw_rate=m.yaw_rate)
+    if drive.speed is not None:
+        add("speed", drive.speed.t, v=drive.speed.v)
+    if drive.truth is not None:
+        tr = drive.truth
+        add("truth", tr.t, x=tr.x, y=tr.y, yaw=tr.yaw, v=tr.v, accuracy=tr.accuracy)
+    df = pd.concat(parts, ignore_index=True)
+    cols = [c for c in KNOWN if c in df.columns]
+    return df[cols].sort_values("t", kind="stable").reset_index(drop=True)
+
+
+def write_table(drive: Drive, path: Path) -> None:
+    """Write a drive in the long format; ``.parquet``/``.pq`` as Parquet, else CSV."""
+    path = Path(path)
+    df = drive_to_frame(drive)
+    if path.suffix.lower() in (".parquet", ".pq"):
+        df.to_parquet(path, index=False)
+    else:
+        df.to_csv(path, index=False, float_format="%.17g")
