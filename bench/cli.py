@@ -27,7 +27,7 @@ data_app = typer.Typer(help="Look at recordings before benchmarking them.", no_a
                        rich_markup_mode=None)
 app.add_typer(data_app, name="data")
 
-console = Console()
+console = Console(width=None if sys.stdout.isatty() else 160)
 err_console = Console(stderr=True)
 
 DEFAULT_PREDICTORS = "cv,poly,kf,kf-paper,ekf,lstm"
@@ -112,6 +112,9 @@ def run(
     projection: ProjectionOpt = "enu",
     include_poor_truth: Annotated[bool, typer.Option(
         help="Also score drives whose truth is poor (median accuracy > 1 m).")] = False,
+    rerun: Annotated[Path | None, typer.Option(
+        "--rerun", help="Also write a rerun recording (.rrd) of every drive (needs the viz extra; "
+        "open it with `bench view FILE.rrd`).")] = None,
 ) -> None:
     """Replay drives through predictors and write report.md, results.json, traces and plots.
 
@@ -135,13 +138,18 @@ def run(
         cfg = RunConfig(predictors=names, horizon_s=horizon, gps_profile=gps_profile,
                         gps_latency_s=gps_latency, dropouts=dropouts, seed=seed,
                         exclude_poor_truth=not include_poor_truth, predictor_options=options)
+        if rerun is not None:
+            try:
+                import rerun as _rr  # noqa: F401
+            except ImportError:
+                raise UsageError("--rerun needs the viz extra: pip install 'posbench[viz]'") from None
         drives = _load_drives(data, projection, _parse_topics(topic), seed=seed)
-        _run(drives, cfg, data, out, workers)
+        _run(drives, cfg, data, out, workers, rerun)
     except (DataError, UsageError) as e:
         raise _fail(str(e)) from None
 
 
-def _run(drives, cfg, data, out: Path, workers: int) -> None:
+def _run(drives, cfg, data, out: Path, workers: int, rerun: Path | None = None) -> None:
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
     from rich.table import Table
 
@@ -172,6 +180,12 @@ def _run(drives, cfg, data, out: Path, workers: int) -> None:
         console.print(f"skipped {len(skipped)} drives: " + "; ".join(
             f"{r.name} ({r.skipped})" for r in skipped))
     console.print(f"wrote {out / 'report.md'}, results.json, traces.parquet and plots")
+    if rerun is not None:
+        from bench.rerun_log import write_recording
+
+        with console.status(f"writing rerun recording {rerun}..."):
+            write_recording(rerun, runs, list(cfg.predictors))
+        console.print(f"wrote {rerun} (open it with: bench view {rerun})")
 
 
 @data_app.command("inspect")
@@ -197,9 +211,10 @@ def inspect(
         print(json.dumps(rows, indent=2, default=float))
         return
     t = Table(title=f"{len(rows)} drives")
-    for h in ("drive", "format", "dur [s]", "dist [m]", "fixes", "fix dt p5/p50/p95/max [ms]",
-              "IMU [Hz]", "speed [m/s]", "stopped", "truth (acc.)", "warnings"):
-        t.add_column(h, overflow="fold")
+    t.add_column("drive", no_wrap=True)
+    for h in ("format", "dur [s]", "dist [m]", "fixes", "fix dt p5/p50/p95/max [ms]",
+              "IMU [Hz]", "speed [m/s]", "stopped", "truth (acc.)", "warn."):
+        t.add_column(h, justify="left" if h == "format" else "right")
     for r in rows:
         q = r["gps_interval_ms"]
         acc = r["truth_median_accuracy_m"]
@@ -207,8 +222,26 @@ def inspect(
         t.add_row(r["name"], r["format"], f"{r['duration_s']:.1f}", f"{r['distance_m']:.0f}",
                   str(r["gps_count"]), f"{q['p5']:.0f}/{q['p50']:.0f}/{q['p95']:.0f}/{q['max']:.0f}",
                   f"{r['imu_rate_hz']:.0f}", f"{r['speed_mps']['min']:.1f}-{r['speed_mps']['max']:.1f}",
-                  f"{100 * r['fraction_stopped']:.0f}%", truth, "; ".join(r["warnings"]) or "-")
+                  f"{100 * r['fraction_stopped']:.0f}%", truth, str(len(r["warnings"])))
     console.print(t)
+    for r in rows:
+        for w in r["warnings"]:
+            console.print(f"[yellow]warning[/] {r['name']}: {w}", highlight=False)
+
+
+@app.command()
+def view(recording: Annotated[Path, typer.Argument(help="A .rrd file written by bench run --rerun.")]
+         ) -> None:
+    """Open a rerun recording in the rerun viewer (needs the viz extra and a display)."""
+    import shutil
+    import subprocess
+
+    if not recording.is_file():
+        raise _fail(f"{recording}: no such file")
+    exe = shutil.which("rerun")
+    if exe is None:
+        raise _fail("the rerun viewer is not installed: pip install 'posbench[viz]'")
+    raise typer.Exit(subprocess.call([exe, str(recording)]))
 
 
 @app.command("predictors")
