@@ -28,7 +28,7 @@ _REGISTRY: dict[str, Entry] = {
     "poly": Entry("predictors.poly:PolyExtrapolator",
                   "the paper's cubic regression over recent fixes, extrapolated"),
     "kf": Entry("predictors.kf:LinearKalman",
-                "linear Kalman filter, constant-acceleration state, IMU accel as control (tuned)"),
+                "linear Kalman filter, constant-acceleration state, IMU accel (world frame) as observation"),
     "kf-paper": Entry("predictors.kf_paper:PaperKalman",
                       "the paper's Kalman baseline as its authors published it"),
     "ekf": Entry("predictors.ekf:CtraEkf",
