@@ -27,6 +27,8 @@ class RunConfig:
         seed: master seed; each drive's seed derives from it and the drive's name only,
             so results do not depend on the number of workers.
         exclude_poor_truth: skip drives whose truth is flagged poor (median accuracy > 1 m).
+        use_tuned: start from the tuned parameters of ``predictors/tuned.json`` for the drive's
+            GPS condition (``bench tune`` writes them); False = the predictors' physical defaults.
         predictor_options: per-predictor constructor overrides, e.g. ``{"lstm-authors": {"model": p}}``.
     """
 
@@ -39,6 +41,7 @@ class RunConfig:
     dropouts: str = "none"
     seed: int = 0
     exclude_poor_truth: bool = True
+    use_tuned: bool = True
     predictor_options: dict[str, dict[str, Any]] = field(default_factory=dict)
 
     def to_dict(self) -> dict[str, Any]:
@@ -51,3 +54,9 @@ def drive_seed(seed: int, drive_name: str) -> int:
     """A per-drive seed from the master seed and the drive's name (stable across runs/workers)."""
     h = hashlib.sha256(f"{seed}:{drive_name}".encode()).digest()
     return int.from_bytes(h[:4], "little")
+
+
+def gps_condition(cfg: RunConfig, has_truth: bool) -> str:
+    """The GPS condition a drive is replayed under: the run's profile for drives with truth
+    (their fixes are drawn from it), ``native`` for drives fed their own recorded fixes."""
+    return cfg.gps_profile if has_truth and cfg.gps_profile != "native" else "native"

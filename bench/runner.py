@@ -12,7 +12,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import pandas as pd
 
-from bench.config import RunConfig
+from bench.config import RunConfig, gps_condition
 from bench.prepare import PreparedDrive, prepare_drive
 from bench.replay import replay
 from metrics.accuracy import euclidean_error
@@ -79,8 +79,9 @@ def run_drive(drive: Drive, cfg: RunConfig) -> DriveRun:
                         pd.DataFrame(), skipped="poor truth accuracy (median > 1 m)")
     prep = prepare_drive(drive, cfg)
     frames, step_ns, query_ns = [], {}, {}
+    condition = gps_condition(cfg, drive.truth is not None) if cfg.use_tuned else None
     for name in cfg.predictors:
-        pred = create(name, **cfg.predictor_options.get(name, {}))
+        pred = create(name, condition, **cfg.predictor_options.get(name, {}))
         res = replay(pred, prep, cfg.horizon_s)
         frames.append(_trace_frame(prep, name, "future", prep.future, res.future_xy))
         frames.append(_trace_frame(prep, name, "now", prep.now, res.now_xy))

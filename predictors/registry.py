@@ -7,7 +7,9 @@ predictor does not pay for the imports of the others (filterpy ~2 s).
 from __future__ import annotations
 
 import importlib
+import json
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any
 
 from predictors.base import Predictor
@@ -58,8 +60,21 @@ def predictor_class(name: str) -> type[Predictor]:
     return getattr(importlib.import_module(module), cls)
 
 
-def create(name: str, **config: Any) -> Predictor:
-    """A new predictor ``name`` with its defaults overridden by ``config``."""
+def tuned_params(name: str, condition: str | None) -> dict[str, Any]:
+    """Tuned parameters of ``name`` for a GPS condition (``none``, ``rtk``, ``consumer``,
+    ``native``) from ``predictors/tuned.json``; empty if none were tuned."""
+    if condition is None:
+        return {}
+    path = Path(__file__).with_name("tuned.json")
+    if not path.exists():
+        return {}
+    data = json.loads(path.read_text())
+    return dict(data.get(name, {}).get(condition, {}).get("params", {}))
+
+
+def create(name: str, condition: str | None = None, **config: Any) -> Predictor:
+    """A new predictor ``name``: registry defaults, then tuned parameters for the GPS
+    ``condition`` (if given and tuned), then ``config``."""
     cls = predictor_class(name)
-    kwargs = {**_REGISTRY[name].defaults, **config}
+    kwargs = {**_REGISTRY[name].defaults, **tuned_params(name, condition), **config}
     return cls(**kwargs)
