@@ -1,0 +1,313 @@
+"""``lstm``: the paper's system as a streaming predictor (numpy + onnxruntime, no torch).
+
+On each GPS fix (:meth:`LstmPredictor.observe_gps`) one *step* runs:
+
+1. resample: a cubic (closed form) through the most recent fixes covering >= 2 s, evaluated
+   on 8 grid times 200 ms apart ending at the fix; the IMU (ax, ay, yaw) fitted likewise
+   over the same span (:mod:`predictors.lstm.resample`);
+2. features (:mod:`predictors.lstm.features`, the frame recorded in model.json);
+3. inference: the network's displacement to the point 200 ms after the fix;
+4. current-position fit: a cubic through the 8 grid points and that prediction (fixed
+   times, precomputed pseudo-inverse). :meth:`position_at` evaluates it at any t between
+   the fix and the prediction; beyond, see below.
+
+GPS dropout (the paper's feedback loop): when ``position_at`` is asked for a time past
+the prediction (t > last grid time + 0.2 s) and no fix has come, the prediction becomes
+the newest grid sample (stored as a pseudo-fix), the IMU is resampled from the real
+samples up to then, and the next step runs; each step advances 0.2 s, so outages of
+any length are bridged (at most ``MAX_BRIDGE_STEPS`` per call).
+
+Standstill: below 0.15 km/h the position is held (the value at the moment standstill was
+seen). The speed is the latest wheel/CAN speed when the drive has one
+(:meth:`observe_speed`), else the speed of the fitted GPS cubic at the newest fix.
+
+Start-up: until the fixes span 2 s there is no network input; the predictor then
+extrapolates a least-squares *line* through the fixes it has (one fix: that fix), as a
+short cubic would extrapolate wildly.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from importlib import resources
+from pathlib import Path
+
+import numpy as np
+
+from predictors.base import Predictor
+from predictors.lstm.features import features_one, gps_substitute_imu
+from predictors.lstm.resample import (
+    ACCEL_GLITCH,
+    DT,
+    GRID_OFFSETS,
+    MIN_SPAN_S,
+    N_STEPS,
+    FixedGridFit,
+    eval_poly,
+    fit_poly,
+    window_start,
+)
+from predictors.lstm.runtime import OnnxModel
+from scenarios.errors import DataError
+
+STILL_SPEED_MPS = 0.15 / 3.6
+MAX_BRIDGE_STEPS = 1500
+FIX_CAP = 512
+IMU_CAP = 8192
+FITS = ("closed", "lbfgs")
+
+
+def bundled_model() -> Path:
+    """Path of the bundled ``model.onnx`` (package data of predictors.lstm)."""
+    return Path(str(resources.files("predictors.lstm") / "bundled" / "model.onnx"))
+
+
+def load_model_info(onnx_path: Path) -> dict:
+    """The ``model.json`` next to an ``model.onnx`` (same stem)."""
+    js = onnx_path.with_suffix(".json")
+    if not js.is_file():
+        raise DataError(js, "model description not found (expected next to the .onnx file)")
+    try:
+        info = json.loads(js.read_text())
+    except json.JSONDecodeError as exc:
+        raise DataError(js, f"not valid JSON (line {exc.lineno}): {exc.msg}") from None
+    if info.get("format") != "posbench-lstm":
+        raise DataError(js, "not a posbench-lstm model description (key 'format')")
+    return info
+
+
+class _Buf:
+    """Append-only float64 rows with a capacity; keeps the newest half when full."""
+
+    def __init__(self, cap: int, k: int) -> None:
+        self.a = np.empty((cap, k))
+        self.n = 0
+
+    def append(self, row: tuple) -> None:
+        if self.n == self.a.shape[0]:
+            h = self.a.shape[0] // 2
+            self.a[:h] = self.a[self.n - h:self.n]
+            self.n = h
+        self.a[self.n] = row
+        self.n += 1
+
+    def view(self) -> np.ndarray:
+        return self.a[:self.n]
+
+
+class LstmPredictor(Predictor):
+    """The paper's cubic resampling + MLP-LSTM-MLP (ONNX) + cubic current position.
+
+    Args:
+        model: path of a ``model.onnx`` with its ``model.json`` alongside (default: the
+            bundled model).
+        fit: ``"closed"`` (closed-form least squares) or ``"lbfgs"`` (the paper's iterative
+            fit, :func:`predictors.cubic.fit_cubic_lbfgs`; slow, for latency comparison).
+    """
+
+    name = "lstm"
+
+    def __init__(self, model: str | None = None, fit: str = "closed") -> None:
+        if fit not in FITS:
+            raise ValueError(f"fit must be one of {FITS}, not {fit!r}")
+        self.model_path = Path(model) if model else bundled_model()
+        self.info = load_model_info(self.model_path)
+        self.frame = self.info.get("frame", "heading")
+        self.fit = fit
+        self.net = OnnxModel(self.model_path, output=self.info.get("output"))
+        self._init_buffers()
+
+    def _init_buffers(self) -> None:
+        self._final = FixedGridFit(np.append(GRID_OFFSETS, DT))
+        self._grid_fit = FixedGridFit(GRID_OFFSETS)
+        self._x = np.empty((N_STEPS, 6), dtype=np.float64)
+        self._pts = np.empty((N_STEPS + 1, 2))
+        self.reset()
+
+    def config(self) -> dict:
+        return {"model": str(self.model_path), "fit": self.fit, "frame": self.frame,
+                "architecture": self.info.get("architecture"),
+                "command": self.info.get("command")}
+
+    # ------------------------------------------------------------------ state
+    def reset(self) -> None:
+        self._fix = _Buf(FIX_CAP, 3)        # t, x, y (real fixes and bridging pseudo-fixes)
+        self._imu = _Buf(IMU_CAP, 4)        # t, ax, ay, yaw (unwrapped, NaN if unknown)
+        self._yaw_raw = math.nan
+        self._yaw_u = math.nan
+        self._t_yaw_nan = -math.inf         # time of the newest IMU sample without yaw
+        self._can_v: float | None = None
+        self._gps_v = math.nan
+        self._hold: tuple[float, float] | None = None
+        self._mode = "empty"                # empty | line | net
+        self._t_end = math.nan
+        self._grid = np.zeros((N_STEPS, 2))
+        self._pred = np.zeros(2)
+        self._c = (0.0,) * 8                # final cubic (x0..x3, y0..y3) in s = t - t_end
+        self._line = (0.0, 0.0, 0.0, 0.0, 0.0)  # t0, x0, vx, y0, vy
+        self.steps = 0
+        self.bridge_steps = 0
+
+    def observe_imu(self, t: float, ax: float, ay: float, yaw: float, yaw_rate: float) -> None:
+        if not (math.isfinite(ax) and math.isfinite(ay)) or max(abs(ax), abs(ay)) > ACCEL_GLITCH:
+            return
+        if self._imu.n and t <= self._imu.a[self._imu.n - 1, 0]:
+            return
+        if math.isfinite(yaw):
+            if math.isfinite(self._yaw_u):
+                d = (yaw - self._yaw_raw + math.pi) % (2 * math.pi) - math.pi
+                self._yaw_u += d
+            else:
+                self._yaw_u = yaw
+            self._yaw_raw = yaw
+            yu = self._yaw_u
+        else:
+            yu = math.nan
+            self._t_yaw_nan = t
+        self._imu.append((t, ax, ay, yu))
+
+    def observe_speed(self, t: float, v: float) -> None:
+        if math.isfinite(v):
+            self._can_v = v
+
+    def observe_gps(self, t: float, x: float, y: float) -> None:
+        if not (math.isfinite(x) and math.isfinite(y)):
+            return
+        fb = self._fix
+        # a pseudo-fix at or after this time (bridging) gives way to the real fix
+        while fb.n and fb.a[fb.n - 1, 0] >= t:
+            fb.n -= 1
+        fb.append((t, x, y))
+        self._step_on_fixes()
+
+    # ------------------------------------------------------------------ steps
+    def _step_on_fixes(self) -> None:
+        a = self._fix.view()
+        end = a.shape[0] - 1
+        t = a[:, 0]
+        start = window_start(t, end)
+        t_end = float(t[end])
+        if t_end - t[start] < MIN_SPAN_S:
+            self._fallback_line(a)
+            return
+        tt = t[start:end + 1]
+        xy = a[start:end + 1, 1:]
+        scale = t_end - float(tt[0])
+        if self.fit == "lbfgs":
+            from predictors.cubic import fit_cubic_lbfgs
+
+            coef = fit_cubic_lbfgs(tt, xy, t_ref=t_end, scale=scale).coef
+        else:
+            coef = fit_poly(tt, xy, t_end, scale)
+        grid = eval_poly(coef, GRID_OFFSETS / scale)
+        self._gps_v = math.hypot(coef[1, 0], coef[1, 1]) / scale
+        psi = math.atan2(coef[1, 1], coef[1, 0])
+        self._run_net(grid, t_end, float(tt[0]), psi, coef, scale)
+
+    def _imu_on_grid(self, t0: float, t_end: float, coef: np.ndarray, scale: float
+                     ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """ax, ay [vehicle frame] and yaw on the grid: IMU cubic over [t0, t_end], or the
+        GPS curve's stand-ins where the IMU (or its yaw) is missing."""
+        im = self._imu.view()
+        vals = None
+        if im.shape[0] > 3:
+            ti = im[:, 0]
+            i0 = int(np.searchsorted(ti, t0, side="left"))
+            i1 = int(np.searchsorted(ti, t_end, side="right"))
+            if i1 - i0 > 3:
+                tt = ti[i0:i1]
+                sc = max(t_end - t0, 1e-3)
+                yv = im[i0:i1, 1:] if self._t_yaw_nan < tt[0] else im[i0:i1, 1:3]
+                if self.fit == "lbfgs":
+                    from predictors.cubic import fit_cubic_lbfgs
+
+                    c = fit_cubic_lbfgs(tt, yv, t_ref=t_end, scale=sc).coef
+                else:
+                    c = fit_poly(tt, yv, t_end, sc)
+                vals = eval_poly(c, GRID_OFFSETS / sc)
+        if vals is not None and vals.shape[1] == 3:
+            return vals[:, 0], vals[:, 1], vals[:, 2]
+        sax, say, syaw = gps_substitute_imu(coef, scale, GRID_OFFSETS / scale)
+        if vals is not None:
+            return vals[:, 0], vals[:, 1], syaw
+        return sax, say, syaw
+
+    def _run_net(self, grid: np.ndarray, t_end: float, t0: float, psi: float,
+                 coef: np.ndarray, scale: float) -> None:
+        ax, ay, yaw = self._imu_on_grid(t0, t_end, coef, scale)
+        d0, d1 = self._displacement(grid, ax, ay, yaw, psi, coef, scale)
+        pts = self._pts
+        pts[:N_STEPS] = grid
+        pts[N_STEPS, 0] = grid[-1, 0] + d0
+        pts[N_STEPS, 1] = grid[-1, 1] + d1
+        self._grid = grid
+        self._pred = pts[N_STEPS].copy()
+        cf = self._final.fit(pts)
+        self._c = tuple(cf[:, 0].tolist() + cf[:, 1].tolist())
+        self._t_end = t_end
+        self._mode = "net"
+        self.steps += 1
+
+    def _displacement(self, grid: np.ndarray, ax: np.ndarray, ay: np.ndarray, yaw: np.ndarray,
+                      psi: float, coef: np.ndarray, scale: float) -> tuple[float, float]:
+        """Network: world displacement [m] from the newest grid point to 200 ms later."""
+        x = features_one(grid, ax, ay, yaw, psi, self.frame, self._x)
+        out = self.net.run(x)
+        d0, d1 = float(out[0]), float(out[1])
+        if self.frame == "heading":
+            c, s = math.cos(psi), math.sin(psi)
+            d0, d1 = c * d0 - s * d1, s * d0 + c * d1
+        return d0, d1
+
+    def _bridge_step(self) -> None:
+        """No fix for 0.2 s after the grid: the prediction becomes the newest sample."""
+        t_new = self._t_end + DT
+        self._fix.append((t_new, float(self._pred[0]), float(self._pred[1])))
+        grid = np.vstack([self._grid[1:], self._pred])
+        coef = self._grid_fit.fit(grid)  # in s = t - t_new [s], scale 1
+        psi = math.atan2(coef[1, 1], coef[1, 0])
+        t = self._fix.view()[:, 0]
+        start = window_start(t, self._fix.n - 1)
+        t0 = min(float(t[start]), t_new - MIN_SPAN_S)
+        self._run_net(grid, t_new, t0, psi, coef, 1.0)
+        self.bridge_steps += 1
+
+    def _fallback_line(self, a: np.ndarray) -> None:
+        t = a[:, 0]
+        if t.size == 1:
+            self._line = (float(t[0]), float(a[0, 1]), 0.0, float(a[0, 2]), 0.0)
+        else:
+            c = fit_poly(t, a[:, 1:], float(t[-1]), 1.0, degree=1)
+            self._line = (float(t[-1]), float(c[0, 0]), float(c[1, 0]), float(c[0, 1]),
+                          float(c[1, 1]))
+        self._gps_v = math.hypot(self._line[2], self._line[4]) if t.size > 1 else math.nan
+        self._mode = "line"
+
+    # ------------------------------------------------------------------ queries
+    def _stationary(self) -> bool:
+        v = self._can_v if self._can_v is not None else self._gps_v
+        return v == v and abs(v) < STILL_SPEED_MPS
+
+    def _estimate(self, t: float) -> tuple[float, float]:
+        if self._mode == "net":
+            n = 0
+            while t > self._t_end + DT + 1e-9 and n < MAX_BRIDGE_STEPS:
+                self._bridge_step()
+                n += 1
+            s = t - self._t_end
+            c = self._c
+            return (((c[3] * s + c[2]) * s + c[1]) * s + c[0],
+                    ((c[7] * s + c[6]) * s + c[5]) * s + c[4])
+        if self._mode == "line":
+            t0, x0, vx, y0, vy = self._line
+            return x0 + vx * (t - t0), y0 + vy * (t - t0)
+        return math.nan, math.nan
+
+    def position_at(self, t: float) -> tuple[float, float]:
+        if self._stationary():
+            if self._hold is None:
+                self._hold = self._estimate(t)
+            return self._hold
+        self._hold = None
+        return self._estimate(t)

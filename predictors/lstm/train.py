@@ -1,0 +1,318 @@
+"""Train the paper's MLP-LSTM-MLP on drives and write ``model.onnx`` + ``model.json``.
+
+:func:`run_training` is what ``bench train --data PATH... --out DIR [--epochs N] [--seed N]``
+calls. Pipeline: load drives (``scenarios.load``) and optional synthetic drives ->
+split by route (never by window) -> windows (:mod:`predictors.lstm.windows`; drives
+with a truth stream are fed GPS degraded from it with profile ``"rtk"`` under several
+seeds) -> feature statistics on the training windows -> Adam + ReduceLROnPlateau +
+early stopping on the validation loss, turn windows oversampled -> ONNX export (faster
+exporter kept) -> validation future-point error [m] of the exported model and, on the
+same windows, of a plain cubic extrapolation and constant velocity.
+
+Loss (the paper's): MSE over all 8 x 6 standardised outputs + 10 x MSE of the last
+output's x, y. Seeded and deterministic (torch, numpy, the sampler's generator).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import platform
+import time
+from collections.abc import Callable, Sequence
+from importlib import metadata
+from pathlib import Path
+
+import numpy as np
+
+from predictors.lstm.features import FEATURES, FRAMES
+from predictors.lstm.resample import DT, MIN_SPAN_S, N_STEPS
+from predictors.lstm.windows import WindowSet, drive_windows, future_from_output
+from scenarios.drive import Drive
+from scenarios.errors import DataError
+
+Progress = Callable[[int, int, float, float], None]
+FORMAT = "posbench-lstm"
+VAL_EVERY = 5
+VAL_OFFSET = 2
+TURN_LABELS = ("turn", "roundabout")
+
+
+# --------------------------------------------------------------------------- data
+def sha256_file(path: Path) -> str:
+    h = hashlib.sha256()
+    with open(path, "rb") as f:
+        for chunk in iter(lambda: f.read(1 << 20), b""):
+            h.update(chunk)
+    return h.hexdigest()
+
+
+def manifest(paths: Sequence[str | Path]) -> list[dict]:
+    """sha256 of every file at or under each path."""
+    out = []
+    for p in map(Path, paths):
+        files = [p] if p.is_file() else sorted(f for f in p.rglob("*") if f.is_file())
+        out.append({"path": str(p), "files": [
+            {"file": str(f.relative_to(p)) if f != p else f.name, "bytes": f.stat().st_size,
+             "sha256": sha256_file(f)} for f in files]})
+    return out
+
+
+SYNTH_SEED_BASE = 10_000
+
+
+def synthetic_seeds(n: int, seed: int) -> list[int]:
+    """Generator seeds of the training drives: 10000 + 1000 * seed + i, far from the small
+    seeds the benchmark's own synthetic data set uses (no train/test overlap)."""
+    return [SYNTH_SEED_BASE + 1000 * seed + i for i in range(n)]
+
+
+def synthetic_drives(n: int, seed: int) -> list[Drive]:
+    """``n`` drives from the project's synthetic generator, routes in turn (seeded)."""
+    if n <= 0:
+        return []
+    from scenarios.synthetic import ROUTES, generate_drive
+
+    return [generate_drive(seed=s, route=ROUTES[i % len(ROUTES)])
+            for i, s in enumerate(synthetic_seeds(n, seed))]
+
+
+def group_of(drive: Drive) -> str:
+    """Source group used for the split and the per-source metrics."""
+    fmt = (drive.meta.format or "").lower()
+    return fmt if fmt else "other"
+
+
+def split_by_route(drives: Sequence[Drive]) -> tuple[list[Drive], list[Drive]]:
+    """Per source group, in name order, every 5th drive from the 3rd is held out (groups of
+    fewer than 3 drives train only). Falls back to holding out the last drive if that
+    leaves no validation drive, and to validating on the training drive if there is one."""
+    groups: dict[str, list[Drive]] = {}
+    for d in drives:
+        groups.setdefault(group_of(d), []).append(d)
+    train, val = [], []
+    for g in sorted(groups):
+        ds = sorted(groups[g], key=lambda d: d.name)
+        for i, d in enumerate(ds):
+            (val if len(ds) >= 3 and i % VAL_EVERY == VAL_OFFSET else train).append(d)
+    if not val and len(train) > 1:
+        val.append(train.pop())
+    if not val:
+        val = list(train)
+    return train, val
+
+
+def gps_variants(drive: Drive, n_seeds: int, seed: int) -> list:
+    """GPS streams to train on: the drive's own (no truth) or ``n_seeds`` rtk degradations."""
+    if drive.truth is None or len(drive.truth) < 2:
+        return [drive.gps]
+    from scenarios.degrade import degrade_gps
+
+    return [degrade_gps(drive.truth, "rtk", seed=seed * 1000 + k) for k in range(n_seeds)]
+
+
+def build_windows(drives: Sequence[Drive], n_seeds: int, seed: int, frame: str) -> WindowSet:
+    return WindowSet.concat([drive_windows(d, g, frame) for d in drives
+                             for g in gps_variants(d, n_seeds, seed)])
+
+
+def sample_weights(labels: np.ndarray, turn_boost_max: float = 5.0) -> np.ndarray:
+    """Per-window weights: turn/roundabout windows up-weighted to balance them with the rest
+    (factor n_other / n_turn, between 1 and ``turn_boost_max``)."""
+    turn = np.isin(labels, TURN_LABELS)
+    w = np.ones(labels.size)
+    if turn.any() and (~turn).any():
+        w[turn] = float(np.clip((~turn).sum() / turn.sum(), 1.0, turn_boost_max))
+    return w
+
+
+# --------------------------------------------------------------------------- metrics
+def error_stats(pred: np.ndarray, truth: np.ndarray) -> dict[str, float]:
+    e = np.linalg.norm(pred - truth, axis=1)
+    if e.size == 0:
+        return {"n": 0}
+    return {"n": int(e.size), "mean_m": float(e.mean()), "p50_m": float(np.median(e)),
+            "p95_m": float(np.percentile(e, 95))}
+
+
+def evaluate(ws: WindowSet, lstm_future: np.ndarray, groups: dict[str, str]) -> dict:
+    """Future-point error [m] of the network, plain cubic and constant velocity, overall,
+    per label, per source group (``groups``: drive name -> group) and per drive."""
+    out = {"all": {k: error_stats(p, ws.truth_future) for k, p in
+                   (("lstm", lstm_future), ("cubic", ws.cubic_pred), ("cv", ws.cv_pred))}}
+    for lab in sorted(set(ws.label.tolist())):
+        m = ws.label == lab
+        out[f"label:{lab}"] = {k: error_stats(p[m], ws.truth_future[m]) for k, p in
+                               (("lstm", lstm_future), ("cubic", ws.cubic_pred),
+                                ("cv", ws.cv_pred))}
+    for g in sorted(set(groups.values())):
+        m = np.array([groups.get(d) == g for d in ws.drive], dtype=bool)
+        out[f"group:{g}"] = {k: error_stats(p[m], ws.truth_future[m]) for k, p in
+                             (("lstm", lstm_future), ("cubic", ws.cubic_pred),
+                              ("cv", ws.cv_pred))}
+    for name in sorted(set(ws.drive.tolist())):
+        m = ws.drive == name
+        out[f"drive:{name}"] = {k: error_stats(p[m], ws.truth_future[m]) for k, p in
+                                (("lstm", lstm_future), ("cubic", ws.cubic_pred),
+                                 ("cv", ws.cv_pred))}
+    return out
+
+
+def package_versions() -> dict[str, str]:
+    out = {"python": platform.python_version()}
+    for pkg in ("numpy", "torch", "onnx", "onnxruntime", "scipy", "posbench"):
+        try:
+            out[pkg] = metadata.version(pkg)
+        except metadata.PackageNotFoundError:
+            out[pkg] = "not installed"
+    return out
+
+
+# --------------------------------------------------------------------------- training
+def run_training(data_paths: Sequence[str | Path], out_dir: Path, epochs: int = 40,
+                 seed: int = 0, synthetic: int = 0, progress: Progress | None = None,
+                 command: str | None = None, drives: Sequence[Drive] | None = None,
+                 hidden: int = 64, lstm_layers: int = 1, enc_layers: int = 1,
+                 batch_size: int = 256, lr: float = 2e-3, patience: int = 8,
+                 gps_seeds: int = 3, frame: str = "heading", threads: int = 2,
+                 timing_calls: int = 2000) -> dict:
+    """Train, export and describe a model. Returns the dict written to ``model.json``.
+
+    Args:
+        data_paths: files/folders for ``scenarios.load`` (aslan pickles, comma2k19, ...).
+        out_dir: where ``model.onnx`` and ``model.json`` go (created).
+        epochs: maximum epochs (early stopping may end sooner).
+        seed: seeds torch, numpy, the sampler and the synthetic generator.
+        synthetic: number of synthetic drives to add (generator seeds seed .. seed+N-1).
+        progress: ``callback(epoch, n_epochs, train_loss, val_loss)`` after each epoch.
+        command: the exact command line, recorded in model.json.
+        drives: extra in-memory drives (tests).
+        hidden, lstm_layers, enc_layers: network sizes.
+        gps_seeds: rtk GPS draws per drive with truth (training; validation uses one).
+        frame: feature frame, ``"heading"`` or ``"world"``.
+    """
+    import torch
+
+    from predictors.lstm.export import export_best
+    from predictors.lstm.model import LstmNet
+    from predictors.lstm.runtime import OnnxModel
+    from scenarios.loaders import load
+
+    if frame not in FRAMES:
+        raise ValueError(f"unknown frame {frame!r}")
+    t_start = time.perf_counter()
+    out_dir = Path(out_dir)
+    torch.manual_seed(seed)
+    np.random.seed(seed)  # noqa: NPY002 - seeds any legacy-RNG user as well
+    torch.use_deterministic_algorithms(True)
+    torch.set_num_threads(threads)
+
+    all_drives: list[Drive] = []
+    for p in data_paths:
+        all_drives.extend(load(p))
+    all_drives.extend(synthetic_drives(synthetic, seed))
+    all_drives.extend(drives or [])
+    if not all_drives:
+        raise DataError(None, "no training drives: give --data PATH or --synthetic N")
+    train_d, val_d = split_by_route(all_drives)
+    tr = build_windows(train_d, gps_seeds, seed, frame)
+    va = build_windows(val_d, 1, seed + 7919, frame)
+    if len(tr) == 0 or len(va) == 0:
+        raise DataError(None, f"too few windows (train {len(tr)}, validation {len(va)}): "
+                              "drives need >= 2 s of moving GPS")
+    flat = tr.X.reshape(-1, tr.X.shape[-1])
+    mean = flat.mean(axis=0)
+    std = np.maximum(flat.std(axis=0), 1e-3)
+
+    net = LstmNet(hidden, lstm_layers, enc_layers)
+    net.set_stats(torch.tensor(mean), torch.tensor(std))
+    m_t, s_t = torch.tensor(mean, dtype=torch.float32), torch.tensor(std, dtype=torch.float32)
+
+    def std_t(a: np.ndarray) -> torch.Tensor:
+        return (torch.tensor(a, dtype=torch.float32) - m_t) / s_t
+
+    Xtr, Ytr, Xva, Yva = std_t(tr.X), std_t(tr.Y), std_t(va.X), std_t(va.Y)
+    w = sample_weights(tr.label)
+    gen = torch.Generator().manual_seed(seed)
+    sampler = torch.utils.data.WeightedRandomSampler(torch.tensor(w), num_samples=len(tr),
+                                                     replacement=True, generator=gen)
+    loader = torch.utils.data.DataLoader(torch.utils.data.TensorDataset(Xtr, Ytr),
+                                         batch_size=batch_size, sampler=sampler)
+    opt = torch.optim.Adam(net.parameters(), lr=lr)
+    sched = torch.optim.lr_scheduler.ReduceLROnPlateau(opt, factor=0.5, patience=3)
+
+    def loss_fn(pred: torch.Tensor, y: torch.Tensor) -> torch.Tensor:
+        return torch.mean((pred - y) ** 2) + 10.0 * torch.mean((pred[:, -1, :2] - y[:, -1, :2]) ** 2)
+
+    best = (float("inf"), None, 0)
+    history = []
+    for epoch in range(1, epochs + 1):
+        net.train()
+        tot, cnt = 0.0, 0
+        for xb, yb in loader:
+            opt.zero_grad()
+            loss = loss_fn(net.forward_std(xb), yb)
+            loss.backward()
+            opt.step()
+            tot += loss.item() * xb.shape[0]
+            cnt += xb.shape[0]
+        net.eval()
+        with torch.no_grad():
+            vl = float(loss_fn(net.forward_std(Xva), Yva))
+        tl = tot / max(cnt, 1)
+        sched.step(vl)
+        history.append({"epoch": epoch, "train_loss": tl, "val_loss": vl,
+                        "lr": opt.param_groups[0]["lr"]})
+        if progress is not None:
+            progress(epoch, epochs, tl, vl)
+        if vl < best[0] - 1e-6:
+            best = (vl, {k: v.clone() for k, v in net.state_dict().items()}, epoch)
+        elif epoch - best[2] >= patience:
+            break
+    net.load_state_dict(best[1])
+    net.eval()
+    train_s = time.perf_counter() - t_start
+
+    onnx_path = out_dir / "model.onnx"
+    export_report = export_best(net, onnx_path, n_calls=timing_calls)
+    out = OnnxModel(onnx_path).run_batch(va.X.astype(np.float32))
+    lstm_future = future_from_output(va, out[:, :2].astype(float), frame)
+    metrics = evaluate(va, lstm_future, {d.name: group_of(d) for d in val_d})
+
+    info = {
+        "format": FORMAT, "version": 1,
+        "frame": frame, "features": list(FEATURES), "n_steps": N_STEPS, "dt_s": DT,
+        "min_span_s": MIN_SPAN_S, "input": "features", "output": "future",
+        "input_shape": ["batch", N_STEPS, len(FEATURES)], "output_shape": ["batch", len(FEATURES)],
+        "normalisation": "in-graph (raw features in, raw next-sample features out)",
+        "feature_mean": mean.tolist(), "feature_std": std.tolist(),
+        "architecture": {"encoder": f"{enc_layers} x (Linear -> LeakyReLU(0.1)), width {hidden}",
+                         "lstm": {"hidden": hidden, "layers": lstm_layers},
+                         "decoder": f"Linear({hidden},{hidden}) -> LeakyReLU(0.1) -> Linear({hidden},6)",
+                         "parameters": int(sum(p.numel() for p in net.parameters()))},
+        "training": {"epochs_max": epochs, "epochs_run": len(history), "best_epoch": best[2],
+                     "seed": seed, "batch_size": batch_size, "lr": lr, "optimizer": "Adam",
+                     "scheduler": "ReduceLROnPlateau(factor 0.5, patience 3)",
+                     "early_stopping_patience": patience,
+                     "loss": "MSE(all 8x6 standardised outputs) + 10 x MSE(last output x, y)",
+                     "oversampling": "WeightedRandomSampler, turn/roundabout weight "
+                                     "n_other/n_turn clipped to [1, 5]",
+                     "gps_for_truth_drives": f"degrade_gps(truth, 'rtk', seed) x {gps_seeds}",
+                     "threads": threads, "seconds": round(train_s, 1), "history": history},
+        "data": {"paths": manifest(data_paths),
+                 "synthetic": {"drives": synthetic, "generator": "scenarios.synthetic.generate_drive",
+                               "generator_seeds": synthetic_seeds(synthetic, seed)},
+                 "in_memory_drives": [d.name for d in (drives or [])],
+                 "train_drives": [d.name for d in train_d], "val_drives": [d.name for d in val_d],
+                 "split": f"by route: per source group in name order, every {VAL_EVERY}th drive "
+                          f"from index {VAL_OFFSET} held out",
+                 "train_windows": len(tr), "val_windows": len(va),
+                 "train_labels": {k: int(v) for k, v in zip(*np.unique(tr.label, return_counts=True),
+                                                             strict=True)}},
+        "validation": metrics,
+        "export": export_report,
+        "packages": package_versions(),
+        "command": command,
+    }
+    (out_dir / "model.json").write_text(json.dumps(info, indent=1))
+    return info
