@@ -53,19 +53,26 @@ SUMMARY_HEADER = ["predictor", "future mean [m]", "median", "RMSE", "p95", "max"
                   "now mean [m]", "now p95", "n", "step p50 [us]", "step p99 [us]", "query p50 [us]"]
 
 
-def label_table(res: dict[str, Any], dataset: str, kind: str) -> str:
+def label_table(res: dict[str, Any], dataset: str, kind: str, held_out: bool = False) -> str:
     """The paper's Table I layout: route type x mean error [cm] (query count), one column
-    per predictor, the paper's LSTM figure beside."""
+    per predictor, the paper's LSTM figure beside. ``held_out``: only drives no learned
+    predictor was trained on."""
     preds = list(res["predictors"])
     header = ["route type"] + [f"{p} [cm] (n)" for p in preds] + ["paper LSTM [cm]"]
+    if held_out:
+        by_label = {p: v for p, v in res["held_out"][dataset]["by_label"].items()}
+        overall_src = res["held_out"][dataset]["predictors"]
+    else:
+        by_label = res["by_label"].get(dataset, {})
+        overall_src = res["by_dataset"].get(dataset, {})
     rows = []
     for lab in LABELS:
         row = [LABEL_TITLES[lab]]
         for p in preds:
-            row.append(_fmt_cm(res["by_label"].get(dataset, {}).get(p, {}).get(kind, {}).get(lab, {})))
+            row.append(_fmt_cm(by_label.get(p, {}).get(kind, {}).get(lab, {})))
         row.append(f"{PAPER_TABLE_CM[lab]:.1f}")
         rows.append(row)
-    overall = ["all"] + [_fmt_cm(res["by_dataset"].get(dataset, {}).get(p, {}).get(kind, {}))
+    overall = ["all"] + [_fmt_cm(overall_src.get(p, {}).get(kind, {}))
                          for p in preds] + ["11 (LSTM), 46 (Kalman)"]
     rows.append(overall)
     return _table(header, rows)
@@ -125,6 +132,17 @@ def render_markdown(res: dict[str, Any], plots: list[str]) -> str:
                   "", label_table(res, ds, "future"), ""]
         lines += ["### Route type, current position (now), mean error in cm (queries)", "",
                   label_table(res, ds, "now"), ""]
+        ho = res.get("held_out", {}).get(ds)
+        if ho:
+            lines += [f"### Held-out drives only ({len(ho['drives'])} of {len(drives)})", "",
+                      f"The bundled `lstm` was trained on {len(ho['excluded_training_drives'])} of "
+                      f"these drives ({', '.join(ho['excluded_training_drives'])}); figures on them "
+                      f"flatter it. On the held-out drives ({', '.join(ho['drives']) or 'none'}):", ""]
+            if ho["drives"]:
+                lines += ["Future point, mean error in cm (queries):", "",
+                          label_table(res, ds, "future", held_out=True), "",
+                          "Current position (now), mean error in cm (queries):", "",
+                          label_table(res, ds, "now", held_out=True), ""]
     if res.get("by_speed"):
         lines += ["## Future-point error by speed, mean [m] (queries)", ""]
         bins = [b for b in speed_bin_order() + ["unknown"]
@@ -158,7 +176,8 @@ def render_markdown(res: dict[str, Any], plots: list[str]) -> str:
         if d["skipped"]:
             rows.append([d["name"], d["dataset"], f"skipped: {d['skipped']}"] + ["-"] * len(preds))
             continue
-        rows.append([d["name"], d["dataset"], d["reference"]] + [
+        mark = " (lstm trained on it)" if d.get("lstm_trained_on") else ""
+        rows.append([d["name"] + mark, d["dataset"], d["reference"]] + [
             _fmt_m(d["predictors"].get(p, {}).get("future", {}).get("mean_m", float("nan")))
             for p in preds])
     lines += [_table(["drive", "data set", "reference"] + [f"{p} future mean [m]" for p in preds],

@@ -62,6 +62,26 @@ def tree_hash(path: str | Path) -> dict[str, Any]:
     return {"path": str(path), "files": len(files), "bytes": size, "sha256": h.hexdigest()}
 
 
+def lstm_training_drives(cfg: RunConfig) -> dict[str, list[str]]:
+    """Per learned predictor in the run, the drive names its model was trained on
+    (from its model.json), so results on those drives can be told apart."""
+    out: dict[str, list[str]] = {}
+    for name in cfg.predictors:
+        if name != "lstm":
+            continue
+        try:
+            from predictors.lstm.predictor import bundled_model, load_model_info
+
+            model = cfg.predictor_options.get(name, {}).get("model")
+            path = Path(model) if model else bundled_model()
+            if path.is_dir():
+                path = path / "model.onnx"
+            out[name] = list(load_model_info(path).get("data", {}).get("train_drives", []))
+        except Exception:  # noqa: BLE001 - a model without a manifest: nothing to flag
+            out[name] = []
+    return out
+
+
 def all_traces(runs: Sequence[DriveRun]) -> pd.DataFrame:
     frames = [r.traces for r in runs if not r.traces.empty]
     return pd.concat(frames, ignore_index=True) if frames else pd.DataFrame()
@@ -87,6 +107,8 @@ def aggregate(runs: Sequence[DriveRun], cfg: RunConfig, data_manifest: list[dict
         "by_label": {},
         "by_speed": {},
         "outages": {},
+        "training_drives": lstm_training_drives(cfg),
+        "held_out": {},
         "drives": [],
     }
     for name in preds:
@@ -125,10 +147,30 @@ def aggregate(runs: Sequence[DriveRun], cfg: RunConfig, data_manifest: list[dict
                                            dfp.loc[dfp["kind"] == kind, "label"].to_numpy(),
                                            order=list(LABELS))
                     for kind in KINDS}
+    trained_on = {n for names in res["training_drives"].values() for n in names}
+    if not traces.empty and trained_on:
+        for ds, dfd in traces.groupby("dataset", sort=True):
+            names = set(dfd["drive"].unique())
+            if not names & trained_on:
+                continue
+            held = dfd[~dfd["drive"].isin(trained_on)]
+            entry: dict[str, Any] = {"drives": sorted(names - trained_on),
+                                     "excluded_training_drives": sorted(names & trained_on),
+                                     "predictors": {}, "by_label": {}}
+            for name in preds:
+                dfp = held[held["predictor"] == name]
+                entry["predictors"][name] = _kind_summaries(dfp)
+                entry["by_label"][name] = {
+                    kind: summarize_groups(dfp.loc[dfp["kind"] == kind, "error_m"].to_numpy(),
+                                           dfp.loc[dfp["kind"] == kind, "label"].to_numpy(),
+                                           order=list(LABELS))
+                    for kind in KINDS}
+            res["held_out"][ds] = entry
     for r in runs:
         d: dict[str, Any] = {"name": r.name, "dataset": r.dataset, "reference": r.reference,
                              "duration_s": r.duration_s, "gps_fed": r.gps_count,
                              "notes": r.notes, "warnings": r.warnings, "skipped": r.skipped,
+                             "lstm_trained_on": r.name in trained_on,
                              "predictors": {}}
         if not r.traces.empty:
             for name in preds:

@@ -29,11 +29,11 @@ TUNED_PATH = Path(__file__).resolve().parents[1] / "predictors" / "tuned.json"
 #: Search grids per predictor (values tried for each parameter).
 GRIDS: dict[str, dict[str, list[float]]] = {
     "kf": {"gps_sigma": [0.01, 0.02, 0.05, 0.1, 0.3, 1.0],
-           "jerk_psd": [0.5, 2.0, 8.0, 32.0, 128.0],
-           "accel_sigma": [0.1, 0.3, 1.0]},
+           "jerk_psd": [0.5, 2.0, 8.0, 32.0, 128.0, 512.0],
+           "accel_sigma": [0.1, 0.3, 1.0, 3.0]},
     "ekf": {"gps_sigma": [0.01, 0.02, 0.05, 0.1, 0.3, 1.0],
-            "jerk_psd": [0.5, 2.0, 8.0, 32.0],
-            "yaw_acc_psd": [0.01, 0.1, 1.0]},
+            "jerk_psd": [0.5, 2.0, 8.0, 32.0, 128.0],
+            "yaw_acc_psd": [0.01, 0.1, 1.0, 10.0]},
 }
 
 
