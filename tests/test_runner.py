@@ -128,3 +128,26 @@ def test_results_identical_across_worker_counts():
     for ra, rb in zip(a, b, strict=True):
         assert ra.name == rb.name
         np.testing.assert_array_equal(ra.traces.error_m.to_numpy(), rb.traces.error_m.to_numpy())
+
+
+def test_real_predictors_identical_across_worker_counts():
+    from scenarios.synthetic import default_drives
+
+    drives = default_drives(seed=3)[:2]
+    cfg = RunConfig(predictors=("cv", "kf", "ekf"), gps_profile="consumer", dropouts="outages")
+    a = run(drives, cfg, workers=1)
+    b = run(drives, cfg, workers=2)
+    for ra, rb in zip(a, b, strict=True):
+        np.testing.assert_array_equal(ra.traces.error_m.to_numpy(), rb.traces.error_m.to_numpy())
+        assert ra.outages == rb.outages and len(ra.outages) > 0
+
+
+def test_degraded_gps_depends_on_seed_not_workers():
+    from scenarios.synthetic import default_drives
+
+    d = default_drives()[0]
+    p1 = prepare_drive(d, RunConfig(seed=1))
+    p2 = prepare_drive(d, RunConfig(seed=1))
+    p3 = prepare_drive(d, RunConfig(seed=2))
+    np.testing.assert_array_equal(p1.gps.x, p2.gps.x)
+    assert p1.gps.t.size != p3.gps.t.size or not np.array_equal(p1.gps.x, p3.gps.x)

@@ -1,0 +1,107 @@
+"""The command line: one-line errors with exit status 2 for user mistakes, inspect, run."""
+
+from __future__ import annotations
+
+import json
+import os
+import pickle
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+
+def bench(*args: str, cwd: Path | None = None, timeout: float = 300) -> subprocess.CompletedProcess:
+    env = {**os.environ, "COLUMNS": "200"}
+    return subprocess.run([sys.executable, "-m", "bench.cli", *args], capture_output=True,
+                          text=True, cwd=cwd, timeout=timeout, env=env)
+
+
+def assert_user_error(r: subprocess.CompletedProcess, *needles: str) -> None:
+    assert r.returncode == 2, r.stdout + r.stderr
+    assert "Traceback" not in r.stderr and "Traceback" not in r.stdout
+    err = r.stderr.strip()
+    assert err.startswith("error:"), err
+    for n in needles:
+        assert n in err, err
+
+
+def test_missing_path(tmp_path):
+    missing = tmp_path / "nope.bag"
+    assert_user_error(bench("data", "inspect", str(missing)), str(missing), "no such file")
+    assert_user_error(bench("run", "--data", str(missing), "-p", "cv"), str(missing))
+
+
+def test_unknown_format(tmp_path):
+    f = tmp_path / "drive.xyz"
+    f.write_text("hello")
+    assert_user_error(bench("data", "inspect", str(f)), str(f), "unknown format")
+
+
+def test_unknown_predictor():
+    assert_user_error(bench("run", "-p", "cv,magic"), "magic", "known:")
+
+
+def test_lstm_authors_needs_model():
+    assert_user_error(bench("run", "-p", "lstm-authors"), "--model lstm-authors=")
+
+
+class Evil:
+    def __reduce__(self):
+        return (os.system, ("touch pwned-marker",))
+
+
+def test_malicious_pickle_refused_and_not_run(tmp_path):
+    f = tmp_path / "route.pickle"
+    f.write_bytes(pickle.dumps(Evil()))
+    r = bench("data", "inspect", str(f), cwd=tmp_path)
+    assert_user_error(r, str(f), "refused to unpickle", "system")
+    assert not (tmp_path / "pwned-marker").exists()
+
+
+def test_truncated_csv(tmp_path):
+    f = tmp_path / "drive.csv"
+    f.write_text('stream,t,x,y\ngps,0.0,0,0\ngps,0.2,"1,\n')
+    assert_user_error(bench("data", "inspect", str(f)), str(f))
+
+
+def test_bad_topic_syntax(tmp_path):
+    assert_user_error(bench("data", "inspect", "--topic", "gps", str(tmp_path)), "--topic")
+
+
+def test_inspect_default_json():
+    r = bench("data", "inspect", "--json")
+    assert r.returncode == 0, r.stderr
+    rows = json.loads(r.stdout)
+    assert len(rows) >= 4 and all(row["format"] == "synthetic" and row["has_truth"] for row in rows)
+    assert {"name", "format", "duration_s", "gps_count", "has_truth"} <= set(rows[0])
+
+
+@pytest.mark.shared
+def test_inspect_all_shared_drives(kitti_dir, comma_dir, aslan_dir):
+    r = bench("data", "inspect", str(kitti_dir), str(comma_dir), str(aslan_dir), "--json")
+    assert r.returncode == 0, r.stderr
+    rows = json.loads(r.stdout)
+    fmts = [row["format"] for row in rows]
+    assert (fmts.count("kitti"), fmts.count("comma2k19"), fmts.count("aslan")) == (46, 1, 15)
+    for row in rows:
+        assert row["duration_s"] > 5 and row["gps_count"] > 50
+        assert 50 <= row["gps_interval_ms"]["p50"] <= 300
+
+
+def test_run_default_writes_report(tmp_path):
+    out = tmp_path / "out"
+    r = bench("run", "-p", "cv,kf,lstm", "--out", str(out), "--workers", "2")
+    assert r.returncode == 0, r.stderr
+    res = json.loads((out / "results.json").read_text())
+    for name in ("cv", "kf", "lstm"):
+        f = res["predictors"][name]["future"]
+        assert f["count"] > 1000 and 0 < f["mean_m"] < 0.5
+        assert res["predictors"][name]["latency_us"]["p50"] > 0
+    assert res["config"]["gps_profile"] == "rtk"
+    report = (out / "report.md").read_text()
+    assert "Route type (paper's Table I layout)" in report
+    for png in ("error_cdf.png", "error_vs_speed.png", "path.png"):
+        assert (out / png).stat().st_size > 10_000
+    assert (out / "traces.parquet").exists()
