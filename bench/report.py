@@ -187,6 +187,10 @@ def render_markdown(res: dict[str, Any], plots: list[str]) -> str:
         lines += ["## Loader warnings", ""] + [f"- `{n}`: {w}" for n, w in warn] + [""]
     if plots:
         lines += ["## Plots", ""] + [f"![{p}]({p})" for p in plots] + [""]
+    if res.get("paper_figures"):
+        lines += ["## The paper's figures, from this run", ""]
+        for f in res["paper_figures"]:
+            lines += [f"![{f['file']}]({f['file']})", "", f"*{f['caption']}*", ""]
     lines += ["## Data", ""] + [f"- `{m['path']}`: {m['files']} files, {m['bytes']} bytes, "
                                 f"sha256 `{m['sha256'][:16]}...`" for m in res["data"]] + [""]
     return "\n".join(lines)

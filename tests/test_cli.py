@@ -105,3 +105,17 @@ def test_run_default_writes_report(tmp_path):
     for png in ("error_cdf.png", "error_vs_speed.png", "path.png"):
         assert (out / png).stat().st_size > 10_000
     assert (out / "traces.parquet").exists()
+
+
+def test_run_with_lstm_writes_paper_figures(tmp_path):
+    out = tmp_path / "o"
+    r = bench("run", "-p", "kf-paper,lstm", "--out", str(out), "--workers", "1")
+    assert r.returncode == 0, r.stderr
+    res = json.loads((out / "results.json").read_text())
+    files = [f["file"] for f in res["paper_figures"]]
+    assert files == ["paper_fig_prediction.png", "paper_fig_current_position.png",
+                     "paper_fig_path.png", "paper_fig_kalman.png"]
+    for f in res["paper_figures"]:
+        assert (out / f["file"]).stat().st_size > 10_000
+        assert "drive `synthetic-" in f["caption"] and "t = " in f["caption"]
+    assert "The paper's figures, from this run" in (out / "report.md").read_text()

@@ -1,0 +1,169 @@
+"""The paper's figures, made from a real run (matplotlib PNGs with captions).
+
+1. A model prediction: the 8 resampled input points, the predicted future point and
+   the reference (truth) 200 ms after the fix.
+2. The current-position estimate: the cubic through the grid and the prediction,
+   sampled every 50 ms between the fix and the prediction, against the reference.
+3. A predicted path against the reference over 40 s of a route.
+4. The Kalman filter's prediction (``kf-paper``, the paper's baseline) at the same fix.
+
+The moment shown is the fix with the largest heading change over the next second on
+the drive with the most turn / roundabout queries, so the figures show a turn.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+from bench.config import RunConfig, gps_condition
+from bench.prepare import PreparedDrive, prepare_drive
+from bench.replay import GPS, IMU, SPEED, build_events
+from predictors.registry import create
+from scenarios.drive import Drive
+
+
+def replay_until(pred: Any, prep: PreparedDrive, t_stop: float) -> None:
+    """Feed ``pred`` every observation with time <= t_stop (after a reset)."""
+    d = prep.drive
+    kinds, idxs = build_events(prep)
+    nan = float("nan")
+    pred.reset()
+    for k, i in zip(kinds.tolist(), idxs.tolist(), strict=True):
+        if k == GPS:
+            if prep.gps.t[i] > t_stop:
+                break
+            pred.observe_gps(prep.gps.t[i], prep.gps.x[i], prep.gps.y[i])
+        elif k == IMU:
+            if d.imu.t[i] > t_stop:
+                break
+            pred.observe_imu(d.imu.t[i], d.imu.ax[i], d.imu.ay[i],
+                             d.imu.yaw[i] if d.imu.yaw is not None else nan,
+                             d.imu.yaw_rate[i] if d.imu.yaw_rate is not None else nan)
+        elif k == SPEED:
+            if d.speed.t[i] > t_stop:
+                break
+            pred.observe_speed(d.speed.t[i], d.speed.v[i])
+
+
+def pick_moment(traces: pd.DataFrame, predictor: str) -> tuple[str, float] | None:
+    """(drive, fix time) in a turn: the drive with most turn queries, the fix whose
+    reference heading changes most over the following second."""
+    fut = traces[(traces.kind == "future") & (traces.predictor == predictor)]
+    if fut.empty:
+        return None
+    turns = fut[fut.label.isin(["turn", "roundabout"])]
+    drive = turns.groupby("drive").size().idxmax() if not turns.empty else fut.drive.iloc[0]
+    f = fut[(fut.drive == drive)].dropna(subset=["x_ref"]).sort_values("t_issue")
+    if len(f) < 20:
+        return None
+    hd = np.unwrap(np.arctan2(np.gradient(f.y_ref.to_numpy()), np.gradient(f.x_ref.to_numpy())))
+    n = 5
+    change = np.abs(hd[n:] - hd[:-n])
+    speed = f.speed_mps.to_numpy()[:-n]
+    change[~(speed > 2)] = 0
+    i = int(np.argmax(change)) + n // 2
+    return str(drive), float(f.t_issue.iloc[i])
+
+
+def paper_figures(drives: list[Drive], cfg: RunConfig, traces: pd.DataFrame, out: Path
+                  ) -> list[tuple[str, str]]:
+    """Write the figures; return (file name, caption) pairs. Needs ``lstm`` in the run."""
+    if "lstm" not in cfg.predictors or traces.empty:
+        return []
+    moment = pick_moment(traces, "lstm")
+    if moment is None:
+        return []
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    name, t_fix = moment
+    drive = next(d for d in drives if d.name == name)
+    prep = prepare_drive(drive, cfg)
+    cond = gps_condition(cfg, drive.truth is not None) if cfg.use_tuned else None
+    lstm = create("lstm", cond, **cfg.predictor_options.get("lstm", {}))
+    replay_until(lstm, prep, t_fix)
+    grid = np.asarray(lstm._grid)
+    pred = np.asarray(lstm._pred)
+    ts = np.linspace(t_fix, t_fix + cfg.horizon_s, 5)
+    now = np.array([lstm.position_at(t) for t in ts])
+    from bench.prepare import _reference
+
+    ref_now = _reference(drive, ts)
+    ref_path = _reference(drive, np.arange(t_fix - 2.0, t_fix + 1.0, 0.05))
+    fixes = (prep.gps.t > t_fix - 2.5) & (prep.gps.t <= t_fix)
+    figs: list[tuple[str, str]] = []
+
+    def save(fig: Any, fname: str, caption: str) -> None:
+        fig.tight_layout()
+        fig.savefig(out / fname, dpi=110)
+        plt.close(fig)
+        figs.append((fname, caption))
+
+    fig, ax = plt.subplots(figsize=(6, 6))
+    ax.plot(ref_path[:, 0], ref_path[:, 1], "k-", lw=0.8, label="reference path")
+    ax.plot(prep.gps.x[fixes], prep.gps.y[fixes], "rx", label="GPS fixes received")
+    ax.plot(grid[:, 0], grid[:, 1], "o", color="tab:green", label="resampled input (8 x 200 ms)")
+    ax.plot(*pred, "X", color="gold", ms=12, mec="k", label="lstm prediction (+0.2 s)")
+    ax.plot(*ref_now[-1], "*", color="k", ms=14, label="reference at +0.2 s")
+    err = float(np.hypot(*(pred - ref_now[-1])))
+    ax.set_aspect("equal", adjustable="datalim")
+    ax.legend(fontsize=8)
+    ax.set_xlabel("east [m]")
+    ax.set_ylabel("north [m]")
+    save(fig, "paper_fig_prediction.png",
+         f"Model prediction: drive `{name}`, fix at t = {t_fix:.2f} s; the 8 resampled inputs, "
+         f"the predicted point 0.2 s ahead and the reference there (error {100 * err:.1f} cm).")
+
+    fig, ax = plt.subplots(figsize=(6, 6))
+    ax.plot(ref_path[:, 0], ref_path[:, 1], "k-", lw=0.8, label="reference path")
+    ax.plot(grid[:, 0], grid[:, 1], "o", color="tab:green", label="resampled input")
+    ax.plot(*pred, "X", color="gold", ms=12, mec="k", label="lstm prediction")
+    ax.plot(now[:, 0], now[:, 1], "*", color="m", ms=10, label="current-position estimates")
+    ax.plot(ref_now[:, 0], ref_now[:, 1], "k.", ms=6, label="reference at those times")
+    ax.set_aspect("equal", adjustable="datalim")
+    ax.legend(fontsize=8)
+    ax.set_xlabel("east [m]")
+    ax.set_ylabel("north [m]")
+    e_now = np.hypot(*(now - ref_now).T)
+    save(fig, "paper_fig_current_position.png",
+         f"Current position between the fix and the prediction: drive `{name}`, "
+         f"t = {t_fix:.2f}-{t_fix + cfg.horizon_s:.2f} s every {cfg.horizon_s / 4:.2f} s; "
+         f"errors {', '.join(f'{100 * e:.1f}' for e in e_now)} cm.")
+
+    f = traces[(traces.drive == name) & (traces.kind == "future")
+               & (traces.t_issue > t_fix - 20) & (traces.t_issue < t_fix + 20)]
+    fig, ax = plt.subplots(figsize=(7, 7))
+    r = f[f.predictor == "lstm"].sort_values("t_query")
+    ax.plot(r.x_ref, r.y_ref, "k-", lw=1, label="reference")
+    ax.plot(r.x, r.y, ".", ms=4, color="tab:orange", label="lstm future points")
+    ax.set_aspect("equal", adjustable="datalim")
+    ax.legend(fontsize=8)
+    ax.set_xlabel("east [m]")
+    ax.set_ylabel("north [m]")
+    save(fig, "paper_fig_path.png",
+         f"Predicted path against the reference: drive `{name}`, t = {max(t_fix - 20, 0):.0f}-"
+         f"{t_fix + 20:.0f} s, lstm future points (mean error {100 * r.error_m.mean():.1f} cm).")
+
+    if "kf-paper" in cfg.predictors:
+        kfp = create("kf-paper", cond, **cfg.predictor_options.get("kf-paper", {}))
+        replay_until(kfp, prep, t_fix)
+        kp = np.asarray(kfp.position_at(t_fix + cfg.horizon_s))
+        fig, ax = plt.subplots(figsize=(6, 6))
+        ax.plot(ref_path[:, 0], ref_path[:, 1], "k-", lw=0.8, label="reference path")
+        ax.plot(prep.gps.x[fixes], prep.gps.y[fixes], "rx", label="known points (fixes)")
+        ax.plot(*kp, "X", color="gold", ms=12, mec="k", label="kf-paper prediction")
+        ax.plot(*ref_now[-1], "*", color="k", ms=14, label="reference at +0.2 s")
+        ax.set_aspect("equal", adjustable="datalim")
+        ax.legend(fontsize=8)
+        ax.set_xlabel("east [m]")
+        ax.set_ylabel("north [m]")
+        save(fig, "paper_fig_kalman.png",
+             f"The paper's Kalman filter at the same fix: drive `{name}`, t = {t_fix:.2f} s "
+             f"(error {100 * float(np.hypot(*(kp - ref_now[-1]))):.1f} cm).")
+    return figs
