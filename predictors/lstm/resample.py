@@ -55,6 +55,19 @@ def powers(s: np.ndarray | float, degree: int = DEGREE) -> np.ndarray:
     return V
 
 
+try:  # the gufunc behind np.linalg.solve, without its ~30 us of Python-side checks
+    from numpy.linalg import _umath_linalg
+
+    def _solve(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+        with np.errstate(all="ignore"):
+            x = _umath_linalg.solve(a, b, signature="dd->d")
+        if not np.all(np.isfinite(x)):
+            raise np.linalg.LinAlgError("singular normal equations")
+        return x
+except (ImportError, AttributeError):  # pragma: no cover - other NumPy layouts
+    _solve = np.linalg.solve
+
+
 def fit_poly(t: np.ndarray, values: np.ndarray, t_ref: float, scale: float,
              degree: int = DEGREE) -> np.ndarray:
     """Closed-form least-squares polynomial through (t, values) in s = (t - t_ref) / scale.
@@ -75,7 +88,7 @@ def fit_poly(t: np.ndarray, values: np.ndarray, t_ref: float, scale: float,
     V = powers((t - t_ref) / scale, deg)
     G = V.T @ V
     try:
-        out[:deg + 1] = np.linalg.solve(G, V.T @ values)
+        out[:deg + 1] = _solve(G, V.T @ values)
     except np.linalg.LinAlgError:
         out[:deg + 1] = np.linalg.lstsq(V, values, rcond=None)[0]
     return out
