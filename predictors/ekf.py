@@ -16,8 +16,14 @@ chain, white yaw acceleration (``yaw_acc_psd`` [rad^2/s^3]) on (yaw, yaw_rate), 
 small position random walk (``pos_psd`` [m^2/s]) for what CTRA does not model (slip,
 lane changes at constant yaw rate, GNSS wander).
 
-Updates (all scalar, sequential; R diagonal): GNSS x and y; IMU yaw rate; IMU
-longitudinal acceleration ax (= a); IMU yaw when finite (innovation wrapped to
+Sensor biases: two more states, the accelerometer's longitudinal bias ``b_a`` [m/s^2]
+(mounting pitch and gravity leakage: the comma2k19 segment's accelerometer reads about
+-0.57 m/s^2 on average while the truth accelerates at +0.06) and the gyro's yaw-rate
+bias ``b_w`` [rad/s], each a slow random walk (``accel_bias_psd``, ``gyro_bias_psd``).
+They are observable through the GNSS and wheel-speed updates.
+
+Updates (all scalar, sequential; R diagonal): GNSS x and y; IMU yaw rate (= yaw_rate +
+b_w); IMU longitudinal acceleration ax (= a + b_a); IMU yaw when finite (innovation wrapped to
 [-pi, pi)); wheel/CAN speed (= v). Missing values (NaN) skip their update.
 
 Initialisation: at a fix when an IMU yaw is known (speed from the wheel speed when
@@ -42,7 +48,8 @@ from predictors.base import Predictor
 
 NAN2 = (math.nan, math.nan)
 SERIES_LIMIT = 0.05  # |w T| below which the integrals use their Taylor series
-IX, IY, IYAW, IV, IW, IA = range(6)
+IX, IY, IYAW, IV, IW, IA, IBA, IBW = range(8)
+N_STATE = 8
 
 
 def ctra_integrals(w: float, T: float) -> tuple[float, float, float, float, float, float]:
@@ -88,7 +95,7 @@ def ctra_displacement(yaw: float, v: float, w: float, a: float, T: float) -> tup
 
 
 def ctra_step(x: np.ndarray, T: float, F: np.ndarray) -> None:
-    """Advance the state x (6,) by T [s] in place and write the Jacobian into F (6x6).
+    """Advance the state x (first 6 entries) by T [s] in place; write the Jacobian into F.
 
     F must hold the identity outside rows 0-3's model entries (it is fully rewritten there).
     """
@@ -120,7 +127,7 @@ def ctra_step(x: np.ndarray, T: float, F: np.ndarray) -> None:
 
 def ctra_process_noise(yaw: float, T: float, jerk_psd: float, yaw_acc_psd: float,
                        pos_psd: float, out: np.ndarray) -> np.ndarray:
-    """Fill ``out`` (6x6) with the discretised process noise over T [s] at heading yaw."""
+    """Fill ``out`` (zeroed; motion block 6x6) with the process noise over T [s] at heading yaw."""
     out.fill(0.0)
     T2 = T * T
     T3 = T2 * T
@@ -168,7 +175,9 @@ class CtraEkf(Predictor):
                  gps_sigma: float = 0.3, yaw_rate_sigma: float = 0.02, accel_sigma: float = 0.3,
                  yaw_sigma: float = 0.05, speed_sigma: float = 0.2, speed_rel_sigma: float = 0.03,
                  use_imu_yaw: bool = True,
-                 use_speed: bool = True, init_vel_sigma: float = 15.0) -> None:
+                 use_speed: bool = True, init_vel_sigma: float = 15.0,
+                 accel_bias_psd: float = 1e-3, gyro_bias_psd: float = 1e-6,
+                 accel_bias_sigma0: float = 0.5, gyro_bias_sigma0: float = 0.01) -> None:
         check_config("ekf", jerk_psd=(jerk_psd, 1e-9, 1e6), yaw_acc_psd=(yaw_acc_psd, 1e-12, 1e6),
                      pos_psd=(pos_psd, 0.0, 1e6), gps_sigma=(gps_sigma, 1e-4, 1e3),
                      yaw_rate_sigma=(yaw_rate_sigma, 1e-6, 1e3),
@@ -187,15 +196,19 @@ class CtraEkf(Predictor):
         self.use_imu_yaw = bool(use_imu_yaw)
         self.use_speed = bool(use_speed)
         self.init_vel_sigma = float(init_vel_sigma)
+        self.accel_bias_psd = float(accel_bias_psd)
+        self.gyro_bias_psd = float(gyro_bias_psd)
+        self.accel_bias_sigma0 = float(accel_bias_sigma0)
+        self.gyro_bias_sigma0 = float(gyro_bias_sigma0)
         self._r_gps = self.gps_sigma ** 2
         self._r_w = self.yaw_rate_sigma ** 2
         self._r_a = self.accel_sigma ** 2
         self._r_yaw = self.yaw_sigma ** 2
         self._r_v = self.speed_sigma ** 2
-        self.x = np.zeros(6)
-        self.P = np.eye(6)
-        self._F = np.eye(6)
-        self._Q = np.zeros((6, 6))
+        self.x = np.zeros(N_STATE)
+        self.P = np.eye(N_STATE)
+        self._F = np.eye(N_STATE)
+        self._Q = np.zeros((N_STATE, N_STATE))
         self.reset()
 
     def config(self) -> dict:
@@ -205,23 +218,26 @@ class CtraEkf(Predictor):
                 "yaw_sigma": self.yaw_sigma, "speed_sigma": self.speed_sigma,
                 "speed_rel_sigma": self.speed_rel_sigma,
                 "use_imu_yaw": self.use_imu_yaw, "use_speed": self.use_speed,
-                "init_vel_sigma": self.init_vel_sigma}
+                "init_vel_sigma": self.init_vel_sigma, "accel_bias_psd": self.accel_bias_psd,
+                "gyro_bias_psd": self.gyro_bias_psd, "accel_bias_sigma0": self.accel_bias_sigma0,
+                "gyro_bias_sigma0": self.gyro_bias_sigma0}
 
     def reset(self) -> None:
         self._ready = False
         self._ts = math.nan
-        self._s = [math.nan] * 6  # plain-float copy of the mean
+        self._s = [math.nan] * N_STATE  # plain-float copy of the mean
         self._fix = (math.nan, math.nan, math.nan)  # newest fix before initialisation
         self._yaw_meas = math.nan  # latest IMU yaw before initialisation
         self._speed_meas = math.nan
         self.x.fill(0.0)
-        self.P[:] = np.eye(6)
+        self.P[:] = np.eye(N_STATE)
 
     # -- filter core ---------------------------------------------------------------
     def _init(self, t: float, x: float, y: float, yaw: float, v: float,
               var_yaw: float, var_v: float) -> None:
-        self.x[:] = (x, y, wrap_angle(yaw), v, 0.0, 0.0)
-        self.P[:] = np.diag([self._r_gps, self._r_gps, var_yaw, var_v, 0.3 ** 2, 2.0 ** 2])
+        self.x[:] = (x, y, wrap_angle(yaw), v, 0.0, 0.0, 0.0, 0.0)
+        self.P[:] = np.diag([self._r_gps, self._r_gps, var_yaw, var_v, 0.3 ** 2, 2.0 ** 2,
+                             self.accel_bias_sigma0 ** 2, self.gyro_bias_sigma0 ** 2])
         self._ts = t
         self._ready = True
         self._s = self.x.tolist()
@@ -234,6 +250,8 @@ class CtraEkf(Predictor):
         ctra_step(self.x, T, F)
         Q = ctra_process_noise(self._s[IYAW], T, self.jerk_psd, self.yaw_acc_psd,
                                self.pos_psd, self._Q)
+        Q[IBA, IBA] = self.accel_bias_psd * T
+        Q[IBW, IBW] = self.gyro_bias_psd * T
         P = F @ self.P @ F.T
         P += Q
         P += P.T
@@ -253,6 +271,16 @@ class CtraEkf(Predictor):
         P -= np.outer(K, P[j, :])
         if j == IYAW or angle:
             self.x[IYAW] = wrap_angle(self.x[IYAW])
+
+    def _update_sum(self, j: int, k: int, z: float, r: float) -> None:
+        """Scalar update with measurement z = x[j] + x[k] (a signal plus its sensor bias)."""
+        P = self.P
+        innov = z - self.x[j] - self.x[k]
+        ph = P[:, j] + P[:, k]
+        s = ph[j] + ph[k] + r
+        K = ph / s
+        self.x += K * innov
+        P -= np.outer(K, ph)
 
     # -- observations ----------------------------------------------------------------
     def observe_gps(self, t: float, x: float, y: float) -> None:
@@ -291,9 +319,9 @@ class CtraEkf(Predictor):
             return
         self._predict_to(t)
         if math.isfinite(yaw_rate):
-            self._update(IW, yaw_rate, self._r_w)
+            self._update_sum(IW, IBW, yaw_rate, self._r_w)
         if math.isfinite(ax):
-            self._update(IA, ax, self._r_a)
+            self._update_sum(IA, IBA, ax, self._r_a)
         if self.use_imu_yaw and math.isfinite(yaw):
             self._update(IYAW, yaw, self._r_yaw, angle=True)
         self._s = self.x.tolist()
@@ -313,7 +341,7 @@ class CtraEkf(Predictor):
         if not self._ready:
             _, x, y = self._fix
             return (x, y) if x == x else NAN2
-        x, y, yaw, v, w, a = self._s
+        x, y, yaw, v, w, a = self._s[:6]
         T = t - self._ts
         if not T > 0.0:
             return x, y
