@@ -39,7 +39,9 @@ class UsageError(Exception):
 
 
 def _fail(msg: str) -> typer.Exit:
-    err_console.print(f"[bold red]error:[/] {msg}", highlight=False, soft_wrap=True)
+    from rich.markup import escape  # "posbench[ray]" is text, not markup
+
+    err_console.print(f"[bold red]error:[/] {escape(msg)}", highlight=False, soft_wrap=True)
     return typer.Exit(2)
 
 
@@ -115,15 +117,33 @@ def run(
     rerun: Annotated[Path | None, typer.Option(
         "--rerun", help="Also write a rerun recording (.rrd) of every drive (needs the viz extra; "
         "open it with `bench view FILE.rrd`).")] = None,
+    executor: Annotated[str, typer.Option(
+        help="Where to run: local (processes, --workers) or ray (one Ray task per drive and "
+             "predictor; needs the ray extra).")] = "local",
+    address: Annotated[str | None, typer.Option(
+        help="Ray cluster to use with --executor ray (e.g. ray://head:10001 or auto); default: "
+             "start a local Ray instance with --workers CPUs.")] = None,
+    gate: Annotated[bool, typer.Option(
+        "--gate/--no-gate", help="GPS outlier gate: drop fixes implying impossible motion before "
+        "the predictors see them (counted in the report). --no-gate: the paper's ungated input.")
+    ] = True,
 ) -> None:
     """Replay drives through predictors and write report.md, results.json, traces and plots.
 
     Example: bench run --predictors lstm,kf --data ../shared/data/kitti_raw
     """
     from bench.config import GPS_PROFILES, RunConfig
+    from bench.executors import EXECUTORS, RAY_MISSING, ExecutorError, ray_available
+    from bench.fetch import local_paths
     from predictors.registry import available
 
     try:
+        if executor not in EXECUTORS:
+            raise UsageError(f"--executor must be one of {', '.join(EXECUTORS)}")
+        if address and executor != "ray":
+            raise UsageError("--address is for --executor ray")
+        if executor == "ray" and not ray_available():
+            raise UsageError(RAY_MISSING)
         names = tuple(p.strip() for p in predictors.split(",") if p.strip())
         unknown = [n for n in names if n not in available()]
         if unknown:
@@ -137,32 +157,35 @@ def run(
                              "(e.g. ../shared/models/authors/gps_interpolation_model2.onnx)")
         cfg = RunConfig(predictors=names, horizon_s=horizon, gps_profile=gps_profile,
                         gps_latency_s=gps_latency, dropouts=dropouts, seed=seed,
-                        exclude_poor_truth=not include_poor_truth, predictor_options=options)
+                        exclude_poor_truth=not include_poor_truth, predictor_options=options,
+                        gate=gate)
         if rerun is not None:
             try:
                 import rerun as _rr  # noqa: F401
             except ImportError:
                 raise UsageError("--rerun needs the viz extra: pip install 'posbench[viz]'") from None
-        drives = _load_drives(data, projection, _parse_topics(topic), seed=seed)
-        _run(drives, cfg, data, out, workers, rerun)
-    except (DataError, UsageError) as e:
+        with local_paths(data) as data:  # fsspec URLs -> local copies for the loaders
+            drives = _load_drives(data, projection, _parse_topics(topic), seed=seed)
+            _run(drives, cfg, data, out, workers, rerun, executor, address)
+    except (DataError, UsageError, ExecutorError) as e:
         raise _fail(str(e)) from None
 
 
-def _run(drives, cfg, data, out: Path, workers: int, rerun: Path | None = None) -> None:
+def _run(drives, cfg, data, out: Path, workers: int, rerun: Path | None = None,
+         executor: str = "local", address: str | None = None) -> None:
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
     from rich.table import Table
 
+    from bench.executors import run_drives
     from bench.report import SUMMARY_HEADER, summary_rows, write_report
     from bench.results import aggregate, all_traces, tree_hash
-    from bench.runner import run as run_drives
 
     command = "bench " + " ".join(shlex.quote(a) for a in sys.argv[1:])
     with Progress(TextColumn("[bold]{task.description}"), BarColumn(), MofNCompleteColumn(),
                   TimeElapsedColumn(), TextColumn("{task.fields[last]}"), console=console) as prog:
         task = prog.add_task(f"{len(drives)} drives x {len(cfg.predictors)} predictors",
                              total=len(drives), last="")
-        runs = run_drives(drives, cfg, workers=workers,
+        runs = run_drives(drives, cfg, executor, workers=workers, address=address,
                           on_done=lambda r: prog.update(task, advance=1, last=r.name))
     manifest = ([tree_hash(p) for p in data] if data else
                 [{"path": "built-in synthetic drives", "files": 0, "bytes": 0,

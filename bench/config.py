@@ -30,6 +30,10 @@ class RunConfig:
         use_tuned: start from the tuned parameters of ``predictors/tuned.json`` for the drive's
             GPS condition (``bench tune`` writes them); False = the predictors' physical defaults.
         predictor_options: per-predictor constructor overrides, e.g. ``{"lstm-authors": {"model": p}}``.
+        gate: put every predictor behind the GPS outlier gate (:class:`predictors.gate.FixGate`,
+            default limits): a fix implying impossible motion is dropped before the predictor
+            sees it (bridged like a missing fix) and counted. False = the paper's ungated
+            behaviour. Scoring is unaffected: the reference is never gated.
     """
 
     predictors: tuple[str, ...] = ("cv", "kf")
@@ -43,6 +47,7 @@ class RunConfig:
     exclude_poor_truth: bool = True
     use_tuned: bool = True
     predictor_options: dict[str, dict[str, Any]] = field(default_factory=dict)
+    gate: bool = True
 
     def to_dict(self) -> dict[str, Any]:
         d = asdict(self)

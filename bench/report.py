@@ -169,6 +169,7 @@ def render_markdown(res: dict[str, Any], plots: list[str]) -> str:
                            _fmt_m(sc["fde_p95_m"]), _fmt_m(sc["miss_rate"], 2)])
         lines += [_table(["predictor"] + [f"{c} after fix" for c in cps]
                          + ["outages", "ADE [m]", "FDE [m]", "FDE p95 [m]", "miss rate"], rows), ""]
+    lines += gate_lines(res)
     lines += ["## Drives", ""]
     preds = list(res["predictors"])
     rows = []
@@ -194,6 +195,32 @@ def render_markdown(res: dict[str, Any], plots: list[str]) -> str:
     lines += ["## Data", ""] + [f"- `{m['path']}`: {m['files']} files, {m['bytes']} bytes, "
                                 f"sha256 `{m['sha256'][:16]}...`" for m in res["data"]] + [""]
     return "\n".join(lines)
+
+
+def gate_lines(res: dict[str, Any]) -> list[str]:
+    """The "GPS outlier gate" section: fixes rejected per predictor, and per drive."""
+    gate = res.get("gate")
+    if not gate:
+        return []
+    lines = ["## GPS outlier gate: fixes rejected per predictor", ""]
+    if not gate.get("enabled"):
+        return lines + ["Off (`--no-gate`): every fix reached the predictors, as in the paper.", ""]
+    lines += ["A fix implying impossible motion (speed > 60 m/s, or a miss of the constant-velocity "
+              "prediction beyond 15 m/s^2 of acceleration plus 4 sigma of fix noise; a repeated "
+              "stale fix while moving) is dropped before the predictor and bridged like a "
+              "missing fix. Scores still use the ungated reference.", ""]
+    rows = [[p, str(g["rejected"]), str(g["fixes_fed"]),
+             _fmt_m(100.0 * g["rejected"] / g["fixes_fed"] if g["fixes_fed"] else float("nan"), 2),
+             str(g["drives_with_rejections"])] for p, g in gate["predictors"].items()]
+    lines += [_table(["predictor", "rejected", "fixes fed", "rejected [%]", "drives with rejections"],
+                     rows), ""]
+    per_drive = [d for d in res["drives"] if any(d.get("rejected", {}).values())]
+    if per_drive:
+        preds = list(gate["predictors"])
+        lines += [_table(["drive", "fixes fed"] + [f"{p} rejected" for p in preds],
+                         [[d["name"], str(d["gps_fed"])]
+                          + [str(d["rejected"].get(p, 0)) for p in preds] for d in per_drive]), ""]
+    return lines
 
 
 def write_plots(traces: pd.DataFrame, res: dict[str, Any], out: Path) -> list[Path]:

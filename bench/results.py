@@ -171,9 +171,25 @@ def aggregate(runs: Sequence[DriveRun], cfg: RunConfig, data_manifest: list[dict
                              "duration_s": r.duration_s, "gps_fed": r.gps_count,
                              "notes": r.notes, "warnings": r.warnings, "skipped": r.skipped,
                              "lstm_trained_on": r.name in trained_on,
+                             "rejected": dict(r.rejected),
                              "predictors": {}}
         if not r.traces.empty:
             for name in preds:
                 d["predictors"][name] = _kind_summaries(r.traces[r.traces["predictor"] == name])
         res["drives"].append(d)
+    res["gate"] = gate_summary(runs, cfg)
     return res
+
+
+def gate_summary(runs: Sequence[DriveRun], cfg: RunConfig) -> dict[str, Any]:
+    """The GPS outlier gate's totals: per predictor, fixes rejected, fixes fed and drives
+    with at least one rejection (empty when the run was ungated)."""
+    out: dict[str, Any] = {"enabled": bool(cfg.gate), "predictors": {}}
+    if not cfg.gate:
+        return out
+    fed = sum(r.gps_count for r in runs if not r.skipped)
+    for name in cfg.predictors:
+        counts = [r.rejected.get(name, 0) for r in runs if not r.skipped]
+        out["predictors"][name] = {"rejected": int(sum(counts)), "fixes_fed": int(fed),
+                                   "drives_with_rejections": int(sum(c > 0 for c in counts))}
+    return out

@@ -17,6 +17,7 @@ from bench.prepare import PreparedDrive, prepare_drive
 from bench.replay import replay
 from metrics.accuracy import euclidean_error
 from metrics.outages import outage_ids
+from predictors.gate import GatedPredictor
 from predictors.registry import create
 from scenarios.drive import Drive
 
@@ -39,6 +40,7 @@ class DriveRun:
     duration_s: float = 0.0
     fixes: pd.DataFrame | None = None  # t, x, y, received (False = removed by dropouts)
     track: pd.DataFrame | None = None  # t, x, y of the reference (truth or fix cubic), 10 Hz
+    rejected: dict[str, int] = field(default_factory=dict)  # fixes the outlier gate dropped
 
 
 def _fixes_frame(prep: PreparedDrive) -> pd.DataFrame:
@@ -78,11 +80,15 @@ def run_drive(drive: Drive, cfg: RunConfig) -> DriveRun:
         return DriveRun(drive.name, drive.meta.format, "", [], list(drive.meta.warnings),
                         pd.DataFrame(), skipped="poor truth accuracy (median > 1 m)")
     prep = prepare_drive(drive, cfg)
-    frames, step_ns, query_ns = [], {}, {}
+    frames, step_ns, query_ns, rejected = [], {}, {}, {}
     condition = gps_condition(cfg, drive.truth is not None) if cfg.use_tuned else None
     for name in cfg.predictors:
         pred = create(name, condition, **cfg.predictor_options.get(name, {}))
+        if cfg.gate:
+            pred = GatedPredictor(pred)
         res = replay(pred, prep, cfg.horizon_s)
+        if cfg.gate:
+            rejected[name] = pred.rejected
         frames.append(_trace_frame(prep, name, "future", prep.future, res.future_xy))
         frames.append(_trace_frame(prep, name, "now", prep.now, res.now_xy))
         step_ns[name] = res.step_ns
@@ -90,7 +96,8 @@ def run_drive(drive: Drive, cfg: RunConfig) -> DriveRun:
     traces = pd.concat(frames, ignore_index=True) if frames else pd.DataFrame()
     return DriveRun(drive.name, prep.dataset, prep.reference, prep.notes, list(drive.meta.warnings),
                     traces, step_ns, query_ns, prep.outages, gps_count=len(prep.gps),
-                    duration_s=drive.duration_s, fixes=_fixes_frame(prep), track=_track_frame(prep))
+                    duration_s=drive.duration_s, fixes=_fixes_frame(prep), track=_track_frame(prep),
+                    rejected=rejected)
 
 
 def _init_worker() -> None:

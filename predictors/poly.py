@@ -6,7 +6,10 @@ newest fixes covering at least ``span_s`` seconds (paper: "at least a 2-second
 interval", about 10 fixes at 5 Hz). It is refitted on each fix, so a query costs
 one Horner evaluation. With fewer than ``min_points`` fixes it falls back to
 constant velocity from the last two fixes. Extrapolation is not capped: that is
-the paper's method. At standstill (latest wheel/CAN speed below ``stop_speed``,
+the paper's method, up to ``extrapolate_s`` seconds after the newest fix; beyond (a
+long GPS outage) the position continues in a straight line with the cubic's velocity at
+that point, since a cubic extrapolated for tens of seconds grows as t^3 (hundreds of
+metres, at "speeds" above any car's). At standstill (latest wheel/CAN speed below ``stop_speed``,
 paper: 0.15 km/h) the newest fix is held, as the paper does, because a cubic
 through static noisy points extrapolates noise. Units: s, m (ENU), m/s.
 """
@@ -31,24 +34,29 @@ class PolyExtrapolator(Predictor):
         min_points: fewer fixes than this -> constant-velocity fallback (>= 4 for a cubic).
         max_points: cap on the number of fixes in a fit (high-rate GNSS).
         stop_speed: speed [m/s] below which the vehicle is taken as stationary.
+        extrapolate_s: the cubic is extrapolated this long [s] after the newest fix, then
+            continued linearly (``inf``: never, the paper's uncapped cubic).
     """
 
     name = "poly"
 
     def __init__(self, span_s: float = 2.0, min_points: int = 4, max_points: int = 50,
-                 stop_speed: float = 0.15 * KMH) -> None:
+                 stop_speed: float = 0.15 * KMH, extrapolate_s: float = 2.0) -> None:
         check_config("poly", span_s=(span_s, 0.0, 60.0), min_points=(min_points, 4, 1000),
-                     max_points=(max_points, min_points, 1000), stop_speed=(stop_speed, 0.0, 10.0))
+                     max_points=(max_points, min_points, 1000), stop_speed=(stop_speed, 0.0, 10.0),
+                     extrapolate_s=(extrapolate_s, 0.0, math.inf))
         self.span_s = float(span_s)
         self.min_points = int(min_points)
         self.max_points = int(max_points)
         self.stop_speed = float(stop_speed)
+        self.extrapolate_s = float(extrapolate_s)
         self._buf = FixBuffer(max(64, 2 * self.max_points))
         self.reset()
 
     def config(self) -> dict:
         return {"span_s": self.span_s, "min_points": self.min_points,
-                "max_points": self.max_points, "stop_speed": self.stop_speed}
+                "max_points": self.max_points, "stop_speed": self.stop_speed,
+                "extrapolate_s": self.extrapolate_s}
 
     def reset(self) -> None:
         self._buf.clear()
@@ -97,8 +105,16 @@ class PolyExtrapolator(Predictor):
         if not self._cubic:
             dt = t - self._t
             return self._x + self._vx * dt, self._y + self._vy * dt
-        s = (t - self._t_ref) * self._inv_scale
         cx, cy = self._cx, self._cy
+        t_cap = self._t + self.extrapolate_s
+        if t > t_cap:  # long outage: straight on from the cubic at t_cap
+            s = (t_cap - self._t_ref) * self._inv_scale
+            ds = (t - t_cap) * self._inv_scale
+            return (((cx[3] * s + cx[2]) * s + cx[1]) * s + cx[0]
+                    + ((3 * cx[3] * s + 2 * cx[2]) * s + cx[1]) * ds,
+                    ((cy[3] * s + cy[2]) * s + cy[1]) * s + cy[0]
+                    + ((3 * cy[3] * s + 2 * cy[2]) * s + cy[1]) * ds)
+        s = (t - self._t_ref) * self._inv_scale
         return (((cx[3] * s + cx[2]) * s + cx[1]) * s + cx[0],
                 ((cy[3] * s + cy[2]) * s + cy[1]) * s + cy[0])
 

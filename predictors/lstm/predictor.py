@@ -36,7 +36,7 @@ from pathlib import Path
 import numpy as np
 
 from predictors.base import Predictor
-from predictors.lstm.features import features_one, gps_substitute_imu
+from predictors.lstm.features import FRAMES, features_one, gps_substitute_imu
 from predictors.lstm.resample import (
     ACCEL_GLITCH,
     DT,
@@ -53,9 +53,13 @@ from scenarios.errors import DataError
 
 STILL_SPEED_MPS = 0.15 / 3.6
 MAX_BRIDGE_STEPS = 1500
+#: a real fix this long [s] after the previous real one restarts the fix history: the
+#: bridging pseudo-fixes of a long outage (metres off by then) must not shape the new fit
+RESTART_GAP_S = 5.0
 FIX_CAP = 512
 IMU_CAP = 8192
 FITS = ("closed", "lbfgs")
+N_FEATURES = 6
 
 
 def bundled_model() -> Path:
@@ -75,6 +79,24 @@ def load_model_info(onnx_path: Path) -> dict:
     if info.get("format") != "posbench-lstm":
         raise DataError(js, "not a posbench-lstm model description (key 'format')")
     return info
+
+
+def _check_model(onnx_path: Path, info: dict, net: OnnxModel) -> None:
+    """model.json and the network must both match the features this predictor builds
+    (frame, window of N_STEPS x 6): a one-line :class:`DataError` naming the file if not."""
+    js = onnx_path.with_suffix(".json")
+    if info.get("frame", "heading") not in FRAMES:
+        raise DataError(js, f"unknown frame {info.get('frame')!r} (key 'frame'; known: "
+                            f"{', '.join(FRAMES)})")
+    want = [N_STEPS, N_FEATURES]
+    declared = info.get("input_shape")
+    if declared is not None and list(declared)[1:] != want:
+        raise DataError(js, f"input_shape {declared} does not match the features "
+                            f"[batch, {N_STEPS}, {N_FEATURES}]")
+    got = list(net.input_shape)[1:]
+    if len(got) != 2 or any(isinstance(g, int) and g != w for g, w in zip(got, want, strict=True)):
+        raise DataError(onnx_path, f"network input shape {net.input_shape} does not match the "
+                                   f"features [batch, {N_STEPS}, {N_FEATURES}]")
 
 
 class _Buf:
@@ -116,6 +138,7 @@ class LstmPredictor(Predictor):
         self.frame = self.info.get("frame", "heading")
         self.fit = fit
         self.net = OnnxModel(self.model_path, output=self.info.get("output"))
+        _check_model(self.model_path, self.info, self.net)
         self._init_buffers()
 
     def _init_buffers(self) -> None:
@@ -133,6 +156,7 @@ class LstmPredictor(Predictor):
     # ------------------------------------------------------------------ state
     def reset(self) -> None:
         self._fix = _Buf(FIX_CAP, 3)        # t, x, y (real fixes and bridging pseudo-fixes)
+        self._t_real = math.nan             # time of the newest real fix
         self._imu = _Buf(IMU_CAP, 4)        # t, ax, ay, yaw (unwrapped, NaN if unknown)
         self._yaw_raw = math.nan
         self._yaw_u = math.nan
@@ -175,6 +199,9 @@ class LstmPredictor(Predictor):
         if not (math.isfinite(x) and math.isfinite(y)):
             return
         fb = self._fix
+        if t - self._t_real > RESTART_GAP_S:
+            fb.n = 0  # a long outage ends: start afresh from this fix (line, then cubic)
+        self._t_real = t
         # a pseudo-fix at or after this time (bridging) gives way to the real fix
         while fb.n and fb.a[fb.n - 1, 0] >= t:
             fb.n -= 1
@@ -306,7 +333,7 @@ class LstmPredictor(Predictor):
 
     def position_at(self, t: float) -> tuple[float, float]:
         if self._stationary():
-            if self._hold is None:
+            if self._hold is None or self._hold[0] != self._hold[0]:  # never hold "unknown"
                 self._hold = self._estimate(t)
             return self._hold
         self._hold = None

@@ -104,8 +104,12 @@ def _fix_rows(windows: list[tuple[Any, dict]], path: Path) -> tuple[np.ndarray, 
     """All windows' fixes concatenated: stamps [int ns] (n,), positions [m] (n, 2)."""
     ts, ps = [], []
     for k, w in windows:
-        t = np.asarray(w["tstamps"], dtype=np.int64).reshape(-1)
-        p = np.asarray(w["ground_truth"], dtype=float)
+        try:
+            t = np.asarray(w["tstamps"], dtype=np.int64).reshape(-1)
+            p = np.asarray(w["ground_truth"], dtype=float)
+        except (TypeError, ValueError, OverflowError) as exc:
+            raise DataError(path, f"window {k!r}: tstamps / ground_truth are not numbers "
+                                  f"({type(exc).__name__}: {exc})") from None
         if p.ndim != 2 or p.shape != (t.size, 2):
             raise DataError(path, f"window {k!r}: ground_truth has shape {p.shape}, "
                                   f"expected ({t.size}, 2) to match tstamps")

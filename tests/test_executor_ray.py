@@ -1,0 +1,151 @@
+"""The Ray executor: same figures as the local executor, failures retried then reported.
+
+Needs Ray (``posbench[ray]``, part of ``dev``): skipped without it, but failing when CI is set.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+from dataclasses import fields, replace
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from bench.config import RunConfig
+from bench.executors import merge_predictor_runs, run_local, run_predictor, run_ray
+from bench.report import render_markdown
+from bench.results import aggregate, all_traces
+from bench.runner import DriveRun
+from predictors.registry import available
+from scenarios.synthetic import default_drives
+
+if os.environ.get("CI"):
+    import ray  # CI installs the dev extra, which has ray: the test must run there
+else:
+    ray = pytest.importorskip("ray")
+
+pytestmark = pytest.mark.slow  # each Ray start costs ~5 s; the whole file runs in ~45 s
+
+CFG = RunConfig(predictors=("cv", "kf"))
+LATENCY = ("latency_us", "query_us")
+
+
+def error_figures(res: dict) -> str:
+    """results.json without what may differ between executors (latencies, command, versions),
+    as canonical JSON text: exact floats, and NaN (empty groups) compares equal to NaN."""
+    preds = {p: {k: v for k, v in e.items() if k not in LATENCY} for p, e in res["predictors"].items()}
+    keep = {"predictors": preds, **{k: res[k] for k in ("by_dataset", "by_label", "by_speed",
+                                                        "outages", "drives", "config")}}
+    return json.dumps(keep, sort_keys=True, default=float)
+
+
+@pytest.fixture(scope="module")
+def drives():
+    return default_drives(seed=0)[:2]
+
+
+@pytest.fixture(scope="module")
+def ray_session():
+    """One local Ray instance for the tests below; run_ray uses it and leaves it running."""
+    ray.init(num_cpus=2, include_dashboard=False, log_to_driver=False, ignore_reinit_error=True)
+    yield
+    ray.shutdown()
+
+
+class ExplodingExtra(dict):
+    """Drive metadata that makes run_drive raise (it asks for ``truth_poor``), counting the
+    attempts in a file. Sent to Ray workers by value (they cannot import this module)."""
+
+    def get(self, key, default=None):
+        if key == "truth_poor":
+            with open(self["attempts_file"], "a") as f:
+                f.write("attempt\n")
+            raise RuntimeError("corrupt recording")
+        return super().get(key, default)
+
+
+def test_merge_matches_run_drive(drives):
+    """Per-predictor parts merged == one run_drive with every predictor (no Ray needed)."""
+    whole = run_local(drives[:1], CFG, workers=1)[0]
+    parts = [run_predictor(drives[0], CFG, n, {n: available()[n]}) for n in CFG.predictors]
+    merged = merge_predictor_runs(parts)
+    for f in fields(DriveRun):
+        a, b = getattr(merged, f.name), getattr(whole, f.name)
+        if isinstance(a, pd.DataFrame):
+            pd.testing.assert_frame_equal(a, b, check_exact=True)
+        elif f.name in ("step_ns", "query_ns"):  # timings: same calls, not the same durations
+            assert {k: len(v) for k, v in a.items()} == {k: len(v) for k, v in b.items()}
+            assert list(a) == list(CFG.predictors)
+        else:
+            assert a == b, f.name
+
+
+def test_cli_ray_equals_local(tmp_path):
+    """`bench run --executor ray` (its own local Ray instance) writes the same error figures
+    as `--executor local`; a missing Ray is one line naming the extra."""
+    outs = {}
+    for ex in ("local", "ray"):
+        outs[ex] = tmp_path / ex
+        r = subprocess.run([sys.executable, "-m", "bench.cli", "run", "-p", "cv,kf", "--workers", "2",
+                            "--executor", ex, "--out", str(outs[ex])],
+                           capture_output=True, text=True, timeout=240,
+                           env={**os.environ, "COLUMNS": "200"})
+        assert r.returncode == 0, r.stdout + r.stderr
+    res = {ex: json.loads((o / "results.json").read_text()) for ex, o in outs.items()}
+    assert len(res["ray"]["drives"]) == 4
+    assert error_figures(res["ray"]) == error_figures(res["local"])
+    assert res["ray"]["predictors"]["kf"]["latency_us"]["count"] == \
+        res["local"]["predictors"]["kf"]["latency_us"]["count"]
+    no_ray = ("import sys; sys.modules['ray'] = None; sys.argv = ['bench', 'run', '--executor', "
+              "'ray']; from bench.cli import main; main()")
+    r = subprocess.run([sys.executable, "-c", no_ray], capture_output=True, text=True, timeout=60)
+    assert r.returncode == 2 and "pip install 'posbench[ray]'" in r.stderr, r.stderr
+    assert "Traceback" not in r.stderr
+    r = subprocess.run([sys.executable, "-m", "bench.cli", "run", "--address", "auto"],
+                       capture_output=True, text=True, timeout=60)
+    assert r.returncode == 2 and "--address is for --executor ray" in r.stderr, r.stderr
+
+
+def test_ray_traces_identical_to_local(drives, ray_session):
+    local = run_local(drives, CFG, workers=2)
+    done = []
+    remote = run_ray(drives, CFG, on_done=lambda r: done.append(r.name))
+    assert ray.is_initialized()  # an existing session is used, not shut down
+    assert sorted(done) == sorted(d.name for d in drives)
+    assert [r.name for r in remote] == [d.name for d in drives]
+    for a, b in zip(local, remote, strict=True):
+        assert not b.skipped
+        pd.testing.assert_frame_equal(a.traces, b.traces, check_exact=True)
+        assert list(b.step_ns) == ["cv", "kf"] and len(b.step_ns["kf"]) == len(a.step_ns["kf"])
+    la, ra = (aggregate(runs, CFG, [], "test") for runs in (local, remote))
+    assert error_figures(ra) == error_figures(la)
+    assert np.array_equal(all_traces(remote)["error_m"].to_numpy(),
+                          all_traces(local)["error_m"].to_numpy(), equal_nan=True)
+
+
+def test_failed_task_retried_then_reported(drives, ray_session, tmp_path):
+    ray.cloudpickle.register_pickle_by_value(sys.modules[__name__])
+    attempts = tmp_path / "attempts.txt"
+    bad = drives[0]
+    broken = replace(bad, meta=replace(bad.meta, name="broken-drive",
+                                       extra=ExplodingExtra(attempts_file=str(attempts))))
+    runs = run_ray([broken, drives[1]], CFG, max_retries=1)
+    assert [r.name for r in runs] == ["broken-drive", drives[1].name]
+    # 2 predictor tasks x (1 try + 1 retry)
+    assert attempts.read_text().count("attempt") == 4
+    failed = runs[0]
+    assert failed.skipped and failed.skipped.startswith("worker failed: predictor cv: ")
+    assert "RuntimeError: corrupt recording" in failed.skipped and "2 attempts" in failed.skipped
+    assert failed.traces.empty
+    assert not runs[1].skipped and set(runs[1].traces["predictor"]) == {"cv", "kf"}
+    res = aggregate(runs, CFG, [], "test")
+    assert res["drives"][0]["skipped"] == failed.skipped
+    # the figures are those of the surviving drive alone: nothing of the failed one leaks in
+    assert json.dumps(res["predictors"], sort_keys=True) == json.dumps(
+        aggregate(runs[1:], CFG, [], "test")["predictors"], sort_keys=True)
+    md = render_markdown(res, [])
+    assert "| broken-drive |" in md and "skipped: worker failed" in md
