@@ -64,12 +64,16 @@ def _parse_topics(values: list[str] | None) -> dict[str, str] | None:
 
 
 def _load_drives(paths: list[Path] | None, projection: str, topics: dict[str, str] | None,
-                 seed: int = 0):
+                 seed: int = 0, synthetic_duration: float | None = None):
     from scenarios.loaders import iter_load
 
     if not paths:
-        from scenarios.synthetic import default_drives
+        from scenarios.synthetic import default_drives, generate_drive
 
+        if synthetic_duration is not None:
+            if not synthetic_duration > 1.0:
+                raise UsageError("--synthetic-duration must be more than 1 s")
+            return [generate_drive(seed=seed, route="mixed", duration_s=synthetic_duration)]
         return default_drives(seed=seed)
     drives = []
     with console.status("loading drives...") as status:
@@ -114,6 +118,9 @@ def run(
     projection: ProjectionOpt = "enu",
     include_poor_truth: Annotated[bool, typer.Option(
         help="Also score drives whose truth is poor (median accuracy > 1 m).")] = False,
+    synthetic_duration: Annotated[float | None, typer.Option(
+        help="Without --data: one synthetic mixed drive of this length [s] instead of the "
+             "built-in set (e.g. 36000 for a 10-hour soak test).")] = None,
     rerun: Annotated[Path | None, typer.Option(
         "--rerun", help="Also write a rerun recording (.rrd) of every drive (needs the viz extra; "
         "open it with `bench view FILE.rrd`).")] = None,
@@ -165,7 +172,8 @@ def run(
             except ImportError:
                 raise UsageError("--rerun needs the viz extra: pip install 'posbench[viz]'") from None
         with local_paths(data) as data:  # fsspec URLs -> local copies for the loaders
-            drives = _load_drives(data, projection, _parse_topics(topic), seed=seed)
+            drives = _load_drives(data, projection, _parse_topics(topic), seed=seed,
+                                  synthetic_duration=synthetic_duration)
             _run(drives, cfg, data, out, workers, rerun, executor, address)
     except (DataError, UsageError, ExecutorError) as e:
         raise _fail(str(e)) from None
