@@ -20,7 +20,10 @@ Sensor biases: two more states, the accelerometer's longitudinal bias ``b_a`` [m
 (mounting pitch and gravity leakage: the comma2k19 segment's accelerometer reads about
 -0.57 m/s^2 on average while the truth accelerates at +0.06) and the gyro's yaw-rate
 bias ``b_w`` [rad/s], each a slow random walk (``accel_bias_psd``, ``gyro_bias_psd``).
-They are observable through the GNSS and wheel-speed updates.
+Two more calibrate the absolute sensors against the GNSS track: an IMU yaw offset ``b_y``
+[rad] (heading sensors disagree with the track by up to ~0.1 rad on KITTI) and a wheel-
+speed scale error ``k_v`` (KITTI's vf reads ~2.5 % high), with IMU yaw = yaw + b_y and
+wheel speed = (1 + k_v) v. All four are observable through the GNSS updates.
 
 Updates (all scalar, sequential; R diagonal): GNSS x and y; IMU yaw rate (= yaw_rate +
 b_w); IMU longitudinal acceleration ax (= a + b_a); IMU yaw when finite (innovation wrapped to
@@ -48,8 +51,8 @@ from predictors.base import Predictor
 
 NAN2 = (math.nan, math.nan)
 SERIES_LIMIT = 0.05  # |w T| below which the integrals use their Taylor series
-IX, IY, IYAW, IV, IW, IA, IBA, IBW = range(8)
-N_STATE = 8
+IX, IY, IYAW, IV, IW, IA, IBA, IBW, IBY, IKV = range(10)
+N_STATE = 10
 
 
 def ctra_integrals(w: float, T: float) -> tuple[float, float, float, float, float, float]:
@@ -177,7 +180,9 @@ class CtraEkf(Predictor):
                  use_imu_yaw: bool = True,
                  use_speed: bool = True, init_vel_sigma: float = 15.0,
                  accel_bias_psd: float = 1e-3, gyro_bias_psd: float = 1e-6,
-                 accel_bias_sigma0: float = 0.5, gyro_bias_sigma0: float = 0.01) -> None:
+                 accel_bias_sigma0: float = 0.5, gyro_bias_sigma0: float = 0.01,
+                 yaw_offset_sigma0: float = 0.1, speed_scale_sigma0: float = 0.05,
+                 calib_psd: float = 1e-6) -> None:
         check_config("ekf", jerk_psd=(jerk_psd, 1e-9, 1e6), yaw_acc_psd=(yaw_acc_psd, 1e-12, 1e6),
                      pos_psd=(pos_psd, 0.0, 1e6), gps_sigma=(gps_sigma, 1e-4, 1e3),
                      yaw_rate_sigma=(yaw_rate_sigma, 1e-6, 1e3),
@@ -200,6 +205,9 @@ class CtraEkf(Predictor):
         self.gyro_bias_psd = float(gyro_bias_psd)
         self.accel_bias_sigma0 = float(accel_bias_sigma0)
         self.gyro_bias_sigma0 = float(gyro_bias_sigma0)
+        self.yaw_offset_sigma0 = float(yaw_offset_sigma0)
+        self.speed_scale_sigma0 = float(speed_scale_sigma0)
+        self.calib_psd = float(calib_psd)
         self._r_gps = self.gps_sigma ** 2
         self._r_w = self.yaw_rate_sigma ** 2
         self._r_a = self.accel_sigma ** 2
@@ -220,7 +228,9 @@ class CtraEkf(Predictor):
                 "use_imu_yaw": self.use_imu_yaw, "use_speed": self.use_speed,
                 "init_vel_sigma": self.init_vel_sigma, "accel_bias_psd": self.accel_bias_psd,
                 "gyro_bias_psd": self.gyro_bias_psd, "accel_bias_sigma0": self.accel_bias_sigma0,
-                "gyro_bias_sigma0": self.gyro_bias_sigma0}
+                "gyro_bias_sigma0": self.gyro_bias_sigma0,
+                "yaw_offset_sigma0": self.yaw_offset_sigma0,
+                "speed_scale_sigma0": self.speed_scale_sigma0, "calib_psd": self.calib_psd}
 
     def reset(self) -> None:
         self._ready = False
@@ -235,9 +245,10 @@ class CtraEkf(Predictor):
     # -- filter core ---------------------------------------------------------------
     def _init(self, t: float, x: float, y: float, yaw: float, v: float,
               var_yaw: float, var_v: float) -> None:
-        self.x[:] = (x, y, wrap_angle(yaw), v, 0.0, 0.0, 0.0, 0.0)
+        self.x[:] = (x, y, wrap_angle(yaw), v, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
         self.P[:] = np.diag([self._r_gps, self._r_gps, var_yaw, var_v, 0.3 ** 2, 2.0 ** 2,
-                             self.accel_bias_sigma0 ** 2, self.gyro_bias_sigma0 ** 2])
+                             self.accel_bias_sigma0 ** 2, self.gyro_bias_sigma0 ** 2,
+                             self.yaw_offset_sigma0 ** 2, self.speed_scale_sigma0 ** 2])
         self._ts = t
         self._ready = True
         self._s = self.x.tolist()
@@ -252,6 +263,7 @@ class CtraEkf(Predictor):
                                self.pos_psd, self._Q)
         Q[IBA, IBA] = self.accel_bias_psd * T
         Q[IBW, IBW] = self.gyro_bias_psd * T
+        Q[IBY, IBY] = Q[IKV, IKV] = self.calib_psd * T
         P = F @ self.P @ F.T
         P += Q
         P += P.T
@@ -278,6 +290,28 @@ class CtraEkf(Predictor):
         innov = z - self.x[j] - self.x[k]
         ph = P[:, j] + P[:, k]
         s = ph[j] + ph[k] + r
+        K = ph / s
+        self.x += K * innov
+        P -= np.outer(K, ph)
+
+    def _update_yaw_offset(self, z: float) -> None:
+        """IMU yaw z = yaw + b_y (innovation wrapped to [-pi, pi))."""
+        P = self.P
+        innov = wrap_angle(z - self.x[IYAW] - self.x[IBY])
+        ph = P[:, IYAW] + P[:, IBY]
+        s = ph[IYAW] + ph[IBY] + self._r_yaw
+        K = ph / s
+        self.x += K * innov
+        P -= np.outer(K, ph)
+        self.x[IYAW] = wrap_angle(self.x[IYAW])
+
+    def _update_speed(self, z: float, r: float) -> None:
+        """Wheel speed z = (1 + k_v) v: linearised scalar update."""
+        P = self.P
+        v, k = self.x[IV], self.x[IKV]
+        innov = z - (1.0 + k) * v
+        ph = (1.0 + k) * P[:, IV] + v * P[:, IKV]
+        s = (1.0 + k) * ph[IV] + v * ph[IKV] + r
         K = ph / s
         self.x += K * innov
         P -= np.outer(K, ph)
@@ -323,7 +357,7 @@ class CtraEkf(Predictor):
         if math.isfinite(ax):
             self._update_sum(IA, IBA, ax, self._r_a)
         if self.use_imu_yaw and math.isfinite(yaw):
-            self._update(IYAW, yaw, self._r_yaw, angle=True)
+            self._update_yaw_offset(yaw)
         self._s = self.x.tolist()
 
     def observe_speed(self, t: float, v: float) -> None:
@@ -333,7 +367,7 @@ class CtraEkf(Predictor):
             self._speed_meas = v
             return
         self._predict_to(t)
-        self._update(IV, v, self._r_v + (self.speed_rel_sigma * v) ** 2)
+        self._update_speed(v, self._r_v + (self.speed_rel_sigma * v) ** 2)
         self._s = self.x.tolist()
 
     # -- query -------------------------------------------------------------------------
