@@ -163,3 +163,25 @@ def test_authors_model_on_aslan_windows(authors_models_dir, aslan_dir) -> None:
         errs = np.array(errs)
         assert errs.size > 100 and np.isfinite(errs).all()
         assert np.median(errs) < 1.0 and np.percentile(errs, 90) < 2.0, (name, np.median(errs))
+
+
+def test_standstill_hold_follows_the_newest_fixes() -> None:
+    """At standstill (wheel speed 0) the held position is the mean of the newest fixes, so a
+    slow creep of the receiver (truth drift) is followed instead of a stale first estimate."""
+    p = LstmPredictor()
+    rng = np.random.default_rng(0)
+    t = 0.0
+    for _ in range(40):  # 8 s of driving at 5 m/s, then a stop
+        p.observe_imu(t, 0.0, 0.0, 0.0, 0.0)
+        p.observe_speed(t, 5.0)
+        p.observe_gps(t, 5.0 * t, 0.0)
+        t += 0.2
+    x_stop = 5.0 * (t - 0.2)
+    for k in range(100):  # 20 s at standstill while the fixes creep 0.5 m north
+        creep = 0.5 * k / 99
+        p.observe_speed(t, 0.0)
+        p.observe_gps(t, x_stop + rng.normal(0, 0.02), creep + rng.normal(0, 0.02))
+        x, y = p.position_at(t + 0.2)
+        t += 0.2
+    assert abs(x - x_stop) < 0.05
+    assert abs(y - 0.5) < 0.05  # the mean of the newest 5 fixes lags the creep by ~1 cm

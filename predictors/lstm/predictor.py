@@ -52,6 +52,7 @@ from predictors.lstm.runtime import OnnxModel
 from scenarios.errors import DataError
 
 STILL_SPEED_MPS = 0.15 / 3.6
+STILL_FIXES = 5  # fixes averaged for the standstill hold
 MAX_BRIDGE_STEPS = 1500
 #: a real fix this long [s] after the previous real one restarts the fix history: the
 #: bridging pseudo-fixes of a long outage (metres off by then) must not shape the new fit
@@ -164,6 +165,7 @@ class LstmPredictor(Predictor):
         self._can_v: float | None = None
         self._gps_v = math.nan
         self._hold: tuple[float, float] | None = None
+        self._still: list[tuple[float, float]] = []  # newest fixes received at standstill
         self._mode = "empty"                # empty | line | net
         self._t_end = math.nan
         self._grid = np.zeros((N_STEPS, 2))
@@ -198,6 +200,17 @@ class LstmPredictor(Predictor):
     def observe_gps(self, t: float, x: float, y: float) -> None:
         if not (math.isfinite(x) and math.isfinite(y)):
             return
+        if self._can_v is not None and abs(self._can_v) < STILL_SPEED_MPS:
+            # standstill (wheel speed): hold the mean of the newest fixes received while
+            # standing (noise / sqrt(n)), so the hold follows slow creep and the receiver
+            # rather than a stale extrapolation
+            st = self._still
+            st.append((x, y))
+            if len(st) > STILL_FIXES:
+                del st[0]
+            self._hold = (sum(p[0] for p in st) / len(st), sum(p[1] for p in st) / len(st))
+        else:
+            self._still.clear()
         fb = self._fix
         if t - self._t_real > RESTART_GAP_S:
             fb.n = 0  # a long outage ends: start afresh from this fix (line, then cubic)
