@@ -51,44 +51,74 @@ def build_events(prep: PreparedDrive) -> tuple[np.ndarray, np.ndarray]:
     return k[order], idx[order]
 
 
-def replay(predictor: Predictor, prep: PreparedDrive, horizon_s: float) -> ReplayResult:
-    """Feed every event to ``predictor`` in order; collect its answers and timings."""
-    d = prep.drive
-    kinds, idxs = build_events(prep)
-    gt, gx, gy = prep.gps.t.tolist(), prep.gps.x.tolist(), prep.gps.y.tolist()
-    if d.imu is not None:
-        n = len(d.imu)
-        nan = [float("nan")] * n
-        it, iax, iay = d.imu.t.tolist(), d.imu.ax.tolist(), d.imu.ay.tolist()
-        iyaw = d.imu.yaw.tolist() if d.imu.yaw is not None else nan
-        irate = d.imu.yaw_rate.tolist() if d.imu.yaw_rate is not None else nan
-    if d.speed is not None:
-        st, sv = d.speed.t.tolist(), d.speed.v.tolist()
-    qt = prep.now.t_query.tolist()
+#: events converted to Python floats at a time: memory stays bounded by this window,
+#: not by the drive's length
+CHUNK_EVENTS = 1 << 16
 
-    future = np.full((len(gt), 2), np.nan)
-    now = np.full((len(qt), 2), np.nan)
-    step_ns = np.zeros(len(gt), dtype=np.int64)
-    query_ns = np.zeros(len(qt), dtype=np.int64)
+
+def _columns(prep: PreparedDrive) -> dict[int, list[np.ndarray | None]]:
+    d = prep.drive
+    cols: dict[int, list[np.ndarray | None]] = {
+        GPS: [prep.gps.t, prep.gps.x, prep.gps.y], QUERY: [prep.now.t_query]}
+    if d.imu is not None:
+        cols[IMU] = [d.imu.t, d.imu.ax, d.imu.ay, d.imu.yaw, d.imu.yaw_rate]
+    if d.speed is not None:
+        cols[SPEED] = [d.speed.t, d.speed.v]
+    return cols
+
+
+def _window(cols: list[np.ndarray | None], sel: np.ndarray) -> tuple[int, list[list[float]]]:
+    """(offset, Python-float lists) of the index range ``sel`` covers in each column."""
+    if sel.size == 0:
+        return 0, [[] for _ in cols]
+    lo, hi = int(sel.min()), int(sel.max()) + 1
+    return lo, [c[lo:hi].tolist() if c is not None else [float("nan")] * (hi - lo) for c in cols]
+
+
+def replay(predictor: Predictor, prep: PreparedDrive, horizon_s: float) -> ReplayResult:
+    """Feed every event to ``predictor`` in order; collect its answers and timings.
+
+    Events are handled in windows of :data:`CHUNK_EVENTS`, converting only that window's
+    samples to Python floats (fast scalar access without holding a whole long drive as
+    Python objects)."""
+    kinds, idxs = build_events(prep)
+    cols = _columns(prep)
+    n_fix, n_now = len(prep.gps), prep.now.t_query.size
+    future = np.full((n_fix, 2), np.nan)
+    now = np.full((n_now, 2), np.nan)
+    step_ns = np.zeros(n_fix, dtype=np.int64)
+    query_ns = np.zeros(n_now, dtype=np.int64)
     clock = perf_counter_ns
     observe_gps, observe_imu = predictor.observe_gps, predictor.observe_imu
     observe_speed, position_at = predictor.observe_speed, predictor.position_at
     predictor.reset()
-    for k, i in zip(kinds.tolist(), idxs.tolist(), strict=True):
-        if k == IMU:
-            observe_imu(it[i], iax[i], iay[i], iyaw[i], irate[i])
-        elif k == GPS:
-            t = gt[i]
-            c0 = clock()
-            observe_gps(t, gx[i], gy[i])
-            p = position_at(t + horizon_s)
-            step_ns[i] = clock() - c0
-            future[i] = p
-        elif k == SPEED:
-            observe_speed(st[i], sv[i])
-        else:
-            c0 = clock()
-            p = position_at(qt[i])
-            query_ns[i] = clock() - c0
-            now[i] = p
+    for c in range(0, kinds.size, CHUNK_EVENTS):
+        kc, ic = kinds[c:c + CHUNK_EVENTS], idxs[c:c + CHUNK_EVENTS]
+        go, (gt, gx, gy) = _window(cols[GPS], ic[kc == GPS])
+        qo, (qt,) = _window(cols[QUERY], ic[kc == QUERY])
+        if IMU in cols:
+            io, (it, iax, iay, iyaw, irate) = _window(cols[IMU], ic[kc == IMU])
+        if SPEED in cols:
+            so, (st, sv) = _window(cols[SPEED], ic[kc == SPEED])
+        for k, i in zip(kc.tolist(), ic.tolist(), strict=True):
+            if k == IMU:
+                j = i - io
+                observe_imu(it[j], iax[j], iay[j], iyaw[j], irate[j])
+            elif k == GPS:
+                j = i - go
+                t = gt[j]
+                c0 = clock()
+                observe_gps(t, gx[j], gy[j])
+                p = position_at(t + horizon_s)
+                step_ns[i] = clock() - c0
+                future[i] = p
+            elif k == SPEED:
+                j = i - so
+                observe_speed(st[j], sv[j])
+            else:
+                j = i - qo
+                c0 = clock()
+                p = position_at(qt[j])
+                query_ns[i] = clock() - c0
+                now[i] = p
     return ReplayResult(future, now, step_ns, query_ns)

@@ -13,7 +13,7 @@ import numpy as np
 import pandas as pd
 
 from bench.config import RunConfig, gps_condition
-from bench.prepare import PreparedDrive, prepare_drive
+from bench.prepare import LABELS, PreparedDrive, prepare_drive
 from bench.replay import replay
 from metrics.accuracy import euclidean_error
 from metrics.outages import outage_ids
@@ -62,6 +62,12 @@ def _track_frame(prep: PreparedDrive) -> pd.DataFrame:
     return pd.DataFrame({"t": t, "x": xy[:, 0], "y": xy[:, 1]})
 
 
+#: fixed categories keep the string columns of long traces at one byte a row, also
+#: after concatenation (identical categories concatenate as categoricals)
+LABEL_CATEGORIES = [*LABELS, "unlabelled"]
+KIND_DTYPE = pd.CategoricalDtype(["future", "now"])
+
+
 def _trace_frame(prep: PreparedDrive, predictor: str, kind: str, q, xy: np.ndarray) -> pd.DataFrame:
     err = euclidean_error(xy, q.ref_xy)
     outage = outage_ids(q.t_query, prep.outages)
@@ -69,9 +75,9 @@ def _trace_frame(prep: PreparedDrive, predictor: str, kind: str, q, xy: np.ndarr
         "dataset": prep.dataset, "drive": prep.drive.name, "predictor": predictor, "kind": kind,
         "t_issue": q.t_issue, "t_query": q.t_query,
         "x": xy[:, 0], "y": xy[:, 1], "x_ref": q.ref_xy[:, 0], "y_ref": q.ref_xy[:, 1],
-        "error_m": err, "label": q.label, "speed_mps": q.speed_mps, "since_fix_s": q.since_fix_s,
-        "outage": outage,
-    })
+        "error_m": err, "label": pd.Categorical(q.label, categories=LABEL_CATEGORIES),
+        "speed_mps": q.speed_mps, "since_fix_s": q.since_fix_s, "outage": outage,
+    }).astype({"kind": KIND_DTYPE})
 
 
 def run_drive(drive: Drive, cfg: RunConfig) -> DriveRun:
