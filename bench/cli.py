@@ -198,13 +198,13 @@ def _run(drives, cfg, data, out: Path, workers: int, rerun: Path | None = None,
     manifest = ([tree_hash(p) for p in data] if data else
                 [{"path": "built-in synthetic drives", "files": 0, "bytes": 0,
                   "sha256": f"generator seed {cfg.seed}"}])
-    res = aggregate(runs, cfg, manifest, command)
     traces = all_traces(runs)
+    res = aggregate(runs, cfg, manifest, command, traces=traces)
     from bench.figures import paper_figures
 
     out.mkdir(parents=True, exist_ok=True)
     res["paper_figures"] = [{"file": f, "caption": c} for f, c in
-                            paper_figures(list(drives), cfg, traces, out)]
+                            paper_figures(list(drives), cfg, traces, out, runs)]
     write_report(res, traces, out)
     table = Table(title=f"{len(runs)} drives - errors in metres, latency in microseconds")
     for h in SUMMARY_HEADER:

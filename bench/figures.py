@@ -69,9 +69,27 @@ def pick_moment(traces: pd.DataFrame, predictor: str) -> tuple[str, float] | Non
     return str(drive), float(f.t_issue.iloc[i])
 
 
-def paper_figures(drives: list[Drive], cfg: RunConfig, traces: pd.DataFrame, out: Path
-                  ) -> list[tuple[str, str]]:
-    """Write the figures; return (file name, caption) pairs. Needs ``lstm`` in the run."""
+def _prepared_window(drive: Drive, fixes: pd.DataFrame, t0: float, t1: float) -> PreparedDrive:
+    """The run's own received fixes and the drive's other streams within [t0, t1] [s], ready
+    to replay (no queries): the figures show exactly what the predictors saw in the run."""
+    from bench.prepare import Queries
+    from bench.reference import FIX_CUBIC, TRUTH
+    from scenarios.drive import GpsStream
+
+    sub = drive.window(t0, t1)
+    f = fixes[fixes.received & (fixes.t >= t0) & (fixes.t <= t1)]
+    gps = GpsStream(f.t.to_numpy(), f.x.to_numpy(), f.y.to_numpy())
+    e = np.empty(0)
+    none = Queries(e, e, np.empty((0, 2)), e, np.empty(0, dtype=str), e)
+    return PreparedDrive(sub, drive.meta.format, gps, gps,
+                         TRUTH if drive.truth is not None else FIX_CUBIC, none, none)
+
+
+def paper_figures(drives: list[Drive], cfg: RunConfig, traces: pd.DataFrame, out: Path,
+                  runs: list | None = None) -> list[tuple[str, str]]:
+    """Write the figures; return (file name, caption) pairs. Needs ``lstm`` in the run.
+    With ``runs`` (the run's DriveRuns) the replay uses the run's own fixes over a 40 s
+    window, so long drives cost no more than short ones."""
     if "lstm" not in cfg.predictors or traces.empty:
         return []
     moment = pick_moment(traces, "lstm")
@@ -84,7 +102,11 @@ def paper_figures(drives: list[Drive], cfg: RunConfig, traces: pd.DataFrame, out
 
     name, t_fix = moment
     drive = next(d for d in drives if d.name == name)
-    prep = prepare_drive(drive, cfg)
+    run = next((r for r in runs or [] if r.name == name and r.fixes is not None), None)
+    if run is not None:
+        prep = _prepared_window(drive, run.fixes, t_fix - 30.0, t_fix + 5.0)
+    else:
+        prep = prepare_drive(drive, cfg)
     cond = gps_condition(cfg, drive.truth is not None) if cfg.use_tuned else None
     lstm = create("lstm", cond, **cfg.predictor_options.get("lstm", {}))
     replay_until(lstm, prep, t_fix)

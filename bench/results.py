@@ -83,7 +83,10 @@ def lstm_training_drives(cfg: RunConfig) -> dict[str, list[str]]:
 
 
 def all_traces(runs: Sequence[DriveRun]) -> pd.DataFrame:
+    """Every run's per-query traces in one frame (a single run's frame is returned as is)."""
     frames = [r.traces for r in runs if not r.traces.empty]
+    if len(frames) == 1:
+        return frames[0]
     return pd.concat(frames, ignore_index=True) if frames else pd.DataFrame()
 
 
@@ -92,9 +95,10 @@ def _kind_summaries(df: pd.DataFrame) -> dict[str, Any]:
 
 
 def aggregate(runs: Sequence[DriveRun], cfg: RunConfig, data_manifest: list[dict[str, Any]],
-              command: str) -> dict[str, Any]:
-    """The content of ``results.json``."""
-    traces = all_traces(runs)
+              command: str, traces: pd.DataFrame | None = None) -> dict[str, Any]:
+    """The content of ``results.json`` (``traces``: :func:`all_traces` if already made)."""
+    if traces is None:
+        traces = all_traces(runs)
     preds = list(cfg.predictors)
     res: dict[str, Any] = {
         "command": command,

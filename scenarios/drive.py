@@ -188,6 +188,19 @@ class Drive:
         acc = self.truth.accuracy[np.isfinite(self.truth.accuracy)]
         return float(np.median(acc)) if acc.size else None
 
+    def window(self, t0: float, t1: float) -> Drive:
+        """A copy holding only the samples with t0 <= t <= t1 [s] of every stream."""
+        def cut(stream: Any) -> Any:
+            if stream is None:
+                return None
+            m = (stream.t >= t0) & (stream.t <= t1)
+            kw = {f: (None if getattr(stream, f) is None else getattr(stream, f)[m])
+                  for f in stream.__dataclass_fields__}
+            return type(stream)(**kw)
+
+        return replace(self, gps=cut(self.gps), imu=cut(self.imu), speed=cut(self.speed),
+                       truth=cut(self.truth))
+
     def with_gps(self, gps: GpsStream, note: str | None = None) -> Drive:
         """A copy with another GPS stream (e.g. degraded), noting why in the warnings."""
         meta = replace(self.meta, warnings=list(self.meta.warnings))
