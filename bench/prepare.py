@@ -122,16 +122,21 @@ def prepare_drive(drive: Drive, cfg: RunConfig) -> PreparedDrive:
     t0 = min(gps.t[0], drive.truth.t[0]) if drive.truth is not None and len(gps) else gps.t[0]
     t1 = max(gps.t[-1], drive.truth.t[-1]) if drive.truth is not None and len(gps) else gps.t[-1]
     grid_t = np.arange(t0, t1 + 1e-9, 0.1)
-    grid_xy = _reference(drive, grid_t)
+    # one reference evaluation (one truth spline) for the grid and both query kinds
+    all_ref = _reference(drive, np.concatenate([grid_t, f_query, n_query]))
+    grid_xy = all_ref[:grid_t.size]
+    refs = {"future": all_ref[grid_t.size:grid_t.size + f_query.size],
+            "now": all_ref[grid_t.size + f_query.size:]}
+    del all_ref
 
-    def queries(t_issue: np.ndarray, t_query: np.ndarray) -> Queries:
-        ref = _reference(drive, t_query)
+    def queries(kind: str, t_issue: np.ndarray, t_query: np.ndarray) -> Queries:
+        ref = refs[kind]
         last_fix = np.searchsorted(gps.t, t_issue, side="right") - 1
         since = t_query - gps.t[np.clip(last_fix, 0, None)]
         return Queries(t_issue, t_query, ref, _speed_at(drive, t_query, grid_t, grid_xy),
                        _labels(drive, t_query, grid_t, grid_xy), since)
 
-    future = queries(f_issue, f_query)
-    now = queries(n_query, n_query)
+    future = queries("future", f_issue, f_query)
+    now = queries("now", n_query, n_query)
     return PreparedDrive(drive, drive.meta.format, gps, gps_all, reference, future, now, outages,
                          notes)
