@@ -116,8 +116,8 @@ def paper_figures(drives: list[Drive], cfg: RunConfig, traces: pd.DataFrame, out
     now = np.array([lstm.position_at(t) for t in ts])
     from bench.prepare import _reference
 
-    ref_now = _reference(drive, ts)
-    ref_path = _reference(drive, np.arange(t_fix - 2.0, t_fix + 1.0, 0.05))
+    ref_now = _reference(prep.drive, ts)
+    ref_path = _reference(prep.drive, np.arange(t_fix - 2.0, t_fix + 1.0, 0.05))
     fixes = (prep.gps.t > t_fix - 2.5) & (prep.gps.t <= t_fix)
     figs: list[tuple[str, str]] = []
 
