@@ -151,3 +151,11 @@ def test_degraded_gps_depends_on_seed_not_workers():
     p3 = prepare_drive(d, RunConfig(seed=2))
     np.testing.assert_array_equal(p1.gps.x, p2.gps.x)
     assert p1.gps.t.size != p3.gps.t.size or not np.array_equal(p1.gps.x, p3.gps.x)
+
+
+def test_drive_window_cuts_every_stream():
+    d = line_drive(n=100)
+    w = d.window(5.0, 10.0)
+    for s in (w.gps, w.imu, w.speed):
+        assert s.t.min() >= 5.0 and s.t.max() <= 10.0 and len(s) > 0
+    assert w.name == d.name
