@@ -119,3 +119,11 @@ def test_run_with_lstm_writes_paper_figures(tmp_path):
         assert (out / f["file"]).stat().st_size > 10_000
         assert "drive `synthetic-" in f["caption"] and "t = " in f["caption"]
     assert "The paper's figures, from this run" in (out / "report.md").read_text()
+
+
+def test_installed_package_ships_tuned_parameters_and_model():
+    from predictors.lstm.predictor import bundled_model
+    from predictors.registry import tuned_params
+
+    assert tuned_params("kf", "rtk") and tuned_params("ekf", "native")
+    assert bundled_model().is_file() and bundled_model().with_suffix(".json").is_file()
