@@ -122,6 +122,12 @@ def paper_figures(drives: list[Drive], cfg: RunConfig, traces: pd.DataFrame, out
     figs: list[tuple[str, str]] = []
 
     def save(fig: Any, fname: str, caption: str) -> None:
+        """Style the figure's map axes (equal scale, ENU labels, legend), write it, keep its caption."""
+        for ax in fig.axes:
+            ax.set_aspect("equal", adjustable="datalim")
+            ax.legend(fontsize=8)
+            ax.set_xlabel("east [m]")
+            ax.set_ylabel("north [m]")
         fig.tight_layout()
         fig.savefig(out / fname, dpi=110)
         plt.close(fig)
@@ -134,10 +140,6 @@ def paper_figures(drives: list[Drive], cfg: RunConfig, traces: pd.DataFrame, out
     ax.plot(*pred, "X", color="gold", ms=12, mec="k", label="lstm prediction (+0.2 s)")
     ax.plot(*ref_now[-1], "*", color="k", ms=14, label="reference at +0.2 s")
     err = float(np.hypot(*(pred - ref_now[-1])))
-    ax.set_aspect("equal", adjustable="datalim")
-    ax.legend(fontsize=8)
-    ax.set_xlabel("east [m]")
-    ax.set_ylabel("north [m]")
     save(fig, "paper_fig_prediction.png",
          f"Model prediction: drive `{name}`, fix at t = {t_fix:.2f} s; the 8 resampled inputs, "
          f"the predicted point 0.2 s ahead and the reference there (error {100 * err:.1f} cm).")
@@ -148,10 +150,6 @@ def paper_figures(drives: list[Drive], cfg: RunConfig, traces: pd.DataFrame, out
     ax.plot(*pred, "X", color="gold", ms=12, mec="k", label="lstm prediction")
     ax.plot(now[:, 0], now[:, 1], "*", color="m", ms=10, label="current-position estimates")
     ax.plot(ref_now[:, 0], ref_now[:, 1], "k.", ms=6, label="reference at those times")
-    ax.set_aspect("equal", adjustable="datalim")
-    ax.legend(fontsize=8)
-    ax.set_xlabel("east [m]")
-    ax.set_ylabel("north [m]")
     e_now = np.hypot(*(now - ref_now).T)
     save(fig, "paper_fig_current_position.png",
          f"Current position between the fix and the prediction: drive `{name}`, "
@@ -164,10 +162,6 @@ def paper_figures(drives: list[Drive], cfg: RunConfig, traces: pd.DataFrame, out
     r = f[f.predictor == "lstm"].sort_values("t_query")
     ax.plot(r.x_ref, r.y_ref, "k-", lw=1, label="reference")
     ax.plot(r.x, r.y, ".", ms=4, color="tab:orange", label="lstm future points")
-    ax.set_aspect("equal", adjustable="datalim")
-    ax.legend(fontsize=8)
-    ax.set_xlabel("east [m]")
-    ax.set_ylabel("north [m]")
     save(fig, "paper_fig_path.png",
          f"Predicted path against the reference: drive `{name}`, t = {max(t_fix - 20, 0):.0f}-"
          f"{t_fix + 20:.0f} s, lstm future points (mean error {100 * r.error_m.mean():.1f} cm).")
@@ -181,10 +175,6 @@ def paper_figures(drives: list[Drive], cfg: RunConfig, traces: pd.DataFrame, out
         ax.plot(prep.gps.x[fixes], prep.gps.y[fixes], "rx", label="known points (fixes)")
         ax.plot(*kp, "X", color="gold", ms=12, mec="k", label="kf-paper prediction")
         ax.plot(*ref_now[-1], "*", color="k", ms=14, label="reference at +0.2 s")
-        ax.set_aspect("equal", adjustable="datalim")
-        ax.legend(fontsize=8)
-        ax.set_xlabel("east [m]")
-        ax.set_ylabel("north [m]")
         save(fig, "paper_fig_kalman.png",
              f"The paper's Kalman filter at the same fix: drive `{name}`, t = {t_fix:.2f} s "
              f"(error {100 * float(np.hypot(*(kp - ref_now[-1]))):.1f} cm).")

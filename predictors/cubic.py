@@ -42,6 +42,20 @@ def vandermonde(s: np.ndarray, degree: int = DEGREE) -> np.ndarray:
     return np.vander(np.asarray(s, dtype=float), degree + 1, increasing=True)
 
 
+def _prepare(t: np.ndarray, values: np.ndarray, t_ref: float | None, scale: float | None
+             ) -> tuple[np.ndarray, np.ndarray, float, float]:
+    """Times and values as float arrays ((n,), (n, k)) and the time origin / scale [s]
+    (defaults: the first time; the span of t, or 1 s if it is zero)."""
+    t = np.asarray(t, dtype=float)
+    y = np.asarray(values, dtype=float)
+    if y.ndim == 1:
+        y = y[:, None]
+    t_ref = float(t[0]) if t_ref is None else float(t_ref)
+    span = float(t[-1] - t[0]) if t.size > 1 else 0.0
+    scale = (span if span > 0 else 1.0) if scale is None else float(scale)
+    return t, y, t_ref, scale
+
+
 def fit_cubic(t: np.ndarray, values: np.ndarray, t_ref: float | None = None,
               scale: float | None = None, degree: int = DEGREE) -> CubicFit:
     """Closed-form least-squares polynomial fit.
@@ -53,13 +67,7 @@ def fit_cubic(t: np.ndarray, values: np.ndarray, t_ref: float | None = None,
         scale: time scale [s] (default: the span of t, or 1 if zero).
         degree: polynomial degree, reduced to n - 1 when fewer points are given.
     """
-    t = np.asarray(t, dtype=float)
-    y = np.asarray(values, dtype=float)
-    if y.ndim == 1:
-        y = y[:, None]
-    t_ref = float(t[0]) if t_ref is None else float(t_ref)
-    span = float(t[-1] - t[0]) if t.size > 1 else 0.0
-    scale = (span if span > 0 else 1.0) if scale is None else float(scale)
+    t, y, t_ref, scale = _prepare(t, values, t_ref, scale)
     deg = min(degree, t.size - 1)
     V = vandermonde((t - t_ref) / scale, deg)
     coef, *_ = np.linalg.lstsq(V, y, rcond=None)
@@ -74,13 +82,7 @@ def fit_cubic_lbfgs(t: np.ndarray, values: np.ndarray, t_ref: float | None = Non
     (analytic gradient), per channel. Slow (~ms); kept for latency comparison."""
     from scipy.optimize import minimize
 
-    t = np.asarray(t, dtype=float)
-    y = np.asarray(values, dtype=float)
-    if y.ndim == 1:
-        y = y[:, None]
-    t_ref = float(t[0]) if t_ref is None else float(t_ref)
-    span = float(t[-1] - t[0]) if t.size > 1 else 0.0
-    scale = (span if span > 0 else 1.0) if scale is None else float(scale)
+    t, y, t_ref, scale = _prepare(t, values, t_ref, scale)
     V = vandermonde((t - t_ref) / scale)
     coefs = []
     for k in range(y.shape[1]):
