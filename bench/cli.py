@@ -27,7 +27,7 @@ data_app = typer.Typer(help="Look at recordings before benchmarking them.", no_a
                        rich_markup_mode=None)
 app.add_typer(data_app, name="data")
 
-console = Console(width=None if sys.stdout.isatty() else 160)
+console = Console(width=None if sys.stdout.isatty() else 200)
 err_console = Console(stderr=True)
 
 DEFAULT_PREDICTORS = "cv,poly,kf,kf-paper,ekf,lstm"
@@ -250,7 +250,8 @@ def inspect(
     t = Table(title=f"{len(rows)} drives")
     t.add_column("drive", no_wrap=True)
     for h in ("format", "dur [s]", "dist [m]", "fixes", "fix dt p5/p50/p95/max [ms]",
-              "IMU [Hz]", "speed [m/s]", "stopped", "truth (acc.)", "warn."):
+              "IMU [Hz]", "speed [m/s]", "stopped", "str/turn/rbt/stop [%]", "truth (acc.)",
+              "warn."):
         t.add_column(h, justify="left" if h == "format" else "right")
     for r in rows:
         q = r["gps_interval_ms"]
@@ -259,7 +260,9 @@ def inspect(
         t.add_row(r["name"], r["format"], f"{r['duration_s']:.1f}", f"{r['distance_m']:.0f}",
                   str(r["gps_count"]), f"{q['p5']:.0f}/{q['p50']:.0f}/{q['p95']:.0f}/{q['max']:.0f}",
                   f"{r['imu_rate_hz']:.0f}", f"{r['speed_mps']['min']:.1f}-{r['speed_mps']['max']:.1f}",
-                  f"{100 * r['fraction_stopped']:.0f}%", truth, str(len(r["warnings"])))
+                  f"{100 * r['fraction_stopped']:.0f}%",
+                  "/".join(f"{100 * v:.0f}" for v in r["label_shares"].values()), truth,
+                  str(len(r["warnings"])))
     console.print(t)
     for r in rows:
         for w in r["warnings"]:

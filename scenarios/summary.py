@@ -16,7 +16,7 @@ def _path_length(x: np.ndarray, y: np.ndarray) -> float:
 
 
 def _speed_series(drive: Drive) -> np.ndarray:
-    """Best available speed samples [m/s]: CAN/wheel, truth v, else differenced fixes."""
+    """Best available speed samples [m/s]: CAN/wheel, truth v, else positions differenced over >= 0.5 s."""
     if drive.speed is not None and len(drive.speed):
         return drive.speed.v
     if drive.truth is not None and drive.truth.v is not None:
@@ -24,13 +24,33 @@ def _speed_series(drive: Drive) -> np.ndarray:
     src = drive.truth if drive.truth is not None else drive.gps
     if len(src) < 2:
         return np.empty(0)
-    return np.hypot(np.diff(src.x), np.diff(src.y)) / np.diff(src.t)
+    # displacement over at least 0.5 s: a stale repeated fix followed by a fresh one a few
+    # milliseconds later must not read as a 70 m/s jump
+    j = np.searchsorted(src.t, src.t + 0.5)
+    ok = j < len(src)
+    i, j = np.flatnonzero(ok), j[ok]
+    return np.hypot(src.x[j] - src.x[i], src.y[j] - src.y[i]) / (src.t[j] - src.t[i])
+
+
+def drive_label_shares(drive: Drive, step_s: float = 0.1) -> dict[str, float]:
+    """Share [0..1] of the drive's time per scenario label, labelled every ``step_s`` from
+    the truth (or the drive's own fixes where it has none) and the wheel speed if any."""
+    from scenarios.labels import LABELS, label_shares, label_times
+
+    track = drive.truth if drive.truth is not None else drive.gps
+    if len(track) < 8:
+        return {lab: float("nan") for lab in LABELS}
+    tq = np.arange(track.t[0], track.t[-1], step_s)
+    sp = drive.speed
+    labels = label_times(tq, track.t, track.x, track.y,
+                         speed_t=None if sp is None else sp.t, speed_v=None if sp is None else sp.v)
+    return label_shares(labels)
 
 
 def summarize_drive(drive: Drive) -> dict[str, Any]:
     """Figures for one drive: duration [s], distance [m], fix count and interval
-    percentiles [ms], IMU rate [Hz], speed range [m/s], fraction stopped, truth and
-    its median accuracy [m], warnings."""
+    percentiles [ms], IMU rate [Hz], speed range [m/s], fraction stopped, share of each
+    scenario label, truth and its median accuracy [m], warnings."""
     gps = drive.gps
     dt_ms = np.diff(gps.t) * 1e3
     q = (np.percentile(dt_ms, [5, 50, 95]).tolist() + [float(dt_ms.max())]) if dt_ms.size else [
@@ -53,6 +73,7 @@ def summarize_drive(drive: Drive) -> dict[str, Any]:
         "speed_mps": {"min": float(np.min(v)) if v.size else float("nan"),
                       "max": float(np.max(v)) if v.size else float("nan")},
         "fraction_stopped": float(np.mean(v < STANDSTILL_MPS)) if v.size else float("nan"),
+        "label_shares": drive_label_shares(drive),
         "has_truth": drive.truth is not None,
         "truth_median_accuracy_m": drive.truth_median_accuracy_m,
         "projection": drive.meta.projection,

@@ -76,6 +76,11 @@ def test_inspect_default_json():
     rows = json.loads(r.stdout)
     assert len(rows) >= 4 and all(row["format"] == "synthetic" and row["has_truth"] for row in rows)
     assert {"name", "format", "duration_s", "gps_count", "has_truth"} <= set(rows[0])
+    shares = {row["name"]: row["label_shares"] for row in rows}
+    for sh in shares.values():
+        assert sum(sh.values()) == pytest.approx(1.0)
+    assert shares["synthetic-roundabout-s0"]["roundabout"] > 0.3
+    assert shares["synthetic-stop_and_go-s0"]["start_stop"] > 0.3
 
 
 @pytest.mark.shared
@@ -127,3 +132,24 @@ def test_installed_package_ships_tuned_parameters_and_model():
 
     assert tuned_params("kf", "rtk") and tuned_params("ekf", "native")
     assert bundled_model().is_file() and bundled_model().with_suffix(".json").is_file()
+
+
+def test_latency_json_shape():
+    r = bench("latency", "-p", "cv,lstm", "--steps", "200", "--json")
+    assert r.returncode == 0, r.stderr
+    res = json.loads(r.stdout)
+    for name in ("cv", "lstm"):
+        assert {"p50", "p99"} <= set(res[name]["step_us"]) and {"p50", "p99"} <= set(res[name]["query_us"])
+        assert 0 < res[name]["step_us"]["p50"] <= res[name]["step_us"]["p99"]
+    assert {"resample_positions", "resample_imu", "features", "inference",
+            "current_position_fit", "cubic_fit_lbfgs"} <= set(res["lstm_stages"])
+    assert res["lstm_stages"]["cubic_fit_lbfgs"]["p50"] > res["lstm_stages"]["cubic_fit_closed_form"]["p50"]
+    assert set(res["batch"]) == {"1", "64", "1024"}
+
+
+def test_run_writes_rerun_recording(tmp_path):
+    rrd = tmp_path / "run.rrd"
+    r = bench("run", "-p", "cv", "--out", str(tmp_path / "o"), "--rerun", str(rrd), "--workers", "1")
+    assert r.returncode == 0, r.stderr
+    assert rrd.stat().st_size > 10_000
+    assert "bench view" in r.stdout
