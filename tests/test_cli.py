@@ -153,3 +153,18 @@ def test_run_writes_rerun_recording(tmp_path):
     assert r.returncode == 0, r.stderr
     assert rrd.stat().st_size > 10_000
     assert "bench view" in r.stdout
+
+
+@pytest.mark.slow
+def test_train_command_writes_a_usable_model(tmp_path):
+    out = tmp_path / "m"
+    r = bench("train", "--synthetic", "2", "--epochs", "1", "--out", str(out))
+    assert r.returncode == 0, r.stderr
+    info = json.loads((out / "model.json").read_text())
+    assert info["command"].startswith("bench train") and "--synthetic 2" in info["command"]
+    r = bench("run", "-p", "lstm", "--model", f"lstm={out / 'model.onnx'}", "--out", str(tmp_path / "o"),
+              "--workers", "1")
+    assert r.returncode == 0, r.stderr
+    res = json.loads((tmp_path / "o" / "results.json").read_text())
+    assert res["predictors"]["lstm"]["future"]["count"] > 1000
+    assert res["training_drives"]["lstm"]  # the run knows which drives that model trained on
