@@ -95,6 +95,18 @@ class FixBuffer:
         d = self._data
         return float(d[0, i]), float(d[1, i]), float(d[2, i])
 
+    def last_velocity(self) -> tuple[float, float] | None:
+        """Velocity [m/s] from the two newest fixes; None with fewer than two fixes or no
+        time between them."""
+        if self.n < 2:
+            return None
+        t0, x0, y0 = self.last(2)
+        t1, x1, y1 = self.last(1)
+        dt = t1 - t0
+        if not dt > 0.0:
+            return None
+        return (x1 - x0) / dt, (y1 - y0) / dt
+
     def window_start(self, span_s: float, min_points: int = 1) -> int:
         """Index (into the views) of the oldest fix such that the fixes from it to the
         newest cover at least ``span_s`` seconds and number at least ``min_points``

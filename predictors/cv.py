@@ -61,11 +61,9 @@ class ConstantVelocity(Predictor):
             self._vx = self._vy = 0.0
             return
         if self.window_s <= 0.0:
-            t0, x0, y0 = buf.last(2)
-            dt = t - t0
-            if dt > 0.0:
-                self._vx = (x - x0) / dt
-                self._vy = (y - y0) / dt
+            v = buf.last_velocity()
+            if v is not None:
+                self._vx, self._vy = v
             return
         i = max(0, min(int(buf.n) - 2, _first_within(buf, self.window_s)))
         ts, xs, ys = buf.t[i:], buf.x[i:], buf.y[i:]

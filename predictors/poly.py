@@ -82,11 +82,9 @@ class PolyExtrapolator(Predictor):
         i = max(buf.window_start(self.span_s, self.min_points), buf.n - self.max_points)
         if buf.n - i < self.min_points:
             self._cubic = False
-            if buf.n >= 2:
-                t0, x0, y0 = buf.last(2)
-                dt = t - t0
-                if dt > 0.0:
-                    self._vx, self._vy = (x - x0) / dt, (y - y0) / dt
+            v = buf.last_velocity()
+            if v is not None:
+                self._vx, self._vy = v
             return
         ts = buf.t[i:]
         fit = fit_cubic(ts, buf.xy_from(i))
