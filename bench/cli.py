@@ -55,6 +55,16 @@ def _parse_pairs(values: list[str] | None, what: str) -> dict[str, str]:
     return out
 
 
+def _model_options(values: list[str] | None) -> dict[str, dict[str, str]]:
+    """``--model name=PATH`` pairs as per-predictor constructor options."""
+    return {k: {"model": v} for k, v in _parse_pairs(values, "--model").items()}
+
+
+def _command_line() -> str:
+    """This invocation as a shell command, recorded in reports and model descriptions."""
+    return "bench " + " ".join(shlex.quote(a) for a in sys.argv[1:])
+
+
 def _parse_topics(values: list[str] | None) -> dict[str, str] | None:
     topics = _parse_pairs(values, "--topic")
     bad = set(topics) - {"gps", "imu", "speed", "truth"}
@@ -158,7 +168,7 @@ def run(
                              f"{', '.join(sorted(available()))}")
         if gps_profile not in GPS_PROFILES:
             raise UsageError(f"--gps-profile must be one of {', '.join(GPS_PROFILES)}")
-        options = {k: {"model": v} for k, v in _parse_pairs(model, "--model").items()}
+        options = _model_options(model)
         if "lstm-authors" in names and "lstm-authors" not in options:
             raise UsageError("lstm-authors needs the authors' network: --model lstm-authors=PATH.onnx "
                              "(e.g. ../shared/models/authors/gps_interpolation_model2.onnx)")
@@ -188,7 +198,7 @@ def _run(drives, cfg, data, out: Path, workers: int, rerun: Path | None = None,
     from bench.report import SUMMARY_HEADER, summary_rows, write_report
     from bench.results import aggregate, all_traces, tree_hash
 
-    command = "bench " + " ".join(shlex.quote(a) for a in sys.argv[1:])
+    command = _command_line()
     with Progress(TextColumn("[bold]{task.description}"), BarColumn(), MofNCompleteColumn(),
                   TimeElapsedColumn(), TextColumn("{task.fields[last]}"), console=console) as prog:
         task = prog.add_task(f"{len(drives)} drives x {len(cfg.predictors)} predictors",
@@ -311,7 +321,7 @@ def train(
 
     from predictors.lstm.train import run_training
 
-    command = "bench " + " ".join(shlex.quote(a) for a in sys.argv[1:])
+    command = _command_line()
     try:
         with Progress(TextColumn("[bold]training"), BarColumn(), MofNCompleteColumn(),
                       TimeElapsedColumn(), TextColumn("{task.fields[loss]}"), console=console) as prog:
@@ -351,7 +361,7 @@ def latency(
         unknown = [n for n in names if n not in available()]
         if unknown:
             raise UsageError(f"unknown predictor(s) {', '.join(unknown)}")
-        options = {k: {"model": v} for k, v in _parse_pairs(model, "--model").items()}
+        options = _model_options(model)
         drives = _load_drives(data, "enu", None)
         drive = max(drives, key=lambda d: len(d.gps))
         res: dict = {}
@@ -439,7 +449,7 @@ def tune(
     best_val = min(v for _, v in trials)
     console.print(f"best {best} -> future+now mean error {best_val:.4f} m over {len(dev)} drives")
     if save:
-        command = "bench " + " ".join(shlex.quote(a) for a in sys.argv[1:])
+        command = _command_line()
         save_tuned(predictor, gps_profile, best,
                    f"`{command}`: {source}; objective mean future + mean now error "
                    f"{best_val:.4f} m; {len(trials)} trials")
