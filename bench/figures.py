@@ -22,6 +22,7 @@ import pandas as pd
 from bench.config import RunConfig, gps_condition
 from bench.prepare import PreparedDrive, prepare_drive
 from bench.replay import GPS, IMU, SPEED, build_events
+from bench.report import most_turning_drive
 from predictors.registry import create
 from scenarios.drive import Drive
 
@@ -55,8 +56,7 @@ def pick_moment(traces: pd.DataFrame, predictor: str) -> tuple[str, float] | Non
     fut = traces[(traces.kind == "future") & (traces.predictor == predictor)]
     if fut.empty:
         return None
-    turns = fut[fut.label.isin(["turn", "roundabout"])]
-    drive = turns.groupby("drive").size().idxmax() if not turns.empty else fut.drive.iloc[0]
+    drive, _ = most_turning_drive(fut)
     f = fut[(fut.drive == drive)].dropna(subset=["x_ref"]).sort_values("t_issue")
     if len(f) < 20:
         return None

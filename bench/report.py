@@ -223,6 +223,18 @@ def gate_lines(res: dict[str, Any]) -> list[str]:
     return lines
 
 
+TURN_LABELS = ("turn", "roundabout")
+
+
+def most_turning_drive(fut: pd.DataFrame) -> tuple[str, bool]:
+    """The drive with the most turn / roundabout queries in ``fut`` (a traces slice), and
+    whether any query is turning at all (else the first drive)."""
+    turns = fut[fut.label.isin(TURN_LABELS)]
+    if turns.empty:
+        return str(fut.drive.iloc[0]), False
+    return str(turns.groupby("drive", observed=True).size().idxmax()), True
+
+
 def write_plots(traces: pd.DataFrame, res: dict[str, Any], out: Path) -> list[Path]:
     """error_cdf.png, error_vs_speed.png, path.png."""
     import matplotlib
@@ -230,7 +242,13 @@ def write_plots(traces: pd.DataFrame, res: dict[str, Any], out: Path) -> list[Pa
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    paths = []
+    def save(fig: Any, name: str) -> Path:
+        fig.tight_layout()
+        fig.savefig(out / name, dpi=110)
+        plt.close(fig)
+        return out / name
+
+    paths: list[Path] = []
     preds = list(res["predictors"])
     fig, axes = plt.subplots(1, 2, figsize=(11, 4), sharey=True)
     for ax, kind in zip(axes, ("future", "now"), strict=True):
@@ -245,10 +263,7 @@ def write_plots(traces: pd.DataFrame, res: dict[str, Any], out: Path) -> list[Pa
         ax.grid(True, which="both", alpha=0.3)
     axes[0].set_ylabel("fraction of queries")
     axes[0].legend()
-    fig.tight_layout()
-    paths.append(out / "error_cdf.png")
-    fig.savefig(paths[-1], dpi=110)
-    plt.close(fig)
+    paths.append(save(fig, "error_cdf.png"))
 
     fig, ax = plt.subplots(figsize=(8, 4))
     bins = speed_bin_order()
@@ -262,10 +277,7 @@ def write_plots(traces: pd.DataFrame, res: dict[str, Any], out: Path) -> list[Pa
     ax.set_title("future-point error vs speed")
     ax.grid(True, alpha=0.3)
     ax.legend()
-    fig.tight_layout()
-    paths.append(out / "error_vs_speed.png")
-    fig.savefig(paths[-1], dpi=110)
-    plt.close(fig)
+    paths.append(save(fig, "error_vs_speed.png"))
 
     now = traces[traces.kind == "now"]
     if (now["outage"] >= 0).any():
@@ -285,18 +297,14 @@ def write_plots(traces: pd.DataFrame, res: dict[str, Any], out: Path) -> list[Pa
         ax.set_title("error vs time since last fix")
         ax.grid(True, which="both", alpha=0.3)
         ax.legend()
-        fig.tight_layout()
-        paths.append(out / "error_vs_since_fix.png")
-        fig.savefig(paths[-1], dpi=110)
-        plt.close(fig)
+        paths.append(save(fig, "error_vs_since_fix.png"))
 
     # path plot: the drive with the most turn queries (first drive if unlabelled), a 40 s window
     fut = traces[traces.kind == "future"]
-    turns = fut[fut.label.isin(["turn", "roundabout"])].groupby("drive").size()
-    drive = turns.idxmax() if not turns.empty else fut.drive.iloc[0]
+    drive, has_turns = most_turning_drive(fut)
     dfd = fut[fut.drive == drive]
-    if not turns.empty:
-        tc = dfd.loc[dfd.label.isin(["turn", "roundabout"]), "t_issue"].median()
+    if has_turns:
+        tc = dfd.loc[dfd.label.isin(TURN_LABELS), "t_issue"].median()
     else:
         tc = dfd.t_issue.median()
     win = dfd[(dfd.t_issue > tc - 20) & (dfd.t_issue < tc + 20)]
@@ -312,8 +320,5 @@ def write_plots(traces: pd.DataFrame, res: dict[str, Any], out: Path) -> list[Pa
     ax.set_title(f"{drive}: 40 s around a turn")
     ax.legend(fontsize=8)
     ax.grid(True, alpha=0.3)
-    fig.tight_layout()
-    paths.append(out / "path.png")
-    fig.savefig(paths[-1], dpi=110)
-    plt.close(fig)
+    paths.append(save(fig, "path.png"))
     return paths
