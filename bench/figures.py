@@ -21,33 +21,10 @@ import pandas as pd
 
 from bench.config import RunConfig, gps_condition
 from bench.prepare import PreparedDrive, prepare_drive
-from bench.replay import GPS, IMU, SPEED, build_events
+from bench.replay import replay
 from bench.report import most_turning_drive
 from predictors.registry import create
 from scenarios.drive import Drive
-
-
-def replay_until(pred: Any, prep: PreparedDrive, t_stop: float) -> None:
-    """Feed ``pred`` every observation with time <= t_stop (after a reset)."""
-    d = prep.drive
-    kinds, idxs = build_events(prep)
-    nan = float("nan")
-    pred.reset()
-    for k, i in zip(kinds.tolist(), idxs.tolist(), strict=True):
-        if k == GPS:
-            if prep.gps.t[i] > t_stop:
-                break
-            pred.observe_gps(prep.gps.t[i], prep.gps.x[i], prep.gps.y[i])
-        elif k == IMU:
-            if d.imu.t[i] > t_stop:
-                break
-            pred.observe_imu(d.imu.t[i], d.imu.ax[i], d.imu.ay[i],
-                             d.imu.yaw[i] if d.imu.yaw is not None else nan,
-                             d.imu.yaw_rate[i] if d.imu.yaw_rate is not None else nan)
-        elif k == SPEED:
-            if d.speed.t[i] > t_stop:
-                break
-            pred.observe_speed(d.speed.t[i], d.speed.v[i])
 
 
 def pick_moment(traces: pd.DataFrame, predictor: str) -> tuple[str, float] | None:
@@ -104,21 +81,25 @@ def paper_figures(drives: list[Drive], cfg: RunConfig, traces: pd.DataFrame, out
     drive = next(d for d in drives if d.name == name)
     run = next((r for r in runs or [] if r.name == name and r.fixes is not None), None)
     if run is not None:
-        prep = _prepared_window(drive, run.fixes, t_fix - 30.0, t_fix + 5.0)
+        fixes_fed = run.fixes
     else:
-        prep = prepare_drive(drive, cfg)
+        g = prepare_drive(drive, cfg).gps
+        fixes_fed = pd.DataFrame({"t": g.t, "x": g.x, "y": g.y, "received": True})
+    # the predictors replay the run's fixes up to the fix shown; references use a wider window
+    prep = _prepared_window(drive, fixes_fed, t_fix - 30.0, t_fix)
+    around = drive.window(t_fix - 30.0, t_fix + 5.0)
     cond = gps_condition(cfg, drive.truth is not None) if cfg.use_tuned else None
     lstm = create("lstm", cond, **cfg.predictor_options.get("lstm", {}))
-    replay_until(lstm, prep, t_fix)
+    replay(lstm, prep, cfg.horizon_s)
     grid = np.asarray(lstm._grid)
     pred = np.asarray(lstm._pred)
     ts = np.linspace(t_fix, t_fix + cfg.horizon_s, 5)
     now = np.array([lstm.position_at(t) for t in ts])
     from bench.prepare import _reference
 
-    ref_now = _reference(prep.drive, ts)
-    ref_path = _reference(prep.drive, np.arange(t_fix - 2.0, t_fix + 1.0, 0.05))
-    fixes = (prep.gps.t > t_fix - 2.5) & (prep.gps.t <= t_fix)
+    ref_now = _reference(around, ts)
+    ref_path = _reference(around, np.arange(t_fix - 2.0, t_fix + 1.0, 0.05))
+    fixes = prep.gps.t > t_fix - 2.5
     figs: list[tuple[str, str]] = []
 
     def save(fig: Any, fname: str, caption: str) -> None:
@@ -168,7 +149,7 @@ def paper_figures(drives: list[Drive], cfg: RunConfig, traces: pd.DataFrame, out
 
     if "kf-paper" in cfg.predictors:
         kfp = create("kf-paper", cond, **cfg.predictor_options.get("kf-paper", {}))
-        replay_until(kfp, prep, t_fix)
+        replay(kfp, prep, cfg.horizon_s)
         kp = np.asarray(kfp.position_at(t_fix + cfg.horizon_s))
         fig, ax = plt.subplots(figsize=(6, 6))
         ax.plot(ref_path[:, 0], ref_path[:, 1], "k-", lw=0.8, label="reference path")
