@@ -221,14 +221,15 @@ def test_runner_counts_rejections_and_no_gate_turns_it_off():
 
 def test_cli_no_gate_flag(tmp_path, monkeypatch):
     import bench.cli as cli
+    from bench.commands import run as run_cmd
 
     seen = {}
 
     def fake_run(drives, cfg, *a, **k):
         seen["gate"] = cfg.gate
 
-    monkeypatch.setattr(cli, "_run", fake_run)
-    monkeypatch.setattr(cli, "_load_drives", lambda *a, **k: [])
+    monkeypatch.setattr(run_cmd, "_run", fake_run)
+    monkeypatch.setattr(run_cmd, "load_drives", lambda *a, **k: [])
     from typer.testing import CliRunner
 
     for flag, want in (([], True), (["--no-gate"], False), (["--gate"], True)):

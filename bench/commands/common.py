@@ -1,0 +1,94 @@
+"""What every ``bench`` command shares: consoles, the one-line error, option types, drive loading.
+
+Bad user input (missing file, unknown format, unknown predictor, ...) prints one
+line naming what is wrong and exits with status 2, never a traceback.
+"""
+
+from __future__ import annotations
+
+import shlex
+import sys
+from pathlib import Path
+from typing import Annotated
+
+import typer
+from rich.console import Console
+
+from scenarios.errors import DataError  # noqa: F401 - re-exported for the commands
+
+console = Console(width=None if sys.stdout.isatty() else 200)
+err_console = Console(stderr=True)
+
+DEFAULT_PREDICTORS = "cv,poly,kf,kf-paper,ekf,lstm"
+
+
+class UsageError(Exception):
+    """A command-line mistake: reported in one line, exit status 2."""
+
+
+def fail(msg: str) -> typer.Exit:
+    from rich.markup import escape  # "posbench[ray]" is text, not markup
+
+    err_console.print(f"[bold red]error:[/] {escape(msg)}", highlight=False, soft_wrap=True)
+    return typer.Exit(2)
+
+
+def parse_pairs(values: list[str] | None, what: str) -> dict[str, str]:
+    out: dict[str, str] = {}
+    for v in values or []:
+        if "=" not in v:
+            raise UsageError(f"{what} expects ROLE=VALUE, got {v!r}")
+        k, val = v.split("=", 1)
+        out[k.strip()] = val.strip()
+    return out
+
+
+def model_options(values: list[str] | None) -> dict[str, dict[str, str]]:
+    """``--model name=PATH`` pairs as per-predictor constructor options."""
+    return {k: {"model": v} for k, v in parse_pairs(values, "--model").items()}
+
+
+def command_line() -> str:
+    """This invocation as a shell command, recorded in reports and model descriptions."""
+    return "bench " + " ".join(shlex.quote(a) for a in sys.argv[1:])
+
+
+def parse_topics(values: list[str] | None) -> dict[str, str] | None:
+    topics = parse_pairs(values, "--topic")
+    bad = set(topics) - {"gps", "imu", "speed", "truth"}
+    if bad:
+        raise UsageError(f"--topic roles are gps, imu, speed, truth; got {', '.join(sorted(bad))}")
+    return topics or None
+
+
+def load_drives(paths: list[Path] | None, projection: str, topics: dict[str, str] | None,
+                 seed: int = 0, synthetic_duration: float | None = None):
+    from scenarios.loaders import iter_load
+
+    if not paths:
+        from scenarios.synthetic import default_drives, generate_drive
+
+        if synthetic_duration is not None:
+            if not synthetic_duration > 1.0:
+                raise UsageError("--synthetic-duration must be more than 1 s")
+            return [generate_drive(seed=seed, route="mixed", duration_s=synthetic_duration)]
+        return default_drives(seed=seed)
+    drives = []
+    with console.status("loading drives...") as status:
+        for p in paths:
+            for d in iter_load(p, projection=projection, topics=topics):
+                drives.append(d)
+                status.update(f"loading drives... {len(drives)} ({d.name})")
+    return drives
+
+
+DataOpt = Annotated[list[Path] | None, typer.Option(
+    "--data", "-d", help="Recordings or folders of them (any mix of ROS 1/2 bags, KITTI raw, "
+    "comma2k19 segments, the paper's route pickles, CSV/Parquet). Several paths may follow one "
+    "--data. Default: the built-in synthetic drives.")]
+TopicOpt = Annotated[list[str] | None, typer.Option(
+    "--topic", help="Pick bag topics by role when ambiguous: gps=/name imu=/name speed=/name "
+    "truth=/name.")]
+ProjectionOpt = Annotated[str, typer.Option(
+    help="Local frame for lat/lon sources: 'enu' (true metres, default) or 'mercator' (the paper's "
+         "spherical Mercator, for parity only: +1/cos(lat) scale error, ~+52 %% at 49 deg N).")]

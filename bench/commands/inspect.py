@@ -1,0 +1,63 @@
+"""`bench data inspect`: what is in each recording."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Annotated
+
+import typer
+
+from bench.commands.common import (
+    DataError,
+    ProjectionOpt,
+    TopicOpt,
+    UsageError,
+    console,
+    fail,
+    load_drives,
+    parse_topics,
+)
+
+
+def inspect(
+    paths: Annotated[list[Path] | None, typer.Argument(
+        help="Recordings or folders (default: the built-in synthetic drives).")] = None,
+    as_json: Annotated[bool, typer.Option("--json", help="Print a JSON list, one object per drive.")
+                       ] = False,
+    topic: TopicOpt = None,
+    projection: ProjectionOpt = "enu",
+) -> None:
+    """Show what is in each drive: duration, distance, fix intervals, IMU rate, speeds, truth."""
+    from rich.table import Table
+
+    from scenarios.summary import summarize_drive
+
+    try:
+        drives = load_drives(paths, projection, parse_topics(topic))
+    except (DataError, UsageError) as e:
+        raise fail(str(e)) from None
+    rows = [summarize_drive(d) for d in drives]
+    if as_json:
+        print(json.dumps(rows, indent=2, default=float))
+        return
+    t = Table(title=f"{len(rows)} drives")
+    t.add_column("drive", no_wrap=True)
+    for h in ("format", "dur [s]", "dist [m]", "fixes", "fix dt p5/p50/p95/max [ms]",
+              "IMU [Hz]", "speed [m/s]", "stopped", "str/turn/rbt/stop [%]", "truth (acc.)",
+              "warn."):
+        t.add_column(h, justify="left" if h == "format" else "right")
+    for r in rows:
+        q = r["gps_interval_ms"]
+        acc = r["truth_median_accuracy_m"]
+        truth = ("yes" + (f" ({acc:.2f} m)" if acc is not None else "")) if r["has_truth"] else "no"
+        t.add_row(r["name"], r["format"], f"{r['duration_s']:.1f}", f"{r['distance_m']:.0f}",
+                  str(r["gps_count"]), f"{q['p5']:.0f}/{q['p50']:.0f}/{q['p95']:.0f}/{q['max']:.0f}",
+                  f"{r['imu_rate_hz']:.0f}", f"{r['speed_mps']['min']:.1f}-{r['speed_mps']['max']:.1f}",
+                  f"{100 * r['fraction_stopped']:.0f}%",
+                  "/".join(f"{100 * v:.0f}" for v in r["label_shares"].values()), truth,
+                  str(len(r["warnings"])))
+    console.print(t)
+    for r in rows:
+        for w in r["warnings"]:
+            console.print(f"[yellow]warning[/] {r['name']}: {w}", highlight=False)

@@ -1,0 +1,151 @@
+"""`bench run`: replay drives through predictors and write the report."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Annotated
+
+import typer
+
+from bench.commands.common import (
+    DEFAULT_PREDICTORS,
+    DataError,
+    DataOpt,
+    ProjectionOpt,
+    TopicOpt,
+    UsageError,
+    command_line,
+    console,
+    fail,
+    load_drives,
+    model_options,
+    parse_topics,
+)
+
+
+def run(
+    data: DataOpt = None,
+    predictors: Annotated[str, typer.Option(
+        "--predictors", "-p", help="Comma-separated predictor names (see `bench predictors`).")
+    ] = DEFAULT_PREDICTORS,
+    horizon: Annotated[float, typer.Option(help="Future-point horizon after each fix [s].")] = 0.2,
+    gps_profile: Annotated[str, typer.Option(
+        help="GPS input for drives with truth: native (their own fixes), none (exact), rtk (~2 cm), "
+             "consumer (~1 m, correlated).")] = "rtk",
+    gps_latency: Annotated[float, typer.Option(help="Receiver latency of drawn fixes [s].")] = 0.0,
+    dropouts: Annotated[str, typer.Option(
+        help="GPS dropouts: none, random:P, outages (0.5/1/2/5 s), outage:L.")] = "none",
+    seed: Annotated[int, typer.Option(help="Master seed (GPS draws, dropouts, synthetic data).")] = 0,
+    out: Annotated[Path, typer.Option("--out", "-o", help="Output folder.")] = Path("bench-out"),
+    workers: Annotated[int, typer.Option(help="Parallel processes (one drive each).")] = 2,
+    model: Annotated[list[str] | None, typer.Option(
+        "--model", help="Model file per predictor, e.g. lstm-authors=PATH.onnx or lstm=DIR.")] = None,
+    topic: TopicOpt = None,
+    projection: ProjectionOpt = "enu",
+    include_poor_truth: Annotated[bool, typer.Option(
+        help="Also score drives whose truth is poor (median accuracy > 1 m).")] = False,
+    synthetic_duration: Annotated[float | None, typer.Option(
+        help="Without --data: one synthetic mixed drive of this length [s] instead of the "
+             "built-in set (e.g. 36000 for a 10-hour soak test).")] = None,
+    rerun: Annotated[Path | None, typer.Option(
+        "--rerun", help="Also write a rerun recording (.rrd) of every drive (needs the viz extra; "
+        "open it with `bench view FILE.rrd`).")] = None,
+    executor: Annotated[str, typer.Option(
+        help="Where to run: local (processes, --workers) or ray (one Ray task per drive and "
+             "predictor; needs the ray extra).")] = "local",
+    address: Annotated[str | None, typer.Option(
+        help="Ray cluster to use with --executor ray (e.g. ray://head:10001 or auto); default: "
+             "start a local Ray instance with --workers CPUs.")] = None,
+    gate: Annotated[bool, typer.Option(
+        "--gate/--no-gate", help="GPS outlier gate: drop fixes implying impossible motion before "
+        "the predictors see them (counted in the report). --no-gate: the paper's ungated input.")
+    ] = True,
+) -> None:
+    """Replay drives through predictors and write report.md, results.json, traces and plots.
+
+    Example: bench run --predictors lstm,kf --data ../shared/data/kitti_raw
+    """
+    from bench.config import GPS_PROFILES, RunConfig
+    from bench.executors import EXECUTORS, RAY_MISSING, ExecutorError, ray_available
+    from bench.fetch import local_paths
+    from predictors.registry import available
+
+    try:
+        if executor not in EXECUTORS:
+            raise UsageError(f"--executor must be one of {', '.join(EXECUTORS)}")
+        if address and executor != "ray":
+            raise UsageError("--address is for --executor ray")
+        if executor == "ray" and not ray_available():
+            raise UsageError(RAY_MISSING)
+        names = tuple(p.strip() for p in predictors.split(",") if p.strip())
+        unknown = [n for n in names if n not in available()]
+        if unknown:
+            raise UsageError(f"unknown predictor(s) {', '.join(unknown)}; known: "
+                             f"{', '.join(sorted(available()))}")
+        if gps_profile not in GPS_PROFILES:
+            raise UsageError(f"--gps-profile must be one of {', '.join(GPS_PROFILES)}")
+        options = model_options(model)
+        if "lstm-authors" in names and "lstm-authors" not in options:
+            raise UsageError("lstm-authors needs the authors' network: --model lstm-authors=PATH.onnx "
+                             "(e.g. ../shared/models/authors/gps_interpolation_model2.onnx)")
+        cfg = RunConfig(predictors=names, horizon_s=horizon, gps_profile=gps_profile,
+                        gps_latency_s=gps_latency, dropouts=dropouts, seed=seed,
+                        exclude_poor_truth=not include_poor_truth, predictor_options=options,
+                        gate=gate)
+        if rerun is not None:
+            try:
+                import rerun as _rr  # noqa: F401
+            except ImportError:
+                raise UsageError("--rerun needs the viz extra: pip install 'posbench[viz]'") from None
+        with local_paths(data) as data:  # fsspec URLs -> local copies for the loaders
+            drives = load_drives(data, projection, parse_topics(topic), seed=seed,
+                                  synthetic_duration=synthetic_duration)
+            _run(drives, cfg, data, out, workers, rerun, executor, address)
+    except (DataError, UsageError, ExecutorError) as e:
+        raise fail(str(e)) from None
+
+
+def _run(drives, cfg, data, out: Path, workers: int, rerun: Path | None = None,
+         executor: str = "local", address: str | None = None) -> None:
+    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
+    from rich.table import Table
+
+    from bench.executors import run_drives
+    from bench.report import SUMMARY_HEADER, summary_rows, write_report
+    from bench.results import aggregate, all_traces, tree_hash
+
+    command = command_line()
+    with Progress(TextColumn("[bold]{task.description}"), BarColumn(), MofNCompleteColumn(),
+                  TimeElapsedColumn(), TextColumn("{task.fields[last]}"), console=console) as prog:
+        task = prog.add_task(f"{len(drives)} drives x {len(cfg.predictors)} predictors",
+                             total=len(drives), last="")
+        runs = run_drives(drives, cfg, executor, workers=workers, address=address,
+                          on_done=lambda r: prog.update(task, advance=1, last=r.name))
+    manifest = ([tree_hash(p) for p in data] if data else
+                [{"path": "built-in synthetic drives", "files": 0, "bytes": 0,
+                  "sha256": f"generator seed {cfg.seed}"}])
+    traces = all_traces(runs)
+    res = aggregate(runs, cfg, manifest, command, traces=traces)
+    from bench.figures import paper_figures
+
+    out.mkdir(parents=True, exist_ok=True)
+    res["paper_figures"] = [{"file": f, "caption": c} for f, c in
+                            paper_figures(list(drives), cfg, traces, out, runs)]
+    write_report(res, traces, out)
+    table = Table(title=f"{len(runs)} drives - errors in metres, latency in microseconds")
+    for h in SUMMARY_HEADER:
+        table.add_column(h, justify="left" if h == "predictor" else "right")
+    for row in summary_rows(res):
+        table.add_row(*row)
+    console.print(table)
+    skipped = [r for r in runs if r.skipped]
+    if skipped:
+        console.print(f"skipped {len(skipped)} drives: " + "; ".join(
+            f"{r.name} ({r.skipped})" for r in skipped))
+    console.print(f"wrote {out / 'report.md'}, results.json, traces.parquet and plots")
+    if rerun is not None:
+        from bench.rerun_log import write_recording
+
+        with console.status(f"writing rerun recording {rerun}..."):
+            write_recording(rerun, runs, list(cfg.predictors))
+        console.print(f"wrote {rerun} (open it with: bench view {rerun})")
