@@ -16,7 +16,7 @@ from rich.console import Console
 
 from scenarios.errors import DataError  # noqa: F401 - re-exported for the commands
 
-console = Console(width=None if sys.stdout.isatty() else 200)
+console = Console()
 err_console = Console(stderr=True)
 
 DEFAULT_PREDICTORS = "cv,poly,kf,kf-paper,ekf,lstm"
