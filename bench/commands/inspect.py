@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import json
 from pathlib import Path
-from typing import Annotated
+from typing import Annotated, Any
 
 import typer
 
@@ -18,6 +18,29 @@ from bench.commands.common import (
     load_drives,
     parse_topics,
 )
+from bench.terminal import print_table
+
+HEADER = ("drive", "format", "dur [s]", "dist [m]", "fixes", "fix dt p5/p50/p95/max [ms]",
+          "IMU [Hz]", "speed [m/s]", "stopped", "str/turn/rbt/stop [%]", "truth (acc.)", "warn.")
+
+
+def inspect_rows(summaries: list[dict[str, Any]]) -> tuple[tuple[str, ...], list[list[str]]]:
+    """Header and cell strings of the inspect table, one row per drive summary
+    (:func:`scenarios.summary.summarize_drive`: seconds, metres, m/s, Hz)."""
+    out = []
+    for r in summaries:
+        q = r["gps_interval_ms"]
+        acc = r["truth_median_accuracy_m"]
+        truth = ("yes" + (f" ({acc:.2f} m)" if acc is not None else "")) if r["has_truth"] else "no"
+        out.append([r["name"], r["format"], f"{r['duration_s']:.1f}", f"{r['distance_m']:.0f}",
+                    str(r["gps_count"]),
+                    f"{q['p5']:.0f}/{q['p50']:.0f}/{q['p95']:.0f}/{q['max']:.0f}",
+                    f"{r['imu_rate_hz']:.0f}",
+                    f"{r['speed_mps']['min']:.1f}-{r['speed_mps']['max']:.1f}",
+                    f"{100 * r['fraction_stopped']:.0f}%",
+                    "/".join(f"{100 * v:.0f}" for v in r["label_shares"].values()), truth,
+                    str(len(r["warnings"]))])
+    return HEADER, out
 
 
 def inspect(
@@ -29,8 +52,6 @@ def inspect(
     projection: ProjectionOpt = "enu",
 ) -> None:
     """Show what is in each drive: duration, distance, fix intervals, IMU rate, speeds, truth."""
-    from rich.table import Table
-
     from scenarios.summary import summarize_drive
 
     try:
@@ -41,23 +62,11 @@ def inspect(
     if as_json:
         print(json.dumps(rows, indent=2, default=float))
         return
-    t = Table(title=f"{len(rows)} drives")
-    t.add_column("drive", no_wrap=True)
-    for h in ("format", "dur [s]", "dist [m]", "fixes", "fix dt p5/p50/p95/max [ms]",
-              "IMU [Hz]", "speed [m/s]", "stopped", "str/turn/rbt/stop [%]", "truth (acc.)",
-              "warn."):
-        t.add_column(h, justify="left" if h == "format" else "right")
-    for r in rows:
-        q = r["gps_interval_ms"]
-        acc = r["truth_median_accuracy_m"]
-        truth = ("yes" + (f" ({acc:.2f} m)" if acc is not None else "")) if r["has_truth"] else "no"
-        t.add_row(r["name"], r["format"], f"{r['duration_s']:.1f}", f"{r['distance_m']:.0f}",
-                  str(r["gps_count"]), f"{q['p5']:.0f}/{q['p50']:.0f}/{q['p95']:.0f}/{q['max']:.0f}",
-                  f"{r['imu_rate_hz']:.0f}", f"{r['speed_mps']['min']:.1f}-{r['speed_mps']['max']:.1f}",
-                  f"{100 * r['fraction_stopped']:.0f}%",
-                  "/".join(f"{100 * v:.0f}" for v in r["label_shares"].values()), truth,
-                  str(len(r["warnings"])))
-    console.print(t)
+    header, cells = inspect_rows(rows)
+    print_table(console, header, cells, title=f"{len(rows)} drive{'' if len(rows) == 1 else 's'}",
+                key_columns=1, left_columns=2)
+    from rich.markup import escape
+
     for r in rows:
         for w in r["warnings"]:
-            console.print(f"[yellow]warning[/] {r['name']}: {w}", highlight=False)
+            console.print(f"[yellow]warning[/] {escape(r['name'])}: {escape(w)}", highlight=False)

@@ -16,6 +16,7 @@ from bench.commands.common import (
     load_drives,
     model_options,
 )
+from bench.terminal import print_table
 
 
 def latency(
@@ -59,29 +60,23 @@ def latency(
     if as_json:
         print(json.dumps(res, indent=2))
         return
-    from rich.table import Table
-
-    t = Table(title=f"per-call latency (us) on {drive.name} (one process, one thread)")
-    for h in ("predictor", "step p50", "p90", "p99", "max", "query p50", "query p99", "paper"):
-        t.add_column(h, justify="left" if h in ("predictor", "paper") else "right")
     paper = {"lstm": "4000-6000 (step)", "kf-paper": "1000 (Kalman)"}
+    rows = []
     for n in names:
         s, q = res[n]["step_us"], res[n]["query_us"]
-        t.add_row(n, f"{s['p50']:.1f}", f"{s['p90']:.1f}", f"{s['p99']:.1f}", f"{s['max']:.0f}",
-                  f"{q['p50']:.1f}", f"{q['p99']:.1f}", paper.get(n, ""))
-    console.print(t)
+        rows.append([n, f"{s['p50']:.1f}", f"{s['p90']:.1f}", f"{s['p99']:.1f}", f"{s['max']:.0f}",
+                     f"{q['p50']:.1f}", f"{q['p99']:.1f}", paper.get(n, "")])
+    print_table(console, ("predictor", "step p50", "p90", "p99", "max", "query p50", "query p99",
+                          "paper"), rows,
+                title=f"per-call latency (us) on {drive.name} (one process, one thread)")
     if "lstm_stages" in res:
-        st = Table(title="lstm fix step by stage (us)")
-        for h in ("stage", "p50", "p90", "p99", "paper"):
-            st.add_column(h, justify="left" if h in ("stage", "paper") else "right")
         pp = {"resample_positions": "~2000 (L-BFGS regression)", "inference": "~2000 (LSTM)",
               "cubic_fit_lbfgs": "~2000"}
-        for k, v in res["lstm_stages"].items():
-            st.add_row(k, f"{v['p50']:.1f}", f"{v['p90']:.1f}", f"{v['p99']:.1f}", pp.get(k, ""))
-        console.print(st)
-        bt = Table(title="batch throughput (onnxruntime, one thread)")
-        for h in ("batch", "windows/s", "us/window"):
-            bt.add_column(h, justify="right")
-        for b, v in res["batch"].items():
-            bt.add_row(b, f"{v['windows_per_s']:.0f}", f"{v['us_per_window']:.1f}")
-        console.print(bt)
+        print_table(console, ("stage", "p50", "p90", "p99", "paper"),
+                    [[k, f"{v['p50']:.1f}", f"{v['p90']:.1f}", f"{v['p99']:.1f}", pp.get(k, "")]
+                     for k, v in res["lstm_stages"].items()],
+                    title="lstm fix step by stage (us)")
+        print_table(console, ("batch", "windows/s", "us/window"),
+                    [[str(b), f"{v['windows_per_s']:.0f}", f"{v['us_per_window']:.1f}"]
+                     for b, v in res["batch"].items()],
+                    title="batch throughput (onnxruntime, one thread)", left_columns=0)
