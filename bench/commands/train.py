@@ -2,11 +2,11 @@
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 from typing import Annotated
 
 import typer
+from rich.console import Console
 
 from bench.commands.common import (
     DataError,
@@ -16,6 +16,7 @@ from bench.commands.common import (
     console,
     fail,
 )
+from bench.terminal import print_table
 
 
 def train(
@@ -36,6 +37,7 @@ def train(
     from predictors.lstm.train import run_training
 
     command = command_line()
+    stopped: list[tuple[int, int, int]] = []
     try:
         with Progress(TextColumn("[bold]training"), BarColumn(), MofNCompleteColumn(),
                       TimeElapsedColumn(), TextColumn("{task.fields[loss]}"), console=console) as prog:
@@ -45,9 +47,87 @@ def train(
                 prog.update(task, completed=epoch, total=n_epochs,
                             loss=f"train {train_loss:.4f} val {val_loss:.4f}")
 
+            def early_stop(epoch: int, best_epoch: int, patience: int) -> None:
+                stopped.append((epoch, best_epoch, patience))
+                prog.console.print(early_stop_message(epoch, best_epoch), highlight=False)
+
             info = run_training([str(p) for p in data or []], out, epochs=epochs, seed=seed,
-                                synthetic=synthetic, progress=progress, command=command)
+                                synthetic=synthetic, progress=progress, command=command,
+                                on_early_stop=early_stop)
     except (DataError, UsageError) as e:
         raise fail(str(e)) from None
-    console.print(json.dumps(info.get("validation", info), indent=2, default=float))
-    console.print(f"wrote {out / 'model.onnx'} and {out / 'model.json'}")
+    print_summary(console, info, out, stopped[0] if stopped else None)
+
+
+def early_stop_message(epoch: int, best_epoch: int) -> str:
+    """The line announcing that early stopping ended training after ``epoch``."""
+    return (f"early stop at epoch {epoch}: validation loss did not improve for "
+            f"{_plural(epoch - best_epoch, 'epoch')} (best epoch {best_epoch})")
+
+
+def _sources(names: list[str], info: dict) -> str:
+    """Where a split's drives come from: --data, the synthetic generator, in-memory drives."""
+    data = info["data"]
+    seeds = {f"-s{s}" for s in data["synthetic"]["generator_seeds"]}
+    in_memory = set(data["in_memory_drives"])
+    n_mem = sum(n in in_memory for n in names)
+    n_syn = sum(n not in in_memory and n.startswith("synthetic-") and "-s" in n
+                and n[n.rindex("-s"):] in seeds for n in names)
+    parts = [(len(names) - n_mem - n_syn, "--data"), (n_syn, "synthetic"), (n_mem, "in memory")]
+    return ", ".join(f"{k} {what}" for k, what in parts if k)
+
+
+def _plural(n: int, word: str) -> str:
+    return f"{n} {word}{'' if n == 1 else 's'}"
+
+
+def print_summary(console: Console, info: dict, out: Path,
+                  early_stop: tuple[int, int, int] | None) -> None:
+    """The end of ``bench train``: data, epochs and early stopping, validation error [m] of the
+    model beside the cubic-extrapolation and constant-velocity baselines, export timing [us]
+    and where model.onnx and its model card model.json are. ``info`` is ``run_training``'s
+    result; ``early_stop`` is ``(epoch, best_epoch, patience)`` when early stopping fired."""
+    data, tr = info["data"], info["training"]
+    print_table(console, ("split", "sources", "drives", "windows"),
+                [[split, _sources(data[f"{key}_drives"], info), str(len(data[f"{key}_drives"])),
+                  str(data[f"{key}_windows"])] for split, key in (("train", "train"),
+                                                                  ("validation", "val"))],
+                title="training data", left_columns=2)
+    paths = [p["path"] for p in data["paths"]]
+    if paths:
+        console.print("--data: " + ", ".join(paths), markup=False, highlight=False,
+                      soft_wrap=True)
+
+    patience = tr["early_stopping_patience"]
+    stop = f"after epoch {early_stop[0]}" if early_stop else "no"
+    export = info.get("export") or {}
+    chosen = export.get("chosen")
+    p50 = (export.get("candidates") or {}).get(chosen, {}).get("p50_us")
+    rows = [["epochs run", f"{tr['epochs_run']} of {tr['epochs_max']}"],
+            ["early stopping", f"{stop} (patience {patience})"],
+            ["best epoch", f"{tr['best_epoch']} (its weights exported)"],
+            ["training time", f"{tr['seconds']:.1f} s"]]
+    if chosen:
+        rows.append(["ONNX exporter", chosen])
+    if p50 is not None:
+        rows.append(["inference p50", f"{p50:.1f} us per window"])
+    print_table(console, ("training", ""), rows, left_columns=2)
+
+    val = info["validation"]
+    groups = [k for k in val if k.startswith("group:")]
+    subsets = ["all", *groups] if len(groups) > 1 else ["all"]
+    methods = (("lstm", "lstm (this model)"), ("cubic", "cubic extrapolation"),
+               ("cv", "constant velocity"))
+    by_source = len(subsets) > 1  # a source column only when the windows come from several
+    rows = []
+    for sub in subsets:
+        for key, label in methods:
+            e = val[sub][key]
+            rows.append([*([sub.removeprefix("group:")] if by_source else []), label, str(e["n"]),
+                         *(f"{e[k]:.3f}" if e["n"] else "-" for k in ("mean_m", "p50_m", "p95_m"))])
+    header = ("predictor", "windows", "mean [m]", "p50 [m]", "p95 [m]")
+    print_table(console, ("source", *header) if by_source else header, rows,
+                title="validation: future-point error", key_columns=1 + by_source,
+                left_columns=1 + by_source)
+    for what, name in (("model", "model.onnx"), ("model card", "model.json")):
+        console.print(f"{what}: {out / name}", markup=False, highlight=False, soft_wrap=True)

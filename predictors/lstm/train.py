@@ -32,6 +32,7 @@ from scenarios.drive import Drive
 from scenarios.errors import DataError
 
 Progress = Callable[[int, int, float, float], None]
+EarlyStop = Callable[[int, int, int], None]
 FORMAT = "posbench-lstm"
 VAL_EVERY = 5
 VAL_OFFSET = 2
@@ -175,7 +176,7 @@ def run_training(data_paths: Sequence[str | Path], out_dir: Path, epochs: int = 
                  hidden: int = 64, lstm_layers: int = 1, enc_layers: int = 1,
                  batch_size: int = 256, lr: float = 2e-3, patience: int = 8,
                  gps_seeds: int = 3, frame: str = "heading", threads: int = 2,
-                 timing_calls: int = 2000) -> dict:
+                 timing_calls: int = 2000, on_early_stop: EarlyStop | None = None) -> dict:
     """Train, export and describe a model. Returns the dict written to ``model.json``.
 
     Args:
@@ -190,6 +191,9 @@ def run_training(data_paths: Sequence[str | Path], out_dir: Path, epochs: int = 
         hidden, lstm_layers, enc_layers: network sizes.
         gps_seeds: rtk GPS draws per drive with truth (training; validation uses one).
         frame: feature frame, ``"heading"`` or ``"world"``.
+        on_early_stop: ``callback(epoch, best_epoch, patience)`` when early stopping ends
+            training after ``epoch``: the validation loss has not improved for
+            ``epoch - best_epoch`` (= ``patience``) epochs; the best epoch's weights are kept.
     """
     import torch
 
@@ -268,6 +272,8 @@ def run_training(data_paths: Sequence[str | Path], out_dir: Path, epochs: int = 
         if vl < best[0] - 1e-6:
             best = (vl, {k: v.clone() for k, v in net.state_dict().items()}, epoch)
         elif epoch - best[2] >= patience:
+            if on_early_stop is not None:
+                on_early_stop(epoch, best[2], patience)
             break
     net.load_state_dict(best[1])
     net.eval()
