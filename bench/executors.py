@@ -25,7 +25,7 @@ import pandas as pd
 
 from bench.config import RunConfig
 from bench.runner import DriveRun, run, run_drive
-from predictors.registry import Entry, available, register
+from predictors.registry import Entry, available, base_name, register
 from scenarios.drive import Drive
 
 EXECUTORS = ("local", "ray")
@@ -141,7 +141,7 @@ def _fan_out(ray: Any, drives: Sequence[Drive], cfg: RunConfig, max_retries: int
     task = ray.remote(num_cpus=1, max_retries=max_retries, retry_exceptions=True)(run_predictor)
     names: tuple[str | None, ...] = cfg.predictors or (None,)
     known = available()
-    entries = {n: known[n] for n in cfg.predictors if n in known}
+    entries = {base_name(n): known[base_name(n)] for n in cfg.predictors if base_name(n) in known}
     cfg_ref = ray.put(cfg)
     pending: dict[Any, tuple[int, int]] = {}
     for i, d in enumerate(drives):

@@ -36,21 +36,88 @@ def _table(header: list[str], rows: list[list[str]]) -> str:
     return "\n".join(lines)
 
 
-def summary_rows(res: dict[str, Any]) -> list[list[str]]:
-    """Rows of the headline table: per predictor, future and now errors [m], latency [us]."""
+TRAINED_MARK = " *"
+
+
+def trained_in_run(res: dict[str, Any]) -> dict[str, list[str]]:
+    """Per learned predictor, the drives of this run its model was trained on (non-empty only)."""
+    names = {d["name"] for d in res["drives"] if not d["skipped"]}
+    out = {}
+    for p, drives in res.get("training_drives", {}).items():
+        mine = sorted(names & set(drives))
+        if mine:
+            out[p] = mine
+    return out
+
+
+def summary_rows(res: dict[str, Any], held_out: bool = False) -> list[list[str]]:
+    """Rows of the headline table: per predictor, future and now errors [m], queries
+    without an answer, latency [us]. A predictor trained on some of the run's drives is
+    marked ``*``. ``held_out``: figures over the drives no learned predictor trained on."""
+    trained = trained_in_run(res)
+    src = res["held_out_all"]["predictors"] if held_out else res["predictors"]
     rows = []
-    for name, p in res["predictors"].items():
+    for name, p in src.items():
         f, n = p["future"], p["now"]
-        rows.append([name, _fmt_m(f["mean_m"]), _fmt_m(f["median_m"]), _fmt_m(f["rmse_m"]),
+        lat = res["predictors"][name]
+        mark = TRAINED_MARK if name in trained and not held_out else ""
+        rows.append([name + mark, _fmt_m(f["mean_m"]), _fmt_m(f["median_m"]), _fmt_m(f["rmse_m"]),
                      _fmt_m(f["p95_m"]), _fmt_m(f["max_m"]), str(f["count"]),
                      _fmt_m(n["mean_m"]), _fmt_m(n["p95_m"]), str(n["count"]),
-                     _fmt_m(p["latency_us"]["p50"], 1), _fmt_m(p["latency_us"]["p99"], 1),
-                     _fmt_m(p["query_us"]["p50"], 1)])
+                     str(f.get("missing", 0) + n.get("missing", 0)),
+                     _fmt_m(lat["latency_us"]["p50"], 1), _fmt_m(lat["latency_us"]["p99"], 1),
+                     _fmt_m(lat["query_us"]["p50"], 1)])
     return rows
 
 
 SUMMARY_HEADER = ["predictor", "future mean [m]", "median", "RMSE", "p95", "max", "n",
-                  "now mean [m]", "now p95", "n", "step p50 [us]", "step p99 [us]", "query p50 [us]"]
+                  "now mean [m]", "now p95", "n", "missing", "step p50 [us]", "step p99 [us]",
+                  "query p50 [us]"]
+
+
+def trained_note(res: dict[str, Any]) -> str:
+    """The footnote of ``*`` rows: which model, trained on which of the run's drives."""
+    trained = trained_in_run(res)
+    if not trained:
+        return ""
+    n_drives = sum(1 for d in res["drives"] if not d["skipped"])
+    parts = [f"{p} (model {res['models'][p]['model']}) was trained on {len(d)} of these "
+             f"{n_drives} drives" for p, d in trained.items()]
+    return "* " + "; ".join(parts) + ": its figures on them flatter it; see the held-out table."
+
+
+def excluded_note(res: dict[str, Any]) -> str:
+    """One sentence: how many queries the headline figures leave out, and why."""
+    ex = res.get("excluded", {})
+    first = next(iter(res["predictors"]), None)
+    if first is None:
+        return ""
+    warm = ex.get("warmup", {}).get(first, {})
+    n_warm = sum(warm.get(k, {}).get("count", 0) + warm.get(k, {}).get("missing", 0)
+                 for k in ("future", "now"))
+    n_noref = sum(ex.get("no_reference", {}).get(first, {}).values())
+    return (f"Excluded from these figures, per predictor: {n_warm} warm-up queries (issued before "
+            f"a drive's second received fix, when no predictor can know a velocity) and "
+            f"{n_noref} queries without a reference position (past the end of the truth or of "
+            f"the fixes).")
+
+
+def warmup_rows(res: dict[str, Any]) -> list[list[str]]:
+    """Per predictor, the error figures of the warm-up queries left out of the headline."""
+    rows = []
+    for name, w in res.get("excluded", {}).get("warmup", {}).items():
+        f, n = w["future"], w["now"]
+        rows.append([name, _fmt_m(f["mean_m"]), _fmt_m(f["max_m"]), str(f["count"]),
+                     _fmt_m(n["mean_m"]), _fmt_m(n["max_m"]), str(n["count"]),
+                     str(f.get("missing", 0) + n.get("missing", 0))])
+    return rows
+
+
+WARMUP_HEADER = ["predictor", "future mean [m]", "max", "n", "now mean [m]", "max", "n", "missing"]
+
+MISSING_NOTE = ("`missing`: queries a predictor answered with no position (NaN) although a "
+                "reference exists, e.g. before its first fix; they are counted, not averaged, so "
+                "a predictor cannot look better by abstaining.")
 
 
 def label_table(res: dict[str, Any], dataset: str, kind: str, held_out: bool = False) -> str:
@@ -58,7 +125,8 @@ def label_table(res: dict[str, Any], dataset: str, kind: str, held_out: bool = F
     per predictor, the paper's LSTM figure beside. ``held_out``: only drives no learned
     predictor was trained on."""
     preds = list(res["predictors"])
-    header = ["route type"] + [f"{p} [cm] (n)" for p in preds] + ["paper LSTM [cm]"]
+    paper = kind == "future"  # the paper's Table I measures the future point only
+    header = ["route type"] + [f"{p} [cm] (n)" for p in preds] + (["paper LSTM [cm]"] if paper else [])
     if held_out:
         by_label = {p: v for p, v in res["held_out"][dataset]["by_label"].items()}
         overall_src = res["held_out"][dataset]["predictors"]
@@ -70,26 +138,36 @@ def label_table(res: dict[str, Any], dataset: str, kind: str, held_out: bool = F
         row = [LABEL_TITLES[lab]]
         for p in preds:
             row.append(_fmt_cm(by_label.get(p, {}).get(kind, {}).get(lab, {})))
-        row.append(f"{PAPER_TABLE_CM[lab]:.1f}")
+        if paper:
+            row.append(f"{PAPER_TABLE_CM[lab]:.1f}")
         rows.append(row)
     overall = ["all"] + [_fmt_cm(overall_src.get(p, {}).get(kind, {}))
-                         for p in preds] + ["11 (LSTM), 46 (Kalman)"]
+                         for p in preds] + (["11 (LSTM), 46 (Kalman)"] if paper else [])
     rows.append(overall)
     return _table(header, rows)
 
 
-def write_report(res: dict[str, Any], traces: pd.DataFrame, out: Path) -> list[Path]:
-    """Write every output file into ``out``; return the paths written."""
+def write_report(res: dict[str, Any], traces: pd.DataFrame, out: Path,
+                 formats: tuple[str, ...] = ("png",),
+                 also_written: list[Path] | None = None) -> list[Path]:
+    """Write every output file into ``out``; return the paths written. ``results.json`` comes
+    last and lists (key ``outputs``) everything the run wrote there, ``also_written``
+    (the paper's figures) included, so the next run into ``out`` can replace exactly those."""
+    from bench.outputs import relative_outputs
+
     out.mkdir(parents=True, exist_ok=True)
-    written = []
-    (out / "results.json").write_text(json.dumps(res, indent=2, default=_json_default) + "\n")
-    written.append(out / "results.json")
+    written = list(also_written or [])
+    plots: list[Path] = []
     if not traces.empty:
         traces.to_parquet(out / "traces.parquet", index=False)
         written.append(out / "traces.parquet")
-        written += write_plots(traces, res, out)
-    (out / "report.md").write_text(render_markdown(res, [p.name for p in written if p.suffix == ".png"]))
+        plots = write_plots(traces, res, out)
+        written += plots
+    (out / "report.md").write_text(render_markdown(res, [p.name for p in plots if p.suffix == ".png"]))
     written.append(out / "report.md")
+    written.append(out / "results.json")
+    res["outputs"] = relative_outputs(out, written)
+    (out / "results.json").write_text(json.dumps(res, indent=2, default=_json_default) + "\n")
     return written
 
 
@@ -116,6 +194,18 @@ def render_markdown(res: dict[str, Any], plots: list[str]) -> str:
              "asked every now-step between fixes. Latency: `step` = one `observe_gps` plus the "
              "future query, `query` = one between-fix `position_at`, single process.", "",
              "## All drives", "", _table(SUMMARY_HEADER, summary_rows(res)), ""]
+    for note in (trained_note(res), excluded_note(res), MISSING_NOTE):
+        if note:
+            lines += [note, ""]
+    if res.get("held_out_all"):
+        ho = res["held_out_all"]
+        lines += [f"## Held-out drives ({len(ho['drives'])}: no learned predictor of this run "
+                  f"was trained on them)", "", _table(SUMMARY_HEADER, summary_rows(res, held_out=True)),
+                  ""]
+    if any(r[3] != "0" or r[6] != "0" for r in warmup_rows(res)):
+        lines += ["## Warm-up queries (left out above)", "",
+                  "Queries issued before a drive's second received fix: a cold start, not a "
+                  "prediction.", "", _table(WARMUP_HEADER, warmup_rows(res)), ""]
     for ds in res["by_dataset"]:
         drives = [d for d in res["drives"] if d["dataset"] == ds]
         refs = sorted({d["reference"] for d in drives if d["reference"]})
@@ -134,10 +224,14 @@ def render_markdown(res: dict[str, Any], plots: list[str]) -> str:
                   label_table(res, ds, "now"), ""]
         ho = res.get("held_out", {}).get(ds)
         if ho:
+            who = "; ".join(
+                f"`{p}` (model {res['models'][p]['model']}) was trained on "
+                + ", ".join(sorted(set(names) & set(ho["excluded_training_drives"])))
+                for p, names in res.get("training_drives", {}).items()
+                if set(names) & set(ho["excluded_training_drives"]))
             lines += [f"### Held-out drives only ({len(ho['drives'])} of {len(drives)})", "",
-                      f"The bundled `lstm` was trained on {len(ho['excluded_training_drives'])} of "
-                      f"these drives ({', '.join(ho['excluded_training_drives'])}); figures on them "
-                      f"flatter it. On the held-out drives ({', '.join(ho['drives']) or 'none'}):", ""]
+                      f"{who}: figures on those drives flatter it. On the held-out drives "
+                      f"({', '.join(ho['drives']) or 'none'}):", ""]
             if ho["drives"]:
                 lines += ["Future point, mean error in cm (queries):", "",
                           label_table(res, ds, "future", held_out=True), "",
@@ -177,7 +271,7 @@ def render_markdown(res: dict[str, Any], plots: list[str]) -> str:
         if d["skipped"]:
             rows.append([d["name"], d["dataset"], f"skipped: {d['skipped']}"] + ["-"] * len(preds))
             continue
-        mark = " (lstm trained on it)" if d.get("lstm_trained_on") else ""
+        mark = "".join(f" ({p} trained on it)" for p in d.get("trained_on", []))
         rows.append([d["name"] + mark, d["dataset"], d["reference"]] + [
             _fmt_m(d["predictors"].get(p, {}).get("future", {}).get("mean_m", float("nan")))
             for p in preds])

@@ -62,23 +62,60 @@ def tree_hash(path: str | Path) -> dict[str, Any]:
     return {"path": str(path), "files": len(files), "bytes": size, "sha256": h.hexdigest()}
 
 
-def lstm_training_drives(cfg: RunConfig) -> dict[str, list[str]]:
-    """Per learned predictor in the run, the drive names its model was trained on
-    (from its model.json), so results on those drives can be told apart."""
-    out: dict[str, list[str]] = {}
-    for name in cfg.predictors:
-        if name != "lstm":
-            continue
-        try:
-            from predictors.lstm.predictor import bundled_model, load_model_info
+#: the registered predictors whose models declare their training drives (model.json)
+LEARNED = ("lstm",)
 
-            model = cfg.predictor_options.get(name, {}).get("model")
-            path = Path(model) if model else bundled_model()
-            if path.is_dir():
-                path = path / "model.onnx"
-            out[name] = list(load_model_info(path).get("data", {}).get("train_drives", []))
+
+def learned_models(cfg: RunConfig) -> dict[str, dict[str, Any]]:
+    """Per learned predictor in the run (``lstm``, ``lstm@mine``, ...): the model file it
+    uses, whether that is the bundled one, and the drive names the model was trained on
+    (from its model.json), so results on those drives can be told apart."""
+    from predictors.registry import base_name
+
+    out: dict[str, dict[str, Any]] = {}
+    for name in cfg.predictors:
+        if base_name(name) not in LEARNED:
+            continue
+        from predictors.lstm.predictor import bundled_model, load_model_info
+
+        model = cfg.predictor_options.get(name, {}).get("model")
+        path = Path(model) if model else bundled_model()
+        if path.is_dir():
+            path = path / "model.onnx"
+        try:
+            drives = list(load_model_info(path).get("data", {}).get("train_drives", []))
         except Exception:  # noqa: BLE001 - a model without a manifest: nothing to flag
-            out[name] = []
+            drives = []
+        out[name] = {"model": str(path) if model else "bundled (predictors/lstm/bundled/model.onnx)",
+                     "bundled": not model, "train_drives": drives}
+    return out
+
+
+def scored_mask(traces: pd.DataFrame) -> np.ndarray:
+    """Rows that count in the headline figures: past the warm-up (see
+    :func:`bench.runner.warmup_end_s`) and with a known reference position."""
+    if traces.empty:
+        return np.zeros(0, dtype=bool)
+    m = traces["x_ref"].notna().to_numpy() & traces["y_ref"].notna().to_numpy()
+    if "warmup" in traces:
+        m &= ~traces["warmup"].to_numpy(dtype=bool)
+    return m
+
+
+def excluded_summary(traces: pd.DataFrame, preds: Sequence[str]) -> dict[str, Any]:
+    """What the headline figures leave out, per predictor and kind: warm-up queries (with
+    their error summaries) and queries without a reference (beyond the truth's or the
+    fixes' span: nothing to score against)."""
+    out: dict[str, Any] = {"warmup": {}, "no_reference": {}}
+    if traces.empty:
+        return out
+    no_ref = traces["x_ref"].isna() | traces["y_ref"].isna()
+    warm = traces["warmup"] if "warmup" in traces else pd.Series(False, index=traces.index)
+    for name in preds:
+        mine = traces["predictor"] == name
+        out["warmup"][name] = _kind_summaries(traces[mine & warm & ~no_ref])
+        out["no_reference"][name] = {k: int((mine & no_ref & (traces["kind"] == k)).sum())
+                                     for k in KINDS}
     return out
 
 
@@ -100,6 +137,8 @@ def aggregate(runs: Sequence[DriveRun], cfg: RunConfig, data_manifest: list[dict
     if traces is None:
         traces = all_traces(runs)
     preds = list(cfg.predictors)
+    excluded = excluded_summary(traces, preds)
+    traces = traces[scored_mask(traces)] if not traces.empty else traces
     res: dict[str, Any] = {
         "command": command,
         "config": cfg.to_dict(),
@@ -111,8 +150,10 @@ def aggregate(runs: Sequence[DriveRun], cfg: RunConfig, data_manifest: list[dict
         "by_label": {},
         "by_speed": {},
         "outages": {},
-        "training_drives": lstm_training_drives(cfg),
+        "models": learned_models(cfg),
+        "excluded": excluded,
         "held_out": {},
+        "held_out_all": {},
         "drives": [],
     }
     for name in preds:
@@ -151,7 +192,14 @@ def aggregate(runs: Sequence[DriveRun], cfg: RunConfig, data_manifest: list[dict
                                            dfp.loc[dfp["kind"] == kind, "label"].to_numpy(),
                                            order=list(LABELS))
                     for kind in KINDS}
+    res["training_drives"] = {n: m["train_drives"] for n, m in res["models"].items()}
     trained_on = {n for names in res["training_drives"].values() for n in names}
+    if not traces.empty and trained_on and (~traces["drive"].isin(trained_on)).any():
+        held_all = traces[~traces["drive"].isin(trained_on)]
+        res["held_out_all"] = {
+            "drives": sorted(set(held_all["drive"].unique())),
+            "predictors": {name: _kind_summaries(held_all[held_all["predictor"] == name])
+                           for name in preds}}
     if not traces.empty and trained_on:
         for ds, dfd in traces.groupby("dataset", sort=True):
             names = set(dfd["drive"].unique())
@@ -174,12 +222,14 @@ def aggregate(runs: Sequence[DriveRun], cfg: RunConfig, data_manifest: list[dict
         d: dict[str, Any] = {"name": r.name, "dataset": r.dataset, "reference": r.reference,
                              "duration_s": r.duration_s, "gps_fed": r.gps_count,
                              "notes": r.notes, "warnings": r.warnings, "skipped": r.skipped,
-                             "lstm_trained_on": r.name in trained_on,
+                             "trained_on": [n for n, names in res["training_drives"].items()
+                                            if r.name in names],
                              "rejected": dict(r.rejected),
                              "predictors": {}}
         if not r.traces.empty:
+            tr = r.traces[scored_mask(r.traces)]
             for name in preds:
-                d["predictors"][name] = _kind_summaries(r.traces[r.traces["predictor"] == name])
+                d["predictors"][name] = _kind_summaries(tr[tr["predictor"] == name])
         res["drives"].append(d)
     res["gate"] = gate_summary(runs, cfg)
     return res

@@ -68,6 +68,16 @@ LABEL_CATEGORIES = [*LABELS, "unlabelled"]
 KIND_DTYPE = pd.CategoricalDtype(["future", "now"])
 
 
+def warmup_end_s(prep: PreparedDrive) -> float:
+    """When a drive's warm-up ends [s]: the time of its second received fix (inf with fewer).
+
+    Queries issued before it are warm-up: no predictor can know a velocity from one fix, so
+    their errors measure the cold start, not prediction. They are kept in the traces
+    (column ``warmup``) and reported apart, never in the headline figures.
+    """
+    return float(prep.gps.t[1]) if len(prep.gps) >= 2 else float("inf")
+
+
 def _trace_frame(prep: PreparedDrive, predictor: str, kind: str, q, xy: np.ndarray) -> pd.DataFrame:
     err = euclidean_error(xy, q.ref_xy)
     outage = outage_ids(q.t_query, prep.outages)
@@ -77,6 +87,7 @@ def _trace_frame(prep: PreparedDrive, predictor: str, kind: str, q, xy: np.ndarr
         "x": xy[:, 0], "y": xy[:, 1], "x_ref": q.ref_xy[:, 0], "y_ref": q.ref_xy[:, 1],
         "error_m": err, "label": pd.Categorical(q.label, categories=LABEL_CATEGORIES),
         "speed_mps": q.speed_mps, "since_fix_s": q.since_fix_s, "outage": outage,
+        "warmup": q.t_issue < warmup_end_s(prep),
     }).astype({"kind": KIND_DTYPE})
 
 

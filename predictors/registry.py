@@ -47,13 +47,33 @@ def register(name: str, target: str, description: str, **defaults: Any) -> None:
     _REGISTRY[name] = Entry(target, description, dict(defaults))
 
 
+#: separates a registered name from an instance alias: ``lstm@mine`` is ``lstm`` under its own name
+ALIAS_SEP = "@"
+
+
+def base_name(name: str) -> str:
+    """The registered name behind ``name``: ``lstm@mine`` -> ``lstm``; ``kf`` -> ``kf``.
+
+    An alias lets one run hold two instances of one predictor with different options
+    (e.g. two LSTM models), each reported under its full name.
+    """
+    return name.split(ALIAS_SEP, 1)[0]
+
+
+def is_known(name: str) -> bool:
+    """Whether ``name`` (or, for an alias, its base) is registered and the alias is non-empty."""
+    base, sep, alias = name.partition(ALIAS_SEP)
+    return base in _REGISTRY and (not sep or bool(alias.strip()))
+
+
 def available() -> dict[str, Entry]:
     """All registered names and entries."""
     return dict(_REGISTRY)
 
 
 def predictor_class(name: str) -> type[Predictor]:
-    """The class registered under ``name`` (raises KeyError listing the known names)."""
+    """The class registered under ``name`` or its base (raises KeyError listing the known names)."""
+    name = base_name(name)
     if name not in _REGISTRY:
         raise KeyError(f"unknown predictor {name!r}; known: {', '.join(sorted(_REGISTRY))}")
     module, cls = _REGISTRY[name].target.split(":")
@@ -73,8 +93,9 @@ def tuned_params(name: str, condition: str | None) -> dict[str, Any]:
 
 
 def create(name: str, condition: str | None = None, **config: Any) -> Predictor:
-    """A new predictor ``name``: registry defaults, then tuned parameters for the GPS
-    ``condition`` (if given and tuned), then ``config``."""
+    """A new predictor ``name`` (a registered name or ``name@alias``): registry defaults, then
+    tuned parameters for the GPS ``condition`` (if given and tuned), then ``config``."""
     cls = predictor_class(name)
-    kwargs = {**_REGISTRY[name].defaults, **tuned_params(name, condition), **config}
+    base = base_name(name)
+    kwargs = {**_REGISTRY[base].defaults, **tuned_params(base, condition), **config}
     return cls(**kwargs)

@@ -56,6 +56,9 @@ def run(
     address: Annotated[str | None, typer.Option(
         help="Ray cluster to use with --executor ray (e.g. ray://head:10001 or auto); default: "
              "start a local Ray instance with --workers CPUs.")] = None,
+    plot_format: Annotated[str, typer.Option(
+        "--plot-format", help="Figure formats, comma-separated: png, svg, pdf (e.g. png,pdf).")
+    ] = "png",
     gate: Annotated[bool, typer.Option(
         "--gate/--no-gate", help="GPS outlier gate: drop fixes implying impossible motion before "
         "the predictors see them (counted in the report). --no-gate: the paper's ungated input.")
@@ -68,7 +71,6 @@ def run(
     from bench.config import GPS_PROFILES, RunConfig
     from bench.executors import EXECUTORS, RAY_MISSING, ExecutorError, ray_available
     from bench.fetch import local_paths
-    from predictors.registry import available
 
     try:
         if executor not in EXECUTORS:
@@ -77,16 +79,16 @@ def run(
             raise UsageError("--address is for --executor ray")
         if executor == "ray" and not ray_available():
             raise UsageError(RAY_MISSING)
-        names = tuple(p.strip() for p in predictors.split(",") if p.strip())
-        unknown = [n for n in names if n not in available()]
-        if unknown:
-            raise UsageError(f"unknown predictor(s) {', '.join(unknown)}; known: "
-                             f"{', '.join(sorted(available()))}")
+        options = model_options(model)
+        names = predictor_names(predictors, options)
+        formats = plot_formats(plot_format)
         if gps_profile not in GPS_PROFILES:
             raise UsageError(f"--gps-profile must be one of {', '.join(GPS_PROFILES)}")
-        options = model_options(model)
-        if "lstm-authors" in names and "lstm-authors" not in options:
-            raise UsageError("lstm-authors needs the authors' network: --model lstm-authors=PATH.onnx "
+        from predictors.registry import base_name
+
+        needs_model = [n for n in names if base_name(n) == "lstm-authors" and n not in options]
+        if needs_model:
+            raise UsageError(f"{needs_model[0]} needs the authors' network: --model lstm-authors=PATH.onnx "
                              "(e.g. ../shared/models/authors/gps_interpolation_model2.onnx)")
         cfg = RunConfig(predictors=names, horizon_s=horizon, gps_profile=gps_profile,
                         gps_latency_s=gps_latency, dropouts=dropouts, seed=seed,
@@ -100,24 +102,79 @@ def run(
         with local_paths(data) as data:  # fsspec URLs -> local copies for the loaders
             drives = load_drives(data, projection, parse_topics(topic), seed=seed,
                                   synthetic_duration=synthetic_duration)
-            _run(drives, cfg, data, out, workers, rerun, executor, address)
+            _run(drives, cfg, data, out, workers, rerun, executor, address, formats)
     except (DataError, UsageError, ExecutorError) as e:
         raise fail(str(e)) from None
 
 
+PLOT_FORMATS = ("png", "svg", "pdf")
+
+
+def plot_formats(value: str) -> tuple[str, ...]:
+    """``--plot-format png,pdf`` as a tuple of known formats, in the order given."""
+    formats = tuple(dict.fromkeys(f.strip().lower().lstrip(".") for f in value.split(",")
+                                  if f.strip()))
+    bad = [f for f in formats if f not in PLOT_FORMATS]
+    if bad or not formats:
+        raise UsageError(f"--plot-format takes {', '.join(PLOT_FORMATS)} (comma-separated), "
+                         f"got {value!r}")
+    return formats
+
+
+def predictor_names(predictors: str, options: dict[str, dict[str, str]]) -> tuple[str, ...]:
+    """The run's predictor names from ``--predictors`` and ``--model``.
+
+    ``NAME@ALIAS`` runs a second instance of a registered predictor under its own name
+    (``--model lstm@mine=PATH`` compares your model with the bundled ``lstm``); an alias
+    given only in ``--model`` is added to the run. A ``--model`` for a plain name that
+    is not in the run is a mistake and is reported.
+    """
+    from predictors.registry import ALIAS_SEP, available, is_known
+
+    names = list(dict.fromkeys(p.strip() for p in predictors.split(",") if p.strip()))
+    for n in options:
+        if n not in names:
+            if ALIAS_SEP not in n:
+                raise UsageError(f"--model {n}=...: {n} is not in --predictors "
+                                 f"({','.join(names)}); add it, or use {n}@NAME=PATH for a "
+                                 f"second {n}")
+            names.append(n)
+    unknown = [n for n in names if not is_known(n)]
+    if unknown:
+        raise UsageError(f"unknown predictor(s) {', '.join(unknown)}; known: "
+                         f"{', '.join(sorted(available()))} (NAME@ALIAS for a second instance)")
+    if not names:
+        raise UsageError("--predictors is empty; known: " + ", ".join(sorted(available())))
+    return tuple(names)
+
+
+def plural(n: int, word: str) -> str:
+    """``1 drive``, ``2 drives``."""
+    return f"{n} {word}" + ("" if n == 1 else "s")
+
+
 def _run(drives, cfg, data, out: Path, workers: int, rerun: Path | None = None,
-         executor: str = "local", address: str | None = None) -> None:
+         executor: str = "local", address: str | None = None,
+         formats: tuple[str, ...] = ("png",)) -> None:
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
-    from rich.table import Table
 
     from bench.executors import run_drives
-    from bench.report import SUMMARY_HEADER, summary_rows, write_report
+    from bench.outputs import remove_previous_outputs
+    from bench.report import (
+        SUMMARY_HEADER,
+        excluded_note,
+        summary_rows,
+        trained_note,
+        write_report,
+    )
     from bench.results import aggregate, all_traces, tree_hash
+    from bench.terminal import print_table
 
     command = command_line()
     with Progress(TextColumn("[bold]{task.description}"), BarColumn(), MofNCompleteColumn(),
                   TimeElapsedColumn(), TextColumn("{task.fields[last]}"), console=console) as prog:
-        task = prog.add_task(f"{len(drives)} drives x {len(cfg.predictors)} predictors",
+        task = prog.add_task(f"{plural(len(drives), 'drive')} x "
+                             f"{plural(len(cfg.predictors), 'predictor')}",
                              total=len(drives), last="")
         runs = run_drives(drives, cfg, executor, workers=workers, address=address,
                           on_done=lambda r: prog.update(task, advance=1, last=r.name))
@@ -129,23 +186,46 @@ def _run(drives, cfg, data, out: Path, workers: int, rerun: Path | None = None,
     from bench.figures import paper_figures
 
     out.mkdir(parents=True, exist_ok=True)
-    res["paper_figures"] = [{"file": f, "caption": c} for f, c in
-                            paper_figures(list(drives), cfg, traces, out, runs)]
-    write_report(res, traces, out)
-    table = Table(title=f"{len(runs)} drives - errors in metres, latency in microseconds")
-    for h in SUMMARY_HEADER:
-        table.add_column(h, justify="left" if h == "predictor" else "right")
-    for row in summary_rows(res):
-        table.add_row(*row)
-    console.print(table)
+    removed = remove_previous_outputs(out)
+    figures = paper_figures(list(drives), cfg, traces, out, runs, formats=formats)
+    res["paper_figures"] = [{"file": f, "caption": c} for f, c in figures]
+    written = write_report(res, traces, out, formats=formats,
+                           also_written=[out / f for f, _ in figures])
     skipped = [r for r in runs if r.skipped]
+    scored = len(runs) - len(skipped)
     if skipped:
-        console.print(f"skipped {len(skipped)} drives: " + "; ".join(
-            f"{r.name} ({r.skipped})" for r in skipped))
-    console.print(f"wrote {out / 'report.md'}, results.json, traces.parquet and plots")
+        console.print(f"skipped {plural(len(skipped), 'drive')}: " + "; ".join(
+            f"{r.name} ({r.skipped})" for r in skipped), highlight=False)
+    if scored == 0:
+        raise UsageError(f"every drive was skipped ({plural(len(runs), 'drive')}), nothing was "
+                         f"scored; the reasons are in {out / 'report.md'}")
+    print_table(console, SUMMARY_HEADER, summary_rows(res),
+                title=f"{plural(scored, 'drive')} - errors in metres, latency in microseconds")
+    for note in (trained_note(res), excluded_note(res)):
+        if note:
+            console.print(note, highlight=False)
+    if res.get("held_out_all"):
+        ho = res["held_out_all"]
+        print_table(console, SUMMARY_HEADER, summary_rows(res, held_out=True),
+                    title=f"held-out {plural(len(ho['drives']), 'drive')} (no learned predictor "
+                          f"trained on them) - errors in metres")
+    console.print(written_summary(out, written, removed), highlight=False)
     if rerun is not None:
         from bench.rerun_log import write_recording
 
         with console.status(f"writing rerun recording {rerun}..."):
             write_recording(rerun, runs, list(cfg.predictors))
         console.print(f"wrote {rerun} (open it with: bench view {rerun})")
+
+
+def written_summary(out: Path, written: list[Path], removed: list[Path]) -> str:
+    """One line naming what the run wrote into ``out`` (and removed of an earlier run)."""
+    top = [p.name for p in written if p.parent == out]
+    nested = [p for p in written if p.parent != out]
+    text = f"wrote {out}/: " + ", ".join(top)
+    if nested:
+        folders = sorted({str(p.parent.relative_to(out)) for p in nested})
+        text += f", {plural(len(nested), 'per-drive plot')} in {', '.join(f + '/' for f in folders)}"
+    if removed:
+        text += f" (removed {plural(len(removed), 'file')} of an earlier run there)"
+    return text

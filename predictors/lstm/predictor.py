@@ -135,6 +135,8 @@ class LstmPredictor(Predictor):
         if fit not in FITS:
             raise ValueError(f"fit must be one of {FITS}, not {fit!r}")
         self.model_path = Path(model) if model else bundled_model()
+        if self.model_path.is_dir():  # a folder written by `bench train`
+            self.model_path = self.model_path / "model.onnx"
         self.info = load_model_info(self.model_path)
         self.frame = self.info.get("frame", "heading")
         self.fit = fit

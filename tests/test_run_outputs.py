@@ -1,0 +1,195 @@
+"""What a run scores and writes: warm-up kept out of the headline, honest counts, model
+names and aliases, trained-on marks, the output folder, every drive skipped."""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from bench.config import RunConfig
+from bench.report import label_table, render_markdown
+from bench.results import aggregate, scored_mask
+from bench.runner import run, run_drive
+from scenarios.synthetic import default_drives
+
+
+def bench(*args: str, cwd: Path | None = None, columns: int = 200) -> subprocess.CompletedProcess:
+    env = {**os.environ, "COLUMNS": str(columns)}
+    return subprocess.run([sys.executable, "-m", "bench.cli", *args], capture_output=True,
+                          text=True, cwd=cwd, timeout=600, env=env)
+
+
+@pytest.fixture(scope="module")
+def cv_kf_result():
+    drives = default_drives()
+    cfg = RunConfig(predictors=("cv", "kf"))
+    runs = run(drives, cfg)
+    return runs, aggregate(runs, cfg, [], "test")
+
+
+def test_warmup_is_the_queries_before_the_second_fix():
+    r = run_drive(default_drives()[0], RunConfig(predictors=("cv",)))
+    tr = r.traces
+    fut = tr[tr.kind == "future"].sort_values("t_issue")
+    second_fix = fut.t_issue.iloc[1]
+    assert fut.warmup.iloc[0] and not fut.warmup.iloc[1:].any()
+    now = tr[tr.kind == "now"]
+    assert (now.warmup == (now.t_issue < second_fix)).all()
+    assert now.warmup.sum() >= 1
+
+
+def test_headline_excludes_the_cold_start(cv_kf_result):
+    runs, res = cv_kf_result
+    # the cold start (one fix, no velocity) scored ~3 m max on every drive; past warm-up it is gone
+    for p in ("cv", "kf"):
+        assert res["predictors"][p]["future"]["max_m"] < 1.0, res["predictors"][p]["future"]
+        warm = res["excluded"]["warmup"][p]
+        assert warm["future"]["count"] == len(runs)  # one future query per drive: at its first fix
+        assert warm["future"]["max_m"] > 1.0  # ... and that is where the 3 m errors went
+    total = sum(len(r.traces[r.traces.predictor == "cv"]) for r in runs)
+    counted = sum(res["predictors"]["cv"][k]["count"] + res["predictors"]["cv"][k]["missing"]
+                  for k in ("future", "now"))
+    excluded = (sum(res["excluded"]["warmup"]["cv"][k]["count"]
+                    + res["excluded"]["warmup"]["cv"][k]["missing"] for k in ("future", "now"))
+                + sum(res["excluded"]["no_reference"]["cv"].values()))
+    assert counted + excluded == total  # every query is in exactly one place
+
+
+def test_missing_counts_only_unanswered_queries_with_a_reference():
+    tr = pd.DataFrame({"x_ref": [0.0, np.nan, 1.0, 2.0], "y_ref": [0.0, 0.0, 1.0, 2.0],
+                       "warmup": [False, False, True, False]})
+    assert scored_mask(tr).tolist() == [True, False, False, True]
+
+
+def test_now_route_table_has_no_paper_column(cv_kf_result):
+    _, res = cv_kf_result
+    fut = label_table(res, "synthetic", "future")
+    now = label_table(res, "synthetic", "now")
+    assert "paper LSTM" in fut and "46 (Kalman)" in fut
+    assert "paper" not in now and "46" not in now.splitlines()[-1]
+
+
+def test_report_explains_missing_and_exclusions(cv_kf_result):
+    _, res = cv_kf_result
+    md = render_markdown(res, [])
+    assert "`missing`:" in md and "warm-up queries" in md
+    assert "## Warm-up queries (left out above)" in md
+
+
+def test_alias_runs_a_second_instance_under_its_own_name():
+    from bench.commands.run import predictor_names
+    from predictors.registry import create
+
+    names = predictor_names("cv,kf", {"kf@b": {}})
+    assert names == ("cv", "kf", "kf@b")
+    assert type(create("kf@b")) is type(create("kf"))
+    d = default_drives()[2]
+    res = run_drive(d, RunConfig(predictors=("kf", "kf@b")))
+    a = res.traces[res.traces.predictor == "kf"].error_m.to_numpy()
+    b = res.traces[res.traces.predictor == "kf@b"].error_m.to_numpy()
+    np.testing.assert_array_equal(a, b)
+
+
+@pytest.mark.parametrize("bad", ["nope@x", "kf@", "kf@b,nope"])
+def test_alias_of_unknown_predictor_is_refused(bad):
+    from bench.commands.common import UsageError
+    from bench.commands.run import predictor_names
+
+    with pytest.raises(UsageError, match="unknown predictor"):
+        predictor_names(bad, {})
+
+
+def test_model_for_a_predictor_not_in_the_run_is_refused():
+    from bench.commands.common import UsageError
+    from bench.commands.run import predictor_names
+
+    with pytest.raises(UsageError, match="not in --predictors"):
+        predictor_names("cv", {"lstm": {"model": "x"}})
+
+
+def _model_copy(tmp_path: Path, train_drives: list[str]) -> Path:
+    from predictors.lstm.predictor import bundled_model
+
+    src = bundled_model().parent
+    dst = tmp_path / "my-model"
+    shutil.copytree(src, dst)
+    info = json.loads((dst / "model.json").read_text())
+    info.setdefault("data", {})["train_drives"] = train_drives
+    (dst / "model.json").write_text(json.dumps(info))
+    return dst
+
+
+@pytest.mark.slow
+def test_two_models_of_one_predictor_named_and_marked(tmp_path):
+    """--model lstm@mine=DIR beside the bundled lstm: both in the tables, the report names
+    each model, rows trained on some of the run's drives are marked and a held-out table
+    follows in the terminal too."""
+    model = _model_copy(tmp_path, ["synthetic-mixed-s0", "synthetic-turns-s0"])
+    out = tmp_path / "o"
+    r = bench("run", "-p", "cv,lstm", "--model", f"lstm@mine={model}", "--out", str(out),
+              "--workers", "1")
+    assert r.returncode == 0, r.stderr
+    res = json.loads((out / "results.json").read_text())
+    assert list(res["predictors"]) == ["cv", "lstm", "lstm@mine"]
+    assert res["models"]["lstm@mine"]["model"] == str(model / "model.onnx")
+    assert res["models"]["lstm"]["bundled"]
+    assert "lstm@mine *" in r.stdout
+    assert "* lstm@mine (model " + str(model / "model.onnx") in r.stdout.replace("\n", " ")
+    assert "held-out 2 drives" in r.stdout
+    md = (out / "report.md").read_text()
+    assert "`lstm@mine` (model " + str(model / "model.onnx") + ") was trained on" in md
+    assert "The bundled `lstm` was trained" not in md
+    # identical weights: the alias scores exactly what the bundled model scores
+    assert res["predictors"]["lstm"]["future"] == res["predictors"]["lstm@mine"]["future"]
+
+
+def test_rerun_into_the_same_folder_replaces_only_its_own_files(tmp_path):
+    out = tmp_path / "o"
+    out.mkdir()
+    (out / "my-notes.txt").write_text("keep me")
+    (out / "results.json").write_text(json.dumps({"outputs": ["old_plot.png", "../outside.txt",
+                                                              "drives/x.png"]}))
+    (out / "old_plot.png").write_bytes(b"x")
+    (out / "drives").mkdir()
+    (out / "drives" / "x.png").write_bytes(b"x")
+    (tmp_path / "outside.txt").write_text("not the run's")
+    r = bench("run", "-p", "cv", "--out", str(out), "--workers", "1")
+    assert r.returncode == 0, r.stderr
+    assert not (out / "old_plot.png").exists() and not (out / "drives" / "x.png").exists()
+    assert (out / "my-notes.txt").read_text() == "keep me"
+    assert (tmp_path / "outside.txt").exists()
+    res = json.loads((out / "results.json").read_text())
+    assert "report.md" in res["outputs"] and "results.json" in res["outputs"]
+    assert all((out / f).is_file() for f in res["outputs"])
+    assert "removed 2 files of an earlier run" in r.stdout
+    assert "wrote " in r.stdout and "report.md" in r.stdout
+
+
+def test_every_drive_skipped_writes_the_report_and_fails(tmp_path, monkeypatch):
+    from typer.testing import CliRunner
+
+    import bench.cli as cli
+    import bench.executors as ex
+    from bench.runner import DriveRun
+
+    def all_skipped(drives, cfg, *a, **k):
+        return [DriveRun(d.name, "synthetic", "", [], [], pd.DataFrame(), skipped="poor truth")
+                for d in drives]
+
+    monkeypatch.setattr(ex, "run_drives", all_skipped)
+    out = tmp_path / "o"
+    r = CliRunner().invoke(cli.app, ["run", "-p", "cv", "--out", str(out)])
+    assert r.exit_code == 2
+    assert "every drive was skipped (4 drives)" in r.output
+    md = (out / "report.md").read_text()
+    assert md.count("skipped: poor truth") == 4
+    assert not (out / "traces.parquet").exists()
+    assert "traces.parquet" not in r.output
