@@ -2,27 +2,55 @@
 
 Each command lives in its own module under :mod:`bench.commands`; what they share
 (consoles, the one-line error, option types) is in :mod:`bench.commands.common`.
-Bad user input prints one line naming what is wrong and exits with status 2.
+Bad user input - a bad value, and also a command-line syntax error (unknown option,
+missing value, not a number) - prints one line ``error: ...`` on stderr naming what
+is wrong and exits with status 2.
 """
 
 from __future__ import annotations
 
+import importlib
 import sys
+from typing import Annotated
 
 import typer
 
 from bench.commands import inspect, latency, predictors, run, train, tune, view
-from bench.commands.common import err_console
+from bench.commands.common import fail
 
 app = typer.Typer(
     help="posbench: benchmark real-time vehicle position predictors on your drives.\n\n"
          "Start with `bench run` (built-in synthetic drives, no data needed), then point it at "
          "your recordings: `bench run --data PATH... --predictors lstm,kf`.",
-    no_args_is_help=True, add_completion=False, pretty_exceptions_enable=False,
+    no_args_is_help=True, add_completion=True, pretty_exceptions_enable=False,
     rich_markup_mode=None)
 data_app = typer.Typer(help="Look at recordings before benchmarking them.", no_args_is_help=True,
                        rich_markup_mode=None)
 app.add_typer(data_app, name="data")
+
+
+def version_string() -> str:
+    """``posbench X.Y.Z`` from the installed package's metadata."""
+    from importlib.metadata import PackageNotFoundError, version
+
+    try:
+        return f"posbench {version('posbench')}"
+    except PackageNotFoundError:  # run from a source tree that was never installed
+        return "posbench (version unknown: not installed)"
+
+
+def _show_version(value: bool) -> None:
+    if value:
+        print(version_string())
+        raise typer.Exit(0)
+
+
+@app.callback()
+def _root(version: Annotated[bool, typer.Option(
+        "--version", callback=_show_version, is_eager=True,
+        help="Print the posbench version and exit.")] = False) -> None:
+    pass
+
 
 app.command("run")(run.run)
 data_app.command("inspect")(inspect.inspect)
@@ -50,14 +78,68 @@ def _normalise_argv(argv: list[str]) -> list[str]:
     return out
 
 
-def main() -> None:
-    """Console-script entry point."""
-    argv = _normalise_argv(sys.argv[1:])
+def _click_errors(name: str) -> tuple[type[BaseException], ...]:
+    """Click's exception class ``name``, and its twin in the copy of click that newer typer
+    versions vendor (``typer._click``): a command-line error can be either."""
+    out: list[type[BaseException]] = []
+    for module in ("click.exceptions", "typer._click.exceptions"):
+        try:
+            cls = getattr(importlib.import_module(module), name, None)
+        except ImportError:
+            continue
+        if isinstance(cls, type) and cls not in out:
+            out.append(cls)
+    return tuple(out)
+
+
+NO_ARGS = _click_errors("NoArgsIsHelpError")
+USAGE_ERRORS = _click_errors("UsageError")
+CLICK_ERRORS = _click_errors("ClickException")
+ABORTS = (typer.Abort, *_click_errors("Abort"))
+
+
+def command_path(args: list[str]) -> str:
+    """The (sub)command that ``args`` call, e.g. ``bench data inspect``."""
+    cmd, path = typer.main.get_command(app), ["bench"]
+    for a in args:
+        sub = getattr(cmd, "commands", {}).get(a)
+        if sub is not None:
+            cmd = sub
+            path.append(a)
+        elif not a.startswith("-"):
+            break
+    return " ".join(path)
+
+
+def usage_line(e: BaseException, args: list[str]) -> str:
+    """A click error as one line; a usage error points at its command's ``--help``."""
+    fmt = getattr(e, "format_message", None)
+    msg = " ".join((fmt() if callable(fmt) else str(e)).split())
+    if isinstance(e, USAGE_ERRORS):
+        ctx = getattr(e, "ctx", None)
+        msg += f" (see `{ctx.command_path if ctx is not None else command_path(args)} --help`)"
+    return msg
+
+
+def main(argv: list[str] | None = None) -> None:
+    """Console-script entry point: run ``bench`` on ``argv`` (default: ``sys.argv[1:]``) and
+    exit with its status (0 ok, 2 user error, 130 interrupted)."""
+    args = _normalise_argv(sys.argv[1:] if argv is None else argv)
     try:
-        app(args=argv, prog_name="bench")
+        rv = app(args=args, prog_name="bench", standalone_mode=False)
+    except NO_ARGS as e:  # `bench` or `bench data` alone: their help
+        print(e.ctx.get_help())
+        rv = 0
+    except CLICK_ERRORS as e:  # unknown option, missing value, not a number, no such command
+        fail(usage_line(e, args))
+        rv = 2
+    except ABORTS:
+        fail("aborted")
+        rv = 130
     except KeyboardInterrupt:
-        err_console.print("interrupted")
-        sys.exit(130)
+        fail("interrupted")
+        rv = 130
+    sys.exit(rv if isinstance(rv, int) else 0)  # typer.Exit(n) comes back as n; None: 0
 
 
 if __name__ == "__main__":

@@ -22,3 +22,8 @@ class DataError(Exception):
         self.path = None if path is None else str(path)
         self.detail = detail
         super().__init__(f"{self.path}: {detail}" if self.path else detail)
+
+    def __reduce__(self) -> tuple:
+        # pickle (process pools, Ray) rebuilds an exception from ``args`` = (message,), which
+        # does not fit ``__init__(path, detail)``: rebuild it from its own arguments instead
+        return type(self), (self.path, self.detail), self.__dict__

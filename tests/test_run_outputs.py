@@ -85,11 +85,12 @@ def test_report_explains_missing_and_exclusions(cv_kf_result):
 
 
 def test_alias_runs_a_second_instance_under_its_own_name():
-    from bench.commands.run import predictor_names
+    from bench.options import validate_predictors, with_model_aliases
     from predictors.registry import create
 
-    names = predictor_names("cv,kf", {"kf@b": {}})
+    names = with_model_aliases(("cv", "kf"), {"kf@b": {}})
     assert names == ("cv", "kf", "kf@b")
+    assert validate_predictors(names, {"kf@b": {}}) == {"kf@b": {}}
     assert type(create("kf@b")) is type(create("kf"))
     d = default_drives()[2]
     res = run_drive(d, RunConfig(predictors=("kf", "kf@b")))
@@ -100,19 +101,18 @@ def test_alias_runs_a_second_instance_under_its_own_name():
 
 @pytest.mark.parametrize("bad", ["nope@x", "kf@", "kf@b,nope"])
 def test_alias_of_unknown_predictor_is_refused(bad):
-    from bench.commands.common import UsageError
-    from bench.commands.run import predictor_names
+    from bench.options import UsageError, parse_predictor_names, validate_predictors
 
     with pytest.raises(UsageError, match="unknown predictor"):
-        predictor_names(bad, {})
+        validate_predictors(parse_predictor_names(bad), {})
 
 
 def test_model_for_a_predictor_not_in_the_run_is_refused():
-    from bench.commands.common import UsageError
-    from bench.commands.run import predictor_names
+    from bench.options import UsageError, validate_predictors, with_model_aliases
 
-    with pytest.raises(UsageError, match="not in --predictors"):
-        predictor_names("cv", {"lstm": {"model": "x"}})
+    opts = {"lstm": {"model": "x"}}
+    with pytest.raises(UsageError, match="lstm@NAME=PATH"):
+        validate_predictors(with_model_aliases(("cv",), opts), opts)
 
 
 def _model_copy(tmp_path: Path, train_drives: list[str]) -> Path:

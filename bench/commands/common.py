@@ -14,26 +14,30 @@ from typing import Annotated
 import typer
 from rich.console import Console
 
-from scenarios.errors import DataError  # noqa: F401 - re-exported for the commands
+from bench.options import UsageError, check_topics
+from scenarios.errors import DataError
+
+__all__ = ["DataError", "UsageError"]  # re-exported for the commands
 
 console = Console()
 err_console = Console(stderr=True)
 
 DEFAULT_PREDICTORS = "cv,poly,kf,kf-paper,ekf,lstm"
-
-
-class UsageError(Exception):
-    """A command-line mistake: reported in one line, exit status 2."""
+#: the one line for a worker process that was killed (by the OOM killer, a signal, a crash)
+WORKER_DIED = "a worker process died (out of memory?); try fewer --workers"
 
 
 def fail(msg: str) -> typer.Exit:
+    """Print ``error: msg`` as one line on stderr; return the exit (status 2) to raise."""
     from rich.markup import escape  # "posbench[ray]" is text, not markup
 
-    err_console.print(f"[bold red]error:[/] {escape(msg)}", highlight=False, soft_wrap=True)
+    err_console.print(f"[bold red]error:[/] {escape(msg)}", highlight=False, soft_wrap=True,
+                      emoji=False)
     return typer.Exit(2)
 
 
 def parse_pairs(values: list[str] | None, what: str) -> dict[str, str]:
+    """``KEY=VALUE`` strings as a dict (``what`` names the option in the error)."""
     out: dict[str, str] = {}
     for v in values or []:
         if "=" not in v:
@@ -44,8 +48,13 @@ def parse_pairs(values: list[str] | None, what: str) -> dict[str, str]:
 
 
 def model_options(values: list[str] | None) -> dict[str, dict[str, str]]:
-    """``--model name=PATH`` pairs as per-predictor constructor options."""
-    return {k: {"model": v} for k, v in parse_pairs(values, "--model").items()}
+    """``--model name=PATH`` pairs as per-predictor constructor options; a folder PATH
+    holding a ``model.onnx`` (what ``bench train --out`` writes) stands for that file."""
+    out = {}
+    for name, path in parse_pairs(values, "--model").items():
+        onnx = Path(path) / "model.onnx"
+        out[name] = {"model": str(onnx) if onnx.is_file() else path}
+    return out
 
 
 def command_line() -> str:
@@ -54,10 +63,9 @@ def command_line() -> str:
 
 
 def parse_topics(values: list[str] | None) -> dict[str, str] | None:
+    """``--topic ROLE=NAME`` pairs (roles gps, imu, speed, truth) or None when none given."""
     topics = parse_pairs(values, "--topic")
-    bad = set(topics) - {"gps", "imu", "speed", "truth"}
-    if bad:
-        raise UsageError(f"--topic roles are gps, imu, speed, truth; got {', '.join(sorted(bad))}")
+    check_topics(topics)
     return topics or None
 
 
@@ -83,12 +91,14 @@ def load_drives(paths: list[Path] | None, projection: str, topics: dict[str, str
 
 
 DataOpt = Annotated[list[Path] | None, typer.Option(
-    "--data", "-d", help="Recordings or folders of them (any mix of ROS 1/2 bags, KITTI raw, "
-    "comma2k19 segments, the paper's route pickles, CSV/Parquet). Several paths may follow one "
-    "--data. Default: the built-in synthetic drives.")]
+    "--data", "-d", metavar="PATH...",
+    help="Recordings or folders of them (any mix of ROS 1/2 bags, KITTI raw, comma2k19 segments, "
+         "the paper's route pickles, CSV/Parquet). Several paths may follow one --data. "
+         "Default: the built-in synthetic drives.")]
 TopicOpt = Annotated[list[str] | None, typer.Option(
-    "--topic", help="Pick bag topics by role when ambiguous: gps=/name imu=/name speed=/name "
-    "truth=/name.")]
+    "--topic", metavar="ROLE=TOPIC...",
+    help="Pick bag topics by role when ambiguous: gps=/name imu=/name speed=/name truth=/name.")]
 ProjectionOpt = Annotated[str, typer.Option(
+    metavar="enu|mercator",
     help="Local frame for lat/lon sources: 'enu' (true metres, default) or 'mercator' (the paper's "
-         "spherical Mercator, for parity only: +1/cos(lat) scale error, ~+52 %% at 49 deg N).")]
+         "spherical Mercator, for parity only: +1/cos(lat) scale error, ~+52 % at 49 deg N).")]

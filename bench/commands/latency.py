@@ -16,6 +16,12 @@ from bench.commands.common import (
     load_drives,
     model_options,
 )
+from bench.options import (
+    check_at_least,
+    check_data_paths,
+    parse_predictor_names,
+    validate_predictors,
+)
 from bench.terminal import print_table
 
 
@@ -27,10 +33,17 @@ def latency(
     data: DataOpt = None,
     as_json: Annotated[bool, typer.Option("--json", help="Print JSON instead of tables.")] = False,
     model: Annotated[list[str] | None, typer.Option(
-        "--model", help="Model file per predictor, e.g. lstm-authors=PATH.onnx.")] = None,
+        "--model", metavar="NAME=PATH...",
+        help="Model file per predictor, e.g. lstm-authors=PATH.onnx.")] = None,
 ) -> None:
     """Per-call latency percentiles (us) in one process and thread, with the lstm's stages and
     batch throughput, beside the paper's figures (2 ms fit + 2 ms LSTM, 4-6 ms per step)."""
+    try:  # every option is checked before a drive is loaded or a predictor timed
+        check_at_least(steps, 1, "--steps")
+        check_data_paths(data)
+        validate_predictors(parse_predictor_names(predictors), model_options(model))
+    except UsageError as e:
+        raise fail(str(e)) from None
     from bench.latency import PAPER_MS, batch_throughput, lstm_stages, single_thread, time_predictor
     from predictors.registry import available
 

@@ -9,6 +9,7 @@ import typer
 
 from bench.commands.common import (
     DEFAULT_PREDICTORS,
+    WORKER_DIED,
     DataError,
     DataOpt,
     ProjectionOpt,
@@ -21,39 +22,64 @@ from bench.commands.common import (
     model_options,
     parse_topics,
 )
+from bench.options import (
+    check_at_least,
+    check_choice,
+    check_data_paths,
+    check_dropouts,
+    check_horizon,
+    check_out_dir,
+    check_out_file,
+    check_synthetic_duration,
+    parse_predictor_names,
+    validate_predictors,
+    with_model_aliases,
+)
 
 
 def run(
     data: DataOpt = None,
     predictors: Annotated[str, typer.Option(
-        "--predictors", "-p", help="Comma-separated predictor names (see `bench predictors`).")
+        "--predictors", "-p", metavar="NAMES",
+        help="Comma-separated predictor names (see `bench predictors`).")
     ] = DEFAULT_PREDICTORS,
-    horizon: Annotated[float, typer.Option(help="Future-point horizon after each fix [s].")] = 0.2,
+    horizon: Annotated[float, typer.Option(
+        metavar="SECONDS", help="Future-point horizon after each fix [s] (0 < h <= 10).")] = 0.2,
     gps_profile: Annotated[str, typer.Option(
-        help="GPS input for drives with truth: native (their own fixes), none (exact), rtk (~2 cm), "
-             "consumer (~1 m, correlated).")] = "rtk",
-    gps_latency: Annotated[float, typer.Option(help="Receiver latency of drawn fixes [s].")] = 0.0,
+        metavar="PROFILE",
+        help="GPS input for drives with truth: native (their own fixes), none (exact), "
+             "rtk (~2 cm), consumer (~1 m, correlated).")] = "rtk",
+    gps_latency: Annotated[float, typer.Option(
+        metavar="SECONDS", help="Receiver latency of drawn fixes [s].")] = 0.0,
     dropouts: Annotated[str, typer.Option(
+        metavar="PROFILE",
         help="GPS dropouts: none, random:P, outages (0.5/1/2/5 s), outage:L.")] = "none",
-    seed: Annotated[int, typer.Option(help="Master seed (GPS draws, dropouts, synthetic data).")] = 0,
-    out: Annotated[Path, typer.Option("--out", "-o", help="Output folder.")] = Path("bench-out"),
-    workers: Annotated[int, typer.Option(help="Parallel processes (one drive each).")] = 2,
+    seed: Annotated[int, typer.Option(
+        metavar="INT", help="Master seed (GPS draws, dropouts, synthetic data).")] = 0,
+    out: Annotated[Path, typer.Option("--out", "-o", metavar="DIR", help="Output folder.")
+                   ] = Path("bench-out"),
+    workers: Annotated[int, typer.Option(
+        metavar="N", help="Parallel processes (one drive each).")] = 2,
     model: Annotated[list[str] | None, typer.Option(
-        "--model", help="Model file per predictor, e.g. lstm-authors=PATH.onnx or lstm=DIR.")] = None,
+        "--model", metavar="NAME=PATH...",
+        help="Model file per predictor, e.g. lstm-authors=PATH.onnx or lstm=DIR.")] = None,
     topic: TopicOpt = None,
     projection: ProjectionOpt = "enu",
     include_poor_truth: Annotated[bool, typer.Option(
         help="Also score drives whose truth is poor (median accuracy > 1 m).")] = False,
     synthetic_duration: Annotated[float | None, typer.Option(
+        metavar="SECONDS",
         help="Without --data: one synthetic mixed drive of this length [s] instead of the "
              "built-in set (e.g. 36000 for a 10-hour soak test).")] = None,
     rerun: Annotated[Path | None, typer.Option(
-        "--rerun", help="Also write a rerun recording (.rrd) of every drive (needs the viz extra; "
-        "open it with `bench view FILE.rrd`).")] = None,
+        "--rerun", metavar="FILE", help="Also write a rerun recording (.rrd) of every drive (needs "
+        "the viz extra; open it with `bench view FILE.rrd`).")] = None,
     executor: Annotated[str, typer.Option(
+        metavar="local|ray",
         help="Where to run: local (processes, --workers) or ray (one Ray task per drive and "
              "predictor; needs the ray extra).")] = "local",
     address: Annotated[str | None, typer.Option(
+        metavar="ADDRESS",
         help="Ray cluster to use with --executor ray (e.g. ray://head:10001 or auto); default: "
              "start a local Ray instance with --workers CPUs.")] = None,
     plot_format: Annotated[str, typer.Option(
@@ -68,43 +94,55 @@ def run(
 
     Example: bench run --predictors lstm,kf --data ../shared/data/kitti_raw
     """
+    from concurrent.futures.process import BrokenProcessPool
+
     from bench.config import GPS_PROFILES, RunConfig
     from bench.executors import EXECUTORS, RAY_MISSING, ExecutorError, ray_available
     from bench.fetch import local_paths
+    from scenarios.projection import PROJECTIONS
 
     try:
-        if executor not in EXECUTORS:
-            raise UsageError(f"--executor must be one of {', '.join(EXECUTORS)}")
+        # every option is checked before a drive is loaded or a worker starts
+        check_choice(executor, EXECUTORS, "--executor")
         if address and executor != "ray":
             raise UsageError("--address is for --executor ray")
         if executor == "ray" and not ray_available():
             raise UsageError(RAY_MISSING)
-        options = model_options(model)
-        names = predictor_names(predictors, options)
+        names = parse_predictor_names(predictors)
         formats = plot_formats(plot_format)
-        if gps_profile not in GPS_PROFILES:
-            raise UsageError(f"--gps-profile must be one of {', '.join(GPS_PROFILES)}")
-        from predictors.registry import base_name
-
-        needs_model = [n for n in names if base_name(n) == "lstm-authors" and n not in options]
-        if needs_model:
-            raise UsageError(f"{needs_model[0]} needs the authors' network: --model lstm-authors=PATH.onnx "
-                             "(e.g. ../shared/models/authors/gps_interpolation_model2.onnx)")
+        check_choice(gps_profile, GPS_PROFILES, "--gps-profile")
+        check_choice(projection, PROJECTIONS, "--projection")
+        check_horizon(horizon)
+        check_at_least(gps_latency, 0.0, "--gps-latency", " s")
+        check_dropouts(dropouts)
+        check_at_least(seed, 0, "--seed")
+        check_at_least(workers, 1, "--workers")
+        check_synthetic_duration(synthetic_duration, data)
+        topics = parse_topics(topic)
+        check_data_paths(data)
+        check_out_dir(out)
+        if rerun is not None:
+            check_out_file(rerun, "--rerun")
+            try:
+                import rerun as _rr  # noqa: F401
+            except ImportError:
+                raise UsageError("--rerun needs the viz extra: "
+                                 "pip install 'posbench[viz]'") from None
+        options = model_options(model)
+        names = with_model_aliases(names, options)
+        options = validate_predictors(names, options)
         cfg = RunConfig(predictors=names, horizon_s=horizon, gps_profile=gps_profile,
                         gps_latency_s=gps_latency, dropouts=dropouts, seed=seed,
                         exclude_poor_truth=not include_poor_truth, predictor_options=options,
                         gate=gate)
-        if rerun is not None:
-            try:
-                import rerun as _rr  # noqa: F401
-            except ImportError:
-                raise UsageError("--rerun needs the viz extra: pip install 'posbench[viz]'") from None
         with local_paths(data) as data:  # fsspec URLs -> local copies for the loaders
-            drives = load_drives(data, projection, parse_topics(topic), seed=seed,
-                                  synthetic_duration=synthetic_duration)
+            drives = load_drives(data, projection, topics, seed=seed,
+                                 synthetic_duration=synthetic_duration)
             _run(drives, cfg, data, out, workers, rerun, executor, address, formats)
     except (DataError, UsageError, ExecutorError) as e:
         raise fail(str(e)) from None
+    except BrokenProcessPool:
+        raise fail(WORKER_DIED) from None
 
 
 PLOT_FORMATS = ("png", "svg", "pdf")
@@ -119,33 +157,6 @@ def plot_formats(value: str) -> tuple[str, ...]:
         raise UsageError(f"--plot-format takes {', '.join(PLOT_FORMATS)} (comma-separated), "
                          f"got {value!r}")
     return formats
-
-
-def predictor_names(predictors: str, options: dict[str, dict[str, str]]) -> tuple[str, ...]:
-    """The run's predictor names from ``--predictors`` and ``--model``.
-
-    ``NAME@ALIAS`` runs a second instance of a registered predictor under its own name
-    (``--model lstm@mine=PATH`` compares your model with the bundled ``lstm``); an alias
-    given only in ``--model`` is added to the run. A ``--model`` for a plain name that
-    is not in the run is a mistake and is reported.
-    """
-    from predictors.registry import ALIAS_SEP, available, is_known
-
-    names = list(dict.fromkeys(p.strip() for p in predictors.split(",") if p.strip()))
-    for n in options:
-        if n not in names:
-            if ALIAS_SEP not in n:
-                raise UsageError(f"--model {n}=...: {n} is not in --predictors "
-                                 f"({','.join(names)}); add it, or use {n}@NAME=PATH for a "
-                                 f"second {n}")
-            names.append(n)
-    unknown = [n for n in names if not is_known(n)]
-    if unknown:
-        raise UsageError(f"unknown predictor(s) {', '.join(unknown)}; known: "
-                         f"{', '.join(sorted(available()))} (NAME@ALIAS for a second instance)")
-    if not names:
-        raise UsageError("--predictors is empty; known: " + ", ".join(sorted(available())))
-    return tuple(names)
 
 
 def plural(n: int, word: str) -> str:

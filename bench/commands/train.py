@@ -16,18 +16,30 @@ from bench.commands.common import (
     console,
     fail,
 )
+from bench.options import check_at_least, check_data_paths, check_out_dir
 from bench.terminal import print_table
 
 
 def train(
     data: DataOpt = None,
-    out: Annotated[Path, typer.Option("--out", "-o", help="Folder for model.onnx and model.json.")
+    out: Annotated[Path, typer.Option("--out", "-o", metavar="DIR",
+                                      help="Folder for model.onnx and model.json.")
                    ] = Path("model-out"),
     epochs: Annotated[int, typer.Option(help="Maximum epochs (early stopping may end sooner).")] = 40,
     seed: Annotated[int, typer.Option(help="Seed for split, sampling and initialisation.")] = 0,
     synthetic: Annotated[int, typer.Option(help="Number of synthetic drives to add.")] = 0,
 ) -> None:
     """Train the LSTM predictor (needs the `train` extra: pip install 'posbench[train]')."""
+    try:  # every option is checked before PyTorch is imported or a drive loaded
+        check_at_least(epochs, 1, "--epochs")
+        check_at_least(seed, 0, "--seed")
+        check_at_least(synthetic, 0, "--synthetic")
+        if not data and synthetic == 0:
+            raise UsageError("no training drives: give --data PATH... or --synthetic N")
+        check_data_paths(data)
+        check_out_dir(out)
+    except UsageError as e:
+        raise fail(str(e)) from None
     try:
         import torch  # noqa: F401
     except ImportError:

@@ -7,6 +7,7 @@ from typing import Annotated
 import typer
 
 from bench.commands.common import (
+    WORKER_DIED,
     DataError,
     DataOpt,
     UsageError,
@@ -15,24 +16,37 @@ from bench.commands.common import (
     fail,
     load_drives,
 )
+from bench.options import check_at_least, check_choice, check_data_paths
 
 
 def tune(
     predictor: Annotated[str, typer.Argument(help="Predictor to tune (kf or ekf).")],
     gps_profile: Annotated[str, typer.Option(
+        metavar="PROFILE",
         help="GPS condition to tune for: none, rtk, consumer (synthetic development drives, "
              "seeds 1000+) or native (give --data: the development routes).")] = "rtk",
     data: DataOpt = None,
-    drives: Annotated[int, typer.Option(help="Synthetic development drives per route type.")] = 1,
-    workers: Annotated[int, typer.Option(help="Parallel processes.")] = 2,
+    drives: Annotated[int, typer.Option(
+        metavar="N", help="Synthetic development drives per route type.")] = 1,
+    workers: Annotated[int, typer.Option(metavar="N", help="Parallel processes.")] = 2,
     save: Annotated[bool, typer.Option(help="Write the winner to predictors/tuned.json.")] = True,
 ) -> None:
     """Grid-search a filter's noise parameters on development drives (never evaluation drives)."""
+    from concurrent.futures.process import BrokenProcessPool
+
+    from bench.config import GPS_PROFILES
     from bench.tune import GRIDS, grid_search, save_tuned
 
     if predictor not in GRIDS:
         raise fail(f"no tuning grid for {predictor!r}; tunable: {', '.join(GRIDS)}")
     try:
+        check_choice(gps_profile, GPS_PROFILES, "--gps-profile")
+        check_at_least(drives, 1, "--drives")
+        check_at_least(workers, 1, "--workers")
+        if data and gps_profile != "native":
+            raise UsageError("--data is for --gps-profile native (the other profiles tune on "
+                             "synthetic development drives)")
+        check_data_paths(data)
         if gps_profile == "native":
             if not data:
                 raise UsageError("--gps-profile native tunes on recorded fixes: give --data PATH...")
@@ -53,6 +67,8 @@ def tune(
                                        on_step=lambda p, v: prog.update(task, advance=1))
     except (DataError, UsageError) as e:
         raise fail(str(e)) from None
+    except BrokenProcessPool:
+        raise fail(WORKER_DIED) from None
     best_val = min(v for _, v in trials)
     console.print(f"best {best} -> future+now mean error {best_val:.4f} m over {len(dev)} drives")
     if save:

@@ -1,0 +1,242 @@
+"""Command-line option checks, run before any drive is loaded or any worker starts.
+
+Each check raises :class:`UsageError` with one line naming the option and what is
+wrong, so a typo costs a second instead of a whole run (and never surfaces as a
+traceback from a worker process). The checks of values are pure; those of paths
+look at the file system but never create or change anything there.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from collections.abc import Iterable, Mapping, Sequence
+from pathlib import Path
+from typing import Any
+
+#: longest --horizon [s]: the predictors extrapolate between fixes, not over minutes
+MAX_HORIZON_S = 10.0
+#: shortest --synthetic-duration [s]
+MIN_SYNTHETIC_S = 1.0
+
+
+class UsageError(Exception):
+    """A command-line mistake: reported in one line, exit status 2."""
+
+
+def _num(value: float) -> str:
+    return f"{value:g}" if isinstance(value, float) else str(value)
+
+
+def check_choice(value: str, choices: Iterable[str], option: str) -> str:
+    """``value`` if it is one of ``choices``, else a :class:`UsageError` listing them."""
+    choices = tuple(choices)
+    if value not in choices:
+        raise UsageError(f"{option} must be one of {', '.join(choices)}; got {value!r}")
+    return value
+
+
+def check_at_least(value: float, minimum: float, option: str, unit: str = "") -> float:
+    """``value`` if it is a finite number >= ``minimum`` (``unit`` only words the message)."""
+    if not (math.isfinite(value) and value >= minimum):
+        raise UsageError(f"{option} must be at least {_num(minimum)}{unit}; got {_num(value)}")
+    return value
+
+
+def check_horizon(seconds: float, option: str = "--horizon") -> float:
+    """A look-ahead [s]: more than 0 and at most :data:`MAX_HORIZON_S`."""
+    if not (math.isfinite(seconds) and 0.0 < seconds <= MAX_HORIZON_S):
+        raise UsageError(f"{option} must be more than 0 s and at most {MAX_HORIZON_S:g} s; "
+                         f"got {_num(seconds)}")
+    return seconds
+
+
+def check_dropouts(profile: str) -> str:
+    """A GPS dropout profile (``none``, ``random:P``, ``outages``, ``outage:L``), checked by
+    the parser that applies it (:func:`scenarios.degrade._parse_dropouts`)."""
+    from scenarios.degrade import _parse_dropouts
+    from scenarios.errors import DataError
+
+    try:
+        _parse_dropouts(profile)
+    except DataError as e:
+        raise UsageError(f"--dropouts: {e.detail}") from None
+    return profile
+
+
+def check_synthetic_duration(seconds: float | None, data: Sequence[Any] | None) -> float | None:
+    """``--synthetic-duration`` [s]: only without ``--data``, finite and > 1 s."""
+    if seconds is None:
+        return None
+    if data:
+        raise UsageError("--synthetic-duration is for runs without --data (it sets the length "
+                         "of the synthetic drive)")
+    if not (math.isfinite(seconds) and seconds > MIN_SYNTHETIC_S):
+        raise UsageError(f"--synthetic-duration must be more than {MIN_SYNTHETIC_S:g} s; "
+                         f"got {_num(seconds)}")
+    return seconds
+
+
+def parse_predictor_names(text: str, option: str = "--predictors") -> tuple[str, ...]:
+    """Comma-separated predictor names, in order (not yet checked against the registry)."""
+    names = tuple(n.strip() for n in text.split(",") if n.strip())
+    if not names:
+        raise UsageError(f"{option} names no predictor; e.g. {option} cv,kf")
+    twice = sorted({n for n in names if names.count(n) > 1})
+    if twice:
+        raise UsageError(f"{option} lists {', '.join(twice)} more than once")
+    return names
+
+
+def check_topics(topics: Mapping[str, str] | None,
+                 roles: Iterable[str] = ("gps", "imu", "speed", "truth")) -> None:
+    """``--topic ROLE=NAME`` pairs: known roles, non-empty names."""
+    roles = tuple(roles)
+    bad = sorted(set(topics or {}) - set(roles))
+    if bad:
+        raise UsageError(f"--topic roles are {', '.join(roles)}; got {', '.join(bad)}")
+    empty = sorted(r for r, name in (topics or {}).items() if not name)
+    if empty:
+        raise UsageError(f"--topic {empty[0]}= needs a topic name, e.g. --topic {empty[0]}=/fix")
+
+
+# ------------------------------------------------------------------- paths
+def _first_existing(path: Path) -> Path:
+    p = path.absolute()
+    while not p.exists() and p != p.parent:
+        p = p.parent
+    return p
+
+
+def _check_creatable(path: Path, option: str) -> None:
+    anc = _first_existing(path)
+    if not anc.is_dir():
+        raise UsageError(f"{option} {path}: cannot be created, {anc} is a file")
+    if not os.access(anc, os.W_OK | os.X_OK):
+        raise UsageError(f"{option} {path}: cannot be created, no permission to write in {anc}")
+
+
+def check_out_dir(path: Path, option: str = "--out") -> Path:
+    """An output folder: an existing folder, or one that can be created (nothing is created
+    here: a failed check leaves no trace)."""
+    if path.exists():
+        if not path.is_dir():
+            raise UsageError(f"{option} {path}: exists and is not a folder; give a folder path")
+        if not os.access(path, os.W_OK | os.X_OK):
+            raise UsageError(f"{option} {path}: no permission to write in this folder")
+        return path
+    _check_creatable(path, option)
+    return path
+
+
+def check_out_file(path: Path, option: str) -> Path:
+    """An output file: not an existing folder, and its folder exists or can be created."""
+    if path.is_dir():
+        raise UsageError(f"{option} {path}: is a folder; give a file path")
+    if path.exists():
+        if not os.access(path, os.W_OK):
+            raise UsageError(f"{option} {path}: no permission to overwrite this file")
+        return path
+    _check_creatable(path, option)
+    return path
+
+
+def check_data_paths(paths: Sequence[str | Path] | None, option: str = "--data") -> None:
+    """Local ``--data`` paths exist (fsspec URLs such as ``s3://...`` are fetched later)."""
+    from bench.fetch import as_url
+
+    for p in paths or []:
+        if as_url(p) is None and not Path(p).exists():
+            raise UsageError(f"{option} {p}: no such file or folder")
+
+
+# -------------------------------------------------------------- predictors
+def _first_line(exc: BaseException) -> str:
+    text = str(exc).strip().splitlines()
+    return text[0][:300] if text else type(exc).__name__
+
+
+def _load_failure(name: str, given: Any, path: str | None, exc: BaseException) -> str:
+    """One line: which predictor (and model file) could not be built, and why."""
+    from scenarios.errors import DataError
+
+    if isinstance(exc, DataError):
+        # the path is in the message already unless it is the model file itself
+        detail = exc.detail if exc.path is not None and exc.path in (str(given), path) \
+            else _first_line(exc)
+    else:
+        detail = f"{type(exc).__name__}: {_first_line(exc)}"
+    if given is None:
+        return f"predictor {name} cannot be created: {detail}"
+    return f"--model {name}={given}: {name} cannot load it: {detail}"
+
+
+def _model_path(name: str, path: Any) -> str:
+    """A ``--model`` value as the file the predictor loads (a folder means its model.onnx)."""
+    p = Path(str(path))
+    if not p.exists():
+        raise UsageError(f"--model {name}={path}: no such file or folder")
+    if p.is_dir():
+        onnx = p / "model.onnx"
+        if not onnx.is_file():
+            raise UsageError(f"--model {name}={path}: folder without a model.onnx")
+        return str(onnx)
+    return str(p)
+
+
+def with_model_aliases(names: Sequence[str], options: Mapping[str, Any]) -> tuple[str, ...]:
+    """``names`` plus every ``NAME@ALIAS`` given only in ``--model`` (in the order given).
+
+    ``NAME@ALIAS`` runs a second instance of a registered predictor under its own name, so
+    ``--model lstm@mine=DIR`` compares your model with the bundled ``lstm``.
+    """
+    from predictors.registry import ALIAS_SEP
+
+    return tuple(names) + tuple(n for n in options if ALIAS_SEP in n and n not in names)
+
+
+def validate_predictors(names: Sequence[str], options: Mapping[str, Mapping[str, Any]]
+                        ) -> dict[str, dict[str, Any]]:
+    """Check the requested predictors and their constructor options before any work.
+
+    Each name must be registered, each option set must belong to a requested name, a
+    ``model`` path must exist (a folder stands for its ``model.onnx``), and each predictor
+    is built once here with its options (registry defaults, no tuned parameters) so that a
+    bad model file fails now, in one line naming the predictor and the path.
+
+    Args:
+        names: the final predictor names, in report order.
+        options: per-name constructor options, e.g. ``{"lstm": {"model": "m/model.onnx"}}``.
+
+    Returns:
+        the options with ``model`` folders resolved to their ``model.onnx``.
+    """
+    from predictors.registry import available, base_name, create, is_known
+
+    unknown = [n for n in names if not is_known(n)]
+    if unknown:
+        raise UsageError(f"unknown predictor(s) {', '.join(unknown)}; known: "
+                         f"{', '.join(sorted(available()))} (NAME@ALIAS runs a second instance)")
+    stray = [n for n in options if n not in names]
+    if stray:
+        n = stray[0]
+        raise UsageError(f"--model {n}={options[n].get('model', '...')}: {n} is not among the "
+                         f"predictors to run ({', '.join(names)}); add it, or use {n}@NAME=PATH "
+                         f"for a second {n}")
+    for n in names:
+        if base_name(n) == "lstm-authors" and "model" not in options.get(n, {}):
+            raise UsageError(f"{n} needs the authors' network: --model {n}=PATH.onnx "
+                             "(e.g. ../shared/models/authors/gps_interpolation_model2.onnx)")
+    resolved: dict[str, dict[str, Any]] = {}
+    for name, opts in options.items():
+        resolved[name] = dict(opts)
+        if "model" in opts:
+            resolved[name]["model"] = _model_path(name, opts["model"])
+    for name in names:
+        opts = resolved.get(name, {})
+        try:
+            create(name, None, **opts)
+        except Exception as e:  # noqa: BLE001 - ValueError, DataError, onnxruntime's own types
+            raise UsageError(_load_failure(name, options.get(name, {}).get("model"),
+                                           opts.get("model"), e)) from None
+    return resolved
