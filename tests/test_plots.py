@@ -270,3 +270,33 @@ def test_report_prints_notes_and_links_per_drive_files(tmp_path):
     assert "![path.png](path.png)" in md and "![trajectory_error.png](trajectory_error.png)" in md
     assert "- error_vs_since_fix: no GPS outage in this run" in md
     assert (tmp_path / "path.svg").exists() and (tmp_path / f"drives/{drive}-error_over_time.svg").exists()
+
+
+def test_paper_figures_have_titles_and_every_format(tmp_path, monkeypatch):
+    import bench.figures as figures
+    from bench.config import RunConfig
+    from bench.results import all_traces
+    from bench.runner import run_drive
+    from scenarios.synthetic import default_drives
+
+    drive = default_drives()[2]
+    cfg = RunConfig(predictors=("kf-paper", "lstm"))
+    runs = [run_drive(drive, cfg)]
+    titles = []
+
+    def spy(fig, folder, stem, formats, dpi=plots.DPI):
+        titles.append([ax.get_title() for ax in fig.axes])
+        assert all(ax.get_xlabel() == "east [m]" and ax.get_ylabel() == "north [m]"
+                   for ax in fig.axes)
+        return plots.save_figure(fig, folder, stem, formats, dpi)
+
+    monkeypatch.setattr(figures, "save_figure", spy)
+    figs = figures.paper_figures([drive], cfg, all_traces(runs), tmp_path, runs,
+                                 formats=("svg", "png"))
+    assert [f for f, _ in figs] == ["paper_fig_prediction.png", "paper_fig_current_position.png",
+                                    "paper_fig_path.png", "paper_fig_kalman.png"]
+    assert len(titles) == 4 and all(t and all(t) for t in titles)
+    for f, _ in figs:
+        stem = f.removesuffix(".png")
+        assert (tmp_path / f"{stem}.svg").read_bytes()[:5] == MAGIC["svg"]
+        assert (tmp_path / f).read_bytes()[:4] == MAGIC["png"]
