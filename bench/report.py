@@ -1,18 +1,20 @@
 """Write a run's outputs: ``report.md`` (tables a person reads first), ``results.json``,
-per-query traces (Parquet) and PNG plots."""
+per-query traces (Parquet) and the plots (:mod:`bench.plots`)."""
 
 from __future__ import annotations
 
 import json
 import math
+from collections.abc import Iterable
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 import pandas as pd
 
+from bench.plots import shown_format, write_plots
 from bench.prepare import LABELS
-from metrics.accuracy import error_cdf, speed_bin_order
+from metrics.accuracy import speed_bin_order
 
 PAPER_TABLE_CM = {"straight": 16.6, "turn": 12.1, "roundabout": 9.7, "start_stop": 4.2}
 PAPER_OVERALL_CM = {"lstm": 11.0, "kf-paper": 46.0}
@@ -148,22 +150,25 @@ def label_table(res: dict[str, Any], dataset: str, kind: str, held_out: bool = F
 
 
 def write_report(res: dict[str, Any], traces: pd.DataFrame, out: Path,
-                 formats: tuple[str, ...] = ("png",),
+                 formats: Iterable[str] = ("png",),
                  also_written: list[Path] | None = None) -> list[Path]:
-    """Write every output file into ``out``; return the paths written. ``results.json`` comes
-    last and lists (key ``outputs``) everything the run wrote there, ``also_written``
-    (the paper's figures) included, so the next run into ``out`` can replace exactly those."""
+    """Write every output file into ``out``, the plots in each of ``formats`` (png, svg,
+    pdf; ValueError on others); return the paths written. ``results.json`` comes last and
+    lists (key ``outputs``) everything the run wrote there, ``also_written`` (the paper's
+    figures) included, so the next run into ``out`` can replace exactly those."""
     from bench.outputs import relative_outputs
 
+    shown = "." + shown_format(formats)  # checks the formats before anything is written
     out.mkdir(parents=True, exist_ok=True)
     written = list(also_written or [])
-    plots: list[Path] = []
     if not traces.empty:
         traces.to_parquet(out / "traces.parquet", index=False)
         written.append(out / "traces.parquet")
-        plots = write_plots(traces, res, out)
-        written += plots
-    (out / "report.md").write_text(render_markdown(res, [p.name for p in plots if p.suffix == ".png"]))
+    plots = write_plots(traces, res, out, formats)
+    written += plots.files
+    (out / "report.md").write_text(render_markdown(
+        res, [p.relative_to(out).as_posix() for p in plots.files if p.suffix == shown],
+        plot_notes=plots.notes))
     written.append(out / "report.md")
     written.append(out / "results.json")
     res["outputs"] = relative_outputs(out, written)
@@ -181,7 +186,11 @@ def _json_default(o: Any) -> Any:
     return str(o)
 
 
-def render_markdown(res: dict[str, Any], plots: list[str]) -> str:
+def render_markdown(res: dict[str, Any], plots: list[str],
+                    plot_notes: dict[str, str] | None = None) -> str:
+    """The report as Markdown. ``plots``: figure files relative to the report (those under
+    ``drives/`` are listed as links, the others shown); ``plot_notes``: figure name -> why it
+    was not written."""
     cfg = res["config"]
     lines = ["# posbench report", "",
              f"Command: `{res['command']}`", "",
@@ -280,8 +289,18 @@ def render_markdown(res: dict[str, Any], plots: list[str]) -> str:
     warn = [(d["name"], w) for d in res["drives"] for w in d["warnings"]]
     if warn:
         lines += ["## Loader warnings", ""] + [f"- `{n}`: {w}" for n, w in warn] + [""]
-    if plots:
-        lines += ["## Plots", ""] + [f"![{p}]({p})" for p in plots] + [""]
+    if plots or plot_notes:
+        shown = [p for p in plots if not p.startswith("drives/")]
+        per_drive = [p for p in plots if p.startswith("drives/")]
+        lines += ["## Plots", ""]
+        lines += [f"![{p}]({p})" if p.endswith((".png", ".svg")) else f"- [{p}]({p})"
+                  for p in shown] + [""] * bool(shown)
+        if plot_notes:
+            lines += ["Not drawn:", ""] + [f"- {k}: {v}" for k, v in plot_notes.items()] + [""]
+        if per_drive:
+            lines += ["Future-point error over time, per drive:", ""]
+            lines += [f"- [{Path(p).stem.removesuffix('-error_over_time')}]({p})"
+                      for p in per_drive] + [""]
     if res.get("paper_figures"):
         lines += ["## The paper's figures, from this run", ""]
         for f in res["paper_figures"]:
@@ -315,104 +334,3 @@ def gate_lines(res: dict[str, Any]) -> list[str]:
                          [[d["name"], str(d["gps_fed"])]
                           + [str(d["rejected"].get(p, 0)) for p in preds] for d in per_drive]), ""]
     return lines
-
-
-TURN_LABELS = ("turn", "roundabout")
-
-
-def most_turning_drive(fut: pd.DataFrame) -> tuple[str, bool]:
-    """The drive with the most turn / roundabout queries in ``fut`` (a traces slice), and
-    whether any query is turning at all (else the first drive)."""
-    turns = fut[fut.label.isin(TURN_LABELS)]
-    if turns.empty:
-        return str(fut.drive.iloc[0]), False
-    return str(turns.groupby("drive", observed=True).size().idxmax()), True
-
-
-def write_plots(traces: pd.DataFrame, res: dict[str, Any], out: Path) -> list[Path]:
-    """error_cdf.png, error_vs_speed.png, path.png."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    def save(fig: Any, name: str) -> Path:
-        fig.tight_layout()
-        fig.savefig(out / name, dpi=110)
-        plt.close(fig)
-        return out / name
-
-    paths: list[Path] = []
-    preds = list(res["predictors"])
-    fig, axes = plt.subplots(1, 2, figsize=(11, 4), sharey=True)
-    for ax, kind in zip(axes, ("future", "now"), strict=True):
-        for p in preds:
-            e, c = error_cdf(traces.loc[(traces.predictor == p) & (traces.kind == kind), "error_m"]
-                             .to_numpy())
-            if e.size:
-                ax.plot(e, c, label=p)
-        ax.set_xscale("log")
-        ax.set_xlabel("error [m]")
-        ax.set_title(f"{kind} error CDF")
-        ax.grid(True, which="both", alpha=0.3)
-    axes[0].set_ylabel("fraction of queries")
-    axes[0].legend()
-    paths.append(save(fig, "error_cdf.png"))
-
-    fig, ax = plt.subplots(figsize=(8, 4))
-    bins = speed_bin_order()
-    for p in preds:
-        s = res["by_speed"].get(p, {}).get("future", {})
-        ys = [s.get(b, {}).get("mean_m", np.nan) for b in bins]
-        ax.plot(range(len(bins)), ys, marker="o", label=p)
-    ax.set_xticks(range(len(bins)), bins, rotation=20)
-    ax.set_ylabel("mean future error [m]")
-    ax.set_yscale("log")
-    ax.set_title("future-point error vs speed")
-    ax.grid(True, alpha=0.3)
-    ax.legend()
-    paths.append(save(fig, "error_vs_speed.png"))
-
-    now = traces[traces.kind == "now"]
-    if (now["outage"] >= 0).any():
-        fig, ax = plt.subplots(figsize=(8, 4))
-        edges = np.array([0, 0.1, 0.2, 0.3, 0.5, 0.75, 1, 1.5, 2, 3, 4, 5, 6])
-        mid = 0.5 * (edges[:-1] + edges[1:])
-        for p in preds:
-            dn = now[now.predictor == p]
-            b = np.digitize(dn.since_fix_s.to_numpy(), edges) - 1
-            e = dn.error_m.to_numpy()
-            ys = [np.nanmean(e[b == i]) if np.any((b == i) & np.isfinite(e)) else np.nan
-                  for i in range(mid.size)]
-            ax.plot(mid, ys, marker="o", label=p)
-        ax.set_xlabel("time since last fix [s]")
-        ax.set_ylabel("mean current-position error [m]")
-        ax.set_yscale("log")
-        ax.set_title("error vs time since last fix")
-        ax.grid(True, which="both", alpha=0.3)
-        ax.legend()
-        paths.append(save(fig, "error_vs_since_fix.png"))
-
-    # path plot: the drive with the most turn queries (first drive if unlabelled), a 40 s window
-    fut = traces[traces.kind == "future"]
-    drive, has_turns = most_turning_drive(fut)
-    dfd = fut[fut.drive == drive]
-    if has_turns:
-        tc = dfd.loc[dfd.label.isin(TURN_LABELS), "t_issue"].median()
-    else:
-        tc = dfd.t_issue.median()
-    win = dfd[(dfd.t_issue > tc - 20) & (dfd.t_issue < tc + 20)]
-    fig, ax = plt.subplots(figsize=(7, 7))
-    ref = win[win.predictor == preds[0]].sort_values("t_query")
-    ax.plot(ref.x_ref, ref.y_ref, "k-", lw=1, label="reference")
-    for p in preds:
-        w = win[win.predictor == p]
-        ax.plot(w.x, w.y, ".", ms=4, label=f"{p} future")
-    ax.set_aspect("equal", adjustable="datalim")
-    ax.set_xlabel("east [m]")
-    ax.set_ylabel("north [m]")
-    ax.set_title(f"{drive}: 40 s around a turn")
-    ax.legend(fontsize=8)
-    ax.grid(True, alpha=0.3)
-    paths.append(save(fig, "path.png"))
-    return paths

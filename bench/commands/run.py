@@ -145,18 +145,14 @@ def run(
         raise fail(WORKER_DIED) from None
 
 
-PLOT_FORMATS = ("png", "svg", "pdf")
-
-
 def plot_formats(value: str) -> tuple[str, ...]:
     """``--plot-format png,pdf`` as a tuple of known formats, in the order given."""
-    formats = tuple(dict.fromkeys(f.strip().lower().lstrip(".") for f in value.split(",")
-                                  if f.strip()))
-    bad = [f for f in formats if f not in PLOT_FORMATS]
-    if bad or not formats:
-        raise UsageError(f"--plot-format takes {', '.join(PLOT_FORMATS)} (comma-separated), "
-                         f"got {value!r}")
-    return formats
+    from bench.plots import check_formats
+
+    try:
+        return check_formats(value)
+    except ValueError as e:
+        raise UsageError(f"--plot-format {value!r}: {e}") from None
 
 
 def plural(n: int, word: str) -> str:
@@ -201,7 +197,8 @@ def _run(drives, cfg, data, out: Path, workers: int, rerun: Path | None = None,
     figures = paper_figures(list(drives), cfg, traces, out, runs, formats=formats)
     res["paper_figures"] = [{"file": f, "caption": c} for f, c in figures]
     written = write_report(res, traces, out, formats=formats,
-                           also_written=[out / f for f, _ in figures])
+                           also_written=[(out / f).with_suffix("." + fmt)
+                                         for f, _ in figures for fmt in formats])
     skipped = [r for r in runs if r.skipped]
     scored = len(runs) - len(skipped)
     if skipped:
