@@ -63,18 +63,21 @@ def summary_rows(res: dict[str, Any], held_out: bool = False) -> list[list[str]]
         f, n = p["future"], p["now"]
         lat = res["predictors"][name]
         mark = TRAINED_MARK if name in trained and not held_out else ""
-        rows.append([name + mark, _fmt_m(f["mean_m"]), _fmt_m(f["median_m"]), _fmt_m(f["rmse_m"]),
-                     _fmt_m(f["p95_m"]), _fmt_m(f["max_m"]), str(f["count"]),
-                     _fmt_m(n["mean_m"]), _fmt_m(n["p95_m"]), str(n["count"]),
-                     str(f.get("missing", 0) + n.get("missing", 0)),
-                     _fmt_m(lat["latency_us"]["p50"], 1), _fmt_m(lat["latency_us"]["p99"], 1),
-                     _fmt_m(lat["query_us"]["p50"], 1)])
+        row = [name + mark, _fmt_m(f["mean_m"]), _fmt_m(f["median_m"]), _fmt_m(f["rmse_m"]),
+               _fmt_m(f["p95_m"]), _fmt_m(f["max_m"]), str(f["count"]),
+               _fmt_m(n["mean_m"]), _fmt_m(n["p95_m"]), str(n["count"]),
+               str(f.get("missing", 0) + n.get("missing", 0))]
+        if not held_out:  # latency is measured over the whole run only
+            row += [_fmt_m(lat["latency_us"]["p50"], 1), _fmt_m(lat["latency_us"]["p99"], 1),
+                    _fmt_m(lat["query_us"]["p50"], 1)]
+        rows.append(row)
     return rows
 
 
 SUMMARY_HEADER = ["predictor", "future mean [m]", "median", "RMSE", "p95", "max", "n",
                   "now mean [m]", "now p95", "n", "missing", "step p50 [us]", "step p99 [us]",
                   "query p50 [us]"]
+HELD_OUT_HEADER = SUMMARY_HEADER[:11]
 
 
 def trained_note(res: dict[str, Any]) -> str:
@@ -209,7 +212,7 @@ def render_markdown(res: dict[str, Any], plots: list[str],
     if res.get("held_out_all"):
         ho = res["held_out_all"]
         lines += [f"## Held-out drives ({len(ho['drives'])}: no learned predictor of this run "
-                  f"was trained on them)", "", _table(SUMMARY_HEADER, summary_rows(res, held_out=True)),
+                  f"was trained on them)", "", _table(HELD_OUT_HEADER, summary_rows(res, held_out=True)),
                   ""]
     if any(r[3] != "0" or r[6] != "0" for r in warmup_rows(res)):
         lines += ["## Warm-up queries (left out above)", "",

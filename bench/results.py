@@ -194,8 +194,9 @@ def aggregate(runs: Sequence[DriveRun], cfg: RunConfig, data_manifest: list[dict
                     for kind in KINDS}
     res["training_drives"] = {n: m["train_drives"] for n, m in res["models"].items()}
     trained_on = {n for names in res["training_drives"].values() for n in names}
-    if not traces.empty and trained_on and (~traces["drive"].isin(trained_on)).any():
-        held_all = traces[~traces["drive"].isin(trained_on)]
+    in_training = traces["drive"].isin(trained_on) if not traces.empty else None
+    if in_training is not None and in_training.any() and (~in_training).any():
+        held_all = traces[~in_training]
         res["held_out_all"] = {
             "drives": sorted(set(held_all["drive"].unique())),
             "predictors": {name: _kind_summaries(held_all[held_all["predictor"] == name])

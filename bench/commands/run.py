@@ -168,6 +168,7 @@ def _run(drives, cfg, data, out: Path, workers: int, rerun: Path | None = None,
     from bench.executors import run_drives
     from bench.outputs import remove_previous_outputs
     from bench.report import (
+        HELD_OUT_HEADER,
         SUMMARY_HEADER,
         excluded_note,
         summary_rows,
@@ -207,6 +208,9 @@ def _run(drives, cfg, data, out: Path, workers: int, rerun: Path | None = None,
     if scored == 0:
         raise UsageError(f"every drive was skipped ({plural(len(runs), 'drive')}), nothing was "
                          f"scored; the reasons are in {out / 'report.md'}")
+    if not any(p[k]["count"] for p in res["predictors"].values() for k in ("future", "now")):
+        console.print("warning: no query could be scored (no reference position at any query "
+                      "past the warm-up); see the exclusions below", highlight=False)
     print_table(console, SUMMARY_HEADER, summary_rows(res),
                 title=f"{plural(scored, 'drive')} - errors in metres, latency in microseconds")
     for note in (trained_note(res), excluded_note(res)):
@@ -214,7 +218,7 @@ def _run(drives, cfg, data, out: Path, workers: int, rerun: Path | None = None,
             console.print(note, highlight=False)
     if res.get("held_out_all"):
         ho = res["held_out_all"]
-        print_table(console, SUMMARY_HEADER, summary_rows(res, held_out=True),
+        print_table(console, HELD_OUT_HEADER, summary_rows(res, held_out=True),
                     title=f"held-out {plural(len(ho['drives']), 'drive')} (no learned predictor "
                           f"trained on them) - errors in metres")
     console.print(written_summary(out, written, removed), highlight=False)
