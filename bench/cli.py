@@ -18,6 +18,15 @@ import typer
 from bench.commands import inspect, latency, predictors, run, train, tune, view
 from bench.commands.common import fail
 
+
+def _argument_type(self: typer.core.TyperArgument, ctx: object) -> str | None:
+    """Help shows an argument's placeholder (``PATH``, ``FILE``) without Typer's type tag
+    (``<list[Path]>``) beside it; arguments without a placeholder keep the tag."""
+    return None if self.metavar else typer.core.TyperArgument.display_type(self, ctx)
+
+
+typer.core.TyperArgument.display_type_rich = _argument_type  # typer has no hook for this
+
 app = typer.Typer(
     help="posbench: benchmark real-time vehicle position predictors on your drives.\n\n"
          "Start with `bench run` (built-in synthetic drives, no data needed), then point it at "

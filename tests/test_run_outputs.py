@@ -193,3 +193,43 @@ def test_every_drive_skipped_writes_the_report_and_fails(tmp_path, monkeypatch):
     assert md.count("skipped: poor truth") == 4
     assert not (out / "traces.parquet").exists()
     assert "traces.parquet" not in r.output
+
+
+def test_thin_drive_still_gets_a_report(tmp_path):
+    """A GPS-only CSV with 3 fixes scores nothing: the run says so, writes report.md with the
+    reason for each missing figure, and exits 0 (today: a matplotlib error, no report)."""
+    csv = tmp_path / "three.csv"
+    csv.write_text("stream,t,x,y\ngps,0,0,0\ngps,0.2,1,0\ngps,0.4,2,0\n")
+    out = tmp_path / "o"
+    r = bench("run", "--data", str(csv), "-p", "cv,kf", "--out", str(out), "--workers", "1")
+    assert r.returncode == 0, r.stderr
+    assert "1 drive -" in r.stdout and "no query could be scored" in r.stdout
+    md = (out / "report.md").read_text()
+    assert "Not drawn:" in md and "error_cdf:" in md
+
+
+def test_run_table_fits_100_columns_and_cuts_no_number(tmp_path):
+    out = tmp_path / "o"
+    r = bench("run", "-p", "cv,kf-paper", "--out", str(out), "--workers", "1", columns=100)
+    assert r.returncode == 0, r.stderr
+    assert "…" not in r.stdout
+    assert max(len(line) for line in r.stdout.splitlines()) <= 100
+    res = json.loads((out / "results.json").read_text())
+    for p in ("cv", "kf-paper"):
+        assert f"{res['predictors'][p]['future']['mean_m']:.3f}" in r.stdout
+        assert f"{res['predictors'][p]['latency_us']['p99']:.1f}" in r.stdout
+    assert "kf-paper" in r.stdout
+
+
+def test_plot_formats(tmp_path):
+    out = tmp_path / "o"
+    r = bench("run", "-p", "cv", "--out", str(out), "--workers", "1", "--plot-format", "svg,pdf")
+    assert r.returncode == 0, r.stderr
+    assert (out / "error_cdf.svg").is_file() and (out / "error_cdf.pdf").is_file()
+    assert not (out / "error_cdf.png").exists()
+    assert "![error_cdf.svg](error_cdf.svg)" in (out / "report.md").read_text()
+    res = json.loads((out / "results.json").read_text())
+    assert "error_cdf.pdf" in res["outputs"]
+    bad = bench("run", "-p", "cv", "--out", str(tmp_path / "b"), "--plot-format", "png,gif")
+    assert bad.returncode == 2 and bad.stderr.startswith("error: --plot-format")
+    assert not (tmp_path / "b").exists()

@@ -45,6 +45,7 @@ def inspect_rows(summaries: list[dict[str, Any]]) -> tuple[tuple[str, ...], list
 
 def inspect(
     paths: Annotated[list[Path] | None, typer.Argument(
+        metavar="PATH",
         help="Recordings or folders (default: the built-in synthetic drives).")] = None,
     as_json: Annotated[bool, typer.Option("--json", help="Print a JSON list, one object per drive.")
                        ] = False,

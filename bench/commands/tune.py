@@ -20,7 +20,8 @@ from bench.options import check_at_least, check_choice, check_data_paths
 
 
 def tune(
-    predictor: Annotated[str, typer.Argument(help="Predictor to tune (kf or ekf).")],
+    predictor: Annotated[str, typer.Argument(
+        metavar="PREDICTOR", help="Predictor to tune (kf or ekf).")],
     gps_profile: Annotated[str, typer.Option(
         metavar="PROFILE",
         help="GPS condition to tune for: none, rtk, consumer (synthetic development drives, "
