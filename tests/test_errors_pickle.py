@@ -21,6 +21,7 @@ def samples() -> dict[str, list[BaseException]]:
     """Instances of each project exception class, by ``module.Class``."""
     from bench.executors import ExecutorError
     from bench.options import UsageError
+    from bench.plots import NothingToPlot
     from scenarios.errors import DataError
 
     return {
@@ -29,6 +30,7 @@ def samples() -> dict[str, list[BaseException]]:
                                        DataError(None, "truth: need at least 2 samples")],
         "bench.options.UsageError": [UsageError("--horizon must be more than 0 s; got -1")],
         "bench.executors.ExecutorError": [ExecutorError("cannot start Ray at auto: no cluster")],
+        "bench.plots.NothingToPlot": [NothingToPlot("no query with a known speed")],
     }
 
 
