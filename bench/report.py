@@ -3,17 +3,14 @@ per-query traces (Parquet) and the plots (:mod:`bench.plots`)."""
 
 from __future__ import annotations
 
-import json
 import math
 from collections.abc import Iterable
 from pathlib import Path
 from typing import Any
 
-import numpy as np
-import pandas as pd
-
 from bench.plots import shown_format, write_plots
 from bench.prepare import LABELS
+from bench.saved_run import Run
 from metrics.accuracy import speed_bin_order
 
 PAPER_TABLE_CM = {"straight": 16.6, "turn": 12.1, "roundabout": 9.7, "start_stop": 4.2}
@@ -152,41 +149,17 @@ def label_table(res: dict[str, Any], dataset: str, kind: str, held_out: bool = F
     return _table(header, rows)
 
 
-def write_report(res: dict[str, Any], traces: pd.DataFrame, out: Path,
-                 formats: Iterable[str] = ("png",),
-                 also_written: list[Path] | None = None) -> list[Path]:
-    """Write every output file into ``out``, the plots in each of ``formats`` (png, svg,
-    pdf; ValueError on others); return the paths written. ``results.json`` comes last and
-    lists (key ``outputs``) everything the run wrote there, ``also_written`` (the paper's
-    figures) included, so the next run into ``out`` can replace exactly those."""
-    from bench.outputs import relative_outputs
-
+def write_report(run: Run, out: Path, formats: Iterable[str] = ("png",)) -> list[Path]:
+    """Write the run's plots (in each of ``formats``: png, svg, pdf; ValueError on others)
+    and ``report.md`` into ``out``; return the paths written. The run itself (results.json,
+    traces) is written by :func:`bench.saved_run.save_run`."""
     shown = "." + shown_format(formats)  # checks the formats before anything is written
     out.mkdir(parents=True, exist_ok=True)
-    written = list(also_written or [])
-    if not traces.empty:
-        traces.to_parquet(out / "traces.parquet", index=False)
-        written.append(out / "traces.parquet")
-    plots = write_plots(traces, res, out, formats)
-    written += plots.files
+    plots = write_plots(run.traces, run.results, out, formats)
     (out / "report.md").write_text(render_markdown(
-        res, [p.relative_to(out).as_posix() for p in plots.files if p.suffix == shown],
+        run.results, [p.relative_to(out).as_posix() for p in plots.files if p.suffix == shown],
         plot_notes=plots.notes))
-    written.append(out / "report.md")
-    written.append(out / "results.json")
-    res["outputs"] = relative_outputs(out, written)
-    (out / "results.json").write_text(json.dumps(res, indent=2, default=_json_default) + "\n")
-    return written
-
-
-def _json_default(o: Any) -> Any:
-    if isinstance(o, np.integer):
-        return int(o)
-    if isinstance(o, np.floating):
-        return float(o)
-    if isinstance(o, np.ndarray):
-        return o.tolist()
-    return str(o)
+    return [*plots.files, out / "report.md"]
 
 
 def render_markdown(res: dict[str, Any], plots: list[str],

@@ -93,7 +93,7 @@ def learned_models(cfg: RunConfig) -> dict[str, dict[str, Any]]:
 
 def scored_mask(traces: pd.DataFrame) -> np.ndarray:
     """Rows that count in the headline figures: past the warm-up (see
-    :func:`bench.runner.warmup_end_s`) and with a known reference position."""
+    :func:`bench.scoring.warmup_end_s`) and with a known reference position."""
     if traces.empty:
         return np.zeros(0, dtype=bool)
     m = traces["x_ref"].notna().to_numpy() & traces["y_ref"].notna().to_numpy()

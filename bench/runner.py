@@ -13,10 +13,9 @@ import numpy as np
 import pandas as pd
 
 from bench.config import RunConfig, gps_condition
-from bench.prepare import LABELS, PreparedDrive, prepare_drive
+from bench.prepare import PreparedDrive, prepare_drive
 from bench.replay import replay
-from metrics.accuracy import euclidean_error
-from metrics.outages import outage_ids
+from bench.scoring import query_frame, score
 from predictors.gate import GatedPredictor
 from predictors.registry import create
 from scenarios.drive import Drive
@@ -62,35 +61,6 @@ def _track_frame(prep: PreparedDrive) -> pd.DataFrame:
     return pd.DataFrame({"t": t, "x": xy[:, 0], "y": xy[:, 1]})
 
 
-#: fixed categories keep the string columns of long traces at one byte a row, also
-#: after concatenation (identical categories concatenate as categoricals)
-LABEL_CATEGORIES = [*LABELS, "unlabelled"]
-KIND_DTYPE = pd.CategoricalDtype(["future", "now"])
-
-
-def warmup_end_s(prep: PreparedDrive) -> float:
-    """When a drive's warm-up ends [s]: the time of its second received fix (inf with fewer).
-
-    Queries issued before it are warm-up: no predictor can know a velocity from one fix, so
-    their errors measure the cold start, not prediction. They are kept in the traces
-    (column ``warmup``) and reported apart, never in the headline figures.
-    """
-    return float(prep.gps.t[1]) if len(prep.gps) >= 2 else float("inf")
-
-
-def _trace_frame(prep: PreparedDrive, predictor: str, kind: str, q, xy: np.ndarray) -> pd.DataFrame:
-    err = euclidean_error(xy, q.ref_xy)
-    outage = outage_ids(q.t_query, prep.outages)
-    return pd.DataFrame({
-        "dataset": prep.dataset, "drive": prep.drive.name, "predictor": predictor, "kind": kind,
-        "t_issue": q.t_issue, "t_query": q.t_query,
-        "x": xy[:, 0], "y": xy[:, 1], "x_ref": q.ref_xy[:, 0], "y_ref": q.ref_xy[:, 1],
-        "error_m": err, "label": pd.Categorical(q.label, categories=LABEL_CATEGORIES),
-        "speed_mps": q.speed_mps, "since_fix_s": q.since_fix_s, "outage": outage,
-        "warmup": q.t_issue < warmup_end_s(prep),
-    }).astype({"kind": KIND_DTYPE})
-
-
 def run_drive(drive: Drive, cfg: RunConfig) -> DriveRun:
     """Prepare one drive and replay it through every configured predictor."""
     if cfg.exclude_poor_truth and drive.meta.extra.get("truth_poor"):
@@ -98,6 +68,7 @@ def run_drive(drive: Drive, cfg: RunConfig) -> DriveRun:
                         pd.DataFrame(), skipped="poor truth accuracy (median > 1 m)")
     prep = prepare_drive(drive, cfg)
     frames, step_ns, query_ns, rejected = [], {}, {}, {}
+    queries = {kind: query_frame(prep, kind) for kind in ("future", "now")}
     condition = gps_condition(cfg, drive.truth is not None) if cfg.use_tuned else None
     for name in cfg.predictors:
         pred = create(name, condition, **cfg.predictor_options.get(name, {}))
@@ -106,8 +77,8 @@ def run_drive(drive: Drive, cfg: RunConfig) -> DriveRun:
         res = replay(pred, prep, cfg.horizon_s)
         if cfg.gate:
             rejected[name] = pred.rejected
-        frames.append(_trace_frame(prep, name, "future", prep.future, res.future_xy))
-        frames.append(_trace_frame(prep, name, "now", prep.now, res.now_xy))
+        frames.append(score(queries["future"], name, res.future_xy))
+        frames.append(score(queries["now"], name, res.now_xy))
         step_ns[name] = res.step_ns
         query_ns[name] = res.query_ns
     traces = pd.concat(frames, ignore_index=True) if frames else pd.DataFrame()

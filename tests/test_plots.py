@@ -131,7 +131,9 @@ def test_gps_only_three_fixes_end_to_end_writes_report(tmp_path):
     traces = all_traces(runs)
     res = aggregate(runs, cfg, [], "bench run", traces=traces)
     out = tmp_path / "out"
-    written = write_report(res, traces, out)
+    from bench.saved_run import Run
+
+    written = write_report(Run.from_results(res, traces), out)
     report = (out / "report.md").read_text()
     assert out / "report.md" in written
     assert "- error_vs_speed: no query with a known speed" in report
@@ -263,7 +265,9 @@ def test_report_prints_notes_and_links_per_drive_files(tmp_path):
     runs = [run_drive(default_drives()[0], cfg)]
     traces = all_traces(runs)
     res = aggregate(runs, cfg, [], "bench run", traces=traces)
-    write_report(res, traces, tmp_path, formats=("svg", "png"))
+    from bench.saved_run import Run
+
+    write_report(Run.from_results(res, traces), tmp_path, formats=("svg", "png"))
     md = (tmp_path / "report.md").read_text()
     drive = runs[0].name
     assert f"- [{drive}](drives/{drive}-error_over_time.png)" in md

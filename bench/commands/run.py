@@ -176,6 +176,7 @@ def _run(drives, cfg, data, out: Path, workers: int, rerun: Path | None = None,
         write_report,
     )
     from bench.results import aggregate, all_traces, tree_hash
+    from bench.saved_run import Run, save_run
     from bench.terminal import print_table
 
     command = command_line()
@@ -195,11 +196,13 @@ def _run(drives, cfg, data, out: Path, workers: int, rerun: Path | None = None,
 
     out.mkdir(parents=True, exist_ok=True)
     removed = remove_previous_outputs(out)
-    figures = paper_figures(list(drives), cfg, traces, out, runs, formats=formats)
-    res["paper_figures"] = [{"file": f, "caption": c} for f, c in figures]
-    written = write_report(res, traces, out, formats=formats,
-                           also_written=[(out / f).with_suffix("." + fmt)
-                                         for f, _ in figures for fmt in formats])
+    result = Run.from_results(res, traces)
+    figures = paper_figures(list(drives), cfg, result.traces, out, runs, formats=formats)
+    result.results["paper_figures"] = [{"file": f, "caption": c} for f, c in figures]
+    written = [(out / f).with_suffix("." + fmt) for f, _ in figures for fmt in formats]
+    written += write_report(result, out, formats=formats)
+    written += save_run(out, result, also_written=written)
+    res = result.results
     skipped = [r for r in runs if r.skipped]
     scored = len(runs) - len(skipped)
     if skipped:

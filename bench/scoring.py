@@ -1,0 +1,135 @@
+"""Scoring, its own pure step: queries + a predictor's answers -> per-query traces.
+
+``bench run`` replays a drive through each predictor and scores the answers here; answers
+that come from elsewhere (a file written by another program) go through the same
+:func:`score`, matched to the queries by drive, kind and query time. Aggregation
+(:mod:`bench.results`) works from the traces only.
+
+:data:`TRACE_COLUMNS` documents every column of ``traces.parquet`` (the README's table
+is generated from it: :func:`trace_columns_markdown`).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pandas as pd
+
+from bench.prepare import LABELS, PreparedDrive, Queries
+from metrics.accuracy import euclidean_error
+from metrics.outages import outage_ids
+
+#: column -> (type, unit, meaning); frames: x/y in the drive's local ENU metres
+TRACE_COLUMNS: dict[str, tuple[str, str, str]] = {
+    "dataset": ("str", "", "data set (the loader's format, e.g. kitti, aslan, synthetic)"),
+    "drive": ("str", "", "drive name"),
+    "predictor": ("str", "", "predictor name as run (NAME or NAME@ALIAS)"),
+    "kind": ("category", "", "`future`: position at fix time + horizon, asked at the fix; "
+             "`now`: current position, asked every now-step"),
+    "t_issue": ("float64", "s", "when the query was asked (every observation given is at or before it)"),
+    "t_query": ("float64", "s", "the instant whose position was asked for"),
+    "x": ("float64", "m", "answer, east (NaN: no answer)"),
+    "y": ("float64", "m", "answer, north"),
+    "x_ref": ("float64", "m", "reference position, east (truth, or a cubic through the fixes; "
+              "NaN: none)"),
+    "y_ref": ("float64", "m", "reference position, north"),
+    "error_m": ("float64", "m", "Euclidean distance answer - reference"),
+    "label": ("category", "", "scenario at t_query: straight, turn, roundabout, start_stop, "
+              "unlabelled"),
+    "speed_mps": ("float64", "m/s", "reference speed at t_query (NaN: unknown)"),
+    "since_fix_s": ("float64", "s", "t_query minus the time of the last fix received by t_issue"),
+    "outage": ("int64", "", "index of the GPS outage t_query falls in within its drive, -1: none"),
+    "warmup": ("bool", "", "asked before the drive's second received fix (left out of headline "
+               "figures)"),
+}
+#: the columns a query table holds (all but the predictor and its answer)
+QUERY_COLUMNS = tuple(c for c in TRACE_COLUMNS if c not in ("predictor", "x", "y", "error_m"))
+#: fixed categories keep the string columns of long traces at one byte a row, also
+#: after concatenation (identical categories concatenate as categoricals)
+LABEL_CATEGORIES = [*LABELS, "unlabelled"]
+KIND_DTYPE = pd.CategoricalDtype(["future", "now"])
+#: answers from a file are matched to queries at this resolution of t_query
+MATCH_RESOLUTION_S = 1e-6
+
+
+def warmup_end_s(prep: PreparedDrive) -> float:
+    """When a drive's warm-up ends [s]: the time of its second received fix (inf with fewer).
+
+    Queries issued before it are warm-up: no predictor can know a velocity from one fix, so
+    their errors measure the cold start, not prediction. They are kept in the traces
+    (column ``warmup``) and reported apart, never in the headline figures.
+    """
+    return float(prep.gps.t[1]) if len(prep.gps) >= 2 else float("inf")
+
+
+def query_frame(prep: PreparedDrive, kind: str) -> pd.DataFrame:
+    """One drive's queries of one kind (``future`` or ``now``) with what they are scored
+    against: the :data:`QUERY_COLUMNS` of the traces."""
+    q: Queries = prep.future if kind == "future" else prep.now
+    return pd.DataFrame({
+        "dataset": prep.dataset, "drive": prep.drive.name, "kind": kind,
+        "t_issue": q.t_issue, "t_query": q.t_query,
+        "x_ref": q.ref_xy[:, 0], "y_ref": q.ref_xy[:, 1],
+        "label": pd.Categorical(q.label, categories=LABEL_CATEGORIES),
+        "speed_mps": q.speed_mps, "since_fix_s": q.since_fix_s,
+        "outage": outage_ids(q.t_query, prep.outages),
+        "warmup": q.t_issue < warmup_end_s(prep),
+    }).astype({"kind": KIND_DTYPE})
+
+
+def match_answers(queries: pd.DataFrame, answers: pd.DataFrame) -> np.ndarray:
+    """(N, 2) answers [m] in the order of ``queries``, matched on drive, kind and t_query
+    (to :data:`MATCH_RESOLUTION_S`); a query without an answer gets NaN (counted as missing).
+
+    Raises:
+        ValueError: an answer is given twice for one query.
+    """
+    def key(df: pd.DataFrame) -> pd.DataFrame:
+        return pd.DataFrame({"drive": df["drive"].astype(str).to_numpy(),
+                             "kind": df["kind"].astype(str).to_numpy(),
+                             "tq": np.round(df["t_query"].to_numpy(float) / MATCH_RESOLUTION_S)
+                             .astype(np.int64)})
+
+    a = key(answers)
+    if a.duplicated().any():
+        first = a[a.duplicated()].iloc[0]
+        raise ValueError(f"two answers for drive {first.drive}, kind {first.kind}, "
+                         f"t_query {first.tq * MATCH_RESOLUTION_S:.6f} s")
+    a["x"] = answers["x"].to_numpy(float)
+    a["y"] = answers["y"].to_numpy(float)
+    m = key(queries).merge(a, on=["drive", "kind", "tq"], how="left", sort=False)
+    return m[["x", "y"]].to_numpy(float)
+
+
+def score(queries: pd.DataFrame, predictor: str, answers: np.ndarray | pd.DataFrame
+          ) -> pd.DataFrame:
+    """Traces of one predictor: ``queries`` (a :func:`query_frame`, or several concatenated)
+    with the predictor's answers and their errors, columns as :data:`TRACE_COLUMNS`.
+
+    Args:
+        queries: the query table.
+        predictor: the predictor's name as run.
+        answers: (N, 2) positions [m] in the order of ``queries`` (a live replay), or a
+            frame with drive, kind, t_query, x, y (answers from a file), matched by
+            :func:`match_answers`.
+    """
+    if isinstance(answers, pd.DataFrame):
+        xy = match_answers(queries, answers)
+    else:
+        xy = np.asarray(answers, dtype=float).reshape(-1, 2)
+        if len(xy) != len(queries):
+            raise ValueError(f"{len(xy)} answers for {len(queries)} queries")
+    ref = queries[["x_ref", "y_ref"]].to_numpy(float)
+    cols = {c: queries[c] for c in ("dataset", "drive")}
+    cols["predictor"] = predictor
+    cols.update({c: queries[c] for c in ("kind", "t_issue", "t_query")})
+    cols.update({"x": xy[:, 0], "y": xy[:, 1], "x_ref": ref[:, 0], "y_ref": ref[:, 1],
+                 "error_m": euclidean_error(xy, ref)})
+    cols.update({c: queries[c] for c in ("label", "speed_mps", "since_fix_s", "outage", "warmup")})
+    return pd.DataFrame(cols, index=queries.index).reset_index(drop=True)
+
+
+def trace_columns_markdown() -> str:
+    """The Markdown table of :data:`TRACE_COLUMNS` (the README shows it; a test keeps the two equal)."""
+    lines = ["| column | type | unit | meaning |", "|---|---|---|---|"]
+    lines += [f"| `{c}` | {t} | {u or '-'} | {m} |" for c, (t, u, m) in TRACE_COLUMNS.items()]
+    return "\n".join(lines)
