@@ -15,9 +15,10 @@ import pandas as pd
 import pytest
 
 from bench.config import RunConfig
-from bench.report import label_table, render_markdown
+from bench.report import render_markdown
 from bench.results import aggregate, scored_mask
 from bench.runner import run, run_drive
+from bench.tables import label_table
 from scenarios.synthetic import default_drives
 
 
@@ -71,8 +72,8 @@ def test_missing_counts_only_unanswered_queries_with_a_reference():
 
 def test_now_route_table_has_no_paper_column(cv_kf_result):
     _, res = cv_kf_result
-    fut = label_table(res, "synthetic", "future")
-    now = label_table(res, "synthetic", "now")
+    fut = label_table(res, "synthetic", "future").markdown()
+    now = label_table(res, "synthetic", "now").markdown()
     assert "paper LSTM" in fut and "46 (Kalman)" in fut
     assert "paper" not in now and "46" not in now.splitlines()[-1]
 
@@ -233,3 +234,33 @@ def test_plot_formats(tmp_path):
     bad = bench("run", "-p", "cv", "--out", str(tmp_path / "b"), "--plot-format", "png,gif")
     assert bad.returncode == 2 and bad.stderr.startswith("error: --plot-format")
     assert not (tmp_path / "b").exists()
+
+
+def test_tables_are_numeric_until_rendered(cv_kf_result, tmp_path):
+    """One table, four forms: terminal cells and Markdown agree, CSV keeps full precision
+    and counts in their own columns, LaTeX escapes text; every report table is written."""
+    import io
+
+    from rich.console import Console
+
+    from bench.report import report_tables, write_tables
+    from bench.tables import label_table, summary_table
+    from bench.terminal import print_table
+
+    _, res = cv_kf_result
+    t = summary_table(res)
+    assert t.frame["future_mean"].dtype == float and t.frame["future_n"].dtype.kind == "i"
+    md = t.markdown()
+    for row in t.cells():
+        assert "| " + " | ".join(row) + " |" in md
+    buf = io.StringIO()
+    print_table(Console(file=buf, width=300), t.header(), t.cells())
+    assert f"{res['predictors']['kf']['future']['mean_m']:.3f}" in buf.getvalue()
+    csv = pd.read_csv(io.StringIO(label_table(res, "synthetic", "future").csv()))
+    assert csv.loc[4, "kf [cm]"] == pytest.approx(100 * res["by_dataset"]["synthetic"]["kf"]["future"]["mean_m"])
+    assert csv.loc[4, "kf n"] == res["by_dataset"]["synthetic"]["kf"]["future"]["count"]
+    tex = label_table(res, "synthetic", "future").latex()
+    assert tex.startswith("\\begin{tabular}{l") and "Starting / stopping" in tex
+    written = write_tables(res, tmp_path)
+    assert len(written) == 2 * len(report_tables(res))
+    assert (tmp_path / "summary.csv").is_file() and (tmp_path / "summary.tex").is_file()

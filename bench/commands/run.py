@@ -167,14 +167,7 @@ def _run(drives, cfg, data, out: Path, workers: int, rerun: Path | None = None,
 
     from bench.executors import run_drives
     from bench.outputs import remove_previous_outputs
-    from bench.report import (
-        HELD_OUT_HEADER,
-        SUMMARY_HEADER,
-        excluded_note,
-        summary_rows,
-        trained_note,
-        write_report,
-    )
+    from bench.report import excluded_note, trained_note, write_report
     from bench.results import aggregate, all_traces, tree_hash
     from bench.saved_run import Run, save_run
     from bench.terminal import print_table
@@ -214,14 +207,18 @@ def _run(drives, cfg, data, out: Path, workers: int, rerun: Path | None = None,
     if not any(p[k]["count"] for p in res["predictors"].values() for k in ("future", "now")):
         console.print("warning: no query could be scored (no reference position at any query "
                       "past the warm-up); see the exclusions below", highlight=False)
-    print_table(console, SUMMARY_HEADER, summary_rows(res),
+    from bench.tables import summary_table
+
+    headline = summary_table(res)
+    print_table(console, headline.header(), headline.cells(),
                 title=f"{plural(scored, 'drive')} - errors in metres, latency in microseconds")
     for note in (trained_note(res), excluded_note(res)):
         if note:
             console.print(note, highlight=False)
     if res.get("held_out_all"):
         ho = res["held_out_all"]
-        print_table(console, HELD_OUT_HEADER, summary_rows(res, held_out=True),
+        held = summary_table(res, held_out=True)
+        print_table(console, held.header(), held.cells(),
                     title=f"held-out {plural(len(ho['drives']), 'drive')} (no learned predictor "
                           f"trained on them) - errors in metres")
     console.print(written_summary(out, written, removed), highlight=False)

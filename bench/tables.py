@@ -1,0 +1,310 @@
+"""Every table of a run, built once as a numeric frame and rendered at the last moment.
+
+A :class:`Table` holds a DataFrame (numbers stay numbers; NaN/None = no figure), how many
+decimals each float column shows, and which columns are shown as ``value (count)``. One
+renderer writes each form: terminal cells (:meth:`Table.cells`, printed by
+:func:`bench.terminal.print_table`), Markdown, CSV (full precision, counts as their own
+columns) and LaTeX. The builders below read a run's ``results`` (see
+:mod:`bench.saved_run`); nothing else formats a figure.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import pandas as pd
+
+from bench.prepare import LABELS
+from metrics.accuracy import speed_bin_order
+
+PAPER_TABLE_CM = {"straight": 16.6, "turn": 12.1, "roundabout": 9.7, "start_stop": 4.2}
+PAPER_OVERALL = "11 (LSTM), 46 (Kalman)"
+LABEL_TITLES = {"straight": "Straight path / full speed", "turn": "Turn",
+                "roundabout": "Roundabout", "start_stop": "Starting / stopping"}
+TRAINED_MARK = " *"
+KINDS = ("future", "now")
+
+
+@dataclass
+class Table:
+    """A table kept numeric until rendered.
+
+    Attributes:
+        frame: the columns in display order (unique names; text columns hold str).
+        name: a file stem for the CSV / LaTeX forms (e.g. ``summary``).
+        labels: column -> header text (default: the column name).
+        digits: float column -> decimals shown (default 3).
+        counts: value column -> the column holding its query count, shown as ``v (n)``.
+        title: a caption.
+    """
+
+    frame: pd.DataFrame
+    name: str
+    labels: Mapping[str, str] = field(default_factory=dict)
+    digits: Mapping[str, int] = field(default_factory=dict)
+    counts: Mapping[str, str] = field(default_factory=dict)
+    title: str = ""
+
+    def shown_columns(self) -> list[str]:
+        hidden = set(self.counts.values())
+        return [c for c in self.frame.columns if c not in hidden]
+
+    def header(self) -> list[str]:
+        """Header texts of the shown columns (count columns fold into their values)."""
+        return [self.labels.get(c, c) for c in self.shown_columns()]
+
+    def cells(self) -> list[list[str]]:
+        """Every shown cell as text: floats to their decimals, NaN/None as ``-``."""
+        out = []
+        for _, row in self.frame.iterrows():
+            cells = []
+            for c in self.shown_columns():
+                text = fmt(row[c], self.digits.get(c, 3))
+                if c in self.counts:
+                    n = row[self.counts[c]]
+                    text = f"{'-' if not n else text} ({fmt(n)})"
+                cells.append(text)
+            out.append(cells)
+        return out
+
+    def markdown(self) -> str:
+        header = self.header()
+        lines = ["| " + " | ".join(header) + " |", "|" + "|".join("---" for _ in header) + "|"]
+        lines += ["| " + " | ".join(r) + " |" for r in self.cells()]
+        return "\n".join(lines)
+
+    def csv(self) -> str:
+        """Full-precision numbers, counts in their own columns, empty for no figure."""
+        labels = {c: h for c, h in self.labels.items() if c not in self.counts}
+        return self.frame.rename(columns=labels).to_csv(index=False)
+
+    def latex(self) -> str:
+        """A booktabs ``tabular`` (text escaped), figures as in the Markdown form."""
+        cols = self.shown_columns()
+        align = "".join("r" if c in self.counts or pd.api.types.is_numeric_dtype(self.frame[c])
+                        else "l" for c in cols)
+        lines = [f"\\begin{{tabular}}{{{align}}}", "\\toprule",
+                 " & ".join(_tex(h) for h in self.header()) + " \\\\", "\\midrule"]
+        lines += [" & ".join(_tex(c) for c in row) + " \\\\" for row in self.cells()]
+        lines += ["\\bottomrule", "\\end{tabular}"]
+        return "\n".join(lines) + "\n"
+
+
+def fmt(v: Any, digits: int = 3) -> str:
+    """One figure as text: ``-`` for None/NaN, integers as is, floats to ``digits``."""
+    if v is None or (isinstance(v, float) and math.isnan(v)):
+        return "-"
+    if isinstance(v, bool) or isinstance(v, str):
+        return str(v)
+    if isinstance(v, int) or (hasattr(v, "is_integer") and not isinstance(v, float)):
+        return str(int(v))
+    try:
+        return f"{float(v):.{digits}f}"
+    except (TypeError, ValueError):
+        return str(v)
+
+
+_TEX = {"\\": r"\textbackslash{}", "&": r"\&", "%": r"\%", "$": r"\$", "#": r"\#", "_": r"\_",
+        "{": r"\{", "}": r"\}", "~": r"\textasciitilde{}", "^": r"\textasciicircum{}"}
+
+
+def _tex(text: str) -> str:
+    return "".join(_TEX.get(ch, ch) for ch in text)
+
+
+def _num(v: Any) -> float:
+    return float("nan") if v is None else float(v)
+
+
+def _frame(rows: Sequence[Mapping[str, Any]], columns: Sequence[str]) -> pd.DataFrame:
+    return pd.DataFrame(list(rows), columns=list(columns))
+
+
+# ------------------------------------------------------------------ builders
+def trained_in_run(res: Mapping[str, Any]) -> dict[str, list[str]]:
+    """Per learned predictor, the drives of this run its model was trained on (non-empty only)."""
+    names = {d["name"] for d in res["drives"] if not d["skipped"]}
+    out = {}
+    for p, drives in res.get("training_drives", {}).items():
+        mine = sorted(names & set(drives))
+        if mine:
+            out[p] = mine
+    return out
+
+
+SUMMARY_LABELS = {"predictor": "predictor", "future_mean": "future mean [m]", "future_median": "median",
+                  "future_rmse": "RMSE", "future_p95": "p95", "future_max": "max", "future_n": "n",
+                  "now_mean": "now mean [m]", "now_p95": "now p95", "now_n": "n",
+                  "missing": "missing", "step_p50": "step p50 [us]", "step_p99": "step p99 [us]",
+                  "query_p50": "query p50 [us]"}
+LATENCY_DIGITS = {"step_p50": 1, "step_p99": 1, "query_p50": 1}
+
+
+def summary_table(res: Mapping[str, Any], held_out: bool = False) -> Table:
+    """The headline: per predictor, future and now errors [m], unanswered queries, latency
+    [us]. A predictor trained on some of the run's drives is marked ``*``. ``held_out``:
+    over the drives no learned predictor trained on (no latency: it is run-wide)."""
+    trained = trained_in_run(res)
+    src = res["held_out_all"]["predictors"] if held_out else res["predictors"]
+    rows = []
+    for name, p in src.items():
+        f, n = p["future"], p["now"]
+        row = {"predictor": name + (TRAINED_MARK if name in trained and not held_out else ""),
+               "future_mean": _num(f["mean_m"]), "future_median": _num(f["median_m"]),
+               "future_rmse": _num(f["rmse_m"]), "future_p95": _num(f["p95_m"]),
+               "future_max": _num(f["max_m"]), "future_n": f["count"],
+               "now_mean": _num(n["mean_m"]), "now_p95": _num(n["p95_m"]), "now_n": n["count"],
+               "missing": f.get("missing", 0) + n.get("missing", 0)}
+        if not held_out:
+            lat = res["predictors"][name]
+            row.update(step_p50=_num(lat["latency_us"].get("p50")),
+                       step_p99=_num(lat["latency_us"].get("p99")),
+                       query_p50=_num(lat["query_us"].get("p50")))
+        rows.append(row)
+    cols = list(SUMMARY_LABELS) if not held_out else list(SUMMARY_LABELS)[:11]
+    return Table(_frame(rows, cols), "held_out" if held_out else "summary", SUMMARY_LABELS,
+                 LATENCY_DIGITS)
+
+
+def warmup_table(res: Mapping[str, Any]) -> Table:
+    """Per predictor, the errors of the warm-up queries left out of the headline."""
+    rows = []
+    for name, w in res.get("excluded", {}).get("warmup", {}).items():
+        f, n = w["future"], w["now"]
+        rows.append({"predictor": name, "future_mean": _num(f["mean_m"]), "future_max": _num(f["max_m"]),
+                     "future_n": f["count"], "now_mean": _num(n["mean_m"]), "now_max": _num(n["max_m"]),
+                     "now_n": n["count"], "missing": f.get("missing", 0) + n.get("missing", 0)})
+    labels = {"future_mean": "future mean [m]", "future_max": "max", "future_n": "n",
+              "now_mean": "now mean [m]", "now_max": "max", "now_n": "n"}
+    return Table(_frame(rows, ["predictor", *labels, "missing"]), "warmup", labels)
+
+
+def dataset_table(res: Mapping[str, Any], dataset: str) -> Table:
+    """One data set: per predictor, future and now errors [m]."""
+    rows = []
+    for name, s in res["by_dataset"][dataset].items():
+        f, n = s["future"], s["now"]
+        rows.append({"predictor": name, "future_mean": _num(f["mean_m"]),
+                     "future_median": _num(f["median_m"]), "future_p95": _num(f["p95_m"]),
+                     "future_n": f["count"], "now_mean": _num(n["mean_m"]),
+                     "now_p95": _num(n["p95_m"]), "now_n": n["count"]})
+    labels = {"future_mean": "future mean [m]", "future_median": "median", "future_p95": "p95",
+              "future_n": "n", "now_mean": "now mean [m]", "now_p95": "now p95", "now_n": "n"}
+    return Table(_frame(rows, ["predictor", *labels]), f"dataset-{dataset}", labels)
+
+
+def label_table(res: Mapping[str, Any], dataset: str, kind: str, held_out: bool = False) -> Table:
+    """The paper's Table I layout: route type x mean error [cm] (query count), one column per
+    predictor; for the future point (what the paper measured) its LSTM figure beside.
+    ``held_out``: only drives no learned predictor was trained on."""
+    preds = list(res["predictors"])
+    paper = kind == "future"
+    if held_out:
+        by_label = res["held_out"][dataset]["by_label"]
+        overall_src = res["held_out"][dataset]["predictors"]
+    else:
+        by_label = res["by_label"].get(dataset, {})
+        overall_src = res["by_dataset"].get(dataset, {})
+
+    def cells(summaries: Mapping[str, Any]) -> dict[str, Any]:
+        out: dict[str, Any] = {}
+        for p in preds:
+            s = summaries.get(p) or {}
+            out[f"{p} [cm]"] = 100 * _num(s.get("mean_m")) if s.get("count") else float("nan")
+            out[f"{p} n"] = int(s.get("count", 0))
+        return out
+
+    rows = []
+    for lab in LABELS:
+        row = {"route type": LABEL_TITLES[lab],
+               **cells({p: by_label.get(p, {}).get(kind, {}).get(lab, {}) for p in preds})}
+        if paper:
+            row["paper LSTM [cm]"] = PAPER_TABLE_CM[lab]
+        rows.append(row)
+    overall = {"route type": "all", **cells({p: overall_src.get(p, {}).get(kind, {}) for p in preds})}
+    if paper:
+        overall["paper LSTM [cm]"] = PAPER_OVERALL
+    rows.append(overall)
+    cols = ["route type"] + [c for p in preds for c in (f"{p} [cm]", f"{p} n")]
+    cols += ["paper LSTM [cm]"] if paper else []
+    return Table(_frame(rows, cols), f"route-type-{dataset}-{kind}" + ("-held-out" if held_out else ""),
+                 {f"{p} [cm]": f"{p} [cm] (n)" for p in preds},
+                 {c: 1 for c in cols if c.endswith("[cm]")},
+                 {f"{p} [cm]": f"{p} n" for p in preds})
+
+
+def speed_table(res: Mapping[str, Any]) -> Table:
+    """Future-point error by speed bin, mean [m] (queries); bins without queries left out."""
+    by_speed = res["by_speed"]
+    bins = [b for b in speed_bin_order() + ["unknown"]
+            if any(by_speed[p]["future"].get(b, {}).get("count", 0) for p in by_speed)]
+    rows = []
+    for p, s in by_speed.items():
+        row: dict[str, Any] = {"predictor": p}
+        for b in bins:
+            row[b] = _num(s["future"][b]["mean_m"])
+            row[f"{b} n"] = s["future"][b]["count"]
+        rows.append(row)
+    cols = ["predictor"] + [c for b in bins for c in (b, f"{b} n")]
+    return Table(_frame(rows, cols), "speed", counts={b: f"{b} n" for b in bins})
+
+
+def outage_table(res: Mapping[str, Any]) -> Table:
+    """Now-error by time since the last fix (mean [m], queries) and per-outage scores."""
+    cps = list(next(iter(res["outages"].values()))["since_fix"])
+    rows = []
+    for p, o in res["outages"].items():
+        sc = o["scores"]
+        row: dict[str, Any] = {"predictor": p}
+        for c in cps:
+            row[c] = _num(o["since_fix"][c]["mean_m"])
+            row[f"{c} n"] = o["since_fix"][c]["count"]
+        row.update(outages=sc["outages"], ade=_num(sc["ade_mean_m"]), fde=_num(sc["fde_mean_m"]),
+                   fde_p95=_num(sc["fde_p95_m"]), miss_rate=_num(sc["miss_rate"]))
+        rows.append(row)
+    cols = ["predictor"] + [x for c in cps for x in (c, f"{c} n")]
+    cols += ["outages", "ade", "fde", "fde_p95", "miss_rate"]
+    labels = {c: f"{c} after fix" for c in cps}
+    labels.update(ade="ADE [m]", fde="FDE [m]", fde_p95="FDE p95 [m]", miss_rate="miss rate")
+    return Table(_frame(rows, cols), "outages", labels, {"miss_rate": 2},
+                 {c: f"{c} n" for c in cps})
+
+
+def gate_table(res: Mapping[str, Any]) -> Table:
+    """Fixes the outlier gate rejected, per predictor."""
+    rows = [{"predictor": p, "rejected": g["rejected"], "fixes fed": g["fixes_fed"],
+             "rejected [%]": 100.0 * g["rejected"] / g["fixes_fed"] if g["fixes_fed"] else float("nan"),
+             "drives with rejections": g["drives_with_rejections"]}
+            for p, g in res["gate"]["predictors"].items()]
+    cols = ["predictor", "rejected", "fixes fed", "rejected [%]", "drives with rejections"]
+    return Table(_frame(rows, cols), "gate", digits={"rejected [%]": 2})
+
+
+def gate_drive_table(res: Mapping[str, Any]) -> Table:
+    """Per drive with a rejection: fixes fed and rejected per predictor."""
+    preds = list(res["gate"]["predictors"])
+    rows = [{"drive": d["name"], "fixes fed": d["gps_fed"],
+             **{f"{p} rejected": d["rejected"].get(p, 0) for p in preds}}
+            for d in res["drives"] if any(d.get("rejected", {}).values())]
+    return Table(_frame(rows, ["drive", "fixes fed"] + [f"{p} rejected" for p in preds]),
+                 "gate-drives")
+
+
+def drives_table(res: Mapping[str, Any]) -> Table:
+    """Per drive: data set, reference (or why it was skipped), each predictor's future mean [m]."""
+    preds = list(res["predictors"])
+    rows = []
+    for d in res["drives"]:
+        if d["skipped"]:
+            rows.append({"drive": d["name"], "data set": d["dataset"],
+                         "reference": f"skipped: {d['skipped']}"})
+            continue
+        mark = "".join(f" ({p} trained on it)" for p in d.get("trained_on", []))
+        rows.append({"drive": d["name"] + mark, "data set": d["dataset"], "reference": d["reference"],
+                     **{f"{p} future mean [m]": _num(d["predictors"].get(p, {}).get("future", {})
+                                                     .get("mean_m")) for p in preds}})
+    return Table(_frame(rows, ["drive", "data set", "reference"]
+                        + [f"{p} future mean [m]" for p in preds]), "drives")
