@@ -98,10 +98,10 @@ def paper_figures(drives: list[Drive], cfg: RunConfig, traces: pd.DataFrame, out
     cond = gps_condition(cfg, drive.truth is not None) if cfg.use_tuned else None
     lstm = create("lstm", cond, **cfg.predictor_options.get("lstm", {}))
     replay(lstm, prep, cfg.horizon_s)
-    if getattr(lstm, "_grid", None) is None or getattr(lstm, "_pred", None) is None:
+    step = lstm.last_step()
+    if step is None:
         return []  # too few fixes before the moment for a model prediction
-    grid = np.asarray(lstm._grid)
-    pred = np.asarray(lstm._pred)
+    grid, pred = step.grid, step.pred
     ts = np.linspace(t_fix, t_fix + cfg.horizon_s, 5)
     now = np.array([lstm.position_at(t) for t in ts])
     from bench.prepare import _reference

@@ -57,67 +57,49 @@ def lstm_stages(drive: Drive, steps: int) -> dict[str, Any]:
     """Per-stage latency [us] of the ``lstm`` fix step on a drive's real windows, plus the
     paper's iterative (L-BFGS) fit and the closed-form fit alone for comparison.
 
-    The predictor's own stage methods are wrapped with timers on this one instance, so the
-    code timed is the code that runs: IMU fit (``_imu_on_grid``), features (``_displacement``
-    less inference), inference (``net.run``), current-position fit (``_final.fit``); the
-    position fit is the rest of the step (window search, fit, grid, heading)."""
+    The stages are those the predictor reports through its ``stage_timer`` hook
+    (:data:`predictors.lstm.predictor.STAGES`), so the code timed is the code that runs;
+    start-up line fits (no network) report none. After each step the hook also times the
+    position cubic alone on that step's window of fixes (the first 200 by L-BFGS too),
+    interleaved with the steps as before; the hook's own time is charged to no stage."""
     from time import perf_counter_ns
 
     from predictors.cubic import fit_cubic_lbfgs
-    from predictors.lstm.predictor import LstmPredictor
+    from predictors.lstm.predictor import STAGES, LstmPredictor, StageRecorder
     from predictors.lstm.resample import fit_poly, window_start
 
     clock = perf_counter_ns
-    prep = prepare_drive(drive, RunConfig(predictors=("lstm",)))
+    cfg = RunConfig(predictors=("lstm",))
+    prep = prepare_drive(drive, cfg)
+    t, xy = prep.gps.t, np.column_stack([prep.gps.x, prep.gps.y])
     p = LstmPredictor()
-    spent: dict[str, int] = {}
-
-    def timed(key: str, fn: Any) -> Any:
-        def wrapper(*args: Any) -> Any:
-            c0 = clock()
-            out = fn(*args)
-            spent[key] = spent.get(key, 0) + clock() - c0
-            return out
-        return wrapper
-
-    p._imu_on_grid = timed("imu", p._imu_on_grid)
-    p._displacement = timed("displacement", p._displacement)
-    p.net.run = timed("inference", p.net.run)
-    p._final.fit = timed("final", p._final.fit)
-    names = ("resample_positions", "resample_imu", "features", "inference", "current_position_fit")
-    rec: dict[str, list[int]] = {n: [] for n in names}
+    rec = StageRecorder()
     fit_alone: list[int] = []
     lbfgs: list[int] = []
-    step = p.observe_gps
 
-    def observe_gps(t: float, x: float, y: float) -> None:
-        spent.clear()
-        c0 = clock()
-        step(t, x, y)
-        total = clock() - c0
-        if "inference" not in spent:  # start-up line fit: no network step to time
+    def hook(stage: str, ns: int) -> None:
+        rec(stage, ns)
+        if stage != STAGES[-1]:
             return
-        rec["resample_positions"].append(
-            total - spent["imu"] - spent["displacement"] - spent["final"])
-        rec["resample_imu"].append(spent["imu"])
-        rec["features"].append(spent["displacement"] - spent["inference"])
-        rec["inference"].append(spent["inference"])
-        rec["current_position_fit"].append(spent["final"])
-        a = p._fix.view()
-        i = window_start(a[:, 0], a.shape[0] - 1)
-        tt, xy = a[i:, 0], a[i:, 1:]
+        step = p.last_step()
+        end = int(np.searchsorted(t, step.t_fix))  # the fix this step ran on
+        i = window_start(t, end)
+        tt, w = t[i:end + 1], xy[i:end + 1]
         c0 = clock()
-        fit_poly(tt, xy, float(tt[-1]), float(tt[-1] - tt[0]))
+        fit_poly(tt, w, float(tt[-1]), float(tt[-1] - tt[0]))
         fit_alone.append(clock() - c0)
         if len(lbfgs) < 200:
             c0 = clock()
-            fit_cubic_lbfgs(tt, xy)
+            fit_cubic_lbfgs(tt, w)
             lbfgs.append(clock() - c0)
 
-    p.observe_gps = observe_gps
-    while len(rec["inference"]) < steps:
-        replay(p, prep, RunConfig().horizon_s)
-    out = {n: latency_summary(np.asarray(v[:steps])) for n, v in rec.items()}
+    p.stage_timer = hook
+    while len(rec.ns["inference"]) < steps:
+        before = len(rec.ns["inference"])
+        replay(p, prep, cfg.horizon_s)
+        if len(rec.ns["inference"]) == before:  # no window of fixes spans 2 s: nothing to time
+            break
+    out = {n: latency_summary(np.asarray(rec.ns[n][:steps])) for n in STAGES}
     out["cubic_fit_closed_form"] = latency_summary(np.asarray(fit_alone[:steps]))
     out["cubic_fit_lbfgs"] = latency_summary(np.asarray(lbfgs))
     return out

@@ -62,32 +62,29 @@ def tree_hash(path: str | Path) -> dict[str, Any]:
     return {"path": str(path), "files": len(files), "bytes": size, "sha256": h.hexdigest()}
 
 
-#: the registered predictors whose models declare their training drives (model.json)
-LEARNED = ("lstm",)
-
-
 def learned_models(cfg: RunConfig) -> dict[str, dict[str, Any]]:
-    """Per learned predictor in the run (``lstm``, ``lstm@mine``, ...): the model file it
-    uses, whether that is the bundled one, and the drive names the model was trained on
-    (from its model.json), so results on those drives can be told apart."""
-    from predictors.registry import base_name
+    """Per predictor of the run that declares a learned model (``lstm``, ``lstm@mine``,
+    ``lstm-authors``, ...; :meth:`~predictors.base.Predictor.model_description`): the model
+    file it uses, whether that is the bundled one, and the drive names the model was
+    trained on (:meth:`~predictors.base.Predictor.training_drives`), so results on those
+    drives can be told apart. Each predictor is created with the run's options for it."""
+    from predictors.base import Predictor
+    from predictors.registry import create, predictor_class
 
     out: dict[str, dict[str, Any]] = {}
     for name in cfg.predictors:
-        if base_name(name) not in LEARNED:
+        cls = predictor_class(name)
+        if (cls.model_description is Predictor.model_description
+                and cls.training_drives is Predictor.training_drives):
+            continue  # no learned model: not worth building (an ONNX session, ...)
+        pred = create(name, None, **cfg.predictor_options.get(name, {}))
+        desc = pred.model_description()
+        drives = list(pred.training_drives())
+        if desc is None and not drives:
             continue
-        from predictors.lstm.predictor import bundled_model, load_model_info
-
-        model = cfg.predictor_options.get(name, {}).get("model")
-        path = Path(model) if model else bundled_model()
-        if path.is_dir():
-            path = path / "model.onnx"
-        try:
-            drives = list(load_model_info(path).get("data", {}).get("train_drives", []))
-        except Exception:  # noqa: BLE001 - a model without a manifest: nothing to flag
-            drives = []
-        out[name] = {"model": str(path) if model else "bundled (predictors/lstm/bundled/model.onnx)",
-                     "bundled": not model, "train_drives": drives}
+        desc = desc or {}
+        out[name] = {"model": str(desc.get("model", "")), "bundled": bool(desc.get("bundled")),
+                     "train_drives": drives}
     return out
 
 

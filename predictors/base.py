@@ -45,3 +45,17 @@ class Predictor(ABC):
     def config(self) -> dict:
         """The predictor's configuration, recorded in results for reproducibility."""
         return {}
+
+    # optional seams of learned predictors: the defaults describe a predictor without a model
+
+    def model_description(self) -> dict | None:
+        """The learned model behind the predictor, recorded in results: ``{"model": str,
+        "bundled": bool}`` (the model file, or a text naming the bundled one; whether the
+        package's bundled model is used). None for a predictor without a learned model."""
+        return None
+
+    def training_drives(self) -> tuple[str, ...]:
+        """Names of the drives the predictor's model was trained on, as its model records
+        them: results on those drives are not held-out. () when there is no learned model
+        or the model does not record its training drives."""
+        return ()

@@ -31,6 +31,8 @@ the fix before the stale one, is consistent. Units: s, m (ENU), m/s, m/s^2.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
+from typing import Any
 
 from predictors._geometry import check_config
 from predictors.base import Predictor
@@ -164,8 +166,20 @@ class GatedPredictor(Predictor):
     """Any predictor behind a :class:`FixGate`: rejected fixes never reach it, so it bridges
     them exactly as it bridges a missing fix. Everything else is forwarded unchanged.
 
+    The gate's own: ``observe_gps`` (judged), ``reset`` (gate and predictor), ``config``
+    (with the gate's), ``rejected``, ``gate`` and ``inner``. Every other attribute reads
+    through to the wrapped predictor (``__getattr__``: its ``last_step``, ``steps``, ...),
+    and so do the optional :class:`~predictors.base.Predictor` methods the gate does not
+    override (``training_drives``, ``model_description``, new ones alike). Setting an
+    attribute the wrapped predictor has (``gated.stage_timer = hook``) sets it there.
+    ``observe_imu``, ``observe_speed`` and ``position_at`` are the wrapped predictor's
+    bound methods (no hop on the hot path).
+
     ``gate.rejected`` counts the rejections since the last :meth:`reset`.
     """
+
+    #: the names stored on the gate itself (everything else may be the wrapped predictor's)
+    _OWN = frozenset({"inner", "gate", "name", "observe_imu", "observe_speed", "position_at"})
 
     def __init__(self, inner: Predictor, gate: FixGate | None = None) -> None:
         self.inner = inner
@@ -174,6 +188,27 @@ class GatedPredictor(Predictor):
         self.observe_imu = inner.observe_imu  # type: ignore[method-assign]  # hot path: no hop
         self.observe_speed = inner.observe_speed  # type: ignore[method-assign]
         self.position_at = inner.position_at  # type: ignore[method-assign]
+
+    def __getattr__(self, key: str) -> Any:
+        """Only for names the gate lacks: the wrapped predictor's attribute. Special names
+        (``__setstate__``, ``__deepcopy__``, ...) and a gate without ``inner`` yet (being
+        unpickled) raise AttributeError, so pickle and copy treat the gate as itself."""
+        inner = self.__dict__.get("inner")
+        if inner is None or (key.startswith("__") and key.endswith("__")):
+            raise AttributeError(f"{type(self).__name__!r} object has no attribute {key!r}")
+        return getattr(inner, key)
+
+    def __setattr__(self, key: str, value: object) -> None:
+        """The gate's own names (and any the wrapped predictor lacks) are set on the gate;
+        a name the wrapped predictor has is set there."""
+        if key in self._OWN or hasattr(type(self), key) or key in self.__dict__:
+            object.__setattr__(self, key, value)
+            return
+        inner = self.__dict__.get("inner")
+        if inner is not None and hasattr(inner, key):
+            setattr(inner, key, value)
+        else:
+            object.__setattr__(self, key, value)
 
     @property
     def rejected(self) -> int:
@@ -193,3 +228,22 @@ class GatedPredictor(Predictor):
 
     def config(self) -> dict:
         return {**self.inner.config(), "gate": self.gate.config()}
+
+
+def _forward(key: str) -> Callable[..., Any]:
+    """A GatedPredictor method calling the wrapped predictor's method ``key``."""
+
+    def method(self: GatedPredictor, *args: object, **kwargs: object) -> object:
+        return getattr(self.inner, key)(*args, **kwargs)
+
+    method.__name__ = key
+    method.__qualname__ = f"GatedPredictor.{key}"
+    method.__doc__ = getattr(Predictor, key).__doc__
+    return method
+
+
+# the base's optional methods the gate inherits but does not override would answer for the
+# gate itself (a model-less default): forward them, the ones added later included
+for _key, _value in vars(Predictor).items():
+    if callable(_value) and not _key.startswith("_") and _key not in vars(GatedPredictor):
+        setattr(GatedPredictor, _key, _forward(_key))

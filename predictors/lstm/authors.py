@@ -47,6 +47,10 @@ class AuthorsLstmPredictor(LstmPredictor):
         model: path of ``gps_interpolation_model2.onnx`` / ``..._model3.onnx``.
         fit: ``"closed"`` or ``"lbfgs"`` (as :class:`LstmPredictor`).
         origin: ``"window"`` or ``"absolute"`` (see the module doc).
+
+    :meth:`model_description` names the .onnx file (never bundled); :meth:`training_drives`
+    is (): the authors' files come without a model description and their ONNX metadata
+    records no training data.
     """
 
     name = "lstm-authors"
@@ -66,12 +70,14 @@ class AuthorsLstmPredictor(LstmPredictor):
         self.origin = origin
         self.frame = "authors"
         self.info = {}
+        self.bundled = False  # the authors' files are never bundled
         self.net = OnnxModel(self.model_path, output=OUTPUT)
         try:
             self.net.run(np.zeros((6, N_STEPS), dtype=np.float32))
         except Exception:  # onnxruntime rejects batch 1: feed fixed batches, padded
             self.net = OnnxModel(self.model_path, output=OUTPUT, fixed_batch=FIXED_BATCH)
         self._xa = np.empty((6, N_STEPS))
+        self._off = np.zeros(2)  # x, y offset [m] of the newest network input
         self._init_buffers()
 
     def config(self) -> dict:
@@ -92,10 +98,14 @@ class AuthorsLstmPredictor(LstmPredictor):
         x[5] = _T
         return x, off
 
-    def _displacement(self, grid: np.ndarray, ax: np.ndarray, ay: np.ndarray, yaw: np.ndarray,
-                      psi: float, coef: np.ndarray, scale: float) -> tuple[float, float]:
-        x, off = self.features(grid, ax, ay, coef, scale)
-        out = np.asarray(self.net.run(x)).reshape(-1)
+    def _net_input(self, grid: np.ndarray, ax: np.ndarray, ay: np.ndarray, yaw: np.ndarray,
+                   psi: float, coef: np.ndarray, scale: float) -> np.ndarray:
+        x, self._off = self.features(grid, ax, ay, coef, scale)
+        return x
+
+    def _net_output(self, out: np.ndarray, grid: np.ndarray, psi: float) -> tuple[float, float]:
+        out = np.asarray(out).reshape(-1)
+        off = self._off
         px, py = float(out[0]) + off[0], float(out[1]) + off[1]
         if not (math.isfinite(px) and math.isfinite(py)):
             return 0.0, 0.0

@@ -24,14 +24,26 @@ seen). The speed is the latest wheel/CAN speed when the drive has one
 Start-up: until the fixes span 2 s there is no network input; the predictor then
 extrapolates a least-squares *line* through the fixes it has (one fix: that fix), as a
 short cubic would extrapolate wildly.
+
+Public seams (for benchmarks and figures, nothing private to reach into):
+
+- :attr:`LstmPredictor.stage_timer`: None (default; costs one ``is None`` test per stage)
+  or a callable ``(stage, duration_ns)`` called once per stage of every network step a
+  fix triggers (:data:`STAGES`, in order; bridging steps inside ``position_at`` and
+  start-up line fits report nothing). :class:`StageRecorder` collects them.
+- :meth:`LstmPredictor.last_step`: the newest network step as an :class:`LstmStep`
+  (input grid, predicted point, times), copied.
 """
 
 from __future__ import annotations
 
 import json
 import math
+from collections.abc import Callable
+from dataclasses import dataclass
 from importlib import resources
 from pathlib import Path
+from time import perf_counter_ns
 
 import numpy as np
 
@@ -61,6 +73,64 @@ FIX_CAP = 512
 IMU_CAP = 8192
 FITS = ("closed", "lbfgs")
 N_FEATURES = 6
+#: text recorded in results for the bundled model (:meth:`LstmPredictor.model_description`)
+BUNDLED_TEXT = "bundled (predictors/lstm/bundled/model.onnx)"
+
+#: the stages of a network step, in the order :attr:`LstmPredictor.stage_timer` receives them:
+#: ``resample_positions`` (fix bookkeeping, window search, position cubic, 8-point grid,
+#: heading), ``resample_imu`` (IMU cubic on the grid or its GPS stand-ins), ``features``
+#: (the network input), ``inference`` (the ONNX run), ``current_position_fit`` (network
+#: output to a world displacement, cubic through grid and prediction, state update)
+STAGES = ("resample_positions", "resample_imu", "features", "inference", "current_position_fit")
+
+#: a stage-timer hook: called with (stage name, duration [ns])
+StageTimer = Callable[[str, int], None]
+
+
+def _lap(timer: StageTimer, stage: str, c0: int) -> int:
+    """Report the stage that began at ``c0`` [ns]; the clock after the report (so the
+    hook's own time is charged to no stage)."""
+    timer(stage, perf_counter_ns() - c0)
+    return perf_counter_ns()
+
+
+class StageRecorder:
+    """A :data:`StageTimer` that keeps every duration [ns] per stage name.
+
+    ``ns[stage]`` lists the durations in the order received; :meth:`clear` empties them.
+    """
+
+    def __init__(self) -> None:
+        self.ns: dict[str, list[int]] = {s: [] for s in STAGES}
+
+    def __call__(self, stage: str, duration_ns: int) -> None:
+        self.ns.setdefault(stage, []).append(duration_ns)
+
+    def clear(self) -> None:
+        for v in self.ns.values():
+            v.clear()
+
+
+@dataclass(frozen=True, eq=False)
+class LstmStep:
+    """One network step of :class:`LstmPredictor`, copied out of its state (read-only arrays).
+
+    Attributes:
+        grid: (8, 2) resampled input positions [m, ENU], oldest first, 200 ms apart,
+            the last at ``t_fix``.
+        pred: (2,) the predicted position [m, ENU] at ``t_fix + horizon_s``.
+        t_fix: time [s] of the newest grid point: the fix the step ran on (for a bridging
+            step, the pseudo-fix that stood in for a missing one).
+        horizon_s: how far [s] past ``t_fix`` the network predicts (0.2 s).
+        bridged: True if a missing fix was bridged (the step ran inside ``position_at``
+            on the previous prediction, not on a real fix).
+    """
+
+    grid: np.ndarray
+    pred: np.ndarray
+    t_fix: float
+    horizon_s: float
+    bridged: bool
 
 
 def bundled_model() -> Path:
@@ -130,10 +200,14 @@ class LstmPredictor(Predictor):
     """
 
     name = "lstm"
+    #: None, or a hook receiving (stage, duration [ns]) for each of :data:`STAGES` of every
+    #: network step a fix triggers (see the module doc); set it on an instance
+    stage_timer: StageTimer | None = None
 
     def __init__(self, model: str | None = None, fit: str = "closed") -> None:
         if fit not in FITS:
             raise ValueError(f"fit must be one of {FITS}, not {fit!r}")
+        self.bundled = not model
         self.model_path = Path(model) if model else bundled_model()
         if self.model_path.is_dir():  # a folder written by `bench train`
             self.model_path = self.model_path / "model.onnx"
@@ -149,12 +223,37 @@ class LstmPredictor(Predictor):
         self._grid_fit = FixedGridFit(GRID_OFFSETS)
         self._x = np.empty((N_STEPS, 6), dtype=np.float64)
         self._pts = np.empty((N_STEPS + 1, 2))
+        self.stage_timer = None
         self.reset()
 
     def config(self) -> dict:
         return {"model": str(self.model_path), "fit": self.fit, "frame": self.frame,
                 "architecture": self.info.get("architecture"),
                 "command": self.info.get("command")}
+
+    # ------------------------------------------------------------------ seams
+    def model_description(self) -> dict:
+        """``{"model": the model.onnx path (or BUNDLED_TEXT), "bundled": bool}``."""
+        return {"model": BUNDLED_TEXT if self.bundled else str(self.model_path),
+                "bundled": self.bundled}
+
+    def training_drives(self) -> tuple[str, ...]:
+        """The drive names model.json records under ``data.train_drives`` (() if none)."""
+        data = self.info.get("data") or {}
+        return tuple(str(d) for d in data.get("train_drives") or ())
+
+    def last_step(self) -> LstmStep | None:
+        """The network step behind the current answers (copies), or None while there is
+        none: before the fixes span 2 s, or while a restart after a long outage is still
+        answered by the start-up line. A query past the prediction may run bridging steps
+        first; :meth:`position_at` may answer otherwise at standstill (the hold)."""
+        if self._mode != "net":
+            return None
+        grid = self._grid.copy()
+        pred = self._pred.copy()
+        grid.flags.writeable = False
+        pred.flags.writeable = False
+        return LstmStep(grid, pred, self._t_end, DT, self._t_end > self._t_real)
 
     # ------------------------------------------------------------------ state
     def reset(self) -> None:
@@ -200,6 +299,8 @@ class LstmPredictor(Predictor):
             self._can_v = v
 
     def observe_gps(self, t: float, x: float, y: float) -> None:
+        timer = self.stage_timer
+        c0 = perf_counter_ns() if timer is not None else 0
         if not (math.isfinite(x) and math.isfinite(y)):
             return
         if self._can_v is not None and abs(self._can_v) < STILL_SPEED_MPS:
@@ -221,10 +322,12 @@ class LstmPredictor(Predictor):
         while fb.n and fb.a[fb.n - 1, 0] >= t:
             fb.n -= 1
         fb.append((t, x, y))
-        self._step_on_fixes()
+        self._step_on_fixes(timer, c0)
 
     # ------------------------------------------------------------------ steps
-    def _step_on_fixes(self) -> None:
+    def _step_on_fixes(self, timer: StageTimer | None, c0: int) -> None:
+        """A step on the fixes (the newest real): the position cubic and grid, then the
+        network (``timer``: the stage hook, ``c0``: the step's start [ns])."""
         a = self._fix.view()
         end = a.shape[0] - 1
         t = a[:, 0]
@@ -245,7 +348,9 @@ class LstmPredictor(Predictor):
         grid = eval_poly(coef, GRID_OFFSETS / scale)
         self._gps_v = math.hypot(coef[1, 0], coef[1, 1]) / scale
         psi = math.atan2(coef[1, 1], coef[1, 0])
-        self._run_net(grid, t_end, float(tt[0]), psi, coef, scale)
+        if timer is not None:
+            c0 = _lap(timer, "resample_positions", c0)
+        self._run_net(grid, t_end, float(tt[0]), psi, coef, scale, timer, c0)
 
     def _imu_on_grid(self, t0: float, t_end: float, coef: np.ndarray, scale: float
                      ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -276,9 +381,17 @@ class LstmPredictor(Predictor):
         return sax, say, syaw
 
     def _run_net(self, grid: np.ndarray, t_end: float, t0: float, psi: float,
-                 coef: np.ndarray, scale: float) -> None:
+                 coef: np.ndarray, scale: float, timer: StageTimer | None, c0: int) -> None:
         ax, ay, yaw = self._imu_on_grid(t0, t_end, coef, scale)
-        d0, d1 = self._displacement(grid, ax, ay, yaw, psi, coef, scale)
+        if timer is not None:
+            c0 = _lap(timer, "resample_imu", c0)
+        x = self._net_input(grid, ax, ay, yaw, psi, coef, scale)
+        if timer is not None:
+            c0 = _lap(timer, "features", c0)
+        out = self.net.run(x)
+        if timer is not None:
+            c0 = _lap(timer, "inference", c0)
+        d0, d1 = self._net_output(out, grid, psi)
         pts = self._pts
         pts[:N_STEPS] = grid
         pts[N_STEPS, 0] = grid[-1, 0] + d0
@@ -290,12 +403,17 @@ class LstmPredictor(Predictor):
         self._t_end = t_end
         self._mode = "net"
         self.steps += 1
+        if timer is not None:
+            _lap(timer, "current_position_fit", c0)
 
-    def _displacement(self, grid: np.ndarray, ax: np.ndarray, ay: np.ndarray, yaw: np.ndarray,
-                      psi: float, coef: np.ndarray, scale: float) -> tuple[float, float]:
-        """Network: world displacement [m] from the newest grid point to 200 ms later."""
-        x = features_one(grid, ax, ay, yaw, psi, self.frame, self._x)
-        out = self.net.run(x)
+    def _net_input(self, grid: np.ndarray, ax: np.ndarray, ay: np.ndarray, yaw: np.ndarray,
+                   psi: float, coef: np.ndarray, scale: float) -> np.ndarray:
+        """The network's input window from the grid [m], IMU on the grid and heading [rad]."""
+        return features_one(grid, ax, ay, yaw, psi, self.frame, self._x)
+
+    def _net_output(self, out: np.ndarray, grid: np.ndarray, psi: float) -> tuple[float, float]:
+        """World displacement [m] from the newest grid point to 200 ms later, from the
+        network's output (in the model's frame)."""
         d0, d1 = float(out[0]), float(out[1])
         if self.frame == "heading":
             c, s = math.cos(psi), math.sin(psi)
@@ -312,7 +430,7 @@ class LstmPredictor(Predictor):
         t = self._fix.view()[:, 0]
         start = window_start(t, self._fix.n - 1)
         t0 = min(float(t[start]), t_new - MIN_SPAN_S)
-        self._run_net(grid, t_new, t0, psi, coef, 1.0)
+        self._run_net(grid, t_new, t0, psi, coef, 1.0, None, 0)
         self.bridge_steps += 1
 
     def _fallback_line(self, a: np.ndarray) -> None:
