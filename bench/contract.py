@@ -232,23 +232,24 @@ def run_replay(factory: Factory, prep: PreparedDrive, pred: Predictor | None = N
 
 
 def differences(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Distance [m] between answers row by row: 0 where both are NaN, inf where only one is."""
+    """Distance [m] between answers row by row: 0 where the rows are equal (NaN equal to NaN),
+    inf where they differ and one holds a NaN or an inf."""
     a, b = np.asarray(a, dtype=float), np.asarray(b, dtype=float)
-    with np.errstate(invalid="ignore"):
+    with np.errstate(invalid="ignore", over="ignore"):
         d = np.hypot(a[:, 0] - b[:, 0], a[:, 1] - b[:, 1])
-    na, nb = ~np.all(np.isfinite(a), axis=1), ~np.all(np.isfinite(b), axis=1)
-    d[na & nb] = 0.0
-    d[na ^ nb] = np.inf
+        same = np.all((a == b) | (np.isnan(a) & np.isnan(b)), axis=1)
+    d[same] = 0.0
+    d[~np.isfinite(d)] = np.inf
     return d
 
 
 def metres(x: float) -> str:
-    """A distance for evidence lines: ``0 m``, ``3.2e-12 m``, ``0.412 m``, ``inf m`` (NaN vs
-    a number)."""
+    """A distance for evidence lines: ``0 m``, ``3.2e-12 m``, ``0.412 m``, or ``inf m (a NaN
+    or inf on one side)``."""
     if x == 0.0:
         return "0 m"
     if not math.isfinite(x):
-        return "NaN vs a number" if x == math.inf else f"{x} m"
+        return "inf m (a NaN or inf on one side)"
     return f"{x:.3g} m" if x < 1e-3 else f"{x:.3f} m"
 
 
@@ -612,7 +613,7 @@ def resolve_predictor(spec: str, options: dict[str, Any] | None = None) -> Facto
         try:
             module = importlib.import_module(mod_name)
         except ModuleNotFoundError as e:
-            if e.name and mod_name.startswith(e.name):
+            if e.name == mod_name or mod_name.startswith(f"{e.name}."):
                 raise UsageError(f"{spec}: no module named {mod_name!r} (run from the folder that "
                                  "holds it, or put it on PYTHONPATH)") from None
             raise UsageError(f"{spec}: importing {mod_name} {_raised(e)}") from None

@@ -167,6 +167,15 @@ def test_an_exception_fails_clauses_and_names_where_it_was_raised():
         assert "raised ZeroDivisionError: float division by zero (test_contract.py:" in ev, ev
 
 
+def test_differences_treat_nan_as_equal_only_to_nan():
+    from bench.contract import differences
+
+    nan, inf = np.nan, np.inf
+    a = np.array([[1, 2], [nan, nan], [nan, 1], [1, inf], [1, inf], [0, 0]], dtype=float)
+    b = np.array([[1, 2.5], [nan, nan], [1, nan], [1, inf], [1, 5], [3, 4]], dtype=float)
+    np.testing.assert_array_equal(differences(a, b), [0.5, 0.0, inf, 0.0, inf, 5.0])
+
+
 def test_feed_matches_the_runners_replay():
     """The hand feeder (query order, pickling) drives a predictor exactly as bench.replay."""
     prep = cut_prepared(inputs().drive, 15.0)
@@ -201,6 +210,16 @@ def test_resolve_errors_are_one_line(spec, needle):
     with pytest.raises(UsageError) as e:
         resolve_predictor(spec)
     assert needle in str(e.value) and "\n" not in str(e.value)
+
+
+def test_resolve_names_the_missing_dependency_of_a_plugin(tmp_path, monkeypatch):
+    (tmp_path / "plugin_with_missing_dep.py").write_text("import no_such_dependency_x\n")
+    monkeypatch.syspath_prepend(str(tmp_path))
+    with pytest.raises(UsageError) as e:
+        resolve_predictor("plugin_with_missing_dep:P")
+    msg = str(e.value)
+    assert msg.startswith("plugin_with_missing_dep:P: importing plugin_with_missing_dep raised "
+                          "ModuleNotFoundError: No module named 'no_such_dependency_x'"), msg
 
 
 # ------------------------------------------------------------------------------- CLI
