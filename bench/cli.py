@@ -15,7 +15,7 @@ from typing import Annotated
 
 import typer
 
-from bench.commands import inspect, latency, predictors, run, train, tune, view
+from bench.commands import check, inspect, latency, predictors, run, train, tune, view
 from bench.commands.common import fail
 
 
@@ -68,6 +68,7 @@ app.command("predictors")(predictors.list_predictors)
 app.command("train")(train.train)
 app.command("latency")(latency.latency)
 app.command("tune")(tune.tune)
+app.command("check")(check.check)
 
 MULTI_VALUE_OPTIONS = ("--data", "--topic", "--model")
 
