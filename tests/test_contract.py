@@ -48,13 +48,9 @@ REGISTERED = [n for n, e in available().items()
 #: the model file a predictor of NEEDS_MODEL is checked with, in ../shared/models/authors
 MODEL_FILES = {"lstm-authors": "gps_interpolation_model3.onnx"}
 
-ONNX_PICKLE = ("onnxruntime's InferenceSession cannot be pickled and OnnxModel "
-               "(predictors/lstm/runtime.py) has no __getstate__")
 #: clauses a built-in predictor is known to break (findings, see the report): strict xfail,
 #: and only for the known reason (the evidence must contain the text given)
 KNOWN_FAILURES = {
-    ("lstm", "picklable"): (ONNX_PICKLE, "cannot pickle 'onnxruntime"),
-    ("lstm-authors", "picklable"): (ONNX_PICKLE, "cannot pickle 'onnxruntime"),
     ("lstm-authors", "straight_line"): (
         "the authors' network lags on an exact straight line: its future answers are "
         "~0.17 s x speed behind (2.6 m at 15 m/s, 1.5 m at 9 m/s)",

@@ -25,6 +25,11 @@ def session_options() -> ort.SessionOptions:
     return so
 
 
+def _session(model: bytes) -> ort.InferenceSession:
+    return ort.InferenceSession(model, sess_options=session_options(),
+                                providers=["CPUExecutionProvider"])
+
+
 class OnnxModel:
     """An ONNX network with one float32 input; ``run`` feeds one window, ``run_batch`` many.
 
@@ -39,9 +44,9 @@ class OnnxModel:
         p = Path(path)
         if not p.is_file():
             raise DataError(p, "ONNX model file not found")
+        self.source = p.read_bytes()  # kept so that a pickled copy rebuilds its session anywhere
         try:
-            self.session = ort.InferenceSession(str(p), sess_options=session_options(),
-                                                providers=["CPUExecutionProvider"])
+            self.session = _session(self.source)
         except Exception as exc:  # onnxruntime raises its own exception types
             raise DataError(p, f"not a loadable ONNX model ({type(exc).__name__}: "
                                f"{str(exc).splitlines()[0][:200]})") from None
@@ -58,6 +63,16 @@ class OnnxModel:
         self.batch = b if isinstance(b, int) else 1
         self.buf = np.zeros([self.batch] + [d if d is not None else 1 for d in dims[1:]],
                             dtype=np.float32)
+        self._feed = {self.input_name: self.buf}
+
+    def __getstate__(self) -> dict:
+        """Everything but the onnxruntime session (not picklable): it is rebuilt from the
+        model bytes on unpickling, so predictors can cross process boundaries."""
+        return {k: v for k, v in self.__dict__.items() if k not in ("session", "_feed")}
+
+    def __setstate__(self, state: dict) -> None:
+        self.__dict__.update(state)
+        self.session = _session(self.source)
         self._feed = {self.input_name: self.buf}
 
     def run(self, x: np.ndarray) -> np.ndarray:
