@@ -48,6 +48,11 @@ DRIVE_DPI = 80
 #: at most this many per-drive error-over-time figures per run (the first drives in run
 #: order); the note of ``error_over_time`` says when drives were left out
 MAX_DRIVE_FIGURES = 250
+#: per-drive plots drawn by default: every drive of a run with up to this many, else this
+#: many drives with the largest mean future-point error (``bench run --drive-plots``)
+DEFAULT_DRIVE_PLOTS = 20
+#: points drawn per CDF curve (evenly spaced in rank; the curve is exact at each)
+CDF_POINTS = 4000
 TURN_LABELS = ("turn", "roundabout")
 LABEL_COLORS = {"straight": "#c7e9c0", "turn": "#fdd0a2", "roundabout": "#d4b9da",
                 "start_stop": "#fff2ae", "unlabelled": "#ffffff"}
@@ -101,6 +106,12 @@ def shown_format(formats: Iterable[str] | str) -> str:
 _METADATA = {"png": {"Software": None}, "svg": {"Date": None}, "pdf": {"CreationDate": None}}
 
 
+def _in_order(preds: Sequence[str], column: pd.Series) -> list[str]:
+    """The predictors present in ``column``: those of ``preds`` in its order, then others sorted."""
+    present = {str(x) for x in pd.unique(column)}
+    return [p for p in preds if p in present] + sorted(present - set(preds))
+
+
 def save_figure(fig: Figure, folder: Path, stem: str, formats: Sequence[str],
                 dpi: int = DPI) -> list[Path]:
     """Write ``fig`` as ``folder/stem.<fmt>`` for each format (already checked by
@@ -110,7 +121,8 @@ def save_figure(fig: Figure, folder: Path, stem: str, formats: Sequence[str],
     paths = []
     for fmt in formats:
         p = folder / f"{stem}.{fmt}"
-        fig.savefig(p, format=fmt, dpi=dpi, metadata=_METADATA[fmt])
+        extra = {"pil_kwargs": {"compress_level": 1}} if fmt == "png" else {}  # quicker; ~10 % larger
+        fig.savefig(p, format=fmt, dpi=dpi, metadata=_METADATA[fmt], **extra)
         paths.append(p)
     return paths
 
@@ -142,8 +154,11 @@ def _warmup(traces: pd.DataFrame) -> np.ndarray:
     return traces["warmup"].fillna(False).astype(bool).to_numpy()
 
 
-def headline(traces: pd.DataFrame) -> pd.DataFrame:
-    """The rows the headline figures use: all but the warm-up."""
+def headline(traces: pd.DataFrame, columns: Sequence[str] | None = None) -> pd.DataFrame:
+    """The rows the headline figures use: all but the warm-up (only ``columns`` of them, if
+    given: filtering a few columns of a long run is much cheaper than all of them)."""
+    if columns is not None:
+        traces = traces[[c for c in dict.fromkeys([*columns, "warmup"]) if c in traces.columns]]
     w = _warmup(traces)
     return traces[~w] if w.any() else traces
 
@@ -184,7 +199,7 @@ def plot_error_cdf(traces: pd.DataFrame, preds: Sequence[str]) -> Figure:
     """Future and now error CDFs [m], one line per predictor, warm-up excluded."""
     from matplotlib.figure import Figure
 
-    t = _finite(headline(traces))
+    t = _finite(headline(traces, ["predictor", "kind", "error_m"]))
     if t.empty:
         raise NothingToPlot("no query with a known error (no reference position)")
     colors = _colors(preds)
@@ -195,9 +210,13 @@ def plot_error_cdf(traces: pd.DataFrame, preds: Sequence[str]) -> Figure:
         tk = t[t.kind == kind]
         for p, g in tk.groupby("predictor", observed=True, sort=False):
             e, c = error_cdf(g["error_m"].to_numpy(dtype=float))
+            n = e.size
+            if n > CDF_POINTS:  # a drawn CDF needs no more points than pixels: thin evenly
+                pick = np.unique(np.linspace(0, n - 1, CDF_POINTS).astype(int))
+                e, c = e[pick], c[pick]
             v, low = _log_values(e)
             clipped |= low
-            ax.step(v, c, where="post", label=f"{p} (n={e.size})", color=colors.get(p))
+            ax.step(v, c, where="post", label=f"{p} (n={n})", color=colors.get(p))
         if tk.empty:
             ax.text(0.5, 0.5, f"no {kind} query with a known error", transform=ax.transAxes,
                     ha="center", va="center")
@@ -274,7 +293,8 @@ def plot_error_vs_since_fix(traces: pd.DataFrame, preds: Sequence[str]) -> Figur
     fig = Figure(figsize=(8, 4.5), layout="constrained")
     ax = fig.add_subplot()
     clipped = False
-    names = list(dict.fromkeys([p for p in preds if p in set(frame.p)] + list(frame.p.unique())))
+    present = {str(x) for x in pd.unique(frame.p)}
+    names = list(dict.fromkeys([p for p in preds if p in present] + list(frame.p.unique())))
     for p in names:
         m = mean.loc[p]
         ys, low = _log_values(m.reindex(used).to_numpy(dtype=float))
@@ -326,7 +346,8 @@ def plot_path(traces: pd.DataFrame, preds: Sequence[str]) -> Figure:
     ref = ref_rows.dropna(subset=["x_ref"]).sort_values("t_query")
     moments = _worst_moments(win, ZOOMS, gap_s=3.0)
     colors = _colors(preds)
-    names = [p for p in preds if p in set(win.predictor)]
+    present = {str(x) for x in pd.unique(win.predictor)}
+    names = [p for p in preds if p in present]
     fig = Figure(figsize=(13 if moments else 7.5, 7.5), layout="constrained")
     if moments:
         gs = fig.add_gridspec(len(moments), 2, width_ratios=(2.1, 1))
@@ -395,13 +416,14 @@ def plot_trajectory_error(traces: pd.DataFrame, preds: Sequence[str]) -> Figure:
     from matplotlib.colors import LogNorm, Normalize
     from matplotlib.figure import Figure
 
-    t = headline(traces)
+    t = headline(traces, ["drive", "predictor", "kind", "t_query", "x_ref", "y_ref", "error_m",
+                          "label"])
     fut = _finite(t[(t.kind == "future") & np.isfinite(t["x_ref"].to_numpy(dtype=float))])
     if fut.empty:
         raise NothingToPlot("no future query with a known error")
     drive, _ = most_turning_drive(fut)
     dfd = fut[fut.drive == drive]
-    names = [p for p in preds if p in set(dfd.predictor)] + sorted(set(dfd.predictor) - set(preds))
+    names = _in_order(preds, dfd.predictor)
     track = t[(t.drive == drive) & (t.predictor == names[0])].dropna(subset=["x_ref"])
     track = track.sort_values("t_query")
     e_all = dfd.error_m.to_numpy(dtype=float)
@@ -434,7 +456,8 @@ def plot_trajectory_error(traces: pd.DataFrame, preds: Sequence[str]) -> Figure:
             lc = LineCollection(seg, cmap="viridis", norm=norm, lw=2.5, capstyle="round")
             lc.set_array(0.5 * (e[:-1] + e[1:])[keep])
             ax.add_collection(lc)
-        ax.scatter(xy[:, 0], xy[:, 1], c=e, cmap="viridis", norm=norm, s=4, zorder=2)
+        else:  # a single answer: a dot instead of a line
+            ax.scatter(xy[:, 0], xy[:, 1], c=e, cmap="viridis", norm=norm, s=12, zorder=2)
         ax.plot(*xy[0], "o", mfc="none", mec="k", ms=9, zorder=3)
         ax.annotate("start", xy[0], xytext=(6, -10), textcoords="offset points", fontsize=8)
         ax.set_title(f"{p}: mean {e.mean():.3f} m, max {e.max():.3f} m", fontsize=10)
@@ -484,7 +507,7 @@ def draw_error_over_time(ax: Any, drive_rows: pd.DataFrame, preds: Sequence[str]
     handles: list[Any] = []
     clipped = False
     lo_hi = (np.inf, -np.inf)
-    for p in [p for p in preds if p in set(fut.predictor)] + sorted(set(fut.predictor) - set(preds)):
+    for p in _in_order(preds, fut.predictor):
         d = fut[fut.predictor == p].sort_values("t_query")
         e = d.error_m.to_numpy(dtype=float)
         v, low = _log_values(e)
@@ -494,7 +517,7 @@ def draw_error_over_time(ax: Any, drive_rows: pd.DataFrame, preds: Sequence[str]
         tq = d.t_query.to_numpy(dtype=float)
         gap = np.flatnonzero(_gaps(tq)) + 1  # break the line across outages
         (h,) = ax.plot(np.insert(tq, gap, np.nan), np.insert(v, gap, np.nan), "-", lw=0.8,
-                       marker=".", ms=2, color=colors.get(p), label=f"{p} (mean {e.mean():.3f} m)")
+                       color=colors.get(p), label=f"{p} (mean {e.mean():.3f} m)")
         handles.append(h)
     xband = ax.get_xaxis_transform()  # x in data, y in axes fraction
     one = drive_rows[drive_rows.predictor == drive_rows.predictor.iloc[0]].sort_values("t_query")
@@ -537,11 +560,34 @@ def draw_error_over_time(ax: Any, drive_rows: pd.DataFrame, preds: Sequence[str]
     return True
 
 
+def drives_to_plot(traces: pd.DataFrame, limit: int | None) -> tuple[list[str], str | None]:
+    """Which drives get an error-over-time plot: all of them when there are at most
+    ``limit`` (None: no limit; never more than :data:`MAX_DRIVE_FIGURES`), else the
+    ``limit`` drives with the largest mean future-point error over all predictors (past the
+    warm-up), in drive order; and a note saying which were chosen, or None."""
+    drives = [str(d) for d in pd.unique(traces.drive)]
+    cap = MAX_DRIVE_FIGURES if limit is None else min(limit, MAX_DRIVE_FIGURES)
+    if len(drives) <= cap:
+        return drives, None
+    if cap == 0:
+        return [], f"not drawn for the {len(drives)} drives (--drive-plots 0)"
+    fut = headline(traces[traces.kind == "future"])
+    worst = (fut.groupby(fut.drive, sort=False, observed=True)["error_m"].mean()
+             .sort_values(ascending=False, kind="stable").index[:cap])
+    worst = {str(d) for d in worst}
+    chosen = [d for d in drives if d in worst]
+    why = ("cap MAX_DRIVE_FIGURES in bench/plots.py" if limit is None or limit > MAX_DRIVE_FIGURES
+           else "--drive-plots all for every drive")
+    return chosen, (f"drawn for the {len(chosen)} of {len(drives)} drives with the largest mean "
+                    f"future-point error ({why})")
+
+
 def write_error_over_time(traces: pd.DataFrame, preds: Sequence[str], out: Path,
-                          formats: Sequence[str]) -> tuple[list[Path], str | None]:
-    """``out/drives/<drive>-error_over_time.<fmt>`` for each drive (at most
-    :data:`MAX_DRIVE_FIGURES`), drawn into one reused figure at :data:`DRIVE_DPI`;
-    return the files and a note (drives left out and why), or None."""
+                          formats: Sequence[str], limit: int | None = DEFAULT_DRIVE_PLOTS
+                          ) -> tuple[list[Path], str | None]:
+    """``out/drives/<drive>-error_over_time.<fmt>`` for the drives of :func:`drives_to_plot`,
+    drawn into one reused figure at :data:`DRIVE_DPI`; return the files and a note (drives
+    left out and why), or None."""
     from matplotlib.figure import Figure
 
     colors = _colors(preds)
@@ -550,14 +596,11 @@ def write_error_over_time(traces: pd.DataFrame, preds: Sequence[str], out: Path,
     fig.subplots_adjust(left=0.065, right=0.80, bottom=0.13, top=0.91)
     files: list[Path] = []
     empty: list[str] = []
-    names = traces.drive.astype(str)
-    drives = list(dict.fromkeys(names))
-    capped = drives[MAX_DRIVE_FIGURES:]
+    chosen, chosen_note = drives_to_plot(traces, limit)
+    picked = traces[traces.drive.isin(chosen)]
     stems: set[str] = set()
     # iterate the groups (first appearance order): get_group fails on 1-row groups (pandas 3.1)
-    for i, (drive, rows) in enumerate(traces.groupby(names, sort=False)):
-        if i == MAX_DRIVE_FIGURES:
-            break
+    for i, (drive, rows) in enumerate(picked.groupby(picked.drive, sort=False, observed=True)):
         ax.clear()
         if not draw_error_over_time(ax, rows, preds, colors):
             empty.append(str(drive))
@@ -570,11 +613,10 @@ def write_error_over_time(traces: pd.DataFrame, preds: Sequence[str], out: Path,
                              dpi=DRIVE_DPI)
     notes = []
     if empty:
-        notes.append(f"{len(empty)} of {len(drives)} drives have no future query with a known "
+        notes.append(f"{len(empty)} of {len(chosen)} drives have no future query with a known "
                      f"error ({', '.join(empty[:5])}{', ...' if len(empty) > 5 else ''})")
-    if capped:
-        notes.append(f"drawn for the first {MAX_DRIVE_FIGURES} of {len(drives)} drives only "
-                     f"(cap MAX_DRIVE_FIGURES in bench/plots.py)")
+    if chosen_note:
+        notes.append(chosen_note)
     return files, "; ".join(notes) or None
 
 
@@ -586,10 +628,12 @@ REQUIRED = ("drive", "predictor", "kind", "t_query", "x", "y", "x_ref", "y_ref",
 
 
 def write_plots(traces: pd.DataFrame, res: dict[str, Any], out: Path,
-                formats: Iterable[str] = ("png",)) -> PlotsWritten:
-    """Write the run's figures into ``out`` (per-drive ones into ``out/drives``), each in
-    every one of ``formats`` (from :data:`FORMATS`). Never raises on thin data: a figure
-    with nothing to show is not written and gets a note instead.
+                formats: Iterable[str] = ("png",),
+                drive_plots: int | None = DEFAULT_DRIVE_PLOTS) -> PlotsWritten:
+    """Write the run's figures into ``out`` (per-drive ones into ``out/drives``, for the
+    drives of :func:`drives_to_plot` with limit ``drive_plots``), each in every one of
+    ``formats`` (from :data:`FORMATS`). Never raises on thin data: a figure with nothing to
+    show is not written and gets a note instead.
 
     Raises:
         ValueError: an unknown format (checked before anything is written).
@@ -601,7 +645,7 @@ def write_plots(traces: pd.DataFrame, res: dict[str, Any], out: Path,
         why = "no query in this run" if traces.empty else f"traces lack {', '.join(missing)}"
         written.notes = {name: why for name in [*FIGURES, "error_over_time"]}
         return written
-    preds = list(res.get("predictors") or dict.fromkeys(traces.predictor.astype(str)))
+    preds = list(res.get("predictors") or [str(p) for p in pd.unique(traces.predictor)])
     out.mkdir(parents=True, exist_ok=True)
     for name, draw in FIGURES.items():
         try:
@@ -612,7 +656,7 @@ def write_plots(traces: pd.DataFrame, res: dict[str, Any], out: Path,
         except Exception as e:  # noqa: BLE001 - one bad figure must not lose the report
             written.notes[name] = f"failed ({type(e).__name__}: {e})"
     try:
-        files, note = write_error_over_time(traces, preds, out, fmts)
+        files, note = write_error_over_time(traces, preds, out, fmts, drive_plots)
         written.files += files
         if note:
             written.notes["error_over_time"] = note

@@ -7,7 +7,7 @@ from collections.abc import Iterable
 from pathlib import Path
 from typing import Any
 
-from bench.plots import shown_format, write_plots
+from bench.plots import DEFAULT_DRIVE_PLOTS, shown_format, write_plots
 from bench.saved_run import Run
 from bench.tables import (
     Table,
@@ -28,13 +28,20 @@ MISSING_NOTE = ("`missing`: queries a predictor answered with no position (NaN) 
                 "a predictor cannot look better by abstaining.")
 
 
+def model_text(model: dict[str, Any]) -> str:
+    """How a report names a learned predictor's model: the bundled one, or its file."""
+    if model.get("bundled"):
+        return "the bundled model, predictors/lstm/bundled/model.onnx"
+    return f"model {model['model']}"
+
+
 def trained_note(res: dict[str, Any]) -> str:
     """The footnote of ``*`` rows: which model, trained on which of the run's drives."""
     trained = trained_in_run(res)
     if not trained:
         return ""
     n_drives = sum(1 for d in res["drives"] if not d["skipped"])
-    parts = [f"{p} (model {res['models'][p]['model']}) was trained on {len(d)} of these "
+    parts = [f"{p} ({model_text(res['models'][p])}) was trained on {len(d)} of these "
              f"{n_drives} drives" for p, d in trained.items()]
     return "* " + "; ".join(parts) + ": its figures on them flatter it; see the held-out table."
 
@@ -55,13 +62,14 @@ def excluded_note(res: dict[str, Any]) -> str:
             f"the fixes).")
 
 
-def write_report(run: Run, out: Path, formats: Iterable[str] = ("png",)) -> list[Path]:
+def write_report(run: Run, out: Path, formats: Iterable[str] = ("png",),
+                 drive_plots: int | None = DEFAULT_DRIVE_PLOTS) -> list[Path]:
     """Write the run's plots (in each of ``formats``: png, svg, pdf; ValueError on others)
     and ``report.md`` into ``out``; return the paths written. The run itself (results.json,
     traces) is written by :func:`bench.saved_run.save_run`."""
     shown = "." + shown_format(formats)  # checks the formats before anything is written
     out.mkdir(parents=True, exist_ok=True)
-    plots = write_plots(run.traces, run.results, out, formats)
+    plots = write_plots(run.traces, run.results, out, formats, drive_plots)
     (out / "report.md").write_text(render_markdown(
         run.results, [p.relative_to(out).as_posix() for p in plots.files if p.suffix == shown],
         plot_notes=plots.notes))
@@ -146,7 +154,7 @@ def render_markdown(res: dict[str, Any], plots: list[str],
         ho = res.get("held_out", {}).get(ds)
         if ho:
             who = "; ".join(
-                f"`{p}` (model {res['models'][p]['model']}) was trained on "
+                f"`{p}` ({model_text(res['models'][p])}) was trained on "
                 + ", ".join(sorted(set(names) & set(ho["excluded_training_drives"])))
                 for p, names in res.get("training_drives", {}).items()
                 if set(names) & set(ho["excluded_training_drives"]))

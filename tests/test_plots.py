@@ -251,7 +251,21 @@ def test_drive_figures_are_capped_and_say_so(tmp_path, monkeypatch):
     tr = make_traces(n_fix=40, drives=3)
     w = write_plots(tr, res_for(tr), tmp_path)
     assert len([f for f in w.files if f.parent.name == "drives"]) == 2
-    assert "first 2 of 3 drives" in w.notes["error_over_time"]
+    assert "2 of 3 drives with the largest mean future-point error" in w.notes["error_over_time"]
+
+
+def test_drive_plots_limit_picks_the_worst_drives(tmp_path):
+    tr = make_traces(n_fix=40, drives=3)
+    names = list(dict.fromkeys(tr.drive.astype(str)))
+    worst = names[1]
+    tr.loc[tr.drive.astype(str) == worst, "error_m"] *= 10
+    chosen, note = plots.drives_to_plot(tr, 1)
+    assert chosen == [worst] and "--drive-plots all" in note
+    assert plots.drives_to_plot(tr, None) == (names, None)
+    assert plots.drives_to_plot(tr, 0)[0] == []
+    w = write_plots(tr, res_for(tr), tmp_path, drive_plots=1)
+    assert [f.name for f in w.files if f.parent.name == "drives"] == [
+        f"{worst}-error_over_time.png"]
 
 
 def test_report_prints_notes_and_links_per_drive_files(tmp_path):

@@ -85,6 +85,11 @@ def run(
     plot_format: Annotated[str, typer.Option(
         "--plot-format", help="Figure formats, comma-separated: png, svg, pdf (e.g. png,pdf).")
     ] = "png",
+    drive_plots: Annotated[str, typer.Option(
+        "--drive-plots", metavar="N|all",
+        help="Error-over-time plots per drive (drives/): every drive of a run with at most N, "
+             "else the N drives with the largest mean future error; 'all' for every drive, 0 "
+             "for none.")] = "20",
     gate: Annotated[bool, typer.Option(
         "--gate/--no-gate", help="GPS outlier gate: drop fixes implying impossible motion before "
         "the predictors see them (counted in the report). --no-gate: the paper's ungated input.")
@@ -110,6 +115,7 @@ def run(
             raise UsageError(RAY_MISSING)
         names = parse_predictor_names(predictors)
         formats = plot_formats(plot_format)
+        n_drive_plots = drive_plot_limit(drive_plots)
         check_choice(gps_profile, GPS_PROFILES, "--gps-profile")
         check_choice(projection, PROJECTIONS, "--projection")
         check_horizon(horizon)
@@ -138,7 +144,8 @@ def run(
         with local_paths(data) as data:  # fsspec URLs -> local copies for the loaders
             drives = load_drives(data, projection, topics, seed=seed,
                                  synthetic_duration=synthetic_duration)
-            _run(drives, cfg, data, out, workers, rerun, executor, address, formats)
+            _run(drives, cfg, data, out, workers, rerun, executor, address, formats,
+                 n_drive_plots)
     except (DataError, UsageError, ExecutorError) as e:
         raise fail(str(e)) from None
     except BrokenProcessPool:
@@ -155,6 +162,19 @@ def plot_formats(value: str) -> tuple[str, ...]:
         raise UsageError(f"--plot-format {value!r}: {e}") from None
 
 
+def drive_plot_limit(value: str) -> int | None:
+    """``--drive-plots``: a count >= 0, or ``all`` (None: no limit)."""
+    if value.strip().lower() == "all":
+        return None
+    try:
+        n = int(value)
+    except ValueError:
+        n = -1
+    if n < 0:
+        raise UsageError(f"--drive-plots takes a count >= 0 or 'all', got {value!r}")
+    return n
+
+
 def plural(n: int, word: str) -> str:
     """``1 drive``, ``2 drives``."""
     return f"{n} {word}" + ("" if n == 1 else "s")
@@ -162,7 +182,7 @@ def plural(n: int, word: str) -> str:
 
 def _run(drives, cfg, data, out: Path, workers: int, rerun: Path | None = None,
          executor: str = "local", address: str | None = None,
-         formats: tuple[str, ...] = ("png",)) -> None:
+         formats: tuple[str, ...] = ("png",), drive_plots: int | None = 20) -> None:
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
     from bench.executors import run_drives
@@ -193,7 +213,7 @@ def _run(drives, cfg, data, out: Path, workers: int, rerun: Path | None = None,
     figures = paper_figures(list(drives), cfg, result.traces, out, runs, formats=formats)
     result.results["paper_figures"] = [{"file": f, "caption": c} for f, c in figures]
     written = [(out / f).with_suffix("." + fmt) for f, _ in figures for fmt in formats]
-    written += write_report(result, out, formats=formats)
+    written += write_report(result, out, formats=formats, drive_plots=drive_plots)
     written += save_run(out, result, also_written=written)
     res = result.results
     skipped = [r for r in runs if r.skipped]
@@ -233,11 +253,15 @@ def _run(drives, cfg, data, out: Path, workers: int, rerun: Path | None = None,
 def written_summary(out: Path, written: list[Path], removed: list[Path]) -> str:
     """One line naming what the run wrote into ``out`` (and removed of an earlier run)."""
     top = [p.name for p in written if p.parent == out]
-    nested = [p for p in written if p.parent != out]
     text = f"wrote {out}/: " + ", ".join(top)
-    if nested:
-        folders = sorted({str(p.parent.relative_to(out)) for p in nested})
-        text += f", {plural(len(nested), 'per-drive plot')} in {', '.join(f + '/' for f in folders)}"
+    nested: dict[str, int] = {}
+    for p in written:
+        if p.parent != out:
+            folder = p.relative_to(out).parts[0]
+            nested[folder] = nested.get(folder, 0) + 1
+    what = {"drives": "per-drive plot", "tables": "table file"}
+    for folder, n in nested.items():
+        text += f", {plural(n, what.get(folder, 'file'))} in {folder}/"
     if removed:
         text += f" (removed {plural(len(removed), 'file')} of an earlier run there)"
     return text
