@@ -239,7 +239,7 @@ def plot_error_vs_speed(traces: pd.DataFrame, preds: Sequence[str]) -> Figure:
     are dropped. Warm-up excluded."""
     from matplotlib.figure import Figure
 
-    t = headline(traces)
+    t = headline(traces, ["predictor", "kind", "error_m", "speed_mps"])
     fut = _finite(t[(t.kind == "future") & np.isfinite(t["speed_mps"].to_numpy(dtype=float))])
     if fut.empty:
         raise NothingToPlot("no query with a known speed")
@@ -274,7 +274,7 @@ def plot_error_vs_since_fix(traces: pd.DataFrame, preds: Sequence[str]) -> Figur
     GPS outages; bins where no predictor has a query are dropped. Warm-up excluded."""
     from matplotlib.figure import Figure
 
-    t = headline(traces)
+    t = headline(traces, ["predictor", "kind", "error_m", "since_fix_s", "outage"])
     now = t[t.kind == "now"]
     if not (now["outage"] >= 0).any():
         raise NothingToPlot("no GPS outage in this run")
@@ -331,7 +331,8 @@ def plot_path(traces: pd.DataFrame, preds: Sequence[str]) -> Figure:
     error of any predictor), each scaled to that error so the misses are visible."""
     from matplotlib.figure import Figure
 
-    t = headline(traces)
+    t = headline(traces, ["drive", "predictor", "kind", "t_issue", "t_query", "x", "y", "x_ref",
+                          "y_ref", "error_m", "label"])
     fut = t[(t.kind == "future") & np.isfinite(t["x_ref"].to_numpy(dtype=float))]
     if fut.empty:
         raise NothingToPlot("no future query with a reference position")
@@ -597,7 +598,9 @@ def write_error_over_time(traces: pd.DataFrame, preds: Sequence[str], out: Path,
     files: list[Path] = []
     empty: list[str] = []
     chosen, chosen_note = drives_to_plot(traces, limit)
-    picked = traces[traces.drive.isin(chosen)]
+    used = [c for c in ("drive", "predictor", "kind", "t_query", "error_m", "label", "outage",
+                        "warmup") if c in traces.columns]
+    picked = traces.loc[traces.drive.isin(chosen).to_numpy(), used]
     stems: set[str] = set()
     # iterate the groups (first appearance order): get_group fails on 1-row groups (pandas 3.1)
     for i, (drive, rows) in enumerate(picked.groupby(picked.drive, sort=False, observed=True)):

@@ -21,6 +21,9 @@ from metrics.latency import latency_summary
 from metrics.outages import error_vs_since_fix, outage_scores
 
 KINDS = ("future", "now")
+#: the trace columns aggregation reads (positions are not needed once errors exist)
+AGGREGATED = ("dataset", "drive", "predictor", "kind", "t_query", "error_m", "label", "speed_mps",
+              "since_fix_s", "outage")
 VERSIONED = ("posbench", "numpy", "scipy", "pandas", "filterpy", "onnxruntime", "rosbags", "pymap3d")
 
 
@@ -128,14 +131,27 @@ def _kind_summaries(df: pd.DataFrame) -> dict[str, Any]:
     return {k: summarize(df.loc[df["kind"] == k, "error_m"].to_numpy()) for k in KINDS}
 
 
+def _label_summaries(df: pd.DataFrame) -> dict[str, Any]:
+    return {kind: summarize_groups(df.loc[df["kind"] == kind, "error_m"].to_numpy(),
+                                   df.loc[df["kind"] == kind, "label"].to_numpy(),
+                                   order=list(LABELS))
+            for kind in KINDS}
+
+
+def _empty_kinds() -> dict[str, Any]:
+    return {k: summarize(np.empty(0)) for k in KINDS}
+
+
 def aggregate(runs: Sequence[DriveRun], cfg: RunConfig, data_manifest: list[dict[str, Any]],
               command: str, traces: pd.DataFrame | None = None) -> dict[str, Any]:
-    """The content of ``results.json`` (``traces``: :func:`all_traces` if already made)."""
+    """The content of ``results.json`` (``traces``: :func:`all_traces` if already made).
+
+    Headline figures use the scored rows only (:func:`scored_mask`); the work goes one
+    predictor at a time over just the :data:`AGGREGATED` columns of its rows, so a long run
+    never holds a second full copy of its traces."""
     if traces is None:
         traces = all_traces(runs)
     preds = list(cfg.predictors)
-    excluded = excluded_summary(traces, preds)
-    traces = traces[scored_mask(traces)] if not traces.empty else traces
     res: dict[str, Any] = {
         "command": command,
         "config": cfg.to_dict(),
@@ -148,74 +164,72 @@ def aggregate(runs: Sequence[DriveRun], cfg: RunConfig, data_manifest: list[dict
         "by_speed": {},
         "outages": {},
         "models": learned_models(cfg),
-        "excluded": excluded,
+        "excluded": excluded_summary(traces, preds),
         "held_out": {},
         "held_out_all": {},
         "drives": [],
     }
+    res["training_drives"] = {n: m["train_drives"] for n, m in res["models"].items()}
+    trained_on = {n for names in res["training_drives"].values() for n in names}
+    keep = scored_mask(traces)
+    cols = [c for c in AGGREGATED if c in traces.columns] if not traces.empty else list(AGGREGATED)
+    scored_pairs = (traces.loc[keep, ["dataset", "drive"]].drop_duplicates() if not traces.empty
+                    else pd.DataFrame(columns=["dataset", "drive"]))
+    datasets = sorted(set(scored_pairs["dataset"].astype(str)))
+    drives_of = {ds: set(scored_pairs.loc[scored_pairs["dataset"].astype(str) == ds, "drive"]
+                         .astype(str)) for ds in datasets}
+    all_drives = set().union(*drives_of.values()) if drives_of else set()
+    with_outages = not traces.empty and bool((traces.loc[keep, "outage"] >= 0).any())
+    held_ds = [ds for ds in datasets if drives_of[ds] & trained_on]
+    for ds in held_ds:
+        res["held_out"][ds] = {"drives": sorted(drives_of[ds] - trained_on),
+                               "excluded_training_drives": sorted(drives_of[ds] & trained_on),
+                               "predictors": {}, "by_label": {}}
+    held_all = bool(all_drives & trained_on) and bool(all_drives - trained_on)
+    if held_all:
+        res["held_out_all"] = {"drives": sorted(all_drives - trained_on), "predictors": {}}
+    per_drive: dict[tuple[str, str], dict[str, Any]] = {}
+    for ds in datasets:
+        res["by_dataset"][ds] = {}
+        res["by_label"][ds] = {}
     for name in preds:
-        df = traces[traces["predictor"] == name] if not traces.empty else traces
-        entry = _kind_summaries(df) if not df.empty else {k: summarize(np.empty(0)) for k in KINDS}
+        df = (traces.loc[keep & (traces["predictor"] == name).to_numpy(), cols]
+              if not traces.empty else pd.DataFrame(columns=cols))
+        entry = _kind_summaries(df) if not df.empty else _empty_kinds()
         steps = np.concatenate([r.step_ns[name] for r in runs if name in r.step_ns] or [np.empty(0)])
         queries = np.concatenate([r.query_ns[name] for r in runs if name in r.query_ns] or [np.empty(0)])
         entry["latency_us"] = latency_summary(steps)
         entry["query_us"] = latency_summary(queries)
         res["predictors"][name] = entry
-        if df.empty:
-            continue
-        for kind in KINDS:
-            dk = df[df["kind"] == kind]
-            bins = speed_bin_labels(dk["speed_mps"].to_numpy())
-            res["by_speed"].setdefault(name, {})[kind] = summarize_groups(
-                dk["error_m"].to_numpy(), bins, order=speed_bin_order() + ["unknown"])
-    if not traces.empty and (traces["outage"] >= 0).any():
-        for name in preds:
-            dn = traces[(traces["predictor"] == name) & (traces["kind"] == "now")]
+        if not df.empty:
+            for kind in KINDS:
+                dk = df[df["kind"] == kind]
+                bins = speed_bin_labels(dk["speed_mps"].to_numpy())
+                res["by_speed"].setdefault(name, {})[kind] = summarize_groups(
+                    dk["error_m"].to_numpy(), bins, order=speed_bin_order() + ["unknown"])
+        if with_outages:
+            dn = df[df["kind"] == "now"]
             code = pd.factorize(dn["drive"])[0].astype(np.int64)
             ids = np.where(dn["outage"].to_numpy() >= 0, code * 1_000_000 + dn["outage"].to_numpy(), -1)
             res["outages"][name] = {
                 "since_fix": error_vs_since_fix(dn["error_m"].to_numpy(), dn["since_fix_s"].to_numpy()),
                 "scores": outage_scores(dn["error_m"].to_numpy(), dn["t_query"].to_numpy(), ids),
             }
-    if not traces.empty:
-        for ds, dfd in traces.groupby("dataset", sort=True):
-            res["by_dataset"][ds] = {}
-            res["by_label"][ds] = {}
-            for name in preds:
-                dfp = dfd[dfd["predictor"] == name]
-                res["by_dataset"][ds][name] = _kind_summaries(dfp)
-                res["by_label"][ds][name] = {
-                    kind: summarize_groups(dfp.loc[dfp["kind"] == kind, "error_m"].to_numpy(),
-                                           dfp.loc[dfp["kind"] == kind, "label"].to_numpy(),
-                                           order=list(LABELS))
-                    for kind in KINDS}
-    res["training_drives"] = {n: m["train_drives"] for n, m in res["models"].items()}
-    trained_on = {n for names in res["training_drives"].values() for n in names}
-    in_training = traces["drive"].isin(trained_on) if not traces.empty else None
-    if in_training is not None and in_training.any() and (~in_training).any():
-        held_all = traces[~in_training]
-        res["held_out_all"] = {
-            "drives": sorted(set(held_all["drive"].unique())),
-            "predictors": {name: _kind_summaries(held_all[held_all["predictor"] == name])
-                           for name in preds}}
-    if not traces.empty and trained_on:
-        for ds, dfd in traces.groupby("dataset", sort=True):
-            names = set(dfd["drive"].unique())
-            if not names & trained_on:
-                continue
-            held = dfd[~dfd["drive"].isin(trained_on)]
-            entry: dict[str, Any] = {"drives": sorted(names - trained_on),
-                                     "excluded_training_drives": sorted(names & trained_on),
-                                     "predictors": {}, "by_label": {}}
-            for name in preds:
-                dfp = held[held["predictor"] == name]
-                entry["predictors"][name] = _kind_summaries(dfp)
-                entry["by_label"][name] = {
-                    kind: summarize_groups(dfp.loc[dfp["kind"] == kind, "error_m"].to_numpy(),
-                                           dfp.loc[dfp["kind"] == kind, "label"].to_numpy(),
-                                           order=list(LABELS))
-                    for kind in KINDS}
-            res["held_out"][ds] = entry
+        groups = {str(ds): g for ds, g in df.groupby("dataset", sort=True, observed=True)}
+        for ds in datasets:
+            dfp = groups.get(ds, df.iloc[:0])
+            res["by_dataset"][ds][name] = _kind_summaries(dfp)
+            res["by_label"][ds][name] = _label_summaries(dfp)
+            if ds in res["held_out"]:
+                held = dfp[~dfp["drive"].isin(trained_on)]
+                res["held_out"][ds]["predictors"][name] = _kind_summaries(held)
+                res["held_out"][ds]["by_label"][name] = _label_summaries(held)
+        if held_all:
+            res["held_out_all"]["predictors"][name] = _kind_summaries(
+                df[~df["drive"].isin(trained_on)])
+        for (ds, drive), g in df.groupby(["dataset", "drive"], sort=False, observed=True):
+            per_drive.setdefault((str(ds), str(drive)), {})[name] = _kind_summaries(g)
+        del df, groups
     for r in runs:
         d: dict[str, Any] = {"name": r.name, "dataset": r.dataset, "reference": r.reference,
                              "duration_s": r.duration_s, "gps_fed": r.gps_count,
@@ -225,9 +239,8 @@ def aggregate(runs: Sequence[DriveRun], cfg: RunConfig, data_manifest: list[dict
                              "rejected": dict(r.rejected),
                              "predictors": {}}
         if not r.traces.empty:
-            tr = r.traces[scored_mask(r.traces)]
-            for name in preds:
-                d["predictors"][name] = _kind_summaries(tr[tr["predictor"] == name])
+            mine = per_drive.get((r.dataset, r.name), {})
+            d["predictors"] = {name: mine.get(name, _empty_kinds()) for name in preds}
         res["drives"].append(d)
     res["gate"] = gate_summary(runs, cfg)
     return res
