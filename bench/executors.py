@@ -147,7 +147,11 @@ def run_ray(drives: Sequence[Drive], cfg: RunConfig, address: str | None = None,
 
 def import_roots(names: Sequence[str]) -> list[str]:
     """The ``sys.path`` folders the driver imported the non-built-in predictors of ``names``
-    from (``module:Class`` import paths, entry points, run-time registrations), in order."""
+    from (``module:Class`` import paths, entry points, run-time registrations), in order;
+    site-packages folders are left out (an installed plugin is installed on the workers too)."""
+    import site
+
+    installed = {os.path.realpath(p) for p in [*site.getsitepackages(), site.getusersitepackages()]}
     roots: list[str] = []
     for name in names:
         if resolve(name).source == BUILT_IN:
@@ -160,7 +164,7 @@ def import_roots(names: Sequence[str]) -> list[str]:
         here = [os.path.realpath(p or os.curdir) for p in sys.path]
         inside = [p for p in here if path.startswith(p.rstrip(os.sep) + os.sep)]
         root = max(inside, key=len, default=None)
-        if root and root not in roots:
+        if root and root not in roots and root not in installed:
             roots.append(root)
     return roots
 

@@ -66,10 +66,6 @@ class Entry:
     source: str = BUILT_IN
     distribution: str | None = None
 
-    def origin(self) -> str:
-        """Where it comes from, in words: ``built-in``, ``entry point (mypkg 1.0)``, ..."""
-        return f"{self.source} ({self.distribution})" if self.distribution else self.source
-
 
 _REGISTRY: dict[str, Entry] = {
     "cv": Entry("predictors.cv:ConstantVelocity",
@@ -139,7 +135,8 @@ def _read_entry_points() -> _Plugins:
             notes.append(f"entry point {ep.name} of {who} is ignored: "
                          f"{entries[ep.name].distribution} declares {ep.name} too")
         else:
-            entries[ep.name] = Entry(ep.value.strip(), "", source=ENTRY_POINT, distribution=who)
+            target = f"{ep.module}:{ep.attr}" if ep.attr else ep.value.strip()  # no [extras]
+            entries[ep.name] = Entry(target, "", source=ENTRY_POINT, distribution=who)
     return _Plugins(entries, tuple(notes))
 
 

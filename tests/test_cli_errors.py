@@ -256,7 +256,7 @@ def test_shell_completion_is_enabled():
 
 @pytest.mark.parametrize(("cmd", "placeholders"), [
     ("run", ["--data PATH...", "--model NAME=PATH...", "--topic ROLE=TOPIC...", "--out DIR",
-             "--rerun FILE", "--projection enu|mercator"]),
+             "--rerun FILE", "--projection enu|mercator", "--set NAME.OPTION=VALUE..."]),
     ("data inspect", ["--topic ROLE=TOPIC..."]),
     ("train", ["--data PATH...", "--out DIR"]),
     ("latency", ["--data PATH...", "--model NAME=PATH..."]),
