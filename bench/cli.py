@@ -70,7 +70,7 @@ app.command("latency")(latency.latency)
 app.command("tune")(tune.tune)
 app.command("check")(check.check)
 
-MULTI_VALUE_OPTIONS = ("--data", "--topic", "--model")
+MULTI_VALUE_OPTIONS = ("--data", "--topic", "--model", "--set")
 
 
 def _normalise_argv(argv: list[str]) -> list[str]:

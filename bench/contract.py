@@ -27,7 +27,6 @@ Units: seconds, metres (local ENU).
 
 from __future__ import annotations
 
-import importlib
 import math
 import pickle
 import traceback
@@ -590,43 +589,23 @@ def check_predictor(factory: Factory, name: str,
 
 # ----------------------------------------------------------------------- resolving
 def resolve_predictor(spec: str, options: dict[str, Any] | None = None) -> Factory:
-    """A factory of fresh predictors for ``spec``: a registered name (or ``NAME@ALIAS``),
-    built with the registry's defaults and ``options``; or ``module:Class``, a
-    :class:`Predictor` subclass imported from an importable module and built with
-    ``options``. One instance is built here, so that a predictor that cannot be built fails
-    now. Raises :class:`UsageError` (one line) for an unknown name, a missing module or class,
-    a class that is not a Predictor, or a predictor that cannot be built."""
-    from predictors.registry import available, create, is_known
+    """A factory of fresh predictors for ``spec``: a registered or entry-point name (or
+    ``NAME@ALIAS``), built with the registry's defaults and ``options``; or ``module:Class``,
+    a :class:`Predictor` subclass imported from an importable module and built with
+    ``options`` (:func:`predictors.registry.resolve`). One instance is built here, so that a
+    predictor that cannot be built fails now. Raises :class:`UsageError` (one line) for an
+    unknown name, a missing module or class, a class that is not a Predictor, or a predictor
+    that cannot be built."""
+    from predictors.registry import PredictorError, create, predictor_class
 
     opts = dict(options or {})
-    if ":" not in spec:
-        if not is_known(spec):
-            raise UsageError(f"unknown predictor {spec!r}; known: {', '.join(sorted(available()))}"
-                             " (or module:Class for a class of your own)")
+    try:
+        predictor_class(spec)
+    except PredictorError as e:
+        raise UsageError(str(e)) from None
 
-        def factory() -> Predictor:
-            return create(spec, None, **opts)
-    else:
-        mod_name, _, cls_name = spec.partition(":")
-        if not mod_name or not cls_name.isidentifier():
-            raise UsageError(f"{spec!r}: expected a registered name or module:Class")
-        try:
-            module = importlib.import_module(mod_name)
-        except ModuleNotFoundError as e:
-            if e.name == mod_name or mod_name.startswith(f"{e.name}."):
-                raise UsageError(f"{spec}: no module named {mod_name!r} (run from the folder that "
-                                 "holds it, or put it on PYTHONPATH)") from None
-            raise UsageError(f"{spec}: importing {mod_name} {_raised(e)}") from None
-        except Exception as e:  # noqa: BLE001 - the plugin's own import error, in one line
-            raise UsageError(f"{spec}: importing {mod_name} {_raised(e)}") from None
-        cls = getattr(module, cls_name, None)
-        if cls is None:
-            raise UsageError(f"{spec}: module {mod_name} has no {cls_name!r}")
-        if not (isinstance(cls, type) and issubclass(cls, Predictor)):
-            raise UsageError(f"{spec}: {cls_name} is not a subclass of predictors.base.Predictor")
-
-        def factory() -> Predictor:
-            return cls(**opts)
+    def factory() -> Predictor:
+        return create(spec, None, **opts)
     try:
         factory()
     except Exception as e:  # noqa: BLE001 - DataError, TypeError (abstract, arguments), ...

@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import importlib.util
 import os
+import sys
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, fields, replace
 from typing import Any
@@ -25,7 +26,15 @@ import pandas as pd
 
 from bench.config import RunConfig
 from bench.runner import DriveRun, run, run_drive
-from predictors.registry import Entry, available, base_name, register
+from predictors.registry import (
+    BUILT_IN,
+    Entry,
+    available,
+    base_name,
+    predictor_class,
+    register,
+    resolve,
+)
 from scenarios.drive import Drive
 
 EXECUTORS = ("local", "ray")
@@ -136,9 +145,57 @@ def run_ray(drives: Sequence[Drive], cfg: RunConfig, address: str | None = None,
             ray.shutdown()
 
 
+def import_roots(names: Sequence[str]) -> list[str]:
+    """The ``sys.path`` folders the driver imported the non-built-in predictors of ``names``
+    from (``module:Class`` import paths, entry points, run-time registrations), in order;
+    site-packages folders are left out (an installed plugin is installed on the workers too)."""
+    import site
+
+    installed = {os.path.realpath(p) for p in [*site.getsitepackages(), site.getusersitepackages()]}
+    roots: list[str] = []
+    for name in names:
+        if resolve(name).source == BUILT_IN:
+            continue
+        module = sys.modules.get(predictor_class(name).__module__)
+        path = getattr(module, "__file__", None)
+        if not path:
+            continue
+        path = os.path.realpath(path)
+        here = [os.path.realpath(p or os.curdir) for p in sys.path]
+        inside = [p for p in here if path.startswith(p.rstrip(os.sep) + os.sep)]
+        root = max(inside, key=len, default=None)
+        if root and root not in roots and root not in installed:
+            roots.append(root)
+    return roots
+
+
+def worker_runtime_env(names: Sequence[str]) -> dict[str, Any] | None:
+    """The Ray ``runtime_env`` that lets workers import the predictors of ``names`` that are
+    not part of posbench, or None when every one is built in.
+
+    Workers import a predictor by its name (``mymod:MyPredictor``, or an entry point's
+    ``module:Class``), so its folder must be on their ``sys.path``. A local Ray instance that
+    ``bench`` starts inherits the driver's environment (PYTHONPATH), and Ray itself adds the
+    driver's current folder; but a cluster started elsewhere (``--address``), or a session
+    already running in this process, knows neither a PYTHONPATH nor a ``sys.path`` entry the
+    driver added (``import_from_cwd``, a test's ``sys.path``). So each task gets the folders
+    the driver imported them from in front of the worker's own PYTHONPATH (Ray expands
+    ``${PYTHONPATH}`` to the worker's value). Checked: a module importable only through the
+    driver's ``sys.path`` fails in the workers without this and runs with it
+    (tests/test_plugins.py). On a cluster, those folders must exist on every node (a shared
+    file system), or the plugin be installed there as a package (an entry point)."""
+    roots = import_roots(names)
+    if not roots:
+        return None
+    return {"env_vars": {"PYTHONPATH": os.pathsep.join([*roots, "${PYTHONPATH}"])}}
+
+
 def _fan_out(ray: Any, drives: Sequence[Drive], cfg: RunConfig, max_retries: int,
              on_done: Callable[[DriveRun], None] | None) -> list[DriveRun]:
     task = ray.remote(num_cpus=1, max_retries=max_retries, retry_exceptions=True)(run_predictor)
+    env = worker_runtime_env(cfg.predictors)
+    if env:
+        task = task.options(runtime_env=env)
     names: tuple[str | None, ...] = cfg.predictors or (None,)
     known = available()
     entries = {base_name(n): known[base_name(n)] for n in cfg.predictors if base_name(n) in known}

@@ -156,8 +156,17 @@ def _first_line(exc: BaseException) -> str:
     return text[0][:300] if text else type(exc).__name__
 
 
-def _load_failure(name: str, given: Any, path: str | None, exc: BaseException) -> str:
-    """One line: which predictor (and model file) could not be built, and why."""
+def _failure_detail(exc: BaseException) -> str:
+    """``Type: first line`` of an exception (a DataError's own line, without its type)."""
+    from scenarios.errors import DataError
+
+    return _first_line(exc) if isinstance(exc, DataError) else \
+        f"{type(exc).__name__}: {_first_line(exc)}"
+
+
+def _load_failure(name: str, given: Any, path: str | None, exc: BaseException,
+                  flag: str | None = None) -> str:
+    """One line: which predictor (and model file, given as ``flag``) could not be built, and why."""
     from scenarios.errors import DataError
 
     if isinstance(exc, DataError):
@@ -165,10 +174,10 @@ def _load_failure(name: str, given: Any, path: str | None, exc: BaseException) -
         detail = exc.detail if exc.path is not None and exc.path in (str(given), path) \
             else _first_line(exc)
     else:
-        detail = f"{type(exc).__name__}: {_first_line(exc)}"
+        detail = _failure_detail(exc)
     if given is None:
         return f"predictor {name} cannot be created: {detail}"
-    return f"--model {name}={given}: {name} cannot load it: {detail}"
+    return f"{flag or f'--model {name}={given}'}: {name} cannot load it: {detail}"
 
 
 def _model_path(name: str, path: Any) -> str:
@@ -195,48 +204,103 @@ def with_model_aliases(names: Sequence[str], options: Mapping[str, Any]) -> tupl
     return tuple(names) + tuple(n for n in options if ALIAS_SEP in n and n not in names)
 
 
-def validate_predictors(names: Sequence[str], options: Mapping[str, Mapping[str, Any]]
+def validate_predictors(names: Sequence[str], options: Mapping[str, Mapping[str, Any]],
+                        given: Mapping[tuple[str, str], str] | None = None
                         ) -> dict[str, dict[str, Any]]:
     """Check the requested predictors and their constructor options before any work.
 
-    Each name must be registered, each option set must belong to a requested name, a
-    ``model`` path must exist (a folder stands for its ``model.onnx``), and each predictor
-    is built once here with its options (registry defaults, no tuned parameters) so that a
-    bad model file fails now, in one line naming the predictor and the path.
+    Each name must be a built-in, an entry point or an importable ``module:Class`` of a
+    Predictor subclass (:func:`predictors.registry.resolve`), each option set must belong to
+    a requested name and name a keyword of its constructor, a ``model`` path must exist (a
+    folder stands for its ``model.onnx``), and each predictor is built once here with its
+    options (registry defaults, no tuned parameters) so that a bad model file or value fails
+    now, in one line naming the predictor and the option.
 
     Args:
         names: the final predictor names, in report order.
         options: per-name constructor options, e.g. ``{"lstm": {"model": "m/model.onnx"}}``.
+        given: how each ``(name, option)`` was given on the command line, for messages
+            (``--set kf.jerk_psd=4``); default ``--model NAME=PATH``.
 
     Returns:
         the options with ``model`` folders resolved to their ``model.onnx``.
     """
-    from predictors.registry import available, base_name, create, is_known
+    from bench.predictor_options import check_option_names, flag_text
+    from predictors.registry import (
+        PredictorError,
+        base_name,
+        is_import_path,
+        is_known,
+        known_names_text,
+        predictor_class,
+    )
 
-    unknown = [n for n in names if not is_known(n)]
+    given = given or {}
+    unknown = [n for n in names if not is_import_path(n) and not is_known(n)]
     if unknown:
         raise UsageError(f"unknown predictor(s) {', '.join(unknown)}; known: "
-                         f"{', '.join(sorted(available()))} (NAME@ALIAS runs a second instance)")
+                         f"{known_names_text()} (NAME@ALIAS runs a second instance; "
+                         "module:Class a Predictor subclass of your own)")
+    for n in names:
+        try:
+            predictor_class(n)
+        except PredictorError as e:
+            raise UsageError(str(e)) from None
     stray = [n for n in options if n not in names]
     if stray:
         n = stray[0]
-        raise UsageError(f"--model {n}={options[n].get('model', '...')}: {n} is not among the "
-                         f"predictors to run ({', '.join(names)}); add it, or use {n}@NAME=PATH "
-                         f"for a second {n}")
+        option, value = next(iter(options[n].items()), ("model", "..."))
+        alias = f"{n}@NAME=PATH" if option == "model" else f"{n}@NAME.{option}=VALUE"
+        hint = (f"add it, or use {alias} for a second {n}" if is_known(n) or n in names
+                else "add it to --predictors")
+        raise UsageError(f"{flag_text(given, n, option, value)}: {n} is not among the "
+                         f"predictors to run ({', '.join(names)}); {hint}")
     for n in names:
         if base_name(n) == "lstm-authors" and "model" not in options.get(n, {}):
             raise UsageError(f"{n} needs the authors' network: --model {n}=PATH.onnx "
                              "(e.g. ../shared/models/authors/gps_interpolation_model2.onnx)")
+    for name, opts in options.items():
+        check_option_names(name, opts, given)
     resolved: dict[str, dict[str, Any]] = {}
     for name, opts in options.items():
         resolved[name] = dict(opts)
         if "model" in opts:
             resolved[name]["model"] = _model_path(name, opts["model"])
     for name in names:
-        opts = resolved.get(name, {})
-        try:
-            create(name, None, **opts)
-        except Exception as e:  # noqa: BLE001 - ValueError, DataError, onnxruntime's own types
-            raise UsageError(_load_failure(name, options.get(name, {}).get("model"),
-                                           opts.get("model"), e)) from None
+        _build_once(name, resolved.get(name, {}), options.get(name, {}), given)
     return resolved
+
+
+def _build_once(name: str, opts: Mapping[str, Any], as_given: Mapping[str, Any],
+                given: Mapping[tuple[str, str], str]) -> None:
+    """Build predictor ``name`` with ``opts``; a failure names the option to blame. The model
+    file (if any) is tried first, then the other options are added one at a time in the order
+    given: the first that makes the constructor fail is named."""
+    from bench.predictor_options import flag_text
+    from predictors.registry import create
+
+    def build(kw: Mapping[str, Any]) -> BaseException | None:
+        try:
+            create(name, None, **kw)
+        except Exception as e:  # noqa: BLE001 - ValueError, DataError, onnxruntime's own types
+            return e
+        return None
+
+    exc = build(opts)
+    if exc is None:
+        return
+    base = {k: v for k, v in opts.items() if k == "model"}
+    others = [k for k in opts if k != "model"]
+    if not others or build(base) is not None:  # the predictor itself, or its model file
+        flag = flag_text(given, name, "model", as_given["model"]) if "model" in opts else None
+        raise UsageError(_load_failure(name, as_given.get("model"), opts.get("model"), exc, flag))
+    kw = dict(base)
+    for k in others:
+        kw[k] = opts[k]
+        failed = build(kw)
+        if failed is not None:
+            raise UsageError(f"{flag_text(given, name, k, as_given.get(k))}: predictor {name} "
+                             f"rejects {k}={opts[k]!r}: {_failure_detail(failed)}")
+    raise UsageError(f"predictor {name} cannot be created with "
+                     f"{', '.join(flag_text(given, name, k, as_given.get(k)) for k in others)}: "
+                     f"{_failure_detail(exc)}")

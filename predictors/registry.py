@@ -1,27 +1,70 @@
-"""Names -> predictor factories with their default configuration.
+"""Names -> predictor classes: built-ins, entry points of installed packages, import paths.
 
-Entries are imported lazily (``module:Class``) so that listing or running one
-predictor does not pay for the imports of the others (filterpy ~2 s).
+A predictor is named in one of three ways, resolved in this order:
+
+- a **built-in** (or :func:`register`-ed) name: ``cv``, ``kf``, ``lstm``, ...;
+- an **entry point** of the group ``posbench.predictors`` that an installed
+  distribution declares (``name = module:Class`` in its ``entry_points.txt``); a
+  built-in name always wins over an entry point of the same name;
+- an **import path** ``module:Class`` (``mypkg.mymodule:MyPredictor``) of a
+  :class:`~predictors.base.Predictor` subclass importable from ``sys.path``.
+
+Any of them may carry an alias, ``NAME@ALIAS``: a second instance under its own name.
+Everything is imported lazily: listing names reads distribution metadata only, and a
+class is imported when it is needed (filterpy costs ~2 s; a broken plugin must not
+break a run that does not use it). Every failure is a :class:`PredictorError` with
+one line naming the predictor and what is wrong.
 """
 
 from __future__ import annotations
 
 import importlib
+import importlib.metadata
+import inspect
 import json
+import re
+import sys
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 from predictors.base import Predictor
 
+#: where a predictor comes from (:attr:`Entry.source`)
+BUILT_IN = "built-in"
+REGISTERED = "registered"
+ENTRY_POINT = "entry point"
+IMPORT_PATH = "import path"
+
+#: the entry-point group installed packages declare their predictors in
+ENTRY_POINT_GROUP = "posbench.predictors"
+
+#: separates a predictor name from an instance alias: ``lstm@mine`` is ``lstm`` under its own name
+ALIAS_SEP = "@"
+
+_IDENT = r"[A-Za-z_]\w*"
+_IMPORT_PATH = re.compile(rf"{_IDENT}(\.{_IDENT})*:{_IDENT}(\.{_IDENT})*")
+#: names an entry point may declare: usable in ``--predictors a,b`` and ``--set NAME.OPT=V``
+_EP_NAME = re.compile(r"[A-Za-z0-9_][A-Za-z0-9_.+-]*")
+
+
+class PredictorError(Exception):
+    """A predictor name that cannot be resolved or loaded: unknown, malformed, not
+    importable, not a Predictor subclass. One line naming the predictor."""
+
 
 @dataclass(frozen=True)
 class Entry:
-    """A registered predictor: where its class lives, its defaults, a one-line description."""
+    """A known predictor: where its class lives (``module:Class``), its default options,
+    a one-line description, where it comes from (:data:`BUILT_IN`, :data:`REGISTERED`,
+    :data:`ENTRY_POINT`, :data:`IMPORT_PATH`) and, for an entry point, the distribution
+    that declares it (``NAME VERSION``)."""
 
     target: str
     description: str
     defaults: dict[str, Any] = field(default_factory=dict)
+    source: str = BUILT_IN
+    distribution: str | None = None
 
 
 _REGISTRY: dict[str, Entry] = {
@@ -44,15 +87,68 @@ _REGISTRY: dict[str, Entry] = {
 
 def register(name: str, target: str, description: str, **defaults: Any) -> None:
     """Add (or replace) a predictor under ``name``; ``target`` is ``"module:Class"``."""
-    _REGISTRY[name] = Entry(target, description, dict(defaults))
+    _REGISTRY[name] = Entry(target, description, dict(defaults),
+                            source=BUILT_IN if name in _BUILT_IN_NAMES else REGISTERED)
 
 
-#: separates a registered name from an instance alias: ``lstm@mine`` is ``lstm`` under its own name
-ALIAS_SEP = "@"
+_BUILT_IN_NAMES = frozenset(_REGISTRY)
 
 
+# ------------------------------------------------------------------- entry points
+@dataclass(frozen=True)
+class _Plugins:
+    entries: dict[str, Entry]
+    notes: tuple[str, ...]
+
+
+_plugins_cache: dict[tuple[str, ...], _Plugins] = {}
+
+
+def _plugins() -> _Plugins:
+    """The entry points of :data:`ENTRY_POINT_GROUP` (metadata only: nothing is imported),
+    and notes on those left out. Cached per ``sys.path``."""
+    key = tuple(sys.path)
+    if key not in _plugins_cache:
+        _plugins_cache.clear()
+        _plugins_cache[key] = _read_entry_points()
+    return _plugins_cache[key]
+
+
+def _read_entry_points() -> _Plugins:
+    try:
+        eps = list(importlib.metadata.entry_points(group=ENTRY_POINT_GROUP))
+    except Exception as e:  # noqa: BLE001 - a malformed installation must not break a run
+        return _Plugins({}, (f"entry points of group {ENTRY_POINT_GROUP} cannot be read: "
+                             f"{_raised(e)}",))
+    entries: dict[str, Entry] = {}
+    notes: list[str] = []
+    for ep in eps:
+        dist = getattr(ep, "dist", None)
+        who = f"{dist.name} {dist.version}" if dist is not None else "unknown distribution"
+        if not _EP_NAME.fullmatch(ep.name):
+            notes.append(f"entry point {ep.name!r} of {who} is ignored: a predictor name "
+                         "takes letters, digits and _ . + - only")
+        elif ep.name in _REGISTRY:
+            notes.append(f"entry point {ep.name} of {who} is ignored: {ep.name} is "
+                         f"{_REGISTRY[ep.name].source}")
+        elif ep.name in entries:
+            notes.append(f"entry point {ep.name} of {who} is ignored: "
+                         f"{entries[ep.name].distribution} declares {ep.name} too")
+        else:
+            target = f"{ep.module}:{ep.attr}" if ep.attr else ep.value.strip()  # no [extras]
+            entries[ep.name] = Entry(target, "", source=ENTRY_POINT, distribution=who)
+    return _Plugins(entries, tuple(notes))
+
+
+def entry_point_notes() -> tuple[str, ...]:
+    """Entry points of :data:`ENTRY_POINT_GROUP` that are left out, and why (one line each)."""
+    return _plugins().notes
+
+
+# ------------------------------------------------------------------------ names
 def base_name(name: str) -> str:
-    """The registered name behind ``name``: ``lstm@mine`` -> ``lstm``; ``kf`` -> ``kf``.
+    """The predictor behind ``name``: ``lstm@mine`` -> ``lstm``; ``kf`` -> ``kf``;
+    ``mypkg.mod:Cls@fast`` -> ``mypkg.mod:Cls``.
 
     An alias lets one run hold two instances of one predictor with different options
     (e.g. two LSTM models), each reported under its full name.
@@ -60,26 +156,128 @@ def base_name(name: str) -> str:
     return name.split(ALIAS_SEP, 1)[0]
 
 
-def is_known(name: str) -> bool:
-    """Whether ``name`` (or, for an alias, its base) is registered and the alias is non-empty."""
-    base, sep, alias = name.partition(ALIAS_SEP)
-    return base in _REGISTRY and (not sep or bool(alias.strip()))
+def is_import_path(name: str) -> bool:
+    """Whether ``name`` (or its base, for an alias) is written as an import path
+    ``module:Class`` (well formed or not: it holds a ``:``)."""
+    return ":" in base_name(name)
 
 
 def available() -> dict[str, Entry]:
-    """All registered names and entries."""
-    return dict(_REGISTRY)
+    """Every predictor that can be named without an import path: the built-ins (and
+    :func:`register`-ed ones), then the entry points of installed distributions. Nothing
+    is imported."""
+    out = dict(_REGISTRY)
+    out.update((n, e) for n, e in _plugins().entries.items() if n not in out)
+    return out
+
+
+def is_known(name: str) -> bool:
+    """Whether ``name`` (or, for an alias, its base) is a built-in, registered or entry-point
+    name, and the alias (if any) is non-empty. Import paths are not "known": see :func:`resolve`."""
+    base, sep, alias = name.partition(ALIAS_SEP)
+    return base in available() and (not sep or bool(alias.strip()))
+
+
+def known_names_text() -> str:
+    """The names that can be used, for an error message."""
+    return ", ".join(sorted(available()))
+
+
+def resolve(name: str) -> Entry:
+    """The :class:`Entry` behind ``name`` (``NAME``, ``NAME@ALIAS``, ``module:Class``,
+    ``module:Class@ALIAS``), without importing anything. Raises :class:`PredictorError`
+    for an unknown name, an empty alias or a malformed import path."""
+    base, sep, alias = name.partition(ALIAS_SEP)
+    if sep and not alias.strip():
+        raise PredictorError(f"unknown predictor {name!r}: the alias after {ALIAS_SEP} is empty "
+                             f"(NAME{ALIAS_SEP}ALIAS runs a second instance)")
+    if ":" in base:
+        if not _IMPORT_PATH.fullmatch(base):
+            raise PredictorError(f"{base!r} is not a predictor name: expected a registered name "
+                                 "or module:Class (e.g. mypkg.mymodule:MyPredictor)")
+        return Entry(base, "", source=IMPORT_PATH)
+    entry = available().get(base)
+    if entry is None:
+        raise PredictorError(f"unknown predictor {base!r}; known: {known_names_text()} (or "
+                             f"module:Class for a Predictor subclass of your own; "
+                             f"NAME{ALIAS_SEP}ALIAS runs a second instance)")
+    return entry
+
+
+# ---------------------------------------------------------------------- classes
+def _raised(exc: BaseException) -> str:
+    text = str(exc).strip().splitlines()
+    return f"{type(exc).__name__}: {text[0][:300]}" if text else type(exc).__name__
+
+
+def _import_target(target: str, label: str, hint: bool = True) -> Any:
+    """The object at ``module:attr.attr`` (``label`` starts every error line; ``hint``: say
+    where a missing module is looked for)."""
+    mod_name, _, attr = target.partition(":")
+    if not mod_name or not attr:
+        raise PredictorError(f"{label}: {target!r} is not module:Class")
+    try:
+        obj: Any = importlib.import_module(mod_name)
+    except ModuleNotFoundError as e:
+        if e.name == mod_name or mod_name.startswith(f"{e.name}."):
+            where = (" (put the folder that holds it on PYTHONPATH, or run from that folder)"
+                     if hint else "")
+            raise PredictorError(f"{label}: no module named {mod_name!r}{where}") from None
+        raise PredictorError(f"{label}: importing {mod_name} raised {_raised(e)}") from None
+    except Exception as e:  # noqa: BLE001 - the plugin's own import error, in one line
+        raise PredictorError(f"{label}: importing {mod_name} raised {_raised(e)}") from None
+    where = mod_name
+    for part in attr.split("."):
+        if not hasattr(obj, part):
+            raise PredictorError(f"{label}: module {where} has no {part!r}")
+        obj = getattr(obj, part)
+        where = f"{where}.{part}"
+    return obj
+
+
+def load_class(entry: Entry, name: str) -> type[Predictor]:
+    """Import the class of ``entry`` (named ``name``), checking it is a Predictor subclass."""
+    label = name if entry.source == IMPORT_PATH else (
+        f"predictor {name} (entry point {entry.target} of {entry.distribution})"
+        if entry.source == ENTRY_POINT else f"predictor {name}")
+    cls = _import_target(entry.target, label, hint=entry.source == IMPORT_PATH)
+    if not isinstance(cls, type):
+        raise PredictorError(f"{label}: {entry.target.partition(':')[2]} is not a class (it is "
+                             f"a {type(cls).__name__}); expected a Predictor subclass")
+    if not issubclass(cls, Predictor):
+        raise PredictorError(f"{label}: {cls.__name__} is not a subclass of "
+                             "predictors.base.Predictor")
+    return cls
 
 
 def predictor_class(name: str) -> type[Predictor]:
-    """The class registered under ``name`` or its base (raises KeyError listing the known names)."""
-    name = base_name(name)
-    if name not in _REGISTRY:
-        raise KeyError(f"unknown predictor {name!r}; known: {', '.join(sorted(_REGISTRY))}")
-    module, cls = _REGISTRY[name].target.split(":")
-    return getattr(importlib.import_module(module), cls)
+    """The class behind ``name`` (see :func:`resolve`); raises :class:`PredictorError`."""
+    return load_class(resolve(name), base_name(name))
 
 
+def description(name: str) -> str:
+    """One line describing ``name``: the registry's text for a built-in, else the first
+    line of the class docstring (this imports the class; raises :class:`PredictorError`)."""
+    entry = resolve(name)
+    if entry.description:
+        return entry.description
+    doc = inspect.getdoc(predictor_class(name)) or ""
+    return doc.strip().splitlines()[0] if doc.strip() else ""
+
+
+def constructor_options(cls: type[Predictor]) -> tuple[dict[str, Any], bool]:
+    """The keyword options ``cls(...)`` takes, with their defaults (``inspect.Parameter.empty``
+    when required), and whether it takes any keyword at all (``**kwargs``)."""
+    try:
+        params = inspect.signature(cls).parameters.values()
+    except (TypeError, ValueError):  # no signature to read: accept anything
+        return {}, True
+    options = {p.name: p.default for p in params
+               if p.kind in (p.POSITIONAL_OR_KEYWORD, p.KEYWORD_ONLY)}
+    return options, any(p.kind is p.VAR_KEYWORD for p in params)
+
+
+# ----------------------------------------------------------------------- create
 def tuned_params(name: str, condition: str | None) -> dict[str, Any]:
     """Tuned parameters of ``name`` for a GPS condition (``none``, ``rtk``, ``consumer``,
     ``native``) from ``predictors/tuned.json``; empty if none were tuned."""
@@ -93,9 +291,9 @@ def tuned_params(name: str, condition: str | None) -> dict[str, Any]:
 
 
 def create(name: str, condition: str | None = None, **config: Any) -> Predictor:
-    """A new predictor ``name`` (a registered name or ``name@alias``): registry defaults, then
+    """A new predictor ``name`` (any form :func:`resolve` takes): its registry defaults, then
     tuned parameters for the GPS ``condition`` (if given and tuned), then ``config``."""
-    cls = predictor_class(name)
-    base = base_name(name)
-    kwargs = {**_REGISTRY[base].defaults, **tuned_params(base, condition), **config}
+    entry = resolve(name)
+    cls = load_class(entry, base_name(name))
+    kwargs = {**entry.defaults, **tuned_params(base_name(name), condition), **config}
     return cls(**kwargs)

@@ -22,6 +22,7 @@ def samples() -> dict[str, list[BaseException]]:
     from bench.executors import ExecutorError
     from bench.options import UsageError
     from bench.plots import NothingToPlot
+    from predictors.registry import PredictorError
     from scenarios.errors import DataError
 
     return {
@@ -31,6 +32,8 @@ def samples() -> dict[str, list[BaseException]]:
         "bench.options.UsageError": [UsageError("--horizon must be more than 0 s; got -1")],
         "bench.executors.ExecutorError": [ExecutorError("cannot start Ray at auto: no cluster")],
         "bench.plots.NothingToPlot": [NothingToPlot("no query with a known speed")],
+        "predictors.registry.PredictorError": [
+            PredictorError("nosuchmodule:X: no module named 'nosuchmodule'")],
     }
 
 

@@ -3,14 +3,19 @@
 from __future__ import annotations
 
 import json
-import os
-import sys
 import time
 from typing import Annotated
 
 import typer
 
-from bench.commands.common import DataError, UsageError, console, fail, model_options
+from bench.commands.common import (
+    DataError,
+    UsageError,
+    console,
+    fail,
+    import_from_cwd,
+    model_options,
+)
 from bench.options import validate_predictors, with_model_aliases
 
 #: registered predictors left out of the default set unless ``--model NAME=PATH`` names them
@@ -25,17 +30,15 @@ def default_names(options: dict[str, dict[str, str]]) -> list[str]:
 
 
 def _factories(specs: list[str], options: dict[str, dict[str, str]]) -> dict:
-    """``spec -> factory`` for registered names (checked as ``bench run`` checks them) and
-    ``module:Class`` specs (imported from the current folder or PYTHONPATH)."""
+    """``spec -> factory`` for registered and entry-point names and ``module:Class`` specs
+    (imported from the current folder or PYTHONPATH), checked as ``bench run`` checks them."""
     from bench.contract import resolve_predictor
 
     twice = sorted({s for s in specs if specs.count(s) > 1})
     if twice:
         raise UsageError(f"{', '.join(twice)} named more than once")
-    registered = [s for s in specs if ":" not in s]
-    resolved = validate_predictors(registered, options)
-    if os.getcwd() not in sys.path and "" not in sys.path:  # `bench` script: like `python -m`
-        sys.path.insert(0, os.getcwd())
+    import_from_cwd()
+    resolved = validate_predictors(specs, options)
     return {s: resolve_predictor(s, resolved.get(s)) for s in specs}
 
 

@@ -57,6 +57,25 @@ def model_options(values: list[str] | None) -> dict[str, dict[str, str]]:
     return out
 
 
+def predictor_options(model: list[str] | None, sets: list[str] | None
+                      ) -> tuple[dict[str, dict], dict[tuple[str, str], str]]:
+    """``--model NAME=PATH`` and ``--set NAME.OPTION=VALUE`` as one set of per-predictor
+    options, with the text each option was given as (for messages)."""
+    from bench.predictor_options import merge_options, parse_set
+
+    values, given = parse_set(sets)
+    return merge_options(model_options(model), values, given)
+
+
+def import_from_cwd() -> None:
+    """Let ``module:Class`` predictors be imported from the current folder, as under
+    ``python -m`` (the installed ``bench`` script has its own folder first on sys.path)."""
+    import os
+
+    if os.getcwd() not in sys.path and "" not in sys.path:
+        sys.path.append(os.getcwd())
+
+
 def command_line() -> str:
     """This invocation as a shell command, recorded in reports and model descriptions."""
     return "bench " + " ".join(shlex.quote(a) for a in sys.argv[1:])
@@ -98,6 +117,12 @@ DataOpt = Annotated[list[Path] | None, typer.Option(
 TopicOpt = Annotated[list[str] | None, typer.Option(
     "--topic", metavar="ROLE=TOPIC...",
     help="Pick bag topics by role when ambiguous: gps=/name imu=/name speed=/name truth=/name.")]
+SetOpt = Annotated[list[str] | None, typer.Option(
+    "--set", metavar="NAME.OPTION=VALUE...",
+    help="A constructor option of one predictor of the run, over its tuned value, e.g. "
+         "--set kf.jerk_psd=4.0 or kf@slow.jerk_psd=1 or mymod:MyPredictor.tau_s=0.5 (split at "
+         "the last '.' before '='). VALUE is a JSON literal (4, 0.5, true, \"text\", [1, 2]), "
+         "else taken as text. Repeatable; see `bench predictors NAME` for the options.")]
 ProjectionOpt = Annotated[str, typer.Option(
     metavar="enu|mercator",
     help="Local frame for lat/lon sources: 'enu' (true metres, default) or 'mercator' (the paper's "

@@ -13,14 +13,16 @@ from bench.commands.common import (
     DataError,
     DataOpt,
     ProjectionOpt,
+    SetOpt,
     TopicOpt,
     UsageError,
     command_line,
     console,
     fail,
+    import_from_cwd,
     load_drives,
-    model_options,
     parse_topics,
+    predictor_options,
 )
 from bench.options import (
     check_at_least,
@@ -41,7 +43,9 @@ def run(
     data: DataOpt = None,
     predictors: Annotated[str, typer.Option(
         "--predictors", "-p", metavar="NAMES",
-        help="Comma-separated predictor names (see `bench predictors`).")
+        help="Comma-separated predictor names (see `bench predictors`) or module:Class of a "
+             "Predictor subclass of your own (from PYTHONPATH or the current folder), e.g. "
+             "kf,lstm,mypkg.mymodule:MyPredictor.")
     ] = DEFAULT_PREDICTORS,
     horizon: Annotated[float, typer.Option(
         metavar="SECONDS", help="Future-point horizon after each fix [s] (0 < h <= 10).")] = 0.2,
@@ -63,6 +67,7 @@ def run(
     model: Annotated[list[str] | None, typer.Option(
         "--model", metavar="NAME=PATH...",
         help="Model file per predictor, e.g. lstm-authors=PATH.onnx or lstm=DIR.")] = None,
+    set_: SetOpt = None,
     topic: TopicOpt = None,
     projection: ProjectionOpt = "enu",
     include_poor_truth: Annotated[bool, typer.Option(
@@ -134,9 +139,10 @@ def run(
             except ImportError:
                 raise UsageError("--rerun needs the viz extra: "
                                  "pip install 'posbench[viz]'") from None
-        options = model_options(model)
+        options, given = predictor_options(model, set_)
         names = with_model_aliases(names, options)
-        options = validate_predictors(names, options)
+        import_from_cwd()
+        options = validate_predictors(names, options, given)
         cfg = RunConfig(predictors=names, horizon_s=horizon, gps_profile=gps_profile,
                         gps_latency_s=gps_latency, dropouts=dropouts, seed=seed,
                         exclude_poor_truth=not include_poor_truth, predictor_options=options,
