@@ -229,31 +229,31 @@ def _drive_summaries(run: Run, predictor: str, kind: str, dataset: str | None = 
     return out
 
 
-def _ratio(weights: np.ndarray, sums: np.ndarray, counts: np.ndarray) -> np.ndarray:
-    with np.errstate(invalid="ignore", divide="ignore"):
-        return (weights @ sums) / (weights @ counts)
-
-
 def _pooled_by_resample(summaries: Sequence[Mapping[str, Any]], stat: str,
                         weights: np.ndarray) -> tuple[float, np.ndarray]:
     """The pooled ``stat`` (mean_m or rmse_m) of drives given their summaries, and its value
     under each resample (rows of ``weights``: multiplicities of the drives)."""
+    from metrics.bootstrap import resampled_means
+
     n = np.array([float(s["count"]) for s in summaries])
     if stat == "mean_m":
         x = np.array([float(s["mean_m"]) for s in summaries]) * n
-        return float(x.sum() / n.sum()), _ratio(weights, x, n)
+        return float(x.sum() / n.sum()), resampled_means(x, n, weights)
     x = np.array([float(s["rmse_m"]) ** 2 for s in summaries]) * n
-    return float(np.sqrt(x.sum() / n.sum())), np.sqrt(_ratio(weights, x, n))
+    return float(np.sqrt(x.sum() / n.sum())), np.sqrt(resampled_means(x, n, weights))
 
 
 def _pooled_quantiles_by_resample(errors: Sequence[np.ndarray], q: float, weights: np.ndarray
                                   ) -> tuple[float, np.ndarray]:
     """Quantile ``q`` (0..1, linear interpolation) of the pooled errors of drives, and its
     value under each resample; exact (weights are drive multiplicities)."""
-    from metrics.bootstrap import cluster_quantiles
+    from metrics.bootstrap import resampled_quantiles
 
-    allv = np.concatenate(errors)
-    return float(np.quantile(allv, q)), cluster_quantiles(errors, q, weights)
+    values = np.concatenate(errors)
+    units = np.concatenate([np.full(len(e), i, dtype=np.int64) for i, e in enumerate(errors)])
+    order = np.argsort(values, kind="stable")
+    return (float(np.quantile(values, q)),
+            resampled_quantiles(values[order], units[order], weights, (q,))[:, 0])
 
 
 @dataclass(frozen=True)
