@@ -15,7 +15,7 @@ from typing import Annotated
 
 import typer
 
-from bench.commands import check, inspect, latency, predictors, run, train, tune, view
+from bench.commands import check, compare, inspect, latency, predictors, run, train, tune, view
 from bench.commands.common import fail
 
 
@@ -69,6 +69,7 @@ app.command("train")(train.train)
 app.command("latency")(latency.latency)
 app.command("tune")(tune.tune)
 app.command("check")(check.check)
+app.command("compare")(compare.compare)
 
 MULTI_VALUE_OPTIONS = ("--data", "--topic", "--model", "--set")
 

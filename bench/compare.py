@@ -1,0 +1,483 @@
+"""Compare saved runs: align their figures, flag config differences, gate regressions.
+
+Everything here reads :class:`bench.saved_run.Run` objects (``results.json`` and, for
+quantile gates, ``traces.parquet``) and returns numeric frames or plain records; the
+``bench compare`` command turns them into tables, a figure and an exit status.
+
+Alignment keys: predictor, data set, route type (label) and drive. A figure missing in
+one run is NaN there, never dropped. Runs whose configurations differ (horizon, GPS
+profile, dropouts, data hashes, ...) are flagged by :func:`config_differences`.
+
+The paired difference between two runs (:func:`paired_difference`) is a cluster
+bootstrap over the drives both runs scored (:mod:`metrics.bootstrap`): each resample
+draws drives with replacement and recomputes the statistic of both runs on the same
+drives, so drive-to-drive variation that both runs share cancels.
+"""
+
+from __future__ import annotations
+
+import math
+import re
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+from bench.options import UsageError
+from bench.saved_run import Run
+
+KINDS = ("future", "now")
+STATS = ("mean_m", "median_m", "rmse_m", "p95_m", "max_m")
+#: statistics whose paired difference is computed from per-drive summaries alone
+#: (pooled from per-drive sums); the others need the runs' traces
+SUMMARY_STATS = ("mean_m", "rmse_m")
+#: config keys that make two runs' figures incomparable when they differ
+CONFIG_KEYS = ("horizon_s", "now_step_s", "gps_profile", "gps_latency_s", "intervals", "dropouts",
+               "seed", "seeds", "exclude_poor_truth", "use_tuned", "gate")
+#: resamples of the paired cluster bootstrap (seeded: the same runs give the same CI)
+RESAMPLES = 2000
+LEVEL = 0.95
+#: fewest shared drives for a paired CI: with one drive, resampling drives says nothing
+#: about the spread (the CI is then NaN and no gate can fail on it)
+MIN_DRIVES = 2
+
+
+@dataclass(frozen=True)
+class Metric:
+    """A figure of a saved run: ``kind`` (future, now) and ``stat`` (mean_m, median_m, ...)."""
+
+    kind: str
+    stat: str
+
+    @classmethod
+    def parse(cls, text: str, option: str = "--metric") -> Metric:
+        """``future.mean_m`` -> Metric; a :class:`UsageError` naming the choices otherwise."""
+        kind, _, stat = text.strip().partition(".")
+        if kind not in KINDS or stat not in STATS:
+            raise UsageError(f"{option}: {text!r} is not a metric; use KIND.STAT with KIND one of "
+                             f"{', '.join(KINDS)} and STAT one of {', '.join(STATS)} "
+                             f"(e.g. future.mean_m)")
+        return cls(kind, stat)
+
+    def __str__(self) -> str:
+        return f"{self.kind}.{self.stat}"
+
+
+@dataclass(frozen=True)
+class Gate:
+    """``PREDICTOR:KIND.STAT:TOL``: the NEW run fails when its figure is worse (larger) than
+    the OLD run's by more than the tolerance **and** the paired CI of NEW - OLD excludes 0.
+
+    ``tolerance`` is a fraction of the OLD figure when ``relative`` (``5%``), else metres
+    (``0.01m``)."""
+
+    predictor: str
+    metric: Metric
+    tolerance: float
+    relative: bool
+    text: str
+
+    @classmethod
+    def parse(cls, text: str) -> Gate:
+        option = f"--fail-if-worse {text!r}"
+        parts = text.strip().split(":")
+        if len(parts) != 3 or not all(p.strip() for p in parts):
+            raise UsageError(f"{option}: expected PREDICTOR:KIND.STAT:TOLERANCE, e.g. "
+                             f"'lstm:future.mean_m:5%' or 'kf:now.p95_m:0.01m'")
+        pred, metric, tol = (p.strip() for p in parts)
+        m = re.fullmatch(r"([0-9]*\.?[0-9]+)\s*(%|m)", tol)
+        if not m:
+            raise UsageError(f"{option}: tolerance {tol!r} must be a percentage (5%) or metres "
+                             f"(0.01m)")
+        value = float(m.group(1))
+        relative = m.group(2) == "%"
+        return cls(pred, Metric.parse(metric, option), value / 100 if relative else value,
+                   relative, text.strip())
+
+    def limit(self, old: float) -> float:
+        """The largest NEW figure that passes, given the OLD one [m]."""
+        return old * (1 + self.tolerance) if self.relative else old + self.tolerance
+
+
+# ------------------------------------------------------------------ run labels and config
+def run_labels(runs: Sequence[Run]) -> list[str]:
+    """Short unique names for runs: their folder names, with parents added until unique."""
+    paths = [Path(r.folder).resolve() if r.folder is not None else Path(f"run{i}")
+             for i, r in enumerate(runs)]
+    depth = 1
+    while True:
+        labels = ["/".join(p.parts[-depth:]) for p in paths]
+        if len(set(labels)) == len(labels) or depth >= max(len(p.parts) for p in paths):
+            break
+        depth += 1
+    seen: dict[str, int] = {}
+    out = []
+    for lab in labels:  # the same folder given twice
+        seen[lab] = seen.get(lab, 0) + 1
+        out.append(lab if seen[lab] == 1 else f"{lab} ({seen[lab]})")
+    return out
+
+
+def _data_hashes(run: Run) -> dict[str, str]:
+    return {str(d.get("path", "")): str(d.get("sha256", "")) for d in run.results.get("data") or []}
+
+
+def config_differences(runs: Sequence[Run], labels: Sequence[str]) -> list[str]:
+    """One line per configuration item on which the runs disagree (empty: comparable).
+
+    Checked: :data:`CONFIG_KEYS`, per-predictor options of predictors the runs share, and
+    the data (paths and content hashes)."""
+    lines = []
+    configs = [r.config for r in runs]
+    for key in CONFIG_KEYS:
+        values = [c.get(key) for c in configs]
+        if any(v != values[0] for v in values[1:]):
+            lines.append(f"{key}: " + ", ".join(f"{v!r} ({lab})" for v, lab in zip(values, labels, strict=True)))
+    shared = set.intersection(*(set(r.predictors) for r in runs)) if runs else set()
+    for name in sorted(shared):
+        opts = [c.get("predictor_options", {}).get(name, {}) for c in configs]
+        if any(o != opts[0] for o in opts[1:]):
+            lines.append(f"options of {name}: " + ", ".join(
+                f"{o!r} ({lab})" for o, lab in zip(opts, labels, strict=True)))
+    hashes = [_data_hashes(r) for r in runs]
+    if any(h != hashes[0] for h in hashes[1:]):
+        lines.append("data: " + ", ".join(
+            f"{', '.join(f'{Path(p).name}:{s[:8]}' for p, s in sorted(h.items())) or 'synthetic'} ({lab})"
+            for h, lab in zip(hashes, labels, strict=True)))
+    return lines
+
+
+# ------------------------------------------------------------------ aligned figures
+def _ci(summary: Mapping[str, Any], stat: str) -> tuple[float, float]:
+    ci = (summary.get("ci95") or {}).get(stat)
+    if not ci or ci[0] is None or ci[1] is None:
+        return math.nan, math.nan
+    return float(ci[0]), float(ci[1])
+
+
+def _value(summary: Mapping[str, Any] | None, stat: str) -> tuple[float, float, float, int]:
+    if not summary:
+        return math.nan, math.nan, math.nan, 0
+    v = summary.get(stat)
+    lo, hi = _ci(summary, stat)
+    return (math.nan if v is None else float(v)), lo, hi, int(summary.get("count") or 0)
+
+
+def _scoped_summaries(run: Run, kind: str) -> list[tuple[str, str, str, str, Mapping[str, Any]]]:
+    """(scope, dataset, group, predictor, summary) for every figure of ``run``: the run as a
+    whole, each data set, each route type of each data set and each drive."""
+    res = run.results
+    out = []
+    for p, s in res["predictors"].items():
+        out.append(("all", "", "", p, s.get(kind)))
+    for ds, preds in res.get("by_dataset", {}).items():
+        for p, s in preds.items():
+            out.append(("dataset", ds, "", p, s.get(kind)))
+    for ds, preds in res.get("by_label", {}).items():
+        for p, kinds in preds.items():
+            for label, s in (kinds.get(kind) or {}).items():
+                out.append(("route type", ds, label, p, s))
+    for d in res.get("drives", []):
+        if d.get("skipped"):
+            continue
+        for p, s in (d.get("predictors") or {}).items():
+            out.append(("drive", d["dataset"], d["name"], p, s.get(kind)))
+    return out
+
+
+def aligned(runs: Sequence[Run], labels: Sequence[str], metric: Metric) -> pd.DataFrame:
+    """The ``metric`` of every run, aligned: one row per (scope, dataset, group, predictor)
+    and, per run label ``L``, columns ``L`` (value [m]), ``L lo``, ``L hi`` (95 % CI, NaN
+    when the run has none) and ``L n`` (queries). Rows keep the first run's order; rows
+    only some runs have come after, NaN in the others."""
+    keys: dict[tuple[str, str, str, str], dict[str, Any]] = {}
+    for run, lab in zip(runs, labels, strict=True):
+        for scope, ds, group, pred, summary in _scoped_summaries(run, metric.kind):
+            v, lo, hi, n = _value(summary, metric.stat)
+            row = keys.setdefault((scope, ds, group, pred), {})
+            row.update({lab: v, f"{lab} lo": lo, f"{lab} hi": hi, f"{lab} n": n})
+    cols = ["scope", "dataset", "group", "predictor"]
+    for lab in labels:
+        cols += [lab, f"{lab} lo", f"{lab} hi", f"{lab} n"]
+    rows = [{"scope": k[0], "dataset": k[1], "group": k[2], "predictor": k[3], **v}
+            for k, v in keys.items()]
+    frame = pd.DataFrame(rows, columns=cols)
+    for lab in labels:
+        frame[f"{lab} n"] = frame[f"{lab} n"].fillna(0).astype(int)
+    order = {"all": 0, "dataset": 1, "route type": 2, "drive": 3}
+    frame["_o"] = frame["scope"].map(order)
+    return frame.sort_values(["_o"], kind="stable").drop(columns="_o").reset_index(drop=True)
+
+
+# ------------------------------------------------------------------ paired differences
+def _drive_key(d: Mapping[str, Any]) -> tuple[str, str]:
+    return str(d["dataset"]), str(d["name"])
+
+
+def _drive_summaries(run: Run, predictor: str, kind: str, dataset: str | None = None
+                     ) -> dict[tuple[str, str], Mapping[str, Any]]:
+    out = {}
+    for d in run.results.get("drives", []):
+        if dataset is not None and str(d["dataset"]) != dataset:
+            continue
+        s = (d.get("predictors") or {}).get(predictor, {}).get(kind)
+        if not d.get("skipped") and s and s.get("count"):
+            out[_drive_key(d)] = s
+    return out
+
+
+def _pooled_by_resample(summaries: Sequence[Mapping[str, Any]], stat: str,
+                        weights: np.ndarray) -> tuple[float, np.ndarray]:
+    """The pooled ``stat`` (mean_m or rmse_m) of drives given their summaries, and its value
+    under each resample (rows of ``weights``: multiplicities of the drives)."""
+    from metrics.bootstrap import resampled_means
+
+    n = np.array([float(s["count"]) for s in summaries])
+    if stat == "mean_m":
+        x = np.array([float(s["mean_m"]) for s in summaries]) * n
+        return float(x.sum() / n.sum()), resampled_means(x, n, weights)
+    x = np.array([float(s["rmse_m"]) ** 2 for s in summaries]) * n
+    return float(np.sqrt(x.sum() / n.sum())), np.sqrt(resampled_means(x, n, weights))
+
+
+def _pooled_quantiles_by_resample(errors: Sequence[np.ndarray], q: float, weights: np.ndarray
+                                  ) -> tuple[float, np.ndarray]:
+    """Quantile ``q`` (0..1, linear interpolation) of the pooled errors of drives, and its
+    value under each resample; exact (weights are drive multiplicities)."""
+    from metrics.bootstrap import resampled_quantiles
+
+    values = np.concatenate(errors)
+    units = np.concatenate([np.full(len(e), i, dtype=np.int64) for i, e in enumerate(errors)])
+    order = np.argsort(values, kind="stable")
+    return (float(np.quantile(values, q)),
+            resampled_quantiles(values[order], units[order], weights, (q,))[:, 0])
+
+
+@dataclass(frozen=True)
+class PairedDifference:
+    """NEW - OLD of one statistic over the drives both runs scored (positive: NEW worse)."""
+
+    old: float
+    new: float
+    diff: float
+    lo: float
+    hi: float
+    drives: int
+
+    @property
+    def conclusive(self) -> bool:
+        """The 95 % CI excludes 0 (False when there is no CI)."""
+        return bool(self.lo > 0 or self.hi < 0)
+
+
+def paired_difference(old: Run, new: Run, predictor: str, metric: Metric,
+                      seed: int = 0, resamples: int = RESAMPLES, dataset: str | None = None
+                      ) -> PairedDifference | None:
+    """The paired cluster-bootstrap difference of ``metric`` (NEW - OLD) for ``predictor``
+    over the drives both runs scored (of ``dataset`` only, if given); None when they share
+    no drive.
+
+    ``mean_m`` and ``rmse_m`` come from the per-drive summaries of results.json; the other
+    statistics read the runs' ``traces.parquet`` (a :class:`DataError` if one has none)."""
+    from metrics.bootstrap import resample_counts
+
+    a = _drive_summaries(old, predictor, metric.kind, dataset)
+    b = _drive_summaries(new, predictor, metric.kind, dataset)
+    common = sorted(set(a) & set(b))
+    if not common:
+        return None
+    enough = len(common) >= MIN_DRIVES
+    w = (resample_counts(len(common), resamples, seed) if enough
+         else np.ones((1, len(common)), dtype=np.int64))
+    if metric.stat in SUMMARY_STATS:
+        va, ra = _pooled_by_resample([a[k] for k in common], metric.stat, w)
+        vb, rb = _pooled_by_resample([b[k] for k in common], metric.stat, w)
+    elif metric.stat == "max_m":
+        ma = np.array([float(a[k]["max_m"]) for k in common])
+        mb = np.array([float(b[k]["max_m"]) for k in common])
+        picked = w > 0
+        va, vb = float(ma.max()), float(mb.max())
+        ra = np.where(picked, ma, -np.inf).max(axis=1)
+        rb = np.where(picked, mb, -np.inf).max(axis=1)
+    else:
+        q = 0.5 if metric.stat == "median_m" else 0.95
+        ea = _drive_errors(old, predictor, metric.kind, common)
+        eb = _drive_errors(new, predictor, metric.kind, common)
+        va, ra = _pooled_quantiles_by_resample(ea, q, w)
+        vb, rb = _pooled_quantiles_by_resample(eb, q, w)
+    d = rb - ra
+    d = d[np.isfinite(d)]
+    alpha = (1 - LEVEL) / 2
+    lo, hi = (np.quantile(d, [alpha, 1 - alpha]) if enough and d.size else (math.nan, math.nan))
+    return PairedDifference(va, vb, vb - va, float(lo), float(hi), len(common))
+
+
+def _drive_errors(run: Run, predictor: str, kind: str, drives: Sequence[tuple[str, str]]
+                  ) -> list[np.ndarray]:
+    """The scored errors [m] of ``predictor`` per drive, in ``drives`` order (from traces)."""
+    from bench.results import scored_mask
+
+    tr = run.traces
+    tr = tr[scored_mask(tr) & (tr["predictor"] == predictor).to_numpy()
+            & (tr["kind"] == kind).to_numpy()]
+    groups = {(str(ds), str(dr)): g["error_m"].to_numpy(dtype=float)
+              for (ds, dr), g in tr.groupby(["dataset", "drive"], observed=True, sort=False)}
+    out = []
+    for k in drives:
+        e = groups.get(k, np.empty(0))
+        out.append(e[np.isfinite(e)])
+    return out
+
+
+@dataclass(frozen=True)
+class GateCheck:
+    """One gate's outcome: passed or not, with the figures behind it."""
+
+    gate: Gate
+    paired: PairedDifference
+    limit: float
+
+    @property
+    def failed(self) -> bool:
+        """NEW beyond the limit and the paired CI of NEW - OLD entirely above 0."""
+        return bool(self.paired.new > self.limit and self.paired.lo > 0)
+
+    def line(self) -> str:
+        p = self.paired
+        verdict = "FAILED" if self.failed else "passed"
+        return (f"{verdict}: {self.gate.predictor} {self.gate.metric} {p.new:.4f} m (NEW) vs "
+                f"{p.old:.4f} m (OLD), limit {self.limit:.4f} m; NEW - OLD {p.diff:+.4f} m, "
+                f"95 % CI [{p.lo:+.4f}, {p.hi:+.4f}] over {p.drives} shared drives")
+
+
+def check_gates(old: Run, new: Run, gates: Sequence[Gate], seed: int = 0) -> list[GateCheck]:
+    """Each gate checked on NEW against OLD (a :class:`UsageError` when a gate names a
+    predictor one of the runs lacks or the runs share no scored drive)."""
+    out = []
+    for g in gates:
+        for run, which in ((old, "OLD"), (new, "NEW")):
+            if g.predictor not in run.predictors:
+                raise UsageError(f"--fail-if-worse {g.text!r}: the {which} run has no predictor "
+                                 f"{g.predictor!r} (it has {', '.join(run.predictors)})")
+        paired = paired_difference(old, new, g.predictor, g.metric, seed)
+        if paired is None:
+            raise UsageError(f"--fail-if-worse {g.text!r}: the runs share no scored drive")
+        out.append(GateCheck(g, paired, g.limit(paired.old)))
+    return out
+
+
+# ------------------------------------------------------------------ table and figure
+def _cell(v: float, lo: float, hi: float, digits: int = 3) -> str:
+    if not np.isfinite(v):
+        return "-"
+    text = f"{v:.{digits}f}"
+    if np.isfinite(lo) and np.isfinite(hi):
+        text += f" [{lo:.{digits}f}, {hi:.{digits}f}]"
+    return text
+
+
+def _delta_cell(p: PairedDifference | None, digits: int = 3) -> str:
+    if p is None or not np.isfinite(p.diff):
+        return "-"
+    text = f"{p.diff:+.{digits}f}"
+    if np.isfinite(p.lo) and np.isfinite(p.hi):
+        text += f" [{p.lo:+.{digits}f}, {p.hi:+.{digits}f}]" + (" *" if p.conclusive else "")
+    return text
+
+
+def comparison_table(runs: Sequence[Run], labels: Sequence[str], metric: Metric,
+                     scopes: Sequence[str], seed: int = 0) -> tuple[Any, pd.DataFrame]:
+    """The comparison as a display :class:`bench.tables.Table` (``value [CI]`` cells, one
+    column per run, then ``Δ`` columns: each later run minus the first, paired over shared
+    drives, ``*`` where the CI excludes 0) and the numeric frame behind it (for CSV).
+
+    ``scopes``: which rows, among ``all``, ``dataset``, ``route type``, ``drive``. Paired
+    CIs are given for ``all`` and ``dataset`` rows; route-type and drive rows show the
+    plain difference (results.json keeps no per-drive, per-route-type figures)."""
+    from bench.tables import Table
+
+    frame = aligned(runs, labels, metric)
+    frame = frame[frame["scope"].isin(list(scopes))].reset_index(drop=True)
+    first = labels[0]
+    for run, lab in zip(runs[1:], labels[1:], strict=True):
+        diffs, los, his, nd = [], [], [], []
+        for _, row in frame.iterrows():
+            p = None
+            if row["scope"] in ("all", "dataset") and row["predictor"] in run.predictors \
+                    and row["predictor"] in runs[0].predictors:
+                p = paired_difference(runs[0], run, row["predictor"], metric, seed,
+                                      dataset=row["dataset"] if row["scope"] == "dataset" else None)
+            if p is None:
+                d = row[lab] - row[first]
+                diffs.append(d)
+                los.append(math.nan)
+                his.append(math.nan)
+                nd.append(0)
+            else:
+                diffs.append(p.diff)
+                los.append(p.lo)
+                his.append(p.hi)
+                nd.append(p.drives)
+        frame[f"delta {lab}"] = diffs
+        frame[f"delta {lab} lo"] = los
+        frame[f"delta {lab} hi"] = his
+        frame[f"delta {lab} drives"] = nd
+    shown: dict[str, list[str]] = {"scope": [], "dataset": [], "group": [], "predictor": []}
+    for lab in labels:
+        shown[lab] = []
+        shown[f"{lab} n"] = []
+    for lab in labels[1:]:
+        shown[f"Δ {lab}"] = []
+    for _, row in frame.iterrows():
+        for c in ("scope", "dataset", "group", "predictor"):
+            shown[c].append(str(row[c]) or "-")
+        for lab in labels:
+            shown[lab].append(_cell(row[lab], row[f"{lab} lo"], row[f"{lab} hi"]))
+            shown[f"{lab} n"].append(str(int(row[f"{lab} n"])))
+        for lab in labels[1:]:
+            d = row[f"delta {lab}"]
+            p = PairedDifference(math.nan, math.nan, d, row[f"delta {lab} lo"],
+                                 row[f"delta {lab} hi"], int(row[f"delta {lab} drives"]))
+            shown[f"Δ {lab}"].append(_delta_cell(p))
+    heads = {"scope": "scope", "dataset": "data set", "group": "route type / drive",
+             "predictor": "predictor"}
+    for lab in labels:
+        heads[lab] = lab
+        heads[f"{lab} n"] = "n"
+    for lab in labels[1:]:
+        heads[f"Δ {lab}"] = f"Δ {lab} - {first}"
+    title = (f"{metric} [m], 95 % CI in brackets; Δ: paired over shared drives, "
+             f"* where its CI excludes 0")
+    return Table(pd.DataFrame(shown), "comparison", heads, title=title), frame
+
+
+def comparison_figure(runs: Sequence[Run], labels: Sequence[str], metric: Metric) -> Any:
+    """One bar group per predictor (the whole-run figure), one bar per run, 95 % CI whiskers
+    where the runs have them."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    frame = aligned(runs, labels, metric)
+    frame = frame[frame["scope"] == "all"]
+    preds = list(frame["predictor"])
+    fig, ax = plt.subplots(figsize=(max(6.0, 1.2 * len(preds) * max(1, len(labels)) / 2 + 2), 4.5))
+    width = 0.8 / max(1, len(labels))
+    x = np.arange(len(preds))
+    for i, lab in enumerate(labels):
+        v = frame[lab].to_numpy(dtype=float)
+        lo = frame[f"{lab} lo"].to_numpy(dtype=float)
+        hi = frame[f"{lab} hi"].to_numpy(dtype=float)
+        err = np.vstack([np.where(np.isfinite(lo), v - lo, 0.0), np.where(np.isfinite(hi), hi - v, 0.0)])
+        ax.bar(x + (i - (len(labels) - 1) / 2) * width, np.nan_to_num(v), width, yerr=err,
+               capsize=3, label=lab)
+    ax.set_xticks(x, preds, rotation=30, ha="right")
+    ax.set_ylabel(f"{metric} [m]")
+    ax.set_title(f"{metric} per predictor (whiskers: 95 % cluster-bootstrap CI)")
+    ax.legend(fontsize="small")
+    fig.tight_layout()
+    return fig
