@@ -19,6 +19,7 @@ The answers are turned into the same :class:`~bench.runner.DriveRun` records as 
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -50,6 +51,7 @@ class Answers:
         return f"line {row + 2}" if self.is_csv else f"row {row + 1}"
 
     def fail(self, row: int, detail: str) -> DataError:
+        """The error to raise for data row ``row``: the file, the row, ``detail``."""
         return DataError(self.path, f"{self.where(row)}: {detail}")
 
 
@@ -125,6 +127,7 @@ class Scored:
 
     @property
     def missing(self) -> int:
+        """Queries without an answer, all drives and kinds."""
         return sum(sum(k.values()) for k in self.unanswered.values())
 
 
@@ -176,7 +179,7 @@ def match(folder: QueryFolder, answers: Answers) -> np.ndarray:
 
 
 def score_answers(folder: QueryFolder, answers: Answers, predictor: str,
-                  on_done=None) -> Scored:
+                  on_done: Callable[[str], None] | None = None) -> Scored:
     """Score ``answers`` as predictor ``predictor`` against ``folder``: per drive (folder
     order) the :class:`~bench.runner.DriveRun` a replay would give, traces from
     :func:`bench.scoring.score` (unanswered queries NaN, i.e. ``missing``), step latency from

@@ -232,10 +232,8 @@ class QueryFolder:
 
     def config(self, predictor: str) -> RunConfig:
         """The ``bench queries`` config with ``predictor`` as the one predictor run."""
-        cfg = dict(self.manifest["config"])
-        cfg["predictors"] = (predictor,)
-        cfg["predictor_options"] = {}
-        return RunConfig(**cfg)
+        return RunConfig(**{**self.manifest["config"], "predictors": (predictor,),
+                            "predictor_options": {}})
 
     def public_times(self) -> pd.DataFrame:
         """The key's drive, kind and t_query as the public files give them (drive id, times
@@ -276,6 +274,15 @@ def _manifest(folder: Path) -> dict[str, Any]:
     missing = [k for k in ("config", "drives", "files", "data", "command") if k not in man]
     if missing:
         raise DataError(path, f"incomplete manifest: no {', '.join(missing)}")
+    known = set(RunConfig.__dataclass_fields__)
+    if not isinstance(man["config"], dict) or set(man["config"]) - known:
+        extra = sorted(set(man["config"]) - known) if isinstance(man["config"], dict) else []
+        raise DataError(path, f"config keys this posbench does not know: {', '.join(extra)} "
+                              f"(written by posbench {man.get('posbench', '?')})"
+                        if extra else "config is not an object")
+    if not isinstance(man["drives"], list) or not all(
+            isinstance(d, dict) and {"drive", "name", "t0_s"} <= set(d) for d in man["drives"]):
+        raise DataError(path, "malformed drives list (each needs drive, name, t0_s)")
     return man
 
 
@@ -304,8 +311,9 @@ def read_queries(folder: str | Path) -> QueryFolder:
         raise DataError(folder / "key", f"cannot read the answer key: {str(e).splitlines()[0]}"
                         ) from None
     listed = man["drives"]
-    if len(records) != len(listed) or any(r["name"] != d["name"] for r, d in
-                                          zip(records, listed, strict=False)):
+    if (not isinstance(records, list) or len(records) != len(listed)
+            or any(not isinstance(r, dict) or set(DRIVE_FIELDS) - set(r) or r["name"] != d["name"]
+                   for r, d in zip(records, listed, strict=False))):
         raise DataError(folder / KEY_DRIVES, "does not list the drives of the manifest")
     drives = [{**r, "id": d["drive"], "t0_s": float(d["t0_s"])}
               for r, d in zip(records, listed, strict=True)]

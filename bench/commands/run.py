@@ -2,8 +2,9 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable, Sequence
 from pathlib import Path
-from typing import Annotated
+from typing import TYPE_CHECKING, Annotated, Any
 
 import typer
 
@@ -41,6 +42,12 @@ from bench.options import (
     validate_predictors,
     with_model_aliases,
 )
+
+if TYPE_CHECKING:
+    import pandas as pd
+
+    from bench.runner import DriveRun
+    from bench.saved_run import Run
 
 
 def run(
@@ -193,8 +200,9 @@ def _run(drives, cfg, data, out: Path, workers: int, rerun: Path | None = None,
         console.print(f"wrote {rerun} (open it with: bench view {rerun})")
 
 
-def publish(res, traces, runs, out: Path, formats: tuple[str, ...] = ("png",),
-            drive_plots: int | None = 20, figures=None):
+def publish(res: dict[str, Any], traces: pd.DataFrame, runs: Sequence[DriveRun], out: Path,
+            formats: tuple[str, ...] = ("png",), drive_plots: int | None = 20,
+            figures: Callable[[Run], list[tuple[str, str]]] | None = None) -> Run:
     """Write the report folder for aggregated results ``res`` (report.md, figures, tables,
     results.json, traces.parquet; an earlier run's files there are replaced) and print the
     summary tables and the ``wrote ...`` line: how ``bench run`` and ``bench score`` end.
@@ -233,7 +241,8 @@ def publish(res, traces, runs, out: Path, formats: tuple[str, ...] = ("png",),
     if scored == 0:
         raise UsageError(f"every drive was skipped ({plural(len(runs), 'drive')}), nothing was "
                          f"scored; the reasons are in {out / 'report.md'}")
-    if not any(p[k]["count"] for p in res["predictors"].values() for k in ("future", "now")):
+    if not any(p[k]["count"] + p[k]["missing"] for p in res["predictors"].values()
+               for k in ("future", "now")):
         console.print("warning: no query could be scored (no reference position at any query "
                       "past the warm-up); see the exclusions below", highlight=False)
     from bench.tables import summary_table

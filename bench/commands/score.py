@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import re
 from pathlib import Path
-from typing import Annotated
+from typing import TYPE_CHECKING, Annotated
 
 import typer
 
@@ -18,6 +18,9 @@ from bench.commands.common import (
     fail,
 )
 from bench.options import check_out_dir
+
+if TYPE_CHECKING:
+    from bench.answers import Scored
 
 #: what --name may be: it names the predictor in every table, file name and results key
 NAME_PATTERN = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.+@-]*$")
@@ -99,7 +102,7 @@ def _score(answers_path: Path, queries_dir: Path, name: str, out: Path,
     publish(res, traces, scored.runs, out, formats, drive_plots)
 
 
-def answers_line(path: Path, scored, ignored: list[str]) -> str:
+def answers_line(path: Path, scored: Scored, ignored: list[str]) -> str:
     """One line: how many queries were answered, and which were not (counted as missing)."""
     text = f"{path}: {scored.answered} answers to {scored.queries} queries"
     if scored.missing:
