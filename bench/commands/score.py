@@ -91,7 +91,8 @@ def _score(answers_path: Path, queries_dir: Path, name: str, out: Path,
         task = prog.add_task(f"scoring {plural(n, 'drive')}", total=n, last="")
         scored = score_answers(folder, answers, name,
                                on_done=lambda d: prog.update(task, advance=1, last=d))
-    console.print(answers_line(answers_path, scored, answers.ignored), highlight=False)
+    ids = {d["name"]: d["id"] for d in folder.drives}
+    console.print(answers_line(answers_path, scored, answers.ignored, ids), highlight=False)
     cfg = folder.config(name)
     data = [*folder.manifest["data"], tree_hash(answers_path)]
     traces = all_traces(scored.runs)
@@ -102,13 +103,16 @@ def _score(answers_path: Path, queries_dir: Path, name: str, out: Path,
     publish(res, traces, scored.runs, out, formats, drive_plots)
 
 
-def answers_line(path: Path, scored: Scored, ignored: list[str]) -> str:
-    """One line: how many queries were answered, and which were not (counted as missing)."""
+def answers_line(path: Path, scored: Scored, ignored: list[str],
+                 ids: dict[str, str] | None = None) -> str:
+    """One line: how many queries were answered, and which were not (counted as missing),
+    naming drives as the answers file does (``ids``: drive name -> id)."""
+    ids = ids or {}
     text = f"{path}: {scored.answered} answers to {scored.queries} queries"
     if scored.missing:
         per = sorted(scored.unanswered.items(), key=lambda kv: -sum(kv[1].values()))
         fut = sum(m["future"] for m in scored.unanswered.values())
-        shown = ", ".join(f"{d} {sum(m.values())}" for d, m in per[:5])
+        shown = ", ".join(f"{ids.get(d, d)} {sum(m.values())}" for d, m in per[:5])
         more = f", {len(per) - 5} more drives" if len(per) > 5 else ""
         text += (f"; {scored.missing} queries without an answer (future {fut}, now "
                  f"{scored.missing - fut}; {shown}{more}): scored as missing")
