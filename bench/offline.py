@@ -138,7 +138,7 @@ def write_queries(drives: Sequence[Drive], cfg: RunConfig, out: Path, *, command
                   on_done: Callable[[str], None] | None = None) -> QueriesWritten:
     """Prepare ``drives`` as ``bench run`` does under ``cfg`` and write the queries folder
     ``out`` (layout in the module docstring); ``data`` is the data block of the manifest
-    (:func:`bench.results.data_manifest`), ``fmt`` csv or parquet for the queries list and
+    (:func:`bench.results.data_provenance`), ``fmt`` csv or parquet for the queries list and
     inputs. ``on_done(drive name)`` is called as each drive is written (progress bar).
     Files of an earlier queries folder there are replaced; others are left alone."""
     from bench.results import git_commit, package_versions

@@ -37,7 +37,7 @@ def package_versions() -> dict[str, str]:
     return out
 
 
-def data_manifest(paths: Sequence[str | Path] | None, seed: int) -> list[dict[str, Any]]:
+def data_provenance(paths: Sequence[str | Path] | None, seed: int) -> list[dict[str, Any]]:
     """The ``data`` block of results.json: :func:`tree_hash` of each data path, or the built-in
     synthetic drives' generator seed when there is none."""
     if paths:

@@ -90,14 +90,14 @@ def _write(drives, cfg, data, out: Path, file_format: str) -> None:
 
     from bench.commands.run import plural
     from bench.offline import write_queries
-    from bench.results import data_manifest
+    from bench.results import data_provenance
 
     with Progress(TextColumn("[bold]{task.description}"), BarColumn(), MofNCompleteColumn(),
                   TimeElapsedColumn(), TextColumn("{task.fields[last]}"), console=console) as prog:
         task = prog.add_task(f"{plural(len(drives), 'drive')}: queries and inputs",
                              total=len(drives), last="")
         done = write_queries(drives, cfg, out, command=command_line(),
-                             data=data_manifest(data, cfg.seed), fmt=file_format,
+                             data=data_provenance(data, cfg.seed), fmt=file_format,
                              on_done=lambda name: prog.update(task, advance=1, last=name))
     skipped = f" ({done.skipped} skipped, named in manifest.json)" if done.skipped else ""
     console.print(f"wrote {out}/: {done.files[0]} ({done.queries} queries), "

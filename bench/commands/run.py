@@ -174,7 +174,7 @@ def _run(drives, cfg, data, out: Path, workers: int, rerun: Path | None = None,
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
     from bench.executors import run_drives
-    from bench.results import aggregate, all_traces, data_manifest
+    from bench.results import aggregate, all_traces, data_provenance
 
     command = command_line()
     with Progress(TextColumn("[bold]{task.description}"), BarColumn(), MofNCompleteColumn(),
@@ -185,7 +185,7 @@ def _run(drives, cfg, data, out: Path, workers: int, rerun: Path | None = None,
         runs = run_drives(drives, cfg, executor, workers=workers, address=address,
                           on_done=lambda r: prog.update(task, advance=1, last=r.name))
     traces = all_traces(runs)
-    res = aggregate(runs, cfg, data_manifest(data, cfg.seed), command, traces=traces)
+    res = aggregate(runs, cfg, data_provenance(data, cfg.seed), command, traces=traces)
     from bench.figures import paper_figures
 
     def figures(result):
