@@ -15,7 +15,19 @@ from typing import Annotated
 
 import typer
 
-from bench.commands import check, compare, inspect, latency, predictors, run, train, tune, view
+from bench.commands import (
+    check,
+    compare,
+    inspect,
+    latency,
+    predictors,
+    queries,
+    run,
+    score,
+    train,
+    tune,
+    view,
+)
 from bench.commands.common import fail
 
 
@@ -62,6 +74,8 @@ def _root(version: Annotated[bool, typer.Option(
 
 
 app.command("run")(run.run)
+app.command("queries")(queries.queries)
+app.command("score")(score.score)
 data_app.command("inspect")(inspect.inspect)
 app.command("view")(view.view)
 app.command("predictors")(predictors.list_predictors)

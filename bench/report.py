@@ -126,8 +126,9 @@ def render_markdown(res: dict[str, Any], plots: list[str],
              "Errors are Euclidean distances in metres in a local ENU frame (true metres). "
              "`future` = position at fix time + horizon, asked at the fix; `now` = current position, "
              "asked every now-step between fixes. Latency: `step` = one `observe_gps` plus the "
-             "future query, `query` = one between-fix `position_at`, single process.", "",
-             "## All drives", "", summary_table(res).markdown(), ""]
+             "future query, `query` = one between-fix `position_at`, single process.", ""]
+    lines += answers_lines(res)
+    lines += ["## All drives", "", summary_table(res).markdown(), ""]
     for note in (trained_note(res), excluded_note(res), MISSING_NOTE):
         if note:
             lines += [note, ""]
@@ -203,6 +204,22 @@ def render_markdown(res: dict[str, Any], plots: list[str],
     return "\n".join(lines)
 
 
+def answers_lines(res: dict[str, Any]) -> list[str]:
+    """For answers scored by ``bench score``: where they came from, how many queries they
+    left unanswered, and what posbench could not check."""
+    a = res.get("answers")
+    if not a:
+        return []
+    missing = a["queries"] - a["answered"]
+    return [f"Answers produced outside posbench (`{a['file']}`), scored against the queries "
+            f"folder `{a['queries_folder']}`: {a['answered']} of {a['queries']} queries answered"
+            + (f", {missing} without an answer (scored as `missing`; per drive in the drive "
+               f"notes of results.json)" if missing else "")
+            + ". posbench cannot check such answers for look-ahead (use of inputs stamped after "
+              "the query's t_issue), as it does for a predictor it replays; latency is what the "
+              "file's `latency_us` column gives (`-`: none given).", ""]
+
+
 def gate_lines(res: dict[str, Any]) -> list[str]:
     """The "GPS outlier gate" section: fixes rejected per predictor, and per drive."""
     gate = res.get("gate")
@@ -210,6 +227,9 @@ def gate_lines(res: dict[str, Any]) -> list[str]:
         return []
     lines = ["## GPS outlier gate: fixes rejected per predictor", ""]
     if not gate.get("enabled"):
+        if res.get("answers"):
+            return lines + ["None: answers scored by `bench score` come from a system that got "
+                            "every fed fix; any gating is its own.", ""]
         return lines + ["Off (`--no-gate`): every fix reached the predictors, as in the paper.", ""]
     lines += ["A fix implying impossible motion (speed > 60 m/s, or a miss of the constant-velocity "
               "prediction beyond 15 m/s^2 of acceleration plus 4 sigma of fix noise; a repeated "

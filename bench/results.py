@@ -37,6 +37,15 @@ def package_versions() -> dict[str, str]:
     return out
 
 
+def data_provenance(paths: Sequence[str | Path] | None, seed: int) -> list[dict[str, Any]]:
+    """The ``data`` block of results.json: :func:`tree_hash` of each data path, or the built-in
+    synthetic drives' generator seed when there is none."""
+    if paths:
+        return [tree_hash(p) for p in paths]
+    return [{"path": "built-in synthetic drives", "files": 0, "bytes": 0,
+             "sha256": f"generator seed {seed}"}]
+
+
 def git_commit() -> str | None:
     """The commit of the posbench checkout, with ``-dirty`` if it has changes; None outside git."""
     root = Path(__file__).resolve().parents[1]
@@ -143,8 +152,11 @@ def _empty_kinds() -> dict[str, Any]:
 
 
 def aggregate(runs: Sequence[DriveRun], cfg: RunConfig, data_manifest: list[dict[str, Any]],
-              command: str, traces: pd.DataFrame | None = None) -> dict[str, Any]:
-    """The content of ``results.json`` (``traces``: :func:`all_traces` if already made).
+              command: str, traces: pd.DataFrame | None = None,
+              models: dict[str, dict[str, Any]] | None = None) -> dict[str, Any]:
+    """The content of ``results.json`` (``traces``: :func:`all_traces` if already made;
+    ``models``: the learned models behind the predictors, :func:`learned_models` of ``cfg``
+    if None; ``{}`` for answers scored from a file, whose models posbench cannot know).
 
     Headline figures use the scored rows only (:func:`scored_mask`); the work goes one
     predictor at a time over just the :data:`AGGREGATED` columns of its rows, so a long run
@@ -163,7 +175,7 @@ def aggregate(runs: Sequence[DriveRun], cfg: RunConfig, data_manifest: list[dict
         "by_label": {},
         "by_speed": {},
         "outages": {},
-        "models": learned_models(cfg),
+        "models": learned_models(cfg) if models is None else models,
         "excluded": excluded_summary(traces, preds),
         "held_out": {},
         "held_out_all": {},

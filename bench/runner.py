@@ -61,11 +61,24 @@ def _track_frame(prep: PreparedDrive) -> pd.DataFrame:
     return pd.DataFrame({"t": t, "x": xy[:, 0], "y": xy[:, 1]})
 
 
+def skip_reason(drive: Drive, cfg: RunConfig) -> str | None:
+    """Why ``drive`` is not scored under ``cfg`` (None: it is)."""
+    if cfg.exclude_poor_truth and drive.meta.extra.get("truth_poor"):
+        return "poor truth accuracy (median > 1 m)"
+    return None
+
+
+def skipped_run(drive: Drive, reason: str) -> DriveRun:
+    """The record of a drive that is not scored, with the reason."""
+    return DriveRun(drive.name, drive.meta.format, "", [], list(drive.meta.warnings),
+                    pd.DataFrame(), skipped=reason)
+
+
 def run_drive(drive: Drive, cfg: RunConfig) -> DriveRun:
     """Prepare one drive and replay it through every configured predictor."""
-    if cfg.exclude_poor_truth and drive.meta.extra.get("truth_poor"):
-        return DriveRun(drive.name, drive.meta.format, "", [], list(drive.meta.warnings),
-                        pd.DataFrame(), skipped="poor truth accuracy (median > 1 m)")
+    reason = skip_reason(drive, cfg)
+    if reason:
+        return skipped_run(drive, reason)
     prep = prepare_drive(drive, cfg)
     frames, step_ns, query_ns, rejected = [], {}, {}, {}
     queries = {kind: query_frame(prep, kind) for kind in ("future", "now")}

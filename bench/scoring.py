@@ -47,8 +47,9 @@ QUERY_COLUMNS = tuple(c for c in TRACE_COLUMNS if c not in ("predictor", "x", "y
 #: after concatenation (identical categories concatenate as categoricals)
 LABEL_CATEGORIES = [*LABELS, "unlabelled"]
 KIND_DTYPE = pd.CategoricalDtype(["future", "now"])
-#: answers from a file are matched to queries at this resolution of t_query
-MATCH_RESOLUTION_S = 1e-6
+#: answers from a file are matched to queries whose t_query is this close [s]: far below
+#: the query spacing (>= 1 ms), far above what a CSV round trip of the times can change
+MATCH_TOLERANCE_S = 1e-6
 
 
 def warmup_end_s(prep: PreparedDrive) -> float:
@@ -76,28 +77,64 @@ def query_frame(prep: PreparedDrive, kind: str) -> pd.DataFrame:
     }).astype({"kind": KIND_DTYPE})
 
 
+def answer_positions(queries: pd.DataFrame, answers: pd.DataFrame,
+                     tolerance_s: float = MATCH_TOLERANCE_S) -> np.ndarray:
+    """For each answer row, the 0-based row of ``queries`` it answers: same ``drive`` and
+    ``kind``, the nearest ``t_query`` [s] within ``tolerance_s``; -1 where there is none.
+
+    Both frames need columns drive, kind and t_query. Vectorised per (drive, kind) pair.
+    """
+    q_drive = queries["drive"].astype(str).to_numpy()
+    q_kind = queries["kind"].astype(str).to_numpy()
+    a_drive = answers["drive"].astype(str).to_numpy()
+    a_kind = answers["kind"].astype(str).to_numpy()
+    d_codes, _ = pd.factorize(np.concatenate([q_drive, a_drive]))
+    k_codes, kinds = pd.factorize(np.concatenate([q_kind, a_kind]))
+    group = d_codes.astype(np.int64) * max(len(kinds), 1) + k_codes
+    gq, ga = group[:len(queries)], group[len(queries):]
+    tq = queries["t_query"].to_numpy(float)
+    ta = answers["t_query"].to_numpy(float)
+    out = np.full(len(answers), -1, dtype=np.int64)
+    order = np.lexsort((tq, gq))  # queries by group, then time
+    g_sorted = gq[order]
+    for g in np.unique(ga):
+        lo, hi = np.searchsorted(g_sorted, [g, g + 1])
+        mine = np.flatnonzero(ga == g)
+        if lo == hi:
+            continue  # no query of this drive and kind
+        rows = order[lo:hi]
+        times = tq[rows]
+        i = np.searchsorted(times, ta[mine])
+        left, right = np.clip(i - 1, 0, times.size - 1), np.clip(i, 0, times.size - 1)
+        nearest = np.where(np.abs(ta[mine] - times[left]) <= np.abs(times[right] - ta[mine]),
+                           left, right)
+        ok = np.abs(times[nearest] - ta[mine]) <= tolerance_s
+        out[mine[ok]] = rows[nearest[ok]]
+    return out
+
+
 def match_answers(queries: pd.DataFrame, answers: pd.DataFrame) -> np.ndarray:
     """(N, 2) answers [m] in the order of ``queries``, matched on drive, kind and t_query
-    (to :data:`MATCH_RESOLUTION_S`); a query without an answer gets NaN (counted as missing).
+    (within :data:`MATCH_TOLERANCE_S`, :func:`answer_positions`); a query without an answer
+    gets NaN (counted as missing).
 
     Raises:
-        ValueError: an answer is given twice for one query.
+        ValueError: an answer matches no query, or two answers match one query.
     """
-    def key(df: pd.DataFrame) -> pd.DataFrame:
-        return pd.DataFrame({"drive": df["drive"].astype(str).to_numpy(),
-                             "kind": df["kind"].astype(str).to_numpy(),
-                             "tq": np.round(df["t_query"].to_numpy(float) / MATCH_RESOLUTION_S)
-                             .astype(np.int64)})
-
-    a = key(answers)
-    if a.duplicated().any():
-        first = a[a.duplicated()].iloc[0]
-        raise ValueError(f"two answers for drive {first.drive}, kind {first.kind}, "
-                         f"t_query {first.tq * MATCH_RESOLUTION_S:.6f} s")
-    a["x"] = answers["x"].to_numpy(float)
-    a["y"] = answers["y"].to_numpy(float)
-    m = key(queries).merge(a, on=["drive", "kind", "tq"], how="left", sort=False)
-    return m[["x", "y"]].to_numpy(float)
+    pos = answer_positions(queries, answers)
+    if (pos < 0).any():
+        a = answers.iloc[int(np.flatnonzero(pos < 0)[0])]
+        raise ValueError(f"no query for drive {a['drive']}, kind {a['kind']}, "
+                         f"t_query {float(a['t_query']):.9f} s")
+    seen, first = np.unique(pos, return_index=True)
+    if seen.size < pos.size:
+        twice = np.setdiff1d(np.arange(pos.size), first)[0]
+        a = answers.iloc[int(twice)]
+        raise ValueError(f"two answers for drive {a['drive']}, kind {a['kind']}, "
+                         f"t_query {float(a['t_query']):.9f} s")
+    xy = np.full((len(queries), 2), np.nan)
+    xy[pos] = answers[["x", "y"]].to_numpy(float)
+    return xy
 
 
 def score(queries: pd.DataFrame, predictor: str, answers: np.ndarray | pd.DataFrame

@@ -127,3 +127,57 @@ ProjectionOpt = Annotated[str, typer.Option(
     metavar="enu|mercator",
     help="Local frame for lat/lon sources: 'enu' (true metres, default) or 'mercator' (the paper's "
          "spherical Mercator, for parity only: +1/cos(lat) scale error, ~+52 % at 49 deg N).")]
+
+# ---- options shared by the commands that place drives, fixes and queries the same way
+# (`bench run`, `bench queries`): one definition each, so the two stay the same config
+HorizonOpt = Annotated[float, typer.Option(
+    metavar="SECONDS", help="Future-point horizon after each fix [s] (0 < h <= 10).")]
+GpsProfileOpt = Annotated[str, typer.Option(
+    metavar="PROFILE",
+    help="GPS input for drives with truth: native (their own fixes), none (exact), "
+         "rtk (~2 cm), consumer (~1 m, correlated).")]
+GpsLatencyOpt = Annotated[float, typer.Option(
+    metavar="SECONDS", help="Receiver latency of drawn fixes [s].")]
+DropoutsOpt = Annotated[str, typer.Option(
+    metavar="PROFILE", help="GPS dropouts: none, random:P, outages (0.5/1/2/5 s), outage:L.")]
+SeedOpt = Annotated[int, typer.Option(
+    metavar="INT", help="Master seed (GPS draws, dropouts, synthetic data).")]
+IncludePoorTruthOpt = Annotated[bool, typer.Option(
+    help="Also score drives whose truth is poor (median accuracy > 1 m).")]
+SyntheticDurationOpt = Annotated[float | None, typer.Option(
+    metavar="SECONDS",
+    help="Without --data: one synthetic mixed drive of this length [s] instead of the "
+         "built-in set (e.g. 36000 for a 10-hour soak test).")]
+PlotFormatOpt = Annotated[str, typer.Option(
+    "--plot-format", metavar="FORMATS",
+    help="Figure formats, comma-separated: png, svg, pdf (e.g. png,pdf).")]
+DrivePlotsOpt = Annotated[str, typer.Option(
+    "--drive-plots", metavar="N|all",
+    help="Error-over-time plots per drive (drives/): every drive of a run with at most N, "
+         "else the N drives with the largest mean future error; 'all' for every drive, 0 "
+         "for none.")]
+
+
+def check_drive_options(gps_profile: str, projection: str, horizon: float, gps_latency: float,
+                        dropouts: str, seed: int, synthetic_duration: float | None,
+                        data: list[Path] | None) -> None:
+    """The checks of the options above (and ``--projection``, ``--data``), before any work."""
+    from bench.config import GPS_PROFILES
+    from bench.options import (
+        check_at_least,
+        check_choice,
+        check_data_paths,
+        check_dropouts,
+        check_horizon,
+        check_synthetic_duration,
+    )
+    from scenarios.projection import PROJECTIONS
+
+    check_choice(gps_profile, GPS_PROFILES, "--gps-profile")
+    check_choice(projection, PROJECTIONS, "--projection")
+    check_horizon(horizon)
+    check_at_least(gps_latency, 0.0, "--gps-latency", " s")
+    check_dropouts(dropouts)
+    check_at_least(seed, 0, "--seed")
+    check_synthetic_duration(synthetic_duration, data)
+    check_data_paths(data)

@@ -2,8 +2,9 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable, Sequence
 from pathlib import Path
-from typing import Annotated
+from typing import TYPE_CHECKING, Annotated, Any
 
 import typer
 
@@ -12,10 +13,20 @@ from bench.commands.common import (
     WORKER_DIED,
     DataError,
     DataOpt,
+    DrivePlotsOpt,
+    DropoutsOpt,
+    GpsLatencyOpt,
+    GpsProfileOpt,
+    HorizonOpt,
+    IncludePoorTruthOpt,
+    PlotFormatOpt,
     ProjectionOpt,
+    SeedOpt,
     SetOpt,
+    SyntheticDurationOpt,
     TopicOpt,
     UsageError,
+    check_drive_options,
     command_line,
     console,
     fail,
@@ -27,16 +38,18 @@ from bench.commands.common import (
 from bench.options import (
     check_at_least,
     check_choice,
-    check_data_paths,
-    check_dropouts,
-    check_horizon,
     check_out_dir,
     check_out_file,
-    check_synthetic_duration,
     parse_predictor_names,
     validate_predictors,
     with_model_aliases,
 )
+
+if TYPE_CHECKING:
+    import pandas as pd
+
+    from bench.runner import DriveRun
+    from bench.saved_run import Run
 
 
 def run(
@@ -47,19 +60,11 @@ def run(
              "Predictor subclass of your own (from PYTHONPATH or the current folder), e.g. "
              "kf,lstm,mypkg.mymodule:MyPredictor.")
     ] = DEFAULT_PREDICTORS,
-    horizon: Annotated[float, typer.Option(
-        metavar="SECONDS", help="Future-point horizon after each fix [s] (0 < h <= 10).")] = 0.2,
-    gps_profile: Annotated[str, typer.Option(
-        metavar="PROFILE",
-        help="GPS input for drives with truth: native (their own fixes), none (exact), "
-             "rtk (~2 cm), consumer (~1 m, correlated).")] = "rtk",
-    gps_latency: Annotated[float, typer.Option(
-        metavar="SECONDS", help="Receiver latency of drawn fixes [s].")] = 0.0,
-    dropouts: Annotated[str, typer.Option(
-        metavar="PROFILE",
-        help="GPS dropouts: none, random:P, outages (0.5/1/2/5 s), outage:L.")] = "none",
-    seed: Annotated[int, typer.Option(
-        metavar="INT", help="Master seed (GPS draws, dropouts, synthetic data).")] = 0,
+    horizon: HorizonOpt = 0.2,
+    gps_profile: GpsProfileOpt = "rtk",
+    gps_latency: GpsLatencyOpt = 0.0,
+    dropouts: DropoutsOpt = "none",
+    seed: SeedOpt = 0,
     out: Annotated[Path, typer.Option("--out", "-o", metavar="DIR", help="Output folder.")
                    ] = Path("bench-out"),
     workers: Annotated[int, typer.Option(
@@ -70,12 +75,8 @@ def run(
     set_: SetOpt = None,
     topic: TopicOpt = None,
     projection: ProjectionOpt = "enu",
-    include_poor_truth: Annotated[bool, typer.Option(
-        help="Also score drives whose truth is poor (median accuracy > 1 m).")] = False,
-    synthetic_duration: Annotated[float | None, typer.Option(
-        metavar="SECONDS",
-        help="Without --data: one synthetic mixed drive of this length [s] instead of the "
-             "built-in set (e.g. 36000 for a 10-hour soak test).")] = None,
+    include_poor_truth: IncludePoorTruthOpt = False,
+    synthetic_duration: SyntheticDurationOpt = None,
     rerun: Annotated[Path | None, typer.Option(
         "--rerun", metavar="FILE", help="Also write a rerun recording (.rrd) of every drive (needs "
         "the viz extra; open it with `bench view FILE.rrd`).")] = None,
@@ -87,14 +88,8 @@ def run(
         metavar="ADDRESS",
         help="Ray cluster to use with --executor ray (e.g. ray://head:10001 or auto); default: "
              "start a local Ray instance with --workers CPUs.")] = None,
-    plot_format: Annotated[str, typer.Option(
-        "--plot-format", help="Figure formats, comma-separated: png, svg, pdf (e.g. png,pdf).")
-    ] = "png",
-    drive_plots: Annotated[str, typer.Option(
-        "--drive-plots", metavar="N|all",
-        help="Error-over-time plots per drive (drives/): every drive of a run with at most N, "
-             "else the N drives with the largest mean future error; 'all' for every drive, 0 "
-             "for none.")] = "20",
+    plot_format: PlotFormatOpt = "png",
+    drive_plots: DrivePlotsOpt = "20",
     gate: Annotated[bool, typer.Option(
         "--gate/--no-gate", help="GPS outlier gate: drop fixes implying impossible motion before "
         "the predictors see them (counted in the report). --no-gate: the paper's ungated input.")
@@ -106,10 +101,9 @@ def run(
     """
     from concurrent.futures.process import BrokenProcessPool
 
-    from bench.config import GPS_PROFILES, RunConfig
+    from bench.config import RunConfig
     from bench.executors import EXECUTORS, RAY_MISSING, ExecutorError, ray_available
     from bench.fetch import local_paths
-    from scenarios.projection import PROJECTIONS
 
     try:
         # every option is checked before a drive is loaded or a worker starts
@@ -121,16 +115,10 @@ def run(
         names = parse_predictor_names(predictors)
         formats = plot_formats(plot_format)
         n_drive_plots = drive_plot_limit(drive_plots)
-        check_choice(gps_profile, GPS_PROFILES, "--gps-profile")
-        check_choice(projection, PROJECTIONS, "--projection")
-        check_horizon(horizon)
-        check_at_least(gps_latency, 0.0, "--gps-latency", " s")
-        check_dropouts(dropouts)
-        check_at_least(seed, 0, "--seed")
+        check_drive_options(gps_profile, projection, horizon, gps_latency, dropouts, seed,
+                            synthetic_duration, data)
         check_at_least(workers, 1, "--workers")
-        check_synthetic_duration(synthetic_duration, data)
         topics = parse_topics(topic)
-        check_data_paths(data)
         check_out_dir(out)
         if rerun is not None:
             check_out_file(rerun, "--rerun")
@@ -192,11 +180,7 @@ def _run(drives, cfg, data, out: Path, workers: int, rerun: Path | None = None,
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
     from bench.executors import run_drives
-    from bench.outputs import remove_previous_outputs
-    from bench.report import excluded_note, trained_note, write_report
-    from bench.results import aggregate, all_traces, tree_hash
-    from bench.saved_run import Run, save_run
-    from bench.terminal import print_table
+    from bench.results import aggregate, all_traces, data_provenance
 
     command = command_line()
     with Progress(TextColumn("[bold]{task.description}"), BarColumn(), MofNCompleteColumn(),
@@ -206,19 +190,52 @@ def _run(drives, cfg, data, out: Path, workers: int, rerun: Path | None = None,
                              total=len(drives), last="")
         runs = run_drives(drives, cfg, executor, workers=workers, address=address,
                           on_done=lambda r: prog.update(task, advance=1, last=r.name))
-    manifest = ([tree_hash(p) for p in data] if data else
-                [{"path": "built-in synthetic drives", "files": 0, "bytes": 0,
-                  "sha256": f"generator seed {cfg.seed}"}])
     traces = all_traces(runs)
-    res = aggregate(runs, cfg, manifest, command, traces=traces)
+    res = aggregate(runs, cfg, data_provenance(data, cfg.seed), command, traces=traces)
     from bench.figures import paper_figures
+
+    def figures(result):
+        return paper_figures(list(drives), cfg, result.traces, out, runs, formats=formats)
+
+    publish(res, traces, runs, out, formats, drive_plots, figures)
+    if rerun is not None:
+        from bench.rerun_log import write_recording
+
+        with console.status(f"writing rerun recording {rerun}..."):
+            write_recording(rerun, runs, list(cfg.predictors))
+        console.print(f"wrote {rerun} (open it with: bench view {rerun})")
+
+
+def publish(res: dict[str, Any], traces: pd.DataFrame, runs: Sequence[DriveRun], out: Path,
+            formats: tuple[str, ...] = ("png",), drive_plots: int | None = 20,
+            figures: Callable[[Run], list[tuple[str, str]]] | None = None) -> Run:
+    """Write the report folder for aggregated results ``res`` (report.md, figures, tables,
+    results.json, traces.parquet; an earlier run's files there are replaced) and print the
+    summary tables and the ``wrote ...`` line: how ``bench run`` and ``bench score`` end.
+
+    Args:
+        res: :func:`bench.results.aggregate` output; ``traces`` the traces it was made from.
+        runs: the per-drive :class:`~bench.runner.DriveRun` records (skipped drives named).
+        figures: ``figures(run) -> [(file stem, caption)]`` draws extra figures into ``out``
+            (the paper's figures of ``bench run``); None: none.
+
+    Returns:
+        the saved :class:`~bench.saved_run.Run`.
+
+    Raises:
+        UsageError: every drive was skipped (the report is written first).
+    """
+    from bench.outputs import remove_previous_outputs
+    from bench.report import excluded_note, trained_note, write_report
+    from bench.saved_run import Run, save_run
+    from bench.terminal import print_table
 
     out.mkdir(parents=True, exist_ok=True)
     removed = remove_previous_outputs(out)
     result = Run.from_results(res, traces)
-    figures = paper_figures(list(drives), cfg, result.traces, out, runs, formats=formats)
-    result.results["paper_figures"] = [{"file": f, "caption": c} for f, c in figures]
-    written = [(out / f).with_suffix("." + fmt) for f, _ in figures for fmt in formats]
+    drawn = figures(result) if figures is not None else []
+    result.results["paper_figures"] = [{"file": f, "caption": c} for f, c in drawn]
+    written = [(out / f).with_suffix("." + fmt) for f, _ in drawn for fmt in formats]
     written += write_report(result, out, formats=formats, drive_plots=drive_plots)
     written += save_run(out, result, also_written=written)
     res = result.results
@@ -230,7 +247,8 @@ def _run(drives, cfg, data, out: Path, workers: int, rerun: Path | None = None,
     if scored == 0:
         raise UsageError(f"every drive was skipped ({plural(len(runs), 'drive')}), nothing was "
                          f"scored; the reasons are in {out / 'report.md'}")
-    if not any(p[k]["count"] for p in res["predictors"].values() for k in ("future", "now")):
+    if not any(p[k]["count"] + p[k]["missing"] for p in res["predictors"].values()
+               for k in ("future", "now")):
         console.print("warning: no query could be scored (no reference position at any query "
                       "past the warm-up); see the exclusions below", highlight=False)
     from bench.tables import summary_table
@@ -248,12 +266,7 @@ def _run(drives, cfg, data, out: Path, workers: int, rerun: Path | None = None,
                     title=f"held-out {plural(len(ho['drives']), 'drive')} (no learned predictor "
                           f"trained on them) - errors in metres")
     console.print(written_summary(out, written, removed), highlight=False)
-    if rerun is not None:
-        from bench.rerun_log import write_recording
-
-        with console.status(f"writing rerun recording {rerun}..."):
-            write_recording(rerun, runs, list(cfg.predictors))
-        console.print(f"wrote {rerun} (open it with: bench view {rerun})")
+    return result
 
 
 def written_summary(out: Path, written: list[Path], removed: list[Path]) -> str:

@@ -60,8 +60,8 @@ REQUIRED = {"imu": ("ax", "ay"), "speed": ("v",)}
 UNIX_MIN_S = 1e8
 
 
-class _Table:
-    """A read table with its file and a way to name rows."""
+class TableFile:
+    """A read table (``df``, a pandas DataFrame) with its file and a way to name rows."""
 
     def __init__(self, path: Path, df, is_csv: bool) -> None:
         self.path = path
@@ -73,7 +73,10 @@ class _Table:
         return f"line {i + 2}" if self.is_csv else f"row {i + 1}"
 
 
-def _read(path: Path) -> _Table:
+def read_table_file(path: Path, text_columns: tuple[str, ...] = ("stream",)) -> TableFile:
+    """Read a CSV (``text_columns``, named in lower case, kept as text) or Parquet file; column
+    names stripped and lower-cased. Raises :class:`DataError` (naming the file and the line) when it is missing,
+    empty, damaged or has duplicate columns."""
     import pandas as pd
 
     if not path.is_file():
@@ -89,8 +92,9 @@ def _read(path: Path) -> _Table:
         is_csv = False
     else:
         try:
-            df = pd.read_csv(path, skip_blank_lines=False, dtype={"stream": str},
-                             low_memory=False)
+            header = pd.read_csv(path, nrows=0).columns  # text columns by any case or spacing
+            text = {c: str for c in header if str(c).strip().lower() in text_columns}
+            df = pd.read_csv(path, skip_blank_lines=False, dtype=text, low_memory=False)
         except pd.errors.EmptyDataError:
             raise DataError(path, "empty file") from None
         except pd.errors.ParserError as e:
@@ -102,7 +106,7 @@ def _read(path: Path) -> _Table:
     dup = sorted({c for c in df.columns if list(df.columns).count(c) > 1})
     if dup:
         raise DataError(path, f"duplicate columns: {', '.join(dup)}")
-    return _Table(path, df, is_csv)
+    return TableFile(path, df, is_csv)
 
 
 def _parser_error(msg: str) -> str:
@@ -120,8 +124,9 @@ def _parser_error(msg: str) -> str:
     return f"malformed CSV: {msg}"
 
 
-def _numeric(tab: _Table, col: str) -> np.ndarray:
-    """Column as float64; raise naming the first non-numeric cell."""
+def numeric_column(tab: TableFile, col: str) -> np.ndarray:
+    """Column ``col`` as float64 (empty cells NaN); :class:`DataError` naming the first
+    non-numeric cell."""
     import pandas as pd
 
     s = tab.df[col]
@@ -139,7 +144,7 @@ def _numeric(tab: _Table, col: str) -> np.ndarray:
     return num.to_numpy(dtype=np.float64, na_value=np.nan)
 
 
-def _times(tab: _Table, rows: np.ndarray) -> tuple[np.ndarray, float]:
+def _times(tab: TableFile, rows: np.ndarray) -> tuple[np.ndarray, float]:
     """Times [s] relative to the earliest selected row and that row's absolute time [s].
 
     An integer ``t_ns`` column is differenced in int64 so Unix-epoch stamps keep ns
@@ -154,16 +159,16 @@ def _times(tab: _Table, rows: np.ndarray) -> tuple[np.ndarray, float]:
             ns = df["t_ns"].to_numpy(dtype=np.int64)[rows]
             ns0 = int(ns.min())
             return (ns - ns0).astype(np.float64) / 1e9, ns0 / 1e9
-        t = _numeric(tab, col)[rows] / 1e9
+        t = numeric_column(tab, col)[rows] / 1e9
     else:
         col = "t"
-        t = _numeric(tab, col)[rows]
+        t = numeric_column(tab, col)[rows]
     _need_cells(tab, rows, ~np.isfinite(t), col)
     t0 = float(t.min())
     return t - t0, t0
 
 
-def _need_cells(tab: _Table, rows: np.ndarray, missing: np.ndarray, col: str,
+def _need_cells(tab: TableFile, rows: np.ndarray, missing: np.ndarray, col: str,
                 what: str = "") -> None:
     if np.any(missing):
         i = int(rows[np.flatnonzero(missing)[0]])
@@ -172,7 +177,7 @@ def _need_cells(tab: _Table, rows: np.ndarray, missing: np.ndarray, col: str,
                                   f"value{extra}; {int(missing.sum())} such rows in all")
 
 
-def _stream_labels(tab: _Table, warnings: list[str]) -> tuple[np.ndarray, np.ndarray]:
+def _stream_labels(tab: TableFile, warnings: list[str]) -> tuple[np.ndarray, np.ndarray]:
     """(labels per row, mask of rows kept); blank CSV lines are dropped with a warning."""
     df = tab.df
     blank = df.isna().all(axis=1).to_numpy()
@@ -193,7 +198,7 @@ def _stream_labels(tab: _Table, warnings: list[str]) -> tuple[np.ndarray, np.nda
     return labels, ~blank
 
 
-def _check_columns(tab: _Table, present_streams: set[str]) -> None:
+def _check_columns(tab: TableFile, present_streams: set[str]) -> None:
     cols = set(tab.df.columns)
     missing: list[str] = []
     if not ({"t", "t_ns"} & cols):
@@ -208,7 +213,7 @@ def _check_columns(tab: _Table, present_streams: set[str]) -> None:
         raise DataError(tab.path, f"missing required column(s): {'; '.join(missing)}")
 
 
-def _position_frame(tab: _Table, rows: np.ndarray, num: dict[str, np.ndarray]) -> str:
+def _position_frame(tab: TableFile, rows: np.ndarray, num: dict[str, np.ndarray]) -> str:
     """'latlon' or 'xy': which columns every gps/truth row fills."""
     def complete(a: str, b: str) -> np.ndarray:
         if a not in num or b not in num:
@@ -237,7 +242,7 @@ def load_table(path: Path, projection: str = "enu") -> Drive:
     """Load a long-format (or wide GPS-only) CSV / Parquet table; see the module docstring."""
     path = Path(path)
     warnings: list[str] = []
-    tab = _read(path)
+    tab = read_table_file(path)
     df = tab.df
     if len(df) == 0:
         raise DataError(path, "no data rows (only a header)")
@@ -250,7 +255,7 @@ def load_table(path: Path, projection: str = "enu") -> Drive:
     if ignored:
         warnings.append(f"table: ignored unknown columns {', '.join(ignored)}")
 
-    num = {c: _numeric(tab, c) for c in NUMERIC if c in df.columns and c != "t_ns"}
+    num = {c: numeric_column(tab, c) for c in NUMERIC if c in df.columns and c != "t_ns"}
     all_rows = np.flatnonzero(keep)
     t_all, t_origin = _times(tab, all_rows)
     t_full = np.full(len(df), np.nan)
