@@ -1,0 +1,550 @@
+"""Bootstrap confidence intervals for pooled error figures, resampling whole drives.
+
+Queries inside one drive are correlated (the same stretch of road, the same filter state a
+few milliseconds apart), so resampling single queries would make every interval too narrow.
+Every interval here is a **cluster bootstrap**: one resample draws D clusters (drives) with
+replacement from the D that contribute to a figure, the figure is recomputed over the pooled
+queries of the drawn clusters (a cluster drawn twice counts twice), and the interval is the
+percentile interval of the B recomputed figures. A resample is a row of integer
+multiplicities, one per cluster (:func:`resample_counts`); so that
+
+- a pooled mean needs only each cluster's error sum and count: B resamples are one B x D
+  matrix product (:func:`ratio_ci`, :func:`paired_ratio_diff`);
+- a quantile (median, p95) of the pooled errors is computed exactly, as ``np.percentile``
+  (linear interpolation) of each resample would give it, from the pooled errors sorted once
+  with their cluster index (:func:`resampled_quantiles`).
+
+With one cluster (a single drive), queries are resampled in contiguous blocks instead
+(circular block bootstrap, :func:`block_resample`, block length :func:`block_length`): the
+blocks keep the correlation that whole drives keep above. Everything is seeded: the same
+inputs and seed give the same interval on any machine. Pure numpy, no other import.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+from functools import lru_cache
+
+import numpy as np
+
+#: resamples per interval (B)
+DEFAULT_RESAMPLES = 2000
+#: coverage of every interval
+LEVEL = 0.95
+#: at most this many units in a block bootstrap (longer series get longer units)
+MAX_UNITS = 1024
+#: a block is at most 1/MIN_BLOCKS of the series
+MIN_BLOCKS = 10
+#: the quantiles whose intervals :func:`summary_ci` gives, with their results keys
+QUANTILES = {"median_m": 0.5, "p95_m": 0.95}
+
+#: what each figure of this module means (the report's glossary collects these)
+DEFINITIONS = {
+    "95 % CI": (
+        "95 % confidence interval [lo, hi] of the figure beside it: percentile interval of "
+        "the figure recomputed on B resamples (B in the report's statistics line, seeded, "
+        "deterministic). Cluster bootstrap: each resample draws, with replacement, as many "
+        "drives as contribute to the figure and pools every scored query of the drawn drives "
+        "(queries inside a drive are correlated, so they are never resampled one by one)."),
+    "block bootstrap": (
+        "For a figure from a single drive: the drive's queries (in time order) are resampled "
+        "as circular blocks of contiguous queries instead of drives; the block length is the "
+        "larger of n^(1/3) and the lag at which the errors' autocorrelation falls below 1/e "
+        "(at most n/10), given in queries where it is used."),
+    "paired difference": (
+        "Δ mean = mean error of the predictor minus mean error of the baseline, over the "
+        "queries both answered (negative: the predictor is better); its 95 % CI resamples "
+        "drives jointly for both, so their shared difficulty cancels."),
+    "wins": (
+        "drives (among those with paired queries) on which the predictor's mean error is "
+        "below the baseline's; win share = wins / drives."),
+    "conclusive": (
+        "`*` beside a paired difference: its 95 % CI excludes 0. `?` beside a route-type "
+        "cell: not conclusive, its 95 % CI is wider than the value itself."),
+}
+
+
+# ----------------------------------------------------------------- resamples
+@lru_cache(maxsize=64)
+def _cluster_counts(n_clusters: int, n_resamples: int, seed: int) -> np.ndarray:
+    rng = np.random.default_rng(seed)
+    draws = rng.integers(0, n_clusters, size=(n_resamples, n_clusters))
+    draws += (np.arange(n_resamples) * n_clusters)[:, None]
+    counts = np.bincount(draws.ravel(), minlength=n_resamples * n_clusters)
+    out = counts.reshape(n_resamples, n_clusters).astype(np.float32)
+    out.flags.writeable = False
+    return out
+
+
+def resample_counts(n_clusters: int, n_resamples: int = DEFAULT_RESAMPLES,
+                    seed: int = 0) -> np.ndarray:
+    """Multiplicity of each cluster in each cluster-bootstrap resample.
+
+    Row ``b`` is one multinomial draw of ``n_clusters`` clusters with replacement (equal
+    probabilities): entries are integers >= 0 summing to ``n_clusters``. Deterministic for
+    a seed.
+
+    Returns:
+        (n_resamples, n_clusters) int64 array.
+    """
+    if n_clusters < 1 or n_resamples < 1:
+        raise ValueError(f"need at least one cluster and one resample, got {n_clusters}, "
+                         f"{n_resamples}")
+    return _cluster_counts(int(n_clusters), int(n_resamples), int(seed)).astype(np.int64)
+
+
+def cluster_weights(n_clusters: int, n_resamples: int = DEFAULT_RESAMPLES,
+                    seed: int = 0) -> np.ndarray:
+    """:func:`resample_counts` as a read-only float32 array (integers, exact), cached: what
+    the interval functions multiply with; the same arguments return the same array."""
+    if n_clusters < 1 or n_resamples < 1:
+        raise ValueError(f"need at least one cluster and one resample, got {n_clusters}, "
+                         f"{n_resamples}")
+    return _cluster_counts(int(n_clusters), int(n_resamples), int(seed))
+
+
+def _interval(stats: np.ndarray, level: float) -> tuple[float, float]:
+    s = stats[np.isfinite(stats)]
+    if s.size == 0:
+        return float("nan"), float("nan")
+    lo, hi = np.quantile(s, [(1.0 - level) / 2.0, (1.0 + level) / 2.0])
+    return float(lo), float(hi)
+
+
+# --------------------------------------------------------------------- means
+def resampled_means(sums: np.ndarray, counts: np.ndarray, counts_matrix: np.ndarray
+                    ) -> np.ndarray:
+    """Pooled mean sum(w * sums) / sum(w * counts) for each row w of ``counts_matrix``
+    (NaN where a resample holds no query). ``sums``, ``counts``: per cluster. A float32
+    ``counts_matrix`` (the cached ones) is multiplied in float32 (relative precision ~1e-7,
+    far below any interval's width); any other in float64."""
+    w = np.asarray(counts_matrix)
+    ftype = np.float32 if w.dtype == np.float32 else np.float64
+    w = w.astype(ftype, copy=False)
+    num = (w @ np.asarray(sums, dtype=ftype)).astype(np.float64)
+    den = (w @ np.asarray(counts, dtype=ftype)).astype(np.float64)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return np.where(den > 0, num / np.where(den > 0, den, 1.0), np.nan)
+
+
+def ratio_ci(sums: np.ndarray, counts: np.ndarray, counts_matrix: np.ndarray,
+             level: float = LEVEL) -> tuple[float, float]:
+    """Percentile interval of the pooled mean under the resamples of ``counts_matrix``.
+
+    Args:
+        sums: per cluster, the sum of its values (e.g. errors [m]); counts: per cluster,
+            how many values; counts_matrix: (B, D) multiplicities (:func:`resample_counts`,
+            or :attr:`BlockResample.counts` with the sums per block unit).
+        level: coverage (0.95).
+
+    Returns:
+        (lo, hi) in the values' unit; NaN when no resample holds a value.
+    """
+    return _interval(resampled_means(sums, counts, counts_matrix), level)
+
+
+def paired_ratio_diff(sum_a: np.ndarray, count_a: np.ndarray, sum_b: np.ndarray,
+                      count_b: np.ndarray, counts_matrix: np.ndarray,
+                      level: float = LEVEL) -> dict[str, float]:
+    """Difference of two pooled means over the same clusters, with its interval.
+
+    Sign convention (kept everywhere): ``diff = mean_b - mean_a``, where mean_x =
+    sum(sum_x) / sum(count_x). With errors, a the baseline and b a predictor, a negative
+    difference means b is better. Both means are recomputed on the **same** resample (the
+    same row of ``counts_matrix``), so what the two share (hard drives) cancels.
+
+    Args:
+        sum_a, count_a, sum_b, count_b: per cluster, sums and counts of each side (e.g.
+            ``mean_m * count`` of per-drive summaries); counts_matrix: (B, D).
+
+    Returns:
+        ``{"diff": ..., "lo": ..., "hi": ...}`` (NaN without values).
+    """
+    ca, cb = float(np.sum(count_a)), float(np.sum(count_b))
+    diff = (float(np.sum(sum_b)) / cb - float(np.sum(sum_a)) / ca) if ca > 0 and cb > 0 \
+        else float("nan")
+    d = resampled_means(sum_b, count_b, counts_matrix) - resampled_means(sum_a, count_a,
+                                                                         counts_matrix)
+    lo, hi = _interval(d, level)
+    return {"diff": diff, "lo": lo, "hi": hi}
+
+
+# ----------------------------------------------------------------- quantiles
+def _coarse_blocks(n: int, n_units: int) -> int:
+    """How many position blocks the coarse pass of :func:`resampled_quantiles` uses: a
+    balance between the B x D x K product (cheap per element) and the B x n/K gathers of
+    the fine pass; any value gives the same (exact) result."""
+    return int(min(n, max(1, round(math.sqrt(COST_RATIO * n / n_units)))))
+
+
+#: cost of one gathered element in the fine pass over one multiply-add of the coarse product
+COST_RATIO = 400.0
+
+
+def _last_at_most(table: np.ndarray, rank: np.ndarray) -> np.ndarray:
+    """Per row of ``table`` (ascending along the row, first column <= rank), the last
+    column j with table[row, j] <= rank[row]."""
+    n_rows, n_cols = table.shape
+    if n_cols <= 64:  # a comparison with every column is cheaper than a search
+        return (table[:, 1:] <= rank[:, None]).view(np.int8).sum(axis=1, dtype=np.int64)
+    flat = table.ravel()  # contiguous: a view
+    base = np.arange(n_rows, dtype=np.int64) * n_cols
+    lo = np.zeros(n_rows, dtype=np.int64)
+    hi = np.full(n_rows, n_cols - 1, dtype=np.int64)
+    for _ in range(int(n_cols).bit_length()):  # a vectorised binary search
+        mid = (lo + hi + 1) >> 1
+        ok = flat[base + mid] <= rank
+        lo = np.where(ok, mid, lo)
+        hi = np.where(ok, hi, mid - 1)
+    return lo
+
+
+def resampled_quantiles(sorted_values: np.ndarray, units: np.ndarray,
+                        counts_matrix: np.ndarray, qs: tuple[float, ...] = (0.5, 0.95)
+                        ) -> np.ndarray:
+    """Quantiles of every resample, exactly as ``np.percentile`` (linear interpolation)
+    would give them on the resample written out (each value repeated as often as its unit
+    is drawn).
+
+    Args:
+        sorted_values: pooled values, ascending; units: unit (cluster) index of each value,
+            0 .. D-1; counts_matrix: (B, D) integer multiplicities (floats allowed);
+        qs: quantiles in [0, 1].
+
+    Returns:
+        (B, len(qs)) array; NaN rows for resamples that hold no value.
+
+    Method: the sorted positions are cut into K blocks; one product W @ M (M: count of each
+    unit's values before each block start) gives, per resample, the weighted count before
+    every block, so a search finds the block holding the wanted rank; inside that block a
+    cumulative sum of the resample's weights finds the exact position. Cost B x D x K +
+    B x n / K instead of B x n. All counts are integers, exact in floating point (float32
+    while every count stays below 2**23). :func:`resampled_quantiles_many` does several
+    series under the same resamples at once.
+    """
+    return resampled_quantiles_many([(sorted_values, units)], counts_matrix, qs)[0]
+
+
+def resampled_quantiles_many(series: Sequence[tuple[np.ndarray, np.ndarray]],
+                             counts_matrix: np.ndarray, qs: tuple[float, ...] = (0.5, 0.95)
+                             ) -> list[np.ndarray]:
+    """:func:`resampled_quantiles` of several series (each: sorted values and their units)
+    whose units share the resamples ``counts_matrix`` (e.g. each predictor's errors on the
+    same queries), in one pass: one matrix product and one search for all of them."""
+    w = np.asarray(counts_matrix)
+    n_res, n_units = w.shape
+    outs = [np.full((n_res, len(qs)), np.nan) for _ in series]
+    live = [i for i, (v, _) in enumerate(series) if np.asarray(v).size]
+    if not live:
+        return outs
+    n_max = max(np.asarray(series[i][0]).size for i in live)
+    # a resample holds at most n * n_units values: exact in float32 below 2**23
+    ftype = np.float32 if float(n_max) * n_units < 2.0 ** 23 else np.float64
+    wf = np.ascontiguousarray(w, dtype=ftype)  # no copy for the cached float32 weights
+    k = _coarse_blocks(n_max, n_units)
+    length = -(-n_max // k)
+    k = -(-n_max // length)
+    n_ser = len(live)
+    before = np.zeros((n_units, n_ser, k), dtype=ftype)
+    sizes = np.zeros((n_units, n_ser), dtype=ftype)
+    unit_blocks = np.zeros((n_ser, k * length), dtype=np.int64)
+    value_blocks = np.empty((n_ser, k * length))
+    for j, i in enumerate(live):
+        v = np.asarray(series[i][0], dtype=np.float64)
+        u = np.asarray(series[i][1], dtype=np.int64)
+        hist = np.bincount(u * k + np.arange(v.size) // length, minlength=n_units * k)
+        hist = hist.reshape(n_units, k)
+        np.cumsum(hist[:, :-1], axis=1, out=before[:, j, 1:])
+        sizes[:, j] = hist.sum(axis=1)
+        # positions past n pad the last block: weight there only adds after the
+        # resample's last value, so it is never counted
+        unit_blocks[j, :v.size] = u
+        value_blocks[j, :v.size] = v
+        value_blocks[j, v.size:] = v[-1]
+    unit_blocks = unit_blocks.reshape(n_ser * k, length)
+    value_blocks = value_blocks.reshape(n_ser * k, length)
+    # per (series, resample) row: weight before each block start, and the resample's size
+    wm = np.ascontiguousarray((wf @ before.reshape(n_units, n_ser * k))
+                              .reshape(n_res, n_ser, k).transpose(1, 0, 2)).reshape(-1, k)
+    total = (wf @ sizes).T.ravel().astype(np.float64)
+    n_rows = n_ser * n_res
+    rows = np.arange(n_rows)
+    series_of = rows // n_res
+    flat_w = wf.ravel()
+    row_base = ((rows % n_res) * n_units)[:, None]
+
+    def count_le(cum: np.ndarray, limit: np.ndarray) -> np.ndarray:
+        return (cum <= limit[:, None]).view(np.int8).sum(axis=1, dtype=np.int64)
+
+    def locate(rank: np.ndarray, which: np.ndarray | None = None
+               ) -> tuple[np.ndarray, np.ndarray]:
+        """Row of the block table and cumulative weights of the block holding ``rank``
+        (in rows ``which``, default all)."""
+        sub = wm if which is None else wm[which]
+        blk = _last_at_most(sub, rank)
+        tab = blk + (series_of * k if which is None else series_of[which] * k)
+        base = row_base if which is None else row_base[which]
+        cum = np.cumsum(flat_w.take(unit_blocks[tab] + base), axis=1)
+        cum += sub[np.arange(len(blk)), blk][:, None]
+        return tab, cum
+
+    def value_pair(rank: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Values at ``rank`` and ``rank + 1`` (0-based) of each sorted resample."""
+        tab, cum = locate(rank)
+        at = count_le(cum, rank)
+        at1 = count_le(cum, rank + 1)
+        lo = value_blocks[tab, np.minimum(at, length - 1)]
+        hi = value_blocks[tab, np.minimum(at1, length - 1)]
+        spill = np.flatnonzero(at1 >= length)  # rank + 1 in a later block: look there
+        if spill.size:
+            tab2, cum2 = locate(rank[spill] + 1, spill)
+            at2 = np.minimum(count_le(cum2, rank[spill] + 1), length - 1)
+            hi[spill] = value_blocks[tab2, at2]
+        return lo, hi
+
+    ok = total > 0
+    last = np.where(ok, total - 1.0, 0.0)
+    res = np.full((n_rows, len(qs)), np.nan)
+    for j, q in enumerate(qs):
+        h = last * q
+        r = np.floor(h)
+        lo, hi = value_pair(r.astype(ftype))
+        hi = np.where(r + 1.0 <= last, hi, lo)
+        res[:, j] = np.where(ok, lo + (h - r) * (hi - lo), np.nan)
+    for j, i in enumerate(live):
+        outs[i] = res[j * n_res:(j + 1) * n_res]
+    return outs
+
+
+def quantile_ci(sorted_values: np.ndarray, units: np.ndarray, counts_matrix: np.ndarray,
+                qs: tuple[float, ...] = (0.5, 0.95), level: float = LEVEL
+                ) -> list[tuple[float, float]]:
+    """Percentile interval of each quantile in ``qs`` of the pooled values under the
+    resamples of ``counts_matrix`` (see :func:`resampled_quantiles`)."""
+    stats = resampled_quantiles(sorted_values, units, counts_matrix, qs)
+    return [_interval(stats[:, j], level) for j in range(len(qs))]
+
+
+# ----------------------------------------------------------- block bootstrap
+def block_length(x: np.ndarray) -> int:
+    """Block length [samples] for the block bootstrap of a series in time order.
+
+    The larger of ceil(n^(1/3)) (the classic rate for variance estimation) and the first
+    lag at which the sample autocorrelation of ``x`` falls below 1/e (how far the series
+    remembers itself), at most n // :data:`MIN_BLOCKS` and at least 1. A constant series
+    gets ceil(n^(1/3)).
+    """
+    x = np.asarray(x, dtype=np.float64)
+    n = x.size
+    if n <= 1:
+        return 1
+    base = math.ceil(n ** (1.0 / 3.0))
+    cap = max(1, n // MIN_BLOCKS)
+    d = x - x.mean()
+    var = float(d @ d)
+    lag = 0
+    if var > 0:
+        size = 1 << (2 * n - 1).bit_length()
+        f = np.fft.rfft(d, size)
+        acf = np.fft.irfft(f * np.conj(f), size)[:n] / var
+        below = np.flatnonzero(acf < 1.0 / math.e)
+        lag = int(below[0]) if below.size else n
+    return int(max(1, min(max(base, lag), cap)))
+
+
+@dataclass(frozen=True)
+class BlockResample:
+    """A circular block bootstrap of one series of n samples, expressed as a cluster
+    bootstrap over units of contiguous samples.
+
+    Attributes:
+        units: (n,) unit index of each sample (sample i is in unit i // unit_len).
+        counts: (B, U) float64 multiplicity of each unit in each resample.
+        block_len: samples per resampled block (a multiple of ``unit_len``).
+        unit_len: samples per unit.
+    """
+
+    units: np.ndarray
+    counts: np.ndarray
+    block_len: int
+    unit_len: int
+
+
+@lru_cache(maxsize=16)
+def _block_counts(n_units: int, per_block: int, n_resamples: int, seed: int) -> np.ndarray:
+    rng = np.random.default_rng(seed)
+    n_blocks = -(-n_units // per_block)
+    starts = rng.integers(0, n_units, size=(n_resamples, n_blocks))
+    starts += (np.arange(n_resamples) * n_units)[:, None]
+    c = np.bincount(starts.ravel(), minlength=n_resamples * n_units).reshape(n_resamples,
+                                                                             n_units)
+    w = c.astype(np.float32)
+    flat_w, flat_c = w.ravel(), c.ravel()
+    for j in range(1, min(per_block, n_units)):
+        # a block starting at unit s covers s .. s+per_block-1 (circularly): shift the
+        # starts by j along the flat array, then move what crossed into the next row to the
+        # start of its own row
+        flat_w[j:] += flat_c[:-j]
+        w[1:, :j] -= c[:-1, n_units - j:]
+        w[:, :j] += c[:, n_units - j:]
+    w.flags.writeable = False
+    return w
+
+
+def unit_length(n: int) -> int:
+    """Samples per unit in :func:`block_resample` of a series of ``n``: half of n^(1/3)
+    (so the shortest block, ceil(n^(1/3)), spans about two units), more when the series would
+    need more than :data:`MAX_UNITS` units. It depends on n only, so that series of the
+    same length (one drive's queries for each predictor) share their resamples."""
+    return int(max(1, round(n ** (1.0 / 3.0) / 2.0), -(-n // MAX_UNITS)))
+
+
+def block_resample(n: int, block_len: int, n_resamples: int = DEFAULT_RESAMPLES,
+                   seed: int = 0) -> BlockResample:
+    """Circular block bootstrap of a series of ``n`` samples in time order.
+
+    The series is cut into units of :func:`unit_length` contiguous samples; a block is
+    ``per_block`` = round(block_len / unit_len) consecutive units (at least one; wrapping
+    around the end), its start drawn uniformly among the units; each resample joins
+    ceil(U / per_block) blocks, about n samples. Block starts are thus on a grid of one
+    unit (a circular block bootstrap whose starts are every unit_len-th sample). The
+    multiplicities per unit plug into :func:`ratio_ci` and :func:`resampled_quantiles` as
+    clusters do. The block length actually used (per_block * unit_len) is returned.
+    """
+    if n < 1 or block_len < 1:
+        raise ValueError(f"need n >= 1 and block_len >= 1, got {n}, {block_len}")
+    unit_len = unit_length(n)
+    n_units = -(-n // unit_len)
+    per_block = min(n_units, max(1, round(min(block_len, n) / unit_len)))
+    counts = _block_counts(n_units, per_block, int(n_resamples), int(seed))
+    return BlockResample(np.arange(n) // unit_len, counts, per_block * unit_len, unit_len)
+
+
+# ------------------------------------------------------------------ summaries
+def _compact(clusters: np.ndarray) -> tuple[np.ndarray, int]:
+    """Cluster labels as 0 .. D-1 (order of first sorted label) and D."""
+    c = np.asarray(clusters)
+    if c.dtype.kind in "iu" and (c.size == 0 or c.min() >= 0):
+        present = np.bincount(c) > 0 if c.size else np.zeros(0, dtype=bool)
+        index = np.cumsum(present) - 1
+        return index[c], int(present.sum())
+    uniq, inv = np.unique(c, return_inverse=True)
+    return inv.ravel(), int(uniq.size)
+
+
+def _time_order(values: np.ndarray, times: np.ndarray | None) -> np.ndarray:
+    """Indices putting one cluster's values in time order (as given without times)."""
+    if times is None:
+        return np.arange(values.shape[-1])
+    t = np.asarray(times, dtype=np.float64)
+    if t.size < 2 or bool(np.all(t[1:] >= t[:-1])):
+        return np.arange(t.size)
+    return np.argsort(t, kind="stable")
+
+
+def summary_ci(errors: np.ndarray, clusters: np.ndarray, times: np.ndarray | None = None,
+               n_resamples: int = DEFAULT_RESAMPLES, seed: int = 0,
+               level: float = LEVEL) -> dict[str, object]:
+    """Intervals of the mean, median and p95 of the finite ``errors`` (what
+    :func:`metrics.accuracy.summarize` reports), resampling ``clusters`` (e.g. the drive of
+    each query); with a single cluster, a block bootstrap over the queries in time order
+    (``times`` [s]; default: the order given).
+
+    Returns:
+        ``{"mean_m": [lo, hi], "median_m": [lo, hi], "p95_m": [lo, hi], "clusters": D,
+        "block_len": L}``: ``block_len`` is the block length [queries] when one cluster was
+        block-resampled, else None; with no finite error every interval is NaN and D = 0.
+    """
+    return summary_cis([errors], clusters, times, n_resamples, seed, level)[0]
+
+
+def summary_cis(errors: Sequence[np.ndarray], clusters: np.ndarray,
+                times: np.ndarray | None = None, n_resamples: int = DEFAULT_RESAMPLES,
+                seed: int = 0, level: float = LEVEL) -> list[dict[str, object]]:
+    """:func:`summary_ci` of several error arrays over the same queries (``clusters`` and
+    ``times`` shared; e.g. each predictor's errors on one drive). Each array gets exactly
+    what :func:`summary_ci` gives it; those that end up with the same resamples (same
+    clusters, or the same block length) share one quantile pass."""
+    clusters = np.asarray(clusters)
+    nan2 = [float("nan"), float("nan")]
+    out: list[dict[str, object]] = []
+    shared: dict[int, tuple[np.ndarray, list[tuple[int, np.ndarray, np.ndarray]]]] = {}
+    for i, err in enumerate(errors):
+        e = np.asarray(err, dtype=np.float64)
+        ok = np.isfinite(e)
+        e = e[ok]
+        if e.size == 0:
+            out.append({"mean_m": list(nan2), "median_m": list(nan2), "p95_m": list(nan2),
+                        "clusters": 0, "block_len": None})
+            continue
+        c, d = _compact(clusters[ok])
+        block = None
+        if d == 1:
+            e = e[_time_order(e, None if times is None else np.asarray(times)[ok])]
+            br = block_resample(e.size, block_length(e), n_resamples, seed)
+            units, w, block = br.units, br.counts, br.block_len
+        else:
+            units, w = c, cluster_weights(d, n_resamples, seed)
+        n_units = w.shape[1]
+        sums = np.bincount(units, weights=e, minlength=n_units)
+        counts = np.bincount(units, minlength=n_units)
+        out.append({"mean_m": list(ratio_ci(sums, counts, w, level)), "clusters": d,
+                    "block_len": block})
+        order = np.argsort(e)  # ties hold equal values: any order of them gives the same
+        shared.setdefault(id(w), (w, []))[1].append((i, e[order], units[order]))
+    for w, members in shared.values():
+        stats = resampled_quantiles_many([(v, u) for _, v, u in members], w,
+                                         tuple(QUANTILES.values()))
+        for (i, _, _), st in zip(members, stats, strict=True):
+            for j, key in enumerate(QUANTILES):
+                out[i][key] = list(_interval(st[:, j], level))
+    return [{k: r[k] for k in ("mean_m", "median_m", "p95_m", "clusters", "block_len")}
+            for r in out]
+
+
+def paired_summary(errors_a: np.ndarray, errors_b: np.ndarray, clusters: np.ndarray,
+                   times: np.ndarray | None = None, n_resamples: int = DEFAULT_RESAMPLES,
+                   seed: int = 0, level: float = LEVEL) -> dict[str, object]:
+    """Paired comparison of two sets of errors on the same queries (a: baseline, b: the
+    predictor compared), over the queries both answered (finite in both); ``times`` [s]
+    order the queries of a single cluster for its block bootstrap.
+
+    Returns:
+        ``diff_m`` (mean b - mean a: negative = b better), ``ci95`` [lo, hi] (cluster
+        bootstrap over ``clusters``, or a block bootstrap of the queries in the given order
+        when there is one cluster; block length from the per-query differences),
+        ``drives`` (clusters with paired queries), ``wins`` (clusters where b's mean error
+        is below a's), ``win_share``, ``conclusive`` (the interval excludes 0),
+        ``queries`` (paired queries) and ``block_len`` (None unless block-resampled).
+    """
+    a = np.asarray(errors_a, dtype=np.float64)
+    b = np.asarray(errors_b, dtype=np.float64)
+    ok = np.isfinite(a) & np.isfinite(b)
+    a, b = a[ok], b[ok]
+    nan = float("nan")
+    if a.size == 0:
+        return {"diff_m": nan, "ci95": [nan, nan], "drives": 0, "wins": 0, "win_share": nan,
+                "conclusive": False, "queries": 0, "block_len": None}
+    c, d = _compact(np.asarray(clusters)[ok])
+    per_a = np.bincount(c, weights=a, minlength=d)
+    per_b = np.bincount(c, weights=b, minlength=d)
+    wins = int(np.sum(per_b < per_a))  # same counts on both sides: compare the sums
+    block = None
+    if d == 1:
+        order = _time_order(a, None if times is None else np.asarray(times)[ok])
+        a, b = a[order], b[order]
+        block = block_length(b - a)
+        br = block_resample(a.size, block, n_resamples, seed)
+        units, w, block = br.units, br.counts, br.block_len
+    else:
+        units, w = c, cluster_weights(d, n_resamples, seed)
+    n_units = w.shape[1]
+    cnt = np.bincount(units, minlength=n_units)
+    r = paired_ratio_diff(np.bincount(units, weights=a, minlength=n_units), cnt,
+                          np.bincount(units, weights=b, minlength=n_units), cnt, w, level)
+    conclusive = bool(r["lo"] > 0 or r["hi"] < 0)
+    return {"diff_m": r["diff"], "ci95": [r["lo"], r["hi"]], "drives": d, "wins": wins,
+            "win_share": wins / d, "conclusive": conclusive, "queries": int(a.size),
+            "block_len": block}
