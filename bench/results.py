@@ -103,6 +103,15 @@ def learned_models(cfg: RunConfig) -> dict[str, dict[str, Any]]:
     return out
 
 
+#: which queries the figures are over (the report's glossary collects this)
+DEFINITIONS = {
+    "scored queries": "every figure is over the queries of its row and cell (predictor; data "
+                      "set, route type, speed bin, drive) that are past their drive's warm-up "
+                      "(issued after its second received fix) and have a reference position; "
+                      "`future` and `now` queries are never mixed.",
+}
+
+
 def scored_mask(traces: pd.DataFrame) -> np.ndarray:
     """Rows that count in the headline figures: past the warm-up (see
     :func:`bench.scoring.warmup_end_s`) and with a known reference position."""

@@ -44,8 +44,8 @@ QUANTILES = {"median_m": 0.5, "p95_m": 0.95}
 DEFINITIONS = {
     "95 % CI": (
         "95 % confidence interval [lo, hi] of the figure beside it: percentile interval of "
-        "the figure recomputed on B resamples (B in the report's statistics line, seeded, "
-        "deterministic). Cluster bootstrap: each resample draws, with replacement, as many "
+        "the figure recomputed on B seeded resamples (B and the seed: the report's header). "
+        "Cluster bootstrap: each resample draws, with replacement, as many "
         "drives as contribute to the figure and pools every scored query of the drawn drives "
         "(queries inside a drive are correlated, so they are never resampled one by one)."),
     "block bootstrap": (

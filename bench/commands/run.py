@@ -32,6 +32,8 @@ from bench.options import (
     check_out_file,
     check_synthetic_duration,
     parse_predictor_names,
+    parse_seeds,
+    resolve_baseline,
     validate_predictors,
     with_model_aliases,
 )
@@ -54,8 +56,20 @@ def run(
     dropouts: Annotated[str, typer.Option(
         metavar="PROFILE",
         help="GPS dropouts: none, random:P, outages (0.5/1/2/5 s), outage:L.")] = "none",
-    seed: Annotated[int, typer.Option(
-        metavar="INT", help="Master seed (GPS draws, dropouts, synthetic data).")] = 0,
+    seed: Annotated[int | None, typer.Option(
+        metavar="INT", help="Master seed (GPS draws, dropouts, synthetic data); default 0.")
+    ] = None,
+    seeds: Annotated[str | None, typer.Option(
+        "--seeds", metavar="N|S,S,...",
+        help="Repeat the run over GPS-noise and dropout seeds, same drives: a count (5 = seeds "
+             "0..4) or a list (0,1,2,3,4). The report adds each figure's mean, sd, min and max "
+             "across seeds; traces, plots and every other figure are the first seed's. Not "
+             "with --seed.")] = None,
+    baseline: Annotated[str | None, typer.Option(
+        "--baseline", metavar="NAME|none",
+        help="Predictor the others are compared with on the same queries (difference of mean "
+             "error, 95 % CI, drives won). Default: kf when it is in the run; none: no "
+             "comparison.")] = None,
     out: Annotated[Path, typer.Option("--out", "-o", metavar="DIR", help="Output folder.")
                    ] = Path("bench-out"),
     workers: Annotated[int, typer.Option(
@@ -104,6 +118,7 @@ def run(
     from bench.config import GPS_PROFILES, RunConfig
     from bench.executors import EXECUTORS, RAY_MISSING, ExecutorError, ray_available
     from bench.fetch import local_paths
+    from bench.intervals import Statistics
     from scenarios.projection import PROJECTIONS
 
     try:
@@ -121,6 +136,11 @@ def run(
         check_horizon(horizon)
         check_at_least(gps_latency, 0.0, "--gps-latency", " s")
         check_dropouts(dropouts)
+        if seed is not None and seeds is not None:
+            raise UsageError("--seed and --seeds together: give one seed (--seed 3) or the "
+                             "seeds to repeat the run over (--seeds 0,1,2)")
+        seed_list = parse_seeds(seeds) if seeds is not None else [0 if seed is None else seed]
+        seed = seed_list[0]
         check_at_least(seed, 0, "--seed")
         check_at_least(workers, 1, "--workers")
         check_synthetic_duration(synthetic_duration, data)
@@ -137,6 +157,7 @@ def run(
         options = model_options(model)
         names = with_model_aliases(names, options)
         options = validate_predictors(names, options)
+        stats = Statistics(baseline=resolve_baseline(baseline, names))
         cfg = RunConfig(predictors=names, horizon_s=horizon, gps_profile=gps_profile,
                         gps_latency_s=gps_latency, dropouts=dropouts, seed=seed,
                         exclude_poor_truth=not include_poor_truth, predictor_options=options,
@@ -145,7 +166,7 @@ def run(
             drives = load_drives(data, projection, topics, seed=seed,
                                  synthetic_duration=synthetic_duration)
             _run(drives, cfg, data, out, workers, rerun, executor, address, formats,
-                 n_drive_plots)
+                 n_drive_plots, stats, seed_list if seeds is not None else None)
     except (DataError, UsageError, ExecutorError) as e:
         raise fail(str(e)) from None
     except BrokenProcessPool:
@@ -180,31 +201,51 @@ def plural(n: int, word: str) -> str:
     return f"{n} {word}" + ("" if n == 1 else "s")
 
 
-def _run(drives, cfg, data, out: Path, workers: int, rerun: Path | None = None,
-         executor: str = "local", address: str | None = None,
-         formats: tuple[str, ...] = ("png",), drive_plots: int | None = 20) -> None:
+def _replay(drives, cfg, executor: str, workers: int, address: str | None, label: str = ""):
+    """Every drive through every predictor of ``cfg``, with a progress bar."""
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
     from bench.executors import run_drives
+
+    with Progress(TextColumn("[bold]{task.description}"), BarColumn(), MofNCompleteColumn(),
+                  TimeElapsedColumn(), TextColumn("{task.fields[last]}"), console=console) as prog:
+        task = prog.add_task(f"{label}{plural(len(drives), 'drive')} x "
+                             f"{plural(len(cfg.predictors), 'predictor')}",
+                             total=len(drives), last="")
+        return run_drives(drives, cfg, executor, workers=workers, address=address,
+                          on_done=lambda r: prog.update(task, advance=1, last=r.name))
+
+
+def _run(drives, cfg, data, out: Path, workers: int, rerun: Path | None = None,
+         executor: str = "local", address: str | None = None,
+         formats: tuple[str, ...] = ("png",), drive_plots: int | None = 20,
+         stats=None, seeds: list[int] | None = None) -> None:
+    from dataclasses import replace
+
     from bench.outputs import remove_previous_outputs
     from bench.report import excluded_note, trained_note, write_report
     from bench.results import aggregate, all_traces, tree_hash
     from bench.saved_run import Run, save_run
+    from bench.seeds import seed_figures, seeds_section
     from bench.terminal import print_table
 
     command = command_line()
-    with Progress(TextColumn("[bold]{task.description}"), BarColumn(), MofNCompleteColumn(),
-                  TimeElapsedColumn(), TextColumn("{task.fields[last]}"), console=console) as prog:
-        task = prog.add_task(f"{plural(len(drives), 'drive')} x "
-                             f"{plural(len(cfg.predictors), 'predictor')}",
-                             total=len(drives), last="")
-        runs = run_drives(drives, cfg, executor, workers=workers, address=address,
-                          on_done=lambda r: prog.update(task, advance=1, last=r.name))
+    first = f"seed {cfg.seed} (1/{len(seeds)}): " if seeds else ""
+    runs = _replay(drives, cfg, executor, workers, address, first)
     manifest = ([tree_hash(p) for p in data] if data else
                 [{"path": "built-in synthetic drives", "files": 0, "bytes": 0,
                   "sha256": f"generator seed {cfg.seed}"}])
     traces = all_traces(runs)
-    res = aggregate(runs, cfg, manifest, command, traces=traces)
+    res = aggregate(runs, cfg, manifest, command, traces=traces, statistics=stats)
+    if seeds:
+        base = res["paired"]["baseline"]
+        figures = [seed_figures(traces, cfg.predictors, base, cfg.seed)]
+        for i, s in enumerate(seeds[1:], start=2):
+            runs_s = _replay(drives, replace(cfg, seed=s), executor, workers, address,
+                             f"seed {s} ({i}/{len(seeds)}): ")
+            figures.append(seed_figures(all_traces(runs_s), cfg.predictors, base, s))
+            del runs_s
+        res["seeds"] = seeds_section(seeds, figures)
     from bench.figures import paper_figures
 
     out.mkdir(parents=True, exist_ok=True)
@@ -227,14 +268,26 @@ def _run(drives, cfg, data, out: Path, workers: int, rerun: Path | None = None,
     if not any(p[k]["count"] for p in res["predictors"].values() for k in ("future", "now")):
         console.print("warning: no query could be scored (no reference position at any query "
                       "past the warm-up); see the exclusions below", highlight=False)
-    from bench.tables import summary_table
+    from bench.report import has_paired
+    from bench.tables import paired_table, seeds_table, summary_table
 
-    headline = summary_table(res)
+    headline = summary_table(res, compact=True)
     print_table(console, headline.header(), headline.cells(),
-                title=f"{plural(scored, 'drive')} - errors in metres, latency in microseconds")
+                title=f"{plural(scored, 'drive')} - errors in metres [95 % CI], latency in "
+                      f"microseconds")
     for note in (trained_note(res), excluded_note(res)):
         if note:
             console.print(note, highlight=False)
+    if has_paired(res):
+        paired = paired_table(res)
+        print_table(console, paired.header(), paired.cells(),
+                    title=f"against {res['paired']['baseline']}: difference of mean error [m] on "
+                          f"the same queries [95 % CI], * = CI excludes 0")
+    if res.get("seeds"):
+        st = seeds_table(res)
+        print_table(console, st.header(), st.cells(),
+                    title=f"over seeds {', '.join(map(str, res['seeds']['seeds']))}: mean error "
+                          f"[m] (figures and traces: seed {res['seeds']['traces_seed']})")
     if res.get("held_out_all"):
         ho = res["held_out_all"]
         held = summary_table(res, held_out=True)
