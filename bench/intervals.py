@@ -27,6 +27,7 @@ from metrics.bootstrap import (
     DEFAULT_RESAMPLES,
     LEVEL,
     MIN_BLOCKS,
+    group_cis,
     paired_summary,
     summary_ci,
     summary_cis,
@@ -58,8 +59,8 @@ class Statistics:
         """``results["statistics"]``."""
         return {"method": "cluster bootstrap over drives, percentile interval",
                 "single_drive_method": "circular block bootstrap of contiguous queries "
-                                       "(block length: the larger of n^(1/3) and the lag where "
-                                       f"the autocorrelation falls below 1/e, at most n/{MIN_BLOCKS})",
+                                       "(block length: Politis & White 2004/2009 automatic "
+                                       f"rule, at least {MIN_BLOCKS} blocks per resample)",
                 "resamples": self.resamples, "seed": self.seed, "level": self.level,
                 "baseline": self.baseline}
 
@@ -127,10 +128,13 @@ def add_group_cis(summaries: Mapping[str, dict[str, Any]], errors: np.ndarray,
     if stats is None:
         return
     code, names = pd.factorize(np.asarray(keys))
-    index = {str(n): i for i, n in enumerate(names)}
+    wanted = {str(n): i for i, n in enumerate(names)}
+    cis = group_cis(errors, code, codes, times, n_resamples=stats.resamples, seed=stats.seed,
+                    level=stats.level)
+    empty = _entry(summary_ci(np.empty(0), np.empty(0, dtype=np.int64)))
     for k, s in summaries.items():
-        m = code == index.get(str(k), -2)
-        with_ci(s, errors[m], codes[m], None if times is None else times[m], stats)
+        i = wanted.get(str(k))
+        s["ci95"] = _entry(cis[i]) if i is not None else dict(empty)
 
 
 def since_fix_keys(since_fix_s: np.ndarray) -> np.ndarray:

@@ -164,13 +164,12 @@ def _columns(df: pd.DataFrame, kind: str) -> tuple[np.ndarray, np.ndarray, np.nd
 def _kind_summaries(df: pd.DataFrame, stats: Statistics | None = None) -> dict[str, Any]:
     """Per kind, :func:`summarize` of the errors, with ``ci95`` given ``stats`` (``df`` then
     needs the ``code`` column of :func:`_with_codes`)."""
-    out = {}
-    for k in KINDS:
-        if stats is None:
-            out[k] = summarize(df.loc[df["kind"] == k, "error_m"].to_numpy())
-            continue
-        e, codes, t, _ = _columns(df, k)
-        out[k] = with_ci(summarize(e), e, codes, t, stats)
+    if stats is None:
+        return {k: summarize(df.loc[df["kind"] == k, "error_m"].to_numpy()) for k in KINDS}
+    kind = df["kind"].to_numpy()
+    out = {k: summarize(df["error_m"].to_numpy(dtype=float)[kind == k]) for k in KINDS}
+    add_group_cis(out, df["error_m"].to_numpy(dtype=float), kind, df["code"].to_numpy(),
+                  df["t_query"].to_numpy(dtype=float), stats)
     return out
 
 

@@ -35,7 +35,7 @@ DEFAULT_RESAMPLES = 2000
 LEVEL = 0.95
 #: at most this many units in a block bootstrap (longer series get longer units)
 MAX_UNITS = 1024
-#: a block is at most 1/MIN_BLOCKS of the series
+#: a resample joins at least this many blocks (a block is at most 1/MIN_BLOCKS of the series)
 MIN_BLOCKS = 10
 #: the quantiles whose intervals :func:`summary_ci` gives, with their results keys
 QUANTILES = {"median_m": 0.5, "p95_m": 0.95}
@@ -50,9 +50,10 @@ DEFINITIONS = {
         "(queries inside a drive are correlated, so they are never resampled one by one)."),
     "block bootstrap": (
         "For a figure from a single drive: the drive's queries (in time order) are resampled "
-        "as circular blocks of contiguous queries instead of drives; the block length is the "
-        "larger of n^(1/3) and the lag at which the errors' autocorrelation falls below 1/e "
-        "(at most n/10), given in queries where it is used."),
+        "as circular blocks of contiguous queries instead of drives; the block length follows "
+        "the automatic rule of Politis & White (2004, corrected 2009) from the errors' "
+        "autocorrelation (longer the longer errors stay correlated; at least 10 blocks per "
+        "resample), is rounded to the block grid, and is given in queries where it is used."),
     "paired difference": (
         "Δ mean = mean error of the predictor minus mean error of the baseline, over the "
         "queries both answered (negative: the predictor is better); its 95 % CI resamples "
@@ -106,11 +107,18 @@ def cluster_weights(n_clusters: int, n_resamples: int = DEFAULT_RESAMPLES,
 
 
 def _interval(stats: np.ndarray, level: float) -> tuple[float, float]:
-    s = stats[np.isfinite(stats)]
+    """The percentile interval: the (1 -/+ level) / 2 quantiles of the finite ``stats``
+    (linear interpolation, as ``np.quantile``, without its overhead)."""
+    s = np.sort(stats[np.isfinite(stats)])
     if s.size == 0:
         return float("nan"), float("nan")
-    lo, hi = np.quantile(s, [(1.0 - level) / 2.0, (1.0 + level) / 2.0])
-    return float(lo), float(hi)
+    out = []
+    for p in ((1.0 - level) / 2.0, (1.0 + level) / 2.0):
+        h = (s.size - 1) * p
+        i = min(int(h), s.size - 1)
+        j = min(i + 1, s.size - 1)
+        out.append(float(s[i] + (h - i) * (s[j] - s[i])))
+    return out[0], out[1]
 
 
 # --------------------------------------------------------------------- means
@@ -275,6 +283,8 @@ def resampled_quantiles_many(series: Sequence[tuple[np.ndarray, np.ndarray]],
     flat_w = wf.ravel()
     row_base = ((rows % n_res) * n_units)[:, None]
 
+    upper = np.triu(np.ones((length, length), dtype=ftype)) if length <= 64 else None
+
     def count_le(cum: np.ndarray, limit: np.ndarray) -> np.ndarray:
         return (cum <= limit[:, None]).view(np.int8).sum(axis=1, dtype=np.int64)
 
@@ -286,7 +296,9 @@ def resampled_quantiles_many(series: Sequence[tuple[np.ndarray, np.ndarray]],
         blk = _last_at_most(sub, rank)
         tab = blk + (series_of * k if which is None else series_of[which] * k)
         base = row_base if which is None else row_base[which]
-        cum = np.cumsum(flat_w.take(unit_blocks[tab] + base), axis=1)
+        wts = flat_w.take(unit_blocks[tab] + base)
+        # a running sum along short rows is faster as a product with a triangle of ones
+        cum = wts @ upper if upper is not None else np.cumsum(wts, axis=1)
         cum += sub[np.arange(len(blk)), blk][:, None]
         return tab, cum
 
@@ -328,30 +340,51 @@ def quantile_ci(sorted_values: np.ndarray, units: np.ndarray, counts_matrix: np.
 
 
 # ----------------------------------------------------------- block bootstrap
-def block_length(x: np.ndarray) -> int:
-    """Block length [samples] for the block bootstrap of a series in time order.
+def _autocovariance(x: np.ndarray, max_lag: int) -> np.ndarray:
+    """Sample autocovariances (divisor n) of ``x`` at lags 0 .. max_lag, through the FFT."""
+    n = x.size
+    d = x - x.mean()
+    size = 1 << (2 * n - 1).bit_length()
+    f = np.fft.rfft(d, size)
+    return np.fft.irfft(f * np.conj(f), size)[:max_lag + 1] / n
 
-    The larger of ceil(n^(1/3)) (the classic rate for variance estimation) and the first
-    lag at which the sample autocorrelation of ``x`` falls below 1/e (how far the series
-    remembers itself), at most n // :data:`MIN_BLOCKS` and at least 1. A constant series
-    gets ceil(n^(1/3)).
+
+def block_length(x: np.ndarray) -> int:
+    """Block length [samples] for the circular block bootstrap of a series in time order.
+
+    The automatic rule of Politis & White (2004) with the correction of Patton, Politis &
+    White (2009): b = (2 G^2 / D)^(1/3) n^(1/3), D = 4/3 g(0)^2, with g(0) (the long-run
+    variance) and G = sum |k| gamma(k) estimated from the sample autocovariances gamma(k)
+    under a flat-top window of 2m lags, m the first lag after which Kn = max(5,
+    log10 n) autocorrelations in a row are insignificant (|rho| < 2 sqrt(log10 n / n)).
+    It grows with how long the series remembers itself (about 75 samples for an AR(1) of
+    coefficient 0.9 and n = 3000; 1-3 for independent samples). Rounded, at least 1, at
+    most min(3 sqrt(n), n / :data:`MIN_BLOCKS`) so that a resample joins at least
+    :data:`MIN_BLOCKS` blocks.
     """
     x = np.asarray(x, dtype=np.float64)
     n = x.size
-    if n <= 1:
+    cap = max(1, min(math.ceil(3.0 * math.sqrt(n)), n // MIN_BLOCKS))
+    if n < 3:
         return 1
-    base = math.ceil(n ** (1.0 / 3.0))
-    cap = max(1, n // MIN_BLOCKS)
-    d = x - x.mean()
-    var = float(d @ d)
-    lag = 0
-    if var > 0:
-        size = 1 << (2 * n - 1).bit_length()
-        f = np.fft.rfft(d, size)
-        acf = np.fft.irfft(f * np.conj(f), size)[:n] / var
-        below = np.flatnonzero(acf < 1.0 / math.e)
-        lag = int(below[0]) if below.size else n
-    return int(max(1, min(max(base, lag), cap)))
+    kn = max(5, int(math.log10(n)))
+    m_max = min(n - 1, math.ceil(math.sqrt(n)) + kn)
+    acv = _autocovariance(x, m_max)
+    if not acv[0] > 0:
+        return 1  # a constant series: nothing to keep together
+    small = np.abs(acv[1:] / acv[0]) < 2.0 * math.sqrt(math.log10(n) / n)  # lags 1 .. m_max
+    runs = np.convolve(small.astype(np.int64), np.ones(kn, dtype=np.int64), "valid")
+    first = np.flatnonzero(runs == kn)
+    m = min(2 * max(int(first[0]), 1), m_max) if first.size else m_max
+    k = np.arange(1, m + 1)
+    t = k / m
+    lam = np.where(t <= 0.5, 1.0, 2.0 * (1.0 - t))
+    g0 = acv[0] + 2.0 * float(np.sum(lam * acv[1:m + 1]))
+    g = 2.0 * float(np.sum(lam * k * acv[1:m + 1]))
+    if not g0 > 0 or g == 0:
+        return 1
+    b = (2.0 * g * g / (4.0 / 3.0 * g0 * g0)) ** (1.0 / 3.0) * n ** (1.0 / 3.0)
+    return int(max(1, min(round(b), cap)))
 
 
 @dataclass(frozen=True)
@@ -380,25 +413,37 @@ def _block_counts(n_units: int, per_block: int, n_resamples: int, seed: int) -> 
     starts += (np.arange(n_resamples) * n_units)[:, None]
     c = np.bincount(starts.ravel(), minlength=n_resamples * n_units).reshape(n_resamples,
                                                                              n_units)
-    w = c.astype(np.float32)
-    flat_w, flat_c = w.ravel(), c.ravel()
-    for j in range(1, min(per_block, n_units)):
-        # a block starting at unit s covers s .. s+per_block-1 (circularly): shift the
-        # starts by j along the flat array, then move what crossed into the next row to the
-        # start of its own row
-        flat_w[j:] += flat_c[:-j]
-        w[1:, :j] -= c[:-1, n_units - j:]
-        w[:, :j] += c[:, n_units - j:]
+    # a block starting at unit s covers s .. s+per_block-1 (circularly): the weight of
+    # unit u is the number of starts in u-per_block+1 .. u, a circular moving sum
+    m = min(per_block, n_units)
+    if m <= 4:  # a few shifted additions along the flat array, wrapped rows corrected
+        w = c.astype(np.float32)
+        flat_w, flat_c = w.ravel(), c.ravel()
+        for j in range(1, m):
+            flat_w[j:] += flat_c[:-j]
+            w[1:, :j] -= c[:-1, n_units - j:]
+            w[:, :j] += c[:, n_units - j:]
+    else:  # a cumulative sum over the row with its last m-1 units in front
+        ext = np.zeros((n_resamples, n_units + m), dtype=np.int32)
+        ext[:, 1:m] = c[:, n_units - m + 1:]
+        ext[:, m:] = c
+        np.cumsum(ext, axis=1, out=ext)
+        w = (ext[:, m:] - ext[:, :n_units]).astype(np.float32)
     w.flags.writeable = False
     return w
 
 
-def unit_length(n: int) -> int:
-    """Samples per unit in :func:`block_resample` of a series of ``n``: half of n^(1/3)
-    (so the shortest block, ceil(n^(1/3)), spans about two units), more when the series would
-    need more than :data:`MAX_UNITS` units. It depends on n only, so that series of the
-    same length (one drive's queries for each predictor) share their resamples."""
-    return int(max(1, round(n ** (1.0 / 3.0) / 2.0), -(-n // MAX_UNITS)))
+#: a block spans about this many units (block starts lie on a grid of one unit)
+UNITS_PER_BLOCK = 4
+
+
+def unit_length(n: int, block_len: int = 1) -> int:
+    """Samples per unit in :func:`block_resample` of a series of ``n`` in blocks of
+    ``block_len``: a quarter block (:data:`UNITS_PER_BLOCK`), but at least half of n^(1/3)
+    (finer grids cost time and change little) and long enough for at most
+    :data:`MAX_UNITS` units."""
+    return int(max(1, round(n ** (1.0 / 3.0) / 2.0), -(-block_len // UNITS_PER_BLOCK),
+                   -(-n // MAX_UNITS)))
 
 
 def block_resample(n: int, block_len: int, n_resamples: int = DEFAULT_RESAMPLES,
@@ -415,7 +460,7 @@ def block_resample(n: int, block_len: int, n_resamples: int = DEFAULT_RESAMPLES,
     """
     if n < 1 or block_len < 1:
         raise ValueError(f"need n >= 1 and block_len >= 1, got {n}, {block_len}")
-    unit_len = unit_length(n)
+    unit_len = unit_length(n, block_len)
     n_units = -(-n // unit_len)
     per_block = min(n_units, max(1, round(min(block_len, n) / unit_len)))
     counts = _block_counts(n_units, per_block, int(n_resamples), int(seed))
@@ -457,51 +502,102 @@ def summary_ci(errors: np.ndarray, clusters: np.ndarray, times: np.ndarray | Non
         "block_len": L}``: ``block_len`` is the block length [queries] when one cluster was
         block-resampled, else None; with no finite error every interval is NaN and D = 0.
     """
-    return summary_cis([errors], clusters, times, n_resamples, seed, level)[0]
+    return interval_batch([(errors, clusters, times)], False, n_resamples, seed, level)[0]
 
 
 def summary_cis(errors: Sequence[np.ndarray], clusters: np.ndarray,
                 times: np.ndarray | None = None, n_resamples: int = DEFAULT_RESAMPLES,
                 seed: int = 0, level: float = LEVEL) -> list[dict[str, object]]:
     """:func:`summary_ci` of several error arrays over the same queries (``clusters`` and
-    ``times`` shared; e.g. each predictor's errors on one drive). Each array gets exactly
-    what :func:`summary_ci` gives it; those that end up with the same resamples (same
-    clusters, or the same block length) share one quantile pass."""
-    clusters = np.asarray(clusters)
+    ``times`` shared; e.g. each predictor's errors on one drive), in one pass per set of
+    resamples. With a single cluster, the series with the same number of finite errors are
+    resampled alike: in blocks of the longest of their :func:`block_length` (so one
+    series alone gets exactly what :func:`summary_ci` gives it)."""
+    return interval_batch([(e, clusters, times) for e in errors], True, n_resamples, seed,
+                          level)
+
+
+def group_cis(errors: np.ndarray, keys: np.ndarray, clusters: np.ndarray,
+              times: np.ndarray | None = None, n_resamples: int = DEFAULT_RESAMPLES,
+              seed: int = 0, level: float = LEVEL) -> dict[object, dict[str, object]]:
+    """:func:`summary_ci` of the errors of each distinct key (e.g. scenario label, speed
+    bin, query kind): key -> intervals, exactly what :func:`summary_ci` gives each group."""
+    k = np.asarray(keys)
+    if k.size == 0:
+        return {}
+    if k.dtype.kind in "iu" and k.min() >= 0:
+        counts = np.bincount(k)
+        names: list[object] = np.flatnonzero(counts).tolist()
+        code = k
+    else:
+        uniq, code = np.unique(k, return_inverse=True)
+        code = code.ravel()
+        names = uniq.tolist()
+        counts = np.bincount(code)
+    order = np.argsort(code, kind="stable")  # stable: each group keeps its time order
+    bounds = np.cumsum(counts)[np.flatnonzero(counts)]
+    starts = bounds - counts[np.flatnonzero(counts)]
+    e = np.asarray(errors, dtype=np.float64)[order]
+    c = np.asarray(clusters)[order]
+    t = None if times is None else np.asarray(times, dtype=np.float64)[order]
+    items = [(e[a:b], c[a:b], None if t is None else t[a:b]) for a, b in zip(starts, bounds,
+                                                                             strict=True)]
+    return dict(zip(names, interval_batch(items, False, n_resamples, seed, level), strict=True))
+
+
+def interval_batch(items: Sequence[tuple[np.ndarray, np.ndarray, np.ndarray | None]],
+                   share_blocks: bool, n_resamples: int = DEFAULT_RESAMPLES, seed: int = 0,
+                   level: float = LEVEL) -> list[dict[str, object]]:
+    """:func:`summary_ci` of each (errors, clusters, times) of ``items``; those that end up
+    with the same resamples (as many clusters, or one cluster and the same block) share one
+    quantile pass. ``share_blocks``: the items are series over the same queries, and the
+    single-cluster ones of equal length use the longest of their block lengths."""
     nan2 = [float("nan"), float("nan")]
     out: list[dict[str, object]] = []
-    shared: dict[int, tuple[np.ndarray, list[tuple[int, np.ndarray, np.ndarray]]]] = {}
-    for i, err in enumerate(errors):
+    prepared: list[tuple[int, np.ndarray, np.ndarray | None, int]] = []
+    for i, (err, clusters, times) in enumerate(items):
         e = np.asarray(err, dtype=np.float64)
         ok = np.isfinite(e)
         e = e[ok]
+        out.append({"mean_m": list(nan2), "median_m": list(nan2), "p95_m": list(nan2),
+                    "clusters": 0, "block_len": None})
         if e.size == 0:
-            out.append({"mean_m": list(nan2), "median_m": list(nan2), "p95_m": list(nan2),
-                        "clusters": 0, "block_len": None})
             continue
-        c, d = _compact(clusters[ok])
-        block = None
+        c, d = _compact(np.asarray(clusters)[ok])
         if d == 1:
             e = e[_time_order(e, None if times is None else np.asarray(times)[ok])]
-            br = block_resample(e.size, block_length(e), n_resamples, seed)
-            units, w, block = br.units, br.counts, br.block_len
+            prepared.append((i, e, None, block_length(e)))
         else:
-            units, w = c, cluster_weights(d, n_resamples, seed)
+            prepared.append((i, e, c, d))
+    blocks: dict[int, int] = {}
+    if share_blocks:  # one block length per series length among the single-cluster series
+        for _, e, c, b in prepared:
+            if c is None:
+                blocks[e.size] = max(blocks.get(e.size, 1), b)
+    shared: dict[tuple[int, int], tuple[np.ndarray, list[tuple[int, np.ndarray, np.ndarray]]]] = {}
+    for i, e, c, d in prepared:
+        if c is None:
+            br = block_resample(e.size, blocks.get(e.size, d) if share_blocks else d,
+                                n_resamples, seed)
+            units, w, block, n_clusters = br.units, br.counts, br.block_len, 1
+        else:
+            units, w, block, n_clusters = c, cluster_weights(d, n_resamples, seed), None, d
         n_units = w.shape[1]
         sums = np.bincount(units, weights=e, minlength=n_units)
         counts = np.bincount(units, minlength=n_units)
-        out.append({"mean_m": list(ratio_ci(sums, counts, w, level)), "clusters": d,
-                    "block_len": block})
+        out[i].update(mean_m=list(ratio_ci(sums, counts, w, level)), clusters=n_clusters,
+                      block_len=block)
         order = np.argsort(e)  # ties hold equal values: any order of them gives the same
-        shared.setdefault(id(w), (w, []))[1].append((i, e[order], units[order]))
+        # series over the same queries share a pass when they share their resamples
+        key = (id(w), e.size) if share_blocks else (id(w), i)
+        shared.setdefault(key, (w, []))[1].append((i, e[order], units[order]))
     for w, members in shared.values():
         stats = resampled_quantiles_many([(v, u) for _, v, u in members], w,
                                          tuple(QUANTILES.values()))
         for (i, _, _), st in zip(members, stats, strict=True):
             for j, key in enumerate(QUANTILES):
                 out[i][key] = list(_interval(st[:, j], level))
-    return [{k: r[k] for k in ("mean_m", "median_m", "p95_m", "clusters", "block_len")}
-            for r in out]
+    return out
 
 
 def paired_summary(errors_a: np.ndarray, errors_b: np.ndarray, clusters: np.ndarray,
