@@ -311,6 +311,22 @@ def aggregate(runs: Sequence[DriveRun], cfg: RunConfig, data_manifest: list[dict
         for name, ci in one_drive_cis(by_pred, stats).items():
             per_drive[(ds, drive)][name][k]["ci95"] = ci
     del drive_queries
+    # a summary over exactly one drive's queries is that drive's summary: the same interval
+    pairs = {ds: {(ds, d) for d in drives_of[ds]} for ds in datasets}
+    one_drive = [(res["predictors"], set().union(*pairs.values()) if pairs else set())]
+    one_drive += [(res["by_dataset"][ds], pairs[ds]) for ds in datasets]
+    one_drive += [(h["predictors"], {(ds, d) for d in h["drives"]})
+                  for ds, h in res["held_out"].items()]
+    if held_all:
+        one_drive.append((res["held_out_all"]["predictors"],
+                          {p for ds in datasets for p in pairs[ds] if p[1] not in trained_on}))
+    for summaries, drives in one_drive:
+        if len(drives) == 1 and next(iter(drives)) in per_drive:
+            mine = per_drive[next(iter(drives))]
+            for name, kinds in summaries.items():
+                for k in KINDS:
+                    if name in mine and "ci95" in kinds.get(k, {}):
+                        kinds[k]["ci95"] = dict(mine[name][k]["ci95"])
     for r in runs:
         d: dict[str, Any] = {"name": r.name, "dataset": r.dataset, "reference": r.reference,
                              "duration_s": r.duration_s, "gps_fed": r.gps_count,

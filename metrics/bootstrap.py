@@ -53,7 +53,9 @@ DEFINITIONS = {
         "as circular blocks of contiguous queries instead of drives; the block length follows "
         "the automatic rule of Politis & White (2004, corrected 2009) from the errors' "
         "autocorrelation (longer the longer errors stay correlated; at least 10 blocks per "
-        "resample), is rounded to the block grid, and is given in queries where it is used."),
+        "resample; for a whole drive, the longest among its predictors, so that they are "
+        "resampled alike), is rounded to the block grid, and is given in queries where it is "
+        "used."),
     "paired difference": (
         "Δ mean = mean error of the predictor minus mean error of the baseline, over the "
         "queries both answered (negative: the predictor is better); its 95 % CI resamples "
