@@ -10,19 +10,16 @@ from typing import Any
 from bench.glossary import glossary_lines
 from bench.plots import DEFAULT_DRIVE_PLOTS, shown_format, write_plots
 from bench.saved_run import Run
+from bench.stat_tables import block_lengths, paired_label_table, paired_table, seeds_table
 from bench.tables import (
     NOT_CONCLUSIVE,
     Table,
-    block_lengths,
     dataset_table,
     drives_table,
     gate_drive_table,
     gate_table,
     label_table,
     outage_table,
-    paired_label_table,
-    paired_table,
-    seeds_table,
     speed_table,
     summary_table,
     trained_in_run,

@@ -12,7 +12,7 @@ and markers as their own columns) and LaTeX. The builders below read a run's ``r
 from __future__ import annotations
 
 import math
-from collections.abc import Iterable, Mapping, Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -160,7 +160,7 @@ def trained_in_run(res: Mapping[str, Any]) -> dict[str, list[str]]:
     return out
 
 
-def _put(row: dict[str, Any], col: str, summary: Mapping[str, Any] | None, figure: str,
+def put_figure(row: dict[str, Any], col: str, summary: Mapping[str, Any] | None, figure: str,
          scale: float = 1.0) -> None:
     """``row[col]``: ``summary[figure]`` x ``scale``; ``row[col_lo]``, ``row[col_hi]``: its
     95 % interval (``ci95``; NaN when the run has none)."""
@@ -170,12 +170,12 @@ def _put(row: dict[str, Any], col: str, summary: Mapping[str, Any] | None, figur
     row[f"{col}_lo"], row[f"{col}_hi"] = scale * _num(lo), scale * _num(hi)
 
 
-def _with_ci(cols: Sequence[str], with_ci: Sequence[str]) -> list[str]:
+def with_ci_columns(cols: Sequence[str], with_ci: Sequence[str]) -> list[str]:
     """``cols`` with each column of ``with_ci`` followed by its ``_lo``, ``_hi`` columns."""
     return [x for c in cols for x in ((c, f"{c}_lo", f"{c}_hi") if c in with_ci else (c,))]
 
 
-def _ci_map(cols: Sequence[str]) -> dict[str, tuple[str, str]]:
+def ci_map(cols: Sequence[str]) -> dict[str, tuple[str, str]]:
     return {c: (f"{c}_lo", f"{c}_hi") for c in cols}
 
 
@@ -205,7 +205,7 @@ def summary_table(res: Mapping[str, Any], held_out: bool = False, compact: bool 
                                ("future_rmse", f, "rmse_m"), ("future_p95", f, "p95_m"),
                                ("future_max", f, "max_m"), ("now_mean", n, "mean_m"),
                                ("now_p95", n, "p95_m")):
-            _put(row, col, summ, fig)
+            put_figure(row, col, summ, fig)
         row.update(future_n=f["count"], now_n=n["count"],
                    missing=f.get("missing", 0) + n.get("missing", 0))
         if not held_out:
@@ -216,66 +216,8 @@ def summary_table(res: Mapping[str, Any], held_out: bool = False, compact: bool 
         rows.append(row)
     shown_ci = ("future_mean", "now_mean") if compact else SUMMARY_CI
     cols = list(SUMMARY_LABELS) if not held_out else list(SUMMARY_LABELS)[:11]
-    return Table(_frame(rows, _with_ci(cols, shown_ci)), "held_out" if held_out else "summary",
-                 SUMMARY_LABELS, LATENCY_DIGITS, ci=_ci_map(shown_ci))
-
-
-def paired_table(res: Mapping[str, Any], dataset: str | None = None) -> Table:
-    """Each predictor against the baseline (``results["paired"]``), overall or in one data
-    set: difference of mean error [m] (predictor - baseline, queries both answered) with its
-    95 % interval, ``*`` where the interval excludes 0, and the drives it wins."""
-    paired = res.get("paired") or {}
-    src = (paired.get("overall") if dataset is None
-           else paired.get("by_dataset", {}).get(dataset)) or {}
-    rows = []
-    for name, kinds in src.items():
-        row: dict[str, Any] = {"predictor": name}
-        for k in KINDS:
-            e = kinds.get(k) or {}
-            ci = e.get("ci95") or [None, None]
-            row.update({f"{k}_diff": _num(e.get("diff_m")), f"{k}_diff_lo": _num(ci[0]),
-                        f"{k}_diff_hi": _num(ci[1]), f"{k}_mark": "*" if e.get("conclusive") else "",
-                        f"{k}_wins": f"{e.get('wins', 0)}/{e.get('drives', 0)}",
-                        f"{k}_wins_n": e.get("wins", 0), f"{k}_drives": e.get("drives", 0),
-                        f"{k}_queries": e.get("queries", 0)})
-        rows.append(row)
-    base = paired.get("baseline")
-    labels = {f"{k}_diff": f"{k} Δ mean vs {base} [m]" for k in KINDS}
-    labels.update({f"{k}_wins": "drives won" for k in KINDS})
-    labels.update({f"{k}_queries": "queries" for k in KINDS})
-    cols = ["predictor"] + [c for k in KINDS for c in (
-        f"{k}_diff", f"{k}_diff_lo", f"{k}_diff_hi", f"{k}_mark", f"{k}_wins", f"{k}_wins_n",
-        f"{k}_drives", f"{k}_queries")]
-    return Table(_frame(rows, cols), "paired" if dataset is None else f"paired-{dataset}", labels,
-                 ci=_ci_map([f"{k}_diff" for k in KINDS]),
-                 marks={f"{k}_diff": f"{k}_mark" for k in KINDS},
-                 hidden=[c for k in KINDS for c in (f"{k}_wins_n", f"{k}_drives")])
-
-
-def paired_label_table(res: Mapping[str, Any], dataset: str, kind: str = "future") -> Table:
-    """Route type x predictor: difference of mean error against the baseline [cm] with its
-    95 % interval, ``*`` where it excludes 0, (queries both answered)."""
-    by_label = (res.get("paired") or {}).get("by_label", {}).get(dataset, {})
-    preds = list(by_label)
-    rows = []
-    for lab in LABELS:
-        row: dict[str, Any] = {"route type": LABEL_TITLES[lab]}
-        for p in preds:
-            e = by_label[p].get(kind, {}).get(lab) or {}
-            ci = e.get("ci95") or [None, None]
-            row.update({f"{p} [cm]": 100 * _num(e.get("diff_m")),
-                        f"{p} [cm]_lo": 100 * _num(ci[0]), f"{p} [cm]_hi": 100 * _num(ci[1]),
-                        f"{p} mark": "*" if e.get("conclusive") else "",
-                        f"{p} n": int(e.get("queries", 0))})
-        rows.append(row)
-    cols = ["route type"] + [c for p in preds for c in (f"{p} [cm]", f"{p} [cm]_lo", f"{p} [cm]_hi",
-                                                        f"{p} mark", f"{p} n")]
-    base = (res.get("paired") or {}).get("baseline")
-    return Table(_frame(rows, cols), f"paired-route-type-{dataset}-{kind}",
-                 {f"{p} [cm]": f"{p} Δ vs {base} [cm] (n)" for p in preds},
-                 {f"{p} [cm]": 1 for p in preds}, {f"{p} [cm]": f"{p} n" for p in preds},
-                 ci=_ci_map([f"{p} [cm]" for p in preds]),
-                 marks={f"{p} [cm]": f"{p} mark" for p in preds})
+    return Table(_frame(rows, with_ci_columns(cols, shown_ci)), "held_out" if held_out else "summary",
+                 SUMMARY_LABELS, LATENCY_DIGITS, ci=ci_map(shown_ci))
 
 
 def warmup_table(res: Mapping[str, Any]) -> Table:
@@ -284,16 +226,16 @@ def warmup_table(res: Mapping[str, Any]) -> Table:
     for name, w in res.get("excluded", {}).get("warmup", {}).items():
         f, n = w["future"], w["now"]
         row: dict[str, Any] = {"predictor": name}
-        _put(row, "future_mean", f, "mean_m")
-        _put(row, "now_mean", n, "mean_m")
+        put_figure(row, "future_mean", f, "mean_m")
+        put_figure(row, "now_mean", n, "mean_m")
         row.update(future_max=_num(f["max_m"]), future_n=f["count"], now_max=_num(n["max_m"]),
                    now_n=n["count"], missing=f.get("missing", 0) + n.get("missing", 0))
         rows.append(row)
     labels = {"future_mean": "future mean [m]", "future_max": "max", "future_n": "n",
               "now_mean": "now mean [m]", "now_max": "max", "now_n": "n"}
     with_ci = ("future_mean", "now_mean")
-    return Table(_frame(rows, _with_ci(["predictor", *labels, "missing"], with_ci)), "warmup",
-                 labels, ci=_ci_map(with_ci))
+    return Table(_frame(rows, with_ci_columns(["predictor", *labels, "missing"], with_ci)), "warmup",
+                 labels, ci=ci_map(with_ci))
 
 
 DATASET_CI = ("future_mean", "future_median", "future_p95", "now_mean", "now_p95")
@@ -308,13 +250,13 @@ def dataset_table(res: Mapping[str, Any], dataset: str) -> Table:
         for col, summ, fig in (("future_mean", f, "mean_m"), ("future_median", f, "median_m"),
                                ("future_p95", f, "p95_m"), ("now_mean", n, "mean_m"),
                                ("now_p95", n, "p95_m")):
-            _put(row, col, summ, fig)
+            put_figure(row, col, summ, fig)
         row.update(future_n=f["count"], now_n=n["count"])
         rows.append(row)
     labels = {"future_mean": "future mean [m]", "future_median": "median", "future_p95": "p95",
               "future_n": "n", "now_mean": "now mean [m]", "now_p95": "now p95", "now_n": "n"}
-    return Table(_frame(rows, _with_ci(["predictor", *labels], DATASET_CI)),
-                 f"dataset-{dataset}", labels, ci=_ci_map(DATASET_CI))
+    return Table(_frame(rows, with_ci_columns(["predictor", *labels], DATASET_CI)),
+                 f"dataset-{dataset}", labels, ci=ci_map(DATASET_CI))
 
 
 #: the marker of a route-type cell whose 95 % interval is wider than its value
@@ -345,7 +287,7 @@ def label_table(res: Mapping[str, Any], dataset: str, kind: str, held_out: bool 
         for p in preds:
             s = summaries.get(p) or {}
             col = f"{p} [cm]"
-            _put(out, col, s if s.get("count") else {}, "mean_m", 100.0)
+            put_figure(out, col, s if s.get("count") else {}, "mean_m", 100.0)
             out[f"{p} mark"] = (NOT_CONCLUSIVE if not_conclusive(out[col], out[f"{col}_lo"],
                                                                  out[f"{col}_hi"]) else "")
             out[f"{p} n"] = int(s.get("count", 0))
@@ -369,7 +311,7 @@ def label_table(res: Mapping[str, Any], dataset: str, kind: str, held_out: bool 
                  {f"{p} [cm]": f"{p} [cm] (n)" for p in preds},
                  {c: 1 for c in cols if c.endswith("[cm]")},
                  {f"{p} [cm]": f"{p} n" for p in preds},
-                 ci=_ci_map([f"{p} [cm]" for p in preds]),
+                 ci=ci_map([f"{p} [cm]" for p in preds]),
                  marks={f"{p} [cm]": f"{p} mark" for p in preds})
 
 
@@ -383,12 +325,12 @@ def speed_table(res: Mapping[str, Any]) -> Table:
     for p, s in by_speed.items():
         row: dict[str, Any] = {"predictor": p}
         for b in bins:
-            _put(row, b, s["future"][b], "mean_m")
+            put_figure(row, b, s["future"][b], "mean_m")
             row[f"{b} n"] = s["future"][b]["count"]
         rows.append(row)
     cols = ["predictor"] + [c for b in bins for c in (b, f"{b}_lo", f"{b}_hi", f"{b} n")]
     return Table(_frame(rows, cols), "speed", counts={b: f"{b} n" for b in bins},
-                 ci=_ci_map(bins))
+                 ci=ci_map(bins))
 
 
 def outage_table(res: Mapping[str, Any]) -> Table:
@@ -400,21 +342,21 @@ def outage_table(res: Mapping[str, Any]) -> Table:
         sc = o["scores"]
         row: dict[str, Any] = {"predictor": p}
         for c in cps:
-            _put(row, c, o["since_fix"][c], "mean_m")
+            put_figure(row, c, o["since_fix"][c], "mean_m")
             row[f"{c} n"] = o["since_fix"][c]["count"]
         row["outages"] = sc["outages"]
         ci = sc.get("ci95") or {}
         for col, fig in (("ade", "ade_mean_m"), ("fde", "fde_mean_m"), ("fde_p95", "fde_p95_m"),
                          ("miss_rate", "miss_rate")):
-            _put(row, col, {fig: sc[fig], "ci95": ci}, fig)
+            put_figure(row, col, {fig: sc[fig], "ci95": ci}, fig)
         rows.append(row)
     scores = ["ade", "fde", "fde_p95", "miss_rate"]
     cols = ["predictor"] + [x for c in cps for x in (c, f"{c}_lo", f"{c}_hi", f"{c} n")]
-    cols += ["outages"] + _with_ci(scores, scores)
+    cols += ["outages"] + with_ci_columns(scores, scores)
     labels = {c: f"{c} after fix" for c in cps}
     labels.update(ade="ADE [m]", fde="FDE [m]", fde_p95="FDE p95 [m]", miss_rate="miss rate")
     return Table(_frame(rows, cols), "outages", labels, {"miss_rate": 2},
-                 {c: f"{c} n" for c in cps}, ci=_ci_map([*cps, *scores]))
+                 {c: f"{c} n" for c in cps}, ci=ci_map([*cps, *scores]))
 
 
 def gate_table(res: Mapping[str, Any]) -> Table:
@@ -449,46 +391,8 @@ def drives_table(res: Mapping[str, Any]) -> Table:
         mark = "".join(f" ({p} trained on it)" for p in d.get("trained_on", []))
         row = {"drive": d["name"] + mark, "data set": d["dataset"], "reference": d["reference"]}
         for p in preds:
-            _put(row, f"{p} future mean [m]", d["predictors"].get(p, {}).get("future"), "mean_m")
+            put_figure(row, f"{p} future mean [m]", d["predictors"].get(p, {}).get("future"), "mean_m")
         rows.append(row)
     cols = [f"{p} future mean [m]" for p in preds]
-    return Table(_frame(rows, _with_ci(["drive", "data set", "reference", *cols], cols)),
-                 "drives", ci=_ci_map(cols))
-
-
-def block_lengths(summaries: Iterable[Mapping[str, Any]]) -> list[int]:
-    """The block lengths [queries] of the summaries whose interval came from the block
-    bootstrap of a single drive (sorted, distinct)."""
-    return sorted({int(s["ci95"]["block_len"]) for s in summaries
-                   if (s or {}).get("ci95") and s["ci95"].get("block_len")})
-
-
-def seeds_table(res: Mapping[str, Any]) -> Table:
-    """Per predictor and kind: the mean error [m] of the first seed with its 95 % interval,
-    beside its mean, sd, min and max across the seeds (``results["seeds"]``)."""
-    seeds = res["seeds"]
-    first = seeds["traces_seed"]
-    rows = []
-    for name, kinds in seeds["spread"].items():
-        row: dict[str, Any] = {"predictor": name}
-        for k in KINDS:
-            _put(row, f"{k}_mean", res["predictors"][name][k], "mean_m")
-            sp = kinds[k]["mean_m"]
-            row.update({f"{k}_seeds_mean": _num(sp["mean"]), f"{k}_sd": _num(sp["sd"]),
-                        f"{k}_min": _num(sp["min"]), f"{k}_max": _num(sp["max"])})
-            d = kinds[k].get("diff_m")
-            row[f"{k}_diff_sd"] = _num(d["sd"]) if d else float("nan")
-        rows.append(row)
-    labels = {}
-    for k in KINDS:
-        labels.update({f"{k}_mean": f"{k} mean [m], seed {first}",
-                       f"{k}_seeds_mean": f"{k} mean over seeds", f"{k}_sd": "sd",
-                       f"{k}_min": "min", f"{k}_max": "max",
-                       f"{k}_diff_sd": f"sd of Δ vs {res.get('paired', {}).get('baseline')}"})
-    cols = ["predictor"] + [c for k in KINDS for c in (
-        f"{k}_mean", f"{k}_mean_lo", f"{k}_mean_hi", f"{k}_seeds_mean", f"{k}_sd", f"{k}_min",
-        f"{k}_max", f"{k}_diff_sd")]
-    if not (res.get("paired") or {}).get("baseline"):
-        cols = [c for c in cols if not c.endswith("_diff_sd")]
-    return Table(_frame(rows, cols), "seeds", labels,
-                 {c: 4 for c in cols if c.endswith("_sd")}, ci=_ci_map([f"{k}_mean" for k in KINDS]))
+    return Table(_frame(rows, with_ci_columns(["drive", "data set", "reference", *cols], cols)),
+                 "drives", ci=ci_map(cols))

@@ -22,7 +22,8 @@ from bench.report import render_markdown
 from bench.results import aggregate
 from bench.runner import run
 from bench.saved_run import Run, load_run, results_schema
-from bench.tables import NOT_CONCLUSIVE, label_table, paired_table, summary_table
+from bench.stat_tables import paired_table
+from bench.tables import NOT_CONCLUSIVE, label_table, summary_table
 from metrics import bootstrap, outages
 from scenarios.synthetic import default_drives
 

@@ -269,7 +269,8 @@ def _run(drives, cfg, data, out: Path, workers: int, rerun: Path | None = None,
         console.print("warning: no query could be scored (no reference position at any query "
                       "past the warm-up); see the exclusions below", highlight=False)
     from bench.report import has_paired
-    from bench.tables import paired_table, seeds_table, summary_table
+    from bench.stat_tables import paired_table, seeds_table
+    from bench.tables import summary_table
 
     headline = summary_table(res, compact=True)
     print_table(console, headline.header(), headline.cells(),
@@ -290,7 +291,7 @@ def _run(drives, cfg, data, out: Path, workers: int, rerun: Path | None = None,
                           f"[m] (figures and traces: seed {res['seeds']['traces_seed']})")
     if res.get("held_out_all"):
         ho = res["held_out_all"]
-        held = summary_table(res, held_out=True)
+        held = summary_table(res, held_out=True, compact=True)
         print_table(console, held.header(), held.cells(),
                     title=f"held-out {plural(len(ho['drives']), 'drive')} (no learned predictor "
                           f"trained on them) - errors in metres")
