@@ -186,6 +186,29 @@ def _label_summaries(df: pd.DataFrame, stats: Statistics | None = None) -> dict[
     return out
 
 
+def _per_drive(df: pd.DataFrame, name: str, per_drive: dict[tuple[str, str], dict[str, Any]],
+               queries: dict[tuple[str, str, str], dict[str, tuple[np.ndarray, np.ndarray]]]
+               ) -> None:
+    """Each drive's summaries of predictor ``name`` (``df``: its scored rows with ``code``)
+    into ``per_drive[(dataset, drive)][name]``, and each drive's errors and query times per
+    kind into ``queries[(dataset, drive, kind)][name]`` (for the intervals, drive by drive)."""
+    first = df.drop_duplicates("code")
+    keys = dict(zip(first["code"].to_numpy(), zip(first["dataset"].astype(str),
+                                                  first["drive"].astype(str), strict=True),
+                    strict=True))
+    for key in keys.values():
+        per_drive.setdefault(key, {})[name] = {k: summarize(np.empty(0)) for k in KINDS}
+    for k in KINDS:
+        e, codes, t, _ = _columns(df, k)
+        order = np.argsort(codes, kind="stable")  # stable: each drive keeps its time order
+        present, starts, counts = np.unique(codes[order], return_index=True, return_counts=True)
+        for code, a, n in zip(present.tolist(), starts.tolist(), counts.tolist(), strict=True):
+            ds, drive = keys[code]
+            idx = order[a:a + n]
+            per_drive[(ds, drive)][name][k] = summarize(e[idx])
+            queries.setdefault((ds, drive, k), {})[name] = (e[idx], t[idx])
+
+
 def _empty_kinds(stats: Statistics | None = None) -> dict[str, Any]:
     empty = np.empty(0)
     return {k: with_ci(summarize(empty), empty, empty, None, stats) for k in KINDS}
@@ -299,11 +322,8 @@ def aggregate(runs: Sequence[DriveRun], cfg: RunConfig, data_manifest: list[dict
         if held_all:
             res["held_out_all"]["predictors"][name] = _kind_summaries(
                 df[~df["drive"].isin(trained_on)], stats)
-        for (ds, drive), g in df.groupby(["dataset", "drive"], sort=False, observed=True):
-            per_drive.setdefault((str(ds), str(drive)), {})[name] = _kind_summaries(g)
-            for k in KINDS:
-                e, _, t, _ = _columns(g, k)
-                drive_queries.setdefault((str(ds), str(drive), k), {})[name] = (e, t)
+        if not df.empty:
+            _per_drive(df, name, per_drive, drive_queries)
         del df, groups
     del base_df
     # one drive's intervals (block bootstrap), drive by drive: its predictors share resamples
@@ -311,6 +331,11 @@ def aggregate(runs: Sequence[DriveRun], cfg: RunConfig, data_manifest: list[dict
         for name, ci in one_drive_cis(by_pred, stats).items():
             per_drive[(ds, drive)][name][k]["ci95"] = ci
     del drive_queries
+    empty_ci = _empty_kinds(stats)["future"].get("ci95")
+    for kinds in (s for by_name in per_drive.values() for s in by_name.values()):
+        for k in KINDS:
+            if empty_ci is not None and "ci95" not in kinds[k]:  # a kind without queries
+                kinds[k]["ci95"] = dict(empty_ci)
     # a summary over exactly one drive's queries is that drive's summary: the same interval
     pairs = {ds: {(ds, d) for d in drives_of[ds]} for ds in datasets}
     one_drive = [(res["predictors"], set().union(*pairs.values()) if pairs else set())]

@@ -112,5 +112,7 @@ def seeds_table(res: Mapping[str, Any]) -> Table:
         f"{k}_max", f"{k}_diff_sd")]
     if not (res.get("paired") or {}).get("baseline"):
         cols = [c for c in cols if not c.endswith("_diff_sd")]
+    spread_cols = ("_seeds_mean", "_sd", "_min", "_max")
     return Table(pd.DataFrame(rows, columns=cols), "seeds", labels,
-                 {c: 4 for c in cols if c.endswith("_sd")}, ci=ci_map([f"{k}_mean" for k in KINDS]))
+                 {c: 4 for c in cols if c.endswith(spread_cols)},
+                 ci=ci_map([f"{k}_mean" for k in KINDS]))

@@ -282,8 +282,8 @@ def _run(drives, cfg, data, out: Path, workers: int, rerun: Path | None = None,
     if has_paired(res):
         paired = paired_table(res)
         print_table(console, paired.header(), paired.cells(),
-                    title=f"against {res['paired']['baseline']}: difference of mean error [m] on "
-                          f"the same queries [95 % CI], * = CI excludes 0")
+                    title=f"vs {res['paired']['baseline']}: Δ mean error [m], same queries "
+                          f"[95 % CI]; * CI excludes 0")
     if res.get("seeds"):
         st = seeds_table(res)
         print_table(console, st.header(), st.cells(),
