@@ -128,9 +128,10 @@ def add_group_cis(summaries: Mapping[str, dict[str, Any]], errors: np.ndarray,
     if stats is None:
         return
     code, names = pd.factorize(np.asarray(keys))
-    wanted = {str(n): i for i, n in enumerate(names)}
-    cis = group_cis(errors, code, codes, times, n_resamples=stats.resamples, seed=stats.seed,
-                    level=stats.level)
+    wanted = {str(n): i for i, n in enumerate(names) if str(n) in summaries}
+    m = np.isin(code, list(wanted.values()))  # only the groups that have a summary
+    cis = group_cis(errors[m], code[m], codes[m], None if times is None else times[m],
+                    n_resamples=stats.resamples, seed=stats.seed, level=stats.level)
     empty = _entry(summary_ci(np.empty(0), np.empty(0, dtype=np.int64)))
     for k, s in summaries.items():
         i = wanted.get(str(k))
