@@ -88,6 +88,45 @@ def parse_predictor_names(text: str, option: str = "--predictors") -> tuple[str,
     return names
 
 
+def parse_seeds(text: str, option: str = "--seeds") -> list[int]:
+    """``--seeds``: a count N (the seeds 0 .. N-1) or a comma-separated list of distinct
+    seeds >= 0, e.g. ``5`` or ``0,1,2,3,4``."""
+    parts = [p.strip() for p in text.split(",")]
+    try:
+        values = [int(p) for p in parts]
+    except ValueError:
+        raise UsageError(f"{option} takes a count (e.g. 5: seeds 0..4) or a list of seeds "
+                         f"(e.g. 0,1,2,3,4); got {text!r}") from None
+    if len(values) == 1:
+        if values[0] < 1:
+            raise UsageError(f"{option} count must be at least 1; got {values[0]}")
+        return list(range(values[0]))
+    bad = [v for v in values if v < 0]
+    if bad:
+        raise UsageError(f"{option}: seeds must be >= 0; got {bad[0]}")
+    twice = sorted({v for v in values if values.count(v) > 1})
+    if twice:
+        raise UsageError(f"{option} lists {', '.join(map(str, twice))} more than once")
+    return values
+
+
+def resolve_baseline(value: str | None, names: Sequence[str]) -> str | None:
+    """``--baseline``: the predictor the others are compared with. Default (None): ``kf``
+    when it is in the run, else no comparison; ``none``: no comparison; otherwise it must
+    be one of the run's predictors."""
+    from bench.intervals import default_baseline
+
+    if value is None:
+        return default_baseline(names)
+    value = value.strip()
+    if value.lower() == "none":
+        return None
+    if value not in names:
+        raise UsageError(f"--baseline {value}: not among the predictors to run "
+                         f"({', '.join(names)}); name one of them, or 'none'")
+    return value
+
+
 def check_topics(topics: Mapping[str, str] | None,
                  roles: Iterable[str] = ("gps", "imu", "speed", "truth")) -> None:
     """``--topic ROLE=NAME`` pairs: known roles, non-empty names."""

@@ -7,9 +7,12 @@ from collections.abc import Iterable
 from pathlib import Path
 from typing import Any
 
+from bench.glossary import glossary_lines
 from bench.plots import DEFAULT_DRIVE_PLOTS, shown_format, write_plots
 from bench.saved_run import Run
+from bench.stat_tables import block_lengths, paired_label_table, paired_table, seeds_table
 from bench.tables import (
+    NOT_CONCLUSIVE,
     Table,
     dataset_table,
     drives_table,
@@ -81,11 +84,17 @@ def report_tables(res: dict[str, Any]) -> list[Table]:
     if not res.get("drives"):
         return []
     tables = [summary_table(res), warmup_table(res)]
+    if has_paired(res):
+        tables.append(paired_table(res))
+    if res.get("seeds"):
+        tables.append(seeds_table(res))
     if res.get("held_out_all"):
         tables.append(summary_table(res, held_out=True))
     for ds in res["by_dataset"]:
         tables += [dataset_table(res, ds), label_table(res, ds, "future"),
                    label_table(res, ds, "now")]
+        if has_paired(res):
+            tables += [paired_table(res, ds), paired_label_table(res, ds, "future")]
         if res.get("held_out", {}).get(ds, {}).get("drives"):
             tables += [label_table(res, ds, k, held_out=True) for k in ("future", "now")]
     if res.get("by_speed"):
@@ -96,6 +105,43 @@ def report_tables(res: dict[str, Any]) -> list[Table]:
         tables.append(gate_table(res))
     tables.append(drives_table(res))
     return tables
+
+
+def has_paired(res: dict[str, Any]) -> bool:
+    """Whether the run compared its predictors with a baseline (schema 1.1, a baseline, and
+    another predictor)."""
+    paired = res.get("paired") or {}
+    return bool(paired.get("baseline")) and bool(paired.get("overall"))
+
+
+def statistics_note(res: dict[str, Any]) -> str:
+    """One sentence: how the intervals were computed (empty for runs without them)."""
+    st = res.get("statistics")
+    if not st:
+        return ""
+    return (f"`value [lo, hi]`: {100 * st['level']:g} % confidence interval, cluster bootstrap "
+            f"over drives ({st['resamples']} resamples, seed {st['seed']}); a figure from a "
+            f"single drive resamples blocks of contiguous queries instead (block bootstrap). "
+            f"See the glossary at the end.")
+
+
+def paired_note(res: dict[str, Any], where: str = "") -> str:
+    """What the paired table shows."""
+    base = res["paired"]["baseline"]
+    return (f"Each predictor against `{base}`{where}, on the queries both answered: Δ mean = "
+            f"its mean error minus `{base}`'s (negative: better than `{base}`), with its 95 % "
+            f"interval (drives resampled jointly), `*` where the interval excludes 0; drives "
+            f"won = drives on which its mean error is below `{base}`'s.")
+
+
+def block_note(summaries: list[dict[str, Any]], what: str) -> str:
+    """A sentence naming the block lengths of the single-drive intervals among ``summaries``."""
+    lengths = block_lengths(summaries)
+    if not lengths:
+        return ""
+    span = (f"{lengths[0]}" if len(lengths) == 1 else f"{lengths[0]} to {lengths[-1]}")
+    return (f"{what}: one drive, so the intervals come from a block bootstrap of its "
+            f"contiguous queries (blocks of {span} queries), not from resampling drives.")
 
 
 def write_tables(res: dict[str, Any], folder: Path) -> list[Path]:
@@ -128,10 +174,16 @@ def render_markdown(res: dict[str, Any], plots: list[str],
              "asked every now-step between fixes. Latency: `step` = one `observe_gps` plus the "
              "future query, `query` = one between-fix `position_at`, single process.", ""]
     lines += answers_lines(res)
+    if statistics_note(res):
+        lines += [statistics_note(res), ""]
     lines += ["## All drives", "", summary_table(res).markdown(), ""]
     for note in (trained_note(res), excluded_note(res), MISSING_NOTE):
         if note:
             lines += [note, ""]
+    if has_paired(res):
+        lines += [f"### Against the baseline `{res['paired']['baseline']}`", "", paired_note(res),
+                  "", paired_table(res).markdown(), ""]
+    lines += seeds_lines(res)
     if res.get("held_out_all"):
         ho = res["held_out_all"]
         lines += [f"## Held-out drives ({len(ho['drives'])}: no learned predictor of this run "
@@ -148,10 +200,23 @@ def render_markdown(res: dict[str, Any], plots: list[str],
         lines += [f"## Data set `{ds}`", "",
                   f"{len(drives)} drives; reference: {', '.join(refs) or '-'}.", ""]
         lines += [dataset_table(res, ds).markdown(), ""]
+        note = block_note([s[k] for s in res["by_dataset"][ds].values() for k in ("future", "now")],
+                          f"`{ds}`")
+        if note:
+            lines += [note, ""]
+        if has_paired(res):
+            lines += [paired_note(res, f" in `{ds}`"), "", paired_table(res, ds).markdown(), ""]
         lines += ["### Route type (paper's Table I layout), future point, mean error in cm (queries)",
                   "", label_table(res, ds, "future").markdown(), ""]
+        if res.get("statistics"):
+            lines += [f"`{NOT_CONCLUSIVE}`: not conclusive, the cell's 95 % interval is wider "
+                      f"than its value.", ""]
         lines += ["### Route type, current position (now), mean error in cm (queries)", "",
                   label_table(res, ds, "now").markdown(), ""]
+        if has_paired(res):
+            base = res["paired"]["baseline"]
+            lines += [f"### Route type, future point, Δ mean vs `{base}` in cm (queries both "
+                      f"answered)", "", paired_label_table(res, ds, "future").markdown(), ""]
         ho = res.get("held_out", {}).get(ds)
         if ho:
             who = "; ".join(
@@ -180,6 +245,10 @@ def render_markdown(res: dict[str, Any], plots: list[str],
     lines += gate_lines(res)
     lines += ["## Drives", ""]
     lines += [drives_table(res).markdown(), ""]
+    note = block_note([d["predictors"][p]["future"] for d in res["drives"] if not d["skipped"]
+                       for p in d.get("predictors", {})], "Each row")
+    if note:
+        lines += [note, ""]
     warn = [(d["name"], w) for d in res["drives"] for w in d["warnings"]]
     if warn:
         lines += ["## Loader warnings", ""] + [f"- `{n}`: {w}" for n, w in warn] + [""]
@@ -201,6 +270,7 @@ def render_markdown(res: dict[str, Any], plots: list[str],
             lines += [f"![{f['file']}]({f['file']})", "", f"*{f['caption']}*", ""]
     lines += ["## Data", ""] + [f"- `{m['path']}`: {m['files']} files, {m['bytes']} bytes, "
                                 f"sha256 `{m['sha256'][:16]}...`" for m in res["data"]] + [""]
+    lines += glossary_lines(res)
     return "\n".join(lines)
 
 
@@ -218,6 +288,21 @@ def answers_lines(res: dict[str, Any]) -> list[str]:
             + ". posbench cannot check such answers for look-ahead (use of inputs stamped after "
               "the query's t_issue), as it does for a predictor it replays; latency is what the "
               "file's `latency_us` column gives (`-`: none given).", ""]
+
+
+def seeds_lines(res: dict[str, Any]) -> list[str]:
+    """The "Repeated over seeds" section (runs with --seeds)."""
+    seeds = res.get("seeds")
+    if not seeds:
+        return []
+    listed = ", ".join(str(s) for s in seeds["seeds"])
+    return [f"## Repeated over {len(seeds['seeds'])} seeds ({listed})", "",
+            f"The same drives and predictors replayed with each seed's GPS noise and dropouts. "
+            f"Every other figure, interval, table and plot of this report, and traces.parquet, "
+            f"are from seed {seeds['traces_seed']}; results.json keeps each seed's headline "
+            f"figures (`seeds.runs`). Beside seed {seeds['traces_seed']}'s mean and its 95 % "
+            f"interval (other drives), the spread over seeds (other random draws):", "",
+            seeds_table(res).markdown(), ""]
 
 
 def gate_lines(res: dict[str, Any]) -> list[str]:

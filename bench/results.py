@@ -14,6 +14,18 @@ import numpy as np
 import pandas as pd
 
 from bench.config import RunConfig
+from bench.intervals import (
+    OUTAGE_ID_BASE,
+    Statistics,
+    add_group_cis,
+    default_baseline,
+    drive_codes,
+    one_drive_cis,
+    outage_cis,
+    paired_results,
+    since_fix_keys,
+    with_ci,
+)
 from bench.prepare import LABELS
 from bench.runner import DriveRun
 from metrics.accuracy import speed_bin_labels, speed_bin_order, summarize, summarize_groups
@@ -100,6 +112,15 @@ def learned_models(cfg: RunConfig) -> dict[str, dict[str, Any]]:
     return out
 
 
+#: which queries the figures are over (the report's glossary collects this)
+DEFINITIONS = {
+    "scored queries": "every figure is over the queries of its row and cell (predictor; data "
+                      "set, route type, speed bin, drive) that are past their drive's warm-up "
+                      "(issued after its second received fix) and have a reference position; "
+                      "`future` and `now` queries are never mixed.",
+}
+
+
 def scored_mask(traces: pd.DataFrame) -> np.ndarray:
     """Rows that count in the headline figures: past the warm-up (see
     :func:`bench.scoring.warmup_end_s`) and with a known reference position."""
@@ -111,10 +132,11 @@ def scored_mask(traces: pd.DataFrame) -> np.ndarray:
     return m
 
 
-def excluded_summary(traces: pd.DataFrame, preds: Sequence[str]) -> dict[str, Any]:
+def excluded_summary(traces: pd.DataFrame, preds: Sequence[str],
+                     stats: Statistics | None = None) -> dict[str, Any]:
     """What the headline figures leave out, per predictor and kind: warm-up queries (with
-    their error summaries) and queries without a reference (beyond the truth's or the
-    fixes' span: nothing to score against)."""
+    their error summaries, and intervals given ``stats``) and queries without a reference
+    (beyond the truth's or the fixes' span: nothing to score against)."""
     out: dict[str, Any] = {"warmup": {}, "no_reference": {}}
     if traces.empty:
         return out
@@ -122,7 +144,7 @@ def excluded_summary(traces: pd.DataFrame, preds: Sequence[str]) -> dict[str, An
     warm = traces["warmup"] if "warmup" in traces else pd.Series(False, index=traces.index)
     for name in preds:
         mine = traces["predictor"] == name
-        out["warmup"][name] = _kind_summaries(traces[mine & warm & ~no_ref])
+        out["warmup"][name] = _kind_summaries(_with_codes(traces[mine & warm & ~no_ref]), stats)
         out["no_reference"][name] = {k: int((mine & no_ref & (traces["kind"] == k)).sum())
                                      for k in KINDS}
     return out
@@ -136,34 +158,89 @@ def all_traces(runs: Sequence[DriveRun]) -> pd.DataFrame:
     return pd.concat(frames, ignore_index=True) if frames else pd.DataFrame()
 
 
-def _kind_summaries(df: pd.DataFrame) -> dict[str, Any]:
-    return {k: summarize(df.loc[df["kind"] == k, "error_m"].to_numpy()) for k in KINDS}
+def _with_codes(df: pd.DataFrame) -> pd.DataFrame:
+    """``df`` with column ``code``: its drive as an integer (the bootstrap's cluster)."""
+    return df.assign(code=drive_codes(df))
 
 
-def _label_summaries(df: pd.DataFrame) -> dict[str, Any]:
-    return {kind: summarize_groups(df.loc[df["kind"] == kind, "error_m"].to_numpy(),
-                                   df.loc[df["kind"] == kind, "label"].to_numpy(),
-                                   order=list(LABELS))
-            for kind in KINDS}
+def _columns(df: pd.DataFrame, kind: str) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Errors [m], drive codes, query times [s] and the row mask of one kind's rows."""
+    m = (df["kind"] == kind).to_numpy()
+    return (df["error_m"].to_numpy(dtype=float)[m], df["code"].to_numpy()[m],
+            df["t_query"].to_numpy(dtype=float)[m], m)
 
 
-def _empty_kinds() -> dict[str, Any]:
-    return {k: summarize(np.empty(0)) for k in KINDS}
+def _kind_summaries(df: pd.DataFrame, stats: Statistics | None = None) -> dict[str, Any]:
+    """Per kind, :func:`summarize` of the errors, with ``ci95`` given ``stats`` (``df`` then
+    needs the ``code`` column of :func:`_with_codes`)."""
+    if stats is None:
+        return {k: summarize(df.loc[df["kind"] == k, "error_m"].to_numpy()) for k in KINDS}
+    kind = df["kind"].to_numpy()
+    out = {k: summarize(df["error_m"].to_numpy(dtype=float)[kind == k]) for k in KINDS}
+    add_group_cis(out, df["error_m"].to_numpy(dtype=float), kind, df["code"].to_numpy(),
+                  df["t_query"].to_numpy(dtype=float), stats)
+    return out
+
+
+def _label_summaries(df: pd.DataFrame, stats: Statistics | None = None) -> dict[str, Any]:
+    out = {}
+    for kind in KINDS:
+        m = (df["kind"] == kind).to_numpy()
+        e = df["error_m"].to_numpy(dtype=float)[m]
+        labels = df["label"].to_numpy()[m]
+        out[kind] = summarize_groups(e, labels, order=list(LABELS))
+        if stats is not None:
+            add_group_cis(out[kind], e, labels, df["code"].to_numpy()[m],
+                          df["t_query"].to_numpy(dtype=float)[m], stats)
+    return out
+
+
+def _per_drive(df: pd.DataFrame, name: str, per_drive: dict[tuple[str, str], dict[str, Any]],
+               queries: dict[tuple[str, str, str], dict[str, tuple[np.ndarray, np.ndarray]]]
+               ) -> None:
+    """Each drive's summaries of predictor ``name`` (``df``: its scored rows with ``code``)
+    into ``per_drive[(dataset, drive)][name]``, and each drive's errors and query times per
+    kind into ``queries[(dataset, drive, kind)][name]`` (for the intervals, drive by drive)."""
+    first = df.drop_duplicates("code")
+    keys = dict(zip(first["code"].to_numpy(), zip(first["dataset"].astype(str),
+                                                  first["drive"].astype(str), strict=True),
+                    strict=True))
+    for key in keys.values():
+        per_drive.setdefault(key, {})[name] = {k: summarize(np.empty(0)) for k in KINDS}
+    for k in KINDS:
+        e, codes, t, _ = _columns(df, k)
+        order = np.argsort(codes, kind="stable")  # stable: each drive keeps its time order
+        present, starts, counts = np.unique(codes[order], return_index=True, return_counts=True)
+        for code, a, n in zip(present.tolist(), starts.tolist(), counts.tolist(), strict=True):
+            ds, drive = keys[code]
+            idx = order[a:a + n]
+            per_drive[(ds, drive)][name][k] = summarize(e[idx])
+            queries.setdefault((ds, drive, k), {})[name] = (e[idx], t[idx])
+
+
+def _empty_kinds(stats: Statistics | None = None) -> dict[str, Any]:
+    empty = np.empty(0)
+    return {k: with_ci(summarize(empty), empty, empty, None, stats) for k in KINDS}
 
 
 def aggregate(runs: Sequence[DriveRun], cfg: RunConfig, data_manifest: list[dict[str, Any]],
               command: str, traces: pd.DataFrame | None = None,
-              models: dict[str, dict[str, Any]] | None = None) -> dict[str, Any]:
+              models: dict[str, dict[str, Any]] | None = None,
+              statistics: Statistics | None = None) -> dict[str, Any]:
     """The content of ``results.json`` (``traces``: :func:`all_traces` if already made;
     ``models``: the learned models behind the predictors, :func:`learned_models` of ``cfg``
     if None; ``{}`` for answers scored from a file, whose models posbench cannot know).
 
     Headline figures use the scored rows only (:func:`scored_mask`); the work goes one
     predictor at a time over just the :data:`AGGREGATED` columns of its rows, so a long run
-    never holds a second full copy of its traces."""
+    never holds a second full copy of its traces (the baseline's rows are kept for the
+    paired comparison). Every summary gets its ``ci95`` and each predictor its paired
+    comparison with the baseline as ``statistics`` says (default: :class:`Statistics` with
+    baseline ``kf`` when it is in the run; see :mod:`bench.intervals`)."""
     if traces is None:
         traces = all_traces(runs)
     preds = list(cfg.predictors)
+    stats = statistics or Statistics(baseline=default_baseline(preds))
     res: dict[str, Any] = {
         "command": command,
         "config": cfg.to_dict(),
@@ -176,7 +253,7 @@ def aggregate(runs: Sequence[DriveRun], cfg: RunConfig, data_manifest: list[dict
         "by_speed": {},
         "outages": {},
         "models": learned_models(cfg) if models is None else models,
-        "excluded": excluded_summary(traces, preds),
+        "excluded": excluded_summary(traces, preds, stats),
         "held_out": {},
         "held_out_all": {},
         "drives": [],
@@ -201,13 +278,22 @@ def aggregate(runs: Sequence[DriveRun], cfg: RunConfig, data_manifest: list[dict
     if held_all:
         res["held_out_all"] = {"drives": sorted(all_drives - trained_on), "predictors": {}}
     per_drive: dict[tuple[str, str], dict[str, Any]] = {}
+    drive_queries: dict[tuple[str, str, str], dict[str, tuple[np.ndarray, np.ndarray]]] = {}
     for ds in datasets:
         res["by_dataset"][ds] = {}
         res["by_label"][ds] = {}
+    res["statistics"] = stats.to_dict()
+    res["paired"] = {"baseline": stats.baseline, "overall": {}, "by_dataset": {}, "by_label": {}}
+
+    def scored_rows(name: str) -> pd.DataFrame:
+        if traces.empty:
+            return pd.DataFrame(columns=[*cols, "code"])
+        return _with_codes(traces.loc[keep & (traces["predictor"] == name).to_numpy(), cols])
+
+    base_df = scored_rows(stats.baseline) if stats.baseline else None
     for name in preds:
-        df = (traces.loc[keep & (traces["predictor"] == name).to_numpy(), cols]
-              if not traces.empty else pd.DataFrame(columns=cols))
-        entry = _kind_summaries(df) if not df.empty else _empty_kinds()
+        df = base_df if name == stats.baseline else scored_rows(name)
+        entry = _kind_summaries(df, stats) if not df.empty else _empty_kinds(stats)
         steps = np.concatenate([r.step_ns[name] for r in runs if name in r.step_ns] or [np.empty(0)])
         queries = np.concatenate([r.query_ns[name] for r in runs if name in r.query_ns] or [np.empty(0)])
         entry["latency_us"] = latency_summary(steps)
@@ -215,33 +301,69 @@ def aggregate(runs: Sequence[DriveRun], cfg: RunConfig, data_manifest: list[dict
         res["predictors"][name] = entry
         if not df.empty:
             for kind in KINDS:
-                dk = df[df["kind"] == kind]
-                bins = speed_bin_labels(dk["speed_mps"].to_numpy())
-                res["by_speed"].setdefault(name, {})[kind] = summarize_groups(
-                    dk["error_m"].to_numpy(), bins, order=speed_bin_order() + ["unknown"])
+                e, codes, t, m = _columns(df, kind)
+                bins = speed_bin_labels(df["speed_mps"].to_numpy()[m])
+                by_speed = summarize_groups(e, bins, order=speed_bin_order() + ["unknown"])
+                add_group_cis(by_speed, e, bins, codes, t, stats)
+                res["by_speed"].setdefault(name, {})[kind] = by_speed
         if with_outages:
-            dn = df[df["kind"] == "now"]
-            code = pd.factorize(dn["drive"])[0].astype(np.int64)
-            ids = np.where(dn["outage"].to_numpy() >= 0, code * 1_000_000 + dn["outage"].to_numpy(), -1)
-            res["outages"][name] = {
-                "since_fix": error_vs_since_fix(dn["error_m"].to_numpy(), dn["since_fix_s"].to_numpy()),
-                "scores": outage_scores(dn["error_m"].to_numpy(), dn["t_query"].to_numpy(), ids),
-            }
+            e, codes, t, m = _columns(df, "now")
+            outage = df["outage"].to_numpy()[m]
+            since = df["since_fix_s"].to_numpy()[m]
+            ids = np.where(outage >= 0, codes * OUTAGE_ID_BASE + outage, -1)
+            since_fix = error_vs_since_fix(e, since)
+            add_group_cis(since_fix, e, since_fix_keys(since), codes, t, stats)
+            scores = outage_scores(e, t, ids)
+            scores["ci95"] = outage_cis(e, t, ids, stats)
+            res["outages"][name] = {"since_fix": since_fix, "scores": scores}
+        if base_df is not None and name != stats.baseline and not df.empty:
+            pr = paired_results(df, base_df, datasets, stats)
+            res["paired"]["overall"][name] = pr["overall"]
+            for ds in datasets:
+                res["paired"]["by_dataset"].setdefault(ds, {})[name] = pr["by_dataset"][ds]
+                res["paired"]["by_label"].setdefault(ds, {})[name] = pr["by_label"][ds]
         groups = {str(ds): g for ds, g in df.groupby("dataset", sort=True, observed=True)}
         for ds in datasets:
             dfp = groups.get(ds, df.iloc[:0])
-            res["by_dataset"][ds][name] = _kind_summaries(dfp)
-            res["by_label"][ds][name] = _label_summaries(dfp)
+            res["by_dataset"][ds][name] = _kind_summaries(dfp, stats)
+            res["by_label"][ds][name] = _label_summaries(dfp, stats)
             if ds in res["held_out"]:
                 held = dfp[~dfp["drive"].isin(trained_on)]
-                res["held_out"][ds]["predictors"][name] = _kind_summaries(held)
-                res["held_out"][ds]["by_label"][name] = _label_summaries(held)
+                res["held_out"][ds]["predictors"][name] = _kind_summaries(held, stats)
+                res["held_out"][ds]["by_label"][name] = _label_summaries(held, stats)
         if held_all:
             res["held_out_all"]["predictors"][name] = _kind_summaries(
-                df[~df["drive"].isin(trained_on)])
-        for (ds, drive), g in df.groupby(["dataset", "drive"], sort=False, observed=True):
-            per_drive.setdefault((str(ds), str(drive)), {})[name] = _kind_summaries(g)
+                df[~df["drive"].isin(trained_on)], stats)
+        if not df.empty:
+            _per_drive(df, name, per_drive, drive_queries)
         del df, groups
+    del base_df
+    # one drive's intervals (block bootstrap), drive by drive: its predictors share resamples
+    for (ds, drive, k), by_pred in drive_queries.items():
+        for name, ci in one_drive_cis(by_pred, stats).items():
+            per_drive[(ds, drive)][name][k]["ci95"] = ci
+    del drive_queries
+    empty_ci = _empty_kinds(stats)["future"].get("ci95")
+    for kinds in (s for by_name in per_drive.values() for s in by_name.values()):
+        for k in KINDS:
+            if empty_ci is not None and "ci95" not in kinds[k]:  # a kind without queries
+                kinds[k]["ci95"] = dict(empty_ci)
+    # a summary over exactly one drive's queries is that drive's summary: the same interval
+    pairs = {ds: {(ds, d) for d in drives_of[ds]} for ds in datasets}
+    one_drive = [(res["predictors"], set().union(*pairs.values()) if pairs else set())]
+    one_drive += [(res["by_dataset"][ds], pairs[ds]) for ds in datasets]
+    one_drive += [(h["predictors"], {(ds, d) for d in h["drives"]})
+                  for ds, h in res["held_out"].items()]
+    if held_all:
+        one_drive.append((res["held_out_all"]["predictors"],
+                          {p for ds in datasets for p in pairs[ds] if p[1] not in trained_on}))
+    for summaries, drives in one_drive:
+        if len(drives) == 1 and next(iter(drives)) in per_drive:
+            mine = per_drive[next(iter(drives))]
+            for name, kinds in summaries.items():
+                for k in KINDS:
+                    if name in mine and "ci95" in kinds.get(k, {}):
+                        kinds[k]["ci95"] = dict(mine[name][k]["ci95"])
     for r in runs:
         d: dict[str, Any] = {"name": r.name, "dataset": r.dataset, "reference": r.reference,
                              "duration_s": r.duration_s, "gps_fed": r.gps_count,
@@ -252,7 +374,7 @@ def aggregate(runs: Sequence[DriveRun], cfg: RunConfig, data_manifest: list[dict
                              "predictors": {}}
         if not r.traces.empty:
             mine = per_drive.get((r.dataset, r.name), {})
-            d["predictors"] = {name: mine.get(name, _empty_kinds()) for name in preds}
+            d["predictors"] = {name: mine.get(name, _empty_kinds(stats)) for name in preds}
         res["drives"].append(d)
     res["gate"] = gate_summary(runs, cfg)
     return res

@@ -31,7 +31,7 @@ from scenarios.errors import DataError
 
 #: MAJOR.MINOR of results.json: a reader accepts every MINOR of its MAJOR; MINOR grows when
 #: keys are added, MAJOR when a key changes meaning or goes
-SCHEMA_VERSION = "1.0"
+SCHEMA_VERSION = "1.1"
 RESULTS = "results.json"
 TRACES = "traces.parquet"
 PROVENANCE_KEYS = ("command", "versions", "git_commit", "data")
@@ -114,8 +114,19 @@ class Run:
 
     def summary(self, kind: str = "future") -> pd.DataFrame:
         """Headline errors of one kind (``future`` or ``now``) as a numeric frame: one row per
-        predictor, columns count, missing, mean_m, median_m, rmse_m, p95_m, max_m [m]."""
-        rows = {p: v[kind] for p, v in self.results["predictors"].items()}
+        predictor, columns count, missing, mean_m, median_m, rmse_m, p95_m, max_m [m], and
+        for runs with intervals (schema 1.1) their 95 % bounds mean_m_lo, mean_m_hi,
+        median_m_lo, ... [m]."""
+        from metrics.accuracy import SUMMARY_KEYS
+
+        rows = {}
+        for p, v in self.results["predictors"].items():
+            s = v[kind]
+            row = {k: s.get(k) for k in SUMMARY_KEYS}
+            for fig, (lo, hi) in ((f, b) for f, b in s.get("ci95", {}).items()
+                                  if isinstance(b, list)):
+                row[f"{fig}_lo"], row[f"{fig}_hi"] = lo, hi
+            rows[p] = row
         return pd.DataFrame.from_dict(rows, orient="index").astype(float)
 
 

@@ -1,11 +1,12 @@
 """Every table of a run, built once as a numeric frame and rendered at the last moment.
 
 A :class:`Table` holds a DataFrame (numbers stay numbers; NaN/None = no figure), how many
-decimals each float column shows, and which columns are shown as ``value (count)``. One
+decimals each float column shows, which columns are shown as ``value (count)``, which carry
+a 95 % interval (``value [lo, hi]``) and which a marker (``*`` conclusive, ``?`` not). One
 renderer writes each form: terminal cells (:meth:`Table.cells`, printed by
-:func:`bench.terminal.print_table`), Markdown, CSV (full precision, counts as their own
-columns) and LaTeX. The builders below read a run's ``results`` (see
-:mod:`bench.saved_run`); nothing else formats a figure.
+:func:`bench.terminal.print_table`), Markdown, CSV (full precision; counts, interval bounds
+and markers as their own columns) and LaTeX. The builders below read a run's ``results``
+(see :mod:`bench.saved_run`); nothing else formats a figure.
 """
 
 from __future__ import annotations
@@ -39,6 +40,9 @@ class Table:
         digits: float column -> decimals shown (default 3).
         counts: value column -> the column holding its query count, shown as ``v (n)``.
         title: a caption.
+        ci: value column -> its (lo, hi) columns, shown as ``v [lo, hi]`` (same decimals).
+        marks: value column -> a text column whose content follows the value (``*``, ``?``).
+        hidden: further columns kept for the CSV form only.
     """
 
     frame: pd.DataFrame
@@ -47,9 +51,13 @@ class Table:
     digits: Mapping[str, int] = field(default_factory=dict)
     counts: Mapping[str, str] = field(default_factory=dict)
     title: str = ""
+    ci: Mapping[str, tuple[str, str]] = field(default_factory=dict)
+    marks: Mapping[str, str] = field(default_factory=dict)
+    hidden: Sequence[str] = ()
 
     def shown_columns(self) -> list[str]:
-        hidden = set(self.counts.values())
+        hidden = (set(self.counts.values()) | {c for b in self.ci.values() for c in b}
+                  | set(self.marks.values()) | set(self.hidden))
         return [c for c in self.frame.columns if c not in hidden]
 
     def header(self) -> list[str]:
@@ -62,7 +70,14 @@ class Table:
         for _, row in self.frame.iterrows():
             cells = []
             for c in self.shown_columns():
-                text = fmt(row[c], self.digits.get(c, 3))
+                digits = self.digits.get(c, 3)
+                text = fmt(row[c], digits)
+                if c in self.ci and text != "-":
+                    lo, hi = (row[b] for b in self.ci[c])
+                    if _finite(lo) and _finite(hi):
+                        text += f" [{fmt(lo, digits)}, {fmt(hi, digits)}]"
+                if c in self.marks and row[self.marks[c]] and text != "-":
+                    text += f" {row[self.marks[c]]}"
                 if c in self.counts:
                     n = row[self.counts[c]]
                     text = f"{'-' if not n else text} ({fmt(n)})"
@@ -79,6 +94,9 @@ class Table:
     def csv(self) -> str:
         """Full-precision numbers, counts in their own columns, empty for no figure."""
         labels = {c: h for c, h in self.labels.items() if c not in self.counts}
+        for c, (lo, hi) in self.ci.items():
+            name = self.labels.get(c, c) if c not in self.counts else c
+            labels[lo], labels[hi] = f"{name} ci95 lo", f"{name} ci95 hi"
         return self.frame.rename(columns=labels).to_csv(index=False)
 
     def latex(self) -> str:
@@ -91,6 +109,13 @@ class Table:
         lines += [" & ".join(_tex(c) for c in row) + " \\\\" for row in self.cells()]
         lines += ["\\bottomrule", "\\end{tabular}"]
         return "\n".join(lines) + "\n"
+
+
+def _finite(v: Any) -> bool:
+    try:
+        return v is not None and math.isfinite(float(v))
+    except (TypeError, ValueError):
+        return False
 
 
 def fmt(v: Any, digits: int = 3) -> str:
@@ -135,38 +160,64 @@ def trained_in_run(res: Mapping[str, Any]) -> dict[str, list[str]]:
     return out
 
 
+def put_figure(row: dict[str, Any], col: str, summary: Mapping[str, Any] | None, figure: str,
+         scale: float = 1.0) -> None:
+    """``row[col]``: ``summary[figure]`` x ``scale``; ``row[col_lo]``, ``row[col_hi]``: its
+    95 % interval (``ci95``; NaN when the run has none)."""
+    summary = summary or {}
+    row[col] = scale * _num(summary.get(figure))
+    lo, hi = ((summary.get("ci95") or {}).get(figure) or [None, None])[:2]
+    row[f"{col}_lo"], row[f"{col}_hi"] = scale * _num(lo), scale * _num(hi)
+
+
+def with_ci_columns(cols: Sequence[str], with_ci: Sequence[str]) -> list[str]:
+    """``cols`` with each column of ``with_ci`` followed by its ``_lo``, ``_hi`` columns."""
+    return [x for c in cols for x in ((c, f"{c}_lo", f"{c}_hi") if c in with_ci else (c,))]
+
+
+def ci_map(cols: Sequence[str]) -> dict[str, tuple[str, str]]:
+    return {c: (f"{c}_lo", f"{c}_hi") for c in cols}
+
+
 SUMMARY_LABELS = {"predictor": "predictor", "future_mean": "future mean [m]", "future_median": "median",
                   "future_rmse": "RMSE", "future_p95": "p95", "future_max": "max", "future_n": "n",
                   "now_mean": "now mean [m]", "now_p95": "now p95", "now_n": "n",
                   "missing": "missing", "step_p50": "step p50 [us]", "step_p99": "step p99 [us]",
                   "query_p50": "query p50 [us]"}
 LATENCY_DIGITS = {"step_p50": 1, "step_p99": 1, "query_p50": 1}
+#: the columns of the summary table that carry a 95 % interval (all means, medians, p95s)
+SUMMARY_CI = ("future_mean", "future_median", "future_p95", "now_mean", "now_p95")
 
 
-def summary_table(res: Mapping[str, Any], held_out: bool = False) -> Table:
-    """The headline: per predictor, future and now errors [m], unanswered queries, latency
-    [us]. A predictor trained on some of the run's drives is marked ``*``. ``held_out``:
-    over the drives no learned predictor trained on (no latency: it is run-wide)."""
+def summary_table(res: Mapping[str, Any], held_out: bool = False, compact: bool = False) -> Table:
+    """The headline: per predictor, future and now errors [m] with their 95 % intervals,
+    unanswered queries, latency [us]. A predictor trained on some of the run's drives is
+    marked ``*``. ``held_out``: over the drives no learned predictor trained on (no latency:
+    it is run-wide). ``compact`` (the terminal): intervals on the means only."""
     trained = trained_in_run(res)
     src = res["held_out_all"]["predictors"] if held_out else res["predictors"]
     rows = []
     for name, p in src.items():
         f, n = p["future"], p["now"]
-        row = {"predictor": name + (TRAINED_MARK if name in trained and not held_out else ""),
-               "future_mean": _num(f["mean_m"]), "future_median": _num(f["median_m"]),
-               "future_rmse": _num(f["rmse_m"]), "future_p95": _num(f["p95_m"]),
-               "future_max": _num(f["max_m"]), "future_n": f["count"],
-               "now_mean": _num(n["mean_m"]), "now_p95": _num(n["p95_m"]), "now_n": n["count"],
-               "missing": f.get("missing", 0) + n.get("missing", 0)}
+        row: dict[str, Any] = {"predictor": name + (TRAINED_MARK if name in trained and not held_out
+                                                    else "")}
+        for col, summ, fig in (("future_mean", f, "mean_m"), ("future_median", f, "median_m"),
+                               ("future_rmse", f, "rmse_m"), ("future_p95", f, "p95_m"),
+                               ("future_max", f, "max_m"), ("now_mean", n, "mean_m"),
+                               ("now_p95", n, "p95_m")):
+            put_figure(row, col, summ, fig)
+        row.update(future_n=f["count"], now_n=n["count"],
+                   missing=f.get("missing", 0) + n.get("missing", 0))
         if not held_out:
             lat = res["predictors"][name]
             row.update(step_p50=_num(lat["latency_us"].get("p50")),
                        step_p99=_num(lat["latency_us"].get("p99")),
                        query_p50=_num(lat["query_us"].get("p50")))
         rows.append(row)
+    shown_ci = ("future_mean", "now_mean") if compact else SUMMARY_CI
     cols = list(SUMMARY_LABELS) if not held_out else list(SUMMARY_LABELS)[:11]
-    return Table(_frame(rows, cols), "held_out" if held_out else "summary", SUMMARY_LABELS,
-                 LATENCY_DIGITS)
+    return Table(_frame(rows, with_ci_columns(cols, shown_ci)), "held_out" if held_out else "summary",
+                 SUMMARY_LABELS, LATENCY_DIGITS, ci=ci_map(shown_ci))
 
 
 def warmup_table(res: Mapping[str, Any]) -> Table:
@@ -174,32 +225,54 @@ def warmup_table(res: Mapping[str, Any]) -> Table:
     rows = []
     for name, w in res.get("excluded", {}).get("warmup", {}).items():
         f, n = w["future"], w["now"]
-        rows.append({"predictor": name, "future_mean": _num(f["mean_m"]), "future_max": _num(f["max_m"]),
-                     "future_n": f["count"], "now_mean": _num(n["mean_m"]), "now_max": _num(n["max_m"]),
-                     "now_n": n["count"], "missing": f.get("missing", 0) + n.get("missing", 0)})
+        row: dict[str, Any] = {"predictor": name}
+        put_figure(row, "future_mean", f, "mean_m")
+        put_figure(row, "now_mean", n, "mean_m")
+        row.update(future_max=_num(f["max_m"]), future_n=f["count"], now_max=_num(n["max_m"]),
+                   now_n=n["count"], missing=f.get("missing", 0) + n.get("missing", 0))
+        rows.append(row)
     labels = {"future_mean": "future mean [m]", "future_max": "max", "future_n": "n",
               "now_mean": "now mean [m]", "now_max": "max", "now_n": "n"}
-    return Table(_frame(rows, ["predictor", *labels, "missing"]), "warmup", labels)
+    with_ci = ("future_mean", "now_mean")
+    return Table(_frame(rows, with_ci_columns(["predictor", *labels, "missing"], with_ci)), "warmup",
+                 labels, ci=ci_map(with_ci))
+
+
+DATASET_CI = ("future_mean", "future_median", "future_p95", "now_mean", "now_p95")
 
 
 def dataset_table(res: Mapping[str, Any], dataset: str) -> Table:
-    """One data set: per predictor, future and now errors [m]."""
+    """One data set: per predictor, future and now errors [m] with their 95 % intervals."""
     rows = []
     for name, s in res["by_dataset"][dataset].items():
         f, n = s["future"], s["now"]
-        rows.append({"predictor": name, "future_mean": _num(f["mean_m"]),
-                     "future_median": _num(f["median_m"]), "future_p95": _num(f["p95_m"]),
-                     "future_n": f["count"], "now_mean": _num(n["mean_m"]),
-                     "now_p95": _num(n["p95_m"]), "now_n": n["count"]})
+        row: dict[str, Any] = {"predictor": name}
+        for col, summ, fig in (("future_mean", f, "mean_m"), ("future_median", f, "median_m"),
+                               ("future_p95", f, "p95_m"), ("now_mean", n, "mean_m"),
+                               ("now_p95", n, "p95_m")):
+            put_figure(row, col, summ, fig)
+        row.update(future_n=f["count"], now_n=n["count"])
+        rows.append(row)
     labels = {"future_mean": "future mean [m]", "future_median": "median", "future_p95": "p95",
               "future_n": "n", "now_mean": "now mean [m]", "now_p95": "now p95", "now_n": "n"}
-    return Table(_frame(rows, ["predictor", *labels]), f"dataset-{dataset}", labels)
+    return Table(_frame(rows, with_ci_columns(["predictor", *labels], DATASET_CI)),
+                 f"dataset-{dataset}", labels, ci=ci_map(DATASET_CI))
+
+
+#: the marker of a route-type cell whose 95 % interval is wider than its value
+NOT_CONCLUSIVE = "?"
+
+
+def not_conclusive(value: float, lo: float, hi: float) -> bool:
+    """A figure whose 95 % interval is wider than the figure itself (hi - lo > value)."""
+    return _finite(value) and _finite(lo) and _finite(hi) and hi - lo > value
 
 
 def label_table(res: Mapping[str, Any], dataset: str, kind: str, held_out: bool = False) -> Table:
-    """The paper's Table I layout: route type x mean error [cm] (query count), one column per
-    predictor; for the future point (what the paper measured) its LSTM figure beside.
-    ``held_out``: only drives no learned predictor was trained on."""
+    """The paper's Table I layout: route type x mean error [cm] with its 95 % interval
+    (query count), one column per predictor, ``?`` where the interval is wider than the
+    value (not conclusive); for the future point (what the paper measured) its LSTM figure
+    beside. ``held_out``: only drives no learned predictor was trained on."""
     preds = list(res["predictors"])
     paper = kind == "future"
     if held_out:
@@ -213,7 +286,10 @@ def label_table(res: Mapping[str, Any], dataset: str, kind: str, held_out: bool 
         out: dict[str, Any] = {}
         for p in preds:
             s = summaries.get(p) or {}
-            out[f"{p} [cm]"] = 100 * _num(s.get("mean_m")) if s.get("count") else float("nan")
+            col = f"{p} [cm]"
+            put_figure(out, col, s if s.get("count") else {}, "mean_m", 100.0)
+            out[f"{p} mark"] = (NOT_CONCLUSIVE if not_conclusive(out[col], out[f"{col}_lo"],
+                                                                 out[f"{col}_hi"]) else "")
             out[f"{p} n"] = int(s.get("count", 0))
         return out
 
@@ -228,16 +304,20 @@ def label_table(res: Mapping[str, Any], dataset: str, kind: str, held_out: bool 
     if paper:
         overall["paper LSTM [cm]"] = PAPER_OVERALL
     rows.append(overall)
-    cols = ["route type"] + [c for p in preds for c in (f"{p} [cm]", f"{p} n")]
+    cols = ["route type"] + [c for p in preds for c in (f"{p} [cm]", f"{p} [cm]_lo",
+                                                        f"{p} [cm]_hi", f"{p} mark", f"{p} n")]
     cols += ["paper LSTM [cm]"] if paper else []
     return Table(_frame(rows, cols), f"route-type-{dataset}-{kind}" + ("-held-out" if held_out else ""),
                  {f"{p} [cm]": f"{p} [cm] (n)" for p in preds},
                  {c: 1 for c in cols if c.endswith("[cm]")},
-                 {f"{p} [cm]": f"{p} n" for p in preds})
+                 {f"{p} [cm]": f"{p} n" for p in preds},
+                 ci=ci_map([f"{p} [cm]" for p in preds]),
+                 marks={f"{p} [cm]": f"{p} mark" for p in preds})
 
 
 def speed_table(res: Mapping[str, Any]) -> Table:
-    """Future-point error by speed bin, mean [m] (queries); bins without queries left out."""
+    """Future-point error by speed bin, mean [m] with its 95 % interval (queries); bins
+    without queries left out."""
     by_speed = res["by_speed"]
     bins = [b for b in speed_bin_order() + ["unknown"]
             if any(by_speed[p]["future"].get(b, {}).get("count", 0) for p in by_speed)]
@@ -245,32 +325,38 @@ def speed_table(res: Mapping[str, Any]) -> Table:
     for p, s in by_speed.items():
         row: dict[str, Any] = {"predictor": p}
         for b in bins:
-            row[b] = _num(s["future"][b]["mean_m"])
+            put_figure(row, b, s["future"][b], "mean_m")
             row[f"{b} n"] = s["future"][b]["count"]
         rows.append(row)
-    cols = ["predictor"] + [c for b in bins for c in (b, f"{b} n")]
-    return Table(_frame(rows, cols), "speed", counts={b: f"{b} n" for b in bins})
+    cols = ["predictor"] + [c for b in bins for c in (b, f"{b}_lo", f"{b}_hi", f"{b} n")]
+    return Table(_frame(rows, cols), "speed", counts={b: f"{b} n" for b in bins},
+                 ci=ci_map(bins))
 
 
 def outage_table(res: Mapping[str, Any]) -> Table:
-    """Now-error by time since the last fix (mean [m], queries) and per-outage scores."""
+    """Now-error by time since the last fix (mean [m], queries) and per-outage scores, each
+    with its 95 % interval."""
     cps = list(next(iter(res["outages"].values()))["since_fix"])
     rows = []
     for p, o in res["outages"].items():
         sc = o["scores"]
         row: dict[str, Any] = {"predictor": p}
         for c in cps:
-            row[c] = _num(o["since_fix"][c]["mean_m"])
+            put_figure(row, c, o["since_fix"][c], "mean_m")
             row[f"{c} n"] = o["since_fix"][c]["count"]
-        row.update(outages=sc["outages"], ade=_num(sc["ade_mean_m"]), fde=_num(sc["fde_mean_m"]),
-                   fde_p95=_num(sc["fde_p95_m"]), miss_rate=_num(sc["miss_rate"]))
+        row["outages"] = sc["outages"]
+        ci = sc.get("ci95") or {}
+        for col, fig in (("ade", "ade_mean_m"), ("fde", "fde_mean_m"), ("fde_p95", "fde_p95_m"),
+                         ("miss_rate", "miss_rate")):
+            put_figure(row, col, {fig: sc[fig], "ci95": ci}, fig)
         rows.append(row)
-    cols = ["predictor"] + [x for c in cps for x in (c, f"{c} n")]
-    cols += ["outages", "ade", "fde", "fde_p95", "miss_rate"]
+    scores = ["ade", "fde", "fde_p95", "miss_rate"]
+    cols = ["predictor"] + [x for c in cps for x in (c, f"{c}_lo", f"{c}_hi", f"{c} n")]
+    cols += ["outages"] + with_ci_columns(scores, scores)
     labels = {c: f"{c} after fix" for c in cps}
     labels.update(ade="ADE [m]", fde="FDE [m]", fde_p95="FDE p95 [m]", miss_rate="miss rate")
     return Table(_frame(rows, cols), "outages", labels, {"miss_rate": 2},
-                 {c: f"{c} n" for c in cps})
+                 {c: f"{c} n" for c in cps}, ci=ci_map([*cps, *scores]))
 
 
 def gate_table(res: Mapping[str, Any]) -> Table:
@@ -303,8 +389,10 @@ def drives_table(res: Mapping[str, Any]) -> Table:
                          "reference": f"skipped: {d['skipped']}"})
             continue
         mark = "".join(f" ({p} trained on it)" for p in d.get("trained_on", []))
-        rows.append({"drive": d["name"] + mark, "data set": d["dataset"], "reference": d["reference"],
-                     **{f"{p} future mean [m]": _num(d["predictors"].get(p, {}).get("future", {})
-                                                     .get("mean_m")) for p in preds}})
-    return Table(_frame(rows, ["drive", "data set", "reference"]
-                        + [f"{p} future mean [m]" for p in preds]), "drives")
+        row = {"drive": d["name"] + mark, "data set": d["dataset"], "reference": d["reference"]}
+        for p in preds:
+            put_figure(row, f"{p} future mean [m]", d["predictors"].get(p, {}).get("future"), "mean_m")
+        rows.append(row)
+    cols = [f"{p} future mean [m]" for p in preds]
+    return Table(_frame(rows, with_ci_columns(["drive", "data set", "reference", *cols], cols)),
+                 "drives", ci=ci_map(cols))

@@ -15,6 +15,22 @@ import numpy as np
 
 SUMMARY_KEYS = ("count", "missing", "mean_m", "median_m", "rmse_m", "p95_m", "max_m")
 
+#: what each figure of :func:`summarize` means (the report's glossary collects these); a
+#: figure is over the errors of the queries its row or cell covers, pooled over drives
+DEFINITIONS = {
+    "error": "Euclidean distance [m] between a predictor's answer and the reference position "
+             "at the query time, in the drive's local ENU frame.",
+    "mean": "arithmetic mean of the errors [m] (pooled: each drive weighs by its queries).",
+    "median": "50th percentile of the errors [m] (linear interpolation, as numpy).",
+    "RMSE": "root mean square of the errors [m].",
+    "p95": "95th percentile of the errors [m] (linear interpolation, as numpy).",
+    "max": "largest error [m].",
+    "n": "number of answered queries a figure is over (in parentheses after a value).",
+    "missing": "queries answered with no position (NaN) although a reference exists; counted, "
+               "never averaged, so abstaining cannot flatter a predictor.",
+    "speed bin": "the reference speed at the query time [m/s], in bins [a, b).",
+}
+
 
 def euclidean_error(pred_xy: np.ndarray, ref_xy: np.ndarray) -> np.ndarray:
     """Per-row Euclidean distance [m] between (N, 2) predicted and reference positions."""

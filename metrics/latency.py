@@ -8,6 +8,13 @@ from __future__ import annotations
 
 import numpy as np
 
+#: what each latency figure means (the report's glossary collects these)
+DEFINITIONS = {
+    "step p50 / p99": "median / 99th percentile [us] of the time one fix step takes "
+                      "(observe_gps plus the future query), perf_counter_ns, one process.",
+    "query p50": "median [us] of one between-fix position_at call (a now query).",
+}
+
 
 def latency_summary(durations_ns: np.ndarray) -> dict[str, float | int]:
     """count, p50, p90, p99, max and mean [us] of call durations given in ns."""

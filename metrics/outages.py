@@ -17,6 +17,22 @@ import numpy as np
 from metrics.accuracy import summarize
 
 SINCE_FIX_CHECKPOINTS_S = (0.2, 0.5, 1.0, 2.0, 5.0)
+#: a query counts for a checkpoint when its time since the last fix is this close to it [s]
+SINCE_FIX_TOLERANCE_S = 0.05
+#: an outage is missed when its FDE exceeds this [m]
+MISS_THRESHOLD_M = 2.0
+
+#: what each figure of this module means (the report's glossary collects these)
+DEFINITIONS = {
+    "after fix": ("mean current-position (now) error over the queries whose time since the "
+                  f"last received fix is within {SINCE_FIX_TOLERANCE_S:g} s of the checkpoint "
+                  "(0.2 s, 0.5 s, ...), in runs with GPS dropouts."),
+    "ADE": "average displacement error: mean now-error over one GPS outage's queries, then "
+           "averaged over outages [m].",
+    "FDE": "final displacement error: now-error of an outage's last query, just before the "
+           "fix returns, averaged over outages (FDE p95: its 95th percentile) [m].",
+    "miss rate": f"share of outages whose FDE exceeds {MISS_THRESHOLD_M:g} m.",
+}
 
 
 def outage_ids(t_query: np.ndarray, outages: Sequence[tuple[float, float]]) -> np.ndarray:
@@ -36,32 +52,56 @@ def outage_ids(t_query: np.ndarray, outages: Sequence[tuple[float, float]]) -> n
 
 def error_vs_since_fix(errors: np.ndarray, since_fix_s: np.ndarray,
                        checkpoints_s: Sequence[float] = SINCE_FIX_CHECKPOINTS_S,
-                       tolerance_s: float = 0.05) -> dict[str, dict]:
+                       tolerance_s: float = SINCE_FIX_TOLERANCE_S) -> dict[str, dict]:
     """Summary of errors at each checkpoint of time since the last fix, keyed like ``"1s"``."""
     e = np.asarray(errors, dtype=float)
     s = np.asarray(since_fix_s, dtype=float)
     return {f"{c:g}s": summarize(e[np.abs(s - c) <= tolerance_s]) for c in checkpoints_s}
 
 
+def since_fix_checkpoint(since_fix_s: np.ndarray,
+                         checkpoints_s: Sequence[float] = SINCE_FIX_CHECKPOINTS_S,
+                         tolerance_s: float = SINCE_FIX_TOLERANCE_S) -> np.ndarray:
+    """The key of :func:`error_vs_since_fix` (``"1s"``, ...) each query counts for, ``""``
+    for none (the checkpoints are further apart than twice the tolerance)."""
+    s = np.asarray(since_fix_s, dtype=float)
+    out = np.full(s.size, "", dtype=object)
+    for c in checkpoints_s:
+        out[np.abs(s - c) <= tolerance_s] = f"{c:g}s"
+    return out
+
+
+def per_outage(errors: np.ndarray, t_query: np.ndarray, ids: np.ndarray
+               ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Per outage with at least one finite error, in increasing id: its id, ADE [m] (mean
+    error over its queries), FDE [m] (error of its last query) and the time of that last
+    query [s]."""
+    e = np.asarray(errors, dtype=float)
+    t = np.asarray(t_query, dtype=float)
+    ids = np.asarray(ids)
+    out_id, ade, fde, t_end = [], [], [], []
+    for k in np.unique(ids[ids >= 0]):
+        sel = np.flatnonzero((ids == k) & np.isfinite(e))
+        if sel.size == 0:
+            continue
+        last = sel[np.argmax(t[sel])]
+        out_id.append(k)
+        ade.append(e[sel].mean())
+        fde.append(e[last])
+        t_end.append(t[last])
+    return (np.asarray(out_id, dtype=np.int64), np.asarray(ade, dtype=float),
+            np.asarray(fde, dtype=float), np.asarray(t_end, dtype=float))
+
+
 def outage_scores(errors: np.ndarray, t_query: np.ndarray, ids: np.ndarray,
-                  miss_threshold_m: float = 2.0) -> dict[str, float | int]:
+                  miss_threshold_m: float = MISS_THRESHOLD_M) -> dict[str, float | int]:
     """ADE / FDE statistics over outages and the miss rate.
 
     Args:
         errors: per-query errors [m]; t_query: their times [s]; ids: outage index per
             query (-1 outside outages), from :func:`outage_ids`.
     """
-    e = np.asarray(errors, dtype=float)
-    t = np.asarray(t_query, dtype=float)
-    ids = np.asarray(ids)
-    ade, fde = [], []
-    for k in np.unique(ids[ids >= 0]):
-        sel = np.flatnonzero((ids == k) & np.isfinite(e))
-        if sel.size == 0:
-            continue
-        ade.append(e[sel].mean())
-        fde.append(e[sel[np.argmax(t[sel])]])
-    ade_a, fde_a = np.asarray(ade), np.asarray(fde)
+    _, ade_a, fde_a, _ = per_outage(errors, t_query, ids)
     n = int(fde_a.size)
     return {
         "outages": n,

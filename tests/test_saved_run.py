@@ -132,23 +132,31 @@ def test_readme_documents_every_trace_column():
 #: BLAS may differ in the last bits across CPUs, hence a relative tolerance
 GOLDEN_RTOL = 1e-6
 GOLDEN_ATOL_M = 1e-9
-NOT_COMPARED = {"command", "versions", "git_commit", "outputs", "paper_figures"}
+NOT_COMPARED = {"command", "versions", "git_commit", "outputs", "paper_figures",
+                "schema_version"}
 
 
-def _compare(a, b, path=""):
-    """Yield differences between two results trees; latency figures (``*_us``) are skipped."""
+def _minor(res: dict) -> int:
+    return int(str(res.get("schema_version", "1.0")).split(".")[1])
+
+
+def _compare(a, b, path="", added_ok=False):
+    """Yield differences between two results trees; latency figures (``*_us``) are skipped.
+    ``added_ok``: ``a`` follows a newer schema MINOR than ``b``, whose added keys (e.g. the
+    ``ci95`` of 1.1) ``b`` cannot have; every key ``b`` has must still be in ``a``, equal."""
     if isinstance(a, dict) and isinstance(b, dict):
-        if set(a) != set(b):
-            yield f"{path}: keys {sorted(set(a) ^ set(b))}"
+        keys_a = set(a) & set(b) | (set() if added_ok else set(a))
+        if keys_a != set(b):
+            yield f"{path}: keys {sorted(keys_a ^ set(b))}"
         for k in set(a) & set(b):
             if k in NOT_COMPARED or k.endswith("_us"):
                 continue
-            yield from _compare(a[k], b[k], f"{path}/{k}")
+            yield from _compare(a[k], b[k], f"{path}/{k}", added_ok)
     elif isinstance(a, list) and isinstance(b, list):
         if len(a) != len(b):
             yield f"{path}: length {len(a)} vs {len(b)}"
         for i, (x, y) in enumerate(zip(a, b, strict=False)):
-            yield from _compare(x, y, f"{path}[{i}]")
+            yield from _compare(x, y, f"{path}[{i}]", added_ok)
     elif isinstance(a, float) and isinstance(b, float):
         if not math.isclose(a, b, rel_tol=GOLDEN_RTOL, abs_tol=GOLDEN_ATOL_M):
             yield f"{path}: {a!r} vs {b!r}"
@@ -169,7 +177,9 @@ def test_golden_synthetic_run_equals_the_committed_report(tmp_path):
     assert r.returncode == 0, r.stderr
     fresh = load_run(tmp_path / "o")
     validate(fresh.results)
-    diffs = list(_compare(fresh.results, golden.results))
+    assert _minor(fresh.results) >= _minor(golden.results)
+    diffs = list(_compare(fresh.results, golden.results,
+                          added_ok=_minor(fresh.results) > _minor(golden.results)))
     assert not diffs, "\n".join(diffs[:20])
 
 

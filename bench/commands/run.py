@@ -21,7 +21,6 @@ from bench.commands.common import (
     IncludePoorTruthOpt,
     PlotFormatOpt,
     ProjectionOpt,
-    SeedOpt,
     SetOpt,
     SyntheticDurationOpt,
     TopicOpt,
@@ -41,6 +40,8 @@ from bench.options import (
     check_out_dir,
     check_out_file,
     parse_predictor_names,
+    parse_seeds,
+    resolve_baseline,
     validate_predictors,
     with_model_aliases,
 )
@@ -64,7 +65,20 @@ def run(
     gps_profile: GpsProfileOpt = "rtk",
     gps_latency: GpsLatencyOpt = 0.0,
     dropouts: DropoutsOpt = "none",
-    seed: SeedOpt = 0,
+    seed: Annotated[int | None, typer.Option(
+        metavar="INT", help="Master seed (GPS draws, dropouts, synthetic data); default 0.")
+    ] = None,
+    seeds: Annotated[str | None, typer.Option(
+        "--seeds", metavar="N|S,S,...",
+        help="Repeat the run over GPS-noise and dropout seeds, same drives: a count (5 = seeds "
+             "0..4) or a list (0,1,2,3,4). The report adds each figure's mean, sd, min and max "
+             "across seeds; traces, plots and every other figure are the first seed's. Not "
+             "with --seed.")] = None,
+    baseline: Annotated[str | None, typer.Option(
+        "--baseline", metavar="NAME|none",
+        help="Predictor the others are compared with on the same queries (difference of mean "
+             "error, 95 % CI, drives won). Default: kf when it is in the run; none: no "
+             "comparison.")] = None,
     out: Annotated[Path, typer.Option("--out", "-o", metavar="DIR", help="Output folder.")
                    ] = Path("bench-out"),
     workers: Annotated[int, typer.Option(
@@ -104,6 +118,7 @@ def run(
     from bench.config import RunConfig
     from bench.executors import EXECUTORS, RAY_MISSING, ExecutorError, ray_available
     from bench.fetch import local_paths
+    from bench.intervals import Statistics
 
     try:
         # every option is checked before a drive is loaded or a worker starts
@@ -115,6 +130,11 @@ def run(
         names = parse_predictor_names(predictors)
         formats = plot_formats(plot_format)
         n_drive_plots = drive_plot_limit(drive_plots)
+        if seed is not None and seeds is not None:
+            raise UsageError("--seed and --seeds together: give one seed (--seed 3) or the "
+                             "seeds to repeat the run over (--seeds 0,1,2)")
+        seed_list = parse_seeds(seeds) if seeds is not None else [0 if seed is None else seed]
+        seed = seed_list[0]
         check_drive_options(gps_profile, projection, horizon, gps_latency, dropouts, seed,
                             synthetic_duration, data)
         check_at_least(workers, 1, "--workers")
@@ -131,6 +151,7 @@ def run(
         names = with_model_aliases(names, options)
         import_from_cwd()
         options = validate_predictors(names, options, given)
+        stats = Statistics(baseline=resolve_baseline(baseline, names))
         cfg = RunConfig(predictors=names, horizon_s=horizon, gps_profile=gps_profile,
                         gps_latency_s=gps_latency, dropouts=dropouts, seed=seed,
                         exclude_poor_truth=not include_poor_truth, predictor_options=options,
@@ -139,7 +160,7 @@ def run(
             drives = load_drives(data, projection, topics, seed=seed,
                                  synthetic_duration=synthetic_duration)
             _run(drives, cfg, data, out, workers, rerun, executor, address, formats,
-                 n_drive_plots)
+                 n_drive_plots, stats, seed_list if seeds is not None else None)
     except (DataError, UsageError, ExecutorError) as e:
         raise fail(str(e)) from None
     except BrokenProcessPool:
@@ -174,24 +195,45 @@ def plural(n: int, word: str) -> str:
     return f"{n} {word}" + ("" if n == 1 else "s")
 
 
-def _run(drives, cfg, data, out: Path, workers: int, rerun: Path | None = None,
-         executor: str = "local", address: str | None = None,
-         formats: tuple[str, ...] = ("png",), drive_plots: int | None = 20) -> None:
+def _replay(drives, cfg, executor: str, workers: int, address: str | None, label: str = ""):
+    """Every drive through every predictor of ``cfg``, with a progress bar."""
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
     from bench.executors import run_drives
-    from bench.results import aggregate, all_traces, data_provenance
 
-    command = command_line()
     with Progress(TextColumn("[bold]{task.description}"), BarColumn(), MofNCompleteColumn(),
                   TimeElapsedColumn(), TextColumn("{task.fields[last]}"), console=console) as prog:
-        task = prog.add_task(f"{plural(len(drives), 'drive')} x "
+        task = prog.add_task(f"{label}{plural(len(drives), 'drive')} x "
                              f"{plural(len(cfg.predictors), 'predictor')}",
                              total=len(drives), last="")
-        runs = run_drives(drives, cfg, executor, workers=workers, address=address,
+        return run_drives(drives, cfg, executor, workers=workers, address=address,
                           on_done=lambda r: prog.update(task, advance=1, last=r.name))
+
+
+def _run(drives, cfg, data, out: Path, workers: int, rerun: Path | None = None,
+         executor: str = "local", address: str | None = None,
+         formats: tuple[str, ...] = ("png",), drive_plots: int | None = 20,
+         stats=None, seeds: list[int] | None = None) -> None:
+    from dataclasses import replace
+
+    from bench.results import aggregate, all_traces, data_provenance
+    from bench.seeds import seed_figures, seeds_section
+
+    command = command_line()
+    first = f"seed {cfg.seed} (1/{len(seeds)}): " if seeds else ""
+    runs = _replay(drives, cfg, executor, workers, address, first)
     traces = all_traces(runs)
-    res = aggregate(runs, cfg, data_provenance(data, cfg.seed), command, traces=traces)
+    res = aggregate(runs, cfg, data_provenance(data, cfg.seed), command, traces=traces,
+                    statistics=stats)
+    if seeds:
+        base = res["paired"]["baseline"]
+        figures = [seed_figures(traces, cfg.predictors, base, cfg.seed)]
+        for i, s in enumerate(seeds[1:], start=2):
+            runs_s = _replay(drives, replace(cfg, seed=s), executor, workers, address,
+                             f"seed {s} ({i}/{len(seeds)}): ")
+            figures.append(seed_figures(all_traces(runs_s), cfg.predictors, base, s))
+            del runs_s
+        res["seeds"] = seeds_section(seeds, figures)
     from bench.figures import paper_figures
 
     def figures(result):
@@ -251,17 +293,30 @@ def publish(res: dict[str, Any], traces: pd.DataFrame, runs: Sequence[DriveRun],
                for k in ("future", "now")):
         console.print("warning: no query could be scored (no reference position at any query "
                       "past the warm-up); see the exclusions below", highlight=False)
+    from bench.report import has_paired
+    from bench.stat_tables import paired_table, seeds_table
     from bench.tables import summary_table
 
-    headline = summary_table(res)
+    headline = summary_table(res, compact=True)
     print_table(console, headline.header(), headline.cells(),
-                title=f"{plural(scored, 'drive')} - errors in metres, latency in microseconds")
+                title=f"{plural(scored, 'drive')} - errors in metres [95 % CI], latency in "
+                      f"microseconds")
     for note in (trained_note(res), excluded_note(res)):
         if note:
             console.print(note, highlight=False)
+    if has_paired(res):
+        paired = paired_table(res)
+        print_table(console, paired.header(), paired.cells(),
+                    title=f"vs {res['paired']['baseline']}: Δ mean error [m], same queries "
+                          f"[95 % CI]; * CI excludes 0")
+    if res.get("seeds"):
+        st = seeds_table(res)
+        print_table(console, st.header(), st.cells(),
+                    title=f"over seeds {', '.join(map(str, res['seeds']['seeds']))}: mean error "
+                          f"[m] (figures and traces: seed {res['seeds']['traces_seed']})")
     if res.get("held_out_all"):
         ho = res["held_out_all"]
-        held = summary_table(res, held_out=True)
+        held = summary_table(res, held_out=True, compact=True)
         print_table(console, held.header(), held.cells(),
                     title=f"held-out {plural(len(ho['drives']), 'drive')} (no learned predictor "
                           f"trained on them) - errors in metres")
