@@ -472,7 +472,9 @@ def comparison_figure(runs: Sequence[Run], labels: Sequence[str], metric: Metric
         v = frame[lab].to_numpy(dtype=float)
         lo = frame[f"{lab} lo"].to_numpy(dtype=float)
         hi = frame[f"{lab} hi"].to_numpy(dtype=float)
-        err = np.vstack([np.where(np.isfinite(lo), v - lo, 0.0), np.where(np.isfinite(hi), hi - v, 0.0)])
+        # a percentile interval need not hold its point value (a skewed median): clip at 0
+        err = np.vstack([np.where(np.isfinite(lo), np.maximum(v - lo, 0.0), 0.0),
+                         np.where(np.isfinite(hi), np.maximum(hi - v, 0.0), 0.0)])
         ax.bar(x + (i - (len(labels) - 1) / 2) * width, np.nan_to_num(v), width, yerr=err,
                capsize=3, label=lab)
     ax.set_xticks(x, preds, rotation=30, ha="right")

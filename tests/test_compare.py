@@ -51,6 +51,9 @@ def _copy(src: Path, dst: Path, kf_scale: float = 1.0, config: dict | None = Non
         for k in STATS:
             if s.get(k) is not None:
                 s[k] *= kf_scale
+            ci = (s.get("ci95") or {}).get(k)
+            if ci and None not in ci:
+                s["ci95"][k] = [c * kf_scale for c in ci]
 
     for kind in ("future", "now"):
         scale(res["predictors"]["kf"][kind])

@@ -68,9 +68,12 @@ def readme_runs() -> list[tuple[list[str], dict[str, list[str]]]]:
 
 
 def table_rows(text: str) -> dict[str, list[str]]:
-    """Rows of a printed summary table: predictor name -> its cells after the name."""
+    """Rows of the first table printed (the summary): predictor name -> its cells after the
+    name (later tables, such as the paired comparison, are not read)."""
     rows = {}
     for line in text.splitlines():
+        if line.startswith("└"):
+            break
         if line.startswith("│"):
             cells = [c.strip() for c in line.strip().strip("│").split("│")]
             rows[cells[0]] = cells[1:]
