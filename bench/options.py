@@ -343,3 +343,22 @@ def _build_once(name: str, opts: Mapping[str, Any], as_given: Mapping[str, Any],
     raise UsageError(f"predictor {name} cannot be created with "
                      f"{', '.join(flag_text(given, name, k, as_given.get(k)) for k in others)}: "
                      f"{_failure_detail(exc)}")
+
+
+#: what ``--format`` may list: report.md is always written; csv and latex add table files
+REPORT_FORMATS = ("md", "csv", "latex")
+#: table file formats beside report.md: full-precision CSV, booktabs LaTeX (the default: both)
+TABLE_FORMATS = ("csv", "latex")
+
+
+def parse_report_formats(text: str, option: str = "--format") -> tuple[str, ...]:
+    """``--format md,csv,latex`` -> the table file formats to write beside report.md
+    (``("csv", "latex")``; ``md`` alone: none)."""
+    items = [f.strip().lower() for f in text.split(",") if f.strip()]
+    if not items:
+        raise UsageError(f"{option}: give one or more of {', '.join(REPORT_FORMATS)}")
+    for f in items:
+        if f not in REPORT_FORMATS:
+            raise UsageError(f"{option}: unknown format {f!r}; use one or more of "
+                             f"{', '.join(REPORT_FORMATS)} (e.g. md,csv)")
+    return tuple(f for f in REPORT_FORMATS[1:] if f in items)

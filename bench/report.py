@@ -8,6 +8,7 @@ from pathlib import Path
 from typing import Any
 
 from bench.glossary import glossary_lines
+from bench.options import TABLE_FORMATS
 from bench.plots import DEFAULT_DRIVE_PLOTS, shown_format, write_plots
 from bench.saved_run import Run
 from bench.stat_tables import block_lengths, paired_label_table, paired_table, seeds_table
@@ -66,17 +67,20 @@ def excluded_note(res: dict[str, Any]) -> str:
 
 
 def write_report(run: Run, out: Path, formats: Iterable[str] = ("png",),
-                 drive_plots: int | None = DEFAULT_DRIVE_PLOTS) -> list[Path]:
-    """Write the run's plots (in each of ``formats``: png, svg, pdf; ValueError on others)
-    and ``report.md`` into ``out``; return the paths written. The run itself (results.json,
-    traces) is written by :func:`bench.saved_run.save_run`."""
+                 drive_plots: int | None = DEFAULT_DRIVE_PLOTS,
+                 table_formats: Iterable[str] = TABLE_FORMATS) -> list[Path]:
+    """Write the run's plots (in each of ``formats``: png, svg, pdf; ValueError on others),
+    ``report.md`` and its tables as files (``table_formats``: csv, latex; see
+    :func:`write_tables`) into ``out``; return the paths written. The run itself
+    (results.json, traces) is written by :func:`bench.saved_run.save_run`."""
     shown = "." + shown_format(formats)  # checks the formats before anything is written
     out.mkdir(parents=True, exist_ok=True)
     plots = write_plots(run.traces, run.results, out, formats, drive_plots)
     (out / "report.md").write_text(render_markdown(
         run.results, [p.relative_to(out).as_posix() for p in plots.files if p.suffix == shown],
         plot_notes=plots.notes))
-    return [*plots.files, out / "report.md", *write_tables(run.results, out / "tables")]
+    return [*plots.files, out / "report.md",
+            *write_tables(run.results, out / "tables", table_formats)]
 
 
 def report_tables(res: dict[str, Any]) -> list[Table]:
@@ -144,13 +148,16 @@ def block_note(summaries: list[dict[str, Any]], what: str) -> str:
             f"contiguous queries (blocks of {span} queries), not from resampling drives.")
 
 
-def write_tables(res: dict[str, Any], folder: Path) -> list[Path]:
-    """Each report table as ``NAME.csv`` (full precision) and ``NAME.tex`` (booktabs) in
-    ``folder``; return the paths written."""
+def write_tables(res: dict[str, Any], folder: Path,
+                 table_formats: Iterable[str] = TABLE_FORMATS) -> list[Path]:
+    """Each report table as ``NAME.csv`` (full precision) and/or ``NAME.tex`` (booktabs) in
+    ``folder``, as ``table_formats`` asks; return the paths written."""
     written = []
-    for t in report_tables(res):
+    wanted = set(table_formats)
+    for t in report_tables(res) if wanted else []:
         folder.mkdir(parents=True, exist_ok=True)
-        for ext, text in (("csv", t.csv()), ("tex", t.latex())):
+        forms = (("csv", "csv", t.csv), ("latex", "tex", t.latex))
+        for ext, text in ((ext, render()) for name, ext, render in forms if name in wanted):
             path = folder / f"{t.name}.{ext}"
             path.write_text(text)
             written.append(path)

@@ -148,6 +148,11 @@ SyntheticDurationOpt = Annotated[float | None, typer.Option(
     metavar="SECONDS",
     help="Without --data: one synthetic mixed drive of this length [s] instead of the "
          "built-in set (e.g. 36000 for a 10-hour soak test).")]
+ReportFormatOpt = Annotated[str, typer.Option(
+    "--format", metavar="md,csv,latex",
+    help="Report forms, comma-separated: md (report.md, always written), csv (every report "
+         "table as tables/NAME.csv, full precision, CI bounds in their own columns), latex "
+         "(tables/NAME.tex, booktabs). Example: --format md,csv.")]
 PlotFormatOpt = Annotated[str, typer.Option(
     "--plot-format", metavar="FORMATS",
     help="Figure formats, comma-separated: png, svg, pdf (e.g. png,pdf).")]

@@ -21,6 +21,7 @@ from bench.commands.common import (
     IncludePoorTruthOpt,
     PlotFormatOpt,
     ProjectionOpt,
+    ReportFormatOpt,
     SetOpt,
     SyntheticDurationOpt,
     TopicOpt,
@@ -35,11 +36,13 @@ from bench.commands.common import (
     predictor_options,
 )
 from bench.options import (
+    TABLE_FORMATS,
     check_at_least,
     check_choice,
     check_out_dir,
     check_out_file,
     parse_predictor_names,
+    parse_report_formats,
     parse_seeds,
     resolve_baseline,
     validate_predictors,
@@ -102,6 +105,7 @@ def run(
         metavar="ADDRESS",
         help="Ray cluster to use with --executor ray (e.g. ray://head:10001 or auto); default: "
              "start a local Ray instance with --workers CPUs.")] = None,
+    report_format: ReportFormatOpt = "md,csv,latex",
     plot_format: PlotFormatOpt = "png",
     drive_plots: DrivePlotsOpt = "20",
     gate: Annotated[bool, typer.Option(
@@ -129,6 +133,7 @@ def run(
             raise UsageError(RAY_MISSING)
         names = parse_predictor_names(predictors)
         formats = plot_formats(plot_format)
+        table_formats = parse_report_formats(report_format)
         n_drive_plots = drive_plot_limit(drive_plots)
         if seed is not None and seeds is not None:
             raise UsageError("--seed and --seeds together: give one seed (--seed 3) or the "
@@ -160,7 +165,8 @@ def run(
             drives = load_drives(data, projection, topics, seed=seed,
                                  synthetic_duration=synthetic_duration)
             _run(drives, cfg, data, out, workers, rerun, executor, address, formats,
-                 n_drive_plots, stats, seed_list if seeds is not None else None)
+                 n_drive_plots, stats, seed_list if seeds is not None else None,
+                 table_formats)
     except (DataError, UsageError, ExecutorError) as e:
         raise fail(str(e)) from None
     except BrokenProcessPool:
@@ -213,7 +219,8 @@ def _replay(drives, cfg, executor: str, workers: int, address: str | None, label
 def _run(drives, cfg, data, out: Path, workers: int, rerun: Path | None = None,
          executor: str = "local", address: str | None = None,
          formats: tuple[str, ...] = ("png",), drive_plots: int | None = 20,
-         stats=None, seeds: list[int] | None = None) -> None:
+         stats=None, seeds: list[int] | None = None,
+         table_formats: tuple[str, ...] = TABLE_FORMATS) -> None:
     from dataclasses import replace
 
     from bench.results import aggregate, all_traces, data_provenance
@@ -239,7 +246,7 @@ def _run(drives, cfg, data, out: Path, workers: int, rerun: Path | None = None,
     def figures(result):
         return paper_figures(list(drives), cfg, result.traces, out, runs, formats=formats)
 
-    publish(res, traces, runs, out, formats, drive_plots, figures)
+    publish(res, traces, runs, out, formats, drive_plots, figures, table_formats)
     if rerun is not None:
         from bench.rerun_log import write_recording
 
@@ -250,7 +257,8 @@ def _run(drives, cfg, data, out: Path, workers: int, rerun: Path | None = None,
 
 def publish(res: dict[str, Any], traces: pd.DataFrame, runs: Sequence[DriveRun], out: Path,
             formats: tuple[str, ...] = ("png",), drive_plots: int | None = 20,
-            figures: Callable[[Run], list[tuple[str, str]]] | None = None) -> Run:
+            figures: Callable[[Run], list[tuple[str, str]]] | None = None,
+            table_formats: tuple[str, ...] = TABLE_FORMATS) -> Run:
     """Write the report folder for aggregated results ``res`` (report.md, figures, tables,
     results.json, traces.parquet; an earlier run's files there are replaced) and print the
     summary tables and the ``wrote ...`` line: how ``bench run`` and ``bench score`` end.
@@ -260,6 +268,7 @@ def publish(res: dict[str, Any], traces: pd.DataFrame, runs: Sequence[DriveRun],
         runs: the per-drive :class:`~bench.runner.DriveRun` records (skipped drives named).
         figures: ``figures(run) -> [(file stem, caption)]`` draws extra figures into ``out``
             (the paper's figures of ``bench run``); None: none.
+        table_formats: table files beside report.md (csv, latex; empty: none).
 
     Returns:
         the saved :class:`~bench.saved_run.Run`.
@@ -278,7 +287,8 @@ def publish(res: dict[str, Any], traces: pd.DataFrame, runs: Sequence[DriveRun],
     drawn = figures(result) if figures is not None else []
     result.results["paper_figures"] = [{"file": f, "caption": c} for f, c in drawn]
     written = [(out / f).with_suffix("." + fmt) for f, _ in drawn for fmt in formats]
-    written += write_report(result, out, formats=formats, drive_plots=drive_plots)
+    written += write_report(result, out, formats=formats, drive_plots=drive_plots,
+                            table_formats=table_formats)
     written += save_run(out, result, also_written=written)
     res = result.results
     skipped = [r for r in runs if r.skipped]

@@ -12,12 +12,13 @@ from bench.commands.common import (
     DataError,
     DrivePlotsOpt,
     PlotFormatOpt,
+    ReportFormatOpt,
     UsageError,
     command_line,
     console,
     fail,
 )
-from bench.options import check_out_dir
+from bench.options import check_out_dir, parse_report_formats
 
 if TYPE_CHECKING:
     from bench.answers import Scored
@@ -38,6 +39,7 @@ def score(
         metavar="NAME", help="Name of the system under test in the report.")] = "answers",
     out: Annotated[Path, typer.Option("--out", "-o", metavar="DIR", help="Output folder.")
                    ] = Path("bench-out"),
+    report_format: ReportFormatOpt = "md,csv,latex",
     plot_format: PlotFormatOpt = "png",
     drive_plots: DrivePlotsOpt = "20",
 ) -> None:
@@ -61,6 +63,7 @@ def score(
             raise UsageError(f"--name {name!r}: use letters, digits and _ . + @ - (starting with "
                              f"a letter or digit)")
         formats = plot_formats(plot_format)
+        table_formats = parse_report_formats(report_format)
         n_drive_plots = drive_plot_limit(drive_plots)
         if not answers.is_file():
             raise UsageError(f"ANSWERS {answers}: no such file")
@@ -68,13 +71,14 @@ def score(
             raise UsageError(f"--queries {queries}: no such folder (give the folder `bench "
                              f"queries` wrote)")
         check_out_dir(out)
-        _score(answers, queries, name, out, formats, n_drive_plots)
+        _score(answers, queries, name, out, formats, n_drive_plots, table_formats)
     except (DataError, UsageError) as e:
         raise fail(str(e)) from None
 
 
 def _score(answers_path: Path, queries_dir: Path, name: str, out: Path,
-           formats: tuple[str, ...], drive_plots: int | None) -> None:
+           formats: tuple[str, ...], drive_plots: int | None,
+           table_formats: tuple[str, ...] = ("csv", "latex")) -> None:
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
     from bench.answers import read_answers, score_answers
@@ -100,7 +104,7 @@ def _score(answers_path: Path, queries_dir: Path, name: str, out: Path,
     res["answers"] = {"file": str(answers_path), "queries_folder": str(queries_dir),
                       "queries": scored.queries, "answered": scored.answered,
                       "unanswered": scored.unanswered, "look_ahead_checked": False}
-    publish(res, traces, scored.runs, out, formats, drive_plots)
+    publish(res, traces, scored.runs, out, formats, drive_plots, table_formats=table_formats)
 
 
 def answers_line(path: Path, scored: Scored, ignored: list[str],
