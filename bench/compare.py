@@ -442,16 +442,18 @@ def comparison_table(runs: Sequence[Run], labels: Sequence[str], metric: Metric,
             p = PairedDifference(math.nan, math.nan, d, row[f"delta {lab} lo"],
                                  row[f"delta {lab} hi"], int(row[f"delta {lab} drives"]))
             shown[f"Δ {lab}"].append(_delta_cell(p))
-    heads = {"scope": "scope", "dataset": "data set", "group": "route type / drive",
+    heads = {"scope": "scope", "dataset": "data set", "group": "route/drive",
              "predictor": "predictor"}
     for lab in labels:
         heads[lab] = lab
         heads[f"{lab} n"] = "n"
     for lab in labels[1:]:
         heads[f"Δ {lab}"] = f"Δ {lab} - {first}"
-    title = (f"{metric} [m], 95 % CI in brackets; Δ: paired over shared drives, "
-             f"* where its CI excludes 0")
-    return Table(pd.DataFrame(shown), "comparison", heads, title=title), frame
+    title = f"{metric} [m] [95 % CI]; Δ paired over shared drives, * CI excludes 0"
+    table = pd.DataFrame(shown)
+    if (table["group"] == "-").all():  # only whole-run and data-set rows: no route or drive
+        table = table.drop(columns="group")
+    return Table(table, "comparison", heads, title=title), frame
 
 
 def comparison_figure(runs: Sequence[Run], labels: Sequence[str], metric: Metric) -> Any:

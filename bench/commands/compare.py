@@ -116,8 +116,9 @@ def _print(table, frame, fmt: str) -> None:
     elif fmt == "latex":
         print(table.latex(), end="")
     else:
-        print_table(console, table.header(), table.cells(), title=table.title, key_columns=4,
-                    left_columns=4)
+        keys = 4 if "group" in table.frame.columns else 3
+        print_table(console, table.header(), table.cells(), title=table.title, key_columns=keys,
+                    left_columns=keys)
 
 
 def _write(out: Path, table, frame, runs, labels, metric, fmt: str) -> None:
