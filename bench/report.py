@@ -94,6 +94,8 @@ def report_tables(res: dict[str, Any]) -> list[Table]:
         tables.append(seeds_table(res))
     if res.get("held_out_all"):
         tables.append(summary_table(res, held_out=True))
+    if has_held_out_paired(res):
+        tables.append(paired_table(res, held_out=True))
     for ds in res["by_dataset"]:
         tables += [dataset_table(res, ds), label_table(res, ds, "future"),
                    label_table(res, ds, "now")]
@@ -101,6 +103,8 @@ def report_tables(res: dict[str, Any]) -> list[Table]:
             tables += [paired_table(res, ds), paired_label_table(res, ds, "future")]
         if res.get("held_out", {}).get(ds, {}).get("drives"):
             tables += [label_table(res, ds, k, held_out=True) for k in ("future", "now")]
+            if has_held_out_paired(res, ds):
+                tables.append(paired_table(res, ds, held_out=True))
     if res.get("by_speed"):
         tables.append(speed_table(res))
     if res.get("outages"):
@@ -116,6 +120,14 @@ def has_paired(res: dict[str, Any]) -> bool:
     another predictor)."""
     paired = res.get("paired") or {}
     return bool(paired.get("baseline")) and bool(paired.get("overall"))
+
+
+def has_held_out_paired(res: dict[str, Any], dataset: str | None = None) -> bool:
+    """Whether the run holds the paired comparison over held-out drives (overall, or in
+    ``dataset``)."""
+    held = (res.get("paired") or {}).get("held_out") or {}
+    src = held.get("overall") if dataset is None else held.get("by_dataset", {}).get(dataset)
+    return has_paired(res) and bool(src)
 
 
 def statistics_note(res: dict[str, Any]) -> str:
@@ -190,12 +202,18 @@ def render_markdown(res: dict[str, Any], plots: list[str],
     if has_paired(res):
         lines += [f"### Against the baseline `{res['paired']['baseline']}`", "", paired_note(res),
                   "", paired_table(res).markdown(), ""]
+        if trained_note(res):
+            lines += ["`*` after a name: a learned predictor trained on some of these drives; "
+                      "its comparison over the held-out drives only is below.", ""]
     lines += seeds_lines(res)
     if res.get("held_out_all"):
         ho = res["held_out_all"]
         lines += [f"## Held-out drives ({len(ho['drives'])}: no learned predictor of this run "
                   f"was trained on them)", "", summary_table(res, held_out=True).markdown(),
                   ""]
+        if has_held_out_paired(res):
+            lines += [paired_note(res, " on the held-out drives"), "",
+                      paired_table(res, held_out=True).markdown(), ""]
     warm = warmup_table(res)
     if (warm.frame[["future_n", "now_n", "missing"]].to_numpy() > 0).any():
         lines += ["## Warm-up queries (left out above)", "",
@@ -234,6 +252,9 @@ def render_markdown(res: dict[str, Any], plots: list[str],
             lines += [f"### Held-out drives only ({len(ho['drives'])} of {len(drives)})", "",
                       f"{who}: figures on those drives flatter it. On the held-out drives "
                       f"({', '.join(ho['drives']) or 'none'}):", ""]
+            if ho["drives"] and has_held_out_paired(res, ds):
+                lines += [paired_note(res, f" on the held-out drives of `{ds}`"), "",
+                          paired_table(res, ds, held_out=True).markdown(), ""]
             if ho["drives"]:
                 lines += ["Future point, mean error in cm (queries):", "",
                           label_table(res, ds, "future", held_out=True).markdown(), "",

@@ -322,6 +322,15 @@ def aggregate(runs: Sequence[DriveRun], cfg: RunConfig, data_manifest: list[dict
             for ds in datasets:
                 res["paired"]["by_dataset"].setdefault(ds, {})[name] = pr["by_dataset"][ds]
                 res["paired"]["by_label"].setdefault(ds, {})[name] = pr["by_label"][ds]
+            if held_all or held_ds:  # the same comparison without the training drives
+                ph = paired_results(df[~df["drive"].isin(trained_on)],
+                                    base_df[~base_df["drive"].isin(trained_on)], held_ds, stats)
+                held = res["paired"].setdefault(
+                    "held_out", {"drives": sorted(all_drives - trained_on), "overall": {},
+                                 "by_dataset": {ds: {} for ds in held_ds}})
+                held["overall"][name] = ph["overall"]
+                for ds in held_ds:
+                    held["by_dataset"][ds][name] = ph["by_dataset"][ds]
         groups = {str(ds): g for ds, g in df.groupby("dataset", sort=True, observed=True)}
         for ds in datasets:
             dfp = groups.get(ds, df.iloc[:0])

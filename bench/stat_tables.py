@@ -10,7 +10,15 @@ from typing import Any
 import pandas as pd
 
 from bench.prepare import LABELS
-from bench.tables import KINDS, LABEL_TITLES, Table, ci_map, put_figure
+from bench.tables import (
+    KINDS,
+    LABEL_TITLES,
+    TRAINED_MARK,
+    Table,
+    ci_map,
+    put_figure,
+    trained_in_run,
+)
 
 #: the marker of a paired difference whose 95 % interval excludes 0
 CONCLUSIVE = "*"
@@ -20,16 +28,31 @@ def _num(v: Any) -> float:
     return float("nan") if v is None else float(v)
 
 
-def paired_table(res: Mapping[str, Any], dataset: str | None = None) -> Table:
+def _trained_in(res: Mapping[str, Any], dataset: str | None) -> set[str]:
+    """Learned predictors trained on some drive of the run (of ``dataset``, if given)."""
+    names = ({d["name"] for d in res.get("drives", []) if d["dataset"] == dataset}
+             if dataset is not None else None)
+    return {p for p, drives in trained_in_run(res).items()
+            if names is None or names & set(drives)}
+
+
+def paired_table(res: Mapping[str, Any], dataset: str | None = None,
+                 held_out: bool = False) -> Table:
     """Each predictor against the baseline (``results["paired"]``), overall or in one data
     set: difference of mean error [m] (predictor - baseline, queries both answered) with its
-    95 % interval, ``*`` where the interval excludes 0, and the drives it wins."""
+    95 % interval, ``*`` where the interval excludes 0, and the drives it wins. A learned
+    predictor trained on some of the drives compared is marked ``*`` after its name;
+    ``held_out``: over the drives no learned predictor trained on
+    (``results["paired"]["held_out"]``)."""
     paired = res.get("paired") or {}
+    if held_out:
+        paired = {**(paired.get("held_out") or {}), "baseline": paired.get("baseline")}
     src = (paired.get("overall") if dataset is None
            else paired.get("by_dataset", {}).get(dataset)) or {}
+    trained = set() if held_out else _trained_in(res, dataset)
     rows = []
     for name, kinds in src.items():
-        row: dict[str, Any] = {"predictor": name}
+        row: dict[str, Any] = {"predictor": name + (TRAINED_MARK if name in trained else "")}
         for k in KINDS:
             e = kinds.get(k) or {}
             ci = e.get("ci95") or [None, None]
@@ -46,7 +69,8 @@ def paired_table(res: Mapping[str, Any], dataset: str | None = None) -> Table:
     cols = ["predictor"] + [c for k in KINDS for c in (
         f"{k}_diff", f"{k}_diff_lo", f"{k}_diff_hi", f"{k}_mark", f"{k}_wins", f"{k}_wins_n",
         f"{k}_drives", f"{k}_queries")]
-    return Table(pd.DataFrame(rows, columns=cols), "paired" if dataset is None else f"paired-{dataset}", labels,
+    stem = "paired" + ("" if dataset is None else f"-{dataset}") + ("-held-out" if held_out else "")
+    return Table(pd.DataFrame(rows, columns=cols), stem, labels,
                  ci=ci_map([f"{k}_diff" for k in KINDS]),
                  marks={f"{k}_diff": f"{k}_mark" for k in KINDS},
                  hidden=[c for k in KINDS for c in (f"{k}_wins_n", f"{k}_drives")])

@@ -170,9 +170,46 @@ def test_seeds_repeat_the_run_and_report_the_spread(tmp_path):
     assert "over seeds 0, 1" in r.stdout
 
 
-def test_reports_written_before_intervals_still_render():
-    old = load_run(ROOT / "reports" / "kitti").results
+def _without_intervals(tree):
+    """A results tree as schema 1.0 wrote it: no ci95, paired, statistics or seeds."""
+    if isinstance(tree, dict):
+        return {k: _without_intervals(v) for k, v in tree.items()
+                if k not in ("ci95", "paired", "statistics", "seeds")}
+    if isinstance(tree, list):
+        return [_without_intervals(v) for v in tree]
+    return tree
+
+
+def test_reports_written_before_intervals_still_render(tmp_path):
+    res = _without_intervals(load_run(ROOT / "reports" / "kitti").results)
+    res["schema_version"] = "1.0"
+    (tmp_path / "results.json").write_text(json.dumps(res))
+    old = load_run(tmp_path).results
     assert old["schema_version"] == "1.0" and "paired" not in old
     md = render_markdown(old, [])
     assert "## All drives" in md and "Against the baseline" not in md
     assert not any("[" in c for row in summary_table(old).cells() for c in row)
+
+
+def test_held_out_paired_leaves_the_training_drives_out(twin_run):
+    """A learned predictor trained on one drive: the paired comparison is also given over
+    the other drives, with exactly the difference of the means of those drives' queries;
+    the table marks the trained predictor in the all-drives comparison only."""
+    runs, cfg, _ = twin_run
+    trained = runs[0].name
+    res = aggregate(runs, cfg, [], "test",
+                    models={"cv": {"model": "m.onnx", "bundled": False, "train_drives": [trained]}})
+    held = res["paired"]["held_out"]
+    assert held["drives"] == sorted(r.name for r in runs[1:])
+    entry = held["overall"]["cv"]["future"]
+    assert entry["drives"] == len(runs) - 1
+    tr = pd.concat([r.traces for r in runs[1:]])
+    tr = tr[(tr["kind"] == "future") & ~tr["warmup"] & tr["x_ref"].notna()]
+    want = (tr.loc[tr["predictor"] == "cv", "error_m"].mean()
+            - tr.loc[tr["predictor"] == "kf", "error_m"].mean())
+    assert entry["diff_m"] == pytest.approx(want, rel=1e-9)
+    assert res["paired"]["overall"]["cv"]["future"]["drives"] == len(runs)
+    assert paired_table(res).frame["predictor"].tolist()[0] == "cv *"
+    assert paired_table(res, held_out=True).frame["predictor"].tolist()[0] == "cv"
+    md = render_markdown(Run.from_results(res).results, [])
+    assert "on the held-out drives" in md

@@ -303,7 +303,7 @@ def publish(res: dict[str, Any], traces: pd.DataFrame, runs: Sequence[DriveRun],
                for k in ("future", "now")):
         console.print("warning: no query could be scored (no reference position at any query "
                       "past the warm-up); see the exclusions below", highlight=False)
-    from bench.report import has_paired
+    from bench.report import has_held_out_paired, has_paired
     from bench.stat_tables import paired_table, seeds_table
     from bench.tables import summary_table
 
@@ -330,6 +330,11 @@ def publish(res: dict[str, Any], traces: pd.DataFrame, runs: Sequence[DriveRun],
         print_table(console, held.header(), held.cells(),
                     title=f"held-out {plural(len(ho['drives']), 'drive')} (no learned predictor "
                           f"trained on them) - errors in metres")
+        if has_held_out_paired(res):
+            hp = paired_table(res, held_out=True)
+            print_table(console, hp.header(), hp.cells(),
+                        title=f"held-out drives vs {res['paired']['baseline']}: Δ mean error [m] "
+                              f"[95 % CI]; * CI excludes 0")
     console.print(written_summary(out, written, removed), highlight=False)
     return result
 
