@@ -94,21 +94,15 @@ def _entry(r: Mapping[str, Any]) -> dict[str, Any]:
 def one_drive_cis(queries: Mapping[str, tuple[np.ndarray, np.ndarray]], stats: Statistics
                   ) -> dict[str, dict[str, Any]]:
     """``ci95`` per predictor of one drive and kind (block bootstrap): ``queries`` maps each
-    predictor to its errors [m] and query times [s]; predictors asked at the same times
-    (the usual case) share their resamples and are computed in one pass."""
+    predictor to its errors [m] and query times [s]. Each predictor is resampled in blocks
+    of its own :func:`metrics.bootstrap.block_length`, so its interval does not depend on
+    which other predictors share the run (a run of ``cv`` alone, or answers scored by
+    ``bench score``, give ``cv`` the same interval as a run of every predictor)."""
     out: dict[str, dict[str, Any]] = {}
-    groups: list[tuple[np.ndarray, list[str]]] = []
-    for name, (_, t) in queries.items():
-        for times, names in groups:
-            if times.shape == t.shape and np.array_equal(times, t):
-                names.append(name)
-                break
-        else:
-            groups.append((t, [name]))
-    for times, names in groups:
-        rs = summary_cis([queries[n][0] for n in names], np.zeros(times.size, dtype=np.int64),
-                         times, n_resamples=stats.resamples, seed=stats.seed, level=stats.level)
-        out.update({n: _entry(r) for n, r in zip(names, rs, strict=True)})
+    for name, (errors, times) in queries.items():
+        (r,) = summary_cis([errors], np.zeros(times.size, dtype=np.int64), times,
+                           n_resamples=stats.resamples, seed=stats.seed, level=stats.level)
+        out[name] = _entry(r)
     return out
 
 
