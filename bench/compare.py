@@ -28,6 +28,7 @@ import pandas as pd
 
 from bench.options import UsageError
 from bench.saved_run import Run
+from metrics.bootstrap import DEFAULT_RESAMPLES
 
 KINDS = ("future", "now")
 STATS = ("mean_m", "median_m", "rmse_m", "p95_m", "max_m")
@@ -37,9 +38,6 @@ SUMMARY_STATS = ("mean_m", "rmse_m")
 #: config keys that make two runs' figures incomparable when they differ
 CONFIG_KEYS = ("horizon_s", "now_step_s", "gps_profile", "gps_latency_s", "intervals", "dropouts",
                "seed", "seeds", "exclude_poor_truth", "use_tuned", "gate")
-#: resamples of the paired cluster bootstrap (seeded: the same runs give the same CI)
-RESAMPLES = 2000
-LEVEL = 0.95
 #: fewest shared drives for a paired CI: with one drive, resampling drives says nothing
 #: about the spread (the CI is then NaN and no gate can fail on it)
 MIN_DRIVES = 2
@@ -274,7 +272,7 @@ class PairedDifference:
 
 
 def paired_difference(old: Run, new: Run, predictor: str, metric: Metric,
-                      seed: int = 0, resamples: int = RESAMPLES, dataset: str | None = None
+                      seed: int = 0, resamples: int = DEFAULT_RESAMPLES, dataset: str | None = None
                       ) -> PairedDifference | None:
     """The paired cluster-bootstrap difference of ``metric`` (NEW - OLD) for ``predictor``
     over the drives both runs scored (of ``dataset`` only, if given); None when they share
@@ -282,7 +280,7 @@ def paired_difference(old: Run, new: Run, predictor: str, metric: Metric,
 
     ``mean_m`` and ``rmse_m`` come from the per-drive summaries of results.json; the other
     statistics read the runs' ``traces.parquet`` (a :class:`DataError` if one has none)."""
-    from metrics.bootstrap import resample_counts
+    from metrics.bootstrap import percentile_interval, resample_counts
 
     a = _drive_summaries(old, predictor, metric.kind, dataset)
     b = _drive_summaries(new, predictor, metric.kind, dataset)
@@ -308,11 +306,8 @@ def paired_difference(old: Run, new: Run, predictor: str, metric: Metric,
         eb = _drive_errors(new, predictor, metric.kind, common)
         va, ra = _pooled_quantiles_by_resample(ea, q, w)
         vb, rb = _pooled_quantiles_by_resample(eb, q, w)
-    d = rb - ra
-    d = d[np.isfinite(d)]
-    alpha = (1 - LEVEL) / 2
-    lo, hi = (np.quantile(d, [alpha, 1 - alpha]) if enough and d.size else (math.nan, math.nan))
-    return PairedDifference(va, vb, vb - va, float(lo), float(hi), len(common))
+    lo, hi = percentile_interval(rb - ra) if enough else (math.nan, math.nan)
+    return PairedDifference(va, vb, vb - va, lo, hi, len(common))
 
 
 def _drive_errors(run: Run, predictor: str, kind: str, drives: Sequence[tuple[str, str]]
@@ -379,12 +374,13 @@ def _cell(v: float, lo: float, hi: float, digits: int = 3) -> str:
     return text
 
 
-def _delta_cell(p: PairedDifference | None, digits: int = 3) -> str:
-    if p is None or not np.isfinite(p.diff):
+def _delta_cell(diff: float, lo: float, hi: float, digits: int = 3) -> str:
+    """``+d [lo, hi]``, with `` *`` when the interval excludes 0; ``-`` without a difference."""
+    if not np.isfinite(diff):
         return "-"
-    text = f"{p.diff:+.{digits}f}"
-    if np.isfinite(p.lo) and np.isfinite(p.hi):
-        text += f" [{p.lo:+.{digits}f}, {p.hi:+.{digits}f}]" + (" *" if p.conclusive else "")
+    text = f"{diff:+.{digits}f}"
+    if np.isfinite(lo) and np.isfinite(hi):
+        text += f" [{lo:+.{digits}f}, {hi:+.{digits}f}]" + (" *" if lo > 0 or hi < 0 else "")
     return text
 
 
@@ -438,10 +434,8 @@ def comparison_table(runs: Sequence[Run], labels: Sequence[str], metric: Metric,
             shown[lab].append(_cell(row[lab], row[f"{lab} lo"], row[f"{lab} hi"]))
             shown[f"{lab} n"].append(str(int(row[f"{lab} n"])))
         for lab in labels[1:]:
-            d = row[f"delta {lab}"]
-            p = PairedDifference(math.nan, math.nan, d, row[f"delta {lab} lo"],
-                                 row[f"delta {lab} hi"], int(row[f"delta {lab} drives"]))
-            shown[f"Δ {lab}"].append(_delta_cell(p))
+            shown[f"Δ {lab}"].append(_delta_cell(row[f"delta {lab}"], row[f"delta {lab} lo"],
+                                                 row[f"delta {lab} hi"]))
     heads = {"scope": "scope", "dataset": "data set", "group": "route/drive",
              "predictor": "predictor"}
     for lab in labels:
@@ -457,8 +451,8 @@ def comparison_table(runs: Sequence[Run], labels: Sequence[str], metric: Metric,
 
 
 def comparison_figure(runs: Sequence[Run], labels: Sequence[str], metric: Metric) -> Any:
-    """One bar group per predictor (the whole-run figure), one bar per run, 95 % CI whiskers
-    where the runs have them."""
+    """One bar group per predictor (the whole-run figure, whatever rows the table shows),
+    one bar per run, 95 % CI whiskers where the runs have them."""
     import matplotlib
 
     matplotlib.use("Agg")

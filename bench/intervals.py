@@ -30,7 +30,6 @@ from metrics.bootstrap import (
     group_cis,
     paired_summary,
     summary_ci,
-    summary_cis,
 )
 from metrics.outages import MISS_THRESHOLD_M, per_outage, since_fix_checkpoint
 
@@ -100,9 +99,9 @@ def one_drive_cis(queries: Mapping[str, tuple[np.ndarray, np.ndarray]], stats: S
     ``bench score``, give ``cv`` the same interval as a run of every predictor)."""
     out: dict[str, dict[str, Any]] = {}
     for name, (errors, times) in queries.items():
-        (r,) = summary_cis([errors], np.zeros(times.size, dtype=np.int64), times,
-                           n_resamples=stats.resamples, seed=stats.seed, level=stats.level)
-        out[name] = _entry(r)
+        out[name] = _entry(summary_ci(errors, np.zeros(times.size, dtype=np.int64), times,
+                                      n_resamples=stats.resamples, seed=stats.seed,
+                                      level=stats.level))
     return out
 
 

@@ -111,7 +111,7 @@ def cluster_weights(n_clusters: int, n_resamples: int = DEFAULT_RESAMPLES,
     return _cluster_counts(int(n_clusters), int(n_resamples), int(seed))
 
 
-def _interval(stats: np.ndarray, level: float) -> tuple[float, float]:
+def percentile_interval(stats: np.ndarray, level: float = LEVEL) -> tuple[float, float]:
     """The percentile interval: the (1 -/+ level) / 2 quantiles of the finite ``stats``
     (linear interpolation, as ``np.quantile``, without its overhead)."""
     s = np.sort(stats[np.isfinite(stats)])
@@ -155,7 +155,7 @@ def ratio_ci(sums: np.ndarray, counts: np.ndarray, counts_matrix: np.ndarray,
     Returns:
         (lo, hi) in the values' unit; NaN when no resample holds a value.
     """
-    return _interval(resampled_means(sums, counts, counts_matrix), level)
+    return percentile_interval(resampled_means(sums, counts, counts_matrix), level)
 
 
 def paired_ratio_diff(sum_a: np.ndarray, count_a: np.ndarray, sum_b: np.ndarray,
@@ -180,7 +180,7 @@ def paired_ratio_diff(sum_a: np.ndarray, count_a: np.ndarray, sum_b: np.ndarray,
         else float("nan")
     d = resampled_means(sum_b, count_b, counts_matrix) - resampled_means(sum_a, count_a,
                                                                          counts_matrix)
-    lo, hi = _interval(d, level)
+    lo, hi = percentile_interval(d, level)
     return {"diff": diff, "lo": lo, "hi": hi}
 
 
@@ -191,7 +191,7 @@ def quantile_ci(sorted_values: np.ndarray, units: np.ndarray, counts_matrix: np.
     """Percentile interval of each quantile in ``qs`` of the pooled values under the
     resamples of ``counts_matrix`` (see :func:`resampled_quantiles`)."""
     stats = resampled_quantiles(sorted_values, units, counts_matrix, qs)
-    return [_interval(stats[:, j], level) for j in range(len(qs))]
+    return [percentile_interval(stats[:, j], level) for j in range(len(qs))]
 
 
 # ----------------------------------------------------------- block bootstrap
@@ -451,7 +451,7 @@ def interval_batch(items: Sequence[tuple[np.ndarray, np.ndarray, np.ndarray | No
                                          tuple(QUANTILES.values()))
         for (i, _, _), st in zip(members, stats, strict=True):
             for j, key in enumerate(QUANTILES):
-                out[i][key] = list(_interval(st[:, j], level))
+                out[i][key] = list(percentile_interval(st[:, j], level))
     return out
 
 
