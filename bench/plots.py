@@ -234,6 +234,17 @@ def plot_error_cdf(traces: pd.DataFrame, preds: Sequence[str]) -> Figure:
     return fig
 
 
+def _mean_error_axes(ax: Any, xlabel: str, ylabel: str, clipped: bool, title: str) -> None:
+    """Labels, log error axis (noting a clipped floor), title, grid and legend of a
+    mean-error-per-bin figure."""
+    ax.set_xlabel(xlabel)
+    ax.set_ylabel(ylabel + " (log" + _floor_note(clipped) + ")")
+    ax.set_yscale("log")
+    ax.set_title(title)
+    ax.grid(True, which="both", alpha=0.3)
+    ax.legend(fontsize=8)
+
+
 def plot_error_vs_speed(traces: pd.DataFrame, preds: Sequence[str]) -> Figure:
     """Mean future-point error [m] per speed bin [m/s]; bins where no predictor has a query
     are dropped. Warm-up excluded."""
@@ -260,12 +271,8 @@ def plot_error_vs_speed(traces: pd.DataFrame, preds: Sequence[str]) -> Figure:
     ax.set_xticks(range(len(bins)), [f"{b.removesuffix(' m/s')}\nn={n}"
                                      for b, n in zip(bins, counts, strict=True)])
     ax.set_xlim(-0.5, len(bins) - 0.5)
-    ax.set_xlabel("speed [m/s] (n = queries per predictor)")
-    ax.set_ylabel("mean future-point error [m] (log" + _floor_note(clipped) + ")")
-    ax.set_yscale("log")
-    ax.set_title("Future-point error vs speed")
-    ax.grid(True, which="both", alpha=0.3)
-    ax.legend(fontsize=8)
+    _mean_error_axes(ax, "speed [m/s] (n = queries per predictor)",
+                     "mean future-point error [m]", clipped, "Future-point error vs speed")
     return fig
 
 
@@ -302,12 +309,9 @@ def plot_error_vs_since_fix(traces: pd.DataFrame, preds: Sequence[str]) -> Figur
         ax.plot(mid[used], ys, marker="o", label=p, color=colors.get(p))
     if mid[used].max() > 10:
         ax.set_xscale("log")
-    ax.set_xlabel("time since last fix [s] (bin centres)")
-    ax.set_ylabel("mean current-position error [m] (log" + _floor_note(clipped) + ")")
-    ax.set_yscale("log")
-    ax.set_title("Current-position error vs time since the last fix")
-    ax.grid(True, which="both", alpha=0.3)
-    ax.legend(fontsize=8)
+    _mean_error_axes(ax, "time since last fix [s] (bin centres)",
+                     "mean current-position error [m]", clipped,
+                     "Current-position error vs time since the last fix")
     return fig
 
 
