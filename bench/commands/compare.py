@@ -102,7 +102,7 @@ def compare(
 
 
 def _table(runs, labels, metric, scopes, seed):
-    from bench.compare import comparison_table
+    from bench.compare_views import comparison_table
 
     names = {"route": "route type"}
     return comparison_table(runs, labels, metric, [names.get(s, s) for s in scopes], seed)
@@ -122,7 +122,7 @@ def _print(table, frame, fmt: str) -> None:
 
 
 def _write(out: Path, table, frame, runs, labels, metric, fmt: str) -> None:
-    from bench.compare import comparison_figure
+    from bench.compare_views import comparison_figure
     from bench.plots import save_figure
 
     out.mkdir(parents=True, exist_ok=True)
