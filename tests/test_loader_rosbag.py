@@ -44,6 +44,12 @@ def _trajectory(n_gps: int = 20) -> dict[str, np.ndarray]:
             "yaw_rate": np.full(ti.size, w)}
 
 
+def _latlon_of(x: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """lat/lon [deg] of local metres, the way _trajectory makes the GPS's."""
+    return (LAT0 + np.degrees(y / 6378137.0),
+            LON0 + np.degrees(x / (6378137.0 * math.cos(math.radians(LAT0)))))
+
+
 def _ns(t: float) -> int:
     return T0_NS + int(round(t * 1e9))
 
@@ -203,17 +209,29 @@ def test_round_trip_values_equal(tmp_path: Path, kind: str) -> None:
     np.testing.assert_allclose(d.imu.ay, tr["ay"])
     np.testing.assert_allclose(d.imu.yaw_rate, tr["yaw_rate"])
     np.testing.assert_allclose(np.unwrap(d.imu.yaw), tr["yaw_i"], atol=1e-12)
-    # speed from TwistStamped, truth from Odometry (own frame, noted)
-    assert d.speed is not None and d.truth is not None
+    # level IMU with an ENU orientation: levelled, yaw checked against the GPS course
+    assert d.meta.extra["imu_frame"]["method"] == "orientation"
+    assert d.meta.extra["imu_frame"]["yaw"] == "enu"
+    # speed from TwistStamped; the odometry (frame odom) is NOT the truth by default (issue 18,
+    # REP 105: it used to be, positions taken as-is): the drive is scored against its fixes
+    assert d.speed is not None and d.truth is None
     np.testing.assert_allclose(d.speed.t, tr["tt"], atol=1e-9)
     np.testing.assert_allclose(d.speed.v, 5.0)
-    np.testing.assert_allclose(d.truth.x, tr["xt"])
-    np.testing.assert_allclose(d.truth.y, tr["yt"])
+    assert d.meta.extra["truth_kind"] == "gps-fixes"
+    assert any("/odom is not used as truth" in w for w in d.meta.warnings)
+    # named, it is the truth, aligned to the GPS by a rigid fit (here the identity)
+    d = loaders.load(path, topics={"truth": "/odom"})[0]
+    assert d.truth is not None and d.meta.extra["truth_kind"] == "named"
+    ex, ey = to_local(*_latlon_of(tr["xt"], tr["yt"]), tr["lat"][0], tr["lon"][0])
+    np.testing.assert_allclose(d.truth.x, ex, atol=0.05)
+    np.testing.assert_allclose(d.truth.y, ey, atol=0.05)
     np.testing.assert_allclose(d.truth.v, 5.0)
     np.testing.assert_allclose(d.truth.accuracy, 0.1)
-    np.testing.assert_allclose(np.unwrap(d.truth.yaw), tr["yaw_t"], atol=1e-12)
+    np.testing.assert_allclose(np.unwrap(d.truth.yaw), tr["yaw_t"], atol=1e-3)
     assert d.meta.extra["truth_frame"] == "odom"
-    assert any("odom" in w and "as-is" in w for w in d.meta.warnings)
+    al = d.meta.extra["truth_alignment"]
+    assert abs(al["rotation_deg"]) < 0.1 and al["residual_rms_m"] < 0.05
+    assert any("aligned to the GPS" in w for w in d.meta.warnings)
 
 
 def test_bare_db3_and_mcap_files(tmp_path: Path) -> None:
@@ -283,11 +301,20 @@ def test_ambiguous_optional_role_can_be_skipped(tmp_path: Path) -> None:
     msgs = _messages("mcap", tr)
     msgs += [("/odom2",) + r[1:] for r in msgs if r[0] == "/odom"]
     path = _write_bag(tmp_path / "two_odom", "mcap", sorted(msgs, key=lambda r: r[2]))
-    with pytest.raises(DataError, match=r"several truth topics .*/odom, /odom2.*truth=none"):
-        load_rosbag(path)
-    assert load_rosbag(path, topics={"truth": "none"}).truth is None
+    # odometry is never the truth by default: two of them are only ambiguous if they would
+    # feed the speed (here /vel does), and a named one is the truth
+    d = load_rosbag(path)
+    assert d.truth is None and d.meta.extra["topics"]["speed"] == "/vel"
     d = load_rosbag(path, topics={"truth": "/odom2"})
     assert d.truth is not None and d.meta.extra["topics"]["truth"] == "/odom2"
+    path2 = _write_bag(tmp_path / "two_odom_no_vel", "mcap",
+                       sorted([r for r in msgs if r[0] != "/vel"], key=lambda r: r[2]))
+    with pytest.raises(DataError, match=r"several speed topics .*/odom, /odom2.*speed=none"):
+        load_rosbag(path2)
+    assert load_rosbag(path2, topics={"speed": "none"}).speed is None
+    d = load_rosbag(path2, topics={"truth": "/odom2"})  # the other odometry feeds the speed
+    assert d.meta.extra["topics"] == {"gps": "/fix", "imu": "/imu", "speed": "/odom",
+                                      "truth": "/odom2"}
 
 
 def test_named_topic_validated(tmp_path: Path) -> None:

@@ -8,20 +8,23 @@ role to a topic name when a bag has several candidates):
   with ``status.status < 0`` (no fix) are skipped and counted; accuracy [m] is
   ``sqrt(mean(cov[0], cov[4]))`` when the covariance type is known (> 0).
   lat/lon are projected about the first valid fix (``projection``).
-- ``imu``   ``sensor_msgs/Imu`` -> :class:`ImuStream`: ``linear_acceleration``
-  x, y; yaw from the orientation quaternion (NaN when
-  ``orientation_covariance[0] == -1``, REP-145's "no orientation");
-  ``angular_velocity.z`` as yaw rate. REP-103 puts the body frame x forward,
-  y left, z up and the world frame ENU, so these map onto the Drive
-  conventions without conversion.
+- ``imu``   ``sensor_msgs/Imu`` -> :class:`ImuStream`. REP 145: ``linear_acceleration`` is in
+  the sensor frame (``header.frame_id``) and includes gravity; the mount comes from
+  ``/tf_static`` (or ``/tf``). :mod:`scenarios.loaders.ros_imu` levels it (orientation),
+  rotates it into the vehicle frame (tf mount, or a mount estimated from the data), removes
+  gravity and checks the orientation's yaw against the GPS course; the path taken is in
+  ``meta.extra["imu_frame"]``. A field with covariance[0] == -1 is absent.
 - ``speed`` ``geometry_msgs/TwistStamped`` -> :class:`SpeedStream`, v = |(linear.x,
-  linear.y)| [m/s]. (An ``nav_msgs/Odometry`` topic may be named explicitly,
-  ``topics={"speed": "/odom"}``: its twist is used.)
-- ``truth`` ``nav_msgs/Odometry`` -> :class:`TruthStream`: ``pose.pose.position``
-  x, y, yaw from its quaternion, v from ``twist.twist.linear``. Assumption: the
-  odometry frame (``header.frame_id``, kept in ``meta.extra["truth_frame"]``)
-  is metric and ENU-aligned; its positions are used as they are, *not*
-  re-anchored to the GPS origin. A warning says so.
+  linear.y)| [m/s]; when the bag has none, a ``nav_msgs/Odometry`` topic's twist (wheel
+  odometry is a speed sensor, REP 105).
+- ``truth`` only when named (``topics={"truth": "/name"}``, ``nav_msgs/Odometry``): a pose
+  in a drifting or local frame is no independent truth (REP 105), so nothing becomes the
+  truth automatically; without one the drive is scored against its own GPS fixes, as the
+  paper's routes (``meta.extra["truth_kind"] = "gps-fixes"``). A named truth is aligned to
+  the GPS ENU frame by a 2-D rigid fit over the drive (:mod:`scenarios.align`, frame names
+  are not trusted: ``map``/``earth``/``utm`` are not our ENU about the first fix either); the
+  transform and residual RMS are in ``meta.extra["truth_alignment"]``, and a residual above
+  :func:`scenarios.align.alignment_limit_m` is a DataError.
 
 A role mapped to ``""`` or ``"none"`` is not loaded. Times: a message's header
 stamp when non-zero, its receive (log) time otherwise; ``meta.time_source``
@@ -39,9 +42,13 @@ from typing import Any
 
 import numpy as np
 
+from scenarios.align import alignment_limit_m, umeyama_2d
 from scenarios.cleaning import clean_times
 from scenarios.drive import Drive, DriveMeta, GpsStream, ImuStream, SpeedStream, TruthStream
 from scenarios.errors import DataError
+from scenarios.imu_frames import wrap
+from scenarios.loaders.ros_imu import imu_to_vehicle
+from scenarios.loaders.ros_tf import TF_TOPICS, TFMESSAGE, edges_from_messages, find_mount
 from scenarios.projection import PROJECTIONS, to_local
 
 NAVSATFIX = "sensor_msgs/msg/NavSatFix"
@@ -54,8 +61,10 @@ ROLE_TYPES: dict[str, tuple[tuple[str, ...], tuple[str, ...]]] = {
     "gps": ((NAVSATFIX,), (NAVSATFIX,)),
     "imu": ((IMU,), (IMU,)),
     "speed": ((TWIST_STAMPED,), (TWIST_STAMPED, ODOMETRY)),
-    "truth": ((ODOMETRY,), (ODOMETRY,)),
+    "truth": ((), (ODOMETRY,)),  # never chosen automatically: see the module notes
 }
+#: a role's fallback types when the bag has none of its automatic ones
+FALLBACK_TYPES: dict[str, tuple[str, ...]] = {"speed": (ODOMETRY,)}
 _OFF = ("", "none", "-")
 
 
@@ -111,9 +120,15 @@ def select_topics(topic_types: dict[str, str], topics: dict[str, str] | None,
             chosen[role] = name
             continue
         cands = sorted(t for t, m in topic_types.items() if m in auto)
+        kind = auto[0] if auto else ""
+        if not cands and role in FALLBACK_TYPES:
+            fb = FALLBACK_TYPES[role]
+            cands = sorted(t for t, m in topic_types.items()
+                           if m in fb and t != topics.get("truth"))
+            kind = fb[0]
         if len(cands) > 1:
             off = "" if role == "gps" else f" (or --topic {role}=none to skip it)"
-            raise DataError(path, f"several {role} topics ({auto[0]}): {', '.join(cands)}; "
+            raise DataError(path, f"several {role} topics ({kind}): {', '.join(cands)}; "
                                   f"choose one with --topic {role}=/name{off}")
         chosen[role] = cands[0] if cands else None
     if chosen["gps"] is None:
@@ -177,6 +192,33 @@ def _read(path: Path, wanted: dict[str, str | None], reader: Any) -> dict[str, l
     return out
 
 
+def _read_tf(reader: Any, topic_types: dict[str, str], imu_frame: str | None
+             ) -> dict[tuple[str, str], np.ndarray]:
+    """tf edges from ``/tf_static`` (all of it), then from ``/tf`` only while the IMU's mount
+    is still unknown (stops reading as soon as it is found)."""
+    from scenarios.loaders.ros_tf import frame_name
+
+    edges: dict[tuple[str, str], np.ndarray] = {}
+    if not imu_frame:
+        return edges
+    for topic in TF_TOPICS:
+        if topic_types.get(topic) != TFMESSAGE:
+            continue
+        if find_mount(edges, imu_frame)[0] is not None:
+            break
+        conns = [c for c in reader.connections if c.topic == topic]
+        for conn, _, raw in reader.messages(connections=conns):
+            new = edges_from_messages([reader.deserialize(raw, conn.msgtype)])
+            added = {k: v for k, v in new.items() if k not in edges}
+            if not added:
+                continue
+            edges.update(added)
+            if topic != "/tf_static" and any(frame_name(imu_frame) in k for k in added) \
+                    and find_mount(edges, imu_frame)[0] is not None:
+                break
+    return edges
+
+
 def _gps(items: list, topic: str, path: Path, warnings: list[str]) -> dict[str, Any]:
     stamps, recv, lat, lon, acc, idx = [], [], [], [], [], []
     skipped = 0
@@ -209,26 +251,28 @@ def _gps(items: list, topic: str, path: Path, warnings: list[str]) -> dict[str, 
 
 
 def _imu(items: list) -> dict[str, Any]:
+    """Raw IMU fields in the sensor frame: f (N, 3) [m/s^2], w (N, 3) [rad/s], q (N, 4) w x y z
+    (NaN rows where REP 145's covariance[0] == -1 marks the field absent, or a zero quaternion)."""
     stamps, recv = [], []
     n = len(items)
-    ax, ay, yaw_q, yr = np.full(n, np.nan), np.full(n, np.nan), np.full((n, 4), np.nan), \
-        np.full(n, np.nan)
+    f, w, q = np.full((n, 3), np.nan), np.full((n, 3), np.nan), np.full((n, 4), np.nan)
     for i, (t_ns, m) in enumerate(items):
         stamps.append(_stamp_ns(m))
         recv.append(t_ns)
         if float(m.linear_acceleration_covariance[0]) != -1.0:
-            ax[i] = m.linear_acceleration.x
-            ay[i] = m.linear_acceleration.y
+            a = m.linear_acceleration
+            f[i] = (a.x, a.y, a.z)
         if float(m.orientation_covariance[0]) != -1.0:
-            q = m.orientation
-            yaw_q[i] = (q.w, q.x, q.y, q.z)
+            o = m.orientation
+            q[i] = (o.w, o.x, o.y, o.z)
         if float(m.angular_velocity_covariance[0]) != -1.0:
-            yr[i] = m.angular_velocity.z
-    yaw = quat_yaw(*yaw_q.T)
+            g = m.angular_velocity
+            w[i] = (g.x, g.y, g.z)
+    q[np.sum(q * q, axis=1) < 1e-12] = np.nan
     t, src = _times(stamps, recv)
-    return {"t": t, "ax": ax, "ay": ay,
-            "yaw": yaw if np.any(np.isfinite(yaw)) else None,
-            "yaw_rate": yr if np.any(np.isfinite(yr)) else None, "src": src}
+    frames = sorted({str(m.header.frame_id) for _, m in items})
+    return {"t": t, "f": f, "q": q if np.any(np.isfinite(q)) else None,
+            "w": w if np.any(np.isfinite(w)) else None, "src": src, "frames": frames}
 
 
 def _twist_v(m: Any) -> float:
@@ -292,6 +336,9 @@ def load_rosbag(path: Path, projection: str = "enu",
             topic_types = _topic_types(reader.connections)
             chosen = select_topics(topic_types, topics, path)
             items = _read(path, chosen, reader)
+            imu_items = items.get("imu") or []
+            edges = _read_tf(reader, topic_types,
+                             str(imu_items[0][1].header.frame_id) if imu_items else None)
     except DataError:
         raise
     except FileNotFoundError as exc:
@@ -299,16 +346,56 @@ def load_rosbag(path: Path, projection: str = "enu",
     except errors as exc:
         raise DataError(path, f"cannot read bag (truncated or corrupt?): "
                               f"{type(exc).__name__}: {exc}") from None
-    return _assemble(path, fmt, projection, chosen, items)
+    return _assemble(path, fmt, projection, chosen, items, topic_types, edges)
 
 
 def _topic_types(connections: Iterable[Any]) -> dict[str, str]:
     return {c.topic: normalize_msgtype(c.msgtype) for c in connections}
 
 
+def _align_truth(c: dict[str, Any], gps: GpsStream, topic: str, path: Path,
+                 extra: dict[str, Any], warnings: list[str]) -> dict[str, Any]:
+    """Rotate and shift a named truth (local frame) onto the GPS fixes (2-D rigid fit)."""
+    tt = c["t"]
+    inside = (gps.t >= tt[0]) & (gps.t <= tt[-1])
+    if inside.sum() < 3 or tt.size < 2:
+        raise DataError(path, f"--topic truth={topic}: cannot align it to the GPS: only "
+                              f"{int(inside.sum())} fixes fall inside its time span")
+    src = np.column_stack([np.interp(gps.t[inside], tt, c["x"]),
+                           np.interp(gps.t[inside], tt, c["y"])])
+    dst = np.column_stack([gps.x[inside], gps.y[inside]])
+    rot, tr, rms = umeyama_2d(src, dst)
+    acc = gps.accuracy[inside] if gps.accuracy is not None else np.empty(0)
+    acc = acc[np.isfinite(acc)]
+    med = float(np.median(acc)) if acc.size else None
+    limit = alignment_limit_m(med)
+    ang = float(np.degrees(np.arctan2(rot[1, 0], rot[0, 0])))
+    what = (f"rotation {ang:+.1f} deg, translation ({tr[0]:+.1f}, {tr[1]:+.1f}) m, residual RMS "
+            f"{rms:.2f} m over {int(inside.sum())} fixes")
+    extra["truth_alignment"] = {"rotation_deg": round(ang, 3),
+                                "translation_m": [round(float(tr[0]), 3), round(float(tr[1]), 3)],
+                                "residual_rms_m": round(rms, 3), "limit_m": round(limit, 3),
+                                "fixes": int(inside.sum())}
+    if rms > limit:
+        stated = f"3 x median stated GPS accuracy {med:.2f} m, " if med is not None else ""
+        raise DataError(path, f"--topic truth={topic}: residual RMS {rms:.2f} m after aligning it "
+                              f"to the GPS fixes exceeds the limit {limit:.2f} m (max({stated}"
+                              f"5 m); {what}): it drifts or is mis-scaled, so it is no truth")
+    warnings.append(f"truth: {topic} (frame {extra.get('truth_frame') or '?'}) aligned to the GPS "
+                    f"ENU frame by a 2-D rigid fit: {what} (limit {limit:.2f} m)")
+    xy = np.column_stack([c["x"], c["y"]]) @ rot.T + tr
+    out = dict(c)
+    out["x"], out["y"] = xy[:, 0], xy[:, 1]
+    if c["yaw"] is not None:
+        out["yaw"] = wrap(c["yaw"] + np.radians(ang))
+    return out
+
+
 def _assemble(path: Path, fmt: str, projection: str, chosen: dict[str, str | None],
-              items: dict[str, list]) -> Drive:
+              items: dict[str, list], topic_types: dict[str, str] | None = None,
+              edges: dict[tuple[str, str], np.ndarray] | None = None) -> Drive:
     warnings: list[str] = []
+    topic_types = topic_types or {}
     extra: dict[str, Any] = {"topics": {r: t for r, t in chosen.items() if t is not None}}
     sources: dict[str, str] = {}
 
@@ -324,14 +411,25 @@ def _assemble(path: Path, fmt: str, projection: str, chosen: dict[str, str | Non
     if chosen["truth"] is not None and items["truth"]:
         streams["truth"] = tr = _truth(items["truth"])
         extra["truth_frame"] = ",".join(tr["frames"])
-        warnings.append(f"truth: {chosen['truth']} positions used as-is in frame "
-                        f"{extra['truth_frame'] or '?'} (assumed metric, ENU-aligned; "
-                        "not re-anchored to the GPS origin)")
     for role in ("imu", "speed", "truth"):
         if chosen[role] is not None and not items[role]:
             warnings.append(f"{role}: topic {chosen[role]} has no messages")
         if role in streams:
             sources[role] = streams[role]["src"]
+    odoms = sorted(t for t, m in topic_types.items() if m == ODOMETRY and t != chosen["truth"])
+    if "truth" not in streams:
+        extra["truth_kind"] = "gps-fixes"
+        if odoms:
+            used = [t for t in odoms if t == chosen["speed"]]
+            how = (f"its twist feeds the speed stream ({used[0]})" if used
+                   else "not used (speed from " + (chosen["speed"] or "nowhere") + ")")
+            warnings.append(f"truth: odometry {', '.join(odoms)} is not used as truth (a pose in a "
+                            f"drifting frame such as odom is no independent reference, REP 105): "
+                            f"{how}; scored against the GPS fixes themselves, as the paper's "
+                            f"routes (name it with --topic truth=/name to align it to the GPS "
+                            f"and score against it)")
+    else:
+        extra["truth_kind"] = "named"
 
     t0 = min(int(s["t"].min()) for s in streams.values())
 
@@ -346,19 +444,28 @@ def _assemble(path: Path, fmt: str, projection: str, chosen: dict[str, str | Non
     gps = GpsStream(t, x, y, c["lat"], c["lon"], acc)
 
     imu = speed = truth = None
-    if "imu" in streams:
-        s = streams["imu"]
-        t, c = clean_times(rel(s), {k: s[k] for k in ("ax", "ay", "yaw", "yaw_rate")}, "imu",
-                           warnings)
-        imu = ImuStream(t, c["ax"], c["ay"], c["yaw"], c["yaw_rate"])
     if "speed" in streams:
         s = streams["speed"]
         t, c = clean_times(rel(s), {"v": s["v"]}, "speed", warnings)
         speed = SpeedStream(t, c["v"])
+    if "imu" in streams:
+        s = streams["imu"]
+        t, c = clean_times(rel(s), {k: s[k] for k in ("f", "w", "q")}, "imu", warnings)
+        if len(s["frames"]) > 1:
+            warnings.append(f"imu: several frame ids {', '.join(s['frames'])}: the mount of "
+                            f"'{s['frames'][0]}' used for all")
+        cols, info = imu_to_vehicle(t, c["f"], c["w"], c["q"], s["frames"][0], edges or {},
+                                    (gps.t, gps.x, gps.y),
+                                    None if speed is None else (speed.t, speed.v),
+                                    str(chosen["imu"]), warnings)
+        extra["imu_frame"] = info
+        imu = ImuStream(t, cols["ax"], cols["ay"], cols["yaw"], cols["yaw_rate"])
     if "truth" in streams:
         s = streams["truth"]
         t, c = clean_times(rel(s), {k: s[k] for k in ("x", "y", "yaw", "v", "acc")}, "truth",
                            warnings)
+        c["t"] = t
+        c = _align_truth(c, gps, str(chosen["truth"]), path, extra, warnings)
         truth = TruthStream(t, c["x"], c["y"], c["yaw"], c["v"], c["acc"])
 
     name = path.name if path.is_dir() else path.stem
