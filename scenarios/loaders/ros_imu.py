@@ -32,7 +32,7 @@ from scenarios.loaders.ros_tf import find_mount
 
 
 def _rpy_deg(r: np.ndarray) -> list[float]:
-    return [round(float(np.degrees(a)), 1) for a in fr.matrix_to_rpy(r)]
+    return [round(float(np.degrees(a)), 1) + 0.0 for a in fr.matrix_to_rpy(r)]
 
 
 def _check_yaw(t: np.ndarray, yaw_b: np.ndarray, gps: tuple[np.ndarray, np.ndarray, np.ndarray],
