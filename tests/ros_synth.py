@@ -7,7 +7,7 @@ A reusable writer: :func:`write_bag` takes a :class:`SynthBag` of options and wr
 - ``/imu``  ``sensor_msgs/Imu`` at ``imu_hz`` in frame ``imu_link``, mounted by ``mount_rpy_deg``
   (roll 90 deg: gravity on the sensor's +y): specific force f_s = R_bs^T (a_long, a_lat, g)
   (gravity included, REP 145), angular velocity in the sensor frame (``yaw_rate_sign`` -1
-  flips it), orientation R_ws = Rz(yaw + ``yaw_ref_offset_deg``) R_bs or absent
+  flips it), orientation R_ws = Rz(yaw + ``yaw_ref_offset_deg`` + ``yaw_ref_drift_dps`` t) R_bs or absent
   (``orientation_covariance[0] = -1``);
 - ``/tf_static`` ``tf2_msgs/TFMessage`` base_link -> imu_link (when ``tf_static``);
 - ``/odom``  ``nav_msgs/Odometry`` wheel odometry in ``odom`` (child ``base_link``): speed and
@@ -49,6 +49,7 @@ class SynthBag:
     mount_rpy_deg: tuple[float, float, float] = (90.0, 0.0, 0.0)
     orientation: bool = True
     yaw_ref_offset_deg: float = 0.0
+    yaw_ref_drift_dps: float = 0.0
     tf_static: bool = True
     yaw_rate_sign: float = 1.0
     imu_hz: float = 40.0
@@ -148,7 +149,7 @@ def _messages(opts: SynthBag, m: _Msgs) -> list[tuple[str, str, int, object]]:
     w_b = np.column_stack([np.zeros(ti.size), np.zeros(ti.size), opts.yaw_rate_sign * wi])
     w_b += rng.normal(0.0, opts.gyro_noise, w_b.shape)
     f_s, w_s = f_b @ r_bs, w_b @ r_bs  # R_bs^T v, row-wise
-    yr = yi + math.radians(opts.yaw_ref_offset_deg)
+    yr = yi + math.radians(opts.yaw_ref_offset_deg) + math.radians(opts.yaw_ref_drift_dps) * ti
     c, s = np.cos(yr), np.sin(yr)
     r_wb = np.zeros((ti.size, 3, 3))
     r_wb[:, 0, 0], r_wb[:, 0, 1], r_wb[:, 1, 0], r_wb[:, 1, 1], r_wb[:, 2, 2] = c, -s, s, c, 1
