@@ -370,8 +370,8 @@ def _align_truth(c: dict[str, Any], gps: GpsStream, topic: str, path: Path,
     med = float(np.median(acc)) if acc.size else None
     limit = alignment_limit_m(med)
     ang = float(np.degrees(np.arctan2(rot[1, 0], rot[0, 0])))
-    what = (f"rotation {ang:+.1f} deg, translation ({tr[0]:+.1f}, {tr[1]:+.1f}) m, residual RMS "
-            f"{rms:.2f} m over {int(inside.sum())} fixes")
+    fit = f"rotation {ang:+.1f} deg, translation ({tr[0]:+.1f}, {tr[1]:+.1f}) m"
+    what = f"{fit}, residual RMS {rms:.2f} m over {int(inside.sum())} fixes"
     extra["truth_alignment"] = {"rotation_deg": round(ang, 3),
                                 "translation_m": [round(float(tr[0]), 3), round(float(tr[1]), 3)],
                                 "residual_rms_m": round(rms, 3), "limit_m": round(limit, 3),
@@ -380,7 +380,7 @@ def _align_truth(c: dict[str, Any], gps: GpsStream, topic: str, path: Path,
         stated = f"3 x median stated GPS accuracy {med:.2f} m, " if med is not None else ""
         raise DataError(path, f"--topic truth={topic}: residual RMS {rms:.2f} m after aligning it "
                               f"to the GPS fixes exceeds the limit {limit:.2f} m (max({stated}"
-                              f"5 m); {what}): it drifts or is mis-scaled, so it is no truth")
+                              f"5 m); {fit}): it drifts or is mis-scaled, so it is no truth")
     warnings.append(f"truth: {topic} (frame {extra.get('truth_frame') or '?'}) aligned to the GPS "
                     f"ENU frame by a 2-D rigid fit: {what} (limit {limit:.2f} m)")
     xy = np.column_stack([c["x"], c["y"]]) @ rot.T + tr
