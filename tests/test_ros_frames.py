@@ -6,6 +6,7 @@ Bags are written by :mod:`tests.ros_synth` (rotated IMU, tf_static, drifting whe
 
 from __future__ import annotations
 
+import json
 import math
 import os
 import subprocess
@@ -153,6 +154,7 @@ def test_gravity_removed_in_vehicle_frame(bags, case: str, method: str, yaw: str
     d = load_rosbag(path)
     info = d.meta.extra["imu_frame"]
     assert info["method"] == method and info["gravity_removed"] is True and info["yaw"] == yaw
+    json.dumps(d.meta.extra)  # JSON-serialisable (plain floats, lists, str)
     assert d.imu is not None
     ref = _truth_at(o, d.imu.t)
     # gravity (9.8 m/s^2 on the sensor's y) is gone: horizontal means are the motion's own
