@@ -116,7 +116,10 @@ DataOpt = Annotated[list[Path] | None, typer.Option(
          "Default: the built-in synthetic drives.")]
 TopicOpt = Annotated[list[str] | None, typer.Option(
     "--topic", metavar="ROLE=TOPIC...",
-    help="Pick bag topics by role when ambiguous: gps=/name imu=/name speed=/name truth=/name.")]
+    help="Pick bag topics by role when ambiguous: gps=/name imu=/name speed=/name truth=/name. "
+         "A bag has a truth only when named (e.g. truth=/ground_truth, nav_msgs/Odometry); it "
+         "is aligned to the GPS by a 2-D rigid fit, refused if the residual RMS exceeds "
+         "max(3 x stated GPS accuracy, 5 m).")]
 SetOpt = Annotated[list[str] | None, typer.Option(
     "--set", metavar="NAME.OPTION=VALUE...",
     help="A constructor option of one predictor of the run, over its tuned value, e.g. "
