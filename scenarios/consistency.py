@@ -159,7 +159,10 @@ class Check:
     figures: dict[str, float] = field(default_factory=dict)
 
     def to_dict(self) -> dict[str, Any]:
-        return asdict(self)
+        """As plain JSON values (a non-finite figure as None)."""
+        d = asdict(self)
+        d["figures"] = {k: (float(v) if np.isfinite(v) else None) for k, v in self.figures.items()}
+        return d
 
 
 @dataclass
@@ -541,22 +544,16 @@ def check_truth(drive: Drive, tol: Tolerances = TOLERANCES) -> Check:
     if extent >= tol.min_extent_m:
         sc, rot, _, res = similarity_2d(src, dst)
         fig.update(scale=sc, rotation_deg=float(np.degrees(rot)), fit_rms_m=res)
-    for name, val, w, f, unit in (
-            ("offset", off, tol.gps_truth_offset_warn_m, tol.gps_truth_offset_fail_m, " m"),
-            ("RMS", rms, tol.gps_truth_rms_warn_m, tol.gps_truth_rms_fail_m, " m"),
-            ("rotation", abs(fig.get("rotation_deg", 0.0)), tol.rot_warn_deg, tol.rot_fail_deg,
-             " deg"),
-            ("scale error", abs(fig.get("scale", 1.0) - 1), tol.truth_scale_warn,
-             tol.truth_scale_fail, "")):
-        if val > f:
-            return Check(s, FAIL, f"GPS vs truth {name} {val:.3g}{unit}", fig)
-    for name, val, w, unit in (
-            ("offset", off, tol.gps_truth_offset_warn_m, " m"),
-            ("RMS", rms, tol.gps_truth_rms_warn_m, " m"),
-            ("rotation", abs(fig.get("rotation_deg", 0.0)), tol.rot_warn_deg, " deg"),
-            ("scale error", abs(fig.get("scale", 1.0) - 1), tol.truth_scale_warn, "")):
-        if val > w:
-            return Check(s, WARN, f"GPS vs truth {name} {val:.3g}{unit}", fig)
+    tests = (("offset", off, tol.gps_truth_offset_warn_m, tol.gps_truth_offset_fail_m, " m"),
+             ("RMS", rms, tol.gps_truth_rms_warn_m, tol.gps_truth_rms_fail_m, " m"),
+             ("rotation", abs(fig.get("rotation_deg", 0.0)), tol.rot_warn_deg, tol.rot_fail_deg,
+              " deg"),
+             ("scale error", abs(fig.get("scale", 1.0) - 1), tol.truth_scale_warn,
+              tol.truth_scale_fail, ""))
+    for verdict, i in ((FAIL, 3), (WARN, 2)):
+        for t in tests:
+            if t[1] > t[i]:
+                return Check(s, verdict, f"GPS vs truth {t[0]} {t[1]:.3g}{t[4]}", fig)
     return Check(s, PASS, f"offset {off:.2f} m, RMS {rms:.2f} m", fig)
 
 
