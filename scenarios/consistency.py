@@ -333,8 +333,12 @@ def _na(stream: str, reason: str, **figures: float) -> Check:
     return Check(stream, NA, reason, dict(figures))
 
 
-def _seconds(mask: np.ndarray, tol: Tolerances) -> float:
-    return float(np.count_nonzero(mask)) / tol.grid_hz
+def _no_reference(drive: Drive, tol: Tolerances) -> str:
+    """Why there are no GPS kinematics: too few fixes, or too few stating a usable accuracy."""
+    acc = drive.gps.accuracy
+    if acc is not None and len(drive.gps) >= 4:
+        return f"too few fixes stating <= {tol.max_fix_accuracy_m:g} m accuracy (no reference)"
+    return "too few GPS fixes"
 
 
 # ---------------------------------------------------------------- the checks
@@ -348,7 +352,7 @@ def check_yaw_rate(drive: Drive, kin: GpsKinematics | None, tol: Tolerances = TO
     if imu is None or imu.yaw_rate is None or not np.any(np.isfinite(imu.yaw_rate)):
         return _na(s, "no yaw rate in the data")
     if kin is None:
-        return _na(s, "too few GPS fixes")
+        return _na(s, _no_reference(drive, tol))
     k = _kernel(tol.smooth_s, 1.0 / tol.grid_hz)
     w = smooth(bin_mean(imu.t, imu.yaw_rate, kin.t), k)
     w_moving = np.where(kin.moving, w, np.nan)
@@ -387,7 +391,7 @@ def check_ax(drive: Drive, kin: GpsKinematics | None, tol: Tolerances = TOLERANC
     if imu is None or not np.any(np.isfinite(imu.ax)):
         return _na(s, "no IMU")
     if kin is None:
-        return _na(s, "too few GPS fixes")
+        return _na(s, _no_reference(drive, tol))
     dt = 1.0 / tol.grid_hz
     k = _kernel(tol.smooth_s, dt)
     if drive.speed is not None and len(drive.speed) > 3:
@@ -453,7 +457,7 @@ def check_yaw(drive: Drive, kin: GpsKinematics | None, tol: Tolerances = TOLERAN
     if imu is None or imu.yaw is None or not np.any(np.isfinite(imu.yaw)):
         return _na(s, "no yaw in the data")
     if kin is None:
-        return _na(s, "too few GPS fixes")
+        return _na(s, _no_reference(drive, tol))
     k = _kernel(tol.smooth_s, 1.0 / tol.grid_hz)
     c = smooth(bin_mean(imu.t, np.cos(imu.yaw), kin.t), k)
     sn = smooth(bin_mean(imu.t, np.sin(imu.yaw), kin.t), k)
@@ -484,7 +488,7 @@ def check_speed(drive: Drive, kin: GpsKinematics | None, tol: Tolerances = TOLER
     if sp is None or len(sp) < 4:
         return _na(s, "no speed stream")
     if kin is None:
-        return _na(s, "too few GPS fixes")
+        return _na(s, _no_reference(drive, tol))
     k = _kernel(tol.smooth_s, 1.0 / tol.grid_hz)
     v = np.where(kin.moving, smooth(bin_mean(sp.t, sp.v, kin.t), k), np.nan)
     ref, val = _pairs(kin.speed, v)
@@ -526,7 +530,7 @@ def check_truth(drive: Drive, tol: Tolerances = TOLERANCES) -> Check:
     if tr is None or len(tr) < 2:
         return _na(s, "no truth")
     if len(g) < 4:
-        return _na(s, "too few GPS fixes")
+        return _na(s, _no_reference(drive, tol))
     tx = interp_gapped(tr.t, tr.x, g.t, tol.max_fix_gap_s)
     ty = interp_gapped(tr.t, tr.y, g.t, tol.max_fix_gap_s)
     ok = np.isfinite(tx) & np.isfinite(ty)
@@ -580,7 +584,7 @@ def check_gps(drive: Drive, tol: Tolerances = TOLERANCES) -> Check:
     s = "gps"
     g = drive.gps
     if len(g) < 4:
-        return _na(s, "too few GPS fixes")
+        return _na(s, _no_reference(drive, tol))
     scatter = fix_scatter(g.t, g.x, g.y)
     fig = {"scatter_m": scatter, "fixes": float(len(g))}
     acc = None if g.accuracy is None else g.accuracy[np.isfinite(g.accuracy) & (g.accuracy > 0)]
