@@ -222,6 +222,16 @@ def test_run_without_strict_reports_failure(flipped_csv, tmp_path):
     assert res["schema_version"] == "1.2"
     assert res["consistency"]["drives"]["flipped"]["imu.yaw_rate"]["verdict"] == FAIL
     assert res["consistency"]["affected_predictors"] == {"kf": ["flipped: imu.yaw_rate"]}
+    # a run saved before the check (schema 1.1, no key) still validates and loads
+    import jsonschema
+
+    from bench.saved_run import load_run, results_schema
+
+    jsonschema.validate(res, results_schema())
+    old = {k: v for k, v in res.items() if k != "consistency"} | {"schema_version": "1.1"}
+    jsonschema.validate(old, results_schema())
+    (out / "results.json").write_text(json.dumps(old))
+    assert load_run(out).results["schema_version"] == "1.1"
 
 
 def test_inspect_table_synthetic():
