@@ -7,6 +7,7 @@ from collections.abc import Iterable
 from pathlib import Path
 from typing import Any
 
+from bench.consistency import report_lines as consistency_lines
 from bench.glossary import glossary_lines
 from bench.options import TABLE_FORMATS
 from bench.plots import DEFAULT_DRIVE_PLOTS, shown_format, write_plots
@@ -192,6 +193,7 @@ def render_markdown(res: dict[str, Any], plots: list[str],
              "`future` = position at fix time + horizon, asked at the fix; `now` = current position, "
              "asked every now-step between fixes. Latency: `step` = one `observe_gps` plus the "
              "future query, `query` = one between-fix `position_at`, single process.", ""]
+    lines += consistency_lines(res)
     lines += answers_lines(res)
     if statistics_note(res):
         lines += [statistics_note(res), ""]

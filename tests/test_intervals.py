@@ -21,7 +21,7 @@ from bench.intervals import Statistics, default_baseline
 from bench.report import render_markdown
 from bench.results import aggregate
 from bench.runner import run
-from bench.saved_run import Run, load_run, results_schema
+from bench.saved_run import SCHEMA_VERSION, Run, load_run, results_schema
 from bench.stat_tables import paired_table
 from bench.tables import NOT_CONCLUSIVE, label_table, summary_table
 from metrics import bootstrap, outages
@@ -84,7 +84,7 @@ def test_results_with_intervals_follow_the_schema(twin_run):
 
     _, _, res = twin_run
     r = Run.from_results(res)
-    assert r.results["schema_version"] == "1.1"
+    assert r.results["schema_version"] == SCHEMA_VERSION
     jsonschema.validate(r.results, results_schema())
     st = r.results["statistics"]
     assert st["resamples"] >= 1000 and st["level"] == 0.95 and st["baseline"] == "kf"

@@ -126,6 +126,9 @@ SetOpt = Annotated[list[str] | None, typer.Option(
          "--set kf.jerk_psd=4.0 or kf@slow.jerk_psd=1 or mymod:MyPredictor.tau_s=0.5 (split at "
          "the last '.' before '='). VALUE is a JSON literal (4, 0.5, true, \"text\", [1, 2]), "
          "else taken as text. Repeatable; see `bench predictors NAME` for the options.")]
+StrictOpt = Annotated[bool, typer.Option(
+    "--strict", help="Exit 2 if the data consistency check fails for any drive and stream "
+                     "(the line names the drive, stream and figure), before any predictor runs.")]
 ProjectionOpt = Annotated[str, typer.Option(
     metavar="enu|mercator",
     help="Local frame for lat/lon sources: 'enu' (true metres, default) or 'mercator' (the paper's "

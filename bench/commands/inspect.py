@@ -11,6 +11,7 @@ import typer
 from bench.commands.common import (
     DataError,
     ProjectionOpt,
+    StrictOpt,
     TopicOpt,
     UsageError,
     console,
@@ -51,18 +52,34 @@ def inspect(
                        ] = False,
     topic: TopicOpt = None,
     projection: ProjectionOpt = "enu",
+    strict: StrictOpt = False,
 ) -> None:
-    """Show what is in each drive: duration, distance, fix intervals, IMU rate, speeds, truth."""
+    """Show what is in each drive: duration, distance, fix intervals, IMU rate, speeds, truth,
+    and whether its streams agree with each other (the data consistency check)."""
+    from bench.consistency import check_drives, strict_error
     from scenarios.summary import summarize_drive
 
     try:
         drives = load_drives(paths, projection, parse_topics(topic))
+        checks = check_drives(drives)
     except (DataError, UsageError) as e:
         raise fail(str(e)) from None
     rows = [summarize_drive(d) for d in drives]
     if as_json:
+        for r, d in zip(rows, drives, strict=True):
+            r["consistency"] = checks[d.name].to_dict()
         print(json.dumps(rows, indent=2, default=float))
-        return
+    else:
+        print_inspect(rows, checks)
+    err = strict_error(checks) if strict else None
+    if err is not None:
+        raise fail(str(err))
+
+
+def print_inspect(rows: list[dict[str, Any]], checks: dict[str, Any]) -> None:
+    """The inspect table, the consistency table and the warnings, on the console."""
+    from bench.consistency import flagged, table_rows
+
     header, cells = inspect_rows(rows)
     print_table(console, header, cells, title=f"{len(rows)} drive{'' if len(rows) == 1 else 's'}",
                 key_columns=1, left_columns=2)
@@ -71,3 +88,10 @@ def inspect(
     for r in rows:
         for w in r["warnings"]:
             console.print(f"[yellow]warning[/] {escape(r['name'])}: {escape(w)}", highlight=False)
+    section = {d: c.to_dict() for d, c in checks.items()}
+    header, cells = table_rows(section)
+    print_table(console, header, cells, key_columns=1, left_columns=len(header),
+                title="data consistency: each stream against what the GPS fixes imply "
+                      "(pass / warn / fail / n/a)")
+    for verdict, d, s, why in flagged(section, ("fail", "warn", "n/a")):
+        console.print(f"{verdict} {escape(d)}: {s}: {escape(why)}", highlight=False)

@@ -23,6 +23,7 @@ from bench.commands.common import (
     ProjectionOpt,
     ReportFormatOpt,
     SetOpt,
+    StrictOpt,
     SyntheticDurationOpt,
     TopicOpt,
     UsageError,
@@ -112,6 +113,7 @@ def run(
         "--gate/--no-gate", help="GPS outlier gate: drop fixes implying impossible motion before "
         "the predictors see them (counted in the report). --no-gate: the paper's ungated input.")
     ] = True,
+    strict: StrictOpt = False,
 ) -> None:
     """Replay drives through predictors and write report.md, results.json, traces and plots.
 
@@ -164,13 +166,30 @@ def run(
         with local_paths(data) as data:  # fsspec URLs -> local copies for the loaders
             drives = load_drives(data, projection, topics, seed=seed,
                                  synthetic_duration=synthetic_duration)
+            consistency = data_check(drives, names, strict)
             _run(drives, cfg, data, out, workers, rerun, executor, address, formats,
                  n_drive_plots, stats, seed_list if seeds is not None else None,
-                 table_formats)
+                 table_formats, consistency)
     except (DataError, UsageError, ExecutorError) as e:
         raise fail(str(e)) from None
     except BrokenProcessPool:
         raise fail(WORKER_DIED) from None
+
+
+def data_check(drives, names: list[str], strict: bool) -> dict[str, Any]:
+    """The data consistency check of every loaded drive, before any predictor runs: the
+    ``consistency`` key of results.json; failures and warnings printed; with ``strict`` a
+    failure raises :class:`DataError` naming the drive, stream and figure."""
+    from bench.consistency import check_drives, strict_error, summary_lines, to_results
+
+    checks = check_drives(drives)
+    err = strict_error(checks) if strict else None
+    if err is not None:
+        raise err
+    section = to_results(checks, names)
+    for line in summary_lines(section):
+        console.print(line, highlight=False, markup=False)
+    return section
 
 
 def plot_formats(value: str) -> tuple[str, ...]:
@@ -220,7 +239,8 @@ def _run(drives, cfg, data, out: Path, workers: int, rerun: Path | None = None,
          executor: str = "local", address: str | None = None,
          formats: tuple[str, ...] = ("png",), drive_plots: int | None = 20,
          stats=None, seeds: list[int] | None = None,
-         table_formats: tuple[str, ...] = TABLE_FORMATS) -> None:
+         table_formats: tuple[str, ...] = TABLE_FORMATS,
+         consistency: dict[str, Any] | None = None) -> None:
     from dataclasses import replace
 
     from bench.results import aggregate, all_traces, data_provenance
@@ -232,6 +252,8 @@ def _run(drives, cfg, data, out: Path, workers: int, rerun: Path | None = None,
     traces = all_traces(runs)
     res = aggregate(runs, cfg, data_provenance(data, cfg.seed), command, traces=traces,
                     statistics=stats)
+    if consistency is not None:
+        res["consistency"] = consistency
     if seeds:
         base = res["paired"]["baseline"]
         figures = [seed_figures(traces, cfg.predictors, base, cfg.seed)]
