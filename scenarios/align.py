@@ -22,6 +22,27 @@ ALIGN_ACC_FACTOR = 3.0
 ALIGN_MIN_LIMIT_M = 5.0
 
 
+def _umeyama(src: np.ndarray, dst: np.ndarray, with_scale: bool
+             ) -> tuple[float, np.ndarray, np.ndarray, float]:
+    """Umeyama's least-squares fit dst ~ s R src + t: (s, R, t, residual RMS [m])."""
+    src = np.asarray(src, dtype=float).reshape(-1, 2)
+    dst = np.asarray(dst, dtype=float).reshape(-1, 2)
+    ok = np.all(np.isfinite(src), axis=1) & np.all(np.isfinite(dst), axis=1)
+    src, dst = src[ok], dst[ok]
+    if src.shape[0] < 2:
+        raise ValueError("need at least 2 matched points to align")
+    mu_s, mu_d = src.mean(axis=0), dst.mean(axis=0)
+    a, b = src - mu_s, dst - mu_d
+    u, d, vt = np.linalg.svd(b.T @ a / src.shape[0])
+    sgn = np.array([1.0, np.sign(np.linalg.det(u @ vt)) or 1.0])  # no reflection
+    r = u @ np.diag(sgn) @ vt
+    var = float((a * a).sum() / src.shape[0])
+    scale = (float((d * sgn).sum() / var) if var > 0 else float("nan")) if with_scale else 1.0
+    t = mu_d - scale * (r @ mu_s)
+    res = dst - (scale * (src @ r.T) + t)
+    return scale, r, t, float(np.sqrt(np.mean(np.sum(res * res, axis=1))))
+
+
 def umeyama_2d(src: np.ndarray, dst: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
     """Rotation R (2, 2) and translation t (2,) minimising sum |R src_i + t - dst_i|^2.
 
@@ -32,20 +53,19 @@ def umeyama_2d(src: np.ndarray, dst: np.ndarray) -> tuple[np.ndarray, np.ndarray
     Raises:
         ValueError: fewer than 2 finite pairs.
     """
-    src = np.asarray(src, dtype=float).reshape(-1, 2)
-    dst = np.asarray(dst, dtype=float).reshape(-1, 2)
-    ok = np.all(np.isfinite(src), axis=1) & np.all(np.isfinite(dst), axis=1)
-    src, dst = src[ok], dst[ok]
-    if src.shape[0] < 2:
-        raise ValueError("need at least 2 matched points to align")
-    mu_s, mu_d = src.mean(axis=0), dst.mean(axis=0)
-    cov = (dst - mu_d).T @ (src - mu_s) / src.shape[0]
-    u, _, vt = np.linalg.svd(cov)
-    s = np.diag([1.0, np.sign(np.linalg.det(u @ vt)) or 1.0])
-    r = u @ s @ vt
-    t = mu_d - r @ mu_s
-    res = dst - (src @ r.T + t)
-    return r, t, float(np.sqrt(np.mean(np.sum(res * res, axis=1))))
+    _, r, t, rms = _umeyama(src, dst, with_scale=False)
+    return r, t, rms
+
+
+def similarity_2d(src: np.ndarray, dst: np.ndarray) -> tuple[float, float, np.ndarray, float]:
+    """Umeyama's least-squares similarity dst ~ s R src + t for (N, 2) point sets: the
+    scale s, rotation [rad, counter-clockwise], translation t [m] and residual RMS [m].
+
+    Raises:
+        ValueError: fewer than 2 finite pairs.
+    """
+    scale, r, t, rms = _umeyama(src, dst, with_scale=True)
+    return scale, float(np.arctan2(r[1, 0], r[0, 0])), t, rms
 
 
 def alignment_limit_m(median_accuracy_m: float | None) -> float:

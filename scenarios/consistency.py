@@ -40,7 +40,10 @@ from typing import Any
 
 import numpy as np
 
+from scenarios.align import similarity_2d
 from scenarios.drive import Drive
+from scenarios.grid import bin_mean, gaussian_kernel, interp_gapped, smooth
+from scenarios.imu_frames import circular_offset
 
 PASS, WARN, FAIL, NA = "pass", "warn", "fail", "n/a"
 VERDICTS = (PASS, WARN, FAIL, NA)
@@ -187,53 +190,6 @@ def worst(verdicts: list[str]) -> str:
     return max(verdicts, key=_RANK.__getitem__) if verdicts else NA
 
 
-# ---------------------------------------------------------------- grid helpers (pure)
-
-def _kernel(sigma_s: float, dt: float) -> np.ndarray:
-    half = max(1, int(np.ceil(3 * sigma_s / dt)))
-    k = np.exp(-0.5 * (np.arange(-half, half + 1) * dt / sigma_s) ** 2)
-    return k / k.sum()
-
-
-def smooth(values: np.ndarray, kernel: np.ndarray) -> np.ndarray:
-    """Normalised convolution: NaNs are gaps; a point keeps a value only where >= 90 %
-    of the kernel's weight fell on valid samples."""
-    ok = np.isfinite(values)
-    num = np.convolve(np.where(ok, values, 0.0), kernel, mode="same")
-    den = np.convolve(ok.astype(float), kernel, mode="same")
-    with np.errstate(invalid="ignore", divide="ignore"):
-        out = num / den
-    out[den < 0.9] = np.nan
-    return out
-
-
-def bin_mean(t: np.ndarray, v: np.ndarray, grid: np.ndarray) -> np.ndarray:
-    """Mean of samples ``v`` (at times ``t`` [s]) in each grid cell centred on ``grid``
-    (cell width = grid step); NaN for an empty cell. O(n) through cumulative sums."""
-    dt = grid[1] - grid[0] if grid.size > 1 else 1.0
-    ok = np.isfinite(v)
-    t, v = t[ok], v[ok]
-    edges = np.concatenate([grid - dt / 2, grid[-1:] + dt / 2])
-    idx = np.searchsorted(t, edges)
-    cs = np.concatenate([[0.0], np.cumsum(v)])
-    n = np.diff(idx)
-    s = cs[idx[1:]] - cs[idx[:-1]]
-    with np.errstate(invalid="ignore", divide="ignore"):
-        return np.where(n > 0, s / np.maximum(n, 1), np.nan)
-
-
-def interp_gapped(t: np.ndarray, v: np.ndarray, grid: np.ndarray, max_gap_s: float
-                  ) -> np.ndarray:
-    """``v`` linearly interpolated at ``grid``; NaN outside ``t`` or inside a gap between
-    samples longer than ``max_gap_s`` [s]."""
-    out = np.interp(grid, t, v)
-    i = np.clip(np.searchsorted(t, grid), 1, max(t.size - 1, 1))
-    gap = t[i] - t[i - 1] if t.size > 1 else np.full(grid.shape, np.inf)
-    bad = (grid < t[0]) | (grid > t[-1]) | (gap > max_gap_s)
-    out[bad] = np.nan
-    return out
-
-
 @dataclass(frozen=True)
 class GpsKinematics:
     """What the fixes imply on the grid ``t`` [s]: smoothed speed [m/s], its rate dv/dt
@@ -260,7 +216,7 @@ def gps_kinematics(drive: Drive, tol: Tolerances = TOLERANCES) -> GpsKinematics 
     grid = np.arange(g.t[0], g.t[-1] + dt / 2, dt)
     if grid.size < 8:
         return None
-    k = _kernel(tol.smooth_s, dt)
+    k = gaussian_kernel(tol.smooth_s, dt)
     x = smooth(interp_gapped(g.t, g.x, grid, tol.max_fix_gap_s), k)
     y = smooth(interp_gapped(g.t, g.y, grid, tol.max_fix_gap_s), k)
     vx, vy = np.gradient(x, dt), np.gradient(y, dt)
@@ -353,7 +309,7 @@ def check_yaw_rate(drive: Drive, kin: GpsKinematics | None, tol: Tolerances = TO
         return _na(s, "no yaw rate in the data")
     if kin is None:
         return _na(s, _no_reference(drive, tol))
-    k = _kernel(tol.smooth_s, 1.0 / tol.grid_hz)
+    k = gaussian_kernel(tol.smooth_s, 1.0 / tol.grid_hz)
     w = smooth(bin_mean(imu.t, imu.yaw_rate, kin.t), k)
     w_moving = np.where(kin.moving, w, np.nan)
     ref, val = _pairs(kin.course_rate, w_moving)
@@ -393,7 +349,7 @@ def check_ax(drive: Drive, kin: GpsKinematics | None, tol: Tolerances = TOLERANC
     if kin is None:
         return _na(s, _no_reference(drive, tol))
     dt = 1.0 / tol.grid_hz
-    k = _kernel(tol.smooth_s, dt)
+    k = gaussian_kernel(tol.smooth_s, dt)
     if drive.speed is not None and len(drive.speed) > 3:
         v = smooth(bin_mean(drive.speed.t, drive.speed.v, kin.t), k)
         ref_all, source = np.gradient(v, dt), "speed stream"
@@ -437,18 +393,6 @@ def check_ax(drive: Drive, kin: GpsKinematics | None, tol: Tolerances = TOLERANC
     return Check(s, PASS, f"scale {slope:.2f}, corr {corr:.2f}, bias {bias:+.2f} m/s^2", fig)
 
 
-def circular_offset(a: np.ndarray, b: np.ndarray) -> tuple[float, float]:
-    """Circular mean of ``a - b`` [rad, wrapped to (-pi, pi]] and its circular standard
-    deviation [rad], over samples finite in both."""
-    d = a - b
-    d = d[np.isfinite(d)]
-    if d.size == 0:
-        return float("nan"), float("nan")
-    z = np.exp(1j * d).mean()
-    r = min(abs(z), 1.0)
-    return float(np.angle(z)), float(np.sqrt(-2 * np.log(r))) if r > 0 else float("inf")
-
-
 def check_yaw(drive: Drive, kin: GpsKinematics | None, tol: Tolerances = TOLERANCES) -> Check:
     """``imu.yaw`` [rad, ENU] against the GPS course while moving: circular mean offset
     and spread [deg]."""
@@ -458,7 +402,7 @@ def check_yaw(drive: Drive, kin: GpsKinematics | None, tol: Tolerances = TOLERAN
         return _na(s, "no yaw in the data")
     if kin is None:
         return _na(s, _no_reference(drive, tol))
-    k = _kernel(tol.smooth_s, 1.0 / tol.grid_hz)
+    k = gaussian_kernel(tol.smooth_s, 1.0 / tol.grid_hz)
     c = smooth(bin_mean(imu.t, np.cos(imu.yaw), kin.t), k)
     sn = smooth(bin_mean(imu.t, np.sin(imu.yaw), kin.t), k)
     yaw = np.where(kin.moving, np.arctan2(sn, c), np.nan)
@@ -467,7 +411,7 @@ def check_yaw(drive: Drive, kin: GpsKinematics | None, tol: Tolerances = TOLERAN
     if secs < tol.min_samples_s:
         return _na(s, f"too little motion ({secs:.0f} s above {tol.moving_mps:g} m/s)",
                    moving_s=secs)
-    off, spread = circular_offset(val, ref)
+    off, spread = circular_offset(val - ref)
     od, sd = float(np.degrees(off)), float(np.degrees(spread))
     fig = {"offset_deg": od, "spread_deg": sd, "moving_s": secs}
     if abs(od) > tol.yaw_offset_fail_deg:
@@ -489,7 +433,7 @@ def check_speed(drive: Drive, kin: GpsKinematics | None, tol: Tolerances = TOLER
         return _na(s, "no speed stream")
     if kin is None:
         return _na(s, _no_reference(drive, tol))
-    k = _kernel(tol.smooth_s, 1.0 / tol.grid_hz)
+    k = gaussian_kernel(tol.smooth_s, 1.0 / tol.grid_hz)
     v = np.where(kin.moving, smooth(bin_mean(sp.t, sp.v, kin.t), k), np.nan)
     ref, val = _pairs(kin.speed, v)
     secs = ref.size / tol.grid_hz
@@ -503,23 +447,6 @@ def check_speed(drive: Drive, kin: GpsKinematics | None, tol: Tolerances = TOLER
     if v_ != PASS:
         return Check(s, v_, f"scale {scale:.3f} against GPS speed", fig)
     return Check(s, PASS, f"scale {scale:.3f}", fig)
-
-
-def similarity_2d(src: np.ndarray, dst: np.ndarray) -> tuple[float, float, np.ndarray, float]:
-    """Umeyama's least-squares similarity dst ~ s R src + t for (n, 2) point sets: the
-    scale s, rotation [rad, counter-clockwise], translation t [m] and residual RMS [m]."""
-    ms, md = src.mean(0), dst.mean(0)
-    a, b = src - ms, dst - md
-    var = float((a * a).sum() / len(a))
-    u, d, vt = np.linalg.svd(b.T @ a / len(a))
-    sgn = np.ones(2)
-    if np.linalg.det(u) * np.linalg.det(vt) < 0:
-        sgn[-1] = -1
-    rot = u @ np.diag(sgn) @ vt
-    scale = float((d * sgn).sum() / var) if var > 0 else float("nan")
-    t = md - scale * rot @ ms
-    res = dst - (scale * (rot @ src.T).T + t)
-    return scale, float(np.arctan2(rot[1, 0], rot[0, 0])), t, float(np.sqrt((res ** 2).sum(1).mean()))
 
 
 def check_truth(drive: Drive, tol: Tolerances = TOLERANCES) -> Check:

@@ -254,9 +254,18 @@ def yaw_offset(yaw_t: np.ndarray, yaw: np.ndarray, course_t: np.ndarray, course:
     yi = np.interp(course_t, yaw_t[ok], yu, left=np.nan, right=np.nan)
     d = np.asarray(course, dtype=float) - yi
     d = d[np.isfinite(d)]
+    off, spread = circular_offset(d)
+    return off, spread, int(d.size)
+
+
+def circular_offset(d: np.ndarray) -> tuple[float, float]:
+    """Circular mean [rad, wrapped to (-pi, pi]] of the angle differences ``d`` [rad] and
+    their circular standard deviation sqrt(-2 ln R) [rad], over the finite ones; NaNs
+    when there are none."""
+    d = np.asarray(d, dtype=float)
+    d = d[np.isfinite(d)]
     if d.size == 0:
-        return float("nan"), float("nan"), 0
-    c, s = np.cos(d).mean(), np.sin(d).mean()
+        return float("nan"), float("nan")
+    c, s = float(np.cos(d).mean()), float(np.sin(d).mean())
     r = min(float(np.hypot(c, s)), 1.0)
-    spread = float(np.sqrt(-2.0 * np.log(r))) if r > 0 else float("inf")
-    return float(np.arctan2(s, c)), spread, int(d.size)
+    return float(np.arctan2(s, c)), float(np.sqrt(-2.0 * np.log(r))) if r > 0 else float("inf")

@@ -12,6 +12,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from test_cli_errors import assert_one_error_line, bench
 
 from bench.consistency import (
     affected_predictors,
@@ -22,6 +23,7 @@ from bench.consistency import (
     uses_stream,
 )
 from predictors.base import Predictor
+from scenarios.align import similarity_2d
 from scenarios.consistency import (
     FAIL,
     NA,
@@ -29,11 +31,9 @@ from scenarios.consistency import (
     STREAMS,
     WARN,
     check_drive,
-    similarity_2d,
 )
 from scenarios.drive import GpsStream, ImuStream, SpeedStream, TruthStream
 from scenarios.synthetic import default_drives, generate_drive
-from tests.test_cli_errors import assert_one_error_line, bench
 
 
 @pytest.fixture(scope="module")

@@ -1,6 +1,6 @@
 """Issue 18 part A: IMU frames and gravity, yaw reference, and what counts as truth in bags.
 
-Bags are written by :mod:`tests.ros_synth` (rotated IMU, tf_static, drifting wheel odometry,
+Bags are written by :mod:`ros_synth` (tests/ros_synth.py) (rotated IMU, tf_static, drifting wheel odometry,
 1 m-noise NavSatFix at 2-5 Hz) and read back through the loader and the harness.
 """
 
@@ -15,6 +15,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from ros_synth import SynthBag, synth_truth, write_bag
 
 from bench.config import RunConfig
 from bench.reference import FIX_CUBIC, TRUTH
@@ -27,7 +28,6 @@ from scenarios.loaders.ros_tf import chain_rotation, find_mount
 from scenarios.loaders.rosbag import load_rosbag
 from scenarios.projection import to_local
 from scenarios.synthetic import ORIGIN_LAT, ORIGIN_LON
-from tests.ros_synth import SynthBag, synth_truth, write_bag
 
 # --------------------------------------------------------------------------- pure maths
 
