@@ -381,6 +381,8 @@ def aggregate(runs: Sequence[DriveRun], cfg: RunConfig, data_manifest: list[dict
                                             if r.name in names],
                              "rejected": dict(r.rejected),
                              "predictors": {}}
+        if r.sensor_frames:
+            d["sensor_frames"] = r.sensor_frames
         if not r.traces.empty:
             mine = per_drive.get((r.dataset, r.name), {})
             d["predictors"] = {name: mine.get(name, _empty_kinds(stats)) for name in preds}

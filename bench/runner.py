@@ -8,6 +8,7 @@ import os
 from collections.abc import Callable, Sequence
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 import pandas as pd
@@ -40,6 +41,7 @@ class DriveRun:
     fixes: pd.DataFrame | None = None  # t, x, y, received (False = removed by dropouts)
     track: pd.DataFrame | None = None  # t, x, y of the reference (truth or fix cubic), 10 Hz
     rejected: dict[str, int] = field(default_factory=dict)  # fixes the outlier gate dropped
+    sensor_frames: dict[str, Any] = field(default_factory=dict)  # see sensor_frames()
 
 
 def _fixes_frame(prep: PreparedDrive) -> pd.DataFrame:
@@ -61,6 +63,17 @@ def _track_frame(prep: PreparedDrive) -> pd.DataFrame:
     return pd.DataFrame({"t": t, "x": xy[:, 0], "y": xy[:, 1]})
 
 
+#: ``meta.extra`` keys a loader sets about sensor frames and truth (see scenarios.loaders.rosbag)
+SENSOR_FRAME_KEYS = ("imu_frame", "truth_kind", "truth_alignment")
+
+
+def sensor_frames(drive: Drive) -> dict[str, Any]:
+    """What the loader did about sensor frames and truth: the IMU path (levelled by its
+    orientation, mount from tf, estimated, as-is), what the drive is scored against, and
+    the alignment of a named truth (rotation, translation, residual RMS [m])."""
+    return {k: drive.meta.extra[k] for k in SENSOR_FRAME_KEYS if k in drive.meta.extra}
+
+
 def skip_reason(drive: Drive, cfg: RunConfig) -> str | None:
     """Why ``drive`` is not scored under ``cfg`` (None: it is)."""
     if cfg.exclude_poor_truth and drive.meta.extra.get("truth_poor"):
@@ -71,7 +84,7 @@ def skip_reason(drive: Drive, cfg: RunConfig) -> str | None:
 def skipped_run(drive: Drive, reason: str) -> DriveRun:
     """The record of a drive that is not scored, with the reason."""
     return DriveRun(drive.name, drive.meta.format, "", [], list(drive.meta.warnings),
-                    pd.DataFrame(), skipped=reason)
+                    pd.DataFrame(), skipped=reason, sensor_frames=sensor_frames(drive))
 
 
 def run_drive(drive: Drive, cfg: RunConfig) -> DriveRun:
@@ -98,6 +111,7 @@ def run_drive(drive: Drive, cfg: RunConfig) -> DriveRun:
     return DriveRun(drive.name, prep.dataset, prep.reference, prep.notes, list(drive.meta.warnings),
                     traces, step_ns, query_ns, prep.outages, gps_count=len(prep.gps),
                     duration_s=drive.duration_s, fixes=_fixes_frame(prep), track=_track_frame(prep),
+                    sensor_frames=sensor_frames(drive),
                     rejected=rejected)
 
 

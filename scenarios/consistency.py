@@ -320,8 +320,10 @@ def check_yaw_rate(drive: Drive, kin: GpsKinematics | None, tol: Tolerances = TO
     if float(np.std(ref)) < tol.min_turn_rad_s:
         return _na(s, f"too little turning (course rate sd {np.std(ref):.3f} rad/s)",
                    moving_s=secs)
-    lag, peak = best_lag(kin.course_rate, w_moving, 1.0 / tol.grid_hz, tol.max_lag_s)
     slope, corr, icpt = slope_corr(kin.course_rate, w_moving)
+    # the lag of a sign-flipped gyro is that of its negation (else the peak sits at an edge)
+    sign = -1.0 if slope < 0 else 1.0
+    lag, peak = best_lag(kin.course_rate, sign * w_moving, 1.0 / tol.grid_hz, tol.max_lag_s)
     fig = {"sign": float(np.sign(slope)), "scale": slope, "corr": corr, "lag_s": lag,
            "lag_corr": peak, "bias_rad_s": icpt, "moving_s": secs}
     why = f"(correlation {corr:.2f} with GPS course rate)"

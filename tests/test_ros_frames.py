@@ -16,6 +16,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from ros_synth import SynthBag, synth_truth, write_bag
+from test_cli_errors import assert_one_error_line, bench
 
 from bench.config import RunConfig
 from bench.reference import FIX_CUBIC, TRUTH
@@ -248,3 +249,33 @@ def test_yaw_rate_sign_flip_is_written(bags) -> None:
     d = load_rosbag(path)
     ref = _truth_at(o, d.imu.t)
     assert np.corrcoef(d.imu.yaw_rate, ref["w"])[0, 1] < -0.99
+
+
+def test_consistency_check_flags_the_flipped_gyro_of_a_bag(bags) -> None:
+    # the bag's gyro sign flip is caught by the check before any figure (issue 18)
+    from scenarios.consistency import FAIL, PASS, check_drive
+
+    by = check_drive(load_rosbag(bags["flip"][0])).checks
+    good = check_drive(load_rosbag(bags["orient_tf"][0])).checks
+    assert by["imu.yaw_rate"].verdict == FAIL and by["imu.yaw_rate"].figures["sign"] == -1
+    assert good["imu.yaw_rate"].verdict == PASS
+    # gravity removed: the longitudinal acceleration passes its bias check on both
+    assert by["imu.ax"].verdict == PASS
+    r = bench("run", "--data", str(bags["flip"][0]), "-p", "cv,kf", "--strict", "--out",
+              str(bags["flip"][0].parent / "strict-out"), timeout=300)
+    assert_one_error_line(r, "--strict", "imu.yaw_rate", "sign -1")
+
+
+def test_run_records_sensor_frames_in_results(bags, tmp_path: Path) -> None:
+    out = tmp_path / "out"
+    r = bench("run", "--data", str(bags["orient_tf"][0]), "-p", "cv,kf", "--out", str(out),
+              "--drive-plots", "0", timeout=300)
+    assert r.returncode == 0, r.stderr
+    res = json.loads((out / "results.json").read_text())
+    (drive,) = res["drives"]
+    frames = drive["sensor_frames"]
+    assert frames["imu_frame"]["method"] == "orientation+tf_static"
+    assert frames["truth_kind"] == "gps-fixes" and drive["reference"] == FIX_CUBIC
+    report = (out / "report.md").read_text()
+    assert "levelled by its orientation, gravity removed" in report
+    assert "is not used as truth" in report
