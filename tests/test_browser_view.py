@@ -191,7 +191,7 @@ def test_recording_renders_in_rerun_web_viewer(chromium, recording, tmp_path):
             shutil.copyfile(shot, out / SCREENSHOT_NAME)
 
         # the viewer did not crash
-        assert not panicked
+        assert not panicked, text[:1000]
         assert "Rerun has crashed" not in text
         assert not any("Rerun has crashed" in e for e in errors), errors
         # it has the recording open, under the drive's name, with every predictor's entities
@@ -213,7 +213,14 @@ def test_recording_renders_in_rerun_web_viewer(chromium, recording, tmp_path):
         assert out_text.strip().endswith("stopped")
         assert not any(alive(p) for p in spawned)
         assert not rerun_web.port_in_use(n) and not rerun_web.port_in_use(n + 1)
-    finally:
+    finally:  # after a failure: stop bench view as a user would, then by force
+        if server.poll() is None:
+            spawned |= descendants(server.pid)
+            server.terminate()
+            try:
+                server.wait(15)
+            except subprocess.TimeoutExpired:
+                pass
         for pid in [server.pid, *spawned]:
             if alive(pid):
                 os.kill(pid, signal.SIGKILL)

@@ -138,6 +138,25 @@ def start_view(rrd: Path, port: int, env: dict[str, str]) -> subprocess.Popen:
                             stderr=subprocess.PIPE, text=True, env=base, cwd=ROOT)
 
 
+def cleanup(proc: subprocess.Popen, note: Path | None = None) -> None:
+    """After a failed test: stop ``bench view`` the way a user would (SIGTERM, so that it
+    stops its server), then by force, and the stand-in server if it is still there."""
+    if proc.poll() is None:
+        proc.terminate()
+        try:
+            proc.wait(15)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+    proc.communicate()
+    if note is not None and note.exists():
+        import json
+
+        try:
+            os.kill(json.loads(note.read_text())["pid"], signal.SIGKILL)
+        except (ProcessLookupError, ValueError, KeyError):
+            pass
+
+
 def read_until(proc: subprocess.Popen, prefix: str, timeout_s: float = 60.0) -> list[str]:
     """stdout lines up to and including the first that starts with ``prefix`` (read by a
     thread, so a silent process cannot block the test past ``timeout_s``)."""
@@ -190,8 +209,7 @@ def test_web_serves_prints_the_url_and_stops_cleanly_on_ctrl_c(tmp_path):
         proc.send_signal(signal.SIGINT)  # what Ctrl-C sends
         out, err = proc.communicate(timeout=30)
     finally:
-        if proc.poll() is None:
-            proc.kill()
+        cleanup(proc, note)
     assert proc.returncode == 0, err
     assert err == "" and out.strip().endswith("stopped")
     with pytest.raises(ProcessLookupError):  # the server went with it
@@ -213,8 +231,7 @@ def test_web_stops_the_server_on_sigterm_too(tmp_path):
         proc.terminate()
         out, err = proc.communicate(timeout=30)
     finally:
-        if proc.poll() is None:
-            proc.kill()
+        cleanup(proc, note)
     assert proc.returncode == 0 and err == "", err
     with pytest.raises(ProcessLookupError):
         os.kill(pid, 0)
