@@ -137,7 +137,11 @@ def _listening(port: int, host: str = HOST) -> bool:
 def _stop(proc: subprocess.Popen) -> None:
     """End the server's process group (the ``rerun`` launcher script and the viewer binary
     it starts): SIGTERM, then SIGKILL after 5 s."""
-    for sig, wait_s in ((signal.SIGTERM, 5.0), (signal.SIGKILL, 5.0)):
+    if os.name != "posix":  # no process groups: the launcher only
+        proc.terminate()
+        proc.wait()
+        return
+    for sig in (signal.SIGTERM, signal.SIGKILL):
         if proc.poll() is not None:
             break
         try:
@@ -145,7 +149,7 @@ def _stop(proc: subprocess.Popen) -> None:
         except ProcessLookupError:
             break
         try:
-            proc.wait(wait_s)
+            proc.wait(5.0)
         except subprocess.TimeoutExpired:
             continue
     try:  # the launcher may be gone while the binary it started still runs
@@ -167,8 +171,10 @@ def serve(exe: str, recording: Path, web_port: int, data_port: int,
     ``ready_timeout_s`` seconds or exits on its own (its last log line is quoted).
     """
     handlers = {}
-    for sig in (signal.SIGTERM, signal.SIGHUP):  # stop the server too, not just this process
-        handlers[sig] = signal.signal(sig, _raise_keyboard_interrupt)
+    for name in ("SIGTERM", "SIGHUP"):  # stop the server too, not just this process
+        sig = getattr(signal, name, None)  # no SIGHUP on Windows
+        if sig is not None:
+            handlers[sig] = signal.signal(sig, _raise_keyboard_interrupt)
     try:
         with tempfile.TemporaryFile() as log:
             proc = subprocess.Popen(server_command(exe, recording, web_port, data_port),
