@@ -187,7 +187,7 @@ def test_view_without_display_says_how_to_open_it_elsewhere(tmp_path):
     env["PATH"] = f"{fake_bin}{os.pathsep}{env.get('PATH', '')}"
     r = subprocess.run([sys.executable, "-m", "bench.cli", "view", str(rrd)], capture_output=True,
                        text=True, timeout=120, cwd=ROOT, env={**env, "COLUMNS": "80"})
-    line = assert_one_error_line(r, "no display", f"rerun {rrd}", f"rerun --web-viewer {rrd}")
+    line = assert_one_error_line(r, "no display", f"rerun {rrd}", f"bench view {rrd} --web")
     assert "URL" in line
     assert not (tmp_path / "viewer-started").exists()
 

@@ -10,9 +10,8 @@ from typing import Annotated
 
 import typer
 
-from bench.commands.common import (
-    fail,
-)
+from bench import rerun_web
+from bench.commands.common import UsageError, fail
 
 
 def no_display_reason(platform: str | None = None,
@@ -31,22 +30,51 @@ def no_display_reason(platform: str | None = None,
     return "no display here (neither DISPLAY nor WAYLAND_DISPLAY is set)"
 
 
-def view(recording: Annotated[Path, typer.Argument(
-        metavar="FILE", help="A .rrd file written by bench run --rerun.")]) -> None:
-    """Open a rerun recording in the rerun viewer (needs the viz extra and a display)."""
+def _find_rerun() -> str | None:
+    """The ``rerun`` CLI: on PATH, or beside this Python (a virtualenv not activated)."""
     import shutil
+
+    return shutil.which("rerun") or shutil.which("rerun", path=str(Path(sys.executable).parent))
+
+
+def view(recording: Annotated[Path, typer.Argument(
+        metavar="FILE", help="A .rrd file written by bench run --rerun.")],
+         web: Annotated[bool, typer.Option(
+             "--web", help="Serve rerun's web viewer instead of opening a window, print the "
+                           "URL to open in a browser (and the ssh line to reach it from "
+                           "another machine), and serve until Ctrl-C. Listens on 127.0.0.1 "
+                           "only.")] = False,
+         port: Annotated[int | None, typer.Option(
+             "--port", metavar="N", help="With --web: the web viewer's HTTP port N; the "
+                                          "recording is served on port N+1. Default: "
+                                          f"{rerun_web.DEFAULT_WEB_PORT}.")] = None) -> None:
+    """Open a rerun recording in the rerun viewer (needs the viz extra).
+
+    Without --web a viewer window opens (needs a display). With --web, e.g. on a remote
+    machine: `bench view run.rrd --web --port 9090`, then on your own machine
+    `ssh -L 9090:localhost:9090 -L 9091:localhost:9091 HOST` and open the printed URL.
+    """
     import subprocess
 
+    try:
+        if port is not None and not web:
+            raise UsageError("--port is the web viewer's port: use it with --web")
+        web_port, data_port = rerun_web.check_web_port(
+            rerun_web.DEFAULT_WEB_PORT if port is None else port)
+    except UsageError as e:
+        raise fail(str(e)) from None
     if not recording.is_file():
         raise fail(f"{recording}: no such file")
-    exe = shutil.which("rerun") or shutil.which("rerun", path=str(Path(sys.executable).parent))
-    if exe is None:  # neither on PATH nor beside this Python (a virtualenv not activated)
+    exe = _find_rerun()
+    if exe is None:
         raise fail("the rerun viewer is not installed: pip install 'posbench[viz]'")
+    if web:
+        raise _serve_web(exe, recording, web_port, data_port)
     reason = no_display_reason()
     if reason is not None:
-        raise fail(f"{reason}: copy {recording} to a machine with a display and run "
-                   f"`rerun {recording}` there, or serve it from here with "
-                   f"`rerun --web-viewer {recording}` and open the printed URL in a browser")
+        raise fail(f"{reason}: serve it to a browser with `bench view {recording} --web` and "
+                   f"open the printed URL (from another machine through ssh -L), or copy "
+                   f"{recording} to a machine with a display and run `rerun {recording}` there")
     # the viewer's own log goes to a pipe: on failure its last line is quoted in ours
     proc = subprocess.run([exe, str(recording)], stdin=subprocess.DEVNULL,
                           stderr=subprocess.PIPE, text=True, errors="replace")
@@ -55,3 +83,31 @@ def view(recording: Annotated[Path, typer.Argument(
         last = [ln.strip() for ln in log.splitlines() if ln.strip()]
         why = f": {last[-1][:200]}" if last else ""
         raise fail(f"the rerun viewer exited with status {proc.returncode} on {recording}{why}")
+
+
+def _serve_web(exe: str, recording: Path, web_port: int, data_port: int) -> typer.Exit:
+    """Serve ``recording`` until Ctrl-C; the exit to raise (0 when stopped by the user)."""
+    import socket
+
+    try:
+        rerun_web.check_ports_free(web_port, data_port)
+    except UsageError as e:
+        return fail(str(e))
+    url = rerun_web.viewer_url(web_port, data_port)
+
+    def ready() -> None:
+        print(f"serving {recording} with rerun's web viewer on {rerun_web.HOST}, ports "
+              f"{web_port} (page) and {data_port} (recording); Ctrl-C stops it", flush=True)
+        print(f"open: {url}", flush=True)
+        print("  (renderer=webgl works without a GPU; drop it to use WebGPU in a browser "
+              "that has one)", flush=True)
+        print("from another machine, forward both ports first: "
+              f"{rerun_web.ssh_forward_command(web_port, data_port, socket.gethostname())}",
+              flush=True)
+
+    try:
+        rerun_web.serve(exe, recording.resolve(), web_port, data_port, on_ready=ready)
+    except rerun_web.ServeError as e:
+        return fail(str(e))
+    print("stopped", flush=True)
+    return typer.Exit(0)
