@@ -22,6 +22,7 @@ def samples() -> dict[str, list[BaseException]]:
     from bench.executors import ExecutorError
     from bench.options import UsageError
     from bench.plots import NothingToPlot
+    from bench.rerun_web import ServeError
     from predictors.registry import PredictorError
     from scenarios.errors import DataError
 
@@ -32,6 +33,8 @@ def samples() -> dict[str, list[BaseException]]:
         "bench.options.UsageError": [UsageError("--horizon must be more than 0 s; got -1")],
         "bench.executors.ExecutorError": [ExecutorError("cannot start Ray at auto: no cluster")],
         "bench.plots.NothingToPlot": [NothingToPlot("no query with a known speed")],
+        "bench.rerun_web.ServeError": [
+            ServeError("the rerun web viewer stopped on its own (exit 1): port 9090 in use")],
         "predictors.registry.PredictorError": [
             PredictorError("nosuchmodule:X: no module named 'nosuchmodule'")],
     }
