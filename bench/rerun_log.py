@@ -27,9 +27,10 @@ Layout, per drive under ``drives/<drive>/`` (names sanitised to ``[A-Za-z0-9_.-]
   against; ``map/<predictor>/now``: the current-position answer at each "now" query time;
 - ``around/...``: positions relative to the reference at the time shown, so the view's origin
   is the vehicle: ``around/reference`` (0, 0), ``around/road`` (the reference from
-  3 s before to 1 s after), ``around/fixes`` (the last 5 received fixes),
-  ``around/<predictor>/now`` and ``/future`` (the answers) and ``around/<predictor>/error``
-  (an arrow from the reference to the current-position answer);
+  2 s before to 1 s after), ``around/fixes`` (the last 5 received fixes),
+  ``around/<predictor>/error`` (an arrow from the reference to the current-position answer,
+  its tip the answer) and ``around/<predictor>/future`` (the future point, relative to the
+  reference at its query time);
 - ``vehicle_frame/<predictor>``: each current-position error as (along, cross) in the
   reference's heading frame (ahead to the right, left up; :mod:`metrics.track_errors`),
   ``vehicle_frame/axes`` the axes through (0, 0);
@@ -67,8 +68,8 @@ if TYPE_CHECKING:
 
 VIZ_HINT = "rerun recordings need the viz extra: pip install 'posbench[viz]'"
 N_LAST_FIXES = 5  # fixes shown around the vehicle
-ROAD_S = (-3.0, 1.0)  # the stretch of reference shown around the vehicle [s], relative
-ROAD_STEP_S = 0.2
+ROAD_S = (-2.0, 1.0)  # the stretch of reference shown around the vehicle [s], relative
+ROAD_STEP_S = 0.25
 
 # tab10, as RGB
 PALETTE = np.array([
@@ -299,8 +300,8 @@ class _Writer:
                 self.points(f"{root}/map/{part}/{kind}", t, xy, color, radius)
                 self.series(f"{root}/errors/{part}/{kind}", t, g["error_m"].to_numpy(np.float64),
                             f"{pred} {kind}", color, kind)
-                self.points(f"{root}/around/{part}/{kind}", t, xy - ref, color,
-                            0.12 if kind == "now" else 0.09)
+                if kind == "future":  # the current answer is the tip of its error arrow
+                    self.points(f"{root}/around/{part}/future", t, xy - ref, color, 0.09)
                 if "along_m" in g and "cross_m" in g:
                     along = g["along_m"].to_numpy(np.float64)
                     cross = g["cross_m"].to_numpy(np.float64)

@@ -144,7 +144,7 @@ def test_hand_made_run_round_trips(tmp_path):
     root = "drives/my_drive_01"
     per_pred = ("map/{p}/future", "map/{p}/now", "errors/{p}/future", "errors/{p}/now",
                 "along/{p}/future", "along/{p}/now", "cross/{p}/future", "cross/{p}/now",
-                "around/{p}/now", "around/{p}/future", "around/{p}/error", "vehicle_frame/{p}")
+                "around/{p}/future", "around/{p}/error", "vehicle_frame/{p}")
     expected = {f"{root}/{e}" for e in (
         "info", "map/truth", "map/track_error", "colour_scale", "map/fixes/received",
         "map/fixes/dropped", "labels", "outages", "around/reference", "around/road",
@@ -269,17 +269,19 @@ def test_around_the_vehicle_is_reference_relative_and_metre_scaled(tmp_path):
         g = tr[(tr.predictor == p) & (tr.kind == "now")].sort_values("t_query")
         rel = g[["x", "y"]].to_numpy() - g[["x_ref", "y_ref"]].to_numpy()
         ok = np.isfinite(rel).all(axis=1)
-        # the answer relative to the reference at its query time, north up
-        b = ents[f"{root}/around/{p}/now"]["temporal"]
-        np.testing.assert_allclose(times_s(b), g.t_query[ok], atol=1e-9)
-        pos = np.array([v[0] for v in column(b, "Points2D:positions")])
-        np.testing.assert_allclose(pos, screen(rel[ok]), atol=1e-5)
-        # the error arrow: from the reference (0, 0) to the same point
+        # the error arrow: from the reference (0, 0) to the answer, relative to the
+        # reference at its query time, north up
         b = ents[f"{root}/around/{p}/error"]["temporal"]
+        np.testing.assert_allclose(times_s(b), g.t_query[ok], atol=1e-9)
         vec = np.array([v[0] for v in column(b, "Arrows2D:vectors")])
         np.testing.assert_allclose(vec, screen(rel[ok]), atol=1e-5)
         origins = column(ents[f"{root}/around/{p}/error"]["static"], "Arrows2D:origins")
         assert origins == [[[0.0, 0.0]]]
+        gf = tr[(tr.predictor == p) & (tr.kind == "future")].sort_values("t_query")
+        relf = gf[["x", "y"]].to_numpy() - gf[["x_ref", "y_ref"]].to_numpy()
+        pos = np.array([v[0] for v in column(ents[f"{root}/around/{p}/future"]["temporal"],
+                                             "Points2D:positions")])
+        np.testing.assert_allclose(pos, screen(relf[np.isfinite(relf).all(axis=1)]), atol=1e-5)
         # the vehicle frame: (along, cross), left up
         b = ents[f"{root}/vehicle_frame/{p}"]["temporal"]
         ac = g[["along_m", "cross_m"]].to_numpy()
