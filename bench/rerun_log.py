@@ -373,7 +373,7 @@ class _Writer:
                         static=True)
                 rr.send_columns(f"{root}/around/road", indexes=[self._time(t)],
                                 columns=rr.LineStrips2D.columns(
-                                    strips=list(screen(road.reshape(-1, 2)).reshape(k, m, 2))
+                                    strips=screen(road.reshape(-1, 2)).reshape(k, m, 2)
                                 ).partition(np.ones(k, dtype=np.int64)),
                                 recording=rec)
 
@@ -404,9 +404,13 @@ class _Writer:
         top = nice_scale(e)
         if good.any():
             strips = screen(seg[good].reshape(-1, 2)).reshape(-1, 2, 2)
-            rec.log(f"{root}/map/track_error",
-                    rr.LineStrips2D(list(strips), colors=error_colours(seg_e[good], top),
-                                    radii=[0.4]), static=True)
+            path = f"{root}/map/track_error"
+            rec.log(path, rr.LineStrips2D.from_fields(radii=[0.4]), static=True)
+            # one static row of all segments (indexes=[]: static), the fast columnar path
+            rr.send_columns(path, indexes=[],
+                            columns=rr.LineStrips2D.columns(
+                                strips=strips, colors=error_colours(seg_e[good], top)
+                            ).partition([len(strips)]), recording=rec)
         text = (f"Reference track coloured by the current-position (now) error of "
                 f"{self.color_by}: green 0 m, yellow {top / 2:g} m, red >= {top:g} m "
                 f"(the scale's top is the drive's p95 rounded up); grey: no answer. "

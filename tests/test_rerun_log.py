@@ -313,9 +313,12 @@ def test_around_the_vehicle_is_reference_relative_and_metre_scaled(tmp_path):
     # the track coloured by kf-paper's error, with its scale in words
     text = column(ents[f"{root}/colour_scale"]["static"], "TextDocument:text")[0][0]
     assert "kf-paper" in text and "red >=" in text
-    [strips] = ents[f"{root}/map/track_error"]["static"]
+    [strips] = [b for b in ents[f"{root}/map/track_error"]["static"]
+                if "LineStrips2D:strips" in b.schema.names]
     n_seg = len(column([strips], "LineStrips2D:strips")[0])
     assert n_seg == 200 - 1 - 6  # every segment with both ends known (the gap cuts 6)
+    colours = column([strips], "LineStrips2D:colors")[0]
+    assert len(colours) == n_seg and len(set(colours)) > 10  # a colour per segment
 
 
 def test_one_recording_per_drive_each_on_its_own_time(tmp_path):
