@@ -30,24 +30,25 @@ def track_section(traces: pd.DataFrame, keep: np.ndarray, predictors: Sequence[s
     out: dict[str, Any] = {"predictors": {}, "by_label": {}}
     if traces.empty or any(c not in traces for c in NEEDED):
         return out
-    pred = traces["predictor"].to_numpy()
-    kind = traces["kind"].astype(str).to_numpy()
-    label = traces["label"].astype(str).to_numpy()
-    err = traces["error_m"].to_numpy(float)
-    along = traces["along_m"].to_numpy(float)
-    cross = traces["cross_m"].to_numpy(float)
-    inward = inward_cross(cross, traces["yaw_rate_ref"].to_numpy(float))
+    pred_codes, pred_names = pd.factorize(traces["predictor"].astype(str))
+    kind_codes, kind_names = pd.factorize(traces["kind"].astype(str))
+    label_codes, label_names = pd.factorize(traces["label"].astype(str))
+    cols = np.column_stack([traces["along_m"].to_numpy(float), traces["cross_m"].to_numpy(float),
+                            np.zeros(len(traces)), traces["error_m"].to_numpy(float)])
+    cols[:, 2] = inward_cross(cols[:, 1], traces["yaw_rate_ref"].to_numpy(float))
+    pred_of = {str(n): i for i, n in enumerate(pred_names)}
+    kind_of = {str(n): i for i, n in enumerate(kind_names)}
+    label_of = {str(n): i for i, n in enumerate(label_names)}
     for name in predictors:
-        mine = keep & (pred == name)
+        mine = keep & (pred_codes == pred_of.get(name, -1))
         out["predictors"][name] = {}
         out["by_label"][name] = {}
         for k in KINDS:
-            m = mine & (kind == k)
-            out["predictors"][name][k] = track_summary(along[m], cross[m], inward[m], err[m])
+            rows = np.flatnonzero(mine & (kind_codes == kind_of.get(k, -1)))
+            sub, labels = cols[rows], label_codes[rows]
+            out["predictors"][name][k] = track_summary(*sub.T)
             out["by_label"][name][k] = {
-                lab: track_summary(along[m & (label == lab)], cross[m & (label == lab)],
-                                   inward[m & (label == lab)], err[m & (label == lab)])
-                for lab in LABELS}
+                lab: track_summary(*sub[labels == label_of.get(lab, -1)].T) for lab in LABELS}
     return out
 
 
