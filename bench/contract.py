@@ -139,7 +139,9 @@ def inputs() -> Inputs:
 
 def _cut_queries(q: Queries, keep: np.ndarray) -> Queries:
     return Queries(q.t_issue[keep], q.t_query[keep], q.ref_xy[keep], q.speed_mps[keep],
-                   q.label[keep], q.since_fix_s[keep])
+                   q.label[keep], q.since_fix_s[keep],
+                   None if q.heading_rad is None else q.heading_rad[keep],
+                   None if q.yaw_rate is None else q.yaw_rate[keep])
 
 
 def cut_prepared(prep: PreparedDrive, t_cut: float) -> PreparedDrive:

@@ -45,7 +45,7 @@ import pandas as pd
 from bench.config import RunConfig
 from bench.prepare import prepare_drive
 from bench.runner import DriveRun, skip_reason, skipped_run
-from bench.scoring import QUERY_COLUMNS, query_frame
+from bench.scoring import QUERY_COLUMNS, TRACK_QUERY_COLUMNS, query_frame
 from scenarios.drive import Drive, GpsStream, ImuStream, SpeedStream
 from scenarios.errors import DataError
 
@@ -317,6 +317,9 @@ def read_queries(folder: str | Path) -> QueryFolder:
         raise DataError(folder / KEY_DRIVES, "does not list the drives of the manifest")
     drives = [{**r, "id": d["drive"], "t0_s": float(d["t0_s"])}
               for r, d in zip(records, listed, strict=True)]
+    for c in TRACK_QUERY_COLUMNS:  # a key written before the along/cross-track columns
+        if c not in key.columns:
+            key[c] = float("nan")
     if list(key.columns) != list(QUERY_COLUMNS):
         raise DataError(folder / KEY_QUERIES, f"columns {list(key.columns)}, expected "
                                               f"{list(QUERY_COLUMNS)}")

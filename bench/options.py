@@ -168,6 +168,21 @@ def check_out_dir(path: Path, option: str = "--out") -> Path:
     return path
 
 
+def resolve_color_by(value: str | None, names: Sequence[str], rerun: Path | None) -> str | None:
+    """``--rerun-color-by``: the predictor whose error colours the rerun map's track; default
+    the first predictor of the run. Needs ``--rerun`` and one of the run's predictors."""
+    if value is None:
+        return names[0] if names else None
+    value = value.strip()
+    if rerun is None:
+        raise UsageError(f"--rerun-color-by {value}: colours the track of a rerun recording; "
+                         f"give --rerun FILE.rrd too")
+    if value not in names:
+        raise UsageError(f"--rerun-color-by {value}: not among the predictors to run "
+                         f"({', '.join(names)}); name one of them")
+    return value
+
+
 def check_out_file(path: Path, option: str) -> Path:
     """An output file: not an existing folder, and its folder exists or can be created."""
     if path.is_dir():

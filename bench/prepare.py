@@ -13,6 +13,7 @@ import numpy as np
 
 from bench.config import RunConfig, drive_seed
 from bench.reference import FIX_CUBIC, TRUTH, cubic_through_fixes, truth_at
+from metrics.track_errors import HEADING_DT_S, reference_motion
 from scenarios.drive import Drive, GpsStream
 
 LABELS = ("straight", "turn", "roundabout", "start_stop")
@@ -28,6 +29,11 @@ class Queries:
     speed_mps: np.ndarray
     label: np.ndarray
     since_fix_s: np.ndarray  # t_query - time of the last fix received by t_issue [s]
+    #: the reference's direction of travel at t_query [rad, counter-clockwise from east];
+    #: NaN at standstill or unknown (:func:`metrics.track_errors.reference_motion`)
+    heading_rad: np.ndarray | None = None
+    #: the reference's yaw rate at t_query [rad/s], positive = turning left; NaN unknown
+    yaw_rate: np.ndarray | None = None
 
 
 @dataclass
@@ -122,19 +128,25 @@ def prepare_drive(drive: Drive, cfg: RunConfig) -> PreparedDrive:
     t0 = min(gps.t[0], drive.truth.t[0]) if drive.truth is not None and len(gps) else gps.t[0]
     t1 = max(gps.t[-1], drive.truth.t[-1]) if drive.truth is not None and len(gps) else gps.t[-1]
     grid_t = np.arange(t0, t1 + 1e-9, 0.1)
-    # one reference evaluation (one truth spline) for the grid and both query kinds
-    all_ref = _reference(drive, np.concatenate([grid_t, f_query, n_query]))
+    # one reference evaluation (one truth spline) for the grid and both query kinds, at the
+    # query times and HEADING_DT_S before and after them (the reference's direction of travel)
+    tq_all = np.concatenate([f_query, n_query])
+    dt = HEADING_DT_S
+    all_ref = _reference(drive, np.concatenate([grid_t, tq_all, tq_all - dt, tq_all + dt]))
     grid_xy = all_ref[:grid_t.size]
-    refs = {"future": all_ref[grid_t.size:grid_t.size + f_query.size],
-            "now": all_ref[grid_t.size + f_query.size:]}
-    del all_ref
+    at, before, after = np.split(all_ref[grid_t.size:], 3)
+    heading, _, yaw_rate = reference_motion(before, at, after, dt)
+    nf = f_query.size
+    refs = {"future": (at[:nf], heading[:nf], yaw_rate[:nf]),
+            "now": (at[nf:], heading[nf:], yaw_rate[nf:])}
+    del all_ref, before, after
 
     def queries(kind: str, t_issue: np.ndarray, t_query: np.ndarray) -> Queries:
-        ref = refs[kind]
+        ref, heading, yaw_rate = refs[kind]
         last_fix = np.searchsorted(gps.t, t_issue, side="right") - 1
         since = t_query - gps.t[np.clip(last_fix, 0, None)]
         return Queries(t_issue, t_query, ref, _speed_at(drive, t_query, grid_t, grid_xy),
-                       _labels(drive, t_query, grid_t, grid_xy), since)
+                       _labels(drive, t_query, grid_t, grid_xy), since, heading, yaw_rate)
 
     future = queries("future", f_issue, f_query)
     now = queries("now", n_query, n_query)

@@ -27,6 +27,7 @@ from bench.tables import (
     trained_in_run,
     warmup_table,
 )
+from bench.track_results import TRACK_NOTE, track_table
 
 MISSING_NOTE = ("`missing`: queries a predictor answered with no position (NaN) although a "
                 "reference exists, e.g. before its first fix; they are counted, not averaged, so "
@@ -106,6 +107,8 @@ def report_tables(res: dict[str, Any]) -> list[Table]:
             tables += [label_table(res, ds, k, held_out=True) for k in ("future", "now")]
             if has_held_out_paired(res, ds):
                 tables.append(paired_table(res, ds, held_out=True))
+    if res.get("track_errors", {}).get("predictors"):
+        tables.append(track_table(res))
     if res.get("by_speed"):
         tables.append(speed_table(res))
     if res.get("outages"):
@@ -207,6 +210,8 @@ def render_markdown(res: dict[str, Any], plots: list[str],
         if trained_note(res):
             lines += ["`*` after a name: a learned predictor trained on some of these drives; "
                       "its comparison over the held-out drives only is below.", ""]
+    if res.get("track_errors", {}).get("predictors"):
+        lines += ["### Where the error points", "", TRACK_NOTE, "", track_table(res).markdown(), ""]
     lines += seeds_lines(res)
     if res.get("held_out_all"):
         ho = res["held_out_all"]

@@ -388,6 +388,9 @@ def aggregate(runs: Sequence[DriveRun], cfg: RunConfig, data_manifest: list[dict
             d["predictors"] = {name: mine.get(name, _empty_kinds(stats)) for name in preds}
         res["drives"].append(d)
     res["gate"] = gate_summary(runs, cfg)
+    from bench.track_results import track_section
+
+    res["track_errors"] = track_section(traces, keep, preds)
     return res
 
 

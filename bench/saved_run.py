@@ -31,7 +31,7 @@ from scenarios.errors import DataError
 
 #: MAJOR.MINOR of results.json: a reader accepts every MINOR of its MAJOR; MINOR grows when
 #: keys are added, MAJOR when a key changes meaning or goes
-SCHEMA_VERSION = "1.2"
+SCHEMA_VERSION = "1.3"
 RESULTS = "results.json"
 TRACES = "traces.parquet"
 PROVENANCE_KEYS = ("command", "versions", "git_commit", "data")
@@ -128,6 +128,18 @@ class Run:
                 row[f"{fig}_lo"], row[f"{fig}_hi"] = lo, hi
             rows[p] = row
         return pd.DataFrame.from_dict(rows, orient="index").astype(float)
+
+
+    def track_summary(self, kind: str = "future") -> pd.DataFrame:
+        """Along/cross-track figures of one kind as a numeric frame: one row per predictor,
+        columns of :data:`metrics.track_errors.TRACK_SUMMARY_KEYS` [m] (schema 1.3); empty
+        for older runs, which have none."""
+        from metrics.track_errors import TRACK_SUMMARY_KEYS
+
+        block = self.results.get("track_errors", {}).get("predictors", {})
+        rows = {p: {k: v[kind].get(k) for k in TRACK_SUMMARY_KEYS} for p, v in block.items()}
+        return pd.DataFrame.from_dict(rows, orient="index", columns=list(TRACK_SUMMARY_KEYS)
+                                      ).astype(float)
 
 
 def save_run(out: Path, run: Run, also_written: Sequence[Path] = ()) -> list[Path]:

@@ -17,6 +17,7 @@ import pandas as pd
 from bench.prepare import LABELS, PreparedDrive, Queries
 from metrics.accuracy import euclidean_error
 from metrics.outages import outage_ids
+from metrics.track_errors import track_errors
 
 #: column -> (type, unit, meaning); frames: x/y in the drive's local ENU metres
 TRACE_COLUMNS: dict[str, tuple[str, str, str]] = {
@@ -33,6 +34,10 @@ TRACE_COLUMNS: dict[str, tuple[str, str, str]] = {
               "NaN: none)"),
     "y_ref": ("float64", "m", "reference position, north"),
     "error_m": ("float64", "m", "Euclidean distance answer - reference"),
+    "along_m": ("float64", "m", "error along the reference's direction of travel: + ahead, "
+                "- lagging (NaN at standstill, below 0.5 m/s)"),
+    "cross_m": ("float64", "m", "error across the reference's direction of travel: + left, "
+                "- right (ENU; NaN at standstill)"),
     "label": ("category", "", "scenario at t_query: straight, turn, roundabout, start_stop, "
               "unlabelled"),
     "speed_mps": ("float64", "m/s", "reference speed at t_query (NaN: unknown)"),
@@ -40,9 +45,17 @@ TRACE_COLUMNS: dict[str, tuple[str, str, str]] = {
     "outage": ("int64", "", "index of the GPS outage t_query falls in within its drive, -1: none"),
     "warmup": ("bool", "", "asked before the drive's second received fix (left out of headline "
                "figures)"),
+    "heading_ref": ("float64", "rad", "the reference's direction of travel at t_query, "
+                    "counter-clockwise from east (from the reference 0.1 s before and after; "
+                    "NaN: standstill or unknown)"),
+    "yaw_rate_ref": ("float64", "rad/s", "the reference's yaw rate at t_query, + = turning left "
+                     "(NaN: unknown)"),
 }
 #: the columns a query table holds (all but the predictor and its answer)
-QUERY_COLUMNS = tuple(c for c in TRACE_COLUMNS if c not in ("predictor", "x", "y", "error_m"))
+ANSWER_COLUMNS = ("predictor", "x", "y", "error_m", "along_m", "cross_m")
+QUERY_COLUMNS = tuple(c for c in TRACE_COLUMNS if c not in ANSWER_COLUMNS)
+#: query columns an answer key written before they existed may lack (filled with NaN)
+TRACK_QUERY_COLUMNS = ("heading_ref", "yaw_rate_ref")
 #: fixed categories keep the string columns of long traces at one byte a row, also
 #: after concatenation (identical categories concatenate as categoricals)
 LABEL_CATEGORIES = [*LABELS, "unlabelled"]
@@ -74,7 +87,13 @@ def query_frame(prep: PreparedDrive, kind: str) -> pd.DataFrame:
         "speed_mps": q.speed_mps, "since_fix_s": q.since_fix_s,
         "outage": outage_ids(q.t_query, prep.outages),
         "warmup": q.t_issue < warmup_end_s(prep),
+        "heading_ref": _or_nan(q.heading_rad, q.t_query.size),
+        "yaw_rate_ref": _or_nan(q.yaw_rate, q.t_query.size),
     }).astype({"kind": KIND_DTYPE})
+
+
+def _or_nan(values: np.ndarray | None, n: int) -> np.ndarray:
+    return np.full(n, np.nan) if values is None else np.asarray(values, dtype=float)
 
 
 def answer_positions(queries: pd.DataFrame, answers: pd.DataFrame,
@@ -159,9 +178,14 @@ def score(queries: pd.DataFrame, predictor: str, answers: np.ndarray | pd.DataFr
     cols = {c: queries[c] for c in ("dataset", "drive")}
     cols["predictor"] = predictor
     cols.update({c: queries[c] for c in ("kind", "t_issue", "t_query")})
+    heading = (queries["heading_ref"].to_numpy(float) if "heading_ref" in queries
+               else np.full(len(queries), np.nan))
+    along, cross = track_errors(xy, ref, heading)
     cols.update({"x": xy[:, 0], "y": xy[:, 1], "x_ref": ref[:, 0], "y_ref": ref[:, 1],
-                 "error_m": euclidean_error(xy, ref)})
+                 "error_m": euclidean_error(xy, ref), "along_m": along, "cross_m": cross})
     cols.update({c: queries[c] for c in ("label", "speed_mps", "since_fix_s", "outage", "warmup")})
+    for c in TRACK_QUERY_COLUMNS:
+        cols[c] = queries[c] if c in queries else np.nan
     return pd.DataFrame(cols, index=queries.index).reset_index(drop=True)
 
 

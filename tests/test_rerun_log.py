@@ -15,8 +15,19 @@ import pandas as pd
 import pytest
 
 from bench.config import RunConfig
-from bench.rerun_log import drive_paths, outage_steps, sanitise, write_recording
+from bench.rerun_blueprint import AROUND_M, VEHICLE_M
+from bench.rerun_log import (
+    N_LAST_FIXES,
+    drive_paths,
+    error_colours,
+    last_fixes,
+    nice_scale,
+    outage_steps,
+    sanitise,
+    write_recording,
+)
 from bench.runner import DriveRun, run
+from metrics.track_errors import track_errors
 from scenarios.synthetic import generate_drive
 
 rr = pytest.importorskip("rerun", reason="needs the viz extra")
@@ -42,12 +53,16 @@ def fake_run(name: str = "my drive/01", preds=("cv", "kf-paper"), dur: float = 2
             err = rng.uniform(0, 1, n)
             err[0] = np.nan  # not scorable
             lab = np.where((tq >= 5) & (tq < 10), "turn", "straight")
+            ref = 30 * np.column_stack([np.cos(tq / 10), np.sin(tq / 10)])
+            heading = tq / 10 + np.pi / 2  # counter-clockwise on the circle
+            along, cross = track_errors(ref + np.column_stack([err, 0 * err]), ref, heading)
             frames.append(pd.DataFrame({
                 "dataset": "mem", "drive": name, "predictor": p, "kind": kind,
-                "t_issue": tq, "t_query": tq, "x": 30 * np.cos(tq / 10) + err,
-                "y": 30 * np.sin(tq / 10), "x_ref": 30 * np.cos(tq / 10),
-                "y_ref": 30 * np.sin(tq / 10), "error_m": err, "label": lab,
-                "speed_mps": 3.0, "since_fix_s": 0.1, "outage": -1}))
+                "t_issue": tq, "t_query": tq, "x": ref[:, 0] + err,
+                "y": ref[:, 1], "x_ref": ref[:, 0],
+                "y_ref": ref[:, 1], "error_m": err, "along_m": along, "cross_m": cross,
+                "label": lab, "speed_mps": 3.0, "since_fix_s": 0.1, "outage": -1,
+                "heading_ref": heading, "yaw_rate_ref": 0.1}))
         frames[-1].loc[0, ["x", "y"]] = np.nan  # no answer before the first fix
     outages = [(float(tf[received & (tf <= 8.0)][-1]), float(tf[received & (tf >= 9.5)][0]))]
     return DriveRun(name, "mem", "truth", ["a note"], ["a warning"], pd.concat(frames),
@@ -55,25 +70,46 @@ def fake_run(name: str = "my drive/01", preds=("cv", "kf-paper"), dur: float = 2
                     track=track)
 
 
-def read_back(path: Path):
-    """entity path -> {"static": [record batches], "temporal": [record batches]}, and the
-    blueprint's view origins by class."""
+def read_back(path: Path, one: bool = True):
+    """Per recording: entity path -> {"static": [record batches], "temporal": [record
+    batches]}, and its own blueprint's views: display name -> (class, origin, visual bounds
+    or None). ``one``: the file must hold exactly one recording; return its pair."""
     reader = rr.chunk.RrdReader(path)
-    [recording] = reader.recordings()
-    out: dict[str, dict[str, list]] = defaultdict(lambda: {"static": [], "temporal": []})
-    for c in reader.stream(store=recording).to_chunks():
-        assert not c.is_static or c.timeline_names == []
-        if not c.is_static:
-            assert c.timeline_names == ["time"]
-        out[c.entity_path.lstrip("/")]["static" if c.is_static else "temporal"].append(
-            c.to_record_batch())
-    views = {}
-    for c in reader.stream(store=reader.blueprints()[0]).to_chunks():
-        rb = c.to_record_batch()
-        if "ViewBlueprint:space_origin" in rb.schema.names:
-            cls = rb.column("ViewBlueprint:class_identifier").to_pylist()[0][0]
-            views[cls] = rb.column("ViewBlueprint:space_origin").to_pylist()[0][0]
-    return out, views
+    blueprints = {b.application_id: b for b in reader.blueprints()}
+    out = {}
+    for recording in reader.recordings():
+        ents: dict[str, dict[str, list]] = defaultdict(lambda: {"static": [], "temporal": []})
+        for c in reader.stream(store=recording).to_chunks():
+            if c.entity_path == "/__properties":
+                continue
+            assert not c.is_static or c.timeline_names == []
+            if not c.is_static:
+                assert c.timeline_names == ["time"]
+            ents[c.entity_path.lstrip("/")]["static" if c.is_static else "temporal"].append(
+                c.to_record_batch())
+        views, bounds = {}, {}
+        for c in reader.stream(store=blueprints[recording.application_id]).to_chunks():
+            rb = c.to_record_batch()
+            if "ViewBlueprint:space_origin" in rb.schema.names:
+                views[c.entity_path] = (
+                    rb.column("ViewBlueprint:display_name").to_pylist()[0][0],
+                    rb.column("ViewBlueprint:class_identifier").to_pylist()[0][0],
+                    rb.column("ViewBlueprint:space_origin").to_pylist()[0][0])
+            if "VisualBounds2D:range" in rb.schema.names:
+                bounds[c.entity_path.rsplit("/", 1)[0]] = \
+                    rb.column("VisualBounds2D:range").to_pylist()[0][0]
+        out[recording.recording_id] = (ents, {name: (cls, origin, bounds.get(vp))
+                                              for vp, (name, cls, origin) in views.items()})
+    if one:
+        [pair] = out.values()
+        return pair
+    return out
+
+
+def screen(xy) -> np.ndarray:
+    """ENU -> rerun 2-D view coordinates, as the writer logs them (north up)."""
+    xy = np.asarray(xy, dtype=float)
+    return np.column_stack([xy[:, 0], -xy[:, 1]])
 
 
 def times_s(batches) -> np.ndarray:
@@ -106,11 +142,14 @@ def test_hand_made_run_round_trips(tmp_path):
     assert path.stat().st_size > 10_000
     ents, views = read_back(path)
     root = "drives/my_drive_01"
+    per_pred = ("map/{p}/future", "map/{p}/now", "errors/{p}/future", "errors/{p}/now",
+                "along/{p}/future", "along/{p}/now", "cross/{p}/future", "cross/{p}/now",
+                "around/{p}/future", "around/{p}/error", "vehicle_frame/{p}")
     expected = {f"{root}/{e}" for e in (
-        "info", "map/truth", "map/fixes/received", "map/fixes/dropped", "labels", "outages",
-        "map/cv/future", "map/cv/now", "errors/cv/future", "errors/cv/now",
-        "map/kf-paper/future", "map/kf-paper/now", "errors/kf-paper/future",
-        "errors/kf-paper/now")}
+        "info", "map/truth", "map/track_error", "colour_scale", "map/fixes/received",
+        "map/fixes/dropped", "labels", "outages", "around/reference", "around/road",
+        "around/fixes", "vehicle_frame/axes",
+        *(e.format(p=p) for p in ("cv", "kf-paper") for e in per_pred))}
     assert expected <= set(ents), expected - set(ents)
     assert {e for e in ents if e.startswith("drives/")} == expected
 
@@ -126,7 +165,7 @@ def test_hand_made_run_round_trips(tmp_path):
         b = ents[f"{root}/map/fixes/{kind}"]["temporal"]
         np.testing.assert_allclose(times_s(b), f.t[mask], atol=1e-9)
         pos = np.array([p[0] for p in column(b, "Points2D:positions")])
-        np.testing.assert_allclose(pos, f.loc[mask, ["x", "y"]].to_numpy(), atol=1e-4)
+        np.testing.assert_allclose(pos, screen(f.loc[mask, ["x", "y"]]), atol=1e-4)
 
     # errors: every query (NaN kept as a gap), time range = the drive's query times
     for p in ("cv", "kf-paper"):
@@ -161,7 +200,11 @@ def test_hand_made_run_round_trips(tmp_path):
 
     info = column(ents[f"{root}/info"]["static"], "TextDocument:text")[0][0]
     assert "a note" in info and "a warning" in info
-    assert views == {"2D": f"{root}/map", "TimeSeries": root, "TextLog": f"{root}/labels"}
+    assert {(c, o) for c, o, _ in views.values()} == {
+        ("2D", f"{root}/map"), ("2D", f"{root}/around"), ("2D", f"{root}/vehicle_frame"),
+        ("TimeSeries", root), ("TextLog", f"{root}/labels"),
+        ("TextDocument", f"{root}/colour_scale")}
+    assert sum(c == "TimeSeries" for c, _, _ in views.values()) == 3  # error, along, cross
 
 
 def test_runner_output_with_cv_and_skipped_drive(tmp_path):
@@ -171,12 +214,16 @@ def test_runner_output_with_cv_and_skipped_drive(tmp_path):
     skipped = DriveRun("bad drive", "mem", "", [], [], pd.DataFrame(), skipped="poor truth")
     path = tmp_path / "cv.rrd"
     write_recording(path, [skipped, r], ["cv"])
-    ents, views = read_back(path)
+    recs = read_back(path, one=False)
+    assert list(recs) == ["mem/bad drive", f"{r.dataset}/{d.name}"]  # one per drive, in order
+    bad, bad_views = recs["mem/bad drive"]
+    ents, views = recs[f"{r.dataset}/{d.name}"]
     root = f"drives/{sanitise(d.name)}"
-    assert views["2D"] == f"{root}/map"  # the first drive that was not skipped
-    assert set(ents["drives/bad_drive/info"]) and [e for e in ents if "bad_drive" in e] == [
-        "drives/bad_drive/info"]
-    assert "SKIPPED: poor truth" in column(ents["drives/bad_drive/info"]["static"],
+    assert ("2D", f"{root}/map") in {(c, o) for c, o, _ in views.values()}  # its own layout
+    assert ("2D", "drives/bad_drive/map") in {(c, o) for c, o, _ in bad_views.values()}
+    assert list(bad) == ["drives/bad_drive/info"]
+    assert not any("bad_drive" in e for e in ents)
+    assert "SKIPPED: poor truth" in column(bad["drives/bad_drive/info"]["static"],
                                            "TextDocument:text")[0][0]
     for e in ("map/cv/future", "map/cv/now", "errors/cv/future", "errors/cv/now",
               "map/fixes/received", "map/truth", "labels", "outages"):
@@ -209,3 +256,105 @@ def test_two_minute_drive_three_predictors_is_fast(tmp_path):
     assert dt < 2.0  # ~30-40 ms measured; generous for a loaded machine
     ents, _ = read_back(tmp_path / "long.rrd")
     assert times_s(ents["drives/long/errors/poly/now"]["temporal"]).size == 2400
+
+
+def test_around_the_vehicle_is_reference_relative_and_metre_scaled(tmp_path):
+    r = fake_run()
+    path = tmp_path / "around.rrd"
+    write_recording(path, [r], ["cv", "kf-paper"], color_by="kf-paper")
+    ents, views = read_back(path)
+    root = "drives/my_drive_01"
+    tr = r.traces
+    for p in ("cv", "kf-paper"):
+        g = tr[(tr.predictor == p) & (tr.kind == "now")].sort_values("t_query")
+        rel = g[["x", "y"]].to_numpy() - g[["x_ref", "y_ref"]].to_numpy()
+        ok = np.isfinite(rel).all(axis=1)
+        # the error arrow: from the reference (0, 0) to the answer, relative to the
+        # reference at its query time, north up
+        b = ents[f"{root}/around/{p}/error"]["temporal"]
+        np.testing.assert_allclose(times_s(b), g.t_query[ok], atol=1e-9)
+        vec = np.array([v[0] for v in column(b, "Arrows2D:vectors")])
+        np.testing.assert_allclose(vec, screen(rel[ok]), atol=1e-5)
+        origins = column(ents[f"{root}/around/{p}/error"]["static"], "Arrows2D:origins")
+        assert origins == [[[0.0, 0.0]]]
+        gf = tr[(tr.predictor == p) & (tr.kind == "future")].sort_values("t_query")
+        relf = gf[["x", "y"]].to_numpy() - gf[["x_ref", "y_ref"]].to_numpy()
+        pos = np.array([v[0] for v in column(ents[f"{root}/around/{p}/future"]["temporal"],
+                                             "Points2D:positions")])
+        np.testing.assert_allclose(pos, screen(relf[np.isfinite(relf).all(axis=1)]), atol=1e-5)
+        # the vehicle frame: (along, cross), left up
+        b = ents[f"{root}/vehicle_frame/{p}"]["temporal"]
+        ac = g[["along_m", "cross_m"]].to_numpy()
+        pos = np.array([v[0] for v in column(b, "Points2D:positions")])
+        np.testing.assert_allclose(pos, screen(ac[np.isfinite(ac).all(axis=1)]), atol=1e-5)
+        # along/cross series: every query, NaN kept
+        vals = np.array([v[0] for v in column(ents[f"{root}/along/{p}/now"]["temporal"],
+                                               "Scalars:scalars")])
+        np.testing.assert_allclose(vals[1:], g.along_m.to_numpy()[1:])
+    # fixes around the vehicle: at each 'now' time the last received fixes, relative
+    b = ents[f"{root}/around/fixes"]["temporal"]
+    t = times_s(b)
+    rows = column(b, "Points2D:positions")
+    g = tr[(tr.predictor == "cv") & (tr.kind == "now")].sort_values("t_query")
+    f = r.fixes[r.fixes.received]
+    k = 100  # t = 5.0 s
+    assert t[k] == pytest.approx(g.t_query.iloc[k])
+    last = f[f.t <= t[k] + 1e-9].tail(N_LAST_FIXES)
+    want = last[["x", "y"]].to_numpy() - g[["x_ref", "y_ref"]].to_numpy()[k]
+    np.testing.assert_allclose(np.array(rows[k]), screen(want), atol=1e-4)
+    # the views around the vehicle are a few metres wide, not the whole drive
+    by_origin = {o: b for c, o, b in views.values() if c == "2D"}
+    assert by_origin[f"{root}/around"] == {"x_range": [-AROUND_M, AROUND_M],
+                                           "y_range": [-AROUND_M, AROUND_M]}
+    assert by_origin[f"{root}/vehicle_frame"] == {"x_range": [-VEHICLE_M, VEHICLE_M],
+                                                  "y_range": [-VEHICLE_M, VEHICLE_M]}
+    assert AROUND_M <= 10 and VEHICLE_M <= 2
+    assert by_origin[f"{root}/map"] is None  # the overview fits the drive
+    # the track coloured by kf-paper's error, with its scale in words
+    text = column(ents[f"{root}/colour_scale"]["static"], "TextDocument:text")[0][0]
+    assert "kf-paper" in text and "red >=" in text
+    [strips] = [b for b in ents[f"{root}/map/track_error"]["static"]
+                if "LineStrips2D:strips" in b.schema.names]
+    n_seg = len(column([strips], "LineStrips2D:strips")[0])
+    assert n_seg == 200 - 1 - 6  # every segment with both ends known (the gap cuts 6)
+    colours = column([strips], "LineStrips2D:colors")[0]
+    assert len(colours) == n_seg and len(set(colours)) > 10  # a colour per segment
+
+
+def test_one_recording_per_drive_each_on_its_own_time(tmp_path):
+    a = fake_run("drive a", dur=10.0)
+    b = fake_run("drive b", dur=12.0, seed=1)
+    b.traces = b.traces.assign(t_issue=b.traces.t_issue + 1000.0,
+                               t_query=b.traces.t_query + 1000.0)
+    path = tmp_path / "two.rrd"
+    write_recording(path, [a, b], ["cv", "kf-paper"])
+    recs = read_back(path, one=False)
+    assert list(recs) == ["mem/drive a", "mem/drive b"]
+    reader = rr.chunk.RrdReader(path)
+    assert sorted(e.application_id for e in reader.recordings()) == sorted(
+        e.application_id for e in reader.blueprints())  # a layout of its own each
+    for rid, root, t0 in (("mem/drive a", "drives/drive_a", 0.0),
+                          ("mem/drive b", "drives/drive_b", 1000.0)):
+        ents, views = recs[rid]
+        assert {e.split("/")[1] for e in ents} == {root.split("/")[1]}
+        assert all(o.startswith(root) for _, o, _ in views.values())
+        assert times_s(ents[f"{root}/errors/cv/now"]["temporal"]).min() == pytest.approx(t0)
+
+
+def test_colour_scale():
+    assert nice_scale(np.array([0.01, 0.02, 0.03, 0.04])) == pytest.approx(0.05)
+    assert nice_scale(np.array([0.3] * 10)) == pytest.approx(0.5)
+    assert nice_scale(np.array([0.1] * 10)) == pytest.approx(0.1)
+    assert nice_scale(np.array([np.nan])) == pytest.approx(0.1)
+    c = error_colours(np.array([0.0, 0.05, 0.1, 0.5, np.nan]), 0.1)
+    np.testing.assert_array_equal(c[0], [26, 152, 80])  # green
+    np.testing.assert_array_equal(c[1], [254, 224, 60])  # yellow at half the scale
+    np.testing.assert_array_equal(c[2], c[3])  # red at and above the top
+    np.testing.assert_array_equal(c[3], [215, 25, 28])
+    np.testing.assert_array_equal(c[4], [190, 190, 190])  # no error known
+
+
+def test_last_fixes():
+    idx, n = last_fixes(np.array([-1.0, 0.0, 0.5, 3.0]), np.array([0.0, 1.0, 2.0]), n=2)
+    np.testing.assert_array_equal(n, [0, 1, 1, 2])
+    np.testing.assert_array_equal(idx, [0, 0, 1, 2])

@@ -46,6 +46,7 @@ from bench.options import (
     parse_report_formats,
     parse_seeds,
     resolve_baseline,
+    resolve_color_by,
     validate_predictors,
     with_model_aliases,
 )
@@ -96,8 +97,19 @@ def run(
     include_poor_truth: IncludePoorTruthOpt = False,
     synthetic_duration: SyntheticDurationOpt = None,
     rerun: Annotated[Path | None, typer.Option(
-        "--rerun", metavar="FILE", help="Also write a rerun recording (.rrd) of every drive (needs "
-        "the viz extra; open it with `bench view FILE.rrd`).")] = None,
+        "--rerun", metavar="FILE",
+        help="Also write a rerun file (.rrd; needs the viz extra; open it with `bench view "
+             "FILE.rrd`): one recording per drive, named DATASET/DRIVE, picked in the viewer's "
+             "source list. Each shows the whole-drive map (track coloured by error, see "
+             "--rerun-color-by), a view around the vehicle (north up, +-5 m: last fixes, "
+             "answers, error arrows from the reference), errors in the vehicle frame (along "
+             "ahead, cross left, +-1 m, last 3 s), and error, along-track and cross-track [m] "
+             "plots with outages and scenario labels.")] = None,
+    rerun_color_by: Annotated[str | None, typer.Option(
+        "--rerun-color-by", metavar="PREDICTOR",
+        help="Predictor whose current-position error colours the rerun map's track (green 0 m "
+             "to red at the drive's p95, legend in the recording); default: the first "
+             "predictor. Needs --rerun.")] = None,
     executor: Annotated[str, typer.Option(
         metavar="local|ray",
         help="Where to run: local (processes, --workers) or ray (one Ray task per drive and "
@@ -156,6 +168,7 @@ def run(
                                  "pip install 'posbench[viz]'") from None
         options, given = predictor_options(model, set_)
         names = with_model_aliases(names, options)
+        color_by = resolve_color_by(rerun_color_by, names, rerun)
         import_from_cwd()
         options = validate_predictors(names, options, given)
         stats = Statistics(baseline=resolve_baseline(baseline, names))
@@ -169,7 +182,7 @@ def run(
             consistency = data_check(drives, names, strict)
             _run(drives, cfg, data, out, workers, rerun, executor, address, formats,
                  n_drive_plots, stats, seed_list if seeds is not None else None,
-                 table_formats, consistency)
+                 table_formats, consistency, color_by)
     except (DataError, UsageError, ExecutorError) as e:
         raise fail(str(e)) from None
     except BrokenProcessPool:
@@ -240,7 +253,7 @@ def _run(drives, cfg, data, out: Path, workers: int, rerun: Path | None = None,
          formats: tuple[str, ...] = ("png",), drive_plots: int | None = 20,
          stats=None, seeds: list[int] | None = None,
          table_formats: tuple[str, ...] = TABLE_FORMATS,
-         consistency: dict[str, Any] | None = None) -> None:
+         consistency: dict[str, Any] | None = None, color_by: str | None = None) -> None:
     from dataclasses import replace
 
     from bench.results import aggregate, all_traces, data_provenance
@@ -273,7 +286,10 @@ def _run(drives, cfg, data, out: Path, workers: int, rerun: Path | None = None,
         from bench.rerun_log import write_recording
 
         with console.status(f"writing rerun recording {rerun}..."):
-            write_recording(rerun, runs, list(cfg.predictors))
+            try:
+                write_recording(rerun, runs, list(cfg.predictors), color_by)
+            except RuntimeError as e:  # joining the drives' recordings failed
+                raise DataError(rerun, str(e)) from None
         console.print(f"wrote {rerun} (open it with: bench view {rerun})")
 
 

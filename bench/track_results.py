@@ -1,0 +1,89 @@
+"""The ``track_errors`` block of results.json: where the error points (schema 1.2).
+
+Per predictor and kind (and per scenario label), :func:`metrics.track_errors.track_summary`
+of the scored queries' along-track and cross-track errors (trace columns ``along_m``,
+``cross_m``) and of the cross-track error signed toward the inside of the turn
+(:func:`metrics.track_errors.inward_cross` of ``cross_m`` and ``yaw_rate_ref``).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+from bench.prepare import LABELS
+from bench.tables import Table
+from metrics.track_errors import inward_cross, track_summary
+
+KINDS = ("future", "now")
+NEEDED = ("predictor", "kind", "label", "error_m", "along_m", "cross_m", "yaw_rate_ref")
+
+
+def track_section(traces: pd.DataFrame, keep: np.ndarray, predictors: Sequence[str]
+                  ) -> dict[str, Any]:
+    """``{"predictors": {name: {kind: summary}}, "by_label": {name: {kind: {label: summary}}}}``
+    over the rows ``keep`` (the headline figures' scored rows) of ``traces``; empty dicts
+    when the traces have no along/cross-track columns (answers scored before they existed)."""
+    out: dict[str, Any] = {"predictors": {}, "by_label": {}}
+    if traces.empty or any(c not in traces for c in NEEDED):
+        return out
+    pred_codes, pred_names = pd.factorize(traces["predictor"].astype(str))
+    kind_codes, kind_names = pd.factorize(traces["kind"].astype(str))
+    label_codes, label_names = pd.factorize(traces["label"].astype(str))
+    cols = np.column_stack([traces["along_m"].to_numpy(float), traces["cross_m"].to_numpy(float),
+                            np.zeros(len(traces)), traces["error_m"].to_numpy(float)])
+    cols[:, 2] = inward_cross(cols[:, 1], traces["yaw_rate_ref"].to_numpy(float))
+    pred_of = {str(n): i for i, n in enumerate(pred_names)}
+    kind_of = {str(n): i for i, n in enumerate(kind_names)}
+    label_of = {str(n): i for i, n in enumerate(label_names)}
+    for name in predictors:
+        mine = keep & (pred_codes == pred_of.get(name, -1))
+        out["predictors"][name] = {}
+        out["by_label"][name] = {}
+        for k in KINDS:
+            rows = np.flatnonzero(mine & (kind_codes == kind_of.get(k, -1)))
+            sub, labels = cols[rows], label_codes[rows]
+            out["predictors"][name][k] = track_summary(*sub.T)
+            out["by_label"][name][k] = {
+                lab: track_summary(*sub[labels == label_of.get(lab, -1)].T) for lab in LABELS}
+    return out
+
+
+#: the report's paragraph under the table
+TRACK_NOTE = (
+    "Each answer's error in the reference's heading frame (direction of travel from the "
+    "reference 0.1 s before and after the query): `along` + = ahead, - = lagging behind; "
+    "`cross` + = left, - = right of the direction of travel (a mean far from 0 is a side "
+    "bias); `inward` = cross-track toward the inside of the turn while the reference turns "
+    "at >= 0.05 rad/s (+ = cuts corners, - = runs wide; n = turning queries). Queries with "
+    "the reference slower than 0.5 m/s have no heading: counted as `standstill`, not in "
+    "these figures.")
+
+
+def track_table(res: dict[str, Any]) -> Table:
+    """"Where the error points": per predictor and kind, mean along, p95 |along|, mean
+    cross, p95 |cross|, mean inward in turns [m], queries and standstill queries."""
+    rows = []
+    for name, kinds in res.get("track_errors", {}).get("predictors", {}).items():
+        for k in KINDS:
+            s = kinds[k]
+            rows.append({"predictor": name, "kind": k,
+                         **{c: _num(s[c]) for c in ("along_mean_m", "along_p95_abs_m",
+                                                     "cross_mean_m", "cross_p95_abs_m",
+                                                     "inward_mean_m")},
+                         "turning": s["turning"], "n": s["count"],
+                         "standstill": s["standstill"]})
+    labels = {"along_mean_m": "mean along [m]", "along_p95_abs_m": "p95 abs along [m]",
+              "cross_mean_m": "mean cross [m]", "cross_p95_abs_m": "p95 abs cross [m]",
+              "inward_mean_m": "mean inward, turns [m]"}
+    cols = ["predictor", "kind", *labels, "turning", "n", "standstill"]
+    frame = pd.DataFrame(rows, columns=cols)
+    return Table(frame, "track_errors", labels, counts={"inward_mean_m": "turning"},
+                 title="Where the error points")
+
+
+def _num(v: Any) -> float:
+    return float("nan") if v is None else float(v)
