@@ -1,0 +1,207 @@
+"""The baseline filters' fixed-size fast paths against their reference implementations.
+
+``kf`` runs its plain-float :class:`~predictors._ca_kalman.CaFilter2D`; the reference here
+is the same predictor with ``filterpy.kalman.KalmanFilter`` as its filter core (the
+implementation before issue 16, transcribed: F, Q from :func:`predictors.kf.ca_transition`
+/ :func:`predictors.kf.ca_process_noise`, H selecting rows, filterpy's Joseph-form update).
+Both are fed every event of a drive in lock step: after every observation their means
+must agree to 1e-9 (m, m/s, m/s^2) and their covariances to 1e-9 relative, and every
+answer (future and "now" queries) to 1e-9 m. Drives: the synthetic set (with and without
+wheel speed, with and without IMU yaw) and one shared drive per data set (aslan: IMU, no
+speed; KITTI: IMU with yaw, speed; comma2k19: IMU without yaw, CAN speed).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+from filterpy.kalman import KalmanFilter
+
+from bench.config import RunConfig
+from bench.prepare import prepare_drive
+from bench.replay import replay
+from predictors.base import Predictor
+from predictors.kf import LinearKalman, ca_process_noise, ca_transition
+from scenarios.drive import Drive
+from scenarios.loaders import load
+from scenarios.synthetic import default_drives
+
+TOL_M = 1e-9  # mean and answers [m, m/s, m/s^2]
+TOL_P = 1e-9  # covariance, relative to its largest entry
+
+
+# --- the reference: filterpy as the kf's filter core ---------------------------------
+_H = {k: np.zeros((2, 6)) for k in range(3)}  # per-axis component k of both axes
+for _k, _h in _H.items():
+    _h[0, 2 * _k] = _h[1, 2 * _k + 1] = 1.0
+
+
+class FilterpyCore:
+    """The interface of :class:`CaFilter2D` on ``filterpy.kalman.KalmanFilter``: what
+    predictors/kf.py ran before the fast path (state order ``[x, y, vx, vy, ax, ay]``)."""
+
+    def __init__(self) -> None:
+        self.f = KalmanFilter(dim_x=6, dim_z=2)
+        self._F = np.eye(6)
+        self._Q = np.zeros((6, 6))
+
+    def init(self, x: float, y: float, var_p: float, var_v: float, var_a: float) -> None:
+        self.f.x = np.array([[x], [y], [0.0], [0.0], [0.0], [0.0]])
+        self.f.P = np.diag([var_p] * 2 + [var_v] * 2 + [var_a] * 2)
+
+    def predict(self, d: float, psd: float) -> None:
+        self.f.predict(F=ca_transition(d, self._F), Q=ca_process_noise(d, psd, self._Q))
+
+    def update_pair(self, k: int, zx: float, zy: float, r: float) -> None:
+        self.f.update(np.array([[zx], [zy]]), R=np.eye(2) * r, H=_H[k])
+
+    def update_speed(self, c: float, s: float, z: float, r: float) -> None:
+        H = np.zeros((1, 6))
+        H[0, 2], H[0, 3] = c, s
+        self.f.update(np.array([[z]]), R=np.array([[r]]), H=H)
+
+    def state(self) -> list[float]:
+        return self.f.x[:, 0].tolist()
+
+    def covariance(self) -> np.ndarray:
+        return self.f.P.copy()
+
+    def velocity(self) -> tuple[float, float]:
+        return float(self.f.x[2, 0]), float(self.f.x[3, 0])
+
+
+class FilterpyKalman(LinearKalman):
+    """``kf`` on filterpy: the reference."""
+
+    filter_core = FilterpyCore
+
+
+# --- lock step -------------------------------------------------------------------------
+def close(a: np.ndarray | list, b: np.ndarray | list, tol: float) -> bool:
+    a, b = np.asarray(a, float), np.asarray(b, float)
+    both_nan = np.isnan(a) & np.isnan(b)
+    return bool(np.all(both_nan | (np.abs(a - b) <= tol)))
+
+
+class Lockstep(Predictor):
+    """Feeds every call to ``fast`` and ``ref``; after each observation compares their
+    states with ``compare(fast, ref)`` (a message, or None), and their answers to TOL_M.
+    Answers are the fast path's."""
+
+    name = "lockstep"
+
+    def __init__(self, fast: Predictor, ref: Predictor, compare) -> None:
+        self.fast, self.ref, self.compare = fast, ref, compare
+        self.checks = 0
+        self.worst = 0.0
+
+    def _check(self, what: str, t: float) -> None:
+        msg = self.compare(self.fast, self.ref)
+        assert msg is None, f"{what} at t={t:.3f} s: {msg}"
+        self.checks += 1
+
+    def reset(self) -> None:
+        self.fast.reset()
+        self.ref.reset()
+
+    def observe_gps(self, t: float, x: float, y: float) -> None:
+        self.fast.observe_gps(t, x, y)
+        self.ref.observe_gps(t, x, y)
+        self._check("fix", t)
+
+    def observe_imu(self, t: float, ax: float, ay: float, yaw: float, yaw_rate: float) -> None:
+        self.fast.observe_imu(t, ax, ay, yaw, yaw_rate)
+        self.ref.observe_imu(t, ax, ay, yaw, yaw_rate)
+        self._check("imu", t)
+
+    def observe_speed(self, t: float, v: float) -> None:
+        self.fast.observe_speed(t, v)
+        self.ref.observe_speed(t, v)
+        self._check("speed", t)
+
+    def position_at(self, t: float) -> tuple[float, float]:
+        a, b = self.fast.position_at(t), self.ref.position_at(t)
+        assert close(a, b, TOL_M), f"position_at({t:.3f}): fast {a} vs reference {b}"
+        if a[0] == a[0]:
+            self.worst = max(self.worst, math.hypot(a[0] - b[0], a[1] - b[1]))
+        return a
+
+
+def compare_kf(fast: LinearKalman, ref: LinearKalman) -> str | None:
+    tf, mf, Pf = fast.state()
+    tr, mr, Pr = ref.state()
+    if not (tf == tr or (tf != tf and tr != tr)):
+        return f"state times differ: {tf} vs {tr}"
+    if not close(mf, mr, TOL_M):
+        return f"means differ by {np.nanmax(np.abs(np.subtract(mf, mr))):.3g}"
+    if mf[0] == mf[0]:
+        scale = max(1.0, float(np.abs(Pr).max()))
+        if not close(Pf, Pr, TOL_P * scale):
+            return f"covariances differ by {np.abs(Pf - Pr).max():.3g} (scale {scale:.3g})"
+        if not np.array_equal(Pf, Pf.T):
+            return "fast covariance not symmetric"
+    return None
+
+
+def lockstep_run(drive: Drive, fast: Predictor, ref: Predictor, compare) -> Lockstep:
+    cfg = RunConfig(predictors=("kf",))
+    prep = prepare_drive(drive, cfg)
+    ls = Lockstep(fast, ref, compare)
+    res = replay(ls, prep, cfg.horizon_s)
+    assert np.isfinite(res.future_xy).any()
+    assert ls.checks >= len(prep.gps)
+    return ls
+
+
+def variants(drive: Drive) -> list[Drive]:
+    """The drive as given, without wheel speed, and without IMU yaw (heading from the
+    velocity state / yaw rate)."""
+    out = [drive]
+    if drive.speed is not None:
+        out.append(dataclasses.replace(drive, speed=None))
+    if drive.imu is not None and drive.imu.yaw is not None:
+        imu = dataclasses.replace(drive.imu, yaw=None)
+        out.append(dataclasses.replace(drive, imu=imu))
+    return out
+
+
+SYNTHETIC = default_drives()
+
+
+@pytest.mark.parametrize("drive", [v for d in SYNTHETIC[:2] for v in variants(d)],
+                         ids=lambda d: d.name)
+def test_kf_matches_filterpy_on_synthetic(drive: Drive) -> None:
+    ls = lockstep_run(drive, LinearKalman(), FilterpyKalman(), compare_kf)
+    assert ls.worst < TOL_M
+
+
+def test_kf_matches_filterpy_with_other_settings() -> None:
+    """Non-default noise settings, ZUPT threshold and no speed use."""
+    opts = dict(jerk_psd=30.0, gps_sigma=0.02, accel_sigma=1.5, speed_sigma=0.05,
+                speed_rel_sigma=0.0, stop_speed=0.5, init_vel_sigma=2.0, init_acc_sigma=0.5)
+    for d in SYNTHETIC[2:]:
+        lockstep_run(d, LinearKalman(**opts), FilterpyKalman(**opts), compare_kf)
+        lockstep_run(d, LinearKalman(use_speed=False), FilterpyKalman(use_speed=False),
+                     compare_kf)
+
+
+def shared_drives(aslan_dir: Path, kitti_dir: Path, comma_dir: Path) -> list[Drive]:
+    return [load(aslan_dir / "aslan-20220409115940.pickle")[0],
+            load(kitti_dir / "2011_09_26" / "2011_09_26_drive_0005_sync")[0],
+            load(comma_dir)[0]]
+
+
+@pytest.fixture(scope="module")
+def shared(aslan_dir: Path, kitti_dir: Path, comma_dir: Path) -> list[Drive]:
+    return shared_drives(aslan_dir, kitti_dir, comma_dir)
+
+
+@pytest.mark.parametrize("which", [0, 1, 2], ids=["aslan", "kitti", "comma2k19"])
+def test_kf_matches_filterpy_on_shared_drives(shared: list[Drive], which: int) -> None:
+    d = shared[which]
+    ls = lockstep_run(d, LinearKalman(), FilterpyKalman(), compare_kf)
+    assert ls.worst < TOL_M
