@@ -1,4 +1,4 @@
-"""The baseline filters' fixed-size fast paths against their reference implementations.
+"""The baseline filters' fixed-size fast paths against filterpy as the reference.
 
 ``kf`` runs its plain-float :class:`~predictors._ca_kalman.CaFilter2D`; the reference here
 is the same predictor with ``filterpy.kalman.KalmanFilter`` as its filter core (the
@@ -6,7 +6,13 @@ implementation before issue 16, transcribed: F, Q from :func:`predictors.kf.ca_t
 / :func:`predictors.kf.ca_process_noise`, H selecting rows, filterpy's Joseph-form update).
 Both are fed every event of a drive in lock step: after every observation their means
 must agree to 1e-9 (m, m/s, m/s^2) and their covariances to 1e-9 relative, and every
-answer (future and "now" queries) to 1e-9 m. Drives: the synthetic set (with and without
+answer (future and "now" queries) to 1e-9 m.
+
+``ekf`` keeps its own CTRA model, but its numpy fast path (2-D fix update with S^-1 in
+closed form, in-place products, gains without ``np.outer``) is checked against filterpy's
+``ExtendedKalmanFilter`` fed the same model: F and Q transcribed from the implementation
+before issue 16, and one generic ``update`` per scalar measurement (x, y, yaw rate,
+acceleration, yaw with a wrapped residual, wheel speed). Drives: the synthetic set (with and without
 wheel speed, with and without IMU yaw) and one shared drive per data set (aslan: IMU, no
 speed; KITTI: IMU with yaw, speed; comma2k19: IMU without yaw, CAN speed).
 """
@@ -19,12 +25,28 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from filterpy.kalman import KalmanFilter
+from filterpy.kalman import ExtendedKalmanFilter, KalmanFilter
 
 from bench.config import RunConfig
 from bench.prepare import prepare_drive
 from bench.replay import replay
+from predictors._geometry import wrap_angle
 from predictors.base import Predictor
+from predictors.ekf import (
+    IA,
+    IBA,
+    IBW,
+    IBY,
+    IKV,
+    IV,
+    IW,
+    IX,
+    IY,
+    IYAW,
+    N_STATE,
+    CtraEkf,
+    ctra_integrals,
+)
 from predictors.kf import LinearKalman, ca_process_noise, ca_transition
 from scenarios.drive import Drive
 from scenarios.loaders import load
@@ -204,4 +226,154 @@ def shared(aslan_dir: Path, kitti_dir: Path, comma_dir: Path) -> list[Drive]:
 def test_kf_matches_filterpy_on_shared_drives(shared: list[Drive], which: int) -> None:
     d = shared[which]
     ls = lockstep_run(d, LinearKalman(), FilterpyKalman(), compare_kf)
+    assert ls.worst < TOL_M
+
+
+# --- ekf: filterpy's ExtendedKalmanFilter with the CTRA model as the reference ----------
+def ref_ctra_step(x: np.ndarray, T: float, F: np.ndarray) -> None:
+    """ctra_step before issue 16 (item by item)."""
+    yaw, v, w, a = float(x[IYAW]), float(x[IV]), float(x[IW]), float(x[IA])
+    C0, S0, C1, S1, C2, S2 = ctra_integrals(w, T)
+    dxb = v * C0 + a * C1
+    dyb = v * S0 + a * S1
+    c = math.cos(yaw)
+    s = math.sin(yaw)
+    dx = c * dxb - s * dyb
+    dy = s * dxb + c * dyb
+    ddxb_dw = -(v * S1 + a * S2)
+    ddyb_dw = v * C1 + a * C2
+    F[0, 2] = -dy
+    F[1, 2] = dx
+    F[0, 3] = c * C0 - s * S0
+    F[1, 3] = s * C0 + c * S0
+    F[0, 4] = c * ddxb_dw - s * ddyb_dw
+    F[1, 4] = s * ddxb_dw + c * ddyb_dw
+    F[0, 5] = c * C1 - s * S1
+    F[1, 5] = s * C1 + c * S1
+    F[2, 4] = T
+    F[3, 5] = T
+    x[IX] += dx
+    x[IY] += dy
+    x[IYAW] = wrap_angle(yaw + w * T)
+    x[IV] = v + a * T
+
+
+def ref_process_noise(p: CtraEkf, yaw: float, T: float) -> np.ndarray:
+    """The ekf's Q before issue 16 (item by item)."""
+    out = np.zeros((N_STATE, N_STATE))
+    T2 = T * T
+    T3 = T2 * T
+    c = math.cos(yaw)
+    s = math.sin(yaw)
+    qj = p.jerk_psd
+    pp = qj * T3 * T2 / 20.0
+    pv = qj * T2 * T2 / 8.0
+    pa = qj * T3 / 6.0
+    out[0, 0] = pp * c * c + p.pos_psd * T
+    out[1, 1] = pp * s * s + p.pos_psd * T
+    out[0, 1] = out[1, 0] = pp * c * s
+    out[0, 3] = out[3, 0] = pv * c
+    out[1, 3] = out[3, 1] = pv * s
+    out[0, 5] = out[5, 0] = pa * c
+    out[1, 5] = out[5, 1] = pa * s
+    out[3, 3] = qj * T3 / 3.0
+    out[3, 5] = out[5, 3] = qj * T2 / 2.0
+    out[5, 5] = qj * T
+    qw = p.yaw_acc_psd
+    out[2, 2] = qw * T3 / 3.0
+    out[2, 4] = out[4, 2] = qw * T2 / 2.0
+    out[4, 4] = qw * T
+    out[IBA, IBA] = p.accel_bias_psd * T
+    out[IBW, IBW] = p.gyro_bias_psd * T
+    out[IBY, IBY] = out[IKV, IKV] = p.calib_psd * T
+    return out
+
+
+def _row(**entries: float) -> np.ndarray:
+    H = np.zeros((1, N_STATE))
+    for j, v in entries.items():
+        H[0, int(j[1:])] = v
+    return H
+
+
+class FilterpyEkf(CtraEkf):
+    """``ekf`` with every predict and update done by filterpy's ExtendedKalmanFilter."""
+
+    def __init__(self, **kw) -> None:
+        self.f = ExtendedKalmanFilter(dim_x=N_STATE, dim_z=1)
+        super().__init__(**kw)
+
+    def _load(self) -> ExtendedKalmanFilter:
+        self.f.x = self.x.copy()
+        self.f.P = self.P.copy()
+        return self.f
+
+    def _store(self) -> None:
+        self.x[:] = self.f.x
+        self.P = self.f.P.copy()
+
+    def _scalar(self, z: float, H: np.ndarray, hx: float, r: float, angle: bool = False) -> None:
+        f = self._load()
+        f.update(z, HJacobian=lambda _x: H, Hx=lambda _x: np.array([hx]), R=r,
+                 residual=(lambda a, b: np.array([wrap_angle(float(a[0] - b[0]))])) if angle
+                 else np.subtract)
+        self._store()
+
+    def _predict_to(self, t: float) -> None:
+        T = t - self._ts
+        if not T > 0.0:
+            return
+        f = self._load()
+        yaw0 = float(self.x[IYAW])
+        F = np.eye(N_STATE)
+        x = self.x.copy()
+        ref_ctra_step(x, T, F)
+        f.F, f.Q = F, ref_process_noise(self, yaw0, T)
+        f.predict_x = lambda u=0: setattr(f, "x", x)
+        f.predict()
+        self._store()
+        self._ts = t
+
+    def _update_position(self, zx: float, zy: float) -> None:
+        self._scalar(zx, _row(i0=1.0), float(self.x[IX]), self._r_gps)
+        self._scalar(zy, _row(i1=1.0), float(self.x[IY]), self._r_gps)
+
+    def _update_sum(self, j: int, k: int, z: float, r: float) -> None:
+        self._scalar(z, _row(**{f"i{j}": 1.0, f"i{k}": 1.0}), float(self.x[j] + self.x[k]), r)
+
+    def _update_yaw_offset(self, z: float) -> None:
+        self._scalar(z, _row(**{f"i{IYAW}": 1.0, f"i{IBY}": 1.0}),
+                     float(self.x[IYAW] + self.x[IBY]), self._r_yaw, angle=True)
+        self.x[IYAW] = wrap_angle(float(self.x[IYAW]))
+
+    def _update_speed(self, z: float, r: float) -> None:
+        v, k = float(self.x[IV]), float(self.x[IKV])
+        self._scalar(z, _row(**{f"i{IV}": 1.0 + k, f"i{IKV}": v}), (1.0 + k) * v, r)
+
+
+def compare_ekf(fast: CtraEkf, ref: CtraEkf) -> str | None:
+    tf, mf, Pf = fast.state()
+    tr, mr, Pr = ref.state()
+    if not (tf == tr or (tf != tf and tr != tr)):
+        return f"state times differ: {tf} vs {tr}"
+    d = np.subtract(mf, mr)
+    d[IYAW] = wrap_angle(float(d[IYAW]))
+    if not np.all(np.abs(d) <= TOL_M):
+        return f"means differ by {np.abs(d).max():.3g} (component {int(np.abs(d).argmax())})"
+    scale = max(1.0, float(np.abs(Pr).max()))
+    if not close(Pf, Pr, TOL_P * scale):
+        return f"covariances differ by {np.abs(Pf - Pr).max():.3g} (scale {scale:.3g})"
+    return None
+
+
+@pytest.mark.parametrize("drive", [v for d in SYNTHETIC[:2] for v in variants(d)],
+                         ids=lambda d: d.name)
+def test_ekf_matches_filterpy_on_synthetic(drive: Drive) -> None:
+    ls = lockstep_run(drive, CtraEkf(), FilterpyEkf(), compare_ekf)
+    assert ls.worst < TOL_M
+
+
+@pytest.mark.parametrize("which", [0, 1, 2], ids=["aslan", "kitti", "comma2k19"])
+def test_ekf_matches_filterpy_on_shared_drives(shared: list[Drive], which: int) -> None:
+    ls = lockstep_run(shared[which], CtraEkf(), FilterpyEkf(), compare_ekf)
     assert ls.worst < TOL_M
