@@ -16,7 +16,8 @@ acceleration, yaw with a wrapped residual, wheel speed).
 
 ``poly`` fits its cubics through the normal equations in plain floats
 (:func:`predictors._cubic_xy.fit_cubic_xy`); the reference is ``fit_cubic`` (numpy's lstsq),
-compared curve by curve on random windows and answer by answer on the drives. Drives: the synthetic set (with and without
+compared curve by curve on random windows and answer by answer on the drives; ``kf-paper``
+resamples its window with the same fit, checked answer by answer likewise. Drives: the synthetic set (with and without
 wheel speed, with and without IMU yaw) and one shared drive per data set (aslan: IMU, no
 speed; KITTI: IMU with yaw, speed; comma2k19: IMU without yaw, CAN speed).
 """
@@ -54,6 +55,7 @@ from predictors.ekf import (
     ctra_integrals,
 )
 from predictors.kf import LinearKalman, ca_process_noise, ca_transition
+from predictors.kf_paper import PaperKalman
 from predictors.poly import PolyExtrapolator
 from scenarios.drive import Drive
 from scenarios.loaders import load
@@ -503,4 +505,23 @@ def test_poly_matches_lstsq_on_synthetic(drive: Drive) -> None:
 @pytest.mark.parametrize("which", [0, 1, 2], ids=["aslan", "kitti", "comma2k19"])
 def test_poly_matches_lstsq_on_shared_drives(shared: list[Drive], which: int) -> None:
     ls = lockstep_run(shared[which], PolyExtrapolator(), LstsqPoly(), no_state)
+    assert ls.worst < TOL_M
+
+
+class LstsqPaperKalman(PaperKalman):
+    """``kf-paper`` as before issue 16: the resampling cubic by ``fit_cubic`` (lstsq)."""
+
+    def _resample(self, t: np.ndarray, xy: np.ndarray, times: np.ndarray) -> np.ndarray:
+        return fit_cubic(t, xy.T)(times)
+
+
+@pytest.mark.parametrize("drive", SYNTHETIC, ids=lambda d: d.name)
+def test_kf_paper_matches_lstsq_on_synthetic(drive: Drive) -> None:
+    ls = lockstep_run(drive, PaperKalman(), LstsqPaperKalman(), no_state)
+    assert ls.worst < TOL_M
+
+
+@pytest.mark.parametrize("which", [0, 1, 2], ids=["aslan", "kitti", "comma2k19"])
+def test_kf_paper_matches_lstsq_on_shared_drives(shared: list[Drive], which: int) -> None:
+    ls = lockstep_run(shared[which], PaperKalman(), LstsqPaperKalman(), no_state)
     assert ls.worst < TOL_M
