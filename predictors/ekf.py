@@ -169,6 +169,23 @@ def ctra_process_noise(yaw: float, T: float, jerk_psd: float, yaw_acc_psd: float
     return out
 
 
+#: the IMU's measurements as sums of two states: yaw rate, longitudinal accel, yaw
+_IMU_SUMS = ((IW, IBW), (IA, IBA), (IYAW, IBY))
+
+
+def _sym_inverse(S: list[list[float]]) -> list[list[float]]:
+    """Inverse of a symmetric positive definite 2x2 or 3x3 matrix (nested lists), closed form."""
+    if len(S) == 2:
+        (a, b), (_, d) = S
+        det = a * d - b * b
+        return [[d / det, -b / det], [-b / det, a / det]]
+    (a, b, c), (_, d, e), (_, _, f) = S
+    A00, A01, A02 = d * f - e * e, c * e - b * f, b * e - c * d
+    A11, A12, A22 = a * f - c * c, b * c - a * e, a * d - b * b
+    w = 1.0 / (a * A00 + b * A01 + c * A02)
+    return [[A00 * w, A01 * w, A02 * w], [A01 * w, A11 * w, A12 * w], [A02 * w, A12 * w, A22 * w]]
+
+
 class CtraEkf(Predictor):
     """CTRA extended Kalman filter over GNSS, IMU yaw rate / accel / yaw and wheel speed.
 
@@ -232,6 +249,13 @@ class CtraEkf(Predictor):
         self._FP = np.empty((N_STATE, N_STATE))  # work buffers
         self._S2 = np.empty((2, 2))
         self._e2 = np.empty(2)
+        r_imu = (self._r_w, self._r_a, self._r_yaw)
+        self._H_imu = {}  # measurement rows and variances per set of finite IMU channels
+        for sel in ((0, 1), (0, 2), (1, 2), (0, 1, 2)):
+            H = np.zeros((len(sel), N_STATE))
+            for i, k in enumerate(sel):
+                H[i, list(_IMU_SUMS[k])] = 1.0
+            self._H_imu[sel] = (H, tuple(r_imu[k] for k in sel))
         self.reset()
 
     def config(self) -> dict:
@@ -309,6 +333,38 @@ class CtraEkf(Predictor):
         x += np.dot(K, e)
         P -= np.dot(K, ph.T)
 
+    def _update_imu(self, yaw_rate: float, ax: float, yaw: float) -> None:
+        """The IMU sample's measurements that are finite, yaw rate (= w + b_w), ax (= a + b_a)
+        and yaw (= yaw + b_y, innovation wrapped), as one joint update with S^-1 in closed
+        form (equal to the scalar updates in that order: H is linear, R diagonal)."""
+        z = (yaw_rate, ax, yaw)
+        sel = tuple(k for k in range(3) if math.isfinite(z[k]))
+        if len(sel) < 2:
+            if sel == (0,):
+                self._update_sum(IW, IBW, yaw_rate, self._r_w)
+            elif sel == (1,):
+                self._update_sum(IA, IBA, ax, self._r_a)
+            elif sel == (2,):
+                self._update_yaw_offset(yaw)
+            return
+        H, r = self._H_imu[sel]
+        P, x = self.P, self.x
+        PHt = np.dot(P, H.T)  # (10, m)
+        S = np.dot(H, PHt).tolist()
+        xs = x.tolist()
+        e = []
+        for i, k in enumerate(sel):
+            S[i][i] += r[i]
+            j, b = _IMU_SUMS[k]
+            e.append(z[k] - xs[j] - xs[b])
+        if sel[-1] == 2:
+            e[-1] = wrap_angle(e[-1])
+        K = np.dot(PHt, np.array(_sym_inverse(S)))
+        x += np.dot(K, e)
+        P -= np.dot(K, PHt.T)
+        if sel[-1] == 2:
+            x[IYAW] = wrap_angle(x.item(IYAW))
+
     def _update_sum(self, j: int, k: int, z: float, r: float) -> None:
         """Scalar update with measurement z = x[j] + x[k] (a signal plus its sensor bias)."""
         P, x = self.P, self.x
@@ -365,12 +421,7 @@ class CtraEkf(Predictor):
                 self._yaw_meas = yaw
             return
         self._predict_to(t)
-        if math.isfinite(yaw_rate):
-            self._update_sum(IW, IBW, yaw_rate, self._r_w)
-        if math.isfinite(ax):
-            self._update_sum(IA, IBA, ax, self._r_a)
-        if self.use_imu_yaw and math.isfinite(yaw):
-            self._update_yaw_offset(yaw)
+        self._update_imu(yaw_rate, ax, yaw if self.use_imu_yaw else math.nan)
         self._s = self.x.tolist()
 
     def observe_speed(self, t: float, v: float) -> None:

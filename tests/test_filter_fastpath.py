@@ -347,6 +347,15 @@ class FilterpyEkf(CtraEkf):
         self._scalar(zx, _row(i0=1.0), float(self.x[IX]), self._r_gps)
         self._scalar(zy, _row(i1=1.0), float(self.x[IY]), self._r_gps)
 
+    def _update_imu(self, yaw_rate: float, ax: float, yaw: float) -> None:
+        """One scalar update per finite channel, in the order of the code before issue 16."""
+        if math.isfinite(yaw_rate):
+            self._update_sum(IW, IBW, yaw_rate, self._r_w)
+        if math.isfinite(ax):
+            self._update_sum(IA, IBA, ax, self._r_a)
+        if math.isfinite(yaw):
+            self._update_yaw_offset(yaw)
+
     def _update_sum(self, j: int, k: int, z: float, r: float) -> None:
         self._scalar(z, _row(**{f"i{j}": 1.0, f"i{k}": 1.0}), float(self.x[j] + self.x[k]), r)
 
