@@ -89,6 +89,11 @@ class FixBuffer:
         """Positions of the fixes from view index i to the newest, shape (n - i, 2) (a view)."""
         return self._data[1:3, self._start + i:self._start + self.n].T
 
+    def xy_rows_from(self, i: int) -> np.ndarray:
+        """Positions of the fixes from view index i to the newest as rows x, y: shape
+        (2, n - i), a view with contiguous rows."""
+        return self._data[1:3, self._start + i:self._start + self.n]
+
     def last(self, k: int = 1) -> tuple[float, float, float]:
         """The k-th newest fix (k = 1: newest) as (t, x, y)."""
         i = self._start + self.n - k

@@ -26,7 +26,12 @@ changes over ~1 s, so ``jerk_psd`` ~ 1.5^2 * 1 = 2; fix-to-fix GNSS noise (what 
 over 0.2 s; absolute errors are strongly time-correlated) ~0.3 m; accelerometer noise is
 small but road vibration and pitch (1 deg -> 0.17 m/s^2 of gravity) give ~0.3 m/s^2;
 wheel speed ~0.2 m/s plus a 3 % scale error (tyre radius; KITTI drive 0005's speed
-reads 2.5 % above its position-derived speed). The filter is ``filterpy.kalman.KalmanFilter`` (2.0).
+reads 2.5 % above its position-derived speed).
+
+Implementation: :class:`predictors._ca_kalman.CaFilter2D`, the same filter as
+``filterpy.kalman.KalmanFilter`` with F = :func:`ca_transition`, Q = :func:`ca_process_noise`
+written out in plain floats for the fixed 6-state size (fix step p50 ~23 -> ~5 us); the
+tests run filterpy beside it (``filter_core``) and check mean, covariance and every answer.
 """
 
 from __future__ import annotations
@@ -34,21 +39,21 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from filterpy.kalman import KalmanFilter
 
+from predictors._ca_kalman import CaFilter2D
 from predictors._geometry import check_config
 from predictors.base import Predictor
 
 NAN2 = (math.nan, math.nan)
 KMH = 1.0 / 3.6
 
-_H_POS = np.array([[1.0, 0, 0, 0, 0, 0], [0, 1.0, 0, 0, 0, 0]])
-_H_ACC = np.array([[0, 0, 0, 0, 1.0, 0], [0, 0, 0, 0, 0, 1.0]])
-_H_VEL = np.array([[0, 0, 1.0, 0, 0, 0], [0, 0, 0, 1.0, 0, 0]])
+#: per-axis component of a measurement (CaFilter2D.update_pair): position, velocity, accel
+POS, VEL, ACC = 0, 1, 2
 
 
 def ca_transition(dt: float, out: np.ndarray) -> np.ndarray:
-    """Fill ``out`` (6x6, preset to identity) with the constant-acceleration F(dt)."""
+    """Fill ``out`` (6x6, preset to identity) with the constant-acceleration F(dt) (the
+    model's matrix form; :class:`CaFilter2D` applies it per axis)."""
     h = 0.5 * dt * dt
     out[0, 2] = out[1, 3] = out[2, 4] = out[3, 5] = dt
     out[0, 4] = out[1, 5] = h
@@ -110,17 +115,14 @@ class LinearKalman(Predictor):
         self.init_vel_sigma = float(init_vel_sigma)
         self.init_acc_sigma = float(init_acc_sigma)
         self.heading_min_speed = float(heading_min_speed)
-        self._F = np.eye(6)
-        self._Q = np.zeros((6, 6))
-        self._R_pos = np.eye(2) * self.gps_sigma ** 2
-        self._R_acc = np.eye(2) * self.accel_sigma ** 2
-        self._R_spd = np.array([[self.speed_sigma ** 2]])
-        self._R_zupt = np.eye(2) * self.speed_sigma ** 2
-        self._H_spd = np.zeros((1, 6))
-        self._z2 = np.zeros((2, 1))
-        self._z1 = np.zeros((1, 1))
-        self.kf = KalmanFilter(dim_x=6, dim_z=2)
+        self._r_pos = self.gps_sigma ** 2
+        self._r_acc = self.accel_sigma ** 2
+        self._r_spd = self.speed_sigma ** 2
+        self.kf = self.filter_core()
         self.reset()
+
+    #: the filter's mean / covariance algebra (the tests put a filterpy twin here)
+    filter_core: type = CaFilter2D
 
     def config(self) -> dict:
         return {"jerk_psd": self.jerk_psd, "gps_sigma": self.gps_sigma,
@@ -138,42 +140,34 @@ class LinearKalman(Predictor):
         self._yaw_t = math.nan
 
     def _sync(self) -> None:
-        self._s = self.kf.x[:, 0].tolist()
+        self._s = self.kf.state()
 
     def _predict_to(self, t: float) -> None:
         dt = t - self._ts
         if dt > 0.0:
-            ca_transition(dt, self._F)
-            ca_process_noise(dt, self.jerk_psd, self._Q)
-            self.kf.predict(F=self._F, Q=self._Q)
+            self.kf.predict(dt, self.jerk_psd)
             self._ts = t
 
     # -- observations -----------------------------------------------------------------
     def observe_gps(self, t: float, x: float, y: float) -> None:
         if not (math.isfinite(x) and math.isfinite(y)):
             return
-        kf = self.kf
         if not self._ready:
-            kf.x = np.array([[x], [y], [0.0], [0.0], [0.0], [0.0]])
-            kf.P = np.diag([self.gps_sigma ** 2] * 2 + [self.init_vel_sigma ** 2] * 2
-                           + [self.init_acc_sigma ** 2] * 2)
+            self.kf.init(x, y, self.gps_sigma ** 2, self.init_vel_sigma ** 2,
+                         self.init_acc_sigma ** 2)
             self._ts = t
             self._ready = True
             self._sync()
             return
         self._predict_to(t)
-        z = self._z2
-        z[0, 0] = x
-        z[1, 0] = y
-        kf.update(z, R=self._R_pos, H=_H_POS)
+        self.kf.update_pair(POS, x, y, self._r_pos)
         self._sync()
 
     def _heading(self, t: float, yaw: float, yaw_rate: float) -> float:
         if math.isfinite(yaw):
             h = yaw
         else:
-            xs = self.kf.x  # predicted to t (self._s may be older)
-            vx, vy = float(xs[2, 0]), float(xs[3, 0])
+            vx, vy = self.kf.velocity()  # predicted to t (self._s may be older)
             if math.hypot(vx, vy) > self.heading_min_speed:
                 h = math.atan2(vy, vx)
             elif math.isfinite(self._yaw) and math.isfinite(yaw_rate):
@@ -192,10 +186,7 @@ class LinearKalman(Predictor):
         h = self._heading(t, yaw, yaw_rate)
         if math.isfinite(ax) and math.isfinite(ay) and math.isfinite(h):
             c, s = math.cos(h), math.sin(h)
-            z = self._z2
-            z[0, 0] = c * ax - s * ay
-            z[1, 0] = s * ax + c * ay
-            self.kf.update(z, R=self._R_acc, H=_H_ACC)
+            self.kf.update_pair(ACC, c * ax - s * ay, s * ax + c * ay, self._r_acc)
         self._sync()
 
     def observe_speed(self, t: float, v: float) -> None:
@@ -203,21 +194,22 @@ class LinearKalman(Predictor):
             return
         self._predict_to(t)
         if abs(v) < self.stop_speed:
-            self._z2[:] = 0.0
-            self.kf.update(self._z2, R=self._R_zupt, H=_H_VEL)
+            self.kf.update_pair(VEL, 0.0, 0.0, self._r_spd)
         else:
             h = self._yaw
-            vx, vy = float(self.kf.x[2, 0]), float(self.kf.x[3, 0])
+            vx, vy = self.kf.velocity()
             if not math.isfinite(h) and math.hypot(vx, vy) > self.heading_min_speed:
                 h = math.atan2(vy, vx)
             if not math.isfinite(h):
                 return
-            self._H_spd[0, 2] = math.cos(h)
-            self._H_spd[0, 3] = math.sin(h)
-            self._z1[0, 0] = v
-            self._R_spd[0, 0] = self.speed_sigma ** 2 + (self.speed_rel_sigma * v) ** 2
-            self.kf.update(self._z1, R=self._R_spd, H=self._H_spd)
+            self.kf.update_speed(math.cos(h), math.sin(h), v,
+                                 self._r_spd + (self.speed_rel_sigma * v) ** 2)
         self._sync()
+
+    def state(self) -> tuple[float, list[float], np.ndarray]:
+        """(time [s], mean ``[x, y, vx, vy, ax, ay]``, 6x6 covariance) of the filter, NaN
+        time before the first fix. A copy: changing it does not change the filter."""
+        return self._ts, self.kf.state(), self.kf.covariance()
 
     # -- query ------------------------------------------------------------------------
     def position_at(self, t: float) -> tuple[float, float]:

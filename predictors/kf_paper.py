@@ -13,7 +13,8 @@ What their code does, and what this class keeps (K) or changes (C):
   1..7 one ``predict(accel_i)`` and one ``correct(p_i)``; finally one more ``predict`` is
   the future point. That single step is "200 ms ahead": a fixed number of steps (one)
   regardless of the real time.
-- (K) The 8 points are the paper's resampling: a cubic (:func:`predictors.cubic.fit_cubic`)
+- (K) The 8 points are the paper's resampling: a least-squares cubic
+  (:func:`predictors._cubic_xy.fit_cubic_xy`, the normal equations of ``fit_cubic``)
   through the recent fixes, evaluated on a 200 ms grid ending at the newest fix
   (``resample=True``). Their code fitted the window's 8 raw fixes (~1.4 s); the paper's
   text says the fit covers at least 2 s: ``fit_span_s`` (default 2.0) follows the text.
@@ -55,6 +56,7 @@ import math
 
 import numpy as np
 
+from predictors._cubic_xy import fit_cubic_xy
 from predictors._geometry import FixBuffer, check_config
 from predictors.base import Predictor
 from predictors.cubic import fit_cubic
@@ -62,10 +64,11 @@ from predictors.cubic import fit_cubic
 NAN2 = (math.nan, math.nan)
 
 
-def paper_window_predict(points: np.ndarray, accel: np.ndarray, accel_next: np.ndarray,
-                         dt: float = 0.05, q: float = 0.05, r: float = 0.05,
-                         steps: int = 1) -> tuple[float, float]:
-    """The authors' per-window filter: points (n, 2) [m], accel (n, 2) [m/s^2] (accel[i]
+def paper_window_predict(points: np.ndarray | list[list[float]], accel: np.ndarray,
+                         accel_next: np.ndarray, dt: float = 0.05, q: float = 0.05,
+                         r: float = 0.05, steps: int = 1) -> tuple[float, float]:
+    """The authors' per-window filter: points (n, 2) [m] (an array or a list of pairs),
+    accel (n, 2) [m/s^2] (accel[i]
     drives the step into point i; accel[0] unused), accel_next (2,) for the future
     steps. Returns the predicted (x, y) after ``steps`` further predict steps.
 
@@ -74,7 +77,7 @@ def paper_window_predict(points: np.ndarray, accel: np.ndarray, accel_next: np.n
     [[pa, pb], [pb, pc]]: computed here in plain floats, equal to their matrix code
     (checked in the tests against a transcription of it).
     """
-    pts = points.tolist()
+    pts = points.tolist() if isinstance(points, np.ndarray) else points
     acc = accel.tolist()
     d2 = dt * dt
     x, y = pts[0]
@@ -180,7 +183,7 @@ class PaperKalman(Predictor):
         if self.resample and buf.n >= 4 and t - buf.t[0] >= grid_span - 1e-9:
             i = buf.window_start(max(self.fit_span_s, grid_span), 4)
             times = t + self._offsets
-            points = fit_cubic(buf.t[i:], buf.xy_from(i))(times)
+            points = self._resample(buf.t[i:], buf.xy_rows_from(i), times)
         else:
             i = max(0, buf.n - self.window)
             times = buf.t[i:]
@@ -191,6 +194,22 @@ class PaperKalman(Predictor):
         h = self.horizon_steps * self.step_s
         self._vx = (px - x) / h
         self._vy = (py - y) / h
+
+    def _resample(self, t: np.ndarray, xy: np.ndarray, times: np.ndarray
+                  ) -> np.ndarray | list[list[float]]:
+        """The least-squares cubics through the fixes (times t [s], positions xy [m] as rows
+        (2, n)) at ``times`` [s]: :func:`predictors._cubic_xy.fit_cubic_xy` evaluated in
+        plain floats, or ``fit_cubic`` (lstsq) for a window with fewer than four distinct
+        times. Pairs [x, y] [m], one per time."""
+        fit = fit_cubic_xy(t, xy)
+        if fit is None:
+            return fit_cubic(t, xy.T)(times)
+        (a0, a1, a2, a3), (b0, b1, b2, b3), t_ref, inv = fit
+        out = []
+        for tq in times.tolist():
+            u = (tq - t_ref) * inv
+            out.append([((a3 * u + a2) * u + a1) * u + a0, ((b3 * u + b2) * u + b1) * u + b0])
+        return out
 
     def position_at(self, t: float) -> tuple[float, float]:
         if self._t != self._t:

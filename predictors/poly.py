@@ -1,7 +1,8 @@
 """The paper's cubic regression alone: fit x(t), y(t) with a third-order polynomial
 over the most recent fixes and evaluate (extrapolate) it at the query time.
 
-The fit (:func:`predictors.cubic.fit_cubic`, closed-form least squares) uses the
+The fit (closed-form least squares: :func:`predictors._cubic_xy.fit_cubic_xy`, the
+normal equations of :func:`predictors.cubic.fit_cubic` in plain floats) uses the
 newest fixes covering at least ``span_s`` seconds (paper: "at least a 2-second
 interval", about 10 fixes at 5 Hz). It is refitted on each fix, so a query costs
 one Horner evaluation. With fewer than ``min_points`` fixes it falls back to
@@ -18,6 +19,9 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
+
+from predictors._cubic_xy import Cubic, fit_cubic_xy
 from predictors._geometry import FixBuffer, check_config
 from predictors.base import Predictor
 from predictors.cubic import fit_cubic
@@ -86,14 +90,21 @@ class PolyExtrapolator(Predictor):
             if v is not None:
                 self._vx, self._vy = v
             return
-        ts = buf.t[i:]
-        fit = fit_cubic(ts, buf.xy_from(i))
-        c = fit.coef
-        self._cx = (float(c[0, 0]), float(c[1, 0]), float(c[2, 0]), float(c[3, 0]))
-        self._cy = (float(c[0, 1]), float(c[1, 1]), float(c[2, 1]), float(c[3, 1]))
-        self._t_ref = fit.t_ref
-        self._inv_scale = 1.0 / fit.scale
+        self._cx, self._cy, self._t_ref, self._inv_scale = self._fit(buf.t[i:], buf.xy_rows_from(i))
         self._cubic = True
+
+    def _fit(self, t: np.ndarray, xy: np.ndarray) -> tuple[Cubic, Cubic, float, float]:
+        """(cx, cy, t_ref, inv_scale) of the least-squares cubics through the window (times
+        t [s] (n,), positions xy [m] as rows (2, n)):
+        :func:`predictors._cubic_xy.fit_cubic_xy`, or ``fit_cubic`` (lstsq, minimum norm)
+        for a window with fewer than four distinct times."""
+        fit = fit_cubic_xy(t, xy)
+        if fit is not None:
+            return fit
+        f = fit_cubic(t, xy.T)
+        c = f.coef
+        return (tuple(c[:, 0].tolist()), tuple(c[:, 1].tolist()),  # type: ignore[return-value]
+                f.t_ref, 1.0 / f.scale)
 
     def position_at(self, t: float) -> tuple[float, float]:
         if self._t != self._t:
