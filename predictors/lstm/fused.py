@@ -46,10 +46,27 @@ except (ImportError, AttributeError):  # pragma: no cover - other NumPy layouts
         out[...] = np.linalg.solve(a, b)
         return out
 
-#: columns of a fit block: 1, s, s^2, s^3, then up to 3 value channels
+#: columns of a fit block: s^2, s^3, 1, s, then 3 value channels (x, y, 0 for the fixes;
+#: ax, ay, yaw for the IMU). With this order one subtraction of (t_end, 0, ...) from a
+#: buffer row (t, values...) writes s and the values at once, and the basis columns
+#: (s^2, s^3, 1, s) are contiguous: coefficients come out in that order (``_C0``.. below)
 _COLS = 7
+_C2, _C3, _C0, _C1 = 0, 1, 2, 3
 #: the 8 grid times and the prediction's time, relative to the fix [s]
 _TIMES9 = np.append(GRID_OFFSETS, DT)
+
+
+def _eval_rows() -> np.ndarray:
+    """(24, 4) rows that one product with the coefficients turns into: [0:9] the values at
+    the 9 times, [9:16] the differences between neighbouring grid values, [16:24] the grid
+    values minus the value at the fix (the constant term drops out exactly)."""
+    p = powers(_TIMES9)[:, [2, 3, 0, 1]]
+    rel = p[:8].copy()
+    rel[:, _C0] = 0.0
+    return np.concatenate([p, p[1:8] - p[:7], rel])
+
+
+_VAL, _DIFF, _REL = slice(0, 9), slice(9, 16), slice(16, 24)
 
 
 class FusedStep:
@@ -86,19 +103,20 @@ class FusedStep:
         # the two fit blocks, fixes [0] and IMU [1], padded with all-zero rows (which add
         # nothing to the normal equations) so that one product serves both
         self._w = np.zeros((2, rows, _COLS))
-        self._live = [0, 0]  # rows of each block with the leading 1 set; all-zero beyond
+        self._live = [0, 0]  # rows of each block with the 1 set; all-zero beyond
+        self._t3 = np.zeros(3)  # (t_end, 0, 0): subtracted from fix rows (t, x, y)
+        self._t4 = np.zeros(4)  # (t_end, 0, 0, 0): from IMU rows (t, ax, ay, yaw)
         self._m = np.empty((2, 4, _COLS))
         self._x = np.empty((2, 4, 3))
-        self._pg = powers(_TIMES9)  # (9, 4)
-        # grid values: [0] x, y [m] (+ an unused 0), [1] ax, ay, yaw; row 8 of [0] becomes
-        # the prediction (pts)
-        self._e = np.empty((2, 9, 3))
-        self.pts = self._e[0, :, :2]
-        self._ec = self._e[:, :, :2].view(np.complex128)[..., 0]  # (2, 9): x + iy, ax + i ay
+        self._rows_eval = _eval_rows()
+        # [0]: x, y (+ an unused 0), [1]: ax, ay, yaw; rows as in _eval_rows; row 8 of
+        # [0] becomes the prediction
+        self._e = np.empty((2, 24, 3))
+        self.pts = self._e[0, :9, :2]
+        self._ec = self._e[:, :, :2].view(np.complex128)[..., 0]  # x + iy, ax + i ay
         self._x64 = np.zeros((8, 6))  # features in float64, cast once into net.buf
         self._x64[:, 5] = time_feature()
         self._xc = self._x64[:, :4].view(np.complex128)  # (8, 2): dx + i dy, ax + i ay
-        self._d = np.empty(7, dtype=np.complex128)
         self._cs = np.empty((8, 2))
         self._csc = self._cs.view(np.complex128)[:, 0]  # cos + i sin of the relative yaw
         self._cf = np.empty((2, 4))
@@ -116,7 +134,7 @@ class FusedStep:
             self._w = w = g
         live = self._live[k]
         if n > live:
-            w[k, live:n, 0] = 1.0
+            w[k, live:n, _C0] = 1.0
         elif n < live:
             w[k, n:live] = 0.0
         self._live[k] = n
@@ -136,37 +154,38 @@ class FusedStep:
         """
         nf = fix.shape[0]
         ni = 0 if imu is None else imu.shape[0]
-        b = self._rows(0, nf)
-        np.subtract(fix[:, 0], t_end, out=b[:nf, 1])
-        b[:nf, 4:6] = fix[:, 1:]
+        t3 = self._t3
+        t3[0] = t_end
+        np.subtract(fix, t3, out=self._rows(0, nf)[:nf, 3:6])
         b = self._rows(1, ni)
         if ni:
-            np.subtract(imu[:, 0], t_end, out=b[:ni, 1])
-            if yaw_ok:
-                b[:ni, 4:] = imu[:, 1:]
-            else:
-                b[:ni, 4:6] = imu[:, 1:3]
+            t4 = self._t4
+            t4[0] = t_end
+            np.subtract(imu, t4, out=b[:ni, 3:7])
+            if not yaw_ok:
                 b[:ni, 6] = 0.0
         w = self._w[:, :max(nf, ni)]
-        s = w[:, :, 1]
-        np.multiply(s, s, out=w[:, :, 2])
-        np.multiply(w[:, :, 2], s, out=w[:, :, 3])
+        s = w[:, :, _C1]
+        np.multiply(s, s, out=w[:, :, _C2])
+        np.multiply(w[:, :, _C2], s, out=w[:, :, _C3])
         m = np.matmul(w[:, :, :4].transpose(0, 2, 1), w, out=self._m)
         x = self._x
         e = self._e
         if ni:
             _solve(m[:, :, :4], m[:, :, 4:], x)
-            np.matmul(self._pg, x, out=e)
+            np.matmul(self._rows_eval, x, out=e)
         else:
             _solve(m[0, :, :4], m[0, :, 4:], x[0])
-            np.matmul(self._pg, x[0], out=e[0])
+            np.matmul(self._rows_eval, x[0], out=e[0])
         if not (ni and yaw_ok):
-            ax, ay, yaw = gps_substitute_imu(x[0, :, :2], 1.0, GRID_OFFSETS)
+            coef = x[0, [_C0, _C1, _C2, _C3], :2]
+            ax, ay, yaw = gps_substitute_imu(coef, 1.0, GRID_OFFSETS)
             if not ni:
                 e[1, :8, 0] = ax
                 e[1, :8, 1] = ay
             e[1, :8, 2] = yaw
-        c1x, c1y = float(x[0, 1, 0]), float(x[0, 1, 1])
+            e[1, _REL, 2] = yaw - yaw[7]
+        c1x, c1y = x[0, _C1, :2].tolist()
         self.speed = math.hypot(c1x, c1y)
         self.psi = math.atan2(c1y, c1x)
 
@@ -178,21 +197,20 @@ class FusedStep:
         x64 = self._x64
         xc = self._xc
         ec = self._ec
-        d = np.subtract(ec[0, 1:8], ec[0, :7], out=self._d)
-        yaw = self._e[1, :8, 2]
-        rel = x64[:, 4]
+        imu = self._e[1]
         if self.frame == "heading":
-            np.multiply(d, complex(math.cos(self.psi), -math.sin(self.psi)), out=xc[1:, 0])
-            np.subtract(yaw, yaw[7], out=rel)  # yaw relative to the newest sample
+            np.multiply(ec[0, _DIFF], complex(math.cos(self.psi), -math.sin(self.psi)),
+                        out=xc[1:, 0])
+            rel = imu[_REL, 2]  # yaw relative to the newest sample
+            x64[:, 4] = rel
         else:
-            xc[1:, 0] = d
-            np.copyto(rel, yaw)
+            xc[1:, 0] = ec[0, _DIFF]
+            rel = imu[:8, 2]
+            x64[:, 4] = np.pi - np.mod(np.pi - rel, 2 * np.pi)
         cs = self._cs
         np.cos(rel, out=cs[:, 0])
         np.sin(rel, out=cs[:, 1])
         np.multiply(ec[1, :8], self._csc, out=xc[:, 1])
-        if self.frame != "heading":
-            x64[:, 4] = np.pi - np.mod(np.pi - yaw, 2 * np.pi)
         self.net.buf[0] = x64
 
     def infer(self) -> tuple[float, float]:
