@@ -315,6 +315,7 @@ class LstmPredictor(Predictor):
         self._line = (0.0, 0.0, 0.0, 0.0, 0.0)  # t0, x0, vx, y0, vy
         self.steps = 0
         self.bridge_steps = 0
+        self.fused_steps = 0  # of self.steps, those that ran through the fused step
 
     def observe_imu(self, t: float, ax: float, ay: float, yaw: float, yaw_rate: float) -> None:
         if not (math.isfinite(ax) and math.isfinite(ay)) or max(abs(ax), abs(ay)) > ACCEL_GLITCH:
@@ -411,6 +412,7 @@ class LstmPredictor(Predictor):
         self._t_end = t_end
         self._mode = "net"
         self.steps += 1
+        self.fused_steps += 1
         if timer is not None:
             _lap(timer, "current_position_fit", c0)
         return True
