@@ -169,3 +169,11 @@ def test_pinned_session_answers_like_the_public_dynamic_one() -> None:
     q = pickle.loads(pickle.dumps(pinned))
     q.buf[0] = X[3]
     np.testing.assert_array_equal(q.run_buffer(), got[3])
+
+
+def test_an_unknown_step_is_one_error_line(tmp_path: Path) -> None:
+    from test_cli_errors import assert_one_error_line, bench
+
+    r = bench("run", "-p", "lstm", "--set", "lstm.step=bogus", "--out", str(tmp_path / "o"))
+    assert_one_error_line(r, "lstm.step=bogus", "fused", "staged")
+    assert not (tmp_path / "o").exists()  # refused before any drive was loaded
