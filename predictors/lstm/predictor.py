@@ -25,12 +25,18 @@ Start-up: until the fixes span 2 s there is no network input; the predictor then
 extrapolates a least-squares *line* through the fixes it has (one fix: that fix), as a
 short cubic would extrapolate wildly.
 
+The steps above are the *staged* reference (``step="staged"``). By default a fix step runs
+*fused* (:mod:`predictors.lstm.fused`: the same maths in few numpy calls, both cubics in one
+batched solve, one onnxruntime call; within 1e-6 m of the staged step on every shared drive,
+tested); bridging steps, windows of < 4 fixes and the L-BFGS fit run staged.
+
 Public seams (for benchmarks and figures, nothing private to reach into):
 
 - :attr:`LstmPredictor.stage_timer`: None (default; costs one ``is None`` test per stage)
   or a callable ``(stage, duration_ns)`` called once per stage of every network step a
-  fix triggers (:data:`STAGES`, in order; bridging steps inside ``position_at`` and
-  start-up line fits report nothing). :class:`StageRecorder` collects them.
+  fix triggers (:attr:`LstmPredictor.stages`, in order: :data:`FUSED_STAGES` or
+  :data:`STAGES`; bridging steps inside ``position_at`` and start-up line fits report
+  nothing). :class:`StageRecorder` collects them.
 - :meth:`LstmPredictor.last_step`: the newest network step as an :class:`LstmStep`
   (input grid, predicted point, times), copied.
 """
