@@ -9,6 +9,7 @@ percentiles in microseconds, never a single timing.
 from __future__ import annotations
 
 import os
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
@@ -54,8 +55,9 @@ def time_predictor(name: str, drive: Drive, steps: int, options: dict[str, Any] 
 
 
 def lstm_stages(drive: Drive, steps: int) -> dict[str, Any]:
-    """Per-stage latency [us] of the ``lstm`` fix step on a drive's real windows, plus the
-    paper's iterative (L-BFGS) fit and the closed-form fit alone for comparison.
+    """Per-stage latency [us] of the *staged* ``lstm`` fix step (the readable reference,
+    ``step="staged"``) on a drive's real windows, plus the paper's iterative (L-BFGS) fit
+    and the closed-form fit alone for comparison.
 
     The stages are those the predictor reports through its ``stage_timer`` hook
     (:data:`predictors.lstm.predictor.STAGES`), so the code timed is the code that runs;
@@ -65,22 +67,16 @@ def lstm_stages(drive: Drive, steps: int) -> dict[str, Any]:
     from time import perf_counter_ns
 
     from predictors.cubic import fit_cubic_lbfgs
-    from predictors.lstm.predictor import STAGES, LstmPredictor, StageRecorder
     from predictors.lstm.resample import fit_poly, window_start
 
     clock = perf_counter_ns
     cfg = RunConfig(predictors=("lstm",))
     prep = prepare_drive(drive, cfg)
     t, xy = prep.gps.t, np.column_stack([prep.gps.x, prep.gps.y])
-    p = LstmPredictor()
-    rec = StageRecorder()
     fit_alone: list[int] = []
     lbfgs: list[int] = []
 
-    def hook(stage: str, ns: int) -> None:
-        rec(stage, ns)
-        if stage != STAGES[-1]:
-            return
+    def after_step(p: Any) -> None:
         step = p.last_step()
         end = int(np.searchsorted(t, step.t_fix))  # the fix this step ran on
         i = window_start(t, end)
@@ -93,16 +89,45 @@ def lstm_stages(drive: Drive, steps: int) -> dict[str, Any]:
             fit_cubic_lbfgs(tt, w)
             lbfgs.append(clock() - c0)
 
-    p.stage_timer = hook
-    while len(rec.ns["inference"]) < steps:
-        before = len(rec.ns["inference"])
-        replay(p, prep, cfg.horizon_s)
-        if len(rec.ns["inference"]) == before:  # no window of fixes spans 2 s: nothing to time
-            break
-    out = {n: latency_summary(np.asarray(rec.ns[n][:steps])) for n in STAGES}
+    out = _stage_times(prep, cfg.horizon_s, steps, "staged", after_step)
     out["cubic_fit_closed_form"] = latency_summary(np.asarray(fit_alone[:steps]))
     out["cubic_fit_lbfgs"] = latency_summary(np.asarray(lbfgs))
     return out
+
+
+def lstm_fused_stages(drive: Drive, steps: int) -> dict[str, Any]:
+    """Per-stage latency [us] of the default, *fused* ``lstm`` fix step
+    (:data:`predictors.lstm.predictor.FUSED_STAGES`: ``resample`` = fix bookkeeping and both
+    cubics in one solve, ``features``, ``inference``, ``current_position_fit``), timed
+    through the same ``stage_timer`` hook during a normal replay."""
+    cfg = RunConfig(predictors=("lstm",))
+    return _stage_times(prepare_drive(drive, cfg), cfg.horizon_s, steps, "fused")
+
+
+def _stage_times(prep: Any, horizon_s: float, steps: int, step: str,
+                 after_step: Callable[[Any], None] | None = None) -> dict[str, Any]:
+    """Replay ``prep`` through ``LstmPredictor(step=step)`` with a stage hook until ``steps``
+    network steps were timed; percentiles [us] per stage, in the predictor's stage order.
+    ``after_step(predictor)`` runs after each step's last stage (outside every stage)."""
+    from predictors.lstm.predictor import LstmPredictor, StageRecorder
+
+    p = LstmPredictor(step=step)
+    stages = p.stages
+    rec = StageRecorder()
+    count = rec.ns.setdefault("inference", [])
+
+    def hook(stage: str, ns: int) -> None:
+        rec(stage, ns)
+        if stage == stages[-1] and after_step is not None:
+            after_step(p)
+
+    p.stage_timer = hook
+    while len(count) < steps:
+        before = len(count)
+        replay(p, prep, horizon_s)
+        if len(count) == before:  # no window of fixes spans 2 s: nothing to time
+            break
+    return {n: latency_summary(np.asarray(rec.ns.get(n, [])[:steps])) for n in stages}
 
 
 def batch_throughput(batches: tuple[int, ...] = (1, 64, 1024), seconds: float = 1.0

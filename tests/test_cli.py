@@ -144,6 +144,8 @@ def test_latency_json_shape():
     assert {"resample_positions", "resample_imu", "features", "inference",
             "current_position_fit", "cubic_fit_lbfgs"} <= set(res["lstm_stages"])
     assert res["lstm_stages"]["cubic_fit_lbfgs"]["p50"] > res["lstm_stages"]["cubic_fit_closed_form"]["p50"]
+    assert list(res["lstm_fused_stages"]) == ["resample", "features", "inference",
+                                              "current_position_fit"]
     assert set(res["batch"]) == {"1", "64", "1024"}
 
 

@@ -20,6 +20,7 @@ from predictors.base import Predictor
 from predictors.gate import GatedPredictor
 from predictors.lstm.predictor import (
     BUNDLED_TEXT,
+    FUSED_STAGES,
     STAGES,
     LstmPredictor,
     LstmStep,
@@ -48,8 +49,10 @@ class _CallLog:
         self.calls.append((stage, ns, self.p.steps))
 
 
-def test_stage_timer_reports_each_stage_once_per_fix_step(prepared) -> None:
-    p = LstmPredictor()
+@pytest.mark.parametrize("step", ["fused", "staged"])
+def test_stage_timer_reports_each_stage_once_per_fix_step(prepared, step) -> None:
+    p = LstmPredictor(step=step)
+    assert p.stages == (FUSED_STAGES if step == "fused" else STAGES)
     log = _CallLog(p)
     p.stage_timer = log
     g = prepared.gps
@@ -71,16 +74,17 @@ def test_stage_timer_reports_each_stage_once_per_fix_step(prepared) -> None:
         if n == 0:  # start-up line fit: no network step, nothing reported
             assert calls == []
     for calls in stepped:
-        assert [c[0] for c in calls] == list(STAGES)
+        assert [c[0] for c in calls] == list(p.stages)
         assert all(isinstance(ns, int) and ns > 0 for _, ns, _ in calls)
         # current_position_fit is reported once the step has completed
         assert calls[-1][2] == calls[0][2] + 1
 
 
-def test_stage_timer_is_none_by_default_and_changes_no_answer(prepared) -> None:
-    plain = LstmPredictor()
+@pytest.mark.parametrize("step", ["fused", "staged"])
+def test_stage_timer_is_none_by_default_and_changes_no_answer(prepared, step) -> None:
+    plain = LstmPredictor(step=step)
     assert plain.stage_timer is None and LstmPredictor.stage_timer is None
-    timed = LstmPredictor()
+    timed = LstmPredictor(step=step)
     rec = StageRecorder()
     timed.stage_timer = rec
     a = replay(plain, prepared, 0.2)
@@ -88,7 +92,8 @@ def test_stage_timer_is_none_by_default_and_changes_no_answer(prepared) -> None:
     np.testing.assert_array_equal(a.future_xy, b.future_xy)
     np.testing.assert_array_equal(a.now_xy, b.now_xy)
     assert len(rec.ns["inference"]) > 100
-    assert {k: len(v) for k, v in rec.ns.items()} == {s: len(rec.ns["inference"]) for s in STAGES}
+    n = len(rec.ns["inference"])
+    assert {k: len(v) for k, v in rec.ns.items() if v} == {s: n for s in timed.stages}
     rec.clear()
     assert all(not v for v in rec.ns.values())
 
@@ -251,9 +256,13 @@ def test_gate_forwards_the_lstm_seams(prepared) -> None:
 
 
 def test_latency_stages_use_the_hook() -> None:
-    from bench.latency import lstm_stages
+    from bench.latency import lstm_fused_stages, lstm_stages
 
-    out = lstm_stages(generate_drive(seed=3, route="mixed", duration_s=20.0), 30)
+    drive = generate_drive(seed=3, route="mixed", duration_s=20.0)
+    fused = lstm_fused_stages(drive, 30)
+    assert list(fused) == list(FUSED_STAGES)
+    assert all(fused[s]["count"] == 30 and fused[s]["p50"] > 0 for s in FUSED_STAGES)
+    out = lstm_stages(drive, 30)
     assert list(out) == [*STAGES, "cubic_fit_closed_form", "cubic_fit_lbfgs"]
     for s in STAGES:
         assert out[s]["count"] == 30 and out[s]["p50"] > 0

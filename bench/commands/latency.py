@@ -44,7 +44,14 @@ def latency(
         validate_predictors(parse_predictor_names(predictors), model_options(model))
     except UsageError as e:
         raise fail(str(e)) from None
-    from bench.latency import PAPER_MS, batch_throughput, lstm_stages, single_thread, time_predictor
+    from bench.latency import (
+        PAPER_MS,
+        batch_throughput,
+        lstm_fused_stages,
+        lstm_stages,
+        single_thread,
+        time_predictor,
+    )
     from predictors.registry import available
 
     single_thread()
@@ -64,6 +71,7 @@ def latency(
             if "lstm" in names:
                 status.update("timing lstm stages...")
                 res["lstm_stages"] = lstm_stages(drive, steps)
+                res["lstm_fused_stages"] = lstm_fused_stages(drive, steps)
                 status.update("timing batch throughput...")
                 res["batch"] = batch_throughput()
         res["drive"] = drive.name
@@ -88,7 +96,11 @@ def latency(
         print_table(console, ("stage", "p50", "p90", "p99", "paper"),
                     [[k, f"{v['p50']:.1f}", f"{v['p90']:.1f}", f"{v['p99']:.1f}", pp.get(k, "")]
                      for k, v in res["lstm_stages"].items()],
-                    title="lstm fix step by stage (us)")
+                    title="lstm fix step by stage (us), staged reference (step=staged)")
+        print_table(console, ("stage", "p50", "p90", "p99"),
+                    [[k, f"{v['p50']:.1f}", f"{v['p90']:.1f}", f"{v['p99']:.1f}"]
+                     for k, v in res["lstm_fused_stages"].items()],
+                    title="lstm fix step by stage (us), fused (the default)")
         print_table(console, ("batch", "windows/s", "us/window"),
                     [[str(b), f"{v['windows_per_s']:.0f}", f"{v['us_per_window']:.1f}"]
                      for b, v in res["batch"].items()],

@@ -67,6 +67,7 @@ class AuthorsLstmPredictor(LstmPredictor):
             raise ValueError(f"origin must be one of {ORIGINS}, not {origin!r}")
         self.model_path = Path(model)
         self.fit = fit
+        self.step = "staged"  # the authors' feature layout runs through the staged step
         self.origin = origin
         self.frame = "authors"
         self.info = {}

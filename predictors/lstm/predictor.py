@@ -25,12 +25,18 @@ Start-up: until the fixes span 2 s there is no network input; the predictor then
 extrapolates a least-squares *line* through the fixes it has (one fix: that fix), as a
 short cubic would extrapolate wildly.
 
+The steps above are the *staged* reference (``step="staged"``). By default a fix step runs
+*fused* (:mod:`predictors.lstm.fused`: the same maths in few numpy calls, both cubics in one
+batched solve, one onnxruntime call; within 1e-6 m of the staged step on every shared drive,
+tested); bridging steps, windows of < 4 fixes and the L-BFGS fit run staged.
+
 Public seams (for benchmarks and figures, nothing private to reach into):
 
 - :attr:`LstmPredictor.stage_timer`: None (default; costs one ``is None`` test per stage)
   or a callable ``(stage, duration_ns)`` called once per stage of every network step a
-  fix triggers (:data:`STAGES`, in order; bridging steps inside ``position_at`` and
-  start-up line fits report nothing). :class:`StageRecorder` collects them.
+  fix triggers (:attr:`LstmPredictor.stages`, in order: :data:`FUSED_STAGES` or
+  :data:`STAGES`; bridging steps inside ``position_at`` and start-up line fits report
+  nothing). :class:`StageRecorder` collects them.
 - :meth:`LstmPredictor.last_step`: the newest network step as an :class:`LstmStep`
   (input grid, predicted point, times), copied.
 """
@@ -39,6 +45,7 @@ from __future__ import annotations
 
 import json
 import math
+from bisect import bisect_left, bisect_right
 from collections.abc import Callable
 from dataclasses import dataclass
 from importlib import resources
@@ -49,6 +56,7 @@ import numpy as np
 
 from predictors.base import Predictor
 from predictors.lstm.features import FRAMES, features_one, gps_substitute_imu
+from predictors.lstm.fused import FusedStep
 from predictors.lstm.resample import (
     ACCEL_GLITCH,
     DT,
@@ -72,6 +80,9 @@ RESTART_GAP_S = 5.0
 FIX_CAP = 512
 IMU_CAP = 8192
 FITS = ("closed", "lbfgs")
+#: ``fused`` (default): the fix step in few numpy calls (:mod:`predictors.lstm.fused`);
+#: ``staged``: the readable reference, stage by stage (same answers to float rounding)
+STEPS = ("fused", "staged")
 N_FEATURES = 6
 #: text recorded in results for the bundled model (:meth:`LstmPredictor.model_description`)
 BUNDLED_TEXT = "bundled (predictors/lstm/bundled/model.onnx)"
@@ -82,6 +93,10 @@ BUNDLED_TEXT = "bundled (predictors/lstm/bundled/model.onnx)"
 #: (the network input), ``inference`` (the ONNX run), ``current_position_fit`` (network
 #: output to a world displacement, cubic through grid and prediction, state update)
 STAGES = ("resample_positions", "resample_imu", "features", "inference", "current_position_fit")
+#: the stages of a *fused* network step (``step="fused"``, the default): ``resample`` (fix
+#: bookkeeping, window search, both cubics in one solve, their values on the grid),
+#: ``features``, ``inference``, ``current_position_fit`` (as in :data:`STAGES`)
+FUSED_STAGES = ("resample", "features", "inference", "current_position_fit")
 
 #: a stage-timer hook: called with (stage name, duration [ns])
 StageTimer = Callable[[str, int], None]
@@ -171,19 +186,34 @@ def _check_model(onnx_path: Path, info: dict, net: OnnxModel) -> None:
 
 
 class _Buf:
-    """Append-only float64 rows with a capacity; keeps the newest half when full."""
+    """Append-only float64 rows with a capacity; keeps the newest half when full.
+
+    ``t`` mirrors the first column (times [s], increasing) as a list of floats, for
+    :mod:`bisect` searches (~10x cheaper than ``np.searchsorted`` on one value)."""
 
     def __init__(self, cap: int, k: int) -> None:
         self.a = np.empty((cap, k))
         self.n = 0
+        self.t: list[float] = []
 
     def append(self, row: tuple) -> None:
         if self.n == self.a.shape[0]:
             h = self.a.shape[0] // 2
             self.a[:h] = self.a[self.n - h:self.n]
+            del self.t[:self.n - h]
             self.n = h
         self.a[self.n] = row
+        self.t.append(float(row[0]))
         self.n += 1
+
+    def pop(self) -> None:
+        """Drop the newest row."""
+        self.n -= 1
+        self.t.pop()
+
+    def clear(self) -> None:
+        self.n = 0
+        self.t.clear()
 
     def view(self) -> np.ndarray:
         return self.a[:self.n]
@@ -197,6 +227,8 @@ class LstmPredictor(Predictor):
             bundled model).
         fit: ``"closed"`` (closed-form least squares) or ``"lbfgs"`` (the paper's iterative
             fit, :func:`predictors.cubic.fit_cubic_lbfgs`; slow, for latency comparison).
+        step: ``"fused"`` (default; :mod:`predictors.lstm.fused`, closed-form fit only) or
+            ``"staged"`` (the readable reference, timed stage by stage by ``bench latency``).
     """
 
     name = "lstm"
@@ -204,9 +236,13 @@ class LstmPredictor(Predictor):
     #: network step a fix triggers (see the module doc); set it on an instance
     stage_timer: StageTimer | None = None
 
-    def __init__(self, model: str | None = None, fit: str = "closed") -> None:
+    def __init__(self, model: str | None = None, fit: str = "closed", step: str = "fused"
+                 ) -> None:
         if fit not in FITS:
             raise ValueError(f"fit must be one of {FITS}, not {fit!r}")
+        if step not in STEPS:
+            raise ValueError(f"step must be one of {STEPS}, not {step!r}")
+        self.step = step
         self.bundled = not model
         self.model_path = Path(model) if model else bundled_model()
         if self.model_path.is_dir():  # a folder written by `bench train`
@@ -214,7 +250,9 @@ class LstmPredictor(Predictor):
         self.info = load_model_info(self.model_path)
         self.frame = self.info.get("frame", "heading")
         self.fit = fit
-        self.net = OnnxModel(self.model_path, output=self.info.get("output"))
+        declared = self.info.get("input_shape") or [None]
+        batch_dim = declared[0] if isinstance(declared[0], str) else None
+        self.net = OnnxModel(self.model_path, output=self.info.get("output"), batch_dim=batch_dim)
         _check_model(self.model_path, self.info, self.net)
         self._init_buffers()
 
@@ -223,13 +261,21 @@ class LstmPredictor(Predictor):
         self._grid_fit = FixedGridFit(GRID_OFFSETS)
         self._x = np.empty((N_STEPS, 6), dtype=np.float64)
         self._pts = np.empty((N_STEPS + 1, 2))
+        fused = getattr(self, "step", "staged") == "fused" and self.fit == "closed"
+        self._fused = FusedStep(self.net, self.frame, self._final.pinv) if fused else None
         self.stage_timer = None
         self.reset()
 
     def config(self) -> dict:
         return {"model": str(self.model_path), "fit": self.fit, "frame": self.frame,
-                "architecture": self.info.get("architecture"),
+                "step": self.step, "architecture": self.info.get("architecture"),
                 "command": self.info.get("command")}
+
+    @property
+    def stages(self) -> tuple[str, ...]:
+        """The stage names :attr:`stage_timer` receives for a fix step, in order:
+        :data:`FUSED_STAGES` for the fused step, :data:`STAGES` for the staged one."""
+        return FUSED_STAGES if self._fused is not None else STAGES
 
     # ------------------------------------------------------------------ seams
     def model_description(self) -> dict:
@@ -275,11 +321,13 @@ class LstmPredictor(Predictor):
         self._line = (0.0, 0.0, 0.0, 0.0, 0.0)  # t0, x0, vx, y0, vy
         self.steps = 0
         self.bridge_steps = 0
+        self.fused_steps = 0  # of self.steps, those that ran through the fused step
 
     def observe_imu(self, t: float, ax: float, ay: float, yaw: float, yaw_rate: float) -> None:
         if not (math.isfinite(ax) and math.isfinite(ay)) or max(abs(ax), abs(ay)) > ACCEL_GLITCH:
             return
-        if self._imu.n and t <= self._imu.a[self._imu.n - 1, 0]:
+        imu = self._imu
+        if imu.n and t <= imu.t[-1]:
             return
         if math.isfinite(yaw):
             if math.isfinite(self._yaw_u):
@@ -292,7 +340,7 @@ class LstmPredictor(Predictor):
         else:
             yu = math.nan
             self._t_yaw_nan = t
-        self._imu.append((t, ax, ay, yu))
+        imu.append((t, ax, ay, yu))
 
     def observe_speed(self, t: float, v: float) -> None:
         if math.isfinite(v):
@@ -316,15 +364,65 @@ class LstmPredictor(Predictor):
             self._still.clear()
         fb = self._fix
         if t - self._t_real > RESTART_GAP_S:
-            fb.n = 0  # a long outage ends: start afresh from this fix (line, then cubic)
+            fb.clear()  # a long outage ends: start afresh from this fix (line, then cubic)
         self._t_real = t
         # a pseudo-fix at or after this time (bridging) gives way to the real fix
-        while fb.n and fb.a[fb.n - 1, 0] >= t:
-            fb.n -= 1
+        tl = fb.t
+        while tl and tl[-1] >= t:
+            fb.pop()
         fb.append((t, x, y))
+        if self._fused is not None and self._fused_step(timer, c0):
+            return
         self._step_on_fixes(timer, c0)
 
     # ------------------------------------------------------------------ steps
+    def _fused_step(self, timer: StageTimer | None, c0: int) -> bool:
+        """The fix step through :class:`FusedStep`; False (nothing changed) where the staged
+        step must run instead: fixes spanning < 2 s (start-up line), fewer than 4 fixes in
+        the window (a lower-degree fit), a non-finite prediction."""
+        fb = self._fix
+        tl = fb.t
+        end = fb.n - 1
+        t_end = tl[end]
+        start = max(bisect_right(tl, t_end - MIN_SPAN_S) - 1, 0)
+        t0 = tl[start]
+        if end - start < 3 or t_end - t0 < MIN_SPAN_S:
+            return False
+        f = self._fused
+        im = self._imu
+        imu = None
+        yaw_ok = True
+        if im.n > 3:
+            it = im.t
+            i0 = bisect_left(it, t0)
+            i1 = bisect_right(it, t_end)
+            if i1 - i0 > 3:
+                imu = im.a[i0:i1]
+                yaw_ok = self._t_yaw_nan < it[i0]
+        f.fit(fb.a[start:end + 1], imu, t_end, yaw_ok)
+        if timer is not None:
+            c0 = _lap(timer, "resample", c0)
+        f.features()
+        if timer is not None:
+            c0 = _lap(timer, "features", c0)
+        d0, d1 = f.infer()
+        if timer is not None:
+            c0 = _lap(timer, "inference", c0)
+        if not f.finish(d0, d1):
+            return False
+        pts = f.pts
+        self._gps_v = f.speed
+        self._grid = pts[:N_STEPS]
+        self._pred = pts[N_STEPS]
+        self._c = f.coef
+        self._t_end = t_end
+        self._mode = "net"
+        self.steps += 1
+        self.fused_steps += 1
+        if timer is not None:
+            _lap(timer, "current_position_fit", c0)
+        return True
+
     def _step_on_fixes(self, timer: StageTimer | None, c0: int) -> None:
         """A step on the fixes (the newest real): the position cubic and grid, then the
         network (``timer``: the stage hook, ``c0``: the step's start [ns])."""

@@ -61,7 +61,7 @@ try:  # the gufunc behind np.linalg.solve, without its ~30 us of Python-side che
     def _solve(a: np.ndarray, b: np.ndarray) -> np.ndarray:
         with np.errstate(all="ignore"):
             x = _umath_linalg.solve(a, b, signature="dd->d")
-        if not np.all(np.isfinite(x)):
+        if not np.isfinite(x).all():
             raise np.linalg.LinAlgError("singular normal equations")
         return x
 except (ImportError, AttributeError):  # pragma: no cover - other NumPy layouts
@@ -71,6 +71,9 @@ except (ImportError, AttributeError):  # pragma: no cover - other NumPy layouts
 def fit_poly(t: np.ndarray, values: np.ndarray, t_ref: float, scale: float,
              degree: int = DEGREE) -> np.ndarray:
     """Closed-form least-squares polynomial through (t, values) in s = (t - t_ref) / scale.
+
+    The normal equations come from one product ``V.T @ [V | values]`` (V the Vandermonde
+    rows 1, s, .., s^degree), solved by LU; singular ones fall back to ``lstsq``.
 
     Args:
         t: sample times [s], shape (n,).
@@ -85,12 +88,21 @@ def fit_poly(t: np.ndarray, values: np.ndarray, t_ref: float, scale: float,
     out = np.zeros((DEGREE + 1, values.shape[1]))
     if deg < 0:
         return out
-    V = powers((t - t_ref) / scale, deg)
-    G = V.T @ V
+    m = deg + 1
+    b = np.empty((n, m + values.shape[1]))
+    b[:, 0] = 1.0
+    if m > 1:
+        s = b[:, 1]
+        np.subtract(t, t_ref, out=s)
+        s /= scale
+        for j in range(2, m):
+            np.multiply(b[:, j - 1], s, out=b[:, j])
+    b[:, m:] = values
+    g = b[:, :m].T @ b
     try:
-        out[:deg + 1] = _solve(G, V.T @ values)
+        out[:m] = _solve(g[:, :m], g[:, m:])
     except np.linalg.LinAlgError:
-        out[:deg + 1] = np.linalg.lstsq(V, values, rcond=None)[0]
+        out[:m] = np.linalg.lstsq(b[:, :m], values, rcond=None)[0]
     return out
 
 
