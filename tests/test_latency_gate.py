@@ -85,7 +85,7 @@ def test_benchmark_lstm_position_at(benchmark, prepared):
 
 def test_latency_gate(prepared):
     results = {}
-    for name in ("kf", "ekf", "lstm"):
+    for name in ("cv", "kf", "ekf", "lstm"):
         p, fix = warmed(name, prepared)
         results[name] = percentiles_us(step_fn(p, fix))
     # the fused step (default) and the staged reference, measured in the same run, in
@@ -109,8 +109,11 @@ def test_latency_gate(prepared):
     assert results["lstm"][1] <= BUDGETS["lstm_step_p99_us"]
     assert fused[0] <= BUDGETS["lstm_step_p50_us"] and fused[1] <= BUDGETS["lstm_step_p99_us"]
     assert fused[0] / staged[0] <= BUDGETS["max_ratio_lstm_fused_over_staged_step_p50"]
-    assert results["kf"][1] <= BUDGETS["kf_step_p99_us"]
-    assert results["ekf"][1] <= BUDGETS["ekf_step_p99_us"]
+    for name in ("kf", "ekf"):
+        assert results[name][0] <= BUDGETS[f"{name}_step_p50_us"]
+        assert results[name][1] <= BUDGETS[f"{name}_step_p99_us"]
+        ratio = results[name][0] / results["cv"][0]
+        assert ratio <= BUDGETS[f"max_ratio_{name}_step_over_cv_step_p50"], (name, ratio)
     assert pos50 <= BUDGETS["lstm_position_at_p50_us"]
     assert results["lstm"][0] / results["kf"][0] <= BUDGETS["max_ratio_lstm_step_over_kf_step_p50"]
     ratio = lbfgs50 / results["lstm"][0]
