@@ -121,10 +121,20 @@ def _init_worker() -> None:
         os.environ[var] = "1"
 
 
+def replay_cost(drive: Drive, cfg: RunConfig) -> float:
+    """A drive's replay work, in events: its samples (fixes, IMU, speed) and its "now"
+    queries. Only the order matters (the runner starts the costliest drives first)."""
+    n = len(drive.gps) + drive.duration_s / cfg.now_step_s
+    n += len(drive.imu) if drive.imu is not None else 0
+    return n + (len(drive.speed) if drive.speed is not None else 0)
+
+
 def run(drives: Sequence[Drive], cfg: RunConfig, workers: int = 1,
         on_done: Callable[[DriveRun], None] | None = None) -> list[DriveRun]:
     """Run all drives; ``on_done`` is called as each finishes (for a progress bar).
-    The returned list is in the order of ``drives`` whatever ``workers`` is."""
+    The returned list is in the order of ``drives`` whatever ``workers`` is. With several
+    workers the costliest drives (:func:`replay_cost`) start first, so that no long drive is
+    left running alone at the end."""
     out: list[DriveRun | None] = [None] * len(drives)
     if workers <= 1 or len(drives) <= 1:
         for i, d in enumerate(drives):
@@ -133,7 +143,8 @@ def run(drives: Sequence[Drive], cfg: RunConfig, workers: int = 1,
                 on_done(out[i])
         return [r for r in out if r is not None]
     with ProcessPoolExecutor(max_workers=workers, initializer=_init_worker) as pool:
-        futures = {pool.submit(run_drive, d, cfg): i for i, d in enumerate(drives)}
+        first = sorted(range(len(drives)), key=lambda i: -replay_cost(drives[i], cfg))
+        futures = {pool.submit(run_drive, drives[i], cfg): i for i in first}
         from concurrent.futures import as_completed
 
         for fut in as_completed(futures):

@@ -179,7 +179,8 @@ def run(
                         gate=gate)
         with local_paths(data) as data:  # fsspec URLs -> local copies for the loaders
             drives = load_drives(data, projection, topics, seed=seed,
-                                 synthetic_duration=synthetic_duration)
+                                 synthetic_duration=synthetic_duration,
+                                 workers=workers if executor == "local" else 1)
             consistency = data_check(drives, names, strict)
             _run(drives, cfg, data, out, workers, rerun, executor, address, formats,
                  n_drive_plots, stats, seed_list if seeds is not None else None,
