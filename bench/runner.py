@@ -16,7 +16,7 @@ import pandas as pd
 from bench.config import RunConfig, gps_condition
 from bench.prepare import PreparedDrive, prepare_drive
 from bench.replay import replay
-from bench.scoring import query_frame, score
+from bench.scoring import query_frame, score_many
 from predictors.gate import GatedPredictor
 from predictors.registry import create
 from scenarios.drive import Drive
@@ -93,8 +93,11 @@ def run_drive(drive: Drive, cfg: RunConfig) -> DriveRun:
     if reason:
         return skipped_run(drive, reason)
     prep = prepare_drive(drive, cfg)
-    frames, step_ns, query_ns, rejected = [], {}, {}, {}
-    queries = {kind: query_frame(prep, kind) for kind in ("future", "now")}
+    answers, step_ns, query_ns, rejected = [], {}, {}, {}
+    # one query table, future then now: each predictor's traces are its future rows, then
+    # its now rows (score_many tiles the table once per predictor)
+    queries = pd.concat([query_frame(prep, "future"), query_frame(prep, "now")],
+                        ignore_index=True)
     condition = gps_condition(cfg, drive.truth is not None) if cfg.use_tuned else None
     for name in cfg.predictors:
         pred = create(name, condition, **cfg.predictor_options.get(name, {}))
@@ -103,11 +106,10 @@ def run_drive(drive: Drive, cfg: RunConfig) -> DriveRun:
         res = replay(pred, prep, cfg.horizon_s)
         if cfg.gate:
             rejected[name] = pred.rejected
-        frames.append(score(queries["future"], name, res.future_xy))
-        frames.append(score(queries["now"], name, res.now_xy))
+        answers.append((name, np.concatenate([res.future_xy, res.now_xy])))
         step_ns[name] = res.step_ns
         query_ns[name] = res.query_ns
-    traces = pd.concat(frames, ignore_index=True) if frames else pd.DataFrame()
+    traces = score_many(queries, answers)
     return DriveRun(drive.name, prep.dataset, prep.reference, prep.notes, list(drive.meta.warnings),
                     traces, step_ns, query_ns, prep.outages, gps_count=len(prep.gps),
                     duration_s=drive.duration_s, fixes=_fixes_frame(prep), track=_track_frame(prep),

@@ -133,3 +133,23 @@ def test_the_cli_runs_one_blas_thread_unless_told(preset, expected):
     out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True,
                          check=True).stdout.strip()
     assert out == expected
+
+
+def test_score_many_is_the_concatenation_of_score():
+    from bench.prepare import prepare_drive
+    from bench.scoring import query_frame, score, score_many
+
+    prep = prepare_drive(default_drives()[0], RunConfig())
+    qf, qn = query_frame(prep, "future"), query_frame(prep, "now")
+    rng = np.random.default_rng(0)
+    ans = {n: (rng.normal(size=(len(qf), 2)), rng.normal(size=(len(qn), 2)))
+           for n in ("cv", "kf", "lstm@mine")}
+    ans["cv"][0][3] = np.nan  # no answer
+    old = pd.concat([f for n, (a, b) in ans.items()
+                     for f in (score(qf, n, a), score(qn, n, b))], ignore_index=True)
+    new = score_many(pd.concat([qf, qn], ignore_index=True),
+                     [(n, np.concatenate([a, b])) for n, (a, b) in ans.items()])
+    pd.testing.assert_frame_equal(new, old, check_exact=True)
+    assert score_many(qf, []).empty
+    with pytest.raises(ValueError, match="answers for 2 x"):
+        score_many(qf, [("a", ans["kf"][0]), ("b", ans["kf"][0][:-1])])
