@@ -153,3 +153,19 @@ def test_score_many_is_the_concatenation_of_score():
     assert score_many(qf, []).empty
     with pytest.raises(ValueError, match="answers for 2 x"):
         score_many(qf, [("a", ans["kf"][0]), ("b", ans["kf"][0][:-1])])
+
+
+def test_a_long_drive_is_split_by_predictor_and_merged_exactly():
+    from bench.runner import plan_tasks
+
+    drives = default_drives()[:2]
+    cfg = RunConfig(predictors=("cv", "kf", "poly"))
+    assert plan_tasks(drives[:1], cfg, 2) == [(0, "cv"), (0, "kf"), (0, "poly")]
+    fleet = plan_tasks(drives * 4, cfg, 2)  # no drive holds a quarter of the work: whole
+    assert sorted(fleet) == [(i, None) for i in range(8)]
+    split = run(drives[:1], cfg, workers=2)
+    whole = run(drives[:1], cfg, workers=1)
+    assert len(split) == 1 and list(split[0].step_ns) == ["cv", "kf", "poly"]
+    pd.testing.assert_frame_equal(split[0].traces, whole[0].traces, check_exact=True)
+    assert split[0].notes == whole[0].notes and split[0].rejected == whole[0].rejected
+    assert run([], cfg, workers=2) == []
