@@ -258,25 +258,25 @@ def _run(drives, cfg, data, out: Path, workers: int, rerun: Path | None = None,
          consistency: dict[str, Any] | None = None, color_by: str | None = None) -> None:
     from dataclasses import replace
 
+    from bench.figure_jobs import FigureJobs, Job
+    from bench.figures import paper_figures
+    from bench.outputs import remove_previous_outputs
     from bench.results import aggregate, all_traces, data_provenance
     from bench.seeds import seed_figures, seeds_section
 
     command = command_line()
     first = f"seed {cfg.seed} (1/{len(seeds)}): " if seeds else ""
+    provenance = Job(data_provenance, data, cfg.seed)  # hashing the data (~1 s) meanwhile
     runs = _replay(drives, cfg, executor, workers, address, first)
     traces = all_traces(runs)
     # the figures need only the traces: other processes draw them while this one aggregates
     # (an earlier run's files are removed first, so none of the new ones is)
-    from bench.figure_jobs import FigureJobs
-    from bench.figures import paper_figures
-    from bench.outputs import remove_previous_outputs
 
     out.mkdir(parents=True, exist_ok=True)
     removed = remove_previous_outputs(out)
     jobs = FigureJobs(traces, cfg.predictors, out, formats, drive_plots, paper=lambda: (
         paper_figures(list(drives), cfg, traces, out, runs, formats=formats)))
-    res = aggregate(runs, cfg, data_provenance(data, cfg.seed), command, traces=traces,
-                    statistics=stats)
+    res = aggregate(runs, cfg, provenance.result(), command, traces=traces, statistics=stats)
     if consistency is not None:
         res["consistency"] = consistency
     if seeds:
