@@ -15,6 +15,7 @@ from typing import Annotated
 
 import typer
 
+import bench.blas_threads  # noqa: F401  (before numpy: one OpenBLAS thread)
 from bench.commands import (
     check,
     compare,

@@ -19,13 +19,13 @@ import importlib.util
 import os
 import sys
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, fields, replace
+from dataclasses import dataclass, replace
 from typing import Any
 
 import pandas as pd
 
 from bench.config import RunConfig
-from bench.runner import DriveRun, run, run_drive
+from bench.runner import DriveRun, merge_predictor_runs, run, run_drive
 from predictors.registry import (
     BUILT_IN,
     Entry,
@@ -68,22 +68,6 @@ def run_predictor(drive: Drive, cfg: RunConfig, name: str | None,
     for n, e in entries.items():
         register(n, e.target, e.description, **e.defaults)
     return run_drive(drive, cfg if name is None else replace(cfg, predictors=(name,)))
-
-
-def merge_predictor_runs(parts: Sequence[DriveRun]) -> DriveRun:
-    """One drive's per-predictor runs (in predictor order) as one run, exactly as
-    :func:`bench.runner.run_drive` would have made it with all predictors: traces are
-    concatenated (per predictor: future, then now) with a fresh index, and every
-    per-predictor dict (step_ns, query_ns, ...) is joined in predictor order. The rest
-    (prepared-drive figures: notes, outages, fixes, ...) is the same in every part."""
-    first = parts[0]
-    frames = [p.traces for p in parts if not p.traces.empty]
-    merged: dict[str, Any] = {
-        "traces": pd.concat(frames, ignore_index=True) if frames else pd.DataFrame()}
-    for f in fields(DriveRun):
-        if isinstance(getattr(first, f.name), dict):
-            merged[f.name] = {k: v for p in parts for k, v in getattr(p, f.name).items()}
-    return replace(first, **merged)
 
 
 @dataclass(frozen=True)

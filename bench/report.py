@@ -10,7 +10,7 @@ from typing import Any
 from bench.consistency import report_lines as consistency_lines
 from bench.glossary import glossary_lines
 from bench.options import TABLE_FORMATS
-from bench.plots import DEFAULT_DRIVE_PLOTS, shown_format, write_plots
+from bench.plots import DEFAULT_DRIVE_PLOTS, PlotsWritten, shown_format, write_plots
 from bench.saved_run import Run
 from bench.stat_tables import block_lengths, paired_label_table, paired_table, seeds_table
 from bench.tables import (
@@ -70,14 +70,18 @@ def excluded_note(res: dict[str, Any]) -> str:
 
 def write_report(run: Run, out: Path, formats: Iterable[str] = ("png",),
                  drive_plots: int | None = DEFAULT_DRIVE_PLOTS,
-                 table_formats: Iterable[str] = TABLE_FORMATS) -> list[Path]:
+                 table_formats: Iterable[str] = TABLE_FORMATS,
+                 plots: PlotsWritten | None = None) -> list[Path]:
     """Write the run's plots (in each of ``formats``: png, svg, pdf; ValueError on others),
     ``report.md`` and its tables as files (``table_formats``: csv, latex; see
     :func:`write_tables`) into ``out``; return the paths written. The run itself
-    (results.json, traces) is written by :func:`bench.saved_run.save_run`."""
+    (results.json, traces) is written by :func:`bench.saved_run.save_run`. ``plots``: the
+    plots already drawn into ``out`` (``bench run`` draws them while it aggregates,
+    :mod:`bench.figure_jobs`); None draws them here."""
     shown = "." + shown_format(formats)  # checks the formats before anything is written
     out.mkdir(parents=True, exist_ok=True)
-    plots = write_plots(run.traces, run.results, out, formats, drive_plots)
+    if plots is None:
+        plots = write_plots(run.traces, run.results, out, formats, drive_plots)
     (out / "report.md").write_text(render_markdown(
         run.results, [p.relative_to(out).as_posix() for p in plots.files if p.suffix == shown],
         plot_notes=plots.notes))

@@ -7,7 +7,7 @@ from __future__ import annotations
 import os
 from collections.abc import Callable, Sequence
 from concurrent.futures import ProcessPoolExecutor
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields, replace
 from typing import Any
 
 import numpy as np
@@ -16,7 +16,7 @@ import pandas as pd
 from bench.config import RunConfig, gps_condition
 from bench.prepare import PreparedDrive, prepare_drive
 from bench.replay import replay
-from bench.scoring import query_frame, score
+from bench.scoring import query_frame, score_many
 from predictors.gate import GatedPredictor
 from predictors.registry import create
 from scenarios.drive import Drive
@@ -93,8 +93,11 @@ def run_drive(drive: Drive, cfg: RunConfig) -> DriveRun:
     if reason:
         return skipped_run(drive, reason)
     prep = prepare_drive(drive, cfg)
-    frames, step_ns, query_ns, rejected = [], {}, {}, {}
-    queries = {kind: query_frame(prep, kind) for kind in ("future", "now")}
+    answers, step_ns, query_ns, rejected = [], {}, {}, {}
+    # one query table, future then now: each predictor's traces are its future rows, then
+    # its now rows (score_many tiles the table once per predictor)
+    queries = pd.concat([query_frame(prep, "future"), query_frame(prep, "now")],
+                        ignore_index=True)
     condition = gps_condition(cfg, drive.truth is not None) if cfg.use_tuned else None
     for name in cfg.predictors:
         pred = create(name, condition, **cfg.predictor_options.get(name, {}))
@@ -103,11 +106,10 @@ def run_drive(drive: Drive, cfg: RunConfig) -> DriveRun:
         res = replay(pred, prep, cfg.horizon_s)
         if cfg.gate:
             rejected[name] = pred.rejected
-        frames.append(score(queries["future"], name, res.future_xy))
-        frames.append(score(queries["now"], name, res.now_xy))
+        answers.append((name, np.concatenate([res.future_xy, res.now_xy])))
         step_ns[name] = res.step_ns
         query_ns[name] = res.query_ns
-    traces = pd.concat(frames, ignore_index=True) if frames else pd.DataFrame()
+    traces = score_many(queries, answers)
     return DriveRun(drive.name, prep.dataset, prep.reference, prep.notes, list(drive.meta.warnings),
                     traces, step_ns, query_ns, prep.outages, gps_count=len(prep.gps),
                     duration_s=drive.duration_s, fixes=_fixes_frame(prep), track=_track_frame(prep),
@@ -121,24 +123,82 @@ def _init_worker() -> None:
         os.environ[var] = "1"
 
 
+def replay_cost(drive: Drive, cfg: RunConfig) -> float:
+    """A drive's replay work, in events: its samples (fixes, IMU, speed) and its "now"
+    queries. Only the order matters (the runner starts the costliest drives first)."""
+    n = len(drive.gps) + drive.duration_s / cfg.now_step_s
+    n += len(drive.imu) if drive.imu is not None else 0
+    return n + (len(drive.speed) if drive.speed is not None else 0)
+
+
+def merge_predictor_runs(parts: Sequence[DriveRun]) -> DriveRun:
+    """One drive's per-predictor runs (in predictor order) as one run, exactly as
+    :func:`run_drive` would have made it with all predictors: traces are concatenated (per
+    predictor: future, then now) with a fresh index, and every per-predictor dict (step_ns,
+    query_ns, ...) is joined in predictor order. The rest (prepared-drive figures: notes,
+    outages, fixes, ...) is the same in every part."""
+    first = parts[0]
+    frames = [p.traces for p in parts if not p.traces.empty]
+    merged: dict[str, Any] = {
+        "traces": pd.concat(frames, ignore_index=True) if frames else pd.DataFrame()}
+    for f in fields(DriveRun):
+        if isinstance(getattr(first, f.name), dict):
+            merged[f.name] = {k: v for p in parts for k, v in getattr(p, f.name).items()}
+    return replace(first, **merged)
+
+
+def plan_tasks(drives: Sequence[Drive], cfg: RunConfig, workers: int
+               ) -> list[tuple[int, str | None]]:
+    """The local runner's tasks, costliest first: (drive index, None) replays a drive through
+    every predictor; (drive index, name) through predictor ``name`` only. A drive holding
+    more than 1 / (2 x workers) of the run's work (:func:`replay_cost`) is split by
+    predictor, so that one long drive still keeps every worker busy."""
+    costs = [replay_cost(d, cfg) for d in drives]
+    limit = sum(costs) / (2 * max(workers, 1))
+    tasks: list[tuple[float, int, str | None]] = []
+    for i, c in enumerate(costs):
+        if c > limit and len(cfg.predictors) > 1:
+            tasks += [(c / len(cfg.predictors), i, name) for name in cfg.predictors]
+        else:
+            tasks.append((c, i, None))
+    tasks.sort(key=lambda x: -x[0])  # stable: equal costs keep drive and predictor order
+    return [(i, name) for _, i, name in tasks]
+
+
 def run(drives: Sequence[Drive], cfg: RunConfig, workers: int = 1,
         on_done: Callable[[DriveRun], None] | None = None) -> list[DriveRun]:
     """Run all drives; ``on_done`` is called as each finishes (for a progress bar).
-    The returned list is in the order of ``drives`` whatever ``workers`` is."""
+    The returned list is in the order of ``drives`` whatever ``workers`` is. With several
+    workers the costliest drives start first, and a drive long enough to hold a worker
+    alone is replayed one predictor per task (:func:`plan_tasks`); its parts are merged as
+    :func:`run_drive` would have made it (:func:`merge_predictor_runs`)."""
     out: list[DriveRun | None] = [None] * len(drives)
-    if workers <= 1 or len(drives) <= 1:
+    if workers <= 1 or not drives or (len(drives) == 1 and len(cfg.predictors) <= 1):
         for i, d in enumerate(drives):
             out[i] = run_drive(d, cfg)
             if on_done:
                 on_done(out[i])
         return [r for r in out if r is not None]
-    with ProcessPoolExecutor(max_workers=workers, initializer=_init_worker) as pool:
-        futures = {pool.submit(run_drive, d, cfg): i for i, d in enumerate(drives)}
+    tasks = plan_tasks(drives, cfg, workers)
+    parts: dict[int, dict[str, DriveRun]] = {}
+    n_parts = {i: sum(1 for j, _ in tasks if j == i) for i in range(len(drives))}
+    with ProcessPoolExecutor(max_workers=min(workers, len(tasks)),
+                             initializer=_init_worker) as pool:
+        futures = {pool.submit(run_drive, drives[i], cfg if name is None
+                               else replace(cfg, predictors=(name,))): (i, name)
+                   for i, name in tasks}
         from concurrent.futures import as_completed
 
         for fut in as_completed(futures):
-            i = futures[fut]
-            out[i] = fut.result()
+            i, name = futures[fut]
+            if name is None:
+                out[i] = fut.result()
+            else:
+                parts.setdefault(i, {})[name] = fut.result()
+                if len(parts[i]) < n_parts[i]:
+                    continue
+                mine = parts.pop(i)
+                out[i] = merge_predictor_runs([mine[n] for n in cfg.predictors])
             if on_done:
                 on_done(out[i])
     return [r for r in out if r is not None]

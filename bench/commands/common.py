@@ -89,8 +89,10 @@ def parse_topics(values: list[str] | None) -> dict[str, str] | None:
 
 
 def load_drives(paths: list[Path] | None, projection: str, topics: dict[str, str] | None,
-                 seed: int = 0, synthetic_duration: float | None = None):
-    from scenarios.loaders import iter_load
+                 seed: int = 0, synthetic_duration: float | None = None, workers: int = 1):
+    """The drives at ``paths`` in order (``workers`` processes load recordings in parallel),
+    or the built-in synthetic drives when there are none."""
+    from scenarios.loaders import iter_load_many
 
     if not paths:
         from scenarios.synthetic import default_drives, generate_drive
@@ -102,10 +104,9 @@ def load_drives(paths: list[Path] | None, projection: str, topics: dict[str, str
         return default_drives(seed=seed)
     drives = []
     with console.status("loading drives...") as status:
-        for p in paths:
-            for d in iter_load(p, projection=projection, topics=topics):
-                drives.append(d)
-                status.update(f"loading drives... {len(drives)} ({d.name})")
+        for d in iter_load_many(paths, projection=projection, topics=topics, workers=workers):
+            drives.append(d)
+            status.update(f"loading drives... {len(drives)} ({d.name})")
     return drives
 
 

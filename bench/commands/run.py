@@ -54,6 +54,7 @@ from bench.options import (
 if TYPE_CHECKING:
     import pandas as pd
 
+    from bench.figure_jobs import FigureJobs
     from bench.runner import DriveRun
     from bench.saved_run import Run
 
@@ -178,7 +179,8 @@ def run(
                         gate=gate)
         with local_paths(data) as data:  # fsspec URLs -> local copies for the loaders
             drives = load_drives(data, projection, topics, seed=seed,
-                                 synthetic_duration=synthetic_duration)
+                                 synthetic_duration=synthetic_duration,
+                                 workers=workers if executor == "local" else 1)
             consistency = data_check(drives, names, strict)
             _run(drives, cfg, data, out, workers, rerun, executor, address, formats,
                  n_drive_plots, stats, seed_list if seeds is not None else None,
@@ -256,15 +258,25 @@ def _run(drives, cfg, data, out: Path, workers: int, rerun: Path | None = None,
          consistency: dict[str, Any] | None = None, color_by: str | None = None) -> None:
     from dataclasses import replace
 
+    from bench.figure_jobs import FigureJobs, Job
+    from bench.figures import paper_figures
+    from bench.outputs import remove_previous_outputs
     from bench.results import aggregate, all_traces, data_provenance
     from bench.seeds import seed_figures, seeds_section
 
     command = command_line()
     first = f"seed {cfg.seed} (1/{len(seeds)}): " if seeds else ""
+    provenance = Job(data_provenance, data, cfg.seed)  # hashing the data (~1 s) meanwhile
     runs = _replay(drives, cfg, executor, workers, address, first)
     traces = all_traces(runs)
-    res = aggregate(runs, cfg, data_provenance(data, cfg.seed), command, traces=traces,
-                    statistics=stats)
+    # the figures need only the traces: other processes draw them while this one aggregates
+    # (an earlier run's files are removed first, so none of the new ones is)
+
+    out.mkdir(parents=True, exist_ok=True)
+    removed = remove_previous_outputs(out)
+    jobs = FigureJobs(traces, cfg.predictors, out, formats, drive_plots, paper=lambda: (
+        paper_figures(list(drives), cfg, traces, out, runs, formats=formats)))
+    res = aggregate(runs, cfg, provenance.result(), command, traces=traces, statistics=stats)
     if consistency is not None:
         res["consistency"] = consistency
     if seeds:
@@ -276,12 +288,9 @@ def _run(drives, cfg, data, out: Path, workers: int, rerun: Path | None = None,
             figures.append(seed_figures(all_traces(runs_s), cfg.predictors, base, s))
             del runs_s
         res["seeds"] = seeds_section(seeds, figures)
-    from bench.figures import paper_figures
 
-    def figures(result):
-        return paper_figures(list(drives), cfg, result.traces, out, runs, formats=formats)
-
-    publish(res, traces, runs, out, formats, drive_plots, figures, table_formats)
+    publish(res, traces, runs, out, formats, drive_plots, lambda _: jobs.paper(), table_formats,
+            plots=jobs, removed=removed)
     if rerun is not None:
         from bench.rerun_log import write_recording
 
@@ -296,7 +305,8 @@ def _run(drives, cfg, data, out: Path, workers: int, rerun: Path | None = None,
 def publish(res: dict[str, Any], traces: pd.DataFrame, runs: Sequence[DriveRun], out: Path,
             formats: tuple[str, ...] = ("png",), drive_plots: int | None = 20,
             figures: Callable[[Run], list[tuple[str, str]]] | None = None,
-            table_formats: tuple[str, ...] = TABLE_FORMATS) -> Run:
+            table_formats: tuple[str, ...] = TABLE_FORMATS, plots: FigureJobs | None = None,
+            removed: list[Path] | None = None) -> Run:
     """Write the report folder for aggregated results ``res`` (report.md, figures, tables,
     results.json, traces.parquet; an earlier run's files there are replaced) and print the
     summary tables and the ``wrote ...`` line: how ``bench run`` and ``bench score`` end.
@@ -307,6 +317,10 @@ def publish(res: dict[str, Any], traces: pd.DataFrame, runs: Sequence[DriveRun],
         figures: ``figures(run) -> [(file stem, caption)]`` draws extra figures into ``out``
             (the paper's figures of ``bench run``); None: none.
         table_formats: table files beside report.md (csv, latex; empty: none).
+        plots: the run's plots, being drawn by :class:`~bench.figure_jobs.FigureJobs`; None:
+            drawn here.
+        removed: the files of an earlier run already removed from ``out`` (by the caller,
+            before it started drawing into it); None: removed here.
 
     Returns:
         the saved :class:`~bench.saved_run.Run`.
@@ -320,13 +334,15 @@ def publish(res: dict[str, Any], traces: pd.DataFrame, runs: Sequence[DriveRun],
     from bench.terminal import print_table
 
     out.mkdir(parents=True, exist_ok=True)
-    removed = remove_previous_outputs(out)
+    if removed is None:
+        removed = remove_previous_outputs(out)
     result = Run.from_results(res, traces)
     drawn = figures(result) if figures is not None else []
     result.results["paper_figures"] = [{"file": f, "caption": c} for f, c in drawn]
     written = [(out / f).with_suffix("." + fmt) for f, _ in drawn for fmt in formats]
     written += write_report(result, out, formats=formats, drive_plots=drive_plots,
-                            table_formats=table_formats)
+                            table_formats=table_formats,
+                            plots=plots.plots() if plots is not None else None)
     written += save_run(out, result, also_written=written)
     res = result.results
     skipped = [r for r in runs if r.skipped]

@@ -101,6 +101,12 @@ def load_one(path: Path, fmt: str, projection: str = "enu",
 def iter_load(path: str | Path, projection: str = "enu",
               topics: dict[str, str] | None = None) -> Iterator[Drive]:
     """Yield the drives at or under ``path``; raise :class:`DataError` if there are none."""
+    for rec_path, fmt in _recordings(path):
+        yield load_one(rec_path, fmt, projection=projection, topics=topics)
+
+
+def _recordings(path: str | Path) -> list[tuple[Path, str]]:
+    """The recordings at or under ``path``; :class:`DataError` when there are none."""
     p = Path(path)
     if not p.exists():
         raise DataError(p, "no such file or folder")
@@ -109,8 +115,39 @@ def iter_load(path: str | Path, projection: str = "enu",
         raise DataError(p, "unknown format: not a ROS bag (.bag/.db3/.mcap or folder with "
                            "metadata.yaml), KITTI oxts drive, comma2k19 segment, route pickle "
                            "(.pickle) or CSV/Parquet table, and no such recordings below it")
-    for rec_path, fmt in recs:
-        yield load_one(rec_path, fmt, projection=projection, topics=topics)
+    return recs
+
+
+def iter_load_many(paths: Iterable[str | Path], projection: str = "enu",
+                   topics: dict[str, str] | None = None, workers: int = 1) -> Iterator[Drive]:
+    """The drives at or under each of ``paths``, in the order given (as :func:`iter_load` of
+    each), loaded by ``workers`` processes at a time (forked; one recording each). Every path
+    is checked for recordings before any is loaded. A loader's :class:`DataError` is raised
+    here, from whichever process met it, once the drives before it are yielded."""
+    recs = [r for p in paths for r in _recordings(p)]
+    if workers <= 1 or len(recs) <= 1 or not _can_fork():
+        for rec_path, fmt in recs:
+            yield load_one(rec_path, fmt, projection=projection, topics=topics)
+        return
+    import multiprocessing as mp
+    from concurrent.futures import ProcessPoolExecutor
+
+    with ProcessPoolExecutor(max_workers=min(workers, len(recs)),
+                             mp_context=mp.get_context("fork")) as pool:
+        futures = [pool.submit(load_one, rec_path, fmt, projection, topics)
+                   for rec_path, fmt in recs]
+        try:
+            for fut in futures:
+                yield fut.result()
+        finally:
+            for fut in futures:
+                fut.cancel()
+
+
+def _can_fork() -> bool:
+    import multiprocessing as mp
+
+    return "fork" in mp.get_all_start_methods()
 
 
 def load(path: str | Path, projection: str = "enu",
