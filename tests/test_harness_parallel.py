@@ -13,6 +13,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 import pytest
+from test_plots import make_traces, res_for
 
 from bench.config import RunConfig
 from bench.figure_jobs import FigureJobs, Job, can_fork
@@ -22,7 +23,6 @@ from bench.runner import replay_cost, run
 from scenarios.errors import DataError
 from scenarios.loaders import iter_load_many
 from scenarios.synthetic import default_drives
-from tests.test_plots import make_traces, res_for
 
 ROOT = Path(__file__).resolve().parents[1]
 needs_fork = pytest.mark.skipif(not can_fork(), reason="no fork on this platform")
