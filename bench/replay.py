@@ -6,6 +6,10 @@ query. A "future" query is asked right after its fix is observed, so the
 predictor never holds an observation stamped after the time it is asked about.
 Every fix step (``observe_gps`` + the future query) and every "now" query is
 timed with ``perf_counter_ns``.
+
+A predictor that reports uncertainty (:func:`reports_covariance`) is asked
+``covariance_at`` right after each ``position_at``, with the same time; that call is
+timed on its own (``cov_ns``), never charged to the step's or query's latency.
 """
 
 from __future__ import annotations
@@ -29,6 +33,26 @@ class ReplayResult:
     now_xy: np.ndarray  # (n_now, 2)
     step_ns: np.ndarray  # per fix: observe_gps + future position_at
     query_ns: np.ndarray  # per now query
+    #: (n_fixes + n_now, 3): cov_xx, cov_xy, cov_yy [m^2] of each answer (future rows, then
+    #: now rows); NaN where the predictor gave None. None: no covariance_at at all
+    cov: np.ndarray | None = None
+    #: (n_fixes + n_now,) duration of each covariance_at call [ns]; None with ``cov``
+    cov_ns: np.ndarray | None = None
+
+
+def reports_covariance(predictor: Predictor) -> bool:
+    """Whether ``predictor`` (or the predictor a gate wraps) overrides
+    :meth:`~predictors.base.Predictor.covariance_at`; the base default ("no uncertainty")
+    is never called."""
+    inner = getattr(predictor, "inner", predictor)
+    return type(inner).covariance_at is not Predictor.covariance_at
+
+
+def _store_cov(out: np.ndarray, i: int, c: object) -> None:
+    """Row i of ``out`` <- (xx, xy, yy) of the 2x2 covariance c (left NaN when None)."""
+    if c is not None:
+        m = np.asarray(c, dtype=float)
+        out[i] = m[0, 0], 0.5 * (m[0, 1] + m[1, 0]), m[1, 1]
 
 
 def build_events(prep: PreparedDrive) -> tuple[np.ndarray, np.ndarray]:
@@ -89,6 +113,10 @@ def replay(predictor: Predictor, prep: PreparedDrive, horizon_s: float) -> Repla
     step_ns = np.zeros(n_fix, dtype=np.int64)
     query_ns = np.zeros(n_now, dtype=np.int64)
     clock = perf_counter_ns
+    with_cov = reports_covariance(predictor)
+    cov = np.full((n_fix + n_now, 3), np.nan) if with_cov else None
+    cov_ns = np.zeros(n_fix + n_now, dtype=np.int64) if with_cov else None
+    covariance_at = predictor.covariance_at
     observe_gps, observe_imu = predictor.observe_gps, predictor.observe_imu
     observe_speed, position_at = predictor.observe_speed, predictor.position_at
     predictor.reset()
@@ -112,6 +140,11 @@ def replay(predictor: Predictor, prep: PreparedDrive, horizon_s: float) -> Repla
                 p = position_at(t + horizon_s)
                 step_ns[i] = clock() - c0
                 future[i] = p
+                if with_cov:
+                    c0 = clock()
+                    c = covariance_at(t + horizon_s)
+                    cov_ns[i] = clock() - c0
+                    _store_cov(cov, i, c)
             elif k == SPEED:
                 j = i - so
                 observe_speed(st[j], sv[j])
@@ -121,4 +154,9 @@ def replay(predictor: Predictor, prep: PreparedDrive, horizon_s: float) -> Repla
                 p = position_at(qt[j])
                 query_ns[i] = clock() - c0
                 now[i] = p
-    return ReplayResult(future, now, step_ns, query_ns)
+                if with_cov:
+                    c0 = clock()
+                    c = covariance_at(qt[j])
+                    cov_ns[n_fix + i] = clock() - c0
+                    _store_cov(cov, n_fix + i, c)
+    return ReplayResult(future, now, step_ns, query_ns, cov, cov_ns)

@@ -106,7 +106,7 @@ def run_drive(drive: Drive, cfg: RunConfig) -> DriveRun:
         res = replay(pred, prep, cfg.horizon_s)
         if cfg.gate:
             rejected[name] = pred.rejected
-        answers.append((name, np.concatenate([res.future_xy, res.now_xy])))
+        answers.append((name, np.concatenate([res.future_xy, res.now_xy]), res.cov, res.cov_ns))
         step_ns[name] = res.step_ns
         query_ns[name] = res.query_ns
     traces = score_many(queries, answers)

@@ -110,6 +110,11 @@ class Run:
                 self._traces = pd.DataFrame()
             else:
                 self._traces = pd.read_parquet(path)
+                from bench.scoring import COV_COLUMNS
+
+                for c in COV_COLUMNS:  # traces written before schema 1.4
+                    if c not in self._traces:
+                        self._traces[c] = np.nan
         return self._traces
 
     def summary(self, kind: str = "future") -> pd.DataFrame:

@@ -53,9 +53,17 @@ TRACE_COLUMNS: dict[str, tuple[str, str, str]] = {
                     "NaN: standstill or unknown)"),
     "yaw_rate_ref": ("float64", "rad/s", "the reference's yaw rate at t_query, + = turning left "
                      "(NaN: unknown)"),
+    "cov_xx": ("float64", "m^2", "the answer's reported covariance (`covariance_at`, ENU): "
+               "variance east (NaN: the predictor reports no uncertainty for it)"),
+    "cov_xy": ("float64", "m^2", "reported covariance east-north"),
+    "cov_yy": ("float64", "m^2", "reported variance north"),
+    "cov_us": ("float64", "us", "duration of the `covariance_at` call, timed apart from the "
+               "query (NaN: not asked: no `covariance_at`, or answers from a file)"),
 }
+#: the answer's reported uncertainty (filled with NaN in traces written before it existed)
+COV_COLUMNS = ("cov_xx", "cov_xy", "cov_yy", "cov_us")
 #: the columns a query table holds (all but the predictor and its answer)
-ANSWER_COLUMNS = ("predictor", "x", "y", "error_m", "along_m", "cross_m")
+ANSWER_COLUMNS = ("predictor", "x", "y", "error_m", "along_m", "cross_m", *COV_COLUMNS)
 QUERY_COLUMNS = tuple(c for c in TRACE_COLUMNS if c not in ANSWER_COLUMNS)
 #: query columns an answer key written before they existed may lack (filled with NaN)
 TRACK_QUERY_COLUMNS = ("heading_ref", "yaw_rate_ref")
@@ -171,8 +179,11 @@ def score(queries: pd.DataFrame, predictor: str, answers: np.ndarray | pd.DataFr
             frame with drive, kind, t_query, x, y (answers from a file), matched by
             :func:`match_answers`.
     """
+    cov = np.full((len(queries), 3), np.nan)
     if isinstance(answers, pd.DataFrame):
         xy = match_answers(queries, answers)
+        if all(c in answers for c in COV_COLUMNS[:3]):
+            cov[answer_positions(queries, answers)] = answers[list(COV_COLUMNS[:3])].to_numpy(float)
     else:
         xy = np.asarray(answers, dtype=float).reshape(-1, 2)
         if len(xy) != len(queries):
@@ -189,22 +200,27 @@ def score(queries: pd.DataFrame, predictor: str, answers: np.ndarray | pd.DataFr
     cols.update({c: queries[c] for c in ("label", "speed_mps", "since_fix_s", "outage", "warmup")})
     for c in TRACK_QUERY_COLUMNS:
         cols[c] = queries[c] if c in queries else np.nan
+    cols.update({"cov_xx": cov[:, 0], "cov_xy": cov[:, 1], "cov_yy": cov[:, 2],
+                 "cov_us": np.nan})
     return pd.DataFrame(cols, index=queries.index).reset_index(drop=True)
 
 
-def score_many(queries: pd.DataFrame, answers: Sequence[tuple[str, np.ndarray]]) -> pd.DataFrame:
+def score_many(queries: pd.DataFrame, answers: Sequence[tuple[Any, ...]]) -> pd.DataFrame:
     """Traces of several predictors on the same ``queries``, one after the other: exactly
     ``pd.concat([score(queries, name, xy) for name, xy in answers], ignore_index=True)``,
     built in one go (one frame instead of one per predictor and a concatenation).
 
     Args:
         queries: the query table (a :func:`query_frame`, or several concatenated).
-        answers: (predictor name as run, (N, 2) positions [m] in the order of ``queries``).
+        answers: (predictor name as run, (N, 2) positions [m] in the order of ``queries``)
+            or, from a live replay of a predictor reporting uncertainty, (name, positions,
+            (N, 3) covariances cov_xx, cov_xy, cov_yy [m^2] or None, (N,) their
+            covariance_at durations [ns] or None).
     """
     if not answers:
         return pd.DataFrame()
     n, k = len(queries), len(answers)
-    xy = np.concatenate([np.asarray(a, dtype=float).reshape(-1, 2) for _, a in answers])
+    xy = np.concatenate([np.asarray(a[1], dtype=float).reshape(-1, 2) for a in answers])
     if len(xy) != n * k:
         raise ValueError(f"{len(xy)} answers for {k} x {n} queries")
 
@@ -219,7 +235,7 @@ def score_many(queries: pd.DataFrame, answers: Sequence[tuple[str, np.ndarray]])
                else np.full(n * k, np.nan))
     along, cross = track_errors(xy, ref, heading)
     names = np.empty(k, dtype=object)
-    names[:] = [name for name, _ in answers]
+    names[:] = [a[0] for a in answers]
     cols: dict[str, Any] = {c: tiled(c) for c in ("dataset", "drive")}
     cols["predictor"] = pd.array(np.repeat(names, n), dtype=cols["drive"].dtype)
     cols.update({c: tiled(c) for c in ("kind", "t_issue", "t_query")})
@@ -228,6 +244,13 @@ def score_many(queries: pd.DataFrame, answers: Sequence[tuple[str, np.ndarray]])
     cols.update({c: tiled(c) for c in ("label", "speed_mps", "since_fix_s", "outage", "warmup")})
     for c in TRACK_QUERY_COLUMNS:
         cols[c] = tiled(c) if c in queries else np.nan
+    cov = np.full((n * k, 4), np.nan)
+    for j, a in enumerate(answers):
+        if len(a) > 2 and a[2] is not None:
+            cov[j * n:(j + 1) * n, :3] = a[2]
+        if len(a) > 3 and a[3] is not None:
+            cov[j * n:(j + 1) * n, 3] = np.asarray(a[3], dtype=float) / 1e3
+    cols.update({c: cov[:, i] for i, c in enumerate(COV_COLUMNS)})
     return pd.DataFrame(cols)
 
 

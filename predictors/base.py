@@ -16,6 +16,8 @@ from __future__ import annotations
 from abc import ABC, abstractmethod
 from typing import ClassVar
 
+import numpy as np
+
 
 class Predictor(ABC):
     """Base class: override ``reset``, ``observe_gps`` and ``position_at``; IMU and
@@ -41,6 +43,14 @@ class Predictor(ABC):
     @abstractmethod
     def position_at(self, t: float) -> tuple[float, float]:
         """Estimated (x, y) [m] at time t [s] >= the last observation; (nan, nan) if unknown."""
+
+    def covariance_at(self, t: float) -> np.ndarray | None:
+        """Covariance [m^2] of the answer ``position_at(t)`` just gave: a 2x2 array over
+        (x, y) in local ENU, or None for "no uncertainty" (this default: a predictor that
+        does not model its error never gets a made-up one). The runner asks it right after
+        each ``position_at(t)``, with the same t and no observation in between; its time is
+        measured apart from the query's."""
+        return None
 
     def config(self) -> dict:
         """The predictor's configuration, recorded in results for reproducibility."""

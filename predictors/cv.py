@@ -9,6 +9,17 @@ Expected error on a circle of radius R at speed v with fixes every T seconds,
 horizon h after the newest fix: the two-fix chord velocity lags the tangent by
 half a fix interval, so the error is ~ v^2 h (h + T) / (2 R) (v^2 h^2 / (2 R)
 for the exact tangent velocity).
+
+Uncertainty (``covariance_at``), a simple error model, isotropic, per axis:
+fix noise ``fix_sigma`` [m] (white) and an unmodelled acceleration ``accel_sigma``
+[m/s^2] per axis. With the two-fix velocity over T seconds, extrapolating h seconds past
+the newest fix: ``var = fix_sigma^2 ((1 + h/T)^2 + (h/T)^2) + (accel_sigma h (h + T) / 2)^2``
+(the first term propagates both fixes' noise through p_last + (p_last - p_prev) h / T, the
+second is the chord-velocity lag error above for an acceleration of that size). With a
+line fit the velocity variance is ``fix_sigma^2 / sum((t_i - mean t)^2)`` and T is the
+window's span. The defaults (``fix_sigma`` 0.06 m, ``accel_sigma`` 1.0 m/s^2) come from
+the synthetic development drives' fix noise (0.03 m white + 0.05 m Gauss-Markov) and their
+manoeuvres; they are not fitted to any evaluation data. None before the second fix.
 """
 
 from __future__ import annotations
@@ -34,14 +45,19 @@ class ConstantVelocity(Predictor):
 
     name = "cv"
 
-    def __init__(self, window_s: float = 0.0) -> None:
-        check_config("cv", window_s=(window_s, 0.0, 60.0))
+    def __init__(self, window_s: float = 0.0, fix_sigma: float = 0.06,
+                 accel_sigma: float = 1.0) -> None:
+        check_config("cv", window_s=(window_s, 0.0, 60.0), fix_sigma=(fix_sigma, 1e-4, 1e3),
+                     accel_sigma=(accel_sigma, 0.0, 1e3))
         self.window_s = float(window_s)
+        self.fix_sigma = float(fix_sigma)
+        self.accel_sigma = float(accel_sigma)
         self._buf = FixBuffer(256)
         self.reset()
 
     def config(self) -> dict:
-        return {"window_s": self.window_s}
+        return {"window_s": self.window_s, "fix_sigma": self.fix_sigma,
+                "accel_sigma": self.accel_sigma}
 
     def reset(self) -> None:
         self._buf.clear()
@@ -50,6 +66,8 @@ class ConstantVelocity(Predictor):
         self._y = math.nan
         self._vx = 0.0
         self._vy = 0.0
+        self._span = math.nan  # T of the error model [s] (NaN: velocity unknown)
+        self._var_v_rel = math.nan  # velocity variance / fix_sigma^2 [1/s^2]
 
     def observe_gps(self, t: float, x: float, y: float) -> None:
         if not (math.isfinite(x) and math.isfinite(y)):
@@ -64,6 +82,8 @@ class ConstantVelocity(Predictor):
             v = buf.last_velocity()
             if v is not None:
                 self._vx, self._vy = v
+                self._span = t - buf.last(2)[0]
+                self._var_v_rel = math.nan  # the two-fix formula, see covariance_at
             return
         i = max(0, min(int(buf.n) - 2, _first_within(buf, self.window_s)))
         ts, xs, ys = buf.t[i:], buf.x[i:], buf.y[i:]
@@ -72,12 +92,31 @@ class ConstantVelocity(Predictor):
         if den > 0.0:
             self._vx = float(tc @ xs) / den
             self._vy = float(tc @ ys) / den
+            self._span = float(ts[-1] - ts[0])
+            self._var_v_rel = 1.0 / den
 
     def position_at(self, t: float) -> tuple[float, float]:
         if self._t != self._t:  # NaN: no fix yet
             return NAN2
         dt = t - self._t
         return self._x + self._vx * dt, self._y + self._vy * dt
+
+    def covariance_at(self, t: float) -> np.ndarray | None:
+        """2x2 ENU covariance [m^2] of ``position_at(t)`` from the error model of the module
+        docstring (isotropic); None while the velocity is unknown (fewer than two fixes)."""
+        T = self._span
+        if not T > 0.0:
+            return None
+        h = max(t - self._t, 0.0)
+        s2 = self.fix_sigma * self.fix_sigma
+        if self._var_v_rel == self._var_v_rel:  # line fit
+            var = s2 * (1.0 + h * h * self._var_v_rel)
+        else:
+            r = h / T
+            var = s2 * ((1.0 + r) ** 2 + r * r)
+        m = 0.5 * self.accel_sigma * h * (h + T)
+        var += m * m
+        return np.array(((var, 0.0), (0.0, var)))
 
 
 def _first_within(buf: FixBuffer, span_s: float) -> int:

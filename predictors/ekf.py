@@ -450,3 +450,23 @@ class CtraEkf(Predictor):
             return x, y
         dx, dy = ctra_displacement(yaw, v, w, a, T)
         return x + dx, y + dy
+
+    def covariance_at(self, t: float) -> np.ndarray | None:
+        """2x2 ENU position covariance [m^2] of ``position_at(t)``: the position rows of the
+        predict step over T = t - (time of the state), ``F P F' + Q(T)`` with the CTRA
+        Jacobian F at the current mean (the linearisation the filter itself uses), without
+        changing the filter. None before initialisation (``position_at`` then holds the
+        newest fix with no motion model behind it)."""
+        if not self._ready:
+            return None
+        T = t - self._ts
+        P = self.P
+        if not T > 0.0:
+            return P[:2, :2].copy()
+        F = np.eye(N_STATE)
+        ctra_step(np.array(self._s), T, F)  # the mean position_at extrapolates
+        Q = ctra_process_noise(self._s[IYAW], T, self.jerk_psd, self.yaw_acc_psd,
+                               self.pos_psd, np.zeros((N_STATE, N_STATE)))
+        Fp = F[:2, :IA + 1]
+        out = Fp @ P[:IA + 1, :IA + 1] @ Fp.T + Q[:2, :2]
+        return 0.5 * (out + out.T)

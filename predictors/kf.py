@@ -19,7 +19,8 @@ Cycle: predict at every observation's time (variable dt), then update: fixes
 (x, y; sigma ``gps_sigma``), IMU world acceleration, wheel speed along the heading
 (sigma ``speed_sigma``); a speed below ``stop_speed`` is a zero-velocity update of both
 components. ``position_at`` extrapolates the current mean in closed form
-(``p + v dt + a dt^2/2``) without touching the filter.
+(``p + v dt + a dt^2/2``) without touching the filter; ``covariance_at`` gives the position
+block of the same prediction's covariance (``F P F' + Q(dt)``, ENU, m^2).
 
 Defaults chosen by physics, not tuned: comfortable car jerk stays within ~1-2 m/s^3 and
 changes over ~1 s, so ``jerk_psd`` ~ 1.5^2 * 1 = 2; fix-to-fix GNSS noise (what matters
@@ -40,7 +41,7 @@ import math
 
 import numpy as np
 
-from predictors._ca_kalman import CaFilter2D
+from predictors._ca_kalman import CaFilter2D, ca_noise_block, predict_cross, predict_sym
 from predictors._geometry import check_config
 from predictors.base import Predictor
 
@@ -219,3 +220,22 @@ class LinearKalman(Predictor):
         dt = t - self._ts
         h = 0.5 * dt * dt
         return x + vx * dt + ax * h, y + vy * dt + ay * h
+
+    def covariance_at(self, t: float) -> np.ndarray | None:
+        """2x2 ENU position covariance [m^2] of ``position_at(t)``: the filter's covariance
+        propagated over dt = t - (time of the state) exactly as a predict step would
+        (``F P F' + Q(dt)`` with the white-jerk Q), without changing the filter. None
+        before the first fix."""
+        if not self._ready:
+            return None
+        kf = self.kf
+        d = t - self._ts
+        if d > 0.0:
+            h = 0.5 * d * d
+            q = ca_noise_block(d, self.jerk_psd)
+            pxx = predict_sym(kf.A, d, h, q)[0]
+            pyy = predict_sym(kf.B, d, h, q)[0]
+            pxy = predict_cross(kf.C, d, h)[0]
+        else:
+            pxx, pyy, pxy = kf.A[0], kf.B[0], kf.C[0]
+        return np.array(((pxx, pxy), (pxy, pyy)))

@@ -144,7 +144,7 @@ def test_a_reported_covariance_is_checked():
     assert res.passed and re.match(r"^\d+ matrices symmetric, smallest eigenvalue \S+ m\^2$",
                                    res.evidence), res.evidence
     [res] = check_predictor(Cv, "cv", clauses=("covariance_psd",))
-    assert res.passed and res.evidence == "not reported"
+    assert res.passed and res.evidence.startswith("not reported"), res.evidence
 
 
 class Raises(Cv):
@@ -189,7 +189,7 @@ def test_feed_matches_the_runners_replay():
 def test_resolve_module_class_and_alias():
     f = resolve_predictor("contract_broken:LookAhead")
     assert isinstance(f(), LookAhead) and f() is not f()
-    assert resolve_predictor("cv@mine", {"window_s": 0.5})().config() == {"window_s": 0.5}
+    assert resolve_predictor("cv@mine", {"window_s": 0.5})().config()["window_s"] == 0.5
 
 
 @pytest.mark.parametrize(("spec", "needle"), [
