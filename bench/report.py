@@ -28,6 +28,7 @@ from bench.tables import (
     warmup_table,
 )
 from bench.track_results import TRACK_NOTE, track_table
+from bench.uncertainty import UNCERTAINTY_NOTE, uncertainty_table
 
 MISSING_NOTE = ("`missing`: queries a predictor answered with no position (NaN) although a "
                 "reference exists, e.g. before its first fix; they are counted, not averaged, so "
@@ -113,6 +114,10 @@ def report_tables(res: dict[str, Any]) -> list[Table]:
                 tables.append(paired_table(res, ds, held_out=True))
     if res.get("track_errors", {}).get("predictors"):
         tables.append(track_table(res))
+    if "uncertainty" in res:
+        tables.append(uncertainty_table(res))
+        if res["uncertainty"].get("by_since_fix"):
+            tables.append(uncertainty_table(res, "by_since_fix"))
     if res.get("by_speed"):
         tables.append(speed_table(res))
     if res.get("outages"):
@@ -216,6 +221,11 @@ def render_markdown(res: dict[str, Any], plots: list[str],
                       "its comparison over the held-out drives only is below.", ""]
     if res.get("track_errors", {}).get("predictors"):
         lines += ["### Where the error points", "", TRACK_NOTE, "", track_table(res).markdown(), ""]
+    if "uncertainty" in res:
+        lines += ["### Uncertainty", "", UNCERTAINTY_NOTE, "", uncertainty_table(res).markdown(), ""]
+        if res["uncertainty"].get("by_since_fix"):
+            lines += ["By time since the last fix (no CI):", "",
+                      uncertainty_table(res, "by_since_fix").markdown(), ""]
     lines += seeds_lines(res)
     if res.get("held_out_all"):
         ho = res["held_out_all"]

@@ -391,6 +391,9 @@ def aggregate(runs: Sequence[DriveRun], cfg: RunConfig, data_manifest: list[dict
     from bench.track_results import track_section
 
     res["track_errors"] = track_section(traces, keep, preds)
+    from bench.uncertainty import uncertainty_section
+
+    res["uncertainty"] = uncertainty_section(traces, keep, preds)
     return res
 
 
