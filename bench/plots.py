@@ -627,9 +627,50 @@ def write_error_over_time(traces: pd.DataFrame, preds: Sequence[str], out: Path,
     return files, "; ".join(notes) or None
 
 
+def plot_calibration(traces: pd.DataFrame, preds: Sequence[str]) -> Figure:
+    """Calibration curve of the reported covariances: observed vs expected coverage of the
+    p-ellipses (:func:`metrics.calibration.calibration_curve`), future and now panels, one
+    line per predictor that reports covariance; the diagonal is honest, below it
+    overconfident. Warm-up excluded."""
+    from matplotlib.figure import Figure
+
+    from metrics.calibration import calibration_curve, mahalanobis_sq
+
+    cols = ["predictor", "kind", "x", "y", "x_ref", "y_ref", "error_m", "cov_xx", "cov_xy",
+            "cov_yy"]
+    if any(c not in traces for c in cols):
+        raise NothingToPlot("traces without covariance columns")
+    t = _finite(headline(traces, cols))
+    t = t[np.isfinite(t["cov_xx"].to_numpy(dtype=float))]
+    if t.empty:
+        raise NothingToPlot("no predictor reports uncertainty for an answer with a known error")
+    colors = _colors(preds)
+    fig = Figure(figsize=(9, 4.5), layout="constrained")
+    axes = fig.subplots(1, 2, sharey=True)
+    present = {str(x) for x in pd.unique(t.predictor)}
+    for ax, kind in zip(axes, ("future", "now"), strict=True):
+        ax.plot([0, 1], [0, 1], color="0.6", lw=1, ls="--", label="calibrated")
+        rows = t[t.kind == kind]
+        for p in [q for q in preds if q in present]:
+            r = rows[rows.predictor == p]
+            err = r[["x", "y"]].to_numpy(float) - r[["x_ref", "y_ref"]].to_numpy(float)
+            curve = np.array(calibration_curve(mahalanobis_sq(
+                err, r[["cov_xx", "cov_xy", "cov_yy"]].to_numpy(float))))
+            ax.plot(curve[:, 0], curve[:, 1], marker="o", ms=3, label=p, color=colors.get(p))
+        ax.set_title(f"{kind}: reported ellipse vs truth")
+        ax.set_xlabel("expected coverage p of the reported p-ellipse")
+        ax.set_xlim(0, 1)
+        ax.set_ylim(0, 1.01)
+        ax.grid(alpha=0.3)
+    axes[0].set_ylabel("observed share of references inside")
+    axes[1].legend(loc="lower right", fontsize=8)
+    fig.suptitle("Calibration of reported uncertainty (below the diagonal: overconfident)")
+    return fig
+
+
 FIGURES = {"error_cdf": plot_error_cdf, "error_vs_speed": plot_error_vs_speed,
            "error_vs_since_fix": plot_error_vs_since_fix, "path": plot_path,
-           "trajectory_error": plot_trajectory_error}
+           "trajectory_error": plot_trajectory_error, "calibration": plot_calibration}
 REQUIRED = ("drive", "predictor", "kind", "t_query", "x", "y", "x_ref", "y_ref", "error_m",
             "label", "speed_mps", "since_fix_s", "outage")
 

@@ -52,7 +52,10 @@ def make_traces(n_fix: int = 200, preds: tuple[str, ...] = ("cv", "kf"), drives:
                                             categories=["straight", "turn", "roundabout",
                                                         "start_stop", "unlabelled"]),
                     "speed_mps": np.full(tq.size, 10.0), "since_fix_s": tq - np.floor(tq / dt) * dt,
-                    "outage": outage}))
+                    "outage": outage,
+                    # reported covariance: isotropic, per-axis sigma near the error's size
+                    "cov_xx": np.full(tq.size, (0.05 * (p_i + 1)) ** 2), "cov_xy": 0.0,
+                    "cov_yy": np.full(tq.size, (0.05 * (p_i + 1)) ** 2), "cov_us": 1.0}))
     return pd.concat(frames, ignore_index=True)
 
 
