@@ -4,7 +4,9 @@ An answers file (CSV or Parquet, column names case-insensitive) has one row per 
 query: ``drive`` (as in the queries list), ``kind`` (``future`` or ``now``), ``t_query`` [s]
 (as in the queries list: from the drive's first input sample), ``x``, ``y`` [m] (the drive's
 local ENU frame, as the inputs) and optionally ``latency_us`` [us] (how long the system took
-for that answer; empty = not timed). Other columns are ignored.
+for that answer; empty = not timed) and ``cov_xx``, ``cov_xy``, ``cov_yy`` [m^2] (the answer's
+reported 2x2 ENU covariance, all three or none; empty = no uncertainty for that answer; it
+must be positive semi-definite). Other columns are ignored.
 
 A row answers the query of its drive and kind whose ``t_query`` is within
 :data:`~bench.scoring.MATCH_TOLERANCE_S` (1e-6 s) of its own. A query without an answer is
@@ -22,6 +24,7 @@ from __future__ import annotations
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pandas as pd
@@ -32,7 +35,8 @@ from bench.scoring import MATCH_TOLERANCE_S, answer_positions, score
 from scenarios.errors import DataError
 
 REQUIRED = ("drive", "kind", "t_query", "x", "y")
-OPTIONAL = ("latency_us",)
+COVARIANCE = ("cov_xx", "cov_xy", "cov_yy")
+OPTIONAL = ("latency_us", *COVARIANCE)
 KINDS = ("future", "now")
 
 
@@ -111,8 +115,35 @@ def read_answers(path: str | Path) -> Answers:
             i = int(np.flatnonzero(bad)[0])
             raise DataError(path, f"{where(i)}, column 'latency_us': {df['latency_us'].iloc[i]!r} "
                                   f"is not a duration >= 0 [us] (leave it empty if not timed)")
-    frame = pd.DataFrame({"drive": drive, "kind": kind, **num, "latency_us": lat})
+    frame = pd.DataFrame({"drive": drive, "kind": kind, **num, "latency_us": lat,
+                          **_covariance(tab, path)})
     return Answers(path, frame, tab.is_csv, ignored)
+
+
+def _covariance(tab: Any, path: Path) -> dict[str, np.ndarray]:
+    """The optional covariance columns [m^2] (NaN where a row gives none); a DataError for
+    only some of the three columns, or a row whose covariance is not positive semi-definite."""
+    from scenarios.loaders.table import numeric_column
+
+    df = tab.df
+    given = [c for c in COVARIANCE if c in df.columns]
+    if not given:
+        return {c: np.full(len(df), np.nan) for c in COVARIANCE}
+    if len(given) < len(COVARIANCE):
+        raise DataError(path, f"covariance column(s) {', '.join(given)} without "
+                              f"{', '.join(c for c in COVARIANCE if c not in given)}: give all "
+                              f"of {', '.join(COVARIANCE)} [m^2] or none")
+    xx, xy, yy = (numeric_column(tab, c) for c in COVARIANCE)
+    some = np.isfinite(xx) | np.isfinite(xy) | np.isfinite(yy)
+    bad = some & ~(np.isfinite(xx) & np.isfinite(xy) & np.isfinite(yy)
+                   & (xx >= 0) & (yy >= 0) & (xx * yy - xy * xy >= -1e-12 * (xx * yy + 1e-300)))
+    if bad.any():
+        i = int(np.flatnonzero(bad)[0])
+        raise DataError(path, f"{tab.where(i)}, columns cov_xx, cov_xy, cov_yy: "
+                              f"({xx[i]!r}, {xy[i]!r}, {yy[i]!r}) is not a covariance (all three "
+                              f"finite, variances >= 0, cov_xy^2 <= cov_xx cov_yy; leave all "
+                              f"three empty for no uncertainty)")
+    return {"cov_xx": xx, "cov_xy": xy, "cov_yy": yy}
 
 
 @dataclass
@@ -190,6 +221,8 @@ def score_answers(folder: QueryFolder, answers: Answers, predictor: str,
     n = len(key)
     xy = np.full((n, 2), np.nan)
     xy[pos] = answers.frame[["x", "y"]].to_numpy(float)
+    cov = np.full((n, 3), np.nan)
+    cov[pos] = answers.frame[list(COVARIANCE)].to_numpy(float)
     lat_us = np.full(n, np.nan)
     lat_us[pos] = answers.frame["latency_us"].to_numpy(float)
     answered = np.zeros(n, dtype=bool)
@@ -203,7 +236,7 @@ def score_answers(folder: QueryFolder, answers: Answers, predictor: str,
             runs.append(folder.drive_run(d, pd.DataFrame()))
             continue
         rows = rows_of.get(d["name"], np.empty(0, dtype=np.int64))
-        traces = score(key.iloc[rows], predictor, xy[rows])
+        traces = score(key.iloc[rows], predictor, xy[rows], cov=cov[rows])
         run = folder.drive_run(d, traces)
         for k, attr in (("future", "step_ns"), ("now", "query_ns")):
             mine = rows[(kind[rows] == k) & np.isfinite(lat_us[rows])]

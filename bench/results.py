@@ -298,6 +298,9 @@ def aggregate(runs: Sequence[DriveRun], cfg: RunConfig, data_manifest: list[dict
         queries = np.concatenate([r.query_ns[name] for r in runs if name in r.query_ns] or [np.empty(0)])
         entry["latency_us"] = latency_summary(steps)
         entry["query_us"] = latency_summary(queries)
+        covs = [r.cov_ns[name] for r in runs if name in getattr(r, "cov_ns", {})]
+        if covs:  # the covariance_at call, timed apart from the query
+            entry["covariance_us"] = latency_summary(np.concatenate(covs))
         res["predictors"][name] = entry
         if not df.empty:
             for kind in KINDS:

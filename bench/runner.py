@@ -42,6 +42,8 @@ class DriveRun:
     track: pd.DataFrame | None = None  # t, x, y of the reference (truth or fix cubic), 10 Hz
     rejected: dict[str, int] = field(default_factory=dict)  # fixes the outlier gate dropped
     sensor_frames: dict[str, Any] = field(default_factory=dict)  # see sensor_frames()
+    #: covariance_at durations [ns] of the predictors that report one (timed apart)
+    cov_ns: dict[str, np.ndarray] = field(default_factory=dict)
 
 
 def _fixes_frame(prep: PreparedDrive) -> pd.DataFrame:
@@ -93,7 +95,7 @@ def run_drive(drive: Drive, cfg: RunConfig) -> DriveRun:
     if reason:
         return skipped_run(drive, reason)
     prep = prepare_drive(drive, cfg)
-    answers, step_ns, query_ns, rejected = [], {}, {}, {}
+    answers, step_ns, query_ns, cov_ns, rejected = [], {}, {}, {}, {}
     # one query table, future then now: each predictor's traces are its future rows, then
     # its now rows (score_many tiles the table once per predictor)
     queries = pd.concat([query_frame(prep, "future"), query_frame(prep, "now")],
@@ -106,15 +108,17 @@ def run_drive(drive: Drive, cfg: RunConfig) -> DriveRun:
         res = replay(pred, prep, cfg.horizon_s)
         if cfg.gate:
             rejected[name] = pred.rejected
-        answers.append((name, np.concatenate([res.future_xy, res.now_xy]), res.cov, res.cov_ns))
+        answers.append((name, np.concatenate([res.future_xy, res.now_xy]), res.cov))
         step_ns[name] = res.step_ns
         query_ns[name] = res.query_ns
+        if res.cov_ns is not None:
+            cov_ns[name] = res.cov_ns
     traces = score_many(queries, answers)
     return DriveRun(drive.name, prep.dataset, prep.reference, prep.notes, list(drive.meta.warnings),
                     traces, step_ns, query_ns, prep.outages, gps_count=len(prep.gps),
                     duration_s=drive.duration_s, fixes=_fixes_frame(prep), track=_track_frame(prep),
                     sensor_frames=sensor_frames(drive),
-                    rejected=rejected)
+                    rejected=rejected, cov_ns=cov_ns)
 
 
 def _init_worker() -> None:

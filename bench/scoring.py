@@ -57,11 +57,9 @@ TRACE_COLUMNS: dict[str, tuple[str, str, str]] = {
                "variance east (NaN: the predictor reports no uncertainty for it)"),
     "cov_xy": ("float64", "m^2", "reported covariance east-north"),
     "cov_yy": ("float64", "m^2", "reported variance north"),
-    "cov_us": ("float64", "us", "duration of the `covariance_at` call, timed apart from the "
-               "query (NaN: not asked: no `covariance_at`, or answers from a file)"),
 }
 #: the answer's reported uncertainty (filled with NaN in traces written before it existed)
-COV_COLUMNS = ("cov_xx", "cov_xy", "cov_yy", "cov_us")
+COV_COLUMNS = ("cov_xx", "cov_xy", "cov_yy")
 #: the columns a query table holds (all but the predictor and its answer)
 ANSWER_COLUMNS = ("predictor", "x", "y", "error_m", "along_m", "cross_m", *COV_COLUMNS)
 QUERY_COLUMNS = tuple(c for c in TRACE_COLUMNS if c not in ANSWER_COLUMNS)
@@ -167,8 +165,8 @@ def match_answers(queries: pd.DataFrame, answers: pd.DataFrame) -> np.ndarray:
     return xy
 
 
-def score(queries: pd.DataFrame, predictor: str, answers: np.ndarray | pd.DataFrame
-          ) -> pd.DataFrame:
+def score(queries: pd.DataFrame, predictor: str, answers: np.ndarray | pd.DataFrame,
+          cov: np.ndarray | None = None) -> pd.DataFrame:
     """Traces of one predictor: ``queries`` (a :func:`query_frame`, or several concatenated)
     with the predictor's answers and their errors, columns as :data:`TRACE_COLUMNS`.
 
@@ -178,12 +176,15 @@ def score(queries: pd.DataFrame, predictor: str, answers: np.ndarray | pd.DataFr
         answers: (N, 2) positions [m] in the order of ``queries`` (a live replay), or a
             frame with drive, kind, t_query, x, y (answers from a file), matched by
             :func:`match_answers`.
+        cov: with array answers, their (N, 3) reported covariances cov_xx, cov_xy, cov_yy
+            [m^2] (NaN: none); a frame of answers brings its own columns.
     """
-    cov = np.full((len(queries), 3), np.nan)
+    cov = (np.full((len(queries), 3), np.nan) if cov is None
+           else np.asarray(cov, dtype=float).reshape(-1, 3).copy())
     if isinstance(answers, pd.DataFrame):
         xy = match_answers(queries, answers)
-        if all(c in answers for c in COV_COLUMNS[:3]):
-            cov[answer_positions(queries, answers)] = answers[list(COV_COLUMNS[:3])].to_numpy(float)
+        if all(c in answers for c in COV_COLUMNS):
+            cov[answer_positions(queries, answers)] = answers[list(COV_COLUMNS)].to_numpy(float)
     else:
         xy = np.asarray(answers, dtype=float).reshape(-1, 2)
         if len(xy) != len(queries):
@@ -200,8 +201,7 @@ def score(queries: pd.DataFrame, predictor: str, answers: np.ndarray | pd.DataFr
     cols.update({c: queries[c] for c in ("label", "speed_mps", "since_fix_s", "outage", "warmup")})
     for c in TRACK_QUERY_COLUMNS:
         cols[c] = queries[c] if c in queries else np.nan
-    cols.update({"cov_xx": cov[:, 0], "cov_xy": cov[:, 1], "cov_yy": cov[:, 2],
-                 "cov_us": np.nan})
+    cols.update({"cov_xx": cov[:, 0], "cov_xy": cov[:, 1], "cov_yy": cov[:, 2]})
     return pd.DataFrame(cols, index=queries.index).reset_index(drop=True)
 
 
@@ -214,8 +214,8 @@ def score_many(queries: pd.DataFrame, answers: Sequence[tuple[Any, ...]]) -> pd.
         queries: the query table (a :func:`query_frame`, or several concatenated).
         answers: (predictor name as run, (N, 2) positions [m] in the order of ``queries``)
             or, from a live replay of a predictor reporting uncertainty, (name, positions,
-            (N, 3) covariances cov_xx, cov_xy, cov_yy [m^2] or None, (N,) their
-            covariance_at durations [ns] or None).
+            (N, 3) covariances cov_xx, cov_xy, cov_yy [m^2] or None). Durations are not
+            traces: they stay in the DriveRun (``cov_ns``), so traces are deterministic.
     """
     if not answers:
         return pd.DataFrame()
@@ -244,12 +244,10 @@ def score_many(queries: pd.DataFrame, answers: Sequence[tuple[Any, ...]]) -> pd.
     cols.update({c: tiled(c) for c in ("label", "speed_mps", "since_fix_s", "outage", "warmup")})
     for c in TRACK_QUERY_COLUMNS:
         cols[c] = tiled(c) if c in queries else np.nan
-    cov = np.full((n * k, 4), np.nan)
+    cov = np.full((n * k, 3), np.nan)
     for j, a in enumerate(answers):
         if len(a) > 2 and a[2] is not None:
-            cov[j * n:(j + 1) * n, :3] = a[2]
-        if len(a) > 3 and a[3] is not None:
-            cov[j * n:(j + 1) * n, 3] = np.asarray(a[3], dtype=float) / 1e3
+            cov[j * n:(j + 1) * n] = a[2]
     cols.update({c: cov[:, i] for i, c in enumerate(COV_COLUMNS)})
     return pd.DataFrame(cols)
 

@@ -47,9 +47,9 @@ def ok(r: subprocess.CompletedProcess) -> subprocess.CompletedProcess:
 
 
 def answers_from_traces(run_dir: Path, q_dir: Path, predictor: str, path: Path) -> int:
-    """Write a predictor's answers from a saved run's traces as an answers file for the
-    queries folder ``q_dir`` (its drive ids and clock); NaN answers are left out (no
-    answer). Returns the number of answers written."""
+    """Write a predictor's answers (and its reported covariance, if any) from a saved run's
+    traces as an answers file for the queries folder ``q_dir`` (its drive ids and clock);
+    NaN answers are left out (no answer). Returns the number of answers written."""
     tr = load_run(run_dir).traces
     drives = {d["name"]: d for d in json.loads((q_dir / MANIFEST).read_text())["drives"]}
     t = tr[(tr.predictor == predictor) & tr.x.notna() & tr.y.notna()]
@@ -58,6 +58,9 @@ def answers_from_traces(run_dir: Path, q_dir: Path, predictor: str, path: Path) 
                         "kind": t.kind.astype(str),
                         "t_query": t.t_query - names.map(lambda n: drives[n]["t0_s"]),
                         "x": t.x, "y": t.y})
+    cov = ["cov_xx", "cov_xy", "cov_yy"]
+    if t[cov].notna().any(axis=None):  # the reported covariance travels with the answers
+        ans[cov] = t[cov]
     if path.suffix == ".parquet":
         ans.to_parquet(path, index=False)
     else:
@@ -389,3 +392,25 @@ def test_help_teaches_the_offline_commands():
               "9 decimals", "counted as missing", "look-ahead", "latency_us [us]", "Example:"):
         assert s in text, s
     assert "<str>" not in text and "<path>" not in text
+
+
+def test_answers_covariance_columns_checked(tmp_path):
+    """cov_xx, cov_xy, cov_yy travel with the answers: all three or none, a covariance
+    where given (empty = no uncertainty for that answer), else one error naming the row."""
+    base = "drive,kind,t_query,x,y"
+    ok_file = tmp_path / "ok.csv"
+    ok_file.write_text(f"{base},cov_xx,cov_xy,cov_yy\nd,now,0.5,1,2,0.04,0.01,0.09\n"
+                       "d,now,1.0,1,2,,,\n")
+    frame = read_answers(ok_file).frame
+    np.testing.assert_array_equal(frame["cov_xy"].to_numpy()[:1], [0.01])
+    assert frame[["cov_xx", "cov_xy", "cov_yy"]].iloc[1].isna().all()
+    partial = tmp_path / "partial.csv"
+    partial.write_text(f"{base},cov_xx,cov_yy\nd,now,0.5,1,2,0.04,0.09\n")
+    with pytest.raises(DataError, match="cov_xx, cov_yy without cov_xy"):
+        read_answers(partial)
+    not_psd = tmp_path / "not_psd.csv"
+    not_psd.write_text(f"{base},cov_xx,cov_xy,cov_yy\nd,now,0.5,1,2,0.04,0.01,0.09\n"
+                       "d,now,1.0,1,2,0.01,0.5,0.01\n")
+    with pytest.raises(DataError, match="line 3, columns cov_xx, cov_xy, cov_yy: .* is not a "
+                                        "covariance"):
+        read_answers(not_psd)

@@ -55,7 +55,7 @@ def make_traces(n_fix: int = 200, preds: tuple[str, ...] = ("cv", "kf"), drives:
                     "outage": outage,
                     # reported covariance: isotropic, per-axis sigma near the error's size
                     "cov_xx": np.full(tq.size, (0.05 * (p_i + 1)) ** 2), "cov_xy": 0.0,
-                    "cov_yy": np.full(tq.size, (0.05 * (p_i + 1)) ** 2), "cov_us": 1.0}))
+                    "cov_yy": np.full(tq.size, (0.05 * (p_i + 1)) ** 2)}))
     return pd.concat(frames, ignore_index=True)
 
 
