@@ -326,19 +326,10 @@ def check_yaw_rate(drive: Drive, kin: GpsKinematics | None, tol: Tolerances = TO
     lag, peak = best_lag(kin.course_rate, sign * w_moving, 1.0 / tol.grid_hz, tol.max_lag_s)
     fig = {"sign": float(np.sign(slope)), "scale": slope, "corr": corr, "lag_s": lag,
            "lag_corr": peak, "bias_rad_s": icpt, "moving_s": secs}
-    why = f"(correlation {corr:.2f} with GPS course rate)"
-    if abs(corr) >= tol.corr_fail and slope < 0:
-        return Check(s, FAIL, f"sign -1 {why}", fig)
-    if corr < tol.corr_fail:
-        return Check(s, FAIL, f"correlation {corr:.2f} with GPS course rate", fig)
-    v = _scale_verdict(slope, tol.scale_warn, tol.scale_fail)
-    if v != PASS:
-        return Check(s, v, f"scale {slope:.2f} {why}", fig)
-    if corr < tol.corr_warn:
-        return Check(s, WARN, f"correlation {corr:.2f} with GPS course rate", fig)
-    if abs(lag) > tol.lag_warn_s and peak >= tol.lag_min_corr:
-        return Check(s, WARN, f"time offset {lag:+.2f} s against GPS course rate", fig)
-    return Check(s, PASS, f"scale {slope:.2f}, corr {corr:.2f}, lag {lag:+.2f} s", fig)
+    ref = "GPS course rate"
+    return (_contradiction(s, slope, corr, ref, fig, tol)
+            or _weak_agreement(s, corr, lag, peak, ref, ref, fig, tol)
+            or Check(s, PASS, f"scale {slope:.2f}, corr {corr:.2f}, lag {lag:+.2f} s", fig))
 
 
 def check_ax(drive: Drive, kin: GpsKinematics | None, tol: Tolerances = TOLERANCES) -> Check:
@@ -378,21 +369,37 @@ def check_ax(drive: Drive, kin: GpsKinematics | None, tol: Tolerances = TOLERANC
     slope, corr, _ = slope_corr(ref_u, ax_u)
     lag, peak = best_lag(ref_u, ax_u, dt, tol.max_lag_s)
     fig.update(scale=slope, corr=corr, lag_s=lag, lag_corr=peak)
-    why = f"(correlation {corr:.2f} with d(speed)/dt of the {source})"
+    ref = f"d(speed)/dt of the {source}"
+    if found := _contradiction(s, slope, corr, ref, fig, tol):
+        return found
+    if abs(bias) > tol.bias_warn_mps2:
+        return Check(s, WARN, f"bias {bias:+.2f} m/s^2 against d(speed)/dt", fig)
+    return (_weak_agreement(s, corr, lag, peak, ref, "d(speed)/dt", fig, tol)
+            or Check(s, PASS, f"scale {slope:.2f}, corr {corr:.2f}, bias {bias:+.2f} m/s^2", fig))
+
+
+def _contradiction(s: str, slope: float, corr: float, ref: str, fig: dict[str, Any],
+                   tol: Tolerances) -> Check | None:
+    """The verdict of a stream against its GPS-derived reference ``ref`` when its sign,
+    correlation or scale contradicts it (fail, or a scale warning); None when they agree."""
+    why = f"(correlation {corr:.2f} with {ref})"
     if abs(corr) >= tol.corr_fail and slope < 0:
         return Check(s, FAIL, f"sign -1 {why}", fig)
     if corr < tol.corr_fail:
-        return Check(s, FAIL, f"correlation {corr:.2f} with d(speed)/dt of the {source}", fig)
-    v_ = _scale_verdict(slope, tol.scale_warn, tol.scale_fail)
-    if v_ != PASS:
-        return Check(s, v_, f"scale {slope:.2f} {why}", fig)
-    if abs(bias) > tol.bias_warn_mps2:
-        return Check(s, WARN, f"bias {bias:+.2f} m/s^2 against d(speed)/dt", fig)
+        return Check(s, FAIL, f"correlation {corr:.2f} with {ref}", fig)
+    v = _scale_verdict(slope, tol.scale_warn, tol.scale_fail)
+    return Check(s, v, f"scale {slope:.2f} {why}", fig) if v != PASS else None
+
+
+def _weak_agreement(s: str, corr: float, lag: float, peak: float, ref: str, lag_ref: str,
+                    fig: dict[str, Any], tol: Tolerances) -> Check | None:
+    """A warning for a weak correlation with ``ref`` or a time offset against ``lag_ref``
+    (judged only where the cross-correlation peak is clear); None otherwise."""
     if corr < tol.corr_warn:
-        return Check(s, WARN, f"correlation {corr:.2f} with d(speed)/dt of the {source}", fig)
+        return Check(s, WARN, f"correlation {corr:.2f} with {ref}", fig)
     if abs(lag) > tol.lag_warn_s and peak >= tol.lag_min_corr:
-        return Check(s, WARN, f"time offset {lag:+.2f} s against d(speed)/dt", fig)
-    return Check(s, PASS, f"scale {slope:.2f}, corr {corr:.2f}, bias {bias:+.2f} m/s^2", fig)
+        return Check(s, WARN, f"time offset {lag:+.2f} s against {lag_ref}", fig)
+    return None
 
 
 def check_yaw(drive: Drive, kin: GpsKinematics | None, tol: Tolerances = TOLERANCES) -> Check:
