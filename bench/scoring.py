@@ -189,26 +189,13 @@ def score(queries: pd.DataFrame, predictor: str, answers: np.ndarray | pd.DataFr
         xy = np.asarray(answers, dtype=float).reshape(-1, 2)
         if len(xy) != len(queries):
             raise ValueError(f"{len(xy)} answers for {len(queries)} queries")
-    ref = queries[["x_ref", "y_ref"]].to_numpy(float)
-    cols = {c: queries[c] for c in ("dataset", "drive")}
-    cols["predictor"] = predictor
-    cols.update({c: queries[c] for c in ("kind", "t_issue", "t_query")})
-    heading = (queries["heading_ref"].to_numpy(float) if "heading_ref" in queries
-               else np.full(len(queries), np.nan))
-    along, cross = track_errors(xy, ref, heading)
-    cols.update({"x": xy[:, 0], "y": xy[:, 1], "x_ref": ref[:, 0], "y_ref": ref[:, 1],
-                 "error_m": euclidean_error(xy, ref), "along_m": along, "cross_m": cross})
-    cols.update({c: queries[c] for c in ("label", "speed_mps", "since_fix_s", "outage", "warmup")})
-    for c in TRACK_QUERY_COLUMNS:
-        cols[c] = queries[c] if c in queries else np.nan
-    cols.update({"cov_xx": cov[:, 0], "cov_xy": cov[:, 1], "cov_yy": cov[:, 2]})
-    return pd.DataFrame(cols, index=queries.index).reset_index(drop=True)
+    return score_many(queries, [(predictor, xy, cov)])
 
 
 def score_many(queries: pd.DataFrame, answers: Sequence[tuple[Any, ...]]) -> pd.DataFrame:
-    """Traces of several predictors on the same ``queries``, one after the other: exactly
-    ``pd.concat([score(queries, name, xy) for name, xy in answers], ignore_index=True)``,
-    built in one go (one frame instead of one per predictor and a concatenation).
+    """Traces of several predictors on the same ``queries``, one after the other, built in
+    one go (one frame, not one per predictor and a concatenation); :func:`score` is its
+    one-predictor case. A test holds it equal to concatenating per-kind results.
 
     Args:
         queries: the query table (a :func:`query_frame`, or several concatenated).
