@@ -14,6 +14,18 @@ Noise profiles (:data:`GPS_PROFILES`, per axis, independent for x and y)
     ``"consumer"``  white noise sigma 0.5 m plus a first-order Gauss-Markov error
                     (sigma 1.0 m, time constant 45 s): slowly wandering metre-level error.
 
+Stated accuracy (``GpsStream.accuracy``, per-axis 1-sigma [m], :data:`STATED_SIGMA_M`)
+    What the simulated receiver *says* about each fix, as a real one does:
+    ``"rtk"`` states its true sigma, 0.02 m. ``"consumer"`` states only its white part,
+    0.5 m, and so **under-states** its true per-axis error sqrt(0.5^2 + 1.0^2) = 1.118 m
+    by a factor 2.24 (:data:`CONSUMER_UNDERSTATEMENT`): like a real receiver, whose
+    covariance reflects the measurement noise it sees fix to fix, not the slowly wandering
+    multipath / atmosphere error it cannot see. The fix-to-fix error over the 0.1-0.4 s
+    between fixes is nearly all white (the Gauss-Markov part changes by ~1.0 * sqrt(2 dt /
+    45 s) ~ 0.1 m), so 0.5 m is what a filter's fix-to-fix R needs; its absolute position
+    is 2.24x worse than stated. ``"none"`` adds no noise and states none (``None``). A
+    ``latency_s`` is not part of the stated accuracy (receivers do not state it either).
+
 Latency
     ``latency_s`` models a receiver that reports late: a fix stamped ``t`` carries the
     position the vehicle had at ``t - latency_s`` (a stale position). A predictor that
@@ -61,6 +73,12 @@ NOISE_PARAMS: dict[str, tuple[float, float, float]] = {
     "rtk": (0.02, 0.0, 1.0),
     "consumer": (0.5, 1.0, 45.0),
 }
+
+#: Stated per-axis 1-sigma [m] of each profile's fixes (``GpsStream.accuracy``; see the
+#: module doc): rtk its true sigma, consumer its white part only, none nothing.
+STATED_SIGMA_M: dict[str, float | None] = {"none": None, "rtk": 0.02, "consumer": 0.5}
+#: consumer's true per-axis sigma / its stated sigma (sqrt(0.5^2 + 1^2) / 0.5 = 2.236)
+CONSUMER_UNDERSTATEMENT: float = float(np.hypot(0.5, 1.0) / 0.5)
 
 
 # ----------------------------------------------------------------------------- fix times
@@ -185,6 +203,19 @@ def nominal_accuracy_m(profile: str) -> float:
     return float(np.sqrt(2.0 * (w * w + g * g)))
 
 
+def true_sigma_m(profile: str) -> float:
+    """True per-axis 1-sigma [m] of a profile's fix error (white and Gauss-Markov together)."""
+    _check_profile(profile)
+    w, g, _ = NOISE_PARAMS[profile]
+    return float(np.hypot(w, g))
+
+
+def stated_sigma_m(profile: str) -> float | None:
+    """Per-axis 1-sigma [m] a profile's fixes state in ``GpsStream.accuracy`` (None: none)."""
+    _check_profile(profile)
+    return STATED_SIGMA_M[profile]
+
+
 def degrade_gps(truth: TruthStream, profile: str = "rtk", seed: int = 0, latency_s: float = 0.0,
                 intervals: str = "aslan", origin: tuple[float, float] | None = None) -> GpsStream:
     """A GPS stream sampled from ``truth`` at irregular fix times, with profile noise.
@@ -199,7 +230,7 @@ def degrade_gps(truth: TruthStream, profile: str = "rtk", seed: int = 0, latency
         origin: optional (lat, lon) [deg] of the ENU frame; when given, lat/lon are filled.
     Returns:
         GpsStream with t [s], x/y [m], lat/lon (if ``origin``), accuracy = the profile's
-        nominal horizontal RMS [m] (``None`` for ``"none"``).
+        stated per-axis 1-sigma [m] (:func:`stated_sigma_m`; ``None`` for ``"none"``).
     """
     _check_profile(profile)
     if not (np.isfinite(latency_s) and latency_s >= 0):
@@ -215,7 +246,8 @@ def degrade_gps(truth: TruthStream, profile: str = "rtk", seed: int = 0, latency
     lat = lon = None
     if origin is not None:
         lat, lon = enu_to_latlon(x, y, origin[0], origin[1])
-    acc = None if profile == "none" else np.full(t_fix.size, nominal_accuracy_m(profile))
+    stated = stated_sigma_m(profile)
+    acc = None if stated is None else np.full(t_fix.size, stated)
     return GpsStream(t_fix, x, y, lat, lon, acc)
 
 

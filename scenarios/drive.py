@@ -42,7 +42,18 @@ def _check(name: str, t: np.ndarray, cols: dict[str, np.ndarray | None]) -> None
 
 @dataclass(frozen=True)
 class GpsStream:
-    """GNSS fixes. t [s], x/y [m, local frame], lat/lon [deg], accuracy [m, horizontal]."""
+    """GNSS fixes. t [s], x/y [m, local frame], lat/lon [deg], accuracy [m].
+
+    ``accuracy`` is the fix's stated horizontal accuracy as a **per-axis 1-sigma standard
+    deviation [m]**: the error of x (east) and of y (north) are each taken as zero-mean with
+    this standard deviation, equal on both axes and uncorrelated (covariance
+    ``accuracy**2 * I2`` [m^2], ENU). It is what the source *states*, not a measured error.
+    NaN marks a fix without a stated accuracy; ``None`` a stream without any. Per source:
+    ROS NavSatFix ``sqrt((cov[0] + cov[4]) / 2)`` (NaN when ``position_covariance_type`` is
+    UNKNOWN); KITTI OXTS ``pos_accuracy``; CSV/Parquet column ``accuracy``; the
+    degradation profiles (:mod:`scenarios.degrade`) their stated sigma; comma2k19 and the
+    paper's routes: none.
+    """
 
     t: np.ndarray
     x: np.ndarray

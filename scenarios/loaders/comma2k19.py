@@ -8,7 +8,10 @@ A segment folder ``<route>/<segment>/`` holds NumPy arrays saved without the
 Streams built (t = 0 is the earliest sample of any stream used):
 
 - gps: ``processed_log/GNSS/live_gnss_ublox`` (value columns lat [deg], lon [deg],
-  speed [m/s], utc_ms, alt [m], bearing [deg]); no accuracy column. **Time lag**:
+  speed [m/s], utc_ms, alt [m], bearing [deg]); no accuracy column, so
+  ``gps.accuracy`` is None (the u-blox hAcc is not in the processed log; ``raw_gnss_ublox``
+  has per-satellite pseudorange standard deviations, which give a position accuracy
+  only with the satellite geometry, not in the layout). **Time lag**:
   the u-blox fixes are logged ~0.1 s after the epoch they describe (the
   comma2k19 README says so). This loader subtracts ``gnss_lag_s`` (default 0.1 s,
   the README figure, chosen *without* looking at the truth) from the fix times.

@@ -13,7 +13,12 @@ Streams built (all from the one OXTS solution, 10 Hz):
 - truth: x, y [m] (``scenarios.projection.to_local`` about the first fix), yaw [rad]
   = OXTS ``yaw``, v [m/s] = hypot(vf, vl), accuracy [m] = ``pos_accuracy``;
 - gps: the same fixes (lat, lon, x, y, accuracy = ``pos_accuracy``); the runner
-  usually replaces it with a degraded draw from the truth;
+  usually replaces it with a degraded draw from the truth. ``pos_accuracy`` is one number
+  for north and east (dataformat.txt: "velocity accuracy (north/east in m)", a typo for
+  position); it is read as the per-axis 1-sigma of :class:`GpsStream` unchanged (the
+  literal reading: the figure holds for north and for east). Had KITTI folded the
+  OXTS north and east sigmas into their root-sum-square, this over-states by <= sqrt(2);
+  the layout does not say which;
 - imu: ax = ``af``, ay = ``al`` (vehicle frame, forward / left, m/s^2, parallel to
   the earth surface), yaw = OXTS ``yaw``, yaw_rate = ``wu`` (rad/s about up);
 - speed: v = ``vf`` [m/s].

@@ -5,8 +5,10 @@ Roles and the message types that fill them (found by type; ``topics`` maps a
 role to a topic name when a bag has several candidates):
 
 - ``gps``   ``sensor_msgs/NavSatFix`` -> :class:`GpsStream` (required). Fixes
-  with ``status.status < 0`` (no fix) are skipped and counted; accuracy [m] is
-  ``sqrt(mean(cov[0], cov[4]))`` when the covariance type is known (> 0).
+  with ``status.status < 0`` (no fix) are skipped and counted; accuracy [m] (per-axis
+  1-sigma, :class:`~scenarios.drive.GpsStream`) is ``sqrt(mean(cov[0], cov[4]))``, the
+  east and north variances of ``position_covariance`` (ENU, m^2), when its type is not
+  UNKNOWN (> 0), else NaN; a stream with no stated fix at all has accuracy None.
   lat/lon are projected about the first valid fix (``projection``).
 - ``imu``   ``sensor_msgs/Imu`` -> :class:`ImuStream`. REP 145: ``linear_acceleration`` is in
   the sensor frame (``header.frame_id``) and includes gravity; the mount comes from

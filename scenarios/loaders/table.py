@@ -14,13 +14,18 @@ column         used by stream        unit       required?
 ``lon``        gps, truth            deg        (WGS-84)
 ``x``          gps, truth            m          local metres (east-like, e.g. ENU)
 ``y``          gps, truth            m          local metres (north-like)
-``accuracy``   gps, truth            m          optional (horizontal, 1 sigma)
+``accuracy``   gps, truth            m          optional: per-axis 1-sigma (east = north)
 ``ax``         imu                   m/s^2      yes for imu rows (vehicle x forward)
 ``ay``         imu                   m/s^2      yes for imu rows (vehicle y left)
 ``yaw``        imu, truth            rad        optional (ENU: 0 = east, CCW +)
 ``yaw_rate``   imu                   rad/s      optional (CCW +, about up)
 ``v``          speed, truth          m/s        yes for speed rows, optional for truth
 =============  ====================  =========  =====================================
+
+``accuracy`` is the fix's stated horizontal accuracy as the standard deviation of each of
+x and y (not a radius, not a 95 % figure: divide a CEP50 by 1.1774, a 2DRMS by 2.83, a
+horizontal RMS by 1.414); an empty cell or NaN means "not stated". Predictors get it as
+``observe_gps(..., sigma=)``.
 
 Wide GPS-only files: without a ``stream`` column every row is a GPS fix
 (columns ``t`` or ``t_ns``, ``lat``/``lon`` or ``x``/``y``, optional ``accuracy``).
