@@ -43,7 +43,7 @@ from bench.config import RunConfig
 from bench.options import UsageError
 from bench.prepare import PreparedDrive, Queries, prepare_drive
 from bench.replay import GPS, IMU, QUERY, SPEED, build_events, replay
-from predictors.base import Predictor
+from predictors.base import Predictor, accepts_sigma
 from scenarios.drive import Drive, DriveMeta, GpsStream, ImuStream, SpeedStream
 
 #: "future" query horizon after each fix [s] (the paper's 0.2 s)
@@ -168,10 +168,13 @@ Event = tuple[int, float, tuple[float, ...]]
 def events(prep: PreparedDrive) -> list[Event]:
     """The replay's events in the runner's order as ``(kind, t, args)``: observations carry
     their values, a fix is followed by its future query (asked by :func:`feed`), a "now"
-    query has ``args = ()``."""
+    query has ``args = ()``; a fix's args are ``(x, y, sigma)`` (sigma [m] NaN when not stated)."""
     d = prep.drive
-    cols: dict[int, list[np.ndarray]] = {GPS: [prep.gps.t, prep.gps.x, prep.gps.y],
-                                         QUERY: [prep.now.t_query]}
+    acc = prep.gps.accuracy
+    cols: dict[int, list[np.ndarray]] = {
+        GPS: [prep.gps.t, prep.gps.x, prep.gps.y,
+              np.full(len(prep.gps), np.nan) if acc is None else acc],
+        QUERY: [prep.now.t_query]}
     if d.imu is not None:
         nan = np.full(len(d.imu), np.nan)
         cols[IMU] = [d.imu.t, d.imu.ax, d.imu.ay, nan if d.imu.yaw is None else d.imu.yaw,
@@ -191,10 +194,15 @@ def feed(pred: Predictor, evs: list[Event], start: int = 0, stop: int | None = N
     """Feed ``evs[start:stop]`` to ``pred`` (no ``reset()``) as :func:`bench.replay.replay`
     does; ``after(i)`` is called after event ``i``. Returns ``(t_query, x, y)`` per answer."""
     out = []
+    with_sigma = accepts_sigma(pred.observe_gps)
     for i in range(start, len(evs) if stop is None else stop):
         k, t, a = evs[i]
         if k == GPS:
-            pred.observe_gps(t, *a)
+            if with_sigma:
+                s = a[2]
+                pred.observe_gps(t, a[0], a[1], sigma=s if 0.0 < s < math.inf else None)
+            else:
+                pred.observe_gps(t, a[0], a[1])
             x, y = pred.position_at(t + HORIZON_S)
             out.append((t + HORIZON_S, float(x), float(y)))
         elif k == IMU:

@@ -10,17 +10,23 @@ timed with ``perf_counter_ns``.
 A predictor that reports uncertainty (:func:`reports_covariance`) is asked
 ``covariance_at`` right after each ``position_at``, with the same time; that call is
 timed on its own (``cov_ns``), never charged to the step's or query's latency.
+
+Fix accuracy: a predictor whose ``observe_gps`` takes ``sigma``
+(:func:`predictors.base.accepts_sigma`, checked once per replay) gets each fix's stated
+per-axis 1-sigma [m] (``GpsStream.accuracy``) as ``sigma=``, or ``sigma=None`` where the
+stream states none or the value is not finite and positive; others get (t, x, y) only.
 """
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from time import perf_counter_ns
 
 import numpy as np
 
 from bench.prepare import PreparedDrive
-from predictors.base import Predictor
+from predictors.base import Predictor, accepts_sigma
 
 GPS, IMU, SPEED, QUERY = 0, 1, 2, 3
 
@@ -83,7 +89,7 @@ CHUNK_EVENTS = 1 << 16
 def _columns(prep: PreparedDrive) -> dict[int, list[np.ndarray | None]]:
     d = prep.drive
     cols: dict[int, list[np.ndarray | None]] = {
-        GPS: [prep.gps.t, prep.gps.x, prep.gps.y], QUERY: [prep.now.t_query]}
+        GPS: [prep.gps.t, prep.gps.x, prep.gps.y, prep.gps.accuracy], QUERY: [prep.now.t_query]}
     if d.imu is not None:
         cols[IMU] = [d.imu.t, d.imu.ax, d.imu.ay, d.imu.yaw, d.imu.yaw_rate]
     if d.speed is not None:
@@ -97,6 +103,11 @@ def _window(cols: list[np.ndarray | None], sel: np.ndarray) -> tuple[int, list[l
         return 0, [[] for _ in cols]
     lo, hi = int(sel.min()), int(sel.max()) + 1
     return lo, [c[lo:hi].tolist() if c is not None else [float("nan")] * (hi - lo) for c in cols]
+
+
+def _sigmas(acc: list[float]) -> list[float | None]:
+    """Fix accuracies [m] as observe_gps takes them: None where not finite and positive."""
+    return [a if 0.0 < a < math.inf else None for a in acc]
 
 
 def replay(predictor: Predictor, prep: PreparedDrive, horizon_s: float) -> ReplayResult:
@@ -119,10 +130,13 @@ def replay(predictor: Predictor, prep: PreparedDrive, horizon_s: float) -> Repla
     covariance_at = predictor.covariance_at
     observe_gps, observe_imu = predictor.observe_gps, predictor.observe_imu
     observe_speed, position_at = predictor.observe_speed, predictor.position_at
+    with_sigma = accepts_sigma(observe_gps)
     predictor.reset()
     for c in range(0, kinds.size, CHUNK_EVENTS):
         kc, ic = kinds[c:c + CHUNK_EVENTS], idxs[c:c + CHUNK_EVENTS]
-        go, (gt, gx, gy) = _window(cols[GPS], ic[kc == GPS])
+        go, (gt, gx, gy, gs) = _window(cols[GPS], ic[kc == GPS])
+        if with_sigma:
+            gs = _sigmas(gs)
         qo, (qt,) = _window(cols[QUERY], ic[kc == QUERY])
         if IMU in cols:
             io, (it, iax, iay, iyaw, irate) = _window(cols[IMU], ic[kc == IMU])
@@ -136,7 +150,10 @@ def replay(predictor: Predictor, prep: PreparedDrive, horizon_s: float) -> Repla
                 j = i - go
                 t = gt[j]
                 c0 = clock()
-                observe_gps(t, gx[j], gy[j])
+                if with_sigma:
+                    observe_gps(t, gx[j], gy[j], sigma=gs[j])
+                else:
+                    observe_gps(t, gx[j], gy[j])
                 p = position_at(t + horizon_s)
                 step_ns[i] = clock() - c0
                 future[i] = p

@@ -13,7 +13,9 @@ Missing values are passed as NaN.
 
 from __future__ import annotations
 
+import inspect
 from abc import ABC, abstractmethod
+from collections.abc import Callable
 from typing import ClassVar
 
 import numpy as np
@@ -31,8 +33,13 @@ class Predictor(ABC):
         """Forget everything: a new drive starts."""
 
     @abstractmethod
-    def observe_gps(self, t: float, x: float, y: float) -> None:
-        """A GNSS fix at time t [s], position (x, y) [m, ENU]."""
+    def observe_gps(self, t: float, x: float, y: float, sigma: float | None = None) -> None:
+        """A GNSS fix at time t [s], position (x, y) [m, ENU]; ``sigma`` [m] is the fix's
+        stated per-axis 1-sigma accuracy (east and north alike, uncorrelated: covariance
+        ``sigma**2 * I2`` m^2, :class:`~scenarios.drive.GpsStream`), None when the source
+        states none. The runner passes ``sigma`` only to an ``observe_gps`` that declares a
+        parameter of that name (:func:`accepts_sigma`): a predictor written with the
+        three-argument form keeps working and never sees it."""
 
     def observe_imu(self, t: float, ax: float, ay: float, yaw: float, yaw_rate: float) -> None:
         """An IMU sample at t [s]: ax, ay [m/s^2, vehicle frame], yaw [rad], yaw_rate [rad/s]."""
@@ -69,3 +76,15 @@ class Predictor(ABC):
         them: results on those drives are not held-out. () when there is no learned model
         or the model does not record its training drives."""
         return ()
+
+
+def accepts_sigma(observe_gps: Callable[..., object]) -> bool:
+    """Whether an ``observe_gps`` (bound or not) takes the fix accuracy: it declares a
+    parameter named ``sigma`` (or ``**kwargs``). Checked once per predictor by the runner
+    and by :class:`~predictors.gate.GatedPredictor`, not per fix."""
+    try:
+        params = inspect.signature(observe_gps).parameters.values()
+    except (TypeError, ValueError):  # a builtin without a signature: the old form
+        return False
+    return any(p.name == "sigma" and p.kind in (p.POSITIONAL_OR_KEYWORD, p.KEYWORD_ONLY)
+               or p.kind is p.VAR_KEYWORD for p in params)

@@ -193,7 +193,9 @@ class CtraEkf(Predictor):
         jerk_psd: white-jerk spectral density [m^2/s^5].
         yaw_acc_psd: white yaw-acceleration spectral density [rad^2/s^3].
         pos_psd: position random-walk density [m^2/s].
-        gps_sigma: fix noise [m] per axis.
+        gps_sigma: fix noise [m] per axis, for fixes that state no accuracy.
+        gps_sigma_scale: a fix stating its accuracy ``sigma`` [m] (``observe_gps(...,
+            sigma=)``, per-axis 1-sigma) is weighed with R = (gps_sigma_scale * sigma)^2 I2.
         yaw_rate_sigma: gyro noise [rad/s]. accel_sigma: longitudinal accel noise [m/s^2].
         yaw_sigma: IMU yaw noise [rad]. speed_sigma: wheel-speed noise [m/s].
         speed_rel_sigma: wheel-speed scale error, fraction of v (tyre radius, calibration).
@@ -211,17 +213,19 @@ class CtraEkf(Predictor):
                  accel_bias_psd: float = 1e-3, gyro_bias_psd: float = 1e-6,
                  accel_bias_sigma0: float = 0.5, gyro_bias_sigma0: float = 0.01,
                  yaw_offset_sigma0: float = 0.1, speed_scale_sigma0: float = 0.05,
-                 calib_psd: float = 1e-6) -> None:
+                 calib_psd: float = 1e-6, gps_sigma_scale: float = 1.0) -> None:
         check_config("ekf", jerk_psd=(jerk_psd, 1e-9, 1e6), yaw_acc_psd=(yaw_acc_psd, 1e-12, 1e6),
                      pos_psd=(pos_psd, 0.0, 1e6), gps_sigma=(gps_sigma, 1e-4, 1e3),
                      yaw_rate_sigma=(yaw_rate_sigma, 1e-6, 1e3),
                      accel_sigma=(accel_sigma, 1e-4, 1e3), yaw_sigma=(yaw_sigma, 1e-6, 10.0),
                      speed_sigma=(speed_sigma, 1e-4, 1e3), speed_rel_sigma=(speed_rel_sigma, 0.0, 1.0),
-                     init_vel_sigma=(init_vel_sigma, 1e-3, 1e3))
+                     init_vel_sigma=(init_vel_sigma, 1e-3, 1e3),
+                     gps_sigma_scale=(gps_sigma_scale, 1e-3, 1e3))
         self.jerk_psd = float(jerk_psd)
         self.yaw_acc_psd = float(yaw_acc_psd)
         self.pos_psd = float(pos_psd)
         self.gps_sigma = float(gps_sigma)
+        self.gps_sigma_scale = float(gps_sigma_scale)
         self.yaw_rate_sigma = float(yaw_rate_sigma)
         self.accel_sigma = float(accel_sigma)
         self.yaw_sigma = float(yaw_sigma)
@@ -238,6 +242,7 @@ class CtraEkf(Predictor):
         self.speed_scale_sigma0 = float(speed_scale_sigma0)
         self.calib_psd = float(calib_psd)
         self._r_gps = self.gps_sigma ** 2
+        self._r_fix = self._r_gps  # R per axis [m^2] of the fix being observed
         self._r_w = self.yaw_rate_sigma ** 2
         self._r_a = self.accel_sigma ** 2
         self._r_yaw = self.yaw_sigma ** 2
@@ -261,6 +266,7 @@ class CtraEkf(Predictor):
     def config(self) -> dict:
         return {"jerk_psd": self.jerk_psd, "yaw_acc_psd": self.yaw_acc_psd,
                 "pos_psd": self.pos_psd, "gps_sigma": self.gps_sigma,
+                "gps_sigma_scale": self.gps_sigma_scale,
                 "yaw_rate_sigma": self.yaw_rate_sigma, "accel_sigma": self.accel_sigma,
                 "yaw_sigma": self.yaw_sigma, "speed_sigma": self.speed_sigma,
                 "speed_rel_sigma": self.speed_rel_sigma,
@@ -285,7 +291,8 @@ class CtraEkf(Predictor):
     def _init(self, t: float, x: float, y: float, yaw: float, v: float,
               var_yaw: float, var_v: float) -> None:
         self.x[:] = (x, y, wrap_angle(yaw), v, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
-        self.P[:] = np.diag([self._r_gps, self._r_gps, var_yaw, var_v, 0.3 ** 2, 2.0 ** 2,
+        r = self._r_fix
+        self.P[:] = np.diag([r, r, var_yaw, var_v, 0.3 ** 2, 2.0 ** 2,
                              self.accel_bias_sigma0 ** 2, self.gyro_bias_sigma0 ** 2,
                              self.yaw_offset_sigma0 ** 2, self.speed_scale_sigma0 ** 2])
         self._ts = t
@@ -321,7 +328,7 @@ class CtraEkf(Predictor):
     def _update_position(self, zx: float, zy: float) -> None:
         """GNSS fix (zx, zy) [m], noise r I2: the 2-D update with S^-1 in closed form
         (equal to the scalar updates of x then y)."""
-        P, x, r = self.P, self.x, self._r_gps
+        P, x, r = self.P, self.x, self._r_fix
         s00, s01, s11 = P.item(0, 0) + r, P.item(0, 1), P.item(1, 1) + r
         det = s00 * s11 - s01 * s01
         Si = self._S2
@@ -387,9 +394,19 @@ class CtraEkf(Predictor):
         self._gain(ph, g * ph.item(IV) + v * ph.item(IKV) + r, z - g * v)
 
     # -- observations ----------------------------------------------------------------
-    def observe_gps(self, t: float, x: float, y: float) -> None:
+    def fix_variance(self, sigma: float | None) -> float:
+        """R per axis [m^2] of a fix stating per-axis 1-sigma ``sigma`` [m]:
+        ``(gps_sigma_scale * sigma)^2``, or ``gps_sigma^2`` when it states none (None,
+        not finite, or <= 0)."""
+        if sigma is not None and 0.0 < sigma < math.inf:
+            s = self.gps_sigma_scale * sigma
+            return s * s
+        return self._r_gps
+
+    def observe_gps(self, t: float, x: float, y: float, sigma: float | None = None) -> None:
         if not (math.isfinite(x) and math.isfinite(y)):
             return
+        self._r_fix = self.fix_variance(sigma)  # this fix's R, read by _init / _update_position
         if not self._ready:
             self._try_init(t, x, y)
             return
@@ -409,10 +426,11 @@ class CtraEkf(Predictor):
         if not (t > t0):  # first fix (t0 NaN) or a repeated time stamp
             return
         d = math.hypot(x - x0, y - y0)
-        var_yaw = min((2.0 * self.gps_sigma / d) ** 2, math.pi ** 2) if d > 0 else math.pi ** 2
+        r = self._r_fix
+        var_yaw = min(4.0 * r / (d * d), math.pi ** 2) if d > 0 else math.pi ** 2
         if not v_known:
             v0 = d / (t - t0)
-            var_v = 2.0 * self._r_gps / (t - t0) ** 2 + 1.0
+            var_v = 2.0 * r / (t - t0) ** 2 + 1.0
         self._init(t, x, y, math.atan2(y - y0, x - x0), v0, var_yaw, var_v)
 
     def observe_imu(self, t: float, ax: float, ay: float, yaw: float, yaw_rate: float) -> None:

@@ -35,7 +35,7 @@ from collections.abc import Callable
 from typing import Any
 
 from predictors._geometry import check_config
-from predictors.base import Predictor
+from predictors.base import Predictor, accepts_sigma
 
 #: EWMA weight of one accepted fix in the noise estimate
 NOISE_ALPHA = 0.05
@@ -179,7 +179,8 @@ class GatedPredictor(Predictor):
     """
 
     #: the names stored on the gate itself (everything else may be the wrapped predictor's)
-    _OWN = frozenset({"inner", "gate", "name", "observe_imu", "observe_speed", "position_at"})
+    _OWN = frozenset({"inner", "gate", "name", "observe_imu", "observe_speed", "position_at",
+                      "_inner_sigma"})
 
     def __init__(self, inner: Predictor, gate: FixGate | None = None) -> None:
         self.inner = inner
@@ -188,6 +189,7 @@ class GatedPredictor(Predictor):
         self.observe_imu = inner.observe_imu  # type: ignore[method-assign]  # hot path: no hop
         self.observe_speed = inner.observe_speed  # type: ignore[method-assign]
         self.position_at = inner.position_at  # type: ignore[method-assign]
+        self._inner_sigma = accepts_sigma(inner.observe_gps)  # forward the fix accuracy?
 
     def __getattr__(self, key: str) -> Any:
         """Only for names the gate lacks: the wrapped predictor's attribute. Special names
@@ -219,9 +221,14 @@ class GatedPredictor(Predictor):
         self.gate.reset()
         self.inner.reset()
 
-    def observe_gps(self, t: float, x: float, y: float) -> None:
+    def observe_gps(self, t: float, x: float, y: float, sigma: float | None = None) -> None:
+        """Judge the fix; pass an accepted one on, with ``sigma`` [m] when the wrapped
+        predictor's observe_gps takes it (three-argument predictors get t, x, y only)."""
         if self.gate.check(t, x, y):
-            self.inner.observe_gps(t, x, y)
+            if self._inner_sigma:
+                self.inner.observe_gps(t, x, y, sigma=sigma)
+            else:
+                self.inner.observe_gps(t, x, y)
 
     def position_at(self, t: float) -> tuple[float, float]:  # replaced per instance
         return self.inner.position_at(t)

@@ -16,7 +16,8 @@ yaw; when yaw is NaN (e.g. comma2k19) with the heading of the velocity state (ab
 heading at all the sample is skipped.
 
 Cycle: predict at every observation's time (variable dt), then update: fixes
-(x, y; sigma ``gps_sigma``), IMU world acceleration, wheel speed along the heading
+(x, y; per-axis sigma ``gps_sigma_scale`` x the fix's stated accuracy when
+``observe_gps`` is given one, else ``gps_sigma``), IMU world acceleration, wheel speed along the heading
 (sigma ``speed_sigma``); a speed below ``stop_speed`` is a zero-velocity update of both
 components. ``position_at`` extrapolates the current mean in closed form
 (``p + v dt + a dt^2/2``) without touching the filter; ``covariance_at`` gives the position
@@ -82,7 +83,9 @@ class LinearKalman(Predictor):
 
     Args:
         jerk_psd: process noise, white-jerk spectral density [m^2/s^5].
-        gps_sigma: fix noise [m] per axis.
+        gps_sigma: fix noise [m] per axis, for fixes that state no accuracy.
+        gps_sigma_scale: a fix stating its accuracy ``sigma`` [m] (``observe_gps(...,
+            sigma=)``, per-axis 1-sigma) is weighed with R = (gps_sigma_scale * sigma)^2 I2.
         accel_sigma: IMU acceleration noise [m/s^2] per axis.
         speed_sigma: wheel-speed noise [m/s].
         speed_rel_sigma: wheel-speed scale error (tyre radius, calibration), fraction of v.
@@ -100,14 +103,16 @@ class LinearKalman(Predictor):
                  speed_sigma: float = 0.2, speed_rel_sigma: float = 0.03, use_speed: bool = True,
                  stop_speed: float = 0.15 * KMH,
                  init_vel_sigma: float = 15.0, init_acc_sigma: float = 3.0,
-                 heading_min_speed: float = 1.0) -> None:
+                 heading_min_speed: float = 1.0, gps_sigma_scale: float = 1.0) -> None:
         check_config("kf", jerk_psd=(jerk_psd, 1e-9, 1e6), gps_sigma=(gps_sigma, 1e-4, 1e3),
+                     gps_sigma_scale=(gps_sigma_scale, 1e-3, 1e3),
                      accel_sigma=(accel_sigma, 1e-4, 1e3), speed_sigma=(speed_sigma, 1e-4, 1e3),
                      speed_rel_sigma=(speed_rel_sigma, 0.0, 1.0), stop_speed=(stop_speed, 0.0, 10.0), init_vel_sigma=(init_vel_sigma, 1e-3, 1e3),
                      init_acc_sigma=(init_acc_sigma, 1e-3, 1e3),
                      heading_min_speed=(heading_min_speed, 0.0, 100.0))
         self.jerk_psd = float(jerk_psd)
         self.gps_sigma = float(gps_sigma)
+        self.gps_sigma_scale = float(gps_sigma_scale)
         self.accel_sigma = float(accel_sigma)
         self.speed_sigma = float(speed_sigma)
         self.speed_rel_sigma = float(speed_rel_sigma)
@@ -130,7 +135,8 @@ class LinearKalman(Predictor):
                 "accel_sigma": self.accel_sigma, "speed_sigma": self.speed_sigma,
                 "speed_rel_sigma": self.speed_rel_sigma, "use_speed": self.use_speed, "stop_speed": self.stop_speed,
                 "init_vel_sigma": self.init_vel_sigma, "init_acc_sigma": self.init_acc_sigma,
-                "heading_min_speed": self.heading_min_speed}
+                "heading_min_speed": self.heading_min_speed,
+                "gps_sigma_scale": self.gps_sigma_scale}
 
     # -- state -------------------------------------------------------------------------
     def reset(self) -> None:
@@ -150,18 +156,27 @@ class LinearKalman(Predictor):
             self._ts = t
 
     # -- observations -----------------------------------------------------------------
-    def observe_gps(self, t: float, x: float, y: float) -> None:
+    def fix_variance(self, sigma: float | None) -> float:
+        """R per axis [m^2] of a fix stating per-axis 1-sigma ``sigma`` [m]:
+        ``(gps_sigma_scale * sigma)^2``, or ``gps_sigma^2`` when it states none (None,
+        not finite, or <= 0)."""
+        if sigma is not None and 0.0 < sigma < math.inf:
+            s = self.gps_sigma_scale * sigma
+            return s * s
+        return self._r_pos
+
+    def observe_gps(self, t: float, x: float, y: float, sigma: float | None = None) -> None:
         if not (math.isfinite(x) and math.isfinite(y)):
             return
+        r = self.fix_variance(sigma)
         if not self._ready:
-            self.kf.init(x, y, self.gps_sigma ** 2, self.init_vel_sigma ** 2,
-                         self.init_acc_sigma ** 2)
+            self.kf.init(x, y, r, self.init_vel_sigma ** 2, self.init_acc_sigma ** 2)
             self._ts = t
             self._ready = True
             self._sync()
             return
         self._predict_to(t)
-        self.kf.update_pair(POS, x, y, self._r_pos)
+        self.kf.update_pair(POS, x, y, r)
         self._sync()
 
     def _heading(self, t: float, yaw: float, yaw_rate: float) -> float:

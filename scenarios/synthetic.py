@@ -316,7 +316,8 @@ def generate_drive(seed: int = 0, name: str | None = None, route: str = "mixed",
     e = gps_noise(tf, r_gps, GPS_WHITE_SD, GPS_GM_SD, GPS_GM_TAU_S)
     gx, gy = gx + e[:, 0], gy + e[:, 1]
     lat, lon = enu_to_latlon(gx, gy, ORIGIN_LAT, ORIGIN_LON)
-    acc = np.full(tf.size, float(np.sqrt(2 * (GPS_WHITE_SD ** 2 + GPS_GM_SD ** 2))))
+    # stated accuracy: the true per-axis 1-sigma of the noise added (an honest receiver)
+    acc = np.full(tf.size, float(np.hypot(GPS_WHITE_SD, GPS_GM_SD)))
     gps = GpsStream(tf, gx, gy, lat, lon, acc)
     n_out = max(1, int(round(span / 40.0)))
     win = outage_windows(float(tf[0]), float(tf[-1]), r_drop.uniform(1.0, 2.0, n_out), r_drop,

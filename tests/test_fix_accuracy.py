@@ -10,6 +10,10 @@ import numpy as np
 import pytest
 from test_loader_rosbag import _Msgs, _ns, _trajectory, _write_bag
 
+from bench.replay import replay
+from predictors.base import Predictor, accepts_sigma
+from predictors.gate import GatedPredictor
+from predictors.registry import create
 from scenarios import loaders
 from scenarios.degrade import (
     CONSUMER_UNDERSTATEMENT,
@@ -18,7 +22,7 @@ from scenarios.degrade import (
     stated_sigma_m,
     true_sigma_m,
 )
-from scenarios.drive import TruthStream
+from scenarios.drive import GpsStream, TruthStream
 
 KITTI_SMALL = "2011_09_26/2011_09_26_drive_0001_sync"
 COMMA_SEG = "b0c9d2329ad1606b_2018-08-02--08-34-47/40"
@@ -138,3 +142,132 @@ def test_rtk_states_the_truth_consumer_understates() -> None:
                 CONSUMER_UNDERSTATEMENT, rel=0.15)
             step = np.concatenate([np.diff(x, axis=0) for x in errs]) / math.sqrt(2.0)
             assert np.allclose(step.std(axis=0), 0.5, rtol=0.1)
+
+
+# --------------------------------------------------------------------------- observe_gps(sigma=)
+
+class _OldStyle(Predictor):
+    """A user predictor written before fix accuracy existed: three-argument observe_gps."""
+
+    name = "old_style"
+
+    def reset(self) -> None:
+        self.fixes: list[tuple[float, float, float]] = []
+
+    def observe_gps(self, t: float, x: float, y: float) -> None:  # type: ignore[override]
+        self.fixes.append((t, x, y))
+
+    def position_at(self, t: float) -> tuple[float, float]:
+        return self.fixes[-1][1:] if self.fixes else (math.nan, math.nan)
+
+
+class _NewStyle(_OldStyle):
+    name = "new_style"
+
+    def reset(self) -> None:
+        super().reset()
+        self.sigmas: list[float | None] = []
+
+    def observe_gps(self, t: float, x: float, y: float, sigma: float | None = None) -> None:
+        self.fixes.append((t, x, y))
+        self.sigmas.append(sigma)
+
+
+def test_accepts_sigma() -> None:
+    assert not accepts_sigma(_OldStyle().observe_gps)
+    assert accepts_sigma(_NewStyle().observe_gps)
+    assert accepts_sigma(lambda t, x, y, **kw: None)
+    assert accepts_sigma(lambda t, x, y, *, sigma=None: None)
+    assert not accepts_sigma(lambda t, x, y, *args: None)
+    assert not accepts_sigma(print)  # no signature: the old form, never a crash
+    assert accepts_sigma(create("kf").observe_gps) and accepts_sigma(create("ekf").observe_gps)
+    assert not accepts_sigma(create("cv").observe_gps)
+
+
+def _prep(accuracy: np.ndarray | None):
+    from dataclasses import replace
+
+    from bench.contract import cut_prepared, inputs
+
+    prep = cut_prepared(inputs().drive, 15.0)
+    g = prep.gps
+    return replace(prep, gps=GpsStream(g.t, g.x, g.y, g.lat, g.lon, accuracy))
+
+
+def test_replay_passes_sigma_only_to_predictors_that_take_it() -> None:
+    n = len(_prep(None).gps)
+    acc = np.full(n, 0.7)
+    acc[::3] = np.nan  # not stated
+    acc[1] = 0.0  # not a usable sigma
+    prep = _prep(acc)
+    old, new = _OldStyle(), _NewStyle()
+    r_old = replay(old, prep, 0.2)
+    r_new = replay(new, prep, 0.2)
+    assert len(old.fixes) == len(new.fixes) == n
+    np.testing.assert_array_equal(r_old.future_xy, r_new.future_xy)
+    want = [None if not (a > 0) else 0.7 for a in acc]
+    assert new.sigmas == want
+    # a stream without any stated accuracy: sigma=None on every fix
+    new2 = _NewStyle()
+    replay(new2, _prep(None), 0.2)
+    assert new2.sigmas == [None] * n
+
+
+def test_gate_forwards_sigma() -> None:
+    old, new = GatedPredictor(_OldStyle()), GatedPredictor(_NewStyle())
+    for p in (old, new):
+        p.reset()
+        p.observe_gps(0.0, 0.0, 0.0, sigma=0.4)
+        p.observe_gps(0.2, 2.0, 0.0)
+        p.observe_gps(0.4, 4.0, 0.0, sigma=0.5)
+    assert len(old.inner.fixes) == 3
+    assert new.inner.sigmas == [0.4, None, 0.5]
+    assert accepts_sigma(old.observe_gps)  # the gate always takes it, forwards it if it can
+    # the gate survives pickling with its forwarding decision
+    import pickle
+
+    c = pickle.loads(pickle.dumps(new))
+    c.observe_gps(0.6, 6.0, 0.0, sigma=0.25)
+    assert c.inner.sigmas[-1] == 0.25
+
+
+def test_old_style_predictor_through_the_runner() -> None:
+    """A three-argument user predictor keeps working in a whole run (behind the gate)."""
+    from bench.contract import cut_prepared, inputs
+
+    prep = cut_prepared(inputs().drive, 15.0)
+    assert prep.gps.accuracy is not None  # the synthetic fixes state an accuracy
+    p = GatedPredictor(_OldStyle())
+    res = replay(p, prep, 0.2)
+    assert np.isfinite(res.future_xy).all()
+
+
+@pytest.mark.parametrize("name", ["kf", "ekf"])
+def test_filters_use_stated_sigma_as_R(name: str) -> None:
+    """A fix stating sigma is weighed exactly like a fix of a filter whose constant R is
+    (gps_sigma_scale * sigma)^2; a fix stating none (None, NaN, 0) uses gps_sigma."""
+    rng = np.random.default_rng(5)
+    t = np.arange(0.0, 20.0, 0.2)
+    x = 8.0 * t + rng.normal(0, 0.5, t.size)
+    y = 0.02 * t * t + rng.normal(0, 0.5, t.size)
+
+    def answers(p: Predictor, sigmas: list) -> np.ndarray:
+        p.reset()
+        out = []
+        for ti, xi, yi, s in zip(t, x, y, sigmas, strict=True):
+            if s == "old":  # the three-argument call
+                p.observe_gps(ti, xi, yi)
+            else:
+                p.observe_gps(ti, xi, yi, sigma=s)
+            out.append(p.position_at(ti + 0.2))
+        return np.asarray(out)
+
+    stated = answers(create(name, gps_sigma=0.3, gps_sigma_scale=2.0), [0.5] * t.size)
+    constant = answers(create(name, gps_sigma=1.0), ["old"] * t.size)
+    np.testing.assert_allclose(stated, constant, rtol=0, atol=1e-9)
+    plain = answers(create(name, gps_sigma=0.3), ["old"] * t.size)
+    for missing in (None, math.nan, 0.0):
+        np.testing.assert_array_equal(
+            answers(create(name, gps_sigma=0.3, gps_sigma_scale=2.0), [missing] * t.size), plain)
+    assert not np.allclose(stated, plain)  # the stated sigma really changes the answers
+    assert create(name, gps_sigma_scale=1.5).config()["gps_sigma_scale"] == 1.5
