@@ -36,6 +36,24 @@ GRIDS: dict[str, dict[str, list[float]]] = {
             "yaw_acc_psd": [0.01, 0.1, 1.0, 10.0]},
 }
 
+#: values of ``gps_sigma_scale`` tried where the fixes state their accuracy (rtk, consumer):
+#: there R = (scale * stated sigma)^2 and ``gps_sigma`` is never used, so the scale takes its
+#: place in the grid (rtk's old optimum gps_sigma 0.3 m is 15 x its stated 0.02 m)
+SCALE_GRID: list[float] = [0.5, 1.0, 1.5, 2.0, 3.0, 4.0, 6.0, 8.0, 16.0, 32.0]
+
+
+def grid_for(predictor: str, gps_profile: str) -> dict[str, list[float]]:
+    """The search grid of ``predictor`` under ``gps_profile``: :data:`GRIDS`, with
+    ``gps_sigma`` replaced by ``gps_sigma_scale`` (:data:`SCALE_GRID`) for a simulated
+    profile whose fixes state their accuracy (:func:`scenarios.degrade.stated_sigma_m`)."""
+    from scenarios.degrade import GPS_PROFILES, stated_sigma_m
+
+    grid = GRIDS[predictor]
+    if gps_profile not in GPS_PROFILES or stated_sigma_m(gps_profile) is None:
+        return dict(grid)
+    return {("gps_sigma_scale" if k == "gps_sigma" else k): (SCALE_GRID if k == "gps_sigma" else v)
+            for k, v in grid.items()}
+
 
 def objective(runs) -> float:
     """Mean future error + mean now error [m] over all queries of the runs."""

@@ -36,7 +36,7 @@ def tune(
     from concurrent.futures.process import BrokenProcessPool
 
     from bench.config import GPS_PROFILES
-    from bench.tune import GRIDS, grid_search, save_tuned
+    from bench.tune import GRIDS, grid_for, grid_search, save_tuned
 
     if predictor not in GRIDS:
         raise fail(f"no tuning grid for {predictor!r}; tunable: {', '.join(GRIDS)}")
@@ -58,13 +58,14 @@ def tune(
 
             dev = [d for s in range(1000, 1000 + drives) for d in default_drives(seed=s)]
             source = f"synthetic development drives, seeds 1000-{999 + drives}"
-        n = len(list(__import__("itertools").product(*list(GRIDS[predictor].values())[:2]))) + sum(
-            len(v) for v in list(GRIDS[predictor].values())[2:])
+        grid = grid_for(predictor, gps_profile)
+        n = len(list(__import__("itertools").product(*list(grid.values())[:2]))) + sum(
+            len(v) for v in list(grid.values())[2:])
         from rich.progress import Progress
 
         with Progress(console=console) as prog:
             task = prog.add_task(f"tuning {predictor} ({gps_profile})", total=n)
-            best, trials = grid_search(predictor, dev, gps_profile, GRIDS[predictor], workers=workers,
+            best, trials = grid_search(predictor, dev, gps_profile, grid, workers=workers,
                                        on_step=lambda p, v: prog.update(task, advance=1))
     except (DataError, UsageError) as e:
         raise fail(str(e)) from None
