@@ -5,7 +5,14 @@ simulated GPS profiles (``none``, ``rtk``, ``consumer``) they are synthetic driv
 drawn with seeds 1000+ (the built-in default set uses seed 0); for ``native``
 (the paper's routes, real fixes) they are the LSTM's training routes, never its
 validation routes. The objective is the mean future-point error [m] plus the mean
-current-position error [m] over all queries. Winners are written to
+current-position error [m] over all queries.
+
+Calibration follows the search (:func:`calibrate`): with the winning parameters, the
+same development drives are replayed once and ``cov_scale`` (the factor ``covariance_at``
+multiplies its covariance by) is set so that 95 % of the scored queries (future and now
+pooled) fall inside their 95 % ellipse (:func:`metrics.calibration.coverage_scale`). It
+changes no position, so it cannot trade accuracy for honesty. ``cv`` has no noise to
+search, only this scale. Winners are written to
 ``predictors/tuned.json``, keyed by predictor and GPS condition, which the
 registry merges over the predictors' physical defaults.
 """
@@ -31,6 +38,7 @@ GRIDS: dict[str, dict[str, list[float]]] = {
     "kf": {"gps_sigma": [0.01, 0.02, 0.05, 0.1, 0.3, 1.0],
            "jerk_psd": [0.5, 2.0, 8.0, 32.0, 128.0, 512.0],
            "accel_sigma": [0.1, 0.3, 1.0, 3.0]},
+    "cv": {},
     "ekf": {"gps_sigma": [0.01, 0.02, 0.05, 0.1, 0.3, 1.0],
             "jerk_psd": [0.5, 2.0, 8.0, 32.0, 128.0],
             "yaw_acc_psd": [0.01, 0.1, 1.0, 10.0]},
@@ -83,7 +91,7 @@ def grid_search(predictor: str, drives: Sequence[Drive], gps_profile: str,
 
     best: dict[str, Any] = {}
     best_val = np.inf
-    head = names[:2]
+    head = names[:2]  # an empty grid: one trial of the defaults
     for combo in itertools.product(*(grid[n] for n in head)):
         p = dict(zip(head, combo, strict=True))
         v = score(p)
@@ -97,6 +105,33 @@ def grid_search(predictor: str, drives: Sequence[Drive], gps_profile: str,
             if v < best_val:
                 best, best_val = p, v
     return best, trials
+
+
+def calibrate(predictor: str, drives: Sequence[Drive], gps_profile: str,
+              params: dict[str, Any], workers: int = 2, seed: int = 0) -> float:
+    """``cov_scale`` for ``params``: replay ``drives`` once and return the factor that makes
+    95 % of the scored queries' 95 % ellipses cover the truth, rounded to 3 significant
+    digits (NaN when the predictor reports no covariance on these drives)."""
+    import pandas as pd
+
+    from bench.results import scored_mask
+    from bench.uncertainty import COV
+    from metrics.calibration import coverage_scale, mahalanobis_sq
+
+    cfg = RunConfig(predictors=(predictor,), gps_profile=gps_profile, seed=seed,
+                    predictor_options={predictor: {k: v for k, v in params.items()
+                                                   if k != "cov_scale"}},
+                    use_tuned=False)
+    traces = [r.traces for r in run(drives, cfg, workers=workers) if not r.traces.empty]
+    if not traces:
+        return float("nan")
+    t = pd.concat(traces, ignore_index=True)
+    if any(c not in t for c in COV):
+        return float("nan")
+    t = t[scored_mask(t)]
+    err = t[["x", "y"]].to_numpy(float) - t[["x_ref", "y_ref"]].to_numpy(float)
+    k = coverage_scale(mahalanobis_sq(err, t[COV].to_numpy(float)))
+    return float(f"{k:.3g}") if np.isfinite(k) else k
 
 
 def save_tuned(predictor: str, condition: str, params: dict[str, Any], note: str,

@@ -132,6 +132,18 @@ def log_likelihood(d2: np.ndarray, cov: np.ndarray) -> np.ndarray:
     return -math.log(2.0 * math.pi) - 0.5 * log_det(cov) - 0.5 * np.asarray(d2, dtype=float)
 
 
+def coverage_scale(d2: np.ndarray, p: float = 0.95) -> float:
+    """The factor k by which to multiply the reported covariances so that a fraction p of
+    the queries fall inside their p-ellipse: scaling P by k divides every squared
+    Mahalanobis distance d2 by k, so k = (p-quantile of d2) / r2(p). k > 1: the predictor was
+    overconfident, k < 1: underconfident. NaN without a finite d2."""
+    d = np.asarray(d2, dtype=float)
+    d = d[np.isfinite(d)]
+    if d.size == 0:
+        return math.nan
+    return float(np.quantile(d, p) / ellipse_r2(p))
+
+
 def coverage_band(n: int, p: float = 0.95) -> tuple[float, float]:
     """Where a calibrated predictor's observed p-coverage falls for n queries:
     p +- max(0.02, 1.96 sqrt(p (1 - p) / n))."""

@@ -204,3 +204,39 @@ def test_a_2x_too_small_covariance_is_flagged_overconfident():
     assert s["verdict"] == OVERCONFIDENT
     assert s["nees"] > nees_interval(s["count"])[1] and s["nees_ci95"][0] > 2.0
     assert s["coverage"]["95"] < 0.93
+
+
+def test_coverage_scale_recovers_a_known_variance_ratio():
+    from metrics.calibration import coverage_scale
+
+    rng = np.random.default_rng(3)
+    cov = np.array([[0.5, 0.2], [0.2, 0.3]])
+    err = rng.multivariate_normal([0.0, 0.0], 4.0 * cov, size=20000)  # truth 4x the claim
+    rows = np.tile([cov[0, 0], cov[0, 1], cov[1, 1]], (err.shape[0], 1))
+    d2 = mahalanobis_sq(err, rows)
+    k = coverage_scale(d2)
+    assert k == pytest.approx(4.0, rel=0.05)
+    assert coverage(d2 / k, (0.95,))[0] == pytest.approx(0.95, abs=1e-3)
+    assert math.isnan(coverage_scale(np.array([np.nan])))
+
+
+@pytest.mark.parametrize("name", ["cv", "kf", "ekf"])
+def test_cov_scale_scales_the_covariance_and_changes_no_position(name):
+    from predictors.registry import create
+    from scenarios.synthetic import generate_drive
+
+    d = generate_drive(seed=7, route="turns", duration_s=20)
+    out = []
+    for k in (1.0, 2.5):
+        p = create(name, cov_scale=k)
+        p.reset()
+        pos, covs = [], []
+        for t, x, y in zip(d.gps.t, d.gps.x, d.gps.y, strict=True):
+            p.observe_gps(float(t), float(x), float(y))
+            pos.append(p.position_at(float(t) + 0.2))
+            c = p.covariance_at(float(t) + 0.2)
+            covs.append(np.full((2, 2), np.nan) if c is None else c)
+        out.append((np.array(pos), np.array(covs)))
+    np.testing.assert_array_equal(out[0][0], out[1][0])
+    np.testing.assert_allclose(out[1][1], 2.5 * out[0][1], rtol=1e-12)
+    assert np.isfinite(out[0][1]).any()

@@ -132,6 +132,7 @@ CASES = [
     ("tune-predictor", "tune magic", "magic", True),
     ("tune-profile", "tune kf --gps-profile x", "--gps-profile", True),
     ("tune-native-no-data", "tune kf --gps-profile native", "--data", True),
+    ("tune-drives-0", "tune kf --drives 0", "--drives", True),
     ("latency-predictor", "latency -p nope", "nope", False),
     ("latency-steps-0", "latency --steps 0", "--steps", False),
     ("latency-model-missing", "latency -p lstm --model lstm={ws}/nope.onnx", "nope.onnx", False),

@@ -22,3 +22,37 @@ def test_grid_tunes_the_scale_where_fixes_state_their_accuracy():
             assert list(g)[1:] == list(GRIDS[name])[1:]  # same order: the scale tuned jointly
         for profile in ("none", "native"):  # no stated accuracy: the constant R is tuned
             assert grid_for(name, profile) == GRIDS[name]
+
+
+def test_calibration_makes_95_percent_of_the_development_ellipses_cover():
+    # the scale is fitted on these drives, so on them the 95 % ellipse must cover 95 % of the
+    # scored queries, whatever the filter's own covariance said
+    import numpy as np
+
+    from bench.config import RunConfig
+    from bench.results import scored_mask
+    from bench.runner import run
+    from bench.tune import calibrate
+    from bench.uncertainty import COV
+    from metrics.calibration import coverage, mahalanobis_sq
+
+    drives = [generate_drive(seed=1002, route="turns", duration_s=60)]
+    for name, params in (("kf", {"gps_sigma_scale": 3.0, "jerk_psd": 32.0}), ("cv", {})):
+        k = calibrate(name, drives, "consumer", params, workers=1)
+        assert np.isfinite(k) and k > 0
+        cfg = RunConfig(predictors=(name,), gps_profile="consumer",
+                        predictor_options={name: {**params, "cov_scale": k}}, use_tuned=False)
+        t = run(drives, cfg, workers=1)[0].traces
+        t = t[scored_mask(t)]
+        err = t[["x", "y"]].to_numpy(float) - t[["x_ref", "y_ref"]].to_numpy(float)
+        cov95 = coverage(mahalanobis_sq(err, t[COV].to_numpy(float)), (0.95,))[0]
+        assert abs(cov95 - 0.95) < 0.01, (name, k, cov95)
+
+
+def test_calibration_of_a_predictor_without_covariance_is_nan():
+    import math
+
+    from bench.tune import calibrate
+
+    drives = [generate_drive(seed=1003, route="straight", duration_s=20)]
+    assert math.isnan(calibrate("poly", drives, "rtk", {}, workers=1))
