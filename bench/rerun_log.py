@@ -25,6 +25,12 @@ Layout, per drive under ``drives/<drive>/`` (names sanitised to ``[A-Za-z0-9_.-]
 - ``map/<predictor>/future``: the future point, logged at its query time
   ``t_query = t_issue + horizon`` so it lines up with the track position it is scored
   against; ``map/<predictor>/now``: the current-position answer at each "now" query time;
+  ``map/<predictor>/ellipse_future``, ``map/<predictor>/ellipse_now``: for a predictor that
+  reports covariance (``covariance_at``), the 95 % ellipse around each answer
+  (:func:`metrics.ellipses.ellipse_outlines`, 24 segments, radius sqrt(5.991) in the
+  covariance's eigenbasis), in its colour, at the answer's time; a query without a
+  covariance holds an empty row (the ellipse is cleared); no entity for a predictor
+  without uncertainty;
 - ``around/...``: positions relative to the reference at the time shown, so the view's origin
   is the vehicle: ``around/reference`` (0, 0), ``around/road`` (the reference from
   2 s before to 1 s after), ``around/fixes`` (the last 5 received fixes),
@@ -60,6 +66,8 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from bench.rerun_blueprint import TIMELINE, blueprint
+from bench.scoring import COV_COLUMNS
+from metrics.ellipses import ellipse_outlines
 
 if TYPE_CHECKING:
     import pandas as pd
@@ -82,6 +90,9 @@ TRUTH_RGB = (160, 160, 160)
 #: the error colour scale: green at 0, yellow at half the scale, red at and above it
 SCALE_RGB = np.array([[26, 152, 80], [254, 224, 60], [215, 25, 28]], dtype=float)
 NO_ERROR_RGB = (190, 190, 190)
+#: line radius of the drawn 95 % ellipses: 0.75 UI points (negative: rerun's UI unit), so a
+#: 2 cm ellipse stays an outline when zoomed in
+ELLIPSE_RADIUS = -0.75
 
 _UNSAFE = re.compile(r"[^A-Za-z0-9_.\-]+")
 
@@ -235,6 +246,28 @@ class _Writer:
                             columns=rr.Points2D.columns(positions=screen(xy[ok])),
                             recording=self.rec)
 
+    def ellipses(self, path: str, t: np.ndarray, xy: np.ndarray, cov: np.ndarray, color
+                 ) -> None:
+        """The 95 % ellipse of each answer (centre ``xy`` [m, ENU], covariance ``cov`` (N, 3)
+        (xx, xy, yy) [m^2]) as a closed line strip at its time, in screen coordinates; a
+        row without a valid covariance or position holds no strip (the previous ellipse is
+        cleared). Nothing is logged when no row has one (a predictor without uncertainty)."""
+        rr = self.rr
+        keep = np.isfinite(t)
+        t, xy, cov = t[keep], xy[keep], cov[keep]
+        outline = ellipse_outlines(cov)
+        has = np.all(np.isfinite(xy), axis=1) & np.all(np.isfinite(outline), axis=(1, 2))
+        if not has.any():
+            return
+        pts = outline[has] + xy[has, None, :]
+        k, m, _ = pts.shape
+        self.rec.log(path, rr.LineStrips2D.from_fields(colors=[color], radii=[ELLIPSE_RADIUS]),
+                     static=True)
+        rr.send_columns(path, indexes=[self._time(t)],
+                        columns=rr.LineStrips2D.columns(
+                            strips=screen(pts.reshape(-1, 2)).reshape(k, m, 2)
+                        ).partition(has.astype(np.int64)), recording=self.rec)
+
     def scalars(self, path: str, t: np.ndarray, v: np.ndarray) -> None:
         ok = np.isfinite(t)
         if ok.any():
@@ -298,6 +331,9 @@ class _Writer:
                 xy = g[["x", "y"]].to_numpy(np.float64)
                 ref = g[["x_ref", "y_ref"]].to_numpy(np.float64)
                 self.points(f"{root}/map/{part}/{kind}", t, xy, color, radius)
+                if all(c in g for c in COV_COLUMNS):
+                    self.ellipses(f"{root}/map/{part}/ellipse_{kind}", t, xy,
+                                  g[list(COV_COLUMNS)].to_numpy(np.float64), color)
                 self.series(f"{root}/errors/{part}/{kind}", t, g["error_m"].to_numpy(np.float64),
                             f"{pred} {kind}", color, kind)
                 if kind == "future":  # the current answer is the tip of its error arrow

@@ -205,3 +205,131 @@ def test_cli_bad_input_is_one_line(base_run: Path, tmp_path: Path) -> None:
     ]
     for args, needles in cases:
         assert_one_error_line(bench(*args), *needles)
+
+
+# ------------------------------------------------------------------ uncertainty
+def _uncertainty_copy(src: Path, dst: Path, kf: str = "same") -> Path:
+    """A copy of run ``src`` whose kf uncertainty is ``same``, ``none`` (kf reports no
+    covariance: moved to ``uncertainty.none``, as a predictor without covariance_at) or
+    ``pre-1.4`` (the whole ``uncertainty`` block gone, schema 1.3: a run saved before it)."""
+    shutil.copytree(src, dst)
+    p = dst / "results.json"
+    res = json.loads(p.read_text())
+    if kf == "none":
+        for block in ("predictors", "by_dataset", "by_label", "by_since_fix", "curve"):
+            res["uncertainty"][block].pop("kf")
+        res["uncertainty"]["none"].append("kf")
+    elif kf == "pre-1.4":
+        del res["uncertainty"]
+        res["schema_version"] = "1.3"
+    p.write_text(json.dumps(res))
+    return dst
+
+
+def test_uncertainty_figures_side_by_side(base_run: Path, tmp_path: Path) -> None:
+    from bench.compare_uncertainty import uncertainty_aligned
+
+    old = load_run(base_run)
+    new = load_run(_uncertainty_copy(base_run, tmp_path / "new", kf="none"))
+    u = old.results["uncertainty"]
+    assert set(u["predictors"]) == {"cv", "kf"}  # both report covariance in this run
+    f = uncertainty_aligned([old, new], ["old", "new"], ["all", "dataset", "route type",
+                                                           "since fix"])
+    assert list(f["scope"].unique()) == ["all", "dataset", "route type", "since fix"]
+    for pred in ("cv", "kf"):
+        for kind in ("future", "now"):
+            s = u["predictors"][pred][kind]
+            row = f[(f.scope == "all") & (f.predictor == pred) & (f.kind == kind)].iloc[0]
+            assert row["old nees"] == pytest.approx(s["nees"])
+            assert [row["old nees lo"], row["old nees hi"]] == pytest.approx(s["nees_ci95"])
+            assert row["old cov95"] == pytest.approx(s["coverage"]["95"])
+            assert row["old area"] == pytest.approx(s["sharpness_m2"])
+            assert row["old loglik"] == pytest.approx(s["loglik"])
+            assert (row["old verdict"], row["old n"]) == (s["verdict"], s["count"])
+            ds = u["by_dataset"][pred][kind]["synthetic"]
+            row = f[(f.scope == "dataset") & (f.predictor == pred) & (f.kind == kind)].iloc[0]
+            assert row["dataset"] == "synthetic" and row["old nees"] == pytest.approx(ds["nees"])
+            assert np.isnan(row["old nees lo"])  # results.json keeps no CI by data set
+            assert row["old cov95"] == pytest.approx(ds["coverage"]["95"])
+    # cv is unchanged in NEW; kf reports no covariance there: said so, no figure made up
+    cv = f[f.predictor == "cv"]
+    assert (cv["new nees"] == cv["old nees"]).all() and (cv["new verdict"] == cv["old verdict"]).all()
+    kf = f[f.predictor == "kf"]
+    assert len(kf) > 4 and (kf["new verdict"] == "no uncertainty").all()
+    assert kf[["new nees", "new cov95", "new area", "new loglik"]].isna().all().all()
+    assert (kf["new n"] == 0).all() and kf["old nees"].notna().all()
+    # a predictor without covariance in every run: one whole-run row saying so
+    both = load_run(_uncertainty_copy(base_run, tmp_path / "both", kf="none"))
+    f = uncertainty_aligned([both, new], ["both", "new"], ["all", "dataset"])
+    kf = f[f.predictor == "kf"]
+    assert len(kf) == 1 and kf.iloc[0]["kind"] == "-" and kf.iloc[0]["scope"] == "all"
+    assert kf.iloc[0]["both verdict"] == kf.iloc[0]["new verdict"] == "no uncertainty"
+
+
+def test_uncertainty_of_a_run_before_schema_1_4(base_run: Path, tmp_path: Path) -> None:
+    from bench.compare_uncertainty import missing_notes, uncertainty_aligned
+
+    old = load_run(_uncertainty_copy(base_run, tmp_path / "old13", kf="pre-1.4"))
+    new = load_run(base_run)
+    f = uncertainty_aligned([old, new], ["old13", "old"], ["all", "dataset"])
+    assert len(f) == 8  # cv, kf x future, now x whole run, data set: from the new run
+    assert (f["old13 verdict"] == "pre-1.4 run").all() and f["old13 nees"].isna().all()
+    assert f["old nees"].notna().all()
+    [note] = missing_notes([old, new], ["old13", "old"])
+    assert note.startswith("old13 has no uncertainty figures (results.json schema 1.3")
+    # only old runs: no rows, no crash
+    assert uncertainty_aligned([old], ["old13"], ["all"]).empty
+
+
+def test_cli_uncertainty_table_csv_and_outputs(base_run: Path, tmp_path: Path) -> None:
+    from io import StringIO
+
+    new = _uncertainty_copy(base_run, tmp_path / "new", kf="none")
+    old13 = _uncertainty_copy(base_run, tmp_path / "old13", kf="pre-1.4")
+    # without the option: the error table alone, as before
+    r = bench("compare", str(base_run), str(new))
+    assert r.returncode == 0 and "Uncertainty" not in r.stdout and "NEES" not in r.stdout
+    # the terminal table: figures, "no uncertainty", "pre-1.4 run", a note for the old run
+    r = bench("compare", str(old13), str(base_run), str(new), "--uncertainty")
+    assert r.returncode == 0, r.stderr
+    assert "Traceback" not in r.stdout + r.stderr
+    assert "Uncertainty" in r.stdout and "NEES" in r.stdout  # headers wrap at 80 columns
+    verdict = json.loads((base_run / "results.json").read_text())[
+        "uncertainty"]["predictors"]["cv"]["future"]["verdict"]
+    for needle in ("no uncertainty", "pre-1.4 run", verdict):
+        assert needle in r.stdout, needle
+    assert "note: old13 has no uncertainty figures (results.json schema 1.3" in r.stderr
+    # CSV: the error table, an empty line, the uncertainty table, full precision
+    out = tmp_path / "cmp"
+    r = bench("compare", str(base_run), str(new), "--uncertainty", "--format", "csv",
+              "--scope", "all,since-fix", "--out", str(out))
+    assert r.returncode == 0, r.stderr
+    errors, unc = r.stdout.split("written:")[0].split("\n\n")
+    assert set(pd.read_csv(StringIO(errors))["scope"]) == {"all"}
+    frame = pd.read_csv(StringIO(unc), keep_default_na=False, na_values=[""])
+    assert set(frame["scope"]) == {"all", "since fix"}
+    res = json.loads((base_run / "results.json").read_text())["uncertainty"]
+    row = frame[(frame.scope == "all") & (frame.predictor == "cv") & (frame.kind == "now")].iloc[0]
+    assert row["old nees"] == pytest.approx(res["predictors"]["cv"]["now"]["nees"], rel=1e-12)
+    assert row["new nees"] == row["old nees"]
+    since = frame[(frame.scope == "since fix") & (frame.predictor == "kf")]
+    assert set(since["group"]) <= set(res["by_since_fix"]["kf"]["now"]) | set(
+        res["by_since_fix"]["kf"]["future"]) and (since["new verdict"] == "no uncertainty").all()
+    written = pd.read_csv(out / "uncertainty_comparison.csv", keep_default_na=False,
+                          na_values=[""])
+    pd.testing.assert_frame_equal(written, frame)
+    assert (out / "comparison.csv").is_file()
+    r = bench("compare", str(base_run), str(new), "--uncertainty", "--out", str(tmp_path / "md"))
+    md = (tmp_path / "md" / "uncertainty_comparison.md").read_text()
+    assert md.startswith("# Uncertainty") and "| no uncertainty |" in md
+
+
+def test_cli_uncertainty_option_is_taught_and_checked(base_run: Path) -> None:
+    r = bench("compare", "--help")
+    assert r.returncode == 0
+    text = " ".join(r.stdout.split())
+    for needle in ("--uncertainty", "NEES", "no uncertainty", "pre-1.4 run", "since-fix",
+                   "uncertainty_comparison"):
+        assert needle in text, needle
+    assert_one_error_line(bench("compare", str(base_run), "--scope", "all,since-fix"),
+                          "--scope since-fix", "--uncertainty")

@@ -8,6 +8,7 @@ from __future__ import annotations
 import sys
 import time
 from collections import defaultdict
+from collections.abc import Sequence
 from pathlib import Path
 
 import numpy as np
@@ -17,7 +18,9 @@ import pytest
 from bench.config import RunConfig
 from bench.rerun_blueprint import AROUND_M, VEHICLE_M
 from bench.rerun_log import (
+    ELLIPSE_RADIUS,
     N_LAST_FIXES,
+    PALETTE,
     drive_paths,
     error_colours,
     last_fixes,
@@ -27,6 +30,9 @@ from bench.rerun_log import (
     write_recording,
 )
 from bench.runner import DriveRun, run
+from bench.scoring import COV_COLUMNS
+from metrics.calibration import mahalanobis_sq
+from metrics.ellipses import ELLIPSE_SEGMENTS
 from metrics.track_errors import track_errors
 from scenarios.synthetic import generate_drive
 
@@ -34,8 +40,10 @@ rr = pytest.importorskip("rerun", reason="needs the viz extra")
 
 
 def fake_run(name: str = "my drive/01", preds=("cv", "kf-paper"), dur: float = 20.0,
-             now_step: float = 0.05, seed: int = 0) -> DriveRun:
-    """A DriveRun by hand: circle track, fixes every 0.2 s (every 7th dropped), one outage."""
+             now_step: float = 0.05, seed: int = 0, cov: Sequence[str] = ()) -> DriveRun:
+    """A DriveRun by hand: circle track, fixes every 0.2 s (every 7th dropped), one outage.
+    Predictors in ``cov`` report a covariance (NaN for the first 10 queries of each kind,
+    as before a filter is warm); the others' cov columns are NaN, as in real traces."""
     rng = np.random.default_rng(seed)
     tf = np.arange(0.0, dur, 0.2)
     received = np.arange(tf.size) % 7 != 3
@@ -62,12 +70,27 @@ def fake_run(name: str = "my drive/01", preds=("cv", "kf-paper"), dur: float = 2
                 "y": ref[:, 1], "x_ref": ref[:, 0],
                 "y_ref": ref[:, 1], "error_m": err, "along_m": along, "cross_m": cross,
                 "label": lab, "speed_mps": 3.0, "since_fix_s": 0.1, "outage": -1,
-                "heading_ref": heading, "yaw_rate_ref": 0.1}))
+                "heading_ref": heading, "yaw_rate_ref": 0.1,
+                **dict(zip(COV_COLUMNS, _covariances(rng, n) if p in cov
+                           else np.full((3, n), np.nan), strict=True))}))
         frames[-1].loc[0, ["x", "y"]] = np.nan  # no answer before the first fix
     outages = [(float(tf[received & (tf <= 8.0)][-1]), float(tf[received & (tf >= 9.5)][0]))]
     return DriveRun(name, "mem", "truth", ["a note"], ["a warning"], pd.concat(frames),
                     outages=outages, gps_count=int(received.sum()), duration_s=dur, fixes=fixes,
                     track=track)
+
+
+def _covariances(rng: np.random.Generator, n: int) -> np.ndarray:
+    """(3, n) columns xx, xy, yy [m^2] of random positive definite covariances (sigmas
+    0.05-1 m, any orientation); the first 10 NaN."""
+    a, b = rng.uniform(0.05, 1.0, n), rng.uniform(0.05, 1.0, n)
+    th = rng.uniform(-np.pi, np.pi, n)
+    c, s = np.cos(th), np.sin(th)
+    xx, yy = a**2 * c**2 + b**2 * s**2, a**2 * s**2 + b**2 * c**2
+    xy = (a**2 - b**2) * c * s
+    out = np.array([xx, xy, yy])
+    out[:, :10] = np.nan
+    return out
 
 
 def read_back(path: Path, one: bool = True):
@@ -358,3 +381,63 @@ def test_last_fixes():
     idx, n = last_fixes(np.array([-1.0, 0.0, 0.5, 3.0]), np.array([0.0, 1.0, 2.0]), n=2)
     np.testing.assert_array_equal(n, [0, 1, 1, 2])
     np.testing.assert_array_equal(idx, [0, 0, 1, 2])
+
+
+def test_95_percent_ellipses_of_predictors_with_covariance(tmp_path):
+    """cv reports a covariance (NaN for its first queries), kf-paper none: cv gets a closed
+    95 % outline around each answer at its query time, in the map's screen frame and its
+    colour, an empty row (cleared) where it has no covariance; kf-paper gets nothing."""
+    r = fake_run(cov=("cv",))
+    path = tmp_path / "cov.rrd"
+    write_recording(path, [r], ["cv", "kf-paper"])
+    ents, _ = read_back(path)
+    root = "drives/my_drive_01"
+    assert not any("ellipse" in e for e in ents if "/kf-paper/" in e)
+    tr = r.traces
+    for kind in ("future", "now"):
+        e = ents[f"{root}/map/cv/ellipse_{kind}"]
+        g = tr[(tr.predictor == "cv") & (tr.kind == kind)].sort_values("t_query")
+        b = e["temporal"]
+        np.testing.assert_allclose(times_s(b), g.t_query, atol=1e-9)  # a row per query
+        rows = column(b, "LineStrips2D:strips")
+        xy = g[["x", "y"]].to_numpy()
+        cov = g[list(COV_COLUMNS)].to_numpy()
+        drawn = np.isfinite(xy).all(axis=1) & np.isfinite(cov).all(axis=1)
+        assert [len(x) for x in rows] == drawn.astype(int).tolist()
+        assert drawn.sum() == len(g) - 10  # the first 10 have no covariance
+        strips = np.array([x[0] for x in rows if x])  # (drawn, segments + 1, 2), screen
+        assert strips.shape == (drawn.sum(), ELLIPSE_SEGMENTS + 1, 2)
+        np.testing.assert_allclose(strips[:, 0], strips[:, -1])  # closed
+        enu = np.stack([strips[..., 0], -strips[..., 1]], axis=-1)  # back from (x, -y)
+        rel = enu - xy[drawn][:, None, :]
+        d2 = mahalanobis_sq(rel.reshape(-1, 2),
+                            np.repeat(cov[drawn], ELLIPSE_SEGMENTS + 1, axis=0))
+        np.testing.assert_allclose(d2, 5.991, rtol=2e-3)  # on the 95 % boundary (float32)
+        # the centre is the answer: the outline's mean point
+        np.testing.assert_allclose(rel[:, :-1].mean(axis=1), 0.0, atol=1e-3)
+        [style] = e["static"]
+        assert column([style], "LineStrips2D:colors")[0] == column(
+            ents[f"{root}/map/cv/{kind}"]["static"], "Points2D:colors")[0]
+        assert column([style], "LineStrips2D:colors")[0][0] == int.from_bytes(
+            bytes([*PALETTE[0], 255]), "big")  # cv's colour, the first predictor's
+        assert column([style], "LineStrips2D:radii")[0] == [ELLIPSE_RADIUS]
+
+
+def test_ellipses_keep_the_recording_small(tmp_path):
+    """Each drawn ellipse costs about its 25 float32 points (200 bytes); predictors that
+    report no covariance write no ellipse entity at all."""
+    plain, with_cov = tmp_path / "plain.rrd", tmp_path / "cov.rrd"
+    preds = ("cv", "kf", "poly")
+    write_recording(plain, [fake_run("long", preds=preds, dur=120.0)], list(preds))
+    r = fake_run("long", preds=preds, dur=120.0, cov=("cv", "kf"))
+    write_recording(with_cov, [r], list(preds))
+    assert not any("ellipse" in e for e in read_back(plain)[0])
+    tr = r.traces
+    n = int((np.isfinite(tr[list(COV_COLUMNS)]).all(axis=1)
+             & np.isfinite(tr[["x", "y"]]).all(axis=1)).sum())
+    extra = with_cov.stat().st_size - plain.stat().st_size
+    per = extra / n
+    print(f"{n} ellipses: {plain.stat().st_size} -> {with_cov.stat().st_size} bytes, "
+          f"{per:.0f} bytes each")
+    assert n > 5000
+    assert 150 < per < 300, per

@@ -10,7 +10,11 @@ import typer
 from bench.commands.common import DataError, UsageError, console, err_console, fail
 
 FORMATS = ("md", "csv", "latex")
-SCOPES = ("all", "dataset", "route", "drive")
+SCOPES = ("all", "dataset", "route", "drive", "since-fix")
+#: the tables' leading name columns (repeated when a wide table is split)
+KEY_COLUMNS = ("scope", "dataset", "group", "predictor", "kind")
+#: --scope names -> row scopes of the tables
+SCOPE_ROWS = {"route": "route type", "since-fix": "since fix"}
 
 
 def compare(
@@ -28,7 +32,9 @@ def compare(
     scope: Annotated[str, typer.Option(
         metavar="SCOPES",
         help="Comma-separated rows to show: all (whole run), dataset, route (route type per "
-             "data set), drive.")] = "all,dataset",
+             "data set; over all data sets in the uncertainty table), drive (error table "
+             "only), since-fix (time since the last fix bins; uncertainty table only).")
+    ] = "all,dataset",
     out: Annotated[Path | None, typer.Option(
         "--out", "-o", metavar="DIR",
         help="Also write the table and comparison.png (bars per predictor, 95 % CI whiskers) "
@@ -43,6 +49,16 @@ def compare(
         help="Gate runs whose configurations differ (horizon, GPS profile, data, ...); "
              "by default that is an error.")] = False,
     seed: Annotated[int, typer.Option(metavar="INT", help="Seed of the paired bootstrap.")] = 0,
+    uncertainty: Annotated[bool, typer.Option(
+        "--uncertainty",
+        help="Also compare the reported uncertainty (results.json `uncertainty`, schema 1.4), "
+             "in a second table: per predictor that reports covariance and kind, mean NEES "
+             "(2 = honest) [95 % CI over drives, whole run only], coverage of the 95 % "
+             "ellipse, sharpness (median 95 % ellipse area, m^2), log-likelihood [nats], "
+             "verdict, n. A predictor reporting none reads 'no uncertainty'; a run saved "
+             "before schema 1.4 reads 'pre-1.4 run' (with a note). CSV: a second block "
+             "after an empty line; --out also writes uncertainty_comparison.{md,csv,tex}.")
+    ] = False,
 ) -> None:
     """Compare saved runs: one figure per predictor, data set, route type and drive, aligned.
 
@@ -57,6 +73,8 @@ def compare(
       bench compare a b c --metric now.p95_m --format csv --out cmp
 
       bench compare main-run pr-run --fail-if-worse 'lstm:future.mean_m:5%'
+
+      bench compare old-run new-run --uncertainty --scope all,dataset,since-fix
     """
     from bench.compare import Gate, Metric, check_gates, config_differences, run_labels
     from bench.options import check_choice, check_out_dir
@@ -68,6 +86,9 @@ def compare(
         scopes = [s.strip() for s in scope.split(",") if s.strip()]
         for s in scopes:
             check_choice(s, SCOPES, "--scope")
+        if "since-fix" in scopes and not uncertainty:
+            raise UsageError("--scope since-fix: rows of the uncertainty table only; add "
+                             "--uncertainty")
         gates = [Gate.parse(g) for g in fail_if_worse or []]
         if gates and len(runs) != 2:
             raise UsageError(f"--fail-if-worse compares exactly two runs (OLD NEW); got {len(runs)}")
@@ -81,15 +102,23 @@ def compare(
                              "): their figures are not comparable; re-run one, or pass "
                              "--allow-config-change")
         table, frame = _table(loaded, labels, m, scopes, seed)
+        extra = _uncertainty(loaded, labels, scopes) if uncertainty else None
         checks = check_gates(loaded[0], loaded[1], gates, seed) if gates else []
     except (UsageError, DataError) as e:
         raise fail(str(e)) from None
     for line in diffs:
         err_console.print(f"note: runs differ in {line}", highlight=False, soft_wrap=True,
                           markup=False)
+    if extra is not None:
+        for line in extra[2]:
+            err_console.print(f"note: {line}", highlight=False, soft_wrap=True, markup=False)
     _print(table, frame, fmt)
+    if extra is not None:
+        if fmt == "csv" and not table.frame.empty:
+            print()  # the second CSV block
+        _print(extra[0], extra[1], fmt)
     if out is not None:
-        _write(out, table, frame, loaded, labels, m, fmt)
+        _write(out, table, frame, loaded, labels, m, fmt, extra)
     if checks:
         failed = [c for c in checks if c.failed]
         for c in checks:
@@ -104,39 +133,56 @@ def compare(
 def _table(runs, labels, metric, scopes, seed):
     from bench.compare_views import comparison_table
 
-    names = {"route": "route type"}
-    return comparison_table(runs, labels, metric, [names.get(s, s) for s in scopes], seed)
+    return comparison_table(runs, labels, metric, [SCOPE_ROWS.get(s, s) for s in scopes], seed)
+
+
+def _uncertainty(runs, labels, scopes):
+    """(table, frame, notes) of the uncertainty comparison."""
+    from bench.compare_uncertainty import missing_notes, uncertainty_comparison
+
+    table, frame = uncertainty_comparison(runs, labels, [SCOPE_ROWS.get(s, s) for s in scopes])
+    notes = missing_notes(runs, labels)
+    if frame.empty:
+        notes.append("no run has uncertainty figures to compare")
+    return table, frame, notes
 
 
 def _print(table, frame, fmt: str) -> None:
     from bench.terminal import print_table
 
+    if table.frame.empty:
+        return
     if fmt == "csv":
         print(frame.to_csv(index=False), end="")
     elif fmt == "latex":
         print(table.latex(), end="")
     else:
-        keys = 4 if "group" in table.frame.columns else 3
+        keys = sum(c in KEY_COLUMNS for c in table.frame.columns)
         print_table(console, table.header(), table.cells(), title=table.title, key_columns=keys,
                     left_columns=keys)
 
 
-def _write(out: Path, table, frame, runs, labels, metric, fmt: str) -> None:
+def _write_table(out: Path, stem: str, table, frame, fmt: str) -> Path:
+    if fmt == "md":
+        path = out / f"{stem}.md"
+        path.write_text(f"# {table.title}\n\n{table.markdown()}\n")
+    elif fmt == "csv":
+        path = out / f"{stem}.csv"
+        frame.to_csv(path, index=False)
+    else:
+        path = out / f"{stem}.tex"
+        path.write_text(table.latex())
+    return path
+
+
+def _write(out: Path, table, frame, runs, labels, metric, fmt: str, extra=None) -> None:
     from bench.compare_views import comparison_figure
     from bench.plots import save_figure
 
     out.mkdir(parents=True, exist_ok=True)
-    written = []
-    if fmt == "md":
-        path = out / "comparison.md"
-        path.write_text(f"# {table.title}\n\n{table.markdown()}\n")
-    elif fmt == "csv":
-        path = out / "comparison.csv"
-        frame.to_csv(path, index=False)
-    else:
-        path = out / "comparison.tex"
-        path.write_text(table.latex())
-    written.append(path)
+    written = [_write_table(out, "comparison", table, frame, fmt)]
+    if extra is not None:
+        written.append(_write_table(out, "uncertainty_comparison", extra[0], extra[1], fmt))
     import matplotlib.pyplot as plt
 
     fig = comparison_figure(runs, labels, metric)
