@@ -352,7 +352,8 @@ class TakesAnything(Predictor):
 
 def test_constructor_options():
     opts, any_kw = constructor_options(predictor_class("cv"))
-    assert opts == {"window_s": 0.0, "fix_sigma": 0.06, "accel_sigma": 1.0} and not any_kw
+    assert opts == {"window_s": 0.0, "fix_sigma": 0.06, "accel_sigma": 1.0,
+                    "cov_scale": 1.0} and not any_kw
     assert constructor_options(TakesAnything) == ({}, True)
     validate_predictors([f"{__name__}:TakesAnything"],
                         {f"{__name__}:TakesAnything": {"whatever": [1, 2]}})
