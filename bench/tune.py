@@ -134,6 +134,20 @@ def calibrate(predictor: str, drives: Sequence[Drive], gps_profile: str,
     return float(f"{k:.3g}") if np.isfinite(k) else k
 
 
+#: what separates a tuned entry's note on its noise from the note on its calibration
+CALIBRATION_NOTE = "; cov_scale for 95 % coverage by"
+
+
+def tuning_note(predictor: str, condition: str, calibration: str,
+                path: Path = TUNED_PATH) -> str:
+    """The note of an entry whose noise is kept and whose scale is refitted: the note
+    ``path`` holds on how its noise was tuned (without an older calibration note), then
+    ``calibration``; ``calibration`` alone where there is none."""
+    data = json.loads(path.read_text()) if path.exists() else {}
+    old = data.get(predictor, {}).get(condition, {}).get("how")
+    return f"{old.split(CALIBRATION_NOTE)[0]}; {calibration}" if old else calibration
+
+
 def save_tuned(predictor: str, condition: str, params: dict[str, Any], note: str,
                path: Path = TUNED_PATH) -> None:
     """Merge one result into ``predictors/tuned.json``."""

@@ -51,7 +51,7 @@ import math
 import numpy as np
 
 from predictors._geometry import check_config, wrap_angle
-from predictors.base import Predictor
+from predictors.base import Predictor, stated_fix_variance
 
 NAN2 = (math.nan, math.nan)
 SERIES_LIMIT = 0.05  # |w T| below which the integrals use their Taylor series
@@ -405,10 +405,7 @@ class CtraEkf(Predictor):
         """R per axis [m^2] of a fix stating per-axis 1-sigma ``sigma`` [m]:
         ``(gps_sigma_scale * sigma)^2``, or ``gps_sigma^2`` when it states none (None,
         not finite, or <= 0)."""
-        if sigma is not None and 0.0 < sigma < math.inf:
-            s = self.gps_sigma_scale * sigma
-            return s * s
-        return self._r_gps
+        return stated_fix_variance(sigma, self.gps_sigma_scale, self._r_gps)
 
     def observe_gps(self, t: float, x: float, y: float, sigma: float | None = None) -> None:
         if not (math.isfinite(x) and math.isfinite(y)):

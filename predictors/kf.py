@@ -44,7 +44,7 @@ import numpy as np
 
 from predictors._ca_kalman import CaFilter2D, ca_noise_block, predict_cross, predict_sym
 from predictors._geometry import check_config
-from predictors.base import Predictor
+from predictors.base import Predictor, stated_fix_variance
 
 NAN2 = (math.nan, math.nan)
 KMH = 1.0 / 3.6
@@ -167,10 +167,7 @@ class LinearKalman(Predictor):
         """R per axis [m^2] of a fix stating per-axis 1-sigma ``sigma`` [m]:
         ``(gps_sigma_scale * sigma)^2``, or ``gps_sigma^2`` when it states none (None,
         not finite, or <= 0)."""
-        if sigma is not None and 0.0 < sigma < math.inf:
-            s = self.gps_sigma_scale * sigma
-            return s * s
-        return self._r_pos
+        return stated_fix_variance(sigma, self.gps_sigma_scale, self._r_pos)
 
     def observe_gps(self, t: float, x: float, y: float, sigma: float | None = None) -> None:
         if not (math.isfinite(x) and math.isfinite(y)):

@@ -50,7 +50,7 @@ def tune(
     from concurrent.futures.process import BrokenProcessPool
 
     from bench.config import GPS_PROFILES
-    from bench.tune import GRIDS, TUNED_PATH, calibrate, grid_for, grid_search, save_tuned
+    from bench.tune import GRIDS, calibrate, grid_for, grid_search, save_tuned, tuning_note
     from predictors.registry import tuned_params
 
     if predictor not in GRIDS:
@@ -115,8 +115,6 @@ def tune(
                f"{best_val:.4f} m; {len(trials)} trials; then cov_scale for 95 % coverage"
                if trials else f"`{command}`: cov_scale for 95 % coverage on {source}")
         if calibrate_only:
-            old = __import__("json").loads(TUNED_PATH.read_text()).get(predictor, {}).get(
-                gps_profile, {}).get("how") if TUNED_PATH.exists() else None
-            how = f"{old.split('; cov_scale for 95 % coverage by')[0]}; {how}" if old else how
+            how = tuning_note(predictor, gps_profile, how)
         save_tuned(predictor, gps_profile, best, how)
         console.print("saved to predictors/tuned.json")
