@@ -63,3 +63,66 @@ def test_tiny_retrain_end_to_end(tmp_path) -> None:
         p.observe_gps(d.gps.t[i], d.gps.x[i], d.gps.y[i])
     assert p.steps > 0
     assert np.isfinite(p.position_at(d.gps.t[39] + 0.1)).all()
+
+
+def test_speed_form_onnx_matches_torch_and_is_a_residual(tmp_path) -> None:
+    """The speed-invariant form exports with the runtime's interface (raw features in, raw
+    next-sample features out), matches torch in onnxruntime, and with a zero last layer
+    predicts exactly the previous grid step (its skip)."""
+    torch.manual_seed(1)
+    net = LstmNet(hidden=16, form="speed").eval()
+    net.set_stats(torch.tensor([1.0, 0.0, 0.2, -0.1, 0.0, 0.7]),
+                  torch.tensor([1.5, 0.3, 0.8, 0.9, 0.1, 0.46]))
+    net.set_speed_stats(0.5, 0.8, torch.tensor([0.04, 0.03]))
+    rng = np.random.default_rng(2)
+    x = rng.normal(0, 1, (6, 8, 6)).astype(np.float32)
+    x[:, :, 0] += 3.0  # ~15 m/s along the heading
+    x[:, 0, :2] = 0.0
+    export_best(net, tmp_path / "m.onnx", n_calls=20)
+    with torch.no_grad():
+        ref = FuturePoint(net)(torch.from_numpy(x)).numpy()
+        full = net(torch.from_numpy(x)).numpy()
+    np.testing.assert_allclose(OnnxModel(tmp_path / "m.onnx").run_batch(x), ref, atol=1e-5)
+    np.testing.assert_allclose(full[:, -1], ref, atol=1e-5)
+    with torch.no_grad():
+        net.decoder[-1].weight.zero_()
+        net.decoder[-1].bias.zero_()
+        out = FuturePoint(net)(torch.from_numpy(x)).numpy()
+    np.testing.assert_allclose(out[:, :2], x[:, -1, :2], atol=1e-6)
+
+
+def test_speed_form_input_is_scale_free() -> None:
+    """Scaling every displacement by k changes only the log-speed channel of the encoder input."""
+    net = LstmNet(hidden=8, form="speed")
+    x = torch.randn(3, 8, 6)
+    x[:, 0, :2] = 0.0
+    x2 = x.clone()
+    x2[:, :, :2] *= 4.0
+    a, b = net.encode_input(x), net.encode_input(x2)
+    assert a.shape[-1] == 7
+    # the 0.02 m standstill guard breaks exact invariance only slightly
+    np.testing.assert_allclose(a[..., :2].numpy(), b[..., :2].numpy(), rtol=0.05, atol=0.02)
+    np.testing.assert_allclose(a[..., 2:6].numpy(), b[..., 2:6].numpy())
+    assert float((b[..., 6] - a[..., 6]).mean()) > 0
+
+
+def test_mirroring_is_exact_left_right() -> None:
+    """A mirrored drive's windows equal the original's with dy, ay, yaw negated, so mirroring
+    windows in training is the same as training on mirrored drives."""
+    from dataclasses import replace
+
+    from predictors.lstm.train import mirror_signs
+    from predictors.lstm.windows import drive_windows
+
+    d = generate_drive(seed=5, route="turns", duration_s=60.0)
+    g, imu, tr = d.gps, d.imu, d.truth
+    m = replace(d, gps=replace(g, y=-g.y), imu=replace(imu, ay=-imu.ay, yaw=-imu.yaw,
+                                                           yaw_rate=-imu.yaw_rate),
+                truth=replace(tr, y=-tr.y, yaw=-tr.yaw))
+    a, b = drive_windows(d), drive_windows(m)
+    sign = np.array([1, -1, 1, -1, -1, 1.0])
+    np.testing.assert_allclose(b.X, a.X * sign, atol=1e-6)
+    np.testing.assert_allclose(b.Y, a.Y * sign, atol=1e-6)
+    sg = mirror_signs(1000, torch.Generator().manual_seed(0), torch.zeros(1))
+    flipped = (sg[:, 0, 1] < 0).float().mean()
+    assert 0.4 < float(flipped) < 0.6 and torch.equal(sg[:, 0, 3], sg[:, 0, 1])

@@ -36,7 +36,8 @@ def test_train_ends_with_summary_table(tmp_path) -> None:
     assert f"model: {tmp_path / 'model.onnx'}" in out
     assert "2 of 2" in out and "early stop at" not in out
     rows = {line.split("│")[1].strip(): line for line in lines if line.startswith("│")}
-    assert rows["early stopping"].split("│")[2].strip() == "no (patience 8)"
+    assert rows["early stopping"].split("│")[2].strip() == (
+        f"no (patience {js['training']['early_stopping_patience']})")
     assert rows["train"].split("│")[3].strip() == str(len(js["data"]["train_drives"]))
     assert str(js["data"]["val_windows"]) in rows["validation"]
     cells = [[c.strip() for c in line.split("│")[1:-1]] for line in lines if line.startswith("│")]

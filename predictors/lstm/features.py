@@ -9,6 +9,11 @@ Layout ``[batch, 8, 6]`` (time-major; the paper writes it [Nb, 6, 8]), columns
 - yaw [rad];
 - t [s]: 0, 0.2, ..., 1.4 (time since the window's first sample).
 
+Row 0's dx, dy have no previous sample and are 0 in the paper's layout. A model whose
+model.json sets ``"fix_offset": true`` gets there instead the newest fix minus the newest
+grid point [m] (same frame as dx, dy): how far the fix itself lies from the cubic that
+resampled it, the one thing the grid cannot show (the fit smooths the newest fix away).
+
 Two frames (``model.json["frame"]``):
 
 - ``"world"``: the paper's layout as written: dx, dy, ax, ay in the local ENU frame,
@@ -59,7 +64,8 @@ def time_feature(n: int = N_STEPS) -> np.ndarray:
 
 def compute_features(pos: np.ndarray, ax: np.ndarray, ay: np.ndarray, yaw: np.ndarray,
                      psi_ref: np.ndarray | float, frame: str = "heading",
-                     anchor: int = N_STEPS - 1, out: np.ndarray | None = None) -> np.ndarray:
+                     anchor: int = N_STEPS - 1, out: np.ndarray | None = None,
+                     fix_xy: np.ndarray | None = None) -> np.ndarray:
     """Features (..., n, 6) for grid samples with any leading batch shape.
 
     Args:
@@ -70,12 +76,16 @@ def compute_features(pos: np.ndarray, ax: np.ndarray, ay: np.ndarray, yaw: np.nd
         frame: ``"heading"`` or ``"world"``.
         anchor: index of the newest input sample (the frame's origin); 7 for 8 inputs.
         out: optional preallocated output array.
+        fix_xy: (..., 2) newest fix [m, ENU] or None: row 0's dx, dy become the fix minus
+            the anchor sample (the ``fix_offset`` layout, see the module doc).
     """
     n = pos.shape[-2]
     if out is None:
         out = np.empty(pos.shape[:-2] + (n, N_FEATURES))
     dxy = np.zeros(pos.shape)
     dxy[..., 1:, :] = pos[..., 1:, :] - pos[..., :-1, :]
+    if fix_xy is not None:
+        dxy[..., 0, :] = fix_xy - pos[..., anchor, :]
     awx, awy = vehicle_to_world(ax, ay, yaw)
     if frame == "heading":
         ref = np.asarray(psi_ref)[..., None]
@@ -97,21 +107,26 @@ _T = time_feature()
 
 
 def features_one(pos: np.ndarray, ax: np.ndarray, ay: np.ndarray, yaw: np.ndarray,
-                 psi_ref: float, frame: str, out: np.ndarray) -> np.ndarray:
+                 psi_ref: float, frame: str, out: np.ndarray,
+                 fix_xy: tuple[float, float] | None = None) -> np.ndarray:
     """:func:`compute_features` for one window of 8 samples (the runtime's hot path, ~4x
     fewer numpy calls); writes into ``out`` (8, 6) and returns it. Equal to
     ``compute_features`` (tested)."""
     d0 = pos[1:, 0] - pos[:-1, 0]
     d1 = pos[1:, 1] - pos[:-1, 1]
-    out[0, 0] = out[0, 1] = 0.0
+    o0 = o1 = 0.0
+    if fix_xy is not None:
+        o0, o1 = fix_xy[0] - float(pos[-1, 0]), fix_xy[1] - float(pos[-1, 1])
     if frame == "heading":
         c, s = math.cos(psi_ref), math.sin(psi_ref)
         out[1:, 0] = c * d0 + s * d1
         out[1:, 1] = c * d1 - s * d0
+        out[0, 0], out[0, 1] = c * o0 + s * o1, c * o1 - s * o0
         rel = yaw - yaw[-1]
     elif frame == "world":
         out[1:, 0] = d0
         out[1:, 1] = d1
+        out[0, 0], out[0, 1] = o0, o1
         rel = yaw
     else:
         raise ValueError(f"unknown frame {frame!r}; choose one of {FRAMES}")

@@ -85,15 +85,18 @@ class FusedStep:
     ``pts`` is overwritten by the next step: copy what must be kept.
     """
 
-    def __init__(self, net: OnnxModel, frame: str, final_pinv: np.ndarray) -> None:
+    def __init__(self, net: OnnxModel, frame: str, final_pinv: np.ndarray,
+                 fix_offset: bool = False) -> None:
         self.net = net
         self.frame = frame
         self.final_pinv = np.ascontiguousarray(final_pinv)
+        self.fix_offset = fix_offset
         self._alloc()
 
     # scratch buffers are rebuilt, not pickled (a pickled view would lose its base)
     def __getstate__(self) -> dict:
-        return {"net": self.net, "frame": self.frame, "final_pinv": self.final_pinv}
+        return {"net": self.net, "frame": self.frame, "final_pinv": self.final_pinv,
+                "fix_offset": self.fix_offset}
 
     def __setstate__(self, state: dict) -> None:
         self.__dict__.update(state)
@@ -122,6 +125,7 @@ class FusedStep:
         self._cf = np.empty((2, 4))
         self._pinv_t = np.ascontiguousarray(self.final_pinv.T)  # (9, 4)
         self.coef: tuple[float, ...] = (0.0,) * 8
+        self._fix_c = 0j  # the newest fix as x + iy (fix_offset models)
         self.psi = 0.0
         self.speed = math.nan
 
@@ -154,6 +158,7 @@ class FusedStep:
         """
         nf = fix.shape[0]
         ni = 0 if imu is None else imu.shape[0]
+        self._fix_c = complex(fix[nf - 1, 1], fix[nf - 1, 2])
         t3 = self._t3
         t3[0] = t_end
         np.subtract(fix, t3, out=self._rows(0, nf)[:nf, 3:6])
@@ -199,12 +204,16 @@ class FusedStep:
         ec = self._ec
         imu = self._e[1]
         if self.frame == "heading":
-            np.multiply(ec[0, _DIFF], complex(math.cos(self.psi), -math.sin(self.psi)),
-                        out=xc[1:, 0])
+            rot = complex(math.cos(self.psi), -math.sin(self.psi))
+            np.multiply(ec[0, _DIFF], rot, out=xc[1:, 0])
+            if self.fix_offset:  # row 0: the newest fix minus the newest grid point
+                xc[0, 0] = (self._fix_c - ec[0, 7]) * rot
             rel = imu[_REL, 2]  # yaw relative to the newest sample
             x64[:, 4] = rel
         else:
             xc[1:, 0] = ec[0, _DIFF]
+            if self.fix_offset:
+                xc[0, 0] = self._fix_c - ec[0, 7]
             rel = imu[:8, 2]
             x64[:, 4] = np.pi - np.mod(np.pi - rel, 2 * np.pi)
         cs = self._cs

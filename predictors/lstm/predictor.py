@@ -249,6 +249,8 @@ class LstmPredictor(Predictor):
             self.model_path = self.model_path / "model.onnx"
         self.info = load_model_info(self.model_path)
         self.frame = self.info.get("frame", "heading")
+        #: row 0 of the input holds the newest fix minus the newest grid point (model.json)
+        self.fix_offset = bool(self.info.get("fix_offset", False))
         self.fit = fit
         declared = self.info.get("input_shape") or [None]
         batch_dim = declared[0] if isinstance(declared[0], str) else None
@@ -262,12 +264,14 @@ class LstmPredictor(Predictor):
         self._x = np.empty((N_STEPS, 6), dtype=np.float64)
         self._pts = np.empty((N_STEPS + 1, 2))
         fused = getattr(self, "step", "staged") == "fused" and self.fit == "closed"
-        self._fused = FusedStep(self.net, self.frame, self._final.pinv) if fused else None
+        self._fused = (FusedStep(self.net, self.frame, self._final.pinv, self.fix_offset)
+                       if fused else None)
         self.stage_timer = None
         self.reset()
 
     def config(self) -> dict:
         return {"model": str(self.model_path), "fit": self.fit, "frame": self.frame,
+                "fix_offset": self.fix_offset,
                 "step": self.step, "architecture": self.info.get("architecture"),
                 "command": self.info.get("command")}
 
@@ -506,8 +510,13 @@ class LstmPredictor(Predictor):
 
     def _net_input(self, grid: np.ndarray, ax: np.ndarray, ay: np.ndarray, yaw: np.ndarray,
                    psi: float, coef: np.ndarray, scale: float) -> np.ndarray:
-        """The network's input window from the grid [m], IMU on the grid and heading [rad]."""
-        return features_one(grid, ax, ay, yaw, psi, self.frame, self._x)
+        """The network's input window from the grid [m], IMU on the grid and heading [rad]
+        (and, for a ``fix_offset`` model, the newest fix: the fix buffer's last row)."""
+        fix = None
+        if self.fix_offset:
+            row = self._fix.a[self._fix.n - 1]
+            fix = (float(row[1]), float(row[2]))
+        return features_one(grid, ax, ay, yaw, psi, self.frame, self._x, fix)
 
     def _net_output(self, out: np.ndarray, grid: np.ndarray, psi: float) -> tuple[float, float]:
         """World displacement [m] from the newest grid point to 200 ms later, from the

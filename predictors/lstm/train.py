@@ -1,16 +1,22 @@
 """Train the paper's MLP-LSTM-MLP on drives and write ``model.onnx`` + ``model.json``.
 
 :func:`run_training` is what ``bench train --data PATH... --out DIR [--epochs N] [--seed N]``
-calls. Pipeline: load drives (``scenarios.load``) and optional synthetic drives ->
-split by route (never by window) -> windows (:mod:`predictors.lstm.windows`; drives
-with a truth stream are fed GPS degraded from it with profile ``"rtk"`` under several
-seeds) -> feature statistics on the training windows -> Adam + ReduceLROnPlateau +
-early stopping on the validation loss, turn windows oversampled -> ONNX export (faster
-exporter kept) -> validation future-point error [m] of the exported model and, on the
-same windows, of a plain cubic extrapolation and constant velocity.
+calls. Pipeline: load drives (``scenarios.load``), optional synthetic drives and hours of the
+vehicle-dynamics corpus (:mod:`scenarios.corpus`) -> split by route (never by window) ->
+windows (:mod:`predictors.lstm.windows`; drives with a truth stream are fed GPS degraded
+from it under each of ``profiles``, ``gps_seeds`` draws each: fresh fix times from the
+paper's interval distribution every draw, i.e. time jitter) -> feature statistics on the
+training windows -> Adam + ReduceLROnPlateau + early stopping on the validation loss,
+turn windows oversampled, every batch mirrored at random (left <-> right: dy, ay, yaw
+negated in inputs and targets; exact in both frames) -> ONNX export (faster exporter kept)
+-> validation future-point error [m] of the exported model and, on the same windows, of a
+plain cubic extrapolation and constant velocity.
 
-Loss (the paper's): MSE over all 8 x 6 standardised outputs + 10 x MSE of the last
-output's x, y. Seeded and deterministic (torch, numpy, the sampler's generator).
+Loss (the paper's): MSE over all 8 x 6 outputs in the network's units (standardised;
+for the ``"speed"`` form the displacement is a residual in units of its own scale, see
+:mod:`predictors.lstm.model`) + 10 x MSE of the last output's x, y. Seeded and
+deterministic (torch, numpy, the sampler's generator). A wall-clock budget
+(``max_minutes``) ends training early if it is reached; the best epoch is kept.
 """
 
 from __future__ import annotations
@@ -31,7 +37,8 @@ from predictors.lstm.windows import WindowSet, drive_windows, future_from_output
 from scenarios.drive import Drive
 from scenarios.errors import DataError
 
-Progress = Callable[[int, int, float, float], None]
+#: ``callback(epoch, n_epochs, train_loss, val_loss, val_future_mean_m)`` after each epoch
+Progress = Callable[[int, int, float, float, float], None]
 EarlyStop = Callable[[int, int, int], None]
 FORMAT = "posbench-lstm"
 VAL_EVERY = 5
@@ -103,18 +110,52 @@ def split_by_route(drives: Sequence[Drive]) -> tuple[list[Drive], list[Drive]]:
     return train, val
 
 
-def gps_variants(drive: Drive, n_seeds: int, seed: int) -> list:
-    """GPS streams to train on: the drive's own (no truth) or ``n_seeds`` rtk degradations."""
+def gps_variants(drive: Drive, n_seeds: int, seed: int,
+                 profiles: Sequence[str] = ("rtk",)) -> list:
+    """GPS streams to train on: the drive's own (no truth) or, per profile, ``n_seeds``
+    degradations of its truth (each with freshly drawn fix times)."""
     if drive.truth is None or len(drive.truth) < 2:
         return [drive.gps]
     from scenarios.degrade import degrade_gps
 
-    return [degrade_gps(drive.truth, "rtk", seed=seed * 1000 + k) for k in range(n_seeds)]
+    return [degrade_gps(drive.truth, prof, seed=seed * 1000 + 100 * j + k)
+            for j, prof in enumerate(profiles) for k in range(n_seeds)]
 
 
-def build_windows(drives: Sequence[Drive], n_seeds: int, seed: int, frame: str) -> WindowSet:
-    return WindowSet.concat([drive_windows(d, g, frame) for d in drives
-                             for g in gps_variants(d, n_seeds, seed)])
+def build_windows(drives: Sequence[Drive], n_seeds: int, seed: int, frame: str,
+                  profiles: Sequence[str] = ("rtk",), fix_offset: bool = False) -> WindowSet:
+    return WindowSet.concat([drive_windows(d, g, frame, fix_offset=fix_offset) for d in drives
+                             for g in gps_variants(d, n_seeds, seed, profiles)])
+
+
+def corpus(hours: float, seed: int) -> list[Drive]:
+    """``hours`` of the vehicle-dynamics corpus (:func:`scenarios.corpus.corpus_drives`)."""
+    if hours <= 0:
+        return []
+    from scenarios.corpus import corpus_drives
+
+    return list(corpus_drives(hours, seed=seed))
+
+
+def mirror_signs(n: int, gen, like) -> object:
+    """Per-window sign vectors (n, 1, 6) for left-right mirroring: +1 everywhere, or -1 on
+    dy, ay and yaw (features 1, 3, 4) for about half the windows (torch tensors)."""
+    import torch
+
+    flip = torch.rand(n, generator=gen) < 0.5
+    sg = torch.ones(n, 1, 6, dtype=like.dtype)
+    sg[flip, :, 1] = -1.0
+    sg[flip, :, 3] = -1.0
+    sg[flip, :, 4] = -1.0
+    return sg
+
+
+def subsample(ws: WindowSet, n_max: int, seed: int) -> WindowSet:
+    """At most ``n_max`` windows, drawn without replacement (seeded), order kept."""
+    if len(ws) <= n_max:
+        return ws
+    idx = np.sort(np.random.default_rng(seed).choice(len(ws), n_max, replace=False))
+    return ws.take(idx)
 
 
 def sample_weights(labels: np.ndarray, turn_boost_max: float = 5.0) -> np.ndarray:
@@ -174,26 +215,39 @@ def run_training(data_paths: Sequence[str | Path], out_dir: Path, epochs: int = 
                  seed: int = 0, synthetic: int = 0, progress: Progress | None = None,
                  command: str | None = None, drives: Sequence[Drive] | None = None,
                  hidden: int = 64, lstm_layers: int = 1, enc_layers: int = 1,
-                 batch_size: int = 256, lr: float = 2e-3, patience: int = 8,
-                 gps_seeds: int = 3, frame: str = "heading", threads: int = 2,
-                 timing_calls: int = 2000, on_early_stop: EarlyStop | None = None) -> dict:
+                 batch_size: int = 512, lr: float = 2e-3, patience: int = 6,
+                 gps_seeds: int = 1, frame: str = "heading", threads: int = 2,
+                 timing_calls: int = 2000, on_early_stop: EarlyStop | None = None,
+                 form: str = "speed", corpus_hours: float = 0.0,
+                 profiles: Sequence[str] = ("none", "rtk"), mirror: bool = True,
+                 max_minutes: float = 30.0, max_val_windows: int = 60_000,
+                 fix_offset: bool = True) -> dict:
     """Train, export and describe a model. Returns the dict written to ``model.json``.
 
     Args:
         data_paths: files/folders for ``scenarios.load`` (aslan pickles, comma2k19, ...).
         out_dir: where ``model.onnx`` and ``model.json`` go (created).
-        epochs: maximum epochs (early stopping may end sooner).
-        seed: seeds torch, numpy, the sampler and the synthetic generator.
-        synthetic: number of synthetic drives to add (generator seeds seed .. seed+N-1).
-        progress: ``callback(epoch, n_epochs, train_loss, val_loss)`` after each epoch.
+        epochs: maximum epochs (early stopping or ``max_minutes`` may end sooner).
+        seed: seeds torch, numpy, the sampler and the synthetic generators.
+        synthetic: number of drives of the benchmark's synthetic generator to add.
+        progress: called after each epoch (:data:`Progress`).
         command: the exact command line, recorded in model.json.
         drives: extra in-memory drives (tests).
         hidden, lstm_layers, enc_layers: network sizes.
-        gps_seeds: rtk GPS draws per drive with truth (training; validation uses one).
+        gps_seeds: GPS draws per profile for drives with truth (validation uses one).
         frame: feature frame, ``"heading"`` or ``"world"``.
         on_early_stop: ``callback(epoch, best_epoch, patience)`` when early stopping ends
             training after ``epoch``: the validation loss has not improved for
             ``epoch - best_epoch`` (= ``patience``) epochs; the best epoch's weights are kept.
+        form: ``"speed"`` (speed-invariant input, residual output) or ``"paper"``
+            (:mod:`predictors.lstm.model`).
+        corpus_hours: hours of the vehicle-dynamics corpus to add (:mod:`scenarios.corpus`).
+        profiles: GPS profiles drawn from the truth of drives that have one.
+        mirror: mirror every batch left-right at random (augmentation).
+        max_minutes: wall-clock budget of the epochs [min]; the best epoch so far is kept.
+        max_val_windows: validation windows kept (a seeded subsample beyond).
+        fix_offset: row 0 of the input holds the newest fix minus the newest grid point
+            (:mod:`predictors.lstm.features`).
     """
     import torch
 
@@ -215,65 +269,92 @@ def run_training(data_paths: Sequence[str | Path], out_dir: Path, epochs: int = 
     for p in data_paths:
         all_drives.extend(load(p))
     all_drives.extend(synthetic_drives(synthetic, seed))
+    corpus_d = corpus(corpus_hours, seed)
+    all_drives.extend(corpus_d)
     all_drives.extend(drives or [])
     if not all_drives:
-        raise DataError(None, "no training drives: give --data PATH or --synthetic N")
+        raise DataError(None, "no training drives: give --data PATH, --synthetic N or "
+                              "--corpus-hours H")
     train_d, val_d = split_by_route(all_drives)
-    tr = build_windows(train_d, gps_seeds, seed, frame)
-    va = build_windows(val_d, 1, seed + 7919, frame)
+    tr = build_windows(train_d, gps_seeds, seed, frame, profiles, fix_offset)
+    va = subsample(build_windows(val_d, 1, seed + 7919, frame, profiles, fix_offset),
+                   max_val_windows, seed)
     if len(tr) == 0 or len(va) == 0:
         raise DataError(None, f"too few windows (train {len(tr)}, validation {len(va)}): "
                               "drives need >= 2 s of moving GPS")
+    t_data = time.perf_counter() - t_start
     flat = tr.X.reshape(-1, tr.X.shape[-1])
     mean = flat.mean(axis=0)
     std = np.maximum(flat.std(axis=0), 1e-3)
 
-    net = LstmNet(hidden, lstm_layers, enc_layers)
+    net = LstmNet(hidden, lstm_layers, enc_layers, form=form, fix_offset=fix_offset)
     net.set_stats(torch.tensor(mean), torch.tensor(std))
-    m_t, s_t = torch.tensor(mean, dtype=torch.float32), torch.tensor(std, dtype=torch.float32)
-
-    def std_t(a: np.ndarray) -> torch.Tensor:
-        return (torch.tensor(a, dtype=torch.float32) - m_t) / s_t
-
-    Xtr, Ytr, Xva, Yva = std_t(tr.X), std_t(tr.Y), std_t(va.X), std_t(va.Y)
-    w = sample_weights(tr.label)
+    Xtr, Ytr = torch.tensor(tr.X, dtype=torch.float32), torch.tensor(tr.Y, dtype=torch.float32)
+    Xva, Yva = torch.tensor(va.X, dtype=torch.float32), torch.tensor(va.Y, dtype=torch.float32)
+    if form == "speed":
+        with torch.no_grad():
+            log_s = torch.log(LstmNet.speed_scale(Xtr)).flatten()
+            res = (Ytr[:, :, :2] - LstmNet.base_step(Xtr)).reshape(-1, 2)
+            net.set_speed_stats(float(log_s.mean()), float(log_s.std().clamp_min(1e-3)),
+                                res.std(0).clamp_min(1e-3))
+    w = torch.tensor(sample_weights(tr.label))
     gen = torch.Generator().manual_seed(seed)
-    sampler = torch.utils.data.WeightedRandomSampler(torch.tensor(w), num_samples=len(tr),
-                                                     replacement=True, generator=gen)
-    loader = torch.utils.data.DataLoader(torch.utils.data.TensorDataset(Xtr, Ytr),
-                                         batch_size=batch_size, sampler=sampler)
     opt = torch.optim.Adam(net.parameters(), lr=lr)
-    sched = torch.optim.lr_scheduler.ReduceLROnPlateau(opt, factor=0.5, patience=3)
+    sched = torch.optim.lr_scheduler.ReduceLROnPlateau(opt, factor=0.5, patience=2)
 
-    def loss_fn(pred: torch.Tensor, y: torch.Tensor) -> torch.Tensor:
-        return torch.mean((pred - y) ** 2) + 10.0 * torch.mean((pred[:, -1, :2] - y[:, -1, :2]) ** 2)
+    def loss_fn(x: torch.Tensor, y: torch.Tensor) -> torch.Tensor:
+        pred, tgt = net.core(x), net.target_std(x, y)
+        return torch.mean((pred - tgt) ** 2) + 10.0 * torch.mean((pred[:, -1, :2] - tgt[:, -1, :2]) ** 2)
+
+    def validate() -> tuple[float, float]:
+        """Validation loss and future-point mean error [m] (no mirroring)."""
+        net.eval()
+        tot, outs = 0.0, []
+        with torch.no_grad():
+            for i in range(0, len(va), 8192):
+                xb, yb = Xva[i:i + 8192], Yva[i:i + 8192]
+                tot += float(loss_fn(xb, yb)) * xb.shape[0]
+                outs.append(net(xb)[:, -1, :2].numpy())
+        fut = future_from_output(va, np.concatenate(outs).astype(float), frame)
+        return tot / len(va), float(np.linalg.norm(fut - va.truth_future, axis=1).mean())
 
     best = (float("inf"), None, 0)
     history = []
+    budget_s = max_minutes * 60.0
+    stopped_by = "epochs"
     for epoch in range(1, epochs + 1):
         net.train()
         tot, cnt = 0.0, 0
-        for xb, yb in loader:
+        order = torch.multinomial(w, len(tr), replacement=True, generator=gen)
+        for i in range(0, len(tr), batch_size):
+            idx = order[i:i + batch_size]
+            xb, yb = Xtr[idx], Ytr[idx]
+            if mirror:
+                sg = mirror_signs(idx.shape[0], gen, xb)
+                xb, yb = xb * sg, yb * sg
             opt.zero_grad()
-            loss = loss_fn(net.forward_std(xb), yb)
+            loss = loss_fn(xb, yb)
             loss.backward()
             opt.step()
             tot += loss.item() * xb.shape[0]
             cnt += xb.shape[0]
-        net.eval()
-        with torch.no_grad():
-            vl = float(loss_fn(net.forward_std(Xva), Yva))
+        vl, vm = validate()
         tl = tot / max(cnt, 1)
         sched.step(vl)
         history.append({"epoch": epoch, "train_loss": tl, "val_loss": vl,
-                        "lr": opt.param_groups[0]["lr"]})
+                        "val_future_mean_m": vm, "lr": opt.param_groups[0]["lr"],
+                        "elapsed_s": round(time.perf_counter() - t_start, 1)})
         if progress is not None:
-            progress(epoch, epochs, tl, vl)
+            progress(epoch, epochs, tl, vl, vm)
         if vl < best[0] - 1e-6:
             best = (vl, {k: v.clone() for k, v in net.state_dict().items()}, epoch)
         elif epoch - best[2] >= patience:
+            stopped_by = "early stopping"
             if on_early_stop is not None:
                 on_early_stop(epoch, best[2], patience)
+            break
+        if time.perf_counter() - t_start > budget_s:
+            stopped_by = f"time budget ({max_minutes:g} min)"
             break
     net.load_state_dict(best[1])
     net.eval()
@@ -285,29 +366,42 @@ def run_training(data_paths: Sequence[str | Path], out_dir: Path, epochs: int = 
     lstm_future = future_from_output(va, out[:, :2].astype(float), frame)
     metrics = evaluate(va, lstm_future, {d.name: group_of(d) for d in val_d})
 
+    forms = {"paper": "every feature standardised (training mean/std), displacement output "
+                      "standardised likewise",
+             "speed": "speed-invariant in-graph: (dx, dy) / s with s = mean grid step + 0.02 m, "
+                      "log s as a 7th encoder channel; displacement output = previous grid step "
+                      "+ res_std x net (a residual); aux features standardised"}
     info = {
-        "format": FORMAT, "version": 1,
-        "frame": frame, "features": list(FEATURES), "n_steps": N_STEPS, "dt_s": DT,
+        "format": FORMAT, "version": 2 if form == "speed" else 1,
+        "frame": frame, "form": form, "fix_offset": fix_offset, "features": list(FEATURES), "n_steps": N_STEPS, "dt_s": DT,
         "min_span_s": MIN_SPAN_S, "input": "features", "output": "future",
         "input_shape": ["batch", N_STEPS, len(FEATURES)], "output_shape": ["batch", len(FEATURES)],
-        "normalisation": "in-graph (raw features in, raw next-sample features out)",
+        "normalisation": f"in-graph (raw features in, raw next-sample features out); {forms[form]}",
         "feature_mean": mean.tolist(), "feature_std": std.tolist(),
+        "speed_stats": ({"log_s_mean": float(net.log_s_mean), "log_s_std": float(net.log_s_std),
+                         "res_std_m": net.res_std.tolist()} if form == "speed" else None),
         "architecture": {"encoder": f"{enc_layers} x (Linear -> LeakyReLU(0.1)), width {hidden}",
                          "lstm": {"hidden": hidden, "layers": lstm_layers},
                          "decoder": f"Linear({hidden},{hidden}) -> LeakyReLU(0.1) -> Linear({hidden},6)",
                          "parameters": int(sum(p.numel() for p in net.parameters()))},
         "training": {"epochs_max": epochs, "epochs_run": len(history), "best_epoch": best[2],
+                     "stopped_by": stopped_by, "max_minutes": max_minutes,
                      "seed": seed, "batch_size": batch_size, "lr": lr, "optimizer": "Adam",
-                     "scheduler": "ReduceLROnPlateau(factor 0.5, patience 3)",
+                     "scheduler": "ReduceLROnPlateau(factor 0.5, patience 2)",
                      "early_stopping_patience": patience,
-                     "loss": "MSE(all 8x6 standardised outputs) + 10 x MSE(last output x, y)",
-                     "oversampling": "WeightedRandomSampler, turn/roundabout weight "
-                                     "n_other/n_turn clipped to [1, 5]",
-                     "gps_for_truth_drives": f"degrade_gps(truth, 'rtk', seed) x {gps_seeds}",
-                     "threads": threads, "seconds": round(train_s, 1), "history": history},
+                     "loss": "MSE(all 8x6 outputs in network units) + 10 x MSE(last output x, y)",
+                     "oversampling": "turn/roundabout weight n_other/n_turn clipped to [1, 5], "
+                                     "windows drawn with replacement",
+                     "augmentation": {"mirror": mirror, "gps_profiles": list(profiles),
+                                      "gps_draws_per_profile": gps_seeds,
+                                      "time_jitter": "fix times drawn afresh per GPS draw "
+                                                     "(the paper's interval distribution)"},
+                     "threads": threads, "data_seconds": round(t_data, 1),
+                     "seconds": round(train_s, 1), "history": history},
         "data": {"paths": manifest(data_paths),
                  "synthetic": {"drives": synthetic, "generator": "scenarios.synthetic.generate_drive",
                                "generator_seeds": synthetic_seeds(synthetic, seed)},
+                 "corpus": corpus_card(corpus_d, corpus_hours, seed),
                  "in_memory_drives": [d.name for d in (drives or [])],
                  "train_drives": [d.name for d in train_d], "val_drives": [d.name for d in val_d],
                  "split": f"by route: per source group in name order, every {VAL_EVERY}th drive "
@@ -322,3 +416,14 @@ def run_training(data_paths: Sequence[str | Path], out_dir: Path, epochs: int = 
     }
     (out_dir / "model.json").write_text(json.dumps(info, indent=1))
     return info
+
+
+def corpus_card(drives: Sequence[Drive], hours: float, seed: int) -> dict:
+    """What the model card says about the corpus drives: hours asked, the generator, the
+    seed and the envelope the drives cover (:func:`scenarios.corpus.envelope`)."""
+    if not drives:
+        return {"hours": 0}
+    from scenarios.corpus import envelope
+
+    return {"hours": hours, "seed": seed, "generator": "scenarios.corpus.corpus_drives",
+            "drives": len(drives), "envelope": envelope(drives)}

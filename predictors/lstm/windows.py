@@ -106,8 +106,10 @@ def _labels(drive: Drive, t_end: np.ndarray, psi_first: np.ndarray, psi: np.ndar
 
 
 def drive_windows(drive: Drive, gps: GpsStream | None = None, frame: str = "heading",
-                  min_span: float = MIN_SPAN_S) -> WindowSet:
-    """All training windows of one drive, its GPS optionally replaced (e.g. degraded)."""
+                  min_span: float = MIN_SPAN_S, fix_offset: bool = False) -> WindowSet:
+    """All training windows of one drive, its GPS optionally replaced (e.g. degraded);
+    ``fix_offset``: row 0 holds the newest fix minus the newest grid point
+    (:mod:`predictors.lstm.features`)."""
     gps = drive.gps if gps is None else gps
     t = gps.t
     xy = np.stack([gps.x, gps.y], axis=1)
@@ -152,7 +154,7 @@ def drive_windows(drive: Drive, gps: GpsStream | None = None, frame: str = "head
         ax[okimu], ay[okimu] = res[okimu, :, 0], res[okimu, :, 1]
         okyaw = okimu & np.isfinite(res[:, :, 2]).all(axis=1)
         yaw[okyaw] = res[okyaw, :, 2]
-    X = compute_features(pos, ax, ay, yaw, psi, frame)
+    X = compute_features(pos, ax, ay, yaw, psi, frame, fix_xy=xy[ends] if fix_offset else None)
     # targets: reference displacement from each input sample, next row's aux features
     Y = np.empty_like(X)
     d = ref - pos
