@@ -12,6 +12,9 @@ fully vectorised:
    100 Hz, speed smoothed twice with a 0.6 s box kernel (bounded jerk, exactly 0 at
    standstill) and re-integrated, so position, heading and speed are consistent.
 
+The limits above are the defaults of :func:`simulate`'s keyword arguments (the built-in
+data set); :mod:`scenarios.corpus` draws them per drive for the training corpus.
+
 Streams (t in seconds from the start, ENU metres about :data:`ORIGIN_LAT`, :data:`ORIGIN_LON`,
 the truth starting at (0, 0)):
 
@@ -68,7 +71,11 @@ class Segment:
 
     kind: ``"straight"`` (``length_m``), ``"arc"`` (signed heading change ``angle_rad``,
     + = left / counter-clockwise, at ``radius_m``) or ``"stop"`` (standstill ``dwell_s``).
-    ``speed_mps`` is the target speed; ``label`` the manoeuvre it belongs to.
+    ``speed_mps`` is the target speed; ``label`` the scenario label (one of
+    :data:`scenarios.labels.LABELS`) it belongs to; ``manoeuvre`` the finer kind (e.g.
+    ``"lane_change"``, ``"u_turn"``; empty = ``label``); ``cont`` marks a segment that
+    continues the previous segment's manoeuvre (the ring and exit of a roundabout, the
+    second arc of a lane change), so the two share one time span.
     """
 
     kind: str
@@ -78,6 +85,8 @@ class Segment:
     speed_mps: float = 0.0
     dwell_s: float = 0.0
     label: str = "straight"
+    manoeuvre: str = ""
+    cont: bool = False
 
     @property
     def path_length_m(self) -> float:
@@ -99,12 +108,30 @@ def stop(dwell_s: float) -> Segment:
     return Segment("stop", dwell_s=dwell_s, label="start_stop")
 
 
-def roundabout(rng: np.random.Generator, j: Callable[[float, float], float]) -> list[Segment]:
-    """Enter with a right turn, ~270 deg counter-clockwise at radius 15-20 m, exit right."""
+def roundabout(rng: np.random.Generator, j: Callable[[float, float], float],
+               radius_m: float | None = None, speed_mps: float | None = None) -> list[Segment]:
+    """Enter with a right turn, ~270 deg counter-clockwise around the ring, exit right.
+
+    Default (both ``None``): ring radius 15-20 m at 7 m/s, entry / exit radius 10-12 m at
+    6 m/s (the draws of the built-in routes). With ``radius_m`` [m] (and ``speed_mps``, the
+    ring's target speed [m/s], default 7): entry / exit radius 0.6 x the ring's (6-15 m) at
+    0.85 x the ring speed, ring angle 240-300 deg.
+    """
     entry = j(30, 40)
-    return [turn(-entry, j(10, 12), 6.0, "roundabout"),
-            turn(j(260, 280), j(15, 20), 7.0, "roundabout"),
-            turn(-entry, j(10, 12), 6.0, "roundabout")]
+    if radius_m is None:
+        r_in = j(10, 12)
+        ring = Segment("arc", angle_rad=np.radians(j(260, 280)), radius_m=j(15, 20),
+                       speed_mps=7.0, label="roundabout", cont=True)
+        r_out, v_io = j(10, 12), 6.0
+    else:
+        v_ring = 7.0 if speed_mps is None else float(speed_mps)
+        r_in = r_out = float(np.clip(0.6 * radius_m, 6.0, 15.0))
+        ring = Segment("arc", angle_rad=np.radians(j(240, 300)), radius_m=float(radius_m),
+                       speed_mps=v_ring, label="roundabout", cont=True)
+        v_io = 0.85 * v_ring
+    return [turn(-entry, r_in, v_io, "roundabout"), ring,
+            Segment("arc", angle_rad=np.radians(-entry), radius_m=r_out, speed_mps=v_io,
+                    label="roundabout", cont=True)]
 
 
 def route_segments(route: str, rng: np.random.Generator) -> list[Segment]:
@@ -165,12 +192,27 @@ class _Sim:
     v: np.ndarray
     yaw_rate: np.ndarray
     ax: np.ndarray
-    segments: list[list]
+    segments: list[list]     # [label, t_start, t_end], label in scenarios.labels.LABELS
+    manoeuvres: list[list]   # [manoeuvre, t_start, t_end], the finer kinds
 
 
-def simulate(segments: list[Segment], yaw0: float = 0.0, dt: float = DT_TRUTH) -> _Sim:
-    """Kinematic simulation of a route at ``dt`` (see module doc). Starts at the first
-    segment's target speed (0 if it is a stop)."""
+def simulate(segments: list[Segment], yaw0: float = 0.0, dt: float = DT_TRUTH, *,
+             a_acc: float = A_ACC, a_dec: float = A_DEC, ay_max: float = AY_MAX,
+             v_smooth_s: float = V_SMOOTH_S, kappa_smooth_m: float = KAPPA_SMOOTH_M,
+             ay_window_m: float = 0.0) -> _Sim:
+    """Kinematic simulation of a route at ``dt`` [s] (see module doc). Starts at the first
+    segment's target speed (0 if it is a stop).
+
+    The vehicle limits default to the module constants (the built-in data set):
+    ``a_acc`` acceleration and ``a_dec`` braking [m/s^2] of the reachable speed profile,
+    ``ay_max`` lateral acceleration [m/s^2] of the curve speed limit, ``v_smooth_s`` the
+    box kernel [s] the speed is smoothed with twice (bounds the jerk), ``kappa_smooth_m``
+    the arc length [m] the curvature is smoothed over (transition curves). ``ay_window_m``
+    [m] > 0 makes the curve speed limit hold that far before and after each point of the
+    path (a running minimum): the speed smoothing averages over +-``v_smooth_s``, which
+    otherwise carries the faster approach into a curve's entry and overshoots ``ay_max``;
+    a window of at least ``v_smooth_s`` x the top speed keeps |v^2 kappa| <= ``ay_max``.
+    """
     plen = np.array([s.path_length_m for s in segments])
     edges = np.concatenate([[0.0], np.cumsum(plen)])
     n_s = int(round(edges[-1] / DS)) + 1
@@ -179,22 +221,26 @@ def simulate(segments: list[Segment], yaw0: float = 0.0, dt: float = DT_TRUTH) -
     kseg = np.array([np.sign(g.angle_rad) / g.radius_m if g.kind == "arc" else 0.0
                      for g in segments])
     vseg = np.array([g.speed_mps for g in segments])
-    kappa = _box(kseg[idx], int(KAPPA_SMOOTH_M / DS) | 1)
+    kappa = _box(kseg[idx], int(kappa_smooth_m / DS) | 1)
     theta = yaw0 + np.concatenate([[0.0], np.cumsum(0.5 * (kappa[1:] + kappa[:-1]) * DS)])
     c, si = np.cos(theta), np.sin(theta)
     xs = np.concatenate([[0.0], np.cumsum(0.5 * (c[1:] + c[:-1]) * DS)])
     ys = np.concatenate([[0.0], np.cumsum(0.5 * (si[1:] + si[:-1]) * DS)])
 
     # speed limit and reachable profile (v^2 passes as running minima)
-    vlim = np.minimum(vseg[idx], np.sqrt(AY_MAX / np.maximum(np.abs(kappa), 1e-9)))
+    vlat = np.sqrt(ay_max / np.maximum(np.abs(kappa), 1e-9))
+    if ay_window_m > 0.0:
+        from scipy.ndimage import minimum_filter1d
+        vlat = minimum_filter1d(vlat, 2 * int(np.ceil(ay_window_m / DS)) + 1, mode="nearest")
+    vlim = np.minimum(vseg[idx], vlat)
     stops = [(k, g.dwell_s) for k, g in enumerate(segments) if g.kind == "stop"]
     k_stop = np.array([int(round(edges[k] / DS)) for k, _ in stops], dtype=int)
     dwell = np.array([d for _, d in stops], dtype=float)
     vlim[k_stop] = 0.0
     u = vlim ** 2
     i = np.arange(n_s)
-    uf = 2 * A_ACC * DS * i + np.minimum.accumulate(u - 2 * A_ACC * DS * i)
-    ub = -2 * A_DEC * DS * i + np.minimum.accumulate((u + 2 * A_DEC * DS * i)[::-1])[::-1]
+    uf = 2 * a_acc * DS * i + np.minimum.accumulate(u - 2 * a_acc * DS * i)
+    ub = -2 * a_dec * DS * i + np.minimum.accumulate((u + 2 * a_dec * DS * i)[::-1])[::-1]
     vs = np.sqrt(np.maximum(np.minimum(uf, ub), 0.0))
 
     # time along the path, dwell inserted at the stops
@@ -209,7 +255,7 @@ def simulate(segments: list[Segment], yaw0: float = 0.0, dt: float = DT_TRUTH) -
     s_raw = np.interp(t, t_knots, s_knots)
     v_raw = np.gradient(s_raw, dt)
     v_raw[np.interp(t, t_knots, np.insert(vs, k_stop + 1, 0.0)) == 0.0] = 0.0
-    w = int(V_SMOOTH_S / dt) | 1
+    w = int(v_smooth_s / dt) | 1
     v = np.maximum(_box(_box(v_raw, w), w), 0.0)
     st = np.concatenate([[0.0], np.cumsum(0.5 * (v[1:] + v[:-1]) * dt)])
     st = np.minimum(st, s[-1])
@@ -230,17 +276,25 @@ def simulate(segments: list[Segment], yaw0: float = 0.0, dt: float = DT_TRUTH) -
     still = v == 0.0
     d = np.diff(np.concatenate([[0], still.astype(np.int8), [0]]))
     r0, r1 = np.flatnonzero(d == 1), np.flatnonzero(d == -1) - 1
+    mans: list[list] = []
     for k, g in enumerate(segments):
         if g.kind == "stop":
             # the standstill run at this stop's arc length
             m = np.flatnonzero(np.abs(st[r0] - edges[k]) < 1.0)
             if m.size:
                 spans.append(["start_stop", float(t[r0[m[0]]]), float(t[r1[m[0]]])])
-        elif spans and spans[-1][0] == g.label == "roundabout":
+                mans.append([g.manoeuvre or "start_stop", *spans[-1][1:]])
+            continue
+        if spans and (spans[-1][0] == g.label == "roundabout"
+                      or (g.cont and spans[-1][0] == g.label)):
             spans[-1][2] = float(t_to[k + 1])
         else:
             spans.append([g.label, float(t_from[k]), float(t_to[k + 1])])
-    return _Sim(t, x, y, yaw, v, yaw_rate, ax, spans)
+        if mans and g.cont:
+            mans[-1][2] = float(t_to[k + 1])
+        else:
+            mans.append([g.manoeuvre or g.label, float(t_from[k]), float(t_to[k + 1])])
+    return _Sim(t, x, y, yaw, v, yaw_rate, ax, spans, mans)
 
 
 def _hermite(t: np.ndarray, x: np.ndarray, y: np.ndarray, vx: np.ndarray, vy: np.ndarray,
@@ -260,6 +314,69 @@ def _hermite(t: np.ndarray, x: np.ndarray, y: np.ndarray, vx: np.ndarray, vy: np
 
 def _wrap(a: np.ndarray) -> np.ndarray:
     return (a + np.pi) % (2 * np.pi) - np.pi
+
+
+def imu_stream(t: np.ndarray, yaw: np.ndarray, v: np.ndarray, yaw_rate: np.ndarray,
+               ax: np.ndarray, rng: np.random.Generator, step: int = 2, accel_sd: float = 0.05,
+               bias_sd: float = 0.05, yaw_sd: float = 0.005, yaw_rate_sd: float = 0.005,
+               gyro_bias_sd: float = 0.0) -> ImuStream:
+    """IMU samples from the 100 Hz truth: every ``step``-th sample (2 = 50 Hz, 1 = 100 Hz).
+
+    ax = dv/dt, ay = v * yaw_rate [m/s^2, vehicle frame x forward, y left] with white noise
+    ``accel_sd`` and a constant bias per axis drawn with sigma ``bias_sd``; yaw [rad, ENU,
+    wrapped] with white noise ``yaw_sd``; yaw_rate [rad/s] with white noise ``yaw_rate_sd``
+    and (if ``gyro_bias_sd`` > 0) a constant bias drawn with that sigma.
+    """
+    ii = np.arange(0, t.size, step)
+    m = ii.size
+    bias = rng.normal(0.0, bias_sd, 2)
+    fax = ax[ii] + bias[0] + rng.normal(0.0, accel_sd, m)
+    fay = v[ii] * yaw_rate[ii] + bias[1] + rng.normal(0.0, accel_sd, m)
+    fyaw = _wrap(yaw[ii] + rng.normal(0.0, yaw_sd, m))
+    fyr = yaw_rate[ii] + rng.normal(0.0, yaw_rate_sd, m)
+    if gyro_bias_sd > 0.0:
+        fyr = fyr + rng.normal(0.0, gyro_bias_sd)
+    return ImuStream(t[ii], fax, fay, fyaw, fyr)
+
+
+def can_speed_stream(t: np.ndarray, v: np.ndarray, rng: np.random.Generator) -> SpeedStream:
+    """CAN speed at 50 Hz from the 100 Hz truth (the odd samples, 10 ms after the IMU's):
+    white noise 0.02 m/s, never negative, exactly 0 at standstill."""
+    jj = np.arange(1, t.size, 2)
+    vc = np.maximum(v[jj] + rng.normal(0.0, 0.02, jj.size), 0.0)
+    vc[v[jj] == 0.0] = 0.0
+    return SpeedStream(t[jj], vc)
+
+
+def gps_stream(t: np.ndarray, x: np.ndarray, y: np.ndarray, yaw: np.ndarray, v: np.ndarray,
+               r_times: np.random.Generator, r_gps: np.random.Generator,
+               r_drop: np.random.Generator) -> tuple[GpsStream, list[tuple[float, float]]]:
+    """GPS fixes from the truth (t [s], x/y [m ENU], yaw [rad], v [m/s]) and the dropouts.
+
+    Fix intervals from the paper's distribution clipped to 0.1-0.6 s with ~4 % late fixes
+    (0.4-0.6 s); positions by cubic Hermite interpolation of the truth plus white noise
+    (:data:`GPS_WHITE_SD`) and a Gauss-Markov error (:data:`GPS_GM_SD`, :data:`GPS_GM_TAU_S`),
+    stated accuracy their combined per-axis sigma; one 1-2 s dropout per ~40 s.
+    Returns the stream and the outages ``[(t_last_fix, t_next_fix), ...]`` [s].
+    """
+    span = t[-1] - t[0]
+    k = int(span / 0.2 * 1.3) + 16
+    d = np.clip(draw_intervals(k, r_times, "aslan"), 0.1, 0.6)
+    late = r_times.random(k) < 0.04
+    d[late] = r_times.uniform(0.4, 0.6, int(late.sum()))
+    tf = t[0] + r_times.random() * 0.2 + np.concatenate([[0.0], np.cumsum(d)])
+    tf = tf[tf <= t[-1]]
+    gx, gy = _hermite(t, x, y, v * np.cos(yaw), v * np.sin(yaw), tf)
+    e = gps_noise(tf, r_gps, GPS_WHITE_SD, GPS_GM_SD, GPS_GM_TAU_S)
+    gx, gy = gx + e[:, 0], gy + e[:, 1]
+    lat, lon = enu_to_latlon(gx, gy, ORIGIN_LAT, ORIGIN_LON)
+    # stated accuracy: the true per-axis 1-sigma of the noise added (an honest receiver)
+    acc = np.full(tf.size, float(np.hypot(GPS_WHITE_SD, GPS_GM_SD)))
+    gps = GpsStream(tf, gx, gy, lat, lon, acc)
+    n_out = max(1, int(round(span / 40.0)))
+    win = outage_windows(float(tf[0]), float(tf[-1]), r_drop.uniform(1.0, 2.0, n_out), r_drop,
+                         min_sep_s=10.0, repeat=False)
+    return drop_windows(gps, win)
 
 
 def generate_drive(seed: int = 0, name: str | None = None, route: str = "mixed",
@@ -290,39 +407,9 @@ def generate_drive(seed: int = 0, name: str | None = None, route: str = "mixed",
     yaw_rate, ax = sim.yaw_rate[:n], sim.ax[:n]
     truth = TruthStream(t, x, y, _wrap(yaw), v)
 
-    # IMU 50 Hz
-    ii = np.arange(0, n, 2)
-    m = ii.size
-    bias = r_imu.normal(0.0, 0.05, 2)
-    imu = ImuStream(t[ii], ax[ii] + bias[0] + r_imu.normal(0.0, 0.05, m),
-                    v[ii] * yaw_rate[ii] + bias[1] + r_imu.normal(0.0, 0.05, m),
-                    _wrap(yaw[ii] + r_imu.normal(0.0, 0.005, m)),
-                    yaw_rate[ii] + r_imu.normal(0.0, 0.005, m))
-    # CAN speed 50 Hz
-    jj = np.arange(1, n, 2)
-    vc = np.maximum(v[jj] + r_speed.normal(0.0, 0.02, jj.size), 0.0)
-    vc[v[jj] == 0.0] = 0.0
-    speed = SpeedStream(t[jj], vc)
-
-    # GPS
-    span = t[-1] - t[0]
-    k = int(span / 0.2 * 1.3) + 16
-    d = np.clip(draw_intervals(k, r_times, "aslan"), 0.1, 0.6)
-    late = r_times.random(k) < 0.04
-    d[late] = r_times.uniform(0.4, 0.6, int(late.sum()))
-    tf = t[0] + r_times.random() * 0.2 + np.concatenate([[0.0], np.cumsum(d)])
-    tf = tf[tf <= t[-1]]
-    gx, gy = _hermite(t, x, y, v * np.cos(yaw), v * np.sin(yaw), tf)
-    e = gps_noise(tf, r_gps, GPS_WHITE_SD, GPS_GM_SD, GPS_GM_TAU_S)
-    gx, gy = gx + e[:, 0], gy + e[:, 1]
-    lat, lon = enu_to_latlon(gx, gy, ORIGIN_LAT, ORIGIN_LON)
-    # stated accuracy: the true per-axis 1-sigma of the noise added (an honest receiver)
-    acc = np.full(tf.size, float(np.hypot(GPS_WHITE_SD, GPS_GM_SD)))
-    gps = GpsStream(tf, gx, gy, lat, lon, acc)
-    n_out = max(1, int(round(span / 40.0)))
-    win = outage_windows(float(tf[0]), float(tf[-1]), r_drop.uniform(1.0, 2.0, n_out), r_drop,
-                         min_sep_s=10.0, repeat=False)
-    gps, outages = drop_windows(gps, win)
+    imu = imu_stream(t, yaw, v, yaw_rate, ax, r_imu)
+    speed = can_speed_stream(t, v, r_speed)
+    gps, outages = gps_stream(t, x, y, yaw, v, r_times, r_gps, r_drop)
 
     segments = [sp for sp in sim.segments if sp[1] < t[-1]]
     if segments:
