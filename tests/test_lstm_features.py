@@ -75,6 +75,22 @@ def test_fast_path_equals_general(frame: str) -> None:
     np.testing.assert_allclose(batch[1], compute_features(pos + 1, ax, ay, yaw, psi, frame))
 
 
+@pytest.mark.parametrize("frame", ["heading", "world"])
+def test_fix_offset_row_in_both_paths(frame: str) -> None:
+    """A fix_offset model's row 0: the newest fix minus the newest grid point, in the frame of
+    dx, dy (rotated by -psi in the heading frame); rows 1-7 unchanged."""
+    pos, ax, ay, yaw, psi = _window(3)
+    fix = pos[-1] + np.array([0.03, -0.02])
+    one = features_one(pos, ax, ay, yaw, psi, frame, np.empty((8, 6)), (fix[0], fix[1]))
+    gen = compute_features(pos, ax, ay, yaw, psi, frame, fix_xy=fix)
+    plain = compute_features(pos, ax, ay, yaw, psi, frame)
+    np.testing.assert_allclose(one, gen, atol=1e-12)
+    np.testing.assert_allclose(gen[1:], plain[1:], atol=1e-12)
+    ang = -psi if frame == "heading" else 0.0
+    want = [0.03 * np.cos(ang) + 0.02 * np.sin(ang), 0.03 * np.sin(ang) - 0.02 * np.cos(ang)]
+    np.testing.assert_allclose(gen[0, :2], want, atol=1e-12)
+
+
 def _circle_drive(with_truth: bool = True) -> Drive:
     """Constant speed 10 m/s on a 50 m radius circle, fixes at irregular 0.1-0.3 s."""
     rng = np.random.default_rng(0)

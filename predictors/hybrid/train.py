@@ -1,0 +1,266 @@
+"""Train the ``hybrid``'s residual network and write ``model.onnx`` + ``model.json``.
+
+:func:`run_training` is what ``bench train --model hybrid`` calls; its arguments mirror
+:func:`predictors.lstm.train.run_training`. Pipeline: drives (``--data``, the benchmark's
+synthetic generator, hours of :mod:`scenarios.corpus`) -> split by route
+(:func:`predictors.lstm.train.split_by_route`) -> rows (:func:`predictors.hybrid.data.hybrid_windows`):
+drives with truth get their fixes drawn from it under each of ``profiles`` and the kf prior
+with that profile's tuned parameters (``predictors/tuned.json``); drives without truth
+keep their own fixes and the ``native`` parameters -> statistics -> Adam, early stopping
+on the validation future-point error [m], turn rows oversampled, batches mirrored at
+random (left <-> right: dy, ay, yaw of the features, y of prior and target negated) ->
+ONNX export with a parity check -> model card.
+
+Loss: beta-NLL (Seitzer et al., ICLR 2022, beta = 0.5) of the residual under the predicted
+Gaussian, per horizon and axis, in residual units: the variance head learns how far the
+prior can be trusted, and rows whose residual is noise (a consumer receiver's metre-level
+error that nothing in the window can predict) weigh less in the mean's gradient instead of
+swamping the centimetres elsewhere. Imports torch: training only.
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from collections.abc import Sequence
+from pathlib import Path
+
+import numpy as np
+
+from predictors.hybrid.data import HybridWindows, hybrid_windows
+from predictors.lstm.train import (
+    EarlyStop,
+    Progress,
+    corpus,
+    corpus_card,
+    error_stats,
+    group_of,
+    manifest,
+    package_versions,
+    sample_weights,
+    split_by_route,
+    synthetic_drives,
+    synthetic_seeds,
+)
+from scenarios.drive import Drive
+from scenarios.errors import DataError
+
+BETA = 0.5
+#: the loss weighs the 0.2 s horizon (the benchmark's future point) this much more
+FUTURE_WEIGHT = 4.0
+
+
+def drive_rows(drive: Drive, profiles: Sequence[str], kf_params: dict[str, dict], seed: int
+               ) -> HybridWindows:
+    """Training rows of one drive: per profile for a drive with truth, else its own fixes."""
+    if drive.truth is None or len(drive.truth) < 2:
+        return hybrid_windows(drive, drive.gps, kf_params.get("native") or {})
+    from scenarios.degrade import degrade_gps
+
+    return HybridWindows.concat([
+        hybrid_windows(drive, degrade_gps(drive.truth, p, seed=seed * 1000 + 100 * j),
+                       kf_params.get(p) or {})
+        for j, p in enumerate(profiles)])
+
+
+def build_rows(drives: Sequence[Drive], profiles: Sequence[str], kf_params: dict[str, dict],
+               seed: int) -> HybridWindows:
+    return HybridWindows.concat([drive_rows(d, profiles, kf_params, seed) for d in drives])
+
+
+def future_answers(hw: HybridWindows, corr: np.ndarray) -> np.ndarray:
+    """World positions at t_fix + 0.2 s [m]: the kf's answer plus the 0.2 s correction
+    (B, 2) [m, heading frame] rotated by psi."""
+    c, s = np.cos(hw.psi), np.sin(hw.psi)
+    return hw.kf_future + np.stack([c * corr[:, 0] - s * corr[:, 1],
+                                    s * corr[:, 0] + c * corr[:, 1]], axis=1)
+
+
+def evaluate(hw: HybridWindows, future: np.ndarray, groups: dict[str, str]) -> dict:
+    """Future-point error [m] of the hybrid and of its kf prior alone, overall, per label and
+    per source group."""
+    def both(m: np.ndarray) -> dict:
+        return {"hybrid": error_stats(future[m], hw.truth_future[m]),
+                "kf": error_stats(hw.kf_future[m], hw.truth_future[m])}
+
+    out = {"all": both(np.ones(len(hw), dtype=bool))}
+    for lab in sorted(set(hw.label.tolist())):
+        out[f"label:{lab}"] = both(hw.label == lab)
+    for g in sorted(set(groups.values())):
+        out[f"group:{g}"] = both(np.array([groups.get(d) == g for d in hw.drive], dtype=bool))
+    return out
+
+
+def run_training(data_paths: Sequence[str | Path], out_dir: Path, epochs: int = 40,
+                 seed: int = 0, synthetic: int = 0, progress: Progress | None = None,
+                 command: str | None = None, drives: Sequence[Drive] | None = None,
+                 hidden: int = 48, lstm_layers: int = 1, batch_size: int = 512,
+                 lr: float = 2e-3, patience: int = 6, threads: int = 2,
+                 on_early_stop: EarlyStop | None = None, corpus_hours: float = 0.0,
+                 profiles: Sequence[str] = ("none", "rtk", "consumer"), mirror: bool = True,
+                 max_minutes: float = 30.0, max_val_windows: int = 60_000,
+                 kf_params: dict[str, dict] | None = None) -> dict:
+    """Train, export and describe a hybrid model; returns the dict written to model.json.
+
+    Args as :func:`predictors.lstm.train.run_training`; ``hidden`` is the network width
+    (default 48), ``kf_params`` the prior's parameters per GPS condition (default: the tuned
+    ones, :func:`predictors.hybrid.export.tuned_kf_params`)."""
+    import torch
+
+    from predictors.hybrid.export import fit_stats, save_model, tuned_kf_params
+    from predictors.hybrid.model import HybridNet
+    from scenarios.loaders import load
+
+    t_start = time.perf_counter()
+    out_dir = Path(out_dir)
+    torch.manual_seed(seed)
+    torch.use_deterministic_algorithms(True)
+    torch.set_num_threads(threads)
+    prior = dict(kf_params or tuned_kf_params())
+
+    all_drives: list[Drive] = []
+    for p in data_paths:
+        all_drives.extend(load(p))
+    all_drives.extend(synthetic_drives(synthetic, seed))
+    corpus_d = corpus(corpus_hours, seed)
+    all_drives.extend(corpus_d)
+    all_drives.extend(drives or [])
+    if not all_drives:
+        raise DataError(None, "no training drives: give --data PATH, --synthetic N or "
+                              "--corpus-hours H")
+    train_d, val_d = split_by_route(all_drives)
+    tr = build_rows(train_d, profiles, prior, seed)
+    va = build_rows(val_d, profiles, prior, seed + 7919)
+    if len(va) > max_val_windows:
+        va = va.take(np.sort(np.random.default_rng(seed).choice(len(va), max_val_windows,
+                                                                replace=False)))
+    if len(tr) == 0 or len(va) == 0:
+        raise DataError(None, f"too few windows (train {len(tr)}, validation {len(va)}): "
+                              "drives need >= 2 s of moving GPS")
+    t_data = time.perf_counter() - t_start
+
+    net = HybridNet(hidden=hidden, lstm_layers=lstm_layers)
+    st = fit_stats(tr)
+    net.set_stats(st["feature_mean"], st["feature_std"], st["prior_std"], st["res_std"])
+
+    def tens(a: np.ndarray) -> torch.Tensor:
+        return torch.tensor(a, dtype=torch.float32)
+
+    Xtr, Ptr, Ttr = tens(tr.X), tens(tr.prior), tens(tr.target)
+    Xva, Pva, Tva = tens(va.X), tens(va.prior), tens(va.target)
+    hw_ = torch.ones(Ttr.shape[1], 1)
+    hw_[0] = FUTURE_WEIGHT
+    hw_ = hw_ / hw_.mean()
+    feat_sign = torch.tensor([1.0, -1.0, 1.0, -1.0, -1.0, 1.0])
+    vec_sign = torch.tensor([1.0, -1.0])
+
+    def loss_fn(x: torch.Tensor, p: torch.Tensor, t: torch.Tensor) -> torch.Tensor:
+        y = net.forward_std(x, p)
+        mu, lv = y[..., :2], y[..., 2:].clamp(-12.0, 12.0)
+        z = t / net.res_std
+        nll = 0.5 * (lv + (z - mu) ** 2 * torch.exp(-lv))
+        return torch.mean(torch.exp(lv).detach() ** BETA * nll * hw_)
+
+    def validate() -> tuple[float, float]:
+        net.eval()
+        tot, outs = 0.0, []
+        with torch.no_grad():
+            for i in range(0, len(va), 8192):
+                sl = slice(i, i + 8192)
+                tot += float(loss_fn(Xva[sl], Pva[sl], Tva[sl])) * Xva[sl].shape[0]
+                outs.append(net(Xva[sl], Pva[sl])[:, 0, :2].numpy())
+        fut = future_answers(va, np.concatenate(outs).astype(float))
+        return tot / len(va), float(np.linalg.norm(fut - va.truth_future, axis=1).mean())
+
+    w = torch.tensor(sample_weights(tr.label))
+    gen = torch.Generator().manual_seed(seed)
+    opt = torch.optim.Adam(net.parameters(), lr=lr)
+    sched = torch.optim.lr_scheduler.ReduceLROnPlateau(opt, factor=0.5, patience=2)
+    vl0, vm0 = validate()
+    best = (vm0, {k: v.clone() for k, v in net.state_dict().items()}, 0)
+    history = [{"epoch": 0, "val_loss": vl0, "val_future_mean_m": vm0}]
+    stopped_by = "epochs"
+    for epoch in range(1, epochs + 1):
+        net.train()
+        tot, cnt = 0.0, 0
+        order = torch.multinomial(w, len(tr), replacement=True, generator=gen)
+        for i in range(0, len(tr), batch_size):
+            idx = order[i:i + batch_size]
+            xb, pb, tb = Xtr[idx], Ptr[idx], Ttr[idx]
+            if mirror:
+                flip = (torch.rand(idx.shape[0], generator=gen) < 0.5).float()[:, None, None]
+                xb = xb * (1 - flip + flip * feat_sign)
+                pb = pb * (1 - flip + flip * vec_sign)
+                tb = tb * (1 - flip + flip * vec_sign)
+            opt.zero_grad()
+            loss = loss_fn(xb, pb, tb)
+            loss.backward()
+            opt.step()
+            tot += loss.item() * xb.shape[0]
+            cnt += xb.shape[0]
+        vl, vm = validate()
+        tl = tot / max(cnt, 1)
+        sched.step(vm)
+        history.append({"epoch": epoch, "train_loss": tl, "val_loss": vl,
+                        "val_future_mean_m": vm, "lr": opt.param_groups[0]["lr"],
+                        "elapsed_s": round(time.perf_counter() - t_start, 1)})
+        if progress is not None:
+            progress(epoch, epochs, tl, vl, vm)
+        if vm < best[0] - 1e-6:
+            best = (vm, {k: v.clone() for k, v in net.state_dict().items()}, epoch)
+        elif epoch - best[2] >= patience:
+            stopped_by = "early stopping"
+            if on_early_stop is not None:
+                on_early_stop(epoch, best[2], patience)
+            break
+        if time.perf_counter() - t_start > max_minutes * 60.0:
+            stopped_by = f"time budget ({max_minutes:g} min)"
+            break
+    net.load_state_dict(best[1])
+    net.eval()
+    train_s = time.perf_counter() - t_start
+
+    from predictors.hybrid.predictor import HybridPredictor  # noqa: F401 - loadability below
+    from predictors.lstm.runtime import OnnxModel
+
+    extra = {
+        "trained": True,
+        "training": {"epochs_max": epochs, "epochs_run": len(history) - 1,
+                     "best_epoch": best[2], "stopped_by": stopped_by,
+                     "max_minutes": max_minutes, "seed": seed, "batch_size": batch_size,
+                     "lr": lr, "optimizer": "Adam",
+                     "scheduler": "ReduceLROnPlateau(factor 0.5, patience 2) on the "
+                                  "validation future error",
+                     "early_stopping_patience": patience,
+                     "selection": "validation future-point mean error [m] (development "
+                                  "drives; epoch 0 = the untrained net = the kf alone)",
+                     "loss": f"beta-NLL (beta {BETA}) of the residual per horizon and axis, "
+                             f"in residual units; the 0.2 s horizon weighted {FUTURE_WEIGHT}x",
+                     "oversampling": "turn/roundabout weight n_other/n_turn clipped to [1, 5]",
+                     "augmentation": {"mirror": mirror, "gps_profiles": list(profiles),
+                                      "time_jitter": "fix times drawn afresh per GPS draw"},
+                     "threads": threads, "data_seconds": round(t_data, 1),
+                     "seconds": round(train_s, 1), "history": history},
+        "data": {"paths": manifest(data_paths),
+                 "synthetic": {"drives": synthetic,
+                               "generator": "scenarios.synthetic.generate_drive",
+                               "generator_seeds": synthetic_seeds(synthetic, seed)},
+                 "corpus": corpus_card(corpus_d, corpus_hours, seed),
+                 "in_memory_drives": [d.name for d in (drives or [])],
+                 "train_drives": [d.name for d in train_d],
+                 "val_drives": [d.name for d in val_d],
+                 "split": "by route (predictors.lstm.train.split_by_route)",
+                 "train_windows": len(tr), "val_windows": len(va),
+                 "train_labels": {k: int(v) for k, v in
+                                  zip(*np.unique(tr.label, return_counts=True), strict=True)}},
+        "packages": package_versions(),
+        "command": command,
+    }
+    info = save_model(net, out_dir, prior, **extra)
+    onnx = OnnxModel(out_dir / "model.onnx")
+    outs = onnx.session.run(None, {"features": va.X.astype(np.float32),
+                                   "prior": va.prior.astype(np.float32)})[0]
+    future = future_answers(va, outs[:, 0, :2].astype(float))
+    info["validation"] = evaluate(va, future, {d.name: group_of(d) for d in val_d})
+    (out_dir / "model.json").write_text(json.dumps(info, indent=1) + "\n")
+    return info
