@@ -82,7 +82,12 @@ _REGISTRY: dict[str, Entry] = {
                   "the paper's system: cubic resampling + MLP-LSTM-MLP (ONNX) + cubic"),
     "lstm-authors": Entry("predictors.lstm.authors:AuthorsLstmPredictor",
                           "the paper authors' published ONNX network (needs --model PATH)"),
+    "hybrid": Entry("predictors.hybrid.predictor:HybridPredictor",
+                    "kf prior + learned residual (ONNX), 200 ms ahead"),
 }
+
+#: a constructor parameter of this name receives the run's GPS condition (:func:`create`)
+CONDITION_PARAM = "gps_condition"
 
 
 def register(name: str, target: str, description: str, **defaults: Any) -> None:
@@ -292,8 +297,15 @@ def tuned_params(name: str, condition: str | None) -> dict[str, Any]:
 
 def create(name: str, condition: str | None = None, **config: Any) -> Predictor:
     """A new predictor ``name`` (any form :func:`resolve` takes): its registry defaults, then
-    tuned parameters for the GPS ``condition`` (if given and tuned), then ``config``."""
+    tuned parameters for the GPS ``condition`` (if given and tuned), then ``config``.
+
+    A class whose constructor declares a parameter :data:`CONDITION_PARAM`
+    (``gps_condition``) also receives ``gps_condition=condition`` (None included) unless
+    ``config`` sets it: a predictor that keeps per-condition parameters of its own (the
+    ``hybrid``'s prior, recorded in its model) picks them itself."""
     entry = resolve(name)
     cls = load_class(entry, base_name(name))
     kwargs = {**entry.defaults, **tuned_params(base_name(name), condition), **config}
+    if CONDITION_PARAM not in kwargs and CONDITION_PARAM in constructor_options(cls)[0]:
+        kwargs[CONDITION_PARAM] = condition
     return cls(**kwargs)

@@ -90,7 +90,7 @@ CASES = [
      "--rerun-color-by cv: colours the track of a rerun recording; give --rerun", True),
     ("unknown-predictor", "run -p cv,magic", "magic", True),
     ("predictor-twice", "run -p cv,cv", "more than once", True),
-    ("unknown-predictor-lists-known", "run -p kf,nope", "known: cv, ekf, kf", True),
+    ("unknown-predictor-lists-known", "run -p kf,nope", "known: cv, ekf, hybrid, kf", True),
     ("import-path-no-module", "run -p kf,nosuchmodule:X", "no module named 'nosuchmodule'", True),
     ("import-path-not-a-class", "run -p os:path", "path is not a class", True),
     ("import-path-not-a-predictor", "run -p collections:OrderedDict",

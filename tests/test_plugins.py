@@ -289,7 +289,7 @@ def test_resolve_every_form_without_importing():
                         (":Class", "expected a registered name or module:Class"),
                         ("a-b:C", "expected a registered name or module:Class"),
                         ("kf@", "alias after @ is empty"),
-                        ("nope", "unknown predictor 'nope'; known: cv, ekf, kf")]:
+                        ("nope", "unknown predictor 'nope'; known: cv, ekf, hybrid, kf")]:
         with pytest.raises(PredictorError, match=re.escape(needle)):
             resolve(bad)
 

@@ -27,7 +27,8 @@ from bench.terminal import print_table
 
 def latency(
     predictors: Annotated[str, typer.Option(
-        "--predictors", "-p", help="Comma-separated predictor names.")] = "cv,poly,kf,kf-paper,ekf,lstm",
+        "--predictors", "-p", help="Comma-separated predictor names.")
+    ] = "cv,poly,kf,kf-paper,ekf,lstm,hybrid",
     steps: Annotated[int, typer.Option(help="Fix steps to time per predictor (after warm-up).")
                      ] = 2000,
     data: DataOpt = None,

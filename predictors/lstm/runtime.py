@@ -9,7 +9,7 @@ hot path takes two shortcuts, both checked to give the public API's outputs:
 - ``batch_dim``: the graph's symbolic batch dimension pinned to 1 (onnxruntime then folds
   the LSTM's shape arithmetic: 14 nodes run instead of 18, ~3 us); :meth:`OnnxModel.run_batch`
   builds an unpinned session on first use;
-- the feed is fixed (one input, its name checked once), so :meth:`OnnxModel.run_buffer`
+- the feed is fixed (preallocated buffers, the inputs' names checked once), so :meth:`OnnxModel.run_buffer`
   calls the session's compiled ``run`` without the Python wrapper's per-call checks
   (~4 us under cache pressure); where onnxruntime's layout differs, or that call does not
   answer exactly as the public ``InferenceSession.run`` on a probe, the public one is used.
@@ -44,7 +44,9 @@ def _session(model: bytes, batch_dim: str | None = None) -> ort.InferenceSession
 
 
 class OnnxModel:
-    """An ONNX network with one float32 input; ``run`` feeds one window, ``run_batch`` many.
+    """An ONNX network with float32 inputs; ``run`` feeds one window, ``run_batch`` many
+    (both for the first input alone: one-input graphs); ``run_buffer`` feeds every input
+    from its preallocated buffer (:attr:`bufs`).
 
     Args:
         path: the .onnx file.
@@ -68,9 +70,13 @@ class OnnxModel:
         except Exception as exc:  # onnxruntime raises its own exception types
             raise DataError(p, f"not a loadable ONNX model ({type(exc).__name__}: "
                                f"{str(exc).splitlines()[0][:200]})") from None
-        inp = self.session.get_inputs()[0]
+        ins = self.session.get_inputs()
+        inp = ins[0]
         self.input_name = inp.name
         self.input_shape = list(inp.shape)
+        #: every input's name and shape, in the graph's order (the first is ``input_name``)
+        self.input_names = [i.name for i in ins]
+        self.input_shapes = [list(i.shape) for i in ins]
         outs = [o.name for o in self.session.get_outputs()]
         if output is not None and output not in outs:
             raise DataError(p, f"ONNX model has no output {output!r} (outputs: {outs})")
@@ -81,7 +87,12 @@ class OnnxModel:
         self.batch = b if isinstance(b, int) else 1
         self.buf = np.zeros([self.batch] + [d if d is not None else 1 for d in dims[1:]],
                             dtype=np.float32)
-        self._feed = {self.input_name: self.buf}
+        #: one preallocated float32 buffer per input (``bufs[0]`` is :attr:`buf`): a graph
+        #: with several inputs is fed all of them by :meth:`run_buffer`
+        self.bufs = [self.buf] + [
+            np.zeros([self.batch] + [d if isinstance(d, int) else 1 for d in shape[1:]],
+                     dtype=np.float32) for shape in self.input_shapes[1:]]
+        self._feed = dict(zip(self.input_names, self.bufs, strict=True))
         #: the batch dimension was pinned to 1: many windows need another session
         self.pinned = bool(batch_dim) and self.input_shape[0] == 1
         self._bind_fast_run()
@@ -96,15 +107,18 @@ class OnnxModel:
         if inner is None:  # pragma: no cover - another onnxruntime layout
             return
         try:
-            self.buf[...] = 0.0
+            for b in self.bufs:
+                b[...] = 0.0
             same = _equal(inner.run(self._outs, self._feed, None), public(self._outs, self._feed))
-            self.buf[...] = np.arange(self.buf.size).reshape(self.buf.shape) % 7 - 3
+            for b in self.bufs:
+                b[...] = np.arange(b.size).reshape(b.shape) % 7 - 3
             same = same and _equal(inner.run(self._outs, self._feed, None),
                                    public(self._outs, self._feed))
         except Exception:  # pragma: no cover - another signature: keep the public run
             same = False
         finally:
-            self.buf[...] = 0.0
+            for b in self.bufs:
+                b[...] = 0.0
         if same:
             def run(outputs: list[str], feed: dict, _inner=inner.run) -> list:
                 return _inner(outputs, feed, None)
@@ -120,7 +134,9 @@ class OnnxModel:
         self.__dict__.update(state)
         self.session = _session(self.source, self.batch_dim)
         self._batch_session = None
-        self._feed = {self.input_name: self.buf}
+        if "bufs" not in state:  # pickled before models with several inputs were fed
+            self.input_names, self.bufs = [self.input_name], [self.buf]
+        self._feed = dict(zip(self.input_names, self.bufs, strict=True))
         self._bind_fast_run()
 
     def _batch(self) -> ort.InferenceSession:
@@ -139,7 +155,8 @@ class OnnxModel:
 
     def run_buffer(self) -> np.ndarray:
         """The network on :attr:`buf` as it stands (the caller wrote its window into
-        ``buf[0]``, float32): the first output row, without copying the input."""
+        ``buf[0]``, float32; a graph with several inputs: each into ``bufs[k][0]``): the
+        first output row, without copying the input."""
         return self._run(self._outs, self._feed)[0][0]
 
     def run_batch(self, X: np.ndarray) -> np.ndarray:

@@ -1,0 +1,380 @@
+"""``hybrid``: a Kalman-filter prior plus a learned residual (numpy + onnxruntime, no torch).
+
+The prior is :class:`predictors.kf.LinearKalman` (``kf``), run inside the hybrid on every
+observation exactly as ``kf`` runs alone (fixes with their stated sigma, IMU, wheel speed),
+with the parameters the network was trained with (model.json ``prior.params[condition]``,
+see :func:`prior_params`).
+
+On each real GPS fix whose window holds >= 4 fixes spanning >= 2 s, one *network step*:
+
+1. the ``lstm``'s input window (:class:`predictors.lstm.fused.FusedStep`: cubics through
+   the fixes and the IMU, 8 grid points 200 ms apart ending at the fix, features in the
+   heading frame; psi [rad] = heading of the fixes' cubic at the fix);
+2. the prior input: for H = (0.2, 0.4, 0.6, 0.8) s, ``kf.position_at(t_fix + h) - grid[7]``
+   rotated by -psi (heading frame: x along the heading, y to the left) [m], shape (4, 2);
+3. the network (inputs ``features`` [1, 8, 6], ``prior`` [1, 4, 2]) answers ``correction``
+   [1, 4, 4]: per horizon (dx, dy) [m, heading frame] to ADD to ``kf.position_at(t_fix +
+   h)`` and (log var along the heading, log var across) [log m^2] of that residual.
+
+Answers, with h = t - t_fix of the newest network step:
+``position_at(t) = kf.position_at(t) + R(psi) corr(h)``, corr linearly interpolated over
+the knots h = 0 (correction 0), 0.2, 0.4, 0.6, 0.8 s and held at its 0.8 s value beyond;
+``covariance_at(t) = kf.covariance_at(t) + R(psi) diag(var(h)) R(psi)^T`` with the log
+variances interpolated the same way between the knots 0.2-0.8 s (held beyond), and the
+variance rising linearly from 0 at h = 0 to its 0.2 s value.
+
+GPS outages: no network step runs between real fixes, so an outage is bridged by the
+kf's own dead reckoning (its constant-acceleration state, kept current by IMU and wheel
+speed updates) plus the correction held at its 0.8 s value. This differs from ``lstm``,
+which feeds its own predictions back as pseudo-fixes. A real fix arriving more than
+:data:`RESTART_GAP_S` after the previous one restarts the fix history (start-up again).
+
+Fallback to the prior alone (correction 0, the kf's covariance):
+
+- start-up: before the first window of >= 4 fixes spanning >= 2 s (and after a restart);
+  a real fix that yields no window clears the previous step's correction;
+- standstill: the wheel/CAN speed (else the speed of the window's cubic at the fix) below
+  0.15 km/h (:data:`predictors.lstm.predictor.STILL_SPEED_MPS`), decided at query time;
+- a network output (or its variance) that is not finite.
+
+Frames and units: positions [m] local ENU, times [s], covariances [m^2] ENU.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from bisect import bisect_left, bisect_right
+from importlib import resources
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from predictors.base import Predictor
+from predictors.kf import LinearKalman
+from predictors.lstm.features import N_FEATURES
+from predictors.lstm.fused import FusedStep
+from predictors.lstm.predictor import IMU_CAP, RESTART_GAP_S, STILL_SPEED_MPS, _Buf
+from predictors.lstm.resample import ACCEL_GLITCH, DT, GRID_OFFSETS, MIN_SPAN_S, N_STEPS
+from predictors.lstm.runtime import OnnxModel
+from scenarios.errors import DataError
+
+FORMAT = "posbench-hybrid"
+#: horizons [s] of the prior input and the correction output, after the fix
+HORIZONS = (0.2, 0.4, 0.6, 0.8)
+N_H = len(HORIZONS)
+INPUTS = ("features", "prior")
+OUTPUT = "correction"
+#: GPS conditions model.json records prior parameters for; a condition it lacks falls
+#: back to ``native``, then to the kf's defaults
+CONDITIONS = ("none", "rtk", "consumer", "native")
+FALLBACK_CONDITION = "native"
+FIX_CAP = 512
+#: text recorded in results for the bundled model
+BUNDLED_TEXT = "bundled (predictors/hybrid/bundled/model.onnx)"
+#: a log variance above this [log m^2] counts as not finite (exp would overflow)
+MAX_LOGVAR = 80.0
+_NAN2 = (math.nan, math.nan)
+
+
+def bundled_model() -> Path:
+    """Path of the bundled ``model.onnx`` (package data of predictors.hybrid)."""
+    return Path(str(resources.files("predictors.hybrid") / "bundled" / "model.onnx"))
+
+
+def load_model_info(onnx_path: Path) -> dict:
+    """The ``model.json`` next to ``model.onnx``, checked: format, frame, horizons, prior.
+    Raises a one-line :class:`DataError` naming the file."""
+    js = onnx_path.with_suffix(".json")
+    if not js.is_file():
+        raise DataError(js, "model description not found (expected next to the .onnx file)")
+    try:
+        info = json.loads(js.read_text())
+    except json.JSONDecodeError as exc:
+        raise DataError(js, f"not valid JSON (line {exc.lineno}): {exc.msg}") from None
+    if not isinstance(info, dict) or info.get("format") != FORMAT:
+        raise DataError(js, f"not a {FORMAT} model description (key 'format')")
+    if info.get("frame", "heading") != "heading":
+        raise DataError(js, f"frame {info.get('frame')!r} is not supported (key 'frame'; "
+                            "the hybrid works in the heading frame)")
+    hz = info.get("horizons_s", list(HORIZONS))
+    if not (isinstance(hz, list) and len(hz) == N_H
+            and all(isinstance(h, int | float) and abs(h - w) < 1e-9
+                    for h, w in zip(hz, HORIZONS, strict=True))):
+        raise DataError(js, f"horizons_s {hz!r} must be {list(HORIZONS)}")
+    prior = info.get("prior")
+    if not (isinstance(prior, dict) and prior.get("predictor") == "kf"
+            and isinstance(prior.get("params", {}), dict)
+            and all(isinstance(v, dict) for v in prior.get("params", {}).values())):
+        raise DataError(js, "key 'prior' must be {\"predictor\": \"kf\", \"params\": "
+                            "{CONDITION: {kf option: value}}}")
+    return info
+
+
+def prior_params(info: dict, condition: str | None) -> tuple[str, dict[str, Any]]:
+    """(condition used, kf parameters) for a GPS ``condition``: model.json's params for it,
+    else for ``native``, else the kf's defaults (condition ``"defaults"``)."""
+    params = info["prior"].get("params", {})
+    for c in (condition, FALLBACK_CONDITION):
+        if c is not None and c in params:
+            return c, dict(params[c])
+    return "defaults", {}
+
+
+def _check_net(onnx_path: Path, net: OnnxModel) -> None:
+    """The graph must take ``features`` [b, 8, 6] and ``prior`` [b, 4, 2] (in that order)
+    and answer ``correction`` [b, 4, 4]."""
+    if net.input_names != list(INPUTS):
+        raise DataError(onnx_path, f"network inputs {net.input_names} are not {list(INPUTS)}")
+    want = ([N_STEPS, N_FEATURES], [N_H, 2])
+    for name, shape, w in zip(INPUTS, net.input_shapes, want, strict=True):
+        got = shape[1:]
+        if len(got) != 2 or any(isinstance(g, int) and g != x for g, x in zip(got, w,
+                                                                              strict=True)):
+            raise DataError(onnx_path, f"network input {name} has shape {shape}, expected "
+                                       f"[batch, {w[0]}, {w[1]}]")
+    out = next(o for o in net.session.get_outputs() if o.name == net.output_name)
+    got = list(out.shape)[1:]
+    if len(got) != 2 or any(isinstance(g, int) and g != x for g, x in zip(got, (N_H, 4),
+                                                                          strict=True)):
+        raise DataError(onnx_path, f"network output {OUTPUT} has shape {list(out.shape)}, "
+                                   f"expected [batch, {N_H}, 4]")
+
+
+class HybridPredictor(Predictor):
+    """``kf`` prior + learned residual (ONNX) at 0.2-0.8 s; see the module doc.
+
+    Args:
+        model: a ``model.onnx`` with its ``model.json`` alongside, or a folder holding both
+            (as ``bench train`` writes it); default: the bundled model.
+        gps_condition: the run's GPS condition (``none``, ``rtk``, ``consumer``, ``native``;
+            passed by :func:`predictors.registry.create`): picks the prior's kf parameters
+            from model.json (fallback ``native``, then the kf's defaults).
+    """
+
+    name = "hybrid"
+
+    def __init__(self, model: str | None = None, gps_condition: str | None = None) -> None:
+        self.bundled = not model
+        self.model_path = Path(model) if model else bundled_model()
+        if self.model_path.is_dir():  # a folder written by training
+            self.model_path = self.model_path / "model.onnx"
+        if not self.model_path.is_file():
+            raise DataError(self.model_path, "ONNX model file not found")
+        self.info = load_model_info(self.model_path)
+        self.gps_condition = gps_condition
+        self.prior_condition, self.prior_params = prior_params(self.info, gps_condition)
+        try:
+            self.kf = LinearKalman(**self.prior_params)
+        except (TypeError, DataError) as exc:
+            raise DataError(self.model_path.with_suffix(".json"),
+                            f"prior.params[{self.prior_condition!r}] is not a kf "
+                            f"configuration: {str(exc).splitlines()[0]}") from None
+        shape = (self.info.get("input_shapes") or {}).get(INPUTS[0]) or [None]
+        batch_dim = shape[0] if isinstance(shape[0], str) else None
+        self.net = OnnxModel(self.model_path, output=self.info.get("output", OUTPUT),
+                             batch_dim=batch_dim)
+        _check_net(self.model_path, self.net)
+        pinv = np.linalg.pinv(np.vander(np.append(GRID_OFFSETS, DT), 4, increasing=True))
+        self._fused = FusedStep(self.net, "heading", pinv)
+        self._prior = np.zeros((N_H, 2))
+        self.reset()
+
+    def config(self) -> dict:
+        return {"model": str(self.model_path), "gps_condition": self.gps_condition,
+                "prior": {"predictor": "kf", "condition": self.prior_condition,
+                          "params": self.kf.config()},
+                "architecture": self.info.get("architecture"),
+                "command": self.info.get("command")}
+
+    # ------------------------------------------------------------------ seams
+    def model_description(self) -> dict:
+        """``{"model": the model.onnx path (or BUNDLED_TEXT), "bundled": bool}``."""
+        return {"model": BUNDLED_TEXT if self.bundled else str(self.model_path),
+                "bundled": self.bundled}
+
+    def training_drives(self) -> tuple[str, ...]:
+        """The drive names model.json records under ``data.train_drives`` (() if none)."""
+        data = self.info.get("data") or {}
+        return tuple(str(d) for d in data.get("train_drives") or ())
+
+    def last_step(self) -> tuple[float, float] | None:
+        """(t_fix [s], psi [rad]) of the network step behind the current corrections, or
+        None while the hybrid answers as its prior (start-up, a fix without a window, a
+        non-finite network output). At standstill the correction is 0 whatever this says."""
+        if not self._has:
+            return None
+        return self._t_fix, math.atan2(self._cs[1], self._cs[0])
+
+    # ------------------------------------------------------------------ state
+    def reset(self) -> None:
+        self.kf.reset()
+        self._fix = _Buf(FIX_CAP, 3)        # t, x, y of real fixes
+        self._imu = _Buf(IMU_CAP, 4)        # t, ax, ay, yaw (unwrapped, NaN if unknown)
+        self._yaw_raw = math.nan
+        self._yaw_u = math.nan
+        self._t_yaw_nan = -math.inf
+        self._t_real = math.nan
+        self._can_v: float | None = None
+        self._gps_v = math.nan
+        self._clear()
+        self.steps = 0
+
+    def _clear(self) -> None:
+        """No correction: answers are the prior's."""
+        self._has = False
+        self._t_fix = math.nan
+        self._cs = (1.0, 0.0)
+        self._kx = self._ky = (0.0,) * (N_H + 1)   # world correction at the knots [m]
+        self._lva = self._lvc = (0.0,) * (N_H + 1)  # log variances at the knots (index 0 unused)
+
+    def observe_imu(self, t: float, ax: float, ay: float, yaw: float, yaw_rate: float) -> None:
+        self.kf.observe_imu(t, ax, ay, yaw, yaw_rate)
+        if not (math.isfinite(ax) and math.isfinite(ay)) or max(abs(ax), abs(ay)) > ACCEL_GLITCH:
+            return
+        imu = self._imu
+        if imu.n and t <= imu.t[-1]:
+            return
+        if math.isfinite(yaw):
+            if math.isfinite(self._yaw_u):
+                self._yaw_u += (yaw - self._yaw_raw + math.pi) % (2 * math.pi) - math.pi
+            else:
+                self._yaw_u = yaw
+            self._yaw_raw = yaw
+            yu = self._yaw_u
+        else:
+            yu = math.nan
+            self._t_yaw_nan = t
+        imu.append((t, ax, ay, yu))
+
+    def observe_speed(self, t: float, v: float) -> None:
+        self.kf.observe_speed(t, v)
+        if math.isfinite(v):
+            self._can_v = v
+
+    def observe_gps(self, t: float, x: float, y: float, sigma: float | None = None) -> None:
+        if not (math.isfinite(x) and math.isfinite(y)):
+            return
+        self.kf.observe_gps(t, x, y, sigma)
+        fb = self._fix
+        if t - self._t_real > RESTART_GAP_S:
+            fb.clear()  # a long outage ends: start afresh from this fix
+        self._t_real = t
+        tl = fb.t
+        while tl and tl[-1] >= t:  # a repeated time: the newer fix replaces the older
+            fb.pop()
+        fb.append((t, x, y))
+        if not self._step(t):
+            self._clear()
+
+    # ------------------------------------------------------------------ step
+    def _step(self, t_end: float) -> bool:
+        """The network step on the newest fix (see the module doc); False where there is
+        no window or the network's answer is not finite."""
+        fb = self._fix
+        tl = fb.t
+        end = fb.n - 1
+        start = max(bisect_right(tl, t_end - MIN_SPAN_S) - 1, 0)
+        t0 = tl[start]
+        if end - start < 3 or t_end - t0 < MIN_SPAN_S:
+            return False
+        f = self._fused
+        im = self._imu
+        imu = None
+        yaw_ok = True
+        if im.n > 3:
+            it = im.t
+            i0 = bisect_left(it, t0)
+            i1 = bisect_right(it, t_end)
+            if i1 - i0 > 3:
+                imu = im.a[i0:i1]
+                yaw_ok = self._t_yaw_nan < it[i0]
+        f.fit(fb.a[start:end + 1], imu, t_end, yaw_ok)
+        f.features()
+        psi = f.psi
+        c, s = math.cos(psi), math.sin(psi)
+        gx, gy = f.pts[7].tolist()
+        pr = self._prior
+        kf_at = self.kf.position_at
+        for k, h in enumerate(HORIZONS):
+            px, py = kf_at(t_end + h)
+            dx, dy = px - gx, py - gy
+            pr[k, 0] = c * dx + s * dy
+            pr[k, 1] = c * dy - s * dx
+        self.net.bufs[1][0] = pr
+        out = self.net.run_buffer()  # (4, 4): dx, dy [m, heading frame], log var along/across
+        self._gps_v = f.speed
+        if not np.isfinite(out).all() or out[:, 2:].max() > MAX_LOGVAR:
+            return False
+        o = out.tolist()
+        self._kx = (0.0,) + tuple(c * r[0] - s * r[1] for r in o)
+        self._ky = (0.0,) + tuple(s * r[0] + c * r[1] for r in o)
+        self._lva = (0.0,) + tuple(r[2] for r in o)
+        self._lvc = (0.0,) + tuple(r[3] for r in o)
+        self._cs = (c, s)
+        self._t_fix = t_end
+        self._has = True
+        self.steps += 1
+        return True
+
+    # ------------------------------------------------------------------ queries
+    def _stationary(self) -> bool:
+        v = self._can_v if self._can_v is not None else self._gps_v
+        return v == v and abs(v) < STILL_SPEED_MPS
+
+    def correction_at(self, t: float) -> tuple[float, float]:
+        """The world correction (dx, dy) [m, ENU] added to the prior's answer for t [s]:
+        (0, 0) where the hybrid falls back to the prior (see the module doc)."""
+        if not self._has or self._stationary():
+            return 0.0, 0.0
+        u = (t - self._t_fix) / DT
+        kx, ky = self._kx, self._ky
+        if u >= N_H:
+            return kx[N_H], ky[N_H]
+        if u <= 0.0:
+            return 0.0, 0.0
+        k = int(u)
+        f = u - k
+        return kx[k] + f * (kx[k + 1] - kx[k]), ky[k] + f * (ky[k + 1] - ky[k])
+
+    def position_at(self, t: float) -> tuple[float, float]:
+        px, py = self.kf.position_at(t)
+        if not self._has or px != px:
+            return px, py
+        dx, dy = self.correction_at(t)
+        return px + dx, py + dy
+
+    def residual_variance_at(self, t: float) -> tuple[float, float]:
+        """(along, across) the heading: the variance [m^2] of the learned residual at t [s]
+        (0, 0 on fallback; see the module doc for the interpolation)."""
+        if not self._has or self._stationary():
+            return 0.0, 0.0
+        u = (t - self._t_fix) / DT
+        la, lc = self._lva, self._lvc
+        if u >= N_H:
+            return math.exp(la[N_H]), math.exp(lc[N_H])
+        if u <= 0.0:
+            return 0.0, 0.0
+        if u < 1.0:
+            return u * math.exp(la[1]), u * math.exp(lc[1])
+        k = int(u)
+        f = u - k
+        return (math.exp(la[k] + f * (la[k + 1] - la[k])),
+                math.exp(lc[k] + f * (lc[k + 1] - lc[k])))
+
+    def covariance_at(self, t: float) -> np.ndarray | None:
+        """2x2 ENU covariance [m^2]: the kf's plus the residual's, R(psi) diag(var) R(psi)^T."""
+        p = self.kf.covariance_at(t)
+        if p is None or not self._has:
+            return p
+        va, vc = self.residual_variance_at(t)
+        if va == 0.0 and vc == 0.0:
+            return p
+        c, s = self._cs
+        cc, ss, cs = c * c, s * s, c * s * (va - vc)
+        p[0, 0] += cc * va + ss * vc
+        p[1, 1] += ss * va + cc * vc
+        p[0, 1] += cs
+        p[1, 0] += cs
+        return p
