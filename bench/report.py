@@ -38,7 +38,10 @@ MISSING_NOTE = ("`missing`: queries a predictor answered with no position (NaN) 
 def model_text(model: dict[str, Any]) -> str:
     """How a report names a learned predictor's model: the bundled one, or its file."""
     if model.get("bundled"):
-        return "the bundled model, predictors/lstm/bundled/model.onnx"
+        text = str(model.get("model", ""))  # "bundled (predictors/<pkg>/bundled/model.onnx)"
+        path = text[text.find("(") + 1:text.rfind(")")] if "(" in text else \
+            "predictors/lstm/bundled/model.onnx"
+        return f"the bundled model, {path}"
     return f"model {model['model']}"
 
 

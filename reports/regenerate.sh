@@ -6,11 +6,16 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 S=../shared
 bench run --out reports/synthetic
-bench run --predictors cv,poly,kf,kf-paper,ekf --data $S/data/kitti_raw --out reports/kitti
-bench run --predictors cv,poly,kf,kf-paper,ekf,lstm,lstm-authors \
+bench run --predictors cv,poly,kf,kf-paper,ekf,lstm,hybrid --data $S/data/kitti_raw --out reports/kitti
+# the learned predictors against the filters on independent truth at the other GPS profiles
+bench run --predictors cv,kf,ekf,lstm,hybrid --data $S/data/kitti_raw --gps-profile none \
+  --drive-plots 0 --out reports/kitti-none
+bench run --predictors cv,kf,ekf,lstm,hybrid --data $S/data/kitti_raw --gps-profile consumer \
+  --drive-plots 0 --out reports/kitti-consumer
+bench run --predictors cv,poly,kf,kf-paper,ekf,lstm,hybrid,lstm-authors \
   --model lstm-authors=$S/models/authors/gps_interpolation_model3.onnx \
   --data $S/data/aslan $S/data/kitti_raw $S/data/comma2k19 --out reports/all-data
-bench run --predictors cv,poly,kf,kf-paper,ekf,lstm --dropouts outages \
+bench run --predictors cv,poly,kf,kf-paper,ekf,lstm,hybrid --dropouts outages \
   --data $S/data/aslan $S/data/kitti_raw $S/data/comma2k19 --out reports/outages
 bench latency --json > reports/latency.json
 # the outlier gate's effect on the paper's routes: the same run with the gate off

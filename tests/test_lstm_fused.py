@@ -2,7 +2,7 @@
 
 Both replay the same drives through :func:`bench.replay.replay` (every fix, every IMU
 sample, every query, with the run's default GPS profile and dropouts, so bridging steps
-run too); every future and "now" answer must agree to 1e-6 m, with the same missing
+run too); every future and "now" answer must agree to 5e-6 m (``TOL_M``), with the same missing
 answers and the same number of network steps. On every shared drive (all of
 ``../shared/data``: 62 drives, ~30k network steps, ~20 s) and on synthetic drives that
 need no data, including the rare paths: no IMU, IMU without yaw, 1 Hz fixes (too few
@@ -29,7 +29,11 @@ from predictors.lstm.runtime import OnnxModel
 from scenarios.drive import Drive
 from scenarios.synthetic import default_drives, generate_drive
 
-TOL_M = 1e-6
+#: both paths feed the network float32 inputs; a one-ulp difference in the input (the two
+#: paths round their float64 sums differently) moves the answer by up to ~1e-6 m with the
+#: issue-13 model, whose row-0 fix offset enters divided by its residual scale (~3 cm):
+#: seen 1.17e-6 m once in ~30k steps. 1e-6 held for the paper-form model before it.
+TOL_M = 5e-6
 
 
 def _compare(drive: Drive, fused: LstmPredictor, staged: LstmPredictor) -> float:
@@ -164,7 +168,10 @@ def test_pinned_session_answers_like_the_public_dynamic_one() -> None:
     for i, x in enumerate(X):
         pinned.buf[0] = x
         got[i] = pinned.run_buffer()
-    np.testing.assert_allclose(got, ref, rtol=1e-6, atol=1e-6)
+    # the displacement (what the runtime uses) to 1e-6; the auxiliary outputs to float32
+    # kernel rounding (batched and single-window kernels sum in different orders: ~1e-6)
+    np.testing.assert_allclose(got[:, :2], ref[:, :2], rtol=1e-6, atol=1e-6)
+    np.testing.assert_allclose(got, ref, rtol=1e-5, atol=1e-5)
     np.testing.assert_allclose(pinned.run_batch(X[:7]), ref[:7], rtol=1e-6, atol=1e-6)
     q = pickle.loads(pickle.dumps(pinned))
     q.buf[0] = X[3]

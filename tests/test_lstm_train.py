@@ -57,6 +57,9 @@ def test_tiny_retrain_end_to_end(tmp_path) -> None:
     assert js["command"] == "test" and js["frame"] == "heading"
     assert js["data"]["val_drives"] and js["validation"]["all"]["lstm"]["n"] > 0
     assert len(js["feature_mean"]) == 6 and info["training"]["epochs_run"] == 2
+    card = (tmp_path / "MODEL_CARD.md").read_text()
+    assert card.startswith("# Model card: `lstm`") and "never KITTI" in card
+    assert f"{js['data']['train_windows']} windows" in card
     p = LstmPredictor(str(tmp_path / "model.onnx"))
     d = drives[0]
     for i in range(40):

@@ -191,5 +191,6 @@ def print_summary(console: Console, info: dict, out: Path,
     print_table(console, ("source", *header) if by_source else header, rows,
                 title="validation: future-point error", key_columns=1 + by_source,
                 left_columns=1 + by_source)
-    for what, name in (("model", "model.onnx"), ("model card", "model.json")):
+    for what, name in (("model", "model.onnx"), ("model card", "model.json"),
+                       ("model card (text)", "MODEL_CARD.md")):
         console.print(f"{what}: {out / name}", markup=False, highlight=False, soft_wrap=True)

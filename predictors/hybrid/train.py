@@ -263,4 +263,7 @@ def run_training(data_paths: Sequence[str | Path], out_dir: Path, epochs: int = 
     future = future_answers(va, outs[:, 0, :2].astype(float))
     info["validation"] = evaluate(va, future, {d.name: group_of(d) for d in val_d})
     (out_dir / "model.json").write_text(json.dumps(info, indent=1) + "\n")
+    from predictors.model_card import write_model_card
+
+    write_model_card(info, out_dir, "hybrid")
     return info

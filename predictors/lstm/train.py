@@ -415,6 +415,9 @@ def run_training(data_paths: Sequence[str | Path], out_dir: Path, epochs: int = 
         "command": command,
     }
     (out_dir / "model.json").write_text(json.dumps(info, indent=1))
+    from predictors.model_card import write_model_card
+
+    write_model_card(info, out_dir, "lstm")
     return info
 
 

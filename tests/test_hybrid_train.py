@@ -1,0 +1,66 @@
+"""The hybrid's training loop end to end (tiny), and `bench train --model hybrid`."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+torch = pytest.importorskip("torch")
+
+from typer.testing import CliRunner  # noqa: E402
+
+from bench.cli import app  # noqa: E402
+from predictors.hybrid.data import hybrid_windows  # noqa: E402
+from predictors.hybrid.predictor import HybridPredictor  # noqa: E402
+from predictors.hybrid.train import future_answers, run_training  # noqa: E402
+from scenarios.synthetic import generate_drive  # noqa: E402
+
+
+@pytest.mark.slow
+def test_tiny_hybrid_training_end_to_end(tmp_path) -> None:
+    drives = [generate_drive(seed=200 + i, route=r, duration_s=60.0)
+              for i, r in enumerate(("mixed", "turns", "roundabout"))]
+    calls = []
+    info = run_training([], tmp_path, epochs=2, drives=drives, hidden=16, command="test",
+                        profiles=("rtk",), progress=lambda *a: calls.append(a))
+    assert [c[0] for c in calls] == [1, 2] and all(np.isfinite(c[4]) for c in calls)
+    js = json.loads((tmp_path / "model.json").read_text())
+    assert js["format"] == "posbench-hybrid" and js["trained"] is True
+    assert js["command"] == "test" and js["data"]["val_drives"]
+    assert js["training"]["history"][0]["epoch"] == 0  # the kf alone, the selection's baseline
+    val = js["validation"]["all"]
+    assert val["hybrid"]["n"] == val["kf"]["n"] > 0
+    # selection keeps the best epoch by validation error, epoch 0 (= the kf) included
+    best = min(h["val_future_mean_m"] for h in js["training"]["history"])
+    assert val["hybrid"]["mean_m"] == pytest.approx(best, rel=1e-4)
+    card = (tmp_path / "MODEL_CARD.md").read_text()
+    assert card.startswith("# Model card: `hybrid`") and "| all | hybrid |" in card
+    p = HybridPredictor(str(tmp_path), gps_condition="rtk")
+    p.reset()
+    assert p.config()["gps_condition"] == "rtk"
+    assert info["prior"]["params"]["rtk"] == js["prior"]["params"]["rtk"]
+
+
+def test_future_answers_rotate_the_correction() -> None:
+    d = generate_drive(seed=3, route="turns", duration_s=40.0)
+    hw = hybrid_windows(d, d.gps, {})
+    corr = np.zeros((len(hw), 2))
+    corr[:, 0] = 1.0  # 1 m along the heading
+    got = future_answers(hw, corr) - hw.kf_future
+    np.testing.assert_allclose(got, np.stack([np.cos(hw.psi), np.sin(hw.psi)], 1), atol=1e-12)
+
+
+@pytest.mark.parametrize("args, message", [
+    (["--model", "gru"], "--model 'gru': choose one of lstm, hybrid"),
+    (["--profiles", "rtk,gnss"], "--profiles 'rtk,gnss': choose from none, rtk, consumer"),
+    (["--corpus-hours", "-1"], "--corpus-hours must be >= 0"),
+    (["--max-minutes", "0"], "--max-minutes must be > 0"),
+])
+def test_train_option_errors_are_one_line(tmp_path, args, message) -> None:
+    r = CliRunner().invoke(app, ["train", "--synthetic", "1", "--out", str(tmp_path / "o"),
+                                 *args])
+    assert r.exit_code == 2
+    lines = [x for x in r.output.splitlines() if x.strip()]
+    assert len(lines) == 1 and lines[0].startswith("error: ") and message in lines[0]
