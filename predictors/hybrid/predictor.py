@@ -44,7 +44,6 @@ from __future__ import annotations
 
 import json
 import math
-from bisect import bisect_left, bisect_right
 from importlib import resources
 from pathlib import Path
 from typing import Any
@@ -55,8 +54,14 @@ from predictors.base import Predictor
 from predictors.kf import LinearKalman
 from predictors.lstm.features import N_FEATURES
 from predictors.lstm.fused import FusedStep
-from predictors.lstm.predictor import IMU_CAP, RESTART_GAP_S, STILL_SPEED_MPS, _Buf
-from predictors.lstm.resample import ACCEL_GLITCH, DT, GRID_OFFSETS, MIN_SPAN_S, N_STEPS
+from predictors.lstm.predictor import (
+    IMU_CAP,
+    RESTART_GAP_S,
+    STILL_SPEED_MPS,
+    _Buf,
+    fit_fused_window,
+)
+from predictors.lstm.resample import ACCEL_GLITCH, DT, GRID_OFFSETS, N_STEPS
 from predictors.lstm.runtime import OnnxModel
 from scenarios.errors import DataError
 
@@ -272,25 +277,9 @@ class HybridPredictor(Predictor):
     def _step(self, t_end: float) -> bool:
         """The network step on the newest fix (see the module doc); False where there is
         no window or the network's answer is not finite."""
-        fb = self._fix
-        tl = fb.t
-        end = fb.n - 1
-        start = max(bisect_right(tl, t_end - MIN_SPAN_S) - 1, 0)
-        t0 = tl[start]
-        if end - start < 3 or t_end - t0 < MIN_SPAN_S:
-            return False
         f = self._fused
-        im = self._imu
-        imu = None
-        yaw_ok = True
-        if im.n > 3:
-            it = im.t
-            i0 = bisect_left(it, t0)
-            i1 = bisect_right(it, t_end)
-            if i1 - i0 > 3:
-                imu = im.a[i0:i1]
-                yaw_ok = self._t_yaw_nan < it[i0]
-        f.fit(fb.a[start:end + 1], imu, t_end, yaw_ok)
+        if not fit_fused_window(f, self._fix, self._imu, self._t_yaw_nan, t_end):
+            return False
         f.features()
         psi = f.psi
         c, s = math.cos(psi), math.sin(psi)

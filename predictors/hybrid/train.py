@@ -31,15 +31,13 @@ from predictors.hybrid.data import HybridWindows, hybrid_windows
 from predictors.lstm.train import (
     EarlyStop,
     Progress,
-    corpus,
     corpus_card,
     error_stats,
+    gather_drives,
     group_of,
     manifest,
     package_versions,
     sample_weights,
-    split_by_route,
-    synthetic_drives,
     synthetic_seeds,
 )
 from scenarios.drive import Drive
@@ -109,7 +107,7 @@ def run_training(data_paths: Sequence[str | Path], out_dir: Path, epochs: int = 
 
     from predictors.hybrid.export import fit_stats, save_model, tuned_kf_params
     from predictors.hybrid.model import HybridNet
-    from scenarios.loaders import load
+    from predictors.training_loop import fit_epochs
 
     t_start = time.perf_counter()
     out_dir = Path(out_dir)
@@ -118,17 +116,7 @@ def run_training(data_paths: Sequence[str | Path], out_dir: Path, epochs: int = 
     torch.set_num_threads(threads)
     prior = dict(kf_params or tuned_kf_params())
 
-    all_drives: list[Drive] = []
-    for p in data_paths:
-        all_drives.extend(load(p))
-    all_drives.extend(synthetic_drives(synthetic, seed))
-    corpus_d = corpus(corpus_hours, seed)
-    all_drives.extend(corpus_d)
-    all_drives.extend(drives or [])
-    if not all_drives:
-        raise DataError(None, "no training drives: give --data PATH, --synthetic N or "
-                              "--corpus-hours H")
-    train_d, val_d = split_by_route(all_drives)
+    train_d, val_d, corpus_d = gather_drives(data_paths, synthetic, corpus_hours, seed, drives)
     tr = build_rows(train_d, profiles, prior, seed)
     va = build_rows(val_d, profiles, prior, seed + 7919)
     if len(va) > max_val_windows:
@@ -172,52 +160,22 @@ def run_training(data_paths: Sequence[str | Path], out_dir: Path, epochs: int = 
         fut = future_answers(va, np.concatenate(outs).astype(float))
         return tot / len(va), float(np.linalg.norm(fut - va.truth_future, axis=1).mean())
 
-    w = torch.tensor(sample_weights(tr.label))
     gen = torch.Generator().manual_seed(seed)
-    opt = torch.optim.Adam(net.parameters(), lr=lr)
-    sched = torch.optim.lr_scheduler.ReduceLROnPlateau(opt, factor=0.5, patience=2)
-    vl0, vm0 = validate()
-    best = (vm0, {k: v.clone() for k, v in net.state_dict().items()}, 0)
-    history = [{"epoch": 0, "val_loss": vl0, "val_future_mean_m": vm0}]
-    stopped_by = "epochs"
-    for epoch in range(1, epochs + 1):
-        net.train()
-        tot, cnt = 0.0, 0
-        order = torch.multinomial(w, len(tr), replacement=True, generator=gen)
-        for i in range(0, len(tr), batch_size):
-            idx = order[i:i + batch_size]
-            xb, pb, tb = Xtr[idx], Ptr[idx], Ttr[idx]
-            if mirror:
-                flip = (torch.rand(idx.shape[0], generator=gen) < 0.5).float()[:, None, None]
-                xb = xb * (1 - flip + flip * feat_sign)
-                pb = pb * (1 - flip + flip * vec_sign)
-                tb = tb * (1 - flip + flip * vec_sign)
-            opt.zero_grad()
-            loss = loss_fn(xb, pb, tb)
-            loss.backward()
-            opt.step()
-            tot += loss.item() * xb.shape[0]
-            cnt += xb.shape[0]
-        vl, vm = validate()
-        tl = tot / max(cnt, 1)
-        sched.step(vm)
-        history.append({"epoch": epoch, "train_loss": tl, "val_loss": vl,
-                        "val_future_mean_m": vm, "lr": opt.param_groups[0]["lr"],
-                        "elapsed_s": round(time.perf_counter() - t_start, 1)})
-        if progress is not None:
-            progress(epoch, epochs, tl, vl, vm)
-        if vm < best[0] - 1e-6:
-            best = (vm, {k: v.clone() for k, v in net.state_dict().items()}, epoch)
-        elif epoch - best[2] >= patience:
-            stopped_by = "early stopping"
-            if on_early_stop is not None:
-                on_early_stop(epoch, best[2], patience)
-            break
-        if time.perf_counter() - t_start > max_minutes * 60.0:
-            stopped_by = f"time budget ({max_minutes:g} min)"
-            break
-    net.load_state_dict(best[1])
-    net.eval()
+
+    def batch_loss(idx: torch.Tensor) -> torch.Tensor:
+        xb, pb, tb = Xtr[idx], Ptr[idx], Ttr[idx]
+        if mirror:
+            flip = (torch.rand(idx.shape[0], generator=gen) < 0.5).float()[:, None, None]
+            xb = xb * (1 - flip + flip * feat_sign)
+            pb = pb * (1 - flip + flip * vec_sign)
+            tb = tb * (1 - flip + flip * vec_sign)
+        return loss_fn(xb, pb, tb)
+
+    fit = fit_epochs(net, batch_loss, validate, torch.tensor(sample_weights(tr.label)),
+                     epochs=epochs, batch_size=batch_size, lr=lr, patience=patience, gen=gen,
+                     t_start=t_start, max_minutes=max_minutes, select="val_future_mean_m",
+                     include_initial=True, progress=progress, on_early_stop=on_early_stop)
+    history, stopped_by = fit.history, fit.stopped_by
     train_s = time.perf_counter() - t_start
 
     from predictors.hybrid.predictor import HybridPredictor  # noqa: F401 - loadability below
@@ -226,7 +184,7 @@ def run_training(data_paths: Sequence[str | Path], out_dir: Path, epochs: int = 
     extra = {
         "trained": True,
         "training": {"epochs_max": epochs, "epochs_run": len(history) - 1,
-                     "best_epoch": best[2], "stopped_by": stopped_by,
+                     "best_epoch": fit.best_epoch, "stopped_by": stopped_by,
                      "max_minutes": max_minutes, "seed": seed, "batch_size": batch_size,
                      "lr": lr, "optimizer": "Adam",
                      "scheduler": "ReduceLROnPlateau(factor 0.5, patience 2) on the "

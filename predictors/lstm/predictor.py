@@ -219,6 +219,30 @@ class _Buf:
         return self.a[:self.n]
 
 
+def fit_fused_window(f: FusedStep, fb: _Buf, im: _Buf, t_yaw_nan: float, t_end: float) -> bool:
+    """The fused step's window at the newest fix (time ``t_end`` [s], the last row of ``fb``):
+    the fixes spanning >= MIN_SPAN_S and the IMU samples within them, fitted by ``f.fit``.
+    False (nothing fitted) when the window has fewer than 4 fixes or spans < MIN_SPAN_S.
+    ``t_yaw_nan``: time [s] of the newest IMU sample without yaw (older windows use the yaw)."""
+    tl = fb.t
+    end = fb.n - 1
+    start = max(bisect_right(tl, t_end - MIN_SPAN_S) - 1, 0)
+    t0 = tl[start]
+    if end - start < 3 or t_end - t0 < MIN_SPAN_S:
+        return False
+    imu = None
+    yaw_ok = True
+    if im.n > 3:
+        it = im.t
+        i0 = bisect_left(it, t0)
+        i1 = bisect_right(it, t_end)
+        if i1 - i0 > 3:
+            imu = im.a[i0:i1]
+            yaw_ok = t_yaw_nan < it[i0]
+    f.fit(fb.a[start:end + 1], imu, t_end, yaw_ok)
+    return True
+
+
 class LstmPredictor(Predictor):
     """The paper's cubic resampling + MLP-LSTM-MLP (ONNX) + cubic current position.
 
@@ -385,25 +409,10 @@ class LstmPredictor(Predictor):
         step must run instead: fixes spanning < 2 s (start-up line), fewer than 4 fixes in
         the window (a lower-degree fit), a non-finite prediction."""
         fb = self._fix
-        tl = fb.t
-        end = fb.n - 1
-        t_end = tl[end]
-        start = max(bisect_right(tl, t_end - MIN_SPAN_S) - 1, 0)
-        t0 = tl[start]
-        if end - start < 3 or t_end - t0 < MIN_SPAN_S:
+        t_end = fb.t[fb.n - 1]
+        if not fit_fused_window(self._fused, fb, self._imu, self._t_yaw_nan, t_end):
             return False
         f = self._fused
-        im = self._imu
-        imu = None
-        yaw_ok = True
-        if im.n > 3:
-            it = im.t
-            i0 = bisect_left(it, t0)
-            i1 = bisect_right(it, t_end)
-            if i1 - i0 > 3:
-                imu = im.a[i0:i1]
-                yaw_ok = self._t_yaw_nan < it[i0]
-        f.fit(fb.a[start:end + 1], imu, t_end, yaw_ok)
         if timer is not None:
             c0 = _lap(timer, "resample", c0)
         f.features()

@@ -137,6 +137,27 @@ def corpus(hours: float, seed: int) -> list[Drive]:
     return list(corpus_drives(hours, seed=seed))
 
 
+def gather_drives(data_paths: Sequence[str | Path], synthetic: int, corpus_hours: float,
+                  seed: int, drives: Sequence[Drive] | None = None
+                  ) -> tuple[list[Drive], list[Drive], list[Drive]]:
+    """Every training source loaded and split by route: (train, validation, the corpus
+    drives among them); a one-line DataError when there is none."""
+    from scenarios.loaders import load
+
+    all_drives: list[Drive] = []
+    for p in data_paths:
+        all_drives.extend(load(p))
+    all_drives.extend(synthetic_drives(synthetic, seed))
+    corpus_d = corpus(corpus_hours, seed)
+    all_drives.extend(corpus_d)
+    all_drives.extend(drives or [])
+    if not all_drives:
+        raise DataError(None, "no training drives: give --data PATH, --synthetic N or "
+                              "--corpus-hours H")
+    train_d, val_d = split_by_route(all_drives)
+    return train_d, val_d, corpus_d
+
+
 def mirror_signs(n: int, gen, like) -> object:
     """Per-window sign vectors (n, 1, 6) for left-right mirroring: +1 everywhere, or -1 on
     dy, ay and yaw (features 1, 3, 4) for about half the windows (torch tensors)."""
@@ -254,7 +275,7 @@ def run_training(data_paths: Sequence[str | Path], out_dir: Path, epochs: int = 
     from predictors.lstm.export import export_best
     from predictors.lstm.model import LstmNet
     from predictors.lstm.runtime import OnnxModel
-    from scenarios.loaders import load
+    from predictors.training_loop import fit_epochs
 
     if frame not in FRAMES:
         raise ValueError(f"unknown frame {frame!r}")
@@ -265,17 +286,7 @@ def run_training(data_paths: Sequence[str | Path], out_dir: Path, epochs: int = 
     torch.use_deterministic_algorithms(True)
     torch.set_num_threads(threads)
 
-    all_drives: list[Drive] = []
-    for p in data_paths:
-        all_drives.extend(load(p))
-    all_drives.extend(synthetic_drives(synthetic, seed))
-    corpus_d = corpus(corpus_hours, seed)
-    all_drives.extend(corpus_d)
-    all_drives.extend(drives or [])
-    if not all_drives:
-        raise DataError(None, "no training drives: give --data PATH, --synthetic N or "
-                              "--corpus-hours H")
-    train_d, val_d = split_by_route(all_drives)
+    train_d, val_d, corpus_d = gather_drives(data_paths, synthetic, corpus_hours, seed, drives)
     tr = build_windows(train_d, gps_seeds, seed, frame, profiles, fix_offset)
     va = subsample(build_windows(val_d, 1, seed + 7919, frame, profiles, fix_offset),
                    max_val_windows, seed)
@@ -297,11 +308,6 @@ def run_training(data_paths: Sequence[str | Path], out_dir: Path, epochs: int = 
             res = (Ytr[:, :, :2] - LstmNet.base_step(Xtr)).reshape(-1, 2)
             net.set_speed_stats(float(log_s.mean()), float(log_s.std().clamp_min(1e-3)),
                                 res.std(0).clamp_min(1e-3))
-    w = torch.tensor(sample_weights(tr.label))
-    gen = torch.Generator().manual_seed(seed)
-    opt = torch.optim.Adam(net.parameters(), lr=lr)
-    sched = torch.optim.lr_scheduler.ReduceLROnPlateau(opt, factor=0.5, patience=2)
-
     def loss_fn(x: torch.Tensor, y: torch.Tensor) -> torch.Tensor:
         pred, tgt = net.core(x), net.target_std(x, y)
         return torch.mean((pred - tgt) ** 2) + 10.0 * torch.mean((pred[:, -1, :2] - tgt[:, -1, :2]) ** 2)
@@ -318,46 +324,20 @@ def run_training(data_paths: Sequence[str | Path], out_dir: Path, epochs: int = 
         fut = future_from_output(va, np.concatenate(outs).astype(float), frame)
         return tot / len(va), float(np.linalg.norm(fut - va.truth_future, axis=1).mean())
 
-    best = (float("inf"), None, 0)
-    history = []
-    budget_s = max_minutes * 60.0
-    stopped_by = "epochs"
-    for epoch in range(1, epochs + 1):
-        net.train()
-        tot, cnt = 0.0, 0
-        order = torch.multinomial(w, len(tr), replacement=True, generator=gen)
-        for i in range(0, len(tr), batch_size):
-            idx = order[i:i + batch_size]
-            xb, yb = Xtr[idx], Ytr[idx]
-            if mirror:
-                sg = mirror_signs(idx.shape[0], gen, xb)
-                xb, yb = xb * sg, yb * sg
-            opt.zero_grad()
-            loss = loss_fn(xb, yb)
-            loss.backward()
-            opt.step()
-            tot += loss.item() * xb.shape[0]
-            cnt += xb.shape[0]
-        vl, vm = validate()
-        tl = tot / max(cnt, 1)
-        sched.step(vl)
-        history.append({"epoch": epoch, "train_loss": tl, "val_loss": vl,
-                        "val_future_mean_m": vm, "lr": opt.param_groups[0]["lr"],
-                        "elapsed_s": round(time.perf_counter() - t_start, 1)})
-        if progress is not None:
-            progress(epoch, epochs, tl, vl, vm)
-        if vl < best[0] - 1e-6:
-            best = (vl, {k: v.clone() for k, v in net.state_dict().items()}, epoch)
-        elif epoch - best[2] >= patience:
-            stopped_by = "early stopping"
-            if on_early_stop is not None:
-                on_early_stop(epoch, best[2], patience)
-            break
-        if time.perf_counter() - t_start > budget_s:
-            stopped_by = f"time budget ({max_minutes:g} min)"
-            break
-    net.load_state_dict(best[1])
-    net.eval()
+    gen = torch.Generator().manual_seed(seed)
+
+    def batch_loss(idx: torch.Tensor) -> torch.Tensor:
+        xb, yb = Xtr[idx], Ytr[idx]
+        if mirror:
+            sg = mirror_signs(idx.shape[0], gen, xb)
+            xb, yb = xb * sg, yb * sg
+        return loss_fn(xb, yb)
+
+    fit = fit_epochs(net, batch_loss, validate, torch.tensor(sample_weights(tr.label)),
+                     epochs=epochs, batch_size=batch_size, lr=lr, patience=patience, gen=gen,
+                     t_start=t_start, max_minutes=max_minutes, select="val_loss",
+                     progress=progress, on_early_stop=on_early_stop)
+    history, stopped_by = fit.history, fit.stopped_by
     train_s = time.perf_counter() - t_start
 
     onnx_path = out_dir / "model.onnx"
@@ -384,7 +364,7 @@ def run_training(data_paths: Sequence[str | Path], out_dir: Path, epochs: int = 
                          "lstm": {"hidden": hidden, "layers": lstm_layers},
                          "decoder": f"Linear({hidden},{hidden}) -> LeakyReLU(0.1) -> Linear({hidden},6)",
                          "parameters": int(sum(p.numel() for p in net.parameters()))},
-        "training": {"epochs_max": epochs, "epochs_run": len(history), "best_epoch": best[2],
+        "training": {"epochs_max": epochs, "epochs_run": len(history), "best_epoch": fit.best_epoch,
                      "stopped_by": stopped_by, "max_minutes": max_minutes,
                      "seed": seed, "batch_size": batch_size, "lr": lr, "optimizer": "Adam",
                      "scheduler": "ReduceLROnPlateau(factor 0.5, patience 2)",
