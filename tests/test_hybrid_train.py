@@ -64,3 +64,12 @@ def test_train_option_errors_are_one_line(tmp_path, args, message) -> None:
     assert r.exit_code == 2
     lines = [x for x in r.output.splitlines() if x.strip()]
     assert len(lines) == 1 and lines[0].startswith("error: ") and message in lines[0]
+
+
+def test_training_refuses_kitti(kitti_dir) -> None:
+    """KITTI is evaluation only: `bench train --data <kitti>` is one error line, exit 2."""
+    drive = next(p for p in sorted(kitti_dir.rglob("*_sync")) if p.is_dir())
+    r = CliRunner().invoke(app, ["train", "--data", str(drive), "--out", "/tmp/never-written"])
+    assert r.exit_code == 2 and "Traceback" not in r.output
+    lines = [x for x in r.stderr.splitlines() if x.strip()]
+    assert len(lines) == 1 and lines[0].startswith("error: ") and "evaluation-only" in lines[0]

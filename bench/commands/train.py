@@ -51,8 +51,8 @@ def train(
 ) -> None:
     """Train a predictor's network on drives and write model.onnx + model.json (its model card).
 
-    Needs the `train` extra: pip install 'posbench[train]'. KITTI must never be given here: it
-    is evaluation-only data. Example (the bundled models):
+    Needs the `train` extra: pip install 'posbench[train]'. KITTI is refused (one
+    error line): it is evaluation-only data. Example (the bundled models):
     bench train --data ../shared/data/aslan ../shared/data/comma2k19 --corpus-hours 20 --out DIR
     """
     from scenarios.degrade import GPS_PROFILES

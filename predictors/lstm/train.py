@@ -67,6 +67,8 @@ def manifest(paths: Sequence[str | Path]) -> list[dict]:
 
 
 SYNTH_SEED_BASE = 10_000
+#: drive formats training refuses: KITTI is evaluation only (licence and the benchmark's rule)
+EVALUATION_ONLY = ("kitti",)
 
 
 def synthetic_seeds(n: int, seed: int) -> list[int]:
@@ -146,7 +148,12 @@ def gather_drives(data_paths: Sequence[str | Path], synthetic: int, corpus_hours
 
     all_drives: list[Drive] = []
     for p in data_paths:
-        all_drives.extend(load(p))
+        loaded = load(p)
+        kitti = [d.name for d in loaded if (d.meta.format or "").lower() in EVALUATION_ONLY]
+        if kitti:
+            raise DataError(p, f"KITTI is evaluation-only data (non-commercial licence; never "
+                               f"trained on): {len(kitti)} drive(s), e.g. {kitti[0]}")
+        all_drives.extend(loaded)
     all_drives.extend(synthetic_drives(synthetic, seed))
     corpus_d = corpus(corpus_hours, seed)
     all_drives.extend(corpus_d)
