@@ -55,13 +55,13 @@ from predictors.kf import LinearKalman
 from predictors.lstm.features import N_FEATURES
 from predictors.lstm.fused import FusedStep
 from predictors.lstm.predictor import (
-    IMU_CAP,
     RESTART_GAP_S,
     STILL_SPEED_MPS,
+    ImuHistory,
     _Buf,
     fit_fused_window,
 )
-from predictors.lstm.resample import ACCEL_GLITCH, DT, GRID_OFFSETS, N_STEPS
+from predictors.lstm.resample import DT, GRID_OFFSETS, N_STEPS
 from predictors.lstm.runtime import OnnxModel
 from scenarios.errors import DataError
 
@@ -216,10 +216,7 @@ class HybridPredictor(Predictor):
     def reset(self) -> None:
         self.kf.reset()
         self._fix = _Buf(FIX_CAP, 3)        # t, x, y of real fixes
-        self._imu = _Buf(IMU_CAP, 4)        # t, ax, ay, yaw (unwrapped, NaN if unknown)
-        self._yaw_raw = math.nan
-        self._yaw_u = math.nan
-        self._t_yaw_nan = -math.inf
+        self._imu = ImuHistory()
         self._t_real = math.nan
         self._can_v: float | None = None
         self._gps_v = math.nan
@@ -236,22 +233,7 @@ class HybridPredictor(Predictor):
 
     def observe_imu(self, t: float, ax: float, ay: float, yaw: float, yaw_rate: float) -> None:
         self.kf.observe_imu(t, ax, ay, yaw, yaw_rate)
-        if not (math.isfinite(ax) and math.isfinite(ay)) or max(abs(ax), abs(ay)) > ACCEL_GLITCH:
-            return
-        imu = self._imu
-        if imu.n and t <= imu.t[-1]:
-            return
-        if math.isfinite(yaw):
-            if math.isfinite(self._yaw_u):
-                self._yaw_u += (yaw - self._yaw_raw + math.pi) % (2 * math.pi) - math.pi
-            else:
-                self._yaw_u = yaw
-            self._yaw_raw = yaw
-            yu = self._yaw_u
-        else:
-            yu = math.nan
-            self._t_yaw_nan = t
-        imu.append((t, ax, ay, yu))
+        self._imu.add(t, ax, ay, yaw)
 
     def observe_speed(self, t: float, v: float) -> None:
         self.kf.observe_speed(t, v)
@@ -278,7 +260,7 @@ class HybridPredictor(Predictor):
         """The network step on the newest fix (see the module doc); False where there is
         no window or the network's answer is not finite."""
         f = self._fused
-        if not fit_fused_window(f, self._fix, self._imu, self._t_yaw_nan, t_end):
+        if not fit_fused_window(f, self._fix, self._imu, t_end):
             return False
         f.features()
         psi = f.psi

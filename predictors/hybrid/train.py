@@ -38,6 +38,7 @@ from predictors.lstm.train import (
     manifest,
     package_versions,
     sample_weights,
+    subsample,
     synthetic_seeds,
 )
 from scenarios.drive import Drive
@@ -118,10 +119,7 @@ def run_training(data_paths: Sequence[str | Path], out_dir: Path, epochs: int = 
 
     train_d, val_d, corpus_d = gather_drives(data_paths, synthetic, corpus_hours, seed, drives)
     tr = build_rows(train_d, profiles, prior, seed)
-    va = build_rows(val_d, profiles, prior, seed + 7919)
-    if len(va) > max_val_windows:
-        va = va.take(np.sort(np.random.default_rng(seed).choice(len(va), max_val_windows,
-                                                                replace=False)))
+    va = subsample(build_rows(val_d, profiles, prior, seed + 7919), max_val_windows, seed)
     if len(tr) == 0 or len(va) == 0:
         raise DataError(None, f"too few windows (train {len(tr)}, validation {len(va)}): "
                               "drives need >= 2 s of moving GPS")

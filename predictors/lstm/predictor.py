@@ -219,11 +219,41 @@ class _Buf:
         return self.a[:self.n]
 
 
-def fit_fused_window(f: FusedStep, fb: _Buf, im: _Buf, t_yaw_nan: float, t_end: float) -> bool:
+class ImuHistory(_Buf):
+    """The IMU samples a step fits: rows t [s], ax, ay [m/s^2, vehicle frame], yaw [rad,
+    unwrapped across samples; NaN if unknown], in time order. ``t_yaw_nan`` is the time [s]
+    of the newest sample without yaw (windows older than it use the yaw)."""
+
+    def __init__(self, cap: int = IMU_CAP) -> None:
+        super().__init__(cap, 4)
+        self._yaw_raw = math.nan
+        self._yaw_u = math.nan
+        self.t_yaw_nan = -math.inf
+
+    def add(self, t: float, ax: float, ay: float, yaw: float) -> None:
+        """One sample; dropped if ax or ay is not finite or beyond ACCEL_GLITCH, or if it is
+        not newer than the newest kept sample."""
+        if not (math.isfinite(ax) and math.isfinite(ay)) or max(abs(ax), abs(ay)) > ACCEL_GLITCH:
+            return
+        if self.n and t <= self.t[-1]:
+            return
+        if math.isfinite(yaw):
+            if math.isfinite(self._yaw_u):
+                self._yaw_u += (yaw - self._yaw_raw + math.pi) % (2 * math.pi) - math.pi
+            else:
+                self._yaw_u = yaw
+            self._yaw_raw = yaw
+            yu = self._yaw_u
+        else:
+            yu = math.nan
+            self.t_yaw_nan = t
+        self.append((t, ax, ay, yu))
+
+
+def fit_fused_window(f: FusedStep, fb: _Buf, im: ImuHistory, t_end: float) -> bool:
     """The fused step's window at the newest fix (time ``t_end`` [s], the last row of ``fb``):
     the fixes spanning >= MIN_SPAN_S and the IMU samples within them, fitted by ``f.fit``.
-    False (nothing fitted) when the window has fewer than 4 fixes or spans < MIN_SPAN_S.
-    ``t_yaw_nan``: time [s] of the newest IMU sample without yaw (older windows use the yaw)."""
+    False (nothing fitted) when the window has fewer than 4 fixes or spans < MIN_SPAN_S."""
     tl = fb.t
     end = fb.n - 1
     start = max(bisect_right(tl, t_end - MIN_SPAN_S) - 1, 0)
@@ -238,7 +268,7 @@ def fit_fused_window(f: FusedStep, fb: _Buf, im: _Buf, t_yaw_nan: float, t_end: 
         i1 = bisect_right(it, t_end)
         if i1 - i0 > 3:
             imu = im.a[i0:i1]
-            yaw_ok = t_yaw_nan < it[i0]
+            yaw_ok = im.t_yaw_nan < it[i0]
     f.fit(fb.a[start:end + 1], imu, t_end, yaw_ok)
     return True
 
@@ -333,10 +363,7 @@ class LstmPredictor(Predictor):
     def reset(self) -> None:
         self._fix = _Buf(FIX_CAP, 3)        # t, x, y (real fixes and bridging pseudo-fixes)
         self._t_real = math.nan             # time of the newest real fix
-        self._imu = _Buf(IMU_CAP, 4)        # t, ax, ay, yaw (unwrapped, NaN if unknown)
-        self._yaw_raw = math.nan
-        self._yaw_u = math.nan
-        self._t_yaw_nan = -math.inf         # time of the newest IMU sample without yaw
+        self._imu = ImuHistory()
         self._can_v: float | None = None
         self._gps_v = math.nan
         self._hold: tuple[float, float] | None = None
@@ -352,23 +379,7 @@ class LstmPredictor(Predictor):
         self.fused_steps = 0  # of self.steps, those that ran through the fused step
 
     def observe_imu(self, t: float, ax: float, ay: float, yaw: float, yaw_rate: float) -> None:
-        if not (math.isfinite(ax) and math.isfinite(ay)) or max(abs(ax), abs(ay)) > ACCEL_GLITCH:
-            return
-        imu = self._imu
-        if imu.n and t <= imu.t[-1]:
-            return
-        if math.isfinite(yaw):
-            if math.isfinite(self._yaw_u):
-                d = (yaw - self._yaw_raw + math.pi) % (2 * math.pi) - math.pi
-                self._yaw_u += d
-            else:
-                self._yaw_u = yaw
-            self._yaw_raw = yaw
-            yu = self._yaw_u
-        else:
-            yu = math.nan
-            self._t_yaw_nan = t
-        imu.append((t, ax, ay, yu))
+        self._imu.add(t, ax, ay, yaw)
 
     def observe_speed(self, t: float, v: float) -> None:
         if math.isfinite(v):
@@ -410,7 +421,7 @@ class LstmPredictor(Predictor):
         the window (a lower-degree fit), a non-finite prediction."""
         fb = self._fix
         t_end = fb.t[fb.n - 1]
-        if not fit_fused_window(self._fused, fb, self._imu, self._t_yaw_nan, t_end):
+        if not fit_fused_window(self._fused, fb, self._imu, t_end):
             return False
         f = self._fused
         if timer is not None:
@@ -476,7 +487,7 @@ class LstmPredictor(Predictor):
             if i1 - i0 > 3:
                 tt = ti[i0:i1]
                 sc = max(t_end - t0, 1e-3)
-                yv = im[i0:i1, 1:] if self._t_yaw_nan < tt[0] else im[i0:i1, 1:3]
+                yv = im[i0:i1, 1:] if self._imu.t_yaw_nan < tt[0] else im[i0:i1, 1:3]
                 if self.fit == "lbfgs":
                     from predictors.cubic import fit_cubic_lbfgs
 

@@ -179,7 +179,8 @@ def mirror_signs(n: int, gen, like) -> object:
 
 
 def subsample(ws: WindowSet, n_max: int, seed: int) -> WindowSet:
-    """At most ``n_max`` windows, drawn without replacement (seeded), order kept."""
+    """At most ``n_max`` windows, drawn without replacement (seeded), order kept (any set
+    of rows with ``len`` and ``take``: also the hybrid's HybridWindows)."""
     if len(ws) <= n_max:
         return ws
     idx = np.sort(np.random.default_rng(seed).choice(len(ws), n_max, replace=False))
