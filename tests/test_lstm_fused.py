@@ -115,12 +115,13 @@ def test_fused_step_in_the_world_frame(tmp_path: Path) -> None:
     reinterpreted: the arithmetic, not the accuracy, is under test)."""
     src = bundled_model()
     shutil.copy(src, tmp_path / "model.onnx")
+    shutil.copy(src.with_name("model.core.onnx"), tmp_path / "model.core.onnx")
     info = json.loads(src.with_suffix(".json").read_text())
     info["frame"] = "world"
     (tmp_path / "model.json").write_text(json.dumps(info))
     fused = LstmPredictor(model=str(tmp_path))
     staged = LstmPredictor(model=str(tmp_path), step="staged")
-    assert fused.frame == "world"
+    assert fused.frame == "world" and fused.core is not None
     _compare(generate_drive(seed=2, route="roundabout", duration_s=60.0), fused, staged)
     assert fused.fused_steps > 0
 

@@ -38,6 +38,9 @@ from predictors.lstm.resample import DT, N_STEPS
 FEATURES = ("dx", "dy", "ax", "ay", "yaw", "t")
 N_FEATURES = len(FEATURES)
 FRAMES = ("heading", "world")
+#: ``"speed"``-form models (:mod:`predictors.lstm.model`): added to the window's mean grid
+#: step length [m] before the displacements are divided by it (standstill-safe)
+SPEED_EPS_M = 0.02
 
 
 def rotate(x: np.ndarray, y: np.ndarray, ang: np.ndarray | float) -> tuple[np.ndarray, np.ndarray]:

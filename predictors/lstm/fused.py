@@ -12,7 +12,9 @@ per-call overhead taken out:
 - both cubics are evaluated on the 8 grid times (and +0.2 s) by one product with a
   precomputed Vandermonde matrix;
 - the features are written straight into the float32 input buffer of the ONNX session
-  (rotations as one 7x2 @ 2x2 product and four element-wise products);
+  (rotations as complex products); a ``"speed"``-form model with a core graph
+  (:mod:`predictors.lstm.core_net`) is fed its normalised input instead and runs without
+  the ~30 normalisation nodes of the full graph;
 - the current-position cubic (8 grid points + the prediction) is one product with the
   precomputed pseudo-inverse.
 
@@ -31,8 +33,9 @@ import math
 
 import numpy as np
 
-from predictors.lstm.features import gps_substitute_imu, time_feature
-from predictors.lstm.resample import DT, GRID_OFFSETS, powers
+from predictors.lstm.core_net import CoreNet
+from predictors.lstm.features import N_FEATURES, gps_substitute_imu, time_feature
+from predictors.lstm.resample import DT, GRID_OFFSETS, N_STEPS, powers
 from predictors.lstm.runtime import OnnxModel
 
 try:  # the gufunc behind np.linalg.solve, without its Python-side checks (~3 us)
@@ -74,6 +77,8 @@ class FusedStep:
 
     Args:
         net: the predictor's ONNX model; features are written into ``net.buf[0]`` (8, 6).
+        core: the model's core graph (:class:`~predictors.lstm.core_net.CoreNet`), run
+            instead of ``net`` where given.
         frame: ``"heading"`` or ``"world"`` (:mod:`predictors.lstm.features`).
         final_pinv: (4, 9) pseudo-inverse of the current-position cubic through the 8 grid
             points and the prediction (times ``_TIMES9``).
@@ -86,17 +91,18 @@ class FusedStep:
     """
 
     def __init__(self, net: OnnxModel, frame: str, final_pinv: np.ndarray,
-                 fix_offset: bool = False) -> None:
+                 fix_offset: bool = False, core: CoreNet | None = None) -> None:
         self.net = net
         self.frame = frame
         self.final_pinv = np.ascontiguousarray(final_pinv)
         self.fix_offset = fix_offset
+        self.core = core
         self._alloc()
 
     # scratch buffers are rebuilt, not pickled (a pickled view would lose its base)
     def __getstate__(self) -> dict:
         return {"net": self.net, "frame": self.frame, "final_pinv": self.final_pinv,
-                "fix_offset": self.fix_offset}
+                "fix_offset": self.fix_offset, "core": self.core}
 
     def __setstate__(self, state: dict) -> None:
         self.__dict__.update(state)
@@ -126,6 +132,7 @@ class FusedStep:
         self._pinv_t = np.ascontiguousarray(self.final_pinv.T)  # (9, 4)
         self.coef: tuple[float, ...] = (0.0,) * 8
         self._fix_c = 0j  # the newest fix as x + iy (fix_offset models)
+        self._s = 1.0  # the window's speed scale [m] (core graphs)
         self.psi = 0.0
         self.speed = math.nan
 
@@ -203,27 +210,52 @@ class FusedStep:
         xc = self._xc
         ec = self._ec
         imu = self._e[1]
+        core = self.core
+        # a core graph takes the displacements divided by the window's speed scale s [m]
+        # (rotation-invariant: from the grid differences before any rotation) and row 0 by
+        # res_std, and log s as a 7th column (core_net.CoreNet.load is the reference)
+        if core is not None:
+            s = sum(map(abs, ec[0, _DIFF].tolist())) / (N_STEPS - 1) + core.eps
+            self._s = s
+            k = 1.0 / s
+        else:
+            k = 1.0
         if self.frame == "heading":
             rot = complex(math.cos(self.psi), -math.sin(self.psi))
-            np.multiply(ec[0, _DIFF], rot, out=xc[1:, 0])
+            np.multiply(ec[0, _DIFF], rot * k, out=xc[1:, 0])
             if self.fix_offset:  # row 0: the newest fix minus the newest grid point
-                xc[0, 0] = (self._fix_c - ec[0, 7]) * rot
+                off = (self._fix_c - ec[0, 7]) * rot
             rel = imu[_REL, 2]  # yaw relative to the newest sample
             x64[:, 4] = rel
         else:
-            xc[1:, 0] = ec[0, _DIFF]
+            np.multiply(ec[0, _DIFF], k, out=xc[1:, 0])
             if self.fix_offset:
-                xc[0, 0] = self._fix_c - ec[0, 7]
+                off = self._fix_c - ec[0, 7]
             rel = imu[:8, 2]
             x64[:, 4] = np.pi - np.mod(np.pi - rel, 2 * np.pi)
+        if self.fix_offset:
+            xc[0, 0] = (off if core is None else
+                        complex(off.real / core.res_std[0], off.imag / core.res_std[1]))
         cs = self._cs
         np.cos(rel, out=cs[:, 0])
         np.sin(rel, out=cs[:, 1])
         np.multiply(ec[1, :8], self._csc, out=xc[:, 1])
-        self.net.buf[0] = x64
+        if core is not None:
+            z = core.net.buf
+            z[:, :N_FEATURES] = x64
+            z[:, N_FEATURES] = math.log(s)
+        else:
+            self.net.buf[0] = x64
 
     def infer(self) -> tuple[float, float]:
-        """The network on ``net.buf``: its displacement output [m] in the model's frame."""
+        """The network on the window :meth:`features` wrote: its displacement output [m] in
+        the model's frame (through the core graph where the model has one: the last grid
+        step, unscaled, plus the residual x res_std)."""
+        core = self.core
+        if core is not None:
+            o0, o1 = core.net.run_buffer().tolist()
+            d7 = complex(self._xc[N_STEPS - 1, 0]) * self._s
+            return d7.real + o0 * core.res_std[0], d7.imag + o1 * core.res_std[1]
         out = self.net.run_buffer()
         return float(out[0]), float(out[1])
 

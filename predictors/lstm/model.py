@@ -35,11 +35,9 @@ from __future__ import annotations
 import torch
 from torch import nn
 
-from predictors.lstm.features import N_FEATURES
+from predictors.lstm.features import N_FEATURES, SPEED_EPS_M
 
 FORMS = ("speed", "paper")
-#: added to the window's mean step length [m] before dividing by it (standstill-safe)
-SPEED_EPS_M = 0.02
 
 
 class LstmNet(nn.Module):

@@ -55,6 +55,7 @@ from time import perf_counter_ns
 import numpy as np
 
 from predictors.base import Predictor
+from predictors.lstm.core_net import CoreNet, has_core
 from predictors.lstm.features import FRAMES, features_one, gps_substitute_imu
 from predictors.lstm.fused import FusedStep
 from predictors.lstm.resample import (
@@ -310,6 +311,11 @@ class LstmPredictor(Predictor):
         batch_dim = declared[0] if isinstance(declared[0], str) else None
         self.net = OnnxModel(self.model_path, output=self.info.get("output"), batch_dim=batch_dim)
         _check_model(self.model_path, self.info, self.net)
+        #: the model's core graph (model.json "core"; :mod:`predictors.lstm.core_net`), run by
+        #: the fused step; a model copied without its core file runs the full graph
+        self.core = (CoreNet(self.model_path, self.info["core"], self.net)
+                     if step == "fused" and fit == "closed" and has_core(self.model_path, self.info)
+                     else None)
         self._init_buffers()
 
     def _init_buffers(self) -> None:
@@ -318,15 +324,15 @@ class LstmPredictor(Predictor):
         self._x = np.empty((N_STEPS, 6), dtype=np.float64)
         self._pts = np.empty((N_STEPS + 1, 2))
         fused = getattr(self, "step", "staged") == "fused" and self.fit == "closed"
-        self._fused = (FusedStep(self.net, self.frame, self._final.pinv, self.fix_offset)
-                       if fused else None)
+        self._fused = (FusedStep(self.net, self.frame, self._final.pinv, self.fix_offset,
+                                 getattr(self, "core", None)) if fused else None)
         self.stage_timer = None
         self.reset()
 
     def config(self) -> dict:
         return {"model": str(self.model_path), "fit": self.fit, "frame": self.frame,
                 "fix_offset": self.fix_offset,
-                "step": self.step, "architecture": self.info.get("architecture"),
+                "step": self.step, "core_graph": self.core is not None, "architecture": self.info.get("architecture"),
                 "command": self.info.get("command")}
 
     @property

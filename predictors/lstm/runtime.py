@@ -12,11 +12,16 @@ hot path takes two shortcuts, both checked to give the public API's outputs:
 - the feed is fixed (preallocated buffers, the inputs' names checked once), so :meth:`OnnxModel.run_buffer`
   calls the session's compiled ``run`` without the Python wrapper's per-call checks
   (~4 us under cache pressure); where onnxruntime's layout differs, or that call does not
-  answer exactly as the public ``InferenceSession.run`` on a probe, the public one is used.
+  answer exactly as the public ``InferenceSession.run`` on a probe, the public one is used;
+- where the output's shape is static, the buffers are bound once (IO binding: the inputs
+  read in place, the output written into a preallocated array) and :meth:`run_buffer`
+  calls the compiled ``run_with_iobinding`` (~3 us less: no feed dict, no output
+  allocation); again only if it answers the probe exactly as the public ``run``.
 """
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -103,6 +108,7 @@ class OnnxModel:
         public one."""
         public = self.session.run
         self._run = public
+        self._run_bound: Callable[[], np.ndarray] | None = None
         inner = getattr(self.session, "_sess", None)
         if inner is None:  # pragma: no cover - another onnxruntime layout
             return
@@ -123,12 +129,49 @@ class OnnxModel:
             def run(outputs: list[str], feed: dict, _inner=inner.run) -> list:
                 return _inner(outputs, feed, None)
             self._run = run
+        self._run_bound = self._bound_run(inner)
+
+    def _bound_run(self, inner: object) -> Callable[[], np.ndarray] | None:
+        """A call that runs the session on the bound buffers and returns the first row of
+        a preallocated output (overwritten by the next call); None where the output shape
+        is not static, binding is not available, or the probe answers differ."""
+        meta = next(o for o in self.session.get_outputs() if o.name == self.output_name)
+        shape = meta.shape
+        if meta.type != "tensor(float)" or not all(isinstance(d, int) for d in shape):
+            return None
+        out = np.zeros(shape, dtype=np.float32)
+        public = self.session.run
+        try:
+            io = self.session.io_binding()
+            for name, b in zip(self.input_names, self.bufs, strict=True):
+                io.bind_cpu_input(name, b)
+            io.bind_output(self.output_name, "cpu", 0, np.float32, list(shape),
+                           out.ctypes.data)
+            inner_io = io._iobinding
+
+            def run(_run=inner.run_with_iobinding, _io=inner_io, _out=out) -> np.ndarray:
+                _run(_io, None)
+                return _out[0]
+
+            same = True
+            for k in range(2):
+                for b in self.bufs:
+                    b[...] = np.arange(b.size).reshape(b.shape) % (7 + 4 * k) - 3
+                same = same and np.array_equal(run(), public(self._outs, self._feed)[0][0])
+        except Exception:  # pragma: no cover - another onnxruntime layout
+            return None
+        finally:
+            for b in self.bufs:
+                b[...] = 0.0
+        self._binding = (io, out)  # keeps the binding and its output alive
+        return run if same else None
 
     def __getstate__(self) -> dict:
         """Everything but the onnxruntime sessions (not picklable): they are rebuilt from the
         model bytes on unpickling, so predictors can cross process boundaries."""
         return {k: v for k, v in self.__dict__.items()
-                if k not in ("session", "_batch_session", "_feed", "_run")}
+                if k not in ("session", "_batch_session", "_feed", "_run", "_run_bound",
+                             "_binding")}
 
     def __setstate__(self, state: dict) -> None:
         self.__dict__.update(state)
@@ -156,7 +199,10 @@ class OnnxModel:
     def run_buffer(self) -> np.ndarray:
         """The network on :attr:`buf` as it stands (the caller wrote its window into
         ``buf[0]``, float32; a graph with several inputs: each into ``bufs[k][0]``): the
-        first output row, without copying the input."""
+        first output row, without copying the input. The row may be a view of a
+        preallocated output that the next call overwrites: use it before the next call."""
+        if self._run_bound is not None:
+            return self._run_bound()
         return self._run(self._outs, self._feed)[0][0]
 
     def run_batch(self, X: np.ndarray) -> np.ndarray:

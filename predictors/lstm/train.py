@@ -350,6 +350,7 @@ def run_training(data_paths: Sequence[str | Path], out_dir: Path, epochs: int = 
 
     onnx_path = out_dir / "model.onnx"
     export_report = export_best(net, onnx_path, n_calls=timing_calls)
+    core = write_core_if_any(onnx_path) if form == "speed" else None
     out = OnnxModel(onnx_path).run_batch(va.X.astype(np.float32))
     lstm_future = future_from_output(va, out[:, :2].astype(float), frame)
     metrics = evaluate(va, lstm_future, {d.name: group_of(d) for d in val_d})
@@ -399,6 +400,7 @@ def run_training(data_paths: Sequence[str | Path], out_dir: Path, epochs: int = 
                                                              strict=True)}},
         "validation": metrics,
         "export": export_report,
+        "core": core,
         "packages": package_versions(),
         "command": command,
     }
@@ -407,6 +409,17 @@ def run_training(data_paths: Sequence[str | Path], out_dir: Path, epochs: int = 
 
     write_model_card(info, out_dir, "lstm")
     return info
+
+
+def write_core_if_any(onnx_path: Path) -> dict | None:
+    """The fused step's core graph beside a speed-form model (``model.json["core"]``), or
+    None where the export's layout has none (:mod:`predictors.lstm.core_graph`)."""
+    from predictors.lstm.core_graph import NoCoreGraph, write_core
+
+    try:
+        return write_core(onnx_path)
+    except NoCoreGraph:
+        return None
 
 
 def corpus_card(drives: Sequence[Drive], hours: float, seed: int) -> dict:

@@ -1,0 +1,120 @@
+"""The core network of a ``"speed"``-form model at run time: the fused step's inference
+without the ~30 normalisation nodes of the full graph (see :mod:`predictors.lstm.core_graph`,
+which builds it; onnxruntime only here).
+
+The fused step writes its (8, 6) float64 window once; :meth:`CoreNet.load` applies the
+model's input scaling in three numpy calls (the displacements divided by the window's speed
+scale, row 0's fix offset by ``res_std``, ``log s`` as column 7; the standardisation of the
+other columns lives in the core's weights) and :meth:`CoreNet.displacement` turns the core's
+standardised residual into the displacement 200 ms ahead [m, the model's frame]:
+``d_7 + o * res_std``, as :class:`predictors.lstm.model.FuturePoint` does in-graph.
+
+A core is used only if it reproduces its full graph: on load both answer the same
+deterministic windows (0-40 m/s, turning, braking) and must agree to :data:`CORE_TOL_M`; a
+core that does not is refused with a one-line :class:`~scenarios.errors.DataError`.
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+
+from predictors.lstm.features import N_FEATURES
+from predictors.lstm.resample import DT, N_STEPS
+from predictors.lstm.runtime import OnnxModel
+from scenarios.errors import DataError
+
+#: largest displacement difference [m] allowed between core and full graph on the check
+#: windows (float32 rounding of the folded weights is ~1e-7 m)
+CORE_TOL_M = 1e-5
+#: check windows on load
+CHECK_WINDOWS = 24
+
+
+def check_windows(n: int = CHECK_WINDOWS, seed: int = 0) -> np.ndarray:
+    """(n, 8, 6) deterministic raw windows (heading frame): 0-8 m per 0.2 s step (0-40 m/s),
+    turning and braking, IMU and yaw of matching size, a fix offset of a few cm in row 0;
+    float32-representable, so both graphs see the same numbers."""
+    rng = np.random.default_rng(seed)
+    x = np.zeros((n, N_STEPS, N_FEATURES))
+    step = rng.uniform(0.0, 8.0, n)[:, None] * (1 + rng.uniform(-0.2, 0.2, n)[:, None]
+                                                * np.linspace(-1, 1, N_STEPS))
+    turn = rng.normal(0.0, 0.1, n)[:, None] * np.arange(N_STEPS)
+    x[:, :, 0] = step * np.cos(turn)
+    x[:, :, 1] = step * np.sin(turn)
+    x[:, 0, :2] = rng.normal(0.0, 0.03, (n, 2))
+    x[:, :, 2:4] = rng.normal(0.0, 1.0, (n, N_STEPS, 2))
+    x[:, :, 4] = turn - turn[:, -1:]
+    x[:, :, 5] = np.arange(N_STEPS) * DT
+    return x.astype(np.float32).astype(np.float64)
+
+
+def has_core(onnx_path: Path, info: dict) -> bool:
+    """``model.json`` names a core graph and its file is beside the model (a model copied
+    without it runs its full graph: slower, same answers)."""
+    entry = info.get("core")
+    return (isinstance(entry, dict) and bool(entry.get("file"))
+            and Path(onnx_path).with_name(str(entry["file"])).is_file())
+
+
+class CoreNet:
+    """The core graph beside a full model, with the scaling the fused step applies.
+
+    Args:
+        onnx_path: the full ``model.onnx`` (the core's file name in ``entry`` is relative
+            to it).
+        entry: ``model.json["core"]`` (:func:`predictors.lstm.core_graph.write_core`).
+        full: the full model's session, to check the core against.
+    Raises:
+        DataError: the core file is missing, has another input shape, or does not
+            reproduce the full graph.
+    """
+
+    def __init__(self, onnx_path: Path, entry: dict, full: OnnxModel) -> None:
+        path = Path(onnx_path).with_name(str(entry.get("file", "")))
+        self.path = path
+        self.net = OnnxModel(path, output=entry.get("output"))
+        if list(self.net.input_shape) != [N_STEPS, N_FEATURES + 1]:
+            raise DataError(path, f"core input shape {self.net.input_shape}, expected "
+                                  f"[{N_STEPS}, {N_FEATURES + 1}]")
+        self.res_std = (float(entry["res_std_m"][0]), float(entry["res_std_m"][1]))
+        self.eps = float(entry["speed_eps_m"])
+        #: per-element input scale: rows 1-7 of the displacement columns are set to 1/s per
+        #: window; row 0 (fix offset) 1/res_std; the raw columns 1
+        self._scale = np.ones((N_STEPS, N_FEATURES))
+        self._scale[0, :2] = (1.0 / self.res_std[0], 1.0 / self.res_std[1])
+        worst = self.difference(full)
+        if not worst <= CORE_TOL_M:
+            raise DataError(path, f"does not reproduce {Path(onnx_path).name}: displacements "
+                                  f"differ by up to {worst:.3g} m (allowed {CORE_TOL_M:g}); "
+                                  "export the model again with `bench train`")
+
+    def load(self, x: np.ndarray) -> None:
+        """Write the raw window ``x`` (8, 6) float64 (row 0: the fix offset) into the core's
+        input, scaled as the full graph's ``encode_input``; s [m] = mean length of the grid
+        displacements of rows 1-7 + ``speed_eps_m``."""
+        s = float(np.hypot(x[1:, 0], x[1:, 1]).sum()) / (N_STEPS - 1) + self.eps
+        sc = self._scale
+        sc[1:, :2] = 1.0 / s
+        z = self.net.buf
+        np.multiply(x, sc, out=z[:, :N_FEATURES])
+        z[:, N_FEATURES] = math.log(s)
+
+    def displacement(self, x: np.ndarray) -> tuple[float, float]:
+        """The core on the loaded window: the displacement 200 ms ahead [m, the model's
+        frame] = the last grid displacement of ``x`` + the residual x ``res_std``."""
+        o0, o1 = self.net.run_buffer().tolist()
+        return (float(x[N_STEPS - 1, 0]) + o0 * self.res_std[0],
+                float(x[N_STEPS - 1, 1]) + o1 * self.res_std[1])
+
+    def difference(self, full: OnnxModel) -> float:
+        """Largest |displacement| difference [m] between this core and ``full`` on
+        :func:`check_windows`."""
+        diffs = []
+        for x in check_windows():
+            want = full.run(x)[:2].astype(np.float64)
+            self.load(x)
+            diffs.append(np.abs(np.asarray(self.displacement(x)) - want))
+        return float(np.max(diffs))  # NaN if either answered NaN
