@@ -50,9 +50,9 @@ except (ImportError, AttributeError):  # pragma: no cover - other NumPy layouts
         return out
 
 #: columns of a fit block: s^2, s^3, 1, s, then 3 value channels (x, y, 0 for the fixes;
-#: ax, ay, yaw for the IMU). With this order one subtraction of (t_end, 0, ...) from a
-#: buffer row (t, values...) writes s and the values at once, and the basis columns
-#: (s^2, s^3, 1, s) are contiguous: coefficients come out in that order (``_C0``.. below)
+#: ax, ay, yaw for the IMU). With this order one subtraction of (t_end, 0, ...) from the
+#: buffer's rows (t, values...) writes s and the values at once, and the basis columns
+#: (s^2, s^3, 1, s) are adjacent: coefficients come out in that order (``_C0``.. below)
 _COLS = 7
 _C2, _C3, _C0, _C1 = 0, 1, 2, 3
 #: the 8 grid times and the prediction's time, relative to the fix [s]
@@ -109,12 +109,13 @@ class FusedStep:
         self._alloc()
 
     def _alloc(self, rows: int = 256) -> None:
-        # the two fit blocks, fixes [0] and IMU [1], padded with all-zero rows (which add
-        # nothing to the normal equations) so that one product serves both
-        self._w = np.zeros((2, rows, _COLS))
-        self._live = [0, 0]  # rows of each block with the 1 set; all-zero beyond
-        self._t3 = np.zeros(3)  # (t_end, 0, 0): subtracted from fix rows (t, x, y)
-        self._t4 = np.zeros(4)  # (t_end, 0, 0, 0): from IMU rows (t, ax, ay, yaw)
+        # the two fit blocks, fixes [0] and IMU [1], stored by column (each column's
+        # samples contiguous) and padded with all-zero samples (which add nothing to the
+        # normal equations) so that one product serves both
+        self._w = np.zeros((2, _COLS, rows))
+        self._live = [0, 0]  # samples of each block with the 1 set; all-zero beyond
+        self._t3 = np.zeros((3, 1))  # (t_end, 0, 0): subtracted from fix rows (t, x, y)
+        self._t4 = np.zeros((4, 1))  # (t_end, 0, 0, 0): from IMU rows (t, ax, ay, yaw)
         self._m = np.empty((2, 4, _COLS))
         self._x = np.empty((2, 4, 3))
         self._rows_eval = _eval_rows()
@@ -137,17 +138,17 @@ class FusedStep:
         self.speed = math.nan
 
     def _rows(self, k: int, n: int) -> np.ndarray:
-        """Block k with exactly n live rows (grown when too small); returns the block."""
+        """Block k (columns x samples) with exactly n live samples (grown when too small)."""
         w = self._w
-        if n > w.shape[1]:
-            g = np.zeros((2, max(n, 2 * w.shape[1]), _COLS))
-            g[:, :w.shape[1]] = w
+        if n > w.shape[2]:
+            g = np.zeros((2, _COLS, max(n, 2 * w.shape[2])))
+            g[:, :, :w.shape[2]] = w
             self._w = w = g
         live = self._live[k]
         if n > live:
-            w[k, live:n, _C0] = 1.0
+            w[k, _C0, live:n] = 1.0
         elif n < live:
-            w[k, n:live] = 0.0
+            w[k, :, n:live] = 0.0
         self._live[k] = n
         return w[k]
 
@@ -167,20 +168,20 @@ class FusedStep:
         ni = 0 if imu is None else imu.shape[0]
         self._fix_c = complex(fix[nf - 1, 1], fix[nf - 1, 2])
         t3 = self._t3
-        t3[0] = t_end
-        np.subtract(fix, t3, out=self._rows(0, nf)[:nf, 3:6])
+        t3[0, 0] = t_end
+        np.subtract(fix.T, t3, out=self._rows(0, nf)[3:6, :nf])
         b = self._rows(1, ni)
         if ni:
             t4 = self._t4
-            t4[0] = t_end
-            np.subtract(imu, t4, out=b[:ni, 3:7])
+            t4[0, 0] = t_end
+            np.subtract(imu.T, t4, out=b[3:7, :ni])
             if not yaw_ok:
-                b[:ni, 6] = 0.0
-        w = self._w[:, :max(nf, ni)]
-        s = w[:, :, _C1]
-        np.multiply(s, s, out=w[:, :, _C2])
-        np.multiply(w[:, :, _C2], s, out=w[:, :, _C3])
-        m = np.matmul(w[:, :, :4].transpose(0, 2, 1), w, out=self._m)
+                b[6, :ni] = 0.0
+        w = self._w[:, :, :max(nf, ni)]
+        s = w[:, _C1]
+        np.multiply(s, s, out=w[:, _C2])
+        np.multiply(w[:, _C2], s, out=w[:, _C3])
+        m = np.matmul(w[:, :4], w.transpose(0, 2, 1), out=self._m)
         x = self._x
         e = self._e
         if ni:
