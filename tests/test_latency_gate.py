@@ -85,7 +85,7 @@ def test_benchmark_lstm_position_at(benchmark, prepared):
 
 def test_latency_gate(prepared):
     results = {}
-    for name in ("cv", "kf", "ekf", "lstm"):
+    for name in ("cv", "kf", "ekf", "lstm", "hybrid"):
         p, fix = warmed(name, prepared)
         results[name] = percentiles_us(step_fn(p, fix))
     # the fused step (default) and the staged reference, measured in the same run, in
@@ -116,6 +116,10 @@ def test_latency_gate(prepared):
         assert ratio <= BUDGETS[f"max_ratio_{name}_step_over_cv_step_p50"], (name, ratio)
     assert pos50 <= BUDGETS["lstm_position_at_p50_us"]
     assert results["lstm"][0] / results["kf"][0] <= BUDGETS["max_ratio_lstm_step_over_kf_step_p50"]
+    assert results["hybrid"][0] <= BUDGETS["hybrid_step_p50_us"]
+    assert results["hybrid"][1] <= BUDGETS["hybrid_step_p99_us"]
+    ratio = results["hybrid"][0] / results["lstm"][0]
+    assert ratio <= BUDGETS["max_ratio_hybrid_step_over_lstm_step_p50"], ratio
     ratio = lbfgs50 / results["lstm"][0]
     assert BUDGETS["min_ratio_lstm_fit_lbfgs_over_closed_step_p50"] <= ratio
     assert ratio <= BUDGETS["max_ratio_lstm_fit_lbfgs_over_closed_step_p50"]

@@ -77,11 +77,12 @@ class FusedStep:
 
     Args:
         net: the predictor's ONNX model; features are written into ``net.buf[0]`` (8, 6).
-        core: the model's core graph (:class:`~predictors.lstm.core_net.CoreNet`), run
-            instead of ``net`` where given.
         frame: ``"heading"`` or ``"world"`` (:mod:`predictors.lstm.features`).
         final_pinv: (4, 9) pseudo-inverse of the current-position cubic through the 8 grid
             points and the prediction (times ``_TIMES9``).
+        fix_offset: row 0 of the window holds the newest fix minus the newest grid point.
+        core: the model's core graph (:class:`~predictors.lstm.core_net.CoreNet`), run
+            instead of ``net`` where given.
 
     After a successful :meth:`finish`, :attr:`pts` (9, 2) holds the grid [m] and the
     prediction (row 8), :attr:`coef` the current-position cubic as 8 floats
