@@ -84,6 +84,33 @@ def test_a_child_that_dies_is_redone_here():
     assert calls == [os.getpid(), os.getpid()]  # the child's append is not seen here
 
 
+@needs_fork
+def test_children_run_nicer_than_the_parent():
+    from bench.figure_jobs import CHILD_NICENESS
+
+    mine = os.nice(0)
+    assert Job(os.nice, 0).result() == min(mine + CHILD_NICENESS, 19)
+
+
+@needs_fork
+def test_traces_written_by_a_child_are_those_save_run_writes(tmp_path):
+    from bench.saved_run import Run, save_run, write_traces
+
+    cfg = RunConfig(predictors=("cv", "kf"))
+    runs = run(default_drives()[:1], cfg)
+    traces = all_traces(runs)
+    from bench.results import aggregate
+
+    res = aggregate(runs, cfg, [], "bench run -p cv,kf", traces=traces)
+    here, there = tmp_path / "here", tmp_path / "there"
+    save_run(here, Run.from_results(dict(res), traces))
+    job = Job(write_traces, there, traces)
+    written = save_run(there, Run.from_results(dict(res), traces), traces_written=job.result)
+    assert written == [there / "traces.parquet", there / "results.json"]
+    assert (there / "traces.parquet").read_bytes() == (here / "traces.parquet").read_bytes()
+    assert write_traces(tmp_path / "none", traces.iloc[:0]) is None
+
+
 def _write_table(path: Path, name: str, n: int) -> None:
     t = np.arange(n, dtype=float) * 0.2
     pd.DataFrame({"stream": "gps", "t": t, "x": 10 * t, "y": 0.0 * t}).to_csv(path, index=False)

@@ -262,6 +262,7 @@ def _run(drives, cfg, data, out: Path, workers: int, rerun: Path | None = None,
     from bench.figures import paper_figures
     from bench.outputs import remove_previous_outputs
     from bench.results import aggregate, all_traces, data_provenance
+    from bench.saved_run import write_traces
     from bench.seeds import seed_figures, seeds_section
 
     command = command_line()
@@ -276,6 +277,7 @@ def _run(drives, cfg, data, out: Path, workers: int, rerun: Path | None = None,
     removed = remove_previous_outputs(out)
     jobs = FigureJobs(traces, cfg.predictors, out, formats, drive_plots, paper=lambda: (
         paper_figures(list(drives), cfg, traces, out, runs, formats=formats)))
+    traces_file = Job(write_traces, out, traces)  # the parquet (~0.5 s) meanwhile too
     res = aggregate(runs, cfg, provenance.result(), command, traces=traces, statistics=stats)
     if consistency is not None:
         res["consistency"] = consistency
@@ -290,7 +292,7 @@ def _run(drives, cfg, data, out: Path, workers: int, rerun: Path | None = None,
         res["seeds"] = seeds_section(seeds, figures)
 
     publish(res, traces, runs, out, formats, drive_plots, lambda _: jobs.paper(), table_formats,
-            plots=jobs, removed=removed)
+            plots=jobs, removed=removed, traces_written=traces_file.result)
     if rerun is not None:
         from bench.rerun_log import write_recording
 
@@ -306,7 +308,8 @@ def publish(res: dict[str, Any], traces: pd.DataFrame, runs: Sequence[DriveRun],
             formats: tuple[str, ...] = ("png",), drive_plots: int | None = 20,
             figures: Callable[[Run], list[tuple[str, str]]] | None = None,
             table_formats: tuple[str, ...] = TABLE_FORMATS, plots: FigureJobs | None = None,
-            removed: list[Path] | None = None) -> Run:
+            removed: list[Path] | None = None,
+            traces_written: Callable[[], Path | None] | None = None) -> Run:
     """Write the report folder for aggregated results ``res`` (report.md, figures, tables,
     results.json, traces.parquet; an earlier run's files there are replaced) and print the
     summary tables and the ``wrote ...`` line: how ``bench run`` and ``bench score`` end.
@@ -321,6 +324,8 @@ def publish(res: dict[str, Any], traces: pd.DataFrame, runs: Sequence[DriveRun],
             drawn here.
         removed: the files of an earlier run already removed from ``out`` (by the caller,
             before it started drawing into it); None: removed here.
+        traces_written: returns ``out/traces.parquet`` once written by the caller
+            (:func:`bench.saved_run.write_traces`, in another process); None: written here.
 
     Returns:
         the saved :class:`~bench.saved_run.Run`.
@@ -343,7 +348,7 @@ def publish(res: dict[str, Any], traces: pd.DataFrame, runs: Sequence[DriveRun],
     written += write_report(result, out, formats=formats, drive_plots=drive_plots,
                             table_formats=table_formats,
                             plots=plots.plots() if plots is not None else None)
-    written += save_run(out, result, also_written=written)
+    written += save_run(out, result, also_written=written, traces_written=traces_written)
     res = result.results
     skipped = [r for r in runs if r.skipped]
     scored = len(runs) - len(skipped)
