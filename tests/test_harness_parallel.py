@@ -196,3 +196,17 @@ def test_a_long_drive_is_split_by_predictor_and_merged_exactly():
     pd.testing.assert_frame_equal(split[0].traces, whole[0].traces, check_exact=True)
     assert split[0].notes == whole[0].notes and split[0].rejected == whole[0].rejected
     assert run([], cfg, workers=2) == []
+
+
+def test_preload_imports_in_a_thread_and_swallows_failures():
+    import sys
+
+    from bench.preload import MODULES, Preload
+
+    p = Preload(("json.tool", "no_such_module_for_posbench"))
+    p.join()  # not started: nothing to wait for
+    p.start()
+    p.start()  # once
+    p.join()
+    assert "json.tool" in sys.modules and "no_such_module_for_posbench" not in sys.modules
+    assert "matplotlib.figure" in MODULES and "scipy.special" in MODULES

@@ -55,6 +55,7 @@ if TYPE_CHECKING:
     import pandas as pd
 
     from bench.figure_jobs import FigureJobs
+    from bench.preload import Preload
     from bench.runner import DriveRun
     from bench.saved_run import Run
 
@@ -235,11 +236,21 @@ def plural(n: int, word: str) -> str:
     return f"{n} {word}" + ("" if n == 1 else "s")
 
 
-def _replay(drives, cfg, executor: str, workers: int, address: str | None, label: str = ""):
-    """Every drive through every predictor of ``cfg``, with a progress bar."""
+def _replay(drives, cfg, executor: str, workers: int, address: str | None, label: str = "",
+            preload: Preload | None = None):
+    """Every drive through every predictor of ``cfg``, with a progress bar. ``preload``
+    starts when the first drive is done (the worker processes exist by then), if the drives
+    are replayed in other processes (in this one, its imports would disturb the timings)."""
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
     from bench.executors import run_drives
+
+    elsewhere = executor != "local" or (workers > 1 and len(drives) > 1)
+
+    def done(r: DriveRun) -> None:
+        prog.update(task, advance=1, last=r.name)
+        if preload is not None and elsewhere:
+            preload.start()
 
     with Progress(TextColumn("[bold]{task.description}"), BarColumn(), MofNCompleteColumn(),
                   TimeElapsedColumn(), TextColumn("{task.fields[last]}"), console=console) as prog:
@@ -247,7 +258,7 @@ def _replay(drives, cfg, executor: str, workers: int, address: str | None, label
                              f"{plural(len(cfg.predictors), 'predictor')}",
                              total=len(drives), last="")
         return run_drives(drives, cfg, executor, workers=workers, address=address,
-                          on_done=lambda r: prog.update(task, advance=1, last=r.name))
+                          on_done=done)
 
 
 def _run(drives, cfg, data, out: Path, workers: int, rerun: Path | None = None,
@@ -261,6 +272,7 @@ def _run(drives, cfg, data, out: Path, workers: int, rerun: Path | None = None,
     from bench.figure_jobs import FigureJobs, Job
     from bench.figures import paper_figures
     from bench.outputs import remove_previous_outputs
+    from bench.preload import Preload
     from bench.results import aggregate, all_traces, data_provenance
     from bench.saved_run import write_traces
     from bench.seeds import seed_figures, seeds_section
@@ -268,7 +280,9 @@ def _run(drives, cfg, data, out: Path, workers: int, rerun: Path | None = None,
     command = command_line()
     first = f"seed {cfg.seed} (1/{len(seeds)}): " if seeds else ""
     provenance = Job(data_provenance, data, cfg.seed)  # hashing the data (~1 s) meanwhile
-    runs = _replay(drives, cfg, executor, workers, address, first)
+    preload = Preload()  # the imports of the figures and the report, during the replay
+    runs = _replay(drives, cfg, executor, workers, address, first, preload)
+    preload.join()  # before forking the figure children
     traces = all_traces(runs)
     # the figures need only the traces: other processes draw them while this one aggregates
     # (an earlier run's files are removed first, so none of the new ones is)
