@@ -1,6 +1,9 @@
-"""Import what the end of ``bench run`` needs while its workers replay the drives.
+"""Import what the next step of ``bench run`` needs while worker processes do this one.
 
-After the replay, the main process aggregates while forked children draw the figures;
+Two lists: :data:`REPLAY_MODULES`, imported while the loader processes read the recordings,
+are those every replay worker would otherwise import for itself (scipy.interpolate for the
+references: ~0.7 s each), inherited by the workers forked after loading. :data:`MODULES`:
+after the replay, the main process aggregates while forked children draw the figures;
 importing matplotlib (and its Agg backend, in every child), scipy.special and the report
 modules there costs ~0.65 s on the critical path. During the replay the main process only
 waits for its workers, so :class:`Preload` imports them then, in a thread, once the
@@ -15,6 +18,8 @@ from __future__ import annotations
 import importlib
 import threading
 
+#: imported by every replay worker (the reference cubic, the scenario labels)
+REPLAY_MODULES = ("scipy.interpolate", "scenarios.labels")
 #: imported after the replay by the main process or by every figure child
 MODULES = ("matplotlib.figure", "matplotlib.backends.backend_agg", "scipy.special",
            "bench.results", "bench.uncertainty", "bench.track_results", "bench.figures",
