@@ -5,7 +5,9 @@ drives and the run's fixes), not the aggregated results; drawing them takes abou
 as the aggregation (matplotlib, one core). So ``bench run`` starts them right after the
 replay as forked child processes (:class:`Job`: the child inherits the traces without a
 copy, draws, and sends back only the list of files written and their notes) and collects
-them when the report is written. The files are byte for byte those drawn in-process.
+them when the report is written. The children run a little nicer than the parent
+(:data:`CHILD_NICENESS`), so the aggregation keeps a core to itself. The files are byte for
+byte those drawn in-process.
 
 Where ``fork`` is not available (macOS and Windows start processes by ``spawn``, which
 would pickle the traces), or when a child dies, the work is done in this process when
@@ -15,6 +17,7 @@ its result is asked for: slower, never different.
 from __future__ import annotations
 
 import multiprocessing as mp
+import os
 import pickle
 from collections.abc import Callable, Sequence
 from pathlib import Path
@@ -23,12 +26,23 @@ from typing import Any, Generic, TypeVar
 import pandas as pd
 
 from bench.plots import PlotsWritten, joined, write_drive_plots, write_summary_plots
+from bench.results import lean_traces
 
 T = TypeVar("T")
 
 
+#: how much nicer than the parent a child runs: on a machine with fewer free cores than
+#: processes, the parent (which aggregates, the longest chain of work) keeps a core and the
+#: children share what is left, instead of every process getting an equal slice
+CHILD_NICENESS = 5
+
+
 def _child(conn: Any, fn: Callable[..., Any], args: tuple[Any, ...]) -> None:
     """In the child: run ``fn(*args)``, send ``(True, value)`` or ``(False, exception)``."""
+    try:
+        os.nice(CHILD_NICENESS)
+    except OSError:  # not allowed here: run at the parent's priority
+        pass
     try:
         value: tuple[bool, Any] = (True, fn(*args))
     except BaseException as e:  # noqa: BLE001 - everything goes back to the parent
@@ -106,6 +120,7 @@ class FigureJobs:
         if background and can_fork():
             import matplotlib.figure  # noqa: F401  (once here, not once per child)
         preds = list(preds)
+        traces = lean_traces(traces)
         self._paper = Job(paper, background=background) if paper is not None else None
         self._drives = Job(write_drive_plots, traces, preds, out, tuple(formats), drive_plots,
                            background=background)

@@ -18,7 +18,7 @@ from __future__ import annotations
 
 import json
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from importlib import resources
 from pathlib import Path
@@ -147,19 +147,29 @@ class Run:
                                       ).astype(float)
 
 
-def save_run(out: Path, run: Run, also_written: Sequence[Path] = ()) -> list[Path]:
+def write_traces(out: Path, traces: pd.DataFrame | None) -> Path | None:
+    """``out/traces.parquet`` from ``traces`` (nothing without rows); the path, or None."""
+    if traces is None or traces.empty:
+        return None
+    out.mkdir(parents=True, exist_ok=True)
+    traces.to_parquet(out / TRACES, index=False)
+    return out / TRACES
+
+
+def save_run(out: Path, run: Run, also_written: Sequence[Path] = (),
+             traces_written: Callable[[], Path | None] | None = None) -> list[Path]:
     """Write ``run`` into folder ``out``: ``traces.parquet`` (when there are traces) and
     ``results.json`` last, listing under ``outputs`` every file the run wrote there
     (``also_written``: report, figures) so the next run into ``out`` replaces exactly those.
-    Returns the two paths written."""
+    ``traces_written``: returns the traces file :func:`write_traces` already wrote (or is
+    writing, in another process) for ``run``; None: written here. Returns the two paths
+    written."""
     from bench.outputs import relative_outputs
 
     out.mkdir(parents=True, exist_ok=True)
-    written = []
-    traces = run._traces
-    if traces is not None and not traces.empty:
-        traces.to_parquet(out / TRACES, index=False)
-        written.append(out / TRACES)
+    traces = (traces_written() if traces_written is not None
+              else write_traces(out, run._traces))
+    written = [traces] if traces is not None else []
     written.append(out / RESULTS)
     run.results["outputs"] = relative_outputs(out, [*also_written, *written])
     (out / RESULTS).write_text(json.dumps(to_json_value(run.results), indent=2,

@@ -30,9 +30,10 @@ def track_section(traces: pd.DataFrame, keep: np.ndarray, predictors: Sequence[s
     out: dict[str, Any] = {"predictors": {}, "by_label": {}}
     if traces.empty or any(c not in traces for c in NEEDED):
         return out
-    pred_codes, pred_names = pd.factorize(traces["predictor"].astype(str))
-    kind_codes, kind_names = pd.factorize(traces["kind"].astype(str))
-    label_codes, label_names = pd.factorize(traces["label"].astype(str))
+    # codes only meet the names through the *_of maps: no text copy of the columns needed
+    pred_codes, pred_names = pd.factorize(traces["predictor"])
+    kind_codes, kind_names = pd.factorize(traces["kind"])
+    label_codes, label_names = pd.factorize(traces["label"])
     cols = np.column_stack([traces["along_m"].to_numpy(float), traces["cross_m"].to_numpy(float),
                             np.zeros(len(traces)), traces["error_m"].to_numpy(float)])
     cols[:, 2] = inward_cross(cols[:, 1], traces["yaw_rate_ref"].to_numpy(float))

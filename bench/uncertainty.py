@@ -18,6 +18,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
+from bench.intervals import drive_codes
 from bench.tables import Table
 from metrics.calibration import (
     calibration_curve,
@@ -50,9 +51,8 @@ def uncertainty_section(traces: pd.DataFrame, keep: np.ndarray, predictors: Sequ
         out["none"] = list(predictors)
         return out
     has_cov = np.isfinite(traces["cov_xx"].to_numpy(float))
-    pred = traces["predictor"].astype(str).to_numpy()
     for name in predictors:
-        mine = keep & (pred == name)
+        mine = keep & (traces["predictor"] == name).to_numpy()
         if not (mine & has_cov).any():
             out["none"].append(name)
             continue
@@ -60,18 +60,17 @@ def uncertainty_section(traces: pd.DataFrame, keep: np.ndarray, predictors: Sequ
         for block in ("predictors", "by_dataset", "by_label", "by_since_fix", "curve"):
             out[block][name] = {}
         for k in KINDS:
-            rows = sub[sub["kind"].astype(str).to_numpy() == k]
+            rows = sub[(sub["kind"] == k).to_numpy()]
             err, cov = _arrays(rows)
-            drive = pd.factorize(rows["dataset"].astype(str) + "/" + rows["drive"].astype(str))[0]
             out["predictors"][name][k] = calibration_summary(
-                err, cov, clusters=drive, times=rows["t_query"].to_numpy(float))
+                err, cov, clusters=drive_codes(rows), times=rows["t_query"].to_numpy(float))
             out["curve"][name][k] = [list(pq) for pq in
                                      calibration_curve(mahalanobis_sq(err, cov))]
             for block, col in (("by_dataset", "dataset"), ("by_label", "label")):
-                keys = rows[col].astype(str).to_numpy()
+                code, groups = pd.factorize(rows[col])  # in order of appearance
                 out[block][name][k] = {
-                    g: calibration_summary(err[keys == g], cov[keys == g], with_ci=False)
-                    for g in pd.unique(keys)}
+                    str(g): calibration_summary(err[code == i], cov[code == i], with_ci=False)
+                    for i, g in enumerate(groups)}
             idx, names = since_fix_bin(rows["since_fix_s"].to_numpy(float))
             out["by_since_fix"][name][k] = {
                 b: calibration_summary(err[idx == i], cov[idx == i], with_ci=False)

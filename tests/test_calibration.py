@@ -47,6 +47,16 @@ def test_ellipse_radius_and_chi2_interval():
     assert 1.87 < lo < 1.92 and 2.08 < hi < 2.13
 
 
+@pytest.mark.parametrize("n", [1, 2, 3, 7, 58, 1000, 26200, 106430, 9_999_991])
+def test_chi2_interval_is_scipy_stats_to_the_bit(n):
+    # computed through scipy.special (no scipy.stats import); results.json must not move
+    from scipy.stats import chi2
+
+    a = (1.0 - 0.95) / 2.0  # as nees_interval forms it (0.025000000000000022)
+    assert nees_interval(n) == (float(chi2.ppf(a, 2 * n) / n),
+                                float(chi2.ppf(1.0 - a, 2 * n) / n))
+
+
 def test_gaussian_errors_with_their_covariance_are_calibrated():
     rng = np.random.default_rng(1)
     n = 20000

@@ -84,6 +84,33 @@ def test_a_child_that_dies_is_redone_here():
     assert calls == [os.getpid(), os.getpid()]  # the child's append is not seen here
 
 
+@needs_fork
+def test_children_run_nicer_than_the_parent():
+    from bench.figure_jobs import CHILD_NICENESS
+
+    mine = os.nice(0)
+    assert Job(os.nice, 0).result() == min(mine + CHILD_NICENESS, 19)
+
+
+@needs_fork
+def test_traces_written_by_a_child_are_those_save_run_writes(tmp_path):
+    from bench.saved_run import Run, save_run, write_traces
+
+    cfg = RunConfig(predictors=("cv", "kf"))
+    runs = run(default_drives()[:1], cfg)
+    traces = all_traces(runs)
+    from bench.results import aggregate
+
+    res = aggregate(runs, cfg, [], "bench run -p cv,kf", traces=traces)
+    here, there = tmp_path / "here", tmp_path / "there"
+    save_run(here, Run.from_results(dict(res), traces))
+    job = Job(write_traces, there, traces)
+    written = save_run(there, Run.from_results(dict(res), traces), traces_written=job.result)
+    assert written == [there / "traces.parquet", there / "results.json"]
+    assert (there / "traces.parquet").read_bytes() == (here / "traces.parquet").read_bytes()
+    assert write_traces(tmp_path / "none", traces.iloc[:0]) is None
+
+
 def _write_table(path: Path, name: str, n: int) -> None:
     t = np.arange(n, dtype=float) * 0.2
     pd.DataFrame({"stream": "gps", "t": t, "x": 10 * t, "y": 0.0 * t}).to_csv(path, index=False)
@@ -169,3 +196,17 @@ def test_a_long_drive_is_split_by_predictor_and_merged_exactly():
     pd.testing.assert_frame_equal(split[0].traces, whole[0].traces, check_exact=True)
     assert split[0].notes == whole[0].notes and split[0].rejected == whole[0].rejected
     assert run([], cfg, workers=2) == []
+
+
+def test_preload_imports_in_a_thread_and_swallows_failures():
+    import sys
+
+    from bench.preload import MODULES, Preload
+
+    p = Preload(("json.tool", "no_such_module_for_posbench"))
+    p.join()  # not started: nothing to wait for
+    p.start()
+    p.start()  # once
+    p.join()
+    assert "json.tool" in sys.modules and "no_such_module_for_posbench" not in sys.modules
+    assert "matplotlib.figure" in MODULES and "scipy.special" in MODULES

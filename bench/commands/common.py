@@ -102,11 +102,17 @@ def load_drives(paths: list[Path] | None, projection: str, topics: dict[str, str
                 raise UsageError("--synthetic-duration must be more than 1 s")
             return [generate_drive(seed=seed, route="mixed", duration_s=synthetic_duration)]
         return default_drives(seed=seed)
+    from bench.preload import REPLAY_MODULES, Preload
+
     drives = []
+    preload = Preload(REPLAY_MODULES)  # for the replay workers, forked after loading
     with console.status("loading drives...") as status:
         for d in iter_load_many(paths, projection=projection, topics=topics, workers=workers):
             drives.append(d)
+            if workers > 1:  # the loader processes exist by now: safe to import in a thread
+                preload.start()
             status.update(f"loading drives... {len(drives)} ({d.name})")
+    preload.join()
     return drives
 
 

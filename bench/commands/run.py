@@ -55,6 +55,7 @@ if TYPE_CHECKING:
     import pandas as pd
 
     from bench.figure_jobs import FigureJobs
+    from bench.preload import Preload
     from bench.runner import DriveRun
     from bench.saved_run import Run
 
@@ -235,11 +236,21 @@ def plural(n: int, word: str) -> str:
     return f"{n} {word}" + ("" if n == 1 else "s")
 
 
-def _replay(drives, cfg, executor: str, workers: int, address: str | None, label: str = ""):
-    """Every drive through every predictor of ``cfg``, with a progress bar."""
+def _replay(drives, cfg, executor: str, workers: int, address: str | None, label: str = "",
+            preload: Preload | None = None):
+    """Every drive through every predictor of ``cfg``, with a progress bar. ``preload``
+    starts when the first drive is done (the worker processes exist by then), if the drives
+    are replayed in other processes (in this one, its imports would disturb the timings)."""
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
     from bench.executors import run_drives
+
+    elsewhere = executor != "local" or (workers > 1 and len(drives) > 1)
+
+    def done(r: DriveRun) -> None:
+        prog.update(task, advance=1, last=r.name)
+        if preload is not None and elsewhere:
+            preload.start()
 
     with Progress(TextColumn("[bold]{task.description}"), BarColumn(), MofNCompleteColumn(),
                   TimeElapsedColumn(), TextColumn("{task.fields[last]}"), console=console) as prog:
@@ -247,7 +258,7 @@ def _replay(drives, cfg, executor: str, workers: int, address: str | None, label
                              f"{plural(len(cfg.predictors), 'predictor')}",
                              total=len(drives), last="")
         return run_drives(drives, cfg, executor, workers=workers, address=address,
-                          on_done=lambda r: prog.update(task, advance=1, last=r.name))
+                          on_done=done)
 
 
 def _run(drives, cfg, data, out: Path, workers: int, rerun: Path | None = None,
@@ -261,22 +272,28 @@ def _run(drives, cfg, data, out: Path, workers: int, rerun: Path | None = None,
     from bench.figure_jobs import FigureJobs, Job
     from bench.figures import paper_figures
     from bench.outputs import remove_previous_outputs
-    from bench.results import aggregate, all_traces, data_provenance
+    from bench.preload import Preload
+    from bench.results import aggregate, all_traces, data_provenance, lean_traces
+    from bench.saved_run import write_traces
     from bench.seeds import seed_figures, seeds_section
 
     command = command_line()
     first = f"seed {cfg.seed} (1/{len(seeds)}): " if seeds else ""
     provenance = Job(data_provenance, data, cfg.seed)  # hashing the data (~1 s) meanwhile
-    runs = _replay(drives, cfg, executor, workers, address, first)
+    preload = Preload()  # the imports of the figures and the report, during the replay
+    runs = _replay(drives, cfg, executor, workers, address, first, preload)
+    preload.join()  # before forking the figure children
     traces = all_traces(runs)
     # the figures need only the traces: other processes draw them while this one aggregates
     # (an earlier run's files are removed first, so none of the new ones is)
 
     out.mkdir(parents=True, exist_ok=True)
     removed = remove_previous_outputs(out)
-    jobs = FigureJobs(traces, cfg.predictors, out, formats, drive_plots, paper=lambda: (
+    lean = lean_traces(traces)  # text columns as categoricals: cheaper filters, same results
+    jobs = FigureJobs(lean, cfg.predictors, out, formats, drive_plots, paper=lambda: (
         paper_figures(list(drives), cfg, traces, out, runs, formats=formats)))
-    res = aggregate(runs, cfg, provenance.result(), command, traces=traces, statistics=stats)
+    traces_file = Job(write_traces, out, traces)  # the parquet (~0.5 s) meanwhile too
+    res = aggregate(runs, cfg, provenance.result(), command, traces=lean, statistics=stats)
     if consistency is not None:
         res["consistency"] = consistency
     if seeds:
@@ -290,7 +307,7 @@ def _run(drives, cfg, data, out: Path, workers: int, rerun: Path | None = None,
         res["seeds"] = seeds_section(seeds, figures)
 
     publish(res, traces, runs, out, formats, drive_plots, lambda _: jobs.paper(), table_formats,
-            plots=jobs, removed=removed)
+            plots=jobs, removed=removed, traces_written=traces_file.result)
     if rerun is not None:
         from bench.rerun_log import write_recording
 
@@ -306,7 +323,8 @@ def publish(res: dict[str, Any], traces: pd.DataFrame, runs: Sequence[DriveRun],
             formats: tuple[str, ...] = ("png",), drive_plots: int | None = 20,
             figures: Callable[[Run], list[tuple[str, str]]] | None = None,
             table_formats: tuple[str, ...] = TABLE_FORMATS, plots: FigureJobs | None = None,
-            removed: list[Path] | None = None) -> Run:
+            removed: list[Path] | None = None,
+            traces_written: Callable[[], Path | None] | None = None) -> Run:
     """Write the report folder for aggregated results ``res`` (report.md, figures, tables,
     results.json, traces.parquet; an earlier run's files there are replaced) and print the
     summary tables and the ``wrote ...`` line: how ``bench run`` and ``bench score`` end.
@@ -321,6 +339,8 @@ def publish(res: dict[str, Any], traces: pd.DataFrame, runs: Sequence[DriveRun],
             drawn here.
         removed: the files of an earlier run already removed from ``out`` (by the caller,
             before it started drawing into it); None: removed here.
+        traces_written: returns ``out/traces.parquet`` once written by the caller
+            (:func:`bench.saved_run.write_traces`, in another process); None: written here.
 
     Returns:
         the saved :class:`~bench.saved_run.Run`.
@@ -343,7 +363,7 @@ def publish(res: dict[str, Any], traces: pd.DataFrame, runs: Sequence[DriveRun],
     written += write_report(result, out, formats=formats, drive_plots=drive_plots,
                             table_formats=table_formats,
                             plots=plots.plots() if plots is not None else None)
-    written += save_run(out, result, also_written=written)
+    written += save_run(out, result, also_written=written, traces_written=traces_written)
     res = result.results
     skipped = [r for r in runs if r.skipped]
     scored = len(runs) - len(skipped)
