@@ -31,7 +31,7 @@ def train(
         help="Which network: lstm (the paper's MLP-LSTM-MLP) or hybrid (kf prior + learned "
              "residual).")] = "lstm",
     out: Annotated[Path, typer.Option("--out", "-o", metavar="DIR",
-                                      help="Folder for model.onnx and model.json.")
+                                      help="Folder for model.onnx, model.json, MODEL_CARD.md and (lstm) model.core.onnx.")
                    ] = Path("model-out"),
     epochs: Annotated[int, typer.Option(help="Maximum epochs (early stopping may end sooner).")] = 40,
     seed: Annotated[int, typer.Option(help="Seed for split, sampling and initialisation.")] = 0,
@@ -191,6 +191,8 @@ def print_summary(console: Console, info: dict, out: Path,
     print_table(console, ("source", *header) if by_source else header, rows,
                 title="validation: future-point error", key_columns=1 + by_source,
                 left_columns=1 + by_source)
+    core = (info.get("core") or {}).get("file")
     for what, name in (("model", "model.onnx"), ("model card", "model.json"),
-                       ("model card (text)", "MODEL_CARD.md")):
+                       ("model card (text)", "MODEL_CARD.md"),
+                       *((("core graph", core),) if core else ())):
         console.print(f"{what}: {out / name}", markup=False, highlight=False, soft_wrap=True)
