@@ -23,6 +23,7 @@ def samples() -> dict[str, list[BaseException]]:
     from bench.options import UsageError
     from bench.plots import NothingToPlot
     from bench.rerun_web import ServeError
+    from predictors.lstm.core_graph import NoCoreGraph
     from predictors.registry import PredictorError
     from scenarios.errors import DataError
 
@@ -37,6 +38,8 @@ def samples() -> dict[str, list[BaseException]]:
             ServeError("the rerun web viewer stopped on its own (exit 1): port 9090 in use")],
         "predictors.registry.PredictorError": [
             PredictorError("nosuchmodule:X: no module named 'nosuchmodule'")],
+        "predictors.lstm.core_graph.NoCoreGraph": [
+            NoCoreGraph("not a speed-form posbench model (no net.res_std)")],
     }
 
 
