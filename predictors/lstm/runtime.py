@@ -102,30 +102,34 @@ class OnnxModel:
         self.pinned = bool(batch_dim) and self.input_shape[0] == 1
         self._bind_fast_run()
 
+    def _agrees(self, candidate: Callable[[], np.ndarray]) -> bool:
+        """``candidate()`` answers exactly as the public ``run`` (its first output, whole) on
+        the probe inputs: every buffer zero, then two ramps; the buffers are zero again
+        afterwards. Any exception counts as disagreeing."""
+        public = self.session.run
+        try:
+            for ramp in (None, 7, 11):
+                for b in self.bufs:
+                    b[...] = 0.0 if ramp is None else np.arange(b.size).reshape(b.shape) % ramp - 3
+                if not np.array_equal(candidate(), public(self._outs, self._feed)[0]):
+                    return False
+            return True
+        except Exception:  # pragma: no cover - another onnxruntime layout or signature
+            return False
+        finally:
+            for b in self.bufs:
+                b[...] = 0.0
+
     def _bind_fast_run(self) -> None:
         """``self._run(outputs, feed)``: the session's compiled run where it answers the probe
-        (zeros, then ramp values in :attr:`buf`) exactly as the public ``run``, else the
-        public one."""
-        public = self.session.run
-        self._run = public
+        (:meth:`_agrees`) exactly as the public ``run``, else the public one; and
+        ``self._run_bound`` (:meth:`_bound_run`)."""
+        self._run = self.session.run
         self._run_bound: Callable[[], np.ndarray] | None = None
         inner = getattr(self.session, "_sess", None)
         if inner is None:  # pragma: no cover - another onnxruntime layout
             return
-        try:
-            for b in self.bufs:
-                b[...] = 0.0
-            same = _equal(inner.run(self._outs, self._feed, None), public(self._outs, self._feed))
-            for b in self.bufs:
-                b[...] = np.arange(b.size).reshape(b.shape) % 7 - 3
-            same = same and _equal(inner.run(self._outs, self._feed, None),
-                                   public(self._outs, self._feed))
-        except Exception:  # pragma: no cover - another signature: keep the public run
-            same = False
-        finally:
-            for b in self.bufs:
-                b[...] = 0.0
-        if same:
+        if self._agrees(lambda: inner.run(self._outs, self._feed, None)[0]):
             def run(outputs: list[str], feed: dict, _inner=inner.run) -> list:
                 return _inner(outputs, feed, None)
             self._run = run
@@ -140,31 +144,28 @@ class OnnxModel:
         if meta.type != "tensor(float)" or not all(isinstance(d, int) for d in shape):
             return None
         out = np.zeros(shape, dtype=np.float32)
-        public = self.session.run
         try:
             io = self.session.io_binding()
             for name, b in zip(self.input_names, self.bufs, strict=True):
                 io.bind_cpu_input(name, b)
             io.bind_output(self.output_name, "cpu", 0, np.float32, list(shape),
                            out.ctypes.data)
-            inner_io = io._iobinding
-
-            def run(_run=inner.run_with_iobinding, _io=inner_io, _out=out) -> np.ndarray:
-                _run(_io, None)
-                return _out[0]
-
-            same = True
-            for k in range(2):
-                for b in self.bufs:
-                    b[...] = np.arange(b.size).reshape(b.shape) % (7 + 4 * k) - 3
-                same = same and np.array_equal(run(), public(self._outs, self._feed)[0][0])
+            run_io = inner.run_with_iobinding
         except Exception:  # pragma: no cover - another onnxruntime layout
             return None
-        finally:
-            for b in self.bufs:
-                b[...] = 0.0
+
+        def run(_run=run_io, _io=io._iobinding, _out=out) -> np.ndarray:
+            _run(_io, None)
+            return _out[0]
+
+        def whole() -> np.ndarray:
+            run()
+            return out
+
+        if not self._agrees(whole):
+            return None
         self._binding = (io, out)  # keeps the binding and its output alive
-        return run if same else None
+        return run
 
     def __getstate__(self) -> dict:
         """Everything but the onnxruntime sessions (not picklable): they are rebuilt from the
@@ -217,8 +218,3 @@ class OnnxModel:
             buf[:chunk.shape[0]] = chunk
             outs.append(self.session.run(self._outs, {self.input_name: buf})[0][:chunk.shape[0]])
         return np.concatenate(outs) if outs else np.zeros((0,))
-
-
-def _equal(a: list, b: list) -> bool:
-    """Two lists of onnxruntime outputs hold the same arrays (bit for bit)."""
-    return len(a) == len(b) and all(np.array_equal(x, y) for x, y in zip(a, b, strict=True))
