@@ -78,6 +78,27 @@ class Predictor(ABC):
         return ()
 
 
+class ModelFileSeams:
+    """:meth:`Predictor.model_description` and :meth:`Predictor.training_drives` of a
+    predictor whose learned model is a file with its ``model.json`` (listed before
+    :class:`Predictor` among the bases). The predictor sets ``model_path`` (the .onnx
+    file), ``info`` (its model.json) and ``bundled``; ``bundled_text`` names the package's
+    bundled model in results."""
+
+    #: the text recorded in results for the bundled model
+    bundled_text: ClassVar[str] = ""
+
+    def model_description(self) -> dict:
+        """``{"model": the model file's path (or :attr:`bundled_text`), "bundled": bool}``."""
+        return {"model": self.bundled_text if self.bundled else str(self.model_path),
+                "bundled": self.bundled}
+
+    def training_drives(self) -> tuple[str, ...]:
+        """The drive names model.json records under ``data.train_drives`` (() if none)."""
+        data = self.info.get("data") or {}
+        return tuple(str(d) for d in data.get("train_drives") or ())
+
+
 def stated_fix_variance(sigma: float | None, scale: float, default_var: float) -> float:
     """R per axis [m^2] of a fix stating per-axis 1-sigma ``sigma`` [m]: ``(scale * sigma)^2``,
     or ``default_var`` when it states none (None, not finite, or <= 0)."""

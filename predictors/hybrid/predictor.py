@@ -50,7 +50,7 @@ from typing import Any
 
 import numpy as np
 
-from predictors.base import Predictor
+from predictors.base import ModelFileSeams, Predictor
 from predictors.kf import LinearKalman
 from predictors.lstm.features import N_FEATURES
 from predictors.lstm.fused import FusedStep
@@ -147,7 +147,7 @@ def _check_net(onnx_path: Path, net: OnnxModel) -> None:
                                    f"expected [batch, {N_H}, 4]")
 
 
-class HybridPredictor(Predictor):
+class HybridPredictor(ModelFileSeams, Predictor):
     """``kf`` prior + learned residual (ONNX) at 0.2-0.8 s; see the module doc.
 
     Args:
@@ -159,6 +159,7 @@ class HybridPredictor(Predictor):
     """
 
     name = "hybrid"
+    bundled_text = BUNDLED_TEXT
 
     def __init__(self, model: str | None = None, gps_condition: str | None = None) -> None:
         self.bundled = not model
@@ -194,16 +195,6 @@ class HybridPredictor(Predictor):
                 "command": self.info.get("command")}
 
     # ------------------------------------------------------------------ seams
-    def model_description(self) -> dict:
-        """``{"model": the model.onnx path (or BUNDLED_TEXT), "bundled": bool}``."""
-        return {"model": BUNDLED_TEXT if self.bundled else str(self.model_path),
-                "bundled": self.bundled}
-
-    def training_drives(self) -> tuple[str, ...]:
-        """The drive names model.json records under ``data.train_drives`` (() if none)."""
-        data = self.info.get("data") or {}
-        return tuple(str(d) for d in data.get("train_drives") or ())
-
     def last_step(self) -> tuple[float, float] | None:
         """(t_fix [s], psi [rad]) of the network step behind the current corrections, or
         None while the hybrid answers as its prior (start-up, a fix without a window, a

@@ -54,7 +54,7 @@ from time import perf_counter_ns
 
 import numpy as np
 
-from predictors.base import Predictor
+from predictors.base import ModelFileSeams, Predictor
 from predictors.lstm.core_net import CoreNet, has_core
 from predictors.lstm.features import FRAMES, features_one, gps_substitute_imu
 from predictors.lstm.fused import FusedStep
@@ -85,7 +85,7 @@ FITS = ("closed", "lbfgs")
 #: ``staged``: the readable reference, stage by stage (same answers to float rounding)
 STEPS = ("fused", "staged")
 N_FEATURES = 6
-#: text recorded in results for the bundled model (:meth:`LstmPredictor.model_description`)
+#: text recorded in results for the bundled model (:meth:`~predictors.base.ModelFileSeams.model_description`)
 BUNDLED_TEXT = "bundled (predictors/lstm/bundled/model.onnx)"
 
 #: the stages of a network step, in the order :attr:`LstmPredictor.stage_timer` receives them:
@@ -274,7 +274,7 @@ def fit_fused_window(f: FusedStep, fb: _Buf, im: ImuHistory, t_end: float) -> bo
     return True
 
 
-class LstmPredictor(Predictor):
+class LstmPredictor(ModelFileSeams, Predictor):
     """The paper's cubic resampling + MLP-LSTM-MLP (ONNX) + cubic current position.
 
     Args:
@@ -287,6 +287,7 @@ class LstmPredictor(Predictor):
     """
 
     name = "lstm"
+    bundled_text = BUNDLED_TEXT
     #: None, or a hook receiving (stage, duration [ns]) for each of :data:`STAGES` of every
     #: network step a fix triggers (see the module doc); set it on an instance
     stage_timer: StageTimer | None = None
@@ -342,16 +343,6 @@ class LstmPredictor(Predictor):
         return FUSED_STAGES if self._fused is not None else STAGES
 
     # ------------------------------------------------------------------ seams
-    def model_description(self) -> dict:
-        """``{"model": the model.onnx path (or BUNDLED_TEXT), "bundled": bool}``."""
-        return {"model": BUNDLED_TEXT if self.bundled else str(self.model_path),
-                "bundled": self.bundled}
-
-    def training_drives(self) -> tuple[str, ...]:
-        """The drive names model.json records under ``data.train_drives`` (() if none)."""
-        data = self.info.get("data") or {}
-        return tuple(str(d) for d in data.get("train_drives") or ())
-
     def last_step(self) -> LstmStep | None:
         """The network step behind the current answers (copies), or None while there is
         none: before the fixes span 2 s, or while a restart after a long outage is still
