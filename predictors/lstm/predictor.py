@@ -312,11 +312,6 @@ class LstmPredictor(ModelFileSeams, Predictor):
         batch_dim = declared[0] if isinstance(declared[0], str) else None
         self.net = OnnxModel(self.model_path, output=self.info.get("output"), batch_dim=batch_dim)
         _check_model(self.model_path, self.info, self.net)
-        #: the model's core graph (model.json "core"; :mod:`predictors.lstm.core_net`), run by
-        #: the fused step; a model copied without its core file runs the full graph
-        self.core = (CoreNet(self.model_path, self.info["core"], self.net)
-                     if step == "fused" and fit == "closed" and has_core(self.model_path, self.info)
-                     else None)
         self._init_buffers()
 
     def _init_buffers(self) -> None:
@@ -325,8 +320,12 @@ class LstmPredictor(ModelFileSeams, Predictor):
         self._x = np.empty((N_STEPS, 6), dtype=np.float64)
         self._pts = np.empty((N_STEPS + 1, 2))
         fused = getattr(self, "step", "staged") == "fused" and self.fit == "closed"
+        #: the model's core graph (model.json "core"; :mod:`predictors.lstm.core_net`), run by
+        #: the fused step; a model copied without its core file runs the full graph
+        self.core = (CoreNet(self.model_path, self.info["core"], self.net)
+                     if fused and has_core(self.model_path, self.info) else None)
         self._fused = (FusedStep(self.net, self.frame, self._final.pinv, self.fix_offset,
-                                 getattr(self, "core", None)) if fused else None)
+                                 self.core) if fused else None)
         self.stage_timer = None
         self.reset()
 
