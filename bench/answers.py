@@ -9,13 +9,13 @@ reported 2x2 ENU covariance, all three or none; empty = no uncertainty for that 
 must be positive semi-definite). Other columns are ignored.
 
 A row answers the query of its drive and kind whose ``t_query`` is within
-:data:`~bench.scoring.MATCH_TOLERANCE_S` (1e-6 s) of its own. A query without an answer is
+:data:`~posbench.scoring.MATCH_TOLERANCE_S` (1e-6 s) of its own. A query without an answer is
 scored as ``missing`` (never dropped); an answer to no query, two answers to one query, a
 drive the queries folder does not hold, a missing or non-finite cell: a :class:`DataError`
 naming the file and the first such row (CSV line number, header = line 1; Parquet row).
 
-The answers are turned into the same :class:`~bench.runner.DriveRun` records as a replay
-(:func:`score_answers`), through :func:`bench.scoring.score`, so aggregation, the report and
+The answers are turned into the same :class:`~posbench.runner.DriveRun` records as a replay
+(:func:`score_answers`), through :func:`posbench.scoring.score`, so aggregation, the report and
 ``results.json`` are those of ``bench run``.
 """
 
@@ -29,10 +29,10 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from bench.offline import QueryFolder
-from bench.runner import DriveRun
-from bench.scoring import MATCH_TOLERANCE_S, answer_positions, score
-from scenarios.errors import DataError
+from posbench.offline import QueryFolder
+from posbench.runner import DriveRun
+from posbench.scenarios.errors import DataError
+from posbench.scoring import MATCH_TOLERANCE_S, answer_positions, score
 
 REQUIRED = ("drive", "kind", "t_query", "x", "y")
 COVARIANCE = ("cov_xx", "cov_xy", "cov_yy")
@@ -78,7 +78,7 @@ def read_answers(path: str | Path) -> Answers:
         DataError: missing file or columns, a non-numeric, missing or non-finite t_query, x or
             y, an unknown kind, a negative latency; each naming the first row at fault.
     """
-    from scenarios.loaders.table import numeric_column, read_table_file
+    from posbench.scenarios.loaders.table import numeric_column, read_table_file
 
     path = Path(path)
     tab = read_table_file(path, text_columns=("drive", "kind"))
@@ -123,7 +123,7 @@ def read_answers(path: str | Path) -> Answers:
 def _covariance(tab: Any, path: Path) -> dict[str, np.ndarray]:
     """The optional covariance columns [m^2] (NaN where a row gives none); a DataError for
     only some of the three columns, or a row whose covariance is not positive semi-definite."""
-    from scenarios.loaders.table import numeric_column
+    from posbench.scenarios.loaders.table import numeric_column
 
     df = tab.df
     given = [c for c in COVARIANCE if c in df.columns]
@@ -212,8 +212,8 @@ def match(folder: QueryFolder, answers: Answers) -> np.ndarray:
 def score_answers(folder: QueryFolder, answers: Answers, predictor: str,
                   on_done: Callable[[str], None] | None = None) -> Scored:
     """Score ``answers`` as predictor ``predictor`` against ``folder``: per drive (folder
-    order) the :class:`~bench.runner.DriveRun` a replay would give, traces from
-    :func:`bench.scoring.score` (unanswered queries NaN, i.e. ``missing``), step latency from
+    order) the :class:`~posbench.runner.DriveRun` a replay would give, traces from
+    :func:`posbench.scoring.score` (unanswered queries NaN, i.e. ``missing``), step latency from
     the ``latency_us`` of future answers and query latency from that of now answers [ns].
     ``on_done(drive name)`` is called as each drive is scored."""
     pos = match(folder, answers)

@@ -1,7 +1,7 @@
 """The ``bench`` command line: the Typer app and its entry point.
 
-Each command lives in its own module under :mod:`bench.commands`; what they share
-(consoles, the one-line error, option types) is in :mod:`bench.commands.common`.
+Each command lives in its own module under :mod:`posbench.commands`; what they share
+(consoles, the one-line error, option types) is in :mod:`posbench.commands.common`.
 Bad user input - a bad value, and also a command-line syntax error (unknown option,
 missing value, not a number) - prints one line ``error: ...`` on stderr naming what
 is wrong and exits with status 2.
@@ -15,8 +15,8 @@ from typing import Annotated
 
 import typer
 
-import bench.blas_threads  # noqa: F401  (before numpy: one OpenBLAS thread)
-from bench.commands import (
+import posbench.blas_threads  # noqa: F401  (before numpy: one OpenBLAS thread)
+from posbench.commands import (
     check,
     compare,
     inspect,
@@ -29,7 +29,7 @@ from bench.commands import (
     tune,
     view,
 )
-from bench.commands.common import fail
+from posbench.commands.common import fail
 
 
 def _argument_type(self: typer.core.TyperArgument, ctx: object) -> str | None:
@@ -55,8 +55,10 @@ def version_string() -> str:
     """``posbench X.Y.Z`` from the installed package's metadata."""
     from importlib.metadata import PackageNotFoundError, version
 
+    from posbench import DISTRIBUTION
+
     try:
-        return f"posbench {version('posbench')}"
+        return f"posbench {version(DISTRIBUTION)}"
     except PackageNotFoundError:  # run from a source tree that was never installed
         return "posbench (version unknown: not installed)"
 

@@ -1,8 +1,8 @@
 """Compare saved runs: align their figures, flag config differences, gate regressions.
 
-Everything here reads :class:`bench.saved_run.Run` objects (``results.json`` and, for
+Everything here reads :class:`posbench.saved_run.Run` objects (``results.json`` and, for
 quantile gates, ``traces.parquet``) and returns numeric frames or plain records;
-:mod:`bench.compare_views` renders them as a table and a figure, and the ``bench compare``
+:mod:`posbench.compare_views` renders them as a table and a figure, and the ``bench compare``
 command turns those into output and an exit status.
 
 Alignment keys: predictor, data set, route type (label) and drive. A figure missing in
@@ -10,7 +10,7 @@ one run is NaN there, never dropped. Runs whose configurations differ (horizon, 
 profile, dropouts, data hashes, ...) are flagged by :func:`config_differences`.
 
 The paired difference between two runs (:func:`paired_difference`) is a cluster
-bootstrap over the drives both runs scored (:mod:`metrics.bootstrap`): each resample
+bootstrap over the drives both runs scored (:mod:`posbench.metrics.bootstrap`): each resample
 draws drives with replacement and recomputes the statistic of both runs on the same
 drives, so drive-to-drive variation that both runs share cancels.
 """
@@ -27,9 +27,9 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from bench.options import UsageError
-from bench.saved_run import Run
-from metrics.bootstrap import DEFAULT_RESAMPLES
+from posbench.metrics.bootstrap import DEFAULT_RESAMPLES
+from posbench.options import UsageError
+from posbench.saved_run import Run
 
 KINDS = ("future", "now")
 STATS = ("mean_m", "median_m", "rmse_m", "p95_m", "max_m")
@@ -232,7 +232,7 @@ def _pooled_by_resample(summaries: Sequence[Mapping[str, Any]], stat: str,
                         weights: np.ndarray) -> tuple[float, np.ndarray]:
     """The pooled ``stat`` (mean_m or rmse_m) of drives given their summaries, and its value
     under each resample (rows of ``weights``: multiplicities of the drives)."""
-    from metrics.bootstrap import resampled_means
+    from posbench.metrics.bootstrap import resampled_means
 
     n = np.array([float(s["count"]) for s in summaries])
     if stat == "mean_m":
@@ -246,7 +246,7 @@ def _pooled_quantiles_by_resample(errors: Sequence[np.ndarray], q: float, weight
                                   ) -> tuple[float, np.ndarray]:
     """Quantile ``q`` (0..1, linear interpolation) of the pooled errors of drives, and its
     value under each resample; exact (weights are drive multiplicities)."""
-    from metrics.bootstrap import resampled_quantiles
+    from posbench.metrics.bootstrap import resampled_quantiles
 
     values = np.concatenate(errors)
     units = np.concatenate([np.full(len(e), i, dtype=np.int64) for i, e in enumerate(errors)])
@@ -281,7 +281,7 @@ def paired_difference(old: Run, new: Run, predictor: str, metric: Metric,
 
     ``mean_m`` and ``rmse_m`` come from the per-drive summaries of results.json; the other
     statistics read the runs' ``traces.parquet`` (a :class:`DataError` if one has none)."""
-    from metrics.bootstrap import percentile_interval, resample_counts
+    from posbench.metrics.bootstrap import percentile_interval, resample_counts
 
     a = _drive_summaries(old, predictor, metric.kind, dataset)
     b = _drive_summaries(new, predictor, metric.kind, dataset)
@@ -314,7 +314,7 @@ def paired_difference(old: Run, new: Run, predictor: str, metric: Metric,
 def _drive_errors(run: Run, predictor: str, kind: str, drives: Sequence[tuple[str, str]]
                   ) -> list[np.ndarray]:
     """The scored errors [m] of ``predictor`` per drive, in ``drives`` order (from traces)."""
-    from bench.results import scored_mask
+    from posbench.results import scored_mask
 
     tr = run.traces
     tr = tr[scored_mask(tr) & (tr["predictor"] == predictor).to_numpy()

@@ -1,7 +1,7 @@
 """The uncertainty figures of saved runs side by side (``bench compare --uncertainty``).
 
 Reads each run's ``uncertainty`` block of results.json (schema 1.4, built by
-:mod:`bench.uncertainty`): per predictor that reports covariance and kind (future, now),
+:mod:`posbench.uncertainty`): per predictor that reports covariance and kind (future, now),
 the mean NEES with its cluster-bootstrap 95 % CI as stored (whole run only; the other
 rows have none), the coverage of the 95 % ellipse, the sharpness (median 95 % ellipse area
 [m^2]), the log-likelihood of the reference [nats], the verdict and the query count.
@@ -28,8 +28,8 @@ from typing import Any
 
 import pandas as pd
 
-from bench.saved_run import Run
-from bench.tables import Table
+from posbench.saved_run import Run
+from posbench.tables import Table
 
 KINDS = ("future", "now")
 #: row scope -> the block of results.json ``uncertainty`` holding it
@@ -149,7 +149,7 @@ def _status(run: Run, predictor: str) -> str:
 
 def uncertainty_comparison(runs: Sequence[Run], labels: Sequence[str], scopes: Sequence[str]
                            ) -> tuple[Table, pd.DataFrame]:
-    """The comparison as a display :class:`bench.tables.Table` (per run: NEES [95 % CI],
+    """The comparison as a display :class:`posbench.tables.Table` (per run: NEES [95 % CI],
     95 % coverage, 95 % ellipse area [m^2], log-likelihood, verdict, n) and the numeric
     frame behind it (:func:`uncertainty_aligned`, for CSV)."""
     frame = uncertainty_aligned(runs, labels, scopes)

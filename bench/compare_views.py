@@ -1,5 +1,5 @@
 """The table and the figure of ``bench compare``, from the aligned figures and paired
-differences of :mod:`bench.compare`."""
+differences of :mod:`posbench.compare`."""
 
 from __future__ import annotations
 
@@ -10,8 +10,8 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from bench.compare import Metric, aligned, paired_difference
-from bench.saved_run import Run
+from posbench.compare import Metric, aligned, paired_difference
+from posbench.saved_run import Run
 
 
 def _cell(v: float, lo: float, hi: float, digits: int = 3) -> str:
@@ -35,14 +35,14 @@ def _delta_cell(diff: float, lo: float, hi: float, digits: int = 3) -> str:
 
 def comparison_table(runs: Sequence[Run], labels: Sequence[str], metric: Metric,
                      scopes: Sequence[str], seed: int = 0) -> tuple[Any, pd.DataFrame]:
-    """The comparison as a display :class:`bench.tables.Table` (``value [CI]`` cells, one
+    """The comparison as a display :class:`posbench.tables.Table` (``value [CI]`` cells, one
     column per run, then ``Δ`` columns: each later run minus the first, paired over shared
     drives, ``*`` where the CI excludes 0) and the numeric frame behind it (for CSV).
 
     ``scopes``: which rows, among ``all``, ``dataset``, ``route type``, ``drive``. Paired
     CIs are given for ``all`` and ``dataset`` rows; route-type and drive rows show the
     plain difference (results.json keeps no per-drive, per-route-type figures)."""
-    from bench.tables import Table
+    from posbench.tables import Table
 
     frame = aligned(runs, labels, metric)
     frame = frame[frame["scope"].isin(list(scopes))].reset_index(drop=True)

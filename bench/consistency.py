@@ -2,7 +2,7 @@
 notes at the top of ``bench run``'s report and terminal, the predictors that used a
 failing stream, ``--strict`` and the ``consistency`` key of results.json.
 
-The checks themselves are :mod:`scenarios.consistency` (pure, on a Drive).
+The checks themselves are :mod:`posbench.scenarios.consistency` (pure, on a Drive).
 """
 
 from __future__ import annotations
@@ -11,7 +11,7 @@ from collections.abc import Iterable, Sequence
 from dataclasses import asdict
 from typing import Any
 
-from scenarios.consistency import (
+from posbench.scenarios.consistency import (
     FAIL,
     NA,
     STREAMS,
@@ -22,10 +22,10 @@ from scenarios.consistency import (
     check_drive,
     worst,
 )
-from scenarios.errors import DataError
+from posbench.scenarios.errors import DataError
 
 #: streams whose failure marks only the predictors that observe them (by overriding the
-#: named method of :class:`predictors.base.Predictor`); every other stream marks all
+#: named method of :class:`posbench.predictors.base.Predictor`); every other stream marks all
 STREAM_METHODS = {"imu.yaw_rate": "observe_imu", "imu.ax": "observe_imu",
                   "imu.yaw": "observe_imu", "speed": "observe_speed"}
 
@@ -42,14 +42,14 @@ _CELL = {
 
 
 def check_drives(drives: Iterable[Any]) -> dict[str, Consistency]:
-    """:func:`scenarios.consistency.check_drive` of every drive, by drive name."""
+    """:func:`posbench.scenarios.consistency.check_drive` of every drive, by drive name."""
     return {d.name: check_drive(d) for d in drives}
 
 
 def uses_stream(cls: type, stream: str) -> bool:
     """Whether predictor class ``cls`` uses ``stream``: an IMU or speed stream only if it
     overrides ``observe_imu`` / ``observe_speed``; GPS and truth concern every predictor."""
-    from predictors.base import Predictor
+    from posbench.predictors.base import Predictor
 
     method = STREAM_METHODS.get(stream)
     if method is None:
@@ -60,7 +60,7 @@ def uses_stream(cls: type, stream: str) -> bool:
 def affected_predictors(names: Sequence[str], checks: dict[str, Consistency]
                         ) -> dict[str, list[str]]:
     """Predictor name -> ``"drive: stream"`` for every failing stream it used."""
-    from predictors.registry import predictor_class
+    from posbench.predictors.registry import predictor_class
 
     failing = [(d, c.stream) for d, res in checks.items() for c in res.failures()]
     out: dict[str, list[str]] = {}

@@ -1,4 +1,4 @@
-"""The predictor contract as runnable checks: what any :class:`~predictors.base.Predictor`
+"""The predictor contract as runnable checks: what any :class:`~posbench.predictors.base.Predictor`
 must do for ``bench run`` to score it fairly, checked on small deterministic drives.
 
 :func:`check_predictor` runs every clause on a predictor factory and returns one
@@ -7,10 +7,10 @@ raises: an exception from the predictor fails that clause and names where it was
 
 The inputs (built once per process, deterministic):
 
-- the **drive**: the first built-in synthetic drive (``scenarios.synthetic.default_drives()[0]``),
+- the **drive**: the first built-in synthetic drive (``posbench.scenarios.synthetic.default_drives()[0]``),
   its first :data:`DRIVE_S` seconds (straight, turn, roundabout, straight, a stop) with its own
   recorded fixes (irregular 0.1-0.6 s, noisy, one dropout) and 50 Hz IMU / speed, replayed
-  as the runner does (:func:`bench.replay.replay`: a "future" query :data:`HORIZON_S` after
+  as the runner does (:func:`posbench.replay.replay`: a "future" query :data:`HORIZON_S` after
   every fix, a "now" query every 0.05 s);
 - a **straight line**: 15 m/s on a heading of 0.5 rad, IMU and speed at 50 Hz from t = 0,
   exact fixes at 5 Hz from t = 1 s;
@@ -39,12 +39,12 @@ from typing import Any
 
 import numpy as np
 
-from bench.config import RunConfig
-from bench.options import UsageError
-from bench.prepare import PreparedDrive, Queries, prepare_drive
-from bench.replay import GPS, IMU, QUERY, SPEED, build_events, replay
-from predictors.base import Predictor, accepts_sigma
-from scenarios.drive import Drive, DriveMeta, GpsStream, ImuStream, SpeedStream
+from posbench.config import RunConfig
+from posbench.options import UsageError
+from posbench.predictors.base import Predictor, accepts_sigma
+from posbench.prepare import PreparedDrive, Queries, prepare_drive
+from posbench.replay import GPS, IMU, QUERY, SPEED, build_events, replay
+from posbench.scenarios.drive import Drive, DriveMeta, GpsStream, ImuStream, SpeedStream
 
 #: "future" query horizon after each fix [s] (the paper's 0.2 s)
 HORIZON_S = 0.2
@@ -127,7 +127,7 @@ def line_position(t: np.ndarray) -> np.ndarray:
 def inputs() -> Inputs:
     """The check's drives, prepared as ``bench run`` prepares them (the drives' own fixes,
     no dropouts added). Built once per process."""
-    from scenarios.synthetic import default_drives
+    from posbench.scenarios.synthetic import default_drives
 
     cfg = RunConfig(predictors=(), horizon_s=HORIZON_S, gps_profile="native", gate=False)
     drive = default_drives()[0].window(0.0, DRIVE_S)
@@ -191,7 +191,7 @@ def events(prep: PreparedDrive) -> list[Event]:
 
 def feed(pred: Predictor, evs: list[Event], start: int = 0, stop: int | None = None,
          after: Callable[[int], None] | None = None) -> list[tuple[float, float, float]]:
-    """Feed ``evs[start:stop]`` to ``pred`` (no ``reset()``) as :func:`bench.replay.replay`
+    """Feed ``evs[start:stop]`` to ``pred`` (no ``reset()``) as :func:`posbench.replay.replay`
     does; ``after(i)`` is called after event ``i``. Returns ``(t_query, x, y)`` per answer."""
     out = []
     with_sigma = accepts_sigma(pred.observe_gps)
@@ -231,7 +231,7 @@ class Answers:
 
 
 def run_replay(factory: Factory, prep: PreparedDrive, pred: Predictor | None = None) -> Answers:
-    """Replay ``prep`` through a fresh predictor (or ``pred``) with :func:`bench.replay.replay`;
+    """Replay ``prep`` through a fresh predictor (or ``pred``) with :func:`posbench.replay.replay`;
     future answers first, then the now answers."""
     p = factory() if pred is None else pred
     res = replay(p, prep, HORIZON_S)
@@ -608,11 +608,11 @@ def resolve_predictor(spec: str, options: dict[str, Any] | None = None) -> Facto
     """A factory of fresh predictors for ``spec``: a registered or entry-point name (or
     ``NAME@ALIAS``), built with the registry's defaults and ``options``; or ``module:Class``,
     a :class:`Predictor` subclass imported from an importable module and built with
-    ``options`` (:func:`predictors.registry.resolve`). One instance is built here, so that a
+    ``options`` (:func:`posbench.predictors.registry.resolve`). One instance is built here, so that a
     predictor that cannot be built fails now. Raises :class:`UsageError` (one line) for an
     unknown name, a missing module or class, a class that is not a Predictor, or a predictor
     that cannot be built."""
-    from predictors.registry import PredictorError, create, predictor_class
+    from posbench.predictors.registry import PredictorError, create, predictor_class
 
     opts = dict(options or {})
     try:

@@ -1,6 +1,6 @@
 """Where ``bench run`` does its work: local processes or a Ray cluster.
 
-``local`` is :func:`bench.runner.run` (one process per drive). ``ray`` fans the
+``local`` is :func:`posbench.runner.run` (one process per drive). ``ray`` fans the
 work out as one Ray task per (drive, predictor) pair: each task prepares the drive
 (deterministic: seeds derive from the master seed and the drive's name) and replays
 one predictor, and the parts are merged per drive in the configured predictor order,
@@ -10,7 +10,7 @@ local executor's. Only the measured latencies differ.
 A task that raises, or whose worker dies, is retried ``max_retries`` times; if it
 still fails, its drive is reported as skipped (``worker failed: ...``) with the
 predictor and the error named, never silently dropped. Ray is imported lazily and is
-an extra: ``pip install 'posbench[ray]'``.
+an extra: ``pip install 'posbench-harness[ray]'``.
 """
 
 from __future__ import annotations
@@ -24,9 +24,8 @@ from typing import Any
 
 import pandas as pd
 
-from bench.config import RunConfig
-from bench.runner import DriveRun, merge_predictor_runs, run, run_drive
-from predictors.registry import (
+from posbench.config import RunConfig
+from posbench.predictors.registry import (
     BUILT_IN,
     Entry,
     available,
@@ -35,10 +34,11 @@ from predictors.registry import (
     register,
     resolve,
 )
-from scenarios.drive import Drive
+from posbench.runner import DriveRun, merge_predictor_runs, run, run_drive
+from posbench.scenarios.drive import Drive
 
 EXECUTORS = ("local", "ray")
-RAY_MISSING = "--executor ray needs Ray: pip install 'posbench[ray]'"
+RAY_MISSING = "--executor ray needs Ray: pip install 'posbench-harness[ray]'"
 DEFAULT_RETRIES = 2
 
 
@@ -56,7 +56,7 @@ def ray_available() -> bool:
 
 def run_local(drives: Sequence[Drive], cfg: RunConfig, workers: int = 2,
               on_done: Callable[[DriveRun], None] | None = None) -> list[DriveRun]:
-    """The local executor: :func:`bench.runner.run` in ``workers`` processes."""
+    """The local executor: :func:`posbench.runner.run` in ``workers`` processes."""
     return run(drives, cfg, workers=workers, on_done=on_done)
 
 

@@ -15,7 +15,7 @@ from collections.abc import Iterator, Sequence
 from contextlib import contextmanager
 from pathlib import Path, PurePosixPath
 
-from scenarios.errors import DataError
+from posbench.scenarios.errors import DataError
 
 # "scheme:/..." - pathlib turns "s3://bucket/key" into "s3:/bucket/key"; one-letter schemes
 # are Windows drives, not URLs

@@ -25,8 +25,8 @@ from typing import Any, Generic, TypeVar
 
 import pandas as pd
 
-from bench.plots import PlotsWritten, joined, write_drive_plots, write_summary_plots
-from bench.results import lean_traces
+from posbench.plots import PlotsWritten, joined, write_drive_plots, write_summary_plots
+from posbench.results import lean_traces
 
 T = TypeVar("T")
 
@@ -106,9 +106,9 @@ class FigureJobs:
 
     Args:
         traces: the run's traces; preds: the run's predictors in report order.
-        out, formats, drive_plots: as :func:`bench.plots.write_plots`.
+        out, formats, drive_plots: as :func:`posbench.plots.write_plots`.
         paper: draws the paper's figures into ``out`` and returns (file, caption) pairs
-            (:func:`bench.figures.paper_figures` with the run bound); None: none.
+            (:func:`posbench.figures.paper_figures` with the run bound); None: none.
         background: False draws everything in this process, when asked (for tests and
             platforms without fork this is what happens anyway).
     """
@@ -132,6 +132,6 @@ class FigureJobs:
         return self._paper.result() if self._paper is not None else []
 
     def plots(self) -> PlotsWritten:
-        """The run's figures written and their notes, as :func:`bench.plots.write_plots`
+        """The run's figures written and their notes, as :func:`posbench.plots.write_plots`
         gives them (summary figures first, then the per-drive ones)."""
         return joined(self._summary.result(), self._drives.result())

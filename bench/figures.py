@@ -1,5 +1,5 @@
 """The paper's figures, made from a real run (matplotlib figures with titles; captions for
-the report; written in each requested format of :data:`bench.plots.FORMATS`).
+the report; written in each requested format of :data:`posbench.plots.FORMATS`).
 
 1. A model prediction: the 8 resampled input points, the predicted future point and
    the reference (truth) 200 ms after the fix.
@@ -21,12 +21,12 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from bench.config import RunConfig, gps_condition
-from bench.plots import check_formats, most_turning_drive, save_figure, shown_format
-from bench.prepare import PreparedDrive, prepare_drive
-from bench.replay import replay
-from predictors.registry import create
-from scenarios.drive import Drive
+from posbench.config import RunConfig, gps_condition
+from posbench.plots import check_formats, most_turning_drive, save_figure, shown_format
+from posbench.predictors.registry import create
+from posbench.prepare import PreparedDrive, prepare_drive
+from posbench.replay import replay
+from posbench.scenarios.drive import Drive
 
 
 def pick_moment(traces: pd.DataFrame, predictor: str) -> tuple[str, float] | None:
@@ -51,9 +51,9 @@ def pick_moment(traces: pd.DataFrame, predictor: str) -> tuple[str, float] | Non
 def _prepared_window(drive: Drive, fixes: pd.DataFrame, t0: float, t1: float) -> PreparedDrive:
     """The run's own received fixes and the drive's other streams within [t0, t1] [s], ready
     to replay (no queries): the figures show exactly what the predictors saw in the run."""
-    from bench.prepare import Queries
-    from bench.reference import FIX_CUBIC, TRUTH
-    from scenarios.drive import GpsStream
+    from posbench.prepare import Queries
+    from posbench.reference import FIX_CUBIC, TRUTH
+    from posbench.scenarios.drive import GpsStream
 
     sub = drive.window(t0, t1)
     f = fixes[fixes.received & (fixes.t >= t0) & (fixes.t <= t1)]
@@ -69,7 +69,7 @@ def paper_figures(drives: list[Drive], cfg: RunConfig, traces: pd.DataFrame, out
                   ) -> list[tuple[str, str]]:
     """Write the figures, each in every one of ``formats`` (png, svg, pdf); return
     (file name, caption) pairs, the file in the format a report shows
-    (:func:`bench.plots.shown_format`: png, else svg, else pdf). Needs ``lstm`` in
+    (:func:`posbench.plots.shown_format`: png, else svg, else pdf). Needs ``lstm`` in
     the run. With ``runs`` (the run's DriveRuns) the replay uses the run's own fixes over a
     40 s window, so long drives cost no more than short ones.
 
@@ -104,7 +104,7 @@ def paper_figures(drives: list[Drive], cfg: RunConfig, traces: pd.DataFrame, out
     grid, pred = step.grid, step.pred
     ts = np.linspace(t_fix, t_fix + cfg.horizon_s, 5)
     now = np.array([lstm.position_at(t) for t in ts])
-    from bench.prepare import _reference
+    from posbench.prepare import _reference
 
     ref_now = _reference(around, ts)
     ref_path = _reference(around, np.arange(t_fix - 2.0, t_fix + 1.0, 0.05))

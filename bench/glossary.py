@@ -1,16 +1,16 @@
 """The report's glossary: the definitions written once beside each metric
-(``DEFINITIONS`` of :mod:`metrics.accuracy`, :mod:`metrics.bootstrap`,
-:mod:`metrics.outages`, :mod:`metrics.seeds`, :mod:`metrics.latency` and
-:mod:`bench.results`), picked for the figures a run's report prints."""
+(``DEFINITIONS`` of :mod:`posbench.metrics.accuracy`, :mod:`posbench.metrics.bootstrap`,
+:mod:`posbench.metrics.outages`, :mod:`posbench.metrics.seeds`, :mod:`posbench.metrics.latency` and
+:mod:`posbench.results`), picked for the figures a run's report prints."""
 
 from __future__ import annotations
 
 from collections.abc import Mapping
 from typing import Any
 
-from bench import results
-from bench.scoring import TRACE_COLUMNS
-from metrics import accuracy, bootstrap, latency, outages, seeds
+from posbench import results
+from posbench.metrics import accuracy, bootstrap, latency, outages, seeds
+from posbench.scoring import TRACE_COLUMNS
 
 
 def glossary(res: Mapping[str, Any]) -> list[tuple[str, str]]:

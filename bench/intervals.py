@@ -1,6 +1,6 @@
 """Confidence intervals and the paired comparison, placed into the figures of ``results.json``.
 
-The statistics themselves are pure functions of :mod:`metrics.bootstrap`; this module knows
+The statistics themselves are pure functions of :mod:`posbench.metrics.bootstrap`; this module knows
 which queries make each summary and which drive each query comes from (the cluster), and
 writes:
 
@@ -22,8 +22,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from bench.prepare import LABELS
-from metrics.bootstrap import (
+from posbench.metrics.bootstrap import (
     DEFAULT_RESAMPLES,
     LEVEL,
     MIN_BLOCKS,
@@ -31,7 +30,8 @@ from metrics.bootstrap import (
     paired_summary,
     summary_ci,
 )
-from metrics.outages import MISS_THRESHOLD_M, per_outage, since_fix_checkpoint
+from posbench.metrics.outages import MISS_THRESHOLD_M, per_outage, since_fix_checkpoint
+from posbench.prepare import LABELS
 
 KINDS = ("future", "now")
 #: the predictor compared against when ``--baseline`` is not given (if it is in the run)
@@ -94,7 +94,7 @@ def one_drive_cis(queries: Mapping[str, tuple[np.ndarray, np.ndarray]], stats: S
                   ) -> dict[str, dict[str, Any]]:
     """``ci95`` per predictor of one drive and kind (block bootstrap): ``queries`` maps each
     predictor to its errors [m] and query times [s]. Each predictor is resampled in blocks
-    of its own :func:`metrics.bootstrap.block_length`, so its interval does not depend on
+    of its own :func:`posbench.metrics.bootstrap.block_length`, so its interval does not depend on
     which other predictors share the run (a run of ``cv`` alone, or answers scored by
     ``bench score``, give ``cv`` the same interval as a run of every predictor)."""
     out: dict[str, dict[str, Any]] = {}
@@ -116,7 +116,7 @@ def with_ci(summary: dict[str, Any], errors: np.ndarray, codes: np.ndarray,
 def add_group_cis(summaries: Mapping[str, dict[str, Any]], errors: np.ndarray,
                   keys: np.ndarray, codes: np.ndarray, times: np.ndarray | None,
                   stats: Statistics | None) -> None:
-    """Add ``ci95`` to each summary of :func:`metrics.accuracy.summarize_groups` (key ->
+    """Add ``ci95`` to each summary of :func:`posbench.metrics.accuracy.summarize_groups` (key ->
     summary), the queries of key k being those with ``keys == k``."""
     if stats is None:
         return
@@ -196,7 +196,7 @@ def paired_results(df: pd.DataFrame, base: pd.DataFrame, datasets: Sequence[str]
         "by_label": {ds: {kind: {label: entry}}}}``; entry: ``diff_m`` (predictor's mean
         error - baseline's, [m], over the queries both answered: negative = better than
         the baseline), ``ci95``, ``drives``, ``wins``, ``win_share``, ``conclusive``,
-        ``queries``, ``block_len`` (see :func:`metrics.bootstrap.paired_summary`).
+        ``queries``, ``block_len`` (see :func:`posbench.metrics.bootstrap.paired_summary`).
     """
     out: dict[str, Any] = {"overall": {}, "by_dataset": {ds: {} for ds in datasets},
                            "by_label": {ds: {} for ds in datasets}}

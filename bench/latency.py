@@ -14,12 +14,12 @@ from typing import Any
 
 import numpy as np
 
-from bench.config import RunConfig
-from bench.prepare import prepare_drive
-from bench.replay import replay
-from metrics.latency import latency_summary
-from predictors.registry import create
-from scenarios.drive import Drive
+from posbench.config import RunConfig
+from posbench.metrics.latency import latency_summary
+from posbench.predictors.registry import create
+from posbench.prepare import prepare_drive
+from posbench.replay import replay
+from posbench.scenarios.drive import Drive
 
 PAPER_MS = {"regression": 2.0, "lstm": 2.0, "kalman": 1.0, "step_total": (4.0, 6.0)}
 
@@ -60,14 +60,14 @@ def lstm_stages(drive: Drive, steps: int) -> dict[str, Any]:
     and the closed-form fit alone for comparison.
 
     The stages are those the predictor reports through its ``stage_timer`` hook
-    (:data:`predictors.lstm.predictor.STAGES`), so the code timed is the code that runs;
+    (:data:`posbench.predictors.lstm.predictor.STAGES`), so the code timed is the code that runs;
     start-up line fits (no network) report none. After each step the hook also times the
     position cubic alone on that step's window of fixes (the first 200 by L-BFGS too),
     interleaved with the steps as before; the hook's own time is charged to no stage."""
     from time import perf_counter_ns
 
-    from predictors.cubic import fit_cubic_lbfgs
-    from predictors.lstm.resample import fit_poly, window_start
+    from posbench.predictors.cubic import fit_cubic_lbfgs
+    from posbench.predictors.lstm.resample import fit_poly, window_start
 
     clock = perf_counter_ns
     cfg = RunConfig(predictors=("lstm",))
@@ -97,7 +97,7 @@ def lstm_stages(drive: Drive, steps: int) -> dict[str, Any]:
 
 def lstm_fused_stages(drive: Drive, steps: int) -> dict[str, Any]:
     """Per-stage latency [us] of the default, *fused* ``lstm`` fix step
-    (:data:`predictors.lstm.predictor.FUSED_STAGES`: ``resample`` = fix bookkeeping and both
+    (:data:`posbench.predictors.lstm.predictor.FUSED_STAGES`: ``resample`` = fix bookkeeping and both
     cubics in one solve, ``features``, ``inference``, ``current_position_fit``), timed
     through the same ``stage_timer`` hook during a normal replay."""
     cfg = RunConfig(predictors=("lstm",))
@@ -109,7 +109,7 @@ def _stage_times(prep: Any, horizon_s: float, steps: int, step: str,
     """Replay ``prep`` through ``LstmPredictor(step=step)`` with a stage hook until ``steps``
     network steps were timed; percentiles [us] per stage, in the predictor's stage order.
     ``after_step(predictor)`` runs after each step's last stage (outside every stage)."""
-    from predictors.lstm.predictor import LstmPredictor, StageRecorder
+    from posbench.predictors.lstm.predictor import LstmPredictor, StageRecorder
 
     p = LstmPredictor(step=step)
     stages = p.stages
@@ -135,7 +135,7 @@ def batch_throughput(batches: tuple[int, ...] = (1, 64, 1024), seconds: float = 
     """Windows per second of the bundled network through onnxruntime at several batch sizes."""
     from time import perf_counter
 
-    from predictors.lstm.predictor import LstmPredictor
+    from posbench.predictors.lstm.predictor import LstmPredictor
 
     net = LstmPredictor().net
     rng = np.random.default_rng(0)

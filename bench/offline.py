@@ -8,7 +8,7 @@ file                        who    content
 ==========================  =====  ===============================================================
 ``queries.csv``             give   ``drive, kind, t_issue, t_query``: every query to answer
 ``inputs/DRIVE.csv``        give   what a predictor may see of that drive, in the long table
-                                   format of :mod:`scenarios.loaders.table` (streams gps = the
+                                   format of :mod:`posbench.scenarios.loaders.table` (streams gps = the
                                    fixes fed after degradation and dropouts, imu, speed)
 ``manifest.json``           -      format version, posbench version, command, config, seed,
                                    data hashes, drives, sha256 of every file
@@ -27,7 +27,7 @@ Python's ``repr`` of the float, exact through a CSV round trip. ``drive`` is the
 file's stem (the drive name, with characters unsafe in file names replaced by ``_``).
 
 :func:`write_queries` writes a folder; :func:`read_queries` reads and checks one back
-(:class:`QueryFolder`); :mod:`bench.answers` scores answers against it.
+(:class:`QueryFolder`); :mod:`posbench.answers` scores answers against it.
 """
 
 from __future__ import annotations
@@ -42,12 +42,12 @@ from typing import Any
 
 import pandas as pd
 
-from bench.config import RunConfig
-from bench.prepare import prepare_drive
-from bench.runner import DriveRun, skip_reason, skipped_run
-from bench.scoring import QUERY_COLUMNS, TRACK_QUERY_COLUMNS, query_frame
-from scenarios.drive import Drive, GpsStream, ImuStream, SpeedStream
-from scenarios.errors import DataError
+from posbench.config import RunConfig
+from posbench.prepare import prepare_drive
+from posbench.runner import DriveRun, skip_reason, skipped_run
+from posbench.scenarios.drive import Drive, GpsStream, ImuStream, SpeedStream
+from posbench.scenarios.errors import DataError
+from posbench.scoring import QUERY_COLUMNS, TRACK_QUERY_COLUMNS, query_frame
 
 #: what ``manifest.json`` says it is, and the version of this layout: a reader accepts every
 #: MINOR of its MAJOR (MINOR grows when files or keys are added, MAJOR when one changes)
@@ -138,11 +138,11 @@ def write_queries(drives: Sequence[Drive], cfg: RunConfig, out: Path, *, command
                   on_done: Callable[[str], None] | None = None) -> QueriesWritten:
     """Prepare ``drives`` as ``bench run`` does under ``cfg`` and write the queries folder
     ``out`` (layout in the module docstring); ``data`` is the data block of the manifest
-    (:func:`bench.results.data_provenance`), ``fmt`` csv or parquet for the queries list and
+    (:func:`posbench.results.data_provenance`), ``fmt`` csv or parquet for the queries list and
     inputs. ``on_done(drive name)`` is called as each drive is written (progress bar).
     Files of an earlier queries folder there are replaced; others are left alone."""
-    from bench.results import git_commit, package_versions
-    from scenarios.loaders.table import drive_to_frame
+    from posbench.results import git_commit, package_versions
+    from posbench.scenarios.loaders.table import drive_to_frame
 
     ext = "." + fmt
     out.mkdir(parents=True, exist_ok=True)
@@ -219,9 +219,9 @@ class QueryFolder:
     Attributes:
         folder: where it is.
         manifest: the content of ``manifest.json``.
-        key: the answer key, one row per query, :data:`~bench.scoring.QUERY_COLUMNS`, drive
+        key: the answer key, one row per query, :data:`~posbench.scoring.QUERY_COLUMNS`, drive
             times [s] as in ``traces.parquet``; per drive its future then its now queries.
-        drives: per drive (manifest order) the :class:`~bench.runner.DriveRun` fields of
+        drives: per drive (manifest order) the :class:`~posbench.runner.DriveRun` fields of
             :data:`DRIVE_FIELDS`, plus ``id`` (the drive in the public files) and ``t0_s``.
     """
 
@@ -247,7 +247,7 @@ class QueryFolder:
                              - names.map(t0).to_numpy(float)})
 
     def drive_run(self, d: dict[str, Any], traces: pd.DataFrame) -> DriveRun:
-        """The :class:`~bench.runner.DriveRun` of drive record ``d`` with ``traces``."""
+        """The :class:`~posbench.runner.DriveRun` of drive record ``d`` with ``traces``."""
         kw = {f: d[f] for f in DRIVE_FIELDS}
         kw["outages"] = [(float(a), float(b)) for a, b in d["outages"]]
         return DriveRun(traces=traces, **kw)

@@ -53,9 +53,9 @@ def check_horizon(seconds: float, option: str = "--horizon") -> float:
 
 def check_dropouts(profile: str) -> str:
     """A GPS dropout profile (``none``, ``random:P``, ``outages``, ``outage:L``), checked by
-    the parser that applies it (:func:`scenarios.degrade._parse_dropouts`)."""
-    from scenarios.degrade import _parse_dropouts
-    from scenarios.errors import DataError
+    the parser that applies it (:func:`posbench.scenarios.degrade._parse_dropouts`)."""
+    from posbench.scenarios.degrade import _parse_dropouts
+    from posbench.scenarios.errors import DataError
 
     try:
         _parse_dropouts(profile)
@@ -114,7 +114,7 @@ def resolve_baseline(value: str | None, names: Sequence[str]) -> str | None:
     """``--baseline``: the predictor the others are compared with. Default (None): ``kf``
     when it is in the run, else no comparison; ``none``: no comparison; otherwise it must
     be one of the run's predictors."""
-    from bench.intervals import default_baseline
+    from posbench.intervals import default_baseline
 
     if value is None:
         return default_baseline(names)
@@ -197,7 +197,7 @@ def check_out_file(path: Path, option: str) -> Path:
 
 def check_data_paths(paths: Sequence[str | Path] | None, option: str = "--data") -> None:
     """Local ``--data`` paths exist (fsspec URLs such as ``s3://...`` are fetched later)."""
-    from bench.fetch import as_url
+    from posbench.fetch import as_url
 
     for p in paths or []:
         if as_url(p) is None and not Path(p).exists():
@@ -212,7 +212,7 @@ def _first_line(exc: BaseException) -> str:
 
 def _failure_detail(exc: BaseException) -> str:
     """``Type: first line`` of an exception (a DataError's own line, without its type)."""
-    from scenarios.errors import DataError
+    from posbench.scenarios.errors import DataError
 
     return _first_line(exc) if isinstance(exc, DataError) else \
         f"{type(exc).__name__}: {_first_line(exc)}"
@@ -221,7 +221,7 @@ def _failure_detail(exc: BaseException) -> str:
 def _load_failure(name: str, given: Any, path: str | None, exc: BaseException,
                   flag: str | None = None) -> str:
     """One line: which predictor (and model file, given as ``flag``) could not be built, and why."""
-    from scenarios.errors import DataError
+    from posbench.scenarios.errors import DataError
 
     if isinstance(exc, DataError):
         # the path is in the message already unless it is the model file itself
@@ -253,7 +253,7 @@ def with_model_aliases(names: Sequence[str], options: Mapping[str, Any]) -> tupl
     ``NAME@ALIAS`` runs a second instance of a registered predictor under its own name, so
     ``--model lstm@mine=DIR`` compares your model with the bundled ``lstm``.
     """
-    from predictors.registry import ALIAS_SEP
+    from posbench.predictors.registry import ALIAS_SEP
 
     return tuple(names) + tuple(n for n in options if ALIAS_SEP in n and n not in names)
 
@@ -264,7 +264,7 @@ def validate_predictors(names: Sequence[str], options: Mapping[str, Mapping[str,
     """Check the requested predictors and their constructor options before any work.
 
     Each name must be a built-in, an entry point or an importable ``module:Class`` of a
-    Predictor subclass (:func:`predictors.registry.resolve`), each option set must belong to
+    Predictor subclass (:func:`posbench.predictors.registry.resolve`), each option set must belong to
     a requested name and name a keyword of its constructor, a ``model`` path must exist (a
     folder stands for its ``model.onnx``), and each predictor is built once here with its
     options (registry defaults, no tuned parameters) so that a bad model file or value fails
@@ -279,8 +279,8 @@ def validate_predictors(names: Sequence[str], options: Mapping[str, Mapping[str,
     Returns:
         the options with ``model`` folders resolved to their ``model.onnx``.
     """
-    from bench.predictor_options import check_option_names, flag_text
-    from predictors.registry import (
+    from posbench.predictor_options import check_option_names, flag_text
+    from posbench.predictors.registry import (
         PredictorError,
         base_name,
         is_import_path,
@@ -330,8 +330,8 @@ def _build_once(name: str, opts: Mapping[str, Any], as_given: Mapping[str, Any],
     """Build predictor ``name`` with ``opts``; a failure names the option to blame. The model
     file (if any) is tried first, then the other options are added one at a time in the order
     given: the first that makes the constructor fail is named."""
-    from bench.predictor_options import flag_text
-    from predictors.registry import create
+    from posbench.predictor_options import flag_text
+    from posbench.predictors.registry import create
 
     def build(kw: Mapping[str, Any]) -> BaseException | None:
         try:

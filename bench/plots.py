@@ -2,7 +2,7 @@
 
 Every figure is drawn from the per-query traces (one row per query: ``t_query`` [s] in
 drive time, positions ``x, y, x_ref, y_ref`` [m] in a local ENU frame, ``error_m`` [m];
-see :mod:`bench.runner`). :func:`write_plots` writes them and never raises on thin data:
+see :mod:`posbench.runner`). :func:`write_plots` writes them and never raises on thin data:
 a figure with nothing to show is not written, and :class:`PlotsWritten` says why.
 
 Figures (each written once per requested format, see :data:`FORMATS`):
@@ -33,7 +33,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 import pandas as pd
 
-from metrics.accuracy import error_cdf, speed_bin_labels, speed_bin_order, summarize_groups
+from posbench.metrics.accuracy import error_cdf, speed_bin_labels, speed_bin_order, summarize_groups
 
 if TYPE_CHECKING:  # matplotlib is imported when a figure is drawn: importing this module is cheap
     from matplotlib.figure import Figure
@@ -629,12 +629,12 @@ def write_error_over_time(traces: pd.DataFrame, preds: Sequence[str], out: Path,
 
 def plot_calibration(traces: pd.DataFrame, preds: Sequence[str]) -> Figure:
     """Calibration curve of the reported covariances: observed vs expected coverage of the
-    p-ellipses (:func:`metrics.calibration.calibration_curve`), future and now panels, one
+    p-ellipses (:func:`posbench.metrics.calibration.calibration_curve`), future and now panels, one
     line per predictor that reports covariance; the diagonal is honest, below it
     overconfident. Warm-up excluded."""
     from matplotlib.figure import Figure
 
-    from metrics.calibration import calibration_curve, mahalanobis_sq
+    from posbench.metrics.calibration import calibration_curve, mahalanobis_sq
 
     cols = ["predictor", "kind", "x", "y", "x_ref", "y_ref", "error_m", "cov_xx", "cov_xy",
             "cov_yy"]
@@ -749,7 +749,7 @@ def write_plots(traces: pd.DataFrame, res: dict[str, Any], out: Path,
     ``formats`` (from :data:`FORMATS`). Never raises on thin data: a figure with nothing to
     show is not written and gets a note instead. The same as :func:`write_summary_plots`
     then :func:`write_drive_plots` (which ``bench run`` draws in parallel,
-    :mod:`bench.figure_jobs`).
+    :mod:`posbench.figure_jobs`).
 
     Raises:
         ValueError: an unknown format (checked before anything is written).

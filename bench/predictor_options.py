@@ -21,7 +21,7 @@ from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
-from bench.options import UsageError
+from posbench.options import UsageError
 
 #: how a user gave each option: ``(predictor, option) -> "--set kf.jerk_psd=4"``, for messages
 Given = dict[tuple[str, str], str]
@@ -106,7 +106,7 @@ def check_option_names(name: str, options: Mapping[str, Any],
                        given: Mapping[tuple[str, str], str]) -> None:
     """Every option in ``options`` is a keyword of the constructor of predictor ``name``
     (found with :func:`inspect.signature`; a constructor with ``**kwargs`` takes any)."""
-    from predictors.registry import constructor_options, predictor_class
+    from posbench.predictors.registry import constructor_options, predictor_class
 
     accepted, any_keyword = constructor_options(predictor_class(name))
     if any_keyword:

@@ -19,11 +19,11 @@ import importlib
 import threading
 
 #: imported by every replay worker (the reference cubic, the scenario labels)
-REPLAY_MODULES = ("scipy.interpolate", "scenarios.labels")
+REPLAY_MODULES = ("scipy.interpolate", "posbench.scenarios.labels")
 #: imported after the replay by the main process or by every figure child
 MODULES = ("matplotlib.figure", "matplotlib.backends.backend_agg", "scipy.special",
-           "bench.results", "bench.uncertainty", "bench.track_results", "bench.figures",
-           "bench.report", "bench.saved_run", "bench.tables", "bench.stat_tables")
+           "posbench.results", "posbench.uncertainty", "posbench.track_results", "posbench.figures",
+           "posbench.report", "posbench.saved_run", "posbench.tables", "posbench.stat_tables")
 
 
 def _import_all(modules: tuple[str, ...]) -> None:

@@ -11,10 +11,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from bench.config import RunConfig, drive_seed
-from bench.reference import FIX_CUBIC, TRUTH, cubic_through_fixes, truth_at
-from metrics.track_errors import HEADING_DT_S, reference_motion
-from scenarios.drive import Drive, GpsStream
+from posbench.config import RunConfig, drive_seed
+from posbench.metrics.track_errors import HEADING_DT_S, reference_motion
+from posbench.reference import FIX_CUBIC, TRUTH, cubic_through_fixes, truth_at
+from posbench.scenarios.drive import Drive, GpsStream
 
 LABELS = ("straight", "turn", "roundabout", "start_stop")
 
@@ -30,7 +30,7 @@ class Queries:
     label: np.ndarray
     since_fix_s: np.ndarray  # t_query - time of the last fix received by t_issue [s]
     #: the reference's direction of travel at t_query [rad, counter-clockwise from east];
-    #: NaN at standstill or unknown (:func:`metrics.track_errors.reference_motion`)
+    #: NaN at standstill or unknown (:func:`posbench.metrics.track_errors.reference_motion`)
     heading_rad: np.ndarray | None = None
     #: the reference's yaw rate at t_query [rad/s], positive = turning left; NaN unknown
     yaw_rate: np.ndarray | None = None
@@ -54,7 +54,7 @@ class PreparedDrive:
 def _input_gps(drive: Drive, cfg: RunConfig, seed: int) -> tuple[GpsStream, list[str]]:
     notes: list[str] = []
     if drive.truth is not None and cfg.gps_profile != "native":
-        from scenarios.degrade import degrade_gps
+        from posbench.scenarios.degrade import degrade_gps
 
         gps = degrade_gps(drive.truth, profile=cfg.gps_profile, seed=seed,
                           latency_s=cfg.gps_latency_s, intervals=cfg.intervals)
@@ -89,7 +89,7 @@ def _speed_at(drive: Drive, tq: np.ndarray, ref_t: np.ndarray, ref_xy: np.ndarra
 def _labels(drive: Drive, tq: np.ndarray, grid_t: np.ndarray, grid_xy: np.ndarray) -> np.ndarray:
     """Scenario labels at query times from the reference track (truth or fitted fixes)."""
     try:
-        from scenarios.labels import label_times
+        from posbench.scenarios.labels import label_times
     except ImportError:  # labelling not available: everything is unlabelled
         return np.full(tq.size, "unlabelled")
     ok = np.all(np.isfinite(grid_xy), axis=1)
@@ -108,7 +108,7 @@ def prepare_drive(drive: Drive, cfg: RunConfig) -> PreparedDrive:
     gps_all = gps
     outages: list[tuple[float, float]] = []
     if cfg.dropouts != "none":
-        from scenarios.degrade import apply_dropouts
+        from posbench.scenarios.degrade import apply_dropouts
 
         gps, outages = apply_dropouts(gps, cfg.dropouts, seed=seed + 1)
         notes.append(f"dropouts {cfg.dropouts}: {len(outages)} outages")

@@ -12,7 +12,7 @@ A predictor that reports uncertainty (:func:`reports_covariance`) is asked
 timed on its own (``cov_ns``), never charged to the step's or query's latency.
 
 Fix accuracy: a predictor whose ``observe_gps`` takes ``sigma``
-(:func:`predictors.base.accepts_sigma`, checked once per replay) gets each fix's stated
+(:func:`posbench.predictors.base.accepts_sigma`, checked once per replay) gets each fix's stated
 per-axis 1-sigma [m] (``GpsStream.accuracy``) as ``sigma=``, or ``sigma=None`` where the
 stream states none or the value is not finite and positive; others get (t, x, y) only.
 """
@@ -25,8 +25,8 @@ from time import perf_counter_ns
 
 import numpy as np
 
-from bench.prepare import PreparedDrive
-from predictors.base import Predictor, accepts_sigma
+from posbench.predictors.base import Predictor, accepts_sigma
+from posbench.prepare import PreparedDrive
 
 GPS, IMU, SPEED, QUERY = 0, 1, 2, 3
 
@@ -48,7 +48,7 @@ class ReplayResult:
 
 def reports_covariance(predictor: Predictor) -> bool:
     """Whether ``predictor`` (or the predictor a gate wraps) overrides
-    :meth:`~predictors.base.Predictor.covariance_at`; the base default ("no uncertainty")
+    :meth:`~posbench.predictors.base.Predictor.covariance_at`; the base default ("no uncertainty")
     is never called."""
     inner = getattr(predictor, "inner", predictor)
     return type(inner).covariance_at is not Predictor.covariance_at

@@ -1,5 +1,5 @@
 """Write a run's outputs: ``report.md`` (tables a person reads first), ``results.json``,
-per-query traces (Parquet) and the plots (:mod:`bench.plots`)."""
+per-query traces (Parquet) and the plots (:mod:`posbench.plots`)."""
 
 from __future__ import annotations
 
@@ -7,13 +7,13 @@ from collections.abc import Iterable
 from pathlib import Path
 from typing import Any
 
-from bench.consistency import report_lines as consistency_lines
-from bench.glossary import glossary_lines
-from bench.options import TABLE_FORMATS
-from bench.plots import DEFAULT_DRIVE_PLOTS, PlotsWritten, shown_format, write_plots
-from bench.saved_run import Run
-from bench.stat_tables import block_lengths, paired_label_table, paired_table, seeds_table
-from bench.tables import (
+from posbench.consistency import report_lines as consistency_lines
+from posbench.glossary import glossary_lines
+from posbench.options import TABLE_FORMATS
+from posbench.plots import DEFAULT_DRIVE_PLOTS, PlotsWritten, shown_format, write_plots
+from posbench.saved_run import Run
+from posbench.stat_tables import block_lengths, paired_label_table, paired_table, seeds_table
+from posbench.tables import (
     NOT_CONCLUSIVE,
     Table,
     dataset_table,
@@ -27,8 +27,8 @@ from bench.tables import (
     trained_in_run,
     warmup_table,
 )
-from bench.track_results import TRACK_NOTE, track_table
-from bench.uncertainty import UNCERTAINTY_NOTE, uncertainty_table
+from posbench.track_results import TRACK_NOTE, track_table
+from posbench.uncertainty import UNCERTAINTY_NOTE, uncertainty_table
 
 MISSING_NOTE = ("`missing`: queries a predictor answered with no position (NaN) although a "
                 "reference exists, e.g. before its first fix; they are counted, not averaged, so "
@@ -79,9 +79,9 @@ def write_report(run: Run, out: Path, formats: Iterable[str] = ("png",),
     """Write the run's plots (in each of ``formats``: png, svg, pdf; ValueError on others),
     ``report.md`` and its tables as files (``table_formats``: csv, latex; see
     :func:`write_tables`) into ``out``; return the paths written. The run itself
-    (results.json, traces) is written by :func:`bench.saved_run.save_run`. ``plots``: the
+    (results.json, traces) is written by :func:`posbench.saved_run.save_run`. ``plots``: the
     plots already drawn into ``out`` (``bench run`` draws them while it aggregates,
-    :mod:`bench.figure_jobs`); None draws them here."""
+    :mod:`posbench.figure_jobs`); None draws them here."""
     shown = "." + shown_format(formats)  # checks the formats before anything is written
     out.mkdir(parents=True, exist_ok=True)
     if plots is None:

@@ -1,4 +1,4 @@
-"""The default layout (rerun blueprint) of one drive's recording (:mod:`bench.rerun_log`).
+"""The default layout (rerun blueprint) of one drive's recording (:mod:`posbench.rerun_log`).
 
 Three columns: the whole-drive map (overview, trailing :data:`TRAIL_S`) over the colour
 scale of its error-coloured track; the view around the vehicle (north up, the reference at

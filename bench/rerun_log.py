@@ -6,7 +6,7 @@ Needs the ``viz`` extra (rerun-sdk); rerun is imported only inside
 
 **One drive at a time.** Each drive is its own recording (application id and recording id
 ``<dataset>/<drive>``, recording name the same), with its own default blueprint
-(:mod:`bench.rerun_blueprint`) and its own timeline ``time``: drive time [s] (``duration``),
+(:mod:`posbench.rerun_blueprint`) and its own timeline ``time``: drive time [s] (``duration``),
 the drive's own t. The viewer lists the drives separately in its source panel; pick one
 there. (Each recording is written to a file of its own, then ``rerun rrd merge`` joins them:
 the supported way to hold several recordings in one file.)
@@ -27,7 +27,7 @@ Layout, per drive under ``drives/<drive>/`` (names sanitised to ``[A-Za-z0-9_.-]
   against; ``map/<predictor>/now``: the current-position answer at each "now" query time;
   ``map/<predictor>/ellipse_future``, ``map/<predictor>/ellipse_now``: for a predictor that
   reports covariance (``covariance_at``), the 95 % ellipse around each answer
-  (:func:`metrics.ellipses.ellipse_outlines`, 24 segments, radius sqrt(5.991) in the
+  (:func:`posbench.metrics.ellipses.ellipse_outlines`, 24 segments, radius sqrt(5.991) in the
   covariance's eigenbasis), in its colour, at the answer's time; a query without a
   covariance holds an empty row (the ellipse is cleared); no entity for a predictor
   without uncertainty;
@@ -38,7 +38,7 @@ Layout, per drive under ``drives/<drive>/`` (names sanitised to ``[A-Za-z0-9_.-]
   its tip the answer) and ``around/<predictor>/future`` (the future point, relative to the
   reference at its query time);
 - ``vehicle_frame/<predictor>``: each current-position error as (along, cross) in the
-  reference's heading frame (ahead to the right, left up; :mod:`metrics.track_errors`),
+  reference's heading frame (ahead to the right, left up; :mod:`posbench.metrics.track_errors`),
   ``vehicle_frame/axes`` the axes through (0, 0);
 - ``errors/<predictor>/future``, ``errors/<predictor>/now``: Euclidean error [m];
   ``along/<predictor>/...``, ``cross/<predictor>/...``: along-track (+ ahead) and cross-track
@@ -65,16 +65,16 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from bench.rerun_blueprint import TIMELINE, blueprint
-from bench.scoring import COV_COLUMNS
-from metrics.ellipses import ellipse_outlines
+from posbench.metrics.ellipses import ellipse_outlines
+from posbench.rerun_blueprint import TIMELINE, blueprint
+from posbench.scoring import COV_COLUMNS
 
 if TYPE_CHECKING:
     import pandas as pd
 
-    from bench.runner import DriveRun
+    from posbench.runner import DriveRun
 
-VIZ_HINT = "rerun recordings need the viz extra: pip install 'posbench[viz]'"
+VIZ_HINT = "rerun recordings need the viz extra: pip install 'posbench-harness[viz]'"
 N_LAST_FIXES = 5  # fixes shown around the vehicle
 ROAD_S = (-2.0, 1.0)  # the stretch of reference shown around the vehicle [s], relative
 ROAD_STEP_S = 0.25

@@ -29,7 +29,7 @@ from pathlib import Path
 from typing import IO
 from urllib.parse import quote
 
-from bench.options import UsageError
+from posbench.options import UsageError
 
 #: the host both servers listen on; other machines reach it through ``ssh -L``
 HOST = "127.0.0.1"

@@ -14,8 +14,8 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from bench.config import RunConfig
-from bench.intervals import (
+from posbench.config import RunConfig
+from posbench.intervals import (
     OUTAGE_ID_BASE,
     Statistics,
     add_group_cis,
@@ -27,11 +27,11 @@ from bench.intervals import (
     since_fix_keys,
     with_ci,
 )
-from bench.prepare import LABELS
-from bench.runner import DriveRun
-from metrics.accuracy import speed_bin_labels, speed_bin_order, summarize, summarize_groups
-from metrics.latency import latency_summary
-from metrics.outages import error_vs_since_fix, outage_scores
+from posbench.metrics.accuracy import speed_bin_labels, speed_bin_order, summarize, summarize_groups
+from posbench.metrics.latency import latency_summary
+from posbench.metrics.outages import error_vs_since_fix, outage_scores
+from posbench.prepare import LABELS
+from posbench.runner import DriveRun
 
 KINDS = ("future", "now")
 #: the trace columns aggregation reads (positions are not needed once errors exist)
@@ -41,10 +41,12 @@ VERSIONED = ("posbench", "numpy", "scipy", "pandas", "filterpy", "onnxruntime", 
 
 
 def package_versions() -> dict[str, str]:
+    from posbench import DISTRIBUTION
+
     out = {"python": platform.python_version()}
     for name in VERSIONED:
-        try:
-            out[name] = metadata.version(name)
+        try:  # the key "posbench" names the harness, whatever its distribution is called
+            out[name] = metadata.version(DISTRIBUTION if name == "posbench" else name)
         except metadata.PackageNotFoundError:
             out[name] = "not installed"
     return out
@@ -115,12 +117,12 @@ def tree_hash(path: str | Path) -> dict[str, Any]:
 
 def learned_models(cfg: RunConfig) -> dict[str, dict[str, Any]]:
     """Per predictor of the run that declares a learned model (``lstm``, ``lstm@mine``,
-    ``lstm-authors``, ...; :meth:`~predictors.base.Predictor.model_description`): the model
+    ``lstm-authors``, ...; :meth:`~posbench.predictors.base.Predictor.model_description`): the model
     file it uses, whether that is the bundled one, and the drive names the model was
-    trained on (:meth:`~predictors.base.Predictor.training_drives`), so results on those
+    trained on (:meth:`~posbench.predictors.base.Predictor.training_drives`), so results on those
     drives can be told apart. Each predictor is created with the run's options for it."""
-    from predictors.base import Predictor
-    from predictors.registry import create, predictor_class
+    from posbench.predictors.base import Predictor
+    from posbench.predictors.registry import create, predictor_class
 
     out: dict[str, dict[str, Any]] = {}
     for name in cfg.predictors:
@@ -150,7 +152,7 @@ DEFINITIONS = {
 
 def scored_mask(traces: pd.DataFrame) -> np.ndarray:
     """Rows that count in the headline figures: past the warm-up (see
-    :func:`bench.scoring.warmup_end_s`) and with a known reference position."""
+    :func:`posbench.scoring.warmup_end_s`) and with a known reference position."""
     if traces.empty:
         return np.zeros(0, dtype=bool)
     m = traces["x_ref"].notna().to_numpy() & traces["y_ref"].notna().to_numpy()
@@ -278,7 +280,7 @@ def aggregate(runs: Sequence[DriveRun], cfg: RunConfig, data_manifest: list[dict
     never holds a second full copy of its traces (the baseline's rows are kept for the
     paired comparison). Every summary gets its ``ci95`` and each predictor its paired
     comparison with the baseline as ``statistics`` says (default: :class:`Statistics` with
-    baseline ``kf`` when it is in the run; see :mod:`bench.intervals`)."""
+    baseline ``kf`` when it is in the run; see :mod:`posbench.intervals`)."""
     if traces is None:
         traces = all_traces(runs)
     preds = list(cfg.predictors)
@@ -433,10 +435,10 @@ def aggregate(runs: Sequence[DriveRun], cfg: RunConfig, data_manifest: list[dict
             d["predictors"] = {name: mine.get(name, _empty_kinds(stats)) for name in preds}
         res["drives"].append(d)
     res["gate"] = gate_summary(runs, cfg)
-    from bench.track_results import track_section
+    from posbench.track_results import track_section
 
     res["track_errors"] = track_section(traces, keep, preds)
-    from bench.uncertainty import uncertainty_section
+    from posbench.uncertainty import uncertainty_section
 
     res["uncertainty"] = uncertainty_section(traces, keep, preds)
     return res

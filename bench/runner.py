@@ -13,13 +13,13 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from bench.config import RunConfig, gps_condition
-from bench.prepare import PreparedDrive, prepare_drive
-from bench.replay import replay
-from bench.scoring import query_frame, score_many
-from predictors.gate import GatedPredictor
-from predictors.registry import create
-from scenarios.drive import Drive
+from posbench.config import RunConfig, gps_condition
+from posbench.predictors.gate import GatedPredictor
+from posbench.predictors.registry import create
+from posbench.prepare import PreparedDrive, prepare_drive
+from posbench.replay import replay
+from posbench.scenarios.drive import Drive
+from posbench.scoring import query_frame, score_many
 
 
 @dataclass
@@ -58,7 +58,7 @@ def _track_frame(prep: PreparedDrive) -> pd.DataFrame:
         tr = d.truth
         step = max(1, int(round(0.1 / np.median(np.diff(tr.t))))) if len(tr) > 1 else 1
         return pd.DataFrame({"t": tr.t[::step], "x": tr.x[::step], "y": tr.y[::step]})
-    from bench.reference import cubic_through_fixes
+    from posbench.reference import cubic_through_fixes
 
     t = np.arange(d.gps.t[0], d.gps.t[-1], 0.1)
     xy = cubic_through_fixes(d.gps.t, d.gps.x, d.gps.y, t)

@@ -2,13 +2,13 @@
 
 ``save_run(out, run)`` writes ``results.json`` (validated against the JSON Schema shipped
 as ``bench/schemas/results.schema.json``, version :data:`SCHEMA_VERSION`) and
-``traces.parquet`` (columns: :data:`bench.scoring.TRACE_COLUMNS`); ``load_run(path)``
+``traces.parquet`` (columns: :data:`posbench.scoring.TRACE_COLUMNS`); ``load_run(path)``
 reads them back as a :class:`Run`, its traces loaded only when first used. The report,
 the figures, the terminal tables and every later command read a :class:`Run`.
 
 Example (a notebook)::
 
-    from bench.saved_run import load_run
+    from posbench.saved_run import load_run
     run = load_run("bench-out")
     run.summary("future")                  # predictors x mean_m, median_m, ... [m]
     tr = run.traces                        # one row per query
@@ -27,7 +27,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from scenarios.errors import DataError
+from posbench.scenarios.errors import DataError
 
 #: MAJOR.MINOR of results.json: a reader accepts every MINOR of its MAJOR; MINOR grows when
 #: keys are added, MAJOR when a key changes meaning or goes
@@ -39,7 +39,7 @@ PROVENANCE_KEYS = ("command", "versions", "git_commit", "data")
 
 def results_schema() -> dict[str, Any]:
     """The JSON Schema of ``results.json`` (shipped with the package)."""
-    return json.loads((resources.files("bench") / "schemas" / "results.schema.json").read_text())
+    return json.loads((resources.files("posbench") / "schemas" / "results.schema.json").read_text())
 
 
 def to_json_value(o: Any) -> Any:
@@ -101,7 +101,7 @@ class Run:
     @property
     def traces(self) -> pd.DataFrame:
         """Per-query traces (loaded from the folder on first use; columns:
-        :data:`bench.scoring.TRACE_COLUMNS`). Empty when nothing was scored."""
+        :data:`posbench.scoring.TRACE_COLUMNS`). Empty when nothing was scored."""
         if self._traces is None:
             path = None if self.folder is None else self.folder / TRACES
             if path is None or not path.is_file():
@@ -110,7 +110,7 @@ class Run:
                 self._traces = pd.DataFrame()
             else:
                 self._traces = pd.read_parquet(path)
-                from bench.scoring import COV_COLUMNS
+                from posbench.scoring import COV_COLUMNS
 
                 for c in COV_COLUMNS:  # traces written before schema 1.4
                     if c not in self._traces:
@@ -122,7 +122,7 @@ class Run:
         predictor, columns count, missing, mean_m, median_m, rmse_m, p95_m, max_m [m], and
         for runs with intervals (schema 1.1) their 95 % bounds mean_m_lo, mean_m_hi,
         median_m_lo, ... [m]."""
-        from metrics.accuracy import SUMMARY_KEYS
+        from posbench.metrics.accuracy import SUMMARY_KEYS
 
         rows = {}
         for p, v in self.results["predictors"].items():
@@ -137,9 +137,9 @@ class Run:
 
     def track_summary(self, kind: str = "future") -> pd.DataFrame:
         """Along/cross-track figures of one kind as a numeric frame: one row per predictor,
-        columns of :data:`metrics.track_errors.TRACK_SUMMARY_KEYS` [m] (schema 1.3); empty
+        columns of :data:`posbench.metrics.track_errors.TRACK_SUMMARY_KEYS` [m] (schema 1.3); empty
         for older runs, which have none."""
-        from metrics.track_errors import TRACK_SUMMARY_KEYS
+        from posbench.metrics.track_errors import TRACK_SUMMARY_KEYS
 
         block = self.results.get("track_errors", {}).get("predictors", {})
         rows = {p: {k: v[kind].get(k) for k in TRACK_SUMMARY_KEYS} for p, v in block.items()}
@@ -164,7 +164,7 @@ def save_run(out: Path, run: Run, also_written: Sequence[Path] = (),
     ``traces_written``: returns the traces file :func:`write_traces` already wrote (or is
     writing, in another process) for ``run``; None: written here. Returns the two paths
     written."""
-    from bench.outputs import relative_outputs
+    from posbench.outputs import relative_outputs
 
     out.mkdir(parents=True, exist_ok=True)
     traces = (traces_written() if traces_written is not None

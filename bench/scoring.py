@@ -3,7 +3,7 @@
 ``bench run`` replays a drive through each predictor and scores the answers here; answers
 that come from elsewhere (a file written by another program) go through the same
 :func:`score`, matched to the queries by drive, kind and query time. Aggregation
-(:mod:`bench.results`) works from the traces only.
+(:mod:`posbench.results`) works from the traces only.
 
 :data:`TRACE_COLUMNS` documents every column of ``traces.parquet`` (the README's table
 is generated from it: :func:`trace_columns_markdown`).
@@ -17,10 +17,10 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from bench.prepare import LABELS, PreparedDrive, Queries
-from metrics.accuracy import euclidean_error
-from metrics.outages import outage_ids
-from metrics.track_errors import track_errors
+from posbench.metrics.accuracy import euclidean_error
+from posbench.metrics.outages import outage_ids
+from posbench.metrics.track_errors import track_errors
+from posbench.prepare import LABELS, PreparedDrive, Queries
 
 #: column -> (type, unit, meaning); frames: x/y in the drive's local ENU metres
 TRACE_COLUMNS: dict[str, tuple[str, str, str]] = {

@@ -15,9 +15,9 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from bench.results import KINDS, scored_mask
-from metrics.accuracy import summarize
-from metrics.seeds import spread
+from posbench.metrics.accuracy import summarize
+from posbench.metrics.seeds import spread
+from posbench.results import KINDS, scored_mask
 
 #: the figures whose spread across seeds is reported
 SPREAD_FIGURES = ("mean_m", "median_m", "rmse_m", "p95_m")
@@ -62,7 +62,7 @@ def seed_figures(traces: pd.DataFrame, predictors: Sequence[str], baseline: str 
 def seeds_section(seeds: Sequence[int], figures: Sequence[dict[str, Any]]) -> dict[str, Any]:
     """``results["seeds"]``: the seeds, which one the traces and every other figure come
     from (the first), each seed's figures, and per predictor, kind and figure the spread
-    across seeds (:func:`metrics.seeds.spread`: mean, sd, min, max, n), also of the paired
+    across seeds (:func:`posbench.metrics.seeds.spread`: mean, sd, min, max, n), also of the paired
     difference (figure ``diff_m``)."""
     out: dict[str, Any] = {"seeds": [int(s) for s in seeds], "traces_seed": int(seeds[0]),
                            "runs": list(figures), "spread": {}}

@@ -1,6 +1,6 @@
 """The tables of the statistics: each predictor against the baseline (overall, per data set,
 per route type) and the spread of a run repeated over seeds. Numeric :class:`Table` s like
-every other table of :mod:`bench.tables`, rendered by the same code."""
+every other table of :mod:`posbench.tables`, rendered by the same code."""
 
 from __future__ import annotations
 
@@ -9,8 +9,8 @@ from typing import Any
 
 import pandas as pd
 
-from bench.prepare import LABELS
-from bench.tables import (
+from posbench.prepare import LABELS
+from posbench.tables import (
     KINDS,
     LABEL_TITLES,
     TRAINED_MARK,

@@ -4,9 +4,9 @@ A :class:`Table` holds a DataFrame (numbers stay numbers; NaN/None = no figure),
 decimals each float column shows, which columns are shown as ``value (count)``, which carry
 a 95 % interval (``value [lo, hi]``) and which a marker (``*`` conclusive, ``?`` not). One
 renderer writes each form: terminal cells (:meth:`Table.cells`, printed by
-:func:`bench.terminal.print_table`), Markdown, CSV (full precision; counts, interval bounds
+:func:`posbench.terminal.print_table`), Markdown, CSV (full precision; counts, interval bounds
 and markers as their own columns) and LaTeX. The builders below read a run's ``results``
-(see :mod:`bench.saved_run`); nothing else formats a figure.
+(see :mod:`posbench.saved_run`); nothing else formats a figure.
 """
 
 from __future__ import annotations
@@ -18,8 +18,8 @@ from typing import Any
 
 import pandas as pd
 
-from bench.prepare import LABELS
-from metrics.accuracy import speed_bin_order
+from posbench.metrics.accuracy import speed_bin_order
+from posbench.prepare import LABELS
 
 PAPER_TABLE_CM = {"straight": 16.6, "turn": 12.1, "roundabout": 9.7, "start_stop": 4.2}
 PAPER_OVERALL = "11 (LSTM), 46 (Kalman)"

@@ -1,9 +1,9 @@
 """The ``track_errors`` block of results.json: where the error points (schema 1.2).
 
-Per predictor and kind (and per scenario label), :func:`metrics.track_errors.track_summary`
+Per predictor and kind (and per scenario label), :func:`posbench.metrics.track_errors.track_summary`
 of the scored queries' along-track and cross-track errors (trace columns ``along_m``,
 ``cross_m``) and of the cross-track error signed toward the inside of the turn
-(:func:`metrics.track_errors.inward_cross` of ``cross_m`` and ``yaw_rate_ref``).
+(:func:`posbench.metrics.track_errors.inward_cross` of ``cross_m`` and ``yaw_rate_ref``).
 """
 
 from __future__ import annotations
@@ -14,9 +14,9 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from bench.prepare import LABELS
-from bench.tables import Table
-from metrics.track_errors import inward_cross, track_summary
+from posbench.metrics.track_errors import inward_cross, track_summary
+from posbench.prepare import LABELS
+from posbench.tables import Table
 
 KINDS = ("future", "now")
 NEEDED = ("predictor", "kind", "label", "error_m", "along_m", "cross_m", "yaw_rate_ref")

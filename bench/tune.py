@@ -10,7 +10,7 @@ current-position error [m] over all queries.
 Calibration follows the search (:func:`calibrate`): with the winning parameters, the
 same development drives are replayed once and ``cov_scale`` (the factor ``covariance_at``
 multiplies its covariance by) is set so that 95 % of the scored queries (future and now
-pooled) fall inside their 95 % ellipse (:func:`metrics.calibration.coverage_scale`). It
+pooled) fall inside their 95 % ellipse (:func:`posbench.metrics.calibration.coverage_scale`). It
 changes no position, so it cannot trade accuracy for honesty. ``cv`` has no noise to
 search, only this scale. Winners are written to
 ``predictors/tuned.json``, keyed by predictor and GPS condition, which the
@@ -27,11 +27,12 @@ from typing import Any
 
 import numpy as np
 
-from bench.config import RunConfig
-from bench.runner import run
-from scenarios.drive import Drive
+from posbench.config import RunConfig
+from posbench.predictors.registry import TUNED_FILE
+from posbench.runner import run
+from posbench.scenarios.drive import Drive
 
-TUNED_PATH = Path(__file__).resolve().parents[1] / "predictors" / "tuned.json"
+TUNED_PATH = TUNED_FILE
 
 #: Search grids per predictor (values tried for each parameter).
 GRIDS: dict[str, dict[str, list[float]]] = {
@@ -53,8 +54,8 @@ SCALE_GRID: list[float] = [0.5, 1.0, 1.5, 2.0, 3.0, 4.0, 6.0, 8.0, 16.0, 32.0]
 def grid_for(predictor: str, gps_profile: str) -> dict[str, list[float]]:
     """The search grid of ``predictor`` under ``gps_profile``: :data:`GRIDS`, with
     ``gps_sigma`` replaced by ``gps_sigma_scale`` (:data:`SCALE_GRID`) for a simulated
-    profile whose fixes state their accuracy (:func:`scenarios.degrade.stated_sigma_m`)."""
-    from scenarios.degrade import GPS_PROFILES, stated_sigma_m
+    profile whose fixes state their accuracy (:func:`posbench.scenarios.degrade.stated_sigma_m`)."""
+    from posbench.scenarios.degrade import GPS_PROFILES, stated_sigma_m
 
     grid = GRIDS[predictor]
     if gps_profile not in GPS_PROFILES or stated_sigma_m(gps_profile) is None:
@@ -114,9 +115,9 @@ def calibrate(predictor: str, drives: Sequence[Drive], gps_profile: str,
     digits (NaN when the predictor reports no covariance on these drives)."""
     import pandas as pd
 
-    from bench.results import scored_mask
-    from bench.uncertainty import COV
-    from metrics.calibration import coverage_scale, mahalanobis_sq
+    from posbench.metrics.calibration import coverage_scale, mahalanobis_sq
+    from posbench.results import scored_mask
+    from posbench.uncertainty import COV
 
     cfg = RunConfig(predictors=(predictor,), gps_profile=gps_profile, seed=seed,
                     predictor_options={predictor: {k: v for k, v in params.items()

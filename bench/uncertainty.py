@@ -2,10 +2,10 @@
 covariance honest?
 
 Per predictor that reports covariance (trace columns ``cov_xx``, ``cov_xy``, ``cov_yy``)
-and kind, :func:`metrics.calibration.calibration_summary` of the scored queries (the
+and kind, :func:`posbench.metrics.calibration.calibration_summary` of the scored queries (the
 headline rows: past warm-up, reference known) with the NEES's cluster-bootstrap CI
 (drives resampled), and without CI by data set, by route type (scenario label) and by
-time since the last fix (:data:`metrics.calibration.SINCE_FIX_EDGES_S`), plus the
+time since the last fix (:data:`posbench.metrics.calibration.SINCE_FIX_EDGES_S`), plus the
 calibration curve. A predictor without any covariance is listed under ``none``: the
 report says "no uncertainty" for it, never a made-up figure.
 """
@@ -18,14 +18,14 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from bench.intervals import drive_codes
-from bench.tables import Table
-from metrics.calibration import (
+from posbench.intervals import drive_codes
+from posbench.metrics.calibration import (
     calibration_curve,
     calibration_summary,
     mahalanobis_sq,
     since_fix_bin,
 )
+from posbench.tables import Table
 
 KINDS = ("future", "now")
 COV = ["cov_xx", "cov_xy", "cov_yy"]

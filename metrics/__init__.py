@@ -1,6 +1,6 @@
 """Accuracy and latency metrics: pure functions on numpy arrays (metres, microseconds)."""
 
-from metrics.accuracy import (
+from posbench.metrics.accuracy import (
     error_cdf,
     euclidean_error,
     speed_bin_labels,
@@ -8,7 +8,7 @@ from metrics.accuracy import (
     summarize,
     summarize_groups,
 )
-from metrics.latency import latency_summary
+from posbench.metrics.latency import latency_summary
 
 __all__ = ["error_cdf", "euclidean_error", "latency_summary", "speed_bin_labels",
            "speed_bin_order", "summarize", "summarize_groups"]

@@ -18,7 +18,7 @@ With one cluster (a single drive), queries are resampled in contiguous blocks in
 (circular block bootstrap, :func:`block_resample`, block length :func:`block_length`): the
 blocks keep the correlation that whole drives keep above. Everything is seeded: the same
 inputs and seed give the same interval on any machine. Pure numpy (the exact resampled
-quantiles are in :mod:`metrics.resampled_quantiles`).
+quantiles are in :mod:`posbench.metrics.resampled_quantiles`).
 """
 
 from __future__ import annotations
@@ -30,7 +30,7 @@ from functools import lru_cache
 
 import numpy as np
 
-from metrics.resampled_quantiles import resampled_quantiles, resampled_quantiles_many
+from posbench.metrics.resampled_quantiles import resampled_quantiles, resampled_quantiles_many
 
 #: resamples per interval (B)
 DEFAULT_RESAMPLES = 2000
@@ -348,7 +348,7 @@ def summary_ci(errors: np.ndarray, clusters: np.ndarray, times: np.ndarray | Non
                n_resamples: int = DEFAULT_RESAMPLES, seed: int = 0,
                level: float = LEVEL) -> dict[str, object]:
     """Intervals of the mean, median and p95 of the finite ``errors`` (what
-    :func:`metrics.accuracy.summarize` reports), resampling ``clusters`` (e.g. the drive of
+    :func:`posbench.metrics.accuracy.summarize` reports), resampling ``clusters`` (e.g. the drive of
     each query); with a single cluster, a block bootstrap over the queries in time order
     (``times`` [s]; default: the order given).
 

@@ -9,7 +9,7 @@ degrees of freedom when P is the error's true covariance (Gaussian errors). So:
   For n independent queries, n * NEES ~ chi-square(2n), which gives the 95 % interval of
   a calibrated predictor's mean NEES (:func:`nees_interval`). Queries of one drive are
   correlated, so that interval is narrow: the cluster-bootstrap CI (resampling drives,
-  :mod:`metrics.bootstrap`) says how well the mean NEES itself is known.
+  :mod:`posbench.metrics.bootstrap`) says how well the mean NEES itself is known.
 - **Coverage** of the p-ellipse {e : d^2 <= r^2}, r^2 = -2 ln(1 - p) (the chi-square 2 DoF
   quantile): the share of queries whose truth falls inside; calibrated = p. The
   **calibration curve** is observed vs expected coverage over a grid of p.
@@ -209,7 +209,7 @@ def calibration_summary(err: np.ndarray, cov: np.ndarray, clusters: np.ndarray |
         if n else math.nan,
     }
     if with_ci and n:
-        from metrics.bootstrap import summary_ci
+        from posbench.metrics.bootstrap import summary_ci
 
         cl = np.zeros(n, dtype=np.int64) if clusters is None else np.asarray(clusters)[ok]
         tt = None if times is None else np.asarray(times, dtype=float)[ok]

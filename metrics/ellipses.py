@@ -1,7 +1,7 @@
 """Geometry of 2-D covariance ellipses: the p-ellipse of many covariances at once.
 
 The p-ellipse of a 2x2 position covariance P (ENU, m^2) is {e : e' P^-1 e <= r^2} with
-r^2 = -2 ln(1 - p), the chi-square 2-DoF quantile (:func:`metrics.calibration.ellipse_r2`;
+r^2 = -2 ln(1 - p), the chi-square 2-DoF quantile (:func:`posbench.metrics.calibration.ellipse_r2`;
 p = 0.95: r^2 = 5.991). In the eigenbasis of P (eigenvalues l1 >= l2) it is an ellipse with
 semi-axes r sqrt(l1) and r sqrt(l2), the major one at angle theta = atan2(2 P_xy,
 P_xx - P_yy) / 2 from east, counter-clockwise (towards north).
@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from metrics.calibration import ellipse_r2
+from posbench.metrics.calibration import ellipse_r2
 
 #: segments of a drawn ellipse outline (the outline has one more point: it is closed)
 ELLIPSE_SEGMENTS = 24

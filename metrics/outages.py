@@ -14,7 +14,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from metrics.accuracy import summarize
+from posbench.metrics.accuracy import summarize
 
 SINCE_FIX_CHECKPOINTS_S = (0.2, 0.5, 1.0, 2.0, 5.0)
 #: a query counts for a checkpoint when its time since the last fix is this close to it [s]

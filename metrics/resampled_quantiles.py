@@ -5,7 +5,7 @@ quantile is what ``np.percentile`` (linear interpolation) gives on the values re
 often. Writing B resamples of n values out costs B x n; here the pooled values are sorted
 once and each resample's quantile is found through a coarse pass (one matrix product over
 blocks of sorted positions) and a fine pass inside one block. Used by
-:mod:`metrics.bootstrap`; pure numpy.
+:mod:`posbench.metrics.bootstrap`; pure numpy.
 """
 
 from __future__ import annotations

@@ -2,7 +2,7 @@
 
 A run with simulated GPS noise and dropouts is one random draw; repeating it over seeds
 (``bench run --seeds``) shows how much a figure moves with the draw alone. That spread is a
-different thing from the bootstrap interval (:mod:`metrics.bootstrap`), which measures how
+different thing from the bootstrap interval (:mod:`posbench.metrics.bootstrap`), which measures how
 much it would move with other drives; the report gives both side by side.
 """
 

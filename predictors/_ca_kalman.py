@@ -1,4 +1,4 @@
-"""The 2-D constant-acceleration Kalman filter of :mod:`predictors.kf` in plain floats.
+"""The 2-D constant-acceleration Kalman filter of :mod:`posbench.predictors.kf` in plain floats.
 
 Same maths as ``filterpy.kalman.KalmanFilter`` with ``F``, ``Q`` of the CA model and the
 kf's measurements, written for the fixed size: at IMU rate numpy's per-call overhead

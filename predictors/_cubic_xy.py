@@ -1,6 +1,6 @@
 """Least-squares cubics x(t), y(t) through a short window of fixes, for ``poly``'s fix step.
 
-The same fit as :func:`predictors.cubic.fit_cubic` (linear least squares, degree 3) solved
+The same fit as :func:`posbench.predictors.cubic.fit_cubic` (linear least squares, degree 3) solved
 through its 4x4 normal equations with an unrolled LDL' factorisation in plain floats:
 ``np.linalg.lstsq`` (an SVD, ~15 us of call overhead) is most of the cost of a fix step,
 while the arithmetic is ~100 flops. Conditioning: time is centred and scaled to

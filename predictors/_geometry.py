@@ -12,7 +12,7 @@ import math
 
 import numpy as np
 
-from scenarios.errors import DataError
+from posbench.scenarios.errors import DataError
 
 TWO_PI = 2.0 * math.pi
 

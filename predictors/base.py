@@ -36,7 +36,7 @@ class Predictor(ABC):
     def observe_gps(self, t: float, x: float, y: float, sigma: float | None = None) -> None:
         """A GNSS fix at time t [s], position (x, y) [m, ENU]; ``sigma`` [m] is the fix's
         stated per-axis 1-sigma accuracy (east and north alike, uncorrelated: covariance
-        ``sigma**2 * I2`` m^2, :class:`~scenarios.drive.GpsStream`), None when the source
+        ``sigma**2 * I2`` m^2, :class:`~posbench.scenarios.drive.GpsStream`), None when the source
         states none. The runner passes ``sigma`` only to an ``observe_gps`` that declares a
         parameter of that name (:func:`accepts_sigma`): a predictor written with the
         three-argument form keeps working and never sees it."""
@@ -111,7 +111,7 @@ def stated_fix_variance(sigma: float | None, scale: float, default_var: float) -
 def accepts_sigma(observe_gps: Callable[..., object]) -> bool:
     """Whether an ``observe_gps`` (bound or not) takes the fix accuracy: it declares a
     parameter named ``sigma`` (or ``**kwargs``). Checked once per predictor by the runner
-    and by :class:`~predictors.gate.GatedPredictor`, not per fix."""
+    and by :class:`~posbench.predictors.gate.GatedPredictor`, not per fix."""
     try:
         params = inspect.signature(observe_gps).parameters.values()
     except (TypeError, ValueError):  # a builtin without a signature: the old form

@@ -28,8 +28,8 @@ import math
 
 import numpy as np
 
-from predictors._geometry import FixBuffer, check_config
-from predictors.base import Predictor
+from posbench.predictors._geometry import FixBuffer, check_config
+from posbench.predictors.base import Predictor
 
 NAN2 = (math.nan, math.nan)
 

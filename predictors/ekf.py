@@ -50,8 +50,8 @@ import math
 
 import numpy as np
 
-from predictors._geometry import check_config, wrap_angle
-from predictors.base import Predictor, stated_fix_variance
+from posbench.predictors._geometry import check_config, wrap_angle
+from posbench.predictors.base import Predictor, stated_fix_variance
 
 NAN2 = (math.nan, math.nan)
 SERIES_LIMIT = 0.05  # |w T| below which the integrals use their Taylor series

@@ -34,8 +34,8 @@ import math
 from collections.abc import Callable
 from typing import Any
 
-from predictors._geometry import check_config
-from predictors.base import Predictor, accepts_sigma
+from posbench.predictors._geometry import check_config
+from posbench.predictors.base import Predictor, accepts_sigma
 
 #: EWMA weight of one accepted fix in the noise estimate
 NOISE_ALPHA = 0.05
@@ -169,7 +169,7 @@ class GatedPredictor(Predictor):
     The gate's own: ``observe_gps`` (judged), ``reset`` (gate and predictor), ``config``
     (with the gate's), ``rejected``, ``gate`` and ``inner``. Every other attribute reads
     through to the wrapped predictor (``__getattr__``: its ``last_step``, ``steps``, ...),
-    and so do the optional :class:`~predictors.base.Predictor` methods the gate does not
+    and so do the optional :class:`~posbench.predictors.base.Predictor` methods the gate does not
     override (``training_drives``, ``model_description``, new ones alike). Setting an
     attribute the wrapped predictor has (``gated.stage_timer = hook``) sets it there.
     ``observe_imu``, ``observe_speed`` and ``position_at`` are the wrapped predictor's

@@ -30,7 +30,7 @@ small but road vibration and pitch (1 deg -> 0.17 m/s^2 of gravity) give ~0.3 m/
 wheel speed ~0.2 m/s plus a 3 % scale error (tyre radius; KITTI drive 0005's speed
 reads 2.5 % above its position-derived speed).
 
-Implementation: :class:`predictors._ca_kalman.CaFilter2D`, the same filter as
+Implementation: :class:`posbench.predictors._ca_kalman.CaFilter2D`, the same filter as
 ``filterpy.kalman.KalmanFilter`` with F = :func:`ca_transition`, Q = :func:`ca_process_noise`
 written out in plain floats for the fixed 6-state size (fix step p50 ~23 -> ~5 us); the
 tests run filterpy beside it (``filter_core``) and check mean, covariance and every answer.
@@ -42,9 +42,9 @@ import math
 
 import numpy as np
 
-from predictors._ca_kalman import CaFilter2D, ca_noise_block, predict_cross, predict_sym
-from predictors._geometry import check_config
-from predictors.base import Predictor, stated_fix_variance
+from posbench.predictors._ca_kalman import CaFilter2D, ca_noise_block, predict_cross, predict_sym
+from posbench.predictors._geometry import check_config
+from posbench.predictors.base import Predictor, stated_fix_variance
 
 NAN2 = (math.nan, math.nan)
 KMH = 1.0 / 3.6

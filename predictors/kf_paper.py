@@ -14,7 +14,7 @@ What their code does, and what this class keeps (K) or changes (C):
   the future point. That single step is "200 ms ahead": a fixed number of steps (one)
   regardless of the real time.
 - (K) The 8 points are the paper's resampling: a least-squares cubic
-  (:func:`predictors._cubic_xy.fit_cubic_xy`, the normal equations of ``fit_cubic``)
+  (:func:`posbench.predictors._cubic_xy.fit_cubic_xy`, the normal equations of ``fit_cubic``)
   through the recent fixes, evaluated on a 200 ms grid ending at the newest fix
   (``resample=True``). Their code fitted the window's 8 raw fixes (~1.4 s); the paper's
   text says the fit covers at least 2 s: ``fit_span_s`` (default 2.0) follows the text.
@@ -56,10 +56,10 @@ import math
 
 import numpy as np
 
-from predictors._cubic_xy import fit_cubic_xy
-from predictors._geometry import FixBuffer, check_config
-from predictors.base import Predictor
-from predictors.cubic import fit_cubic
+from posbench.predictors._cubic_xy import fit_cubic_xy
+from posbench.predictors._geometry import FixBuffer, check_config
+from posbench.predictors.base import Predictor
+from posbench.predictors.cubic import fit_cubic
 
 NAN2 = (math.nan, math.nan)
 
@@ -198,7 +198,7 @@ class PaperKalman(Predictor):
     def _resample(self, t: np.ndarray, xy: np.ndarray, times: np.ndarray
                   ) -> np.ndarray | list[list[float]]:
         """The least-squares cubics through the fixes (times t [s], positions xy [m] as rows
-        (2, n)) at ``times`` [s]: :func:`predictors._cubic_xy.fit_cubic_xy` evaluated in
+        (2, n)) at ``times`` [s]: :func:`posbench.predictors._cubic_xy.fit_cubic_xy` evaluated in
         plain floats, or ``fit_cubic`` (lstsq) for a window with fewer than four distinct
         times. Pairs [x, y] [m], one per time."""
         fit = fit_cubic_xy(t, xy)

@@ -1,8 +1,8 @@
 """The paper's cubic regression alone: fit x(t), y(t) with a third-order polynomial
 over the most recent fixes and evaluate (extrapolate) it at the query time.
 
-The fit (closed-form least squares: :func:`predictors._cubic_xy.fit_cubic_xy`, the
-normal equations of :func:`predictors.cubic.fit_cubic` in plain floats) uses the
+The fit (closed-form least squares: :func:`posbench.predictors._cubic_xy.fit_cubic_xy`, the
+normal equations of :func:`posbench.predictors.cubic.fit_cubic` in plain floats) uses the
 newest fixes covering at least ``span_s`` seconds (paper: "at least a 2-second
 interval", about 10 fixes at 5 Hz). It is refitted on each fix, so a query costs
 one Horner evaluation. With fewer than ``min_points`` fixes it falls back to
@@ -21,10 +21,10 @@ import math
 
 import numpy as np
 
-from predictors._cubic_xy import Cubic, fit_cubic_xy
-from predictors._geometry import FixBuffer, check_config
-from predictors.base import Predictor
-from predictors.cubic import fit_cubic
+from posbench.predictors._cubic_xy import Cubic, fit_cubic_xy
+from posbench.predictors._geometry import FixBuffer, check_config
+from posbench.predictors.base import Predictor
+from posbench.predictors.cubic import fit_cubic
 
 NAN2 = (math.nan, math.nan)
 KMH = 1.0 / 3.6
@@ -96,7 +96,7 @@ class PolyExtrapolator(Predictor):
     def _fit(self, t: np.ndarray, xy: np.ndarray) -> tuple[Cubic, Cubic, float, float]:
         """(cx, cy, t_ref, inv_scale) of the least-squares cubics through the window (times
         t [s] (n,), positions xy [m] as rows (2, n)):
-        :func:`predictors._cubic_xy.fit_cubic_xy`, or ``fit_cubic`` (lstsq, minimum norm)
+        :func:`posbench.predictors._cubic_xy.fit_cubic_xy`, or ``fit_cubic`` (lstsq, minimum norm)
         for a window with fewer than four distinct times."""
         fit = fit_cubic_xy(t, xy)
         if fit is not None:

@@ -7,7 +7,7 @@ A predictor is named in one of three ways, resolved in this order:
   distribution declares (``name = module:Class`` in its ``entry_points.txt``); a
   built-in name always wins over an entry point of the same name;
 - an **import path** ``module:Class`` (``mypkg.mymodule:MyPredictor``) of a
-  :class:`~predictors.base.Predictor` subclass importable from ``sys.path``.
+  :class:`~posbench.predictors.base.Predictor` subclass importable from ``sys.path``.
 
 Any of them may carry an alias, ``NAME@ALIAS``: a second instance under its own name.
 Everything is imported lazily: listing names reads distribution metadata only, and a
@@ -28,7 +28,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from predictors.base import Predictor
+from posbench.predictors.base import Predictor
 
 #: where a predictor comes from (:attr:`Entry.source`)
 BUILT_IN = "built-in"
@@ -38,6 +38,9 @@ IMPORT_PATH = "import path"
 
 #: the entry-point group installed packages declare their predictors in
 ENTRY_POINT_GROUP = "posbench.predictors"
+
+#: the tuned noise parameters per predictor and GPS condition (``bench tune`` writes them)
+TUNED_FILE = Path(__file__).with_name("tuned.json")
 
 #: separates a predictor name from an instance alias: ``lstm@mine`` is ``lstm`` under its own name
 ALIAS_SEP = "@"
@@ -68,21 +71,21 @@ class Entry:
 
 
 _REGISTRY: dict[str, Entry] = {
-    "cv": Entry("predictors.cv:ConstantVelocity",
+    "cv": Entry("posbench.predictors.cv:ConstantVelocity",
                 "constant velocity from the last two fixes"),
-    "poly": Entry("predictors.poly:PolyExtrapolator",
+    "poly": Entry("posbench.predictors.poly:PolyExtrapolator",
                   "the paper's cubic regression over recent fixes, extrapolated"),
-    "kf": Entry("predictors.kf:LinearKalman",
+    "kf": Entry("posbench.predictors.kf:LinearKalman",
                 "linear Kalman filter, constant-acceleration state, IMU accel (world frame) as observation"),
-    "kf-paper": Entry("predictors.kf_paper:PaperKalman",
+    "kf-paper": Entry("posbench.predictors.kf_paper:PaperKalman",
                       "the paper's Kalman baseline as its authors published it"),
-    "ekf": Entry("predictors.ekf:CtraEkf",
+    "ekf": Entry("posbench.predictors.ekf:CtraEkf",
                  "extended Kalman filter, CTRA model with IMU yaw rate/accel and wheel speed"),
-    "lstm": Entry("predictors.lstm.predictor:LstmPredictor",
+    "lstm": Entry("posbench.predictors.lstm.predictor:LstmPredictor",
                   "the paper's system: cubic resampling + MLP-LSTM-MLP (ONNX) + cubic"),
-    "lstm-authors": Entry("predictors.lstm.authors:AuthorsLstmPredictor",
+    "lstm-authors": Entry("posbench.predictors.lstm.authors:AuthorsLstmPredictor",
                           "the paper authors' published ONNX network (needs --model PATH)"),
-    "hybrid": Entry("predictors.hybrid.predictor:HybridPredictor",
+    "hybrid": Entry("posbench.predictors.hybrid.predictor:HybridPredictor",
                     "kf prior + learned residual (ONNX), 200 ms ahead"),
 }
 
@@ -251,7 +254,7 @@ def load_class(entry: Entry, name: str) -> type[Predictor]:
                              f"a {type(cls).__name__}); expected a Predictor subclass")
     if not issubclass(cls, Predictor):
         raise PredictorError(f"{label}: {cls.__name__} is not a subclass of "
-                             "predictors.base.Predictor")
+                             "posbench.predictors.base.Predictor")
     return cls
 
 
@@ -288,7 +291,7 @@ def tuned_params(name: str, condition: str | None) -> dict[str, Any]:
     ``native``) from ``predictors/tuned.json``; empty if none were tuned."""
     if condition is None:
         return {}
-    path = Path(__file__).with_name("tuned.json")
+    path = TUNED_FILE
     if not path.exists():
         return {}
     data = json.loads(path.read_text())

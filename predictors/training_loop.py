@@ -3,7 +3,7 @@
 One job: draw weighted batches, step Adam, validate after each epoch, keep the best weights,
 stop early (``patience`` epochs without improvement) or on a wall-clock budget, and report
 progress. What a batch's loss is and how validation is scored stay with the caller
-(:mod:`predictors.lstm.train`, :mod:`predictors.hybrid.train`).
+(:mod:`posbench.predictors.lstm.train`, :mod:`posbench.predictors.hybrid.train`).
 """
 
 from __future__ import annotations

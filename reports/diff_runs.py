@@ -3,7 +3,8 @@
 Compares ``results.json`` of two ``bench run`` folders exactly (floats with ``==``, no
 tolerance), skipping what differs between any two runs of the same code: latencies (keys
 ending ``_us``), the command line, git commit, package versions, and the list of files
-written. ``traces.parquet`` is compared column by column, bit for bit (NaN equal to NaN).
+written. ``traces.parquet`` is compared column by column, bit for bit (NaN equal to NaN),
+when both runs have one (the committed reports in ``reports/`` keep none).
 Prints every difference (up to 50) and exits 1 if there is one, else prints ``same`` and
 exits 0. Used to check that a faster harness gives the same results (README, Performance).
 """
@@ -74,8 +75,13 @@ def main(argv: list[str]) -> int:
     old, new = (Path(p) for p in argv)
     ra = json.loads((old / "results.json").read_text())
     rb = json.loads((new / "results.json").read_text())
-    diffs = list(diff_results(ra, rb)) + list(diff_traces(old / "traces.parquet",
-                                                          new / "traces.parquet"))
+    diffs = list(diff_results(ra, rb))
+    traces = [run / "traces.parquet" for run in (old, new)]
+    if all(p.is_file() for p in traces):
+        diffs += list(diff_traces(*traces))
+    else:  # the committed reports keep no traces (.gitignore): results.json alone then
+        missing = ", ".join(str(p) for p in traces if not p.is_file())
+        print(f"traces not compared: no {missing}")
     for line in diffs[:50]:
         print(line)
     if len(diffs) > 50:

@@ -40,10 +40,10 @@ from typing import Any
 
 import numpy as np
 
-from scenarios.align import similarity_2d
-from scenarios.drive import Drive
-from scenarios.grid import bin_mean, gaussian_kernel, interp_gapped, smooth
-from scenarios.imu_frames import circular_offset
+from posbench.scenarios.align import similarity_2d
+from posbench.scenarios.drive import Drive
+from posbench.scenarios.grid import bin_mean, gaussian_kernel, interp_gapped, smooth
+from posbench.scenarios.imu_frames import circular_offset
 
 PASS, WARN, FAIL, NA = "pass", "warn", "fail", "n/a"
 VERDICTS = (PASS, WARN, FAIL, NA)

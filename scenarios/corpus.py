@@ -1,6 +1,6 @@
 """The training corpus: seeded vehicle-dynamics drives that cover the driving envelope.
 
-Random routes from :mod:`scenarios.synthetic`'s kinematic simulator, per profile
+Random routes from :mod:`posbench.scenarios.synthetic`'s kinematic simulator, per profile
 (:data:`PROFILES`; speed targets in :data:`PROFILE_SPEEDS_MPS`):
 
 - ``urban`` (3-16 m/s): turns (radius 8-60 m, 30-120 deg), roundabouts (ring radius
@@ -21,11 +21,11 @@ Per drive, the vehicle's limits are drawn (:class:`VehicleLimits`: acceleration
 bias sigma 0.02-0.3 m/s^2, yaw noise 0.002-0.02 rad, yaw-rate noise 0.002-0.02 rad/s,
 gyro bias sigma 0-0.005 rad/s). CAN speed, GPS fixes (the paper's fix-interval
 distribution with late fixes, white + Gauss-Markov noise) and dropouts are those of
-:func:`scenarios.synthetic.generate_drive`.
+:func:`posbench.scenarios.synthetic.generate_drive`.
 
 ``meta.extra``: ``seed``, ``profile``, ``route`` (``"corpus-<profile>"``), ``segments``
-(``[label, t_start, t_end]``, label one of :data:`scenarios.labels.LABELS`, as
-:func:`scenarios.labels.label_times` sees the manoeuvre: U-turns ``turn``; lane changes
+(``[label, t_start, t_end]``, label one of :data:`posbench.scenarios.labels.LABELS`, as
+:func:`posbench.scenarios.labels.label_times` sees the manoeuvre: U-turns ``turn``; lane changes
 and creeping ``straight``; arcs and curves ``turn`` if the yaw rate at the speed the car
 can take them exceeds 0.1 rad/s or the radius is < 50 m, else ``straight``; roundabouts
 with a ring radius >= 30 m ``turn``), ``manoeuvres`` (``[kind, t_start, t_end]``, kind one of
@@ -46,9 +46,9 @@ from dataclasses import asdict, dataclass, replace
 
 import numpy as np
 
-from scenarios.drive import Drive, DriveMeta, TruthStream
-from scenarios.labels import LABELS, LabelThresholds
-from scenarios.synthetic import (
+from posbench.scenarios.drive import Drive, DriveMeta, TruthStream
+from posbench.scenarios.labels import LABELS, LabelThresholds
+from posbench.scenarios.synthetic import (
     EPOCH_S,
     ORIGIN_LAT,
     ORIGIN_LON,
@@ -81,7 +81,7 @@ _ROUNDABOUT_RADIUS_M = LabelThresholds().roundabout_radius_m
 class VehicleLimits:
     """One drive's vehicle: ``a_acc`` acceleration, ``a_dec`` braking, ``ay_max`` lateral
     acceleration [m/s^2], ``v_smooth_s`` speed smoothing [s], ``kappa_smooth_m`` curvature
-    smoothing [m] (the keyword limits of :func:`scenarios.synthetic.simulate`)."""
+    smoothing [m] (the keyword limits of :func:`posbench.scenarios.synthetic.simulate`)."""
 
     a_acc: float
     a_dec: float
@@ -259,7 +259,7 @@ def _est_time_s(seg: Segment, lim: VehicleLimits) -> float:
 
 
 def _ay_window_m(segs: list[Segment], lim: VehicleLimits) -> float:
-    """The curve-limit window [m] of :func:`scenarios.synthetic.simulate` that keeps the
+    """The curve-limit window [m] of :func:`posbench.scenarios.synthetic.simulate` that keeps the
     smoothed speed within ``ay_max``: the speed kernels' reach (+-``v_smooth_s``) at the
     route's top speed, plus 2 m for the shift of the re-integrated path."""
     return lim.v_smooth_s * max(g.speed_mps for g in segs) + 2.0

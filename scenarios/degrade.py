@@ -52,9 +52,11 @@ from collections.abc import Mapping, Sequence
 
 import numpy as np
 
-from scenarios.drive import GpsStream, TruthStream
-from scenarios.errors import DataError
-from scenarios.loaders.aslan import ASLAN_FIX_INTERVAL_QUANTILES_S as _ASLAN_MEASURED_QUANTILES_S
+from posbench.scenarios.drive import GpsStream, TruthStream
+from posbench.scenarios.errors import DataError
+from posbench.scenarios.loaders.aslan import (
+    ASLAN_FIX_INTERVAL_QUANTILES_S as _ASLAN_MEASURED_QUANTILES_S,
+)
 
 GPS_PROFILES = ("none", "rtk", "consumer")
 DROPOUT_PROFILES = ("none", "random:p", "outages", "outage:L")
@@ -62,7 +64,7 @@ OUTAGE_LENGTHS_S = (0.5, 1.0, 2.0, 5.0)
 OUTAGE_SEPARATION_S = 10.0
 
 #: Fix-interval distribution [s] of the paper's routes: the 21 quantiles (0, 5, ..., 100 %)
-#: measured over all 15 routes by ``scenarios.loaders.aslan.fix_interval_quantiles``, with the
+#: measured over all 15 routes by ``posbench.scenarios.loaders.aslan.fix_interval_quantiles``, with the
 #: tails clipped to 100-400 ms. The unclipped extremes (17 ms stale repeats, 1.0 s gaps) are
 #: receiver glitches and outages, which the dropout profiles model separately.
 ASLAN_FIX_INTERVAL_QUANTILES_S: np.ndarray = np.clip(_ASLAN_MEASURED_QUANTILES_S, 0.100, 0.400)

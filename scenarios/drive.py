@@ -17,7 +17,7 @@ from typing import Any
 
 import numpy as np
 
-from scenarios.errors import DataError
+from posbench.scenarios.errors import DataError
 
 
 def _f64(a: Any) -> np.ndarray:
@@ -51,7 +51,7 @@ class GpsStream:
     NaN marks a fix without a stated accuracy; ``None`` a stream without any. Per source:
     ROS NavSatFix ``sqrt((cov[0] + cov[4]) / 2)`` (NaN when ``position_covariance_type`` is
     UNKNOWN); KITTI OXTS ``pos_accuracy``; CSV/Parquet column ``accuracy``; the
-    degradation profiles (:mod:`scenarios.degrade`) their stated sigma; comma2k19 and the
+    degradation profiles (:mod:`posbench.scenarios.degrade`) their stated sigma; comma2k19 and the
     paper's routes: none.
     """
 

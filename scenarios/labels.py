@@ -31,7 +31,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from scenarios.errors import DataError
+from posbench.scenarios.errors import DataError
 
 LABELS = ("straight", "turn", "roundabout", "start_stop")
 LABEL_DTYPE = "<U10"

@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from scenarios.errors import DataError
+from posbench.scenarios.errors import DataError
 
 EARTH_RADIUS_M = 6378137.0
 PROJECTIONS = ("enu", "mercator")

@@ -24,7 +24,7 @@ from typing import Any
 
 import numpy as np
 
-from scenarios.errors import DataError
+from posbench.scenarios.errors import DataError
 
 
 def _np_core(submodule: str, name: str) -> Callable[[], Any]:

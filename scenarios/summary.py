@@ -6,7 +6,7 @@ from typing import Any
 
 import numpy as np
 
-from scenarios.drive import Drive
+from posbench.scenarios.drive import Drive
 
 STANDSTILL_MPS = 0.15 / 3.6  # the paper's 0.15 km/h
 
@@ -35,7 +35,7 @@ def _speed_series(drive: Drive) -> np.ndarray:
 def drive_label_shares(drive: Drive, step_s: float = 0.1) -> dict[str, float]:
     """Share [0..1] of the drive's time per scenario label, labelled every ``step_s`` from
     the truth (or the drive's own fixes where it has none) and the wheel speed if any."""
-    from scenarios.labels import LABELS, label_shares, label_times
+    from posbench.scenarios.labels import LABELS, label_shares, label_times
 
     track = drive.truth if drive.truth is not None else drive.gps
     if len(track) < 8:

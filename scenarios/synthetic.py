@@ -13,7 +13,7 @@ fully vectorised:
    standstill) and re-integrated, so position, heading and speed are consistent.
 
 The limits above are the defaults of :func:`simulate`'s keyword arguments (the built-in
-data set); :mod:`scenarios.corpus` draws them per drive for the training corpus.
+data set); :mod:`posbench.scenarios.corpus` draws them per drive for the training corpus.
 
 Streams (t in seconds from the start, ENU metres about :data:`ORIGIN_LAT`, :data:`ORIGIN_LON`,
 the truth starting at (0, 0)):
@@ -40,14 +40,21 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from scenarios.degrade import (
+from posbench.scenarios.degrade import (
     draw_intervals,
     drop_windows,
     enu_to_latlon,
     gps_noise,
     outage_windows,
 )
-from scenarios.drive import Drive, DriveMeta, GpsStream, ImuStream, SpeedStream, TruthStream
+from posbench.scenarios.drive import (
+    Drive,
+    DriveMeta,
+    GpsStream,
+    ImuStream,
+    SpeedStream,
+    TruthStream,
+)
 
 ORIGIN_LAT = 45.8
 ORIGIN_LON = 16.0
@@ -72,7 +79,7 @@ class Segment:
     kind: ``"straight"`` (``length_m``), ``"arc"`` (signed heading change ``angle_rad``,
     + = left / counter-clockwise, at ``radius_m``) or ``"stop"`` (standstill ``dwell_s``).
     ``speed_mps`` is the target speed; ``label`` the scenario label (one of
-    :data:`scenarios.labels.LABELS`) it belongs to; ``manoeuvre`` the finer kind (e.g.
+    :data:`posbench.scenarios.labels.LABELS`) it belongs to; ``manoeuvre`` the finer kind (e.g.
     ``"lane_change"``, ``"u_turn"``; empty = ``label``); ``cont`` marks a segment that
     continues the previous segment's manoeuvre (the ring and exit of a roundabout, the
     second arc of a lane change), so the two share one time span.

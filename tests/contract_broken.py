@@ -13,8 +13,8 @@ import sys
 
 import numpy as np
 
-from bench.prepare import PreparedDrive
-from predictors.base import Predictor
+from posbench.predictors.base import Predictor
+from posbench.prepare import PreparedDrive
 
 NAN2 = (math.nan, math.nan)
 

@@ -16,7 +16,7 @@ A reusable writer: :func:`write_bag` takes a :class:`SynthBag` of options and wr
 - ``/ground_truth`` (when ``ground_truth``) ``nav_msgs/Odometry`` in ``map``: the exact path,
   rotated by ``truth_rot_deg`` and shifted by ``truth_shift_m``.
 
-The path is :func:`scenarios.synthetic.generate_drive`'s truth (turns, stops), cut to
+The path is :func:`posbench.scenarios.synthetic.generate_drive`'s truth (turns, stops), cut to
 ``duration_s``; :func:`synth_truth` returns it (ENU about the first fix's origin) for asserts.
 """
 
@@ -29,11 +29,11 @@ from pathlib import Path
 import numpy as np
 from rosbags.typesys import Stores, get_typestore
 
-from scenarios.degrade import enu_to_latlon
-from scenarios.drive import TruthStream
-from scenarios.imu_frames import G0, matrix_to_quat, rpy_to_matrix
-from scenarios.loaders.ros_tf import register_tfmessage
-from scenarios.synthetic import ORIGIN_LAT, ORIGIN_LON, generate_drive
+from posbench.scenarios.degrade import enu_to_latlon
+from posbench.scenarios.drive import TruthStream
+from posbench.scenarios.imu_frames import G0, matrix_to_quat, rpy_to_matrix
+from posbench.scenarios.loaders.ros_tf import register_tfmessage
+from posbench.scenarios.synthetic import ORIGIN_LAT, ORIGIN_LON, generate_drive
 
 T0_NS = 1_700_000_000_000_000_000
 

@@ -11,7 +11,7 @@ import math
 import numpy as np
 import pytest
 
-from metrics.bootstrap import (
+from posbench.metrics.bootstrap import (
     DEFINITIONS,
     MIN_BLOCKS,
     block_length,

@@ -9,7 +9,7 @@ import math
 import numpy as np
 import pytest
 
-from metrics.calibration import (
+from posbench.metrics.calibration import (
     CALIBRATED,
     OVERCONFIDENT,
     UNDERCONFIDENT,
@@ -24,7 +24,7 @@ from metrics.calibration import (
     since_fix_bin,
     verdict,
 )
-from predictors.kf import LinearKalman
+from posbench.predictors.kf import LinearKalman
 
 
 # ----------------------------------------------------------------------- pure metrics
@@ -124,7 +124,7 @@ def _white_jerk_drive(rng: np.random.Generator, n_fix: int) -> tuple[np.ndarray,
     irregular fix times (0.1-0.4 s apart) and at each fix time + HORIZON_S; fixes carry
     white noise GPS_SIGMA per axis. Returns fix times, fixes (n, 2), query times, truth
     at the queries (n, 2)."""
-    from predictors._ca_kalman import ca_noise_block
+    from posbench.predictors._ca_kalman import ca_noise_block
 
     t_fix = np.cumsum(rng.uniform(0.1, 0.4, n_fix))
     t_q = t_fix + HORIZON_S
@@ -217,7 +217,7 @@ def test_a_2x_too_small_covariance_is_flagged_overconfident():
 
 
 def test_coverage_scale_recovers_a_known_variance_ratio():
-    from metrics.calibration import coverage_scale
+    from posbench.metrics.calibration import coverage_scale
 
     rng = np.random.default_rng(3)
     cov = np.array([[0.5, 0.2], [0.2, 0.3]])
@@ -232,8 +232,8 @@ def test_coverage_scale_recovers_a_known_variance_ratio():
 
 @pytest.mark.parametrize("name", ["cv", "kf", "ekf"])
 def test_cov_scale_scales_the_covariance_and_changes_no_position(name):
-    from predictors.registry import create
-    from scenarios.synthetic import generate_drive
+    from posbench.predictors.registry import create
+    from posbench.scenarios.synthetic import generate_drive
 
     d = generate_drive(seed=7, route="turns", duration_s=20)
     out = []

@@ -14,7 +14,7 @@ import pytest
 
 def bench(*args: str, cwd: Path | None = None, timeout: float = 300) -> subprocess.CompletedProcess:
     env = {**os.environ, "COLUMNS": "200"}
-    return subprocess.run([sys.executable, "-m", "bench.cli", *args], capture_output=True,
+    return subprocess.run([sys.executable, "-m", "posbench.cli", *args], capture_output=True,
                           text=True, cwd=cwd, timeout=timeout, env=env)
 
 
@@ -127,8 +127,8 @@ def test_run_with_lstm_writes_paper_figures(tmp_path):
 
 
 def test_installed_package_ships_tuned_parameters_and_model():
-    from predictors.lstm.predictor import bundled_model
-    from predictors.registry import tuned_params
+    from posbench.predictors.lstm.predictor import bundled_model
+    from posbench.predictors.registry import tuned_params
 
     assert tuned_params("kf", "rtk") and tuned_params("ekf", "native")
     assert bundled_model().is_file() and bundled_model().with_suffix(".json").is_file()

@@ -26,7 +26,7 @@ def bench(*args: str, cwd: Path | None = None, env: dict[str, str] | None = None
           timeout: float = 120) -> subprocess.CompletedProcess:
     base = {**os.environ, "COLUMNS": "80",
             "PYTHONPATH": os.pathsep.join(filter(None, [str(ROOT), os.environ.get("PYTHONPATH")]))}
-    return subprocess.run([sys.executable, "-m", "bench.cli", *args], capture_output=True,
+    return subprocess.run([sys.executable, "-m", "posbench.cli", *args], capture_output=True,
                           text=True, cwd=cwd, timeout=timeout, env={**base, **(env or {})})
 
 
@@ -51,7 +51,7 @@ def snapshot(folder: Path) -> dict[str, tuple[int, int]]:
 def ws(tmp_path_factory) -> Path:
     """A scratch folder: an ordinary file, a sub-folder, a non-ONNX 'model' with a valid
     model description beside it."""
-    from predictors.lstm.predictor import bundled_model
+    from posbench.predictors.lstm.predictor import bundled_model
 
     d = tmp_path_factory.mktemp("ws")
     (d / "notes.txt").write_text("not a folder\n")
@@ -94,7 +94,7 @@ CASES = [
     ("import-path-no-module", "run -p kf,nosuchmodule:X", "no module named 'nosuchmodule'", True),
     ("import-path-not-a-class", "run -p os:path", "path is not a class", True),
     ("import-path-not-a-predictor", "run -p collections:OrderedDict",
-     "OrderedDict is not a subclass of predictors.base.Predictor", True),
+     "OrderedDict is not a subclass of posbench.predictors.base.Predictor", True),
     ("import-path-no-class", "run -p module:", "expected a registered name or module:Class", True),
     ("import-path-no-module-name", "run -p :Class", "expected a registered name or module:Class",
      True),
@@ -190,7 +190,7 @@ def test_view_without_display_says_how_to_open_it_elsewhere(tmp_path):
     rerun.chmod(0o755)
     env = {k: v for k, v in os.environ.items() if k not in ("DISPLAY", "WAYLAND_DISPLAY")}
     env["PATH"] = f"{fake_bin}{os.pathsep}{env.get('PATH', '')}"
-    r = subprocess.run([sys.executable, "-m", "bench.cli", "view", str(rrd)], capture_output=True,
+    r = subprocess.run([sys.executable, "-m", "posbench.cli", "view", str(rrd)], capture_output=True,
                        text=True, timeout=120, cwd=ROOT, env={**env, "COLUMNS": "80"})
     line = assert_one_error_line(r, "no display", f"rerun {rrd}", f"bench view {rrd} --web")
     assert "URL" in line
@@ -226,7 +226,7 @@ def test_view_runs_the_viewer_and_exits_0(tmp_path):
 
 
 def test_no_display_reason_is_pure():
-    from bench.commands.view import no_display_reason
+    from posbench.commands.view import no_display_reason
 
     assert no_display_reason("linux", {}) is not None
     assert no_display_reason("linux", {"DISPLAY": ":0"}) is None
@@ -253,7 +253,7 @@ def test_version():
 
     r = bench("--version")
     assert r.returncode == 0, r.stderr
-    assert r.stdout == f"posbench {version('posbench')}\n"
+    assert r.stdout == f"posbench {version('posbench-harness')}\n"
 
 
 def test_shell_completion_is_enabled():
@@ -301,7 +301,7 @@ def test_usage_error_names_the_command_help():
 def test_option_checks():
     import math
 
-    from bench.options import (
+    from posbench.options import (
         UsageError,
         check_at_least,
         check_dropouts,
@@ -331,7 +331,7 @@ def test_option_checks():
 
 
 def test_out_checks_create_nothing(tmp_path):
-    from bench.options import UsageError, check_out_dir, check_out_file
+    from posbench.options import UsageError, check_out_dir, check_out_file
 
     target = tmp_path / "a" / "b"
     assert check_out_dir(target) == target and not (tmp_path / "a").exists()
@@ -347,8 +347,8 @@ def test_out_checks_create_nothing(tmp_path):
 
 
 def test_validate_predictors_resolves_a_model_folder(tmp_path):
-    from bench.options import UsageError, validate_predictors
-    from predictors.lstm.predictor import bundled_model
+    from posbench.options import UsageError, validate_predictors
+    from posbench.predictors.lstm.predictor import bundled_model
 
     shutil.copy(bundled_model(), tmp_path / "model.onnx")
     shutil.copy(bundled_model().with_suffix(".json"), tmp_path / "model.json")
@@ -368,7 +368,7 @@ def test_validate_predictors_resolves_a_model_folder(tmp_path):
 def test_random_option_values_give_one_error_line(tmp_path, capsys, horizon, dropouts):
     """In-process ``main``: any --horizon / --dropouts text with a bad --seed (checked
     after them, so the run never starts) ends in one error line and status 2."""
-    import bench.cli as cli
+    import posbench.cli as cli
 
     out = tmp_path / "out"
     with pytest.raises(SystemExit) as e:

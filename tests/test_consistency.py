@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 from test_cli_errors import assert_one_error_line, bench
 
-from bench.consistency import (
+from posbench.consistency import (
     affected_predictors,
     report_lines,
     strict_error,
@@ -22,9 +22,9 @@ from bench.consistency import (
     to_results,
     uses_stream,
 )
-from predictors.base import Predictor
-from scenarios.align import similarity_2d
-from scenarios.consistency import (
+from posbench.predictors.base import Predictor
+from posbench.scenarios.align import similarity_2d
+from posbench.scenarios.consistency import (
     FAIL,
     NA,
     PASS,
@@ -32,8 +32,8 @@ from scenarios.consistency import (
     WARN,
     check_drive,
 )
-from scenarios.drive import GpsStream, ImuStream, SpeedStream, TruthStream
-from scenarios.synthetic import default_drives, generate_drive
+from posbench.scenarios.drive import GpsStream, ImuStream, SpeedStream, TruthStream
+from posbench.scenarios.synthetic import default_drives, generate_drive
 
 
 @pytest.fixture(scope="module")
@@ -166,7 +166,7 @@ def test_strict_error_affected_predictors_report(drive):
 
 
 def test_every_shared_drive_has_no_failure(aslan_dir, kitti_dir, comma_dir):
-    from scenarios.loaders import load
+    from posbench.scenarios.loaders import load
 
     seen, slow = 0, []
     for folder in (aslan_dir, kitti_dir, comma_dir):
@@ -186,7 +186,7 @@ def test_every_shared_drive_has_no_failure(aslan_dir, kitti_dir, comma_dir):
 
 @pytest.fixture(scope="module")
 def flipped_csv(tmp_path_factory) -> Path:
-    from scenarios.loaders.table import write_table
+    from posbench.scenarios.loaders.table import write_table
 
     d = generate_drive(seed=3, route="mixed", name="flipped")
     d = with_imu(d, yaw_rate=-d.imu.yaw_rate)
@@ -225,7 +225,7 @@ def test_run_without_strict_reports_failure(flipped_csv, tmp_path):
     # a run saved before the check (schema 1.1, no key) still validates and loads
     import jsonschema
 
-    from bench.saved_run import load_run, results_schema
+    from posbench.saved_run import load_run, results_schema
 
     jsonschema.validate(res, results_schema())
     old = {k: v for k, v in res.items() if k != "consistency"} | {"schema_version": "1.1"}

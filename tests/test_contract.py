@@ -22,8 +22,8 @@ from contract_broken import (
     WithCovariance,
 )
 
-from bench.commands.check import NEEDS_MODEL
-from bench.contract import (
+from posbench.commands.check import NEEDS_MODEL
+from posbench.contract import (
     CLAUSE_IDS,
     ClauseResult,
     check_predictor,
@@ -35,9 +35,9 @@ from bench.contract import (
     resolve_predictor,
     run_replay,
 )
-from bench.options import UsageError
-from predictors.gate import GatedPredictor
-from predictors.registry import available, create
+from posbench.options import UsageError
+from posbench.predictors.gate import GatedPredictor
+from posbench.predictors.registry import available, create
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -164,7 +164,7 @@ def test_an_exception_fails_clauses_and_names_where_it_was_raised():
 
 
 def test_differences_treat_nan_as_equal_only_to_nan():
-    from bench.contract import differences
+    from posbench.contract import differences
 
     nan, inf = np.nan, np.inf
     a = np.array([[1, 2], [nan, nan], [nan, 1], [1, inf], [1, inf], [0, 0]], dtype=float)
@@ -198,9 +198,9 @@ def test_resolve_module_class_and_alias():
     ("no_such_module_x:Foo", "no module named 'no_such_module_x'"),
     ("contract_broken:Missing", "module contract_broken has no 'Missing'"),
     ("contract_broken:NotAPredictor", "NotAPredictor is not a subclass of "
-                                      "predictors.base.Predictor"),
+                                      "posbench.predictors.base.Predictor"),
     ("contract_broken:", "expected a registered name or module:Class"),
-    ("predictors.base:Predictor", "predictors.base:Predictor cannot be created: raised TypeError"),
+    ("posbench.predictors.base:Predictor", "predictors.base:Predictor cannot be created: raised TypeError"),
 ])
 def test_resolve_errors_are_one_line(spec, needle):
     with pytest.raises(UsageError) as e:
@@ -222,7 +222,7 @@ def test_resolve_names_the_missing_dependency_of_a_plugin(tmp_path, monkeypatch)
 def bench(*args: str) -> subprocess.CompletedProcess:
     env = {**os.environ, "COLUMNS": "100",
            "PYTHONPATH": os.pathsep.join(filter(None, [str(ROOT), os.environ.get("PYTHONPATH")]))}
-    return subprocess.run([sys.executable, "-m", "bench.cli", "check", *args], capture_output=True,
+    return subprocess.run([sys.executable, "-m", "posbench.cli", "check", *args], capture_output=True,
                           text=True, cwd=ROOT, timeout=300, env=env)
 
 
@@ -260,7 +260,7 @@ def test_cli_json_gated():
 
 @pytest.mark.parametrize(("args", "needle"), [
     (("nosuch",), "unknown predictor(s) nosuch"),
-    (("tests.contract_broken:NotAPredictor",), "is not a subclass of predictors.base.Predictor"),
+    (("tests.contract_broken:NotAPredictor",), "is not a subclass of posbench.predictors.base.Predictor"),
     (("cv", "--model", "kf=/nonexistent.onnx"), "--model kf=/nonexistent.onnx"),
 ])
 def test_cli_user_errors_are_one_line_exit_2(args, needle):

@@ -9,8 +9,8 @@ import json
 import numpy as np
 import pytest
 
-from scenarios.consistency import check_drive
-from scenarios.corpus import (
+from posbench.scenarios.consistency import check_drive
+from posbench.scenarios.corpus import (
     MANOEUVRES,
     PROFILES,
     corpus_drive,
@@ -20,10 +20,10 @@ from scenarios.corpus import (
     envelope,
     iter_corpus,
 )
-from scenarios.degrade import interpolate_truth
-from scenarios.drive import Drive
-from scenarios.labels import LABELS, label_times
-from scenarios.synthetic import default_drives, simulate, stop, straight, turn
+from posbench.scenarios.degrade import interpolate_truth
+from posbench.scenarios.drive import Drive
+from posbench.scenarios.labels import LABELS, label_times
+from posbench.scenarios.synthetic import default_drives, simulate, stop, straight, turn
 
 #: sha256 of default_drives(0) (every stream array as little-endian float64, names and
 #: meta.extra), computed on main at commit 80c6912 (before simulate got its keyword limits),

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from scipy.interpolate import CubicSpline
 
-from scenarios.degrade import (
+from posbench.scenarios.degrade import (
     ASLAN_FIX_INTERVAL_QUANTILES_S,
     GPS_PROFILES,
     OUTAGE_LENGTHS_S,
@@ -17,8 +17,8 @@ from scenarios.degrade import (
     gauss_markov,
     outage_windows,
 )
-from scenarios.drive import GpsStream, TruthStream
-from scenarios.errors import DataError
+from posbench.scenarios.drive import GpsStream, TruthStream
+from posbench.scenarios.errors import DataError
 
 # the fix-interval table, whichever measured constant is in use: {p: q} or even-p quantiles
 P_IV, Q_IV = _quantile_table(ASLAN_FIX_INTERVAL_QUANTILES_S)
@@ -118,7 +118,7 @@ def test_latency_stale_positions(truth: TruthStream) -> None:
 
 
 def test_origin_fills_latlon(truth: TruthStream) -> None:
-    from scenarios.projection import to_local
+    from posbench.scenarios.projection import to_local
 
     g = degrade_gps(truth, "rtk", seed=1, origin=(45.8, 16.0))
     x, y = to_local(g.lat, g.lon, 45.8, 16.0)

@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 from scipy.stats import chi2
 
-from metrics.calibration import mahalanobis_sq
-from metrics.ellipses import ELLIPSE_SEGMENTS, ellipse_axes, ellipse_outlines
+from posbench.metrics.calibration import mahalanobis_sq
+from posbench.metrics.ellipses import ELLIPSE_SEGMENTS, ellipse_axes, ellipse_outlines
 
 R95 = math.sqrt(chi2.ppf(0.95, 2))  # 2.4477 = sqrt(5.991)
 

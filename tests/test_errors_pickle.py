@@ -12,33 +12,31 @@ from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
 import pytest
-
-ROOT = Path(__file__).resolve().parents[1]
-PACKAGES = ("scenarios", "predictors", "bench", "metrics")
+from layout import module_name, source_files
 
 
 def samples() -> dict[str, list[BaseException]]:
     """Instances of each project exception class, by ``module.Class``."""
-    from bench.executors import ExecutorError
-    from bench.options import UsageError
-    from bench.plots import NothingToPlot
-    from bench.rerun_web import ServeError
-    from predictors.lstm.core_graph import NoCoreGraph
-    from predictors.registry import PredictorError
-    from scenarios.errors import DataError
+    from posbench.executors import ExecutorError
+    from posbench.options import UsageError
+    from posbench.plots import NothingToPlot
+    from posbench.predictors.lstm.core_graph import NoCoreGraph
+    from posbench.predictors.registry import PredictorError
+    from posbench.rerun_web import ServeError
+    from posbench.scenarios.errors import DataError
 
     return {
-        "scenarios.errors.DataError": [DataError("/data/drive.bag", "topic /fix: no messages"),
+        "posbench.scenarios.errors.DataError": [DataError("/data/drive.bag", "topic /fix: no messages"),
                                        DataError(Path("/data/x.csv"), "line 3: 'a' is not a number"),
                                        DataError(None, "truth: need at least 2 samples")],
-        "bench.options.UsageError": [UsageError("--horizon must be more than 0 s; got -1")],
-        "bench.executors.ExecutorError": [ExecutorError("cannot start Ray at auto: no cluster")],
-        "bench.plots.NothingToPlot": [NothingToPlot("no query with a known speed")],
-        "bench.rerun_web.ServeError": [
+        "posbench.options.UsageError": [UsageError("--horizon must be more than 0 s; got -1")],
+        "posbench.executors.ExecutorError": [ExecutorError("cannot start Ray at auto: no cluster")],
+        "posbench.plots.NothingToPlot": [NothingToPlot("no query with a known speed")],
+        "posbench.rerun_web.ServeError": [
             ServeError("the rerun web viewer stopped on its own (exit 1): port 9090 in use")],
-        "predictors.registry.PredictorError": [
+        "posbench.predictors.registry.PredictorError": [
             PredictorError("nosuchmodule:X: no module named 'nosuchmodule'")],
-        "predictors.lstm.core_graph.NoCoreGraph": [
+        "posbench.predictors.lstm.core_graph.NoCoreGraph": [
             NoCoreGraph("not a speed-form posbench model (no net.res_std)")],
     }
 
@@ -52,13 +50,12 @@ def project_exception_classes() -> set[str]:
     """``module.Class`` of every class in the project's packages deriving from an
     exception (by its base's name: ``...Error`` / ``...Exception`` / another found one)."""
     found: dict[str, str] = {}
-    for pkg in PACKAGES:
-        for f in sorted((ROOT / pkg).rglob("*.py")):
-            module = ".".join(f.relative_to(ROOT).with_suffix("").parts)
-            for node in ast.walk(ast.parse(f.read_text())):
-                if isinstance(node, ast.ClassDef) and any(
-                        _is_exception_base(b, set(found)) for b in node.bases):
-                    found[node.name] = f"{module}.{node.name}"
+    for f in source_files():
+        module = module_name(f)
+        for node in ast.walk(ast.parse(f.read_text())):
+            if isinstance(node, ast.ClassDef) and any(
+                    _is_exception_base(b, set(found)) for b in node.bases):
+                found[node.name] = f"{module}.{node.name}"
     return set(found.values())
 
 
@@ -85,7 +82,7 @@ def test_round_trip_through_pickle(key):
 
 
 def test_data_error_keeps_path_and_detail():
-    from scenarios.errors import DataError
+    from posbench.scenarios.errors import DataError
 
     back = pickle.loads(pickle.dumps(DataError(Path("/d/x.bag"), "bad topic")))
     assert (back.path, back.detail, str(back)) == ("/d/x.bag", "bad topic", "/d/x.bag: bad topic")
@@ -112,10 +109,10 @@ def test_raised_in_a_worker_process_arrives_intact(method):
 def test_runner_with_two_workers_raises_the_data_error(tmp_path):
     """A drive that loads but cannot be prepared: its DataError reaches the caller of the
     parallel runner as itself, not as a broken process pool."""
-    from bench.config import RunConfig
-    from bench.runner import run
-    from scenarios.errors import DataError
-    from scenarios.loaders import load
+    from posbench.config import RunConfig
+    from posbench.runner import run
+    from posbench.scenarios.errors import DataError
+    from posbench.scenarios.loaders import load
 
     drives = []
     for k in (1, 2):

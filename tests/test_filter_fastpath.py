@@ -1,9 +1,9 @@
 """The baseline filters' fixed-size fast paths against filterpy as the reference.
 
-``kf`` runs its plain-float :class:`~predictors._ca_kalman.CaFilter2D`; the reference here
+``kf`` runs its plain-float :class:`~posbench.predictors._ca_kalman.CaFilter2D`; the reference here
 is the same predictor with ``filterpy.kalman.KalmanFilter`` as its filter core (the
-implementation before issue 16, transcribed: F, Q from :func:`predictors.kf.ca_transition`
-/ :func:`predictors.kf.ca_process_noise`, H selecting rows, filterpy's Joseph-form update).
+implementation before issue 16, transcribed: F, Q from :func:`posbench.predictors.kf.ca_transition`
+/ :func:`posbench.predictors.kf.ca_process_noise`, H selecting rows, filterpy's Joseph-form update).
 Both are fed every event of a drive in lock step: after every observation their means
 must agree to 1e-9 (m, m/s, m/s^2) and their covariances to 1e-9 relative, and every
 answer (future and "now" queries) to 1e-9 m.
@@ -15,7 +15,7 @@ before issue 16, and one generic ``update`` per scalar measurement (x, y, yaw ra
 acceleration, yaw with a wrapped residual, wheel speed).
 
 ``poly`` fits its cubics through the normal equations in plain floats
-(:func:`predictors._cubic_xy.fit_cubic_xy`); the reference is ``fit_cubic`` (numpy's lstsq),
+(:func:`posbench.predictors._cubic_xy.fit_cubic_xy`); the reference is ``fit_cubic`` (numpy's lstsq),
 compared curve by curve on random windows and answer by answer on the drives; ``kf-paper``
 resamples its window with the same fit, checked answer by answer likewise. Drives: the synthetic set (with and without
 wheel speed, with and without IMU yaw) and one shared drive per data set (aslan: IMU, no
@@ -32,14 +32,12 @@ import numpy as np
 import pytest
 from filterpy.kalman import ExtendedKalmanFilter, KalmanFilter
 
-from bench.config import RunConfig
-from bench.prepare import prepare_drive
-from bench.replay import replay
-from predictors._cubic_xy import fit_cubic_xy
-from predictors._geometry import wrap_angle
-from predictors.base import Predictor
-from predictors.cubic import fit_cubic
-from predictors.ekf import (
+from posbench.config import RunConfig
+from posbench.predictors._cubic_xy import fit_cubic_xy
+from posbench.predictors._geometry import wrap_angle
+from posbench.predictors.base import Predictor
+from posbench.predictors.cubic import fit_cubic
+from posbench.predictors.ekf import (
     IA,
     IBA,
     IBW,
@@ -54,12 +52,14 @@ from predictors.ekf import (
     CtraEkf,
     ctra_integrals,
 )
-from predictors.kf import LinearKalman, ca_process_noise, ca_transition
-from predictors.kf_paper import PaperKalman
-from predictors.poly import PolyExtrapolator
-from scenarios.drive import Drive
-from scenarios.loaders import load
-from scenarios.synthetic import default_drives
+from posbench.predictors.kf import LinearKalman, ca_process_noise, ca_transition
+from posbench.predictors.kf_paper import PaperKalman
+from posbench.predictors.poly import PolyExtrapolator
+from posbench.prepare import prepare_drive
+from posbench.replay import replay
+from posbench.scenarios.drive import Drive
+from posbench.scenarios.loaders import load
+from posbench.scenarios.synthetic import default_drives
 
 TOL_M = 1e-9  # mean and answers [m, m/s, m/s^2]
 TOL_P = 1e-9  # covariance, relative to its largest entry

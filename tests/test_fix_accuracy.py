@@ -10,19 +10,19 @@ import numpy as np
 import pytest
 from test_loader_rosbag import _Msgs, _ns, _trajectory, _write_bag
 
-from bench.replay import replay
-from predictors.base import Predictor, accepts_sigma
-from predictors.gate import GatedPredictor
-from predictors.registry import create
-from scenarios import loaders
-from scenarios.degrade import (
+from posbench.predictors.base import Predictor, accepts_sigma
+from posbench.predictors.gate import GatedPredictor
+from posbench.predictors.registry import create
+from posbench.replay import replay
+from posbench.scenarios import loaders
+from posbench.scenarios.degrade import (
     CONSUMER_UNDERSTATEMENT,
     degrade_gps,
     interpolate_truth,
     stated_sigma_m,
     true_sigma_m,
 )
-from scenarios.drive import GpsStream, TruthStream
+from posbench.scenarios.drive import GpsStream, TruthStream
 
 KITTI_SMALL = "2011_09_26/2011_09_26_drive_0001_sync"
 COMMA_SEG = "b0c9d2329ad1606b_2018-08-02--08-34-47/40"
@@ -187,7 +187,7 @@ def test_accepts_sigma() -> None:
 def _prep(accuracy: np.ndarray | None):
     from dataclasses import replace
 
-    from bench.contract import cut_prepared, inputs
+    from posbench.contract import cut_prepared, inputs
 
     prep = cut_prepared(inputs().drive, 15.0)
     g = prep.gps
@@ -233,7 +233,7 @@ def test_gate_forwards_sigma() -> None:
 
 def test_old_style_predictor_through_the_runner() -> None:
     """A three-argument user predictor keeps working in a whole run (behind the gate)."""
-    from bench.contract import cut_prepared, inputs
+    from posbench.contract import cut_prepared, inputs
 
     prep = cut_prepared(inputs().drive, 15.0)
     assert prep.gps.accuracy is not None  # the synthetic fixes state an accuracy

@@ -13,12 +13,12 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from predictors import registry
-from predictors.cubic import fit_cubic
-from predictors.gate import GatedPredictor
-from predictors.lstm.resample import fit_poly
-from scenarios.errors import DataError
-from scenarios.safe_pickle import safe_loads
+from posbench.predictors import registry
+from posbench.predictors.cubic import fit_cubic
+from posbench.predictors.gate import GatedPredictor
+from posbench.predictors.lstm.resample import fit_poly
+from posbench.scenarios.errors import DataError
+from posbench.scenarios.safe_pickle import safe_loads
 
 FUZZ = settings(max_examples=30, deadline=None,
                 suppress_health_check=[HealthCheck.function_scoped_fixture, HealthCheck.too_slow])
@@ -36,7 +36,7 @@ HEADERS = st.lists(st.sampled_from(["stream", "t", "t_ns", "x", "y", "lat", "lon
 @FUZZ
 @given(header=HEADERS, rows=st.lists(st.lists(CELL, min_size=0, max_size=8), max_size=15))
 def test_table_loader_random_csv(tmp_path_factory, header, rows):
-    from scenarios.loaders.table import load_table
+    from posbench.scenarios.loaders.table import load_table
 
     p = tmp_path_factory.mktemp("csv") / "f.csv"
     p.write_text(",".join(header) + "\n" + "\n".join(",".join(r) for r in rows) + "\n")
@@ -87,7 +87,7 @@ def test_safe_unpickler_random_bytes(data):
               st.lists(st.tuples(st.text(max_size=4), st.floats(), st.floats()), max_size=4),
               st.floats()), max_size=6), max_size=4))
 def test_route_pickle_loader_random_contents(tmp_path_factory, windows):
-    from scenarios.loaders.aslan import load_aslan_pickle
+    from posbench.scenarios.loaders.aslan import load_aslan_pickle
 
     p = tmp_path_factory.mktemp("pk") / "r.pickle"
     p.write_bytes(pickle.dumps(windows, protocol=2))
@@ -158,7 +158,7 @@ def test_predictors_on_random_event_streams(name, gated):
 # ---------------------------------------------------------------------------- model files
 @pytest.fixture()
 def model_copy(tmp_path):
-    from predictors.lstm.predictor import bundled_model
+    from posbench.predictors.lstm.predictor import bundled_model
 
     src = bundled_model()
     shutil.copy(src, tmp_path / "model.onnx")
@@ -169,7 +169,7 @@ def model_copy(tmp_path):
 @FUZZ
 @given(cut=st.integers(1, 4000), flips=st.lists(st.integers(0, 10**6), max_size=5))
 def test_corrupted_onnx_is_a_one_line_error_naming_the_file(model_copy, cut, flips):
-    from predictors.lstm.predictor import LstmPredictor
+    from posbench.predictors.lstm.predictor import LstmPredictor
 
     data = bytearray(model_copy.read_bytes())
     bad = model_copy.with_name("bad.onnx")
@@ -190,7 +190,7 @@ def test_corrupted_onnx_is_a_one_line_error_naming_the_file(model_copy, cut, fli
 def test_mismatched_model_json_is_a_one_line_error_naming_the_file(model_copy, edit):
     import json
 
-    from predictors.lstm.predictor import LstmPredictor
+    from posbench.predictors.lstm.predictor import LstmPredictor
 
     js = model_copy.with_suffix(".json")
     info = json.loads(js.read_text())

@@ -8,17 +8,17 @@ import math
 import numpy as np
 import pytest
 
-from bench.config import RunConfig
-from bench.report import gate_lines
-from bench.results import gate_summary
-from bench.runner import run_drive
-from predictors import registry
-from predictors.base import Predictor
-from predictors.gate import FixGate, GatedPredictor
-from scenarios.degrade import degrade_gps
-from scenarios.drive import Drive, DriveMeta, GpsStream
-from scenarios.errors import DataError
-from scenarios.synthetic import generate_drive
+from posbench.config import RunConfig
+from posbench.predictors import registry
+from posbench.predictors.base import Predictor
+from posbench.predictors.gate import FixGate, GatedPredictor
+from posbench.report import gate_lines
+from posbench.results import gate_summary
+from posbench.runner import run_drive
+from posbench.scenarios.degrade import degrade_gps
+from posbench.scenarios.drive import Drive, DriveMeta, GpsStream
+from posbench.scenarios.errors import DataError
+from posbench.scenarios.synthetic import generate_drive
 
 
 def run_gate(gate: FixGate, t, x, y) -> np.ndarray:
@@ -220,8 +220,8 @@ def test_runner_counts_rejections_and_no_gate_turns_it_off():
 
 
 def test_cli_no_gate_flag(tmp_path, monkeypatch):
-    import bench.cli as cli
-    from bench.commands import run as run_cmd
+    import posbench.cli as cli
+    from posbench.commands import run as run_cmd
 
     seen = {}
 

@@ -11,11 +11,11 @@ torch = pytest.importorskip("torch")
 
 from typer.testing import CliRunner  # noqa: E402
 
-from bench.cli import app  # noqa: E402
-from predictors.hybrid.data import hybrid_windows  # noqa: E402
-from predictors.hybrid.predictor import HybridPredictor  # noqa: E402
-from predictors.hybrid.train import future_answers, run_training  # noqa: E402
-from scenarios.synthetic import generate_drive  # noqa: E402
+from posbench.cli import app  # noqa: E402
+from posbench.predictors.hybrid.data import hybrid_windows  # noqa: E402
+from posbench.predictors.hybrid.predictor import HybridPredictor  # noqa: E402
+from posbench.predictors.hybrid.train import future_answers, run_training  # noqa: E402
+from posbench.scenarios.synthetic import generate_drive  # noqa: E402
 
 
 @pytest.mark.slow

@@ -5,9 +5,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from scenarios.errors import DataError
-from scenarios.labels import LABELS, LabelThresholds, label_shares, label_times
-from scenarios.synthetic import generate_drive, simulate, stop, straight, turn
+from posbench.scenarios.errors import DataError
+from posbench.scenarios.labels import LABELS, LabelThresholds, label_shares, label_times
+from posbench.scenarios.synthetic import generate_drive, simulate, stop, straight, turn
 
 
 def _roundabout() -> list:

@@ -15,11 +15,11 @@ from time import perf_counter_ns
 import numpy as np
 import pytest
 
-from bench.config import RunConfig
-from bench.prepare import prepare_drive
-from bench.replay import replay
-from predictors.registry import create
-from scenarios.synthetic import generate_drive
+from posbench.config import RunConfig
+from posbench.predictors.registry import create
+from posbench.prepare import prepare_drive
+from posbench.replay import replay
+from posbench.scenarios.synthetic import generate_drive
 
 BUDGETS = json.loads((Path(__file__).with_name("latency_budgets.json")).read_text())
 

@@ -10,9 +10,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from scenarios import loaders
-from scenarios.errors import DataError
-from scenarios.loaders.aslan import (
+from posbench.scenarios import loaders
+from posbench.scenarios.errors import DataError
+from posbench.scenarios.loaders.aslan import (
     ACCEL_GLITCH_MPS2,
     ASLAN_FIX_INTERVAL_QUANTILES_S,
     held_yaw,

@@ -8,10 +8,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from scenarios.drive import Drive
-from scenarios.errors import DataError
-from scenarios.loaders import load
-from scenarios.loaders.comma2k19 import load_comma_segment
+from posbench.scenarios.drive import Drive
+from posbench.scenarios.errors import DataError
+from posbench.scenarios.loaders import load
+from posbench.scenarios.loaders.comma2k19 import load_comma_segment
 
 pytestmark = pytest.mark.shared
 

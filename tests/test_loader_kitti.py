@@ -9,9 +9,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from scenarios.errors import DataError
-from scenarios.loaders import load
-from scenarios.loaders.kitti import load_kitti_drive
+from posbench.scenarios.errors import DataError
+from posbench.scenarios.loaders import load
+from posbench.scenarios.loaders.kitti import load_kitti_drive
 
 pytestmark = pytest.mark.shared
 

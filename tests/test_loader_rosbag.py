@@ -10,10 +10,10 @@ import numpy as np
 import pytest
 from rosbags.typesys import Stores, get_typestore
 
-from scenarios import loaders
-from scenarios.errors import DataError
-from scenarios.loaders.rosbag import load_rosbag, quat_yaw
-from scenarios.projection import to_local
+from posbench.scenarios import loaders
+from posbench.scenarios.errors import DataError
+from posbench.scenarios.loaders.rosbag import load_rosbag, quat_yaw
+from posbench.scenarios.projection import to_local
 
 T0_NS = 1_700_000_000_000_000_000  # Unix ns of the first sample
 LAT0, LON0 = 45.8, 15.97

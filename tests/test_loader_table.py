@@ -7,11 +7,18 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from scenarios.drive import Drive, DriveMeta, GpsStream, ImuStream, SpeedStream, TruthStream
-from scenarios.errors import DataError
-from scenarios.loaders import load
-from scenarios.loaders.table import load_table, write_table
-from scenarios.projection import to_local
+from posbench.scenarios.drive import (
+    Drive,
+    DriveMeta,
+    GpsStream,
+    ImuStream,
+    SpeedStream,
+    TruthStream,
+)
+from posbench.scenarios.errors import DataError
+from posbench.scenarios.loaders import load
+from posbench.scenarios.loaders.table import load_table, write_table
+from posbench.scenarios.projection import to_local
 
 HEADER = "stream,t,lat,lon,accuracy,ax,ay,yaw,yaw_rate,v"
 
@@ -53,7 +60,7 @@ def test_round_trip_synthetic(tmp_path: Path, suffix: str):
 @pytest.mark.shared
 @pytest.mark.parametrize("suffix", [".csv", ".parquet"])
 def test_round_trip_kitti_drive(kitti_dir: Path, tmp_path: Path, suffix: str):
-    from scenarios.loaders.kitti import load_kitti_drive
+    from posbench.scenarios.loaders.kitti import load_kitti_drive
 
     d = load_kitti_drive(kitti_dir / "2011_09_26" / "2011_09_26_drive_0005_sync")
     p = tmp_path / f"k{suffix}"

@@ -13,10 +13,17 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from bench.config import RunConfig
-from bench.runner import run_drive
-from scenarios.drive import Drive, DriveMeta, GpsStream, ImuStream, SpeedStream, TruthStream
-from scenarios.synthetic import generate_drive
+from posbench.config import RunConfig
+from posbench.runner import run_drive
+from posbench.scenarios.drive import (
+    Drive,
+    DriveMeta,
+    GpsStream,
+    ImuStream,
+    SpeedStream,
+    TruthStream,
+)
+from posbench.scenarios.synthetic import generate_drive
 
 NAMES = ("cv", "poly", "kf", "kf-paper", "ekf", "lstm")
 OUT0, OUT1 = 50.0, 80.0  # the 30-s outage [s]
@@ -131,7 +138,7 @@ def test_odd_streams(odd_runs, name):
 
 
 def test_backwards_clock_in_a_file_is_sorted_and_counted(tmp_path):
-    from scenarios.loaders.table import load_table
+    from posbench.scenarios.loaders.table import load_table
 
     t = np.arange(0.0, 20.0, 0.2)
     t[50:] -= 3.0  # the clock jumps back 3 s mid-file (overlapping, some stamps repeat)

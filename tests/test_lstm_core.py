@@ -15,14 +15,14 @@ import pytest
 
 torch = pytest.importorskip("torch")
 
-from predictors.lstm.core_graph import NoCoreGraph, write_core  # noqa: E402
-from predictors.lstm.core_net import CORE_TOL_M, CoreNet, check_windows  # noqa: E402
-from predictors.lstm.export import export_best  # noqa: E402
-from predictors.lstm.model import FuturePoint, LstmNet  # noqa: E402
-from predictors.lstm.predictor import LstmPredictor, bundled_model  # noqa: E402
-from predictors.lstm.runtime import OnnxModel  # noqa: E402
-from scenarios.errors import DataError  # noqa: E402
-from scenarios.synthetic import generate_drive  # noqa: E402
+from posbench.predictors.lstm.core_graph import NoCoreGraph, write_core  # noqa: E402
+from posbench.predictors.lstm.core_net import CORE_TOL_M, CoreNet, check_windows  # noqa: E402
+from posbench.predictors.lstm.export import export_best  # noqa: E402
+from posbench.predictors.lstm.model import FuturePoint, LstmNet  # noqa: E402
+from posbench.predictors.lstm.predictor import LstmPredictor, bundled_model  # noqa: E402
+from posbench.predictors.lstm.runtime import OnnxModel  # noqa: E402
+from posbench.scenarios.errors import DataError  # noqa: E402
+from posbench.scenarios.synthetic import generate_drive  # noqa: E402
 
 
 def _speed_net(seed: int, hidden: int = 16) -> LstmNet:
@@ -104,7 +104,7 @@ def test_a_core_that_does_not_reproduce_its_model_is_refused(tmp_path: Path) -> 
     shutil.copy(other / "model.core.onnx", d / "model.core.onnx")
     with pytest.raises(DataError, match="does not reproduce model.onnx"):
         LstmPredictor(str(d))
-    r = subprocess.run([sys.executable, "-m", "bench.cli", "run", "-p", "lstm", "--model",
+    r = subprocess.run([sys.executable, "-m", "posbench.cli", "run", "-p", "lstm", "--model",
                         f"lstm={d}", "--synthetic-duration", "30", "--out", str(tmp_path / "o")],
                        capture_output=True, text=True)
     assert r.returncode == 2, r.stderr

@@ -5,15 +5,15 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from predictors.lstm.features import (
+from posbench.predictors.lstm.features import (
     compute_features,
     displacement_to_world,
     features_one,
     rotate,
     vehicle_to_world,
 )
-from predictors.lstm.windows import drive_windows, future_from_output
-from scenarios.drive import Drive, DriveMeta, GpsStream, ImuStream, TruthStream
+from posbench.predictors.lstm.windows import drive_windows, future_from_output
+from posbench.scenarios.drive import Drive, DriveMeta, GpsStream, ImuStream, TruthStream
 
 
 def _window(seed: int = 0) -> tuple:

@@ -1,6 +1,6 @@
 """The fused lstm step (the default) against the staged reference (``step="staged"``).
 
-Both replay the same drives through :func:`bench.replay.replay` (every fix, every IMU
+Both replay the same drives through :func:`posbench.replay.replay` (every fix, every IMU
 sample, every query, with the run's default GPS profile and dropouts, so bridging steps
 run too); every future and "now" answer must agree to 5e-6 m (``TOL_M``), with the same missing
 answers and the same number of network steps. On every shared drive (all of
@@ -21,13 +21,13 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from bench.config import RunConfig
-from bench.prepare import prepare_drive
-from bench.replay import replay
-from predictors.lstm.predictor import LstmPredictor, bundled_model
-from predictors.lstm.runtime import OnnxModel
-from scenarios.drive import Drive
-from scenarios.synthetic import default_drives, generate_drive
+from posbench.config import RunConfig
+from posbench.predictors.lstm.predictor import LstmPredictor, bundled_model
+from posbench.predictors.lstm.runtime import OnnxModel
+from posbench.prepare import prepare_drive
+from posbench.replay import replay
+from posbench.scenarios.drive import Drive
+from posbench.scenarios.synthetic import default_drives, generate_drive
 
 #: both paths feed the network float32 inputs; a one-ulp difference in the input (the two
 #: paths round their float64 sums differently) moves the answer by up to ~1e-6 m with the
@@ -56,7 +56,7 @@ def _compare(drive: Drive, fused: LstmPredictor, staged: LstmPredictor) -> float
 @pytest.mark.shared
 @pytest.mark.slow
 def test_fused_step_equals_the_staged_one_on_every_shared_drive(shared_dir: Path) -> None:
-    from scenarios.loaders import iter_load
+    from posbench.scenarios.loaders import iter_load
 
     fused, staged = LstmPredictor(), LstmPredictor(step="staged")
     n_drives = steps = fused_steps = 0

@@ -9,8 +9,8 @@ import sys
 import numpy as np
 import pytest
 
-from predictors.lstm.predictor import LstmPredictor, bundled_model
-from scenarios.errors import DataError
+from posbench.predictors.lstm.predictor import LstmPredictor, bundled_model
+from posbench.scenarios.errors import DataError
 
 V = 10.0
 W = 0.1  # rad/s: a gentle left curve, radius 100 m
@@ -35,8 +35,8 @@ def _feed(p: LstmPredictor, t0: float, t1: float, fixes: bool = True, imu_ay: fl
 
 
 def test_runtime_does_not_import_torch() -> None:
-    code = ("import sys; import predictors.lstm.predictor, predictors.lstm.authors; "
-            "p = predictors.lstm.predictor.LstmPredictor(); p.observe_gps(0.0, 0.0, 0.0); "
+    code = ("import sys; import posbench.predictors.lstm.predictor, posbench.predictors.lstm.authors; "
+            "p = posbench.predictors.lstm.predictor.LstmPredictor(); p.observe_gps(0.0, 0.0, 0.0); "
             "print('torch' in sys.modules)")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                          timeout=60, check=True)
@@ -132,7 +132,7 @@ def test_bad_model_path_is_a_data_error(tmp_path) -> None:
 
 
 def test_authors_needs_a_model() -> None:
-    from predictors.lstm.authors import AuthorsLstmPredictor
+    from posbench.predictors.lstm.authors import AuthorsLstmPredictor
 
     with pytest.raises(DataError, match="--model PATH"):
         AuthorsLstmPredictor()
@@ -140,9 +140,9 @@ def test_authors_needs_a_model() -> None:
 
 @pytest.mark.shared
 def test_authors_model_on_aslan_windows(authors_models_dir, aslan_dir) -> None:
-    from predictors.lstm.authors import AuthorsLstmPredictor
-    from predictors.lstm.resample import centred_cubic_batch
-    from scenarios.loaders import load
+    from posbench.predictors.lstm.authors import AuthorsLstmPredictor
+    from posbench.predictors.lstm.resample import centred_cubic_batch
+    from posbench.scenarios.loaders import load
 
     drive = load(aslan_dir / "aslan-20220409114513.pickle")[0]
     g, imu = drive.gps, drive.imu

@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from predictors.cubic import fit_cubic_lbfgs
-from predictors.lstm.resample import (
+from posbench.predictors.cubic import fit_cubic_lbfgs
+from posbench.predictors.lstm.resample import (
     GRID_OFFSETS,
     FixedGridFit,
     centred_cubic_batch,

@@ -10,12 +10,12 @@ import pytest
 
 torch = pytest.importorskip("torch")
 
-from predictors.lstm.export import export_best  # noqa: E402
-from predictors.lstm.model import FuturePoint, LstmNet  # noqa: E402
-from predictors.lstm.predictor import LstmPredictor  # noqa: E402
-from predictors.lstm.runtime import OnnxModel  # noqa: E402
-from predictors.lstm.train import run_training, sample_weights, split_by_route  # noqa: E402
-from scenarios.synthetic import generate_drive  # noqa: E402
+from posbench.predictors.lstm.export import export_best  # noqa: E402
+from posbench.predictors.lstm.model import FuturePoint, LstmNet  # noqa: E402
+from posbench.predictors.lstm.predictor import LstmPredictor  # noqa: E402
+from posbench.predictors.lstm.runtime import OnnxModel  # noqa: E402
+from posbench.predictors.lstm.train import run_training, sample_weights, split_by_route  # noqa: E402
+from posbench.scenarios.synthetic import generate_drive  # noqa: E402
 
 
 def test_onnx_matches_torch(tmp_path) -> None:
@@ -116,8 +116,8 @@ def test_mirroring_is_exact_left_right() -> None:
     windows in training is the same as training on mirrored drives."""
     from dataclasses import replace
 
-    from predictors.lstm.train import mirror_signs
-    from predictors.lstm.windows import drive_windows
+    from posbench.predictors.lstm.train import mirror_signs
+    from posbench.predictors.lstm.windows import drive_windows
 
     d = generate_drive(seed=5, route="turns", duration_s=60.0)
     g, imu, tr = d.gps, d.imu, d.truth

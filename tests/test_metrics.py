@@ -3,7 +3,13 @@
 import numpy as np
 import pytest
 
-from metrics import euclidean_error, latency_summary, speed_bin_labels, summarize, summarize_groups
+from posbench.metrics import (
+    euclidean_error,
+    latency_summary,
+    speed_bin_labels,
+    summarize,
+    summarize_groups,
+)
 
 
 def test_euclidean_error_345():
@@ -46,7 +52,7 @@ def test_latency_summary_us():
 
 
 def test_outage_ids_and_scores():
-    from metrics.outages import error_vs_since_fix, outage_ids, outage_scores
+    from posbench.metrics.outages import error_vs_since_fix, outage_ids, outage_scores
 
     t = np.array([0.0, 1.0, 1.5, 2.0, 3.0, 10.5, 11.0, 12.0])
     ids = outage_ids(t, [(0.9, 2.5), (10.0, 11.5)])

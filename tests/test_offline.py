@@ -21,9 +21,9 @@ import pandas as pd
 import pytest
 from test_cli_errors import assert_one_error_line, bench
 
-from bench.answers import read_answers, score_answers
-from bench.config import RunConfig
-from bench.offline import (
+from posbench.answers import read_answers, score_answers
+from posbench.config import RunConfig
+from posbench.offline import (
     KEY_QUERIES,
     MANIFEST,
     drive_ids,
@@ -31,12 +31,12 @@ from bench.offline import (
     read_queries,
     write_queries,
 )
-from bench.prepare import prepare_drive
-from bench.saved_run import load_run, results_schema
-from scenarios.drive import ImuStream, SpeedStream
-from scenarios.errors import DataError
-from scenarios.loaders.table import load_table
-from scenarios.synthetic import default_drives
+from posbench.prepare import prepare_drive
+from posbench.saved_run import load_run, results_schema
+from posbench.scenarios.drive import ImuStream, SpeedStream
+from posbench.scenarios.errors import DataError
+from posbench.scenarios.loaders.table import load_table
+from posbench.scenarios.synthetic import default_drives
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -211,9 +211,9 @@ def test_drive_ids_are_file_names_and_unique():
 @pytest.fixture(scope="module")
 def small(tmp_path_factory):
     """A queries folder of two synthetic drives and cv's answers (from a replay)."""
-    from bench.replay import replay
-    from bench.scoring import query_frame
-    from predictors.registry import create
+    from posbench.predictors.registry import create
+    from posbench.replay import replay
+    from posbench.scoring import query_frame
 
     d = tmp_path_factory.mktemp("small")
     drives = default_drives()[:2]
@@ -234,7 +234,7 @@ def small(tmp_path_factory):
 
 
 def test_unanswered_queries_are_counted_as_missing_never_dropped(small, tmp_path):
-    from bench.results import aggregate, all_traces, scored_mask
+    from posbench.results import aggregate, all_traces, scored_mask
 
     d, ans = small
     folder = read_queries(d / "q")

@@ -7,8 +7,8 @@ import numpy as np
 import pandas as pd
 import pytest
 
-import bench.plots as plots
-from bench.plots import (
+import posbench.plots as plots
+from posbench.plots import (
     FIGURES,
     NothingToPlot,
     PlotsWritten,
@@ -121,11 +121,11 @@ def test_thin_traces_never_raise(tmp_path, case):
 def test_gps_only_three_fixes_end_to_end_writes_report(tmp_path):
     """The reported crash: a GPS-only CSV with 3 fixes; the report is written and says why
     the figures are missing."""
-    from bench.config import RunConfig
-    from bench.report import write_report
-    from bench.results import aggregate, all_traces
-    from bench.runner import run_drive
-    from scenarios.loaders.table import load_table
+    from posbench.config import RunConfig
+    from posbench.report import write_report
+    from posbench.results import aggregate, all_traces
+    from posbench.runner import run_drive
+    from posbench.scenarios.loaders.table import load_table
 
     csv = tmp_path / "three.csv"
     csv.write_text("t,x,y\n0,0,0\n1,10,0\n2,20,0\n")
@@ -134,7 +134,7 @@ def test_gps_only_three_fixes_end_to_end_writes_report(tmp_path):
     traces = all_traces(runs)
     res = aggregate(runs, cfg, [], "bench run", traces=traces)
     out = tmp_path / "out"
-    from bench.saved_run import Run
+    from posbench.saved_run import Run
 
     written = write_report(Run.from_results(res, traces), out)
     report = (out / "report.md").read_text()
@@ -160,8 +160,8 @@ def test_formats(tmp_path):
 
 
 def test_paper_figures_reject_unknown_format_before_anything(tmp_path):
-    from bench.config import RunConfig
-    from bench.figures import paper_figures
+    from posbench.config import RunConfig
+    from posbench.figures import paper_figures
 
     with pytest.raises(ValueError, match="tiff"):
         paper_figures([], RunConfig(predictors=("cv",)), make_traces(n_fix=5), tmp_path,
@@ -272,17 +272,17 @@ def test_drive_plots_limit_picks_the_worst_drives(tmp_path):
 
 
 def test_report_prints_notes_and_links_per_drive_files(tmp_path):
-    from bench.config import RunConfig
-    from bench.report import write_report
-    from bench.results import aggregate, all_traces
-    from bench.runner import run_drive
-    from scenarios.synthetic import default_drives
+    from posbench.config import RunConfig
+    from posbench.report import write_report
+    from posbench.results import aggregate, all_traces
+    from posbench.runner import run_drive
+    from posbench.scenarios.synthetic import default_drives
 
     cfg = RunConfig(predictors=("cv", "kf"))
     runs = [run_drive(default_drives()[0], cfg)]
     traces = all_traces(runs)
     res = aggregate(runs, cfg, [], "bench run", traces=traces)
-    from bench.saved_run import Run
+    from posbench.saved_run import Run
 
     write_report(Run.from_results(res, traces), tmp_path, formats=("svg", "png"))
     md = (tmp_path / "report.md").read_text()
@@ -294,11 +294,11 @@ def test_report_prints_notes_and_links_per_drive_files(tmp_path):
 
 
 def test_paper_figures_have_titles_and_every_format(tmp_path, monkeypatch):
-    import bench.figures as figures
-    from bench.config import RunConfig
-    from bench.results import all_traces
-    from bench.runner import run_drive
-    from scenarios.synthetic import default_drives
+    import posbench.figures as figures
+    from posbench.config import RunConfig
+    from posbench.results import all_traces
+    from posbench.runner import run_drive
+    from posbench.scenarios.synthetic import default_drives
 
     drive = default_drives()[2]
     cfg = RunConfig(predictors=("kf-paper", "lstm"))

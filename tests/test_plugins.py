@@ -19,11 +19,11 @@ from pathlib import Path
 
 import pytest
 
-from bench.options import UsageError, validate_predictors, with_model_aliases
-from bench.predictor_options import merge_options, parse_set, parse_value
-from predictors import registry
-from predictors.base import Predictor
-from predictors.registry import (
+from posbench.options import UsageError, validate_predictors, with_model_aliases
+from posbench.predictor_options import merge_options, parse_set, parse_value
+from posbench.predictors import registry
+from posbench.predictors.base import Predictor
+from posbench.predictors.registry import (
     ENTRY_POINT,
     IMPORT_PATH,
     PredictorError,
@@ -123,7 +123,7 @@ def bench(*args: str, cwd: Path, path: list[Path] = (), timeout: float = 300
     pythonpath = [str(p) for p in path] + [str(ROOT)] + [
         p for p in os.environ.get("PYTHONPATH", "").split(os.pathsep) if p]
     env = {**os.environ, "PYTHONPATH": os.pathsep.join(pythonpath), "COLUMNS": "300"}
-    return subprocess.run([sys.executable, "-m", "bench.cli", *args], capture_output=True,
+    return subprocess.run([sys.executable, "-m", "posbench.cli", *args], capture_output=True,
                           text=True, cwd=cwd, timeout=timeout, env=env)
 
 
@@ -176,7 +176,7 @@ def test_import_path_from_the_current_folder(plugin_dir, tmp_path):
     current one): a module in the current folder is found all the same."""
     script = ("import sys; sys.path[:] = [p for p in sys.path if p not in ('', '.')]; "
               "sys.argv = ['bench', 'run', '-p', 'damped:DampedVelocity', '--workers', '1', "
-              f"'--out', {str(tmp_path / 'o')!r}]; from bench.cli import main; main()")
+              f"'--out', {str(tmp_path / 'o')!r}]; from posbench.cli import main; main()")
     env = {**os.environ, "PYTHONPATH": str(ROOT), "COLUMNS": "300"}
     r = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True,
                        cwd=plugin_dir, env=env, timeout=300)
@@ -223,7 +223,7 @@ def test_readme_example_as_entry_point(site_dir, tmp_path):
 
 def test_check_accepts_import_paths_and_entry_points(site_dir, tmp_path):
     for spec in ("damped:DampedVelocity", "damped"):
-        r = subprocess.run([sys.executable, "-m", "bench.cli", "check", spec, "--json"],
+        r = subprocess.run([sys.executable, "-m", "posbench.cli", "check", spec, "--json"],
                            capture_output=True, text=True, cwd=tmp_path, timeout=300,
                            env={**os.environ, "PYTHONPATH": f"{site_dir}{os.pathsep}{ROOT}"})
         assert r.returncode == 0, r.stdout + r.stderr
@@ -252,10 +252,10 @@ def test_ray_workers_get_the_plugin_folder(plugin_dir, monkeypatch):
     current folder, both of which Ray passes on by itself) is found by the workers because
     each task gets its folder on PYTHONPATH; without that, every task fails to import it."""
     ray = _ray()
-    from bench import executors
-    from bench.config import RunConfig
-    from bench.executors import run_local, run_ray, worker_runtime_env
-    from scenarios.synthetic import default_drives
+    from posbench import executors
+    from posbench.config import RunConfig
+    from posbench.executors import run_local, run_ray, worker_runtime_env
+    from posbench.scenarios.synthetic import default_drives
 
     monkeypatch.syspath_prepend(str(plugin_dir))
     assert str(plugin_dir) not in os.environ.get("PYTHONPATH", "")
@@ -297,7 +297,7 @@ def test_resolve_every_form_without_importing():
 @pytest.mark.parametrize(("spec", "needle"), [
     ("nosuchmodule:X", "nosuchmodule:X: no module named 'nosuchmodule' (put the folder"),
     ("os:path", "os:path: path is not a class (it is a module)"),
-    ("collections:OrderedDict", "OrderedDict is not a subclass of predictors.base.Predictor"),
+    ("collections:OrderedDict", "OrderedDict is not a subclass of posbench.predictors.base.Predictor"),
     ("collections:Nope", "module collections has no 'Nope'"),
 ])
 def test_import_path_errors(spec, needle):
@@ -311,7 +311,7 @@ def test_entry_points_are_lazy(tmp_path, monkeypatch):
     and a broken one fails only then."""
     (tmp_path / "lazy_plugin_x.py").write_text(
         "import pathlib\npathlib.Path(__file__).with_name('imported').write_text('yes')\n"
-        "from predictors.cv import ConstantVelocity\n\n\n"
+        "from posbench.predictors.cv import ConstantVelocity\n\n\n"
         "class Lazy(ConstantVelocity):\n    '''A lazy one.\n\n    More text.'''\n")
     install_dist_info(tmp_path, "lazy-x", "2.0", {"lazy": "lazy_plugin_x:Lazy",
                                                   "gone": "gone_module_x:G",

@@ -16,12 +16,12 @@ import numpy as np
 import pytest
 from scipy.integrate import quad
 
-from predictors import registry
-from predictors._geometry import FixBuffer, vehicle_to_world, wrap_angle
-from predictors.cv import ConstantVelocity
-from predictors.ekf import ctra_displacement, ctra_integrals, ctra_step
-from predictors.kf_paper import PaperKalman, paper_window_predict
-from scenarios.errors import DataError
+from posbench.predictors import registry
+from posbench.predictors._geometry import FixBuffer, vehicle_to_world, wrap_angle
+from posbench.predictors.cv import ConstantVelocity
+from posbench.predictors.ekf import ctra_displacement, ctra_integrals, ctra_step
+from posbench.predictors.kf_paper import PaperKalman, paper_window_predict
+from posbench.scenarios.errors import DataError
 
 NAMES = ["cv", "poly", "kf", "kf-paper", "ekf"]
 H = 0.2  # prediction horizon after a fix [s]

@@ -3,8 +3,8 @@
 import numpy as np
 import pytest
 
-from scenarios.errors import DataError
-from scenarios.projection import mercator_scale_error, to_local, validate_latlon
+from posbench.scenarios.errors import DataError
+from posbench.scenarios.projection import mercator_scale_error, to_local, validate_latlon
 
 
 def test_enu_true_metres_one_km_north():

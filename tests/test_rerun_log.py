@@ -15,9 +15,12 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from bench.config import RunConfig
-from bench.rerun_blueprint import AROUND_M, VEHICLE_M
-from bench.rerun_log import (
+from posbench.config import RunConfig
+from posbench.metrics.calibration import mahalanobis_sq
+from posbench.metrics.ellipses import ELLIPSE_SEGMENTS
+from posbench.metrics.track_errors import track_errors
+from posbench.rerun_blueprint import AROUND_M, VEHICLE_M
+from posbench.rerun_log import (
     ELLIPSE_RADIUS,
     N_LAST_FIXES,
     PALETTE,
@@ -29,12 +32,9 @@ from bench.rerun_log import (
     sanitise,
     write_recording,
 )
-from bench.runner import DriveRun, run
-from bench.scoring import COV_COLUMNS
-from metrics.calibration import mahalanobis_sq
-from metrics.ellipses import ELLIPSE_SEGMENTS
-from metrics.track_errors import track_errors
-from scenarios.synthetic import generate_drive
+from posbench.runner import DriveRun, run
+from posbench.scenarios.synthetic import generate_drive
+from posbench.scoring import COV_COLUMNS
 
 rr = pytest.importorskip("rerun", reason="needs the viz extra")
 
@@ -264,7 +264,7 @@ def test_runner_output_with_cv_and_skipped_drive(tmp_path):
 
 def test_missing_rerun_raises_the_hint(tmp_path, monkeypatch):
     monkeypatch.setitem(sys.modules, "rerun", None)
-    with pytest.raises(ImportError, match=r"pip install 'posbench\[viz\]'"):
+    with pytest.raises(ImportError, match=r"pip install 'posbench-harness\[viz\]'"):
         write_recording(tmp_path / "x.rrd", [fake_run()], ["cv"])
     assert not (tmp_path / "x.rrd").exists()
 

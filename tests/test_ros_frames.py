@@ -18,17 +18,17 @@ import pytest
 from ros_synth import SynthBag, synth_truth, write_bag
 from test_cli_errors import assert_one_error_line, bench
 
-from bench.config import RunConfig
-from bench.reference import FIX_CUBIC, TRUTH
-from bench.runner import run_drive
-from scenarios import imu_frames as fr
-from scenarios.align import ALIGN_MIN_LIMIT_M, alignment_limit_m, umeyama_2d
-from scenarios.degrade import enu_to_latlon
-from scenarios.errors import DataError
-from scenarios.loaders.ros_tf import chain_rotation, find_mount
-from scenarios.loaders.rosbag import load_rosbag
-from scenarios.projection import to_local
-from scenarios.synthetic import ORIGIN_LAT, ORIGIN_LON
+from posbench.config import RunConfig
+from posbench.reference import FIX_CUBIC, TRUTH
+from posbench.runner import run_drive
+from posbench.scenarios import imu_frames as fr
+from posbench.scenarios.align import ALIGN_MIN_LIMIT_M, alignment_limit_m, umeyama_2d
+from posbench.scenarios.degrade import enu_to_latlon
+from posbench.scenarios.errors import DataError
+from posbench.scenarios.loaders.ros_tf import chain_rotation, find_mount
+from posbench.scenarios.loaders.rosbag import load_rosbag
+from posbench.scenarios.projection import to_local
+from posbench.scenarios.synthetic import ORIGIN_LAT, ORIGIN_LON
 
 # --------------------------------------------------------------------------- pure maths
 
@@ -234,7 +234,7 @@ def test_drifting_odometry_named_as_truth_refused(bags) -> None:
     with pytest.raises(DataError, match=r"residual RMS \d+\.\d\d m .* exceeds the limit 5\.00 m"):
         load_rosbag(path, topics={"truth": "/odom"})
     env = {**os.environ, "COLUMNS": "200"}
-    r = subprocess.run([sys.executable, "-m", "bench.cli", "data", "inspect", str(path),
+    r = subprocess.run([sys.executable, "-m", "posbench.cli", "data", "inspect", str(path),
                         "--topic", "truth=/odom"], capture_output=True, text=True, env=env,
                        timeout=300)
     assert r.returncode == 2, r.stdout + r.stderr
@@ -253,7 +253,7 @@ def test_yaw_rate_sign_flip_is_written(bags) -> None:
 
 def test_consistency_check_flags_the_flipped_gyro_of_a_bag(bags) -> None:
     # the bag's gyro sign flip is caught by the check before any figure (issue 18)
-    from scenarios.consistency import FAIL, PASS, check_drive
+    from posbench.scenarios.consistency import FAIL, PASS, check_drive
 
     by = check_drive(load_rosbag(bags["flip"][0])).checks
     good = check_drive(load_rosbag(bags["orient_tf"][0])).checks

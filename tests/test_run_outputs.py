@@ -14,17 +14,17 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from bench.config import RunConfig
-from bench.report import render_markdown
-from bench.results import aggregate, scored_mask
-from bench.runner import run, run_drive
-from bench.tables import label_table
-from scenarios.synthetic import default_drives
+from posbench.config import RunConfig
+from posbench.report import render_markdown
+from posbench.results import aggregate, scored_mask
+from posbench.runner import run, run_drive
+from posbench.scenarios.synthetic import default_drives
+from posbench.tables import label_table
 
 
 def bench(*args: str, cwd: Path | None = None, columns: int = 200) -> subprocess.CompletedProcess:
     env = {**os.environ, "COLUMNS": str(columns)}
-    return subprocess.run([sys.executable, "-m", "bench.cli", *args], capture_output=True,
+    return subprocess.run([sys.executable, "-m", "posbench.cli", *args], capture_output=True,
                           text=True, cwd=cwd, timeout=600, env=env)
 
 
@@ -86,8 +86,8 @@ def test_report_explains_missing_and_exclusions(cv_kf_result):
 
 
 def test_alias_runs_a_second_instance_under_its_own_name():
-    from bench.options import validate_predictors, with_model_aliases
-    from predictors.registry import create
+    from posbench.options import validate_predictors, with_model_aliases
+    from posbench.predictors.registry import create
 
     names = with_model_aliases(("cv", "kf"), {"kf@b": {}})
     assert names == ("cv", "kf", "kf@b")
@@ -102,14 +102,14 @@ def test_alias_runs_a_second_instance_under_its_own_name():
 
 @pytest.mark.parametrize("bad", ["nope@x", "kf@", "kf@b,nope"])
 def test_alias_of_unknown_predictor_is_refused(bad):
-    from bench.options import UsageError, parse_predictor_names, validate_predictors
+    from posbench.options import UsageError, parse_predictor_names, validate_predictors
 
     with pytest.raises(UsageError, match="unknown predictor"):
         validate_predictors(parse_predictor_names(bad), {})
 
 
 def test_model_for_a_predictor_not_in_the_run_is_refused():
-    from bench.options import UsageError, validate_predictors, with_model_aliases
+    from posbench.options import UsageError, validate_predictors, with_model_aliases
 
     opts = {"lstm": {"model": "x"}}
     with pytest.raises(UsageError, match="lstm@NAME=PATH"):
@@ -117,7 +117,7 @@ def test_model_for_a_predictor_not_in_the_run_is_refused():
 
 
 def _model_copy(tmp_path: Path, train_drives: list[str]) -> Path:
-    from predictors.lstm.predictor import bundled_model
+    from posbench.predictors.lstm.predictor import bundled_model
 
     src = bundled_model().parent
     dst = tmp_path / "my-model"
@@ -177,9 +177,9 @@ def test_rerun_into_the_same_folder_replaces_only_its_own_files(tmp_path):
 def test_every_drive_skipped_writes_the_report_and_fails(tmp_path, monkeypatch):
     from typer.testing import CliRunner
 
-    import bench.cli as cli
-    import bench.executors as ex
-    from bench.runner import DriveRun
+    import posbench.cli as cli
+    import posbench.executors as ex
+    from posbench.runner import DriveRun
 
     def all_skipped(drives, cfg, *a, **k):
         return [DriveRun(d.name, "synthetic", "", [], [], pd.DataFrame(), skipped="poor truth")
@@ -267,9 +267,9 @@ def test_tables_are_numeric_until_rendered(cv_kf_result, tmp_path):
 
     from rich.console import Console
 
-    from bench.report import report_tables, write_tables
-    from bench.tables import label_table, summary_table
-    from bench.terminal import print_table
+    from posbench.report import report_tables, write_tables
+    from posbench.tables import label_table, summary_table
+    from posbench.terminal import print_table
 
     _, res = cv_kf_result
     t = summary_table(res)

@@ -5,14 +5,14 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from bench.config import RunConfig
-from bench.prepare import prepare_drive
-from bench.reference import cubic_through_fixes, truth_at
-from bench.replay import replay
-from bench.runner import run
-from predictors.base import Predictor
-from predictors.registry import register
-from scenarios.drive import Drive, DriveMeta, GpsStream, ImuStream, SpeedStream
+from posbench.config import RunConfig
+from posbench.predictors.base import Predictor
+from posbench.predictors.registry import register
+from posbench.prepare import prepare_drive
+from posbench.reference import cubic_through_fixes, truth_at
+from posbench.replay import replay
+from posbench.runner import run
+from posbench.scenarios.drive import Drive, DriveMeta, GpsStream, ImuStream, SpeedStream
 
 
 class SpyPredictor(Predictor):
@@ -131,7 +131,7 @@ def test_results_identical_across_worker_counts():
 
 
 def test_real_predictors_identical_across_worker_counts():
-    from scenarios.synthetic import default_drives
+    from posbench.scenarios.synthetic import default_drives
 
     drives = default_drives(seed=3)[:2]
     cfg = RunConfig(predictors=("cv", "kf", "ekf"), gps_profile="consumer", dropouts="outages")
@@ -143,7 +143,7 @@ def test_real_predictors_identical_across_worker_counts():
 
 
 def test_degraded_gps_depends_on_seed_not_workers():
-    from scenarios.synthetic import default_drives
+    from posbench.scenarios.synthetic import default_drives
 
     d = default_drives()[0]
     p1 = prepare_drive(d, RunConfig(seed=1))

@@ -11,8 +11,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from scenarios.errors import DataError
-from scenarios.safe_pickle import safe_load, safe_loads
+from posbench.scenarios.errors import DataError
+from posbench.scenarios.safe_pickle import safe_load, safe_loads
 
 
 class _Evil:

@@ -12,13 +12,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from bench.config import RunConfig
-from bench.prepare import prepare_drive
-from bench.replay import replay
-from bench.results import learned_models
-from predictors.base import Predictor
-from predictors.gate import GatedPredictor
-from predictors.lstm.predictor import (
+from posbench.config import RunConfig
+from posbench.predictors.base import Predictor
+from posbench.predictors.gate import GatedPredictor
+from posbench.predictors.lstm.predictor import (
     BUNDLED_TEXT,
     FUSED_STAGES,
     STAGES,
@@ -27,9 +24,12 @@ from predictors.lstm.predictor import (
     StageRecorder,
     bundled_model,
 )
-from predictors.lstm.resample import DT, GRID_OFFSETS, MIN_SPAN_S, FixedGridFit
-from predictors.registry import create
-from scenarios.synthetic import generate_drive
+from posbench.predictors.lstm.resample import DT, GRID_OFFSETS, MIN_SPAN_S, FixedGridFit
+from posbench.predictors.registry import create
+from posbench.prepare import prepare_drive
+from posbench.replay import replay
+from posbench.results import learned_models
+from posbench.scenarios.synthetic import generate_drive
 
 
 @pytest.fixture(scope="module")
@@ -256,7 +256,7 @@ def test_gate_forwards_the_lstm_seams(prepared) -> None:
 
 
 def test_latency_stages_use_the_hook() -> None:
-    from bench.latency import lstm_fused_stages, lstm_stages
+    from posbench.latency import lstm_fused_stages, lstm_stages
 
     drive = generate_drive(seed=3, route="mixed", duration_s=20.0)
     fused = lstm_fused_stages(drive, 30)

@@ -7,10 +7,10 @@ import time
 import numpy as np
 import pytest
 
-from scenarios.degrade import interpolate_truth
-from scenarios.drive import Drive
-from scenarios.projection import to_local
-from scenarios.synthetic import (
+from posbench.scenarios.degrade import interpolate_truth
+from posbench.scenarios.drive import Drive
+from posbench.scenarios.projection import to_local
+from posbench.scenarios.synthetic import (
     DEFAULT_ROUTES,
     ORIGIN_LAT,
     ORIGIN_LON,

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from metrics.track_errors import (
+from posbench.metrics.track_errors import (
     HEADING_DT_S,
     STANDSTILL_MPS,
     inward_cross,

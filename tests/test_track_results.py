@@ -8,13 +8,13 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from bench.config import RunConfig
-from bench.prepare import prepare_drive
-from bench.results import aggregate, all_traces
-from bench.runner import run
-from bench.track_results import track_section, track_table
-from metrics.track_errors import inward_cross, track_summary
-from scenarios.synthetic import generate_drive
+from posbench.config import RunConfig
+from posbench.metrics.track_errors import inward_cross, track_summary
+from posbench.prepare import prepare_drive
+from posbench.results import aggregate, all_traces
+from posbench.runner import run
+from posbench.scenarios.synthetic import generate_drive
+from posbench.track_results import track_section, track_table
 
 
 @pytest.fixture(scope="module")

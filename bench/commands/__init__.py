@@ -1,1 +1,1 @@
-"""One module per `bench` command; `bench.cli` registers them on the Typer app."""
+"""One module per `bench` command; `posbench.cli` registers them on the Typer app."""

@@ -1,4 +1,4 @@
-"""`bench check`: run the predictor contract (:mod:`bench.contract`) on predictors."""
+"""`bench check`: run the predictor contract (:mod:`posbench.contract`) on predictors."""
 
 from __future__ import annotations
 
@@ -8,7 +8,7 @@ from typing import Annotated
 
 import typer
 
-from bench.commands.common import (
+from posbench.commands.common import (
     DataError,
     UsageError,
     console,
@@ -16,7 +16,7 @@ from bench.commands.common import (
     import_from_cwd,
     model_options,
 )
-from bench.options import validate_predictors, with_model_aliases
+from posbench.options import validate_predictors, with_model_aliases
 
 #: registered predictors left out of the default set unless ``--model NAME=PATH`` names them
 NEEDS_MODEL = ("lstm-authors",)
@@ -24,7 +24,7 @@ NEEDS_MODEL = ("lstm-authors",)
 
 def default_names(options: dict[str, dict[str, str]]) -> list[str]:
     """Every registered predictor, but those in :data:`NEEDS_MODEL` only with a model given."""
-    from predictors.registry import available
+    from posbench.predictors.registry import available
 
     return [n for n in available() if n not in NEEDS_MODEL or n in options]
 
@@ -32,7 +32,7 @@ def default_names(options: dict[str, dict[str, str]]) -> list[str]:
 def _factories(specs: list[str], options: dict[str, dict[str, str]]) -> dict:
     """``spec -> factory`` for registered and entry-point names and ``module:Class`` specs
     (imported from the current folder or PYTHONPATH), checked as ``bench run`` checks them."""
-    from bench.contract import resolve_predictor
+    from posbench.contract import resolve_predictor
 
     twice = sorted({s for s in specs if specs.count(s) > 1})
     if twice:
@@ -87,8 +87,8 @@ def check(
         factories = _factories(specs, options)
     except (DataError, UsageError) as e:
         raise fail(str(e)) from None
-    from bench.contract import check_predictor
-    from predictors.gate import GatedPredictor
+    from posbench.contract import check_predictor
+    from posbench.predictors.gate import GatedPredictor
 
     if left_out and not as_json:
         console.print(f"not checked: {', '.join(left_out)} (needs --model NAME=PATH)",

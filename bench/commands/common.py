@@ -14,8 +14,8 @@ from typing import Annotated
 import typer
 from rich.console import Console
 
-from bench.options import UsageError, check_topics
-from scenarios.errors import DataError
+from posbench.options import UsageError, check_topics
+from posbench.scenarios.errors import DataError
 
 __all__ = ["DataError", "UsageError"]  # re-exported for the commands
 
@@ -29,7 +29,7 @@ WORKER_DIED = "a worker process died (out of memory?); try fewer --workers"
 
 def fail(msg: str) -> typer.Exit:
     """Print ``error: msg`` as one line on stderr; return the exit (status 2) to raise."""
-    from rich.markup import escape  # "posbench[ray]" is text, not markup
+    from rich.markup import escape  # "posbench-harness[ray]" is text, not markup
 
     err_console.print(f"[bold red]error:[/] {escape(msg)}", highlight=False, soft_wrap=True,
                       emoji=False)
@@ -61,7 +61,7 @@ def predictor_options(model: list[str] | None, sets: list[str] | None
                       ) -> tuple[dict[str, dict], dict[tuple[str, str], str]]:
     """``--model NAME=PATH`` and ``--set NAME.OPTION=VALUE`` as one set of per-predictor
     options, with the text each option was given as (for messages)."""
-    from bench.predictor_options import merge_options, parse_set
+    from posbench.predictor_options import merge_options, parse_set
 
     values, given = parse_set(sets)
     return merge_options(model_options(model), values, given)
@@ -92,17 +92,17 @@ def load_drives(paths: list[Path] | None, projection: str, topics: dict[str, str
                  seed: int = 0, synthetic_duration: float | None = None, workers: int = 1):
     """The drives at ``paths`` in order (``workers`` processes load recordings in parallel),
     or the built-in synthetic drives when there are none."""
-    from scenarios.loaders import iter_load_many
+    from posbench.scenarios.loaders import iter_load_many
 
     if not paths:
-        from scenarios.synthetic import default_drives, generate_drive
+        from posbench.scenarios.synthetic import default_drives, generate_drive
 
         if synthetic_duration is not None:
             if not synthetic_duration > 1.0:
                 raise UsageError("--synthetic-duration must be more than 1 s")
             return [generate_drive(seed=seed, route="mixed", duration_s=synthetic_duration)]
         return default_drives(seed=seed)
-    from bench.preload import REPLAY_MODULES, Preload
+    from posbench.preload import REPLAY_MODULES, Preload
 
     drives = []
     preload = Preload(REPLAY_MODULES)  # for the replay workers, forked after loading
@@ -180,8 +180,8 @@ def check_drive_options(gps_profile: str, projection: str, horizon: float, gps_l
                         dropouts: str, seed: int, synthetic_duration: float | None,
                         data: list[Path] | None) -> None:
     """The checks of the options above (and ``--projection``, ``--data``), before any work."""
-    from bench.config import GPS_PROFILES
-    from bench.options import (
+    from posbench.config import GPS_PROFILES
+    from posbench.options import (
         check_at_least,
         check_choice,
         check_data_paths,
@@ -189,7 +189,7 @@ def check_drive_options(gps_profile: str, projection: str, horizon: float, gps_l
         check_horizon,
         check_synthetic_duration,
     )
-    from scenarios.projection import PROJECTIONS
+    from posbench.scenarios.projection import PROJECTIONS
 
     check_choice(gps_profile, GPS_PROFILES, "--gps-profile")
     check_choice(projection, PROJECTIONS, "--projection")

@@ -7,7 +7,7 @@ from typing import Annotated
 
 import typer
 
-from bench.commands.common import DataError, UsageError, console, err_console, fail
+from posbench.commands.common import DataError, UsageError, console, err_console, fail
 
 FORMATS = ("md", "csv", "latex")
 SCOPES = ("all", "dataset", "route", "drive", "since-fix")
@@ -76,9 +76,9 @@ def compare(
 
       bench compare old-run new-run --uncertainty --scope all,dataset,since-fix
     """
-    from bench.compare import Gate, Metric, check_gates, config_differences, run_labels
-    from bench.options import check_choice, check_out_dir
-    from bench.saved_run import load_run
+    from posbench.compare import Gate, Metric, check_gates, config_differences, run_labels
+    from posbench.options import check_choice, check_out_dir
+    from posbench.saved_run import load_run
 
     try:
         m = Metric.parse(metric)
@@ -131,14 +131,14 @@ def compare(
 
 
 def _table(runs, labels, metric, scopes, seed):
-    from bench.compare_views import comparison_table
+    from posbench.compare_views import comparison_table
 
     return comparison_table(runs, labels, metric, [SCOPE_ROWS.get(s, s) for s in scopes], seed)
 
 
 def _uncertainty(runs, labels, scopes):
     """(table, frame, notes) of the uncertainty comparison."""
-    from bench.compare_uncertainty import missing_notes, uncertainty_comparison
+    from posbench.compare_uncertainty import missing_notes, uncertainty_comparison
 
     table, frame = uncertainty_comparison(runs, labels, [SCOPE_ROWS.get(s, s) for s in scopes])
     notes = missing_notes(runs, labels)
@@ -148,7 +148,7 @@ def _uncertainty(runs, labels, scopes):
 
 
 def _print(table, frame, fmt: str) -> None:
-    from bench.terminal import print_table
+    from posbench.terminal import print_table
 
     if table.frame.empty:
         return
@@ -176,8 +176,8 @@ def _write_table(out: Path, stem: str, table, frame, fmt: str) -> Path:
 
 
 def _write(out: Path, table, frame, runs, labels, metric, fmt: str, extra=None) -> None:
-    from bench.compare_views import comparison_figure
-    from bench.plots import save_figure
+    from posbench.compare_views import comparison_figure
+    from posbench.plots import save_figure
 
     out.mkdir(parents=True, exist_ok=True)
     written = [_write_table(out, "comparison", table, frame, fmt)]

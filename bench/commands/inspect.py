@@ -8,7 +8,7 @@ from typing import Annotated, Any
 
 import typer
 
-from bench.commands.common import (
+from posbench.commands.common import (
     DataError,
     ProjectionOpt,
     StrictOpt,
@@ -19,7 +19,7 @@ from bench.commands.common import (
     load_drives,
     parse_topics,
 )
-from bench.terminal import print_table
+from posbench.terminal import print_table
 
 HEADER = ("drive", "format", "dur [s]", "dist [m]", "fixes", "fix dt p5/p50/p95/max [ms]",
           "IMU [Hz]", "speed [m/s]", "stopped", "str/turn/rbt/stop [%]", "truth (acc.)", "warn.")
@@ -27,7 +27,7 @@ HEADER = ("drive", "format", "dur [s]", "dist [m]", "fixes", "fix dt p5/p50/p95/
 
 def inspect_rows(summaries: list[dict[str, Any]]) -> tuple[tuple[str, ...], list[list[str]]]:
     """Header and cell strings of the inspect table, one row per drive summary
-    (:func:`scenarios.summary.summarize_drive`: seconds, metres, m/s, Hz)."""
+    (:func:`posbench.scenarios.summary.summarize_drive`: seconds, metres, m/s, Hz)."""
     out = []
     for r in summaries:
         q = r["gps_interval_ms"]
@@ -56,8 +56,8 @@ def inspect(
 ) -> None:
     """Show what is in each drive: duration, distance, fix intervals, IMU rate, speeds, truth,
     and whether its streams agree with each other (the data consistency check)."""
-    from bench.consistency import check_drives, strict_error
-    from scenarios.summary import summarize_drive
+    from posbench.consistency import check_drives, strict_error
+    from posbench.scenarios.summary import summarize_drive
 
     try:
         drives = load_drives(paths, projection, parse_topics(topic))
@@ -78,7 +78,7 @@ def inspect(
 
 def print_inspect(rows: list[dict[str, Any]], checks: dict[str, Any]) -> None:
     """The inspect table, the consistency table and the warnings, on the console."""
-    from bench.consistency import flagged, table_rows
+    from posbench.consistency import flagged, table_rows
 
     header, cells = inspect_rows(rows)
     print_table(console, header, cells, title=f"{len(rows)} drive{'' if len(rows) == 1 else 's'}",

@@ -7,7 +7,7 @@ from typing import Annotated
 
 import typer
 
-from bench.commands.common import (
+from posbench.commands.common import (
     DataError,
     DataOpt,
     UsageError,
@@ -16,13 +16,13 @@ from bench.commands.common import (
     load_drives,
     model_options,
 )
-from bench.options import (
+from posbench.options import (
     check_at_least,
     check_data_paths,
     parse_predictor_names,
     validate_predictors,
 )
-from bench.terminal import print_table
+from posbench.terminal import print_table
 
 
 def latency(
@@ -45,7 +45,7 @@ def latency(
         validate_predictors(parse_predictor_names(predictors), model_options(model))
     except UsageError as e:
         raise fail(str(e)) from None
-    from bench.latency import (
+    from posbench.latency import (
         PAPER_MS,
         batch_throughput,
         lstm_fused_stages,
@@ -53,7 +53,7 @@ def latency(
         single_thread,
         time_predictor,
     )
-    from predictors.registry import available
+    from posbench.predictors.registry import available
 
     single_thread()
     try:

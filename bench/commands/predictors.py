@@ -8,7 +8,7 @@ from typing import Annotated, Any
 
 import typer
 
-from bench.commands.common import UsageError, console, fail, import_from_cwd
+from posbench.commands.common import UsageError, console, fail, import_from_cwd
 
 
 def _jsonable(value: Any) -> Any:
@@ -27,7 +27,7 @@ def predictor_info(name: str, options: bool = False) -> dict[str, Any]:
     loaded, else None). With ``options``: its constructor options (``name``, ``default``,
     ``required``) and ``any_option`` (it takes ``**kwargs``). A built-in's class is imported
     only for its options; an entry point's or import path's to read its docstring."""
-    from predictors.registry import (
+    from posbench.predictors.registry import (
         PredictorError,
         constructor_options,
         description,
@@ -55,7 +55,7 @@ def predictor_info(name: str, options: bool = False) -> dict[str, Any]:
 def listing(names: list[str] | None = None) -> dict[str, Any]:
     """Every available predictor (or those ``names``, with their options), and notes on
     entry points that are left out or cannot be loaded."""
-    from predictors.registry import PredictorError, available, entry_point_notes
+    from posbench.predictors.registry import PredictorError, available, entry_point_notes
 
     details = bool(names)
     if details:
@@ -97,7 +97,7 @@ def list_predictors(
     """
     from rich.markup import escape
 
-    from bench.terminal import print_table
+    from posbench.terminal import print_table
 
     try:
         res = listing(names)

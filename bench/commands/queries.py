@@ -7,7 +7,7 @@ from typing import Annotated
 
 import typer
 
-from bench.commands.common import (
+from posbench.commands.common import (
     DataError,
     DataOpt,
     DropoutsOpt,
@@ -27,7 +27,7 @@ from bench.commands.common import (
     load_drives,
     parse_topics,
 )
-from bench.options import check_choice, check_out_dir
+from posbench.options import check_choice, check_out_dir
 
 
 def queries(
@@ -63,9 +63,9 @@ def queries(
     Example: bench queries --dropouts outages --out q; then give q/queries.csv and q/inputs/
     to the system under test, keep q/key/, and run bench score ANSWERS.csv --queries q
     """
-    from bench.config import RunConfig
-    from bench.fetch import local_paths
-    from bench.offline import FORMATS
+    from posbench.config import RunConfig
+    from posbench.fetch import local_paths
+    from posbench.offline import FORMATS
 
     try:
         check_drive_options(gps_profile, projection, horizon, gps_latency, dropouts, seed,
@@ -88,9 +88,9 @@ def queries(
 def _write(drives, cfg, data, out: Path, file_format: str) -> None:
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
-    from bench.commands.run import plural
-    from bench.offline import write_queries
-    from bench.results import data_provenance
+    from posbench.commands.run import plural
+    from posbench.offline import write_queries
+    from posbench.results import data_provenance
 
     with Progress(TextColumn("[bold]{task.description}"), BarColumn(), MofNCompleteColumn(),
                   TimeElapsedColumn(), TextColumn("{task.fields[last]}"), console=console) as prog:

@@ -8,7 +8,7 @@ from typing import TYPE_CHECKING, Annotated, Any
 
 import typer
 
-from bench.commands.common import (
+from posbench.commands.common import (
     DEFAULT_PREDICTORS,
     WORKER_DIED,
     DataError,
@@ -36,7 +36,7 @@ from bench.commands.common import (
     parse_topics,
     predictor_options,
 )
-from bench.options import (
+from posbench.options import (
     TABLE_FORMATS,
     check_at_least,
     check_choice,
@@ -54,10 +54,10 @@ from bench.options import (
 if TYPE_CHECKING:
     import pandas as pd
 
-    from bench.figure_jobs import FigureJobs
-    from bench.preload import Preload
-    from bench.runner import DriveRun
-    from bench.saved_run import Run
+    from posbench.figure_jobs import FigureJobs
+    from posbench.preload import Preload
+    from posbench.runner import DriveRun
+    from posbench.saved_run import Run
 
 
 def run(
@@ -135,10 +135,10 @@ def run(
     """
     from concurrent.futures.process import BrokenProcessPool
 
-    from bench.config import RunConfig
-    from bench.executors import EXECUTORS, RAY_MISSING, ExecutorError, ray_available
-    from bench.fetch import local_paths
-    from bench.intervals import Statistics
+    from posbench.config import RunConfig
+    from posbench.executors import EXECUTORS, RAY_MISSING, ExecutorError, ray_available
+    from posbench.fetch import local_paths
+    from posbench.intervals import Statistics
 
     try:
         # every option is checked before a drive is loaded or a worker starts
@@ -167,7 +167,7 @@ def run(
                 import rerun as _rr  # noqa: F401
             except ImportError:
                 raise UsageError("--rerun needs the viz extra: "
-                                 "pip install 'posbench[viz]'") from None
+                                 "pip install 'posbench-harness[viz]'") from None
         options, given = predictor_options(model, set_)
         names = with_model_aliases(names, options)
         color_by = resolve_color_by(rerun_color_by, names, rerun)
@@ -196,7 +196,7 @@ def data_check(drives, names: list[str], strict: bool) -> dict[str, Any]:
     """The data consistency check of every loaded drive, before any predictor runs: the
     ``consistency`` key of results.json; failures and warnings printed; with ``strict`` a
     failure raises :class:`DataError` naming the drive, stream and figure."""
-    from bench.consistency import check_drives, strict_error, summary_lines, to_results
+    from posbench.consistency import check_drives, strict_error, summary_lines, to_results
 
     checks = check_drives(drives)
     err = strict_error(checks) if strict else None
@@ -210,7 +210,7 @@ def data_check(drives, names: list[str], strict: bool) -> dict[str, Any]:
 
 def plot_formats(value: str) -> tuple[str, ...]:
     """``--plot-format png,pdf`` as a tuple of known formats, in the order given."""
-    from bench.plots import check_formats
+    from posbench.plots import check_formats
 
     try:
         return check_formats(value)
@@ -243,7 +243,7 @@ def _replay(drives, cfg, executor: str, workers: int, address: str | None, label
     are replayed in other processes (in this one, its imports would disturb the timings)."""
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
-    from bench.executors import run_drives
+    from posbench.executors import run_drives
 
     elsewhere = executor != "local" or (workers > 1 and len(drives) > 1)
 
@@ -269,13 +269,13 @@ def _run(drives, cfg, data, out: Path, workers: int, rerun: Path | None = None,
          consistency: dict[str, Any] | None = None, color_by: str | None = None) -> None:
     from dataclasses import replace
 
-    from bench.figure_jobs import FigureJobs, Job
-    from bench.figures import paper_figures
-    from bench.outputs import remove_previous_outputs
-    from bench.preload import Preload
-    from bench.results import aggregate, all_traces, data_provenance, lean_traces
-    from bench.saved_run import write_traces
-    from bench.seeds import seed_figures, seeds_section
+    from posbench.figure_jobs import FigureJobs, Job
+    from posbench.figures import paper_figures
+    from posbench.outputs import remove_previous_outputs
+    from posbench.preload import Preload
+    from posbench.results import aggregate, all_traces, data_provenance, lean_traces
+    from posbench.saved_run import write_traces
+    from posbench.seeds import seed_figures, seeds_section
 
     command = command_line()
     first = f"seed {cfg.seed} (1/{len(seeds)}): " if seeds else ""
@@ -309,7 +309,7 @@ def _run(drives, cfg, data, out: Path, workers: int, rerun: Path | None = None,
     publish(res, traces, runs, out, formats, drive_plots, lambda _: jobs.paper(), table_formats,
             plots=jobs, removed=removed, traces_written=traces_file.result)
     if rerun is not None:
-        from bench.rerun_log import write_recording
+        from posbench.rerun_log import write_recording
 
         with console.status(f"writing rerun recording {rerun}..."):
             try:
@@ -330,28 +330,28 @@ def publish(res: dict[str, Any], traces: pd.DataFrame, runs: Sequence[DriveRun],
     summary tables and the ``wrote ...`` line: how ``bench run`` and ``bench score`` end.
 
     Args:
-        res: :func:`bench.results.aggregate` output; ``traces`` the traces it was made from.
-        runs: the per-drive :class:`~bench.runner.DriveRun` records (skipped drives named).
+        res: :func:`posbench.results.aggregate` output; ``traces`` the traces it was made from.
+        runs: the per-drive :class:`~posbench.runner.DriveRun` records (skipped drives named).
         figures: ``figures(run) -> [(file stem, caption)]`` draws extra figures into ``out``
             (the paper's figures of ``bench run``); None: none.
         table_formats: table files beside report.md (csv, latex; empty: none).
-        plots: the run's plots, being drawn by :class:`~bench.figure_jobs.FigureJobs`; None:
+        plots: the run's plots, being drawn by :class:`~posbench.figure_jobs.FigureJobs`; None:
             drawn here.
         removed: the files of an earlier run already removed from ``out`` (by the caller,
             before it started drawing into it); None: removed here.
         traces_written: returns ``out/traces.parquet`` once written by the caller
-            (:func:`bench.saved_run.write_traces`, in another process); None: written here.
+            (:func:`posbench.saved_run.write_traces`, in another process); None: written here.
 
     Returns:
-        the saved :class:`~bench.saved_run.Run`.
+        the saved :class:`~posbench.saved_run.Run`.
 
     Raises:
         UsageError: every drive was skipped (the report is written first).
     """
-    from bench.outputs import remove_previous_outputs
-    from bench.report import excluded_note, trained_note, write_report
-    from bench.saved_run import Run, save_run
-    from bench.terminal import print_table
+    from posbench.outputs import remove_previous_outputs
+    from posbench.report import excluded_note, trained_note, write_report
+    from posbench.saved_run import Run, save_run
+    from posbench.terminal import print_table
 
     out.mkdir(parents=True, exist_ok=True)
     if removed is None:
@@ -377,9 +377,9 @@ def publish(res: dict[str, Any], traces: pd.DataFrame, runs: Sequence[DriveRun],
                for k in ("future", "now")):
         console.print("warning: no query could be scored (no reference position at any query "
                       "past the warm-up); see the exclusions below", highlight=False)
-    from bench.report import has_held_out_paired, has_paired
-    from bench.stat_tables import paired_table, seeds_table
-    from bench.tables import summary_table
+    from posbench.report import has_held_out_paired, has_paired
+    from posbench.stat_tables import paired_table, seeds_table
+    from posbench.tables import summary_table
 
     headline = summary_table(res, compact=True)
     print_table(console, headline.header(), headline.cells(),

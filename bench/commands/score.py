@@ -8,7 +8,7 @@ from typing import TYPE_CHECKING, Annotated
 
 import typer
 
-from bench.commands.common import (
+from posbench.commands.common import (
     DataError,
     DrivePlotsOpt,
     PlotFormatOpt,
@@ -18,10 +18,10 @@ from bench.commands.common import (
     console,
     fail,
 )
-from bench.options import check_out_dir, parse_report_formats
+from posbench.options import check_out_dir, parse_report_formats
 
 if TYPE_CHECKING:
-    from bench.answers import Scored
+    from posbench.answers import Scored
 
 #: what --name may be: it names the predictor in every table, file name and results key
 NAME_PATTERN = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.+@-]*$")
@@ -56,7 +56,7 @@ def score(
 
     Example: bench score answers.csv --queries bench-queries --name mynode --out mynode-run
     """
-    from bench.commands.run import drive_plot_limit, plot_formats
+    from posbench.commands.run import drive_plot_limit, plot_formats
 
     try:
         if not NAME_PATTERN.match(name):
@@ -81,10 +81,10 @@ def _score(answers_path: Path, queries_dir: Path, name: str, out: Path,
            table_formats: tuple[str, ...] = ("csv", "latex")) -> None:
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
-    from bench.answers import read_answers, score_answers
-    from bench.commands.run import plural, publish
-    from bench.offline import read_queries
-    from bench.results import aggregate, all_traces, tree_hash
+    from posbench.answers import read_answers, score_answers
+    from posbench.commands.run import plural, publish
+    from posbench.offline import read_queries
+    from posbench.results import aggregate, all_traces, tree_hash
 
     with console.status("reading the queries folder and the answers..."):
         folder = read_queries(queries_dir)

@@ -8,7 +8,7 @@ from typing import Annotated
 import typer
 from rich.console import Console
 
-from bench.commands.common import (
+from posbench.commands.common import (
     DataError,
     DataOpt,
     UsageError,
@@ -16,8 +16,8 @@ from bench.commands.common import (
     console,
     fail,
 )
-from bench.options import check_at_least, check_data_paths, check_out_dir
-from bench.terminal import print_table
+from posbench.options import check_at_least, check_data_paths, check_out_dir
+from posbench.terminal import print_table
 
 MODELS = ("lstm", "hybrid")
 #: GPS profiles drawn from the truth of drives that have one, per model (``--profiles``)
@@ -51,11 +51,11 @@ def train(
 ) -> None:
     """Train a predictor's network on drives and write model.onnx + model.json (its model card).
 
-    Needs the `train` extra: pip install 'posbench[train]'. KITTI is refused (one
+    Needs the `train` extra: pip install 'posbench-harness[train]'. KITTI is refused (one
     error line): it is evaluation-only data. Example (the bundled models):
     bench train --data ../shared/data/aslan ../shared/data/comma2k19 --corpus-hours 20 --out DIR
     """
-    from scenarios.degrade import GPS_PROFILES
+    from posbench.scenarios.degrade import GPS_PROFILES
 
     try:  # every option is checked before PyTorch is imported or a drive loaded
         if model not in MODELS:
@@ -82,13 +82,13 @@ def train(
     try:
         import torch  # noqa: F401
     except ImportError:
-        raise fail("bench train needs PyTorch: pip install 'posbench[train]'") from None
+        raise fail("bench train needs PyTorch: pip install 'posbench-harness[train]'") from None
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
     if model == "hybrid":
-        from predictors.hybrid.train import run_training
+        from posbench.predictors.hybrid.train import run_training
     else:
-        from predictors.lstm.train import run_training
+        from posbench.predictors.lstm.train import run_training
 
     command = command_line()
     stopped: list[tuple[int, int, int]] = []

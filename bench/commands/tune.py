@@ -6,7 +6,7 @@ from typing import Annotated
 
 import typer
 
-from bench.commands.common import (
+from posbench.commands.common import (
     WORKER_DIED,
     DataError,
     DataOpt,
@@ -16,7 +16,7 @@ from bench.commands.common import (
     fail,
     load_drives,
 )
-from bench.options import check_at_least, check_choice, check_data_paths
+from posbench.options import check_at_least, check_choice, check_data_paths
 
 
 def tune(
@@ -49,9 +49,9 @@ def tune(
     """
     from concurrent.futures.process import BrokenProcessPool
 
-    from bench.config import GPS_PROFILES
-    from bench.tune import GRIDS, calibrate, grid_for, grid_search, save_tuned, tuning_note
-    from predictors.registry import tuned_params
+    from posbench.config import GPS_PROFILES
+    from posbench.predictors.registry import tuned_params
+    from posbench.tune import GRIDS, calibrate, grid_for, grid_search, save_tuned, tuning_note
 
     if predictor not in GRIDS:
         raise fail(f"no tuning grid for {predictor!r}; tunable: {', '.join(GRIDS)}")
@@ -75,7 +75,7 @@ def tune(
             dev = load_drives(data, "enu", None)
             source = "development routes " + ", ".join(str(p) for p in data)
         else:
-            from scenarios.synthetic import default_drives
+            from posbench.scenarios.synthetic import default_drives
 
             dev = [d for s in range(1000, 1000 + drives) for d in default_drives(seed=s)]
             source = f"synthetic development drives, seeds 1000-{999 + drives}"

@@ -10,8 +10,8 @@ from typing import Annotated
 
 import typer
 
-from bench import rerun_web
-from bench.commands.common import UsageError, fail
+from posbench import rerun_web
+from posbench.commands.common import UsageError, fail
 
 
 def no_display_reason(platform: str | None = None,
@@ -67,7 +67,7 @@ def view(recording: Annotated[Path, typer.Argument(
         raise fail(f"{recording}: no such file")
     exe = _find_rerun()
     if exe is None:
-        raise fail("the rerun viewer is not installed: pip install 'posbench[viz]'")
+        raise fail("the rerun viewer is not installed: pip install 'posbench-harness[viz]'")
     if web:
         raise _serve_web(exe, recording, web_port, data_port)
     reason = no_display_reason()

@@ -4,9 +4,9 @@ Run from the repository root: python docs/examples/fix_accuracy_sources.py
 """
 import numpy as np
 
-from scenarios.degrade import degrade_gps
-from scenarios.loaders import load
-from scenarios.synthetic import default_drives
+from posbench.scenarios.degrade import degrade_gps
+from posbench.scenarios.loaders import load
+from posbench.scenarios.synthetic import default_drives
 
 d = default_drives()[0]
 rows = [(x.name, x.meta.format, x.gps.accuracy) for x in

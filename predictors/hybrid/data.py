@@ -1,17 +1,17 @@
 """Training data of the ``hybrid`` (numpy only): windows, kf prior and residual targets.
 
 For one drive and its (possibly degraded) fixes, one row per ``lstm`` training window
-(:func:`predictors.lstm.windows.drive_windows`, matched to its fix by the fix time):
+(:func:`posbench.predictors.lstm.windows.drive_windows`, matched to its fix by the fix time):
 
 - ``X`` (B, 8, 6): the lstm's features (heading frame);
 - ``prior`` (B, 4, 2) [m]: ``kf.position_at(t_fix + h) - p_last`` for h in
-  :data:`~predictors.hybrid.predictor.HORIZONS`, rotated by -psi (heading frame), where the
+  :data:`~posbench.predictors.hybrid.predictor.HORIZONS`, rotated by -psi (heading frame), where the
   kf is a fresh ``LinearKalman(**kf_params)`` replayed over the drive's streams in the
   runner's order (:func:`kf_prior_at_fixes`) and asked right after each fix;
 - ``target`` (B, 4, 2) [m]: ``reference(t_fix + h) - kf.position_at(t_fix + h)``, rotated
   by -psi: the residual the network learns to add. The reference is the drive's truth
   (linearly interpolated) when it has one, else the centred cubic through the fixes
-  within +-1 s (:func:`predictors.lstm.resample.centred_cubic_batch`, the lstm's
+  within +-1 s (:func:`posbench.predictors.lstm.resample.centred_cubic_batch`, the lstm's
   convention). Windows whose reference does not cover t_fix + 0.8 s are dropped.
 
 Frames: positions in local ENU [m]; heading frame = rotated by -psi (x along the heading
@@ -25,11 +25,11 @@ from dataclasses import dataclass, fields
 
 import numpy as np
 
-from predictors.hybrid.predictor import HORIZONS, N_H
-from predictors.kf import LinearKalman
-from predictors.lstm.resample import N_STEPS, centred_cubic_batch
-from predictors.lstm.windows import drive_windows
-from scenarios.drive import Drive, GpsStream
+from posbench.predictors.hybrid.predictor import HORIZONS, N_H
+from posbench.predictors.kf import LinearKalman
+from posbench.predictors.lstm.resample import N_STEPS, centred_cubic_batch
+from posbench.predictors.lstm.windows import drive_windows
+from posbench.scenarios.drive import Drive, GpsStream
 
 _GPS, _IMU, _SPEED = 0, 1, 2
 
@@ -82,7 +82,7 @@ def kf_prior_at_fixes(drive: Drive, gps: GpsStream, kf_params: dict,
     """(n_fixes, len(horizons), 2) [m, ENU]: ``kf.position_at(t_fix + h)`` asked right after
     each fix of ``gps``, from a fresh ``LinearKalman(**kf_params)`` fed the drive's IMU and
     speed and ``gps`` (sigma = the stated accuracy where finite and positive, else None) in
-    the runner's order (:mod:`bench.replay`: by time; at equal times fixes, then IMU, then
+    the runner's order (:mod:`posbench.replay`: by time; at equal times fixes, then IMU, then
     speed). NaN rows for fixes before the kf has a state (a non-finite first fix)."""
     kf = LinearKalman(**kf_params)
     parts_t = [gps.t]

@@ -1,7 +1,7 @@
-"""Export :class:`~predictors.hybrid.model.HybridNet` to ONNX, check it, write model.json.
+"""Export :class:`~posbench.predictors.hybrid.model.HybridNet` to ONNX, check it, write model.json.
 
 The graph (torch's TorchScript exporter, ``dynamo=False``, opset 17, like
-:mod:`predictors.lstm.export`; its dynamo exporter needs ``onnxscript``, not installed in
+:mod:`posbench.predictors.lstm.export`; its dynamo exporter needs ``onnxscript``, not installed in
 this project) takes two float32 inputs with a dynamic batch dimension ``batch``:
 ``features`` [batch, 8, 6] and ``prior`` [batch, 4, 2] [m], and answers ``correction``
 [batch, 4, 4] (dx, dy [m, heading frame], log var along / across [log m^2] per horizon).
@@ -27,12 +27,12 @@ import numpy as np
 import onnxruntime as ort
 import torch
 
-from predictors.hybrid.data import HybridWindows, hybrid_windows
-from predictors.hybrid.model import HybridNet
-from predictors.hybrid.predictor import CONDITIONS, FORMAT, HORIZONS, INPUTS, N_H, OUTPUT
-from predictors.lstm.features import FEATURES, N_FEATURES
-from predictors.lstm.resample import DT, MIN_SPAN_S, N_STEPS
-from predictors.lstm.runtime import session_options
+from posbench.predictors.hybrid.data import HybridWindows, hybrid_windows
+from posbench.predictors.hybrid.model import HybridNet
+from posbench.predictors.hybrid.predictor import CONDITIONS, FORMAT, HORIZONS, INPUTS, N_H, OUTPUT
+from posbench.predictors.lstm.features import FEATURES, N_FEATURES
+from posbench.predictors.lstm.resample import DT, MIN_SPAN_S, N_STEPS
+from posbench.predictors.lstm.runtime import session_options
 
 OPSET = 17
 BATCH_DIM = "batch"
@@ -139,7 +139,7 @@ def save_model(net: HybridNet, out_dir: Path, prior_params: dict[str, dict],
 
 def tuned_kf_params() -> dict[str, dict]:
     """The kf's tuned parameters per GPS condition (predictors/tuned.json; {} where untuned)."""
-    from predictors.registry import tuned_params
+    from posbench.predictors.registry import tuned_params
 
     return {c: tuned_params("kf", c) for c in CONDITIONS}
 
@@ -149,8 +149,8 @@ def write_untrained(out_dir: Path, seeds: tuple[int, ...] = (0, 1, 2, 3),
     """An untrained (zero last layer) model: statistics from synthetic drives ``seeds`` (their
     fixes degraded by the ``stats_condition`` profile, the kf prior with that condition's
     tuned parameters), the tuned kf parameters of every condition as prior."""
-    from scenarios.degrade import degrade_gps
-    from scenarios.synthetic import generate_drive
+    from posbench.scenarios.degrade import degrade_gps
+    from posbench.scenarios.synthetic import generate_drive
 
     prior = tuned_kf_params()
     rows = []

@@ -4,7 +4,7 @@
 per horizon H = (0.2, 0.4, 0.6, 0.8) s, (dx, dy) [m, heading frame] to add to the kf's
 answer and (log var along the heading, log var across) [log m^2] of that residual.
 
-All normalisation lives in the graph as buffers (like :class:`predictors.lstm.model.LstmNet`),
+All normalisation lives in the graph as buffers (like :class:`posbench.predictors.lstm.model.LstmNet`),
 so the exported ONNX takes raw inputs:
 
 - features standardised with ``feature_mean`` / ``feature_std`` (6,);
@@ -26,7 +26,7 @@ import torch
 from numpy.typing import ArrayLike
 from torch import nn
 
-from predictors.lstm.features import N_FEATURES
+from posbench.predictors.lstm.features import N_FEATURES
 
 N_H = 4
 

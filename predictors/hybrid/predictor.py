@@ -1,13 +1,13 @@
 """``hybrid``: a Kalman-filter prior plus a learned residual (numpy + onnxruntime, no torch).
 
-The prior is :class:`predictors.kf.LinearKalman` (``kf``), run inside the hybrid on every
+The prior is :class:`posbench.predictors.kf.LinearKalman` (``kf``), run inside the hybrid on every
 observation exactly as ``kf`` runs alone (fixes with their stated sigma, IMU, wheel speed),
 with the parameters the network was trained with (model.json ``prior.params[condition]``,
 see :func:`prior_params`).
 
 On each real GPS fix whose window holds >= 4 fixes spanning >= 2 s, one *network step*:
 
-1. the ``lstm``'s input window (:class:`predictors.lstm.fused.FusedStep`: cubics through
+1. the ``lstm``'s input window (:class:`posbench.predictors.lstm.fused.FusedStep`: cubics through
    the fixes and the IMU, 8 grid points 200 ms apart ending at the fix, features in the
    heading frame; psi [rad] = heading of the fixes' cubic at the fix);
 2. the prior input: for H = (0.2, 0.4, 0.6, 0.8) s, ``kf.position_at(t_fix + h) - grid[7]``
@@ -34,7 +34,7 @@ Fallback to the prior alone (correction 0, the kf's covariance):
 - start-up: before the first window of >= 4 fixes spanning >= 2 s (and after a restart);
   a real fix that yields no window clears the previous step's correction;
 - standstill: the wheel/CAN speed (else the speed of the window's cubic at the fix) below
-  0.15 km/h (:data:`predictors.lstm.predictor.STILL_SPEED_MPS`), decided at query time;
+  0.15 km/h (:data:`posbench.predictors.lstm.predictor.STILL_SPEED_MPS`), decided at query time;
 - a network output (or its variance) that is not finite.
 
 Frames and units: positions [m] local ENU, times [s], covariances [m^2] ENU.
@@ -50,20 +50,20 @@ from typing import Any
 
 import numpy as np
 
-from predictors.base import ModelFileSeams, Predictor
-from predictors.kf import LinearKalman
-from predictors.lstm.features import N_FEATURES
-from predictors.lstm.fused import FusedStep
-from predictors.lstm.predictor import (
+from posbench.predictors.base import ModelFileSeams, Predictor
+from posbench.predictors.kf import LinearKalman
+from posbench.predictors.lstm.features import N_FEATURES
+from posbench.predictors.lstm.fused import FusedStep
+from posbench.predictors.lstm.predictor import (
     RESTART_GAP_S,
     STILL_SPEED_MPS,
     ImuHistory,
     _Buf,
     fit_fused_window,
 )
-from predictors.lstm.resample import DT, GRID_OFFSETS, N_STEPS
-from predictors.lstm.runtime import OnnxModel
-from scenarios.errors import DataError
+from posbench.predictors.lstm.resample import DT, GRID_OFFSETS, N_STEPS
+from posbench.predictors.lstm.runtime import OnnxModel
+from posbench.scenarios.errors import DataError
 
 FORMAT = "posbench-hybrid"
 #: horizons [s] of the prior input and the correction output, after the fix
@@ -85,7 +85,7 @@ _NAN2 = (math.nan, math.nan)
 
 def bundled_model() -> Path:
     """Path of the bundled ``model.onnx`` (package data of predictors.hybrid)."""
-    return Path(str(resources.files("predictors.hybrid") / "bundled" / "model.onnx"))
+    return Path(str(resources.files("posbench.predictors.hybrid") / "bundled" / "model.onnx"))
 
 
 def load_model_info(onnx_path: Path) -> dict:
@@ -154,7 +154,7 @@ class HybridPredictor(ModelFileSeams, Predictor):
         model: a ``model.onnx`` with its ``model.json`` alongside, or a folder holding both
             (as ``bench train`` writes it); default: the bundled model.
         gps_condition: the run's GPS condition (``none``, ``rtk``, ``consumer``, ``native``;
-            passed by :func:`predictors.registry.create`): picks the prior's kf parameters
+            passed by :func:`posbench.predictors.registry.create`): picks the prior's kf parameters
             from model.json (fallback ``native``, then the kf's defaults).
     """
 

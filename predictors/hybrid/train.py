@@ -1,9 +1,9 @@
 """Train the ``hybrid``'s residual network and write ``model.onnx`` + ``model.json``.
 
 :func:`run_training` is what ``bench train --model hybrid`` calls; its arguments mirror
-:func:`predictors.lstm.train.run_training`. Pipeline: drives (``--data``, the benchmark's
-synthetic generator, hours of :mod:`scenarios.corpus`) -> split by route
-(:func:`predictors.lstm.train.split_by_route`) -> rows (:func:`predictors.hybrid.data.hybrid_windows`):
+:func:`posbench.predictors.lstm.train.run_training`. Pipeline: drives (``--data``, the benchmark's
+synthetic generator, hours of :mod:`posbench.scenarios.corpus`) -> split by route
+(:func:`posbench.predictors.lstm.train.split_by_route`) -> rows (:func:`posbench.predictors.hybrid.data.hybrid_windows`):
 drives with truth get their fixes drawn from it under each of ``profiles`` and the kf prior
 with that profile's tuned parameters (``predictors/tuned.json``); drives without truth
 keep their own fixes and the ``native`` parameters -> statistics -> Adam, early stopping
@@ -27,8 +27,8 @@ from pathlib import Path
 
 import numpy as np
 
-from predictors.hybrid.data import HybridWindows, hybrid_windows
-from predictors.lstm.train import (
+from posbench.predictors.hybrid.data import HybridWindows, hybrid_windows
+from posbench.predictors.lstm.train import (
     EarlyStop,
     Progress,
     corpus_card,
@@ -41,8 +41,8 @@ from predictors.lstm.train import (
     subsample,
     synthetic_seeds,
 )
-from scenarios.drive import Drive
-from scenarios.errors import DataError
+from posbench.scenarios.drive import Drive
+from posbench.scenarios.errors import DataError
 
 BETA = 0.5
 #: the loss weighs the 0.2 s horizon (the benchmark's future point) this much more
@@ -54,7 +54,7 @@ def drive_rows(drive: Drive, profiles: Sequence[str], kf_params: dict[str, dict]
     """Training rows of one drive: per profile for a drive with truth, else its own fixes."""
     if drive.truth is None or len(drive.truth) < 2:
         return hybrid_windows(drive, drive.gps, kf_params.get("native") or {})
-    from scenarios.degrade import degrade_gps
+    from posbench.scenarios.degrade import degrade_gps
 
     return HybridWindows.concat([
         hybrid_windows(drive, degrade_gps(drive.truth, p, seed=seed * 1000 + 100 * j),
@@ -101,14 +101,14 @@ def run_training(data_paths: Sequence[str | Path], out_dir: Path, epochs: int = 
                  kf_params: dict[str, dict] | None = None) -> dict:
     """Train, export and describe a hybrid model; returns the dict written to model.json.
 
-    Args as :func:`predictors.lstm.train.run_training`; ``hidden`` is the network width
+    Args as :func:`posbench.predictors.lstm.train.run_training`; ``hidden`` is the network width
     (default 48), ``kf_params`` the prior's parameters per GPS condition (default: the tuned
-    ones, :func:`predictors.hybrid.export.tuned_kf_params`)."""
+    ones, :func:`posbench.predictors.hybrid.export.tuned_kf_params`)."""
     import torch
 
-    from predictors.hybrid.export import fit_stats, save_model, tuned_kf_params
-    from predictors.hybrid.model import HybridNet
-    from predictors.training_loop import fit_epochs
+    from posbench.predictors.hybrid.export import fit_stats, save_model, tuned_kf_params
+    from posbench.predictors.hybrid.model import HybridNet
+    from posbench.predictors.training_loop import fit_epochs
 
     t_start = time.perf_counter()
     out_dir = Path(out_dir)
@@ -176,8 +176,8 @@ def run_training(data_paths: Sequence[str | Path], out_dir: Path, epochs: int = 
     history, stopped_by = fit.history, fit.stopped_by
     train_s = time.perf_counter() - t_start
 
-    from predictors.hybrid.predictor import HybridPredictor  # noqa: F401 - loadability below
-    from predictors.lstm.runtime import OnnxModel
+    from posbench.predictors.hybrid.predictor import HybridPredictor  # noqa: F401 - loadability below
+    from posbench.predictors.lstm.runtime import OnnxModel
 
     extra = {
         "trained": True,
@@ -199,7 +199,7 @@ def run_training(data_paths: Sequence[str | Path], out_dir: Path, epochs: int = 
                      "seconds": round(train_s, 1), "history": history},
         "data": {"paths": manifest(data_paths),
                  "synthetic": {"drives": synthetic,
-                               "generator": "scenarios.synthetic.generate_drive",
+                               "generator": "posbench.scenarios.synthetic.generate_drive",
                                "generator_seeds": synthetic_seeds(synthetic, seed)},
                  "corpus": corpus_card(corpus_d, corpus_hours, seed),
                  "in_memory_drives": [d.name for d in (drives or [])],
@@ -219,7 +219,7 @@ def run_training(data_paths: Sequence[str | Path], out_dir: Path, epochs: int = 
     future = future_answers(va, outs[:, 0, :2].astype(float))
     info["validation"] = evaluate(va, future, {d.name: group_of(d) for d in val_d})
     (out_dir / "model.json").write_text(json.dumps(info, indent=1) + "\n")
-    from predictors.model_card import write_model_card
+    from posbench.predictors.model_card import write_model_card
 
     write_model_card(info, out_dir, "hybrid")
     return info

@@ -12,7 +12,7 @@ and return ``output`` ``[batch, 6, 1]``: the same features 200 ms after the last
 x, y in the input's frame. The network normalises each window internally.
 
 Everything else (cubic resampling, dropout feedback loop, standstill hold, start-up
-line, final cubic for the current position) is :class:`~predictors.lstm.predictor.LstmPredictor`'s.
+line, final cubic for the current position) is :class:`~posbench.predictors.lstm.predictor.LstmPredictor`'s.
 
 ``origin``: ``"window"`` (default) subtracts the window's first grid sample from x, y
 and adds it back to the output (the paper: "each training sequence commences at the
@@ -29,10 +29,10 @@ from pathlib import Path
 
 import numpy as np
 
-from predictors.lstm.predictor import LstmPredictor
-from predictors.lstm.resample import GRID_OFFSETS, N_STEPS, deriv_poly
-from predictors.lstm.runtime import OnnxModel
-from scenarios.errors import DataError
+from posbench.predictors.lstm.predictor import LstmPredictor
+from posbench.predictors.lstm.resample import GRID_OFFSETS, N_STEPS, deriv_poly
+from posbench.predictors.lstm.runtime import OnnxModel
+from posbench.scenarios.errors import DataError
 
 OUTPUT = "output"
 FIXED_BATCH = 1024

@@ -2,7 +2,7 @@
 normalisation, for the fused fix step (export side: needs the ``onnx`` package).
 
 The exported ``model.onnx`` keeps the public interface (raw features ``[B, 8, 6]`` in, raw
-next-sample features ``[B, 6]`` out, :mod:`predictors.lstm.model`). Its normalisation (speed
+next-sample features ``[B, 6]`` out, :mod:`posbench.predictors.lstm.model`). Its normalisation (speed
 scale, log, divisions, residual) is ~30 small onnxruntime nodes of ~0.7 us each around a
 network of 6; for one window per call that overhead is half the inference time. The core
 graph is the same weights with the input affine parts folded in:
@@ -18,7 +18,7 @@ graph is the same weights with the input affine parts folded in:
   ``d_7 + o * res_std`` (the last grid step plus the residual, [m], the model's frame).
 
 :func:`write_core` writes ``<stem>.core.onnx`` beside the model and returns the
-``model.json["core"]`` entry; the runtime (:mod:`predictors.lstm.core_net`) checks on load
+``model.json["core"]`` entry; the runtime (:mod:`posbench.predictors.lstm.core_net`) checks on load
 that core and full graph agree (to 1e-5 m) and refuses a core that does not.
 """
 
@@ -30,8 +30,8 @@ import numpy as np
 import onnx
 from onnx import TensorProto, helper, numpy_helper
 
-from predictors.lstm.features import N_FEATURES, SPEED_EPS_M
-from predictors.lstm.resample import N_STEPS
+from posbench.predictors.lstm.features import N_FEATURES, SPEED_EPS_M
+from posbench.predictors.lstm.resample import N_STEPS
 
 #: opset of the core graph (Gemm, LeakyRelu, Reshape, LSTM as in opset 14+)
 CORE_OPSET = 17
@@ -53,7 +53,7 @@ def _attrs(node: onnx.NodeProto) -> dict:
 
 
 def core_model(full: onnx.ModelProto) -> onnx.ModelProto:
-    """The core graph of a ``"speed"``-form model exported by :mod:`predictors.lstm.export`
+    """The core graph of a ``"speed"``-form model exported by :mod:`posbench.predictors.lstm.export`
     (one encoder layer, one LSTM layer; initializer names as torch exports them).
 
     Raises:

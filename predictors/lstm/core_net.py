@@ -1,5 +1,5 @@
 """The core network of a ``"speed"``-form model at run time: the fused step's inference
-without the ~30 normalisation nodes of the full graph (see :mod:`predictors.lstm.core_graph`,
+without the ~30 normalisation nodes of the full graph (see :mod:`posbench.predictors.lstm.core_graph`,
 which builds it; onnxruntime only here).
 
 The fused step writes its (8, 6) float64 window once; :meth:`CoreNet.load` applies the
@@ -7,11 +7,11 @@ model's input scaling in three numpy calls (the displacements divided by the win
 scale, row 0's fix offset by ``res_std``, ``log s`` as column 7; the standardisation of the
 other columns lives in the core's weights) and :meth:`CoreNet.displacement` turns the core's
 standardised residual into the displacement 200 ms ahead [m, the model's frame]:
-``d_7 + o * res_std``, as :class:`predictors.lstm.model.FuturePoint` does in-graph.
+``d_7 + o * res_std``, as :class:`posbench.predictors.lstm.model.FuturePoint` does in-graph.
 
 A core is used only if it reproduces its full graph: on load both answer the same
 deterministic windows (0-40 m/s, turning, braking) and must agree to :data:`CORE_TOL_M`; a
-core that does not is refused with a one-line :class:`~scenarios.errors.DataError`.
+core that does not is refused with a one-line :class:`~posbench.scenarios.errors.DataError`.
 """
 
 from __future__ import annotations
@@ -21,10 +21,10 @@ from pathlib import Path
 
 import numpy as np
 
-from predictors.lstm.features import N_FEATURES
-from predictors.lstm.resample import DT, N_STEPS
-from predictors.lstm.runtime import OnnxModel
-from scenarios.errors import DataError
+from posbench.predictors.lstm.features import N_FEATURES
+from posbench.predictors.lstm.resample import DT, N_STEPS
+from posbench.predictors.lstm.runtime import OnnxModel
+from posbench.scenarios.errors import DataError
 
 #: largest displacement difference [m] allowed between core and full graph on the check
 #: windows (float32 rounding of the folded weights is ~1e-7 m)
@@ -65,7 +65,7 @@ class CoreNet:
     Args:
         onnx_path: the full ``model.onnx`` (the core's file name in ``entry`` is relative
             to it).
-        entry: ``model.json["core"]`` (:func:`predictors.lstm.core_graph.write_core`).
+        entry: ``model.json["core"]`` (:func:`posbench.predictors.lstm.core_graph.write_core`).
         full: the full model's session, to check the core against.
     Raises:
         DataError: the core file is missing, has another input shape, or does not

@@ -22,10 +22,10 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from predictors.lstm.features import N_FEATURES
-from predictors.lstm.model import FuturePoint, LstmNet
-from predictors.lstm.resample import N_STEPS
-from predictors.lstm.runtime import OnnxModel
+from posbench.predictors.lstm.features import N_FEATURES
+from posbench.predictors.lstm.model import FuturePoint, LstmNet
+from posbench.predictors.lstm.resample import N_STEPS
+from posbench.predictors.lstm.runtime import OnnxModel
 
 INPUT_NAME = "features"
 OUTPUT_NAME = "future"

@@ -33,12 +33,12 @@ import math
 
 import numpy as np
 
-from predictors.lstm.resample import DT, N_STEPS
+from posbench.predictors.lstm.resample import DT, N_STEPS
 
 FEATURES = ("dx", "dy", "ax", "ay", "yaw", "t")
 N_FEATURES = len(FEATURES)
 FRAMES = ("heading", "world")
-#: ``"speed"``-form models (:mod:`predictors.lstm.model`): added to the window's mean grid
+#: ``"speed"``-form models (:mod:`posbench.predictors.lstm.model`): added to the window's mean grid
 #: step length [m] before the displacements are divided by it (standstill-safe)
 SPEED_EPS_M = 0.02
 

@@ -1,6 +1,6 @@
 """The fused ``lstm`` fix step: the same maths as the staged step, in few numpy calls.
 
-The staged step (:meth:`predictors.lstm.predictor.LstmPredictor._step_on_fixes` with
+The staged step (:meth:`posbench.predictors.lstm.predictor.LstmPredictor._step_on_fixes` with
 ``step="staged"``) stays the readable reference; this module computes the same answer
 (to float rounding; a test holds them within 1e-6 m on every shared drive) with the
 per-call overhead taken out:
@@ -13,7 +13,7 @@ per-call overhead taken out:
   precomputed Vandermonde matrix;
 - the features are written straight into the float32 input buffer of the ONNX session
   (rotations as complex products); a ``"speed"``-form model with a core graph
-  (:mod:`predictors.lstm.core_net`) is fed its normalised input instead and runs without
+  (:mod:`posbench.predictors.lstm.core_net`) is fed its normalised input instead and runs without
   the ~30 normalisation nodes of the full graph;
 - the current-position cubic (8 grid points + the prediction) is one product with the
   precomputed pseudo-inverse.
@@ -33,10 +33,10 @@ import math
 
 import numpy as np
 
-from predictors.lstm.core_net import CoreNet
-from predictors.lstm.features import N_FEATURES, gps_substitute_imu, time_feature
-from predictors.lstm.resample import DT, GRID_OFFSETS, N_STEPS, powers
-from predictors.lstm.runtime import OnnxModel
+from posbench.predictors.lstm.core_net import CoreNet
+from posbench.predictors.lstm.features import N_FEATURES, gps_substitute_imu, time_feature
+from posbench.predictors.lstm.resample import DT, GRID_OFFSETS, N_STEPS, powers
+from posbench.predictors.lstm.runtime import OnnxModel
 
 try:  # the gufunc behind np.linalg.solve, without its Python-side checks (~3 us)
     from numpy.linalg import _umath_linalg
@@ -77,11 +77,11 @@ class FusedStep:
 
     Args:
         net: the predictor's ONNX model; features are written into ``net.buf[0]`` (8, 6).
-        frame: ``"heading"`` or ``"world"`` (:mod:`predictors.lstm.features`).
+        frame: ``"heading"`` or ``"world"`` (:mod:`posbench.predictors.lstm.features`).
         final_pinv: (4, 9) pseudo-inverse of the current-position cubic through the 8 grid
             points and the prediction (times ``_TIMES9``).
         fix_offset: row 0 of the window holds the newest fix minus the newest grid point.
-        core: the model's core graph (:class:`~predictors.lstm.core_net.CoreNet`), run
+        core: the model's core graph (:class:`~posbench.predictors.lstm.core_net.CoreNet`), run
             instead of ``net`` where given.
 
     After a successful :meth:`finish`, :attr:`pts` (9, 2) holds the grid [m] and the
@@ -207,7 +207,7 @@ class FusedStep:
         """The network input (8, 6) from the grid values, cast once into ``net.buf[0]``.
 
         Rotations are complex products: (dx + i dy) e^(-i psi) and (ax + i ay) e^(i rel)
-        (the same products and sums as :func:`predictors.lstm.features.features_one`)."""
+        (the same products and sums as :func:`posbench.predictors.lstm.features.features_one`)."""
         x64 = self._x64
         xc = self._xc
         ec = self._ec

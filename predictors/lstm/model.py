@@ -1,6 +1,6 @@
 """The paper's network in torch: MLP encoder -> LSTM -> MLP decoder (training/export only).
 
-Input ``[batch, 8, 6]`` raw features (see :mod:`predictors.lstm.features`); every
+Input ``[batch, 8, 6]`` raw features (see :mod:`posbench.predictors.lstm.features`); every
 normalisation lives inside the module as buffers, so the exported ONNX graph takes raw
 features and returns raw next-sample features, the interface the runtime has always used.
 ``forward`` returns the many-to-many predictions (the next sample's features for each of
@@ -23,7 +23,7 @@ Two input/output forms (``form``, recorded in model.json):
   standardised as in the paper.
 
 ``fix_offset`` (model.json): row 0's dx, dy hold the newest fix minus the newest grid point
-(:mod:`predictors.lstm.features`); in the ``"speed"`` form they enter divided by ``res_std``
+(:mod:`posbench.predictors.lstm.features`); in the ``"speed"`` form they enter divided by ``res_std``
 (centimetres matter there at any speed), not by the speed scale.
 
 LeakyReLU slope 0.1 (the paper's). This module imports torch: never import it from
@@ -35,7 +35,7 @@ from __future__ import annotations
 import torch
 from torch import nn
 
-from predictors.lstm.features import N_FEATURES, SPEED_EPS_M
+from posbench.predictors.lstm.features import N_FEATURES, SPEED_EPS_M
 
 FORMS = ("speed", "paper")
 

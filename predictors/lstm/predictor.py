@@ -4,8 +4,8 @@ On each GPS fix (:meth:`LstmPredictor.observe_gps`) one *step* runs:
 
 1. resample: a cubic (closed form) through the most recent fixes covering >= 2 s, evaluated
    on 8 grid times 200 ms apart ending at the fix; the IMU (ax, ay, yaw) fitted likewise
-   over the same span (:mod:`predictors.lstm.resample`);
-2. features (:mod:`predictors.lstm.features`, the frame recorded in model.json);
+   over the same span (:mod:`posbench.predictors.lstm.resample`);
+2. features (:mod:`posbench.predictors.lstm.features`, the frame recorded in model.json);
 3. inference: the network's displacement to the point 200 ms after the fix;
 4. current-position fit: a cubic through the 8 grid points and that prediction (fixed
    times, precomputed pseudo-inverse). :meth:`position_at` evaluates it at any t between
@@ -26,7 +26,7 @@ extrapolates a least-squares *line* through the fixes it has (one fix: that fix)
 short cubic would extrapolate wildly.
 
 The steps above are the *staged* reference (``step="staged"``). By default a fix step runs
-*fused* (:mod:`predictors.lstm.fused`: the same maths in few numpy calls, both cubics in one
+*fused* (:mod:`posbench.predictors.lstm.fused`: the same maths in few numpy calls, both cubics in one
 batched solve, one onnxruntime call; within 1e-6 m of the staged step on every shared drive,
 tested); bridging steps, windows of < 4 fixes and the L-BFGS fit run staged.
 
@@ -54,11 +54,11 @@ from time import perf_counter_ns
 
 import numpy as np
 
-from predictors.base import ModelFileSeams, Predictor
-from predictors.lstm.core_net import CoreNet, has_core
-from predictors.lstm.features import FRAMES, features_one, gps_substitute_imu
-from predictors.lstm.fused import FusedStep
-from predictors.lstm.resample import (
+from posbench.predictors.base import ModelFileSeams, Predictor
+from posbench.predictors.lstm.core_net import CoreNet, has_core
+from posbench.predictors.lstm.features import FRAMES, features_one, gps_substitute_imu
+from posbench.predictors.lstm.fused import FusedStep
+from posbench.predictors.lstm.resample import (
     ACCEL_GLITCH,
     DT,
     GRID_OFFSETS,
@@ -69,8 +69,8 @@ from predictors.lstm.resample import (
     fit_poly,
     window_start,
 )
-from predictors.lstm.runtime import OnnxModel
-from scenarios.errors import DataError
+from posbench.predictors.lstm.runtime import OnnxModel
+from posbench.scenarios.errors import DataError
 
 STILL_SPEED_MPS = 0.15 / 3.6
 STILL_FIXES = 5  # fixes averaged for the standstill hold
@@ -81,11 +81,11 @@ RESTART_GAP_S = 5.0
 FIX_CAP = 512
 IMU_CAP = 8192
 FITS = ("closed", "lbfgs")
-#: ``fused`` (default): the fix step in few numpy calls (:mod:`predictors.lstm.fused`);
+#: ``fused`` (default): the fix step in few numpy calls (:mod:`posbench.predictors.lstm.fused`);
 #: ``staged``: the readable reference, stage by stage (same answers to float rounding)
 STEPS = ("fused", "staged")
 N_FEATURES = 6
-#: text recorded in results for the bundled model (:meth:`~predictors.base.ModelFileSeams.model_description`)
+#: text recorded in results for the bundled model (:meth:`~posbench.predictors.base.ModelFileSeams.model_description`)
 BUNDLED_TEXT = "bundled (predictors/lstm/bundled/model.onnx)"
 
 #: the stages of a network step, in the order :attr:`LstmPredictor.stage_timer` receives them:
@@ -151,7 +151,7 @@ class LstmStep:
 
 def bundled_model() -> Path:
     """Path of the bundled ``model.onnx`` (package data of predictors.lstm)."""
-    return Path(str(resources.files("predictors.lstm") / "bundled" / "model.onnx"))
+    return Path(str(resources.files("posbench.predictors.lstm") / "bundled" / "model.onnx"))
 
 
 def load_model_info(onnx_path: Path) -> dict:
@@ -281,8 +281,8 @@ class LstmPredictor(ModelFileSeams, Predictor):
         model: path of a ``model.onnx`` with its ``model.json`` alongside (default: the
             bundled model).
         fit: ``"closed"`` (closed-form least squares) or ``"lbfgs"`` (the paper's iterative
-            fit, :func:`predictors.cubic.fit_cubic_lbfgs`; slow, for latency comparison).
-        step: ``"fused"`` (default; :mod:`predictors.lstm.fused`, closed-form fit only) or
+            fit, :func:`posbench.predictors.cubic.fit_cubic_lbfgs`; slow, for latency comparison).
+        step: ``"fused"`` (default; :mod:`posbench.predictors.lstm.fused`, closed-form fit only) or
             ``"staged"`` (the readable reference, timed stage by stage by ``bench latency``).
     """
 
@@ -320,7 +320,7 @@ class LstmPredictor(ModelFileSeams, Predictor):
         self._x = np.empty((N_STEPS, 6), dtype=np.float64)
         self._pts = np.empty((N_STEPS + 1, 2))
         fused = getattr(self, "step", "staged") == "fused" and self.fit == "closed"
-        #: the model's core graph (model.json "core"; :mod:`predictors.lstm.core_net`), run by
+        #: the model's core graph (model.json "core"; :mod:`posbench.predictors.lstm.core_net`), run by
         #: the fused step; a model copied without its core file runs the full graph
         self.core = (CoreNet(self.model_path, self.info["core"], self.net)
                      if fused and has_core(self.model_path, self.info) else None)
@@ -458,7 +458,7 @@ class LstmPredictor(ModelFileSeams, Predictor):
         xy = a[start:end + 1, 1:]
         scale = t_end - float(tt[0])
         if self.fit == "lbfgs":
-            from predictors.cubic import fit_cubic_lbfgs
+            from posbench.predictors.cubic import fit_cubic_lbfgs
 
             coef = fit_cubic_lbfgs(tt, xy, t_ref=t_end, scale=scale).coef
         else:
@@ -485,7 +485,7 @@ class LstmPredictor(ModelFileSeams, Predictor):
                 sc = max(t_end - t0, 1e-3)
                 yv = im[i0:i1, 1:] if self._imu.t_yaw_nan < tt[0] else im[i0:i1, 1:3]
                 if self.fit == "lbfgs":
-                    from predictors.cubic import fit_cubic_lbfgs
+                    from posbench.predictors.cubic import fit_cubic_lbfgs
 
                     c = fit_cubic_lbfgs(tt, yv, t_ref=t_end, scale=sc).coef
                 else:

@@ -27,7 +27,7 @@ from pathlib import Path
 import numpy as np
 import onnxruntime as ort
 
-from scenarios.errors import DataError
+from posbench.scenarios.errors import DataError
 
 
 def session_options() -> ort.SessionOptions:

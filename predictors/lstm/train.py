@@ -1,9 +1,9 @@
 """Train the paper's MLP-LSTM-MLP on drives and write ``model.onnx`` + ``model.json``.
 
 :func:`run_training` is what ``bench train --data PATH... --out DIR [--epochs N] [--seed N]``
-calls. Pipeline: load drives (``scenarios.load``), optional synthetic drives and hours of the
-vehicle-dynamics corpus (:mod:`scenarios.corpus`) -> split by route (never by window) ->
-windows (:mod:`predictors.lstm.windows`; drives with a truth stream are fed GPS degraded
+calls. Pipeline: load drives (``posbench.scenarios.load``), optional synthetic drives and hours of the
+vehicle-dynamics corpus (:mod:`posbench.scenarios.corpus`) -> split by route (never by window) ->
+windows (:mod:`posbench.predictors.lstm.windows`; drives with a truth stream are fed GPS degraded
 from it under each of ``profiles``, ``gps_seeds`` draws each: fresh fix times from the
 paper's interval distribution every draw, i.e. time jitter) -> feature statistics on the
 training windows -> Adam + ReduceLROnPlateau + early stopping on the validation loss,
@@ -14,7 +14,7 @@ plain cubic extrapolation and constant velocity.
 
 Loss (the paper's): MSE over all 8 x 6 outputs in the network's units (standardised;
 for the ``"speed"`` form the displacement is a residual in units of its own scale, see
-:mod:`predictors.lstm.model`) + 10 x MSE of the last output's x, y. Seeded and
+:mod:`posbench.predictors.lstm.model`) + 10 x MSE of the last output's x, y. Seeded and
 deterministic (torch, numpy, the sampler's generator). A wall-clock budget
 (``max_minutes``) ends training early if it is reached; the best epoch is kept.
 """
@@ -31,11 +31,11 @@ from pathlib import Path
 
 import numpy as np
 
-from predictors.lstm.features import FEATURES, FRAMES
-from predictors.lstm.resample import DT, MIN_SPAN_S, N_STEPS
-from predictors.lstm.windows import WindowSet, drive_windows, future_from_output
-from scenarios.drive import Drive
-from scenarios.errors import DataError
+from posbench.predictors.lstm.features import FEATURES, FRAMES
+from posbench.predictors.lstm.resample import DT, MIN_SPAN_S, N_STEPS
+from posbench.predictors.lstm.windows import WindowSet, drive_windows, future_from_output
+from posbench.scenarios.drive import Drive
+from posbench.scenarios.errors import DataError
 
 #: ``callback(epoch, n_epochs, train_loss, val_loss, val_future_mean_m)`` after each epoch
 Progress = Callable[[int, int, float, float, float], None]
@@ -81,7 +81,7 @@ def synthetic_drives(n: int, seed: int) -> list[Drive]:
     """``n`` drives from the project's synthetic generator, routes in turn (seeded)."""
     if n <= 0:
         return []
-    from scenarios.synthetic import ROUTES, generate_drive
+    from posbench.scenarios.synthetic import ROUTES, generate_drive
 
     return [generate_drive(seed=s, route=ROUTES[i % len(ROUTES)])
             for i, s in enumerate(synthetic_seeds(n, seed))]
@@ -118,7 +118,7 @@ def gps_variants(drive: Drive, n_seeds: int, seed: int,
     degradations of its truth (each with freshly drawn fix times)."""
     if drive.truth is None or len(drive.truth) < 2:
         return [drive.gps]
-    from scenarios.degrade import degrade_gps
+    from posbench.scenarios.degrade import degrade_gps
 
     return [degrade_gps(drive.truth, prof, seed=seed * 1000 + 100 * j + k)
             for j, prof in enumerate(profiles) for k in range(n_seeds)]
@@ -131,10 +131,10 @@ def build_windows(drives: Sequence[Drive], n_seeds: int, seed: int, frame: str,
 
 
 def corpus(hours: float, seed: int) -> list[Drive]:
-    """``hours`` of the vehicle-dynamics corpus (:func:`scenarios.corpus.corpus_drives`)."""
+    """``hours`` of the vehicle-dynamics corpus (:func:`posbench.scenarios.corpus.corpus_drives`)."""
     if hours <= 0:
         return []
-    from scenarios.corpus import corpus_drives
+    from posbench.scenarios.corpus import corpus_drives
 
     return list(corpus_drives(hours, seed=seed))
 
@@ -144,7 +144,7 @@ def gather_drives(data_paths: Sequence[str | Path], synthetic: int, corpus_hours
                   ) -> tuple[list[Drive], list[Drive], list[Drive]]:
     """Every training source loaded and split by route: (train, validation, the corpus
     drives among them); a one-line DataError when there is none."""
-    from scenarios.loaders import load
+    from posbench.scenarios.loaders import load
 
     all_drives: list[Drive] = []
     for p in data_paths:
@@ -254,7 +254,7 @@ def run_training(data_paths: Sequence[str | Path], out_dir: Path, epochs: int = 
     """Train, export and describe a model. Returns the dict written to ``model.json``.
 
     Args:
-        data_paths: files/folders for ``scenarios.load`` (aslan pickles, comma2k19, ...).
+        data_paths: files/folders for ``posbench.scenarios.load`` (aslan pickles, comma2k19, ...).
         out_dir: where ``model.onnx`` and ``model.json`` go (created).
         epochs: maximum epochs (early stopping or ``max_minutes`` may end sooner).
         seed: seeds torch, numpy, the sampler and the synthetic generators.
@@ -269,21 +269,21 @@ def run_training(data_paths: Sequence[str | Path], out_dir: Path, epochs: int = 
             training after ``epoch``: the validation loss has not improved for
             ``epoch - best_epoch`` (= ``patience``) epochs; the best epoch's weights are kept.
         form: ``"speed"`` (speed-invariant input, residual output) or ``"paper"``
-            (:mod:`predictors.lstm.model`).
-        corpus_hours: hours of the vehicle-dynamics corpus to add (:mod:`scenarios.corpus`).
+            (:mod:`posbench.predictors.lstm.model`).
+        corpus_hours: hours of the vehicle-dynamics corpus to add (:mod:`posbench.scenarios.corpus`).
         profiles: GPS profiles drawn from the truth of drives that have one.
         mirror: mirror every batch left-right at random (augmentation).
         max_minutes: wall-clock budget of the epochs [min]; the best epoch so far is kept.
         max_val_windows: validation windows kept (a seeded subsample beyond).
         fix_offset: row 0 of the input holds the newest fix minus the newest grid point
-            (:mod:`predictors.lstm.features`).
+            (:mod:`posbench.predictors.lstm.features`).
     """
     import torch
 
-    from predictors.lstm.export import export_best
-    from predictors.lstm.model import LstmNet
-    from predictors.lstm.runtime import OnnxModel
-    from predictors.training_loop import fit_epochs
+    from posbench.predictors.lstm.export import export_best
+    from posbench.predictors.lstm.model import LstmNet
+    from posbench.predictors.lstm.runtime import OnnxModel
+    from posbench.predictors.training_loop import fit_epochs
 
     if frame not in FRAMES:
         raise ValueError(f"unknown frame {frame!r}")
@@ -388,7 +388,7 @@ def run_training(data_paths: Sequence[str | Path], out_dir: Path, epochs: int = 
                      "threads": threads, "data_seconds": round(t_data, 1),
                      "seconds": round(train_s, 1), "history": history},
         "data": {"paths": manifest(data_paths),
-                 "synthetic": {"drives": synthetic, "generator": "scenarios.synthetic.generate_drive",
+                 "synthetic": {"drives": synthetic, "generator": "posbench.scenarios.synthetic.generate_drive",
                                "generator_seeds": synthetic_seeds(synthetic, seed)},
                  "corpus": corpus_card(corpus_d, corpus_hours, seed),
                  "in_memory_drives": [d.name for d in (drives or [])],
@@ -405,7 +405,7 @@ def run_training(data_paths: Sequence[str | Path], out_dir: Path, epochs: int = 
         "command": command,
     }
     (out_dir / "model.json").write_text(json.dumps(info, indent=1))
-    from predictors.model_card import write_model_card
+    from posbench.predictors.model_card import write_model_card
 
     write_model_card(info, out_dir, "lstm")
     return info
@@ -413,8 +413,8 @@ def run_training(data_paths: Sequence[str | Path], out_dir: Path, epochs: int = 
 
 def write_core_if_any(onnx_path: Path) -> dict | None:
     """The fused step's core graph beside a speed-form model (``model.json["core"]``), or
-    None where the export's layout has none (:mod:`predictors.lstm.core_graph`)."""
-    from predictors.lstm.core_graph import NoCoreGraph, write_core
+    None where the export's layout has none (:mod:`posbench.predictors.lstm.core_graph`)."""
+    from posbench.predictors.lstm.core_graph import NoCoreGraph, write_core
 
     try:
         return write_core(onnx_path)
@@ -424,10 +424,10 @@ def write_core_if_any(onnx_path: Path) -> dict | None:
 
 def corpus_card(drives: Sequence[Drive], hours: float, seed: int) -> dict:
     """What the model card says about the corpus drives: hours asked, the generator, the
-    seed and the envelope the drives cover (:func:`scenarios.corpus.envelope`)."""
+    seed and the envelope the drives cover (:func:`posbench.scenarios.corpus.envelope`)."""
     if not drives:
         return {"hours": 0}
-    from scenarios.corpus import envelope
+    from posbench.scenarios.corpus import envelope
 
-    return {"hours": hours, "seed": seed, "generator": "scenarios.corpus.corpus_drives",
+    return {"hours": hours, "seed": seed, "generator": "posbench.scenarios.corpus.corpus_drives",
             "drives": len(drives), "envelope": envelope(drives)}

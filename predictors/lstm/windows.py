@@ -1,7 +1,7 @@
-"""Training windows from :class:`~scenarios.drive.Drive` objects (numpy only).
+"""Training windows from :class:`~posbench.scenarios.drive.Drive` objects (numpy only).
 
 One window per GPS fix that has >= 2 s of history: the same resampling and features
-as the runtime (:mod:`predictors.lstm.resample`, :mod:`predictors.lstm.features`,
+as the runtime (:mod:`posbench.predictors.lstm.resample`, :mod:`posbench.predictors.lstm.features`,
 batched), plus many-to-many targets: for input sample i (time t_i) the target is the
 sample 200 ms later. Target dx, dy = reference position at t_i + 0.2 minus the input
 grid position at t_i (in the feature frame), so the last target is exactly what the
@@ -22,8 +22,8 @@ from dataclasses import dataclass, fields
 
 import numpy as np
 
-from predictors.lstm.features import compute_features, gps_substitute_imu, wrap
-from predictors.lstm.resample import (
+from posbench.predictors.lstm.features import compute_features, gps_substitute_imu, wrap
+from posbench.predictors.lstm.resample import (
     DEGREE,
     DT,
     GRID_OFFSETS,
@@ -35,7 +35,7 @@ from predictors.lstm.resample import (
     resample_positions_batch,
     window_starts,
 )
-from scenarios.drive import Drive, GpsStream
+from posbench.scenarios.drive import Drive, GpsStream
 
 STILL_PATH_M = 0.05
 TURN_HEADING_RAD = 0.2
@@ -92,7 +92,7 @@ def _labels(drive: Drive, t_end: np.ndarray, psi_first: np.ndarray, psi: np.ndar
     """Scenario labels at the window ends: scenarios.labels.label_times when it exists,
     else "turn" when the fitted heading turns by > 0.2 rad over the window."""
     try:
-        from scenarios.labels import label_times
+        from posbench.scenarios.labels import label_times
     except ImportError:
         label_times = None
     if label_times is not None:
@@ -109,7 +109,7 @@ def drive_windows(drive: Drive, gps: GpsStream | None = None, frame: str = "head
                   min_span: float = MIN_SPAN_S, fix_offset: bool = False) -> WindowSet:
     """All training windows of one drive, its GPS optionally replaced (e.g. degraded);
     ``fix_offset``: row 0 holds the newest fix minus the newest grid point
-    (:mod:`predictors.lstm.features`)."""
+    (:mod:`posbench.predictors.lstm.features`)."""
     gps = drive.gps if gps is None else gps
     t = gps.t
     xy = np.stack([gps.x, gps.y], axis=1)

@@ -2,7 +2,7 @@
 
 A path may be one recording (a bag, a pickle, a CSV/Parquet file, a KITTI drive
 folder, a comma2k19 segment folder) or a folder tree holding many; every
-recording found becomes one :class:`~scenarios.drive.Drive`.
+recording found becomes one :class:`~posbench.scenarios.drive.Drive`.
 """
 
 from __future__ import annotations
@@ -10,8 +10,8 @@ from __future__ import annotations
 from collections.abc import Iterable, Iterator
 from pathlib import Path
 
-from scenarios.drive import Drive
-from scenarios.errors import DataError
+from posbench.scenarios.drive import Drive
+from posbench.scenarios.errors import DataError
 
 ROS1_SUFFIXES = (".bag",)
 ROS2_SUFFIXES = (".db3", ".mcap")
@@ -76,23 +76,23 @@ def load_one(path: Path, fmt: str, projection: str = "enu",
              topics: dict[str, str] | None = None) -> Drive:
     """Load one recording of a known format."""
     if fmt == "kitti":
-        from scenarios.loaders.kitti import load_kitti_drive
+        from posbench.scenarios.loaders.kitti import load_kitti_drive
 
         return load_kitti_drive(path, projection=projection)
     if fmt == "comma2k19":
-        from scenarios.loaders.comma2k19 import load_comma_segment
+        from posbench.scenarios.loaders.comma2k19 import load_comma_segment
 
         return load_comma_segment(path, projection=projection)
     if fmt == "aslan":
-        from scenarios.loaders.aslan import load_aslan_pickle
+        from posbench.scenarios.loaders.aslan import load_aslan_pickle
 
         return load_aslan_pickle(path)
     if fmt in ("ros1", "ros2"):
-        from scenarios.loaders.rosbag import load_rosbag
+        from posbench.scenarios.loaders.rosbag import load_rosbag
 
         return load_rosbag(path, projection=projection, topics=topics)
     if fmt == "table":
-        from scenarios.loaders.table import load_table
+        from posbench.scenarios.loaders.table import load_table
 
         return load_table(path, projection=projection)
     raise DataError(path, f"unknown format {fmt!r}")

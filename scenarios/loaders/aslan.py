@@ -6,7 +6,7 @@ A window holds ``tstamps`` (8 fix times, int ns since the Unix epoch),
 ``(t_ns as str, ax, ay)`` [m/s^2, vehicle frame], ``theta`` [rad] at the
 window's last fix, plus ``X``/``Y`` (untimed raw positions) and the previous
 window's fixes (``old_tstamps``, ``ground_truth_old``). It is read with
-:mod:`scenarios.safe_pickle` (NumPy arrays and containers only).
+:mod:`posbench.scenarios.safe_pickle` (NumPy arrays and containers only).
 
 What was measured on the 15 routes in ``shared/data/aslan`` (ad-hoc scripts; the
 route-level checks are repeated in tests/test_loader_aslan.py) and what the
@@ -54,9 +54,9 @@ from typing import Any
 
 import numpy as np
 
-from scenarios.drive import Drive, DriveMeta, GpsStream, ImuStream
-from scenarios.errors import DataError
-from scenarios.safe_pickle import safe_load
+from posbench.scenarios.drive import Drive, DriveMeta, GpsStream, ImuStream
+from posbench.scenarios.errors import DataError
+from posbench.scenarios.safe_pickle import safe_load
 
 #: |a| [m/s^2] above which an ACCEL sample is a glitch (3 g; real samples < 15 m/s^2).
 ACCEL_GLITCH_MPS2 = 30.0
@@ -66,7 +66,7 @@ BURST_S = 1e-3
 #: Empirical fix intervals [s] of all 15 routes, as loaded (after dropping the
 #: 35 sub-millisecond duplicates): quantiles 0, 5, 10, ..., 100 % of the 10 406
 #: intervals. Measured with
-#: ``python -c "from scenarios.loaders.aslan import fix_interval_quantiles as q;
+#: ``python -c "from posbench.scenarios.loaders.aslan import fix_interval_quantiles as q;
 #: print(q('../shared/data/aslan'))"``. p5 122 ms, p25 197, p50 200, p75 202,
 #: p95 264, max 1002 ms (min 17 ms). Draw intervals by inverse-CDF interpolation
 #: (``np.interp(u, np.linspace(0, 1, 21), ASLAN_FIX_INTERVAL_QUANTILES_S)``).
@@ -251,7 +251,7 @@ def load_aslan_pickle(path: Path) -> Drive:
 
 def fix_interval_quantiles(folder: str | Path, n: int = 21) -> np.ndarray:
     """Quantiles (0..100 %, ``n`` of them) of all fix intervals [s] of the pickles under ``folder``."""
-    from scenarios.loaders import load
+    from posbench.scenarios.loaders import load
 
     dts = [np.diff(d.gps.t) for d in load(folder) if d.meta.format == "aslan"]
     return np.quantile(np.concatenate(dts), np.linspace(0.0, 1.0, n))

@@ -44,10 +44,17 @@ from pathlib import Path
 
 import numpy as np
 
-from scenarios.cleaning import clean_times, drop_nonfinite
-from scenarios.drive import Drive, DriveMeta, GpsStream, ImuStream, SpeedStream, TruthStream
-from scenarios.errors import DataError
-from scenarios.projection import ecef_to_local, to_local, validate_latlon
+from posbench.scenarios.cleaning import clean_times, drop_nonfinite
+from posbench.scenarios.drive import (
+    Drive,
+    DriveMeta,
+    GpsStream,
+    ImuStream,
+    SpeedStream,
+    TruthStream,
+)
+from posbench.scenarios.errors import DataError
+from posbench.scenarios.projection import ecef_to_local, to_local, validate_latlon
 
 GNSS_LAG_S = 0.1
 GPS_UNIX_OFFSET_S = 315964800.0  # 1980-01-06 in Unix time

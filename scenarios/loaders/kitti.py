@@ -10,7 +10,7 @@ Line ``i`` of ``timestamps.txt`` (0-based) belongs to ``data/<i:010d>.txt``.
 
 Streams built (all from the one OXTS solution, 10 Hz):
 
-- truth: x, y [m] (``scenarios.projection.to_local`` about the first fix), yaw [rad]
+- truth: x, y [m] (``posbench.scenarios.projection.to_local`` about the first fix), yaw [rad]
   = OXTS ``yaw``, v [m/s] = hypot(vf, vl), accuracy [m] = ``pos_accuracy``;
 - gps: the same fixes (lat, lon, x, y, accuracy = ``pos_accuracy``); the runner
   usually replaces it with a degraded draw from the truth. ``pos_accuracy`` is one number
@@ -24,7 +24,7 @@ Streams built (all from the one OXTS solution, 10 Hz):
 - speed: v = ``vf`` [m/s].
 
 Yaw convention: dataformat.txt says "heading, 0 = east, positive = counter clockwise",
-i.e. already the ENU yaw of :mod:`scenarios.drive`. Checked on the 46 drives of
+i.e. already the ENU yaw of :mod:`posbench.scenarios.drive`. Checked on the 46 drives of
 ``../shared/data/kitti_raw``: wherever the car moves faster than 3 m/s the direction
 of travel atan2(dy, dx) from the ENU positions agrees with OXTS yaw to a median of
 0.1 - 1.2 degrees on every drive with good truth; only 2011_09_26_drive_0093 (median
@@ -46,10 +46,17 @@ from pathlib import Path
 
 import numpy as np
 
-from scenarios.cleaning import clean_times
-from scenarios.drive import Drive, DriveMeta, GpsStream, ImuStream, SpeedStream, TruthStream
-from scenarios.errors import DataError
-from scenarios.projection import to_local, validate_latlon
+from posbench.scenarios.cleaning import clean_times
+from posbench.scenarios.drive import (
+    Drive,
+    DriveMeta,
+    GpsStream,
+    ImuStream,
+    SpeedStream,
+    TruthStream,
+)
+from posbench.scenarios.errors import DataError
+from posbench.scenarios.projection import to_local, validate_latlon
 
 #: KITTI's documented column order (used when dataformat.txt is missing).
 OXTS_COLUMNS = (

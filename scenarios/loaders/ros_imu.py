@@ -11,13 +11,13 @@ stream (vehicle frame x forward / y left, gravity-free, yaw ENU), choosing one p
     base z only); yaw rate = base-z component.
 ``estimated``
     no orientation, no mount, gravity off the sensor z: the mount is estimated from the data
-    (:func:`scenarios.imu_frames.estimate_mount`) and a warning says so.
+    (:func:`posbench.scenarios.imu_frames.estimate_mount`) and a warning says so.
 ``as-is``
     no orientation, no mount, and the data are level (mean specific force within
-    :data:`~scenarios.imu_frames.LEVEL_TILT_DEG` of +z) or hold no gravity: x, y used as they are.
+    :data:`~posbench.scenarios.imu_frames.LEVEL_TILT_DEG` of +z) or hold no gravity: x, y used as they are.
 
 Yaw (orientation paths only): checked against the GPS course while moving
-(:func:`scenarios.imu_frames.yaw_offset`): kept ("enu"), shifted ("offset-corrected") or not
+(:func:`posbench.scenarios.imu_frames.yaw_offset`): kept ("enu"), shifted ("offset-corrected") or not
 used ("dropped"). ``meta.extra["imu_frame"]`` records the path and the figures.
 """
 
@@ -27,8 +27,8 @@ from typing import Any
 
 import numpy as np
 
-from scenarios import imu_frames as fr
-from scenarios.loaders.ros_tf import find_mount
+from posbench.scenarios import imu_frames as fr
+from posbench.scenarios.loaders.ros_tf import find_mount
 
 
 def _rpy_deg(r: np.ndarray) -> list[float]:
@@ -84,7 +84,7 @@ def imu_to_vehicle(t: np.ndarray, f_s: np.ndarray, w_s: np.ndarray | None, q: np
     Args:
         t: (N,) times [s]; f_s: (N, 3) linear_acceleration [m/s^2], sensor frame (NaN: absent);
         w_s: (N, 3) angular velocity [rad/s] or None; q: (N, 4) orientation (w, x, y, z) or None.
-        frame: the IMU's ``header.frame_id``; edges: tf edges (:mod:`scenarios.loaders.ros_tf`).
+        frame: the IMU's ``header.frame_id``; edges: tf edges (:mod:`posbench.scenarios.loaders.ros_tf`).
         gps: (t [s], x [m], y [m]) ENU fixes; speed: (t [s], v [m/s]) or None.
         topic: for messages; warnings: appended one line per non-trivial decision.
     Returns:

@@ -16,7 +16,7 @@ from typing import Any
 
 import numpy as np
 
-from scenarios.imu_frames import quat_to_matrix
+from posbench.scenarios.imu_frames import quat_to_matrix
 
 TFMESSAGE = "tf2_msgs/msg/TFMessage"
 TF_TOPICS = ("/tf_static", "/tf")

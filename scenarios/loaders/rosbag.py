@@ -6,13 +6,13 @@ role to a topic name when a bag has several candidates):
 
 - ``gps``   ``sensor_msgs/NavSatFix`` -> :class:`GpsStream` (required). Fixes
   with ``status.status < 0`` (no fix) are skipped and counted; accuracy [m] (per-axis
-  1-sigma, :class:`~scenarios.drive.GpsStream`) is ``sqrt(mean(cov[0], cov[4]))``, the
+  1-sigma, :class:`~posbench.scenarios.drive.GpsStream`) is ``sqrt(mean(cov[0], cov[4]))``, the
   east and north variances of ``position_covariance`` (ENU, m^2), when its type is not
   UNKNOWN (> 0), else NaN; a stream with no stated fix at all has accuracy None.
   lat/lon are projected about the first valid fix (``projection``).
 - ``imu``   ``sensor_msgs/Imu`` -> :class:`ImuStream`. REP 145: ``linear_acceleration`` is in
   the sensor frame (``header.frame_id``) and includes gravity; the mount comes from
-  ``/tf_static`` (or ``/tf``). :mod:`scenarios.loaders.ros_imu` levels it (orientation),
+  ``/tf_static`` (or ``/tf``). :mod:`posbench.scenarios.loaders.ros_imu` levels it (orientation),
   rotates it into the vehicle frame (tf mount, or a mount estimated from the data), removes
   gravity and checks the orientation's yaw against the GPS course; the path taken is in
   ``meta.extra["imu_frame"]``. A field with covariance[0] == -1 is absent.
@@ -23,10 +23,10 @@ role to a topic name when a bag has several candidates):
   in a drifting or local frame is no independent truth (REP 105), so nothing becomes the
   truth automatically; without one the drive is scored against its own GPS fixes, as the
   paper's routes (``meta.extra["truth_kind"] = "gps-fixes"``). A named truth is aligned to
-  the GPS ENU frame by a 2-D rigid fit over the drive (:mod:`scenarios.align`, frame names
+  the GPS ENU frame by a 2-D rigid fit over the drive (:mod:`posbench.scenarios.align`, frame names
   are not trusted: ``map``/``earth``/``utm`` are not our ENU about the first fix either); the
   transform and residual RMS are in ``meta.extra["truth_alignment"]``, and a residual above
-  :func:`scenarios.align.alignment_limit_m` is a DataError.
+  :func:`posbench.scenarios.align.alignment_limit_m` is a DataError.
 
 A role mapped to ``""`` or ``"none"`` is not loaded. Times: a message's header
 stamp when non-zero, its receive (log) time otherwise; ``meta.time_source``
@@ -44,14 +44,21 @@ from typing import Any
 
 import numpy as np
 
-from scenarios.align import alignment_limit_m, umeyama_2d
-from scenarios.cleaning import clean_times
-from scenarios.drive import Drive, DriveMeta, GpsStream, ImuStream, SpeedStream, TruthStream
-from scenarios.errors import DataError
-from scenarios.imu_frames import wrap
-from scenarios.loaders.ros_imu import imu_to_vehicle
-from scenarios.loaders.ros_tf import TF_TOPICS, TFMESSAGE, edges_from_messages, find_mount
-from scenarios.projection import PROJECTIONS, to_local
+from posbench.scenarios.align import alignment_limit_m, umeyama_2d
+from posbench.scenarios.cleaning import clean_times
+from posbench.scenarios.drive import (
+    Drive,
+    DriveMeta,
+    GpsStream,
+    ImuStream,
+    SpeedStream,
+    TruthStream,
+)
+from posbench.scenarios.errors import DataError
+from posbench.scenarios.imu_frames import wrap
+from posbench.scenarios.loaders.ros_imu import imu_to_vehicle
+from posbench.scenarios.loaders.ros_tf import TF_TOPICS, TFMESSAGE, edges_from_messages, find_mount
+from posbench.scenarios.projection import PROJECTIONS, to_local
 
 NAVSATFIX = "sensor_msgs/msg/NavSatFix"
 IMU = "sensor_msgs/msg/Imu"
@@ -198,7 +205,7 @@ def _read_tf(reader: Any, topic_types: dict[str, str], imu_frame: str | None
              ) -> dict[tuple[str, str], np.ndarray]:
     """tf edges from ``/tf_static`` (all of it), then from ``/tf`` only while the IMU's mount
     is still unknown (stops reading as soon as it is found)."""
-    from scenarios.loaders.ros_tf import frame_name
+    from posbench.scenarios.loaders.ros_tf import frame_name
 
     edges: dict[tuple[str, str], np.ndarray] = {}
     if not imu_frame:

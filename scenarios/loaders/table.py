@@ -37,7 +37,7 @@ Positions: if every gps and truth row has ``lat`` and ``lon``, they are projecte
 where complete, are kept as attributes). Times: t = 0 is the earliest row of any
 stream; ``meta.epoch_s`` is that time if it looks like Unix time (> 1e8 s, i.e.
 after 1973), else NaN. Rows of a stream are sorted by time and exact duplicate
-stamps dropped, with a warning (:func:`scenarios.cleaning.clean_times`). Blank CSV
+stamps dropped, with a warning (:func:`posbench.scenarios.cleaning.clean_times`). Blank CSV
 lines are dropped with a warning. Unknown columns are ignored with a warning.
 
 Errors (:class:`DataError`, naming the file): empty file, missing required columns,
@@ -53,10 +53,17 @@ from pathlib import Path
 
 import numpy as np
 
-from scenarios.cleaning import clean_times
-from scenarios.drive import Drive, DriveMeta, GpsStream, ImuStream, SpeedStream, TruthStream
-from scenarios.errors import DataError
-from scenarios.projection import to_local, validate_latlon
+from posbench.scenarios.cleaning import clean_times
+from posbench.scenarios.drive import (
+    Drive,
+    DriveMeta,
+    GpsStream,
+    ImuStream,
+    SpeedStream,
+    TruthStream,
+)
+from posbench.scenarios.errors import DataError
+from posbench.scenarios.projection import to_local, validate_latlon
 
 STREAMS = ("gps", "imu", "speed", "truth")
 NUMERIC = ("t", "t_ns", "lat", "lon", "x", "y", "accuracy", "ax", "ay", "yaw", "yaw_rate", "v")
