@@ -4,7 +4,7 @@ numpy's OpenBLAS starts a thread per core. The products ``bench`` does are small
 bootstrap's 2000 x D resample matrices, a few hundred columns), and the worker processes
 already hold the cores: with its threads, aggregating the shared data took 16-20 s on the
 2-core development machine under load, on one thread 5.7 s, with the same results to the
-bit (README, Performance). Imported first by :mod:`posbench.cli`; an ``OPENBLAS_NUM_THREADS``
+bit (README, Performance). Imported first by :mod:`posbench.cli.app`; an ``OPENBLAS_NUM_THREADS``
 already set is kept. Setting it after numpy has loaded has no effect.
 """
 

@@ -14,7 +14,7 @@ import sys
 import numpy as np
 
 from posbench.predictors.base import Predictor
-from posbench.prepare import PreparedDrive
+from posbench.replay.prepare import PreparedDrive
 
 NAN2 = (math.nan, math.nan)
 

@@ -39,7 +39,7 @@ import pytest
 from test_cli_errors import bench
 from test_view_web import ROOT, free_port_pair, read_until
 
-from posbench import rerun_web
+from posbench.recording import web as rerun_web
 
 pytestmark = [pytest.mark.browser, pytest.mark.slow]
 
@@ -155,7 +155,7 @@ def test_recording_renders_in_rerun_web_viewer(chromium, recording, tmp_path):
     n = free_port_pair()
     env = {**os.environ, "COLUMNS": "200",
            "PYTHONPATH": os.pathsep.join(filter(None, [str(ROOT), os.environ.get("PYTHONPATH")]))}
-    server = subprocess.Popen([sys.executable, "-m", "posbench.cli", "view", str(rrd), "--web",
+    server = subprocess.Popen([sys.executable, "-m", "posbench", "view", str(rrd), "--web",
                                "--port", str(n)], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
                               text=True, env=env, cwd=ROOT)
     spawned: set[int] = set()

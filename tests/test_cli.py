@@ -14,7 +14,7 @@ import pytest
 
 def bench(*args: str, cwd: Path | None = None, timeout: float = 300) -> subprocess.CompletedProcess:
     env = {**os.environ, "COLUMNS": "200"}
-    return subprocess.run([sys.executable, "-m", "posbench.cli", *args], capture_output=True,
+    return subprocess.run([sys.executable, "-m", "posbench", *args], capture_output=True,
                           text=True, cwd=cwd, timeout=timeout, env=env)
 
 

@@ -26,7 +26,7 @@ def bench(*args: str, cwd: Path | None = None, env: dict[str, str] | None = None
           timeout: float = 120) -> subprocess.CompletedProcess:
     base = {**os.environ, "COLUMNS": "80",
             "PYTHONPATH": os.pathsep.join(filter(None, [str(ROOT), os.environ.get("PYTHONPATH")]))}
-    return subprocess.run([sys.executable, "-m", "posbench.cli", *args], capture_output=True,
+    return subprocess.run([sys.executable, "-m", "posbench", *args], capture_output=True,
                           text=True, cwd=cwd, timeout=timeout, env={**base, **(env or {})})
 
 
@@ -190,7 +190,7 @@ def test_view_without_display_says_how_to_open_it_elsewhere(tmp_path):
     rerun.chmod(0o755)
     env = {k: v for k, v in os.environ.items() if k not in ("DISPLAY", "WAYLAND_DISPLAY")}
     env["PATH"] = f"{fake_bin}{os.pathsep}{env.get('PATH', '')}"
-    r = subprocess.run([sys.executable, "-m", "posbench.cli", "view", str(rrd)], capture_output=True,
+    r = subprocess.run([sys.executable, "-m", "posbench", "view", str(rrd)], capture_output=True,
                        text=True, timeout=120, cwd=ROOT, env={**env, "COLUMNS": "80"})
     line = assert_one_error_line(r, "no display", f"rerun {rrd}", f"bench view {rrd} --web")
     assert "URL" in line
@@ -226,7 +226,7 @@ def test_view_runs_the_viewer_and_exits_0(tmp_path):
 
 
 def test_no_display_reason_is_pure():
-    from posbench.commands.view import no_display_reason
+    from posbench.cli.view import no_display_reason
 
     assert no_display_reason("linux", {}) is not None
     assert no_display_reason("linux", {"DISPLAY": ":0"}) is None
@@ -301,14 +301,14 @@ def test_usage_error_names_the_command_help():
 def test_option_checks():
     import math
 
-    from posbench.options import (
-        UsageError,
+    from posbench.checks import (
         check_at_least,
         check_dropouts,
         check_horizon,
         check_synthetic_duration,
         parse_predictor_names,
     )
+    from posbench.errors import UsageError
 
     assert check_horizon(0.2) == 0.2 and check_horizon(10.0) == 10.0
     for bad in (-1.0, 0.0, 10.01, math.nan, math.inf):
@@ -331,7 +331,8 @@ def test_option_checks():
 
 
 def test_out_checks_create_nothing(tmp_path):
-    from posbench.options import UsageError, check_out_dir, check_out_file
+    from posbench.checks import check_out_dir, check_out_file
+    from posbench.errors import UsageError
 
     target = tmp_path / "a" / "b"
     assert check_out_dir(target) == target and not (tmp_path / "a").exists()
@@ -347,8 +348,9 @@ def test_out_checks_create_nothing(tmp_path):
 
 
 def test_validate_predictors_resolves_a_model_folder(tmp_path):
-    from posbench.options import UsageError, validate_predictors
+    from posbench.errors import UsageError
     from posbench.predictors.lstm.predictor import bundled_model
+    from posbench.replay.predictor_setup import validate_predictors
 
     shutil.copy(bundled_model(), tmp_path / "model.onnx")
     shutil.copy(bundled_model().with_suffix(".json"), tmp_path / "model.json")
@@ -368,7 +370,7 @@ def test_validate_predictors_resolves_a_model_folder(tmp_path):
 def test_random_option_values_give_one_error_line(tmp_path, capsys, horizon, dropouts):
     """In-process ``main``: any --horizon / --dropouts text with a bad --seed (checked
     after them, so the run never starts) ends in one error line and status 2."""
-    import posbench.cli as cli
+    import posbench.cli.app as cli
 
     out = tmp_path / "out"
     with pytest.raises(SystemExit) as e:

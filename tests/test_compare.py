@@ -16,17 +16,10 @@ import pandas as pd
 import pytest
 from test_cli_errors import assert_one_error_line, bench
 
-from posbench.compare import (
-    Gate,
-    Metric,
-    aligned,
-    check_gates,
-    config_differences,
-    paired_difference,
-    run_labels,
-)
-from posbench.options import UsageError
-from posbench.saved_run import load_run
+from posbench.comparison.align import Metric, aligned, config_differences, run_labels
+from posbench.comparison.gates import Gate, check_gates, paired_difference
+from posbench.errors import UsageError
+from posbench.saved_run.run import load_run
 
 STATS = ("mean_m", "median_m", "rmse_m", "p95_m", "max_m")
 
@@ -227,7 +220,7 @@ def _uncertainty_copy(src: Path, dst: Path, kf: str = "same") -> Path:
 
 
 def test_uncertainty_figures_side_by_side(base_run: Path, tmp_path: Path) -> None:
-    from posbench.compare_uncertainty import uncertainty_aligned
+    from posbench.comparison.uncertainty import uncertainty_aligned
 
     old = load_run(base_run)
     new = load_run(_uncertainty_copy(base_run, tmp_path / "new", kf="none"))
@@ -267,7 +260,7 @@ def test_uncertainty_figures_side_by_side(base_run: Path, tmp_path: Path) -> Non
 
 
 def test_uncertainty_of_a_run_before_schema_1_4(base_run: Path, tmp_path: Path) -> None:
-    from posbench.compare_uncertainty import missing_notes, uncertainty_aligned
+    from posbench.comparison.uncertainty import missing_notes, uncertainty_aligned
 
     old = load_run(_uncertainty_copy(base_run, tmp_path / "old13", kf="pre-1.4"))
     new = load_run(base_run)

@@ -14,15 +14,9 @@ import numpy as np
 import pytest
 from test_cli_errors import assert_one_error_line, bench
 
-from posbench.consistency import (
-    affected_predictors,
-    report_lines,
-    strict_error,
-    table_rows,
-    to_results,
-    uses_stream,
-)
+from posbench.pipeline.data_check import affected_predictors, strict_error, to_results, uses_stream
 from posbench.predictors.base import Predictor
+from posbench.report.data_check import report_lines, table_rows
 from posbench.scenarios.align import similarity_2d
 from posbench.scenarios.consistency import (
     FAIL,
@@ -225,7 +219,7 @@ def test_run_without_strict_reports_failure(flipped_csv, tmp_path):
     # a run saved before the check (schema 1.1, no key) still validates and loads
     import jsonschema
 
-    from posbench.saved_run import load_run, results_schema
+    from posbench.saved_run.run import load_run, results_schema
 
     jsonschema.validate(res, results_schema())
     old = {k: v for k, v in res.items() if k != "consistency"} | {"schema_version": "1.1"}

@@ -22,22 +22,20 @@ from contract_broken import (
     WithCovariance,
 )
 
-from posbench.commands.check import NEEDS_MODEL
-from posbench.contract import (
+from posbench.cli.check import NEEDS_MODEL
+from posbench.errors import UsageError
+from posbench.predictor_tools.contract import (
     CLAUSE_IDS,
     ClauseResult,
     check_predictor,
-    cut_prepared,
-    events,
-    feed,
-    inputs,
     no_look_ahead_cuts,
     resolve_predictor,
     run_replay,
 )
-from posbench.options import UsageError
+from posbench.predictor_tools.contract_inputs import cut_prepared, inputs
 from posbench.predictors.gate import GatedPredictor
 from posbench.predictors.registry import available, create
+from posbench.replay.loop import events, feed
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -164,7 +162,7 @@ def test_an_exception_fails_clauses_and_names_where_it_was_raised():
 
 
 def test_differences_treat_nan_as_equal_only_to_nan():
-    from posbench.contract import differences
+    from posbench.predictor_tools.contract import differences
 
     nan, inf = np.nan, np.inf
     a = np.array([[1, 2], [nan, nan], [nan, 1], [1, inf], [1, inf], [0, 0]], dtype=float)
@@ -222,7 +220,7 @@ def test_resolve_names_the_missing_dependency_of_a_plugin(tmp_path, monkeypatch)
 def bench(*args: str) -> subprocess.CompletedProcess:
     env = {**os.environ, "COLUMNS": "100",
            "PYTHONPATH": os.pathsep.join(filter(None, [str(ROOT), os.environ.get("PYTHONPATH")]))}
-    return subprocess.run([sys.executable, "-m", "posbench.cli", "check", *args], capture_output=True,
+    return subprocess.run([sys.executable, "-m", "posbench", "check", *args], capture_output=True,
                           text=True, cwd=ROOT, timeout=300, env=env)
 
 

@@ -17,22 +17,22 @@ from layout import module_name, source_files
 
 def samples() -> dict[str, list[BaseException]]:
     """Instances of each project exception class, by ``module.Class``."""
-    from posbench.executors import ExecutorError
-    from posbench.options import UsageError
-    from posbench.plots import NothingToPlot
+    from posbench.errors import UsageError
+    from posbench.figures.style import NothingToPlot
     from posbench.predictors.lstm.core_graph import NoCoreGraph
     from posbench.predictors.registry import PredictorError
-    from posbench.rerun_web import ServeError
+    from posbench.recording.web import ServeError
+    from posbench.replay.executors import ExecutorError
     from posbench.scenarios.errors import DataError
 
     return {
         "posbench.scenarios.errors.DataError": [DataError("/data/drive.bag", "topic /fix: no messages"),
                                        DataError(Path("/data/x.csv"), "line 3: 'a' is not a number"),
                                        DataError(None, "truth: need at least 2 samples")],
-        "posbench.options.UsageError": [UsageError("--horizon must be more than 0 s; got -1")],
-        "posbench.executors.ExecutorError": [ExecutorError("cannot start Ray at auto: no cluster")],
-        "posbench.plots.NothingToPlot": [NothingToPlot("no query with a known speed")],
-        "posbench.rerun_web.ServeError": [
+        "posbench.errors.UsageError": [UsageError("--horizon must be more than 0 s; got -1")],
+        "posbench.replay.executors.ExecutorError": [ExecutorError("cannot start Ray at auto: no cluster")],
+        "posbench.figures.style.NothingToPlot": [NothingToPlot("no query with a known speed")],
+        "posbench.recording.web.ServeError": [
             ServeError("the rerun web viewer stopped on its own (exit 1): port 9090 in use")],
         "posbench.predictors.registry.PredictorError": [
             PredictorError("nosuchmodule:X: no module named 'nosuchmodule'")],
@@ -110,7 +110,7 @@ def test_runner_with_two_workers_raises_the_data_error(tmp_path):
     """A drive that loads but cannot be prepared: its DataError reaches the caller of the
     parallel runner as itself, not as a broken process pool."""
     from posbench.config import RunConfig
-    from posbench.runner import run
+    from posbench.replay.runner import run
     from posbench.scenarios.errors import DataError
     from posbench.scenarios.loaders import load
 

@@ -15,13 +15,13 @@ import numpy as np
 import pandas as pd
 import pytest
 
+from posbench.aggregation.aggregate import aggregate
 from posbench.config import RunConfig
-from posbench.executors import merge_predictor_runs, run_local, run_predictor, run_ray
 from posbench.predictors.registry import available
-from posbench.report import render_markdown
-from posbench.results import aggregate, all_traces
-from posbench.runner import DriveRun
+from posbench.replay.executors import merge_predictor_runs, run_local, run_predictor, run_ray
+from posbench.report.markdown import render_markdown
 from posbench.scenarios.synthetic import default_drives
+from posbench.scoring.records import DriveRun, all_traces
 
 if os.environ.get("CI"):
     import ray  # CI installs the dev extra, which has ray: the test must run there
@@ -91,7 +91,7 @@ def test_cli_ray_equals_local(tmp_path):
     outs = {}
     for ex in ("local", "ray"):
         outs[ex] = tmp_path / ex
-        r = subprocess.run([sys.executable, "-m", "posbench.cli", "run", "-p", "cv,kf", "--workers", "2",
+        r = subprocess.run([sys.executable, "-m", "posbench", "run", "-p", "cv,kf", "--workers", "2",
                             "--executor", ex, "--out", str(outs[ex])],
                            capture_output=True, text=True, timeout=240,
                            env={**os.environ, "COLUMNS": "200"})
@@ -102,11 +102,11 @@ def test_cli_ray_equals_local(tmp_path):
     assert res["ray"]["predictors"]["kf"]["latency_us"]["count"] == \
         res["local"]["predictors"]["kf"]["latency_us"]["count"]
     no_ray = ("import sys; sys.modules['ray'] = None; sys.argv = ['bench', 'run', '--executor', "
-              "'ray']; from posbench.cli import main; main()")
+              "'ray']; from posbench.cli.app import main; main()")
     r = subprocess.run([sys.executable, "-c", no_ray], capture_output=True, text=True, timeout=60)
     assert r.returncode == 2 and "pip install 'posbench-harness[ray]'" in r.stderr, r.stderr
     assert "Traceback" not in r.stderr
-    r = subprocess.run([sys.executable, "-m", "posbench.cli", "run", "--address", "auto"],
+    r = subprocess.run([sys.executable, "-m", "posbench", "run", "--address", "auto"],
                        capture_output=True, text=True, timeout=60)
     assert r.returncode == 2 and "--address is for --executor ray" in r.stderr, r.stderr
 

@@ -11,9 +11,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from posbench.fetch import as_url, fetch, local_paths
 from posbench.scenarios.errors import DataError
 from posbench.scenarios.loaders import load
+from posbench.scenarios.remote import as_url, fetch, local_paths
 
 fsspec = pytest.importorskip("fsspec")
 
@@ -84,7 +84,7 @@ def test_cli_run_on_url_equals_local_path(tmp_path):
     res = {}
     for key, arg in (("path", str(src)), ("url", f"file://{src}")):
         out = tmp_path / key
-        r = subprocess.run([sys.executable, "-m", "posbench.cli", "run", "--data", arg, "-p", "cv",
+        r = subprocess.run([sys.executable, "-m", "posbench", "run", "--data", arg, "-p", "cv",
                             "--workers", "1", "--out", str(out)], capture_output=True, text=True,
                            timeout=120, env={**os.environ, "COLUMNS": "200"})
         assert r.returncode == 0, r.stdout + r.stderr
@@ -92,7 +92,7 @@ def test_cli_run_on_url_equals_local_path(tmp_path):
     assert [d["name"] for d in res["url"]["drives"]] == ["drive_a"]
     assert json.dumps(res["url"]["predictors"]["cv"]["future"]) == \
         json.dumps(res["path"]["predictors"]["cv"]["future"])
-    r = subprocess.run([sys.executable, "-m", "posbench.cli", "run", "--data",
+    r = subprocess.run([sys.executable, "-m", "posbench", "run", "--data",
                         f"file://{tmp_path}/missing", "-p", "cv"], capture_output=True, text=True,
                        timeout=60)
     assert r.returncode == 2 and "no such file or folder" in r.stderr and "Traceback" not in r.stderr

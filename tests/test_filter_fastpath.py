@@ -55,8 +55,8 @@ from posbench.predictors.ekf import (
 from posbench.predictors.kf import LinearKalman, ca_process_noise, ca_transition
 from posbench.predictors.kf_paper import PaperKalman
 from posbench.predictors.poly import PolyExtrapolator
-from posbench.prepare import prepare_drive
-from posbench.replay import replay
+from posbench.replay.loop import replay
+from posbench.replay.prepare import prepare_drive
 from posbench.scenarios.drive import Drive
 from posbench.scenarios.loaders import load
 from posbench.scenarios.synthetic import default_drives

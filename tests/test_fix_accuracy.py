@@ -13,7 +13,7 @@ from test_loader_rosbag import _Msgs, _ns, _trajectory, _write_bag
 from posbench.predictors.base import Predictor, accepts_sigma
 from posbench.predictors.gate import GatedPredictor
 from posbench.predictors.registry import create
-from posbench.replay import replay
+from posbench.replay.loop import replay
 from posbench.scenarios import loaders
 from posbench.scenarios.degrade import (
     CONSUMER_UNDERSTATEMENT,
@@ -187,7 +187,7 @@ def test_accepts_sigma() -> None:
 def _prep(accuracy: np.ndarray | None):
     from dataclasses import replace
 
-    from posbench.contract import cut_prepared, inputs
+    from posbench.predictor_tools.contract_inputs import cut_prepared, inputs
 
     prep = cut_prepared(inputs().drive, 15.0)
     g = prep.gps
@@ -233,7 +233,7 @@ def test_gate_forwards_sigma() -> None:
 
 def test_old_style_predictor_through_the_runner() -> None:
     """A three-argument user predictor keeps working in a whole run (behind the gate)."""
-    from posbench.contract import cut_prepared, inputs
+    from posbench.predictor_tools.contract_inputs import cut_prepared, inputs
 
     prep = cut_prepared(inputs().drive, 15.0)
     assert prep.gps.accuracy is not None  # the synthetic fixes state an accuracy

@@ -8,13 +8,13 @@ import math
 import numpy as np
 import pytest
 
+from posbench.aggregation.aggregate import gate_summary
 from posbench.config import RunConfig
 from posbench.predictors import registry
 from posbench.predictors.base import Predictor
 from posbench.predictors.gate import FixGate, GatedPredictor
-from posbench.report import gate_lines
-from posbench.results import gate_summary
-from posbench.runner import run_drive
+from posbench.replay.runner import run_drive
+from posbench.report.markdown import gate_lines
 from posbench.scenarios.degrade import degrade_gps
 from posbench.scenarios.drive import Drive, DriveMeta, GpsStream
 from posbench.scenarios.errors import DataError
@@ -220,8 +220,8 @@ def test_runner_counts_rejections_and_no_gate_turns_it_off():
 
 
 def test_cli_no_gate_flag(tmp_path, monkeypatch):
-    import posbench.cli as cli
-    from posbench.commands import run as run_cmd
+    import posbench.cli.app as cli
+    from posbench.cli import run as run_cmd
 
     seen = {}
 

@@ -16,13 +16,13 @@ import pytest
 from test_plots import make_traces, res_for
 
 from posbench.config import RunConfig
-from posbench.figure_jobs import FigureJobs, Job, can_fork
-from posbench.plots import write_plots
-from posbench.results import all_traces
-from posbench.runner import replay_cost, run
+from posbench.figures.writer import write_plots
+from posbench.pipeline.jobs import FigureJobs, Job, can_fork
+from posbench.replay.runner import replay_cost, run
 from posbench.scenarios.errors import DataError
 from posbench.scenarios.loaders import iter_load_many
 from posbench.scenarios.synthetic import default_drives
+from posbench.scoring.records import all_traces
 
 ROOT = Path(__file__).resolve().parents[1]
 needs_fork = pytest.mark.skipif(not can_fork(), reason="no fork on this platform")
@@ -86,7 +86,7 @@ def test_a_child_that_dies_is_redone_here():
 
 @needs_fork
 def test_children_run_nicer_than_the_parent():
-    from posbench.figure_jobs import CHILD_NICENESS
+    from posbench.pipeline.jobs import CHILD_NICENESS
 
     mine = os.nice(0)
     assert Job(os.nice, 0).result() == min(mine + CHILD_NICENESS, 19)
@@ -94,12 +94,12 @@ def test_children_run_nicer_than_the_parent():
 
 @needs_fork
 def test_traces_written_by_a_child_are_those_save_run_writes(tmp_path):
-    from posbench.saved_run import Run, save_run, write_traces
+    from posbench.saved_run.run import Run, save_run, write_traces
 
     cfg = RunConfig(predictors=("cv", "kf"))
     runs = run(default_drives()[:1], cfg)
     traces = all_traces(runs)
-    from posbench.results import aggregate
+    from posbench.aggregation.aggregate import aggregate
 
     res = aggregate(runs, cfg, [], "bench run -p cv,kf", traces=traces)
     here, there = tmp_path / "here", tmp_path / "there"
@@ -163,8 +163,9 @@ def test_the_cli_runs_one_blas_thread_unless_told(preset, expected):
 
 
 def test_score_many_is_the_concatenation_of_score():
-    from posbench.prepare import prepare_drive
-    from posbench.scoring import query_frame, score, score_many
+    from posbench.replay.prepare import prepare_drive
+    from posbench.replay.queries import query_frame
+    from posbench.scoring.score import score, score_many
 
     prep = prepare_drive(default_drives()[0], RunConfig())
     qf, qn = query_frame(prep, "future"), query_frame(prep, "now")
@@ -183,7 +184,7 @@ def test_score_many_is_the_concatenation_of_score():
 
 
 def test_a_long_drive_is_split_by_predictor_and_merged_exactly():
-    from posbench.runner import plan_tasks
+    from posbench.replay.runner import plan_tasks
 
     drives = default_drives()[:2]
     cfg = RunConfig(predictors=("cv", "kf", "poly"))
@@ -201,7 +202,7 @@ def test_a_long_drive_is_split_by_predictor_and_merged_exactly():
 def test_preload_imports_in_a_thread_and_swallows_failures():
     import sys
 
-    from posbench.preload import MODULES, Preload
+    from posbench.pipeline.preload import MODULES, Preload
 
     p = Preload(("json.tool", "no_such_module_for_posbench"))
     p.join()  # not started: nothing to wait for

@@ -18,7 +18,6 @@ import pytest
 torch = pytest.importorskip("torch")
 
 from posbench.config import RunConfig  # noqa: E402
-from posbench.contract import events, feed  # noqa: E402
 from posbench.predictors.hybrid.data import hybrid_windows  # noqa: E402
 from posbench.predictors.hybrid.export import (  # noqa: E402
     export_onnx,
@@ -32,8 +31,8 @@ from posbench.predictors.hybrid.model import HybridNet  # noqa: E402
 from posbench.predictors.hybrid.predictor import HORIZONS, HybridPredictor  # noqa: E402
 from posbench.predictors.lstm.windows import drive_windows  # noqa: E402
 from posbench.predictors.registry import create  # noqa: E402
-from posbench.prepare import prepare_drive  # noqa: E402
-from posbench.replay import GPS, replay  # noqa: E402
+from posbench.replay.loop import GPS, events, feed, replay  # noqa: E402  # noqa: E402
+from posbench.replay.prepare import prepare_drive  # noqa: E402
 from posbench.scenarios.errors import DataError  # noqa: E402
 from posbench.scenarios.synthetic import generate_drive  # noqa: E402
 
@@ -106,7 +105,7 @@ def test_untrained_hybrid_answers_exactly_as_kf_in_the_runner(untrained, profile
 def test_untrained_hybrid_equals_kf_through_the_runner_command(untrained, tmp_path):
     """The real runner (`bench run`, one worker): same figures for kf and hybrid."""
     out = tmp_path / "out"
-    r = subprocess.run([sys.executable, "-m", "posbench.cli", "run", "-p", "kf,hybrid",
+    r = subprocess.run([sys.executable, "-m", "posbench", "run", "-p", "kf,hybrid",
                         "--model", f"hybrid={untrained}", "--out", str(out), "--workers", "1"],
                        capture_output=True, text=True, cwd=ROOT, timeout=300)
     assert r.returncode == 0, r.stderr
@@ -349,7 +348,7 @@ def test_a_bad_model_is_a_one_line_data_error(untrained, tmp_path):
 
 def test_a_bad_model_on_the_command_line_is_one_error_line(untrained, tmp_path):
     d, needle = _bad_models(untrained, tmp_path)["kf-param"]
-    r = subprocess.run([sys.executable, "-m", "posbench.cli", "run", "-p", "hybrid", "--model",
+    r = subprocess.run([sys.executable, "-m", "posbench", "run", "-p", "hybrid", "--model",
                         f"hybrid={d}", "--out", str(tmp_path / "out")], capture_output=True,
                        text=True, cwd=ROOT, timeout=300)
     assert r.returncode == 2

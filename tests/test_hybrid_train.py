@@ -11,7 +11,7 @@ torch = pytest.importorskip("torch")
 
 from typer.testing import CliRunner  # noqa: E402
 
-from posbench.cli import app  # noqa: E402
+from posbench.cli.app import app  # noqa: E402
 from posbench.predictors.hybrid.data import hybrid_windows  # noqa: E402
 from posbench.predictors.hybrid.predictor import HybridPredictor  # noqa: E402
 from posbench.predictors.hybrid.train import future_answers, run_training  # noqa: E402

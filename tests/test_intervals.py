@@ -16,16 +16,16 @@ from pathlib import Path
 import pandas as pd
 import pytest
 
+from posbench.aggregation.aggregate import aggregate
+from posbench.aggregation.intervals import Statistics, default_baseline
 from posbench.config import RunConfig
-from posbench.intervals import Statistics, default_baseline
 from posbench.metrics import bootstrap, outages
-from posbench.report import render_markdown
-from posbench.results import aggregate
-from posbench.runner import run
-from posbench.saved_run import SCHEMA_VERSION, Run, load_run, results_schema
+from posbench.replay.runner import run
+from posbench.report.markdown import render_markdown
+from posbench.saved_run.run import SCHEMA_VERSION, Run, load_run, results_schema
 from posbench.scenarios.synthetic import default_drives
-from posbench.stat_tables import paired_table
-from posbench.tables import NOT_CONCLUSIVE, label_table, summary_table
+from posbench.tables.run_tables import NOT_CONCLUSIVE, label_table, summary_table
+from posbench.tables.stat_tables import paired_table
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -33,7 +33,7 @@ ROOT = Path(__file__).resolve().parents[1]
 def bench(*args: str) -> subprocess.CompletedProcess:
     env = {**os.environ, "COLUMNS": "120",
            "PYTHONPATH": os.pathsep.join(filter(None, [str(ROOT), os.environ.get("PYTHONPATH")]))}
-    return subprocess.run([sys.executable, "-m", "posbench.cli", *args], capture_output=True,
+    return subprocess.run([sys.executable, "-m", "posbench", *args], capture_output=True,
                           text=True, timeout=600, env=env)
 
 

@@ -17,8 +17,8 @@ import pytest
 
 from posbench.config import RunConfig
 from posbench.predictors.registry import create
-from posbench.prepare import prepare_drive
-from posbench.replay import replay
+from posbench.replay.loop import replay
+from posbench.replay.prepare import prepare_drive
 from posbench.scenarios.synthetic import generate_drive
 
 BUDGETS = json.loads((Path(__file__).with_name("latency_budgets.json")).read_text())

@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 from posbench.config import RunConfig
-from posbench.runner import run_drive
+from posbench.replay.runner import run_drive
 from posbench.scenarios.drive import (
     Drive,
     DriveMeta,

@@ -104,7 +104,7 @@ def test_a_core_that_does_not_reproduce_its_model_is_refused(tmp_path: Path) -> 
     shutil.copy(other / "model.core.onnx", d / "model.core.onnx")
     with pytest.raises(DataError, match="does not reproduce model.onnx"):
         LstmPredictor(str(d))
-    r = subprocess.run([sys.executable, "-m", "posbench.cli", "run", "-p", "lstm", "--model",
+    r = subprocess.run([sys.executable, "-m", "posbench", "run", "-p", "lstm", "--model",
                         f"lstm={d}", "--synthetic-duration", "30", "--out", str(tmp_path / "o")],
                        capture_output=True, text=True)
     assert r.returncode == 2, r.stderr

@@ -1,6 +1,6 @@
 """The fused lstm step (the default) against the staged reference (``step="staged"``).
 
-Both replay the same drives through :func:`posbench.replay.replay` (every fix, every IMU
+Both replay the same drives through :func:`posbench.replay.loop.replay` (every fix, every IMU
 sample, every query, with the run's default GPS profile and dropouts, so bridging steps
 run too); every future and "now" answer must agree to 5e-6 m (``TOL_M``), with the same missing
 answers and the same number of network steps. On every shared drive (all of
@@ -24,8 +24,8 @@ import pytest
 from posbench.config import RunConfig
 from posbench.predictors.lstm.predictor import LstmPredictor, bundled_model
 from posbench.predictors.lstm.runtime import OnnxModel
-from posbench.prepare import prepare_drive
-from posbench.replay import replay
+from posbench.replay.loop import replay
+from posbench.replay.prepare import prepare_drive
 from posbench.scenarios.drive import Drive
 from posbench.scenarios.synthetic import default_drives, generate_drive
 

@@ -21,9 +21,9 @@ import pandas as pd
 import pytest
 from test_cli_errors import assert_one_error_line, bench
 
-from posbench.answers import read_answers, score_answers
 from posbench.config import RunConfig
-from posbench.offline import (
+from posbench.offline.answers import read_answers, score_answers
+from posbench.offline.queries_folder import (
     KEY_QUERIES,
     MANIFEST,
     drive_ids,
@@ -31,8 +31,8 @@ from posbench.offline import (
     read_queries,
     write_queries,
 )
-from posbench.prepare import prepare_drive
-from posbench.saved_run import load_run, results_schema
+from posbench.replay.prepare import prepare_drive
+from posbench.saved_run.run import load_run, results_schema
 from posbench.scenarios.drive import ImuStream, SpeedStream
 from posbench.scenarios.errors import DataError
 from posbench.scenarios.loaders.table import load_table
@@ -212,8 +212,8 @@ def test_drive_ids_are_file_names_and_unique():
 def small(tmp_path_factory):
     """A queries folder of two synthetic drives and cv's answers (from a replay)."""
     from posbench.predictors.registry import create
-    from posbench.replay import replay
-    from posbench.scoring import query_frame
+    from posbench.replay.loop import replay
+    from posbench.replay.queries import query_frame
 
     d = tmp_path_factory.mktemp("small")
     drives = default_drives()[:2]
@@ -234,7 +234,9 @@ def small(tmp_path_factory):
 
 
 def test_unanswered_queries_are_counted_as_missing_never_dropped(small, tmp_path):
-    from posbench.results import aggregate, all_traces, scored_mask
+    from posbench.aggregation.aggregate import aggregate
+    from posbench.scoring.records import all_traces
+    from posbench.scoring.schema import scored_mask
 
     d, ans = small
     folder = read_queries(d / "q")

@@ -1,4 +1,4 @@
-"""The run's figures (bench/plots.py): never raise on thin data, formats, warm-up, bins,
+"""The run's figures (posbench.figures): never raise on thin data, formats, warm-up, bins,
 per-drive error over time, and the report's Plots section."""
 
 from __future__ import annotations
@@ -7,19 +7,18 @@ import numpy as np
 import pandas as pd
 import pytest
 
-import posbench.plots as plots
-from posbench.plots import (
-    FIGURES,
-    NothingToPlot,
-    PlotsWritten,
-    check_formats,
-    draw_error_over_time,
+import posbench.figures.distributions as distributions
+import posbench.figures.per_drive as per_drive
+import posbench.figures.style as style
+from posbench.figures.distributions import (
     plot_error_cdf,
     plot_error_vs_since_fix,
     plot_error_vs_speed,
-    plot_trajectory_error,
-    write_plots,
 )
+from posbench.figures.maps import plot_trajectory_error
+from posbench.figures.per_drive import draw_error_over_time
+from posbench.figures.style import NothingToPlot, PlotsWritten, check_formats
+from posbench.figures.writer import FIGURES, write_plots
 
 MAGIC = {"png": b"\x89PNG", "pdf": b"%PDF", "svg": b"<?xml"}
 ALL = [*FIGURES, "error_over_time"]
@@ -121,11 +120,12 @@ def test_thin_traces_never_raise(tmp_path, case):
 def test_gps_only_three_fixes_end_to_end_writes_report(tmp_path):
     """The reported crash: a GPS-only CSV with 3 fixes; the report is written and says why
     the figures are missing."""
+    from posbench.aggregation.aggregate import aggregate
     from posbench.config import RunConfig
-    from posbench.report import write_report
-    from posbench.results import aggregate, all_traces
-    from posbench.runner import run_drive
+    from posbench.replay.runner import run_drive
+    from posbench.report.markdown import write_report
     from posbench.scenarios.loaders.table import load_table
+    from posbench.scoring.records import all_traces
 
     csv = tmp_path / "three.csv"
     csv.write_text("t,x,y\n0,0,0\n1,10,0\n2,20,0\n")
@@ -134,7 +134,7 @@ def test_gps_only_three_fixes_end_to_end_writes_report(tmp_path):
     traces = all_traces(runs)
     res = aggregate(runs, cfg, [], "bench run", traces=traces)
     out = tmp_path / "out"
-    from posbench.saved_run import Run
+    from posbench.saved_run.run import Run
 
     written = write_report(Run.from_results(res, traces), out)
     report = (out / "report.md").read_text()
@@ -161,7 +161,7 @@ def test_formats(tmp_path):
 
 def test_paper_figures_reject_unknown_format_before_anything(tmp_path):
     from posbench.config import RunConfig
-    from posbench.figures import paper_figures
+    from posbench.predictor_tools.paper_figures import paper_figures
 
     with pytest.raises(ValueError, match="tiff"):
         paper_figures([], RunConfig(predictors=("cv",)), make_traces(n_fix=5), tmp_path,
@@ -191,7 +191,7 @@ def test_warmup_rows_excluded_from_headline_figures_and_shaded_over_time():
     from matplotlib.figure import Figure
 
     ax = Figure().add_subplot()
-    assert draw_error_over_time(ax, tr, ["cv", "kf"], plots._colors(["cv", "kf"]))
+    assert draw_error_over_time(ax, tr, ["cv", "kf"], style._colors(["cv", "kf"]))
     ys = np.concatenate([ln.get_ydata() for ln in ax.get_lines()])
     assert np.nanmax(ys) == pytest.approx(np.log10(500.0))
     labels = [t.get_text() for t in ax.get_legend().get_texts()]
@@ -205,7 +205,7 @@ def test_error_over_time_shades_each_outage_min_to_max():
     from matplotlib.figure import Figure
 
     ax = Figure().add_subplot()
-    draw_error_over_time(ax, tr, ["cv", "kf"], plots._colors(["cv", "kf"]))
+    draw_error_over_time(ax, tr, ["cv", "kf"], style._colors(["cv", "kf"]))
     hatched = [c for c in ax.collections if c.get_hatch()]
     assert len(hatched) == 1
     spans = sorted((round(p.get_extents().x0, 2), round(p.get_extents().x1, 2))
@@ -226,7 +226,7 @@ def test_empty_bins_are_dropped_and_axes_have_units():
     assert all(np.isfinite(ln.get_ydata()).all() for ln in ax.get_lines())
     sf = plot_error_vs_since_fix(tr, ["cv", "kf"])
     occupied = np.unique(np.digitize(tr[tr.kind == "now"].since_fix_s,
-                                     plots.SINCE_FIX_EDGES_S))
+                                     distributions.SINCE_FIX_EDGES_S))
     assert all(len(ln.get_xdata()) == occupied.size for ln in sf.axes[0].get_lines())
     assert sf.axes[0].get_xlabel().startswith("time since last fix [s]")
     no_outage = tr.assign(outage=-1)
@@ -250,7 +250,7 @@ def test_trajectory_error_one_panel_per_predictor_one_colour_scale():
 
 
 def test_drive_figures_are_capped_and_say_so(tmp_path, monkeypatch):
-    monkeypatch.setattr(plots, "MAX_DRIVE_FIGURES", 2)
+    monkeypatch.setattr(per_drive, "MAX_DRIVE_FIGURES", 2)
     tr = make_traces(n_fix=40, drives=3)
     w = write_plots(tr, res_for(tr), tmp_path)
     assert len([f for f in w.files if f.parent.name == "drives"]) == 2
@@ -262,27 +262,28 @@ def test_drive_plots_limit_picks_the_worst_drives(tmp_path):
     names = list(dict.fromkeys(tr.drive.astype(str)))
     worst = names[1]
     tr.loc[tr.drive.astype(str) == worst, "error_m"] *= 10
-    chosen, note = plots.drives_to_plot(tr, 1)
+    chosen, note = per_drive.drives_to_plot(tr, 1)
     assert chosen == [worst] and "--drive-plots all" in note
-    assert plots.drives_to_plot(tr, None) == (names, None)
-    assert plots.drives_to_plot(tr, 0)[0] == []
+    assert per_drive.drives_to_plot(tr, None) == (names, None)
+    assert per_drive.drives_to_plot(tr, 0)[0] == []
     w = write_plots(tr, res_for(tr), tmp_path, drive_plots=1)
     assert [f.name for f in w.files if f.parent.name == "drives"] == [
         f"{worst}-error_over_time.png"]
 
 
 def test_report_prints_notes_and_links_per_drive_files(tmp_path):
+    from posbench.aggregation.aggregate import aggregate
     from posbench.config import RunConfig
-    from posbench.report import write_report
-    from posbench.results import aggregate, all_traces
-    from posbench.runner import run_drive
+    from posbench.replay.runner import run_drive
+    from posbench.report.markdown import write_report
     from posbench.scenarios.synthetic import default_drives
+    from posbench.scoring.records import all_traces
 
     cfg = RunConfig(predictors=("cv", "kf"))
     runs = [run_drive(default_drives()[0], cfg)]
     traces = all_traces(runs)
     res = aggregate(runs, cfg, [], "bench run", traces=traces)
-    from posbench.saved_run import Run
+    from posbench.saved_run.run import Run
 
     write_report(Run.from_results(res, traces), tmp_path, formats=("svg", "png"))
     md = (tmp_path / "report.md").read_text()
@@ -294,22 +295,22 @@ def test_report_prints_notes_and_links_per_drive_files(tmp_path):
 
 
 def test_paper_figures_have_titles_and_every_format(tmp_path, monkeypatch):
-    import posbench.figures as figures
+    import posbench.predictor_tools.paper_figures as figures
     from posbench.config import RunConfig
-    from posbench.results import all_traces
-    from posbench.runner import run_drive
+    from posbench.replay.runner import run_drive
     from posbench.scenarios.synthetic import default_drives
+    from posbench.scoring.records import all_traces
 
     drive = default_drives()[2]
     cfg = RunConfig(predictors=("kf-paper", "lstm"))
     runs = [run_drive(drive, cfg)]
     titles = []
 
-    def spy(fig, folder, stem, formats, dpi=plots.DPI):
+    def spy(fig, folder, stem, formats, dpi=style.DPI):
         titles.append([ax.get_title() for ax in fig.axes])
         assert all(ax.get_xlabel() == "east [m]" and ax.get_ylabel() == "north [m]"
                    for ax in fig.axes)
-        return plots.save_figure(fig, folder, stem, formats, dpi)
+        return style.save_figure(fig, folder, stem, formats, dpi)
 
     monkeypatch.setattr(figures, "save_figure", spy)
     figs = figures.paper_figures([drive], cfg, all_traces(runs), tmp_path, runs,

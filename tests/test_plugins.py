@@ -19,8 +19,7 @@ from pathlib import Path
 
 import pytest
 
-from posbench.options import UsageError, validate_predictors, with_model_aliases
-from posbench.predictor_options import merge_options, parse_set, parse_value
+from posbench.errors import UsageError
 from posbench.predictors import registry
 from posbench.predictors.base import Predictor
 from posbench.predictors.registry import (
@@ -34,6 +33,13 @@ from posbench.predictors.registry import (
     is_import_path,
     predictor_class,
     resolve,
+)
+from posbench.replay.predictor_setup import (
+    merge_options,
+    parse_set,
+    parse_value,
+    validate_predictors,
+    with_model_aliases,
 )
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -123,7 +129,7 @@ def bench(*args: str, cwd: Path, path: list[Path] = (), timeout: float = 300
     pythonpath = [str(p) for p in path] + [str(ROOT)] + [
         p for p in os.environ.get("PYTHONPATH", "").split(os.pathsep) if p]
     env = {**os.environ, "PYTHONPATH": os.pathsep.join(pythonpath), "COLUMNS": "300"}
-    return subprocess.run([sys.executable, "-m", "posbench.cli", *args], capture_output=True,
+    return subprocess.run([sys.executable, "-m", "posbench", *args], capture_output=True,
                           text=True, cwd=cwd, timeout=timeout, env=env)
 
 
@@ -176,7 +182,7 @@ def test_import_path_from_the_current_folder(plugin_dir, tmp_path):
     current one): a module in the current folder is found all the same."""
     script = ("import sys; sys.path[:] = [p for p in sys.path if p not in ('', '.')]; "
               "sys.argv = ['bench', 'run', '-p', 'damped:DampedVelocity', '--workers', '1', "
-              f"'--out', {str(tmp_path / 'o')!r}]; from posbench.cli import main; main()")
+              f"'--out', {str(tmp_path / 'o')!r}]; from posbench.cli.app import main; main()")
     env = {**os.environ, "PYTHONPATH": str(ROOT), "COLUMNS": "300"}
     r = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True,
                        cwd=plugin_dir, env=env, timeout=300)
@@ -223,7 +229,7 @@ def test_readme_example_as_entry_point(site_dir, tmp_path):
 
 def test_check_accepts_import_paths_and_entry_points(site_dir, tmp_path):
     for spec in ("damped:DampedVelocity", "damped"):
-        r = subprocess.run([sys.executable, "-m", "posbench.cli", "check", spec, "--json"],
+        r = subprocess.run([sys.executable, "-m", "posbench", "check", spec, "--json"],
                            capture_output=True, text=True, cwd=tmp_path, timeout=300,
                            env={**os.environ, "PYTHONPATH": f"{site_dir}{os.pathsep}{ROOT}"})
         assert r.returncode == 0, r.stdout + r.stderr
@@ -252,9 +258,9 @@ def test_ray_workers_get_the_plugin_folder(plugin_dir, monkeypatch):
     current folder, both of which Ray passes on by itself) is found by the workers because
     each task gets its folder on PYTHONPATH; without that, every task fails to import it."""
     ray = _ray()
-    from posbench import executors
+    import posbench.replay.executors as executors
     from posbench.config import RunConfig
-    from posbench.executors import run_local, run_ray, worker_runtime_env
+    from posbench.replay.executors import run_local, run_ray, worker_runtime_env
     from posbench.scenarios.synthetic import default_drives
 
     monkeypatch.syspath_prepend(str(plugin_dir))

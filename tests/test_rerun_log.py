@@ -19,8 +19,8 @@ from posbench.config import RunConfig
 from posbench.metrics.calibration import mahalanobis_sq
 from posbench.metrics.ellipses import ELLIPSE_SEGMENTS
 from posbench.metrics.track_errors import track_errors
-from posbench.rerun_blueprint import AROUND_M, VEHICLE_M
-from posbench.rerun_log import (
+from posbench.recording.blueprint import AROUND_M, VEHICLE_M
+from posbench.recording.writer import (
     ELLIPSE_RADIUS,
     N_LAST_FIXES,
     PALETTE,
@@ -32,9 +32,10 @@ from posbench.rerun_log import (
     sanitise,
     write_recording,
 )
-from posbench.runner import DriveRun, run
+from posbench.replay.runner import run
 from posbench.scenarios.synthetic import generate_drive
-from posbench.scoring import COV_COLUMNS
+from posbench.scoring.records import DriveRun
+from posbench.scoring.schema import COV_COLUMNS
 
 rr = pytest.importorskip("rerun", reason="needs the viz extra")
 

@@ -19,8 +19,8 @@ from ros_synth import SynthBag, synth_truth, write_bag
 from test_cli_errors import assert_one_error_line, bench
 
 from posbench.config import RunConfig
-from posbench.reference import FIX_CUBIC, TRUTH
-from posbench.runner import run_drive
+from posbench.replay.reference import FIX_CUBIC, TRUTH
+from posbench.replay.runner import run_drive
 from posbench.scenarios import imu_frames as fr
 from posbench.scenarios.align import ALIGN_MIN_LIMIT_M, alignment_limit_m, umeyama_2d
 from posbench.scenarios.degrade import enu_to_latlon
@@ -234,7 +234,7 @@ def test_drifting_odometry_named_as_truth_refused(bags) -> None:
     with pytest.raises(DataError, match=r"residual RMS \d+\.\d\d m .* exceeds the limit 5\.00 m"):
         load_rosbag(path, topics={"truth": "/odom"})
     env = {**os.environ, "COLUMNS": "200"}
-    r = subprocess.run([sys.executable, "-m", "posbench.cli", "data", "inspect", str(path),
+    r = subprocess.run([sys.executable, "-m", "posbench", "data", "inspect", str(path),
                         "--topic", "truth=/odom"], capture_output=True, text=True, env=env,
                        timeout=300)
     assert r.returncode == 2, r.stdout + r.stderr

@@ -14,17 +14,18 @@ import numpy as np
 import pandas as pd
 import pytest
 
+from posbench.aggregation.aggregate import aggregate
 from posbench.config import RunConfig
-from posbench.report import render_markdown
-from posbench.results import aggregate, scored_mask
-from posbench.runner import run, run_drive
+from posbench.replay.runner import run, run_drive
+from posbench.report.markdown import render_markdown
 from posbench.scenarios.synthetic import default_drives
-from posbench.tables import label_table
+from posbench.scoring.schema import scored_mask
+from posbench.tables.run_tables import label_table
 
 
 def bench(*args: str, cwd: Path | None = None, columns: int = 200) -> subprocess.CompletedProcess:
     env = {**os.environ, "COLUMNS": str(columns)}
-    return subprocess.run([sys.executable, "-m", "posbench.cli", *args], capture_output=True,
+    return subprocess.run([sys.executable, "-m", "posbench", *args], capture_output=True,
                           text=True, cwd=cwd, timeout=600, env=env)
 
 
@@ -86,8 +87,8 @@ def test_report_explains_missing_and_exclusions(cv_kf_result):
 
 
 def test_alias_runs_a_second_instance_under_its_own_name():
-    from posbench.options import validate_predictors, with_model_aliases
     from posbench.predictors.registry import create
+    from posbench.replay.predictor_setup import validate_predictors, with_model_aliases
 
     names = with_model_aliases(("cv", "kf"), {"kf@b": {}})
     assert names == ("cv", "kf", "kf@b")
@@ -102,14 +103,17 @@ def test_alias_runs_a_second_instance_under_its_own_name():
 
 @pytest.mark.parametrize("bad", ["nope@x", "kf@", "kf@b,nope"])
 def test_alias_of_unknown_predictor_is_refused(bad):
-    from posbench.options import UsageError, parse_predictor_names, validate_predictors
+    from posbench.checks import parse_predictor_names
+    from posbench.errors import UsageError
+    from posbench.replay.predictor_setup import validate_predictors
 
     with pytest.raises(UsageError, match="unknown predictor"):
         validate_predictors(parse_predictor_names(bad), {})
 
 
 def test_model_for_a_predictor_not_in_the_run_is_refused():
-    from posbench.options import UsageError, validate_predictors, with_model_aliases
+    from posbench.errors import UsageError
+    from posbench.replay.predictor_setup import validate_predictors, with_model_aliases
 
     opts = {"lstm": {"model": "x"}}
     with pytest.raises(UsageError, match="lstm@NAME=PATH"):
@@ -177,9 +181,9 @@ def test_rerun_into_the_same_folder_replaces_only_its_own_files(tmp_path):
 def test_every_drive_skipped_writes_the_report_and_fails(tmp_path, monkeypatch):
     from typer.testing import CliRunner
 
-    import posbench.cli as cli
-    import posbench.executors as ex
-    from posbench.runner import DriveRun
+    import posbench.cli.app as cli
+    import posbench.replay.executors as ex
+    from posbench.scoring.records import DriveRun
 
     def all_skipped(drives, cfg, *a, **k):
         return [DriveRun(d.name, "synthetic", "", [], [], pd.DataFrame(), skipped="poor truth")
@@ -267,9 +271,9 @@ def test_tables_are_numeric_until_rendered(cv_kf_result, tmp_path):
 
     from rich.console import Console
 
-    from posbench.report import report_tables, write_tables
-    from posbench.tables import label_table, summary_table
-    from posbench.terminal import print_table
+    from posbench.cli.terminal import print_table
+    from posbench.report.markdown import report_tables, write_tables
+    from posbench.tables.run_tables import label_table, summary_table
 
     _, res = cv_kf_result
     t = summary_table(res)

@@ -8,10 +8,10 @@ import pytest
 from posbench.config import RunConfig
 from posbench.predictors.base import Predictor
 from posbench.predictors.registry import register
-from posbench.prepare import prepare_drive
-from posbench.reference import cubic_through_fixes, truth_at
-from posbench.replay import replay
-from posbench.runner import run
+from posbench.replay.loop import replay
+from posbench.replay.prepare import prepare_drive
+from posbench.replay.reference import cubic_through_fixes, truth_at
+from posbench.replay.runner import run
 from posbench.scenarios.drive import Drive, DriveMeta, GpsStream, ImuStream, SpeedStream
 
 

@@ -15,13 +15,16 @@ import numpy as np
 import pandas as pd
 import pytest
 
+from posbench.aggregation.aggregate import aggregate
 from posbench.config import RunConfig
-from posbench.results import aggregate, all_traces
-from posbench.runner import run, run_drive
-from posbench.saved_run import SCHEMA_VERSION, Run, load_run, results_schema, save_run
+from posbench.replay.queries import query_frame
+from posbench.replay.runner import run, run_drive
+from posbench.saved_run.run import SCHEMA_VERSION, Run, load_run, results_schema, save_run
 from posbench.scenarios.errors import DataError
 from posbench.scenarios.synthetic import default_drives
-from posbench.scoring import TRACE_COLUMNS, query_frame, score, trace_columns_markdown
+from posbench.scoring.records import all_traces
+from posbench.scoring.schema import TRACE_COLUMNS, trace_columns_markdown
+from posbench.scoring.score import score
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -95,8 +98,8 @@ def test_scoring_answers_from_a_file_equals_the_live_scoring():
     """Answers given as a table (as another program would write them), shuffled, one
     missing: matched to the queries by drive, kind and time, the same traces result."""
     from posbench.predictors.registry import create
-    from posbench.prepare import prepare_drive
-    from posbench.replay import replay
+    from posbench.replay.loop import replay
+    from posbench.replay.prepare import prepare_drive
 
     d = default_drives()[2]
     cfg = RunConfig(predictors=("cv",))
@@ -172,7 +175,7 @@ def test_golden_synthetic_run_equals_the_committed_report(tmp_path):
     args = golden.results["command"].split()[2:]  # "bench run ..." as recorded
     out_i = args.index("--out")
     args[out_i + 1] = str(tmp_path / "o")
-    r = subprocess.run([sys.executable, "-m", "posbench.cli", "run", *args], capture_output=True,
+    r = subprocess.run([sys.executable, "-m", "posbench", "run", *args], capture_output=True,
                        text=True, timeout=900, env={**os.environ, "COLUMNS": "200"})
     assert r.returncode == 0, r.stderr
     fresh = load_run(tmp_path / "o")

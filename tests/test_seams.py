@@ -26,9 +26,9 @@ from posbench.predictors.lstm.predictor import (
 )
 from posbench.predictors.lstm.resample import DT, GRID_OFFSETS, MIN_SPAN_S, FixedGridFit
 from posbench.predictors.registry import create
-from posbench.prepare import prepare_drive
-from posbench.replay import replay
-from posbench.results import learned_models
+from posbench.replay.loop import replay
+from posbench.replay.predictor_setup import learned_models
+from posbench.replay.prepare import prepare_drive
 from posbench.scenarios.synthetic import generate_drive
 
 
@@ -256,7 +256,7 @@ def test_gate_forwards_the_lstm_seams(prepared) -> None:
 
 
 def test_latency_stages_use_the_hook() -> None:
-    from posbench.latency import lstm_fused_stages, lstm_stages
+    from posbench.predictor_tools.latency import lstm_fused_stages, lstm_stages
 
     drive = generate_drive(seed=3, route="mixed", duration_s=20.0)
     fused = lstm_fused_stages(drive, 30)

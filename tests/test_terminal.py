@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 from rich.console import Console
 
-from posbench.terminal import column_widths, print_table, split_columns, table_width
+from posbench.cli.terminal import column_widths, print_table, split_columns, table_width
 
 HEADER = ["predictor", *(f"{m} {q} [m]" for m in ("along", "cross", "total")
                          for q in ("p50", "p90", "p99", "max"))]
@@ -104,12 +104,12 @@ def test_split_columns_rules() -> None:
 
 
 def test_inspect_at_100_columns_cuts_nothing() -> None:
-    from posbench.commands.inspect import inspect_rows
+    from posbench.cli.inspect import inspect_rows
     from posbench.scenarios.summary import summarize_drive
     from posbench.scenarios.synthetic import default_drives
 
     env = {**os.environ, "COLUMNS": "100"}
-    r = subprocess.run([sys.executable, "-m", "posbench.cli", "data", "inspect"], capture_output=True,
+    r = subprocess.run([sys.executable, "-m", "posbench", "data", "inspect"], capture_output=True,
                        text=True, env=env, timeout=300)
     assert r.returncode == 0, r.stderr
     lines = r.stdout.splitlines()

@@ -8,13 +8,15 @@ import numpy as np
 import pandas as pd
 import pytest
 
+from posbench.aggregation.aggregate import aggregate
+from posbench.aggregation.track import track_section
 from posbench.config import RunConfig
 from posbench.metrics.track_errors import inward_cross, track_summary
-from posbench.prepare import prepare_drive
-from posbench.results import aggregate, all_traces
-from posbench.runner import run
+from posbench.replay.prepare import prepare_drive
+from posbench.replay.runner import run
 from posbench.scenarios.synthetic import generate_drive
-from posbench.track_results import track_section, track_table
+from posbench.scoring.records import all_traces
+from posbench.tables.track import track_table
 
 
 @pytest.fixture(scope="module")

@@ -13,7 +13,7 @@ pytest.importorskip("torch")
 from typer.testing import CliRunner  # noqa: E402
 
 import posbench.predictors.lstm.train as lstm_train  # noqa: E402
-from posbench.cli import app  # noqa: E402
+from posbench.cli.app import app  # noqa: E402
 
 WIDTH = 100
 

@@ -6,7 +6,7 @@ from __future__ import annotations
 import hashlib
 from pathlib import Path
 
-from posbench.results import tree_hash
+from posbench.saved_run.provenance import tree_hash
 
 
 def pathlib_hash(path: Path) -> dict:

@@ -1,7 +1,7 @@
 """Grid search picks the parameters with the lowest error on the development drives."""
 
+from posbench.predictor_tools.tuning import GRIDS, SCALE_GRID, grid_for, grid_search
 from posbench.scenarios.synthetic import generate_drive
-from posbench.tune import GRIDS, SCALE_GRID, grid_for, grid_search
 
 
 def test_grid_search_prefers_matching_fix_noise():
@@ -29,12 +29,12 @@ def test_calibration_makes_95_percent_of_the_development_ellipses_cover():
     # scored queries, whatever the filter's own covariance said
     import numpy as np
 
+    from posbench.aggregation.uncertainty import COV
     from posbench.config import RunConfig
     from posbench.metrics.calibration import coverage, mahalanobis_sq
-    from posbench.results import scored_mask
-    from posbench.runner import run
-    from posbench.tune import calibrate
-    from posbench.uncertainty import COV
+    from posbench.predictor_tools.tuning import calibrate
+    from posbench.replay.runner import run
+    from posbench.scoring.schema import scored_mask
 
     drives = [generate_drive(seed=1002, route="turns", duration_s=60)]
     for name, params in (("kf", {"gps_sigma_scale": 3.0, "jerk_psd": 32.0}), ("cv", {})):
@@ -52,7 +52,7 @@ def test_calibration_makes_95_percent_of_the_development_ellipses_cover():
 def test_calibration_of_a_predictor_without_covariance_is_nan():
     import math
 
-    from posbench.tune import calibrate
+    from posbench.predictor_tools.tuning import calibrate
 
     drives = [generate_drive(seed=1003, route="straight", duration_s=20)]
     assert math.isnan(calibrate("poly", drives, "rtk", {}, workers=1))

@@ -16,8 +16,8 @@ from pathlib import Path
 import pytest
 from test_cli_errors import assert_one_error_line, bench
 
-from posbench import rerun_web
-from posbench.options import UsageError
+from posbench.recording import web as rerun_web
+from posbench.errors import UsageError
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -133,7 +133,7 @@ def fake_rerun(tmp_path: Path, mode: str = "serve") -> tuple[dict[str, str], Pat
 def start_view(rrd: Path, port: int, env: dict[str, str]) -> subprocess.Popen:
     base = {**os.environ, "COLUMNS": "200", **env,
             "PYTHONPATH": os.pathsep.join(filter(None, [str(ROOT), os.environ.get("PYTHONPATH")]))}
-    return subprocess.Popen([sys.executable, "-m", "posbench.cli", "view", str(rrd), "--web",
+    return subprocess.Popen([sys.executable, "-m", "posbench", "view", str(rrd), "--web",
                              "--port", str(port)], stdout=subprocess.PIPE,
                             stderr=subprocess.PIPE, text=True, env=base, cwd=ROOT)
 

@@ -82,7 +82,7 @@ def kf_prior_at_fixes(drive: Drive, gps: GpsStream, kf_params: dict,
     """(n_fixes, len(horizons), 2) [m, ENU]: ``kf.position_at(t_fix + h)`` asked right after
     each fix of ``gps``, from a fresh ``LinearKalman(**kf_params)`` fed the drive's IMU and
     speed and ``gps`` (sigma = the stated accuracy where finite and positive, else None) in
-    the runner's order (:mod:`posbench.replay`: by time; at equal times fixes, then IMU, then
+    the runner's order (:mod:`posbench.replay.loop`: by time; at equal times fixes, then IMU, then
     speed). NaN rows for fixes before the kf has a state (a non-finite first fix)."""
     kf = LinearKalman(**kf_params)
     parts_t = [gps.t]

@@ -1,0 +1,79 @@
+"""The ``uncertainty`` block of results.json (schema 1.4): is each predictor's reported
+covariance honest?
+
+Per predictor that reports covariance (trace columns ``cov_xx``, ``cov_xy``, ``cov_yy``)
+and kind, :func:`posbench.metrics.calibration.calibration_summary` of the scored queries (the
+headline rows: past warm-up, reference known) with the NEES's cluster-bootstrap CI
+(drives resampled), and without CI by data set, by route type (scenario label) and by
+time since the last fix (:data:`posbench.metrics.calibration.SINCE_FIX_EDGES_S`), plus the
+calibration curve. A predictor without any covariance is listed under ``none``: the
+report says "no uncertainty" for it, never a made-up figure.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+from posbench.aggregation.intervals import drive_codes
+from posbench.metrics.calibration import (
+    calibration_curve,
+    calibration_summary,
+    mahalanobis_sq,
+    since_fix_bin,
+)
+from posbench.scoring.schema import KINDS
+
+COV = ["cov_xx", "cov_xy", "cov_yy"]
+
+
+NEEDED = ("predictor", "kind", "dataset", "drive", "label", "since_fix_s", "x", "y",
+          "x_ref", "y_ref", "t_query", *COV)
+
+
+def _arrays(rows: pd.DataFrame) -> tuple[np.ndarray, np.ndarray]:
+    err = rows[["x", "y"]].to_numpy(float) - rows[["x_ref", "y_ref"]].to_numpy(float)
+    return err, rows[COV].to_numpy(float)
+
+
+def uncertainty_section(traces: pd.DataFrame, keep: np.ndarray, predictors: Sequence[str]
+                        ) -> dict[str, Any]:
+    """``{"predictors": {name: {kind: summary}}, "by_dataset": {name: {kind: {ds: summary}}},
+    "by_label": {...}, "by_since_fix": {name: {kind: {bin: summary}}}, "curve": {name:
+    {kind: [[expected, observed], ...]}}, "none": [names without covariance]}`` over the
+    rows ``keep`` of ``traces``. Traces without covariance columns (older runs, answers
+    without them): every predictor under ``none``."""
+    out: dict[str, Any] = {"predictors": {}, "by_dataset": {}, "by_label": {},
+                           "by_since_fix": {}, "curve": {}, "none": []}
+    if traces.empty or any(c not in traces for c in NEEDED):
+        out["none"] = list(predictors)
+        return out
+    has_cov = np.isfinite(traces["cov_xx"].to_numpy(float))
+    for name in predictors:
+        mine = keep & (traces["predictor"] == name).to_numpy()
+        if not (mine & has_cov).any():
+            out["none"].append(name)
+            continue
+        sub = traces.loc[mine, list(NEEDED)]
+        for block in ("predictors", "by_dataset", "by_label", "by_since_fix", "curve"):
+            out[block][name] = {}
+        for k in KINDS:
+            rows = sub[(sub["kind"] == k).to_numpy()]
+            err, cov = _arrays(rows)
+            out["predictors"][name][k] = calibration_summary(
+                err, cov, clusters=drive_codes(rows), times=rows["t_query"].to_numpy(float))
+            out["curve"][name][k] = [list(pq) for pq in
+                                     calibration_curve(mahalanobis_sq(err, cov))]
+            for block, col in (("by_dataset", "dataset"), ("by_label", "label")):
+                code, groups = pd.factorize(rows[col])  # in order of appearance
+                out[block][name][k] = {
+                    str(g): calibration_summary(err[code == i], cov[code == i], with_ci=False)
+                    for i, g in enumerate(groups)}
+            idx, names = since_fix_bin(rows["since_fix_s"].to_numpy(float))
+            out["by_since_fix"][name][k] = {
+                b: calibration_summary(err[idx == i], cov[idx == i], with_ci=False)
+                for i, b in enumerate(names) if (idx == i).any()}
+    return out

@@ -1,0 +1,97 @@
+"""`bench data inspect`: what is in each recording."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Annotated, Any
+
+import typer
+
+from posbench.cli.common import (
+    DataError,
+    ProjectionOpt,
+    StrictOpt,
+    TopicOpt,
+    UsageError,
+    console,
+    fail,
+    load_drives,
+    parse_topics,
+)
+from posbench.cli.terminal import print_table
+
+HEADER = ("drive", "format", "dur [s]", "dist [m]", "fixes", "fix dt p5/p50/p95/max [ms]",
+          "IMU [Hz]", "speed [m/s]", "stopped", "str/turn/rbt/stop [%]", "truth (acc.)", "warn.")
+
+
+def inspect_rows(summaries: list[dict[str, Any]]) -> tuple[tuple[str, ...], list[list[str]]]:
+    """Header and cell strings of the inspect table, one row per drive summary
+    (:func:`posbench.scenarios.summary.summarize_drive`: seconds, metres, m/s, Hz)."""
+    out = []
+    for r in summaries:
+        q = r["gps_interval_ms"]
+        acc = r["truth_median_accuracy_m"]
+        truth = ("yes" + (f" ({acc:.2f} m)" if acc is not None else "")) if r["has_truth"] else "no"
+        out.append([r["name"], r["format"], f"{r['duration_s']:.1f}", f"{r['distance_m']:.0f}",
+                    str(r["gps_count"]),
+                    f"{q['p5']:.0f}/{q['p50']:.0f}/{q['p95']:.0f}/{q['max']:.0f}",
+                    f"{r['imu_rate_hz']:.0f}",
+                    f"{r['speed_mps']['min']:.1f}-{r['speed_mps']['max']:.1f}",
+                    f"{100 * r['fraction_stopped']:.0f}%",
+                    "/".join(f"{100 * v:.0f}" for v in r["label_shares"].values()), truth,
+                    str(len(r["warnings"]))])
+    return HEADER, out
+
+
+def inspect(
+    paths: Annotated[list[Path] | None, typer.Argument(
+        metavar="PATH",
+        help="Recordings or folders (default: the built-in synthetic drives).")] = None,
+    as_json: Annotated[bool, typer.Option("--json", help="Print a JSON list, one object per drive.")
+                       ] = False,
+    topic: TopicOpt = None,
+    projection: ProjectionOpt = "enu",
+    strict: StrictOpt = False,
+) -> None:
+    """Show what is in each drive: duration, distance, fix intervals, IMU rate, speeds, truth,
+    and whether its streams agree with each other (the data consistency check)."""
+    from posbench.pipeline.data_check import check_drives, strict_error
+    from posbench.scenarios.summary import summarize_drive
+
+    try:
+        drives = load_drives(paths, projection, parse_topics(topic))
+        checks = check_drives(drives)
+    except (DataError, UsageError) as e:
+        raise fail(str(e)) from None
+    rows = [summarize_drive(d) for d in drives]
+    if as_json:
+        for r, d in zip(rows, drives, strict=True):
+            r["consistency"] = checks[d.name].to_dict()
+        print(json.dumps(rows, indent=2, default=float))
+    else:
+        print_inspect(rows, checks)
+    err = strict_error(checks) if strict else None
+    if err is not None:
+        raise fail(str(err))
+
+
+def print_inspect(rows: list[dict[str, Any]], checks: dict[str, Any]) -> None:
+    """The inspect table, the consistency table and the warnings, on the console."""
+    from posbench.report.data_check import flagged, table_rows
+
+    header, cells = inspect_rows(rows)
+    print_table(console, header, cells, title=f"{len(rows)} drive{'' if len(rows) == 1 else 's'}",
+                key_columns=1, left_columns=2)
+    from rich.markup import escape
+
+    for r in rows:
+        for w in r["warnings"]:
+            console.print(f"[yellow]warning[/] {escape(r['name'])}: {escape(w)}", highlight=False)
+    section = {d: c.to_dict() for d, c in checks.items()}
+    header, cells = table_rows(section)
+    print_table(console, header, cells, key_columns=1, left_columns=len(header),
+                title="data consistency: each stream against what the GPS fixes imply "
+                      "(pass / warn / fail / n/a)")
+    for verdict, d, s, why in flagged(section, ("fail", "warn", "n/a")):
+        console.print(f"{verdict} {escape(d)}: {s}: {escape(why)}", highlight=False)

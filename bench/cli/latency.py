@@ -1,0 +1,96 @@
+"""`bench latency`: per-call latency percentiles."""
+
+from __future__ import annotations
+
+import json
+from typing import Annotated
+
+import typer
+
+from posbench.checks import check_at_least, check_data_paths, parse_predictor_names
+from posbench.cli.common import DataError, DataOpt, UsageError, console, fail, load_drives
+from posbench.cli.terminal import print_table
+from posbench.replay.predictor_setup import model_options, validate_predictors
+
+
+def latency(
+    predictors: Annotated[str, typer.Option(
+        "--predictors", "-p", help="Comma-separated predictor names.")
+    ] = "cv,poly,kf,kf-paper,ekf,lstm,hybrid",
+    steps: Annotated[int, typer.Option(help="Fix steps to time per predictor (after warm-up).")
+                     ] = 2000,
+    data: DataOpt = None,
+    as_json: Annotated[bool, typer.Option("--json", help="Print JSON instead of tables.")] = False,
+    model: Annotated[list[str] | None, typer.Option(
+        "--model", metavar="NAME=PATH...",
+        help="Model file per predictor, e.g. lstm-authors=PATH.onnx.")] = None,
+) -> None:
+    """Per-call latency percentiles (us) in one process and thread, with the lstm's stages and
+    batch throughput, beside the paper's figures (2 ms fit + 2 ms LSTM, 4-6 ms per step)."""
+    try:  # every option is checked before a drive is loaded or a predictor timed
+        check_at_least(steps, 1, "--steps")
+        check_data_paths(data)
+        validate_predictors(parse_predictor_names(predictors), model_options(model))
+    except UsageError as e:
+        raise fail(str(e)) from None
+    from posbench.predictor_tools.latency import (
+        PAPER_MS,
+        batch_throughput,
+        lstm_fused_stages,
+        lstm_stages,
+        single_thread,
+        time_predictor,
+    )
+    from posbench.predictors.registry import available
+
+    single_thread()
+    try:
+        names = [p.strip() for p in predictors.split(",") if p.strip()]
+        unknown = [n for n in names if n not in available()]
+        if unknown:
+            raise UsageError(f"unknown predictor(s) {', '.join(unknown)}")
+        options = model_options(model)
+        drives = load_drives(data, "enu", None)
+        drive = max(drives, key=lambda d: len(d.gps))
+        res: dict = {}
+        with console.status("timing...") as status:
+            for n in names:
+                status.update(f"timing {n} on {drive.name}...")
+                res[n] = time_predictor(n, drive, steps, options.get(n))
+            if "lstm" in names:
+                status.update("timing lstm stages...")
+                res["lstm_stages"] = lstm_stages(drive, steps)
+                res["lstm_fused_stages"] = lstm_fused_stages(drive, steps)
+                status.update("timing batch throughput...")
+                res["batch"] = batch_throughput()
+        res["drive"] = drive.name
+        res["paper_ms"] = PAPER_MS
+    except (DataError, UsageError) as e:
+        raise fail(str(e)) from None
+    if as_json:
+        print(json.dumps(res, indent=2))
+        return
+    paper = {"lstm": "4000-6000 (step)", "kf-paper": "1000 (Kalman)"}
+    rows = []
+    for n in names:
+        s, q = res[n]["step_us"], res[n]["query_us"]
+        rows.append([n, f"{s['p50']:.1f}", f"{s['p90']:.1f}", f"{s['p99']:.1f}", f"{s['max']:.0f}",
+                     f"{q['p50']:.1f}", f"{q['p99']:.1f}", paper.get(n, "")])
+    print_table(console, ("predictor", "step p50", "p90", "p99", "max", "query p50", "query p99",
+                          "paper"), rows,
+                title=f"per-call latency (us) on {drive.name} (one process, one thread)")
+    if "lstm_stages" in res:
+        pp = {"resample_positions": "~2000 (L-BFGS regression)", "inference": "~2000 (LSTM)",
+              "cubic_fit_lbfgs": "~2000"}
+        print_table(console, ("stage", "p50", "p90", "p99", "paper"),
+                    [[k, f"{v['p50']:.1f}", f"{v['p90']:.1f}", f"{v['p99']:.1f}", pp.get(k, "")]
+                     for k, v in res["lstm_stages"].items()],
+                    title="lstm fix step by stage (us), staged reference (step=staged)")
+        print_table(console, ("stage", "p50", "p90", "p99"),
+                    [[k, f"{v['p50']:.1f}", f"{v['p90']:.1f}", f"{v['p99']:.1f}"]
+                     for k, v in res["lstm_fused_stages"].items()],
+                    title="lstm fix step by stage (us), fused (the default)")
+        print_table(console, ("batch", "windows/s", "us/window"),
+                    [[str(b), f"{v['windows_per_s']:.0f}", f"{v['us_per_window']:.1f}"]
+                     for b, v in res["batch"].items()],
+                    title="batch throughput (onnxruntime, one thread)", left_columns=0)

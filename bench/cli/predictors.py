@@ -1,0 +1,119 @@
+"""`bench predictors`: every available predictor, where it comes from, and its options."""
+
+from __future__ import annotations
+
+import inspect
+import json
+from typing import Annotated, Any
+
+import typer
+
+from posbench.cli.common import UsageError, console, fail, import_from_cwd
+
+
+def _jsonable(value: Any) -> Any:
+    """A default value as JSON: itself if JSON can hold it, else its repr."""
+    try:
+        json.dumps(value, allow_nan=False)
+        return value
+    except (TypeError, ValueError):
+        return repr(value)
+
+
+def predictor_info(name: str, options: bool = False) -> dict[str, Any]:
+    """What ``name`` is (any form ``bench run --predictors`` takes): ``name``, ``source``
+    (built-in, registered, entry point, import path), ``distribution`` (for an entry
+    point), ``target`` (``module:Class``), ``description`` and ``error`` (why it cannot be
+    loaded, else None). With ``options``: its constructor options (``name``, ``default``,
+    ``required``) and ``any_option`` (it takes ``**kwargs``). A built-in's class is imported
+    only for its options; an entry point's or import path's to read its docstring."""
+    from posbench.predictors.registry import (
+        PredictorError,
+        constructor_options,
+        description,
+        predictor_class,
+        resolve,
+    )
+
+    entry = resolve(name)
+    info: dict[str, Any] = {"name": name, "source": entry.source,
+                            "distribution": entry.distribution, "target": entry.target,
+                            "description": entry.description, "error": None}
+    try:
+        info["description"] = description(name)
+        if options:
+            accepted, any_option = constructor_options(predictor_class(name))
+            info["options"] = [{"name": k, "default": None if v is inspect.Parameter.empty
+                                else _jsonable(v), "required": v is inspect.Parameter.empty}
+                               for k, v in accepted.items()]
+            info["any_option"] = any_option
+    except PredictorError as e:
+        info["error"] = str(e)
+    return info
+
+
+def listing(names: list[str] | None = None) -> dict[str, Any]:
+    """Every available predictor (or those ``names``, with their options), and notes on
+    entry points that are left out or cannot be loaded."""
+    from posbench.predictors.registry import PredictorError, available, entry_point_notes
+
+    details = bool(names)
+    if details:
+        import_from_cwd()
+        try:
+            infos = [predictor_info(n, options=True) for n in names or []]
+        except PredictorError as e:
+            raise UsageError(str(e)) from None
+        bad = next((i for i in infos if i["error"]), None)
+        if bad:
+            raise UsageError(bad["error"])
+    else:
+        infos = [predictor_info(n) for n in available()]
+    notes = list(entry_point_notes()) + [i["error"] for i in infos if i["error"]]
+    return {"predictors": infos, "notes": notes}
+
+
+def _option_text(opts: list[dict[str, Any]], any_option: bool) -> str:
+    parts = [f"{o['name']} (required)" if o["required"] else f"{o['name']}={o['default']!r}"
+             for o in opts]
+    if any_option:
+        parts.append("and any other (**kwargs)")
+    return ", ".join(parts) if parts else "none"
+
+
+def list_predictors(
+    names: Annotated[list[str] | None, typer.Argument(
+        metavar="NAME",
+        help="Show these predictors with their options (--set NAME.OPTION=VALUE): registered "
+             "names, entry points or module:Class. Default: list every available one.")] = None,
+    as_json: Annotated[bool, typer.Option("--json", help="Print JSON instead of a table.")
+                       ] = False,
+) -> None:
+    """List the predictors `bench run --predictors` takes: built-in ones, those installed
+    packages declare in the entry-point group posbench.predictors, and any module:Class of a
+    Predictor subclass importable from PYTHONPATH or the current folder.
+
+    Example: bench predictors; bench predictors kf mypkg.mymodule:MyPredictor
+    """
+    from rich.markup import escape
+
+    from posbench.cli.terminal import print_table
+
+    try:
+        res = listing(names)
+    except UsageError as e:
+        raise fail(str(e)) from None
+    if as_json:
+        print(json.dumps(res, indent=2))
+        return
+    rows = [[i["name"], i["source"] + (f" ({i['distribution']})" if i["distribution"] else ""),
+             i["description"] if not i["error"] else "(cannot be loaded: see the note below)"]
+            for i in res["predictors"]]
+    print_table(console, ["name", "from", "description"], rows, left_columns=3)
+    for i in res["predictors"]:
+        if "options" in i:
+            console.print(f"{escape(i['name'])} ({escape(i['target'])}) options: "
+                          f"{escape(_option_text(i['options'], i['any_option']))}",
+                          highlight=False, soft_wrap=True)
+    for note in res["notes"]:
+        console.print(f"note: {escape(note)}", highlight=False, soft_wrap=True)

@@ -1,0 +1,107 @@
+"""`bench queries`: write posbench's queries and inputs for a system that answers elsewhere."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Annotated
+
+import typer
+
+from posbench.checks import check_choice, check_out_dir
+from posbench.cli.common import (
+    DataError,
+    DataOpt,
+    DropoutsOpt,
+    GpsLatencyOpt,
+    GpsProfileOpt,
+    HorizonOpt,
+    IncludePoorTruthOpt,
+    ProjectionOpt,
+    SeedOpt,
+    SyntheticDurationOpt,
+    TopicOpt,
+    UsageError,
+    check_drive_options,
+    command_line,
+    console,
+    fail,
+    load_drives,
+    parse_topics,
+)
+
+
+def queries(
+    data: DataOpt = None,
+    out: Annotated[Path, typer.Option(
+        "--out", "-o", metavar="DIR",
+        help="Queries folder to write: queries.csv and inputs/ (give these to the system under "
+             "test), key/ (the answer key: keep it), manifest.json.")] = Path("bench-queries"),
+    horizon: HorizonOpt = 0.2,
+    gps_profile: GpsProfileOpt = "rtk",
+    gps_latency: GpsLatencyOpt = 0.0,
+    dropouts: DropoutsOpt = "none",
+    seed: SeedOpt = 0,
+    topic: TopicOpt = None,
+    projection: ProjectionOpt = "enu",
+    include_poor_truth: IncludePoorTruthOpt = False,
+    synthetic_duration: SyntheticDurationOpt = None,
+    file_format: Annotated[str, typer.Option(
+        "--format", metavar="csv|parquet",
+        help="File format of the queries list and the inputs.")] = "csv",
+) -> None:
+    """Write the queries of a run and the inputs to answer them, for a system that runs outside
+    posbench (another process, language or machine); score its answers with `bench score`.
+
+    Same drives, fed fixes (after --gps-profile, --dropouts), query times and references as
+    `bench run` with the same options and --seed. Per drive, inputs/DRIVE.csv holds what a
+    predictor may see, in the long table format (stream gps/imu/speed, t [s], x, y [m, local
+    ENU], ax, ay [m/s^2], yaw [rad], yaw_rate [rad/s], v [m/s]); queries.csv lists drive, kind
+    (future: position at t_query = fix time + horizon, asked at the fix; now: current
+    position), t_issue (answer using only inputs with t <= t_issue) and t_query [s]. Times are
+    seconds from each drive's first input sample, written exactly (repr of the float).
+
+    Example: bench queries --dropouts outages --out q; then give q/queries.csv and q/inputs/
+    to the system under test, keep q/key/, and run bench score ANSWERS.csv --queries q
+    """
+    from posbench.config import RunConfig
+    from posbench.offline.queries_folder import FORMATS
+    from posbench.scenarios.remote import local_paths
+
+    try:
+        check_drive_options(gps_profile, projection, horizon, gps_latency, dropouts, seed,
+                            synthetic_duration, data)
+        topics = parse_topics(topic)
+        check_choice(file_format, FORMATS, "--format")
+        check_out_dir(out)
+        # no predictor runs here, and no gate: the system under test gets every fed fix
+        cfg = RunConfig(predictors=(), horizon_s=horizon, gps_profile=gps_profile,
+                        gps_latency_s=gps_latency, dropouts=dropouts, seed=seed,
+                        exclude_poor_truth=not include_poor_truth, gate=False)
+        with local_paths(data) as data:
+            drives = load_drives(data, projection, topics, seed=seed,
+                                 synthetic_duration=synthetic_duration)
+            _write(drives, cfg, data, out, file_format)
+    except (DataError, UsageError) as e:
+        raise fail(str(e)) from None
+
+
+def _write(drives, cfg, data, out: Path, file_format: str) -> None:
+    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
+
+    from posbench.cli.run import plural
+    from posbench.offline.queries_folder import write_queries
+    from posbench.saved_run.provenance import data_provenance
+
+    with Progress(TextColumn("[bold]{task.description}"), BarColumn(), MofNCompleteColumn(),
+                  TimeElapsedColumn(), TextColumn("{task.fields[last]}"), console=console) as prog:
+        task = prog.add_task(f"{plural(len(drives), 'drive')}: queries and inputs",
+                             total=len(drives), last="")
+        done = write_queries(drives, cfg, out, command=command_line(),
+                             data=data_provenance(data, cfg.seed), fmt=file_format,
+                             on_done=lambda name: prog.update(task, advance=1, last=name))
+    skipped = f" ({done.skipped} skipped, named in manifest.json)" if done.skipped else ""
+    console.print(f"wrote {out}/: {done.files[0]} ({done.queries} queries), "
+                  f"{plural(done.drives, 'input file')} in inputs/{skipped}, key/ (the answer "
+                  f"key: keep it from the system under test), manifest.json", highlight=False)
+    console.print(f"score the answers with: bench score ANSWERS.csv --queries {out}",
+                  highlight=False)

@@ -1,0 +1,127 @@
+"""`bench tune`: grid-search a filter's noise on development drives."""
+
+from __future__ import annotations
+
+from typing import Annotated
+
+import typer
+
+from posbench.checks import check_at_least, check_choice, check_data_paths
+from posbench.cli.common import (
+    WORKER_DIED,
+    DataError,
+    DataOpt,
+    UsageError,
+    command_line,
+    console,
+    fail,
+    load_drives,
+)
+
+
+def tune(
+    predictor: Annotated[str, typer.Argument(
+        metavar="PREDICTOR", help="Predictor to tune: kf, ekf (noise grid, then calibration) or "
+                                 "cv (calibration only).")],
+    gps_profile: Annotated[str, typer.Option(
+        metavar="PROFILE",
+        help="GPS condition to tune for: none, rtk, consumer (synthetic development drives, "
+             "seeds 1000+) or native (give --data: the development routes).")] = "rtk",
+    data: DataOpt = None,
+    drives: Annotated[int, typer.Option(
+        metavar="N", help="Synthetic development drives per route type (seeds 1000+).")] = 1,
+    calibrate_only: Annotated[bool, typer.Option(
+        "--calibrate-only",
+        help="Keep the noise parameters tuned.json holds for this profile and fit only "
+             "cov_scale (no position changes).")] = False,
+    workers: Annotated[int, typer.Option(metavar="N", help="Parallel processes.")] = 2,
+    save: Annotated[bool, typer.Option(help="Write the winner to predictors/tuned.json.")] = True,
+) -> None:
+    """Grid-search a filter's noise parameters on development drives (never evaluation drives),
+    then calibrate its covariance.
+
+    The grid minimises mean future + mean now error. With the winner, the same drives are
+    replayed once and cov_scale is set so that 95 % of the 95 % ellipses cover the truth
+    (it changes no position). Both go to predictors/tuned.json under the GPS profile.
+
+    Examples: bench tune kf --gps-profile consumer;
+    bench tune ekf --gps-profile rtk --calibrate-only --drives 3
+    """
+    from concurrent.futures.process import BrokenProcessPool
+
+    from posbench.config import GPS_PROFILES
+    from posbench.predictor_tools.tuning import (
+        GRIDS,
+        calibrate,
+        grid_for,
+        grid_search,
+        save_tuned,
+        tuning_note,
+    )
+    from posbench.predictors.registry import tuned_params
+
+    if predictor not in GRIDS:
+        raise fail(f"no tuning grid for {predictor!r}; tunable: {', '.join(GRIDS)}")
+    try:
+        check_choice(gps_profile, GPS_PROFILES, "--gps-profile")
+        check_at_least(drives, 1, "--drives")
+        check_at_least(workers, 1, "--workers")
+        if data and gps_profile != "native":
+            raise UsageError("--data is for --gps-profile native (the other profiles tune on "
+                             "synthetic development drives)")
+        check_data_paths(data)
+        grid = {} if calibrate_only else grid_for(predictor, gps_profile)
+        kept = {k: v for k, v in tuned_params(predictor, gps_profile).items() if k != "cov_scale"}
+        if calibrate_only and GRIDS[predictor] and not kept:
+            raise UsageError(f"--calibrate-only: predictors/tuned.json holds no {predictor} "
+                             f"parameters for --gps-profile {gps_profile}; tune them first "
+                             f"(bench tune {predictor} --gps-profile {gps_profile})")
+        if gps_profile == "native":
+            if not data:
+                raise UsageError("--gps-profile native tunes on recorded fixes: give --data PATH...")
+            dev = load_drives(data, "enu", None)
+            source = "development routes " + ", ".join(str(p) for p in data)
+        else:
+            from posbench.scenarios.synthetic import default_drives
+
+            dev = [d for s in range(1000, 1000 + drives) for d in default_drives(seed=s)]
+            source = f"synthetic development drives, seeds 1000-{999 + drives}"
+        n = len(list(__import__("itertools").product(*list(grid.values())[:2]))) + sum(
+            len(v) for v in list(grid.values())[2:]) + 1  # + the calibration replay
+        from rich.progress import Progress
+
+        with Progress(console=console) as prog:
+            task = prog.add_task(f"tuning {predictor} ({gps_profile})", total=n)
+            if calibrate_only:
+                best, trials = kept, []
+            else:
+                best, trials = grid_search(predictor, dev, gps_profile, grid, workers=workers,
+                                           on_step=lambda p, v: prog.update(task, advance=1))
+            cov_scale = calibrate(predictor, dev, gps_profile, best, workers=workers)
+            prog.update(task, advance=1)
+    except (DataError, UsageError) as e:
+        raise fail(str(e)) from None
+    except BrokenProcessPool:
+        raise fail(WORKER_DIED) from None
+    if trials:
+        best_val = min(v for _, v in trials)
+        console.print(f"best {best} -> future+now mean error {best_val:.4f} m over "
+                      f"{len(dev)} drives")
+    else:
+        console.print(f"kept {best or 'the defaults'} from predictors/tuned.json")
+    if cov_scale == cov_scale:
+        best = {**best, "cov_scale": cov_scale}
+        console.print(f"calibrated: cov_scale {cov_scale:g} (95 % of the 95 % ellipses cover "
+                      f"on {len(dev)} drives)")
+    else:
+        console.print("no covariance reported on these drives: nothing to calibrate")
+    if save:
+        command = command_line()
+        how = (f"cov_scale for 95 % coverage by `{command}` on {source}" if calibrate_only else
+               f"`{command}`: {source}; objective mean future + mean now error "
+               f"{best_val:.4f} m; {len(trials)} trials; then cov_scale for 95 % coverage"
+               if trials else f"`{command}`: cov_scale for 95 % coverage on {source}")
+        if calibrate_only:
+            how = tuning_note(predictor, gps_profile, how)
+        save_tuned(predictor, gps_profile, best, how)
+        console.print("saved to predictors/tuned.json")

@@ -1,0 +1,178 @@
+"""posbench.predictor_tools.paper_figures.per_drive (split from the flat bench/; docstring to write)."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+import pandas as pd
+
+if TYPE_CHECKING:  # matplotlib is imported when a figure is drawn: importing this module is cheap
+    pass
+from posbench.figures.style import (
+    DRIVE_DPI,
+    FLOOR_M,
+    LABEL_COLORS,
+    _colors,
+    _finite,
+    _gaps,
+    _in_order,
+    _log_values,
+    _warmup,
+    headline,
+    save_figure,
+)
+from posbench.naming import _safe_name
+
+#: at most this many per-drive error-over-time figures per run (the first drives in run
+#: order); the note of ``error_over_time`` says when drives were left out
+MAX_DRIVE_FIGURES = 250
+
+
+#: per-drive plots drawn by default: every drive of a run with up to this many, else this
+#: many drives with the largest mean future-point error (``bench run --drive-plots``)
+DEFAULT_DRIVE_PLOTS = 20
+
+
+def _runs(t: np.ndarray, values: np.ndarray) -> list[tuple[Any, float, float]]:
+    """(value, start, end) of the runs of equal consecutive ``values`` along sorted times
+    ``t`` [s]; a run ends where the next one starts."""
+    if t.size == 0:
+        return []
+    change = np.flatnonzero(values[1:] != values[:-1]) + 1
+    starts = np.r_[0, change]
+    ends = np.r_[change, t.size - 1]
+    return [(values[s], float(t[s]), float(t[e])) for s, e in zip(starts, ends, strict=True)]
+
+
+def draw_error_over_time(ax: Any, drive_rows: pd.DataFrame, preds: Sequence[str],
+                         colors: dict[str, Any]) -> bool:
+    """Draw one drive's future-point error [m] over drive time [s] into ``ax`` (log y);
+    shade scenario labels (background bands), GPS outages (hatched: t_query min..max of
+    each outage) and the warm-up (grey). False (nothing drawn) without a finite error.
+
+    The y axis is linear in log10(error) with ticks at powers of ten: the same picture as a
+    log axis at a third of the rendering time (this runs once per drive)."""
+    from matplotlib.patches import Patch
+
+    fut = _finite(drive_rows[drive_rows.kind == "future"])
+    if fut.empty:
+        return False
+    handles: list[Any] = []
+    clipped = False
+    lo_hi = (np.inf, -np.inf)
+    for p in _in_order(preds, fut.predictor):
+        d = fut[fut.predictor == p].sort_values("t_query")
+        e = d.error_m.to_numpy(dtype=float)
+        v, low = _log_values(e)
+        v = np.log10(v)
+        clipped |= low
+        lo_hi = (min(lo_hi[0], v.min()), max(lo_hi[1], v.max()))
+        tq = d.t_query.to_numpy(dtype=float)
+        gap = np.flatnonzero(_gaps(tq)) + 1  # break the line across outages
+        (h,) = ax.plot(np.insert(tq, gap, np.nan), np.insert(v, gap, np.nan), "-", lw=0.8,
+                       color=colors.get(p), label=f"{p} (mean {e.mean():.3f} m)")
+        handles.append(h)
+    xband = ax.get_xaxis_transform()  # x in data, y in axes fraction
+    one = drive_rows[drive_rows.predictor == drive_rows.predictor.iloc[0]].sort_values("t_query")
+    tq = one.t_query.to_numpy(dtype=float)
+    if "label" in one.columns:
+        spans: dict[str, list[tuple[float, float]]] = {}
+        for lab, a, b in _runs(tq, one.label.astype(str).to_numpy()):
+            spans.setdefault(lab, []).append((a, b - a))
+        for lab, s in spans.items():
+            c = LABEL_COLORS.get(lab, "#dddddd")
+            ax.broken_barh(s, (0, 1), transform=xband, facecolors=c, alpha=0.6, zorder=0)
+            handles.append(Patch(facecolor=c, alpha=0.6, label=lab))
+    out = drive_rows[drive_rows.outage >= 0]
+    if not out.empty:
+        g = out.groupby("outage")["t_query"].agg(["min", "max"])
+        ax.broken_barh(list(zip(g["min"], g["max"] - g["min"], strict=True)), (0, 1),
+                       transform=xband, facecolors="none", edgecolors="0.3", hatch="////",
+                       lw=0, zorder=0.5)
+        handles.append(Patch(facecolor="none", edgecolor="0.3", hatch="////",
+                             label=f"GPS outage ({len(g)})"))
+    w = _warmup(drive_rows)
+    if w.any():
+        tw = drive_rows.t_query.to_numpy(dtype=float)[w]
+        ax.broken_barh([(tw.min(), tw.max() - tw.min())], (0, 1), transform=xband,
+                       facecolors="0.55", alpha=0.6, zorder=0.6)
+        handles.append(Patch(facecolor="0.55", alpha=0.6, label="warm-up"))
+    k = np.arange(np.floor(lo_hi[0]), np.ceil(lo_hi[1]) + 1)
+    ax.set_yticks(k, [f"{10.0 ** i:g}" for i in k])
+    ax.set_ylim(k[0] - 0.05, k[-1] + 0.05) if k.size > 1 else ax.set_ylim(k[0] - 1, k[0] + 1)
+    t0, t1 = float(np.nanmin(drive_rows.t_query)), float(np.nanmax(drive_rows.t_query))
+    ax.set_xlim(t0, t1 if t1 > t0 else t0 + 1.0)
+    ax.set_xlabel("drive time [s]")
+    ax.set_ylabel("future-point error [m] (log scale)")
+    if clipped:
+        ax.text(1.0, 1.01, f"< {1000 * FLOOR_M:g} mm drawn at {1000 * FLOOR_M:g} mm",
+                transform=ax.transAxes, ha="right", va="bottom", fontsize=7)
+    ax.grid(True, which="major", axis="y", alpha=0.3)
+    ax.legend(handles=handles, fontsize=7, loc="upper left", bbox_to_anchor=(1.01, 1.0),
+              borderaxespad=0)
+    return True
+
+
+def drives_to_plot(traces: pd.DataFrame, limit: int | None) -> tuple[list[str], str | None]:
+    """Which drives get an error-over-time plot: all of them when there are at most
+    ``limit`` (None: no limit; never more than :data:`MAX_DRIVE_FIGURES`), else the
+    ``limit`` drives with the largest mean future-point error over all predictors (past the
+    warm-up), in drive order; and a note saying which were chosen, or None."""
+    drives = [str(d) for d in pd.unique(traces.drive)]
+    cap = MAX_DRIVE_FIGURES if limit is None else min(limit, MAX_DRIVE_FIGURES)
+    if len(drives) <= cap:
+        return drives, None
+    if cap == 0:
+        return [], f"not drawn for the {len(drives)} drives (--drive-plots 0)"
+    fut = headline(traces[traces.kind == "future"])
+    worst = (fut.groupby(fut.drive, sort=False, observed=True)["error_m"].mean()
+             .sort_values(ascending=False, kind="stable").index[:cap])
+    worst = {str(d) for d in worst}
+    chosen = [d for d in drives if d in worst]
+    why = ("cap MAX_DRIVE_FIGURES in bench/plots.py" if limit is None or limit > MAX_DRIVE_FIGURES
+           else "--drive-plots all for every drive")
+    return chosen, (f"drawn for the {len(chosen)} of {len(drives)} drives with the largest mean "
+                    f"future-point error ({why})")
+
+
+def write_error_over_time(traces: pd.DataFrame, preds: Sequence[str], out: Path,
+                          formats: Sequence[str], limit: int | None = DEFAULT_DRIVE_PLOTS
+                          ) -> tuple[list[Path], str | None]:
+    """``out/drives/<drive>-error_over_time.<fmt>`` for the drives of :func:`drives_to_plot`,
+    drawn into one reused figure at :data:`DRIVE_DPI`; return the files and a note (drives
+    left out and why), or None."""
+    from matplotlib.figure import Figure
+
+    colors = _colors(preds)
+    fig = Figure(figsize=(12, 4))  # fixed margins: a layout engine would double the cost
+    ax = fig.add_subplot()
+    fig.subplots_adjust(left=0.065, right=0.80, bottom=0.13, top=0.91)
+    files: list[Path] = []
+    empty: list[str] = []
+    chosen, chosen_note = drives_to_plot(traces, limit)
+    used = [c for c in ("drive", "predictor", "kind", "t_query", "error_m", "label", "outage",
+                        "warmup") if c in traces.columns]
+    picked = traces.loc[traces.drive.isin(chosen).to_numpy(), used]
+    stems: set[str] = set()
+    # iterate the groups (first appearance order): get_group fails on 1-row groups (pandas 3.1)
+    for i, (drive, rows) in enumerate(picked.groupby(picked.drive, sort=False, observed=True)):
+        ax.clear()
+        if not draw_error_over_time(ax, rows, preds, colors):
+            empty.append(str(drive))
+            continue
+        ax.set_title(f"{drive}: future-point error over time", fontsize=10, loc="left")
+        stem = _safe_name(str(drive))
+        stem = stem if stem not in stems else f"{stem}-{i}"  # two names, one file name
+        stems.add(stem)
+        files += save_figure(fig, out / "drives", f"{stem}-error_over_time", formats,
+                             dpi=DRIVE_DPI)
+    notes = []
+    if empty:
+        notes.append(f"{len(empty)} of {len(chosen)} drives have no future query with a known "
+                     f"error ({', '.join(empty[:5])}{', ...' if len(empty) > 5 else ''})")
+    if chosen_note:
+        notes.append(chosen_note)
+    return files, "; ".join(notes) or None

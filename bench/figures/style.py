@@ -1,0 +1,179 @@
+"""The figures of a ``bench run``: one function per figure, one save helper.
+
+Every figure is drawn from the per-query traces (one row per query: ``t_query`` [s] in
+drive time, positions ``x, y, x_ref, y_ref`` [m] in a local ENU frame, ``error_m`` [m];
+see :mod:`posbench.replay.runner`). :func:`write_plots` writes them and never raises on thin data:
+a figure with nothing to show is not written, and :class:`PlotsWritten` says why.
+
+Figures (each written once per requested format, see :data:`FORMATS`):
+
+- ``error_cdf``: future / now error CDFs, one line per predictor (log x);
+- ``error_vs_speed``: mean future-point error per speed bin (empty bins dropped);
+- ``error_vs_since_fix``: mean current-position error by time since the last fix
+  (runs with GPS outages only; empty bins dropped);
+- ``path``: 40 s of the most-turning drive, with zoomed panels around its worst moments;
+- ``trajectory_error``: that drive's reference path coloured by each predictor's
+  future-point error, one panel per predictor, one shared colour scale;
+- ``drives/<drive>-error_over_time``: per drive, future-point error over drive time,
+  with GPS outages, scenario labels and the warm-up shaded.
+
+Warm-up: where the traces have a boolean ``warmup`` column (queries before a drive's
+second fix), those rows are left out of every figure but the per-drive error over time,
+which shades them. Old traces without the column are drawn whole.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+import pandas as pd
+
+if TYPE_CHECKING:  # matplotlib is imported when a figure is drawn: importing this module is cheap
+    from matplotlib.figure import Figure
+
+
+#: the output formats :func:`write_plots` and the paper's figures can write
+FORMATS = ("png", "svg", "pdf")
+
+
+#: errors [m] below this are drawn at it on log axes (a log axis cannot show 0)
+FLOOR_M = 1e-3
+
+
+#: resolution of the summary figures and of the per-drive figures [dots per inch]
+DPI = 110
+
+
+DRIVE_DPI = 80
+
+
+TURN_LABELS = ("turn", "roundabout")
+
+
+LABEL_COLORS = {"straight": "#c7e9c0", "turn": "#fdd0a2", "roundabout": "#d4b9da",
+                "start_stop": "#fff2ae", "unlabelled": "#ffffff"}
+
+
+@dataclass
+class PlotsWritten:
+    """What :func:`write_plots` did: every file written (all formats) and, per figure
+    not written, why (figure name -> note)."""
+
+    files: list[Path] = field(default_factory=list)
+    notes: dict[str, str] = field(default_factory=dict)
+
+
+class NothingToPlot(Exception):
+    """A figure has no data to show; the message says why (goes into the report)."""
+
+
+def check_formats(formats: Iterable[str] | str) -> tuple[str, ...]:
+    """The output formats as a tuple of lower-case names from :data:`FORMATS`, in the given
+    order without repeats. A string is split on commas (``"png,svg"``).
+
+    Raises:
+        ValueError: an unknown format, or none at all.
+    """
+    items = formats.split(",") if isinstance(formats, str) else list(formats)
+    out: list[str] = []
+    for f in items:
+        name = str(f).strip().lower().lstrip(".")
+        if name not in FORMATS:
+            raise ValueError(f"unknown plot format {f!r}: use one or more of {', '.join(FORMATS)}")
+        if name not in out:
+            out.append(name)
+    if not out:
+        raise ValueError(f"no plot format given: use one or more of {', '.join(FORMATS)}")
+    return tuple(out)
+
+
+def shown_format(formats: Iterable[str] | str) -> str:
+    """The format a report links to among ``formats``: png, else svg, else pdf (the first
+    two show inline in Markdown)."""
+    fmts = check_formats(formats)
+    return next(f for f in FORMATS if f in fmts)
+
+
+_METADATA = {"png": {"Software": None}, "svg": {"Date": None}, "pdf": {"CreationDate": None}}
+
+
+def _in_order(preds: Sequence[str], column: pd.Series) -> list[str]:
+    """The predictors present in ``column``: those of ``preds`` in its order, then others sorted."""
+    present = {str(x) for x in pd.unique(column)}
+    return [p for p in preds if p in present] + sorted(present - set(preds))
+
+
+def save_figure(fig: Figure, folder: Path, stem: str, formats: Sequence[str],
+                dpi: int = DPI) -> list[Path]:
+    """Write ``fig`` as ``folder/stem.<fmt>`` for each format (already checked by
+    :func:`check_formats`); return the paths. No timestamps in the files, so the same run
+    gives the same bytes."""
+    folder.mkdir(parents=True, exist_ok=True)
+    paths = []
+    for fmt in formats:
+        p = folder / f"{stem}.{fmt}"
+        extra = {"pil_kwargs": {"compress_level": 1}} if fmt == "png" else {}  # quicker; ~10 % larger
+        fig.savefig(p, format=fmt, dpi=dpi, metadata=_METADATA[fmt], **extra)
+        paths.append(p)
+    return paths
+
+
+def most_turning_drive(fut: pd.DataFrame) -> tuple[str, bool]:
+    """The drive with the most turn / roundabout queries in ``fut`` (a traces slice), and
+    whether any query is turning at all (else the first drive)."""
+    turns = fut[fut.label.isin(TURN_LABELS)]
+    if turns.empty:
+        return str(fut.drive.iloc[0]), False
+    return str(turns.groupby("drive", observed=True).size().idxmax()), True
+
+
+def _colors(preds: Sequence[str]) -> dict[str, Any]:
+    """One colour per predictor, the same in every figure."""
+    from matplotlib import colormaps
+
+    cmap = colormaps["tab10"]
+    return {p: cmap(i % 10) for i, p in enumerate(preds)}
+
+
+def _warmup(traces: pd.DataFrame) -> np.ndarray:
+    """Boolean mask of the warm-up rows (all False without a ``warmup`` column)."""
+    if "warmup" not in traces.columns:
+        return np.zeros(len(traces), dtype=bool)
+    return traces["warmup"].fillna(False).astype(bool).to_numpy()
+
+
+def headline(traces: pd.DataFrame, columns: Sequence[str] | None = None) -> pd.DataFrame:
+    """The rows the headline figures use: all but the warm-up (only ``columns`` of them, if
+    given: filtering a few columns of a long run is much cheaper than all of them)."""
+    if columns is not None:
+        traces = traces[[c for c in dict.fromkeys([*columns, "warmup"]) if c in traces.columns]]
+    w = _warmup(traces)
+    return traces[~w] if w.any() else traces
+
+
+def _log_values(e: np.ndarray) -> tuple[np.ndarray, bool]:
+    """Errors [m] ready for a log axis: values below :data:`FLOOR_M` raised to it; and
+    whether any was."""
+    low = e < FLOOR_M
+    return (np.where(low, FLOOR_M, e), bool(low.any()))
+
+
+def _floor_note(clipped: bool) -> str:
+    return f"; < {1000 * FLOOR_M:g} mm drawn at {1000 * FLOOR_M:g} mm" if clipped else ""
+
+
+def _finite(df: pd.DataFrame) -> pd.DataFrame:
+    return df[np.isfinite(df["error_m"].to_numpy(dtype=float))]
+
+
+def _gaps(t: np.ndarray) -> np.ndarray:
+    """Mask of the steps between consecutive sorted query times ``t`` [s] that span a gap
+    (an outage: longer than 2 s and than 5 median steps); lines are not drawn across them."""
+    dt = np.diff(t)
+    if dt.size == 0:
+        return np.zeros(0, dtype=bool)
+    return dt > max(2.0, 5 * float(np.median(dt)))

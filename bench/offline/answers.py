@@ -1,0 +1,257 @@
+"""Answers produced elsewhere, scored exactly as ``bench run`` scores its predictors.
+
+An answers file (CSV or Parquet, column names case-insensitive) has one row per answered
+query: ``drive`` (as in the queries list), ``kind`` (``future`` or ``now``), ``t_query`` [s]
+(as in the queries list: from the drive's first input sample), ``x``, ``y`` [m] (the drive's
+local ENU frame, as the inputs) and optionally ``latency_us`` [us] (how long the system took
+for that answer; empty = not timed) and ``cov_xx``, ``cov_xy``, ``cov_yy`` [m^2] (the answer's
+reported 2x2 ENU covariance, all three or none; empty = no uncertainty for that answer; it
+must be positive semi-definite). Other columns are ignored.
+
+A row answers the query of its drive and kind whose ``t_query`` is within
+:data:`~posbench.scoring.score.MATCH_TOLERANCE_S` (1e-6 s) of its own. A query without an answer is
+scored as ``missing`` (never dropped); an answer to no query, two answers to one query, a
+drive the queries folder does not hold, a missing or non-finite cell: a :class:`DataError`
+naming the file and the first such row (CSV line number, header = line 1; Parquet row).
+
+The answers are turned into the same :class:`~posbench.scoring.records.DriveRun` records as a replay
+(:func:`score_answers`), through :func:`posbench.scoring.score.score`, so aggregation, the report and
+``results.json`` are those of ``bench run``.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+from posbench.offline.queries_folder import QueryFolder
+from posbench.scenarios.errors import DataError
+from posbench.scoring.records import DriveRun
+from posbench.scoring.schema import KINDS
+from posbench.scoring.score import MATCH_TOLERANCE_S, answer_positions, score
+
+REQUIRED = ("drive", "kind", "t_query", "x", "y")
+
+
+COVARIANCE = ("cov_xx", "cov_xy", "cov_yy")
+
+
+OPTIONAL = ("latency_us", *COVARIANCE)
+
+
+@dataclass
+class Answers:
+    """A checked answers file: ``frame`` has columns drive, kind (str), t_query [s], x, y [m],
+    latency_us [us] (NaN: not timed), one row per answer, indexed by the file's data row."""
+
+    path: Path
+    frame: pd.DataFrame
+    is_csv: bool
+    ignored: list[str] = field(default_factory=list)
+
+    def where(self, row: int) -> str:
+        """Data row ``row`` (0-based) as the user finds it: ``line N`` (CSV) or ``row N``."""
+        return f"line {row + 2}" if self.is_csv else f"row {row + 1}"
+
+    def fail(self, row: int, detail: str) -> DataError:
+        """The error to raise for data row ``row``: the file, the row, ``detail``."""
+        return DataError(self.path, f"{self.where(row)}: {detail}")
+
+
+def _text(tab, col: str) -> np.ndarray:
+    """A text column stripped, every cell a non-empty string (else a DataError on its row)."""
+    s = tab.df[col]
+    txt = s.astype("string").str.strip()
+    empty = (txt.isna() | (txt == "")).to_numpy()
+    if empty.any():
+        i = int(np.flatnonzero(empty)[0])
+        raise DataError(tab.path, f"{tab.where(i)}, column {col!r}: empty; "
+                                  f"{int(empty.sum())} such rows in all")
+    return txt.to_numpy(dtype=object).astype(str)
+
+
+def read_answers(path: str | Path) -> Answers:
+    """Read and check an answers file (see the module docstring).
+
+    Raises:
+        DataError: missing file or columns, a non-numeric, missing or non-finite t_query, x or
+            y, an unknown kind, a negative latency; each naming the first row at fault.
+    """
+    from posbench.scenarios.loaders.table import numeric_column, read_table_file
+
+    path = Path(path)
+    tab = read_table_file(path, text_columns=("drive", "kind"))
+    df = tab.df
+    missing = [c for c in REQUIRED if c not in df.columns]
+    if missing:
+        raise DataError(path, f"missing column(s) {', '.join(missing)}: an answers file has "
+                              f"columns {', '.join(REQUIRED)} and optionally latency_us")
+    ignored = [c for c in df.columns if c not in REQUIRED + OPTIONAL]
+    where = tab.where
+    drive = _text(tab, "drive")
+    kind = np.char.lower(_text(tab, "kind").astype(str))
+    bad = ~np.isin(kind, KINDS)
+    if bad.any():
+        i = int(np.flatnonzero(bad)[0])
+        raise DataError(path, f"{where(i)}, column 'kind': {df['kind'].iloc[i]!r} is not a query "
+                              f"kind (future or now)")
+    num = {}
+    for c in ("t_query", "x", "y"):
+        v = numeric_column(tab, c)
+        nonfinite = ~np.isfinite(v)
+        if nonfinite.any():
+            i = int(np.flatnonzero(nonfinite)[0])
+            hint = "; leave the row out to give no answer" if c in ("x", "y") else ""
+            raise DataError(path, f"{where(i)}, column {c!r}: missing or non-finite value "
+                                  f"({df[c].iloc[i]!r}){hint}; {int(nonfinite.sum())} such rows "
+                                  f"in all")
+        num[c] = v
+    lat = np.full(len(df), np.nan)
+    if "latency_us" in df.columns:
+        lat = numeric_column(tab, "latency_us")
+        bad = np.isinf(lat) | (lat < 0)
+        if bad.any():
+            i = int(np.flatnonzero(bad)[0])
+            raise DataError(path, f"{where(i)}, column 'latency_us': {df['latency_us'].iloc[i]!r} "
+                                  f"is not a duration >= 0 [us] (leave it empty if not timed)")
+    frame = pd.DataFrame({"drive": drive, "kind": kind, **num, "latency_us": lat,
+                          **_covariance(tab, path)})
+    return Answers(path, frame, tab.is_csv, ignored)
+
+
+def _covariance(tab: Any, path: Path) -> dict[str, np.ndarray]:
+    """The optional covariance columns [m^2] (NaN where a row gives none); a DataError for
+    only some of the three columns, or a row whose covariance is not positive semi-definite."""
+    from posbench.scenarios.loaders.table import numeric_column
+
+    df = tab.df
+    given = [c for c in COVARIANCE if c in df.columns]
+    if not given:
+        return {c: np.full(len(df), np.nan) for c in COVARIANCE}
+    if len(given) < len(COVARIANCE):
+        raise DataError(path, f"covariance column(s) {', '.join(given)} without "
+                              f"{', '.join(c for c in COVARIANCE if c not in given)}: give all "
+                              f"of {', '.join(COVARIANCE)} [m^2] or none")
+    xx, xy, yy = (numeric_column(tab, c) for c in COVARIANCE)
+    some = np.isfinite(xx) | np.isfinite(xy) | np.isfinite(yy)
+    bad = some & ~(np.isfinite(xx) & np.isfinite(xy) & np.isfinite(yy)
+                   & (xx >= 0) & (yy >= 0) & (xx * yy - xy * xy >= -1e-12 * (xx * yy + 1e-300)))
+    if bad.any():
+        i = int(np.flatnonzero(bad)[0])
+        raise DataError(path, f"{tab.where(i)}, columns cov_xx, cov_xy, cov_yy: "
+                              f"({xx[i]!r}, {xy[i]!r}, {yy[i]!r}) is not a covariance (all three "
+                              f"finite, variances >= 0, cov_xy^2 <= cov_xx cov_yy; leave all "
+                              f"three empty for no uncertainty)")
+    return {"cov_xx": xx, "cov_xy": xy, "cov_yy": yy}
+
+
+@dataclass
+class Scored:
+    """Answers scored against a queries folder: the per-drive records (as a replay gives
+    them) and, per drive name, the queries without an answer per kind."""
+
+    runs: list[DriveRun]
+    unanswered: dict[str, dict[str, int]]
+    answered: int
+    queries: int
+
+    @property
+    def missing(self) -> int:
+        """Queries without an answer, all drives and kinds."""
+        return sum(sum(k.values()) for k in self.unanswered.values())
+
+
+def _nearest_hint(times: np.ndarray, t: float) -> str:
+    if times.size == 0:
+        return "that drive has no such queries"
+    j = int(np.argmin(np.abs(times - t)))
+    return f"nearest: {times[j]!r} s, {abs(times[j] - t):.3g} s away"
+
+
+def match(folder: QueryFolder, answers: Answers) -> np.ndarray:
+    """For each answer row, the row of ``folder.key`` it answers (raising on answers to no
+    query, to a drive not in the folder or skipped there, and on a second answer to one query)."""
+    a = answers.frame
+    ids = {d["id"]: d for d in folder.drives}
+    known = np.isin(a["drive"].to_numpy(), list(ids))
+    if not known.all():
+        i = int(np.flatnonzero(~known)[0])
+        shown = ", ".join(list(ids)[:5]) + (", ..." if len(ids) > 5 else "")
+        raise answers.fail(int(a.index[i]), f"drive {a['drive'].iloc[i]!r} is not in the queries "
+                                            f"folder {folder.folder} (its drives: {shown})")
+    skipped = np.array([ids[d]["skipped"] is not None for d in a["drive"].to_numpy()], dtype=bool)
+    if skipped.any():
+        i = int(np.flatnonzero(skipped)[0])
+        d = ids[a["drive"].iloc[i]]
+        raise answers.fail(int(a.index[i]), f"drive {d['id']!r} has no queries (skipped by "
+                                            f"bench queries: {d['skipped']})")
+    public = folder.public_times()
+    pos = answer_positions(public, a)
+    if (pos < 0).any():
+        i = int(np.flatnonzero(pos < 0)[0])
+        row = a.iloc[i]
+        same = (public["drive"] == row["drive"]) & (public["kind"] == row["kind"])
+        hint = _nearest_hint(public.loc[same, "t_query"].to_numpy(float), float(row["t_query"]))
+        raise answers.fail(int(a.index[i]), f"no query of drive {row['drive']!r}, kind "
+                                            f"{row['kind']} at t_query {row['t_query']!r} s "
+                                            f"({hint}; times match within "
+                                            f"{MATCH_TOLERANCE_S:g} s)")
+    dup = pd.Series(pos).duplicated().to_numpy()
+    if dup.any():
+        i = int(np.flatnonzero(dup)[0])
+        first = int(np.flatnonzero(pos == pos[i])[0])
+        row = a.iloc[i]
+        raise answers.fail(int(a.index[i]), f"a second answer to the query answered on "
+                                            f"{answers.where(int(a.index[first]))} (drive "
+                                            f"{row['drive']!r}, kind {row['kind']}, t_query "
+                                            f"{public['t_query'].iloc[pos[i]]!r} s)")
+    return pos
+
+
+def score_answers(folder: QueryFolder, answers: Answers, predictor: str,
+                  on_done: Callable[[str], None] | None = None) -> Scored:
+    """Score ``answers`` as predictor ``predictor`` against ``folder``: per drive (folder
+    order) the :class:`~posbench.scoring.records.DriveRun` a replay would give, traces from
+    :func:`posbench.scoring.score.score` (unanswered queries NaN, i.e. ``missing``), step latency from
+    the ``latency_us`` of future answers and query latency from that of now answers [ns].
+    ``on_done(drive name)`` is called as each drive is scored."""
+    pos = match(folder, answers)
+    key = folder.key
+    n = len(key)
+    xy = np.full((n, 2), np.nan)
+    xy[pos] = answers.frame[["x", "y"]].to_numpy(float)
+    cov = np.full((n, 3), np.nan)
+    cov[pos] = answers.frame[list(COVARIANCE)].to_numpy(float)
+    lat_us = np.full(n, np.nan)
+    lat_us[pos] = answers.frame["latency_us"].to_numpy(float)
+    answered = np.zeros(n, dtype=bool)
+    answered[pos] = True
+    codes, names = pd.factorize(key["drive"].astype(str))
+    rows_of = {str(name): np.flatnonzero(codes == c) for c, name in enumerate(names)}
+    kind = key["kind"].astype(str).to_numpy()
+    runs, unanswered = [], {}
+    for d in folder.drives:
+        if d["skipped"] is not None:
+            runs.append(folder.drive_run(d, pd.DataFrame()))
+            continue
+        rows = rows_of.get(d["name"], np.empty(0, dtype=np.int64))
+        traces = score(key.iloc[rows], predictor, xy[rows], cov=cov[rows])
+        run = folder.drive_run(d, traces)
+        for k, attr in (("future", "step_ns"), ("now", "query_ns")):
+            mine = rows[(kind[rows] == k) & np.isfinite(lat_us[rows])]
+            getattr(run, attr)[predictor] = np.round(lat_us[mine] * 1e3).astype(np.int64)
+        miss = {k: int(((kind[rows] == k) & ~answered[rows]).sum()) for k in KINDS}
+        if sum(miss.values()):
+            unanswered[d["name"]] = miss
+            run.notes = [*run.notes, f"answers: {sum(miss.values())} of {rows.size} queries "
+                                     f"without an answer (future {miss['future']}, now "
+                                     f"{miss['now']}), scored as missing"]
+        runs.append(run)
+        if on_done:
+            on_done(d["name"])
+    return Scored(runs, unanswered, len(pos), n)

@@ -1,0 +1,66 @@
+"""posbench.pipeline.data_check (split from the flat bench/; docstring to write)."""
+
+from __future__ import annotations
+
+from collections.abc import Iterable, Sequence
+from dataclasses import asdict
+from typing import Any
+
+from posbench.scenarios.consistency import (
+    TOLERANCES,
+    Consistency,
+    check_drive,
+)
+from posbench.scenarios.errors import DataError
+
+#: streams whose failure marks only the predictors that observe them (by overriding the
+#: named method of :class:`posbench.predictors.base.Predictor`); every other stream marks all
+STREAM_METHODS = {"imu.yaw_rate": "observe_imu", "imu.ax": "observe_imu",
+                  "imu.yaw": "observe_imu", "speed": "observe_speed"}
+
+
+def check_drives(drives: Iterable[Any]) -> dict[str, Consistency]:
+    """:func:`posbench.scenarios.consistency.check_drive` of every drive, by drive name."""
+    return {d.name: check_drive(d) for d in drives}
+
+
+def uses_stream(cls: type, stream: str) -> bool:
+    """Whether predictor class ``cls`` uses ``stream``: an IMU or speed stream only if it
+    overrides ``observe_imu`` / ``observe_speed``; GPS and truth concern every predictor."""
+    from posbench.predictors.base import Predictor
+
+    method = STREAM_METHODS.get(stream)
+    if method is None:
+        return True
+    return getattr(cls, method, None) is not getattr(Predictor, method)
+
+
+def affected_predictors(names: Sequence[str], checks: dict[str, Consistency]
+                        ) -> dict[str, list[str]]:
+    """Predictor name -> ``"drive: stream"`` for every failing stream it used."""
+    from posbench.predictors.registry import predictor_class
+
+    failing = [(d, c.stream) for d, res in checks.items() for c in res.failures()]
+    out: dict[str, list[str]] = {}
+    for name in names:
+        cls = predictor_class(name)
+        hit = [f"{d}: {s}" for d, s in failing if uses_stream(cls, s)]
+        if hit:
+            out[name] = hit
+    return out
+
+
+def strict_error(checks: dict[str, Consistency]) -> DataError | None:
+    """The ``--strict`` error for the first failing stream (drive order), or None."""
+    for drive, res in checks.items():
+        for c in res.failures():
+            return DataError(None, f"--strict: drive {drive}: {c.stream}: {c.reason}")
+    return None
+
+
+def to_results(checks: dict[str, Consistency], names: Sequence[str] = ()) -> dict[str, Any]:
+    """The ``consistency`` key of results.json: tolerances, per drive and stream the
+    verdict, reason and figures, and the predictors that used a failing stream."""
+    return {"tolerances": asdict(TOLERANCES),
+            "drives": {d: r.to_dict() for d, r in checks.items()},
+            "affected_predictors": affected_predictors(names, checks) if names else {}}

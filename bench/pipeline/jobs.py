@@ -1,0 +1,138 @@
+"""Draw a run's figures in other processes while this one aggregates.
+
+The figures of a ``bench run`` need only the traces (and, for the paper's figures, the
+drives and the run's fixes), not the aggregated results; drawing them takes about as long
+as the aggregation (matplotlib, one core). So ``bench run`` starts them right after the
+replay as forked child processes (:class:`Job`: the child inherits the traces without a
+copy, draws, and sends back only the list of files written and their notes) and collects
+them when the report is written. The children run a little nicer than the parent
+(:data:`CHILD_NICENESS`), so the aggregation keeps a core to itself. The files are byte for
+byte those drawn in-process.
+
+Where ``fork`` is not available (macOS and Windows start processes by ``spawn``, which
+would pickle the traces), or when a child dies, the work is done in this process when
+its result is asked for: slower, never different.
+"""
+
+from __future__ import annotations
+
+import multiprocessing as mp
+import os
+import pickle
+from collections.abc import Callable, Sequence
+from pathlib import Path
+from typing import Any, Generic, TypeVar
+
+import pandas as pd
+
+from posbench.figures.style import PlotsWritten
+from posbench.figures.writer import joined, write_drive_plots, write_summary_plots
+from posbench.scoring.records import lean_traces
+
+T = TypeVar("T")
+
+
+#: how much nicer than the parent a child runs: on a machine with fewer free cores than
+#: processes, the parent (which aggregates, the longest chain of work) keeps a core and the
+#: children share what is left, instead of every process getting an equal slice
+CHILD_NICENESS = 5
+
+
+def _child(conn: Any, fn: Callable[..., Any], args: tuple[Any, ...]) -> None:
+    """In the child: run ``fn(*args)``, send ``(True, value)`` or ``(False, exception)``."""
+    try:
+        os.nice(CHILD_NICENESS)
+    except OSError:  # not allowed here: run at the parent's priority
+        pass
+    try:
+        value: tuple[bool, Any] = (True, fn(*args))
+    except BaseException as e:  # noqa: BLE001 - everything goes back to the parent
+        value = (False, e)
+    try:
+        conn.send(value)
+    except (pickle.PicklingError, TypeError, AttributeError):  # an exception that won't pickle
+        conn.send((False, RuntimeError(f"{type(value[1]).__name__}: {value[1]}")))
+    finally:
+        conn.close()
+
+
+def can_fork() -> bool:
+    """Whether this platform starts processes by ``fork`` (Linux)."""
+    return "fork" in mp.get_all_start_methods()
+
+
+class Job(Generic[T]):
+    """``fn(*args)`` started now in a forked child process; :meth:`result` waits for it.
+
+    Without fork (or with ``background=False``) nothing starts until :meth:`result`, which
+    then calls ``fn`` here. If the child dies without an answer (killed, out of memory),
+    :meth:`result` calls ``fn`` here too. An exception ``fn`` raised in the child is raised
+    again by :meth:`result`."""
+
+    def __init__(self, fn: Callable[..., T], *args: Any, background: bool = True) -> None:
+        self._fn, self._args = fn, args
+        self._proc: Any = None
+        self._conn: Any = None
+        if background and can_fork():
+            ctx = mp.get_context("fork")
+            recv, send = ctx.Pipe(duplex=False)
+            self._proc = ctx.Process(target=_child, args=(send, fn, args), daemon=True)
+            self._proc.start()
+            send.close()
+            self._conn = recv
+
+    def result(self) -> T:
+        """The value of ``fn(*args)`` (waits for the child). Ask once."""
+        if self._proc is None:
+            return self._fn(*self._args)
+        proc, self._proc = self._proc, None
+        try:
+            answer = self._conn.recv()
+        except EOFError:  # the child died before answering
+            answer = None
+        finally:
+            self._conn.close()
+            proc.join()
+        if answer is None:
+            return self._fn(*self._args)
+        ok, value = answer
+        if not ok:
+            raise value
+        return value
+
+
+class FigureJobs:
+    """The figures of one run, drawn in parallel: the summary figures, the per-drive
+    figures and (given ``paper``) the paper's figures, each in its own child process.
+
+    Args:
+        traces: the run's traces; preds: the run's predictors in report order.
+        out, formats, drive_plots: as :func:`posbench.figures.writer.write_plots`.
+        paper: draws the paper's figures into ``out`` and returns (file, caption) pairs
+            (:func:`posbench.predictor_tools.paper_figures.paper_figures` with the run bound); None: none.
+        background: False draws everything in this process, when asked (for tests and
+            platforms without fork this is what happens anyway).
+    """
+
+    def __init__(self, traces: pd.DataFrame, preds: Sequence[str], out: Path,
+                 formats: Sequence[str] = ("png",), drive_plots: int | None = 20,
+                 paper: Callable[[], list[tuple[str, str]]] | None = None,
+                 background: bool = True) -> None:
+        if background and can_fork():
+            import matplotlib.figure  # noqa: F401  (once here, not once per child)
+        preds = list(preds)
+        traces = lean_traces(traces)
+        self._paper = Job(paper, background=background) if paper is not None else None
+        self._drives = Job(write_drive_plots, traces, preds, out, tuple(formats), drive_plots,
+                           background=background)
+        self._summary = Job(write_summary_plots, traces, preds, out, tuple(formats),
+                            background=background)
+
+    def paper(self) -> list[tuple[str, str]]:
+        """The paper's figures written: (file, caption) pairs ([] without ``paper``)."""
+        return self._paper.result() if self._paper is not None else []
+
+    def plots(self) -> PlotsWritten:
+        """The run's figures written and their notes, as :func:`posbench.figures.writer.write_plots`
+        gives them (summary figures first, then the per-drive ones)."""
+        return joined(self._summary.result(), self._drives.result())

@@ -1,0 +1,153 @@
+"""``bench latency``: per-call timing of predictors on one drive, one process, one thread.
+
+Each predictor replays the drive once to warm up (imports, allocations, ONNX
+session), then replays it again, repeating until at least ``steps`` fix steps
+were timed; every call is timed with ``perf_counter_ns``. Figures are
+percentiles in microseconds, never a single timing.
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Callable
+from typing import Any
+
+import numpy as np
+
+from posbench.config import RunConfig
+from posbench.metrics.latency import latency_summary
+from posbench.predictors.registry import create
+from posbench.replay.loop import replay
+from posbench.replay.prepare import prepare_drive
+from posbench.scenarios.drive import Drive
+
+PAPER_MS = {"regression": 2.0, "lstm": 2.0, "kalman": 1.0, "step_total": (4.0, 6.0)}
+
+
+def single_thread() -> None:
+    """Pin BLAS / OpenMP pools to one thread (call before numpy-heavy work)."""
+    for var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
+        os.environ.setdefault(var, "1")
+    try:
+        from threadpoolctl import threadpool_limits
+
+        threadpool_limits(1)
+    except ImportError:
+        pass
+
+
+def time_predictor(name: str, drive: Drive, steps: int, options: dict[str, Any] | None = None
+                   ) -> dict[str, Any]:
+    """p50/p90/p99/max [us] of fix steps (observe_gps + future query) and between-fix queries."""
+    cfg = RunConfig(predictors=(name,), gps_profile="rtk")
+    prep = prepare_drive(drive, cfg)
+    pred = create(name, **(options or {}))
+    replay(pred, prep, cfg.horizon_s)  # warm-up
+    step, query = [], []
+    n = 0
+    while n < steps:
+        r = replay(pred, prep, cfg.horizon_s)
+        step.append(r.step_ns)
+        query.append(r.query_ns)
+        n += r.step_ns.size
+    return {"step_us": latency_summary(np.concatenate(step)[:steps]),
+            "query_us": latency_summary(np.concatenate(query))}
+
+
+def lstm_stages(drive: Drive, steps: int) -> dict[str, Any]:
+    """Per-stage latency [us] of the *staged* ``lstm`` fix step (the readable reference,
+    ``step="staged"``) on a drive's real windows, plus the paper's iterative (L-BFGS) fit
+    and the closed-form fit alone for comparison.
+
+    The stages are those the predictor reports through its ``stage_timer`` hook
+    (:data:`posbench.predictors.lstm.predictor.STAGES`), so the code timed is the code that runs;
+    start-up line fits (no network) report none. After each step the hook also times the
+    position cubic alone on that step's window of fixes (the first 200 by L-BFGS too),
+    interleaved with the steps as before; the hook's own time is charged to no stage."""
+    from time import perf_counter_ns
+
+    from posbench.predictors.cubic import fit_cubic_lbfgs
+    from posbench.predictors.lstm.resample import fit_poly, window_start
+
+    clock = perf_counter_ns
+    cfg = RunConfig(predictors=("lstm",))
+    prep = prepare_drive(drive, cfg)
+    t, xy = prep.gps.t, np.column_stack([prep.gps.x, prep.gps.y])
+    fit_alone: list[int] = []
+    lbfgs: list[int] = []
+
+    def after_step(p: Any) -> None:
+        step = p.last_step()
+        end = int(np.searchsorted(t, step.t_fix))  # the fix this step ran on
+        i = window_start(t, end)
+        tt, w = t[i:end + 1], xy[i:end + 1]
+        c0 = clock()
+        fit_poly(tt, w, float(tt[-1]), float(tt[-1] - tt[0]))
+        fit_alone.append(clock() - c0)
+        if len(lbfgs) < 200:
+            c0 = clock()
+            fit_cubic_lbfgs(tt, w)
+            lbfgs.append(clock() - c0)
+
+    out = _stage_times(prep, cfg.horizon_s, steps, "staged", after_step)
+    out["cubic_fit_closed_form"] = latency_summary(np.asarray(fit_alone[:steps]))
+    out["cubic_fit_lbfgs"] = latency_summary(np.asarray(lbfgs))
+    return out
+
+
+def lstm_fused_stages(drive: Drive, steps: int) -> dict[str, Any]:
+    """Per-stage latency [us] of the default, *fused* ``lstm`` fix step
+    (:data:`posbench.predictors.lstm.predictor.FUSED_STAGES`: ``resample`` = fix bookkeeping and both
+    cubics in one solve, ``features``, ``inference``, ``current_position_fit``), timed
+    through the same ``stage_timer`` hook during a normal replay."""
+    cfg = RunConfig(predictors=("lstm",))
+    return _stage_times(prepare_drive(drive, cfg), cfg.horizon_s, steps, "fused")
+
+
+def _stage_times(prep: Any, horizon_s: float, steps: int, step: str,
+                 after_step: Callable[[Any], None] | None = None) -> dict[str, Any]:
+    """Replay ``prep`` through ``LstmPredictor(step=step)`` with a stage hook until ``steps``
+    network steps were timed; percentiles [us] per stage, in the predictor's stage order.
+    ``after_step(predictor)`` runs after each step's last stage (outside every stage)."""
+    from posbench.predictors.lstm.predictor import LstmPredictor, StageRecorder
+
+    p = LstmPredictor(step=step)
+    stages = p.stages
+    rec = StageRecorder()
+    count = rec.ns.setdefault("inference", [])
+
+    def hook(stage: str, ns: int) -> None:
+        rec(stage, ns)
+        if stage == stages[-1] and after_step is not None:
+            after_step(p)
+
+    p.stage_timer = hook
+    while len(count) < steps:
+        before = len(count)
+        replay(p, prep, horizon_s)
+        if len(count) == before:  # no window of fixes spans 2 s: nothing to time
+            break
+    return {n: latency_summary(np.asarray(rec.ns.get(n, [])[:steps])) for n in stages}
+
+
+def batch_throughput(batches: tuple[int, ...] = (1, 64, 1024), seconds: float = 1.0
+                     ) -> dict[str, Any]:
+    """Windows per second of the bundled network through onnxruntime at several batch sizes."""
+    from time import perf_counter
+
+    from posbench.predictors.lstm.predictor import LstmPredictor
+
+    net = LstmPredictor().net
+    rng = np.random.default_rng(0)
+    out: dict[str, Any] = {}
+    for b in batches:
+        X = rng.standard_normal((b, 8, 6)).astype(np.float32)
+        net.run_batch(X)
+        n = 0
+        t0 = perf_counter()
+        while perf_counter() - t0 < seconds:
+            net.run_batch(X)
+            n += 1
+        dt = perf_counter() - t0
+        out[str(b)] = {"windows_per_s": n * b / dt, "us_per_window": dt / (n * b) * 1e6}
+    return out

@@ -1,0 +1,182 @@
+"""The paper's figures, made from a real run (matplotlib figures with titles; captions for
+the report; written in each requested format of :data:`posbench.figures.style.FORMATS`).
+
+1. A model prediction: the 8 resampled input points, the predicted future point and
+   the reference (truth) 200 ms after the fix.
+2. The current-position estimate: the cubic through the grid and the prediction,
+   sampled every 50 ms between the fix and the prediction, against the reference.
+3. A predicted path against the reference over 40 s of a route.
+4. The Kalman filter's prediction (``kf-paper``, the paper's baseline) at the same fix.
+
+The moment shown is the fix with the largest heading change over the next second on
+the drive with the most turn / roundabout queries, so the figures show a turn.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+from posbench.config import RunConfig, gps_condition
+from posbench.figures.style import check_formats, most_turning_drive, save_figure, shown_format
+from posbench.predictors.registry import create
+from posbench.replay.loop import replay
+from posbench.replay.prepare import PreparedDrive, prepare_drive
+from posbench.scenarios.drive import Drive
+
+
+def pick_moment(traces: pd.DataFrame, predictor: str) -> tuple[str, float] | None:
+    """(drive, fix time) in a turn: the drive with most turn queries, the fix whose
+    reference heading changes most over the following second."""
+    fut = traces[(traces.kind == "future") & (traces.predictor == predictor)]
+    if fut.empty:
+        return None
+    drive, _ = most_turning_drive(fut)
+    f = fut[(fut.drive == drive)].dropna(subset=["x_ref"]).sort_values("t_issue")
+    if len(f) < 20:
+        return None
+    hd = np.unwrap(np.arctan2(np.gradient(f.y_ref.to_numpy()), np.gradient(f.x_ref.to_numpy())))
+    n = 5
+    change = np.abs(hd[n:] - hd[:-n])
+    speed = f.speed_mps.to_numpy()[:-n]
+    change[~(speed > 2)] = 0
+    i = int(np.argmax(change)) + n // 2
+    return str(drive), float(f.t_issue.iloc[i])
+
+
+def _prepared_window(drive: Drive, fixes: pd.DataFrame, t0: float, t1: float) -> PreparedDrive:
+    """The run's own received fixes and the drive's other streams within [t0, t1] [s], ready
+    to replay (no queries): the figures show exactly what the predictors saw in the run."""
+    from posbench.replay.prepare import Queries
+    from posbench.replay.reference import FIX_CUBIC, TRUTH
+    from posbench.scenarios.drive import GpsStream
+
+    sub = drive.window(t0, t1)
+    f = fixes[fixes.received & (fixes.t >= t0) & (fixes.t <= t1)]
+    gps = GpsStream(f.t.to_numpy(), f.x.to_numpy(), f.y.to_numpy())
+    e = np.empty(0)
+    none = Queries(e, e, np.empty((0, 2)), e, np.empty(0, dtype=str), e)
+    return PreparedDrive(sub, drive.meta.format, gps, gps,
+                         TRUTH if drive.truth is not None else FIX_CUBIC, none, none)
+
+
+def paper_figures(drives: list[Drive], cfg: RunConfig, traces: pd.DataFrame, out: Path,
+                  runs: list | None = None, formats: Iterable[str] = ("png",)
+                  ) -> list[tuple[str, str]]:
+    """Write the figures, each in every one of ``formats`` (png, svg, pdf); return
+    (file name, caption) pairs, the file in the format a report shows
+    (:func:`posbench.figures.style.shown_format`: png, else svg, else pdf). Needs ``lstm`` in
+    the run. With ``runs`` (the run's DriveRuns) the replay uses the run's own fixes over a
+    40 s window, so long drives cost no more than short ones.
+
+    Raises:
+        ValueError: an unknown format.
+    """
+    fmts = check_formats(formats)
+    if "lstm" not in cfg.predictors or traces.empty:
+        return []
+    moment = pick_moment(traces, "lstm")
+    if moment is None:
+        return []
+    from matplotlib.figure import Figure
+
+    name, t_fix = moment
+    drive = next(d for d in drives if d.name == name)
+    run = next((r for r in runs or [] if r.name == name and r.fixes is not None), None)
+    if run is not None:
+        fixes_fed = run.fixes
+    else:
+        g = prepare_drive(drive, cfg).gps
+        fixes_fed = pd.DataFrame({"t": g.t, "x": g.x, "y": g.y, "received": True})
+    # the predictors replay the run's fixes up to the fix shown; references use a wider window
+    prep = _prepared_window(drive, fixes_fed, t_fix - 30.0, t_fix)
+    around = drive.window(t_fix - 30.0, t_fix + 5.0)
+    cond = gps_condition(cfg, drive.truth is not None) if cfg.use_tuned else None
+    lstm = create("lstm", cond, **cfg.predictor_options.get("lstm", {}))
+    replay(lstm, prep, cfg.horizon_s)
+    step = lstm.last_step()
+    if step is None:
+        return []  # too few fixes before the moment for a model prediction
+    grid, pred = step.grid, step.pred
+    ts = np.linspace(t_fix, t_fix + cfg.horizon_s, 5)
+    now = np.array([lstm.position_at(t) for t in ts])
+    from posbench.replay.reference import _reference
+
+    ref_now = _reference(around, ts)
+    ref_path = _reference(around, np.arange(t_fix - 2.0, t_fix + 1.0, 0.05))
+    fixes = prep.gps.t > t_fix - 2.5
+    figs: list[tuple[str, str]] = []
+
+    def new(title: str) -> tuple[Figure, Any]:
+        """A square map figure with its title."""
+        fig = Figure(figsize=(6, 6), layout="constrained")
+        ax = fig.add_subplot()
+        ax.set_title(title, fontsize=11)
+        return fig, ax
+
+    def save(fig: Figure, stem: str, caption: str) -> None:
+        """Style the figure's map axes (equal scale, ENU labels, legend), write it in every
+        format, keep its caption."""
+        for ax in fig.axes:
+            ax.set_aspect("equal", adjustable="datalim")
+            ax.legend(fontsize=8)
+            ax.set_xlabel("east [m]")
+            ax.set_ylabel("north [m]")
+            ax.grid(True, alpha=0.3)
+        save_figure(fig, out, stem, fmts)
+        figs.append((f"{stem}.{shown_format(fmts)}", caption))
+
+    fig, ax = new(f"Model prediction: lstm, {cfg.horizon_s:g} s ahead of the fix at "
+                  f"t = {t_fix:.2f} s")
+    ax.plot(ref_path[:, 0], ref_path[:, 1], "k-", lw=0.8, label="reference path")
+    ax.plot(prep.gps.x[fixes], prep.gps.y[fixes], "rx", label="GPS fixes received")
+    ax.plot(grid[:, 0], grid[:, 1], "o", color="tab:green", label="resampled input (8 x 200 ms)")
+    ax.plot(*pred, "X", color="gold", ms=12, mec="k", label="lstm prediction (+0.2 s)")
+    ax.plot(*ref_now[-1], "*", color="k", ms=14, label="reference at +0.2 s")
+    err = float(np.hypot(*(pred - ref_now[-1])))
+    save(fig, "paper_fig_prediction",
+         f"Model prediction: drive `{name}`, fix at t = {t_fix:.2f} s; the 8 resampled inputs, "
+         f"the predicted point 0.2 s ahead and the reference there (error {100 * err:.1f} cm).")
+
+    fig, ax = new("Current-position estimates between the fix and the prediction")
+    ax.plot(ref_path[:, 0], ref_path[:, 1], "k-", lw=0.8, label="reference path")
+    ax.plot(grid[:, 0], grid[:, 1], "o", color="tab:green", label="resampled input")
+    ax.plot(*pred, "X", color="gold", ms=12, mec="k", label="lstm prediction")
+    ax.plot(now[:, 0], now[:, 1], "*", color="m", ms=10, label="current-position estimates")
+    ax.plot(ref_now[:, 0], ref_now[:, 1], "k.", ms=6, label="reference at those times")
+    e_now = np.hypot(*(now - ref_now).T)
+    save(fig, "paper_fig_current_position",
+         f"Current position between the fix and the prediction: drive `{name}`, "
+         f"t = {t_fix:.2f}-{t_fix + cfg.horizon_s:.2f} s every {cfg.horizon_s / 4:.2f} s; "
+         f"errors {', '.join(f'{100 * e:.1f}' for e in e_now)} cm.")
+
+    f = traces[(traces.drive == name) & (traces.kind == "future")
+               & (traces.t_issue > t_fix - 20) & (traces.t_issue < t_fix + 20)]
+    fig = Figure(figsize=(7, 7), layout="constrained")
+    ax = fig.add_subplot()
+    ax.set_title(f"Predicted path against the reference: lstm, {name}", fontsize=11)
+    r = f[f.predictor == "lstm"].sort_values("t_query")
+    ax.plot(r.x_ref, r.y_ref, "k-", lw=1, label="reference")
+    ax.plot(r.x, r.y, ".", ms=4, color="tab:orange", label="lstm future points")
+    save(fig, "paper_fig_path",
+         f"Predicted path against the reference: drive `{name}`, t = {max(t_fix - 20, 0):.0f}-"
+         f"{t_fix + 20:.0f} s, lstm future points (mean error {100 * r.error_m.mean():.1f} cm).")
+
+    if "kf-paper" in cfg.predictors:
+        kfp = create("kf-paper", cond, **cfg.predictor_options.get("kf-paper", {}))
+        replay(kfp, prep, cfg.horizon_s)
+        kp = np.asarray(kfp.position_at(t_fix + cfg.horizon_s))
+        fig, ax = new(f"The paper's Kalman filter (kf-paper), {cfg.horizon_s:g} s ahead of the "
+                      f"same fix")
+        ax.plot(ref_path[:, 0], ref_path[:, 1], "k-", lw=0.8, label="reference path")
+        ax.plot(prep.gps.x[fixes], prep.gps.y[fixes], "rx", label="known points (fixes)")
+        ax.plot(*kp, "X", color="gold", ms=12, mec="k", label="kf-paper prediction")
+        ax.plot(*ref_now[-1], "*", color="k", ms=14, label="reference at +0.2 s")
+        save(fig, "paper_fig_kalman",
+             f"The paper's Kalman filter at the same fix: drive `{name}`, t = {t_fix:.2f} s "
+             f"(error {100 * float(np.hypot(*(kp - ref_now[-1]))):.1f} cm).")
+    return figs

@@ -1,0 +1,568 @@
+"""Write a benchmark run to a Rerun file (``.rrd``): one recording per drive.
+
+Needs the ``viz`` extra (rerun-sdk); rerun is imported only inside
+:func:`write_recording`. Everything is sent column-wise (``send_columns``), so a
+10-minute drive with several predictors writes in about a second.
+
+**One drive at a time.** Each drive is its own recording (application id and recording id
+``<dataset>/<drive>``, recording name the same), with its own default blueprint
+(:mod:`posbench.recording.blueprint`) and its own timeline ``time``: drive time [s] (``duration``),
+the drive's own t. The viewer lists the drives separately in its source panel; pick one
+there. (Each recording is written to a file of its own, then ``rerun rrd merge`` joins them:
+the supported way to hold several recordings in one file.)
+
+**North up.** rerun's 2-D views draw y downwards; every 2-D position is logged as
+(x, -y) so that north (map, around view) and left (vehicle frame) point up on screen.
+Entity values are therefore (east, -north) [m] and (along, -cross) [m].
+
+Layout, per drive under ``drives/<drive>/`` (names sanitised to ``[A-Za-z0-9_.-]``):
+
+- ``info``: static text with the run's reference, notes and warnings (or why it was skipped);
+- ``map/truth``: static line strip(s) of the reference track (truth or the fix cubic), split
+  at gaps; ``map/track_error``: the same track in short segments coloured by the current
+  position error of one predictor (``--rerun-color-by``), scale in ``colour_scale``;
+- ``map/fixes/received``, ``map/fixes/dropped``: one point per fix at its time;
+- ``map/<predictor>/future``: the future point, logged at its query time
+  ``t_query = t_issue + horizon`` so it lines up with the track position it is scored
+  against; ``map/<predictor>/now``: the current-position answer at each "now" query time;
+  ``map/<predictor>/ellipse_future``, ``map/<predictor>/ellipse_now``: for a predictor that
+  reports covariance (``covariance_at``), the 95 % ellipse around each answer
+  (:func:`posbench.metrics.ellipses.ellipse_outlines`, 24 segments, radius sqrt(5.991) in the
+  covariance's eigenbasis), in its colour, at the answer's time; a query without a
+  covariance holds an empty row (the ellipse is cleared); no entity for a predictor
+  without uncertainty;
+- ``around/...``: positions relative to the reference at the time shown, so the view's origin
+  is the vehicle: ``around/reference`` (0, 0), ``around/road`` (the reference from
+  2 s before to 1 s after), ``around/fixes`` (the last 5 received fixes),
+  ``around/<predictor>/error`` (an arrow from the reference to the current-position answer,
+  its tip the answer) and ``around/<predictor>/future`` (the future point, relative to the
+  reference at its query time);
+- ``vehicle_frame/<predictor>``: each current-position error as (along, cross) in the
+  reference's heading frame (ahead to the right, left up; :mod:`posbench.metrics.track_errors`),
+  ``vehicle_frame/axes`` the axes through (0, 0);
+- ``errors/<predictor>/future``, ``errors/<predictor>/now``: Euclidean error [m];
+  ``along/<predictor>/...``, ``cross/<predictor>/...``: along-track (+ ahead) and cross-track
+  (+ left) error [m] time series;
+- ``labels``: a text log entry each time the scenario label changes;
+- ``outages``: a 1/0 step series (1 between the last fix before and the first fix after
+  an outage).
+
+Rows whose position is NaN are not logged in the 2-D views; error series are logged for
+every query, NaN (not scorable) included.
+"""
+
+from __future__ import annotations
+
+import os
+import re
+import shutil
+import subprocess
+import sys
+import tempfile
+from collections.abc import Sequence
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from posbench.metrics.ellipses import ellipse_outlines
+from posbench.recording.blueprint import TIMELINE, blueprint
+from posbench.scoring.schema import COV_COLUMNS
+
+if TYPE_CHECKING:
+    import pandas as pd
+
+    from posbench.scoring.records import DriveRun
+
+
+VIZ_HINT = "rerun recordings need the viz extra: pip install 'posbench-harness[viz]'"
+
+
+N_LAST_FIXES = 5  # fixes shown around the vehicle
+
+
+ROAD_S = (-2.0, 1.0)  # the stretch of reference shown around the vehicle [s], relative
+
+
+ROAD_STEP_S = 0.25
+
+
+# tab10, as RGB
+PALETTE = np.array([
+    [31, 119, 180], [255, 127, 14], [44, 160, 44], [214, 39, 40], [148, 103, 189],
+    [140, 86, 75], [227, 119, 194], [127, 127, 127], [188, 189, 34], [23, 190, 207],
+], dtype=np.uint8)
+
+
+RECEIVED_RGB = (20, 20, 20)
+
+
+DROPPED_RGB = (230, 30, 30)
+
+
+TRUTH_RGB = (160, 160, 160)
+
+
+#: the error colour scale: green at 0, yellow at half the scale, red at and above it
+SCALE_RGB = np.array([[26, 152, 80], [254, 224, 60], [215, 25, 28]], dtype=float)
+
+
+NO_ERROR_RGB = (190, 190, 190)
+
+
+#: line radius of the drawn 95 % ellipses: 0.75 UI points (negative: rerun's UI unit), so a
+#: 2 cm ellipse stays an outline when zoomed in
+ELLIPSE_RADIUS = -0.75
+
+
+_UNSAFE = re.compile(r"[^A-Za-z0-9_.\-]+")
+
+
+def sanitise(name: str) -> str:
+    """An entity-path part from any name: runs of characters outside ``[A-Za-z0-9_.-]``
+    become ``_``; empty names become ``_``."""
+    s = _UNSAFE.sub("_", str(name)).strip("_")
+    return s or "_"
+
+
+def drive_paths(names: Sequence[str]) -> list[str]:
+    """Entity roots ``drives/<name>`` for drive names, made unique (``_2``, ``_3``...) when two
+    names sanitise to the same part."""
+    seen: dict[str, int] = {}
+    out = []
+    for n in names:
+        s = sanitise(n)
+        k = seen.get(s, 0) + 1
+        seen[s] = k
+        out.append(f"drives/{s}" if k == 1 else f"drives/{s}_{k}")
+    return out
+
+
+def recording_ids(runs: Sequence[DriveRun]) -> list[str]:
+    """``<dataset>/<drive>`` per run, made unique (`` (2)``...) when two coincide."""
+    seen: dict[str, int] = {}
+    out = []
+    for r in runs:
+        s = f"{r.dataset}/{r.name}"
+        k = seen.get(s, 0) + 1
+        seen[s] = k
+        out.append(s if k == 1 else f"{s} ({k})")
+    return out
+
+
+def application_id(recording: str) -> str:
+    """The rerun application id of a drive's recording: ``posbench-<dataset>-<drive>`` with
+    characters outside ``[A-Za-z0-9_-]`` as ``_`` (a blueprint belongs to an application id,
+    so each drive gets its own to keep its own default layout)."""
+    return "posbench-" + re.sub(r"[^A-Za-z0-9_\-]+", "_", recording.replace("/", "-"))
+
+
+def screen(xy: np.ndarray) -> np.ndarray:
+    """(N, 2) ENU [m] -> rerun 2-D view coordinates (x, -y) as float32 (rerun's 2-D views
+    draw y downwards; this puts north up)."""
+    a = np.asarray(xy, dtype=np.float64).reshape(-1, 2)
+    return np.column_stack([a[:, 0], -a[:, 1]]).astype(np.float32)
+
+
+def _finite_runs(xy: np.ndarray) -> list[np.ndarray]:
+    """Contiguous runs of finite rows of an (N, 2) array with at least 2 points."""
+    ok = np.all(np.isfinite(xy), axis=1)
+    if not ok.any():
+        return []
+    edges = np.flatnonzero(np.diff(np.concatenate([[0], ok.view(np.int8), [0]])))
+    return [xy[a:b] for a, b in zip(edges[::2], edges[1::2], strict=True) if b - a >= 2]
+
+
+def _change_points(labels: np.ndarray) -> np.ndarray:
+    """Indices where a label differs from the previous one (index 0 included)."""
+    if labels.size == 0:
+        return np.empty(0, dtype=np.int64)
+    return np.concatenate([[0], np.flatnonzero(labels[1:] != labels[:-1]) + 1])
+
+
+def outage_steps(outages: Sequence[tuple[float, float]], t0: float, t1: float
+                 ) -> tuple[np.ndarray, np.ndarray]:
+    """Times [s] and 1/0 values of a step series that is 1 inside each outage
+    ``(t_last_fix, t_next_fix)`` and 0 elsewhere over ``[t0, t1]`` (plot with StepAfter)."""
+    o = np.asarray(sorted(outages), dtype=float).reshape(-1, 2)
+    t = np.concatenate([[t0], o.ravel(), [t1]])
+    v = np.concatenate([[0.0], np.tile([1.0, 0.0], len(o)), [0.0]])
+    order = np.argsort(t, kind="stable")
+    return t[order], v[order]
+
+
+def last_fixes(t_now: np.ndarray, t_fix: np.ndarray, n: int = N_LAST_FIXES
+               ) -> tuple[np.ndarray, np.ndarray]:
+    """For each time of ``t_now`` [s], the indices of the last ``n`` fixes of sorted ``t_fix``
+    at or before it: (flat indices in row order, row lengths)."""
+    j = np.searchsorted(t_fix, t_now, side="right")
+    idx = j[:, None] - n + np.arange(n)[None, :]
+    ok = idx >= 0
+    return idx[ok], ok.sum(axis=1)
+
+
+def road_around(t_now: np.ndarray, track_t: np.ndarray, track_xy: np.ndarray,
+                span_s: tuple[float, float] = ROAD_S, step_s: float = ROAD_STEP_S
+                ) -> np.ndarray:
+    """(K, M, 2) reference positions [m] from ``span_s[0]`` to ``span_s[1]`` around each
+    time of ``t_now`` (linear between track samples, clamped at the track's ends)."""
+    off = np.arange(span_s[0], span_s[1] + 1e-9, step_s)
+    tt = (np.asarray(t_now, dtype=float)[:, None] + off[None, :]).ravel()
+    ok = np.all(np.isfinite(track_xy), axis=1)
+    x = np.interp(tt, track_t[ok], track_xy[ok, 0])
+    y = np.interp(tt, track_t[ok], track_xy[ok, 1])
+    return np.stack([x, y], axis=-1).reshape(len(t_now), off.size, 2)
+
+
+def nice_scale(errors: np.ndarray) -> float:
+    """The top of the colour scale [m]: the p95 of the finite errors rounded up to 1, 2 or 5
+    times a power of ten (0.1 m when there is none)."""
+    e = np.asarray(errors, dtype=float)
+    e = e[np.isfinite(e)]
+    if e.size == 0 or np.percentile(e, 95) <= 0:
+        return 0.1
+    p = float(np.percentile(e, 95))
+    base = 10.0 ** np.floor(np.log10(p))
+    return float(next(m * base for m in (1, 2, 5, 10) if m * base >= p - 1e-12))
+
+
+def error_colours(errors: np.ndarray, top_m: float) -> np.ndarray:
+    """(N, 3) uint8 colours: green at 0 m, yellow at ``top_m`` / 2, red at and above
+    ``top_m`` [m]; grey for NaN."""
+    e = np.asarray(errors, dtype=float)
+    u = np.nan_to_num(np.clip(e / top_m, 0.0, 1.0)) * 2.0
+    lo = np.clip(np.floor(u), 0, 1).astype(int)
+    w = (u - lo)[:, None]
+    rgb = SCALE_RGB[lo] * (1 - w) + SCALE_RGB[lo + 1] * w
+    rgb[~np.isfinite(e)] = NO_ERROR_RGB
+    return np.round(rgb).astype(np.uint8)
+
+
+def _color(i: int) -> tuple[int, int, int]:
+    return tuple(int(c) for c in PALETTE[i % len(PALETTE)])
+
+
+class _Writer:
+    """Sends one drive to a recording stream."""
+
+    def __init__(self, rr: Any, rec: Any, predictors: Sequence[str], color_by: str | None
+                 ) -> None:
+        self.rr, self.rec = rr, rec
+        self.predictors = list(predictors)
+        self.pred_parts = [sanitise(p) for p in predictors]
+        self.color_by = color_by if color_by is not None else (
+            self.predictors[0] if self.predictors else None)
+
+    def _time(self, t: np.ndarray) -> Any:
+        return self.rr.TimeColumn(TIMELINE, duration=np.asarray(t, dtype=np.float64))
+
+    def points(self, path: str, t: np.ndarray, xy: np.ndarray, color, radius: float) -> None:
+        """One point per row at its time, in screen coordinates (:func:`screen`); rows with
+        NaN time or position are left out."""
+        rr = self.rr
+        ok = np.isfinite(t) & np.all(np.isfinite(xy), axis=1)
+        self.rec.log(path, rr.Points2D.from_fields(colors=[color], radii=[radius]), static=True)
+        if ok.any():
+            rr.send_columns(path, indexes=[self._time(t[ok])],
+                            columns=rr.Points2D.columns(positions=screen(xy[ok])),
+                            recording=self.rec)
+
+    def ellipses(self, path: str, t: np.ndarray, xy: np.ndarray, cov: np.ndarray, color
+                 ) -> None:
+        """The 95 % ellipse of each answer (centre ``xy`` [m, ENU], covariance ``cov`` (N, 3)
+        (xx, xy, yy) [m^2]) as a closed line strip at its time, in screen coordinates; a
+        row without a valid covariance or position holds no strip (the previous ellipse is
+        cleared). Nothing is logged when no row has one (a predictor without uncertainty)."""
+        rr = self.rr
+        keep = np.isfinite(t)
+        t, xy, cov = t[keep], xy[keep], cov[keep]
+        outline = ellipse_outlines(cov)
+        has = np.all(np.isfinite(xy), axis=1) & np.all(np.isfinite(outline), axis=(1, 2))
+        if not has.any():
+            return
+        pts = outline[has] + xy[has, None, :]
+        k, m, _ = pts.shape
+        self.rec.log(path, rr.LineStrips2D.from_fields(colors=[color], radii=[ELLIPSE_RADIUS]),
+                     static=True)
+        rr.send_columns(path, indexes=[self._time(t)],
+                        columns=rr.LineStrips2D.columns(
+                            strips=screen(pts.reshape(-1, 2)).reshape(k, m, 2)
+                        ).partition(has.astype(np.int64)), recording=self.rec)
+
+    def scalars(self, path: str, t: np.ndarray, v: np.ndarray) -> None:
+        ok = np.isfinite(t)
+        if ok.any():
+            self.rr.send_columns(path, indexes=[self._time(t[ok])],
+                                 columns=self.rr.Scalars.columns(scalars=v[ok]), recording=self.rec)
+
+    def series(self, path: str, t: np.ndarray, v: np.ndarray, name: str, color, kind: str
+               ) -> None:
+        """A time series: a line for ``now`` queries, points for ``future`` ones."""
+        rr = self.rr
+        style = (rr.SeriesLines(colors=[color], names=[name], widths=[1.5]) if kind == "now"
+                 else rr.SeriesPoints(colors=[color], names=[name], marker_sizes=[2.0]))
+        self.rec.log(path, style, static=True)
+        self.scalars(path, t, v)
+
+    def drive(self, root: str, run: DriveRun) -> None:
+        rr, rec = self.rr, self.rec
+        info = [f"drive: {run.name}", f"dataset: {run.dataset}",
+                f"reference: {run.reference or '-'}", f"duration: {run.duration_s:.1f} s",
+                f"fixes received: {run.gps_count}"]
+        info += [f"note: {n}" for n in run.notes] + [f"warning: {w}" for w in run.warnings]
+        if run.skipped:
+            info.append(f"SKIPPED: {run.skipped}")
+        rec.log(f"{root}/info", rr.TextDocument("\n".join(info)), static=True)
+        if run.skipped:
+            return
+
+        if run.track is not None and len(run.track):
+            strips = _finite_runs(run.track[["x", "y"]].to_numpy(np.float64))
+            if strips:
+                rec.log(f"{root}/map/truth", rr.LineStrips2D([screen(s) for s in strips],
+                                                             colors=[TRUTH_RGB], radii=[0.15]),
+                        static=True)
+        fix_t = fix_xy = None
+        if run.fixes is not None and len(run.fixes):
+            f = run.fixes
+            t, xy = f["t"].to_numpy(np.float64), f[["x", "y"]].to_numpy(np.float64)
+            rcv = f["received"].to_numpy(bool)
+            self.points(f"{root}/map/fixes/received", t[rcv], xy[rcv], RECEIVED_RGB, 0.35)
+            self.points(f"{root}/map/fixes/dropped", t[~rcv], xy[~rcv], DROPPED_RGB, 0.5)
+            fix_t, fix_xy = t[rcv], xy[rcv]
+
+        tr = run.traces
+        if tr is None or tr.empty:
+            return
+        groups = {key: g.sort_values("t_query", kind="stable")
+                  for key, g in tr.groupby(["predictor", "kind"], sort=False, observed=True)}
+        self._around_common(root, run, groups, fix_t, fix_xy)
+        self._track_colours(root, run, groups)
+        rec.log(f"{root}/vehicle_frame/axes",
+                rr.LineStrips2D([[[-100.0, 0.0], [100.0, 0.0]], [[0.0, -100.0], [0.0, 100.0]]],
+                                colors=[TRUTH_RGB], radii=[0.003],
+                                labels=["along (ahead ->)", "cross (left up)"]), static=True)
+        for i, (pred, part) in enumerate(zip(self.predictors, self.pred_parts, strict=True)):
+            color = _color(i)
+            for kind, radius in (("future", 0.4), ("now", 0.25)):
+                g = groups.get((pred, kind))
+                if g is None or g.empty:
+                    continue
+                t = g["t_query"].to_numpy(np.float64)
+                xy = g[["x", "y"]].to_numpy(np.float64)
+                ref = g[["x_ref", "y_ref"]].to_numpy(np.float64)
+                self.points(f"{root}/map/{part}/{kind}", t, xy, color, radius)
+                if all(c in g for c in COV_COLUMNS):
+                    self.ellipses(f"{root}/map/{part}/ellipse_{kind}", t, xy,
+                                  g[list(COV_COLUMNS)].to_numpy(np.float64), color)
+                self.series(f"{root}/errors/{part}/{kind}", t, g["error_m"].to_numpy(np.float64),
+                            f"{pred} {kind}", color, kind)
+                if kind == "future":  # the current answer is the tip of its error arrow
+                    self.points(f"{root}/around/{part}/future", t, xy - ref, color, 0.09)
+                if "along_m" in g and "cross_m" in g:
+                    along = g["along_m"].to_numpy(np.float64)
+                    cross = g["cross_m"].to_numpy(np.float64)
+                    self.series(f"{root}/along/{part}/{kind}", t, along, f"{pred} {kind} along",
+                                color, kind)
+                    self.series(f"{root}/cross/{part}/{kind}", t, cross, f"{pred} {kind} cross",
+                                color, kind)
+                    if kind == "now":
+                        self.points(f"{root}/vehicle_frame/{part}", t,
+                                    np.column_stack([along, cross]), color, 0.02)
+                if kind == "now":
+                    self._arrows(f"{root}/around/{part}/error", t, xy - ref, color)
+        self._labels(root, tr)
+        self._outages(root, run, tr)
+
+    def _arrows(self, path: str, t: np.ndarray, rel: np.ndarray, color) -> None:
+        """Arrows from (0, 0) (the reference) to each relative answer, at their times."""
+        rr = self.rr
+        ok = np.isfinite(t) & np.all(np.isfinite(rel), axis=1)
+        self.rec.log(path, rr.Arrows2D.from_fields(colors=[color], radii=[0.03],
+                                                   origins=[[0.0, 0.0]]), static=True)
+        if ok.any():
+            rr.send_columns(path, indexes=[self._time(t[ok])],
+                            columns=rr.Arrows2D.columns(vectors=screen(rel[ok])),
+                            recording=self.rec)
+
+    def _now_reference(self, groups: dict) -> tuple[np.ndarray, np.ndarray] | None:
+        """Times [s] and reference positions [m] of the 'now' queries (any predictor's rows:
+        the queries are the same for all)."""
+        for pred in self.predictors:
+            g = groups.get((pred, "now"))
+            if g is not None and not g.empty:
+                return (g["t_query"].to_numpy(np.float64),
+                        g[["x_ref", "y_ref"]].to_numpy(np.float64))
+        return None
+
+    def _around_common(self, root: str, run: DriveRun, groups: dict,
+                       fix_t: np.ndarray | None, fix_xy: np.ndarray | None) -> None:
+        """The reference at (0, 0), and at each 'now' query time the last fixes and the road
+        ahead and behind, relative to the reference then."""
+        rr, rec = self.rr, self.rec
+        rec.log(f"{root}/around/reference",
+                rr.Points2D([[0.0, 0.0]], colors=[(0, 0, 0)], radii=[0.15],
+                            labels=["reference"]), static=True)
+        now = self._now_reference(groups)
+        if now is None:
+            return
+        t, ref = now
+        ok = np.isfinite(t) & np.all(np.isfinite(ref), axis=1)
+        t, ref = t[ok], ref[ok]
+        if t.size == 0:
+            return
+        if fix_t is not None and fix_t.size:
+            idx, lengths = last_fixes(t, fix_t)
+            rel = fix_xy[idx] - np.repeat(ref, lengths, axis=0)
+            rec.log(f"{root}/around/fixes",
+                    rr.Points2D.from_fields(colors=[RECEIVED_RGB], radii=[0.1]), static=True)
+            rr.send_columns(f"{root}/around/fixes", indexes=[self._time(t)],
+                            columns=rr.Points2D.columns(positions=screen(rel)).partition(lengths),
+                            recording=rec)
+        if run.track is not None and len(run.track) >= 2:
+            tt = run.track["t"].to_numpy(np.float64)
+            txy = run.track[["x", "y"]].to_numpy(np.float64)
+            if np.all(np.isfinite(txy), axis=1).sum() >= 2:
+                road = road_around(t, tt, txy) - ref[:, None, :]
+                k, m, _ = road.shape
+                rec.log(f"{root}/around/road",
+                        rr.LineStrips2D.from_fields(colors=[TRUTH_RGB], radii=[0.05]),
+                        static=True)
+                rr.send_columns(f"{root}/around/road", indexes=[self._time(t)],
+                                columns=rr.LineStrips2D.columns(
+                                    strips=screen(road.reshape(-1, 2)).reshape(k, m, 2)
+                                ).partition(np.ones(k, dtype=np.int64)),
+                                recording=rec)
+
+    def _track_colours(self, root: str, run: DriveRun, groups: dict) -> None:
+        """The reference track in segments coloured by ``color_by``'s 'now' error, and the
+        colour scale as text."""
+        rr, rec = self.rr, self.rec
+        g = groups.get((self.color_by, "now")) if self.color_by else None
+        if g is None or g.empty or run.track is None or len(run.track) < 2:
+            return
+        te = g["t_query"].to_numpy(np.float64)
+        e = g["error_m"].to_numpy(np.float64)
+        ok = np.isfinite(te) & np.isfinite(e)
+        if not ok.any():
+            return
+        te, e = te[ok], e[ok]
+        tt = run.track["t"].to_numpy(np.float64)
+        xy = run.track[["x", "y"]].to_numpy(np.float64)
+        mid = 0.5 * (tt[1:] + tt[:-1])
+        seg_e = np.interp(mid, te, e, left=np.nan, right=np.nan)
+        # no colour where the nearest answer is far (an outage of the predictor's answers)
+        j = np.searchsorted(te, mid)
+        near = np.minimum(np.abs(mid - te[np.clip(j - 1, 0, te.size - 1)]),
+                          np.abs(te[np.clip(j, 0, te.size - 1)] - mid))
+        seg_e[near > 0.5] = np.nan
+        seg = np.stack([xy[:-1], xy[1:]], axis=1)
+        good = np.all(np.isfinite(seg), axis=(1, 2))
+        top = nice_scale(e)
+        if good.any():
+            strips = screen(seg[good].reshape(-1, 2)).reshape(-1, 2, 2)
+            path = f"{root}/map/track_error"
+            rec.log(path, rr.LineStrips2D.from_fields(radii=[0.4]), static=True)
+            # one static row of all segments (indexes=[]: static), the fast columnar path
+            rr.send_columns(path, indexes=[],
+                            columns=rr.LineStrips2D.columns(
+                                strips=strips, colors=error_colours(seg_e[good], top)
+                            ).partition([len(strips)]), recording=rec)
+        text = (f"Reference track coloured by the current-position (now) error of "
+                f"{self.color_by}: green 0 m, yellow {top / 2:g} m, red >= {top:g} m "
+                f"(the scale's top is the drive's p95 rounded up); grey: no answer. "
+                f"Choose the predictor with --rerun-color-by.")
+        rec.log(f"{root}/colour_scale", rr.TextDocument(text), static=True)
+
+    def _labels(self, root: str, tr: pd.DataFrame) -> None:
+        """Label changes along the 'now' queries of one predictor (labels depend only on time)."""
+        rr = self.rr
+        now = tr[tr["kind"] == "now"]
+        if now.empty:
+            now = tr
+        now = now[now["predictor"] == now["predictor"].iloc[0]].sort_values("t_query")
+        lab = now["label"].astype(str).to_numpy()
+        idx = _change_points(lab)
+        if idx.size:
+            rr.send_columns(f"{root}/labels",
+                            indexes=[self._time(now["t_query"].to_numpy(np.float64)[idx])],
+                            columns=rr.TextLog.columns(text=lab[idx], level=["INFO"] * idx.size),
+                            recording=self.rec)
+
+    def _outages(self, root: str, run: DriveRun, tr: pd.DataFrame) -> None:
+        rr = self.rr
+        span = np.concatenate([tr["t_query"].to_numpy(np.float64),
+                               np.asarray(run.outages, dtype=float).ravel()])
+        span = span[np.isfinite(span)]
+        if span.size == 0:
+            return
+        t0, t1 = float(span.min()), float(span.max())
+        t, v = outage_steps(run.outages, t0, t1)
+        self.rec.log(f"{root}/outages",
+                     rr.SeriesLines(colors=[DROPPED_RGB], names=["GPS outage (1 = in outage)"],
+                                    interpolation_mode=rr.components.InterpolationMode.StepAfter),
+                     static=True)
+        self.scalars(f"{root}/outages", t, v)
+
+
+def merge_rrd(parts: Sequence[Path], path: Path) -> None:
+    """Join .rrd files into ``path`` with ``rerun rrd merge`` (each recording stays its own).
+
+    Runs the rerun CLI of this Python environment with its home folder in a temporary
+    folder (the CLI writes analytics settings there), and no network is needed.
+
+    Raises:
+        RuntimeError: the merge failed (its last error line).
+    """
+    if len(parts) == 1:
+        shutil.copyfile(parts[0], path)
+        return
+    with tempfile.TemporaryDirectory(prefix="posbench-rerun-home-") as home:
+        env = {**os.environ, "HOME": home, "RERUN_ANALYTICS": "0"}
+        p = subprocess.run([sys.executable, "-m", "rerun_cli", "rrd", "merge", *map(str, parts),
+                            "-o", str(path)], capture_output=True, text=True, env=env)
+    if p.returncode != 0:
+        lines = [ln for ln in p.stderr.splitlines() if ln.strip()] or ["no message"]
+        raise RuntimeError(f"rerun rrd merge failed: {lines[-1]}")
+
+
+def write_recording(path: Path, runs: Sequence[DriveRun], predictors: Sequence[str],
+                    color_by: str | None = None) -> None:
+    """Write ``runs`` to the Rerun file ``path``, one recording per drive (no viewer starts).
+
+    Args:
+        path: output ``.rrd`` file (its folder must exist).
+        runs: the runner's per-drive results; skipped drives get only an ``info`` entry.
+        predictors: predictors to include, in display (colour) order; ones absent from a
+            drive's traces are left out of that drive.
+        color_by: the predictor whose current-position error colours the overview map's
+            track (default: the first of ``predictors``).
+
+    Raises:
+        ImportError: rerun-sdk (the ``viz`` extra) is not installed.
+        RuntimeError: joining the drives' recordings failed.
+    """
+    try:
+        import rerun as rr
+        import rerun.blueprint as rrb
+    except ImportError:
+        raise ImportError(VIZ_HINT) from None
+    roots = drive_paths([r.name for r in runs])
+    with tempfile.TemporaryDirectory(prefix="posbench-rrd-") as tmp:
+        parts = []
+        for i, (root, rid, run) in enumerate(zip(roots, recording_ids(runs), runs, strict=True)):
+            part = Path(tmp) / f"{i:05d}.rrd"
+            rec = rr.RecordingStream(application_id(rid), recording_id=rid)
+            rec.save(part, default_blueprint=blueprint(rrb, root))
+            rec.send_recording_name(rid)
+            _Writer(rr, rec, predictors, color_by).drive(root, run)
+            rec.flush()
+            rec.disconnect()
+            parts.append(part)
+        if parts:
+            merge_rrd(parts, Path(path))
+        else:  # no drive: an empty recording, so the file exists
+            rec = rr.RecordingStream("posbench")
+            rec.save(Path(path))
+            rec.flush()
+            rec.disconnect()

@@ -1,0 +1,237 @@
+"""Replay one prepared drive through one predictor, exactly as a vehicle would see it.
+
+All observations (GPS fixes fed, IMU, speed) and the "now" queries are merged
+into one time-ordered event list; at equal times observations come before the
+query. A "future" query is asked right after its fix is observed, so the
+predictor never holds an observation stamped after the time it is asked about.
+Every fix step (``observe_gps`` + the future query) and every "now" query is
+timed with ``perf_counter_ns``.
+
+A predictor that reports uncertainty (:func:`reports_covariance`) is asked
+``covariance_at`` right after each ``position_at``, with the same time; that call is
+timed on its own (``cov_ns``), never charged to the step's or query's latency.
+
+Fix accuracy: a predictor whose ``observe_gps`` takes ``sigma``
+(:func:`posbench.predictors.base.accepts_sigma`, checked once per replay) gets each fix's stated
+per-axis 1-sigma [m] (``GpsStream.accuracy``) as ``sigma=``, or ``sigma=None`` where the
+stream states none or the value is not finite and positive; others get (t, x, y) only.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from dataclasses import dataclass
+from time import perf_counter_ns
+
+import numpy as np
+
+from posbench.predictor_tools.contract_inputs import HORIZON_S
+from posbench.predictors.base import Predictor, accepts_sigma
+from posbench.replay.prepare import PreparedDrive
+
+# ------------------------------------------------------------------- feeding by hand
+Event = tuple[int, float, tuple[float, ...]]
+
+
+def events(prep: PreparedDrive) -> list[Event]:
+    """The replay's events in the runner's order as ``(kind, t, args)``: observations carry
+    their values, a fix is followed by its future query (asked by :func:`feed`), a "now"
+    query has ``args = ()``; a fix's args are ``(x, y, sigma)`` (sigma [m] NaN when not stated)."""
+    d = prep.drive
+    acc = prep.gps.accuracy
+    cols: dict[int, list[np.ndarray]] = {
+        GPS: [prep.gps.t, prep.gps.x, prep.gps.y,
+              np.full(len(prep.gps), np.nan) if acc is None else acc],
+        QUERY: [prep.now.t_query]}
+    if d.imu is not None:
+        nan = np.full(len(d.imu), np.nan)
+        cols[IMU] = [d.imu.t, d.imu.ax, d.imu.ay, nan if d.imu.yaw is None else d.imu.yaw,
+                     nan if d.imu.yaw_rate is None else d.imu.yaw_rate]
+    if d.speed is not None:
+        cols[SPEED] = [d.speed.t, d.speed.v]
+    kinds, idxs = build_events(prep)
+    out: list[Event] = []
+    for k, i in zip(kinds.tolist(), idxs.tolist(), strict=True):
+        vals = [float(c[i]) for c in cols[k]]
+        out.append((k, vals[0], () if k == QUERY else tuple(vals[1:])))
+    return out
+
+
+def feed(pred: Predictor, evs: list[Event], start: int = 0, stop: int | None = None,
+         after: Callable[[int], None] | None = None) -> list[tuple[float, float, float]]:
+    """Feed ``evs[start:stop]`` to ``pred`` (no ``reset()``) as :func:`posbench.replay.loop.replay`
+    does; ``after(i)`` is called after event ``i``. Returns ``(t_query, x, y)`` per answer."""
+    out = []
+    with_sigma = accepts_sigma(pred.observe_gps)
+    for i in range(start, len(evs) if stop is None else stop):
+        k, t, a = evs[i]
+        if k == GPS:
+            if with_sigma:
+                s = a[2]
+                pred.observe_gps(t, a[0], a[1], sigma=s if 0.0 < s < math.inf else None)
+            else:
+                pred.observe_gps(t, a[0], a[1])
+            x, y = pred.position_at(t + HORIZON_S)
+            out.append((t + HORIZON_S, float(x), float(y)))
+        elif k == IMU:
+            pred.observe_imu(t, *a)
+        elif k == SPEED:
+            pred.observe_speed(t, *a)
+        else:
+            x, y = pred.position_at(t)
+            out.append((t, float(x), float(y)))
+        if after is not None:
+            after(i)
+    return out
+
+
+GPS, IMU, SPEED, QUERY = 0, 1, 2, 3
+
+
+@dataclass
+class ReplayResult:
+    """Predicted positions [m] for each query, and call durations [ns]."""
+
+    future_xy: np.ndarray  # (n_fixes, 2)
+    now_xy: np.ndarray  # (n_now, 2)
+    step_ns: np.ndarray  # per fix: observe_gps + future position_at
+    query_ns: np.ndarray  # per now query
+    #: (n_fixes + n_now, 3): cov_xx, cov_xy, cov_yy [m^2] of each answer (future rows, then
+    #: now rows); NaN where the predictor gave None. None: no covariance_at at all
+    cov: np.ndarray | None = None
+    #: (n_fixes + n_now,) duration of each covariance_at call [ns]; None with ``cov``
+    cov_ns: np.ndarray | None = None
+
+
+def reports_covariance(predictor: Predictor) -> bool:
+    """Whether ``predictor`` (or the predictor a gate wraps) overrides
+    :meth:`~posbench.predictors.base.Predictor.covariance_at`; the base default ("no uncertainty")
+    is never called."""
+    inner = getattr(predictor, "inner", predictor)
+    return type(inner).covariance_at is not Predictor.covariance_at
+
+
+def _store_cov(out: np.ndarray, i: int, c: object) -> None:
+    """Row i of ``out`` <- (xx, xy, yy) of the 2x2 covariance c (left NaN when None)."""
+    if c is not None:
+        m = np.asarray(c, dtype=float)
+        out[i] = m[0, 0], 0.5 * (m[0, 1] + m[1, 0]), m[1, 1]
+
+
+def build_events(prep: PreparedDrive) -> tuple[np.ndarray, np.ndarray]:
+    """(kind, index) arrays of all events in replay order."""
+    d = prep.drive
+    parts_t = [prep.gps.t]
+    parts_k = [np.full(len(prep.gps), GPS)]
+    if d.imu is not None:
+        parts_t.append(d.imu.t)
+        parts_k.append(np.full(len(d.imu), IMU))
+    if d.speed is not None:
+        parts_t.append(d.speed.t)
+        parts_k.append(np.full(len(d.speed), SPEED))
+    parts_t.append(prep.now.t_issue)
+    parts_k.append(np.full(prep.now.t_issue.size, QUERY))
+    t = np.concatenate(parts_t)
+    k = np.concatenate(parts_k)
+    idx = np.concatenate([np.arange(p.size) for p in parts_t])
+    order = np.lexsort((k, t))
+    return k[order], idx[order]
+
+
+#: events converted to Python floats at a time: memory stays bounded by this window,
+#: not by the drive's length
+CHUNK_EVENTS = 1 << 16
+
+
+def _columns(prep: PreparedDrive) -> dict[int, list[np.ndarray | None]]:
+    d = prep.drive
+    cols: dict[int, list[np.ndarray | None]] = {
+        GPS: [prep.gps.t, prep.gps.x, prep.gps.y, prep.gps.accuracy], QUERY: [prep.now.t_query]}
+    if d.imu is not None:
+        cols[IMU] = [d.imu.t, d.imu.ax, d.imu.ay, d.imu.yaw, d.imu.yaw_rate]
+    if d.speed is not None:
+        cols[SPEED] = [d.speed.t, d.speed.v]
+    return cols
+
+
+def _window(cols: list[np.ndarray | None], sel: np.ndarray) -> tuple[int, list[list[float]]]:
+    """(offset, Python-float lists) of the index range ``sel`` covers in each column."""
+    if sel.size == 0:
+        return 0, [[] for _ in cols]
+    lo, hi = int(sel.min()), int(sel.max()) + 1
+    return lo, [c[lo:hi].tolist() if c is not None else [float("nan")] * (hi - lo) for c in cols]
+
+
+def _sigmas(acc: list[float]) -> list[float | None]:
+    """Fix accuracies [m] as observe_gps takes them: None where not finite and positive."""
+    return [a if 0.0 < a < math.inf else None for a in acc]
+
+
+def replay(predictor: Predictor, prep: PreparedDrive, horizon_s: float) -> ReplayResult:
+    """Feed every event to ``predictor`` in order; collect its answers and timings.
+
+    Events are handled in windows of :data:`CHUNK_EVENTS`, converting only that window's
+    samples to Python floats (fast scalar access without holding a whole long drive as
+    Python objects)."""
+    kinds, idxs = build_events(prep)
+    cols = _columns(prep)
+    n_fix, n_now = len(prep.gps), prep.now.t_query.size
+    future = np.full((n_fix, 2), np.nan)
+    now = np.full((n_now, 2), np.nan)
+    step_ns = np.zeros(n_fix, dtype=np.int64)
+    query_ns = np.zeros(n_now, dtype=np.int64)
+    clock = perf_counter_ns
+    with_cov = reports_covariance(predictor)
+    cov = np.full((n_fix + n_now, 3), np.nan) if with_cov else None
+    cov_ns = np.zeros(n_fix + n_now, dtype=np.int64) if with_cov else None
+    covariance_at = predictor.covariance_at
+    observe_gps, observe_imu = predictor.observe_gps, predictor.observe_imu
+    observe_speed, position_at = predictor.observe_speed, predictor.position_at
+    with_sigma = accepts_sigma(observe_gps)
+    predictor.reset()
+    for c in range(0, kinds.size, CHUNK_EVENTS):
+        kc, ic = kinds[c:c + CHUNK_EVENTS], idxs[c:c + CHUNK_EVENTS]
+        go, (gt, gx, gy, gs) = _window(cols[GPS], ic[kc == GPS])
+        if with_sigma:
+            gs = _sigmas(gs)
+        qo, (qt,) = _window(cols[QUERY], ic[kc == QUERY])
+        if IMU in cols:
+            io, (it, iax, iay, iyaw, irate) = _window(cols[IMU], ic[kc == IMU])
+        if SPEED in cols:
+            so, (st, sv) = _window(cols[SPEED], ic[kc == SPEED])
+        for k, i in zip(kc.tolist(), ic.tolist(), strict=True):
+            if k == IMU:
+                j = i - io
+                observe_imu(it[j], iax[j], iay[j], iyaw[j], irate[j])
+            elif k == GPS:
+                j = i - go
+                t = gt[j]
+                c0 = clock()
+                if with_sigma:
+                    observe_gps(t, gx[j], gy[j], sigma=gs[j])
+                else:
+                    observe_gps(t, gx[j], gy[j])
+                p = position_at(t + horizon_s)
+                step_ns[i] = clock() - c0
+                future[i] = p
+                if with_cov:
+                    c0 = clock()
+                    c = covariance_at(t + horizon_s)
+                    cov_ns[i] = clock() - c0
+                    _store_cov(cov, i, c)
+            elif k == SPEED:
+                j = i - so
+                observe_speed(st[j], sv[j])
+            else:
+                j = i - qo
+                c0 = clock()
+                p = position_at(qt[j])
+                query_ns[i] = clock() - c0
+                now[i] = p
+                if with_cov:
+                    c0 = clock()
+                    c = covariance_at(qt[j])
+                    cov_ns[n_fix + i] = clock() - c0
+                    _store_cov(cov, n_fix + i, c)
+    return ReplayResult(future, now, step_ns, query_ns, cov, cov_ns)

@@ -1,0 +1,170 @@
+"""Run predictors over drives: prepare, replay, score. Drives run in parallel
+processes; results are merged in drive order, so they are identical for any
+number of workers."""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Callable, Sequence
+from concurrent.futures import ProcessPoolExecutor
+from dataclasses import replace
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+from posbench.config import RunConfig, gps_condition
+from posbench.predictors.gate import GatedPredictor
+from posbench.predictors.registry import create
+from posbench.replay.loop import replay
+from posbench.replay.prepare import PreparedDrive, prepare_drive
+from posbench.replay.queries import query_frame
+from posbench.scenarios.drive import Drive
+from posbench.scoring.records import DriveRun, merge_predictor_runs
+from posbench.scoring.score import score_many
+
+
+def _fixes_frame(prep: PreparedDrive) -> pd.DataFrame:
+    received = np.isin(prep.gps_all.t, prep.gps.t)
+    return pd.DataFrame({"t": prep.gps_all.t, "x": prep.gps_all.x, "y": prep.gps_all.y,
+                         "received": received})
+
+
+def _track_frame(prep: PreparedDrive) -> pd.DataFrame:
+    d = prep.drive
+    if d.truth is not None:
+        tr = d.truth
+        step = max(1, int(round(0.1 / np.median(np.diff(tr.t))))) if len(tr) > 1 else 1
+        return pd.DataFrame({"t": tr.t[::step], "x": tr.x[::step], "y": tr.y[::step]})
+    from posbench.replay.reference import cubic_through_fixes
+
+    t = np.arange(d.gps.t[0], d.gps.t[-1], 0.1)
+    xy = cubic_through_fixes(d.gps.t, d.gps.x, d.gps.y, t)
+    return pd.DataFrame({"t": t, "x": xy[:, 0], "y": xy[:, 1]})
+
+
+#: ``meta.extra`` keys a loader sets about sensor frames and truth (see scenarios.loaders.rosbag)
+SENSOR_FRAME_KEYS = ("imu_frame", "truth_kind", "truth_alignment")
+
+
+def sensor_frames(drive: Drive) -> dict[str, Any]:
+    """What the loader did about sensor frames and truth: the IMU path (levelled by its
+    orientation, mount from tf, estimated, as-is), what the drive is scored against, and
+    the alignment of a named truth (rotation, translation, residual RMS [m])."""
+    return {k: drive.meta.extra[k] for k in SENSOR_FRAME_KEYS if k in drive.meta.extra}
+
+
+def skip_reason(drive: Drive, cfg: RunConfig) -> str | None:
+    """Why ``drive`` is not scored under ``cfg`` (None: it is)."""
+    if cfg.exclude_poor_truth and drive.meta.extra.get("truth_poor"):
+        return "poor truth accuracy (median > 1 m)"
+    return None
+
+
+def skipped_run(drive: Drive, reason: str) -> DriveRun:
+    """The record of a drive that is not scored, with the reason."""
+    return DriveRun(drive.name, drive.meta.format, "", [], list(drive.meta.warnings),
+                    pd.DataFrame(), skipped=reason, sensor_frames=sensor_frames(drive))
+
+
+def run_drive(drive: Drive, cfg: RunConfig) -> DriveRun:
+    """Prepare one drive and replay it through every configured predictor."""
+    reason = skip_reason(drive, cfg)
+    if reason:
+        return skipped_run(drive, reason)
+    prep = prepare_drive(drive, cfg)
+    answers, step_ns, query_ns, cov_ns, rejected = [], {}, {}, {}, {}
+    # one query table, future then now: each predictor's traces are its future rows, then
+    # its now rows (score_many tiles the table once per predictor)
+    queries = pd.concat([query_frame(prep, "future"), query_frame(prep, "now")],
+                        ignore_index=True)
+    condition = gps_condition(cfg, drive.truth is not None) if cfg.use_tuned else None
+    for name in cfg.predictors:
+        pred = create(name, condition, **cfg.predictor_options.get(name, {}))
+        if cfg.gate:
+            pred = GatedPredictor(pred)
+        res = replay(pred, prep, cfg.horizon_s)
+        if cfg.gate:
+            rejected[name] = pred.rejected
+        answers.append((name, np.concatenate([res.future_xy, res.now_xy]), res.cov))
+        step_ns[name] = res.step_ns
+        query_ns[name] = res.query_ns
+        if res.cov_ns is not None:
+            cov_ns[name] = res.cov_ns
+    traces = score_many(queries, answers)
+    return DriveRun(drive.name, prep.dataset, prep.reference, prep.notes, list(drive.meta.warnings),
+                    traces, step_ns, query_ns, prep.outages, gps_count=len(prep.gps),
+                    duration_s=drive.duration_s, fixes=_fixes_frame(prep), track=_track_frame(prep),
+                    sensor_frames=sensor_frames(drive),
+                    rejected=rejected, cov_ns=cov_ns)
+
+
+def _init_worker() -> None:
+    # one thread per worker process: onnxruntime / BLAS must not oversubscribe the cores
+    for var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
+        os.environ[var] = "1"
+
+
+def replay_cost(drive: Drive, cfg: RunConfig) -> float:
+    """A drive's replay work, in events: its samples (fixes, IMU, speed) and its "now"
+    queries. Only the order matters (the runner starts the costliest drives first)."""
+    n = len(drive.gps) + drive.duration_s / cfg.now_step_s
+    n += len(drive.imu) if drive.imu is not None else 0
+    return n + (len(drive.speed) if drive.speed is not None else 0)
+
+
+def plan_tasks(drives: Sequence[Drive], cfg: RunConfig, workers: int
+               ) -> list[tuple[int, str | None]]:
+    """The local runner's tasks, costliest first: (drive index, None) replays a drive through
+    every predictor; (drive index, name) through predictor ``name`` only. A drive holding
+    more than 1 / (2 x workers) of the run's work (:func:`replay_cost`) is split by
+    predictor, so that one long drive still keeps every worker busy."""
+    costs = [replay_cost(d, cfg) for d in drives]
+    limit = sum(costs) / (2 * max(workers, 1))
+    tasks: list[tuple[float, int, str | None]] = []
+    for i, c in enumerate(costs):
+        if c > limit and len(cfg.predictors) > 1:
+            tasks += [(c / len(cfg.predictors), i, name) for name in cfg.predictors]
+        else:
+            tasks.append((c, i, None))
+    tasks.sort(key=lambda x: -x[0])  # stable: equal costs keep drive and predictor order
+    return [(i, name) for _, i, name in tasks]
+
+
+def run(drives: Sequence[Drive], cfg: RunConfig, workers: int = 1,
+        on_done: Callable[[DriveRun], None] | None = None) -> list[DriveRun]:
+    """Run all drives; ``on_done`` is called as each finishes (for a progress bar).
+    The returned list is in the order of ``drives`` whatever ``workers`` is. With several
+    workers the costliest drives start first, and a drive long enough to hold a worker
+    alone is replayed one predictor per task (:func:`plan_tasks`); its parts are merged as
+    :func:`run_drive` would have made it (:func:`merge_predictor_runs`)."""
+    out: list[DriveRun | None] = [None] * len(drives)
+    if workers <= 1 or not drives or (len(drives) == 1 and len(cfg.predictors) <= 1):
+        for i, d in enumerate(drives):
+            out[i] = run_drive(d, cfg)
+            if on_done:
+                on_done(out[i])
+        return [r for r in out if r is not None]
+    tasks = plan_tasks(drives, cfg, workers)
+    parts: dict[int, dict[str, DriveRun]] = {}
+    n_parts = {i: sum(1 for j, _ in tasks if j == i) for i in range(len(drives))}
+    with ProcessPoolExecutor(max_workers=min(workers, len(tasks)),
+                             initializer=_init_worker) as pool:
+        futures = {pool.submit(run_drive, drives[i], cfg if name is None
+                               else replace(cfg, predictors=(name,))): (i, name)
+                   for i, name in tasks}
+        from concurrent.futures import as_completed
+
+        for fut in as_completed(futures):
+            i, name = futures[fut]
+            if name is None:
+                out[i] = fut.result()
+            else:
+                parts.setdefault(i, {})[name] = fut.result()
+                if len(parts[i]) < n_parts[i]:
+                    continue
+                mine = parts.pop(i)
+                out[i] = merge_predictor_runs([mine[n] for n in cfg.predictors])
+            if on_done:
+                on_done(out[i])
+    return [r for r in out if r is not None]

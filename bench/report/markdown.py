@@ -1,0 +1,305 @@
+"""Write a run's outputs: ``report.md`` (tables a person reads first), ``results.json``,
+per-query traces (Parquet) and the plots (:mod:`posbench.figures.style`)."""
+
+from __future__ import annotations
+
+from collections.abc import Iterable
+from pathlib import Path
+from typing import Any
+
+from posbench.checks import TABLE_FORMATS
+from posbench.figures.per_drive import DEFAULT_DRIVE_PLOTS
+from posbench.figures.style import PlotsWritten, shown_format
+from posbench.figures.writer import write_plots
+from posbench.report.data_check import report_lines as consistency_lines
+from posbench.report.glossary import glossary_lines
+from posbench.report.notes import (
+    MISSING_NOTE,
+    block_note,
+    excluded_note,
+    has_held_out_paired,
+    has_paired,
+    model_text,
+    paired_note,
+    statistics_note,
+    trained_note,
+)
+from posbench.saved_run.run import Run
+from posbench.tables.run_tables import (
+    NOT_CONCLUSIVE,
+    dataset_table,
+    drives_table,
+    gate_drive_table,
+    gate_table,
+    label_table,
+    outage_table,
+    speed_table,
+    summary_table,
+    warmup_table,
+)
+from posbench.tables.stat_tables import paired_label_table, paired_table, seeds_table
+from posbench.tables.table import Table
+from posbench.tables.track import TRACK_NOTE, track_table
+from posbench.tables.uncertainty import UNCERTAINTY_NOTE, uncertainty_table
+
+
+def write_report(run: Run, out: Path, formats: Iterable[str] = ("png",),
+                 drive_plots: int | None = DEFAULT_DRIVE_PLOTS,
+                 table_formats: Iterable[str] = TABLE_FORMATS,
+                 plots: PlotsWritten | None = None) -> list[Path]:
+    """Write the run's plots (in each of ``formats``: png, svg, pdf; ValueError on others),
+    ``report.md`` and its tables as files (``table_formats``: csv, latex; see
+    :func:`write_tables`) into ``out``; return the paths written. The run itself
+    (results.json, traces) is written by :func:`posbench.saved_run.run.save_run`. ``plots``: the
+    plots already drawn into ``out`` (``bench run`` draws them while it aggregates,
+    :mod:`posbench.pipeline.jobs`); None draws them here."""
+    shown = "." + shown_format(formats)  # checks the formats before anything is written
+    out.mkdir(parents=True, exist_ok=True)
+    if plots is None:
+        plots = write_plots(run.traces, run.results, out, formats, drive_plots)
+    (out / "report.md").write_text(render_markdown(
+        run.results, [p.relative_to(out).as_posix() for p in plots.files if p.suffix == shown],
+        plot_notes=plots.notes))
+    return [*plots.files, out / "report.md",
+            *write_tables(run.results, out / "tables", table_formats)]
+
+
+def report_tables(res: dict[str, Any]) -> list[Table]:
+    """Every table of the report, as numeric tables (for the CSV and LaTeX forms)."""
+    if not res.get("drives"):
+        return []
+    tables = [summary_table(res), warmup_table(res)]
+    if has_paired(res):
+        tables.append(paired_table(res))
+    if res.get("seeds"):
+        tables.append(seeds_table(res))
+    if res.get("held_out_all"):
+        tables.append(summary_table(res, held_out=True))
+    if has_held_out_paired(res):
+        tables.append(paired_table(res, held_out=True))
+    for ds in res["by_dataset"]:
+        tables += [dataset_table(res, ds), label_table(res, ds, "future"),
+                   label_table(res, ds, "now")]
+        if has_paired(res):
+            tables += [paired_table(res, ds), paired_label_table(res, ds, "future")]
+        if res.get("held_out", {}).get(ds, {}).get("drives"):
+            tables += [label_table(res, ds, k, held_out=True) for k in ("future", "now")]
+            if has_held_out_paired(res, ds):
+                tables.append(paired_table(res, ds, held_out=True))
+    if res.get("track_errors", {}).get("predictors"):
+        tables.append(track_table(res))
+    if "uncertainty" in res:
+        tables.append(uncertainty_table(res))
+        if res["uncertainty"].get("by_since_fix"):
+            tables.append(uncertainty_table(res, "by_since_fix"))
+    if res.get("by_speed"):
+        tables.append(speed_table(res))
+    if res.get("outages"):
+        tables.append(outage_table(res))
+    if res.get("gate", {}).get("enabled"):
+        tables.append(gate_table(res))
+    tables.append(drives_table(res))
+    return tables
+
+
+def write_tables(res: dict[str, Any], folder: Path,
+                 table_formats: Iterable[str] = TABLE_FORMATS) -> list[Path]:
+    """Each report table as ``NAME.csv`` (full precision) and/or ``NAME.tex`` (booktabs) in
+    ``folder``, as ``table_formats`` asks; return the paths written."""
+    written = []
+    wanted = set(table_formats)
+    for t in report_tables(res) if wanted else []:
+        folder.mkdir(parents=True, exist_ok=True)
+        forms = (("csv", "csv", t.csv), ("latex", "tex", t.latex))
+        for ext, text in ((ext, render()) for name, ext, render in forms if name in wanted):
+            path = folder / f"{t.name}.{ext}"
+            path.write_text(text)
+            written.append(path)
+    return written
+
+
+def render_markdown(res: dict[str, Any], plots: list[str],
+                    plot_notes: dict[str, str] | None = None) -> str:
+    """The report as Markdown. ``plots``: figure files relative to the report (those under
+    ``drives/`` are listed as links, the others shown); ``plot_notes``: figure name -> why it
+    was not written."""
+    cfg = res["config"]
+    lines = ["# posbench report", "",
+             f"Command: `{res['command']}`", "",
+             f"posbench {res['versions'].get('posbench')} at commit `{res.get('git_commit')}`; "
+             f"horizon {cfg['horizon_s']} s; now-queries every {cfg['now_step_s']} s; "
+             f"GPS profile `{cfg['gps_profile']}` (drives with truth); dropouts `{cfg['dropouts']}`; "
+             f"seed {cfg['seed']}.", "",
+             "Errors are Euclidean distances in metres in a local ENU frame (true metres). "
+             "`future` = position at fix time + horizon, asked at the fix; `now` = current position, "
+             "asked every now-step between fixes. Latency: `step` = one `observe_gps` plus the "
+             "future query, `query` = one between-fix `position_at`, single process.", ""]
+    lines += consistency_lines(res)
+    lines += answers_lines(res)
+    if statistics_note(res):
+        lines += [statistics_note(res), ""]
+    lines += ["## All drives", "", summary_table(res).markdown(), ""]
+    for note in (trained_note(res), excluded_note(res), MISSING_NOTE):
+        if note:
+            lines += [note, ""]
+    if has_paired(res):
+        lines += [f"### Against the baseline `{res['paired']['baseline']}`", "", paired_note(res),
+                  "", paired_table(res).markdown(), ""]
+        if trained_note(res):
+            lines += ["`*` after a name: a learned predictor trained on some of these drives; "
+                      "its comparison over the held-out drives only is below.", ""]
+    if res.get("track_errors", {}).get("predictors"):
+        lines += ["### Where the error points", "", TRACK_NOTE, "", track_table(res).markdown(), ""]
+    if "uncertainty" in res:
+        lines += ["### Uncertainty", "", UNCERTAINTY_NOTE, "", uncertainty_table(res).markdown(), ""]
+        if res["uncertainty"].get("by_since_fix"):
+            lines += ["By time since the last fix (no CI):", "",
+                      uncertainty_table(res, "by_since_fix").markdown(), ""]
+    lines += seeds_lines(res)
+    if res.get("held_out_all"):
+        ho = res["held_out_all"]
+        lines += [f"## Held-out drives ({len(ho['drives'])}: no learned predictor of this run "
+                  f"was trained on them)", "", summary_table(res, held_out=True).markdown(),
+                  ""]
+        if has_held_out_paired(res):
+            lines += [paired_note(res, " on the held-out drives"), "",
+                      paired_table(res, held_out=True).markdown(), ""]
+    warm = warmup_table(res)
+    if (warm.frame[["future_n", "now_n", "missing"]].to_numpy() > 0).any():
+        lines += ["## Warm-up queries (left out above)", "",
+                  "Queries issued before a drive's second received fix: a cold start, not a "
+                  "prediction.", "", warm.markdown(), ""]
+    for ds in res["by_dataset"]:
+        drives = [d for d in res["drives"] if d["dataset"] == ds]
+        refs = sorted({d["reference"] for d in drives if d["reference"]})
+        lines += [f"## Data set `{ds}`", "",
+                  f"{len(drives)} drives; reference: {', '.join(refs) or '-'}.", ""]
+        lines += [dataset_table(res, ds).markdown(), ""]
+        note = block_note([s[k] for s in res["by_dataset"][ds].values() for k in ("future", "now")],
+                          f"`{ds}`")
+        if note:
+            lines += [note, ""]
+        if has_paired(res):
+            lines += [paired_note(res, f" in `{ds}`"), "", paired_table(res, ds).markdown(), ""]
+        lines += ["### Route type (paper's Table I layout), future point, mean error in cm (queries)",
+                  "", label_table(res, ds, "future").markdown(), ""]
+        if res.get("statistics"):
+            lines += [f"`{NOT_CONCLUSIVE}`: not conclusive, the cell's 95 % interval is wider "
+                      f"than its value.", ""]
+        lines += ["### Route type, current position (now), mean error in cm (queries)", "",
+                  label_table(res, ds, "now").markdown(), ""]
+        if has_paired(res):
+            base = res["paired"]["baseline"]
+            lines += [f"### Route type, future point, Δ mean vs `{base}` in cm (queries both "
+                      f"answered)", "", paired_label_table(res, ds, "future").markdown(), ""]
+        ho = res.get("held_out", {}).get(ds)
+        if ho:
+            who = "; ".join(
+                f"`{p}` ({model_text(res['models'][p])}) was trained on "
+                + ", ".join(sorted(set(names) & set(ho["excluded_training_drives"])))
+                for p, names in res.get("training_drives", {}).items()
+                if set(names) & set(ho["excluded_training_drives"]))
+            lines += [f"### Held-out drives only ({len(ho['drives'])} of {len(drives)})", "",
+                      f"{who}: figures on those drives flatter it. On the held-out drives "
+                      f"({', '.join(ho['drives']) or 'none'}):", ""]
+            if ho["drives"] and has_held_out_paired(res, ds):
+                lines += [paired_note(res, f" on the held-out drives of `{ds}`"), "",
+                          paired_table(res, ds, held_out=True).markdown(), ""]
+            if ho["drives"]:
+                lines += ["Future point, mean error in cm (queries):", "",
+                          label_table(res, ds, "future", held_out=True).markdown(), "",
+                          "Current position (now), mean error in cm (queries):", "",
+                          label_table(res, ds, "now", held_out=True).markdown(), ""]
+    if res.get("by_speed"):
+        lines += ["## Future-point error by speed, mean [m] (queries)", "",
+                  speed_table(res).markdown(), ""]
+    if res.get("outages"):
+        lines += ["## GPS outages", "",
+                  "Current-position (now) error by time since the last received fix, mean [m] "
+                  "(queries within 0.05 s of each checkpoint), and per outage: ADE (mean error "
+                  "over the outage), FDE (error just before the fix returns), miss rate (share of "
+                  "outages with FDE > 2 m).", ""]
+        lines += [outage_table(res).markdown(), ""]
+    lines += gate_lines(res)
+    lines += ["## Drives", ""]
+    lines += [drives_table(res).markdown(), ""]
+    note = block_note([d["predictors"][p]["future"] for d in res["drives"] if not d["skipped"]
+                       for p in d.get("predictors", {})], "Each row")
+    if note:
+        lines += [note, ""]
+    warn = [(d["name"], w) for d in res["drives"] for w in d["warnings"]]
+    if warn:
+        lines += ["## Loader warnings", ""] + [f"- `{n}`: {w}" for n, w in warn] + [""]
+    if plots or plot_notes:
+        shown = [p for p in plots if not p.startswith("drives/")]
+        per_drive = [p for p in plots if p.startswith("drives/")]
+        lines += ["## Plots", ""]
+        lines += [f"![{p}]({p})" if p.endswith((".png", ".svg")) else f"- [{p}]({p})"
+                  for p in shown] + [""] * bool(shown)
+        if plot_notes:
+            lines += ["Not drawn:", ""] + [f"- {k}: {v}" for k, v in plot_notes.items()] + [""]
+        if per_drive:
+            lines += ["Future-point error over time, per drive:", ""]
+            lines += [f"- [{Path(p).stem.removesuffix('-error_over_time')}]({p})"
+                      for p in per_drive] + [""]
+    if res.get("paper_figures"):
+        lines += ["## The paper's figures, from this run", ""]
+        for f in res["paper_figures"]:
+            lines += [f"![{f['file']}]({f['file']})", "", f"*{f['caption']}*", ""]
+    lines += ["## Data", ""] + [f"- `{m['path']}`: {m['files']} files, {m['bytes']} bytes, "
+                                f"sha256 `{m['sha256'][:16]}...`" for m in res["data"]] + [""]
+    lines += glossary_lines(res)
+    return "\n".join(lines)
+
+
+def answers_lines(res: dict[str, Any]) -> list[str]:
+    """For answers scored by ``bench score``: where they came from, how many queries they
+    left unanswered, and what posbench could not check."""
+    a = res.get("answers")
+    if not a:
+        return []
+    missing = a["queries"] - a["answered"]
+    return [f"Answers produced outside posbench (`{a['file']}`), scored against the queries "
+            f"folder `{a['queries_folder']}`: {a['answered']} of {a['queries']} queries answered"
+            + (f", {missing} without an answer (scored as `missing`; per drive in the drive "
+               f"notes of results.json)" if missing else "")
+            + ". posbench cannot check such answers for look-ahead (use of inputs stamped after "
+              "the query's t_issue), as it does for a predictor it replays; latency is what the "
+              "file's `latency_us` column gives (`-`: none given).", ""]
+
+
+def seeds_lines(res: dict[str, Any]) -> list[str]:
+    """The "Repeated over seeds" section (runs with --seeds)."""
+    seeds = res.get("seeds")
+    if not seeds:
+        return []
+    listed = ", ".join(str(s) for s in seeds["seeds"])
+    return [f"## Repeated over {len(seeds['seeds'])} seeds ({listed})", "",
+            f"The same drives and predictors replayed with each seed's GPS noise and dropouts. "
+            f"Every other figure, interval, table and plot of this report, and traces.parquet, "
+            f"are from seed {seeds['traces_seed']}; results.json keeps each seed's headline "
+            f"figures (`seeds.runs`). Beside seed {seeds['traces_seed']}'s mean and its 95 % "
+            f"interval (other drives), the spread over seeds (other random draws):", "",
+            seeds_table(res).markdown(), ""]
+
+
+def gate_lines(res: dict[str, Any]) -> list[str]:
+    """The "GPS outlier gate" section: fixes rejected per predictor, and per drive."""
+    gate = res.get("gate")
+    if not gate:
+        return []
+    lines = ["## GPS outlier gate: fixes rejected per predictor", ""]
+    if not gate.get("enabled"):
+        if res.get("answers"):
+            return lines + ["None: answers scored by `bench score` come from a system that got "
+                            "every fed fix; any gating is its own.", ""]
+        return lines + ["Off (`--no-gate`): every fix reached the predictors, as in the paper.", ""]
+    lines += ["A fix implying impossible motion (speed > 60 m/s, or a miss of the constant-velocity "
+              "prediction beyond 15 m/s^2 of acceleration plus 4 sigma of fix noise; a repeated "
+              "stale fix while moving) is dropped before the predictor and bridged like a "
+              "missing fix. Scores still use the ungated reference.", ""]
+    lines += [gate_table(res).markdown(), ""]
+    per_drive = gate_drive_table(res)
+    if not per_drive.frame.empty:
+        lines += [per_drive.markdown(), ""]
+    return lines

@@ -1,0 +1,96 @@
+"""posbench.report.markdown.notes (split from the flat bench/; docstring to write)."""
+
+from __future__ import annotations
+
+from typing import Any
+
+from posbench.tables.run_tables import (
+    trained_in_run,
+)
+from posbench.tables.stat_tables import block_lengths
+
+MISSING_NOTE = ("`missing`: queries a predictor answered with no position (NaN) although a "
+                "reference exists, e.g. before its first fix; they are counted, not averaged, so "
+                "a predictor cannot look better by abstaining.")
+
+
+def model_text(model: dict[str, Any]) -> str:
+    """How a report names a learned predictor's model: the bundled one, or its file."""
+    if model.get("bundled"):
+        text = str(model.get("model", ""))  # "bundled (predictors/<pkg>/bundled/model.onnx)"
+        path = text[text.find("(") + 1:text.rfind(")")] if "(" in text else \
+            "predictors/lstm/bundled/model.onnx"
+        return f"the bundled model, {path}"
+    return f"model {model['model']}"
+
+
+def trained_note(res: dict[str, Any]) -> str:
+    """The footnote of ``*`` rows: which model, trained on which of the run's drives."""
+    trained = trained_in_run(res)
+    if not trained:
+        return ""
+    n_drives = sum(1 for d in res["drives"] if not d["skipped"])
+    parts = [f"{p} ({model_text(res['models'][p])}) was trained on {len(d)} of these "
+             f"{n_drives} drives" for p, d in trained.items()]
+    return "* " + "; ".join(parts) + ": its figures on them flatter it; see the held-out table."
+
+
+def excluded_note(res: dict[str, Any]) -> str:
+    """One sentence: how many queries the headline figures leave out, and why."""
+    ex = res.get("excluded", {})
+    first = next(iter(res["predictors"]), None)
+    if first is None:
+        return ""
+    warm = ex.get("warmup", {}).get(first, {})
+    n_warm = sum(warm.get(k, {}).get("count", 0) + warm.get(k, {}).get("missing", 0)
+                 for k in ("future", "now"))
+    n_noref = sum(ex.get("no_reference", {}).get(first, {}).values())
+    return (f"Excluded from these figures, per predictor: {n_warm} warm-up queries (issued before "
+            f"a drive's second received fix, when no predictor can know a velocity) and "
+            f"{n_noref} queries without a reference position (past the end of the truth or of "
+            f"the fixes).")
+
+
+def has_paired(res: dict[str, Any]) -> bool:
+    """Whether the run compared its predictors with a baseline (schema 1.1, a baseline, and
+    another predictor)."""
+    paired = res.get("paired") or {}
+    return bool(paired.get("baseline")) and bool(paired.get("overall"))
+
+
+def has_held_out_paired(res: dict[str, Any], dataset: str | None = None) -> bool:
+    """Whether the run holds the paired comparison over held-out drives (overall, or in
+    ``dataset``)."""
+    held = (res.get("paired") or {}).get("held_out") or {}
+    src = held.get("overall") if dataset is None else held.get("by_dataset", {}).get(dataset)
+    return has_paired(res) and bool(src)
+
+
+def statistics_note(res: dict[str, Any]) -> str:
+    """One sentence: how the intervals were computed (empty for runs without them)."""
+    st = res.get("statistics")
+    if not st:
+        return ""
+    return (f"`value [lo, hi]`: {100 * st['level']:g} % confidence interval, cluster bootstrap "
+            f"over drives ({st['resamples']} resamples, seed {st['seed']}); a figure from a "
+            f"single drive resamples blocks of contiguous queries instead (block bootstrap). "
+            f"See the glossary at the end.")
+
+
+def paired_note(res: dict[str, Any], where: str = "") -> str:
+    """What the paired table shows."""
+    base = res["paired"]["baseline"]
+    return (f"Each predictor against `{base}`{where}, on the queries both answered: Δ mean = "
+            f"its mean error minus `{base}`'s (negative: better than `{base}`), with its 95 % "
+            f"interval (drives resampled jointly), `*` where the interval excludes 0; drives "
+            f"won = drives on which its mean error is below `{base}`'s.")
+
+
+def block_note(summaries: list[dict[str, Any]], what: str) -> str:
+    """A sentence naming the block lengths of the single-drive intervals among ``summaries``."""
+    lengths = block_lengths(summaries)
+    if not lengths:
+        return ""
+    span = (f"{lengths[0]}" if len(lengths) == 1 else f"{lengths[0]} to {lengths[-1]}")
+    return (f"{what}: one drive, so the intervals come from a block bootstrap of its "
+            f"contiguous queries (blocks of {span} queries), not from resampling drives.")

@@ -1,0 +1,209 @@
+"""A run as data: one versioned, documented object, written and read by one pair.
+
+``save_run(out, run)`` writes ``results.json`` (validated against the JSON Schema shipped
+as ``bench/schemas/results.schema.json``, version :data:`SCHEMA_VERSION`) and
+``traces.parquet`` (columns: :data:`posbench.scoring.schema.TRACE_COLUMNS`); ``load_run(path)``
+reads them back as a :class:`Run`, its traces loaded only when first used. The report,
+the figures, the terminal tables and every later command read a :class:`Run`.
+
+Example (a notebook)::
+
+    from posbench.saved_run.run import load_run
+    run = load_run("bench-out")
+    run.summary("future")                  # predictors x mean_m, median_m, ... [m]
+    tr = run.traces                        # one row per query
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from importlib import resources
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+from posbench.scenarios.errors import DataError
+
+#: MAJOR.MINOR of results.json: a reader accepts every MINOR of its MAJOR; MINOR grows when
+#: keys are added, MAJOR when a key changes meaning or goes
+SCHEMA_VERSION = "1.4"
+
+
+RESULTS = "results.json"
+
+
+TRACES = "traces.parquet"
+
+
+PROVENANCE_KEYS = ("command", "versions", "git_commit", "data")
+
+
+def results_schema() -> dict[str, Any]:
+    """The JSON Schema of ``results.json`` (shipped with the package)."""
+    return json.loads((resources.files("posbench.saved_run") / "schemas" / "results.schema.json").read_text())
+
+
+def to_json_value(o: Any) -> Any:
+    """``o`` with NaN/inf as None and NumPy scalars/arrays as Python values (strict JSON)."""
+    if isinstance(o, dict):
+        return {str(k): to_json_value(v) for k, v in o.items()}
+    if isinstance(o, list | tuple):
+        return [to_json_value(v) for v in o]
+    if isinstance(o, np.ndarray):
+        return to_json_value(o.tolist())
+    if isinstance(o, np.bool_):
+        return bool(o)
+    if isinstance(o, np.integer):
+        return int(o)
+    if isinstance(o, float | np.floating):
+        return float(o) if math.isfinite(o) else None
+    if o is None or isinstance(o, str | int | bool):
+        return o
+    return str(o)
+
+
+@dataclass
+class Run:
+    """One bench run: ``results`` (the content of results.json) and its per-query traces.
+
+    Attributes:
+        results: aggregated figures, config and provenance (see the JSON Schema).
+        folder: where the run was saved or loaded from (None while only in memory).
+    """
+
+    results: dict[str, Any]
+    folder: Path | None = None
+    _traces: pd.DataFrame | None = field(default=None, repr=False)
+
+    @classmethod
+    def from_results(cls, results: dict[str, Any], traces: pd.DataFrame | None = None,
+                     folder: Path | None = None) -> Run:
+        """A run from freshly aggregated ``results``: stamped with :data:`SCHEMA_VERSION`
+        and converted to strict JSON values (NaN -> None), exactly as a load would give it."""
+        res = to_json_value({"schema_version": SCHEMA_VERSION,
+                             **{k: v for k, v in results.items() if k != "schema_version"}})
+        return cls(res, folder, traces)
+
+    @property
+    def config(self) -> dict[str, Any]:
+        """The run's configuration (``RunConfig`` as a dict: horizon_s, gps_profile, ...)."""
+        return self.results["config"]
+
+    @property
+    def provenance(self) -> dict[str, Any]:
+        """Command line, package versions, git commit and data hashes."""
+        return {k: self.results.get(k) for k in PROVENANCE_KEYS}
+
+    @property
+    def predictors(self) -> list[str]:
+        """Predictor names in run order."""
+        return list(self.results["predictors"])
+
+    @property
+    def traces(self) -> pd.DataFrame:
+        """Per-query traces (loaded from the folder on first use; columns:
+        :data:`posbench.scoring.schema.TRACE_COLUMNS`). Empty when nothing was scored."""
+        if self._traces is None:
+            path = None if self.folder is None else self.folder / TRACES
+            if path is None or not path.is_file():
+                if any(d.get("skipped") is None for d in self.results.get("drives", [])):
+                    raise DataError(path, "no traces: the run was saved without traces.parquet")
+                self._traces = pd.DataFrame()
+            else:
+                self._traces = pd.read_parquet(path)
+                from posbench.scoring.schema import COV_COLUMNS
+
+                for c in COV_COLUMNS:  # traces written before schema 1.4
+                    if c not in self._traces:
+                        self._traces[c] = np.nan
+        return self._traces
+
+    def summary(self, kind: str = "future") -> pd.DataFrame:
+        """Headline errors of one kind (``future`` or ``now``) as a numeric frame: one row per
+        predictor, columns count, missing, mean_m, median_m, rmse_m, p95_m, max_m [m], and
+        for runs with intervals (schema 1.1) their 95 % bounds mean_m_lo, mean_m_hi,
+        median_m_lo, ... [m]."""
+        from posbench.metrics.accuracy import SUMMARY_KEYS
+
+        rows = {}
+        for p, v in self.results["predictors"].items():
+            s = v[kind]
+            row = {k: s.get(k) for k in SUMMARY_KEYS}
+            for fig, (lo, hi) in ((f, b) for f, b in s.get("ci95", {}).items()
+                                  if isinstance(b, list)):
+                row[f"{fig}_lo"], row[f"{fig}_hi"] = lo, hi
+            rows[p] = row
+        return pd.DataFrame.from_dict(rows, orient="index").astype(float)
+
+
+    def track_summary(self, kind: str = "future") -> pd.DataFrame:
+        """Along/cross-track figures of one kind as a numeric frame: one row per predictor,
+        columns of :data:`posbench.metrics.track_errors.TRACK_SUMMARY_KEYS` [m] (schema 1.3); empty
+        for older runs, which have none."""
+        from posbench.metrics.track_errors import TRACK_SUMMARY_KEYS
+
+        block = self.results.get("track_errors", {}).get("predictors", {})
+        rows = {p: {k: v[kind].get(k) for k in TRACK_SUMMARY_KEYS} for p, v in block.items()}
+        return pd.DataFrame.from_dict(rows, orient="index", columns=list(TRACK_SUMMARY_KEYS)
+                                      ).astype(float)
+
+
+def write_traces(out: Path, traces: pd.DataFrame | None) -> Path | None:
+    """``out/traces.parquet`` from ``traces`` (nothing without rows); the path, or None."""
+    if traces is None or traces.empty:
+        return None
+    out.mkdir(parents=True, exist_ok=True)
+    traces.to_parquet(out / TRACES, index=False)
+    return out / TRACES
+
+
+def save_run(out: Path, run: Run, also_written: Sequence[Path] = (),
+             traces_written: Callable[[], Path | None] | None = None) -> list[Path]:
+    """Write ``run`` into folder ``out``: ``traces.parquet`` (when there are traces) and
+    ``results.json`` last, listing under ``outputs`` every file the run wrote there
+    (``also_written``: report, figures) so the next run into ``out`` replaces exactly those.
+    ``traces_written``: returns the traces file :func:`write_traces` already wrote (or is
+    writing, in another process) for ``run``; None: written here. Returns the two paths
+    written."""
+    from posbench.saved_run.outputs import relative_outputs
+
+    out.mkdir(parents=True, exist_ok=True)
+    traces = (traces_written() if traces_written is not None
+              else write_traces(out, run._traces))
+    written = [traces] if traces is not None else []
+    written.append(out / RESULTS)
+    run.results["outputs"] = relative_outputs(out, [*also_written, *written])
+    (out / RESULTS).write_text(json.dumps(to_json_value(run.results), indent=2,
+                                          allow_nan=False) + "\n")
+    run.folder = out
+    return written
+
+
+def load_run(path: str | Path) -> Run:
+    """A saved run from its folder (or its ``results.json``); traces load lazily.
+
+    Raises:
+        DataError: no results.json there, not JSON, or written by an incompatible
+            posbench (another schema MAJOR version).
+    """
+    p = Path(path)
+    res_path = p / RESULTS if p.is_dir() else p
+    if not res_path.is_file():
+        raise DataError(res_path, "no such file: give a bench run output folder or its results.json")
+    try:
+        results = json.loads(res_path.read_text())
+    except (OSError, ValueError) as e:
+        raise DataError(res_path, f"not readable as JSON: {e}") from None
+    if not isinstance(results, dict) or "predictors" not in results:
+        raise DataError(res_path, "not a posbench results.json (no 'predictors')")
+    version = str(results.get("schema_version", "0"))
+    if version.split(".")[0] != SCHEMA_VERSION.split(".")[0]:
+        raise DataError(res_path, f"schema_version {version} (this posbench reads "
+                                  f"{SCHEMA_VERSION.split('.')[0]}.x): re-run it or use a matching "
+                                  f"posbench")
+    return Run(results, res_path.parent)
