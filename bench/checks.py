@@ -126,7 +126,7 @@ def resolve_baseline(value: str | None, names: Sequence[str]) -> str | None:
     """``--baseline``: the predictor the others are compared with. Default (None): ``kf``
     when it is in the run, else no comparison; ``none``: no comparison; otherwise it must
     be one of the run's predictors."""
-    from posbench.aggregation.intervals import default_baseline
+    from posbench.config import default_baseline
 
     if value is None:
         return default_baseline(names)
@@ -214,24 +214,3 @@ def check_data_paths(paths: Sequence[str | Path] | None, option: str = "--data")
     for p in paths or []:
         if as_url(p) is None and not Path(p).exists():
             raise UsageError(f"{option} {p}: no such file or folder")
-
-
-#: what ``--format`` may list: report.md is always written; csv and latex add table files
-REPORT_FORMATS = ("md", "csv", "latex")
-
-
-#: table file formats beside report.md: full-precision CSV, booktabs LaTeX (the default: both)
-TABLE_FORMATS = ("csv", "latex")
-
-
-def parse_report_formats(text: str, option: str = "--format") -> tuple[str, ...]:
-    """``--format md,csv,latex`` -> the table file formats to write beside report.md
-    (``("csv", "latex")``; ``md`` alone: none)."""
-    items = [f.strip().lower() for f in text.split(",") if f.strip()]
-    if not items:
-        raise UsageError(f"{option}: give one or more of {', '.join(REPORT_FORMATS)}")
-    for f in items:
-        if f not in REPORT_FORMATS:
-            raise UsageError(f"{option}: unknown format {f!r}; use one or more of "
-                             f"{', '.join(REPORT_FORMATS)} (e.g. md,csv)")
-    return tuple(f for f in REPORT_FORMATS[1:] if f in items)

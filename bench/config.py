@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import hashlib
+from collections.abc import Iterable
 from dataclasses import asdict, dataclass, field
 from typing import Any
 
@@ -53,6 +54,16 @@ class RunConfig:
         d = asdict(self)
         d["predictors"] = list(self.predictors)
         return d
+
+
+#: the predictor the others are compared with when no baseline is named (if it is in the run)
+DEFAULT_BASELINE = "kf"
+
+
+def default_baseline(predictors: Iterable[str]) -> str | None:
+    """:data:`DEFAULT_BASELINE` when it is among ``predictors``, else None (no paired
+    comparison)."""
+    return DEFAULT_BASELINE if DEFAULT_BASELINE in tuple(predictors) else None
 
 
 def drive_seed(seed: int, drive_name: str) -> int:

@@ -32,7 +32,7 @@ from posbench.predictor_tools.contract import (
     resolve_predictor,
     run_replay,
 )
-from posbench.predictor_tools.contract_inputs import cut_prepared, inputs
+from posbench.predictor_tools.contract_inputs import HORIZON_S, cut_prepared, inputs
 from posbench.predictors.gate import GatedPredictor
 from posbench.predictors.registry import available, create
 from posbench.replay.loop import events, feed
@@ -171,11 +171,11 @@ def test_differences_treat_nan_as_equal_only_to_nan():
 
 
 def test_feed_matches_the_runners_replay():
-    """The hand feeder (query order, pickling) drives a predictor exactly as bench.replay."""
+    """The hand feeder (query order, pickling) drives a predictor exactly as posbench.replay.loop.replay."""
     prep = cut_prepared(inputs().drive, 15.0)
     p = create("kf")
     p.reset()
-    by_hand = np.array(feed(p, events(prep)))
+    by_hand = np.array(feed(p, events(prep), HORIZON_S))
     ran = run_replay(lambda: create("kf"), prep)
     order = np.lexsort((by_hand[:, 1], by_hand[:, 0]))
     ran_order = np.lexsort((ran.xy[:, 0], ran.t_query))

@@ -15,8 +15,8 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from posbench.aggregation.aggregate import aggregate
 from posbench.config import RunConfig
+from posbench.pipeline.results import build_results
 from posbench.predictors.registry import available
 from posbench.replay.executors import merge_predictor_runs, run_local, run_predictor, run_ray
 from posbench.report.markdown import render_markdown
@@ -122,7 +122,7 @@ def test_ray_traces_identical_to_local(drives, ray_session):
         assert not b.skipped
         pd.testing.assert_frame_equal(a.traces, b.traces, check_exact=True)
         assert list(b.step_ns) == ["cv", "kf"] and len(b.step_ns["kf"]) == len(a.step_ns["kf"])
-    la, ra = (aggregate(runs, CFG, [], "test") for runs in (local, remote))
+    la, ra = (build_results(runs, CFG, [], "test") for runs in (local, remote))
     assert error_figures(ra) == error_figures(la)
     assert np.array_equal(all_traces(remote)["error_m"].to_numpy(),
                           all_traces(local)["error_m"].to_numpy(), equal_nan=True)
@@ -143,10 +143,10 @@ def test_failed_task_retried_then_reported(drives, ray_session, tmp_path):
     assert "RuntimeError: corrupt recording" in failed.skipped and "2 attempts" in failed.skipped
     assert failed.traces.empty
     assert not runs[1].skipped and set(runs[1].traces["predictor"]) == {"cv", "kf"}
-    res = aggregate(runs, CFG, [], "test")
+    res = build_results(runs, CFG, [], "test")
     assert res["drives"][0]["skipped"] == failed.skipped
     # the figures are those of the surviving drive alone: nothing of the failed one leaks in
     assert json.dumps(res["predictors"], sort_keys=True) == json.dumps(
-        aggregate(runs[1:], CFG, [], "test")["predictors"], sort_keys=True)
+        build_results(runs[1:], CFG, [], "test")["predictors"], sort_keys=True)
     md = render_markdown(res, [])
     assert "| broken-drive |" in md and "skipped: worker failed" in md

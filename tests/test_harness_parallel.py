@@ -99,9 +99,9 @@ def test_traces_written_by_a_child_are_those_save_run_writes(tmp_path):
     cfg = RunConfig(predictors=("cv", "kf"))
     runs = run(default_drives()[:1], cfg)
     traces = all_traces(runs)
-    from posbench.aggregation.aggregate import aggregate
+    from posbench.pipeline.results import build_results
 
-    res = aggregate(runs, cfg, [], "bench run -p cv,kf", traces=traces)
+    res = build_results(runs, cfg, [], "bench run -p cv,kf", traces=traces)
     here, there = tmp_path / "here", tmp_path / "there"
     save_run(here, Run.from_results(dict(res), traces))
     job = Job(write_traces, there, traces)

@@ -18,6 +18,7 @@ import pytest
 torch = pytest.importorskip("torch")
 
 from posbench.config import RunConfig  # noqa: E402
+from posbench.predictor_tools.contract_inputs import HORIZON_S  # noqa: E402
 from posbench.predictors.hybrid.data import hybrid_windows  # noqa: E402
 from posbench.predictors.hybrid.export import (  # noqa: E402
     export_onnx,
@@ -31,7 +32,7 @@ from posbench.predictors.hybrid.model import HybridNet  # noqa: E402
 from posbench.predictors.hybrid.predictor import HORIZONS, HybridPredictor  # noqa: E402
 from posbench.predictors.lstm.windows import drive_windows  # noqa: E402
 from posbench.predictors.registry import create  # noqa: E402
-from posbench.replay.loop import GPS, events, feed, replay  # noqa: E402  # noqa: E402
+from posbench.replay.loop import GPS, events, feed, replay  # noqa: E402
 from posbench.replay.prepare import prepare_drive  # noqa: E402
 from posbench.scenarios.errors import DataError  # noqa: E402
 from posbench.scenarios.synthetic import generate_drive  # noqa: E402
@@ -123,7 +124,7 @@ def test_a_hand_set_correction_shifts_answers_by_exactly_R_psi_corr(constant, pr
     evs = events(prep)
     checked = 0
     for i, (k, t, _) in enumerate(evs):
-        feed(hy, evs, i, i + 1)
+        feed(hy, evs, HORIZON_S, i, i + 1)
         if k != GPS or hy.last_step() is None or hy._stationary():
             continue
         t_fix, psi = hy.last_step()
@@ -264,16 +265,16 @@ def test_pickle_round_trip_mid_drive(constant, prep):
     and the two-input feed are rebuilt) and then answer as the original."""
     evs = events(prep)
     ref = HybridPredictor(str(constant), "rtk")
-    full = feed(ref, evs)
+    full = feed(ref, evs, HORIZON_S)
     a = HybridPredictor(str(constant), "rtk")
     half = len(evs) // 2
-    first = feed(a, evs, 0, half)
+    first = feed(a, evs, HORIZON_S, 0, half)
     b = pickle.loads(pickle.dumps(a))
-    ra, rb = feed(a, evs, half), feed(b, evs, half)
+    ra, rb = feed(a, evs, HORIZON_S, half), feed(b, evs, HORIZON_S, half)
     assert rb == ra == full[len(first):]
     assert b.steps == a.steps > 100 and b.last_step() == a.last_step()
     fresh = pickle.loads(pickle.dumps(HybridPredictor(str(constant), "rtk")))
-    assert feed(fresh, evs) == full
+    assert feed(fresh, evs, HORIZON_S) == full
 
 
 # --------------------------------------------------------------- condition seam

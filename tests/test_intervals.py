@@ -16,10 +16,10 @@ from pathlib import Path
 import pandas as pd
 import pytest
 
-from posbench.aggregation.aggregate import aggregate
-from posbench.aggregation.intervals import Statistics, default_baseline
-from posbench.config import RunConfig
+from posbench.aggregation.intervals import Statistics
+from posbench.config import RunConfig, default_baseline
 from posbench.metrics import bootstrap, outages
+from posbench.pipeline.results import build_results
 from posbench.replay.runner import run
 from posbench.report.markdown import render_markdown
 from posbench.saved_run.run import SCHEMA_VERSION, Run, load_run, results_schema
@@ -42,7 +42,7 @@ def twin_run():
     """cv, kf and a second kf (kf@twin: the same filter under another name)."""
     cfg = RunConfig(predictors=("cv", "kf", "kf@twin"))
     runs = run(default_drives(), cfg, workers=2)
-    return runs, cfg, aggregate(runs, cfg, [], "test")
+    return runs, cfg, build_results(runs, cfg, [], "test")
 
 
 def summaries(tree, path=""):
@@ -110,7 +110,7 @@ def test_identical_predictors_compare_as_exactly_equal(twin_run):
 
 def test_baseline_none_and_default(twin_run):
     runs, cfg, _ = twin_run
-    res = aggregate(runs, cfg, [], "test", statistics=Statistics(baseline=None))
+    res = build_results(runs, cfg, [], "test", statistics=Statistics(baseline=None))
     assert res["paired"]["baseline"] is None and res["paired"]["overall"] == {}
     md = render_markdown(Run.from_results(res).results, [])
     assert "Against the baseline" not in md and bootstrap.DEFINITIONS["wins"] not in md
@@ -197,7 +197,7 @@ def test_held_out_paired_leaves_the_training_drives_out(twin_run):
     the table marks the trained predictor in the all-drives comparison only."""
     runs, cfg, _ = twin_run
     trained = runs[0].name
-    res = aggregate(runs, cfg, [], "test",
+    res = build_results(runs, cfg, [], "test",
                     models={"cv": {"model": "m.onnx", "bundled": False, "train_drives": [trained]}})
     held = res["paired"]["held_out"]
     assert held["drives"] == sorted(r.name for r in runs[1:])

@@ -234,7 +234,7 @@ def small(tmp_path_factory):
 
 
 def test_unanswered_queries_are_counted_as_missing_never_dropped(small, tmp_path):
-    from posbench.aggregation.aggregate import aggregate
+    from posbench.pipeline.results import build_results
     from posbench.scoring.records import all_traces
     from posbench.scoring.schema import scored_mask
 
@@ -254,8 +254,8 @@ def test_unanswered_queries_are_counted_as_missing_never_dropped(small, tmp_path
     assert {n: m["now"] for n, m in part.unanswered.items()} == \
         pick.groupby("drive", observed=True).size().to_dict()
     cfg = folder.config("cv")
-    res = aggregate(part.runs, cfg, [], "t", traces=all_traces(part.runs), models={})
-    full_now = aggregate(full.runs, cfg, [], "t", traces=tr, models={})["predictors"]["cv"]["now"]
+    res = build_results(part.runs, cfg, [], "t", traces=all_traces(part.runs), models={})
+    full_now = build_results(full.runs, cfg, [], "t", traces=tr, models={})["predictors"]["cv"]["now"]
     now = res["predictors"]["cv"]["now"]
     assert now["missing"] == len(pick) and now["count"] == full_now["count"] - len(pick)
     assert res["predictors"]["cv"]["future"]["missing"] == 0

@@ -120,8 +120,8 @@ def test_thin_traces_never_raise(tmp_path, case):
 def test_gps_only_three_fixes_end_to_end_writes_report(tmp_path):
     """The reported crash: a GPS-only CSV with 3 fixes; the report is written and says why
     the figures are missing."""
-    from posbench.aggregation.aggregate import aggregate
     from posbench.config import RunConfig
+    from posbench.pipeline.results import build_results
     from posbench.replay.runner import run_drive
     from posbench.report.markdown import write_report
     from posbench.scenarios.loaders.table import load_table
@@ -132,7 +132,7 @@ def test_gps_only_three_fixes_end_to_end_writes_report(tmp_path):
     cfg = RunConfig(predictors=("cv", "kf"))
     runs = [run_drive(load_table(csv), cfg)]
     traces = all_traces(runs)
-    res = aggregate(runs, cfg, [], "bench run", traces=traces)
+    res = build_results(runs, cfg, [], "bench run", traces=traces)
     out = tmp_path / "out"
     from posbench.saved_run.run import Run
 
@@ -272,8 +272,8 @@ def test_drive_plots_limit_picks_the_worst_drives(tmp_path):
 
 
 def test_report_prints_notes_and_links_per_drive_files(tmp_path):
-    from posbench.aggregation.aggregate import aggregate
     from posbench.config import RunConfig
+    from posbench.pipeline.results import build_results
     from posbench.replay.runner import run_drive
     from posbench.report.markdown import write_report
     from posbench.scenarios.synthetic import default_drives
@@ -282,7 +282,7 @@ def test_report_prints_notes_and_links_per_drive_files(tmp_path):
     cfg = RunConfig(predictors=("cv", "kf"))
     runs = [run_drive(default_drives()[0], cfg)]
     traces = all_traces(runs)
-    res = aggregate(runs, cfg, [], "bench run", traces=traces)
+    res = build_results(runs, cfg, [], "bench run", traces=traces)
     from posbench.saved_run.run import Run
 
     write_report(Run.from_results(res, traces), tmp_path, formats=("svg", "png"))

@@ -14,8 +14,8 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from posbench.aggregation.aggregate import aggregate
 from posbench.config import RunConfig
+from posbench.pipeline.results import build_results
 from posbench.replay.runner import run, run_drive
 from posbench.report.markdown import render_markdown
 from posbench.scenarios.synthetic import default_drives
@@ -34,7 +34,7 @@ def cv_kf_result():
     drives = default_drives()
     cfg = RunConfig(predictors=("cv", "kf"))
     runs = run(drives, cfg)
-    return runs, aggregate(runs, cfg, [], "test")
+    return runs, build_results(runs, cfg, [], "test")
 
 
 def test_warmup_is_the_queries_before_the_second_fix():

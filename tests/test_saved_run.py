@@ -15,8 +15,8 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from posbench.aggregation.aggregate import aggregate
 from posbench.config import RunConfig
+from posbench.pipeline.results import build_results
 from posbench.replay.queries import query_frame
 from posbench.replay.runner import run, run_drive
 from posbench.saved_run.run import SCHEMA_VERSION, Run, load_run, results_schema, save_run
@@ -41,7 +41,7 @@ def saved(tmp_path_factory):
     cfg = RunConfig(predictors=("cv", "kf"))
     runs = run(default_drives()[:2], cfg)
     traces = all_traces(runs)
-    r = Run.from_results(aggregate(runs, cfg, [], "bench run -p cv,kf", traces=traces), traces)
+    r = Run.from_results(build_results(runs, cfg, [], "bench run -p cv,kf", traces=traces), traces)
     save_run(out, r)
     return out, r
 

@@ -8,10 +8,10 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from posbench.aggregation.aggregate import aggregate
 from posbench.aggregation.track import track_section
 from posbench.config import RunConfig
 from posbench.metrics.track_errors import inward_cross, track_summary
+from posbench.pipeline.results import build_results
 from posbench.replay.prepare import prepare_drive
 from posbench.replay.runner import run
 from posbench.scenarios.synthetic import generate_drive
@@ -47,7 +47,7 @@ def test_results_block_matches_the_traces(drive):
     both = traces[["along_m", "cross_m"]].notna().all(axis=1)
     np.testing.assert_allclose(np.hypot(traces.along_m[both], traces.cross_m[both]),
                                traces.error_m[both], rtol=1e-9, atol=1e-12)
-    res = aggregate(runs, cfg, [], "test", traces=traces)
+    res = build_results(runs, cfg, [], "test", traces=traces)
     block = res["track_errors"]
     scored = ~traces.warmup & traces.x_ref.notna()
     for p in ("cv", "kf"):

@@ -16,8 +16,8 @@ from pathlib import Path
 import pytest
 from test_cli_errors import assert_one_error_line, bench
 
-from posbench.recording import web as rerun_web
 from posbench.errors import UsageError
+from posbench.recording import web as rerun_web
 
 ROOT = Path(__file__).resolve().parents[1]
 

@@ -1,8 +1,13 @@
-"""Combine per-drive runs into the figures of ``results.json`` (per drive first, then combined)."""
+"""Combine per-drive runs into the figures of ``results.json`` (per drive first, then combined).
+
+Pure given its inputs: traces and per-drive records in, a nested dict of figures out. What
+the run was (command, config, versions, data hashes) is added by
+:func:`posbench.pipeline.results.build_results`; which learned models stand behind the
+predictors is an input (:func:`posbench.replay.predictor_setup.learned_models`)."""
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from typing import Any
 
 import numpy as np
@@ -12,7 +17,6 @@ from posbench.aggregation.intervals import (
     OUTAGE_ID_BASE,
     Statistics,
     add_group_cis,
-    default_baseline,
     drive_codes,
     one_drive_cis,
     outage_cis,
@@ -20,12 +24,10 @@ from posbench.aggregation.intervals import (
     since_fix_keys,
     with_ci,
 )
-from posbench.config import RunConfig
+from posbench.config import RunConfig, default_baseline
 from posbench.metrics.accuracy import speed_bin_labels, speed_bin_order, summarize, summarize_groups
 from posbench.metrics.latency import latency_summary
 from posbench.metrics.outages import error_vs_since_fix, outage_scores
-from posbench.replay.predictor_setup import learned_models
-from posbench.saved_run.provenance import git_commit, package_versions
 from posbench.scenarios.labels import LABELS
 from posbench.scoring.records import DriveRun, all_traces
 from posbench.scoring.schema import KINDS, scored_mask
@@ -118,13 +120,13 @@ def _empty_kinds(stats: Statistics | None = None) -> dict[str, Any]:
     return {k: with_ci(summarize(empty), empty, empty, None, stats) for k in KINDS}
 
 
-def aggregate(runs: Sequence[DriveRun], cfg: RunConfig, data_manifest: list[dict[str, Any]],
-              command: str, traces: pd.DataFrame | None = None,
-              models: dict[str, dict[str, Any]] | None = None,
+def aggregate(runs: Sequence[DriveRun], cfg: RunConfig, *,
+              models: Mapping[str, Mapping[str, Any]], traces: pd.DataFrame | None = None,
               statistics: Statistics | None = None) -> dict[str, Any]:
-    """The content of ``results.json`` (``traces``: :func:`all_traces` if already made;
-    ``models``: the learned models behind the predictors, :func:`learned_models` of ``cfg``
-    if None; ``{}`` for answers scored from a file, whose models posbench cannot know).
+    """The figures of ``results.json``, from its key ``predictors`` on (``traces``:
+    :func:`all_traces` if already made; ``models``: the learned models behind the
+    predictors, per name ``{"model", "bundled", "train_drives"}``, ``{}`` for none, e.g.
+    answers scored from a file, whose models posbench cannot know).
 
     Headline figures use the scored rows only (:func:`scored_mask`); the work goes one
     predictor at a time over just the :data:`AGGREGATED` columns of its rows, so a long run
@@ -137,17 +139,12 @@ def aggregate(runs: Sequence[DriveRun], cfg: RunConfig, data_manifest: list[dict
     preds = list(cfg.predictors)
     stats = statistics or Statistics(baseline=default_baseline(preds))
     res: dict[str, Any] = {
-        "command": command,
-        "config": cfg.to_dict(),
-        "versions": package_versions(),
-        "git_commit": git_commit(),
-        "data": data_manifest,
         "predictors": {},
         "by_dataset": {},
         "by_label": {},
         "by_speed": {},
         "outages": {},
-        "models": learned_models(cfg) if models is None else models,
+        "models": {n: dict(m) for n, m in models.items()},
         "excluded": excluded_summary(traces, preds, stats),
         "held_out": {},
         "held_out_all": {},

@@ -15,7 +15,7 @@ writes:
 
 from __future__ import annotations
 
-from collections.abc import Iterable, Mapping, Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -33,9 +33,6 @@ from posbench.metrics.bootstrap import (
 from posbench.metrics.outages import MISS_THRESHOLD_M, per_outage, since_fix_checkpoint
 from posbench.scenarios.labels import LABELS
 from posbench.scoring.schema import KINDS
-
-#: the predictor compared against when ``--baseline`` is not given (if it is in the run)
-DEFAULT_BASELINE = "kf"
 
 
 @dataclass(frozen=True)
@@ -62,11 +59,6 @@ class Statistics:
                                        f"rule, at least {MIN_BLOCKS} blocks per resample)",
                 "resamples": self.resamples, "seed": self.seed, "level": self.level,
                 "baseline": self.baseline}
-
-
-def default_baseline(predictors: Iterable[str]) -> str | None:
-    """:data:`DEFAULT_BASELINE` when it is among ``predictors``, else None."""
-    return DEFAULT_BASELINE if DEFAULT_BASELINE in tuple(predictors) else None
 
 
 def drive_codes(df: pd.DataFrame) -> np.ndarray:

@@ -25,9 +25,9 @@ from posbench.metrics.calibration import (
     mahalanobis_sq,
     since_fix_bin,
 )
-from posbench.scoring.schema import KINDS
+from posbench.scoring.schema import COV_COLUMNS, KINDS
 
-COV = ["cov_xx", "cov_xy", "cov_yy"]
+COV = list(COV_COLUMNS)
 
 
 NEEDED = ("predictor", "kind", "dataset", "drive", "label", "since_fix_s", "x", "y",

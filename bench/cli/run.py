@@ -9,13 +9,11 @@ from typing import TYPE_CHECKING, Annotated, Any
 import typer
 
 from posbench.checks import (
-    TABLE_FORMATS,
     check_at_least,
     check_choice,
     check_out_dir,
     check_out_file,
     parse_predictor_names,
-    parse_report_formats,
     parse_seeds,
     resolve_baseline,
     resolve_color_by,
@@ -52,6 +50,7 @@ from posbench.replay.predictor_setup import (
     validate_predictors,
     with_model_aliases,
 )
+from posbench.report.markdown import TABLE_FORMATS, parse_report_formats
 
 if TYPE_CHECKING:
     import pandas as pd
@@ -272,10 +271,10 @@ def _run(drives, cfg, data, out: Path, workers: int, rerun: Path | None = None,
          consistency: dict[str, Any] | None = None, color_by: str | None = None) -> None:
     from dataclasses import replace
 
-    from posbench.aggregation.aggregate import aggregate
     from posbench.aggregation.seeds import seed_figures, seeds_section
     from posbench.pipeline.jobs import FigureJobs, Job
     from posbench.pipeline.preload import Preload
+    from posbench.pipeline.results import build_results
     from posbench.predictor_tools.paper_figures import paper_figures
     from posbench.saved_run.outputs import remove_previous_outputs
     from posbench.saved_run.provenance import data_provenance
@@ -298,7 +297,7 @@ def _run(drives, cfg, data, out: Path, workers: int, rerun: Path | None = None,
     jobs = FigureJobs(lean, cfg.predictors, out, formats, drive_plots, paper=lambda: (
         paper_figures(list(drives), cfg, traces, out, runs, formats=formats)))
     traces_file = Job(write_traces, out, traces)  # the parquet (~0.5 s) meanwhile too
-    res = aggregate(runs, cfg, provenance.result(), command, traces=lean, statistics=stats)
+    res = build_results(runs, cfg, provenance.result(), command, traces=lean, statistics=stats)
     if consistency is not None:
         res["consistency"] = consistency
     if seeds:

@@ -8,7 +8,7 @@ from typing import TYPE_CHECKING, Annotated
 
 import typer
 
-from posbench.checks import check_out_dir, parse_report_formats
+from posbench.checks import check_out_dir
 from posbench.cli.common import (
     DataError,
     DrivePlotsOpt,
@@ -19,6 +19,7 @@ from posbench.cli.common import (
     console,
     fail,
 )
+from posbench.report.markdown import parse_report_formats
 
 if TYPE_CHECKING:
     from posbench.offline.answers import Scored
@@ -82,10 +83,10 @@ def _score(answers_path: Path, queries_dir: Path, name: str, out: Path,
            table_formats: tuple[str, ...] = ("csv", "latex")) -> None:
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
-    from posbench.aggregation.aggregate import aggregate
     from posbench.cli.run import plural, publish
     from posbench.offline.answers import read_answers, score_answers
     from posbench.offline.queries_folder import read_queries
+    from posbench.pipeline.results import build_results
     from posbench.saved_run.provenance import tree_hash
     from posbench.scoring.records import all_traces
 
@@ -103,7 +104,7 @@ def _score(answers_path: Path, queries_dir: Path, name: str, out: Path,
     cfg = folder.config(name)
     data = [*folder.manifest["data"], tree_hash(answers_path)]
     traces = all_traces(scored.runs)
-    res = aggregate(scored.runs, cfg, data, command_line(), traces=traces, models={})
+    res = build_results(scored.runs, cfg, data, command_line(), traces=traces, models={})
     res["answers"] = {"file": str(answers_path), "queries_folder": str(queries_dir),
                       "queries": scored.queries, "answered": scored.answered,
                       "unanswered": scored.unanswered, "look_ahead_checked": False}

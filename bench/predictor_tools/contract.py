@@ -327,7 +327,7 @@ def clause_query_order(factory: Factory, inp: Inputs) -> tuple[bool, str]:
             else:
                 seen[off] = (x, y)
 
-    feed(p, evs, after=probe)
+    feed(p, evs, HORIZON_S, after=probe)
     if failures:
         return False, failures[0]
     return True, (f"{n_asked[0]} answers at {len(probe_at)} points of the drive, "
@@ -346,15 +346,15 @@ def clause_picklable(factory: Factory, inp: Inputs) -> tuple[bool, str]:
         c = pickle.loads(pickle.dumps(p))
     except Exception as e:  # noqa: BLE001 - any exception fails the clause
         return False, f"pickling a fresh instance {_raised(e)}"
-    a = np.array(feed(p, evs, stop=mid)).reshape(-1, 3)
-    b = np.array(feed(c, evs, stop=mid)).reshape(-1, 3)
+    a = np.array(feed(p, evs, HORIZON_S, stop=mid)).reshape(-1, 3)
+    b = np.array(feed(c, evs, HORIZON_S, stop=mid)).reshape(-1, 3)
     n_obs = sum(e[0] != QUERY for e in evs[:mid])
     try:
         c2 = pickle.loads(pickle.dumps(p))
     except Exception as e:  # noqa: BLE001
         return False, f"pickling after {n_obs} observations {_raised(e)}"
-    a2 = np.array(feed(p, evs, start=mid)).reshape(-1, 3)
-    b2 = np.array(feed(c2, evs, start=mid)).reshape(-1, 3)
+    a2 = np.array(feed(p, evs, HORIZON_S, start=mid)).reshape(-1, 3)
+    b2 = np.array(feed(c2, evs, HORIZON_S, start=mid)).reshape(-1, 3)
     worst = 0.0
     for what, x, y in (("the copy of a fresh instance", a, b),
                        (f"the copy made after {n_obs} observations", a2, b2)):
@@ -414,7 +414,7 @@ def clause_covariance_psd(factory: Factory, inp: Inputs) -> tuple[bool, str]:
             if e < -PSD_TOL:
                 bad.append(f"covariance_at({t:.2f} s) has eigenvalue {e:.3g} m^2 < 0")
 
-    feed(p, evs, after=probe)
+    feed(p, evs, HORIZON_S, after=probe)
     if bad:
         return False, bad[0]
     if n == 0:

@@ -117,9 +117,8 @@ def calibrate(predictor: str, drives: Sequence[Drive], gps_profile: str,
     digits (NaN when the predictor reports no covariance on these drives)."""
     import pandas as pd
 
-    from posbench.aggregation.uncertainty import COV
     from posbench.metrics.calibration import coverage_scale, mahalanobis_sq
-    from posbench.scoring.schema import scored_mask
+    from posbench.scoring.schema import COV_COLUMNS, scored_mask
 
     cfg = RunConfig(predictors=(predictor,), gps_profile=gps_profile, seed=seed,
                     predictor_options={predictor: {k: v for k, v in params.items()
@@ -129,11 +128,11 @@ def calibrate(predictor: str, drives: Sequence[Drive], gps_profile: str,
     if not traces:
         return float("nan")
     t = pd.concat(traces, ignore_index=True)
-    if any(c not in t for c in COV):
+    if any(c not in t for c in COV_COLUMNS):
         return float("nan")
     t = t[scored_mask(t)]
     err = t[["x", "y"]].to_numpy(float) - t[["x_ref", "y_ref"]].to_numpy(float)
-    k = coverage_scale(mahalanobis_sq(err, t[COV].to_numpy(float)))
+    k = coverage_scale(mahalanobis_sq(err, t[list(COV_COLUMNS)].to_numpy(float)))
     return float(f"{k:.3g}") if np.isfinite(k) else k
 
 

@@ -15,6 +15,10 @@ Fix accuracy: a predictor whose ``observe_gps`` takes ``sigma``
 (:func:`posbench.predictors.base.accepts_sigma`, checked once per replay) gets each fix's stated
 per-axis 1-sigma [m] (``GpsStream.accuracy``) as ``sigma=``, or ``sigma=None`` where the
 stream states none or the value is not finite and positive; others get (t, x, y) only.
+
+:func:`replay` is the runner's loop (timed, in chunks of Python floats); :func:`events` and
+:func:`feed` are the same events and calls one at a time, for checks that stop, copy or
+probe a predictor between events (:mod:`posbench.predictor_tools.contract`).
 """
 
 from __future__ import annotations
@@ -26,66 +30,10 @@ from time import perf_counter_ns
 
 import numpy as np
 
-from posbench.predictor_tools.contract_inputs import HORIZON_S
 from posbench.predictors.base import Predictor, accepts_sigma
 from posbench.replay.prepare import PreparedDrive
 
-# ------------------------------------------------------------------- feeding by hand
-Event = tuple[int, float, tuple[float, ...]]
-
-
-def events(prep: PreparedDrive) -> list[Event]:
-    """The replay's events in the runner's order as ``(kind, t, args)``: observations carry
-    their values, a fix is followed by its future query (asked by :func:`feed`), a "now"
-    query has ``args = ()``; a fix's args are ``(x, y, sigma)`` (sigma [m] NaN when not stated)."""
-    d = prep.drive
-    acc = prep.gps.accuracy
-    cols: dict[int, list[np.ndarray]] = {
-        GPS: [prep.gps.t, prep.gps.x, prep.gps.y,
-              np.full(len(prep.gps), np.nan) if acc is None else acc],
-        QUERY: [prep.now.t_query]}
-    if d.imu is not None:
-        nan = np.full(len(d.imu), np.nan)
-        cols[IMU] = [d.imu.t, d.imu.ax, d.imu.ay, nan if d.imu.yaw is None else d.imu.yaw,
-                     nan if d.imu.yaw_rate is None else d.imu.yaw_rate]
-    if d.speed is not None:
-        cols[SPEED] = [d.speed.t, d.speed.v]
-    kinds, idxs = build_events(prep)
-    out: list[Event] = []
-    for k, i in zip(kinds.tolist(), idxs.tolist(), strict=True):
-        vals = [float(c[i]) for c in cols[k]]
-        out.append((k, vals[0], () if k == QUERY else tuple(vals[1:])))
-    return out
-
-
-def feed(pred: Predictor, evs: list[Event], start: int = 0, stop: int | None = None,
-         after: Callable[[int], None] | None = None) -> list[tuple[float, float, float]]:
-    """Feed ``evs[start:stop]`` to ``pred`` (no ``reset()``) as :func:`posbench.replay.loop.replay`
-    does; ``after(i)`` is called after event ``i``. Returns ``(t_query, x, y)`` per answer."""
-    out = []
-    with_sigma = accepts_sigma(pred.observe_gps)
-    for i in range(start, len(evs) if stop is None else stop):
-        k, t, a = evs[i]
-        if k == GPS:
-            if with_sigma:
-                s = a[2]
-                pred.observe_gps(t, a[0], a[1], sigma=s if 0.0 < s < math.inf else None)
-            else:
-                pred.observe_gps(t, a[0], a[1])
-            x, y = pred.position_at(t + HORIZON_S)
-            out.append((t + HORIZON_S, float(x), float(y)))
-        elif k == IMU:
-            pred.observe_imu(t, *a)
-        elif k == SPEED:
-            pred.observe_speed(t, *a)
-        else:
-            x, y = pred.position_at(t)
-            out.append((t, float(x), float(y)))
-        if after is not None:
-            after(i)
-    return out
-
-
+#: event kinds, in the order they are handled at equal times
 GPS, IMU, SPEED, QUERY = 0, 1, 2, 3
 
 
@@ -163,9 +111,10 @@ def _window(cols: list[np.ndarray | None], sel: np.ndarray) -> tuple[int, list[l
     return lo, [c[lo:hi].tolist() if c is not None else [float("nan")] * (hi - lo) for c in cols]
 
 
-def _sigmas(acc: list[float]) -> list[float | None]:
-    """Fix accuracies [m] as observe_gps takes them: None where not finite and positive."""
-    return [a if 0.0 < a < math.inf else None for a in acc]
+def fix_sigma(accuracy_m: float) -> float | None:
+    """A fix's stated accuracy [m] as ``observe_gps(..., sigma=)`` takes it: None where it is
+    not finite and positive (the stream states none)."""
+    return accuracy_m if 0.0 < accuracy_m < math.inf else None
 
 
 def replay(predictor: Predictor, prep: PreparedDrive, horizon_s: float) -> ReplayResult:
@@ -194,7 +143,7 @@ def replay(predictor: Predictor, prep: PreparedDrive, horizon_s: float) -> Repla
         kc, ic = kinds[c:c + CHUNK_EVENTS], idxs[c:c + CHUNK_EVENTS]
         go, (gt, gx, gy, gs) = _window(cols[GPS], ic[kc == GPS])
         if with_sigma:
-            gs = _sigmas(gs)
+            gs = [fix_sigma(a) for a in gs]
         qo, (qt,) = _window(cols[QUERY], ic[kc == QUERY])
         if IMU in cols:
             io, (it, iax, iay, iyaw, irate) = _window(cols[IMU], ic[kc == IMU])
@@ -235,3 +184,49 @@ def replay(predictor: Predictor, prep: PreparedDrive, horizon_s: float) -> Repla
                     cov_ns[n_fix + i] = clock() - c0
                     _store_cov(cov, n_fix + i, c)
     return ReplayResult(future, now, step_ns, query_ns, cov, cov_ns)
+
+
+# ------------------------------------------------------------------- one event at a time
+Event = tuple[int, float, tuple[float, ...]]
+
+
+def events(prep: PreparedDrive) -> list[Event]:
+    """The replay's events in the runner's order as ``(kind, t, args)``: observations carry
+    their values, a fix is followed by its future query (asked by :func:`feed`), a "now"
+    query has ``args = ()``; a fix's args are ``(x, y, sigma)`` (sigma [m] NaN when not stated)."""
+    cols = _columns(prep)
+    kinds, idxs = build_events(prep)
+    out: list[Event] = []
+    for k, i in zip(kinds.tolist(), idxs.tolist(), strict=True):
+        vals = [float(c[i]) if c is not None else math.nan for c in cols[k]]
+        out.append((k, vals[0], () if k == QUERY else tuple(vals[1:])))
+    return out
+
+
+def feed(pred: Predictor, evs: list[Event], horizon_s: float, start: int = 0,
+         stop: int | None = None, after: Callable[[int], None] | None = None
+         ) -> list[tuple[float, float, float]]:
+    """Feed ``evs[start:stop]`` to ``pred`` (no ``reset()``) as :func:`replay` does, each fix
+    followed by its future query ``horizon_s`` [s] ahead; ``after(i)`` is called after event
+    ``i``. Returns ``(t_query, x, y)`` per answer."""
+    out = []
+    with_sigma = accepts_sigma(pred.observe_gps)
+    for i in range(start, len(evs) if stop is None else stop):
+        k, t, a = evs[i]
+        if k == GPS:
+            if with_sigma:
+                pred.observe_gps(t, a[0], a[1], sigma=fix_sigma(a[2]))
+            else:
+                pred.observe_gps(t, a[0], a[1])
+            x, y = pred.position_at(t + horizon_s)
+            out.append((t + horizon_s, float(x), float(y)))
+        elif k == IMU:
+            pred.observe_imu(t, *a)
+        elif k == SPEED:
+            pred.observe_speed(t, *a)
+        else:
+            x, y = pred.position_at(t)
+            out.append((t, float(x), float(y)))
+        if after is not None:
+            after(i)
+    return out

@@ -7,7 +7,7 @@ from collections.abc import Iterable
 from pathlib import Path
 from typing import Any
 
-from posbench.checks import TABLE_FORMATS
+from posbench.errors import UsageError
 from posbench.figures.per_drive import DEFAULT_DRIVE_PLOTS
 from posbench.figures.style import PlotsWritten, shown_format
 from posbench.figures.writer import write_plots
@@ -41,6 +41,26 @@ from posbench.tables.stat_tables import paired_label_table, paired_table, seeds_
 from posbench.tables.table import Table
 from posbench.tables.track import TRACK_NOTE, track_table
 from posbench.tables.uncertainty import UNCERTAINTY_NOTE, uncertainty_table
+
+#: what ``--format`` may list: report.md is always written; csv and latex add table files
+REPORT_FORMATS = ("md", "csv", "latex")
+
+
+#: table file formats beside report.md: full-precision CSV, booktabs LaTeX (the default: both)
+TABLE_FORMATS = ("csv", "latex")
+
+
+def parse_report_formats(text: str, option: str = "--format") -> tuple[str, ...]:
+    """``--format md,csv,latex`` -> the table file formats to write beside report.md
+    (``("csv", "latex")``; ``md`` alone: none)."""
+    items = [f.strip().lower() for f in text.split(",") if f.strip()]
+    if not items:
+        raise UsageError(f"{option}: give one or more of {', '.join(REPORT_FORMATS)}")
+    for f in items:
+        if f not in REPORT_FORMATS:
+            raise UsageError(f"{option}: unknown format {f!r}; use one or more of "
+                             f"{', '.join(REPORT_FORMATS)} (e.g. md,csv)")
+    return tuple(f for f in REPORT_FORMATS[1:] if f in items)
 
 
 def write_report(run: Run, out: Path, formats: Iterable[str] = ("png",),
