@@ -31,8 +31,6 @@ def parse_pairs(values: list[str] | None, what: str) -> dict[str, str]:
 
 #: longest --horizon [s]: the predictors extrapolate between fixes, not over minutes
 MAX_HORIZON_S = 10.0
-
-
 #: shortest --synthetic-duration [s]
 MIN_SYNTHETIC_S = 1.0
 
@@ -89,9 +87,12 @@ def check_synthetic_duration(seconds: float | None, data: Sequence[Any] | None) 
     return seconds
 
 
-def parse_predictor_names(text: str, option: str = "--predictors") -> tuple[str, ...]:
-    """Comma-separated predictor names, in order (not yet checked against the registry)."""
-    names = tuple(n.strip() for n in text.split(",") if n.strip())
+def parse_predictor_names(values: str | Iterable[str], option: str = "--predictors"
+                          ) -> tuple[str, ...]:
+    """Predictor names, in order (not yet checked against the registry): comma-separated
+    text, or several such texts (``-p kf -p lstm`` as well as ``-p kf,lstm``)."""
+    texts = [values] if isinstance(values, str) else list(values)
+    names = tuple(n.strip() for text in texts for n in str(text).split(",") if n.strip())
     if not names:
         raise UsageError(f"{option} names no predictor; e.g. {option} cv,kf")
     twice = sorted({n for n in names if names.count(n) > 1})
@@ -100,15 +101,23 @@ def parse_predictor_names(text: str, option: str = "--predictors") -> tuple[str,
     return names
 
 
-def parse_seeds(text: str, option: str = "--seeds") -> list[int]:
-    """``--seeds``: a count N (the seeds 0 .. N-1) or a comma-separated list of distinct
-    seeds >= 0, e.g. ``5`` or ``0,1,2,3,4``."""
-    parts = [p.strip() for p in text.split(",")]
+def parse_seeds(value: str | int | Sequence[int], option: str = "--seeds") -> list[int]:
+    """``--seeds``: a count N (the seeds 0 .. N-1) or a list of distinct seeds >= 0, as text
+    (``5``, ``0,1,2,3,4``) or as Python values (``5``, ``[0, 1, 2, 3, 4]``)."""
     try:
-        values = [int(p) for p in parts]
-    except ValueError:
+        if isinstance(value, str):
+            values = [int(p.strip()) for p in value.split(",")]
+        elif isinstance(value, int):
+            values = [value]
+        else:
+            values = [int(v) for v in value]
+            if len(values) == 1:  # a list of one seed is that seed, not a count
+                if values[0] < 0:
+                    raise UsageError(f"{option}: seeds must be >= 0; got {values[0]}")
+                return values
+    except (TypeError, ValueError):
         raise UsageError(f"{option} takes a count (e.g. 5: seeds 0..4) or a list of seeds "
-                         f"(e.g. 0,1,2,3,4); got {text!r}") from None
+                         f"(e.g. 0,1,2,3,4); got {value!r}") from None
     if len(values) == 1:
         if values[0] < 1:
             raise UsageError(f"{option} count must be at least 1; got {values[0]}")
@@ -167,6 +176,19 @@ def _check_creatable(path: Path, option: str) -> None:
         raise UsageError(f"{option} {path}: cannot be created, no permission to write in {anc}")
 
 
+def parse_drive_plots(value: str | int | None, option: str = "--drive-plots") -> int | None:
+    """``--drive-plots``: a count >= 0, or ``all`` / None (no limit)."""
+    if value is None or (isinstance(value, str) and value.strip().lower() == "all"):
+        return None
+    try:
+        n = int(value)
+    except (TypeError, ValueError):
+        n = -1
+    if n < 0:
+        raise UsageError(f"{option} takes a count >= 0 or 'all', got {value!r}")
+    return n
+
+
 def check_out_dir(path: Path, option: str = "--out") -> Path:
     """An output folder: an existing folder, or one that can be created (nothing is created
     here: a failed check leaves no trace)."""
@@ -214,3 +236,23 @@ def check_data_paths(paths: Sequence[str | Path] | None, option: str = "--data")
     for p in paths or []:
         if as_url(p) is None and not Path(p).exists():
             raise UsageError(f"{option} {p}: no such file or folder")
+
+
+def check_drive_options(gps_profile: str, projection: str, horizon_s: float,
+                        gps_latency_s: float, dropouts: str, seed: int,
+                        synthetic_duration_s: float | None,
+                        data: Sequence[str | Path] | None) -> None:
+    """The options that place drives, fixes and queries (``bench run``, ``bench queries``),
+    checked before any work: GPS profile, projection, horizon [s], GPS latency [s], dropout
+    profile, seed, synthetic duration [s] and data paths."""
+    from posbench.config import GPS_PROFILES
+    from posbench.scenarios.projection import PROJECTIONS
+
+    check_choice(gps_profile, GPS_PROFILES, "--gps-profile")
+    check_choice(projection, PROJECTIONS, "--projection")
+    check_horizon(horizon_s)
+    check_at_least(gps_latency_s, 0.0, "--gps-latency", " s")
+    check_dropouts(dropouts)
+    check_at_least(seed, 0, "--seed")
+    check_synthetic_duration(synthetic_duration_s, data)
+    check_data_paths(data)

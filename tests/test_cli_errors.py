@@ -106,7 +106,7 @@ CASES = [
      "--set nope.x=1: nope is not among the predictors to run (kf)", True),
     ("set-bad-json-rejected", "run -p kf --set kf.jerk_psd=[1,",
      "--set kf.jerk_psd=[1,: predictor kf rejects jerk_psd='[1,'", True),
-    ("set-bad-value-of-alias", "run -p cv,kf@slow --set kf@slow.gps_sigma=0.1 kf@slow.jerk_psd=-1",
+    ("set-bad-value-of-alias", "run -p cv,kf@slow --set kf@slow.gps_sigma=0.1 --set kf@slow.jerk_psd=-1",
      "--set kf@slow.jerk_psd=-1: predictor kf@slow rejects jerk_psd=-1", True),
     ("set-twice", "run -p kf --set kf.jerk_psd=1 --set kf.jerk_psd=2", "set twice", True),
     ("set-model-disagrees", "run -p lstm --model lstm={ws}/bad.onnx --set lstm.model={ws}/x.onnx",
@@ -270,12 +270,13 @@ def test_shell_completion_is_enabled():
 
 
 @pytest.mark.parametrize(("cmd", "placeholders"), [
-    ("run", ["--data PATH...", "--model NAME=PATH...", "--topic ROLE=TOPIC...", "--out DIR",
-             "--rerun FILE", "--projection enu|mercator", "--set NAME.OPTION=VALUE..."]),
-    ("data inspect", ["--topic ROLE=TOPIC..."]),
-    ("train", ["--data PATH...", "--out DIR"]),
-    ("latency", ["--data PATH...", "--model NAME=PATH..."]),
-    ("tune", ["--data PATH..."]),
+    ("run", ["--data PATH", "--model NAME=PATH", "--topic ROLE=TOPIC", "--out DIR",
+             "--rerun FILE", "--projection enu|mercator", "--set NAME.OPTION=VALUE",
+             "--config FILE.toml"]),
+    ("data inspect", ["--topic ROLE=TOPIC"]),
+    ("train", ["--data PATH", "--out DIR", "--network NAME"]),
+    ("latency", ["--data PATH", "--model NAME=PATH"]),
+    ("tune", ["--data PATH"]),
 ])
 def test_help_placeholders(cmd, placeholders):
     r = bench(*cmd.split(), "--help")

@@ -17,7 +17,8 @@ import pytest
 from test_cli_errors import assert_one_error_line, bench
 
 from posbench.comparison.align import Metric, aligned, config_differences, run_labels
-from posbench.comparison.gates import Gate, check_gates, paired_difference
+from posbench.comparison.gates import Gate, check_gates
+from posbench.comparison.paired import paired_difference
 from posbench.errors import UsageError
 from posbench.saved_run.run import load_run
 
@@ -152,7 +153,7 @@ def test_cli_gate_fails_on_a_real_regression(base_run: Path, tmp_path: Path) -> 
 def test_cli_table_csv_and_outputs(base_run: Path, tmp_path: Path) -> None:
     new = _copy(base_run, tmp_path / "new", kf_scale=1.3)
     out = tmp_path / "cmp"
-    r = bench("compare", str(base_run), str(new), "--format", "csv", "--scope", "all,drive",
+    r = bench("compare", str(base_run), str(new), "--table-format", "csv", "--scope", "all,drive",
               "--out", str(out))
     assert r.returncode == 0, r.stderr
     from io import StringIO
@@ -185,7 +186,7 @@ def test_cli_bad_input_is_one_line(base_run: Path, tmp_path: Path) -> None:
         (("compare", str(tmp_path / "nope")), ("no such file",)),
         (("compare", str(bad)), ("not readable as JSON",)),
         (("compare", str(base_run), "--metric", "future.avg"), ("--metric", "not a metric")),
-        (("compare", str(base_run), "--format", "xlsx"), ("--format",)),
+        (("compare", str(base_run), "--table-format", "xlsx"), ("--table-format",)),
         (("compare", str(base_run), "--scope", "everything"), ("--scope",)),
         (("compare", str(base_run), "--fail-if-worse", "kf:future.mean_m:5%"),
          ("exactly two runs",)),
@@ -294,7 +295,7 @@ def test_cli_uncertainty_table_csv_and_outputs(base_run: Path, tmp_path: Path) -
     assert "note: old13 has no uncertainty figures (results.json schema 1.3" in r.stderr
     # CSV: the error table, an empty line, the uncertainty table, full precision
     out = tmp_path / "cmp"
-    r = bench("compare", str(base_run), str(new), "--uncertainty", "--format", "csv",
+    r = bench("compare", str(base_run), str(new), "--uncertainty", "--table-format", "csv",
               "--scope", "all,since-fix", "--out", str(out))
     assert r.returncode == 0, r.stderr
     errors, unc = r.stdout.split("written:")[0].split("\n\n")

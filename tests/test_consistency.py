@@ -206,7 +206,7 @@ def test_run_strict_fails_before_predictors(flipped_csv, tmp_path):
 def test_run_without_strict_reports_failure(flipped_csv, tmp_path):
     out = tmp_path / "out"
     r = bench("run", "--data", str(flipped_csv), "-p", "cv,kf", "--out", str(out),
-              "--drive-plots", "0", "--format", "md")
+              "--drive-plots", "0", "--table-format", "md")
     assert r.returncode == 0, r.stderr
     assert "data check FAIL flipped: imu.yaw_rate: sign -1" in r.stdout
     assert "kf used a failing stream" in r.stdout and "cv used" not in r.stdout

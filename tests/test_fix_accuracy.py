@@ -187,7 +187,7 @@ def test_accepts_sigma() -> None:
 def _prep(accuracy: np.ndarray | None):
     from dataclasses import replace
 
-    from posbench.predictor_tools.contract_inputs import cut_prepared, inputs
+    from posbench.predictor_tools.contract.inputs import cut_prepared, inputs
 
     prep = cut_prepared(inputs().drive, 15.0)
     g = prep.gps
@@ -233,7 +233,7 @@ def test_gate_forwards_sigma() -> None:
 
 def test_old_style_predictor_through_the_runner() -> None:
     """A three-argument user predictor keeps working in a whole run (behind the gate)."""
-    from posbench.predictor_tools.contract_inputs import cut_prepared, inputs
+    from posbench.predictor_tools.contract.inputs import cut_prepared, inputs
 
     prep = cut_prepared(inputs().drive, 15.0)
     assert prep.gps.accuracy is not None  # the synthetic fixes state an accuracy

@@ -221,15 +221,16 @@ def test_runner_counts_rejections_and_no_gate_turns_it_off():
 
 def test_cli_no_gate_flag(tmp_path, monkeypatch):
     import posbench.cli.app as cli
-    from posbench.cli import run as run_cmd
+    import posbench.cli.summary as summary
+    import posbench.pipeline.run as pipeline
 
     seen = {}
 
-    def fake_run(drives, cfg, *a, **k):
-        seen["gate"] = cfg.gate
+    def fake_execute(plan, command, reporter):
+        seen["gate"] = plan.config.gate
 
-    monkeypatch.setattr(run_cmd, "_run", fake_run)
-    monkeypatch.setattr(run_cmd, "load_drives", lambda *a, **k: [])
+    monkeypatch.setattr(pipeline, "execute_run", fake_execute)
+    monkeypatch.setattr(summary, "print_run_summary", lambda published: None)
     from typer.testing import CliRunner
 
     for flag, want in (([], True), (["--no-gate"], False), (["--gate"], True)):

@@ -154,8 +154,7 @@ def test_the_cli_runs_one_blas_thread_unless_told(preset, expected):
     env = {k: v for k, v in os.environ.items() if k != "OPENBLAS_NUM_THREADS"}
     if preset:
         env["OPENBLAS_NUM_THREADS"] = preset
-    env["PYTHONPATH"] = str(ROOT)
-    code = ("import sys, bench.cli, os; assert 'numpy' in sys.modules; "
+    code = ("import sys, posbench.cli.app, os; assert 'numpy' in sys.modules; "
             "print(os.environ['OPENBLAS_NUM_THREADS'])")
     out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True,
                          check=True).stdout.strip()

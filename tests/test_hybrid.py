@@ -18,7 +18,7 @@ import pytest
 torch = pytest.importorskip("torch")
 
 from posbench.config import RunConfig  # noqa: E402
-from posbench.predictor_tools.contract_inputs import HORIZON_S  # noqa: E402
+from posbench.predictor_tools.contract.inputs import HORIZON_S  # noqa: E402
 from posbench.predictors.hybrid.data import hybrid_windows  # noqa: E402
 from posbench.predictors.hybrid.export import (  # noqa: E402
     export_onnx,

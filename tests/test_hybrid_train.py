@@ -1,4 +1,4 @@
-"""The hybrid's training loop end to end (tiny), and `bench train --model hybrid`."""
+"""The hybrid's training loop end to end (tiny), and `bench train --network hybrid`."""
 
 from __future__ import annotations
 
@@ -53,7 +53,7 @@ def test_future_answers_rotate_the_correction() -> None:
 
 
 @pytest.mark.parametrize("args, message", [
-    (["--model", "gru"], "--model 'gru': choose one of lstm, hybrid"),
+    (["--network", "gru"], "--network 'gru': choose one of lstm, hybrid"),
     (["--profiles", "rtk,gnss"], "--profiles 'rtk,gnss': choose from none, rtk, consumer"),
     (["--corpus-hours", "-1"], "--corpus-hours must be >= 0"),
     (["--max-minutes", "0"], "--max-minutes must be > 0"),

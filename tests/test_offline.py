@@ -137,7 +137,7 @@ def test_real_drive_scored_offline_equals_bench_run(comma_dir, tmp_path):
     opts = ["--data", str(comma_dir), "--dropouts", "outages"]
     ok(bench("run", "-p", "cv", *opts, "--out", str(tmp_path / "run"), "--drive-plots", "0",
              timeout=600))
-    ok(bench("queries", *opts, "--out", str(tmp_path / "q"), "--format", "parquet"))
+    ok(bench("queries", *opts, "--out", str(tmp_path / "q"), "--file-format", "parquet"))
     man = json.loads((tmp_path / "q" / MANIFEST).read_text())
     (d,) = man["drives"]
     assert d["t0_s"] > 0 and d["drive"] != d["name"] and "/" not in d["drive"]
@@ -385,8 +385,8 @@ def test_readme_offline_example_runs_and_prints_what_the_readme_shows(tmp_path):
 def test_help_teaches_the_offline_commands():
     r = ok(bench("queries", "--help"))
     text = " ".join(r.stdout.split())
-    for s in ("--data PATH...", "--out DIR", "--dropouts PROFILE", "--horizon SECONDS",
-              "--seed INT", "--format csv|parquet", "t_issue", "keep q/key/", "Example:"):
+    for s in ("--data PATH", "--out DIR", "--dropouts PROFILE", "--horizon SECONDS",
+              "--seed INT", "--file-format csv|parquet", "t_issue", "keep q/key/", "Example:"):
         assert s in text, s
     r = ok(bench("score", "--help"))
     text = " ".join(r.stdout.split())

@@ -241,10 +241,10 @@ def test_plot_formats(tmp_path):
 
 
 def test_report_formats_choose_the_table_files(tmp_path):
-    """--format md,csv: report.md and tables/*.csv (no .tex); --format md: no tables/ at all;
+    """--table-format md,csv: report.md and tables/*.csv (no .tex); --table-format md: no tables/ at all;
     the CSV holds the interval bounds as numbers in their own columns."""
     out = tmp_path / "o"
-    r = bench("run", "-p", "cv,kf", "--out", str(out), "--workers", "1", "--format", "md,csv",
+    r = bench("run", "-p", "cv,kf", "--out", str(out), "--workers", "1", "--table-format", "md,csv",
               "--drive-plots", "0")
     assert r.returncode == 0, r.stderr
     csvs = sorted(p.name for p in (out / "tables").iterdir())
@@ -255,12 +255,12 @@ def test_report_formats_choose_the_table_files(tmp_path):
     lo = [c for c in summary.columns if "lo" in c and "future" in c.lower()]
     assert lo and pd.api.types.is_float_dtype(summary[lo[0]]), summary.columns
     out2 = tmp_path / "p"
-    r = bench("run", "-p", "cv", "--out", str(out2), "--workers", "1", "--format", "md",
+    r = bench("run", "-p", "cv", "--out", str(out2), "--workers", "1", "--table-format", "md",
               "--drive-plots", "0")
     assert r.returncode == 0, r.stderr
     assert (out2 / "report.md").is_file() and not (out2 / "tables").exists()
-    bad = bench("run", "-p", "cv", "--out", str(tmp_path / "b"), "--format", "md,xlsx")
-    assert bad.returncode == 2 and bad.stderr.startswith("error: --format: unknown format 'xlsx'")
+    bad = bench("run", "-p", "cv", "--out", str(tmp_path / "b"), "--table-format", "md,xlsx")
+    assert bad.returncode == 2 and bad.stderr.startswith("error: --table-format: unknown format 'xlsx'")
     assert not (tmp_path / "b").exists()
 
 

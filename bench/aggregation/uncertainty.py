@@ -28,8 +28,6 @@ from posbench.metrics.calibration import (
 from posbench.scoring.schema import COV_COLUMNS, KINDS
 
 COV = list(COV_COLUMNS)
-
-
 NEEDED = ("predictor", "kind", "dataset", "drive", "label", "since_fix_s", "x", "y",
           "x_ref", "y_ref", "t_query", *COV)
 

@@ -1,17 +1,22 @@
-"""The ``bench`` command line: the Typer app and its entry point.
+"""The ``bench`` command line: the Typer app, its one error wrapper and its entry point.
 
-Each command lives in its own module under :mod:`posbench.commands`; what they share
-(consoles, the one-line error, option types) is in :mod:`posbench.cli.common`.
-Bad user input - a bad value, and also a command-line syntax error (unknown option,
-missing value, not a number) - prints one line ``error: ...`` on stderr naming what
-is wrong and exits with status 2.
+Each command lives in its own module of :mod:`posbench.cli` and calls the library (the
+pipelines, the comparison, the contract check); what commands share is
+:mod:`posbench.cli.options` (option types), :mod:`posbench.cli.terminal` (output) and
+:mod:`posbench.cli.config_file` (``--config``). Bad user input - a bad value, a file that
+cannot be read, and also a command-line syntax error (unknown option, missing value, not a
+number) - prints one line ``error: ...`` on stderr naming what is wrong and exits with
+status 2, whatever command and whatever process it happened in.
 """
 
 from __future__ import annotations
 
+import functools
 import importlib
 import sys
-from typing import Annotated
+from collections.abc import Callable
+from pathlib import Path
+from typing import Annotated, Any
 
 import typer
 
@@ -29,7 +34,8 @@ from posbench.cli import (
     tune,
     view,
 )
-from posbench.cli.common import fail
+from posbench.cli.options import WORKER_DIED
+from posbench.cli.terminal import fail, warn
 
 
 def _argument_type(self: typer.core.TyperArgument, ctx: object) -> str | None:
@@ -39,20 +45,15 @@ def _argument_type(self: typer.core.TyperArgument, ctx: object) -> str | None:
 
 
 typer.core.TyperArgument.display_type_rich = _argument_type  # typer has no hook for this
-
-
 app = typer.Typer(
     help="posbench: benchmark real-time vehicle position predictors on your drives.\n\n"
          "Start with `bench run` (built-in synthetic drives, no data needed), then point it at "
-         "your recordings: `bench run --data PATH... --predictors lstm,kf`.",
+         "your recordings: `bench run --data PATH -p lstm,kf`. Every command takes -q/-v and "
+         "--config FILE.toml.",
     no_args_is_help=True, add_completion=True, pretty_exceptions_enable=False,
     rich_markup_mode=None)
-
-
 data_app = typer.Typer(help="Look at recordings before benchmarking them.", no_args_is_help=True,
                        rich_markup_mode=None)
-
-
 app.add_typer(data_app, name="data")
 
 
@@ -60,7 +61,7 @@ def version_string() -> str:
     """``posbench X.Y.Z`` from the installed package's metadata."""
     from importlib.metadata import PackageNotFoundError, version
 
-    from posbench import DISTRIBUTION
+    from posbench.naming import DISTRIBUTION
 
     try:
         return f"posbench {version(DISTRIBUTION)}"
@@ -81,57 +82,108 @@ def _root(version: Annotated[bool, typer.Option(
     pass
 
 
-app.command("run")(run.run)
+def user_errors() -> tuple[type[BaseException], ...]:
+    """The exceptions that are a user's mistake or a limit of their machine, never a bug:
+    each becomes one line ``error: ...`` and exit status 2."""
+    from posbench.errors import UsageError
+    from posbench.predictors.registry import PredictorError
+    from posbench.recording.web import ServeError
+    from posbench.replay.executors import ExecutorError
+    from posbench.scenarios.errors import DataError
+
+    return DataError, UsageError, ExecutorError, ServeError, PredictorError
 
 
-app.command("queries")(queries.queries)
+def command(fn: Callable[..., Any]) -> Callable[..., Any]:
+    """``fn`` with the one error wrapper every command has: a user error (:func:`user_errors`)
+    is one line on stderr and exit 2; a dead worker process too (:data:`WORKER_DIED`)."""
+    @functools.wraps(fn)
+    def wrapper(*args: Any, **kwargs: Any) -> Any:
+        from concurrent.futures.process import BrokenProcessPool
+
+        try:
+            return fn(*args, **kwargs)
+        except user_errors() as e:
+            raise fail(str(e)) from None
+        except BrokenProcessPool:
+            raise fail(WORKER_DIED) from None
+    return wrapper
 
 
-app.command("score")(score.score)
+for name, fn in (("run", run.run), ("queries", queries.queries), ("score", score.score),
+                 ("view", view.view), ("predictors", predictors.list_predictors),
+                 ("train", train.train), ("latency", latency.latency), ("tune", tune.tune),
+                 ("check", check.check), ("compare", compare.compare)):
+    app.command(name)(command(fn))
+data_app.command("inspect")(command(inspect.inspect))
 
 
-data_app.command("inspect")(inspect.inspect)
+# ------------------------------------------------------------- last release's spellings
+#: options that took several values after one flag in the last release (``--data a b``)
+GREEDY = {"--data": "-d", "--topic": None, "--model": None, "--set": None}
+#: commands whose own arguments never follow ``--data`` (it took every word after it)
+NO_ARGUMENTS = ("run", "queries", "train", "latency")
 
 
-app.command("view")(view.view)
-
-
-app.command("predictors")(predictors.list_predictors)
-
-
-app.command("train")(train.train)
-
-
-app.command("latency")(latency.latency)
-
-
-app.command("tune")(tune.tune)
-
-
-app.command("check")(check.check)
-
-
-app.command("compare")(compare.compare)
-
-
-MULTI_VALUE_OPTIONS = ("--data", "--topic", "--model", "--set")
-
-
-def _normalise_argv(argv: list[str]) -> list[str]:
-    """Let multi-value options take several values after one flag (``--data a b``)."""
-    out: list[str] = []
-    current: str | None = None
-    for a in argv:
+def _subcommand(argv: list[str]) -> tuple[str | None, int]:
+    """The (sub)command ``argv`` calls (``run``, ``data inspect``) and where its options
+    start."""
+    for i, a in enumerate(argv):
         if a.startswith("-"):
-            current = a if a in MULTI_VALUE_OPTIONS else None
-            out.append(a)
             continue
-        if current is not None and out and out[-1] != current:
-            out.append(current)
+        if a == "data" and i + 1 < len(argv) and argv[i + 1] == "inspect":
+            return "data inspect", i + 2
+        return a, i + 1
+    return None, len(argv)
+
+
+def upgrade_argv(argv: list[str]) -> list[str]:
+    """``argv`` with the last release's spellings rewritten, one notice each on stderr:
+    several values after one ``--data`` (commands without arguments of their own) or after
+    one ``--topic``/``--model``/``--set`` (values holding ``=``) become repeated options;
+    ``bench score ... -q DIR`` (an existing folder) becomes ``--queries DIR``."""
+    cmd, start = _subcommand(argv)
+    if cmd is None:
+        return argv
+    out, current, noted = list(argv[:start]), None, set()
+    i = start
+    while i < len(argv):
+        a = argv[i]
+        if a == "--":
+            out += argv[i:]
+            break
+        if cmd == "score" and a == "-q" and i + 1 < len(argv) and Path(argv[i + 1]).is_dir():
+            warn("-q DIR is deprecated in bench score: -q is --quiet now, use --queries DIR "
+                 "(the old spelling goes in the next release)")
+            out += ["--queries", argv[i + 1]]
+            i += 2
+            continue
+        if a.startswith("-"):
+            flag = next((f for f, short in GREEDY.items() if a in (f, short)), None)
+            current, taken = (flag, 0) if flag else (None, 0)
+            out.append(a)
+            i += 1
+            continue
+        if current is not None:
+            taken += 1
+            more = (cmd in NO_ARGUMENTS if current == "--data" else "=" in a)
+            if taken > 1 and more:
+                if current not in noted:
+                    noted.add(current)
+                    warn(f"several values after one {current} are deprecated: repeat it "
+                         f"({current} A {current} B; the old spelling goes in the next "
+                         f"release)")
+                out += [current, a]
+                i += 1
+                continue
+            if taken > 1:
+                current = None
         out.append(a)
+        i += 1
     return out
 
 
+# ------------------------------------------------------------------------ entry point
 def _click_errors(name: str) -> tuple[type[BaseException], ...]:
     """Click's exception class ``name``, and its twin in the copy of click that newer typer
     versions vendor (``typer._click``): a command-line error can be either."""
@@ -147,14 +199,8 @@ def _click_errors(name: str) -> tuple[type[BaseException], ...]:
 
 
 NO_ARGS = _click_errors("NoArgsIsHelpError")
-
-
 USAGE_ERRORS = _click_errors("UsageError")
-
-
 CLICK_ERRORS = _click_errors("ClickException")
-
-
 ABORTS = (typer.Abort, *_click_errors("Abort"))
 
 
@@ -183,8 +229,8 @@ def usage_line(e: BaseException, args: list[str]) -> str:
 
 def main(argv: list[str] | None = None) -> None:
     """Console-script entry point: run ``bench`` on ``argv`` (default: ``sys.argv[1:]``) and
-    exit with its status (0 ok, 2 user error, 130 interrupted)."""
-    args = _normalise_argv(sys.argv[1:] if argv is None else argv)
+    exit with its status (0 ok, 1 a check or gate failed, 2 user error, 130 interrupted)."""
+    args = upgrade_argv(sys.argv[1:] if argv is None else argv)
     try:
         rv = app(args=args, prog_name="bench", standalone_mode=False)
     except NO_ARGS as e:  # `bench` or `bench data` alone: their help

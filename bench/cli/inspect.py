@@ -1,4 +1,4 @@
-"""`bench data inspect`: what is in each recording."""
+"""``bench data inspect``: what is in each recording, and whether its streams agree."""
 
 from __future__ import annotations
 
@@ -8,18 +8,16 @@ from typing import Annotated, Any
 
 import typer
 
-from posbench.cli.common import (
-    DataError,
+from posbench.cli.options import (
+    ConfigOpt,
     ProjectionOpt,
+    QuietOpt,
     StrictOpt,
     TopicOpt,
-    UsageError,
-    console,
-    fail,
-    load_drives,
+    VerboseOpt,
     parse_topics,
 )
-from posbench.cli.terminal import print_table
+from posbench.cli.terminal import console, print_table
 
 HEADER = ("drive", "format", "dur [s]", "dist [m]", "fixes", "fix dt p5/p50/p95/max [ms]",
           "IMU [Hz]", "speed [m/s]", "stopped", "str/turn/rbt/stop [%]", "truth (acc.)", "warn.")
@@ -53,17 +51,20 @@ def inspect(
     topic: TopicOpt = None,
     projection: ProjectionOpt = "enu",
     strict: StrictOpt = False,
+    config: ConfigOpt = None,
+    quiet: QuietOpt = False,
+    verbose: VerboseOpt = False,
 ) -> None:
     """Show what is in each drive: duration, distance, fix intervals, IMU rate, speeds, truth,
     and whether its streams agree with each other (the data consistency check)."""
+    from posbench.cli.terminal import ConsoleReporter
     from posbench.pipeline.data_check import check_drives, strict_error
+    from posbench.pipeline.drives import load_drives
     from posbench.scenarios.summary import summarize_drive
 
-    try:
-        drives = load_drives(paths, projection, parse_topics(topic))
-        checks = check_drives(drives)
-    except (DataError, UsageError) as e:
-        raise fail(str(e)) from None
+    drives = load_drives(paths, projection, parse_topics(topic) or None,
+                         reporter=ConsoleReporter())
+    checks = check_drives(drives)
     rows = [summarize_drive(d) for d in drives]
     if as_json:
         for r, d in zip(rows, drives, strict=True):
@@ -73,7 +74,7 @@ def inspect(
         print_inspect(rows, checks)
     err = strict_error(checks) if strict else None
     if err is not None:
-        raise fail(str(err))
+        raise err
 
 
 def print_inspect(rows: list[dict[str, Any]], checks: dict[str, Any]) -> None:

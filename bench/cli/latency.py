@@ -1,4 +1,4 @@
-"""`bench latency`: per-call latency percentiles."""
+"""``bench latency``: per-call latency percentiles (:mod:`posbench.predictor_tools.latency`)."""
 
 from __future__ import annotations
 
@@ -7,32 +7,38 @@ from typing import Annotated
 
 import typer
 
-from posbench.checks import check_at_least, check_data_paths, parse_predictor_names
-from posbench.cli.common import DataError, DataOpt, UsageError, console, fail, load_drives
-from posbench.cli.terminal import print_table
+from posbench.checks import check_at_least, check_data_paths, parse_pairs, parse_predictor_names
+from posbench.cli.options import ConfigOpt, DataOpt, ModelOpt, PredictorsOpt, QuietOpt, VerboseOpt
+from posbench.cli.terminal import ConsoleReporter, console, print_table
+from posbench.errors import UsageError
 from posbench.replay.predictor_setup import model_options, validate_predictors
+
+#: the predictors timed by default: those of `bench run`, and hybrid (the CI latency gate
+#: times it too)
+DEFAULT_TIMED = ("cv", "poly", "kf", "kf-paper", "ekf", "lstm", "hybrid")
 
 
 def latency(
-    predictors: Annotated[str, typer.Option(
-        "--predictors", "-p", help="Comma-separated predictor names.")
-    ] = "cv,poly,kf,kf-paper,ekf,lstm,hybrid",
+    predictors: PredictorsOpt = None,
     steps: Annotated[int, typer.Option(help="Fix steps to time per predictor (after warm-up).")
                      ] = 2000,
     data: DataOpt = None,
     as_json: Annotated[bool, typer.Option("--json", help="Print JSON instead of tables.")] = False,
-    model: Annotated[list[str] | None, typer.Option(
-        "--model", metavar="NAME=PATH...",
-        help="Model file per predictor, e.g. lstm-authors=PATH.onnx.")] = None,
+    model: ModelOpt = None,
+    config: ConfigOpt = None,
+    quiet: QuietOpt = False,
+    verbose: VerboseOpt = False,
 ) -> None:
     """Per-call latency percentiles (us) in one process and thread, with the lstm's stages and
-    batch throughput, beside the paper's figures (2 ms fit + 2 ms LSTM, 4-6 ms per step)."""
-    try:  # every option is checked before a drive is loaded or a predictor timed
-        check_at_least(steps, 1, "--steps")
-        check_data_paths(data)
-        validate_predictors(parse_predictor_names(predictors), model_options(model))
-    except UsageError as e:
-        raise fail(str(e)) from None
+    batch throughput, beside the paper's figures (2 ms fit + 2 ms LSTM, 4-6 ms per step).
+    Default predictors: those of `bench run` and hybrid (which the CI latency gate times)."""
+    # every option is checked before a drive is loaded or a predictor timed
+    check_at_least(steps, 1, "--steps")
+    check_data_paths(data)
+    names = list(parse_predictor_names(predictors or DEFAULT_TIMED))
+    options = model_options(parse_pairs(model, "--model"))
+    validate_predictors(names, options)
+    from posbench.pipeline.drives import load_drives
     from posbench.predictor_tools.latency import (
         PAPER_MS,
         batch_throughput,
@@ -44,29 +50,24 @@ def latency(
     from posbench.predictors.registry import available
 
     single_thread()
-    try:
-        names = [p.strip() for p in predictors.split(",") if p.strip()]
-        unknown = [n for n in names if n not in available()]
-        if unknown:
-            raise UsageError(f"unknown predictor(s) {', '.join(unknown)}")
-        options = model_options(model)
-        drives = load_drives(data, "enu", None)
-        drive = max(drives, key=lambda d: len(d.gps))
-        res: dict = {}
-        with console.status("timing...") as status:
-            for n in names:
-                status.update(f"timing {n} on {drive.name}...")
-                res[n] = time_predictor(n, drive, steps, options.get(n))
-            if "lstm" in names:
-                status.update("timing lstm stages...")
-                res["lstm_stages"] = lstm_stages(drive, steps)
-                res["lstm_fused_stages"] = lstm_fused_stages(drive, steps)
-                status.update("timing batch throughput...")
-                res["batch"] = batch_throughput()
-        res["drive"] = drive.name
-        res["paper_ms"] = PAPER_MS
-    except (DataError, UsageError) as e:
-        raise fail(str(e)) from None
+    unknown = [n for n in names if n not in available()]
+    if unknown:
+        raise UsageError(f"unknown predictor(s) {', '.join(unknown)}")
+    drives = load_drives(data, "enu", None, reporter=ConsoleReporter())
+    drive = max(drives, key=lambda d: len(d.gps))
+    res: dict = {}
+    with ConsoleReporter().phase("timing...") as status:
+        for n in names:
+            status(f"timing {n} on {drive.name}...")
+            res[n] = time_predictor(n, drive, steps, options.get(n))
+        if "lstm" in names:
+            status("timing lstm stages...")
+            res["lstm_stages"] = lstm_stages(drive, steps)
+            res["lstm_fused_stages"] = lstm_fused_stages(drive, steps)
+            status("timing batch throughput...")
+            res["batch"] = batch_throughput()
+    res["drive"] = drive.name
+    res["paper_ms"] = PAPER_MS
     if as_json:
         print(json.dumps(res, indent=2))
         return

@@ -1,4 +1,4 @@
-"""`bench predictors`: every available predictor, where it comes from, and its options."""
+"""``bench predictors``: every available predictor, where it comes from, and its options."""
 
 from __future__ import annotations
 
@@ -8,7 +8,9 @@ from typing import Annotated, Any
 
 import typer
 
-from posbench.cli.common import UsageError, console, fail, import_from_cwd
+from posbench.cli.options import ConfigOpt, QuietOpt, VerboseOpt, import_from_cwd
+from posbench.cli.terminal import console
+from posbench.errors import UsageError
 
 
 def _jsonable(value: Any) -> Any:
@@ -88,6 +90,9 @@ def list_predictors(
              "names, entry points or module:Class. Default: list every available one.")] = None,
     as_json: Annotated[bool, typer.Option("--json", help="Print JSON instead of a table.")
                        ] = False,
+    config: ConfigOpt = None,
+    quiet: QuietOpt = False,
+    verbose: VerboseOpt = False,
 ) -> None:
     """List the predictors `bench run --predictors` takes: built-in ones, those installed
     packages declare in the entry-point group posbench.predictors, and any module:Class of a
@@ -97,12 +102,9 @@ def list_predictors(
     """
     from rich.markup import escape
 
-    from posbench.cli.terminal import print_table
+    from posbench.cli.terminal import print_table, say
 
-    try:
-        res = listing(names)
-    except UsageError as e:
-        raise fail(str(e)) from None
+    res = listing(names)
     if as_json:
         print(json.dumps(res, indent=2))
         return
@@ -116,4 +118,4 @@ def list_predictors(
                           f"{escape(_option_text(i['options'], i['any_option']))}",
                           highlight=False, soft_wrap=True)
     for note in res["notes"]:
-        console.print(f"note: {escape(note)}", highlight=False, soft_wrap=True)
+        say(f"note: {note}")

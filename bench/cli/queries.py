@@ -1,4 +1,5 @@
-"""`bench queries`: write posbench's queries and inputs for a system that answers elsewhere."""
+"""``bench queries``: write posbench's queries and inputs for a system that answers elsewhere
+(:mod:`posbench.offline.queries_folder` writes the folder)."""
 
 from __future__ import annotations
 
@@ -7,26 +8,24 @@ from typing import Annotated
 
 import typer
 
-from posbench.checks import check_choice, check_out_dir
-from posbench.cli.common import (
-    DataError,
+from posbench.cli.options import (
+    ConfigOpt,
     DataOpt,
     DropoutsOpt,
     GpsLatencyOpt,
     GpsProfileOpt,
     HorizonOpt,
     IncludePoorTruthOpt,
+    OldFormatOpt,
     ProjectionOpt,
+    QuietOpt,
     SeedOpt,
     SyntheticDurationOpt,
     TopicOpt,
-    UsageError,
-    check_drive_options,
+    VerboseOpt,
     command_line,
-    console,
-    fail,
-    load_drives,
     parse_topics,
+    renamed,
 )
 
 
@@ -46,8 +45,12 @@ def queries(
     include_poor_truth: IncludePoorTruthOpt = False,
     synthetic_duration: SyntheticDurationOpt = None,
     file_format: Annotated[str, typer.Option(
-        "--format", metavar="csv|parquet",
+        "--file-format", metavar="csv|parquet",
         help="File format of the queries list and the inputs.")] = "csv",
+    config: ConfigOpt = None,
+    quiet: QuietOpt = False,
+    verbose: VerboseOpt = False,
+    old_format: OldFormatOpt = None,
 ) -> None:
     """Write the queries of a run and the inputs to answer them, for a system that runs outside
     posbench (another process, language or machine); score its answers with `bench score`.
@@ -63,45 +66,38 @@ def queries(
     Example: bench queries --dropouts outages --out q; then give q/queries.csv and q/inputs/
     to the system under test, keep q/key/, and run bench score ANSWERS.csv --queries q
     """
+    from posbench.checks import check_choice, check_drive_options, check_out_dir
+    from posbench.cli.terminal import ConsoleReporter, say
     from posbench.config import RunConfig
-    from posbench.offline.queries_folder import FORMATS
+    from posbench.naming import plural
+    from posbench.offline.queries_folder import FORMATS, write_queries
+    from posbench.pipeline.drives import load_drives
+    from posbench.saved_run.provenance import data_provenance
     from posbench.scenarios.remote import local_paths
 
-    try:
-        check_drive_options(gps_profile, projection, horizon, gps_latency, dropouts, seed,
-                            synthetic_duration, data)
-        topics = parse_topics(topic)
-        check_choice(file_format, FORMATS, "--format")
-        check_out_dir(out)
-        # no predictor runs here, and no gate: the system under test gets every fed fix
-        cfg = RunConfig(predictors=(), horizon_s=horizon, gps_profile=gps_profile,
-                        gps_latency_s=gps_latency, dropouts=dropouts, seed=seed,
-                        exclude_poor_truth=not include_poor_truth, gate=False)
-        with local_paths(data) as data:
-            drives = load_drives(data, projection, topics, seed=seed,
-                                 synthetic_duration=synthetic_duration)
-            _write(drives, cfg, data, out, file_format)
-    except (DataError, UsageError) as e:
-        raise fail(str(e)) from None
-
-
-def _write(drives, cfg, data, out: Path, file_format: str) -> None:
-    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
-
-    from posbench.cli.run import plural
-    from posbench.offline.queries_folder import write_queries
-    from posbench.saved_run.provenance import data_provenance
-
-    with Progress(TextColumn("[bold]{task.description}"), BarColumn(), MofNCompleteColumn(),
-                  TimeElapsedColumn(), TextColumn("{task.fields[last]}"), console=console) as prog:
-        task = prog.add_task(f"{plural(len(drives), 'drive')}: queries and inputs",
-                             total=len(drives), last="")
-        done = write_queries(drives, cfg, out, command=command_line(),
-                             data=data_provenance(data, cfg.seed), fmt=file_format,
-                             on_done=lambda name: prog.update(task, advance=1, last=name))
-    skipped = f" ({done.skipped} skipped, named in manifest.json)" if done.skipped else ""
-    console.print(f"wrote {out}/: {done.files[0]} ({done.queries} queries), "
-                  f"{plural(done.drives, 'input file')} in inputs/{skipped}, key/ (the answer "
-                  f"key: keep it from the system under test), manifest.json", highlight=False)
-    console.print(f"score the answers with: bench score ANSWERS.csv --queries {out}",
-                  highlight=False)
+    if old_format is not None:
+        renamed("--format", "--file-format", "bench queries")
+        file_format = old_format
+    check_drive_options(gps_profile, projection, horizon, gps_latency, dropouts, seed,
+                        synthetic_duration, data)
+    topics = parse_topics(topic)
+    check_choice(file_format, FORMATS, "--file-format")
+    check_out_dir(out)
+    # no predictor runs here, and no gate: the system under test gets every fed fix
+    cfg = RunConfig(predictors=(), horizon_s=horizon, gps_profile=gps_profile,
+                    gps_latency_s=gps_latency, dropouts=dropouts, seed=seed,
+                    exclude_poor_truth=not include_poor_truth, gate=False)
+    reporter = ConsoleReporter()
+    with local_paths(data) as local:
+        drives = load_drives(local, projection, topics or None, seed=seed,
+                             synthetic_duration_s=synthetic_duration, reporter=reporter)
+        with reporter.steps(f"{plural(len(drives), 'drive')}: queries and inputs",
+                            len(drives)) as done:
+            written = write_queries(drives, cfg, out, command=command_line(),
+                                    data=data_provenance(local, cfg.seed), fmt=file_format,
+                                    on_done=done)
+    skipped = f" ({written.skipped} skipped, named in manifest.json)" if written.skipped else ""
+    say(f"wrote {out}/: {written.files[0]} ({written.queries} queries), "
+        f"{plural(written.drives, 'input file')} in inputs/{skipped}, key/ (the answer "
+        f"key: keep it from the system under test), manifest.json")
+    say(f"score the answers with: bench score ANSWERS.csv --queries {out}")

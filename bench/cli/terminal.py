@@ -1,4 +1,6 @@
-"""Tables that fit the terminal without ever shortening a cell.
+"""What ``bench`` shows in the terminal: the consoles, the one-line error, how loud a command
+is (``-q``, ``-v``), progress (:class:`ConsoleReporter`) and tables that fit the terminal
+without ever shortening a cell.
 
 A column is exactly as wide as its longest cell (or the longest single word of its header:
 headers may wrap at spaces, cells never wrap and never get an ellipsis). A table wider than
@@ -9,25 +11,114 @@ width limit: the table is printed whole, at its natural width.
 
 :func:`column_widths` and :func:`split_columns` are pure (no rich) and decide the layout;
 :func:`print_table` renders it.
+
+Loudness: ``-q`` keeps a command's own output (a table it was asked for) and warnings and
+drops progress and notes; ``-v`` adds a line per finished step and the details a command has.
+Errors are always one line on stderr.
 """
 
 from __future__ import annotations
 
 import os
-from collections.abc import Callable, Iterable, Sequence
+import time
+from collections.abc import Callable, Iterable, Iterator, Sequence
+from contextlib import contextmanager
 
+import typer
 from rich.console import Console, ConsoleOptions, RenderableType, RenderResult
 
+from posbench.pipeline.reporter import INFO, WARNING, Reporter
+
+console = Console()
+err_console = Console(stderr=True)
+
+QUIET, NORMAL, VERBOSE = -1, 0, 1
+_level = [NORMAL]
+
+
+def set_verbosity(level: int) -> None:
+    """How loud the commands of this process are: :data:`QUIET`, :data:`NORMAL`, :data:`VERBOSE`."""
+    _level[0] = level
+
+
+def verbosity() -> int:
+    """The level :func:`set_verbosity` set (:data:`NORMAL` by default)."""
+    return _level[0]
+
+
+def fail(msg: str) -> typer.Exit:
+    """Print ``error: msg`` as one line on stderr; return the exit (status 2) to raise."""
+    from rich.markup import escape  # "posbench-harness[ray]" is text, not markup
+
+    err_console.print(f"[bold red]error:[/] {escape(msg)}", highlight=False, soft_wrap=True,
+                      emoji=False)
+    return typer.Exit(2)
+
+
+def warn(msg: str) -> None:
+    """One line ``warning: msg`` on stderr, whatever the verbosity (deprecations)."""
+    from rich.markup import escape
+
+    err_console.print(f"[yellow]warning:[/] {escape(msg)}", highlight=False, soft_wrap=True,
+                      emoji=False)
+
+
+def say(text: str, level: int = INFO) -> None:
+    """Print one plain line on stdout if the verbosity shows ``level`` (:data:`WARNING`
+    lines always, :data:`INFO` unless quiet, :data:`DETAIL` only verbose)."""
+    if level <= max(verbosity(), WARNING):
+        console.print(text, highlight=False, markup=False)
+
+
+class ConsoleReporter(Reporter):
+    """A pipeline's progress in the terminal: spinners and bars (not when quiet), its lines
+    at their levels (:func:`say`), and with ``-v`` one line per finished step."""
+
+    @contextmanager
+    def phase(self, text: str) -> Iterator[Callable[[str], None]]:
+        if verbosity() <= QUIET:
+            yield lambda _text: None
+            return
+        with console.status(text) as status:
+            yield status.update
+
+    @contextmanager
+    def steps(self, text: str, total: int) -> Iterator[Callable[[str], None]]:
+        if verbosity() <= QUIET:
+            yield lambda _name: None
+            return
+        from rich.progress import (
+            BarColumn,
+            MofNCompleteColumn,
+            Progress,
+            TextColumn,
+            TimeElapsedColumn,
+        )
+
+        t0 = time.perf_counter()
+        count = [0]
+        with Progress(TextColumn("[bold]{task.description}"), BarColumn(),
+                      MofNCompleteColumn(), TimeElapsedColumn(),
+                      TextColumn("{task.fields[last]}"), console=console) as prog:
+            task = prog.add_task(text, total=total, last="")
+
+            def done(name: str) -> None:
+                count[0] += 1
+                prog.update(task, advance=1, last=name)
+                if verbosity() >= VERBOSE:
+                    prog.console.print(f"  {name} done ({count[0]}/{total}, "
+                                       f"{time.perf_counter() - t0:.1f} s)",
+                                       highlight=False, markup=False)
+
+            yield done
+
+    def line(self, text: str, level: int = INFO) -> None:
+        say(text, level)
+
 CELL_OVERHEAD = 3
-
-
 """Characters a rich table adds per column with the default box and padding (1 + 1 padding
 and one border) ..."""
-
-
 EDGE_OVERHEAD = 1
-
-
 """... plus the closing border of the row."""
 
 

@@ -1,4 +1,4 @@
-"""`bench train`: train the ``lstm`` or the ``hybrid`` predictor's network."""
+"""``bench train``: train the ``lstm`` or the ``hybrid`` predictor's network."""
 
 from __future__ import annotations
 
@@ -9,20 +9,27 @@ import typer
 from rich.console import Console
 
 from posbench.checks import check_at_least, check_data_paths, check_out_dir
-from posbench.cli.common import DataError, DataOpt, UsageError, command_line, console, fail
-from posbench.cli.terminal import print_table
+from posbench.cli.options import (
+    ConfigOpt,
+    DataOpt,
+    QuietOpt,
+    VerboseOpt,
+    command_line,
+    renamed,
+)
+from posbench.cli.terminal import QUIET, console, print_table, say, verbosity
+from posbench.errors import UsageError
 
-MODELS = ("lstm", "hybrid")
-
-
-#: GPS profiles drawn from the truth of drives that have one, per model (``--profiles``)
+#: the networks `bench train` trains (``--network``)
+NETWORKS = ("lstm", "hybrid")
+#: GPS profiles drawn from the truth of drives that have one, per network (``--profiles``)
 DEFAULT_PROFILES = {"lstm": "none,rtk", "hybrid": "none,rtk,consumer"}
 
 
 def train(
     data: DataOpt = None,
-    model: Annotated[str, typer.Option(
-        "--model", "-m", metavar="NAME",
+    network: Annotated[str, typer.Option(
+        "--network", "-n", metavar="NAME",
         help="Which network: lstm (the paper's MLP-LSTM-MLP) or hybrid (kf prior + learned "
              "residual).")] = "lstm",
     out: Annotated[Path, typer.Option("--out", "-o", metavar="DIR",
@@ -43,72 +50,78 @@ def train(
     max_minutes: Annotated[float, typer.Option(
         "--max-minutes", metavar="MIN",
         help="Wall-clock budget for the epochs; the best epoch so far is kept.")] = 30.0,
+    config: ConfigOpt = None,
+    quiet: QuietOpt = False,
+    verbose: VerboseOpt = False,
+    old_model: Annotated[str | None, typer.Option("--model", "-m", hidden=True)] = None,
 ) -> None:
     """Train a predictor's network on drives and write model.onnx + model.json (its model card).
 
     Needs the `train` extra: pip install 'posbench-harness[train]'. KITTI is refused (one
     error line): it is evaluation-only data. Example (the bundled models):
-    bench train --data ../shared/data/aslan ../shared/data/comma2k19 --corpus-hours 20 --out DIR
+    bench train --data ../shared/data/aslan --data ../shared/data/comma2k19 --corpus-hours 20
+    --out DIR
     """
     from posbench.scenarios.degrade import GPS_PROFILES
 
-    try:  # every option is checked before PyTorch is imported or a drive loaded
-        if model not in MODELS:
-            raise UsageError(f"--model {model!r}: choose one of {', '.join(MODELS)}")
-        check_at_least(epochs, 1, "--epochs")
-        check_at_least(seed, 0, "--seed")
-        check_at_least(synthetic, 0, "--synthetic")
-        check_at_least(hidden, 4, "--hidden")
-        if not corpus_hours >= 0:
-            raise UsageError(f"--corpus-hours must be >= 0, got {corpus_hours}")
-        if not max_minutes > 0:
-            raise UsageError(f"--max-minutes must be > 0, got {max_minutes}")
-        prof = [p.strip() for p in (profiles or DEFAULT_PROFILES[model]).split(",") if p.strip()]
-        bad = [p for p in prof if p not in GPS_PROFILES]
-        if bad or not prof:
-            raise UsageError(f"--profiles {profiles!r}: choose from {', '.join(GPS_PROFILES)}")
-        if not data and synthetic == 0 and corpus_hours == 0:
-            raise UsageError("no training drives: give --data PATH..., --synthetic N or "
-                             "--corpus-hours H")
-        check_data_paths(data)
-        check_out_dir(out)
-    except UsageError as e:
-        raise fail(str(e)) from None
+    if old_model is not None:
+        renamed("--model", "--network", "bench train")
+        network = old_model
+    # every option is checked before PyTorch is imported or a drive loaded
+    if network not in NETWORKS:
+        raise UsageError(f"--network {network!r}: choose one of {', '.join(NETWORKS)}")
+    check_at_least(epochs, 1, "--epochs")
+    check_at_least(seed, 0, "--seed")
+    check_at_least(synthetic, 0, "--synthetic")
+    check_at_least(hidden, 4, "--hidden")
+    if not corpus_hours >= 0:
+        raise UsageError(f"--corpus-hours must be >= 0, got {corpus_hours}")
+    if not max_minutes > 0:
+        raise UsageError(f"--max-minutes must be > 0, got {max_minutes}")
+    prof = [p.strip() for p in (profiles or DEFAULT_PROFILES[network]).split(",") if p.strip()]
+    bad = [p for p in prof if p not in GPS_PROFILES]
+    if bad or not prof:
+        raise UsageError(f"--profiles {profiles!r}: choose from {', '.join(GPS_PROFILES)}")
+    if not data and synthetic == 0 and corpus_hours == 0:
+        raise UsageError("no training drives: give --data PATH..., --synthetic N or "
+                         "--corpus-hours H")
+    check_data_paths(data)
+    check_out_dir(out)
     try:
         import torch  # noqa: F401
     except ImportError:
-        raise fail("bench train needs PyTorch: pip install 'posbench-harness[train]'") from None
+        raise UsageError("bench train needs PyTorch: pip install 'posbench-harness[train]'"
+                         ) from None
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
-    if model == "hybrid":
+    if network == "hybrid":
         from posbench.predictors.hybrid.train import run_training
     else:
         from posbench.predictors.lstm.train import run_training
 
     command = command_line()
     stopped: list[tuple[int, int, int]] = []
-    try:
-        with Progress(TextColumn(f"[bold]training {model}"), BarColumn(), MofNCompleteColumn(),
-                      TimeElapsedColumn(), TextColumn("{task.fields[loss]}"), console=console) as prog:
-            task = prog.add_task("train", total=epochs, loss="preparing windows")
+    with Progress(TextColumn(f"[bold]training {network}"), BarColumn(), MofNCompleteColumn(),
+                  TimeElapsedColumn(), TextColumn("{task.fields[loss]}"), console=console,
+                  disable=verbosity() <= QUIET) as prog:
+        task = prog.add_task("train", total=epochs, loss="preparing windows")
 
-            def progress(epoch: int, n_epochs: int, train_loss: float, val_loss: float,
-                         val_m: float = float("nan")) -> None:
-                prog.update(task, completed=epoch, total=n_epochs,
-                            loss=f"train {train_loss:.4f} val {val_loss:.4f} "
-                                 f"val future {val_m:.4f} m")
+        def progress(epoch: int, n_epochs: int, train_loss: float, val_loss: float,
+                     val_m: float = float("nan")) -> None:
+            prog.update(task, completed=epoch, total=n_epochs,
+                        loss=f"train {train_loss:.4f} val {val_loss:.4f} "
+                             f"val future {val_m:.4f} m")
 
-            def early_stop(epoch: int, best_epoch: int, patience: int) -> None:
-                stopped.append((epoch, best_epoch, patience))
-                prog.console.print(early_stop_message(epoch, best_epoch), highlight=False)
+        def early_stop(epoch: int, best_epoch: int, patience: int) -> None:
+            stopped.append((epoch, best_epoch, patience))
+            say(early_stop_message(epoch, best_epoch))
 
-            info = run_training([str(p) for p in data or []], out, epochs=epochs, seed=seed,
-                                synthetic=synthetic, progress=progress, command=command,
-                                on_early_stop=early_stop, corpus_hours=corpus_hours,
-                                profiles=tuple(prof), hidden=hidden, max_minutes=max_minutes)
-    except (DataError, UsageError) as e:
-        raise fail(str(e)) from None
-    print_summary(console, info, out, stopped[0] if stopped else None)
+        info = run_training([str(p) for p in data or []], out, epochs=epochs, seed=seed,
+                            synthetic=synthetic, progress=progress, command=command,
+                            on_early_stop=early_stop, corpus_hours=corpus_hours,
+                            profiles=tuple(prof), hidden=hidden, max_minutes=max_minutes)
+    if verbosity() > QUIET:
+        print_summary(console, info, out, stopped[0] if stopped else None)
 
 
 def early_stop_message(epoch: int, best_epoch: int) -> str:

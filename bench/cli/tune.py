@@ -1,4 +1,5 @@
-"""`bench tune`: grid-search a filter's noise on development drives."""
+"""``bench tune``: grid-search a filter's noise on development drives, then calibrate its
+covariance (:mod:`posbench.predictor_tools.tuning`)."""
 
 from __future__ import annotations
 
@@ -7,16 +8,9 @@ from typing import Annotated
 import typer
 
 from posbench.checks import check_at_least, check_choice, check_data_paths
-from posbench.cli.common import (
-    WORKER_DIED,
-    DataError,
-    DataOpt,
-    UsageError,
-    command_line,
-    console,
-    fail,
-    load_drives,
-)
+from posbench.cli.options import ConfigOpt, DataOpt, QuietOpt, VerboseOpt, WorkersOpt, command_line
+from posbench.cli.terminal import ConsoleReporter, say
+from posbench.errors import UsageError
 
 
 def tune(
@@ -34,8 +28,11 @@ def tune(
         "--calibrate-only",
         help="Keep the noise parameters tuned.json holds for this profile and fit only "
              "cov_scale (no position changes).")] = False,
-    workers: Annotated[int, typer.Option(metavar="N", help="Parallel processes.")] = 2,
+    workers: WorkersOpt = 2,
     save: Annotated[bool, typer.Option(help="Write the winner to predictors/tuned.json.")] = True,
+    config: ConfigOpt = None,
+    quiet: QuietOpt = False,
+    verbose: VerboseOpt = False,
 ) -> None:
     """Grid-search a filter's noise parameters on development drives (never evaluation drives),
     then calibrate its covariance.
@@ -47,9 +44,10 @@ def tune(
     Examples: bench tune kf --gps-profile consumer;
     bench tune ekf --gps-profile rtk --calibrate-only --drives 3
     """
-    from concurrent.futures.process import BrokenProcessPool
+    from itertools import product
 
     from posbench.config import GPS_PROFILES
+    from posbench.pipeline.drives import load_drives
     from posbench.predictor_tools.tuning import (
         GRIDS,
         calibrate,
@@ -61,60 +59,51 @@ def tune(
     from posbench.predictors.registry import tuned_params
 
     if predictor not in GRIDS:
-        raise fail(f"no tuning grid for {predictor!r}; tunable: {', '.join(GRIDS)}")
-    try:
-        check_choice(gps_profile, GPS_PROFILES, "--gps-profile")
-        check_at_least(drives, 1, "--drives")
-        check_at_least(workers, 1, "--workers")
-        if data and gps_profile != "native":
-            raise UsageError("--data is for --gps-profile native (the other profiles tune on "
-                             "synthetic development drives)")
-        check_data_paths(data)
-        grid = {} if calibrate_only else grid_for(predictor, gps_profile)
-        kept = {k: v for k, v in tuned_params(predictor, gps_profile).items() if k != "cov_scale"}
-        if calibrate_only and GRIDS[predictor] and not kept:
-            raise UsageError(f"--calibrate-only: predictors/tuned.json holds no {predictor} "
-                             f"parameters for --gps-profile {gps_profile}; tune them first "
-                             f"(bench tune {predictor} --gps-profile {gps_profile})")
-        if gps_profile == "native":
-            if not data:
-                raise UsageError("--gps-profile native tunes on recorded fixes: give --data PATH...")
-            dev = load_drives(data, "enu", None)
-            source = "development routes " + ", ".join(str(p) for p in data)
+        raise UsageError(f"no tuning grid for {predictor!r}; tunable: {', '.join(GRIDS)}")
+    check_choice(gps_profile, GPS_PROFILES, "--gps-profile")
+    check_at_least(drives, 1, "--drives")
+    check_at_least(workers, 1, "--workers")
+    if data and gps_profile != "native":
+        raise UsageError("--data is for --gps-profile native (the other profiles tune on "
+                         "synthetic development drives)")
+    check_data_paths(data)
+    grid = {} if calibrate_only else grid_for(predictor, gps_profile)
+    kept = {k: v for k, v in tuned_params(predictor, gps_profile).items() if k != "cov_scale"}
+    if calibrate_only and GRIDS[predictor] and not kept:
+        raise UsageError(f"--calibrate-only: predictors/tuned.json holds no {predictor} "
+                         f"parameters for --gps-profile {gps_profile}; tune them first "
+                         f"(bench tune {predictor} --gps-profile {gps_profile})")
+    if gps_profile == "native":
+        if not data:
+            raise UsageError("--gps-profile native tunes on recorded fixes: give --data PATH...")
+        dev = load_drives(data, "enu", None, reporter=ConsoleReporter())
+        source = "development routes " + ", ".join(str(p) for p in data)
+    else:
+        from posbench.scenarios.synthetic import default_drives
+
+        dev = [d for s in range(1000, 1000 + drives) for d in default_drives(seed=s)]
+        source = f"synthetic development drives, seeds 1000-{999 + drives}"
+    n = len(list(product(*list(grid.values())[:2]))) + sum(
+        len(v) for v in list(grid.values())[2:]) + 1  # + the calibration replay
+    with ConsoleReporter().steps(f"tuning {predictor} ({gps_profile})", n) as done:
+        if calibrate_only:
+            best, trials = kept, []
         else:
-            from posbench.scenarios.synthetic import default_drives
-
-            dev = [d for s in range(1000, 1000 + drives) for d in default_drives(seed=s)]
-            source = f"synthetic development drives, seeds 1000-{999 + drives}"
-        n = len(list(__import__("itertools").product(*list(grid.values())[:2]))) + sum(
-            len(v) for v in list(grid.values())[2:]) + 1  # + the calibration replay
-        from rich.progress import Progress
-
-        with Progress(console=console) as prog:
-            task = prog.add_task(f"tuning {predictor} ({gps_profile})", total=n)
-            if calibrate_only:
-                best, trials = kept, []
-            else:
-                best, trials = grid_search(predictor, dev, gps_profile, grid, workers=workers,
-                                           on_step=lambda p, v: prog.update(task, advance=1))
-            cov_scale = calibrate(predictor, dev, gps_profile, best, workers=workers)
-            prog.update(task, advance=1)
-    except (DataError, UsageError) as e:
-        raise fail(str(e)) from None
-    except BrokenProcessPool:
-        raise fail(WORKER_DIED) from None
+            best, trials = grid_search(predictor, dev, gps_profile, grid, workers=workers,
+                                       on_step=lambda p, v: done(f"{p}: {v:.4f} m"))
+        cov_scale = calibrate(predictor, dev, gps_profile, best, workers=workers)
+        done("calibration")
     if trials:
         best_val = min(v for _, v in trials)
-        console.print(f"best {best} -> future+now mean error {best_val:.4f} m over "
-                      f"{len(dev)} drives")
+        say(f"best {best} -> future+now mean error {best_val:.4f} m over {len(dev)} drives")
     else:
-        console.print(f"kept {best or 'the defaults'} from predictors/tuned.json")
+        say(f"kept {best or 'the defaults'} from predictors/tuned.json")
     if cov_scale == cov_scale:
         best = {**best, "cov_scale": cov_scale}
-        console.print(f"calibrated: cov_scale {cov_scale:g} (95 % of the 95 % ellipses cover "
-                      f"on {len(dev)} drives)")
+        say(f"calibrated: cov_scale {cov_scale:g} (95 % of the 95 % ellipses cover "
+            f"on {len(dev)} drives)")
     else:
-        console.print("no covariance reported on these drives: nothing to calibrate")
+        say("no covariance reported on these drives: nothing to calibrate")
     if save:
         command = command_line()
         how = (f"cov_scale for 95 % coverage by `{command}` on {source}" if calibrate_only else
@@ -124,4 +113,4 @@ def tune(
         if calibrate_only:
             how = tuning_note(predictor, gps_profile, how)
         save_tuned(predictor, gps_profile, best, how)
-        console.print("saved to predictors/tuned.json")
+        say("saved to predictors/tuned.json")

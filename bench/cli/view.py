@@ -1,4 +1,4 @@
-"""`bench view`: open a rerun recording."""
+"""``bench view``: open a rerun recording, in a window or served to a browser."""
 
 from __future__ import annotations
 
@@ -10,7 +10,9 @@ from typing import Annotated
 
 import typer
 
-from posbench.cli.common import UsageError, fail
+from posbench.cli.options import ConfigOpt, QuietOpt, VerboseOpt
+from posbench.cli.terminal import fail
+from posbench.errors import UsageError
 from posbench.recording import web as rerun_web
 
 
@@ -47,7 +49,10 @@ def view(recording: Annotated[Path, typer.Argument(
          port: Annotated[int | None, typer.Option(
              "--port", metavar="N", help="With --web: the web viewer's HTTP port N; the "
                                           "recording is served on port N+1. Default: "
-                                          f"{rerun_web.DEFAULT_WEB_PORT}.")] = None) -> None:
+                                          f"{rerun_web.DEFAULT_WEB_PORT}.")] = None,
+         config: ConfigOpt = None,
+         quiet: QuietOpt = False,
+         verbose: VerboseOpt = False) -> None:
     """Open a rerun recording in the rerun viewer (needs the viz extra).
 
     Without --web a viewer window opens (needs a display). With --web, e.g. on a remote
@@ -56,13 +61,10 @@ def view(recording: Annotated[Path, typer.Argument(
     """
     import subprocess
 
-    try:
-        if port is not None and not web:
-            raise UsageError("--port is the web viewer's port: use it with --web")
-        web_port, data_port = rerun_web.check_web_port(
-            rerun_web.DEFAULT_WEB_PORT if port is None else port)
-    except UsageError as e:
-        raise fail(str(e)) from None
+    if port is not None and not web:
+        raise UsageError("--port is the web viewer's port: use it with --web")
+    web_port, data_port = rerun_web.check_web_port(
+        rerun_web.DEFAULT_WEB_PORT if port is None else port)
     if not recording.is_file():
         raise fail(f"{recording}: no such file")
     exe = _find_rerun()

@@ -30,8 +30,6 @@ from posbench.saved_run.run import Run
 from posbench.scoring.schema import KINDS
 
 STATS = ("mean_m", "median_m", "rmse_m", "p95_m", "max_m")
-
-
 #: config keys that make two runs' figures incomparable when they differ
 CONFIG_KEYS = ("horizon_s", "now_step_s", "gps_profile", "gps_latency_s", "intervals", "dropouts",
                "seed", "seeds", "exclude_poor_truth", "use_tuned", "gate")
@@ -65,7 +63,7 @@ def run_labels(runs: Sequence[Run]) -> list[str]:
              for i, r in enumerate(runs)]
     depth = 1
     while True:
-        labels = ["/".join(p.parts[-depth:]) for p in paths]
+        labels = [Path(*p.parts[-depth:]).as_posix() for p in paths]
         if len(set(labels)) == len(labels) or depth >= max(len(p.parts) for p in paths):
             break
         depth += 1

@@ -35,16 +35,10 @@ from posbench.tables.table import Table, _num
 #: row scope -> the block of results.json ``uncertainty`` holding it
 SCOPE_BLOCKS = {"all": "predictors", "dataset": "by_dataset", "route type": "by_label",
                 "since fix": "by_since_fix"}
-
-
 #: the figures per run: frame column suffix -> header text
 FIGURES = {"nees": "NEES", "cov95": "cov 95 %", "area": "95 % area [m^2]",
            "loglik": "log-lik", "verdict": "verdict", "n": "n"}
-
-
 NO_UNCERTAINTY = "no uncertainty"
-
-
 PRE_SCHEMA = "pre-1.4 run"
 
 
@@ -92,8 +86,6 @@ def _figures(s: Mapping[str, Any]) -> dict[str, Any]:
 
 _EMPTY = {"nees": float("nan"), "nees lo": float("nan"), "nees hi": float("nan"),
           "cov95": float("nan"), "area": float("nan"), "loglik": float("nan"), "n": 0}
-
-
 #: the per-run columns of the aligned frame, in order
 COLUMNS = ("nees", "nees lo", "nees hi", "cov95", "area", "loglik", "verdict", "n")
 

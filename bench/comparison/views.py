@@ -11,7 +11,7 @@ import numpy as np
 import pandas as pd
 
 from posbench.comparison.align import Metric, aligned
-from posbench.comparison.gates import paired_difference
+from posbench.comparison.paired import paired_difference
 from posbench.saved_run.run import Run
 
 

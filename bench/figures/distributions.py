@@ -24,8 +24,6 @@ from posbench.figures.style import (
 
 #: points drawn per CDF curve (evenly spaced in rank; the curve is exact at each)
 CDF_POINTS = 4000
-
-
 #: edges of the time-since-last-fix bins [s]
 SINCE_FIX_EDGES_S = (0, 0.1, 0.2, 0.3, 0.5, 0.75, 1, 1.5, 2, 3, 4, 5, 6, 8, 10, 15, 20, 30,
                      45, 60, 90, 120, 180, 300, 600)

@@ -23,8 +23,6 @@ from posbench.figures.style import (
 )
 
 PATH_WINDOW_S = 40.0
-
-
 ZOOMS = 3
 
 

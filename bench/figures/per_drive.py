@@ -24,13 +24,11 @@ from posbench.figures.style import (
     headline,
     save_figure,
 )
-from posbench.naming import _safe_name
+from posbench.naming import unique_file_safe
 
 #: at most this many per-drive error-over-time figures per run (the first drives in run
 #: order); the note of ``error_over_time`` says when drives were left out
 MAX_DRIVE_FIGURES = 250
-
-
 #: per-drive plots drawn by default: every drive of a run with up to this many, else this
 #: many drives with the largest mean future-point error (``bench run --drive-plots``)
 DEFAULT_DRIVE_PLOTS = 20
@@ -156,18 +154,15 @@ def write_error_over_time(traces: pd.DataFrame, preds: Sequence[str], out: Path,
     used = [c for c in ("drive", "predictor", "kind", "t_query", "error_m", "label", "outage",
                         "warmup") if c in traces.columns]
     picked = traces.loc[traces.drive.isin(chosen).to_numpy(), used]
-    stems: set[str] = set()
+    stems = dict(zip(chosen, unique_file_safe(chosen), strict=True))  # two names, one file name
     # iterate the groups (first appearance order): get_group fails on 1-row groups (pandas 3.1)
-    for i, (drive, rows) in enumerate(picked.groupby(picked.drive, sort=False, observed=True)):
+    for drive, rows in picked.groupby(picked.drive, sort=False, observed=True):
         ax.clear()
         if not draw_error_over_time(ax, rows, preds, colors):
             empty.append(str(drive))
             continue
         ax.set_title(f"{drive}: future-point error over time", fontsize=10, loc="left")
-        stem = _safe_name(str(drive))
-        stem = stem if stem not in stems else f"{stem}-{i}"  # two names, one file name
-        stems.add(stem)
-        files += save_figure(fig, out / "drives", f"{stem}-error_over_time", formats,
+        files += save_figure(fig, out / "drives", f"{stems[str(drive)]}-error_over_time", formats,
                              dpi=DRIVE_DPI)
     notes = []
     if empty:

@@ -38,22 +38,12 @@ if TYPE_CHECKING:  # matplotlib is imported when a figure is drawn: importing th
 
 #: the output formats :func:`write_plots` and the paper's figures can write
 FORMATS = ("png", "svg", "pdf")
-
-
 #: errors [m] below this are drawn at it on log axes (a log axis cannot show 0)
 FLOOR_M = 1e-3
-
-
 #: resolution of the summary figures and of the per-drive figures [dots per inch]
 DPI = 110
-
-
 DRIVE_DPI = 80
-
-
 TURN_LABELS = ("turn", "roundabout")
-
-
 LABEL_COLORS = {"straight": "#c7e9c0", "turn": "#fdd0a2", "roundabout": "#d4b9da",
                 "start_stop": "#fff2ae", "unlabelled": "#ffffff"}
 

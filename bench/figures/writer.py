@@ -23,8 +23,6 @@ from posbench.figures.style import NothingToPlot, PlotsWritten, check_formats, s
 FIGURES = {"error_cdf": plot_error_cdf, "error_vs_speed": plot_error_vs_speed,
            "error_vs_since_fix": plot_error_vs_since_fix, "path": plot_path,
            "trajectory_error": plot_trajectory_error, "calibration": plot_calibration}
-
-
 REQUIRED = ("drive", "predictor", "kind", "t_query", "x", "y", "x_ref", "y_ref", "error_m",
             "label", "speed_mps", "since_fix_s", "outage")
 

@@ -36,11 +36,7 @@ from posbench.scoring.schema import KINDS
 from posbench.scoring.score import MATCH_TOLERANCE_S, answer_positions, score
 
 REQUIRED = ("drive", "kind", "t_query", "x", "y")
-
-
 COVARIANCE = ("cov_xx", "cov_xy", "cov_yy")
-
-
 OPTIONAL = ("latency_us", *COVARIANCE)
 
 

@@ -34,7 +34,6 @@ from __future__ import annotations
 
 import hashlib
 import json
-import re
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
 from pathlib import Path
@@ -43,6 +42,7 @@ from typing import Any
 import pandas as pd
 
 from posbench.config import RunConfig
+from posbench.naming import unique_file_safe
 from posbench.replay.prepare import prepare_drive
 from posbench.replay.queries import query_frame
 from posbench.replay.runner import skip_reason, skipped_run
@@ -54,31 +54,15 @@ from posbench.scoring.schema import QUERY_COLUMNS, TRACK_QUERY_COLUMNS
 #: what ``manifest.json`` says it is, and the version of this layout: a reader accepts every
 #: MINOR of its MAJOR (MINOR grows when files or keys are added, MAJOR when one changes)
 FORMAT = "posbench-queries"
-
-
 FORMAT_VERSION = "1.0"
-
-
 MANIFEST = "manifest.json"
-
-
 INPUTS = "inputs"
-
-
 KEY_QUERIES = "key/reference.parquet"
-
-
 KEY_DRIVES = "key/drives.json"
-
-
 #: file formats of the queries list and the inputs
 FORMATS = ("csv", "parquet")
-
-
 #: the columns of the public queries list
 PUBLIC_COLUMNS = ("drive", "kind", "t_issue", "t_query")
-
-
 #: the DriveRun fields the key keeps per drive (what aggregation and the report read)
 DRIVE_FIELDS = ("name", "dataset", "reference", "notes", "warnings", "outages", "skipped",
                 "gps_count", "duration_s")
@@ -87,18 +71,8 @@ DRIVE_FIELDS = ("name", "dataset", "reference", "notes", "warnings", "outages", 
 def drive_ids(names: Sequence[str]) -> list[str]:
     """A file-safe, unique id per drive name (the name itself where it is safe): characters
     other than letters, digits, ``.``, ``_`` and ``-`` become ``_``; clashes (also by case)
-    get ``-2``, ``-3``, ..."""
-    out: list[str] = []
-    taken: set[str] = set()
-    for name in names:
-        base = re.sub(r"[^A-Za-z0-9._-]+", "_", name).strip("._") or "drive"
-        cand, n = base, 1
-        while cand.lower() in taken:
-            n += 1
-            cand = f"{base}-{n}"
-        taken.add(cand.lower())
-        out.append(cand)
-    return out
+    get ``-2``, ``-3``, ... (:func:`posbench.naming.unique_file_safe`)."""
+    return unique_file_safe(names)
 
 
 def input_start_s(drive: Drive, gps: GpsStream) -> float:

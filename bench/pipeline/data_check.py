@@ -1,4 +1,7 @@
-"""posbench.pipeline.data_check (split from the flat bench/; docstring to write)."""
+"""The data consistency check before a run: every stream of every drive judged
+(:mod:`posbench.scenarios.consistency`, pure), the predictors that used a failing stream,
+``--strict`` and the ``consistency`` key of results.json. How it reads, in the terminal and
+in report.md, is :mod:`posbench.report.data_check`."""
 
 from __future__ import annotations
 
@@ -6,6 +9,7 @@ from collections.abc import Iterable, Sequence
 from dataclasses import asdict
 from typing import Any
 
+from posbench.pipeline.reporter import INFO, SILENT, WARNING, Reporter
 from posbench.scenarios.consistency import (
     TOLERANCES,
     Consistency,
@@ -64,3 +68,23 @@ def to_results(checks: dict[str, Consistency], names: Sequence[str] = ()) -> dic
     return {"tolerances": asdict(TOLERANCES),
             "drives": {d: r.to_dict() for d, r in checks.items()},
             "affected_predictors": affected_predictors(names, checks) if names else {}}
+
+
+def run_data_check(drives: Iterable[Any], names: Sequence[str], strict: bool = False,
+                   reporter: Reporter = SILENT) -> dict[str, Any]:
+    """The data consistency check of every loaded drive, before any predictor runs: the
+    ``consistency`` key of results.json; its failures and warnings told to ``reporter``.
+
+    Raises:
+        DataError: with ``strict``, the first failing stream (drive, stream and figure).
+    """
+    from posbench.report.data_check import summary_lines
+
+    checks = check_drives(drives)
+    err = strict_error(checks) if strict else None
+    if err is not None:
+        raise err
+    section = to_results(checks, names)
+    for line in summary_lines(section):
+        reporter.line(line, WARNING if line.startswith("data check FAIL") else INFO)
+    return section

@@ -30,8 +30,6 @@ from posbench.figures.writer import joined, write_drive_plots, write_summary_plo
 from posbench.scoring.records import lean_traces
 
 T = TypeVar("T")
-
-
 #: how much nicer than the parent a child runs: on a machine with fewer free cores than
 #: processes, the parent (which aggregates, the longest chain of work) keeps a core and the
 #: children share what is left, instead of every process getting an equal slice

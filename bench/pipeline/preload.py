@@ -20,8 +20,6 @@ import threading
 
 #: imported by every replay worker (the reference cubic, the scenario labels)
 REPLAY_MODULES = ("scipy.interpolate", "posbench.scenarios.labels")
-
-
 #: imported after the replay by the main process or by every figure child
 MODULES = ("matplotlib.figure", "matplotlib.backends.backend_agg", "scipy.special",
            "posbench.aggregation.aggregate", "posbench.aggregation.uncertainty", "posbench.aggregation.track", "posbench.predictor_tools.paper_figures",

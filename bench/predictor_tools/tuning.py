@@ -33,8 +33,6 @@ from posbench.replay.runner import run
 from posbench.scenarios.drive import Drive
 
 TUNED_PATH = TUNED_FILE
-
-
 #: Search grids per predictor (values tried for each parameter).
 GRIDS: dict[str, dict[str, list[float]]] = {
     "kf": {"gps_sigma": [0.01, 0.02, 0.05, 0.1, 0.3, 1.0],
@@ -45,8 +43,6 @@ GRIDS: dict[str, dict[str, list[float]]] = {
             "jerk_psd": [0.5, 2.0, 8.0, 32.0, 128.0],
             "yaw_acc_psd": [0.01, 0.1, 1.0, 10.0]},
 }
-
-
 #: values of ``gps_sigma_scale`` tried where the fixes state their accuracy (rtk, consumer):
 #: there R = (scale * stated sigma)^2 and ``gps_sigma`` is never used, so the scale takes its
 #: place in the grid (rtk's old optimum gps_sigma 0.3 m is 15 x its stated 0.02 m)

@@ -16,17 +16,9 @@ from __future__ import annotations
 from typing import Any
 
 TIMELINE = "time"
-
-
 TRAIL_S = 10.0  # how much history the overview map shows [s]
-
-
 AROUND_M = 5.0  # the around-the-vehicle view shows +-this many metres [m]
-
-
 VEHICLE_M = 1.0  # the vehicle-frame error view shows +-this many metres [m]
-
-
 ERROR_TRAIL_S = 3.0  # how much history the vehicle-frame error view shows [s]
 
 

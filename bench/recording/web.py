@@ -33,19 +33,11 @@ from posbench.errors import UsageError
 
 #: the host both servers listen on; other machines reach it through ``ssh -L``
 HOST = "127.0.0.1"
-
-
 DEFAULT_WEB_PORT = 9090
-
-
 #: the recording's gRPC port is the web port plus this
 DATA_PORT_OFFSET = 1
-
-
 #: WebGPU without a GPU crashes the viewer; WebGL runs everywhere (software too)
 RENDERER = "webgl"
-
-
 #: how long the server may take to open both ports [s]
 READY_TIMEOUT_S = 30.0
 

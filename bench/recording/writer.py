@@ -66,6 +66,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from posbench.metrics.ellipses import ellipse_outlines
+from posbench.naming import file_safe, unique_file_safe
 from posbench.recording.blueprint import TIMELINE, blueprint
 from posbench.scoring.schema import COV_COLUMNS
 
@@ -76,66 +77,35 @@ if TYPE_CHECKING:
 
 
 VIZ_HINT = "rerun recordings need the viz extra: pip install 'posbench-harness[viz]'"
-
-
 N_LAST_FIXES = 5  # fixes shown around the vehicle
-
-
 ROAD_S = (-2.0, 1.0)  # the stretch of reference shown around the vehicle [s], relative
-
-
 ROAD_STEP_S = 0.25
-
-
 # tab10, as RGB
 PALETTE = np.array([
     [31, 119, 180], [255, 127, 14], [44, 160, 44], [214, 39, 40], [148, 103, 189],
     [140, 86, 75], [227, 119, 194], [127, 127, 127], [188, 189, 34], [23, 190, 207],
 ], dtype=np.uint8)
-
-
 RECEIVED_RGB = (20, 20, 20)
-
-
 DROPPED_RGB = (230, 30, 30)
-
-
 TRUTH_RGB = (160, 160, 160)
-
-
 #: the error colour scale: green at 0, yellow at half the scale, red at and above it
 SCALE_RGB = np.array([[26, 152, 80], [254, 224, 60], [215, 25, 28]], dtype=float)
-
-
 NO_ERROR_RGB = (190, 190, 190)
-
-
 #: line radius of the drawn 95 % ellipses: 0.75 UI points (negative: rerun's UI unit), so a
 #: 2 cm ellipse stays an outline when zoomed in
 ELLIPSE_RADIUS = -0.75
 
 
-_UNSAFE = re.compile(r"[^A-Za-z0-9_.\-]+")
-
-
 def sanitise(name: str) -> str:
-    """An entity-path part from any name: runs of characters outside ``[A-Za-z0-9_.-]``
-    become ``_``; empty names become ``_``."""
-    s = _UNSAFE.sub("_", str(name)).strip("_")
-    return s or "_"
+    """An entity-path part from any name (:func:`posbench.naming.file_safe`; ``_`` for a
+    name with nothing safe in it)."""
+    return file_safe(name, empty="_")
 
 
 def drive_paths(names: Sequence[str]) -> list[str]:
     """Entity roots ``drives/<name>`` for drive names, made unique (``_2``, ``_3``...) when two
-    names sanitise to the same part."""
-    seen: dict[str, int] = {}
-    out = []
-    for n in names:
-        s = sanitise(n)
-        k = seen.get(s, 0) + 1
-        seen[s] = k
-        out.append(f"drives/{s}" if k == 1 else f"drives/{s}_{k}")
-    return out
+    names sanitise to the same part (:func:`posbench.naming.unique_file_safe`)."""
+    return [f"drives/{s}" for s in unique_file_safe(names, sep="_", empty="_")]
 
 
 def recording_ids(runs: Sequence[DriveRun]) -> list[str]:

@@ -39,11 +39,7 @@ from posbench.scenarios.drive import Drive
 from posbench.scoring.records import DriveRun, merge_predictor_runs
 
 EXECUTORS = ("local", "ray")
-
-
 RAY_MISSING = "--executor ray needs Ray: pip install 'posbench-harness[ray]'"
-
-
 DEFAULT_RETRIES = 2
 
 

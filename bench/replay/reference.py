@@ -25,8 +25,6 @@ def _reference(drive: Drive, tq: np.ndarray) -> np.ndarray:
 
 
 TRUTH = "truth"
-
-
 FIX_CUBIC = "cubic through surrounding fixes"
 
 

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 from collections.abc import Iterable
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from posbench.errors import UsageError
 from posbench.figures.per_drive import DEFAULT_DRIVE_PLOTS
@@ -24,7 +24,6 @@ from posbench.report.notes import (
     statistics_note,
     trained_note,
 )
-from posbench.saved_run.run import Run
 from posbench.tables.run_tables import (
     NOT_CONCLUSIVE,
     dataset_table,
@@ -42,10 +41,11 @@ from posbench.tables.table import Table
 from posbench.tables.track import TRACK_NOTE, track_table
 from posbench.tables.uncertainty import UNCERTAINTY_NOTE, uncertainty_table
 
+if TYPE_CHECKING:
+    from posbench.saved_run.run import Run
+
 #: what ``--format`` may list: report.md is always written; csv and latex add table files
 REPORT_FORMATS = ("md", "csv", "latex")
-
-
 #: table file formats beside report.md: full-precision CSV, booktabs LaTeX (the default: both)
 TABLE_FORMATS = ("csv", "latex")
 

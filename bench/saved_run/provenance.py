@@ -15,7 +15,7 @@ VERSIONED = ("posbench", "numpy", "scipy", "pandas", "filterpy", "onnxruntime", 
 
 
 def package_versions() -> dict[str, str]:
-    from posbench import DISTRIBUTION
+    from posbench.naming import DISTRIBUTION
 
     out = {"python": platform.python_version()}
     for name in VERSIONED:

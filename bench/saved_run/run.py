@@ -1,16 +1,16 @@
 """A run as data: one versioned, documented object, written and read by one pair.
 
 ``save_run(out, run)`` writes ``results.json`` (validated against the JSON Schema shipped
-as ``bench/schemas/results.schema.json``, version :data:`SCHEMA_VERSION`) and
+as ``posbench/saved_run/schemas/results.schema.json``, version :data:`SCHEMA_VERSION`) and
 ``traces.parquet`` (columns: :data:`posbench.scoring.schema.TRACE_COLUMNS`); ``load_run(path)``
 reads them back as a :class:`Run`, its traces loaded only when first used. The report,
 the figures, the terminal tables and every later command read a :class:`Run`.
 
 Example (a notebook)::
 
-    from posbench.saved_run.run import load_run
-    run = load_run("bench-out")
-    run.summary("future")                  # predictors x mean_m, median_m, ... [m]
+    import posbench
+    run = posbench.load("bench-out")       # this module's load_run
+    run.summary()                          # (predictor, kind) x mean_m, median_m, ... [m]
     tr = run.traces                        # one row per query
 """
 
@@ -32,14 +32,8 @@ from posbench.scenarios.errors import DataError
 #: MAJOR.MINOR of results.json: a reader accepts every MINOR of its MAJOR; MINOR grows when
 #: keys are added, MAJOR when a key changes meaning or goes
 SCHEMA_VERSION = "1.4"
-
-
 RESULTS = "results.json"
-
-
 TRACES = "traces.parquet"
-
-
 PROVENANCE_KEYS = ("command", "versions", "git_commit", "data")
 
 
@@ -123,23 +117,28 @@ class Run:
                         self._traces[c] = np.nan
         return self._traces
 
-    def summary(self, kind: str = "future") -> pd.DataFrame:
-        """Headline errors of one kind (``future`` or ``now``) as a numeric frame: one row per
-        predictor, columns count, missing, mean_m, median_m, rmse_m, p95_m, max_m [m], and
-        for runs with intervals (schema 1.1) their 95 % bounds mean_m_lo, mean_m_hi,
-        median_m_lo, ... [m]."""
+    def summary(self, kind: str | None = None) -> pd.DataFrame:
+        """The headline figures as a numeric frame: one row per predictor and kind (index
+        ``(predictor, kind)``), columns count, missing, mean_m, median_m, rmse_m, p95_m,
+        max_m [m] and, for runs with intervals (schema 1.1), their 95 % bounds mean_m_lo,
+        mean_m_hi, median_m_lo, ... [m]. ``kind`` (``future`` or ``now``): only its rows,
+        indexed by predictor."""
         from posbench.metrics.accuracy import SUMMARY_KEYS
+        from posbench.scoring.schema import KINDS
 
         rows = {}
         for p, v in self.results["predictors"].items():
-            s = v[kind]
-            row = {k: s.get(k) for k in SUMMARY_KEYS}
-            for fig, (lo, hi) in ((f, b) for f, b in s.get("ci95", {}).items()
-                                  if isinstance(b, list)):
-                row[f"{fig}_lo"], row[f"{fig}_hi"] = lo, hi
-            rows[p] = row
-        return pd.DataFrame.from_dict(rows, orient="index").astype(float)
-
+            for k in (KINDS if kind is None else (kind,)):
+                s = v[k]
+                row = {f: s.get(f) for f in SUMMARY_KEYS}
+                for fig, (lo, hi) in ((f, b) for f, b in s.get("ci95", {}).items()
+                                      if isinstance(b, list)):
+                    row[f"{fig}_lo"], row[f"{fig}_hi"] = lo, hi
+                rows[(p, k) if kind is None else p] = row
+        frame = pd.DataFrame.from_dict(rows, orient="index").astype(float)
+        if kind is None and not frame.empty:
+            frame.index = pd.MultiIndex.from_tuples(frame.index, names=["predictor", "kind"])
+        return frame
 
     def track_summary(self, kind: str = "future") -> pd.DataFrame:
         """Along/cross-track figures of one kind as a numeric frame: one row per predictor,
@@ -151,6 +150,40 @@ class Run:
         rows = {p: {k: v[kind].get(k) for k in TRACK_SUMMARY_KEYS} for p, v in block.items()}
         return pd.DataFrame.from_dict(rows, orient="index", columns=list(TRACK_SUMMARY_KEYS)
                                       ).astype(float)
+
+    def report(self, out: str | Path, plot_formats: Sequence[str] = ("png",),
+               drive_plots: int | None = 20, table_formats: Sequence[str] = ("csv", "latex")
+               ) -> list[Path]:
+        """Write this run's report into folder ``out``: its figures (in ``plot_formats``;
+        per-drive ones for at most ``drive_plots`` drives, None: all), ``report.md`` and its
+        tables as files (``table_formats``: csv, latex); the paths written. Needs the traces
+        for the figures (:attr:`traces`)."""
+        from posbench.report.markdown import write_report
+
+        return write_report(self, Path(out), formats=tuple(plot_formats),
+                            drive_plots=drive_plots, table_formats=tuple(table_formats))
+
+    def save(self, out: str | Path) -> list[Path]:
+        """Write ``results.json`` and ``traces.parquet`` into folder ``out``
+        (:func:`save_run`); the paths written. The run then lives there (:attr:`folder`)."""
+        if self._traces is None and self.folder is not None:
+            self.traces  # noqa: B018 - loaded from the old folder before it moves
+        return save_run(Path(out), self)
+
+    def __repr__(self) -> str:
+        """A few lines: where, how many drives, which predictors, their future mean error."""
+        res = self.results
+        drives = [d for d in res.get("drives", []) if not d.get("skipped")]
+        sets = sorted({str(d.get("dataset")) for d in drives})
+        cfg = res.get("config", {})
+        where = str(self.folder) if self.folder is not None else "in memory"
+        head = (f"Run({where}: {len(drives)} drive{'' if len(drives) == 1 else 's'} "
+                f"({', '.join(sets) or 'none'}), {len(self.predictors)} predictors, horizon "
+                f"{cfg.get('horizon_s')} s, GPS {cfg.get('gps_profile')})")
+        means = ", ".join(f"{p} {v['future'].get('mean_m'):.3f}"
+                          if v["future"].get("mean_m") is not None else f"{p} -"
+                          for p, v in res.get("predictors", {}).items())
+        return f"{head}\n  future mean error [m]: {means}"
 
 
 def write_traces(out: Path, traces: pd.DataFrame | None) -> Path | None:

@@ -17,8 +17,6 @@ import pandas as pd
 from posbench.scenarios.labels import LABELS
 
 KINDS = ("future", "now")
-
-
 #: which queries the figures are over (the report's glossary collects this)
 DEFINITIONS = {
     "scored queries": "every figure is over the queries of its row and cell (predictor; data "
@@ -75,28 +73,16 @@ TRACE_COLUMNS: dict[str, tuple[str, str, str]] = {
     "cov_xy": ("float64", "m^2", "reported covariance east-north"),
     "cov_yy": ("float64", "m^2", "reported variance north"),
 }
-
-
 #: the answer's reported uncertainty (filled with NaN in traces written before it existed)
 COV_COLUMNS = ("cov_xx", "cov_xy", "cov_yy")
-
-
 #: the columns a query table holds (all but the predictor and its answer)
 ANSWER_COLUMNS = ("predictor", "x", "y", "error_m", "along_m", "cross_m", *COV_COLUMNS)
-
-
 QUERY_COLUMNS = tuple(c for c in TRACE_COLUMNS if c not in ANSWER_COLUMNS)
-
-
 #: query columns an answer key written before they existed may lack (filled with NaN)
 TRACK_QUERY_COLUMNS = ("heading_ref", "yaw_rate_ref")
-
-
 #: fixed categories keep the string columns of long traces at one byte a row, also
 #: after concatenation (identical categories concatenate as categoricals)
 LABEL_CATEGORIES = [*LABELS, "unlabelled"]
-
-
 KIND_DTYPE = pd.CategoricalDtype(["future", "now"])
 
 

@@ -19,15 +19,9 @@ from posbench.scenarios.labels import LABELS
 from posbench.tables.table import Table, _finite, _frame, _num
 
 PAPER_TABLE_CM = {"straight": 16.6, "turn": 12.1, "roundabout": 9.7, "start_stop": 4.2}
-
-
 PAPER_OVERALL = "11 (LSTM), 46 (Kalman)"
-
-
 LABEL_TITLES = {"straight": "Straight path / full speed", "turn": "Turn",
                 "roundabout": "Roundabout", "start_stop": "Starting / stopping"}
-
-
 TRAINED_MARK = " *"
 
 
@@ -67,11 +61,7 @@ SUMMARY_LABELS = {"predictor": "predictor", "future_mean": "future mean [m]", "f
                   "now_mean": "now mean [m]", "now_p95": "now p95", "now_n": "n",
                   "missing": "missing", "step_p50": "step p50 [us]", "step_p99": "step p99 [us]",
                   "query_p50": "query p50 [us]"}
-
-
 LATENCY_DIGITS = {"step_p50": 1, "step_p99": 1, "query_p50": 1}
-
-
 #: the columns of the summary table that carry a 95 % interval (all means, medians, p95s)
 SUMMARY_CI = ("future_mean", "future_median", "future_p95", "now_mean", "now_p95")
 

@@ -1,29 +1,7 @@
-"""The predictor contract as runnable checks: what any :class:`~posbench.predictors.base.Predictor`
-must do for ``bench run`` to score it fairly, checked on small deterministic drives.
-
-:func:`check_predictor` runs every clause on a predictor factory and returns one
-:class:`ClauseResult` per clause, each with the numbers that decided it. A clause never
-raises: an exception from the predictor fails that clause and names where it was raised.
-
-The inputs (built once per process, deterministic):
-
-- the **drive**: the first built-in synthetic drive (``posbench.scenarios.synthetic.default_drives()[0]``),
-  its first :data:`DRIVE_S` seconds (straight, turn, roundabout, straight, a stop) with its own
-  recorded fixes (irregular 0.1-0.6 s, noisy, one dropout) and 50 Hz IMU / speed, replayed
-  as the runner does (:func:`posbench.replay.loop.replay`: a "future" query :data:`HORIZON_S` after
-  every fix, a "now" query every 0.05 s);
-- a **straight line**: 15 m/s on a heading of 0.5 rad, IMU and speed at 50 Hz from t = 0,
-  exact fixes at 5 Hz from t = 1 s;
-- a **standstill**: the same streams for a car that does not move.
-
-Comparisons of answers are exact up to :data:`SAME_M` (1e-9 m); two NaN answers are equal,
-a NaN and a number are not. Every clause except ``reset`` builds fresh instances from the
-factory (and calls ``reset()`` first, as the runner does), so one broken behaviour fails one
-clause. The comparisons assume nothing about accuracy, only about sameness: a predictor
-that draws random numbers without a fixed seed fails them all.
-
-Units: seconds, metres (local ENU).
-"""
+"""The contract's clauses: one function each, deciding pass or fail from the numbers it
+measured on the inputs of :mod:`posbench.predictor_tools.contract.inputs` (see
+:mod:`posbench.predictor_tools.contract` for what they are and what they prove), and
+:func:`check_predictor`, which runs them."""
 
 from __future__ import annotations
 
@@ -38,8 +16,7 @@ from typing import Any
 
 import numpy as np
 
-from posbench.errors import UsageError
-from posbench.predictor_tools.contract_inputs import (
+from posbench.predictor_tools.contract.inputs import (
     DRIVE_S,
     HORIZON_S,
     LINE_BOUND_M,
@@ -131,7 +108,7 @@ def _xy(p: tuple[float, float] | np.ndarray) -> str:
     return f"({float(p[0]):.3f}, {float(p[1]):.3f})"
 
 
-def _raised(e: BaseException) -> str:
+def raised_line(e: BaseException) -> str:
     """``raised TypeError: msg (file.py:12)``, one line."""
     text = str(e).strip().splitlines()
     msg = f"raised {type(e).__name__}" + (f": {text[0][:200]}" if text else "")
@@ -224,7 +201,7 @@ def clause_no_look_ahead(factory: Factory, inp: Inputs) -> tuple[bool, str]:
         try:
             p.position_at(t_last)
         except Exception as e:  # noqa: BLE001 - any exception fails the clause
-            return False, f"position_at({t_last:.2f} s), the newest observation's time, {_raised(e)}"
+            return False, f"position_at({t_last:.2f} s), the newest observation's time, {raised_line(e)}"
         nf = prep.future.t_query.size
         nw = prep.now.t_query.size
         ref = np.concatenate([whole.xy[:nf], whole.xy[len(inp.drive.future.t_query):][:nw]])
@@ -345,14 +322,14 @@ def clause_picklable(factory: Factory, inp: Inputs) -> tuple[bool, str]:
     try:
         c = pickle.loads(pickle.dumps(p))
     except Exception as e:  # noqa: BLE001 - any exception fails the clause
-        return False, f"pickling a fresh instance {_raised(e)}"
+        return False, f"pickling a fresh instance {raised_line(e)}"
     a = np.array(feed(p, evs, HORIZON_S, stop=mid)).reshape(-1, 3)
     b = np.array(feed(c, evs, HORIZON_S, stop=mid)).reshape(-1, 3)
     n_obs = sum(e[0] != QUERY for e in evs[:mid])
     try:
         c2 = pickle.loads(pickle.dumps(p))
     except Exception as e:  # noqa: BLE001
-        return False, f"pickling after {n_obs} observations {_raised(e)}"
+        return False, f"pickling after {n_obs} observations {raised_line(e)}"
     a2 = np.array(feed(p, evs, HORIZON_S, start=mid)).reshape(-1, 3)
     b2 = np.array(feed(c2, evs, HORIZON_S, start=mid)).reshape(-1, 3)
     worst = 0.0
@@ -443,8 +420,6 @@ CLAUSES: tuple[tuple[str, str, Callable[[Factory, Inputs], tuple[bool, str]]], .
     ("covariance_psd", "covariance_at(t), if reported, is symmetric positive semi-definite",
      clause_covariance_psd),
 )
-
-
 #: the clause ids, in the order they run
 CLAUSE_IDS: tuple[str, ...] = tuple(c for c, _, _ in CLAUSES)
 
@@ -464,32 +439,6 @@ def check_predictor(factory: Factory, name: str,
                 warnings.simplefilter("ignore", RuntimeWarning)
                 passed, evidence = fn(factory, inp)
         except Exception as e:  # noqa: BLE001 - the predictor's fault is the clause's failure
-            passed, evidence = False, f"{name} {_raised(e)}"
+            passed, evidence = False, f"{name} {raised_line(e)}"
         out.append(ClauseResult(cid, text, bool(passed), evidence))
     return out
-
-
-# ----------------------------------------------------------------------- resolving
-def resolve_predictor(spec: str, options: dict[str, Any] | None = None) -> Factory:
-    """A factory of fresh predictors for ``spec``: a registered or entry-point name (or
-    ``NAME@ALIAS``), built with the registry's defaults and ``options``; or ``module:Class``,
-    a :class:`Predictor` subclass imported from an importable module and built with
-    ``options`` (:func:`posbench.predictors.registry.resolve`). One instance is built here, so that a
-    predictor that cannot be built fails now. Raises :class:`UsageError` (one line) for an
-    unknown name, a missing module or class, a class that is not a Predictor, or a predictor
-    that cannot be built."""
-    from posbench.predictors.registry import PredictorError, create, predictor_class
-
-    opts = dict(options or {})
-    try:
-        predictor_class(spec)
-    except PredictorError as e:
-        raise UsageError(str(e)) from None
-
-    def factory() -> Predictor:
-        return create(spec, None, **opts)
-    try:
-        factory()
-    except Exception as e:  # noqa: BLE001 - DataError, TypeError (abstract, arguments), ...
-        raise UsageError(f"{spec} cannot be created: {_raised(e)}") from None
-    return factory

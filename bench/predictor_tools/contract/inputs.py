@@ -1,4 +1,8 @@
-"""posbench.predictor_tools.contract_inputs (split from the flat bench/; docstring to write)."""
+"""The contract's inputs, built once per process and deterministic: the first 52 s of the
+first built-in synthetic drive with its own fixes, a straight line and a standstill, each
+prepared as ``bench run`` prepares a drive; and what the clauses need to cut them.
+
+Units: seconds, metres (local ENU)."""
 
 from __future__ import annotations
 
@@ -16,42 +20,22 @@ from posbench.scenarios.drive import Drive, DriveMeta, GpsStream, ImuStream, Spe
 
 #: "future" query horizon after each fix [s] (the paper's 0.2 s)
 HORIZON_S = 0.2
-
-
 #: length of the synthetic drive window [s]: straight, turn, roundabout, straight, a stop
 DRIVE_S = 52.0
-
-
 #: two answers closer than this [m] are the same answer
 SAME_M = 1e-9
-
-
 #: straight line: speed [m/s], heading [rad, ENU], largest error allowed [m]
 LINE_SPEED = 15.0
-
-
 LINE_HEADING = 0.5
-
-
 LINE_BOUND_M = 0.5
-
-
 #: standstill: largest distance [m] an answer may drift from where the car stands
 STAND_BOUND_M = 0.1
-
-
 #: answers issued in the first this many seconds after the first fix are warm-up [s]
 WARMUP_S = 2.0
-
-
 #: where the car of the line / standstill drives is at t = 0 [m]
 START_XY = (120.0, -40.0)
-
-
 #: eigenvalues of a reported covariance may be this negative [m^2] (rounding)
 PSD_TOL = 1e-9
-
-
 Factory = Callable[[], Predictor]
 
 

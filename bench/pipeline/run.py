@@ -1,0 +1,312 @@
+"""``bench run`` as a library function: options in, a :class:`~posbench.saved_run.run.Run` out.
+
+:class:`RunOptions` holds everything the command takes (as Python values: seconds, paths,
+tuples); :func:`plan_run` checks them all before any drive is loaded or worker started and
+resolves them into a :class:`RunPlan`; :func:`execute_run` loads the drives, checks their
+data, replays them, aggregates and, given an output folder, writes the report there. The
+command line (:mod:`posbench.cli.run`) and :func:`posbench.run` both call these two, so a
+notebook gets exactly the figures of the command.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field, fields, replace
+from pathlib import Path
+from typing import Any
+
+from posbench.aggregation.intervals import Statistics
+from posbench.config import RunConfig
+from posbench.errors import UsageError
+from posbench.naming import plural
+from posbench.pipeline.publish import Published
+from posbench.pipeline.reporter import SILENT, Reporter
+from posbench.report.markdown import TABLE_FORMATS
+from posbench.scenarios.drive import Drive
+
+#: the predictors of a run that names none
+DEFAULT_PREDICTORS = ("cv", "poly", "kf", "kf-paper", "ekf", "lstm")
+
+
+@dataclass(frozen=True)
+class RunOptions:
+    """Everything a run takes (the options of ``bench run``, as Python values).
+
+    Attributes:
+        data: recordings or folders of them (ROS 1/2 bags, KITTI raw, comma2k19 segments,
+            the paper's route pickles, CSV/Parquet) or fsspec URLs; empty: the built-in
+            synthetic drives.
+        predictors: registered names, ``NAME@ALIAS`` or ``module:Class``, in report order.
+        out: the output folder (report.md, results.json, traces, figures); None: the run is
+            kept in memory only.
+        horizon_s: future-point horizon after each fix [s].
+        gps_profile: GPS input for drives with truth (native, none, rtk, consumer).
+        gps_latency_s: receiver latency of drawn fixes [s].
+        dropouts: GPS dropout profile (none, random:P, outages, outage:L).
+        seed: master seed (GPS draws, dropouts, synthetic data).
+        seeds: repeat the run over these seeds (the first one is the run); None: once.
+        baseline: the predictor the others are compared with; None: ``kf`` when it runs;
+            ``"none"``: no comparison.
+        workers: parallel processes (one drive each).
+        models: model file (or folder holding model.onnx) per predictor name.
+        options: constructor options per predictor name, over its tuned values.
+        topics: bag topics by role (gps, imu, speed, truth).
+        projection: local frame of lat/lon sources (enu, mercator).
+        include_poor_truth: also score drives whose truth is poor (median accuracy > 1 m).
+        synthetic_duration_s: without data, one synthetic mixed drive this long [s].
+        rerun: also write a rerun recording (.rrd) there.
+        rerun_color_by: the predictor whose error colours the recording's track.
+        executor: local (processes) or ray.
+        address: the Ray cluster (with ``executor="ray"``).
+        table_formats: table files beside report.md (csv, latex).
+        plot_formats: figure formats (png, svg, pdf).
+        drive_plots: per-drive error plots: every drive of a run with at most this many,
+            else this many worst ones; None: every drive.
+        gate: the GPS outlier gate in front of every predictor.
+        strict: stop (DataError) when the data consistency check fails.
+    """
+
+    data: tuple[str | Path, ...] = ()
+    predictors: tuple[str, ...] = DEFAULT_PREDICTORS
+    out: Path | None = None
+    horizon_s: float = 0.2
+    gps_profile: str = "rtk"
+    gps_latency_s: float = 0.0
+    dropouts: str = "none"
+    seed: int = 0
+    seeds: tuple[int, ...] | None = None
+    baseline: str | None = None
+    workers: int = 2
+    models: Mapping[str, str | Path] = field(default_factory=dict)
+    options: Mapping[str, Mapping[str, Any]] = field(default_factory=dict)
+    topics: Mapping[str, str] = field(default_factory=dict)
+    projection: str = "enu"
+    include_poor_truth: bool = False
+    synthetic_duration_s: float | None = None
+    rerun: Path | None = None
+    rerun_color_by: str | None = None
+    executor: str = "local"
+    address: str | None = None
+    table_formats: tuple[str, ...] = TABLE_FORMATS
+    plot_formats: tuple[str, ...] = ("png",)
+    drive_plots: int | None = 20
+    gate: bool = True
+    strict: bool = False
+
+    @classmethod
+    def names(cls) -> list[str]:
+        """The option names, in order."""
+        return [f.name for f in fields(cls)]
+
+
+@dataclass(frozen=True)
+class RunPlan:
+    """Checked :class:`RunOptions`, resolved into what :func:`execute_run` does.
+
+    Attributes:
+        options: the options as given.
+        config: the run's configuration (predictors with their aliases, resolved model
+            files, the seed of the run).
+        statistics: how intervals and the paired comparison are computed.
+        seeds: the seeds to repeat the run over (the first one is ``config.seed``), or None.
+        color_by: the predictor colouring the rerun recording's track.
+    """
+
+    options: RunOptions
+    config: RunConfig
+    statistics: Statistics
+    seeds: tuple[int, ...] | None = None
+    color_by: str | None = None
+
+
+def plan_run(options: RunOptions, given: Mapping[tuple[str, str], str] | None = None
+             ) -> RunPlan:
+    """Check every option of a run before any work, and resolve them.
+
+    ``given``: how each ``(predictor, option)`` was written (``--set kf.jerk_psd=4``), for
+    the messages; default ``--set NAME.OPTION=VALUE`` / ``--model NAME=PATH``.
+
+    Raises:
+        UsageError: an option that cannot work, in one line naming it.
+        DataError: a model file a predictor cannot load.
+    """
+    from posbench.checks import (
+        check_at_least,
+        check_choice,
+        check_drive_options,
+        check_out_dir,
+        check_out_file,
+        check_topics,
+        parse_drive_plots,
+        parse_predictor_names,
+        parse_seeds,
+        resolve_baseline,
+        resolve_color_by,
+    )
+    from posbench.figures.style import check_formats
+    from posbench.replay.executors import EXECUTORS, RAY_MISSING, ray_available
+    from posbench.replay.predictor_setup import (
+        merge_options,
+        model_options,
+        validate_predictors,
+        with_model_aliases,
+    )
+
+    o = options
+    check_choice(o.executor, EXECUTORS, "--executor")
+    if o.address and o.executor != "ray":
+        raise UsageError("--address is for --executor ray")
+    if o.executor == "ray" and not ray_available():
+        raise UsageError(RAY_MISSING)
+    names = parse_predictor_names(o.predictors)
+    try:
+        plot_formats = check_formats(o.plot_formats)
+    except ValueError as e:
+        raise UsageError(f"--plot-format {','.join(map(str, o.plot_formats))!r}: {e}") from None
+    bad = [f for f in o.table_formats if f not in TABLE_FORMATS]
+    if bad:
+        raise UsageError(f"--table-format: unknown table format {bad[0]!r}; use "
+                         f"{', '.join(TABLE_FORMATS)} (report.md is always written)")
+    drive_plots = parse_drive_plots(o.drive_plots)
+    if o.seeds is not None and o.seed != 0:
+        raise UsageError("--seed and --seeds together: give one seed (--seed 3) or the "
+                         "seeds to repeat the run over (--seeds 0,1,2)")
+    seeds = tuple(parse_seeds(o.seeds)) if o.seeds is not None else None
+    seed = seeds[0] if seeds else o.seed
+    check_drive_options(o.gps_profile, o.projection, o.horizon_s, o.gps_latency_s, o.dropouts,
+                        seed, o.synthetic_duration_s, o.data)
+    check_at_least(o.workers, 1, "--workers")
+    check_topics(o.topics)
+    if o.out is not None:
+        check_out_dir(o.out)
+    if o.rerun is not None:
+        check_out_file(o.rerun, "--rerun")
+        try:
+            import rerun as _rr  # noqa: F401
+        except ImportError:
+            raise UsageError("--rerun needs the viz extra: "
+                             "pip install 'posbench-harness[viz]'") from None
+    opts, given = merge_options(model_options(dict(o.models)),
+                                {n: dict(v) for n, v in o.options.items()}, dict(given or {}))
+    names = with_model_aliases(names, opts)
+    color_by = resolve_color_by(o.rerun_color_by, names, o.rerun)
+    resolved = validate_predictors(names, opts, given)
+    stats = Statistics(baseline=resolve_baseline(o.baseline, names))
+    cfg = RunConfig(predictors=names, horizon_s=o.horizon_s, gps_profile=o.gps_profile,
+                    gps_latency_s=o.gps_latency_s, dropouts=o.dropouts, seed=seed,
+                    exclude_poor_truth=not o.include_poor_truth, predictor_options=resolved,
+                    gate=o.gate)
+    o = replace(o, predictors=names, plot_formats=plot_formats, drive_plots=drive_plots,
+                seeds=seeds, table_formats=tuple(o.table_formats))
+    return RunPlan(o, cfg, stats, seeds, color_by)
+
+
+def execute_run(plan: RunPlan, command: str, reporter: Reporter = SILENT) -> Published:
+    """Run a plan: load the drives (or make the built-in ones), check their data, replay them
+    through every predictor (over every seed of ``plan.seeds``), aggregate, and publish:
+    into ``plan.options.out`` when given, with the rerun recording when asked.
+    ``command`` is recorded in results.json as what made the run.
+
+    Raises:
+        DataError: a recording that cannot be read; with ``strict``, a failing data check.
+        UsageError: every drive was skipped.
+        ExecutorError: Ray could not start.
+    """
+    from posbench.pipeline.data_check import run_data_check
+    from posbench.pipeline.drives import load_drives
+    from posbench.scenarios.remote import local_paths
+
+    o = plan.options
+    with local_paths(list(o.data) or None) as data:  # fsspec URLs -> local copies for loaders
+        drives = load_drives(data, o.projection, dict(o.topics) or None, seed=plan.config.seed,
+                             synthetic_duration_s=o.synthetic_duration_s,
+                             workers=o.workers if o.executor == "local" else 1,
+                             reporter=reporter)
+        consistency = run_data_check(drives, plan.config.predictors, o.strict, reporter)
+        return _replay_and_publish(drives, plan, data, command, consistency, reporter)
+
+
+def replay_drives(drives: Sequence[Drive], cfg: RunConfig, options: RunOptions,
+                  reporter: Reporter = SILENT, label: str = "", preload: Any = None) -> list:
+    """Every drive through every predictor of ``cfg`` on the options' executor, as
+    :class:`~posbench.scoring.records.DriveRun` records in drive order; one reporter step
+    per drive. ``preload`` (:class:`~posbench.pipeline.preload.Preload`) starts when the
+    first drive is done, if the drives are replayed in other processes (the worker processes
+    exist by then; in this one, its imports would disturb the timings)."""
+    from posbench.replay.executors import run_drives
+
+    elsewhere = options.executor != "local" or (options.workers > 1 and len(drives) > 1)
+    with reporter.steps(f"{label}{plural(len(drives), 'drive')} x "
+                        f"{plural(len(cfg.predictors), 'predictor')}", len(drives)) as done:
+        def on_done(r: Any) -> None:
+            done(r.name)
+            if preload is not None and elsewhere:
+                preload.start()
+
+        return run_drives(drives, cfg, options.executor, workers=options.workers,
+                          address=options.address, on_done=on_done)
+
+
+def _replay_and_publish(drives: list[Drive], plan: RunPlan, data: list[Path] | None,
+                        command: str, consistency: dict[str, Any],
+                        reporter: Reporter) -> Published:
+    from posbench.aggregation.seeds import seed_figures, seeds_section
+    from posbench.pipeline.jobs import FigureJobs, Job
+    from posbench.pipeline.preload import Preload
+    from posbench.pipeline.publish import publish
+    from posbench.pipeline.results import build_results
+    from posbench.saved_run.provenance import data_provenance
+    from posbench.scoring.records import all_traces, lean_traces
+
+    cfg, o, seeds = plan.config, plan.options, plan.seeds
+    out = o.out
+    first = f"seed {cfg.seed} (1/{len(seeds)}): " if seeds else ""
+    provenance = Job(data_provenance, data, cfg.seed)  # hashing the data (~1 s) meanwhile
+    preload = Preload()  # the imports of the figures and the report, during the replay
+    runs = replay_drives(drives, cfg, o, reporter, first, preload)
+    preload.join()  # before forking the figure children
+    traces = all_traces(runs)
+    lean = lean_traces(traces)  # text columns as categoricals: cheaper filters, same results
+    jobs = traces_file = removed = None
+    if out is not None:
+        # the figures need only the traces: other processes draw them while this one
+        # aggregates (an earlier run's files are removed first, so none of the new ones is)
+        from posbench.predictor_tools.paper_figures import paper_figures
+        from posbench.saved_run.outputs import remove_previous_outputs
+        from posbench.saved_run.run import write_traces
+
+        out.mkdir(parents=True, exist_ok=True)
+        removed = remove_previous_outputs(out)
+        jobs = FigureJobs(lean, cfg.predictors, out, o.plot_formats, o.drive_plots,
+                          paper=lambda: paper_figures(list(drives), cfg, traces, out, runs,
+                                                      formats=o.plot_formats))
+        traces_file = Job(write_traces, out, traces)  # the parquet (~0.5 s) meanwhile too
+    res = build_results(runs, cfg, provenance.result(), command, traces=lean,
+                        statistics=plan.statistics)
+    res["consistency"] = consistency
+    if seeds:
+        base = res["paired"]["baseline"]
+        figures = [seed_figures(traces, cfg.predictors, base, cfg.seed)]
+        for i, s in enumerate(seeds[1:], start=2):
+            runs_s = replay_drives(drives, replace(cfg, seed=s), o, reporter,
+                                   f"seed {s} ({i}/{len(seeds)}): ")
+            figures.append(seed_figures(all_traces(runs_s), cfg.predictors, base, s))
+            del runs_s
+        res["seeds"] = seeds_section(seeds, figures)
+    published = publish(res, traces, runs, out, plot_formats=o.plot_formats,
+                        drive_plots=o.drive_plots,
+                        figures=(lambda _: jobs.paper()) if jobs is not None else None,
+                        table_formats=o.table_formats, plots=jobs, removed=removed,
+                        traces_written=traces_file.result if traces_file is not None else None,
+                        reporter=reporter)
+    if o.rerun is not None:
+        from posbench.recording.writer import write_recording
+        from posbench.scenarios.errors import DataError
+
+        with reporter.phase(f"writing rerun recording {o.rerun}..."):
+            try:
+                write_recording(o.rerun, runs, list(cfg.predictors), plan.color_by)
+            except RuntimeError as e:  # joining the drives' recordings failed
+                raise DataError(o.rerun, str(e)) from None
+        published.recording = o.rerun
+    return published
