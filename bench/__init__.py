@@ -33,12 +33,12 @@ from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from posbench.naming import DISTRIBUTION
+
 if TYPE_CHECKING:
     from posbench.comparison.comparison import Comparison
     from posbench.predictor_tools.contract import ContractReport
     from posbench.saved_run.run import Run
-
-from posbench.naming import DISTRIBUTION
 
 __all__ = ["DISTRIBUTION", "check", "compare", "load", "run", "score"]
 

@@ -1,9 +1,10 @@
-"""Command-line option checks, run before any drive is loaded or any worker starts.
+"""Option checks, run before any drive is loaded or any worker starts (by the command line
+and by the Python API alike).
 
-Each check raises :class:`UsageError` with one line naming the option and what is
-wrong, so a typo costs a second instead of a whole run (and never surfaces as a
-traceback from a worker process). The checks of values are pure; those of paths
-look at the file system but never create or change anything there.
+Each check raises :class:`~posbench.errors.UsageError` with one line naming the option (as
+``bench`` spells it) and what is wrong, so a typo costs a second instead of a whole run (and
+never surfaces as a traceback from a worker process). The checks of values are pure; those
+of paths look at the file system but never create or change anything there.
 """
 
 from __future__ import annotations
@@ -64,11 +65,11 @@ def check_horizon(seconds: float, option: str = "--horizon") -> float:
 
 def check_dropouts(profile: str) -> str:
     """A GPS dropout profile (``none``, ``random:P``, ``outages``, ``outage:L``), checked by
-    the parser that applies it (:func:`posbench.scenarios.degrade._parse_dropouts`)."""
-    from posbench.scenarios.degrade import _parse_dropouts
+    the parser that applies it (:func:`posbench.scenarios.degrade.parse_dropouts`)."""
+    from posbench.scenarios.degrade import parse_dropouts
 
     try:
-        _parse_dropouts(profile)
+        parse_dropouts(profile)
     except DataError as e:
         raise UsageError(f"--dropouts: {e.detail}") from None
     return profile

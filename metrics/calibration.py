@@ -223,10 +223,10 @@ def since_fix_bin(since_fix_s: np.ndarray, edges: Sequence[float] = SINCE_FIX_ED
                   ) -> tuple[np.ndarray, list[str]]:
     """Bin index of each time since the last fix [s] (-1: NaN or outside) and the bins'
     names (``"0-0.25s"``, ..., ``">=2s"``)."""
-    s = np.asarray(since_fix_s, dtype=float)
+    from posbench.metrics.outages import since_fix_bins
+
     e = np.asarray(edges, dtype=float)
-    idx = np.searchsorted(e, s, side="right") - 1
-    idx[~np.isfinite(s) | (idx < 0) | (idx >= e.size - 1)] = -1
+    idx = since_fix_bins(since_fix_s, e)
     names = [f"{a:g}-{b:g}s" if math.isfinite(b) else f">={a:g}s"
              for a, b in zip(e[:-1], e[1:], strict=True)]
     return idx, names

@@ -17,6 +17,10 @@ import numpy as np
 from posbench.metrics.accuracy import summarize
 
 SINCE_FIX_CHECKPOINTS_S = (0.2, 0.5, 1.0, 2.0, 5.0)
+#: edges [s] of the time-since-last-fix bins of a curve of error over it, 0.1 s to 10 min
+#: (:func:`since_fix_bins` with ``open_last``: the last bin takes everything past 300 s)
+SINCE_FIX_CURVE_EDGES_S = (0, 0.1, 0.2, 0.3, 0.5, 0.75, 1, 1.5, 2, 3, 4, 5, 6, 8, 10, 15, 20,
+                           30, 45, 60, 90, 120, 180, 300, 600)
 #: a query counts for a checkpoint when its time since the last fix is this close to it [s]
 SINCE_FIX_TOLERANCE_S = 0.05
 #: an outage is missed when its FDE exceeds this [m]
@@ -50,6 +54,22 @@ def outage_ids(t_query: np.ndarray, outages: Sequence[tuple[float, float]]) -> n
     return ids
 
 
+#: an outage's run-wide key: its drive's code x OUTAGE_ID_BASE + its index in the drive
+OUTAGE_ID_BASE = 1_000_000
+
+
+def outage_keys(drive_codes: np.ndarray, outage: np.ndarray) -> np.ndarray:
+    """A run-wide key of each query's outage (:func:`outage_ids` within its drive, the
+    drive's integer code): ``code * OUTAGE_ID_BASE + outage``; -1 outside outages."""
+    outage = np.asarray(outage)
+    return np.where(outage >= 0, np.asarray(drive_codes) * OUTAGE_ID_BASE + outage, -1)
+
+
+def outage_drive(keys: np.ndarray) -> np.ndarray:
+    """The drive code of each outage key of :func:`outage_keys` (the bootstrap's cluster)."""
+    return np.asarray(keys) // OUTAGE_ID_BASE
+
+
 def error_vs_since_fix(errors: np.ndarray, since_fix_s: np.ndarray,
                        checkpoints_s: Sequence[float] = SINCE_FIX_CHECKPOINTS_S,
                        tolerance_s: float = SINCE_FIX_TOLERANCE_S) -> dict[str, dict]:
@@ -57,6 +77,20 @@ def error_vs_since_fix(errors: np.ndarray, since_fix_s: np.ndarray,
     e = np.asarray(errors, dtype=float)
     s = np.asarray(since_fix_s, dtype=float)
     return {f"{c:g}s": summarize(e[np.abs(s - c) <= tolerance_s]) for c in checkpoints_s}
+
+
+def since_fix_bins(since_fix_s: np.ndarray, edges: Sequence[float],
+                   open_last: bool = False) -> np.ndarray:
+    """The bin of each time since the last fix [s] among ``edges`` (bin i holds
+    ``edges[i] <= s < edges[i + 1]``); -1 for NaN, before the first edge and past the last
+    one, unless ``open_last`` puts those past it into the last bin."""
+    s = np.asarray(since_fix_s, dtype=float)
+    e = np.asarray(edges, dtype=float)
+    idx = np.searchsorted(e, s, side="right") - 1
+    if open_last:
+        idx = np.where(idx >= e.size - 1, e.size - 2, idx)
+    idx[~np.isfinite(s) | (idx < 0) | (idx >= e.size - 1)] = -1
+    return idx
 
 
 def since_fix_checkpoint(since_fix_s: np.ndarray,

@@ -30,3 +30,14 @@ def spread(values: np.ndarray) -> dict[str, float | int]:
         return {"mean": nan, "sd": nan, "min": nan, "max": nan, "n": 0}
     return {"mean": float(v.mean()), "sd": float(v.std(ddof=1)) if v.size > 1 else nan,
             "min": float(v.min()), "max": float(v.max()), "n": int(v.size)}
+
+
+def paired_mean_difference(baseline: np.ndarray, other: np.ndarray) -> float:
+    """Mean error of ``other`` minus that of ``baseline`` [m] over the queries both answered
+    (finite in both; the two arrays are the same queries in the same order); NaN when they
+    are not the same queries or none was answered by both."""
+    a, b = np.asarray(baseline, dtype=float), np.asarray(other, dtype=float)
+    if a.size != b.size:
+        return float("nan")
+    both = np.isfinite(a) & np.isfinite(b)
+    return float(b[both].mean() - a[both].mean()) if both.any() else float("nan")

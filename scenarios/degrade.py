@@ -336,7 +336,7 @@ def outage_windows(t_start: float, t_end: float, lengths: Sequence[float],
     return np.asarray(sorted(placed), dtype=float).reshape(-1, 2)
 
 
-def _parse_dropouts(profile: str) -> tuple[str, float]:
+def parse_dropouts(profile: str) -> tuple[str, float]:
     bad = DataError(None, f"unknown dropout profile {profile!r}; use 'none', 'random:p' "
                           "(0 <= p < 1), 'outages' or 'outage:L' (L > 0 seconds)")
     if profile in ("none", "outages"):
@@ -376,7 +376,7 @@ def apply_dropouts(gps: GpsStream, profile: str, seed: int, t_turns: np.ndarray 
         t of the first fix after it [s], or the outage's end when no fix follows). For
         ``"random:p"`` an outage is each maximal run of lost fixes.
     """
-    kind, val = _parse_dropouts(profile)
+    kind, val = parse_dropouts(profile)
     if kind == "none" or len(gps) == 0:
         return gps, []
     rng = np.random.default_rng(np.random.SeedSequence([int(seed), 0xD50]))

@@ -7,7 +7,6 @@ import numpy as np
 import pandas as pd
 import pytest
 
-import posbench.figures.distributions as distributions
 import posbench.figures.per_drive as per_drive
 import posbench.figures.style as style
 from posbench.figures.distributions import (
@@ -19,6 +18,7 @@ from posbench.figures.maps import plot_trajectory_error
 from posbench.figures.per_drive import draw_error_over_time
 from posbench.figures.style import NothingToPlot, PlotsWritten, check_formats
 from posbench.figures.writer import FIGURES, write_plots
+from posbench.metrics.outages import SINCE_FIX_CURVE_EDGES_S, since_fix_bins
 
 MAGIC = {"png": b"\x89PNG", "pdf": b"%PDF", "svg": b"<?xml"}
 ALL = [*FIGURES, "error_over_time"]
@@ -191,7 +191,7 @@ def test_warmup_rows_excluded_from_headline_figures_and_shaded_over_time():
     from matplotlib.figure import Figure
 
     ax = Figure().add_subplot()
-    assert draw_error_over_time(ax, tr, ["cv", "kf"], style._colors(["cv", "kf"]))
+    assert draw_error_over_time(ax, tr, ["cv", "kf"], style.colors_for(["cv", "kf"]))
     ys = np.concatenate([ln.get_ydata() for ln in ax.get_lines()])
     assert np.nanmax(ys) == pytest.approx(np.log10(500.0))
     labels = [t.get_text() for t in ax.get_legend().get_texts()]
@@ -205,7 +205,7 @@ def test_error_over_time_shades_each_outage_min_to_max():
     from matplotlib.figure import Figure
 
     ax = Figure().add_subplot()
-    draw_error_over_time(ax, tr, ["cv", "kf"], style._colors(["cv", "kf"]))
+    draw_error_over_time(ax, tr, ["cv", "kf"], style.colors_for(["cv", "kf"]))
     hatched = [c for c in ax.collections if c.get_hatch()]
     assert len(hatched) == 1
     spans = sorted((round(p.get_extents().x0, 2), round(p.get_extents().x1, 2))
@@ -225,8 +225,8 @@ def test_empty_bins_are_dropped_and_axes_have_units():
     assert ax.get_xlabel().startswith("speed [m/s]") and "[m]" in ax.get_ylabel()
     assert all(np.isfinite(ln.get_ydata()).all() for ln in ax.get_lines())
     sf = plot_error_vs_since_fix(tr, ["cv", "kf"])
-    occupied = np.unique(np.digitize(tr[tr.kind == "now"].since_fix_s,
-                                     distributions.SINCE_FIX_EDGES_S))
+    occupied = np.unique(since_fix_bins(tr[tr.kind == "now"].since_fix_s,
+                                        SINCE_FIX_CURVE_EDGES_S, open_last=True))
     assert all(len(ln.get_xdata()) == occupied.size for ln in sf.axes[0].get_lines())
     assert sf.axes[0].get_xlabel().startswith("time since last fix [s]")
     no_outage = tr.assign(outage=-1)

@@ -14,20 +14,23 @@ import numpy as np
 import pandas as pd
 
 from posbench.aggregation.intervals import (
-    OUTAGE_ID_BASE,
     Statistics,
     add_group_cis,
     drive_codes,
     one_drive_cis,
     outage_cis,
     paired_results,
-    since_fix_keys,
     with_ci,
 )
 from posbench.config import RunConfig, default_baseline
 from posbench.metrics.accuracy import speed_bin_labels, speed_bin_order, summarize, summarize_groups
 from posbench.metrics.latency import latency_summary
-from posbench.metrics.outages import error_vs_since_fix, outage_scores
+from posbench.metrics.outages import (
+    error_vs_since_fix,
+    outage_keys,
+    outage_scores,
+    since_fix_checkpoint,
+)
 from posbench.scenarios.labels import LABELS
 from posbench.scoring.records import DriveRun, all_traces
 from posbench.scoring.schema import KINDS, scored_mask
@@ -205,9 +208,9 @@ def aggregate(runs: Sequence[DriveRun], cfg: RunConfig, *,
             e, codes, t, m = _columns(df, "now")
             outage = df["outage"].to_numpy()[m]
             since = df["since_fix_s"].to_numpy()[m]
-            ids = np.where(outage >= 0, codes * OUTAGE_ID_BASE + outage, -1)
+            ids = outage_keys(codes, outage)
             since_fix = error_vs_since_fix(e, since)
-            add_group_cis(since_fix, e, since_fix_keys(since), codes, t, stats)
+            add_group_cis(since_fix, e, since_fix_checkpoint(since), codes, t, stats)
             scores = outage_scores(e, t, ids)
             scores["ci95"] = outage_cis(e, t, ids, stats)
             res["outages"][name] = {"since_fix": since_fix, "scores": scores}

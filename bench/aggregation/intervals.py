@@ -30,7 +30,11 @@ from posbench.metrics.bootstrap import (
     paired_summary,
     summary_ci,
 )
-from posbench.metrics.outages import MISS_THRESHOLD_M, per_outage, since_fix_checkpoint
+from posbench.metrics.outages import (
+    MISS_THRESHOLD_M,
+    outage_drive,
+    per_outage,
+)
 from posbench.scenarios.labels import LABELS
 from posbench.scoring.schema import KINDS
 
@@ -123,23 +127,14 @@ def add_group_cis(summaries: Mapping[str, dict[str, Any]], errors: np.ndarray,
         s["ci95"] = _entry(cis[i]) if i is not None else dict(empty)
 
 
-def since_fix_keys(since_fix_s: np.ndarray) -> np.ndarray:
-    """The ``since_fix`` checkpoint key of each query (``""``: none)."""
-    return since_fix_checkpoint(since_fix_s)
-
-
-#: outage ids are drive code * OUTAGE_ID_BASE + the outage's index in its drive
-OUTAGE_ID_BASE = 1_000_000
-
-
 def outage_cis(errors: np.ndarray, t_query: np.ndarray, ids: np.ndarray,
                stats: Statistics | None) -> dict[str, Any] | None:
     """Intervals of the outage scores (ADE mean, FDE mean and p95, miss rate), resampling the
-    drives the outages belong to (``ids``: drive code * :data:`OUTAGE_ID_BASE` + outage)."""
+    drives the outages belong to (``ids``: :func:`posbench.metrics.outages.outage_keys`)."""
     if stats is None:
         return None
     oid, ade, fde, t_end = per_outage(errors, t_query, ids)
-    drive = oid // OUTAGE_ID_BASE
+    drive = outage_drive(oid)
     kw = {"n_resamples": stats.resamples, "seed": stats.seed, "level": stats.level}
     a = summary_ci(ade, drive, t_end, **kw)
     f = summary_ci(fde, drive, t_end, **kw)

@@ -16,7 +16,7 @@ import numpy as np
 import pandas as pd
 
 from posbench.metrics.accuracy import summarize
-from posbench.metrics.seeds import spread
+from posbench.metrics.seeds import paired_mean_difference, spread
 from posbench.scoring.schema import KINDS, scored_mask
 
 #: the figures whose spread across seeds is reported
@@ -52,10 +52,8 @@ def seed_figures(traces: pd.DataFrame, predictors: Sequence[str], baseline: str 
                 continue
             out["paired"][name] = {}
             for k in KINDS:
-                a, b = errors[(baseline, k)], errors[(name, k)]
-                both = np.isfinite(a) & np.isfinite(b) if a.size == b.size else None
-                out["paired"][name][k] = (float(b[both].mean() - a[both].mean())
-                                          if both is not None and both.any() else float("nan"))
+                out["paired"][name][k] = paired_mean_difference(errors[(baseline, k)],
+                                                                errors[(name, k)])
     return out
 
 
@@ -71,14 +69,12 @@ def seeds_section(seeds: Sequence[int], figures: Sequence[dict[str, Any]]) -> di
     for name in figures[0]["predictors"]:
         out["spread"][name] = {}
         for k in KINDS:
-            fig = {f: spread(np.array([_num(r["predictors"][name][k].get(f)) for r in figures]))
+            # a figure a seed lacks (None) is NaN: spread leaves it out
+            fig = {f: spread(np.array([r["predictors"][name][k].get(f) for r in figures],
+                                      dtype=float))
                    for f in SPREAD_FIGURES}
             if name in figures[0].get("paired", {}):
-                fig["diff_m"] = spread(np.array([_num(r["paired"].get(name, {}).get(k))
-                                                 for r in figures]))
+                fig["diff_m"] = spread(np.array([r["paired"].get(name, {}).get(k)
+                                                 for r in figures], dtype=float))
             out["spread"][name][k] = fig
     return out
-
-
-def _num(v: Any) -> float:
-    return float("nan") if v is None else float(v)

@@ -1,18 +1,12 @@
-"""Compare saved runs: align their figures, flag config differences, gate regressions.
+"""Saved runs side by side: one figure of every run aligned by predictor, data set, route
+type (label) and drive (:func:`aligned`), the figure named (:class:`Metric`), short labels
+for the runs, and the configuration items on which they disagree
+(:func:`config_differences`).
 
-Everything here reads :class:`posbench.saved_run.run.Run` objects (``results.json`` and, for
-quantile gates, ``traces.parquet``) and returns numeric frames or plain records;
-:mod:`posbench.comparison.views` renders them as a table and a figure, and the ``bench compare``
-command turns those into output and an exit status.
-
-Alignment keys: predictor, data set, route type (label) and drive. A figure missing in
-one run is NaN there, never dropped. Runs whose configurations differ (horizon, GPS
-profile, dropouts, data hashes, ...) are flagged by :func:`config_differences`.
-
-The paired difference between two runs (:func:`paired_difference`) is a cluster
-bootstrap over the drives both runs scored (:mod:`posbench.metrics.bootstrap`): each resample
-draws drives with replacement and recomputes the statistic of both runs on the same
-drives, so drive-to-drive variation that both runs share cancels.
+Everything here reads :class:`posbench.saved_run.run.Run` objects and returns numeric frames
+or plain records; :mod:`posbench.comparison.views` renders them. A figure missing in one run
+is NaN there, never dropped. The paired difference of two runs is
+:mod:`posbench.comparison.paired`.
 """
 
 from __future__ import annotations

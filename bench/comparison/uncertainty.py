@@ -30,7 +30,7 @@ import pandas as pd
 
 from posbench.saved_run.run import Run
 from posbench.scoring.schema import KINDS
-from posbench.tables.table import Table, _num
+from posbench.tables.table import Table, as_float
 
 #: row scope -> the block of results.json ``uncertainty`` holding it
 SCOPE_BLOCKS = {"all": "predictors", "dataset": "by_dataset", "route type": "by_label",
@@ -77,7 +77,7 @@ def _summaries(block: Mapping[str, Any], scope: str
 def _figures(s: Mapping[str, Any]) -> dict[str, Any]:
     ci = s.get("nees_ci95") or [None, None]
     cov = s.get("coverage") or {}
-    num = _num
+    num = as_float
     return {"nees": num(s.get("nees")), "nees lo": num(ci[0]), "nees hi": num(ci[1]),
             "cov95": num(cov.get("95")), "area": num(s.get("sharpness_m2")),
             "loglik": num(s.get("loglik")), "verdict": s.get("verdict") or "-",

@@ -1,4 +1,5 @@
-"""posbench.predictor_tools.paper_figures.distributions (split from the flat bench/; docstring to write)."""
+"""The figures of error distributions over all drives: error CDFs, mean error by speed and by
+time since the last fix, and the calibration curve of reported uncertainty."""
 
 from __future__ import annotations
 
@@ -8,35 +9,33 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 import pandas as pd
 
+from posbench.figures.style import (
+    NothingToPlot,
+    colors_for,
+    finite_errors,
+    floor_note,
+    headline,
+    log_values,
+    warmup_mask,
+)
 from posbench.metrics.accuracy import error_cdf, speed_bin_labels, speed_bin_order, summarize_groups
+from posbench.metrics.outages import SINCE_FIX_CURVE_EDGES_S, since_fix_bins
 
 if TYPE_CHECKING:  # matplotlib is imported when a figure is drawn: importing this module is cheap
     from matplotlib.figure import Figure
-from posbench.figures.style import (
-    NothingToPlot,
-    _colors,
-    _finite,
-    _floor_note,
-    _log_values,
-    _warmup,
-    headline,
-)
 
 #: points drawn per CDF curve (evenly spaced in rank; the curve is exact at each)
 CDF_POINTS = 4000
-#: edges of the time-since-last-fix bins [s]
-SINCE_FIX_EDGES_S = (0, 0.1, 0.2, 0.3, 0.5, 0.75, 1, 1.5, 2, 3, 4, 5, 6, 8, 10, 15, 20, 30,
-                     45, 60, 90, 120, 180, 300, 600)
 
 
 def plot_error_cdf(traces: pd.DataFrame, preds: Sequence[str]) -> Figure:
     """Future and now error CDFs [m], one line per predictor, warm-up excluded."""
     from matplotlib.figure import Figure
 
-    t = _finite(headline(traces, ["predictor", "kind", "error_m"]))
+    t = finite_errors(headline(traces, ["predictor", "kind", "error_m"]))
     if t.empty:
         raise NothingToPlot("no query with a known error (no reference position)")
-    colors = _colors(preds)
+    colors = colors_for(preds)
     fig = Figure(figsize=(11, 4), layout="constrained")
     axes = fig.subplots(1, 2, sharey=True)
     clipped = False
@@ -48,7 +47,7 @@ def plot_error_cdf(traces: pd.DataFrame, preds: Sequence[str]) -> Figure:
             if n > CDF_POINTS:  # a drawn CDF needs no more points than pixels: thin evenly
                 pick = np.unique(np.linspace(0, n - 1, CDF_POINTS).astype(int))
                 e, c = e[pick], c[pick]
-            v, low = _log_values(e)
+            v, low = log_values(e)
             clipped |= low
             ax.step(v, c, where="post", label=f"{p} (n={n})", color=colors.get(p))
         if tk.empty:
@@ -61,10 +60,10 @@ def plot_error_cdf(traces: pd.DataFrame, preds: Sequence[str]) -> Figure:
         ax.grid(True, which="both", alpha=0.3)
         ax.set_ylim(0, 1.02)
     for ax in axes:
-        ax.set_xlabel("error [m] (log" + _floor_note(clipped) + ")")
+        ax.set_xlabel("error [m] (log" + floor_note(clipped) + ")")
     axes[0].set_ylabel("fraction of queries")
     fig.suptitle("Error distribution per predictor"
-                 + (" (warm-up excluded)" if _warmup(traces).any() else ""))
+                 + (" (warm-up excluded)" if warmup_mask(traces).any() else ""))
     return fig
 
 
@@ -72,7 +71,7 @@ def _mean_error_axes(ax: Any, xlabel: str, ylabel: str, clipped: bool, title: st
     """Labels, log error axis (noting a clipped floor), title, grid and legend of a
     mean-error-per-bin figure."""
     ax.set_xlabel(xlabel)
-    ax.set_ylabel(ylabel + " (log" + _floor_note(clipped) + ")")
+    ax.set_ylabel(ylabel + " (log" + floor_note(clipped) + ")")
     ax.set_yscale("log")
     ax.set_title(title)
     ax.grid(True, which="both", alpha=0.3)
@@ -85,7 +84,7 @@ def plot_error_vs_speed(traces: pd.DataFrame, preds: Sequence[str]) -> Figure:
     from matplotlib.figure import Figure
 
     t = headline(traces, ["predictor", "kind", "error_m", "speed_mps"])
-    fut = _finite(t[(t.kind == "future") & np.isfinite(t["speed_mps"].to_numpy(dtype=float))])
+    fut = finite_errors(t[(t.kind == "future") & np.isfinite(t["speed_mps"].to_numpy(dtype=float))])
     if fut.empty:
         raise NothingToPlot("no query with a known speed")
     order = speed_bin_order()
@@ -93,12 +92,12 @@ def plot_error_vs_speed(traces: pd.DataFrame, preds: Sequence[str]) -> Figure:
                                  speed_bin_labels(g["speed_mps"].to_numpy(dtype=float)), order)
              for p, g in fut.groupby("predictor", observed=True, sort=False)}
     bins = [b for b in order if any(s[b]["count"] for s in stats.values())]
-    colors = _colors(preds)
+    colors = colors_for(preds)
     fig = Figure(figsize=(8, 4.5), layout="constrained")
     ax = fig.add_subplot()
     clipped = False
     for p in [p for p in preds if p in stats] + [p for p in stats if p not in preds]:
-        ys, low = _log_values(np.array([stats[p][b]["mean_m"] for b in bins], dtype=float))
+        ys, low = log_values(np.array([stats[p][b]["mean_m"] for b in bins], dtype=float))
         clipped |= low
         ax.plot(range(len(bins)), ys, marker="o", label=p, color=colors.get(p))
     counts = [max(s[b]["count"] for s in stats.values()) for b in bins]
@@ -119,18 +118,17 @@ def plot_error_vs_since_fix(traces: pd.DataFrame, preds: Sequence[str]) -> Figur
     now = t[t.kind == "now"]
     if not (now["outage"] >= 0).any():
         raise NothingToPlot("no GPS outage in this run")
-    now = _finite(now[np.isfinite(now["since_fix_s"].to_numpy(dtype=float))])
+    now = finite_errors(now[np.isfinite(now["since_fix_s"].to_numpy(dtype=float))])
     if now.empty:
         raise NothingToPlot("no current-position query with a known error")
-    edges = np.asarray(SINCE_FIX_EDGES_S, dtype=float)
-    b_all = np.digitize(now["since_fix_s"].to_numpy(dtype=float), edges) - 1
-    b_all = np.where(b_all >= edges.size - 1, edges.size - 2, b_all)  # last bin open-ended
+    edges = np.asarray(SINCE_FIX_CURVE_EDGES_S, dtype=float)
+    b_all = since_fix_bins(now["since_fix_s"].to_numpy(dtype=float), edges, open_last=True)
     frame = pd.DataFrame({"p": now["predictor"].to_numpy(), "b": b_all,
                           "e": now["error_m"].to_numpy(dtype=float)})
     mean = frame.groupby(["p", "b"], sort=True)["e"].mean()
     used = np.unique(b_all)  # bins where some predictor has a query
     mid = 0.5 * (edges[:-1] + edges[1:])
-    colors = _colors(preds)
+    colors = colors_for(preds)
     fig = Figure(figsize=(8, 4.5), layout="constrained")
     ax = fig.add_subplot()
     clipped = False
@@ -138,7 +136,7 @@ def plot_error_vs_since_fix(traces: pd.DataFrame, preds: Sequence[str]) -> Figur
     names = list(dict.fromkeys([p for p in preds if p in present] + list(frame.p.unique())))
     for p in names:
         m = mean.loc[p]
-        ys, low = _log_values(m.reindex(used).to_numpy(dtype=float))
+        ys, low = log_values(m.reindex(used).to_numpy(dtype=float))
         clipped |= low
         ax.plot(mid[used], ys, marker="o", label=p, color=colors.get(p))
     if mid[used].max() > 10:
@@ -162,11 +160,11 @@ def plot_calibration(traces: pd.DataFrame, preds: Sequence[str]) -> Figure:
             "cov_yy"]
     if any(c not in traces for c in cols):
         raise NothingToPlot("traces without covariance columns")
-    t = _finite(headline(traces, cols))
+    t = finite_errors(headline(traces, cols))
     t = t[np.isfinite(t["cov_xx"].to_numpy(dtype=float))]
     if t.empty:
         raise NothingToPlot("no predictor reports uncertainty for an answer with a known error")
-    colors = _colors(preds)
+    colors = colors_for(preds)
     fig = Figure(figsize=(9, 4.5), layout="constrained")
     axes = fig.subplots(1, 2, sharey=True)
     present = {str(x) for x in pd.unique(t.predictor)}

@@ -1,4 +1,6 @@
-"""posbench.predictor_tools.paper_figures.maps (split from the flat bench/; docstring to write)."""
+"""The map figures of the most-turning drive: 40 s of its path with the predictors' future
+points and zooms at the worst moments, and its reference path coloured by each predictor's
+error."""
 
 from __future__ import annotations
 
@@ -8,19 +10,20 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 import pandas as pd
 
-if TYPE_CHECKING:  # matplotlib is imported when a figure is drawn: importing this module is cheap
-    from matplotlib.figure import Figure
 from posbench.figures.style import (
     FLOOR_M,
     TURN_LABELS,
     NothingToPlot,
-    _colors,
-    _finite,
-    _gaps,
-    _in_order,
+    colors_for,
+    finite_errors,
+    gap_steps,
     headline,
+    in_order,
     most_turning_drive,
 )
+
+if TYPE_CHECKING:  # matplotlib is imported when a figure is drawn: importing this module is cheap
+    from matplotlib.figure import Figure
 
 PATH_WINDOW_S = 40.0
 ZOOMS = 3
@@ -29,7 +32,7 @@ ZOOMS = 3
 def _worst_moments(win: pd.DataFrame, k: int, gap_s: float) -> list[tuple[float, float, str]]:
     """Up to ``k`` (t_query [s], error [m], predictor) of the largest future errors in
     ``win``, at least ``gap_s`` apart."""
-    w = _finite(win).sort_values("error_m", ascending=False)
+    w = finite_errors(win).sort_values("error_m", ascending=False)
     picked: list[tuple[float, float, str]] = []
     for tq, e, p in zip(w.t_query.to_numpy(), w.error_m.to_numpy(), w.predictor.to_numpy(),
                         strict=True):
@@ -61,7 +64,7 @@ def plot_path(traces: pd.DataFrame, preds: Sequence[str]) -> Figure:
                  & (t.t_query > tc - half) & (t.t_query < tc + half + 1)]
     ref = ref_rows.dropna(subset=["x_ref"]).sort_values("t_query")
     moments = _worst_moments(win, ZOOMS, gap_s=3.0)
-    colors = _colors(preds)
+    colors = colors_for(preds)
     present = {str(x) for x in pd.unique(win.predictor)}
     names = [p for p in preds if p in present]
     fig = Figure(figsize=(13 if moments else 7.5, 7.5), layout="constrained")
@@ -134,12 +137,12 @@ def plot_trajectory_error(traces: pd.DataFrame, preds: Sequence[str]) -> Figure:
 
     t = headline(traces, ["drive", "predictor", "kind", "t_query", "x_ref", "y_ref", "error_m",
                           "label"])
-    fut = _finite(t[(t.kind == "future") & np.isfinite(t["x_ref"].to_numpy(dtype=float))])
+    fut = finite_errors(t[(t.kind == "future") & np.isfinite(t["x_ref"].to_numpy(dtype=float))])
     if fut.empty:
         raise NothingToPlot("no future query with a known error")
     drive, _ = most_turning_drive(fut)
     dfd = fut[fut.drive == drive]
-    names = _in_order(preds, dfd.predictor)
+    names = in_order(preds, dfd.predictor)
     track = t[(t.drive == drive) & (t.predictor == names[0])].dropna(subset=["x_ref"])
     track = track.sort_values("t_query")
     e_all = dfd.error_m.to_numpy(dtype=float)
@@ -167,7 +170,7 @@ def plot_trajectory_error(traces: pd.DataFrame, preds: Sequence[str]) -> Figure:
         e = d.error_m.to_numpy(dtype=float)
         ax.plot(track.x_ref, track.y_ref, "-", color="0.85", lw=4, zorder=0)
         if len(d) >= 2:
-            keep = ~_gaps(tq)  # no segment across an outage
+            keep = ~gap_steps(tq)  # no segment across an outage
             seg = np.stack([xy[:-1], xy[1:]], axis=1)[keep]
             lc = LineCollection(seg, cmap="viridis", norm=norm, lw=2.5, capstyle="round")
             lc.set_array(0.5 * (e[:-1] + e[1:])[keep])

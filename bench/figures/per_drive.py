@@ -1,28 +1,28 @@
-"""posbench.predictor_tools.paper_figures.per_drive (split from the flat bench/; docstring to write)."""
+"""The per-drive figures: future-point error over drive time, with GPS outages, scenario
+labels and the warm-up shaded, for every drive of a small run or the worst ones of a large
+one (``drives/<drive>-error_over_time.<fmt>``)."""
 
 from __future__ import annotations
 
 from collections.abc import Sequence
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 import pandas as pd
 
-if TYPE_CHECKING:  # matplotlib is imported when a figure is drawn: importing this module is cheap
-    pass
 from posbench.figures.style import (
     DRIVE_DPI,
     FLOOR_M,
     LABEL_COLORS,
-    _colors,
-    _finite,
-    _gaps,
-    _in_order,
-    _log_values,
-    _warmup,
+    colors_for,
+    finite_errors,
+    gap_steps,
     headline,
+    in_order,
+    log_values,
     save_figure,
+    warmup_mask,
 )
 from posbench.naming import unique_file_safe
 
@@ -55,21 +55,21 @@ def draw_error_over_time(ax: Any, drive_rows: pd.DataFrame, preds: Sequence[str]
     log axis at a third of the rendering time (this runs once per drive)."""
     from matplotlib.patches import Patch
 
-    fut = _finite(drive_rows[drive_rows.kind == "future"])
+    fut = finite_errors(drive_rows[drive_rows.kind == "future"])
     if fut.empty:
         return False
     handles: list[Any] = []
     clipped = False
     lo_hi = (np.inf, -np.inf)
-    for p in _in_order(preds, fut.predictor):
+    for p in in_order(preds, fut.predictor):
         d = fut[fut.predictor == p].sort_values("t_query")
         e = d.error_m.to_numpy(dtype=float)
-        v, low = _log_values(e)
+        v, low = log_values(e)
         v = np.log10(v)
         clipped |= low
         lo_hi = (min(lo_hi[0], v.min()), max(lo_hi[1], v.max()))
         tq = d.t_query.to_numpy(dtype=float)
-        gap = np.flatnonzero(_gaps(tq)) + 1  # break the line across outages
+        gap = np.flatnonzero(gap_steps(tq)) + 1  # break the line across outages
         (h,) = ax.plot(np.insert(tq, gap, np.nan), np.insert(v, gap, np.nan), "-", lw=0.8,
                        color=colors.get(p), label=f"{p} (mean {e.mean():.3f} m)")
         handles.append(h)
@@ -92,7 +92,7 @@ def draw_error_over_time(ax: Any, drive_rows: pd.DataFrame, preds: Sequence[str]
                        lw=0, zorder=0.5)
         handles.append(Patch(facecolor="none", edgecolor="0.3", hatch="////",
                              label=f"GPS outage ({len(g)})"))
-    w = _warmup(drive_rows)
+    w = warmup_mask(drive_rows)
     if w.any():
         tw = drive_rows.t_query.to_numpy(dtype=float)[w]
         ax.broken_barh([(tw.min(), tw.max() - tw.min())], (0, 1), transform=xband,
@@ -144,7 +144,7 @@ def write_error_over_time(traces: pd.DataFrame, preds: Sequence[str], out: Path,
     left out and why), or None."""
     from matplotlib.figure import Figure
 
-    colors = _colors(preds)
+    colors = colors_for(preds)
     fig = Figure(figsize=(12, 4))  # fixed margins: a layout engine would double the cost
     ax = fig.add_subplot()
     fig.subplots_adjust(left=0.065, right=0.80, bottom=0.13, top=0.91)

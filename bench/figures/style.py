@@ -1,26 +1,7 @@
-"""The figures of a ``bench run``: one function per figure, one save helper.
-
-Every figure is drawn from the per-query traces (one row per query: ``t_query`` [s] in
-drive time, positions ``x, y, x_ref, y_ref`` [m] in a local ENU frame, ``error_m`` [m];
-see :mod:`posbench.replay.runner`). :func:`write_plots` writes them and never raises on thin data:
-a figure with nothing to show is not written, and :class:`PlotsWritten` says why.
-
-Figures (each written once per requested format, see :data:`FORMATS`):
-
-- ``error_cdf``: future / now error CDFs, one line per predictor (log x);
-- ``error_vs_speed``: mean future-point error per speed bin (empty bins dropped);
-- ``error_vs_since_fix``: mean current-position error by time since the last fix
-  (runs with GPS outages only; empty bins dropped);
-- ``path``: 40 s of the most-turning drive, with zoomed panels around its worst moments;
-- ``trajectory_error``: that drive's reference path coloured by each predictor's
-  future-point error, one panel per predictor, one shared colour scale;
-- ``drives/<drive>-error_over_time``: per drive, future-point error over drive time,
-  with GPS outages, scenario labels and the warm-up shaded.
-
-Warm-up: where the traces have a boolean ``warmup`` column (queries before a drive's
-second fix), those rows are left out of every figure but the per-drive error over time,
-which shades them. Old traces without the column are drawn whole.
-"""
+"""What every figure shares: the output formats and the one save helper (no timestamps: the
+same run gives the same bytes), one colour per predictor, the log error axis with its floor,
+the warm-up left out, and how a figure says it has nothing to show (:class:`NothingToPlot`,
+:class:`PlotsWritten`). matplotlib is imported when a figure is drawn, not here."""
 
 from __future__ import annotations
 
@@ -91,7 +72,7 @@ def shown_format(formats: Iterable[str] | str) -> str:
 _METADATA = {"png": {"Software": None}, "svg": {"Date": None}, "pdf": {"CreationDate": None}}
 
 
-def _in_order(preds: Sequence[str], column: pd.Series) -> list[str]:
+def in_order(preds: Sequence[str], column: pd.Series) -> list[str]:
     """The predictors present in ``column``: those of ``preds`` in its order, then others sorted."""
     present = {str(x) for x in pd.unique(column)}
     return [p for p in preds if p in present] + sorted(present - set(preds))
@@ -121,7 +102,7 @@ def most_turning_drive(fut: pd.DataFrame) -> tuple[str, bool]:
     return str(turns.groupby("drive", observed=True).size().idxmax()), True
 
 
-def _colors(preds: Sequence[str]) -> dict[str, Any]:
+def colors_for(preds: Sequence[str]) -> dict[str, Any]:
     """One colour per predictor, the same in every figure."""
     from matplotlib import colormaps
 
@@ -129,7 +110,7 @@ def _colors(preds: Sequence[str]) -> dict[str, Any]:
     return {p: cmap(i % 10) for i, p in enumerate(preds)}
 
 
-def _warmup(traces: pd.DataFrame) -> np.ndarray:
+def warmup_mask(traces: pd.DataFrame) -> np.ndarray:
     """Boolean mask of the warm-up rows (all False without a ``warmup`` column)."""
     if "warmup" not in traces.columns:
         return np.zeros(len(traces), dtype=bool)
@@ -141,26 +122,26 @@ def headline(traces: pd.DataFrame, columns: Sequence[str] | None = None) -> pd.D
     given: filtering a few columns of a long run is much cheaper than all of them)."""
     if columns is not None:
         traces = traces[[c for c in dict.fromkeys([*columns, "warmup"]) if c in traces.columns]]
-    w = _warmup(traces)
+    w = warmup_mask(traces)
     return traces[~w] if w.any() else traces
 
 
-def _log_values(e: np.ndarray) -> tuple[np.ndarray, bool]:
+def log_values(e: np.ndarray) -> tuple[np.ndarray, bool]:
     """Errors [m] ready for a log axis: values below :data:`FLOOR_M` raised to it; and
     whether any was."""
     low = e < FLOOR_M
     return (np.where(low, FLOOR_M, e), bool(low.any()))
 
 
-def _floor_note(clipped: bool) -> str:
+def floor_note(clipped: bool) -> str:
     return f"; < {1000 * FLOOR_M:g} mm drawn at {1000 * FLOOR_M:g} mm" if clipped else ""
 
 
-def _finite(df: pd.DataFrame) -> pd.DataFrame:
+def finite_errors(df: pd.DataFrame) -> pd.DataFrame:
     return df[np.isfinite(df["error_m"].to_numpy(dtype=float))]
 
 
-def _gaps(t: np.ndarray) -> np.ndarray:
+def gap_steps(t: np.ndarray) -> np.ndarray:
     """Mask of the steps between consecutive sorted query times ``t`` [s] that span a gap
     (an outage: longer than 2 s and than 5 median steps); lines are not drawn across them."""
     dt = np.diff(t)

@@ -1,15 +1,15 @@
-"""posbench.predictor_tools.paper_figures.writer (split from the flat bench/; docstring to write)."""
+"""Write a run's figures into its folder (:func:`write_plots`: the summary figures of
+:data:`FIGURES`, then the per-drive ones), never raising on thin data: a figure with nothing
+to show is not written and gets a note instead."""
 
 from __future__ import annotations
 
 from collections.abc import Iterable, Sequence
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import pandas as pd
 
-if TYPE_CHECKING:  # matplotlib is imported when a figure is drawn: importing this module is cheap
-    pass
 from posbench.figures.distributions import (
     plot_calibration,
     plot_error_cdf,

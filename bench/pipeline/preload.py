@@ -22,8 +22,11 @@ import threading
 REPLAY_MODULES = ("scipy.interpolate", "posbench.scenarios.labels")
 #: imported after the replay by the main process or by every figure child
 MODULES = ("matplotlib.figure", "matplotlib.backends.backend_agg", "scipy.special",
-           "posbench.aggregation.aggregate", "posbench.aggregation.uncertainty", "posbench.aggregation.track", "posbench.predictor_tools.paper_figures",
-           "posbench.report.markdown", "posbench.saved_run.run", "posbench.tables.run_tables", "posbench.tables.stat_tables")
+           "posbench.pipeline.results", "posbench.aggregation.aggregate",
+           "posbench.aggregation.uncertainty", "posbench.aggregation.track",
+           "posbench.figures.writer", "posbench.predictor_tools.paper_figures",
+           "posbench.report.markdown", "posbench.saved_run.run", "posbench.tables.run_tables",
+           "posbench.tables.stat_tables")
 
 
 def _import_all(modules: tuple[str, ...]) -> None:

@@ -31,7 +31,12 @@ from posbench.scenarios.drive import Drive
 
 def pick_moment(traces: pd.DataFrame, predictor: str) -> tuple[str, float] | None:
     """(drive, fix time) in a turn: the drive with most turn queries, the fix whose
-    reference heading changes most over the following second."""
+    reference course changes most over the following second (above 2 m/s).
+
+    The course is the direction between neighbouring future-query reference points (a fix
+    apart), not the traces' instantaneous ``heading_ref`` (0.1 s either side of the query):
+    a course over a fix interval is what picks the moment of every reference report, and
+    the instantaneous heading picks other moments on all eight."""
     fut = traces[(traces.kind == "future") & (traces.predictor == predictor)]
     if fut.empty:
         return None
@@ -104,10 +109,10 @@ def paper_figures(drives: list[Drive], cfg: RunConfig, traces: pd.DataFrame, out
     grid, pred = step.grid, step.pred
     ts = np.linspace(t_fix, t_fix + cfg.horizon_s, 5)
     now = np.array([lstm.position_at(t) for t in ts])
-    from posbench.replay.reference import _reference
+    from posbench.replay.reference import reference_at
 
-    ref_now = _reference(around, ts)
-    ref_path = _reference(around, np.arange(t_fix - 2.0, t_fix + 1.0, 0.05))
+    ref_now = reference_at(around, ts)
+    ref_path = reference_at(around, np.arange(t_fix - 2.0, t_fix + 1.0, 0.05))
     fixes = prep.gps.t > t_fix - 2.5
     figs: list[tuple[str, str]] = []
 

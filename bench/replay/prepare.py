@@ -13,7 +13,7 @@ import numpy as np
 
 from posbench.config import RunConfig, drive_seed
 from posbench.metrics.track_errors import HEADING_DT_S, reference_motion
-from posbench.replay.reference import FIX_CUBIC, TRUTH, _reference
+from posbench.replay.reference import FIX_CUBIC, TRUTH, reference_at
 from posbench.scenarios.drive import Drive, GpsStream
 
 
@@ -122,7 +122,7 @@ def prepare_drive(drive: Drive, cfg: RunConfig) -> PreparedDrive:
     # query times and HEADING_DT_S before and after them (the reference's direction of travel)
     tq_all = np.concatenate([f_query, n_query])
     dt = HEADING_DT_S
-    all_ref = _reference(drive, np.concatenate([grid_t, tq_all, tq_all - dt, tq_all + dt]))
+    all_ref = reference_at(drive, np.concatenate([grid_t, tq_all, tq_all - dt, tq_all + dt]))
     grid_xy = all_ref[:grid_t.size]
     at, before, after = np.split(all_ref[grid_t.size:], 3)
     heading, _, yaw_rate = reference_motion(before, at, after, dt)

@@ -1,4 +1,6 @@
-"""posbench.replay.loop.queries (split from the flat bench/; docstring to write)."""
+"""One prepared drive's queries as a table: every query with the reference it is scored
+against (the query columns of the traces, :data:`posbench.scoring.schema.QUERY_COLUMNS`),
+and where its warm-up ends."""
 
 from __future__ import annotations
 

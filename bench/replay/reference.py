@@ -15,17 +15,20 @@ import numpy as np
 
 from posbench.scenarios.drive import Drive
 
+#: what a drive is scored against (``DriveRun.reference``): its truth, or the paper's cubic
+TRUTH = "truth"
+FIX_CUBIC = "cubic through surrounding fixes"
 
-def _reference(drive: Drive, tq: np.ndarray) -> np.ndarray:
+
+def reference_at(drive: Drive, tq: np.ndarray) -> np.ndarray:
+    """(N, 2) reference positions [m] of ``drive`` at times ``tq`` [s]: its truth
+    (:func:`truth_at`) or, without one, the cubic through its fixes
+    (:func:`cubic_through_fixes`); NaN where neither covers a time."""
     if drive.truth is not None:
         tr = drive.truth
         return truth_at(tr.t, tr.x, tr.y, tq)
     g = drive.gps
     return cubic_through_fixes(g.t, g.x, g.y, tq)
-
-
-TRUTH = "truth"
-FIX_CUBIC = "cubic through surrounding fixes"
 
 
 def truth_at(t_truth: np.ndarray, x: np.ndarray, y: np.ndarray, tq: np.ndarray,

@@ -1,8 +1,8 @@
-"""The data consistency check as the CLI shows it: a table per drive and stream, the
-notes at the top of ``bench run``'s report and terminal, the predictors that used a
-failing stream, ``--strict`` and the ``consistency`` key of results.json.
-
-The checks themselves are :mod:`posbench.scenarios.consistency` (pure, on a Drive).
+"""The data consistency check as people read it: a table per drive and stream (``bench data
+inspect``), the lines at the top of ``bench run``'s terminal and the section at the top of
+report.md, from the ``consistency`` key of results.json
+(:mod:`posbench.pipeline.data_check` makes it; the checks themselves are
+:mod:`posbench.scenarios.consistency`, pure, on a Drive).
 """
 
 from __future__ import annotations

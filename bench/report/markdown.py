@@ -1,5 +1,7 @@
-"""Write a run's outputs: ``report.md`` (tables a person reads first), ``results.json``,
-per-query traces (Parquet) and the plots (:mod:`posbench.figures.style`)."""
+"""A run's report: ``report.md`` (the tables a person reads first, with their notes, the data
+check, the plots and the glossary), its tables as CSV and LaTeX files (``tables/``) and, when
+not drawn already, its figures. results.json and the traces are
+:func:`posbench.saved_run.run.save_run`'s."""
 
 from __future__ import annotations
 

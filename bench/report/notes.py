@@ -1,12 +1,12 @@
-"""posbench.report.markdown.notes (split from the flat bench/; docstring to write)."""
+"""The sentences around report.md's tables (and the terminal's): which model a learned
+predictor used and which drives it was trained on, what the headline leaves out, how the
+intervals and the paired comparison were made."""
 
 from __future__ import annotations
 
 from typing import Any
 
-from posbench.tables.run_tables import (
-    trained_in_run,
-)
+from posbench.tables.run_tables import trained_in_run
 from posbench.tables.stat_tables import block_lengths
 
 MISSING_NOTE = ("`missing`: queries a predictor answered with no position (NaN) although a "

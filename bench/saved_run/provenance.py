@@ -1,4 +1,5 @@
-"""posbench.saved_run.run.provenance (split from the flat bench/; docstring to write)."""
+"""Where a run came from, as results.json records it: package versions, the git commit of the
+posbench checkout, and a content hash of every data path (:func:`tree_hash`)."""
 
 from __future__ import annotations
 
@@ -11,10 +12,12 @@ from importlib import metadata
 from pathlib import Path
 from typing import Any
 
+#: the packages whose versions results.json records (``posbench``: this harness)
 VERSIONED = ("posbench", "numpy", "scipy", "pandas", "filterpy", "onnxruntime", "rosbags", "pymap3d")
 
 
 def package_versions() -> dict[str, str]:
+    """Python's version and that of each package of :data:`VERSIONED` (``not installed``)."""
     from posbench.naming import DISTRIBUTION
 
     out = {"python": platform.python_version()}

@@ -1,4 +1,6 @@
-"""posbench.scoring.schema.records (split from the flat bench/; docstring to write)."""
+"""A drive's outcome as one record: :class:`DriveRun` (its traces, call durations, fixes and
+notes), what a replay, a Ray task or scored answers produce and aggregation, the report and
+the rerun recording read; and the traces of many records as one frame."""
 
 from __future__ import annotations
 
@@ -8,29 +10,6 @@ from typing import Any
 
 import numpy as np
 import pandas as pd
-
-
-def all_traces(runs: Sequence[DriveRun]) -> pd.DataFrame:
-    """Every run's per-query traces in one frame (a single run's frame is returned as is)."""
-    frames = [r.traces for r in runs if not r.traces.empty]
-    if len(frames) == 1:
-        return frames[0]
-    return pd.concat(frames, ignore_index=True) if frames else pd.DataFrame()
-
-
-#: text columns of the traces that aggregation and figures filter and group by, again and again
-TEXT_COLUMNS = ("dataset", "drive", "predictor")
-
-
-def lean_traces(traces: pd.DataFrame) -> pd.DataFrame:
-    """``traces`` with its :data:`TEXT_COLUMNS` as categoricals (the same values), for
-    :func:`aggregate` and the figures: every row filter then copies small integer codes
-    instead of strings (on the shared data ~0.5-0.9 CPU-s less aggregation and ~0.2-0.3 less
-    per figure process; results and files the same to the bit). Saved traces keep their
-    text columns."""
-    cols = {c: "category" for c in TEXT_COLUMNS
-            if c in traces.columns and not isinstance(traces[c].dtype, pd.CategoricalDtype)}
-    return traces.astype(cols) if cols else traces
 
 
 @dataclass
@@ -71,3 +50,26 @@ def merge_predictor_runs(parts: Sequence[DriveRun]) -> DriveRun:
         if isinstance(getattr(first, f.name), dict):
             merged[f.name] = {k: v for p in parts for k, v in getattr(p, f.name).items()}
     return replace(first, **merged)
+
+
+def all_traces(runs: Sequence[DriveRun]) -> pd.DataFrame:
+    """Every run's per-query traces in one frame (a single run's frame is returned as is)."""
+    frames = [r.traces for r in runs if not r.traces.empty]
+    if len(frames) == 1:
+        return frames[0]
+    return pd.concat(frames, ignore_index=True) if frames else pd.DataFrame()
+
+
+#: text columns of the traces that aggregation and figures filter and group by, again and again
+TEXT_COLUMNS = ("dataset", "drive", "predictor")
+
+
+def lean_traces(traces: pd.DataFrame) -> pd.DataFrame:
+    """``traces`` with its :data:`TEXT_COLUMNS` as categoricals (the same values), for
+    :func:`aggregate` and the figures: every row filter then copies small integer codes
+    instead of strings (on the shared data ~0.5-0.9 CPU-s less aggregation and ~0.2-0.3 less
+    per figure process; results and files the same to the bit). Saved traces keep their
+    text columns."""
+    cols = {c: "category" for c in TEXT_COLUMNS
+            if c in traces.columns and not isinstance(traces[c].dtype, pd.CategoricalDtype)}
+    return traces.astype(cols) if cols else traces

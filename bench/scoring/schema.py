@@ -1,12 +1,12 @@
-"""Scoring, its own pure step: queries + a predictor's answers -> per-query traces.
+"""What a trace is: its columns (:data:`TRACE_COLUMNS`, with type, unit and meaning), the query
+kinds (:data:`KINDS`), the scenario label categories, and which rows count in the headline
+figures (:func:`scored_mask`).
 
-``bench run`` replays a drive through each predictor and scores the answers here; answers
-that come from elsewhere (a file written by another program) go through the same
-:func:`score`, matched to the queries by drive, kind and query time. Aggregation
-(:mod:`posbench.aggregation.aggregate`) works from the traces only.
-
-:data:`TRACE_COLUMNS` documents every column of ``traces.parquet`` (the README's table
-is generated from it: :func:`trace_columns_markdown`).
+``bench run`` replays a drive through each predictor and scores the answers
+(:mod:`posbench.scoring.score`); answers that come from elsewhere (a file written by another
+program) are scored the same way. Aggregation (:mod:`posbench.aggregation.aggregate`) works
+from the traces only. The README's table of ``traces.parquet`` is generated from
+:data:`TRACE_COLUMNS` (:func:`trace_columns_markdown`).
 """
 
 from __future__ import annotations
@@ -16,6 +16,8 @@ import pandas as pd
 
 from posbench.scenarios.labels import LABELS
 
+#: the two kinds of query: the position at fix time + horizon, asked at the fix; the
+#: current position, asked every now-step
 KINDS = ("future", "now")
 #: which queries the figures are over (the report's glossary collects this)
 DEFINITIONS = {

@@ -1,4 +1,6 @@
-"""posbench.scoring.score.score (split from the flat bench/; docstring to write)."""
+"""Scoring: queries + a predictor's answers -> per-query traces (:func:`score`,
+:func:`score_many`), with answers from a file matched to their queries by drive, kind and
+query time (:func:`answer_positions`, :func:`match_answers`). Pure: no replay, no file."""
 
 from __future__ import annotations
 

@@ -1,13 +1,7 @@
-"""Every table of a run, built once as a numeric frame and rendered at the last moment.
-
-A :class:`Table` holds a DataFrame (numbers stay numbers; NaN/None = no figure), how many
-decimals each float column shows, which columns are shown as ``value (count)``, which carry
-a 95 % interval (``value [lo, hi]``) and which a marker (``*`` conclusive, ``?`` not). One
-renderer writes each form: terminal cells (:meth:`Table.cells`, printed by
-:func:`posbench.cli.terminal.print_table`), Markdown, CSV (full precision; counts, interval bounds
-and markers as their own columns) and LaTeX. The builders below read a run's ``results``
-(see :mod:`posbench.saved_run.run`); nothing else formats a figure.
-"""
+"""The tables of a run's figures, as report.md and the terminal show them: the headline
+(future and now errors with their intervals, latency), warm-up, per data set, route type
+(the paper's Table I layout), speed, outages, the outlier gate and per drive. Each reads
+the run's ``results`` and returns a numeric :class:`~posbench.tables.table.Table`."""
 
 from __future__ import annotations
 
@@ -16,7 +10,7 @@ from typing import Any
 
 from posbench.metrics.accuracy import speed_bin_order
 from posbench.scenarios.labels import LABELS
-from posbench.tables.table import Table, _finite, _frame, _num
+from posbench.tables.table import Table, as_float, is_finite, rows_frame
 
 PAPER_TABLE_CM = {"straight": 16.6, "turn": 12.1, "roundabout": 9.7, "start_stop": 4.2}
 PAPER_OVERALL = "11 (LSTM), 46 (Kalman)"
@@ -42,9 +36,9 @@ def put_figure(row: dict[str, Any], col: str, summary: Mapping[str, Any] | None,
     """``row[col]``: ``summary[figure]`` x ``scale``; ``row[col_lo]``, ``row[col_hi]``: its
     95 % interval (``ci95``; NaN when the run has none)."""
     summary = summary or {}
-    row[col] = scale * _num(summary.get(figure))
+    row[col] = scale * as_float(summary.get(figure))
     lo, hi = ((summary.get("ci95") or {}).get(figure) or [None, None])[:2]
-    row[f"{col}_lo"], row[f"{col}_hi"] = scale * _num(lo), scale * _num(hi)
+    row[f"{col}_lo"], row[f"{col}_hi"] = scale * as_float(lo), scale * as_float(hi)
 
 
 def with_ci_columns(cols: Sequence[str], with_ci: Sequence[str]) -> list[str]:
@@ -87,13 +81,13 @@ def summary_table(res: Mapping[str, Any], held_out: bool = False, compact: bool 
                    missing=f.get("missing", 0) + n.get("missing", 0))
         if not held_out:
             lat = res["predictors"][name]
-            row.update(step_p50=_num(lat["latency_us"].get("p50")),
-                       step_p99=_num(lat["latency_us"].get("p99")),
-                       query_p50=_num(lat["query_us"].get("p50")))
+            row.update(step_p50=as_float(lat["latency_us"].get("p50")),
+                       step_p99=as_float(lat["latency_us"].get("p99")),
+                       query_p50=as_float(lat["query_us"].get("p50")))
         rows.append(row)
     shown_ci = ("future_mean", "now_mean") if compact else SUMMARY_CI
     cols = list(SUMMARY_LABELS) if not held_out else list(SUMMARY_LABELS)[:11]
-    return Table(_frame(rows, with_ci_columns(cols, shown_ci)), "held_out" if held_out else "summary",
+    return Table(rows_frame(rows, with_ci_columns(cols, shown_ci)), "held_out" if held_out else "summary",
                  SUMMARY_LABELS, LATENCY_DIGITS, ci=ci_map(shown_ci))
 
 
@@ -105,13 +99,13 @@ def warmup_table(res: Mapping[str, Any]) -> Table:
         row: dict[str, Any] = {"predictor": name}
         put_figure(row, "future_mean", f, "mean_m")
         put_figure(row, "now_mean", n, "mean_m")
-        row.update(future_max=_num(f["max_m"]), future_n=f["count"], now_max=_num(n["max_m"]),
+        row.update(future_max=as_float(f["max_m"]), future_n=f["count"], now_max=as_float(n["max_m"]),
                    now_n=n["count"], missing=f.get("missing", 0) + n.get("missing", 0))
         rows.append(row)
     labels = {"future_mean": "future mean [m]", "future_max": "max", "future_n": "n",
               "now_mean": "now mean [m]", "now_max": "max", "now_n": "n"}
     with_ci = ("future_mean", "now_mean")
-    return Table(_frame(rows, with_ci_columns(["predictor", *labels, "missing"], with_ci)), "warmup",
+    return Table(rows_frame(rows, with_ci_columns(["predictor", *labels, "missing"], with_ci)), "warmup",
                  labels, ci=ci_map(with_ci))
 
 
@@ -132,7 +126,7 @@ def dataset_table(res: Mapping[str, Any], dataset: str) -> Table:
         rows.append(row)
     labels = {"future_mean": "future mean [m]", "future_median": "median", "future_p95": "p95",
               "future_n": "n", "now_mean": "now mean [m]", "now_p95": "now p95", "now_n": "n"}
-    return Table(_frame(rows, with_ci_columns(["predictor", *labels], DATASET_CI)),
+    return Table(rows_frame(rows, with_ci_columns(["predictor", *labels], DATASET_CI)),
                  f"dataset-{dataset}", labels, ci=ci_map(DATASET_CI))
 
 
@@ -142,7 +136,7 @@ NOT_CONCLUSIVE = "?"
 
 def not_conclusive(value: float, lo: float, hi: float) -> bool:
     """A figure whose 95 % interval is wider than the figure itself (hi - lo > value)."""
-    return _finite(value) and _finite(lo) and _finite(hi) and hi - lo > value
+    return is_finite(value) and is_finite(lo) and is_finite(hi) and hi - lo > value
 
 
 def label_table(res: Mapping[str, Any], dataset: str, kind: str, held_out: bool = False) -> Table:
@@ -184,7 +178,7 @@ def label_table(res: Mapping[str, Any], dataset: str, kind: str, held_out: bool 
     cols = ["route type"] + [c for p in preds for c in (f"{p} [cm]", f"{p} [cm]_lo",
                                                         f"{p} [cm]_hi", f"{p} mark", f"{p} n")]
     cols += ["paper LSTM [cm]"] if paper else []
-    return Table(_frame(rows, cols), f"route-type-{dataset}-{kind}" + ("-held-out" if held_out else ""),
+    return Table(rows_frame(rows, cols), f"route-type-{dataset}-{kind}" + ("-held-out" if held_out else ""),
                  {f"{p} [cm]": f"{p} [cm] (n)" for p in preds},
                  {c: 1 for c in cols if c.endswith("[cm]")},
                  {f"{p} [cm]": f"{p} n" for p in preds},
@@ -206,7 +200,7 @@ def speed_table(res: Mapping[str, Any]) -> Table:
             row[f"{b} n"] = s["future"][b]["count"]
         rows.append(row)
     cols = ["predictor"] + [c for b in bins for c in (b, f"{b}_lo", f"{b}_hi", f"{b} n")]
-    return Table(_frame(rows, cols), "speed", counts={b: f"{b} n" for b in bins},
+    return Table(rows_frame(rows, cols), "speed", counts={b: f"{b} n" for b in bins},
                  ci=ci_map(bins))
 
 
@@ -232,7 +226,7 @@ def outage_table(res: Mapping[str, Any]) -> Table:
     cols += ["outages"] + with_ci_columns(scores, scores)
     labels = {c: f"{c} after fix" for c in cps}
     labels.update(ade="ADE [m]", fde="FDE [m]", fde_p95="FDE p95 [m]", miss_rate="miss rate")
-    return Table(_frame(rows, cols), "outages", labels, {"miss_rate": 2},
+    return Table(rows_frame(rows, cols), "outages", labels, {"miss_rate": 2},
                  {c: f"{c} n" for c in cps}, ci=ci_map([*cps, *scores]))
 
 
@@ -243,7 +237,7 @@ def gate_table(res: Mapping[str, Any]) -> Table:
              "drives with rejections": g["drives_with_rejections"]}
             for p, g in res["gate"]["predictors"].items()]
     cols = ["predictor", "rejected", "fixes fed", "rejected [%]", "drives with rejections"]
-    return Table(_frame(rows, cols), "gate", digits={"rejected [%]": 2})
+    return Table(rows_frame(rows, cols), "gate", digits={"rejected [%]": 2})
 
 
 def gate_drive_table(res: Mapping[str, Any]) -> Table:
@@ -252,7 +246,7 @@ def gate_drive_table(res: Mapping[str, Any]) -> Table:
     rows = [{"drive": d["name"], "fixes fed": d["gps_fed"],
              **{f"{p} rejected": d["rejected"].get(p, 0) for p in preds}}
             for d in res["drives"] if any(d.get("rejected", {}).values())]
-    return Table(_frame(rows, ["drive", "fixes fed"] + [f"{p} rejected" for p in preds]),
+    return Table(rows_frame(rows, ["drive", "fixes fed"] + [f"{p} rejected" for p in preds]),
                  "gate-drives")
 
 
@@ -271,5 +265,5 @@ def drives_table(res: Mapping[str, Any]) -> Table:
             put_figure(row, f"{p} future mean [m]", d["predictors"].get(p, {}).get("future"), "mean_m")
         rows.append(row)
     cols = [f"{p} future mean [m]" for p in preds]
-    return Table(_frame(rows, with_ci_columns(["drive", "data set", "reference", *cols], cols)),
+    return Table(rows_frame(rows, with_ci_columns(["drive", "data set", "reference", *cols], cols)),
                  "drives", ci=ci_map(cols))

@@ -1,6 +1,7 @@
 """The tables of the statistics: each predictor against the baseline (overall, per data set,
-per route type) and the spread of a run repeated over seeds. Numeric :class:`Table` s like
-every other table of :mod:`posbench.tables.run_tables`, rendered by the same code."""
+per route type) and the spread of a run repeated over seeds. Numeric
+:class:`~posbench.tables.table.Table` s like those of :mod:`posbench.tables.run_tables`,
+rendered by the same code."""
 
 from __future__ import annotations
 
@@ -18,7 +19,7 @@ from posbench.tables.run_tables import (
     put_figure,
     trained_in_run,
 )
-from posbench.tables.table import Table, _num
+from posbench.tables.table import Table, as_float
 
 #: the marker of a paired difference whose 95 % interval excludes 0
 CONCLUSIVE = "*"
@@ -52,8 +53,8 @@ def paired_table(res: Mapping[str, Any], dataset: str | None = None,
         for k in KINDS:
             e = kinds.get(k) or {}
             ci = e.get("ci95") or [None, None]
-            row.update({f"{k}_diff": _num(e.get("diff_m")), f"{k}_diff_lo": _num(ci[0]),
-                        f"{k}_diff_hi": _num(ci[1]), f"{k}_mark": CONCLUSIVE if e.get("conclusive") else "",
+            row.update({f"{k}_diff": as_float(e.get("diff_m")), f"{k}_diff_lo": as_float(ci[0]),
+                        f"{k}_diff_hi": as_float(ci[1]), f"{k}_mark": CONCLUSIVE if e.get("conclusive") else "",
                         f"{k}_wins": f"{e.get('wins', 0)}/{e.get('drives', 0)}",
                         f"{k}_wins_n": e.get("wins", 0), f"{k}_drives": e.get("drives", 0),
                         f"{k}_queries": e.get("queries", 0)})
@@ -83,8 +84,8 @@ def paired_label_table(res: Mapping[str, Any], dataset: str, kind: str = "future
         for p in preds:
             e = by_label[p].get(kind, {}).get(lab) or {}
             ci = e.get("ci95") or [None, None]
-            row.update({f"{p} [cm]": 100 * _num(e.get("diff_m")),
-                        f"{p} [cm]_lo": 100 * _num(ci[0]), f"{p} [cm]_hi": 100 * _num(ci[1]),
+            row.update({f"{p} [cm]": 100 * as_float(e.get("diff_m")),
+                        f"{p} [cm]_lo": 100 * as_float(ci[0]), f"{p} [cm]_hi": 100 * as_float(ci[1]),
                         f"{p} mark": CONCLUSIVE if e.get("conclusive") else "",
                         f"{p} n": int(e.get("queries", 0))})
         rows.append(row)
@@ -116,10 +117,10 @@ def seeds_table(res: Mapping[str, Any]) -> Table:
         for k in KINDS:
             put_figure(row, f"{k}_mean", res["predictors"][name][k], "mean_m")
             sp = kinds[k]["mean_m"]
-            row.update({f"{k}_seeds_mean": _num(sp["mean"]), f"{k}_sd": _num(sp["sd"]),
-                        f"{k}_min": _num(sp["min"]), f"{k}_max": _num(sp["max"])})
+            row.update({f"{k}_seeds_mean": as_float(sp["mean"]), f"{k}_sd": as_float(sp["sd"]),
+                        f"{k}_min": as_float(sp["min"]), f"{k}_max": as_float(sp["max"])})
             d = kinds[k].get("diff_m")
-            row[f"{k}_diff_sd"] = _num(d["sd"]) if d else float("nan")
+            row[f"{k}_diff_sd"] = as_float(d["sd"]) if d else float("nan")
         rows.append(row)
     labels = {}
     for k in KINDS:

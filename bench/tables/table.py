@@ -1,4 +1,13 @@
-"""posbench.tables.run_tables.table (split from the flat bench/; docstring to write)."""
+"""Every table of a run, built once as a numeric frame and rendered at the last moment.
+
+A :class:`Table` holds a DataFrame (numbers stay numbers; NaN/None = no figure), how many
+decimals each float column shows, which columns are shown as ``value (count)``, which carry
+a 95 % interval (``value [lo, hi]``) and which a marker (``*`` conclusive, ``?`` not). One
+renderer writes each form: terminal cells (:meth:`Table.cells`, printed by
+:func:`posbench.cli.terminal.print_table`), Markdown, CSV (full precision; counts, interval bounds
+and markers as their own columns) and LaTeX. The builders (:mod:`posbench.tables.run_tables`, ...) read a run's
+``results`` (see :mod:`posbench.saved_run.run`); nothing else formats a figure.
+"""
 
 from __future__ import annotations
 
@@ -10,7 +19,8 @@ from typing import Any
 import pandas as pd
 
 
-def _num(v: Any) -> float:
+def as_float(v: Any) -> float:
+    """A figure of results.json as a float: None (no figure) is NaN."""
     return float("nan") if v is None else float(v)
 
 
@@ -59,7 +69,7 @@ class Table:
                 text = fmt(row[c], digits)
                 if c in self.ci and text != "-":
                     lo, hi = (row[b] for b in self.ci[c])
-                    if _finite(lo) and _finite(hi):
+                    if is_finite(lo) and is_finite(hi):
                         text += f" [{fmt(lo, digits)}, {fmt(hi, digits)}]"
                 if c in self.marks and row[self.marks[c]] and text != "-":
                     text += f" {row[self.marks[c]]}"
@@ -96,7 +106,7 @@ class Table:
         return "\n".join(lines) + "\n"
 
 
-def _finite(v: Any) -> bool:
+def is_finite(v: Any) -> bool:
     try:
         return v is not None and math.isfinite(float(v))
     except (TypeError, ValueError):
@@ -125,5 +135,5 @@ def _tex(text: str) -> str:
     return "".join(_TEX.get(ch, ch) for ch in text)
 
 
-def _frame(rows: Sequence[Mapping[str, Any]], columns: Sequence[str]) -> pd.DataFrame:
+def rows_frame(rows: Sequence[Mapping[str, Any]], columns: Sequence[str]) -> pd.DataFrame:
     return pd.DataFrame(list(rows), columns=list(columns))

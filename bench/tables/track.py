@@ -1,4 +1,5 @@
-"""posbench.tables.run_tables.track (split from the flat bench/; docstring to write)."""
+"""The "where the error points" table: along- and cross-track errors per predictor and kind
+(results.json ``track_errors``, :mod:`posbench.aggregation.track`), with the report's note."""
 
 from __future__ import annotations
 
@@ -7,7 +8,7 @@ from typing import Any
 import pandas as pd
 
 from posbench.scoring.schema import KINDS
-from posbench.tables.table import Table, _num
+from posbench.tables.table import Table, as_float
 
 #: the report's paragraph under the table
 TRACK_NOTE = (
@@ -28,7 +29,7 @@ def track_table(res: dict[str, Any]) -> Table:
         for k in KINDS:
             s = kinds[k]
             rows.append({"predictor": name, "kind": k,
-                         **{c: _num(s[c]) for c in ("along_mean_m", "along_p95_abs_m",
+                         **{c: as_float(s[c]) for c in ("along_mean_m", "along_p95_abs_m",
                                                      "cross_mean_m", "cross_p95_abs_m",
                                                      "inward_mean_m")},
                          "turning": s["turning"], "n": s["count"],

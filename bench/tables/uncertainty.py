@@ -1,4 +1,5 @@
-"""posbench.tables.run_tables.uncertainty (split from the flat bench/; docstring to write)."""
+"""The "uncertainty" table: is each predictor's reported covariance honest (results.json
+``uncertainty``, :mod:`posbench.aggregation.uncertainty`), with the report's note."""
 
 from __future__ import annotations
 
@@ -7,7 +8,7 @@ from typing import Any
 import pandas as pd
 
 from posbench.scoring.schema import KINDS
-from posbench.tables.table import Table, _num
+from posbench.tables.table import Table, as_float
 
 #: the report's paragraph under the table
 UNCERTAINTY_NOTE = (
@@ -37,11 +38,11 @@ def uncertainty_table(res: dict[str, Any], group: str | None = None) -> Table:
                 row = {"predictor": name, "kind": k}
                 if group is not None:
                     row["group"] = g
-                rows.append({**row, "nees": _num(s["nees"]), "nees_lo": _num(ci[0]),
-                             "nees_hi": _num(ci[1]), "cov50": _num(s["coverage"]["50"]),
-                             "cov95": _num(s["coverage"]["95"]),
-                             "sharpness_m2": _num(s["sharpness_m2"]),
-                             "loglik": _num(s["loglik"]), "verdict": s["verdict"] or "-",
+                rows.append({**row, "nees": as_float(s["nees"]), "nees_lo": as_float(ci[0]),
+                             "nees_hi": as_float(ci[1]), "cov50": as_float(s["coverage"]["50"]),
+                             "cov95": as_float(s["coverage"]["95"]),
+                             "sharpness_m2": as_float(s["sharpness_m2"]),
+                             "loglik": as_float(s["loglik"]), "verdict": s["verdict"] or "-",
                              "n": s["count"]})
     if group is None:
         for name in block.get("none", []):
