@@ -113,7 +113,9 @@ def run(data: str | Path | Sequence[str | Path] | None = None,
         options["drive_plots"] = None
     opts = RunOptions(data=_tuple(data), predictors=_tuple(predictors) or DEFAULT_PREDICTORS,
                       out=None if out is None else Path(out), **options)
-    plan = plan_run(opts)
+    given = {(n, k): f"options={{{n!r}: {{{k!r}: {v!r}}}}}"
+             for n, o in opts.options.items() for k, v in o.items()}
+    plan = plan_run(opts, given)
     command = _call("run", {"data": data, "predictors": predictors, "out": out, **options})
     return execute_run(plan, command, _reporter(progress)).run
 
@@ -199,11 +201,7 @@ def check(predictor: str, *, model: str | Path | None = None,
 
 
 def _reporter(progress: bool) -> Any:
-    """The reporter of a library call: silent, or the command line's with ``progress``."""
-    if progress:
-        from posbench.cli.terminal import ConsoleReporter
+    """The reporter of a library call: silent, or progress bars and lines with ``progress``."""
+    from posbench.pipeline.reporter import SILENT, RichReporter
 
-        return ConsoleReporter()
-    from posbench.pipeline.reporter import SILENT
-
-    return SILENT
+    return RichReporter() if progress else SILENT

@@ -218,6 +218,22 @@ def _raised(exc: BaseException) -> str:
     return f"{type(exc).__name__}: {text[0][:300]}" if text else type(exc).__name__
 
 
+#: what posbench 0.1 installed at the top of site-packages; since 0.2 all of it is posbench
+OLD_TOP_LEVEL = {"predictors": "posbench.predictors", "scenarios": "posbench.scenarios",
+                 "metrics": "posbench.metrics", "bench": "posbench"}
+
+
+def _renamed_hint(missing: str | None) -> str:
+    """For a plugin that still imports a package posbench 0.1 installed at the top (``from
+    predictors.base import Predictor``): the name to import instead."""
+    top = (missing or "").partition(".")[0]
+    if top not in OLD_TOP_LEVEL:
+        return ""
+    new = OLD_TOP_LEVEL[top] + missing[len(top):]
+    return (f" (posbench 0.2 installs its packages under posbench: import {new} instead of "
+            f"{missing})")
+
+
 def _import_target(target: str, label: str, hint: bool = True) -> Any:
     """The object at ``module:attr.attr`` (``label`` starts every error line; ``hint``: say
     where a missing module is looked for)."""
@@ -231,7 +247,8 @@ def _import_target(target: str, label: str, hint: bool = True) -> Any:
             where = (" (put the folder that holds it on PYTHONPATH, or run from that folder)"
                      if hint else "")
             raise PredictorError(f"{label}: no module named {mod_name!r}{where}") from None
-        raise PredictorError(f"{label}: importing {mod_name} raised {_raised(e)}") from None
+        raise PredictorError(f"{label}: importing {mod_name} raised {_raised(e)}"
+                             f"{_renamed_hint(e.name)}") from None
     except Exception as e:  # noqa: BLE001 - the plugin's own import error, in one line
         raise PredictorError(f"{label}: importing {mod_name} raised {_raised(e)}") from None
     where = mod_name

@@ -70,7 +70,7 @@ def check(
     Example: bench check cv mypackage.predictor:MyPredictor
     """
     from posbench.checks import parse_pairs
-    from posbench.cli.terminal import ConsoleReporter, say
+    from posbench.cli.terminal import reporter, say
     from posbench.predictor_tools.contract import check_contract
     from posbench.replay.predictor_setup import (
         model_options,
@@ -91,7 +91,7 @@ def check(
         say(f"not checked: {', '.join(left_out)} (needs --model NAME=PATH)")
     reports = []
     for spec in specs:
-        with ConsoleReporter().phase(f"checking {spec}...") if not as_json else _nothing():
+        with reporter().phase(f"checking {spec}...") if not as_json else _nothing():
             report = check_contract(spec, resolved.get(spec), gate=gate)
         reports.append(report)
         if not as_json:

@@ -4,12 +4,14 @@
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Annotated
+from typing import TYPE_CHECKING, Annotated
 
 import typer
 
 from posbench.cli.options import ConfigOpt, OldFormatOpt, QuietOpt, VerboseOpt, renamed
-from posbench.comparison.comparison import Comparison
+
+if TYPE_CHECKING:
+    from posbench.comparison.comparison import Comparison
 
 #: how the tables are printed and written
 FORMATS = ("md", "csv", "latex")

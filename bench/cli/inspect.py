@@ -57,13 +57,13 @@ def inspect(
 ) -> None:
     """Show what is in each drive: duration, distance, fix intervals, IMU rate, speeds, truth,
     and whether its streams agree with each other (the data consistency check)."""
-    from posbench.cli.terminal import ConsoleReporter
+    from posbench.cli.terminal import reporter
     from posbench.pipeline.data_check import check_drives, strict_error
     from posbench.pipeline.drives import load_drives
     from posbench.scenarios.summary import summarize_drive
 
     drives = load_drives(paths, projection, parse_topics(topic) or None,
-                         reporter=ConsoleReporter())
+                         reporter=reporter())
     checks = check_drives(drives)
     rows = [summarize_drive(d) for d in drives]
     if as_json:

@@ -9,7 +9,7 @@ import typer
 
 from posbench.checks import check_at_least, check_data_paths, parse_pairs, parse_predictor_names
 from posbench.cli.options import ConfigOpt, DataOpt, ModelOpt, PredictorsOpt, QuietOpt, VerboseOpt
-from posbench.cli.terminal import ConsoleReporter, console, print_table
+from posbench.cli.terminal import console, print_table, reporter
 from posbench.errors import UsageError
 from posbench.replay.predictor_setup import model_options, validate_predictors
 
@@ -53,10 +53,10 @@ def latency(
     unknown = [n for n in names if n not in available()]
     if unknown:
         raise UsageError(f"unknown predictor(s) {', '.join(unknown)}")
-    drives = load_drives(data, "enu", None, reporter=ConsoleReporter())
+    drives = load_drives(data, "enu", None, reporter=reporter())
     drive = max(drives, key=lambda d: len(d.gps))
     res: dict = {}
-    with ConsoleReporter().phase("timing...") as status:
+    with reporter().phase("timing...") as status:
         for n in names:
             status(f"timing {n} on {drive.name}...")
             res[n] = time_predictor(n, drive, steps, options.get(n))

@@ -67,7 +67,7 @@ def queries(
     to the system under test, keep q/key/, and run bench score ANSWERS.csv --queries q
     """
     from posbench.checks import check_choice, check_drive_options, check_out_dir
-    from posbench.cli.terminal import ConsoleReporter, say
+    from posbench.cli.terminal import reporter, say
     from posbench.config import RunConfig
     from posbench.naming import plural
     from posbench.offline.queries_folder import FORMATS, write_queries
@@ -87,7 +87,7 @@ def queries(
     cfg = RunConfig(predictors=(), horizon_s=horizon, gps_profile=gps_profile,
                     gps_latency_s=gps_latency, dropouts=dropouts, seed=seed,
                     exclude_poor_truth=not include_poor_truth, gate=False)
-    reporter = ConsoleReporter()
+    reporter = reporter()
     with local_paths(data) as local:
         drives = load_drives(local, projection, topics or None, seed=seed,
                              synthetic_duration_s=synthetic_duration, reporter=reporter)

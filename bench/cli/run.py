@@ -115,7 +115,7 @@ def run(
     from posbench.checks import parse_drive_plots, parse_pairs, parse_seeds
     from posbench.cli.config_file import to_toml
     from posbench.cli.summary import print_run_summary
-    from posbench.cli.terminal import ConsoleReporter
+    from posbench.cli.terminal import reporter
     from posbench.pipeline.run import DEFAULT_PREDICTORS, RunOptions, execute_run, plan_run
     from posbench.replay.predictor_setup import parse_set
     from posbench.report.markdown import parse_report_formats
@@ -144,4 +144,4 @@ def run(
         gate=gate, strict=strict)
     import_from_cwd()
     plan = plan_run(opts, given)  # every option is checked before a drive is loaded
-    print_run_summary(execute_run(plan, command_line(), ConsoleReporter()))
+    print_run_summary(execute_run(plan, command_line(), reporter()))

@@ -57,7 +57,7 @@ def score(
     """
     from posbench.checks import parse_drive_plots
     from posbench.cli.summary import print_run_summary
-    from posbench.cli.terminal import ConsoleReporter
+    from posbench.cli.terminal import reporter
     from posbench.pipeline.score import check_score_options, score_answers_file
     from posbench.report.markdown import parse_report_formats
 
@@ -69,5 +69,5 @@ def score(
         answers, queries, name, out, command_line(), plot_formats=plot_formats(plot_format),
         drive_plots=parse_drive_plots(drive_plots),
         table_formats=parse_report_formats(table_format, "--table-format"),
-        reporter=ConsoleReporter())
+        reporter=reporter())
     print_run_summary(published)

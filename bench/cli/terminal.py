@@ -1,5 +1,5 @@
 """What ``bench`` shows in the terminal: the consoles, the one-line error, how loud a command
-is (``-q``, ``-v``), progress (:class:`ConsoleReporter`) and tables that fit the terminal
+is (``-q``, ``-v``), progress (:func:`reporter`) and tables that fit the terminal
 without ever shortening a cell.
 
 A column is exactly as wide as its longest cell (or the longest single word of its header:
@@ -20,19 +20,17 @@ Errors are always one line on stderr.
 from __future__ import annotations
 
 import os
-import time
-from collections.abc import Callable, Iterable, Iterator, Sequence
-from contextlib import contextmanager
+from collections.abc import Callable, Iterable, Sequence
 
 import typer
 from rich.console import Console, ConsoleOptions, RenderableType, RenderResult
 
-from posbench.pipeline.reporter import INFO, WARNING, Reporter
+from posbench.pipeline.reporter import INFO, WARNING, Reporter, RichReporter
 
 console = Console()
 err_console = Console(stderr=True)
 
-QUIET, NORMAL, VERBOSE = -1, 0, 1
+QUIET, NORMAL, VERBOSE = -1, 0, 1  # -q, neither, -v
 _level = [NORMAL]
 
 
@@ -70,50 +68,11 @@ def say(text: str, level: int = INFO) -> None:
         console.print(text, highlight=False, markup=False)
 
 
-class ConsoleReporter(Reporter):
-    """A pipeline's progress in the terminal: spinners and bars (not when quiet), its lines
-    at their levels (:func:`say`), and with ``-v`` one line per finished step."""
+def reporter() -> Reporter:
+    """The reporter of a command: progress and lines on :data:`console`, as loud as
+    :func:`verbosity` says."""
+    return RichReporter(console, verbosity())
 
-    @contextmanager
-    def phase(self, text: str) -> Iterator[Callable[[str], None]]:
-        if verbosity() <= QUIET:
-            yield lambda _text: None
-            return
-        with console.status(text) as status:
-            yield status.update
-
-    @contextmanager
-    def steps(self, text: str, total: int) -> Iterator[Callable[[str], None]]:
-        if verbosity() <= QUIET:
-            yield lambda _name: None
-            return
-        from rich.progress import (
-            BarColumn,
-            MofNCompleteColumn,
-            Progress,
-            TextColumn,
-            TimeElapsedColumn,
-        )
-
-        t0 = time.perf_counter()
-        count = [0]
-        with Progress(TextColumn("[bold]{task.description}"), BarColumn(),
-                      MofNCompleteColumn(), TimeElapsedColumn(),
-                      TextColumn("{task.fields[last]}"), console=console) as prog:
-            task = prog.add_task(text, total=total, last="")
-
-            def done(name: str) -> None:
-                count[0] += 1
-                prog.update(task, advance=1, last=name)
-                if verbosity() >= VERBOSE:
-                    prog.console.print(f"  {name} done ({count[0]}/{total}, "
-                                       f"{time.perf_counter() - t0:.1f} s)",
-                                       highlight=False, markup=False)
-
-            yield done
-
-    def line(self, text: str, level: int = INFO) -> None:
-        say(text, level)
 
 CELL_OVERHEAD = 3
 """Characters a rich table adds per column with the default box and padding (1 + 1 padding

@@ -9,7 +9,7 @@ import typer
 
 from posbench.checks import check_at_least, check_choice, check_data_paths
 from posbench.cli.options import ConfigOpt, DataOpt, QuietOpt, VerboseOpt, WorkersOpt, command_line
-from posbench.cli.terminal import ConsoleReporter, say
+from posbench.cli.terminal import reporter, say
 from posbench.errors import UsageError
 
 
@@ -76,7 +76,7 @@ def tune(
     if gps_profile == "native":
         if not data:
             raise UsageError("--gps-profile native tunes on recorded fixes: give --data PATH...")
-        dev = load_drives(data, "enu", None, reporter=ConsoleReporter())
+        dev = load_drives(data, "enu", None, reporter=reporter())
         source = "development routes " + ", ".join(str(p) for p in data)
     else:
         from posbench.scenarios.synthetic import default_drives
@@ -85,7 +85,7 @@ def tune(
         source = f"synthetic development drives, seeds 1000-{999 + drives}"
     n = len(list(product(*list(grid.values())[:2]))) + sum(
         len(v) for v in list(grid.values())[2:]) + 1  # + the calibration replay
-    with ConsoleReporter().steps(f"tuning {predictor} ({gps_profile})", n) as done:
+    with reporter().steps(f"tuning {predictor} ({gps_profile})", n) as done:
         if calibrate_only:
             best, trials = kept, []
         else:

@@ -90,12 +90,13 @@ def merge_options(models: Mapping[str, Mapping[str, Any]], sets: Mapping[str, Ma
     out_given: Given = {(n, k): f"--model {n}={v}" for n, o in models.items() for k, v in o.items()}
     for name, opts in sets.items():
         for option, value in opts.items():
+            flag = flag_text(given, name, option, value)
             before = merged.get(name, {}).get(option, _MISSING)
             if before is not _MISSING and not (option == "model" and _same_file(before, value)):
-                raise UsageError(f"{out_given[name, option]} and {given[name, option]} disagree; "
+                raise UsageError(f"{out_given[name, option]} and {flag} disagree; "
                                  "give one of them")
             merged.setdefault(name, {})[option] = value
-            out_given.setdefault((name, option), given[name, option])
+            out_given.setdefault((name, option), flag)
     return merged, out_given
 
 
