@@ -14,9 +14,9 @@ bench run --predictors cv,kf,ekf,lstm,hybrid --data $S/data/kitti_raw --gps-prof
   --drive-plots 0 --out reports/kitti-consumer
 bench run --predictors cv,poly,kf,kf-paper,ekf,lstm,hybrid,lstm-authors \
   --model lstm-authors=$S/models/authors/gps_interpolation_model3.onnx \
-  --data $S/data/aslan $S/data/kitti_raw $S/data/comma2k19 --out reports/all-data
+  --data $S/data/aslan --data $S/data/kitti_raw --data $S/data/comma2k19 --out reports/all-data
 bench run --predictors cv,poly,kf,kf-paper,ekf,lstm,hybrid --dropouts outages \
-  --data $S/data/aslan $S/data/kitti_raw $S/data/comma2k19 --out reports/outages
+  --data $S/data/aslan --data $S/data/kitti_raw --data $S/data/comma2k19 --out reports/outages
 bench latency --json > reports/latency.json
 # the outlier gate's effect on the paper's routes: the same run with the gate off
 bench run --predictors cv,poly,kf,kf-paper,ekf,lstm,lstm-authors \
