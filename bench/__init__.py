@@ -92,7 +92,8 @@ def run(data: str | Path | Sequence[str | Path] | None = None,
     """
     from dataclasses import fields
 
-    from posbench.pipeline.run import DEFAULT_PREDICTORS, RunOptions, execute_run, plan_run
+    from posbench.config import DEFAULT_PREDICTORS
+    from posbench.pipeline.run import RunOptions, execute_run, plan_run
 
     known = {f.name for f in fields(RunOptions)}
     unknown = sorted(set(options) - known)

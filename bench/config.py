@@ -8,6 +8,8 @@ from dataclasses import asdict, dataclass, field
 from typing import Any
 
 GPS_PROFILES = ("native", "none", "rtk", "consumer")
+#: the predictors of a run that names none (``bench run``, :func:`posbench.run`)
+DEFAULT_PREDICTORS = ("cv", "poly", "kf", "kf-paper", "ekf", "lstm")
 
 
 @dataclass(frozen=True)

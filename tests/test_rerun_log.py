@@ -20,7 +20,7 @@ from posbench.metrics.calibration import mahalanobis_sq
 from posbench.metrics.ellipses import ELLIPSE_SEGMENTS
 from posbench.metrics.track_errors import track_errors
 from posbench.recording.blueprint import AROUND_M, VEHICLE_M
-from posbench.recording.writer import (
+from posbench.recording.layout import (
     ELLIPSE_RADIUS,
     N_LAST_FIXES,
     PALETTE,
@@ -30,8 +30,8 @@ from posbench.recording.writer import (
     nice_scale,
     outage_steps,
     sanitise,
-    write_recording,
 )
+from posbench.recording.writer import write_recording
 from posbench.replay.runner import run
 from posbench.scenarios.synthetic import generate_drive
 from posbench.scoring.records import DriveRun

@@ -8,18 +8,27 @@ from typing import Annotated
 import typer
 
 from posbench.checks import check_at_least, check_data_paths, parse_pairs, parse_predictor_names
-from posbench.cli.options import ConfigOpt, DataOpt, ModelOpt, PredictorsOpt, QuietOpt, VerboseOpt
+from posbench.cli.options import (
+    ConfigOpt,
+    DataOpt,
+    ModelOpt,
+    QuietOpt,
+    VerboseOpt,
+    predictors_option,
+)
 from posbench.cli.terminal import console, print_table, reporter
+from posbench.config import DEFAULT_PREDICTORS
 from posbench.errors import UsageError
 from posbench.replay.predictor_setup import model_options, validate_predictors
 
 #: the predictors timed by default: those of `bench run`, and hybrid (the CI latency gate
 #: times it too)
-DEFAULT_TIMED = ("cv", "poly", "kf", "kf-paper", "ekf", "lstm", "hybrid")
+DEFAULT_TIMED = (*DEFAULT_PREDICTORS, "hybrid")
 
 
 def latency(
-    predictors: PredictorsOpt = None,
+    predictors: Annotated[list[str] | None, predictors_option(
+        "those of `bench run` and hybrid (which the CI latency gate times)")] = None,
     steps: Annotated[int, typer.Option(help="Fix steps to time per predictor (after warm-up).")
                      ] = 2000,
     data: DataOpt = None,
@@ -30,8 +39,7 @@ def latency(
     verbose: VerboseOpt = False,
 ) -> None:
     """Per-call latency percentiles (us) in one process and thread, with the lstm's stages and
-    batch throughput, beside the paper's figures (2 ms fit + 2 ms LSTM, 4-6 ms per step).
-    Default predictors: those of `bench run` and hybrid (which the CI latency gate times)."""
+    batch throughput, beside the paper's figures (2 ms fit + 2 ms LSTM, 4-6 ms per step)."""
     # every option is checked before a drive is loaded or a predictor timed
     check_at_least(steps, 1, "--steps")
     check_data_paths(data)

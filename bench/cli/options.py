@@ -122,11 +122,15 @@ SyntheticDurationOpt = Annotated[float | None, typer.Option(
          "built-in set (e.g. 36000 for a 10-hour soak test).")]
 
 # ------------------------------------------------------------------ predictors
-PredictorsOpt = Annotated[list[str] | None, typer.Option(
-    "--predictors", "-p", metavar="NAMES",
-    help="Predictor names (see `bench predictors`), comma-separated or repeated (-p kf -p "
-         "lstm), or module:Class of a Predictor subclass of your own (from PYTHONPATH or the "
-         "current folder), e.g. kf,lstm,mypkg.mymodule:MyPredictor.")]
+def predictors_option(default: str) -> object:
+    """The ``--predictors/-p`` option, its help naming the command's ``default``."""
+    return typer.Option(
+        "--predictors", "-p", metavar="NAMES",
+        help="Predictor names (see `bench predictors`), comma-separated or repeated (-p kf -p "
+             "lstm), or module:Class of a Predictor subclass of your own (from PYTHONPATH or "
+             f"the current folder), e.g. kf,lstm,mypkg.mymodule:MyPredictor. Default: {default}.")
+
+
 ModelOpt = Annotated[list[str] | None, typer.Option(
     "--model", metavar="NAME=PATH",
     help="The model file of one predictor, e.g. lstm-authors=PATH.onnx, or lstm=DIR (a folder "

@@ -21,7 +21,6 @@ from posbench.cli.options import (
     ModelOpt,
     OldFormatOpt,
     PlotFormatOpt,
-    PredictorsOpt,
     ProjectionOpt,
     QuietOpt,
     SetOpt,
@@ -35,15 +34,18 @@ from posbench.cli.options import (
     import_from_cwd,
     parse_topics,
     plot_formats,
+    predictors_option,
     renamed,
 )
+from posbench.config import DEFAULT_PREDICTORS
 from posbench.errors import UsageError
 
 
 def run(
     ctx: typer.Context,
     data: DataOpt = None,
-    predictors: PredictorsOpt = None,
+    predictors: Annotated[list[str] | None, predictors_option(
+        ",".join(DEFAULT_PREDICTORS))] = None,
     horizon: HorizonOpt = 0.2,
     gps_profile: GpsProfileOpt = "rtk",
     gps_latency: GpsLatencyOpt = 0.0,
@@ -116,7 +118,7 @@ def run(
     from posbench.cli.config_file import to_toml
     from posbench.cli.summary import print_run_summary
     from posbench.cli.terminal import reporter
-    from posbench.pipeline.run import DEFAULT_PREDICTORS, RunOptions, execute_run, plan_run
+    from posbench.pipeline.run import RunOptions, execute_run, plan_run
     from posbench.replay.predictor_setup import parse_set
     from posbench.report.markdown import parse_report_formats
 

@@ -11,7 +11,6 @@ from typing import Annotated
 import typer
 
 from posbench.cli.options import ConfigOpt, QuietOpt, VerboseOpt
-from posbench.cli.terminal import fail
 from posbench.errors import UsageError
 from posbench.recording import web as rerun_web
 
@@ -66,17 +65,19 @@ def view(recording: Annotated[Path, typer.Argument(
     web_port, data_port = rerun_web.check_web_port(
         rerun_web.DEFAULT_WEB_PORT if port is None else port)
     if not recording.is_file():
-        raise fail(f"{recording}: no such file")
+        raise UsageError(f"{recording}: no such file")
     exe = _find_rerun()
     if exe is None:
-        raise fail("the rerun viewer is not installed: pip install 'posbench-harness[viz]'")
+        raise UsageError("the rerun viewer is not installed: pip install 'posbench-harness[viz]'")
     if web:
-        raise _serve_web(exe, recording, web_port, data_port)
+        _serve_web(exe, recording, web_port, data_port)
+        return
     reason = no_display_reason()
     if reason is not None:
-        raise fail(f"{reason}: serve it to a browser with `bench view {recording} --web` and "
-                   f"open the printed URL (from another machine through ssh -L), or copy "
-                   f"{recording} to a machine with a display and run `rerun {recording}` there")
+        raise UsageError(f"{reason}: serve it to a browser with `bench view {recording} --web` "
+                         f"and open the printed URL (from another machine through ssh -L), or "
+                         f"copy {recording} to a machine with a display and run `rerun "
+                         f"{recording}` there")
     # the viewer's own log goes to a pipe: on failure its last line is quoted in ours
     proc = subprocess.run([exe, str(recording)], stdin=subprocess.DEVNULL,
                           stderr=subprocess.PIPE, text=True, errors="replace")
@@ -84,17 +85,19 @@ def view(recording: Annotated[Path, typer.Argument(
         log = re.sub(r"\x1b\[[0-9;]*[A-Za-z]", "", proc.stderr or "")  # no terminal colours
         last = [ln.strip() for ln in log.splitlines() if ln.strip()]
         why = f": {last[-1][:200]}" if last else ""
-        raise fail(f"the rerun viewer exited with status {proc.returncode} on {recording}{why}")
+        raise UsageError(f"the rerun viewer exited with status {proc.returncode} on "
+                         f"{recording}{why}")
 
 
-def _serve_web(exe: str, recording: Path, web_port: int, data_port: int) -> typer.Exit:
-    """Serve ``recording`` until Ctrl-C; the exit to raise (0 when stopped by the user)."""
+def _serve_web(exe: str, recording: Path, web_port: int, data_port: int) -> None:
+    """Serve ``recording`` until Ctrl-C (returns when stopped by the user).
+
+    Raises:
+        UsageError: a port is taken. ServeError: the server did not start or stopped.
+    """
     import socket
 
-    try:
-        rerun_web.check_ports_free(web_port, data_port)
-    except UsageError as e:
-        return fail(str(e))
+    rerun_web.check_ports_free(web_port, data_port)
     url = rerun_web.viewer_url(web_port, data_port)
 
     def ready() -> None:
@@ -107,9 +110,5 @@ def _serve_web(exe: str, recording: Path, web_port: int, data_port: int) -> type
               f"{rerun_web.ssh_forward_command(web_port, data_port, socket.gethostname())}",
               flush=True)
 
-    try:
-        rerun_web.serve(exe, recording.resolve(), web_port, data_port, on_ready=ready)
-    except rerun_web.ServeError as e:
-        return fail(str(e))
+    rerun_web.serve(exe, recording.resolve(), web_port, data_port, on_ready=ready)
     print("stopped", flush=True)
-    return typer.Exit(0)

@@ -20,6 +20,7 @@ from posbench.figures.style import (
 )
 from posbench.metrics.accuracy import error_cdf, speed_bin_labels, speed_bin_order, summarize_groups
 from posbench.metrics.outages import SINCE_FIX_CURVE_EDGES_S, since_fix_bins
+from posbench.scoring.schema import COV_COLUMNS, KINDS
 
 if TYPE_CHECKING:  # matplotlib is imported when a figure is drawn: importing this module is cheap
     from matplotlib.figure import Figure
@@ -39,7 +40,7 @@ def plot_error_cdf(traces: pd.DataFrame, preds: Sequence[str]) -> Figure:
     fig = Figure(figsize=(11, 4), layout="constrained")
     axes = fig.subplots(1, 2, sharey=True)
     clipped = False
-    for ax, kind in zip(axes, ("future", "now"), strict=True):
+    for ax, kind in zip(axes, KINDS, strict=True):
         tk = t[t.kind == kind]
         for p, g in tk.groupby("predictor", observed=True, sort=False):
             e, c = error_cdf(g["error_m"].to_numpy(dtype=float))
@@ -168,14 +169,14 @@ def plot_calibration(traces: pd.DataFrame, preds: Sequence[str]) -> Figure:
     fig = Figure(figsize=(9, 4.5), layout="constrained")
     axes = fig.subplots(1, 2, sharey=True)
     present = {str(x) for x in pd.unique(t.predictor)}
-    for ax, kind in zip(axes, ("future", "now"), strict=True):
+    for ax, kind in zip(axes, KINDS, strict=True):
         ax.plot([0, 1], [0, 1], color="0.6", lw=1, ls="--", label="calibrated")
         rows = t[t.kind == kind]
         for p in [q for q in preds if q in present]:
             r = rows[rows.predictor == p]
             err = r[["x", "y"]].to_numpy(float) - r[["x_ref", "y_ref"]].to_numpy(float)
             curve = np.array(calibration_curve(mahalanobis_sq(
-                err, r[["cov_xx", "cov_xy", "cov_yy"]].to_numpy(float))))
+                err, r[list(COV_COLUMNS)].to_numpy(float))))
             ax.plot(curve[:, 0], curve[:, 1], marker="o", ms=3, label=p, color=colors.get(p))
         ax.set_title(f"{kind}: reported ellipse vs truth")
         ax.set_xlabel("expected coverage p of the reported p-ellipse")

@@ -32,11 +32,11 @@ import pandas as pd
 from posbench.offline.queries_folder import QueryFolder
 from posbench.scenarios.errors import DataError
 from posbench.scoring.records import DriveRun
-from posbench.scoring.schema import KINDS
+from posbench.scoring.schema import COV_COLUMNS, KINDS
 from posbench.scoring.score import MATCH_TOLERANCE_S, answer_positions, score
 
 REQUIRED = ("drive", "kind", "t_query", "x", "y")
-COVARIANCE = ("cov_xx", "cov_xy", "cov_yy")
+COVARIANCE = COV_COLUMNS  # the answer's reported covariance, as in the traces
 OPTIONAL = ("latency_us", *COVARIANCE)
 
 

@@ -49,7 +49,7 @@ from posbench.replay.runner import skip_reason, skipped_run
 from posbench.scenarios.drive import Drive, GpsStream, ImuStream, SpeedStream
 from posbench.scenarios.errors import DataError
 from posbench.scoring.records import DriveRun
-from posbench.scoring.schema import QUERY_COLUMNS, TRACK_QUERY_COLUMNS
+from posbench.scoring.schema import KINDS, QUERY_COLUMNS, TRACK_QUERY_COLUMNS
 
 #: what ``manifest.json`` says it is, and the version of this layout: a reader accepts every
 #: MINOR of its MAJOR (MINOR grows when files or keys are added, MAJOR when one changes)
@@ -151,7 +151,7 @@ def write_queries(drives: Sequence[Drive], cfg: RunConfig, out: Path, *, command
                            "queries": 0, "skipped": reason})
         else:
             prep = prepare_drive(drive, cfg)
-            q = pd.concat([query_frame(prep, k) for k in ("future", "now")], ignore_index=True)
+            q = pd.concat([query_frame(prep, k) for k in KINDS], ignore_index=True)
             t0 = input_start_s(drive, prep.gps)
             rel = f"{INPUTS}/{did}{ext}"
             _write_frame(drive_to_frame(inputs_drive(drive, prep.gps, t0)), out / rel)

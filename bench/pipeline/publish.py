@@ -16,6 +16,7 @@ from posbench.pipeline.reporter import SILENT, WARNING, Reporter
 from posbench.report.markdown import TABLE_FORMATS
 from posbench.saved_run.run import Run
 from posbench.scoring.records import DriveRun
+from posbench.scoring.schema import KINDS
 
 if TYPE_CHECKING:
     from posbench.pipeline.jobs import FigureJobs
@@ -99,7 +100,7 @@ def publish(res: dict[str, Any], traces: pd.DataFrame, runs: Sequence[DriveRun],
         raise UsageError(f"every drive was skipped ({plural(len(runs), 'drive')}), nothing was "
                          f"scored; {where}")
     if not any(p[k]["count"] + p[k]["missing"] for p in run.results["predictors"].values()
-               for k in ("future", "now")):
+               for k in KINDS):
         reporter.line("warning: no query could be scored (no reference position at any query "
                       "past the warm-up); see the exclusions below", WARNING)
     return Published(run, written, list(removed or []))

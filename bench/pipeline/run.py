@@ -16,16 +16,13 @@ from pathlib import Path
 from typing import Any
 
 from posbench.aggregation.intervals import Statistics
-from posbench.config import RunConfig
+from posbench.config import DEFAULT_PREDICTORS, RunConfig
 from posbench.errors import UsageError
 from posbench.naming import plural
 from posbench.pipeline.publish import Published
 from posbench.pipeline.reporter import SILENT, Reporter
 from posbench.report.markdown import TABLE_FORMATS
 from posbench.scenarios.drive import Drive
-
-#: the predictors of a run that names none
-DEFAULT_PREDICTORS = ("cv", "poly", "kf", "kf-paper", "ekf", "lstm")
 
 
 @dataclass(frozen=True)

@@ -26,6 +26,7 @@ from posbench.report.notes import (
     statistics_note,
     trained_note,
 )
+from posbench.scoring.schema import KINDS
 from posbench.tables.run_tables import (
     NOT_CONCLUSIVE,
     dataset_table,
@@ -105,7 +106,7 @@ def report_tables(res: dict[str, Any]) -> list[Table]:
         if has_paired(res):
             tables += [paired_table(res, ds), paired_label_table(res, ds, "future")]
         if res.get("held_out", {}).get(ds, {}).get("drives"):
-            tables += [label_table(res, ds, k, held_out=True) for k in ("future", "now")]
+            tables += [label_table(res, ds, k, held_out=True) for k in KINDS]
             if has_held_out_paired(res, ds):
                 tables.append(paired_table(res, ds, held_out=True))
     if res.get("track_errors", {}).get("predictors"):
@@ -197,7 +198,7 @@ def render_markdown(res: dict[str, Any], plots: list[str],
         lines += [f"## Data set `{ds}`", "",
                   f"{len(drives)} drives; reference: {', '.join(refs) or '-'}.", ""]
         lines += [dataset_table(res, ds).markdown(), ""]
-        note = block_note([s[k] for s in res["by_dataset"][ds].values() for k in ("future", "now")],
+        note = block_note([s[k] for s in res["by_dataset"][ds].values() for k in KINDS],
                           f"`{ds}`")
         if note:
             lines += [note, ""]

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 from typing import Any
 
+from posbench.scoring.schema import KINDS
 from posbench.tables.run_tables import trained_in_run
 from posbench.tables.stat_tables import block_lengths
 
@@ -43,7 +44,7 @@ def excluded_note(res: dict[str, Any]) -> str:
         return ""
     warm = ex.get("warmup", {}).get(first, {})
     n_warm = sum(warm.get(k, {}).get("count", 0) + warm.get(k, {}).get("missing", 0)
-                 for k in ("future", "now"))
+                 for k in KINDS)
     n_noref = sum(ex.get("no_reference", {}).get(first, {}).values())
     return (f"Excluded from these figures, per predictor: {n_warm} warm-up queries (issued before "
             f"a drive's second received fix, when no predictor can know a velocity) and "

@@ -85,7 +85,7 @@ TRACK_QUERY_COLUMNS = ("heading_ref", "yaw_rate_ref")
 #: fixed categories keep the string columns of long traces at one byte a row, also
 #: after concatenation (identical categories concatenate as categoricals)
 LABEL_CATEGORIES = [*LABELS, "unlabelled"]
-KIND_DTYPE = pd.CategoricalDtype(["future", "now"])
+KIND_DTYPE = pd.CategoricalDtype(list(KINDS))
 
 
 def trace_columns_markdown() -> str:
