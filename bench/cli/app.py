@@ -21,19 +21,17 @@ from typing import Annotated, Any
 import typer
 
 import posbench.blas_threads  # noqa: F401  (before numpy: one OpenBLAS thread)
-from posbench.cli import (
-    check,
-    compare,
-    inspect,
-    latency,
-    predictors,
-    queries,
-    run,
-    score,
-    train,
-    tune,
-    view,
-)
+import posbench.cli.check as check
+import posbench.cli.compare as compare
+import posbench.cli.inspect as inspect
+import posbench.cli.latency as latency
+import posbench.cli.predictors as predictors
+import posbench.cli.queries as queries
+import posbench.cli.run as run
+import posbench.cli.score as score
+import posbench.cli.train as train
+import posbench.cli.tune as tune
+import posbench.cli.view as view
 from posbench.cli.options import WORKER_DIED
 from posbench.cli.terminal import fail, warn
 

@@ -27,7 +27,7 @@ from typing import Any
 
 import numpy as np
 
-from posbench.scenarios import imu_frames as fr
+import posbench.scenarios.imu_frames as fr
 from posbench.scenarios.loaders.ros_tf import find_mount
 
 
