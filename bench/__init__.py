@@ -100,9 +100,8 @@ def run(data: str | Path | Sequence[str | Path] | None = None,
     if unknown:
         raise TypeError(f"run() got unknown option(s) {', '.join(unknown)}; options: "
                         f"{', '.join(sorted(known - {'data', 'predictors', 'out'}))}")
-    for key in ("plot_formats", "table_formats"):
-        if key in options:
-            options[key] = _formats(options[key])
+    if "table_formats" in options:
+        options["table_formats"] = _formats(options["table_formats"])
     for key in ("rerun",):
         if options.get(key) is not None:
             options[key] = Path(options[key])
@@ -133,6 +132,7 @@ def score(answers: str | Path, queries: str | Path, name: str = "answers",
         UsageError: a bad name, a missing file or folder.
         DataError: answers that do not match the queries (the file and row named).
     """
+    from posbench.checks import parse_plot_formats
     from posbench.pipeline.score import check_score_options, score_answers_file
 
     answers, queries = Path(answers), Path(queries)
@@ -141,7 +141,8 @@ def score(answers: str | Path, queries: str | Path, name: str = "answers",
     command = _call("score", {"answers": str(answers), "queries": str(queries), "name": name,
                               "out": out})
     return score_answers_file(answers, queries, name, out_path, command,
-                              plot_formats=_formats(plot_formats), drive_plots=drive_plots,
+                              plot_formats=parse_plot_formats(plot_formats),
+                              drive_plots=drive_plots,
                               table_formats=_formats(table_formats),
                               reporter=_reporter(progress)).run
 

@@ -190,6 +190,19 @@ def parse_drive_plots(value: str | int | None, option: str = "--drive-plots") ->
     return n
 
 
+def parse_plot_formats(value: str | Iterable[str], option: str = "--plot-format"
+                       ) -> tuple[str, ...]:
+    """Figure formats (``png,pdf`` or ``("png", "pdf")``) as a tuple of known ones, in the
+    order given (:func:`posbench.figures.style.check_formats`)."""
+    from posbench.figures.style import check_formats
+
+    try:
+        return check_formats(value)
+    except ValueError as e:
+        shown = value if isinstance(value, str) else ",".join(map(str, value))
+        raise UsageError(f"{option} {shown!r}: {e}") from None
+
+
 def check_out_dir(path: Path, option: str = "--out") -> Path:
     """An output folder: an existing folder, or one that can be created (nothing is created
     here: a failed check leaves no trace)."""

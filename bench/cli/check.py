@@ -4,6 +4,7 @@ predictors."""
 from __future__ import annotations
 
 import json
+from contextlib import nullcontext
 from typing import Annotated
 
 import typer
@@ -91,7 +92,7 @@ def check(
         say(f"not checked: {', '.join(left_out)} (needs --model NAME=PATH)")
     reports = []
     for spec in specs:
-        with reporter().phase(f"checking {spec}...") if not as_json else _nothing():
+        with reporter().phase(f"checking {spec}...") if not as_json else nullcontext():
             report = check_contract(spec, resolved.get(spec), gate=gate)
         reports.append(report)
         if not as_json:
@@ -102,9 +103,3 @@ def check(
                           "not_checked": left_out}, indent=2))
     if not passed:
         raise typer.Exit(1)
-
-
-def _nothing():
-    from contextlib import nullcontext
-
-    return nullcontext()

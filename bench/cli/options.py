@@ -17,8 +17,7 @@ from typing import Annotated
 import typer
 
 from posbench.cli.config_file import load_config
-from posbench.cli.terminal import NORMAL, QUIET, VERBOSE, set_verbosity, verbosity
-from posbench.errors import UsageError
+from posbench.cli.terminal import QUIET, VERBOSE, set_verbosity, verbosity
 
 #: the one line for a worker process that was killed (by the OOM killer, a signal, a crash)
 WORKER_DIED = "a worker process died (out of memory?); try fewer --workers"
@@ -47,29 +46,25 @@ def parse_topics(values: list[str] | None) -> dict[str, str]:
     return topics
 
 
-def _quiet(ctx: typer.Context, value: bool) -> bool:
-    if value:
-        if verbosity() == VERBOSE:
-            raise typer.BadParameter("-q and -v together: give one")
-        set_verbosity(QUIET)
-    return value
-
-
-def _verbose(ctx: typer.Context, value: bool) -> bool:
-    if value:
-        if verbosity() == QUIET:
-            raise typer.BadParameter("-q and -v together: give one")
-        set_verbosity(VERBOSE)
-    return value
+def _loudness(level: int):
+    """The eager callback of ``-q`` (``level`` QUIET) or ``-v`` (VERBOSE): sets the level,
+    refusing the other one given too."""
+    def callback(ctx: typer.Context, value: bool) -> bool:
+        if value:
+            if verbosity() == -level:
+                raise typer.BadParameter("-q and -v together: give one")
+            set_verbosity(level)
+        return value
+    return callback
 
 
 # ------------------------------------------------------------------ on every command
 QuietOpt = Annotated[bool, typer.Option(
-    "--quiet", "-q", is_eager=True, callback=_quiet,
+    "--quiet", "-q", is_eager=True, callback=_loudness(QUIET),
     help="Only the command's own output (a table it was asked for), warnings and errors: no "
          "progress, no notes.")]
 VerboseOpt = Annotated[bool, typer.Option(
-    "--verbose", "-v", is_eager=True, callback=_verbose,
+    "--verbose", "-v", is_eager=True, callback=_loudness(VERBOSE),
     help="Also a line per finished step (drive replayed, drive scored) and the details.")]
 ConfigOpt = Annotated[Path | None, typer.Option(
     "--config", "-c", metavar="FILE.toml", is_eager=True, callback=load_config,
@@ -172,16 +167,3 @@ def renamed(old: str, new: str, command: str) -> None:
 
     warn(f"{old} is deprecated in {command}: use {new} (the old spelling goes in the next "
          f"release)")
-
-
-def plot_formats(value: str) -> tuple[str, ...]:
-    """``--plot-format png,pdf`` as a tuple of known formats, in the order given."""
-    from posbench.figures.style import check_formats
-
-    try:
-        return check_formats(value)
-    except ValueError as e:
-        raise UsageError(f"--plot-format {value!r}: {e}") from None
-
-
-__all__ = ["NORMAL", "WORKER_DIED"]

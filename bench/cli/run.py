@@ -33,7 +33,6 @@ from posbench.cli.options import (
     command_line,
     import_from_cwd,
     parse_topics,
-    plot_formats,
     predictors_option,
     renamed,
 )
@@ -114,7 +113,12 @@ def run(
     Examples: bench run; bench run -p lstm -p kf --data ../shared/data/kitti_raw;
     bench run --config run.toml --seeds 5
     """
-    from posbench.checks import parse_drive_plots, parse_pairs, parse_seeds
+    from posbench.checks import (
+        parse_drive_plots,
+        parse_pairs,
+        parse_plot_formats,
+        parse_seeds,
+    )
     from posbench.cli.config_file import to_toml
     from posbench.cli.summary import print_run_summary
     from posbench.cli.terminal import reporter
@@ -142,7 +146,7 @@ def run(
         include_poor_truth=include_poor_truth, synthetic_duration_s=synthetic_duration,
         rerun=rerun, rerun_color_by=rerun_color_by, executor=executor, address=address,
         table_formats=parse_report_formats(table_format, "--table-format"),
-        plot_formats=plot_formats(plot_format), drive_plots=parse_drive_plots(drive_plots),
+        plot_formats=parse_plot_formats(plot_format), drive_plots=parse_drive_plots(drive_plots),
         gate=gate, strict=strict)
     import_from_cwd()
     plan = plan_run(opts, given)  # every option is checked before a drive is loaded

@@ -17,7 +17,6 @@ from posbench.cli.options import (
     TableFormatOpt,
     VerboseOpt,
     command_line,
-    plot_formats,
     renamed,
 )
 
@@ -55,7 +54,7 @@ def score(
 
     Example: bench score answers.csv --queries bench-queries --name mynode --out mynode-run
     """
-    from posbench.checks import parse_drive_plots
+    from posbench.checks import parse_drive_plots, parse_plot_formats
     from posbench.cli.summary import print_run_summary
     from posbench.cli.terminal import reporter
     from posbench.pipeline.score import check_score_options, score_answers_file
@@ -66,7 +65,7 @@ def score(
         table_format = old_format
     check_score_options(answers, queries, name, out)
     published = score_answers_file(
-        answers, queries, name, out, command_line(), plot_formats=plot_formats(plot_format),
+        answers, queries, name, out, command_line(), plot_formats=parse_plot_formats(plot_format),
         drive_plots=parse_drive_plots(drive_plots),
         table_formats=parse_report_formats(table_format, "--table-format"),
         reporter=reporter())

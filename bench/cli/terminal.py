@@ -25,7 +25,7 @@ from collections.abc import Callable, Iterable, Sequence
 import typer
 from rich.console import Console, ConsoleOptions, RenderableType, RenderResult
 
-from posbench.pipeline.reporter import INFO, WARNING, Reporter, RichReporter
+from posbench.pipeline.reporter import INFO, Reporter, RichReporter
 
 console = Console()
 err_console = Console(stderr=True)
@@ -64,8 +64,7 @@ def warn(msg: str) -> None:
 def say(text: str, level: int = INFO) -> None:
     """Print one plain line on stdout if the verbosity shows ``level`` (:data:`WARNING`
     lines always, :data:`INFO` unless quiet, :data:`DETAIL` only verbose)."""
-    if level <= max(verbosity(), WARNING):
-        console.print(text, highlight=False, markup=False)
+    reporter().line(text, level)
 
 
 def reporter() -> Reporter:

@@ -6,7 +6,6 @@ from __future__ import annotations
 from collections.abc import Sequence
 from pathlib import Path
 
-from posbench.errors import UsageError
 from posbench.pipeline.reporter import SILENT, Reporter
 from posbench.scenarios.drive import Drive
 
@@ -23,11 +22,10 @@ def load_drives(paths: Sequence[str | Path] | None, projection: str = "enu",
     from posbench.scenarios.loaders import iter_load_many
 
     if not paths:
+        from posbench.checks import check_synthetic_duration
         from posbench.scenarios.synthetic import default_drives, generate_drive
 
-        if synthetic_duration_s is not None:
-            if not synthetic_duration_s > 1.0:
-                raise UsageError("--synthetic-duration must be more than 1 s")
+        if check_synthetic_duration(synthetic_duration_s, paths) is not None:
             return [generate_drive(seed=seed, route="mixed", duration_s=synthetic_duration_s)]
         return default_drives(seed=seed)
     from posbench.pipeline.preload import REPLAY_MODULES, Preload

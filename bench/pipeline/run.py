@@ -135,12 +135,12 @@ def plan_run(options: RunOptions, given: Mapping[tuple[str, str], str] | None = 
         check_out_file,
         check_topics,
         parse_drive_plots,
+        parse_plot_formats,
         parse_predictor_names,
         parse_seeds,
         resolve_baseline,
         resolve_color_by,
     )
-    from posbench.figures.style import check_formats
     from posbench.replay.executors import EXECUTORS, RAY_MISSING, ray_available
     from posbench.replay.predictor_setup import (
         merge_options,
@@ -156,10 +156,7 @@ def plan_run(options: RunOptions, given: Mapping[tuple[str, str], str] | None = 
     if o.executor == "ray" and not ray_available():
         raise UsageError(RAY_MISSING)
     names = parse_predictor_names(o.predictors)
-    try:
-        plot_formats = check_formats(o.plot_formats)
-    except ValueError as e:
-        raise UsageError(f"--plot-format {','.join(map(str, o.plot_formats))!r}: {e}") from None
+    plot_formats = parse_plot_formats(o.plot_formats)
     bad = [f for f in o.table_formats if f not in TABLE_FORMATS]
     if bad:
         raise UsageError(f"--table-format: unknown table format {bad[0]!r}; use "
