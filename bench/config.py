@@ -8,6 +8,8 @@ from dataclasses import asdict, dataclass, field
 from typing import Any
 
 GPS_PROFILES = ("native", "none", "rtk", "consumer")
+#: the GPS conditions a predictor can be tuned for (one per profile)
+GPS_CONDITIONS = GPS_PROFILES
 #: the predictors of a run that names none (``bench run``, :func:`posbench.run`)
 DEFAULT_PREDICTORS = ("cv", "poly", "kf", "kf-paper", "ekf", "lstm")
 
@@ -30,6 +32,8 @@ class RunConfig:
         seed: master seed; each drive's seed derives from it and the drive's name only,
             so results do not depend on the number of workers.
         exclude_poor_truth: skip drives whose truth is flagged poor (median accuracy > 1 m).
+        tuning: a tuning file of the user's (``bench tune --out``) whose entries replace the
+            package's for the predictors and GPS conditions it holds; None: the package's.
         use_tuned: start from the tuned parameters of ``predictors/tuned.json`` for the drive's
             GPS condition (``bench tune`` writes them); False = the predictors' physical defaults.
         predictor_options: per-predictor constructor overrides, e.g. ``{"lstm-authors": {"model": p}}``.
@@ -51,6 +55,7 @@ class RunConfig:
     use_tuned: bool = True
     predictor_options: dict[str, dict[str, Any]] = field(default_factory=dict)
     gate: bool = True
+    tuning: str | None = None
 
     def to_dict(self) -> dict[str, Any]:
         d = asdict(self)

@@ -161,3 +161,11 @@ class CaFilter2D:
     def velocity(self) -> tuple[float, float]:
         """(vx, vy) of the mean [m/s]."""
         return self.mx[1], self.my[1]
+
+    def position_block(self) -> tuple[float, float, float]:
+        """(var x, cov xy, var y) of the position [m^2]."""
+        return self.A[0], self.C[0], self.B[0]
+
+    def acceleration_variances(self) -> tuple[float, float]:
+        """(var ax, var ay) [m^2/s^4]."""
+        return self.A[5], self.B[5]

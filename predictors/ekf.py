@@ -50,6 +50,7 @@ import math
 
 import numpy as np
 
+from posbench.predictors._fix_noise import FixNoise
 from posbench.predictors._geometry import check_config, wrap_angle
 from posbench.predictors.base import Predictor, stated_fix_variance
 
@@ -205,6 +206,9 @@ class CtraEkf(Predictor):
             covariance (1: as the model says); fitted on development drives by
             ``bench tune`` so that 95 % of the 95 % ellipses cover the truth. It never
             changes a position.
+        fix_noise_memory: > 0: for fixes that state no accuracy, estimate their noise from
+            the fixes themselves (:class:`~posbench.predictors._fix_noise.FixNoise`, this many
+            fixes of memory) instead of assuming ``gps_sigma``.
     """
 
     name = "ekf"
@@ -218,7 +222,7 @@ class CtraEkf(Predictor):
                  accel_bias_sigma0: float = 0.5, gyro_bias_sigma0: float = 0.01,
                  yaw_offset_sigma0: float = 0.1, speed_scale_sigma0: float = 0.05,
                  calib_psd: float = 1e-6, gps_sigma_scale: float = 1.0,
-                 cov_scale: float = 1.0) -> None:
+                 cov_scale: float = 1.0, fix_noise_memory: float = 0.0) -> None:
         check_config("ekf", jerk_psd=(jerk_psd, 1e-9, 1e6), yaw_acc_psd=(yaw_acc_psd, 1e-12, 1e6),
                      pos_psd=(pos_psd, 0.0, 1e6), gps_sigma=(gps_sigma, 1e-4, 1e3),
                      yaw_rate_sigma=(yaw_rate_sigma, 1e-6, 1e3),
@@ -226,7 +230,11 @@ class CtraEkf(Predictor):
                      speed_sigma=(speed_sigma, 1e-4, 1e3), speed_rel_sigma=(speed_rel_sigma, 0.0, 1.0),
                      init_vel_sigma=(init_vel_sigma, 1e-3, 1e3),
                      gps_sigma_scale=(gps_sigma_scale, 1e-3, 1e3),
-                     cov_scale=(cov_scale, 1e-6, 1e6))
+                     cov_scale=(cov_scale, 1e-6, 1e6),
+                     fix_noise_memory=(fix_noise_memory, 0.0, 1e6))
+        self.fix_noise_memory = float(fix_noise_memory)
+        self._fix_noise = (FixNoise(float(gps_sigma) ** 2, self.fix_noise_memory)
+                           if self.fix_noise_memory > 0.0 else None)
         self.jerk_psd = float(jerk_psd)
         self.yaw_acc_psd = float(yaw_acc_psd)
         self.pos_psd = float(pos_psd)
@@ -282,7 +290,8 @@ class CtraEkf(Predictor):
                 "gyro_bias_psd": self.gyro_bias_psd, "accel_bias_sigma0": self.accel_bias_sigma0,
                 "gyro_bias_sigma0": self.gyro_bias_sigma0,
                 "yaw_offset_sigma0": self.yaw_offset_sigma0,
-                "speed_scale_sigma0": self.speed_scale_sigma0, "calib_psd": self.calib_psd}
+                "speed_scale_sigma0": self.speed_scale_sigma0, "calib_psd": self.calib_psd,
+                "fix_noise_memory": self.fix_noise_memory}
 
     def reset(self) -> None:
         self._ready = False
@@ -293,6 +302,8 @@ class CtraEkf(Predictor):
         self._speed_meas = math.nan
         self.x.fill(0.0)
         self.P[:] = np.eye(N_STATE)
+        if self._fix_noise is not None:
+            self._fix_noise.reset()
 
     # -- filter core ---------------------------------------------------------------
     def _init(self, t: float, x: float, y: float, yaw: float, v: float,
@@ -344,6 +355,7 @@ class CtraEkf(Predictor):
         K = np.dot(ph, Si)
         e = self._e2
         e[0], e[1] = zx - x.item(IX), zy - x.item(IY)
+        self.fix_innovation = (e.item(0), e.item(1), s00, s01, s11)
         x += np.dot(K, e)
         P -= np.dot(K, ph.T)
 
@@ -403,13 +415,23 @@ class CtraEkf(Predictor):
     # -- observations ----------------------------------------------------------------
     def fix_variance(self, sigma: float | None) -> float:
         """R per axis [m^2] of a fix stating per-axis 1-sigma ``sigma`` [m]:
-        ``(gps_sigma_scale * sigma)^2``, or ``gps_sigma^2`` when it states none (None,
-        not finite, or <= 0)."""
-        return stated_fix_variance(sigma, self.gps_sigma_scale, self._r_gps)
+        ``(gps_sigma_scale * sigma)^2``, or when it states none (None, not finite, or <= 0)
+        ``gps_sigma^2`` or, with ``fix_noise_memory``, the variance estimated so far."""
+        fn = self._fix_noise
+        return stated_fix_variance(sigma, self.gps_sigma_scale,
+                                   self._r_gps if fn is None else fn.var)
+
+    #: the newest fix's innovation and its covariance before the update, ``(nu_x, nu_y,
+    #: S_xx, S_xy, S_yy)`` [m, m^2]; None before the filter is initialised (read by
+    #: :class:`~posbench.predictors.bank.ModelBank`)
+    fix_innovation: tuple[float, float, float, float, float] | None = None
 
     def observe_gps(self, t: float, x: float, y: float, sigma: float | None = None) -> None:
+        self.fix_innovation = None
         if not (math.isfinite(x) and math.isfinite(y)):
             return
+        if self._fix_noise is not None:
+            self._fix_noise.observe(t, x, y)
         self._r_fix = self.fix_variance(sigma)  # this fix's R, read by _init / _update_position
         if not self._ready:
             self._try_init(t, x, y)

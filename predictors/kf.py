@@ -42,8 +42,11 @@ import math
 
 import numpy as np
 
+from posbench.predictors._accel_bias import AccelBiasEstimator
 from posbench.predictors._ca_kalman import CaFilter2D, ca_noise_block, predict_cross, predict_sym
+from posbench.predictors._fix_noise import FixNoise
 from posbench.predictors._geometry import check_config
+from posbench.predictors._heading import CourseHeading
 from posbench.predictors.base import Predictor, stated_fix_variance
 
 NAN2 = (math.nan, math.nan)
@@ -99,6 +102,28 @@ class LinearKalman(Predictor):
             covariance (1: as the model says); fitted on development drives by
             ``bench tune`` so that 95 % of the 95 % ellipses cover the truth. It never
             changes a position.
+        use_imu: use IMU acceleration updates when given.
+        heading_from_fixes: where the IMU states no yaw, take the heading from fix chords
+            longer than their noise, carried by the gyro in between
+            (:class:`~posbench.predictors._heading.CourseHeading`), instead of from the
+            velocity state above ``heading_min_speed``; IMU samples are used only while
+            that heading's standard deviation is below ``heading_sigma_max`` [rad].
+        accel_bias_tau_s: > 0: estimate the accelerometer's vehicle-frame bias [m/s^2]
+            (mount tilt, gravity leakage, offset) from the IMU's velocity changes against
+            those of a fixes-only filter, forgetting with this time constant [s]
+            (:class:`~posbench.predictors._accel_bias.AccelBiasEstimator`), and remove it
+            from every sample.
+        imu_gate: > 0: skip an IMU update whose 2-D innovation NIS exceeds this (13.8: the
+            chi-square 99.9 % point).
+        fix_noise_memory: > 0: for fixes that state no accuracy, estimate their noise from
+            the fixes themselves (:class:`~posbench.predictors._fix_noise.FixNoise`, this many
+            fixes of memory) instead of assuming ``gps_sigma``.
+        imu_noise_tau_s: > 0: adapt the IMU noise to its innovations (covariance
+            matching, exponential memory of this many seconds): R = max(accel_sigma^2,
+            mean squared innovation - predicted variance), so vibration and a misfit
+            mount weigh the IMU down.
+        course, bias_estimator: a heading tracker / bias estimator to use instead of the
+            filter's own (filters of a bank share theirs; their inputs are idempotent).
     """
 
     name = "kf"
@@ -108,14 +133,35 @@ class LinearKalman(Predictor):
                  stop_speed: float = 0.15 * KMH,
                  init_vel_sigma: float = 15.0, init_acc_sigma: float = 3.0,
                  heading_min_speed: float = 1.0, gps_sigma_scale: float = 1.0,
-                 cov_scale: float = 1.0) -> None:
+                 cov_scale: float = 1.0, use_imu: bool = True, heading_from_fixes: bool = False,
+                 heading_sigma_max: float = 0.15, accel_bias_tau_s: float = 0.0,
+                 imu_gate: float = 0.0, imu_noise_tau_s: float = 0.0,
+                 fix_noise_memory: float = 0.0, course: CourseHeading | None = None,
+                 bias_estimator: AccelBiasEstimator | None = None) -> None:
         check_config("kf", jerk_psd=(jerk_psd, 1e-9, 1e6), gps_sigma=(gps_sigma, 1e-4, 1e3),
                      gps_sigma_scale=(gps_sigma_scale, 1e-3, 1e3),
                      accel_sigma=(accel_sigma, 1e-4, 1e3), speed_sigma=(speed_sigma, 1e-4, 1e3),
                      speed_rel_sigma=(speed_rel_sigma, 0.0, 1.0), stop_speed=(stop_speed, 0.0, 10.0), init_vel_sigma=(init_vel_sigma, 1e-3, 1e3),
                      init_acc_sigma=(init_acc_sigma, 1e-3, 1e3),
                      heading_min_speed=(heading_min_speed, 0.0, 100.0),
-                     cov_scale=(cov_scale, 1e-6, 1e6))
+                     cov_scale=(cov_scale, 1e-6, 1e6),
+                     heading_sigma_max=(heading_sigma_max, 1e-4, 3.2),
+                     accel_bias_tau_s=(accel_bias_tau_s, 0.0, 1e6), imu_gate=(imu_gate, 0.0, 1e9),
+                     imu_noise_tau_s=(imu_noise_tau_s, 0.0, 1e6),
+                     fix_noise_memory=(fix_noise_memory, 0.0, 1e6))
+        self.fix_noise_memory = float(fix_noise_memory)
+        self.use_imu = bool(use_imu)
+        self.heading_from_fixes = bool(heading_from_fixes)
+        self.heading_sigma_max = float(heading_sigma_max)
+        self.accel_bias_tau_s = float(accel_bias_tau_s)
+        self.imu_gate = float(imu_gate)
+        self.imu_noise_tau_s = float(imu_noise_tau_s)
+        # heading tracker and bias estimator: shared ones where a bank passes them
+        self._course = (course or CourseHeading()) if self.heading_from_fixes else None
+        self._fix_noise = (FixNoise(float(gps_sigma) ** 2, self.fix_noise_memory)
+                           if self.fix_noise_memory > 0.0 else None)
+        self._bias_est = ((bias_estimator or AccelBiasEstimator(self.accel_bias_tau_s))
+                          if self.accel_bias_tau_s > 0.0 else None)
         self.jerk_psd = float(jerk_psd)
         self.gps_sigma = float(gps_sigma)
         self.gps_sigma_scale = float(gps_sigma_scale)
@@ -143,7 +189,12 @@ class LinearKalman(Predictor):
                 "speed_rel_sigma": self.speed_rel_sigma, "use_speed": self.use_speed, "stop_speed": self.stop_speed,
                 "init_vel_sigma": self.init_vel_sigma, "init_acc_sigma": self.init_acc_sigma,
                 "heading_min_speed": self.heading_min_speed,
-                "gps_sigma_scale": self.gps_sigma_scale, "cov_scale": self.cov_scale}
+                "gps_sigma_scale": self.gps_sigma_scale, "cov_scale": self.cov_scale,
+                "use_imu": self.use_imu, "heading_from_fixes": self.heading_from_fixes,
+                "heading_sigma_max": self.heading_sigma_max,
+                "accel_bias_tau_s": self.accel_bias_tau_s, "imu_gate": self.imu_gate,
+                "imu_noise_tau_s": self.imu_noise_tau_s,
+                "fix_noise_memory": self.fix_noise_memory}
 
     # -- state -------------------------------------------------------------------------
     def reset(self) -> None:
@@ -152,6 +203,15 @@ class LinearKalman(Predictor):
         self._s = [math.nan] * 6  # plain-float copy of the mean
         self._yaw = math.nan  # last heading used for rotation [rad]
         self._yaw_t = math.nan
+        if self._bias_est is not None:
+            self._bias_est.reset()
+        if self._fix_noise is not None:
+            self._fix_noise.reset()
+        self._imu_t = math.nan  # time of the previous IMU sample [s]
+        self._imu_yaw = False  # whether the newest IMU sample stated a yaw
+        self._imu_m2 = self._r_acc  # mean squared IMU innovation per axis [m^2/s^4]
+        if self._course is not None:
+            self._course.reset()
 
     def _sync(self) -> None:
         self._s = self.kf.state()
@@ -165,14 +225,28 @@ class LinearKalman(Predictor):
     # -- observations -----------------------------------------------------------------
     def fix_variance(self, sigma: float | None) -> float:
         """R per axis [m^2] of a fix stating per-axis 1-sigma ``sigma`` [m]:
-        ``(gps_sigma_scale * sigma)^2``, or ``gps_sigma^2`` when it states none (None,
-        not finite, or <= 0)."""
-        return stated_fix_variance(sigma, self.gps_sigma_scale, self._r_pos)
+        ``(gps_sigma_scale * sigma)^2``, or when it states none (None, not finite, or <= 0)
+        ``gps_sigma^2`` or, with ``fix_noise_memory``, the variance estimated so far."""
+        fn = self._fix_noise
+        return stated_fix_variance(sigma, self.gps_sigma_scale,
+                                   self._r_pos if fn is None else fn.var)
+
+    #: the newest fix's innovation and its covariance before the update, ``(nu_x, nu_y,
+    #: S_xx, S_xy, S_yy)`` [m, m^2]; None before the filter's second fix (read by
+    #: :class:`~posbench.predictors.bank.ModelBank`)
+    fix_innovation: tuple[float, float, float, float, float] | None = None
 
     def observe_gps(self, t: float, x: float, y: float, sigma: float | None = None) -> None:
+        self.fix_innovation = None
         if not (math.isfinite(x) and math.isfinite(y)):
             return
+        if self._fix_noise is not None:
+            self._fix_noise.observe(t, x, y)
         r = self.fix_variance(sigma)
+        if self._course is not None:
+            self._course.observe_fix(t, x, y, r)
+        if self._bias_est is not None:
+            self._bias_est.observe_fix(t, x, y, r)
         if not self._ready:
             self.kf.init(x, y, r, self.init_vel_sigma ** 2, self.init_acc_sigma ** 2)
             self._ts = t
@@ -180,6 +254,10 @@ class LinearKalman(Predictor):
             self._sync()
             return
         self._predict_to(t)
+        kf = self.kf
+        px, py = kf.state()[:2]
+        pxx, pxy, pyy = kf.position_block()
+        self.fix_innovation = (x - px, y - py, pxx + r, pxy, pyy + r)
         self.kf.update_pair(POS, x, y, r)
         self._sync()
 
@@ -198,16 +276,57 @@ class LinearKalman(Predictor):
         return h
 
     def observe_imu(self, t: float, ax: float, ay: float, yaw: float, yaw_rate: float) -> None:
+        course = self._course
+        if course is not None:
+            course.observe_rate(t, yaw_rate)
+        self._imu_yaw = math.isfinite(yaw)
         if not self._ready:
             if math.isfinite(yaw):
                 self._yaw, self._yaw_t = yaw, t
             return
+        if not self.use_imu:
+            return
         self._predict_to(t)
-        h = self._heading(t, yaw, yaw_rate)
+        if course is not None and not math.isfinite(yaw):
+            h, h_sd = course.heading(t)
+            if not h_sd < self.heading_sigma_max:
+                h = math.nan
+            self._yaw, self._yaw_t = h, t
+        else:
+            h = self._heading(t, yaw, yaw_rate)
+        if self._bias_est is not None:
+            self._bias_est.observe_imu(t, ax, ay, h)
         if math.isfinite(ax) and math.isfinite(ay) and math.isfinite(h):
             c, s = math.cos(h), math.sin(h)
-            self.kf.update_pair(ACC, c * ax - s * ay, s * ax + c * ay, self._r_acc)
+            if self.accel_bias_tau_s > 0.0 or self.imu_gate > 0.0 or self.imu_noise_tau_s > 0.0:
+                self._robust_accel_update(t, ax, ay, c, s)
+            else:
+                self.kf.update_pair(ACC, c * ax - s * ay, s * ax + c * ay, self._r_acc)
+        self._imu_t = t
         self._sync()
+
+    def _robust_accel_update(self, t: float, ax: float, ay: float, c: float, s: float) -> None:
+        """The IMU acceleration update with the bias estimate removed, its noise adapted to
+        the innovations and the update gated (``accel_bias_tau_s``, ``imu_noise_tau_s``,
+        ``imu_gate``). Innovations in the vehicle frame [m/s^2]."""
+        kf = self.kf
+        bx, by = self.accel_bias
+        mx, my = ax - bx, ay - by
+        pax, pay = kf.state()[4:]  # predicted world acceleration
+        nx = mx - (c * pax + s * pay)
+        ny = my - (-s * pax + c * pay)
+        vax, vay = kf.acceleration_variances()
+        pa = 0.5 * (vax + vay)
+        dt = t - self._imu_t
+        dt = min(dt, 0.5) if dt > 0.0 else 0.0
+        m2 = 0.5 * (nx * nx + ny * ny)
+        r = self._r_acc
+        if self.imu_noise_tau_s > 0.0:
+            self._imu_m2 += min(dt / self.imu_noise_tau_s, 1.0) * (m2 - self._imu_m2)
+            r = max(r, self._imu_m2 - pa)
+        if self.imu_gate > 0.0 and 2.0 * m2 > self.imu_gate * (pa + r):
+            return
+        kf.update_pair(ACC, c * mx - s * my, s * mx + c * my, r)
 
     def observe_speed(self, t: float, v: float) -> None:
         if not (self._ready and self.use_speed and math.isfinite(v)):
@@ -217,6 +336,10 @@ class LinearKalman(Predictor):
             self.kf.update_pair(VEL, 0.0, 0.0, self._r_spd)
         else:
             h = self._yaw
+            if self._course is not None and not self._imu_yaw:
+                h, h_sd = self._course.heading(t)
+                if not h_sd < self.heading_sigma_max:
+                    return
             vx, vy = self.kf.velocity()
             if not math.isfinite(h) and math.hypot(vx, vy) > self.heading_min_speed:
                 h = math.atan2(vy, vx)
@@ -225,6 +348,12 @@ class LinearKalman(Predictor):
             self.kf.update_speed(math.cos(h), math.sin(h), v,
                                  self._r_spd + (self.speed_rel_sigma * v) ** 2)
         self._sync()
+
+    @property
+    def accel_bias(self) -> tuple[float, float]:
+        """The accelerometer bias estimate (x forward, y left) [m/s^2]; (0, 0) unless
+        ``accel_bias_tau_s`` > 0."""
+        return self._bias_est.bias if self._bias_est is not None else (0.0, 0.0)
 
     def state(self) -> tuple[float, list[float], np.ndarray]:
         """(time [s], mean ``[x, y, vx, vy, ax, ay]``, 6x6 covariance) of the filter, NaN

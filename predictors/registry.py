@@ -75,18 +75,21 @@ _REGISTRY: dict[str, Entry] = {
                 "constant velocity from the last two fixes"),
     "poly": Entry("posbench.predictors.poly:PolyExtrapolator",
                   "the paper's cubic regression over recent fixes, extrapolated"),
-    "kf": Entry("posbench.predictors.kf:LinearKalman",
-                "linear Kalman filter, constant-acceleration state, IMU accel (world frame) as observation"),
+    "kf": Entry("posbench.predictors.kf_bank:KalmanBank",
+                "linear Kalman filters (constant acceleration; IMU-aided and fixes-only, "
+                "4 process noises), the one that predicts the fixes best answers"),
     "kf-paper": Entry("posbench.predictors.kf_paper:PaperKalman",
                       "the paper's Kalman baseline as its authors published it"),
-    "ekf": Entry("posbench.predictors.ekf:CtraEkf",
-                 "extended Kalman filter, CTRA model with IMU yaw rate/accel and wheel speed"),
+    "ekf": Entry("posbench.predictors.ekf_bank:EkfBank",
+                 "extended Kalman filters (CTRA; IMU- and speed-aided and fixes-only, "
+                 "4 process noises), the one that predicts the fixes best answers"),
     "lstm": Entry("posbench.predictors.lstm.predictor:LstmPredictor",
                   "the paper's system: cubic resampling + MLP-LSTM-MLP (ONNX) + cubic"),
     "lstm-authors": Entry("posbench.predictors.lstm.authors:AuthorsLstmPredictor",
                           "the paper authors' published ONNX network (needs --model PATH)"),
     "hybrid": Entry("posbench.predictors.hybrid.predictor:HybridPredictor",
-                    "kf prior + learned residual (ONNX), 200 ms ahead"),
+                    "one CA Kalman filter (the pre-bank kf) as prior + learned residual "
+                    "(ONNX), 200 ms ahead"),
 }
 
 #: a constructor parameter of this name receives the run's GPS condition (:func:`create`)
@@ -303,21 +306,65 @@ def constructor_options(cls: type[Predictor]) -> tuple[dict[str, Any], bool]:
 
 
 # ----------------------------------------------------------------------- create
-def tuned_params(name: str, condition: str | None) -> dict[str, Any]:
-    """Tuned parameters of ``name`` for a GPS condition (``none``, ``rtk``, ``consumer``,
-    ``native``) from ``predictors/tuned.json``; empty if none were tuned."""
+#: the parsed tuning files, by (path, modification time)
+_tuning_cache: dict[tuple[str, int], dict[str, Any]] = {}
+
+
+def read_tuning(path: Path | str) -> dict[str, Any]:
+    """A tuning file (``bench tune --out``, or the package's :data:`TUNED_FILE`):
+    ``{predictor: {gps_condition: {"params": {...}, "how": str, "drives": [...]}}}``.
+    Raises :class:`PredictorError` naming the file when it is missing or malformed."""
+    path = Path(path)
+    try:
+        key = (str(path.resolve()), path.stat().st_mtime_ns)
+    except OSError as e:
+        raise PredictorError(f"tuning file {path}: {e.strerror or e}") from None
+    if key not in _tuning_cache:
+        try:
+            data = json.loads(path.read_text())
+        except (OSError, UnicodeDecodeError, json.JSONDecodeError) as e:
+            raise PredictorError(f"tuning file {path}: not readable JSON ({e})") from None
+        ok = isinstance(data, dict) and all(
+            isinstance(conds, dict) and all(isinstance(e, dict) and isinstance(e.get("params", {}), dict)
+                                            for e in conds.values())
+            for conds in data.values())
+        if not ok:
+            raise PredictorError(f"tuning file {path}: expected {{predictor: {{gps condition: "
+                                 f'{{"params": {{...}}}}}}}} as `bench tune --out` writes')
+        _tuning_cache[key] = data
+    return _tuning_cache[key]
+
+
+def tuning_entry(name: str, condition: str | None, tuning: Path | str | None = None
+                 ) -> tuple[Path, dict[str, Any]] | None:
+    """(file, entry) of the tuning ``name`` gets under a GPS ``condition`` (``none``,
+    ``rtk``, ``consumer``, ``native``): the entry of the user's ``tuning`` file if it holds
+    one, else the package's :data:`TUNED_FILE`; None where neither does (the predictor's
+    defaults) or ``condition`` is None."""
     if condition is None:
-        return {}
-    path = TUNED_FILE
-    if not path.exists():
-        return {}
-    data = json.loads(path.read_text())
-    return dict(data.get(name, {}).get(condition, {}).get("params", {}))
+        return None
+    for path in ([Path(tuning)] if tuning else []) + [TUNED_FILE]:
+        if path == TUNED_FILE and not path.exists():
+            continue
+        entry = read_tuning(path).get(name, {}).get(condition)
+        if entry is not None:
+            return path, entry
+    return None
 
 
-def create(name: str, condition: str | None = None, **config: Any) -> Predictor:
+def tuned_params(name: str, condition: str | None, tuning: Path | str | None = None
+                 ) -> dict[str, Any]:
+    """Tuned parameters of ``name`` for a GPS condition (:func:`tuning_entry`); empty if
+    none were tuned."""
+    found = tuning_entry(name, condition, tuning)
+    return dict(found[1].get("params", {})) if found else {}
+
+
+def create(name: str, condition: str | None = None, *, tuning_file: Path | str | None = None,
+           **config: Any) -> Predictor:
     """A new predictor ``name`` (any form :func:`resolve` takes): its registry defaults, then
-    tuned parameters for the GPS ``condition`` (if given and tuned), then ``config``.
+    tuned parameters for the GPS ``condition`` (if given and tuned; from ``tuning_file``
+    where it holds them, else the package's), then ``config``.
 
     A class whose constructor declares a parameter :data:`CONDITION_PARAM`
     (``gps_condition``) also receives ``gps_condition=condition`` (None included) unless
@@ -325,7 +372,7 @@ def create(name: str, condition: str | None = None, **config: Any) -> Predictor:
     ``hybrid``'s prior, recorded in its model) picks them itself."""
     entry = resolve(name)
     cls = load_class(entry, base_name(name))
-    kwargs = {**entry.defaults, **tuned_params(base_name(name), condition), **config}
+    kwargs = {**entry.defaults, **tuned_params(base_name(name), condition, tuning_file), **config}
     if CONDITION_PARAM not in kwargs and CONDITION_PARAM in constructor_options(cls)[0]:
         kwargs[CONDITION_PARAM] = condition
     return cls(**kwargs)

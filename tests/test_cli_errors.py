@@ -99,7 +99,7 @@ CASES = [
     ("import-path-no-module-name", "run -p :Class", "expected a registered name or module:Class",
      True),
     ("set-unknown-option", "run -p kf --set kf.nosuch=1",
-     "--set kf.nosuch=1: predictor kf has no option 'nosuch'; its options: jerk_psd, ", True),
+     "--set kf.nosuch=1: predictor kf has no option 'nosuch'; its options: gps_sigma, ", True),
     ("set-no-option", "run -p kf --set kf=1", "--set kf=1: names no option", True),
     ("set-no-equals", "run -p kf --set kf.jerk_psd", "expected NAME.OPTION=VALUE", True),
     ("set-not-in-run", "run -p kf --set nope.x=1",

@@ -104,6 +104,13 @@ class FilterpyCore:
     def velocity(self) -> tuple[float, float]:
         return float(self.f.x[2, 0]), float(self.f.x[3, 0])
 
+    def position_block(self) -> tuple[float, float, float]:
+        P = self.f.P
+        return float(P[0, 0]), float(P[0, 1]), float(P[1, 1])
+
+    def acceleration_variances(self) -> tuple[float, float]:
+        return float(self.f.P[4, 4]), float(self.f.P[5, 5])
+
 
 class FilterpyKalman(LinearKalman):
     """``kf`` on filterpy: the reference."""
@@ -218,6 +225,9 @@ def test_kf_matches_filterpy_with_other_settings() -> None:
         lockstep_run(d, LinearKalman(**opts), FilterpyKalman(**opts), compare_kf)
         lockstep_run(d, LinearKalman(use_speed=False), FilterpyKalman(use_speed=False),
                      compare_kf)
+        robust = dict(heading_from_fixes=True, accel_bias_tau_s=30.0, imu_gate=13.8,
+                      imu_noise_tau_s=5.0, fix_noise_memory=30.0)  # the kf bank's members
+        lockstep_run(d, LinearKalman(**robust), FilterpyKalman(**robust), compare_kf)
 
 
 def shared_drives(aslan_dir: Path, kitti_dir: Path, comma_dir: Path) -> list[Drive]:

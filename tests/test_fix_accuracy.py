@@ -262,12 +262,21 @@ def test_filters_use_stated_sigma_as_R(name: str) -> None:
             out.append(p.position_at(ti + 0.2))
         return np.asarray(out)
 
-    stated = answers(create(name, gps_sigma=0.3, gps_sigma_scale=2.0), [0.5] * t.size)
-    constant = answers(create(name, gps_sigma=1.0), ["old"] * t.size)
+    const = {"fix_noise_memory": 0.0}  # unstated fixes weighed with gps_sigma, not estimated
+    stated = answers(create(name, gps_sigma=0.3, gps_sigma_scale=2.0, **const), [0.5] * t.size)
+    constant = answers(create(name, gps_sigma=1.0, **const), ["old"] * t.size)
     np.testing.assert_allclose(stated, constant, rtol=0, atol=1e-9)
-    plain = answers(create(name, gps_sigma=0.3), ["old"] * t.size)
+    plain = answers(create(name, gps_sigma=0.3, **const), ["old"] * t.size)
     for missing in (None, math.nan, 0.0):
-        np.testing.assert_array_equal(
-            answers(create(name, gps_sigma=0.3, gps_sigma_scale=2.0), [missing] * t.size), plain)
+        np.testing.assert_array_equal(answers(create(
+            name, gps_sigma=0.3, gps_sigma_scale=2.0, **const), [missing] * t.size), plain)
     assert not np.allclose(stated, plain)  # the stated sigma really changes the answers
+    # by default the noise of unstated fixes is estimated from them (0.5 m here), so the
+    # assumed gps_sigma hardly matters: 0.05 m and 3 m give nearly the same answers
+    a = answers(create(name, gps_sigma=0.05), ["old"] * t.size)
+    b = answers(create(name, gps_sigma=3.0), ["old"] * t.size)
+    late = slice(60, None)  # after the estimate's warm-up and the bank's memory
+    assert np.abs(a[late] - b[late]).max() < 0.1 * np.abs(
+        answers(create(name, gps_sigma=0.05, **const), ["old"] * t.size)[late]
+        - answers(create(name, gps_sigma=3.0, **const), ["old"] * t.size)[late]).max()
     assert create(name, gps_sigma_scale=1.5).config()["gps_sigma_scale"] == 1.5

@@ -24,12 +24,13 @@ from posbench.predictors.hybrid.export import (  # noqa: E402
     export_onnx,
     model_info,
     parity,
+    prior_kf_params,
     save_model,
-    tuned_kf_params,
     write_untrained,
 )
 from posbench.predictors.hybrid.model import HybridNet  # noqa: E402
 from posbench.predictors.hybrid.predictor import HORIZONS, HybridPredictor  # noqa: E402
+from posbench.predictors.kf import LinearKalman  # noqa: E402
 from posbench.predictors.lstm.windows import drive_windows  # noqa: E402
 from posbench.predictors.registry import create  # noqa: E402
 from posbench.replay.loop import GPS, events, feed, replay  # noqa: E402
@@ -66,7 +67,7 @@ def _constant_net() -> HybridNet:
 @pytest.fixture(scope="module")
 def constant(tmp_path_factory) -> Path:
     d = tmp_path_factory.mktemp("constant")
-    save_model(_constant_net(), d, tuned_kf_params())
+    save_model(_constant_net(), d, prior_kf_params())
     return d
 
 
@@ -93,7 +94,7 @@ def test_untrained_hybrid_answers_exactly_as_kf_in_the_runner(untrained, profile
     """Zero correction: every future and now answer of the hybrid is the kf's (same tuned
     parameters: the model records them per condition), bit for bit, though the network ran."""
     prep = prepare_drive(generate_drive(seed=2, route="mixed"), RunConfig(gps_profile=profile))
-    kf = create("kf", profile)
+    kf = LinearKalman(**prior_kf_params()[profile])
     hy = create("hybrid", profile, model=str(untrained))
     assert hy.prior_condition == profile and hy.kf.config() == kf.config()
     a, b = replay(kf, prep, 0.2), replay(hy, prep, 0.2)
@@ -104,15 +105,19 @@ def test_untrained_hybrid_answers_exactly_as_kf_in_the_runner(untrained, profile
 
 
 def test_untrained_hybrid_equals_kf_through_the_runner_command(untrained, tmp_path):
-    """The real runner (`bench run`, one worker): same figures for kf and hybrid."""
+    """The real runner (`bench run`, one worker): same figures for the hybrid and its prior,
+    the one CA Kalman filter (``posbench.predictors.kf:LinearKalman``) with the model's rtk
+    parameters."""
     out = tmp_path / "out"
-    r = subprocess.run([sys.executable, "-m", "posbench", "run", "-p", "kf,hybrid",
-                        "--model", f"hybrid={untrained}", "--out", str(out), "--workers", "1"],
-                       capture_output=True, text=True, cwd=ROOT, timeout=300)
+    cls = "posbench.predictors.kf:LinearKalman"
+    sets = [a for k, v in prior_kf_params()["rtk"].items() for a in ("--set", f"{cls}.{k}={v}")]
+    r = subprocess.run([sys.executable, "-m", "posbench", "run", "-p", f"{cls},hybrid",
+                        "--model", f"hybrid={untrained}", "--out", str(out), "--workers", "1",
+                        *sets], capture_output=True, text=True, cwd=ROOT, timeout=300)
     assert r.returncode == 0, r.stderr
     res = json.loads((out / "results.json").read_text())["predictors"]
     for kind in ("future", "now"):
-        a, b = res["kf"][kind], res["hybrid"][kind]
+        a, b = res[cls][kind], res["hybrid"][kind]
         assert a["count"] > 100
         for key in ("count", "missing", "mean_m", "median_m", "rmse_m", "p95_m", "max_m"):
             assert a[key] == b[key], (kind, key)
@@ -180,7 +185,7 @@ def test_a_non_finite_network_output_falls_back_to_the_prior(tmp_path):
     with torch.no_grad():
         net.decoder[-1].bias[0] = float("nan")
     export_onnx(net, tmp_path / "model.onnx")
-    (tmp_path / "model.json").write_text(json.dumps(model_info(net, tuned_kf_params())))
+    (tmp_path / "model.json").write_text(json.dumps(model_info(net, prior_kf_params())))
     hy = HybridPredictor(str(tmp_path))
     for i in range(15):
         hy.observe_gps(0.2 * i, 10.0 * 0.2 * i, 0.0)
@@ -197,7 +202,7 @@ def test_onnx_matches_torch_on_random_inputs(tmp_path):
         torch.nn.init.normal_(net.decoder[-1].weight, std=0.3)
         torch.nn.init.normal_(net.decoder[-1].bias, std=0.3)
     net.set_stats(np.linspace(-1, 1, 6), np.linspace(0.5, 2, 6), [0.5, 1, 1.5, 2], 0.05)
-    info = save_model(net, tmp_path, tuned_kf_params())
+    info = save_model(net, tmp_path, prior_kf_params())
     assert info["parity_max_abs"] <= 1e-5
     assert parity(net, tmp_path / "model.onnx", n=64, seed=9) <= 1e-5
     # the runtime's preallocated two-input feed gives torch's answer too
@@ -227,8 +232,8 @@ def test_untrained_net_outputs_zero_correction():
 
 # --------------------------------------------------------------- training data
 def test_hybrid_windows_prior_is_what_kf_answers_in_a_real_replay(prep):
-    params = tuned_kf_params()["rtk"]
-    kf = create("kf", None, **params)
+    params = prior_kf_params()["rtk"]
+    kf = LinearKalman(**params)
     future = replay(kf, prep, 0.2).future_xy
     hw = hybrid_windows(prep.drive, prep.gps, params)
     ws = drive_windows(prep.drive, prep.gps)
@@ -279,7 +284,7 @@ def test_pickle_round_trip_mid_drive(constant, prep):
 
 # --------------------------------------------------------------- condition seam
 def test_gps_condition_picks_the_prior_params(untrained, tmp_path):
-    tuned = tuned_kf_params()
+    tuned = prior_kf_params()
     for cond in ("none", "rtk", "consumer", "native"):
         hy = create("hybrid", cond, model=str(untrained))
         assert hy.prior_condition == cond
@@ -298,7 +303,7 @@ def test_gps_condition_picks_the_prior_params(untrained, tmp_path):
     assert hy.prior_condition == "defaults" and hy.kf.jerk_psd == 2.0
     assert create("hybrid", "rtk", model=str(tmp_path)).kf.jerk_psd == 7.0
     # predictors without the parameter never receive it
-    assert create("kf", "rtk").config()["jerk_psd"] == tuned["rtk"]["jerk_psd"]
+    assert "gps_condition" not in create("kf", "rtk").config()
 
 
 def test_the_bundled_model_loads_and_records_itself():

@@ -22,6 +22,7 @@ import pytest
 from posbench.errors import UsageError
 from posbench.predictors import registry
 from posbench.predictors.base import Predictor
+from posbench.predictors.kf_bank import JERK_PSDS
 from posbench.predictors.registry import (
     ENTRY_POINT,
     IMPORT_PATH,
@@ -33,6 +34,7 @@ from posbench.predictors.registry import (
     is_import_path,
     predictor_class,
     resolve,
+    tuned_params,
 )
 from posbench.replay.predictor_setup import (
     merge_options,
@@ -328,7 +330,7 @@ def test_entry_points_are_lazy(tmp_path, monkeypatch):
     assert "gone" in names and "bad@name" not in names
     assert any("'bad@name' of lazy-x 2.0 is ignored" in n for n in registry.entry_point_notes())
     assert not (tmp_path / "imported").exists() and "lazy_plugin_x" not in sys.modules
-    assert type(create("kf")).__name__ == "LinearKalman"  # a broken plugin breaks nothing else
+    assert type(create("kf")).__name__ == "KalmanBank"  # a broken plugin breaks nothing else
     validate_predictors(["kf"], {})
     assert registry.description("lazy") == "A lazy one."
     assert (tmp_path / "imported").exists()
@@ -413,8 +415,10 @@ def test_set_alias_joins_the_run_and_tuned_values_come_first():
     names = with_model_aliases(("kf",), opts)
     assert names == ("kf", "kf@slow")
     assert validate_predictors(names, opts, given) == opts
-    assert create("kf", "rtk").jerk_psd == 512.0  # predictors/tuned.json
-    assert create("kf", "rtk", **opts["kf"]).jerk_psd == 4.0
+    tuned = create("kf", "rtk")
+    assert tuned.cov_scale == tuned_params("kf", "rtk")["cov_scale"] != 1.0  # tuned.json
+    assert tuned.jerk_psds == JERK_PSDS
+    assert create("kf", "rtk", **opts["kf"]).jerk_psds == (4.0,)
 
 
 def test_set_errors_name_the_predictor_and_option():

@@ -292,6 +292,9 @@ def aggregate(runs: Sequence[DriveRun], cfg: RunConfig, *,
     from posbench.aggregation.uncertainty import uncertainty_section
 
     res["uncertainty"] = uncertainty_section(traces, keep, preds)
+    from posbench.aggregation.sanity import sanity_section
+
+    res["sanity"] = sanity_section(traces, keep, preds, datasets, stats)
     return res
 
 

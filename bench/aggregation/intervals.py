@@ -173,6 +173,25 @@ def _paired(e_base: np.ndarray, e: np.ndarray, codes: np.ndarray, times: np.ndar
             "block_len": r["block_len"]}
 
 
+def paired_by_dataset(df: pd.DataFrame, base: pd.DataFrame, datasets: Sequence[str],
+                      stats: Statistics) -> dict[str, dict[str, Any]]:
+    """``{ds: {kind: entry}}`` of :func:`paired_results` alone (no overall, no labels): one
+    predictor's scored rows ``df`` against ``base`` per data set and query kind."""
+    both, codes = _aligned(df, base)
+    kind = both["kind"].to_numpy()
+    ds = both["dataset"].astype(str).to_numpy()
+    e = both["error_m"].to_numpy(dtype=float)
+    eb = both["error_base"].to_numpy(dtype=float)
+    t = both["t_query"].to_numpy(dtype=float)
+    out: dict[str, dict[str, Any]] = {}
+    for name in datasets:
+        out[name] = {}
+        for k in KINDS:
+            m = (kind == k) & (ds == name)
+            out[name][k] = _paired(eb[m], e[m], codes[m], t[m], stats)
+    return out
+
+
 def paired_results(df: pd.DataFrame, base: pd.DataFrame, datasets: Sequence[str],
                    stats: Statistics) -> dict[str, Any]:
     """One predictor against the baseline: its scored rows ``df`` and the baseline's

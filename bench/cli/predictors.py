@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import inspect
 import json
+from pathlib import Path
 from typing import Annotated, Any
 
 import typer
@@ -22,19 +23,24 @@ def _jsonable(value: Any) -> Any:
         return repr(value)
 
 
-def predictor_info(name: str, options: bool = False) -> dict[str, Any]:
+def predictor_info(name: str, options: bool = False, tuning: Path | None = None) -> dict[str, Any]:
     """What ``name`` is (any form ``bench run --predictors`` takes): ``name``, ``source``
     (built-in, registered, entry point, import path), ``distribution`` (for an entry
     point), ``target`` (``module:Class``), ``description`` and ``error`` (why it cannot be
     loaded, else None). With ``options``: its constructor options (``name``, ``default``,
-    ``required``) and ``any_option`` (it takes ``**kwargs``). A built-in's class is imported
+    ``required``), ``any_option`` (it takes ``**kwargs``) and ``by_condition``: per GPS
+    condition the values a run uses where they differ from the defaults (the ``tuning``
+    file's, else the package's tuning), with ``tuning`` (the file they come from). A built-in's class is imported
     only for its options; an entry point's or import path's to read its docstring."""
+    from posbench.config import GPS_CONDITIONS
     from posbench.predictors.registry import (
         PredictorError,
+        base_name,
         constructor_options,
         description,
         predictor_class,
         resolve,
+        tuning_entry,
     )
 
     entry = resolve(name)
@@ -49,12 +55,18 @@ def predictor_info(name: str, options: bool = False) -> dict[str, Any]:
                                 else _jsonable(v), "required": v is inspect.Parameter.empty}
                                for k, v in accepted.items()]
             info["any_option"] = any_option
+            info["by_condition"] = {}
+            for cond in GPS_CONDITIONS:
+                found = tuning_entry(base_name(name), cond, tuning)
+                if found:
+                    info["by_condition"][cond] = {"params": found[1].get("params", {}),
+                                                  "tuning": str(found[0])}
     except PredictorError as e:
         info["error"] = str(e)
     return info
 
 
-def listing(names: list[str] | None = None) -> dict[str, Any]:
+def listing(names: list[str] | None = None, tuning: Path | None = None) -> dict[str, Any]:
     """Every available predictor (or those ``names``, with their options), and notes on
     entry points that are left out or cannot be loaded."""
     from posbench.predictors.registry import PredictorError, available, entry_point_notes
@@ -63,7 +75,7 @@ def listing(names: list[str] | None = None) -> dict[str, Any]:
     if details:
         import_from_cwd()
         try:
-            infos = [predictor_info(n, options=True) for n in names or []]
+            infos = [predictor_info(n, options=True, tuning=tuning) for n in names or []]
         except PredictorError as e:
             raise UsageError(str(e)) from None
         bad = next((i for i in infos if i["error"]), None)
@@ -90,6 +102,9 @@ def list_predictors(
              "names, entry points or module:Class. Default: list every available one.")] = None,
     as_json: Annotated[bool, typer.Option("--json", help="Print JSON instead of a table.")
                        ] = False,
+    tuning: Annotated[Path | None, typer.Option(
+        "--tuning", metavar="FILE",
+        help="Show the values a run with `bench run --tuning FILE` would use.")] = None,
     config: ConfigOpt = None,
     quiet: QuietOpt = False,
     verbose: VerboseOpt = False,
@@ -104,7 +119,9 @@ def list_predictors(
 
     from posbench.cli.terminal import print_table, say
 
-    res = listing(names)
+    if tuning is not None and not tuning.is_file():
+        raise UsageError(f"--tuning {tuning}: no such file")
+    res = listing(names, tuning)
     if as_json:
         print(json.dumps(res, indent=2))
         return
@@ -117,5 +134,10 @@ def list_predictors(
             console.print(f"{escape(i['name'])} ({escape(i['target'])}) options: "
                           f"{escape(_option_text(i['options'], i['any_option']))}",
                           highlight=False, soft_wrap=True)
+            for cond, tuned in i.get("by_condition", {}).items():
+                values = ", ".join(f"{k}={v!r}" for k, v in tuned["params"].items())
+                console.print(f"  under GPS condition {cond}: {escape(values or 'the defaults')} "
+                              f"(tuning {escape(tuned['tuning'])})", highlight=False,
+                              soft_wrap=True)
     for note in res["notes"]:
         say(f"note: {note}")

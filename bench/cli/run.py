@@ -71,6 +71,11 @@ def run(
     topic: TopicOpt = None,
     projection: ProjectionOpt = "enu",
     include_poor_truth: IncludePoorTruthOpt = False,
+    tuning: Annotated[Path | None, typer.Option(
+        "--tuning", metavar="FILE",
+        help="A tuning file written by `bench tune --out` (your own development drives): its "
+             "parameters replace the built-in ones for the predictors and GPS conditions it "
+             "holds. report.md and results.json name the tuning each baseline used.")] = None,
     synthetic_duration: SyntheticDurationOpt = None,
     rerun: Annotated[Path | None, typer.Option(
         "--rerun", metavar="FILE",
@@ -147,7 +152,7 @@ def run(
         rerun=rerun, rerun_color_by=rerun_color_by, executor=executor, address=address,
         table_formats=parse_report_formats(table_format, "--table-format"),
         plot_formats=parse_plot_formats(plot_format), drive_plots=parse_drive_plots(drive_plots),
-        gate=gate, strict=strict)
+        gate=gate, strict=strict, tuning=tuning)
     import_from_cwd()
     plan = plan_run(opts, given)  # every option is checked before a drive is loaded
     print_run_summary(execute_run(plan, command_line(), reporter()))

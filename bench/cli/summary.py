@@ -6,7 +6,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from posbench.cli.terminal import QUIET, console, print_table, say, verbosity
+from posbench.cli.terminal import QUIET, console, print_table, say, verbosity, warn
 from posbench.naming import plural
 from posbench.pipeline.publish import Published
 
@@ -14,13 +14,21 @@ from posbench.pipeline.publish import Published
 def print_run_summary(published: Published) -> None:
     """The tables and notes of a finished run, then the ``wrote ...`` line (nothing when
     quiet)."""
-    from posbench.report.notes import excluded_note, has_held_out_paired, has_paired, trained_note
+    from posbench.report.notes import (
+        excluded_note,
+        has_held_out_paired,
+        has_paired,
+        sanity_lines,
+        trained_note,
+    )
     from posbench.tables.run_tables import summary_table
     from posbench.tables.stat_tables import paired_table, seeds_table
 
+    res = published.run.results
+    for line in sanity_lines(res):
+        warn(line)
     if verbosity() <= QUIET:
         return
-    res = published.run.results
     scored = sum(1 for d in res["drives"] if not d["skipped"])
     headline = summary_table(res, compact=True)
     print_table(console, headline.header(), headline.cells(),

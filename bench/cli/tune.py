@@ -3,6 +3,7 @@ covariance (:mod:`posbench.predictor_tools.tuning`)."""
 
 from __future__ import annotations
 
+from pathlib import Path
 from typing import Annotated
 
 import typer
@@ -19,8 +20,9 @@ def tune(
                                  "cv (calibration only).")],
     gps_profile: Annotated[str, typer.Option(
         metavar="PROFILE",
-        help="GPS condition to tune for: none, rtk, consumer (synthetic development drives, "
-             "seeds 1000+) or native (give --data: the development routes).")] = "rtk",
+        help="GPS condition to tune for: none, rtk, consumer (fixes drawn from the truth of "
+             "--data, or of synthetic development drives, seeds 1000+) or native (the "
+             "recordings' own fixes; give --data).")] = "rtk",
     data: DataOpt = None,
     drives: Annotated[int, typer.Option(
         metavar="N", help="Synthetic development drives per route type (seeds 1000+).")] = 1,
@@ -29,7 +31,13 @@ def tune(
         help="Keep the noise parameters tuned.json holds for this profile and fit only "
              "cov_scale (no position changes).")] = False,
     workers: WorkersOpt = 2,
-    save: Annotated[bool, typer.Option(help="Write the winner to predictors/tuned.json.")] = True,
+    out: Annotated[Path, typer.Option(
+        "--out", "-o", metavar="FILE",
+        help="The tuning file to write (merged into if it exists); use it with `bench run "
+             "--tuning FILE`. The package's built-in tuning is never written.")
+                   ] = Path("tuning.json"),
+    save: Annotated[bool, typer.Option(help="Write the result to --out (--no-save: print "
+                                            "it only).")] = True,
     config: ConfigOpt = None,
     quiet: QuietOpt = False,
     verbose: VerboseOpt = False,
@@ -39,10 +47,12 @@ def tune(
 
     The grid minimises mean future + mean now error. With the winner, the same drives are
     replayed once and cov_scale is set so that 95 % of the 95 % ellipses cover the truth
-    (it changes no position). Both go to predictors/tuned.json under the GPS profile.
+    (it changes no position). Both go to the --out file under the GPS profile, with the
+    names of the drives used: `bench run --tuning FILE` then marks those drives like a
+    learned model's training drives, and scores the others as held out.
 
-    Examples: bench tune kf --gps-profile consumer;
-    bench tune ekf --gps-profile rtk --calibrate-only --drives 3
+    Examples: bench tune kf --data my-dev-drives/ --gps-profile native --out my-tuning.json;
+    bench tune ekf --gps-profile rtk --calibrate-only --drives 3 --out my-tuning.json
     """
     from itertools import product
 
@@ -56,28 +66,28 @@ def tune(
         save_tuned,
         tuning_note,
     )
-    from posbench.predictors.registry import tuned_params
+    from posbench.predictors.registry import PredictorError, tuned_params
 
     if predictor not in GRIDS:
         raise UsageError(f"no tuning grid for {predictor!r}; tunable: {', '.join(GRIDS)}")
     check_choice(gps_profile, GPS_PROFILES, "--gps-profile")
     check_at_least(drives, 1, "--drives")
     check_at_least(workers, 1, "--workers")
-    if data and gps_profile != "native":
-        raise UsageError("--data is for --gps-profile native (the other profiles tune on "
-                         "synthetic development drives)")
     check_data_paths(data)
+    if save:
+        check_tuning_out(out)
     grid = {} if calibrate_only else grid_for(predictor, gps_profile)
-    kept = {k: v for k, v in tuned_params(predictor, gps_profile).items() if k != "cov_scale"}
-    if calibrate_only and GRIDS[predictor] and not kept:
-        raise UsageError(f"--calibrate-only: predictors/tuned.json holds no {predictor} "
-                         f"parameters for --gps-profile {gps_profile}; tune them first "
-                         f"(bench tune {predictor} --gps-profile {gps_profile})")
-    if gps_profile == "native":
-        if not data:
-            raise UsageError("--gps-profile native tunes on recorded fixes: give --data PATH...")
+    mine = out if out.exists() else None
+    try:
+        kept = {k: v for k, v in tuned_params(predictor, gps_profile, mine).items()
+                if k != "cov_scale"}
+    except PredictorError as e:
+        raise UsageError(f"--out: {e}") from None
+    if gps_profile == "native" and not data:
+        raise UsageError("--gps-profile native tunes on recorded fixes: give --data PATH...")
+    if data:
         dev = load_drives(data, "enu", None, reporter=reporter())
-        source = "development routes " + ", ".join(str(p) for p in data)
+        source = "development drives " + ", ".join(str(p) for p in data)
     else:
         from posbench.scenarios.synthetic import default_drives
 
@@ -97,7 +107,8 @@ def tune(
         best_val = min(v for _, v in trials)
         say(f"best {best} -> future+now mean error {best_val:.4f} m over {len(dev)} drives")
     else:
-        say(f"kept {best or 'the defaults'} from predictors/tuned.json")
+        say(f"kept {best or 'the defaults'} from the tuning in force "
+            f"({out if mine else 'built-in'})")
     if cov_scale == cov_scale:
         best = {**best, "cov_scale": cov_scale}
         say(f"calibrated: cov_scale {cov_scale:g} (95 % of the 95 % ellipses cover "
@@ -111,6 +122,18 @@ def tune(
                f"{best_val:.4f} m; {len(trials)} trials; then cov_scale for 95 % coverage"
                if trials else f"`{command}`: cov_scale for 95 % coverage on {source}")
         if calibrate_only:
-            how = tuning_note(predictor, gps_profile, how)
-        save_tuned(predictor, gps_profile, best, how)
-        say("saved to predictors/tuned.json")
+            how = tuning_note(predictor, gps_profile, how, out)
+        save_tuned(predictor, gps_profile, best, how, out, drives=[d.name for d in dev])
+        say(f"saved to {out} (use it: bench run --tuning {out})")
+
+
+def check_tuning_out(out: Path) -> None:
+    """``--out`` of ``bench tune``: a writable JSON file that is not the package's own
+    tuning (which a command never changes)."""
+    from posbench.checks import check_out_file
+    from posbench.predictors.registry import TUNED_FILE
+
+    if out.resolve() == TUNED_FILE.resolve():
+        raise UsageError(f"--out {out}: that is the package's built-in tuning, which commands "
+                         "never change; write a file of your own and run with --tuning FILE")
+    check_out_file(out, "--out")

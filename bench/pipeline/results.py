@@ -29,6 +29,41 @@ def build_results(runs: Sequence[DriveRun], cfg: RunConfig, data: list[dict[str,
         from posbench.replay.predictor_setup import learned_models
 
         models = learned_models(cfg)
+    tuning = tuning_provenance(cfg, runs)
+    models = {**models, **{n: {"model": f"tuning {t['file']}", "bundled": t["built_in"],
+                               "train_drives": t["drives"]}
+                           for n, t in tuning.items() if t["drives"] and n not in models}}
     head = {"command": command, "config": cfg.to_dict(), "versions": package_versions(),
-            "git_commit": git_commit(), "data": data}
+            "git_commit": git_commit(), "data": data, "tuning": tuning}
     return {**head, **aggregate(runs, cfg, traces=traces, models=models, statistics=statistics)}
+
+
+def tuning_provenance(cfg: RunConfig, runs: Sequence[DriveRun]) -> dict[str, dict[str, Any]]:
+    """Per predictor of the run that ran with tuned parameters: ``file`` (path), ``sha256``
+    of it, ``built_in`` (the package's file), ``conditions`` (per GPS condition used: its
+    ``params`` and ``how`` they were obtained) and ``drives`` (the development drives the
+    tuning used, marked in the run like a learned model's training drives)."""
+    import hashlib
+
+    from posbench.config import gps_condition
+    from posbench.predictors.registry import TUNED_FILE, base_name, tuning_entry
+
+    if not cfg.use_tuned:
+        return {}
+    from posbench.replay.reference import TRUTH
+
+    conditions = sorted({gps_condition(cfg, r.reference == TRUTH) for r in runs if not r.skipped}
+                        | ({cfg.gps_profile} if not runs else set()))
+    out: dict[str, dict[str, Any]] = {}
+    for name in cfg.predictors:
+        for cond in conditions:
+            found = tuning_entry(base_name(name), cond, cfg.tuning)
+            if found is None:
+                continue
+            path, entry = found
+            t = out.setdefault(name, {"file": str(path), "built_in": path == TUNED_FILE,
+                                      "sha256": hashlib.sha256(path.read_bytes()).hexdigest(),
+                                      "conditions": {}, "drives": []})
+            t["conditions"][cond] = {"params": entry.get("params", {}), "how": entry.get("how", "")}
+            t["drives"] = sorted(set(t["drives"]) | set(entry.get("drives", [])))
+    return out

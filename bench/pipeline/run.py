@@ -61,6 +61,8 @@ class RunOptions:
             else this many worst ones; None: every drive.
         gate: the GPS outlier gate in front of every predictor.
         strict: stop (DataError) when the data consistency check fails.
+        tuning: a tuning file (``bench tune --out``) used over the package's tuning for the
+            predictors and GPS conditions it holds.
     """
 
     data: tuple[str | Path, ...] = ()
@@ -89,6 +91,7 @@ class RunOptions:
     drive_plots: int | None = 20
     gate: bool = True
     strict: bool = False
+    tuning: Path | None = None
 
     @classmethod
     def names(cls) -> list[str]:
@@ -143,6 +146,7 @@ def plan_run(options: RunOptions, given: Mapping[tuple[str, str], str] | None = 
     )
     from posbench.replay.executors import EXECUTORS, RAY_MISSING, ray_available
     from posbench.replay.predictor_setup import (
+        check_tuning_file,
         merge_options,
         model_options,
         validate_predictors,
@@ -185,11 +189,12 @@ def plan_run(options: RunOptions, given: Mapping[tuple[str, str], str] | None = 
     names = with_model_aliases(names, opts)
     color_by = resolve_color_by(o.rerun_color_by, names, o.rerun)
     resolved = validate_predictors(names, opts, given)
+    check_tuning_file(o.tuning, names, resolved)
     stats = Statistics(baseline=resolve_baseline(o.baseline, names))
     cfg = RunConfig(predictors=names, horizon_s=o.horizon_s, gps_profile=o.gps_profile,
                     gps_latency_s=o.gps_latency_s, dropouts=o.dropouts, seed=seed,
                     exclude_poor_truth=not o.include_poor_truth, predictor_options=resolved,
-                    gate=o.gate)
+                    gate=o.gate, tuning=str(o.tuning) if o.tuning is not None else None)
     o = replace(o, predictors=names, plot_formats=plot_formats, drive_plots=drive_plots,
                 seeds=seeds, table_formats=tuple(o.table_formats))
     return RunPlan(o, cfg, stats, seeds, color_by)

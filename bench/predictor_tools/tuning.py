@@ -12,9 +12,11 @@ same development drives are replayed once and ``cov_scale`` (the factor ``covari
 multiplies its covariance by) is set so that 95 % of the scored queries (future and now
 pooled) fall inside their 95 % ellipse (:func:`posbench.metrics.calibration.coverage_scale`). It
 changes no position, so it cannot trade accuracy for honesty. ``cv`` has no noise to
-search, only this scale. Winners are written to
-``predictors/tuned.json``, keyed by predictor and GPS condition, which the
-registry merges over the predictors' physical defaults.
+search, only this scale. Winners are written to the user's tuning file (``bench tune
+--out``, keyed by predictor and GPS condition, with the names of the development drives),
+which ``bench run --tuning`` merges over the package's tuning and the predictors'
+physical defaults. The package's own ``predictors/tuned.json`` is never written by a
+command: maintainers copy a file made this way into the source tree.
 """
 
 from __future__ import annotations
@@ -36,12 +38,10 @@ TUNED_PATH = TUNED_FILE
 #: Search grids per predictor (values tried for each parameter).
 GRIDS: dict[str, dict[str, list[float]]] = {
     "kf": {"gps_sigma": [0.01, 0.02, 0.05, 0.1, 0.3, 1.0],
-           "jerk_psd": [0.5, 2.0, 8.0, 32.0, 128.0, 512.0],
            "accel_sigma": [0.1, 0.3, 1.0, 3.0]},
     "cv": {},
     "ekf": {"gps_sigma": [0.01, 0.02, 0.05, 0.1, 0.3, 1.0],
-            "jerk_psd": [0.5, 2.0, 8.0, 32.0, 128.0],
-            "yaw_acc_psd": [0.01, 0.1, 1.0, 10.0]},
+            "yaw_rate_sigma": [0.005, 0.02, 0.05]},
 }
 #: values of ``gps_sigma_scale`` tried where the fixes state their accuracy (rtk, consumer):
 #: there R = (scale * stated sigma)^2 and ``gps_sigma`` is never used, so the scale takes its
@@ -137,18 +137,25 @@ CALIBRATION_NOTE = "; cov_scale for 95 % coverage by"
 
 
 def tuning_note(predictor: str, condition: str, calibration: str,
-                path: Path = TUNED_PATH) -> str:
-    """The note of an entry whose noise is kept and whose scale is refitted: the note
-    ``path`` holds on how its noise was tuned (without an older calibration note), then
-    ``calibration``; ``calibration`` alone where there is none."""
-    data = json.loads(path.read_text()) if path.exists() else {}
-    old = data.get(predictor, {}).get(condition, {}).get("how")
+                path: Path | None = None) -> str:
+    """The note of an entry whose noise is kept and whose scale is refitted: the note the
+    tuning in force holds (``path``'s entry if it has one, else the package's) on how its
+    noise was tuned (without an older calibration note), then ``calibration``;
+    ``calibration`` alone where there is none."""
+    from posbench.predictors.registry import tuning_entry
+
+    found = tuning_entry(predictor, condition, path if path is not None and path.exists() else None)
+    old = found[1].get("how") if found else None
     return f"{old.split(CALIBRATION_NOTE)[0]}; {calibration}" if old else calibration
 
 
 def save_tuned(predictor: str, condition: str, params: dict[str, Any], note: str,
-               path: Path = TUNED_PATH) -> None:
-    """Merge one result into ``predictors/tuned.json``."""
+               path: Path, drives: Sequence[str] = ()) -> None:
+    """Merge one result into the tuning file ``path`` (created if missing): its
+    ``params``, ``how`` they were obtained and the ``drives`` they were tuned on."""
+    if path.resolve() == TUNED_PATH.resolve():
+        raise ValueError("the package's tuning is not written by a command")
     data = json.loads(path.read_text()) if path.exists() else {}
-    data.setdefault(predictor, {})[condition] = {"params": params, "how": note}
+    data.setdefault(predictor, {})[condition] = {"params": params, "how": note,
+                                                 "drives": sorted(drives)}
     path.write_text(json.dumps(data, indent=2, sort_keys=True) + "\n")

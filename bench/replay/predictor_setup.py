@@ -309,3 +309,25 @@ def learned_models(cfg: RunConfig) -> dict[str, dict[str, Any]]:
         out[name] = {"model": str(desc.get("model", "")), "bundled": bool(desc.get("bundled")),
                      "train_drives": drives}
     return out
+
+
+def check_tuning_file(path: Path | str | None, names: Sequence[str],
+                      options: Mapping[str, Mapping[str, Any]]) -> None:
+    """Check a ``--tuning`` file before any work: readable, shaped as ``bench tune --out``
+    writes it, and each of its entries accepted by the run's predictor of that name
+    (each such predictor is built once per GPS condition the file holds for it)."""
+    if path is None:
+        return
+    from posbench.predictors.registry import PredictorError, base_name, create, read_tuning
+
+    try:
+        data = read_tuning(path)
+    except PredictorError as e:
+        raise UsageError(f"--tuning: {e}") from None
+    for name in names:
+        for condition in data.get(base_name(name), {}):
+            try:
+                create(name, condition, tuning_file=path, **options.get(name, {}))
+            except Exception as e:  # noqa: BLE001 - any constructor failure is the file's
+                raise UsageError(f"--tuning {path}: {base_name(name)} ({condition}) cannot be "
+                                 f"created with its parameters: {_failure_detail(e)}") from None

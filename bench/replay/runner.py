@@ -80,7 +80,8 @@ def run_drive(drive: Drive, cfg: RunConfig) -> DriveRun:
                         ignore_index=True)
     condition = gps_condition(cfg, drive.truth is not None) if cfg.use_tuned else None
     for name in cfg.predictors:
-        pred = create(name, condition, **cfg.predictor_options.get(name, {}))
+        pred = create(name, condition, tuning_file=cfg.tuning,
+                      **cfg.predictor_options.get(name, {}))
         if cfg.gate:
             pred = GatedPredictor(pred)
         res = replay(pred, prep, cfg.horizon_s)

@@ -25,6 +25,7 @@ from posbench.report.notes import (
     paired_note,
     statistics_note,
     trained_note,
+    tuning_lines,
 )
 from posbench.scoring.schema import KINDS
 from posbench.tables.run_tables import (
@@ -165,6 +166,8 @@ def render_markdown(res: dict[str, Any], plots: list[str],
     for note in (trained_note(res), excluded_note(res), MISSING_NOTE):
         if note:
             lines += [note, ""]
+    lines += sanity_report_lines(res)
+    lines += tuning_lines(res)
     if has_paired(res):
         lines += [f"### Against the baseline `{res['paired']['baseline']}`", "", paired_note(res),
                   "", paired_table(res).markdown(), ""]
@@ -273,6 +276,24 @@ def render_markdown(res: dict[str, Any], plots: list[str],
                                 f"sha256 `{m['sha256'][:16]}...`" for m in res["data"]] + [""]
     lines += glossary_lines(res)
     return "\n".join(lines)
+
+
+def sanity_report_lines(res: dict[str, Any]) -> list[str]:
+    """The sanity check against constant velocity (results.json ``sanity``): a heading and
+    one line per predictor that loses to cv on a data set, or one line that none does."""
+    from posbench.report.notes import sanity_lines
+
+    section = res.get("sanity")
+    if not section or not section.get("checked"):
+        return []
+    lines = sanity_lines(res)
+    if not lines:
+        return ["Sanity check: no predictor loses to constant velocity (`cv`) on any data set "
+                "(paired 95 % CI of the difference in mean error above 0).", ""]
+    return ["### Implausible results", "",
+            "A predictor that loses to constant velocity (`cv`, the last two fixes extrapolated) "
+            "on the same queries, with the paired 95 % interval of the difference above 0:", "",
+            *[f"- {line}" for line in lines], ""]
 
 
 def answers_lines(res: dict[str, Any]) -> list[str]:

@@ -95,3 +95,37 @@ def block_note(summaries: list[dict[str, Any]], what: str) -> str:
     span = (f"{lengths[0]}" if len(lengths) == 1 else f"{lengths[0]} to {lengths[-1]}")
     return (f"{what}: one drive, so the intervals come from a block bootstrap of its "
             f"contiguous queries (blocks of {span} queries), not from resampling drives.")
+
+
+def sanity_lines(res: dict[str, Any]) -> list[str]:
+    """One line per predictor and data set that loses to cv (its kinds joined), e.g.
+    ``kf loses to constant velocity on comma2k19: future +0.120 m [0.083, 0.157] (297
+    queries); ...``. Empty when none does (or cv was not run)."""
+    section = res.get("sanity") or {}
+    grouped: dict[tuple[str, str], list[dict[str, Any]]] = {}
+    for loss in section.get("losses", []):
+        grouped.setdefault((loss["predictor"], loss["dataset"]), []).append(loss)
+    lines = []
+    for (name, ds), losses in grouped.items():
+        parts = "; ".join(f"{x['kind']} +{x['diff_m']:.3f} m [{x['ci95'][0]:.3f}, "
+                          f"{x['ci95'][1]:.3f}] ({x['queries']} queries)" for x in losses)
+        lines.append(f"{name} loses to constant velocity on {ds}: {parts}; its tuning or "
+                     f"inputs may not fit these sensors (see bench tune)")
+    return lines
+
+
+def tuning_lines(res: dict[str, Any]) -> list[str]:
+    """One line per predictor that ran with tuned parameters (results.json ``tuning``): the
+    file (built-in or the user's, with its sha256) and, per GPS condition, how the values
+    were obtained."""
+    tuning = res.get("tuning") or {}
+    lines = []
+    for name, t in tuning.items():
+        where = ("built-in (predictors/tuned.json)" if t.get("built_in")
+                 else f"`{t['file']}`") + f", sha256 {t['sha256'][:12]}"
+        conds = "; ".join(f"{c}: {', '.join(f'{k}={v:g}' if isinstance(v, float) else f'{k}={v}' for k, v in e['params'].items()) or 'defaults'}"
+                          f" ({e['how']})" if e.get("how") else f"{c}: {e['params']}"
+                          for c, e in t["conditions"].items())
+        lines.append(f"- `{name}`: tuning {where}; {conds}")
+    return (["Tuning of the baselines (their development drives are marked like training "
+             "drives):", "", *lines, ""] if lines else [])

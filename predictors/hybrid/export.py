@@ -137,11 +137,16 @@ def save_model(net: HybridNet, out_dir: Path, prior_params: dict[str, dict],
     return info
 
 
-def tuned_kf_params() -> dict[str, dict]:
-    """The kf's tuned parameters per GPS condition (predictors/tuned.json; {} where untuned)."""
-    from posbench.predictors.registry import tuned_params
+def prior_kf_params() -> dict[str, dict]:
+    """The prior's parameters per GPS condition: those the bundled hybrid was trained with
+    (its model.json ``prior.params``; {} where it has none). The prior is one linear CA
+    Kalman filter (:class:`~posbench.predictors.kf.LinearKalman`) with fixed noise, the
+    ``kf`` baseline as it was tuned before that became a bank of filters
+    (:mod:`posbench.predictors.kf_bank`); a new hybrid keeps it unless given others."""
+    from posbench.predictors.hybrid.predictor import bundled_model, load_model_info
 
-    return {c: tuned_params("kf", c) for c in CONDITIONS}
+    params = load_model_info(bundled_model())["prior"].get("params", {})
+    return {c: dict(params.get(c, {})) for c in CONDITIONS}
 
 
 def write_untrained(out_dir: Path, seeds: tuple[int, ...] = (0, 1, 2, 3),
@@ -152,7 +157,7 @@ def write_untrained(out_dir: Path, seeds: tuple[int, ...] = (0, 1, 2, 3),
     from posbench.scenarios.degrade import degrade_gps
     from posbench.scenarios.synthetic import generate_drive
 
-    prior = tuned_kf_params()
+    prior = prior_kf_params()
     rows = []
     names = []
     for s in seeds:

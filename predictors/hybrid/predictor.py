@@ -1,7 +1,8 @@
 """``hybrid``: a Kalman-filter prior plus a learned residual (numpy + onnxruntime, no torch).
 
-The prior is :class:`posbench.predictors.kf.LinearKalman` (``kf``), run inside the hybrid on every
-observation exactly as ``kf`` runs alone (fixes with their stated sigma, IMU, wheel speed),
+The prior is one linear CA Kalman filter, :class:`posbench.predictors.kf.LinearKalman` (the
+``kf`` baseline before it became a bank of filters, :mod:`posbench.predictors.kf_bank`), run
+inside the hybrid on every observation (fixes with their stated sigma, IMU, wheel speed),
 with the parameters the network was trained with (model.json ``prior.params[condition]``,
 see :func:`prior_params`).
 

@@ -103,10 +103,10 @@ def run_training(data_paths: Sequence[str | Path], out_dir: Path, epochs: int = 
 
     Args as :func:`posbench.predictors.lstm.train.run_training`; ``hidden`` is the network width
     (default 48), ``kf_params`` the prior's parameters per GPS condition (default: the tuned
-    ones, :func:`posbench.predictors.hybrid.export.tuned_kf_params`)."""
+    ones, :func:`posbench.predictors.hybrid.export.prior_kf_params`)."""
     import torch
 
-    from posbench.predictors.hybrid.export import fit_stats, save_model, tuned_kf_params
+    from posbench.predictors.hybrid.export import fit_stats, prior_kf_params, save_model
     from posbench.predictors.hybrid.model import HybridNet
     from posbench.predictors.training_loop import fit_epochs
 
@@ -115,7 +115,7 @@ def run_training(data_paths: Sequence[str | Path], out_dir: Path, epochs: int = 
     torch.manual_seed(seed)
     torch.use_deterministic_algorithms(True)
     torch.set_num_threads(threads)
-    prior = dict(kf_params or tuned_kf_params())
+    prior = dict(kf_params or prior_kf_params())
 
     train_d, val_d, corpus_d = gather_drives(data_paths, synthetic, corpus_hours, seed, drives)
     tr = build_rows(train_d, profiles, prior, seed)
