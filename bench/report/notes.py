@@ -100,7 +100,8 @@ def block_note(summaries: list[dict[str, Any]], what: str) -> str:
 def sanity_lines(res: dict[str, Any]) -> list[str]:
     """One line per predictor and data set that loses to cv (its kinds joined), e.g.
     ``kf loses to constant velocity on comma2k19: future +0.120 m [0.083, 0.157] (297
-    queries); ...``. Empty when none does (or cv was not run)."""
+    queries); ...``, then a hint: a tuned baseline's tuning may not fit (see bench tune);
+    for any other, its wins prove nothing there. Empty when none does (or cv was not run)."""
     section = res.get("sanity") or {}
     grouped: dict[tuple[str, str], list[dict[str, Any]]] = {}
     for loss in section.get("losses", []):
@@ -109,8 +110,10 @@ def sanity_lines(res: dict[str, Any]) -> list[str]:
     for (name, ds), losses in grouped.items():
         parts = "; ".join(f"{x['kind']} +{x['diff_m']:.3f} m [{x['ci95'][0]:.3f}, "
                           f"{x['ci95'][1]:.3f}] ({x['queries']} queries)" for x in losses)
-        lines.append(f"{name} loses to constant velocity on {ds}: {parts}; its tuning or "
-                     f"inputs may not fit these sensors (see bench tune)")
+        hint = ("its tuning or inputs may not fit these sensors (see bench tune)"
+                if name in (res.get("tuning") or {}) else
+                "a win of it over another method proves nothing on this data")
+        lines.append(f"{name} loses to constant velocity on {ds}: {parts}; {hint}")
     return lines
 
 
