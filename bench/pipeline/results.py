@@ -38,8 +38,13 @@ def build_results(runs: Sequence[DriveRun], cfg: RunConfig, data: list[dict[str,
     return {**head, **aggregate(runs, cfg, traces=traces, models=models, statistics=statistics)}
 
 
+#: how results.json names the package's own tuning file (the same on every installation)
+BUILT_IN_TUNING = "posbench/predictors/tuned.json"
+
+
 def tuning_provenance(cfg: RunConfig, runs: Sequence[DriveRun]) -> dict[str, dict[str, Any]]:
-    """Per predictor of the run that ran with tuned parameters: ``file`` (path), ``sha256``
+    """Per predictor of the run that ran with tuned parameters: ``file`` (the user's path as
+    given, or :data:`BUILT_IN_TUNING`), ``sha256``
     of it, ``built_in`` (the package's file), ``conditions`` (per GPS condition used: its
     ``params`` and ``how`` they were obtained) and ``drives`` (the development drives the
     tuning used, marked in the run like a learned model's training drives)."""
@@ -61,7 +66,9 @@ def tuning_provenance(cfg: RunConfig, runs: Sequence[DriveRun]) -> dict[str, dic
             if found is None:
                 continue
             path, entry = found
-            t = out.setdefault(name, {"file": str(path), "built_in": path == TUNED_FILE,
+            built_in = path == TUNED_FILE  # named by its place in the package, not the disk
+            t = out.setdefault(name, {"file": BUILT_IN_TUNING if built_in else str(path),
+                                      "built_in": built_in,
                                       "sha256": hashlib.sha256(path.read_bytes()).hexdigest(),
                                       "conditions": {}, "drives": []})
             t["conditions"][cond] = {"params": entry.get("params", {}), "how": entry.get("how", "")}

@@ -97,6 +97,11 @@ def block_note(summaries: list[dict[str, Any]], what: str) -> str:
             f"contiguous queries (blocks of {span} queries), not from resampling drives.")
 
 
+def _interval(ci: list[float] | None) -> str:
+    """`` [lo, hi]`` of a 95 % interval, or nothing for a run saved without one."""
+    return f" [{ci[0]:.3f}, {ci[1]:.3f}]" if ci else ""
+
+
 def sanity_lines(res: dict[str, Any]) -> list[str]:
     """One line per predictor and data set that loses to cv (its kinds joined), e.g.
     ``kf loses to constant velocity on comma2k19: future +0.120 m [0.083, 0.157] (297
@@ -108,8 +113,8 @@ def sanity_lines(res: dict[str, Any]) -> list[str]:
         grouped.setdefault((loss["predictor"], loss["dataset"]), []).append(loss)
     lines = []
     for (name, ds), losses in grouped.items():
-        parts = "; ".join(f"{x['kind']} +{x['diff_m']:.3f} m [{x['ci95'][0]:.3f}, "
-                          f"{x['ci95'][1]:.3f}] ({x['queries']} queries)" for x in losses)
+        parts = "; ".join(f"{x['kind']} +{x['diff_m']:.3f} m{_interval(x.get('ci95'))} "
+                          f"({x['queries']} queries)" for x in losses)
         hint = ("its tuning or inputs may not fit these sensors (see bench tune)"
                 if name in (res.get("tuning") or {}) else
                 "a win of it over another method proves nothing on this data")
