@@ -8,7 +8,9 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 A=../shared/data/aslan
-OUT=$(mktemp -d)/tuned.json
+OUT=build/tuned.json  # a file of the script's own (build/ is not tracked)
+mkdir -p build
+rm -f "$OUT"
 DEV=()
 for r in aslan-0.5speed-20220308131954 aslan-20220408124005 aslan-20220409115940 \
          aslan-20220413125957 aslan-20220502091737 aslan-20220502092513 aslan-20220504082807 \
@@ -18,9 +20,9 @@ for r in aslan-0.5speed-20220308131954 aslan-20220408124005 aslan-20220409115940
 done
 for p in kf ekf cv; do
   for g in none rtk consumer; do
-    bench tune "$p" --gps-profile "$g" --calibrate-only --drives 3 --out "$OUT" -q
+    bench tune "$p" --gps-profile "$g" --calibrate-only --drives 3 --out "$OUT"
   done
-  bench tune "$p" --gps-profile native --calibrate-only "${DEV[@]}" --out "$OUT" -q
+  bench tune "$p" --gps-profile native --calibrate-only "${DEV[@]}" --out "$OUT"
 done
 cp "$OUT" predictors/tuned.json
 echo "wrote predictors/tuned.json"

@@ -145,8 +145,9 @@ def tuning_note(predictor: str, condition: str, calibration: str,
     from posbench.predictors.registry import tuning_entry
 
     found = tuning_entry(predictor, condition, path if path is not None and path.exists() else None)
-    old = found[1].get("how") if found else None
-    return f"{old.split(CALIBRATION_NOTE)[0]}; {calibration}" if old else calibration
+    old = found[1].get("how", "") if found else ""
+    noise = "" if old.startswith(CALIBRATION_NOTE[2:]) else old.split(CALIBRATION_NOTE)[0]
+    return f"{noise}; {calibration}" if noise else calibration
 
 
 def save_tuned(predictor: str, condition: str, params: dict[str, Any], note: str,
