@@ -28,8 +28,9 @@ def tune(
         metavar="N", help="Synthetic development drives per route type (seeds 1000+).")] = 1,
     calibrate_only: Annotated[bool, typer.Option(
         "--calibrate-only",
-        help="Keep the noise parameters tuned.json holds for this profile and fit only "
-             "cov_scale (no position changes).")] = False,
+        help="Keep the noise parameters of the tuning in force for this profile (the --out "
+             "file's where it holds them, else the built-in ones) and fit only cov_scale (no "
+             "position changes).")] = False,
     workers: WorkersOpt = 2,
     out: Annotated[Path, typer.Option(
         "--out", "-o", metavar="FILE",
