@@ -40,10 +40,11 @@ class ModelBank(Predictor):
     have the highest recent likelihood (module docstring).
 
     Args:
-        members: predictors with ``covariance_at`` (their own ``cov_scale`` 1) and a
-            ``fix_variance(sigma)`` (R per axis [m^2] of a fix stating sigma); a member
-            with a ``fix_innovation`` attribute (``(nu_x, nu_y, S_xx, S_xy, S_yy)`` of its
-            newest fix, set in ``observe_gps``, None when it has none) is scored from it.
+        members: predictors with ``covariance_at`` (their own ``cov_scale`` 1), a
+            ``fix_variance(sigma)`` (R per axis [m^2] of a fix stating sigma) and a
+            ``fix_innovation`` attribute: ``(nu_x, nu_y, S_xx, S_xy, S_yy)`` of the newest
+            fix before its update, set in ``observe_gps`` (None when it has none), which
+            scores it without a second prediction.
         labels: one short name per member (for ``selected`` and reports).
         memory_fixes: exponential memory of the scores, in fixes.
         huber_k: Mahalanobis distance where the score turns from quadratic to linear.
@@ -64,8 +65,6 @@ class ModelBank(Predictor):
         self.huber_k = float(huber_k)
         self.cov_scale = float(cov_scale)
         self._keep = 1.0 - 1.0 / self.memory_fixes
-        #: every member sets ``fix_innovation`` in its ``observe_gps`` (no extra prediction)
-        self._own_innovations = all(hasattr(m, "fix_innovation") for m in self.members)
         self.reset()
 
     def reset(self) -> None:
@@ -73,24 +72,11 @@ class ModelBank(Predictor):
             m.reset()
         self.scores = [0.0] * len(self.members)
         self.best = 0
-        self.selections = [0] * len(self.members)  # fixes at which each member was selected
 
     @property
     def selected(self) -> str:
         """Label of the member answering now."""
         return self.labels[self.best]
-
-    def _innovation(self, m: Predictor, t: float, x: float, y: float, sigma: float | None
-                    ) -> tuple[float, float, float, float, float] | None:
-        """The innovation of the fix for member ``m`` and its covariance ``(nu_x, nu_y, S_xx,
-        S_xy, S_yy)``, from its answer and covariance for the fix's time (before it sees the
-        fix); None where it has none."""
-        px, py = m.position_at(t)
-        P = m.covariance_at(t)
-        if P is None or px != px or py != py:
-            return None
-        r = m.fix_variance(sigma)  # type: ignore[attr-defined]
-        return x - px, y - py, P[0, 0] + r, P[0, 1], P[1, 1] + r
 
     def _log_likelihood(self, innov: tuple[float, float, float, float, float] | None) -> float:
         if innov is None:
@@ -105,21 +91,13 @@ class ModelBank(Predictor):
         return -0.5 * (rho + math.log(det))
 
     def observe_gps(self, t: float, x: float, y: float, sigma: float | None = None) -> None:
-        finite = math.isfinite(x) and math.isfinite(y)
-        if self._own_innovations:  # each member reports its innovation as it updates
-            for m in self.members:
-                m.observe_gps(t, x, y, sigma)
-            ll = [self._log_likelihood(m.fix_innovation) for m in self.members]  # type: ignore[attr-defined]
-        else:
-            ll = [self._log_likelihood(self._innovation(m, t, x, y, sigma)) if finite
-                  else math.nan for m in self.members]
-            for m in self.members:
-                m.observe_gps(t, x, y, sigma)
-        if finite and all(v == v for v in ll):
+        for m in self.members:
+            m.observe_gps(t, x, y, sigma)
+        ll = [self._log_likelihood(m.fix_innovation) for m in self.members]  # type: ignore[attr-defined]
+        if all(v == v for v in ll):  # every member scored this fix (a non-finite one: none)
             k = self._keep
             self.scores = [k * s + v for s, v in zip(self.scores, ll, strict=True)]
             self.best = int(np.argmax(self.scores))
-            self.selections[self.best] += 1
 
     def observe_imu(self, t: float, ax: float, ay: float, yaw: float, yaw_rate: float) -> None:
         for m in self.members:

@@ -52,8 +52,7 @@ class EkfBank(ModelBank):
         levels = tuple((float(j), float(w)) for j, w in noise_levels)
         check_config("ekf", **{f"noise_levels[{i}]": (j, 1e-9, 1e6)
                               for i, (j, _) in enumerate(levels)})
-        options.setdefault("fix_noise_memory", 30.0)
-        CtraEkf(**options)  # checks the options once, with their names
+        options.setdefault("fix_noise_memory", 30.0)  # members check the options
         self._options = dict(options)
         self.noise_levels = levels
         members, labels = [], []

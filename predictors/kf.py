@@ -288,9 +288,7 @@ class LinearKalman(Predictor):
             return
         self._predict_to(t)
         if course is not None and not math.isfinite(yaw):
-            h, h_sd = course.heading(t)
-            if not h_sd < self.heading_sigma_max:
-                h = math.nan
+            h = self._course_heading(t)
             self._yaw, self._yaw_t = h, t
         else:
             h = self._heading(t, yaw, yaw_rate)
@@ -304,6 +302,12 @@ class LinearKalman(Predictor):
                 self.kf.update_pair(ACC, c * ax - s * ay, s * ax + c * ay, self._r_acc)
         self._imu_t = t
         self._sync()
+
+    def _course_heading(self, t: float) -> float:
+        """The course tracker's heading [rad] at t, NaN while its standard deviation is not
+        below ``heading_sigma_max``."""
+        h, h_sd = self._course.heading(t)  # type: ignore[union-attr]
+        return h if h_sd < self.heading_sigma_max else math.nan
 
     def _robust_accel_update(self, t: float, ax: float, ay: float, c: float, s: float) -> None:
         """The IMU acceleration update with the bias estimate removed, its noise adapted to
@@ -337,8 +341,8 @@ class LinearKalman(Predictor):
         else:
             h = self._yaw
             if self._course is not None and not self._imu_yaw:
-                h, h_sd = self._course.heading(t)
-                if not h_sd < self.heading_sigma_max:
+                h = self._course_heading(t)
+                if not math.isfinite(h):
                     return
             vx, vy = self.kf.velocity()
             if not math.isfinite(h) and math.hypot(vx, vy) > self.heading_min_speed:
