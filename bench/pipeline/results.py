@@ -4,6 +4,7 @@
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
+from pathlib import Path
 from typing import Any
 
 import pandas as pd
@@ -44,10 +45,11 @@ BUILT_IN_TUNING = "posbench/predictors/tuned.json"
 
 def tuning_provenance(cfg: RunConfig, runs: Sequence[DriveRun]) -> dict[str, dict[str, Any]]:
     """Per predictor of the run that ran with tuned parameters: ``file`` (the user's path as
-    given, or :data:`BUILT_IN_TUNING`), ``sha256``
-    of it, ``built_in`` (the package's file), ``conditions`` (per GPS condition used: its
-    ``params`` and ``how`` they were obtained) and ``drives`` (the development drives the
-    tuning used, marked in the run like a learned model's training drives)."""
+    given, or :data:`BUILT_IN_TUNING`), ``sha256`` of it, ``built_in`` (the package's file),
+    ``conditions`` (per GPS condition used: its ``params``, ``how`` they were obtained and the
+    ``file`` they come from: a user's file may hold some conditions, the package's the others;
+    the predictor's ``file`` is the first condition's) and ``drives`` (the development drives
+    the tuning used, marked in the run like a learned model's training drives)."""
     import hashlib
 
     from posbench.config import gps_condition
@@ -60,6 +62,7 @@ def tuning_provenance(cfg: RunConfig, runs: Sequence[DriveRun]) -> dict[str, dic
     conditions = sorted({gps_condition(cfg, r.reference == TRUTH) for r in runs if not r.skipped}
                         | ({cfg.gps_profile} if not runs else set()))
     out: dict[str, dict[str, Any]] = {}
+    sha256: dict[Path, str] = {}  # each file hashed once
     for name in cfg.predictors:
         for cond in conditions:
             found = tuning_entry(base_name(name), cond, cfg.tuning)
@@ -67,10 +70,12 @@ def tuning_provenance(cfg: RunConfig, runs: Sequence[DriveRun]) -> dict[str, dic
                 continue
             path, entry = found
             built_in = path == TUNED_FILE  # named by its place in the package, not the disk
-            t = out.setdefault(name, {"file": BUILT_IN_TUNING if built_in else str(path),
-                                      "built_in": built_in,
-                                      "sha256": hashlib.sha256(path.read_bytes()).hexdigest(),
+            file = BUILT_IN_TUNING if built_in else str(path)
+            if path not in sha256:
+                sha256[path] = hashlib.sha256(path.read_bytes()).hexdigest()
+            t = out.setdefault(name, {"file": file, "built_in": built_in, "sha256": sha256[path],
                                       "conditions": {}, "drives": []})
-            t["conditions"][cond] = {"params": entry.get("params", {}), "how": entry.get("how", "")}
+            t["conditions"][cond] = {"params": entry.get("params", {}),
+                                     "how": entry.get("how", ""), "file": file}
             t["drives"] = sorted(set(t["drives"]) | set(entry.get("drives", [])))
     return out

@@ -122,6 +122,17 @@ def sanity_lines(res: dict[str, Any]) -> list[str]:
     return lines
 
 
+def _condition_text(condition: str, entry: dict[str, Any], file: str) -> str:
+    """``rtk: cov_scale=0.708 (how)``: one GPS condition's tuned values, how they were
+    obtained, and their file where it is not the predictor's."""
+    values = ", ".join(f"{k}={v:g}" if isinstance(v, float) else f"{k}={v}"
+                       for k, v in entry["params"].items()) or "defaults"
+    other = entry.get("file", file)
+    source = f" from `{other}`" if other != file else ""
+    how = f" ({entry['how']})" if entry.get("how") else ""
+    return f"{condition}: {values}{source}{how}"
+
+
 def tuning_lines(res: dict[str, Any]) -> list[str]:
     """One line per predictor that ran with tuned parameters (results.json ``tuning``): the
     file (built-in or the user's, with its sha256) and, per GPS condition, how the values
@@ -131,9 +142,7 @@ def tuning_lines(res: dict[str, Any]) -> list[str]:
     for name, t in tuning.items():
         where = ("built-in (predictors/tuned.json)" if t.get("built_in")
                  else f"`{t['file']}`") + f", sha256 {t['sha256'][:12]}"
-        conds = "; ".join(f"{c}: {', '.join(f'{k}={v:g}' if isinstance(v, float) else f'{k}={v}' for k, v in e['params'].items()) or 'defaults'}"
-                          f" ({e['how']})" if e.get("how") else f"{c}: {e['params']}"
-                          for c, e in t["conditions"].items())
+        conds = "; ".join(_condition_text(c, e, t["file"]) for c, e in t["conditions"].items())
         lines.append(f"- `{name}`: tuning {where}; {conds}")
     return (["Tuning of the baselines (their development drives are marked like training "
              "drives):", "", *lines, ""] if lines else [])
