@@ -339,19 +339,23 @@ class LinearKalman(Predictor):
         if abs(v) < self.stop_speed:
             self.kf.update_pair(VEL, 0.0, 0.0, self._r_spd)
         else:
-            h = self._yaw
-            if self._course is not None and not self._imu_yaw:
-                h = self._course_heading(t)
-                if not math.isfinite(h):
-                    return
-            vx, vy = self.kf.velocity()
-            if not math.isfinite(h) and math.hypot(vx, vy) > self.heading_min_speed:
-                h = math.atan2(vy, vx)
-            if not math.isfinite(h):
-                return
-            self.kf.update_speed(math.cos(h), math.sin(h), v,
-                                 self._r_spd + (self.speed_rel_sigma * v) ** 2)
-        self._sync()
+            h = self._speed_heading(t)
+            if math.isfinite(h):  # no heading: no update, but the prediction stands
+                self.kf.update_speed(math.cos(h), math.sin(h), v,
+                                     self._r_spd + (self.speed_rel_sigma * v) ** 2)
+        self._sync()  # the mean was predicted to t: answers must start from it
+
+    def _speed_heading(self, t: float) -> float:
+        """The heading [rad] a wheel speed at t is taken along: the course tracker's where
+        the IMU states no yaw, else the last heading used, else the velocity's direction
+        above ``heading_min_speed``; NaN when none is known."""
+        if self._course is not None and not self._imu_yaw:
+            return self._course_heading(t)
+        h = self._yaw
+        vx, vy = self.kf.velocity()
+        if not math.isfinite(h) and math.hypot(vx, vy) > self.heading_min_speed:
+            h = math.atan2(vy, vx)
+        return h
 
     @property
     def accel_bias(self) -> tuple[float, float]:

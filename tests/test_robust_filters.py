@@ -112,3 +112,16 @@ def test_kf_recovers_the_accelerometer_bias():
     bx, by = kf.accel_bias
     assert bx == pytest.approx(BIAS[0], abs=0.1)
     assert by == pytest.approx(BIAS[1], abs=0.1)
+
+
+def test_a_speed_without_heading_leaves_answers_on_the_predicted_mean():
+    """A wheel speed the filter cannot place (no heading yet: fixes 2 m apart in 3 m noise)
+    still predicts the filter to its time; its answers must start from that mean, not from
+    the mean of the previous observation."""
+    kf = LinearKalman(gps_sigma=3.0, heading_from_fixes=True, use_imu=False)
+    kf.observe_gps(0.0, 0.0, 0.0)
+    kf.observe_gps(0.2, 2.0, 0.0)
+    kf.observe_speed(0.3, 10.0)
+    t, mean, _ = kf.state()
+    assert t == 0.3
+    assert kf.position_at(0.3) == pytest.approx((mean[0], mean[1]), abs=1e-12)
