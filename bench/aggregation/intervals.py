@@ -164,6 +164,15 @@ def _aligned(df: pd.DataFrame, base: pd.DataFrame) -> tuple[pd.DataFrame, np.nda
     return out, (out["code"].to_numpy() if same else drive_codes(out))
 
 
+def _paired_columns(df: pd.DataFrame, base: pd.DataFrame
+                    ) -> tuple[pd.DataFrame, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The queries both answered (:func:`_aligned`), their drive codes, and as arrays their
+    kind, the predictor's error, the baseline's error [m] and the query time [s]."""
+    both, codes = _aligned(df, base)
+    return (both, codes, both["kind"].to_numpy(), both["error_m"].to_numpy(dtype=float),
+            both["error_base"].to_numpy(dtype=float), both["t_query"].to_numpy(dtype=float))
+
+
 def _paired(e_base: np.ndarray, e: np.ndarray, codes: np.ndarray, times: np.ndarray,
             stats: Statistics) -> dict[str, Any]:
     r = paired_summary(e_base, e, codes, times, n_resamples=stats.resamples, seed=stats.seed,
@@ -177,12 +186,8 @@ def paired_by_dataset(df: pd.DataFrame, base: pd.DataFrame, datasets: Sequence[s
                       stats: Statistics) -> dict[str, dict[str, Any]]:
     """``{ds: {kind: entry}}`` of :func:`paired_results` alone (no overall, no labels): one
     predictor's scored rows ``df`` against ``base`` per data set and query kind."""
-    both, codes = _aligned(df, base)
-    kind = both["kind"].to_numpy()
+    both, codes, kind, e, eb, t = _paired_columns(df, base)
     ds = both["dataset"].astype(str).to_numpy()
-    e = both["error_m"].to_numpy(dtype=float)
-    eb = both["error_base"].to_numpy(dtype=float)
-    t = both["t_query"].to_numpy(dtype=float)
     out: dict[str, dict[str, Any]] = {}
     for name in datasets:
         out[name] = {}
@@ -206,15 +211,11 @@ def paired_results(df: pd.DataFrame, base: pd.DataFrame, datasets: Sequence[str]
     """
     out: dict[str, Any] = {"overall": {}, "by_dataset": {ds: {} for ds in datasets},
                            "by_label": {ds: {} for ds in datasets}}
-    both, codes = _aligned(df, base)
-    kind = both["kind"].to_numpy()
+    both, codes, kind, e, eb, t = _paired_columns(df, base)
     ds_code, ds_names = pd.factorize(both["dataset"])
     lab_code, lab_names = pd.factorize(both["label"])
     ds_index = {str(n): i for i, n in enumerate(ds_names)}
     lab_index = {str(n): i for i, n in enumerate(lab_names)}
-    e = both["error_m"].to_numpy(dtype=float)
-    eb = both["error_base"].to_numpy(dtype=float)
-    t = both["t_query"].to_numpy(dtype=float)
     for k in KINDS:
         mk = kind == k
         out["overall"][k] = _paired(eb[mk], e[mk], codes[mk], t[mk], stats)
