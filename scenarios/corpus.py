@@ -46,7 +46,7 @@ from dataclasses import asdict, dataclass, replace
 
 import numpy as np
 
-from posbench.scenarios.drive import Drive, DriveMeta, TruthStream
+from posbench.scenarios.drive import FIXES_FROM_TRUTH, Drive, DriveMeta, TruthStream
 from posbench.scenarios.labels import LABELS, LabelThresholds
 from posbench.scenarios.synthetic import (
     EPOCH_S,
@@ -316,7 +316,7 @@ def corpus_drive(seed: int, profile: str, duration_s: float = 600.0) -> Drive:
             out[-1][2] = min(out[-1][2], float(t[-1]))
         return out
 
-    meta = DriveMeta(
+    meta = DriveMeta(fix_source=FIXES_FROM_TRUTH,
         name=f"corpus-{profile}-s{seed}", source=f"synthetic:corpus:{profile}:s{seed}",
         format="synthetic", epoch_s=EPOCH_S, origin_lat=ORIGIN_LAT, origin_lon=ORIGIN_LON,
         projection="enu", time_source="simulated",

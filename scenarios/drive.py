@@ -142,6 +142,12 @@ class TruthStream:
         return int(self.t.size)
 
 
+#: ``DriveMeta.fix_source``: the fixes come from a receiver independent of the truth
+FIXES_RECEIVER = "receiver"
+#: ``DriveMeta.fix_source``: the fixes are the truth's positions or were simulated from it
+FIXES_FROM_TRUTH = "truth"
+
+
 @dataclass
 class DriveMeta:
     """Where a drive came from and what a loader did to it.
@@ -150,6 +156,10 @@ class DriveMeta:
     ``origin_lon`` [deg] the local frame's origin (NaN for sources already in metres);
     ``projection`` is ``"enu"`` or ``"mercator"`` (or ``"source"`` when the data came
     in metres); ``warnings`` counts everything a loader removed, re-ordered or doubts.
+    ``fix_source`` says where the GPS fixes come from: :data:`FIXES_RECEIVER` (a receiver
+    of their own, independent of the truth: they are what a run scores by default) or
+    :data:`FIXES_FROM_TRUTH` (the fixes are the truth's own positions, as KITTI's OXTS, or
+    were simulated from it, as the synthetic drives: a run draws its fixes from the truth).
     """
 
     name: str
@@ -162,6 +172,7 @@ class DriveMeta:
     time_source: str = ""
     warnings: list[str] = field(default_factory=list)
     extra: dict[str, Any] = field(default_factory=dict)
+    fix_source: str = "receiver"
 
 
 @dataclass(frozen=True)
@@ -190,6 +201,24 @@ class Drive:
         starts = [s.t[0] for s in (self.gps, self.imu, self.speed, self.truth)
                   if s is not None and len(s)]
         return float(max(ends) - min(starts)) if ends else 0.0
+
+    @property
+    def fixes_from_truth(self) -> bool:
+        """Whether the drive's GPS fixes are no receiver of their own: the loader says they
+        are the truth's positions or simulated from it (``meta.fix_source``), the drive has
+        truth but no fixes, or every fix lies on the truth (within 1 mm at its time)."""
+        if self.truth is None:
+            return False
+        if self.meta.fix_source == FIXES_FROM_TRUTH or len(self.gps) == 0:
+            return True
+        if len(self.truth) < 2:
+            return False
+        inside = (self.gps.t >= self.truth.t[0]) & (self.gps.t <= self.truth.t[-1])
+        if not inside.all():
+            return False
+        dx = self.gps.x - np.interp(self.gps.t, self.truth.t, self.truth.x)
+        dy = self.gps.y - np.interp(self.gps.t, self.truth.t, self.truth.y)
+        return bool(np.nanmax(np.hypot(dx, dy)) < 1e-3)
 
     @property
     def truth_median_accuracy_m(self) -> float | None:

@@ -48,6 +48,7 @@ from posbench.scenarios.degrade import (
     outage_windows,
 )
 from posbench.scenarios.drive import (
+    FIXES_FROM_TRUTH,
     Drive,
     DriveMeta,
     GpsStream,
@@ -421,7 +422,7 @@ def generate_drive(seed: int = 0, name: str | None = None, route: str = "mixed",
     segments = [sp for sp in sim.segments if sp[1] < t[-1]]
     if segments:
         segments[-1][2] = min(segments[-1][2], float(t[-1]))
-    meta = DriveMeta(
+    meta = DriveMeta(fix_source=FIXES_FROM_TRUTH,
         name=name or f"synthetic-{route}-s{seed}", source=f"synthetic:{route}:s{seed}",
         format="synthetic", epoch_s=EPOCH_S, origin_lat=ORIGIN_LAT, origin_lon=ORIGIN_LON,
         projection="enu", time_source="simulated",

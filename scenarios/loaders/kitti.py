@@ -48,6 +48,7 @@ import numpy as np
 
 from posbench.scenarios.cleaning import clean_times
 from posbench.scenarios.drive import (
+    FIXES_FROM_TRUTH,
     Drive,
     DriveMeta,
     GpsStream,
@@ -284,7 +285,7 @@ def load_kitti_drive(path: Path, projection: str = "enu") -> Drive:
                         f"{POOR_TRUTH_M:.0f} m")
         extra["truth_poor"] = True
 
-    meta = DriveMeta(name=name, source=str(path), format="kitti", epoch_s=epoch,
+    meta = DriveMeta(fix_source=FIXES_FROM_TRUTH, name=name, source=str(path), format="kitti", epoch_s=epoch,
                      origin_lat=float(lat[0]), origin_lon=float(lon[0]), projection=projection,
                      time_source="oxts/timestamps.txt (naive wall clock, read as UTC)",
                      warnings=warnings, extra=extra)
