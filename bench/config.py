@@ -5,11 +5,19 @@ from __future__ import annotations
 import hashlib
 from collections.abc import Iterable
 from dataclasses import asdict, dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-GPS_PROFILES = ("native", "none", "rtk", "consumer")
-#: the GPS conditions a predictor can be tuned for (one per profile)
-GPS_CONDITIONS = GPS_PROFILES
+if TYPE_CHECKING:
+    from posbench.scenarios.drive import Drive
+
+#: the GPS conditions a drive can be replayed under (and a predictor tuned for): ``native``
+#: (the recording's own fixes) or a profile of fixes simulated from the truth
+GPS_CONDITIONS = ("native", "none", "rtk", "consumer")
+#: ``--gps-profile`` choices: a condition for every drive, or ``auto`` (one per drive)
+AUTO_PROFILE = "auto"
+GPS_PROFILES = (AUTO_PROFILE, *GPS_CONDITIONS)
+#: the simulated profile ``auto`` gives a drive whose fixes are the truth's own positions
+AUTO_SIMULATED = "rtk"
 #: the predictors of a run that names none (``bench run``, :func:`posbench.run`)
 DEFAULT_PREDICTORS = ("cv", "poly", "kf", "kf-paper", "ekf", "lstm")
 
@@ -22,10 +30,13 @@ class RunConfig:
         predictors: registry names, in report order.
         horizon_s: look-ahead of the "future" query after each fix [s] (paper: 0.2).
         now_step_s: period of the "now" (current position) queries [s].
-        gps_profile: for drives with truth, how their GPS input is drawn from it
-            (``none`` exact, ``rtk`` ~2 cm, ``consumer`` ~1 m correlated) or
-            ``native`` to feed the drive's own recorded fixes. Drives without truth
-            always use their own fixes.
+        gps_profile: which fixes a drive with truth is fed and scored on: ``auto`` (the
+            default) its own receiver's (``native``) where the fixes and the truth come from
+            different sources, and ``rtk`` fixes drawn from the truth where the fixes *are*
+            the truth (KITTI's OXTS, the synthetic drives: ``Drive.fixes_from_truth``);
+            ``native`` or a simulated profile (``none`` exact, ``rtk`` ~2 cm, ``consumer``
+            ~1 m correlated) for every drive. Drives without truth always use their own
+            fixes (:func:`gps_condition`).
         gps_latency_s: receiver latency of the drawn fixes [s].
         intervals: fix-interval distribution of the drawn fixes (``aslan`` = the paper's routes).
         dropouts: GPS dropout profile (``none``, ``random:p``, ``outages``, ``outage:L``).
@@ -46,7 +57,7 @@ class RunConfig:
     predictors: tuple[str, ...] = ("cv", "kf")
     horizon_s: float = 0.2
     now_step_s: float = 0.05
-    gps_profile: str = "rtk"
+    gps_profile: str = AUTO_PROFILE
     gps_latency_s: float = 0.0
     intervals: str = "aslan"
     dropouts: str = "none"
@@ -79,7 +90,24 @@ def drive_seed(seed: int, drive_name: str) -> int:
     return int.from_bytes(h[:4], "little")
 
 
-def gps_condition(cfg: RunConfig, has_truth: bool) -> str:
-    """The GPS condition a drive is replayed under: the run's profile for drives with truth
-    (their fixes are drawn from it), ``native`` for drives fed their own recorded fixes."""
-    return cfg.gps_profile if has_truth and cfg.gps_profile != "native" else "native"
+def gps_condition(cfg: RunConfig, drive: Drive) -> str:
+    """The GPS condition (one of :data:`GPS_CONDITIONS`) ``drive`` is replayed under:
+    ``native`` (its own recorded fixes) for a drive without truth; for one with truth the
+    run's profile, where ``auto`` is ``native`` when the fixes come from a receiver of their
+    own and :data:`AUTO_SIMULATED` when they are the truth's positions or were simulated
+    from it (``Drive.fixes_from_truth``)."""
+    if drive.truth is None:
+        return "native"
+    if cfg.gps_profile == AUTO_PROFILE:
+        return AUTO_SIMULATED if drive.fixes_from_truth else "native"
+    if cfg.gps_profile == "native" and len(drive.gps) == 0:
+        return AUTO_SIMULATED  # no fixes of its own to feed
+    return cfg.gps_profile
+
+
+def fixes_description(condition: str) -> str:
+    """What a run fed and scored under GPS ``condition``, in words for the terminal and
+    report.md."""
+    if condition == "native":
+        return "the recording's own receiver"
+    return f"simulated `{condition}` fixes drawn from the truth"

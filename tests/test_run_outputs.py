@@ -201,16 +201,31 @@ def test_every_drive_skipped_writes_the_report_and_fails(tmp_path, monkeypatch):
 
 
 def test_thin_drive_still_gets_a_report(tmp_path):
-    """A GPS-only CSV with 3 fixes scores nothing: the run says so, writes report.md with the
-    reason for each missing figure, and exits 0 (today: a matplotlib error, no report)."""
+    """A GPS-only CSV with 3 fixes scores nothing: report.md is written with the reason for
+    each missing figure, and the run fails in one line saying why (exit 2: a CI job can
+    tell)."""
     csv = tmp_path / "three.csv"
     csv.write_text("stream,t,x,y\ngps,0,0,0\ngps,0.2,1,0\ngps,0.4,2,0\n")
     out = tmp_path / "o"
     r = bench("run", "--data", str(csv), "-p", "cv,kf", "--out", str(out), "--workers", "1")
-    assert r.returncode == 0, r.stderr
-    assert "1 drive -" in r.stdout and "no query could be scored" in r.stdout
+    assert r.returncode == 2, r.stderr
+    err = r.stderr.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("error: no query of any drive could be scored")
+    assert "without a reference position" in err[0] and "report.md" in err[0]
     md = (out / "report.md").read_text()
     assert "Not drawn:" in md and "error_cdf:" in md
+
+
+def test_one_fix_csv_exits_2_naming_the_drive(tmp_path):
+    """The issue's case: a one-fix CSV scores nothing; the error names the drive and its one
+    fix, report.md is still written."""
+    csv = tmp_path / "one.csv"
+    csv.write_text("t,lat,lon\n0.0,48.0,11.0\n")
+    out = tmp_path / "o"
+    r = bench("run", "--data", str(csv), "-p", "cv", "--out", str(out), "--workers", "1")
+    assert r.returncode == 2
+    assert r.stderr.count("\n") == 1 and "drive one was fed 1 fix" in r.stderr
+    assert (out / "report.md").exists()
 
 
 def test_run_table_fits_100_columns_and_cuts_no_number(tmp_path):

@@ -273,6 +273,7 @@ def aggregate(runs: Sequence[DriveRun], cfg: RunConfig, *,
                         kinds[k]["ci95"] = dict(mine[name][k]["ci95"])
     for r in runs:
         d: dict[str, Any] = {"name": r.name, "dataset": r.dataset, "reference": r.reference,
+                             "gps_condition": r.gps_condition,
                              "duration_s": r.duration_s, "gps_fed": r.gps_count,
                              "notes": r.notes, "warnings": r.warnings, "skipped": r.skipped,
                              "trained_on": [n for n, names in res["training_drives"].items()

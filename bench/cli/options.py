@@ -101,8 +101,11 @@ HorizonOpt = Annotated[float, typer.Option(
     metavar="SECONDS", help="Future-point horizon after each fix [s] (0 < h <= 10).")]
 GpsProfileOpt = Annotated[str, typer.Option(
     metavar="PROFILE",
-    help="GPS input for drives with truth: native (their own fixes), none (exact), "
-         "rtk (~2 cm), consumer (~1 m, correlated).")]
+    help="Which fixes drives with truth are fed and scored on. auto: the recording's own "
+         "receiver where its fixes and truth are different sources (a bag or CSV with both, "
+         "comma2k19), simulated rtk fixes drawn from the truth where the fixes are the truth "
+         "(KITTI's OXTS, the synthetic drives). Or for every drive: native (the recorded "
+         "fixes), none (exact), rtk (~2 cm), consumer (~1 m, correlated).")]
 GpsLatencyOpt = Annotated[float, typer.Option(
     metavar="SECONDS", help="Receiver latency of drawn fixes [s].")]
 DropoutsOpt = Annotated[str, typer.Option(

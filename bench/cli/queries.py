@@ -36,7 +36,7 @@ def queries(
         help="Queries folder to write: queries.csv and inputs/ (give these to the system under "
              "test), key/ (the answer key: keep it), manifest.json.")] = Path("bench-queries"),
     horizon: HorizonOpt = 0.2,
-    gps_profile: GpsProfileOpt = "rtk",
+    gps_profile: GpsProfileOpt = "auto",
     gps_latency: GpsLatencyOpt = 0.0,
     dropouts: DropoutsOpt = "none",
     seed: SeedOpt = 0,

@@ -46,7 +46,7 @@ def run(
     predictors: Annotated[list[str] | None, predictors_option(
         ",".join(DEFAULT_PREDICTORS))] = None,
     horizon: HorizonOpt = 0.2,
-    gps_profile: GpsProfileOpt = "rtk",
+    gps_profile: GpsProfileOpt = "auto",
     gps_latency: GpsLatencyOpt = 0.0,
     dropouts: DropoutsOpt = "none",
     seed: Annotated[int | None, typer.Option(

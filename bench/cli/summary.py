@@ -16,6 +16,7 @@ def print_run_summary(published: Published) -> None:
     quiet)."""
     from posbench.report.notes import (
         excluded_note,
+        fixes_lines,
         has_held_out_paired,
         has_paired,
         sanity_lines,
@@ -30,6 +31,8 @@ def print_run_summary(published: Published) -> None:
     if verbosity() <= QUIET:
         return
     scored = sum(1 for d in res["drives"] if not d["skipped"])
+    for line in fixes_lines(res):
+        say(line.replace("`", ""))
     headline = summary_table(res, compact=True)
     print_table(console, headline.header(), headline.cells(),
                 title=f"{plural(scored, 'drive')} - errors in metres [95 % CI], latency in "

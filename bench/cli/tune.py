@@ -57,7 +57,7 @@ def tune(
     """
     from itertools import product
 
-    from posbench.config import GPS_PROFILES
+    from posbench.config import GPS_CONDITIONS
     from posbench.pipeline.drives import load_drives
     from posbench.predictor_tools.tuning import (
         GRIDS,
@@ -71,7 +71,7 @@ def tune(
 
     if predictor not in GRIDS:
         raise UsageError(f"no tuning grid for {predictor!r}; tunable: {', '.join(GRIDS)}")
-    check_choice(gps_profile, GPS_PROFILES, "--gps-profile")
+    check_choice(gps_profile, GPS_CONDITIONS, "--gps-profile")
     check_at_least(drives, 1, "--drives")
     check_at_least(workers, 1, "--workers")
     check_data_paths(data)

@@ -54,7 +54,7 @@ from posbench.scoring.schema import KINDS, QUERY_COLUMNS, TRACK_QUERY_COLUMNS
 #: what ``manifest.json`` says it is, and the version of this layout: a reader accepts every
 #: MINOR of its MAJOR (MINOR grows when files or keys are added, MAJOR when one changes)
 FORMAT = "posbench-queries"
-FORMAT_VERSION = "1.0"
+FORMAT_VERSION = "1.1"
 MANIFEST = "manifest.json"
 INPUTS = "inputs"
 KEY_QUERIES = "key/reference.parquet"
@@ -65,7 +65,7 @@ FORMATS = ("csv", "parquet")
 PUBLIC_COLUMNS = ("drive", "kind", "t_issue", "t_query")
 #: the DriveRun fields the key keeps per drive (what aggregation and the report read)
 DRIVE_FIELDS = ("name", "dataset", "reference", "notes", "warnings", "outages", "skipped",
-                "gps_count", "duration_s")
+                "gps_count", "duration_s", "gps_condition")
 
 
 def drive_ids(names: Sequence[str]) -> list[str]:
@@ -161,7 +161,8 @@ def write_queries(drives: Sequence[Drive], cfg: RunConfig, out: Path, *, command
             key.append(q)
             run = DriveRun(drive.name, prep.dataset, prep.reference, prep.notes,
                            list(drive.meta.warnings), pd.DataFrame(), outages=prep.outages,
-                           gps_count=len(prep.gps), duration_s=drive.duration_s)
+                           gps_count=len(prep.gps), duration_s=drive.duration_s,
+                           gps_condition=prep.gps_condition)
             records.append(_drive_record(run))
             listed.append({"drive": did, "name": drive.name, "inputs": rel, "t0_s": t0,
                            "queries": len(q), "skipped": None})
@@ -240,7 +241,7 @@ class QueryFolder:
 
     def drive_run(self, d: dict[str, Any], traces: pd.DataFrame) -> DriveRun:
         """The :class:`~posbench.scoring.records.DriveRun` of drive record ``d`` with ``traces``."""
-        kw = {f: d[f] for f in DRIVE_FIELDS}
+        kw = {f: d[f] for f in DRIVE_FIELDS if f in d}  # folders before 1.1: no gps_condition
         kw["outages"] = [(float(a), float(b)) for a, b in d["outages"]]
         return DriveRun(traces=traces, **kw)
 

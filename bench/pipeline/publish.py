@@ -12,9 +12,10 @@ import pandas as pd
 
 from posbench.errors import UsageError
 from posbench.naming import plural
-from posbench.pipeline.reporter import SILENT, WARNING, Reporter
+from posbench.pipeline.reporter import SILENT, Reporter
 from posbench.report.markdown import TABLE_FORMATS
 from posbench.saved_run.run import Run
+from posbench.scenarios.errors import DataError
 from posbench.scoring.records import DriveRun
 from posbench.scoring.schema import KINDS
 
@@ -101,6 +102,30 @@ def publish(res: dict[str, Any], traces: pd.DataFrame, runs: Sequence[DriveRun],
                          f"scored; {where}")
     if not any(p[k]["count"] + p[k]["missing"] for p in run.results["predictors"].values()
                for k in KINDS):
-        reporter.line("warning: no query could be scored (no reference position at any query "
-                      "past the warm-up); see the exclusions below", WARNING)
+        raise DataError(None, nothing_scored(run.results, runs, out))
     return Published(run, written, list(removed or []))
+
+
+def nothing_scored(res: dict[str, Any], runs: Sequence[DriveRun], out: Path | None) -> str:
+    """Why a run scored no query of any drive, in one line: the drives fed fewer than two
+    fixes (queries start at a drive's second fix), and the queries left out as warm-up or
+    for want of a reference position; where report.md was written."""
+    from posbench.report.notes import excluded_counts
+
+    few = [r for r in runs if not r.skipped and r.gps_count < 2]
+    parts = []
+    if few:
+        parts.append("; ".join(f"drive {r.name} was fed {r.gps_count} "
+                               f"fix{'' if r.gps_count == 1 else 'es'}"
+                               for r in few[:3]) + ("; ..." if len(few) > 3 else "")
+                     + " (queries start at a drive's second fix)")
+    n_warm, n_noref = excluded_counts(res)
+    if n_warm:
+        parts.append(f"{n_warm} warm-up quer{'y' if n_warm == 1 else 'ies'} (before a "
+                     f"drive's second received fix)")
+    if n_noref:
+        parts.append(f"{n_noref} quer{'y' if n_noref == 1 else 'ies'} without a reference "
+                     f"position (past the end of the truth or of the fixes)")
+    where = f"; wrote {out / 'report.md'} all the same" if out is not None else ""
+    return ("no query of any drive could be scored: " + ("; ".join(parts) or "no queries")
+            + where)

@@ -52,15 +52,11 @@ def tuning_provenance(cfg: RunConfig, runs: Sequence[DriveRun]) -> dict[str, dic
     the tuning used, marked in the run like a learned model's training drives)."""
     import hashlib
 
-    from posbench.config import gps_condition
     from posbench.predictors.registry import TUNED_FILE, base_name, tuning_entry
 
     if not cfg.use_tuned:
         return {}
-    from posbench.replay.reference import TRUTH
-
-    conditions = sorted({gps_condition(cfg, r.reference == TRUTH) for r in runs if not r.skipped}
-                        | ({cfg.gps_profile} if not runs else set()))
+    conditions = sorted({r.gps_condition for r in runs if not r.skipped and r.gps_condition})
     out: dict[str, dict[str, Any]] = {}
     sha256: dict[Path, str] = {}  # each file hashed once
     for name in cfg.predictors:

@@ -37,7 +37,9 @@ class RunOptions:
         out: the output folder (report.md, results.json, traces, figures); None: the run is
             kept in memory only.
         horizon_s: future-point horizon after each fix [s].
-        gps_profile: GPS input for drives with truth (native, none, rtk, consumer).
+        gps_profile: which fixes drives with truth are fed: auto (their own receiver's where
+            it is not the truth, else rtk drawn from the truth), native, none, rtk, consumer
+            (:func:`posbench.config.gps_condition`).
         gps_latency_s: receiver latency of drawn fixes [s].
         dropouts: GPS dropout profile (none, random:P, outages, outage:L).
         seed: master seed (GPS draws, dropouts, synthetic data).
@@ -69,7 +71,7 @@ class RunOptions:
     predictors: tuple[str, ...] = DEFAULT_PREDICTORS
     out: Path | None = None
     horizon_s: float = 0.2
-    gps_profile: str = "rtk"
+    gps_profile: str = "auto"
     gps_latency_s: float = 0.0
     dropouts: str = "none"
     seed: int = 0

@@ -100,7 +100,7 @@ def paper_figures(drives: list[Drive], cfg: RunConfig, traces: pd.DataFrame, out
     # the predictors replay the run's fixes up to the fix shown; references use a wider window
     prep = _prepared_window(drive, fixes_fed, t_fix - 30.0, t_fix)
     around = drive.window(t_fix - 30.0, t_fix + 5.0)
-    cond = gps_condition(cfg, drive.truth is not None) if cfg.use_tuned else None
+    cond = gps_condition(cfg, drive) if cfg.use_tuned else None
     lstm = create("lstm", cond, **cfg.predictor_options.get("lstm", {}))
     replay(lstm, prep, cfg.horizon_s)
     step = lstm.last_step()

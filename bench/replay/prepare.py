@@ -11,7 +11,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from posbench.config import RunConfig, drive_seed
+from posbench.config import RunConfig, drive_seed, fixes_description, gps_condition
 from posbench.metrics.track_errors import HEADING_DT_S, reference_motion
 from posbench.replay.reference import FIX_CUBIC, TRUTH, reference_at
 from posbench.scenarios.drive import Drive, GpsStream
@@ -47,20 +47,22 @@ class PreparedDrive:
     now: Queries
     outages: list[tuple[float, float]] = field(default_factory=list)
     notes: list[str] = field(default_factory=list)
+    #: the GPS condition of the fixes fed (:func:`posbench.config.gps_condition`)
+    gps_condition: str = "native"
 
 
-def _input_gps(drive: Drive, cfg: RunConfig, seed: int) -> tuple[GpsStream, list[str]]:
-    notes: list[str] = []
-    if drive.truth is not None and cfg.gps_profile != "native":
+def _input_gps(drive: Drive, cfg: RunConfig, seed: int, condition: str
+               ) -> tuple[GpsStream, list[str]]:
+    """The fixes fed under GPS ``condition``: the drive's own, or drawn from its truth."""
+    if condition != "native":
         from posbench.scenarios.degrade import degrade_gps
 
-        gps = degrade_gps(drive.truth, profile=cfg.gps_profile, seed=seed,
+        assert drive.truth is not None  # gps_condition gives a profile only with a truth
+        gps = degrade_gps(drive.truth, profile=condition, seed=seed,
                           latency_s=cfg.gps_latency_s, intervals=cfg.intervals)
-        notes.append(f"GPS drawn from truth: profile {cfg.gps_profile}, intervals "
-                     f"{cfg.intervals}, latency {cfg.gps_latency_s:g} s, seed {seed}")
-        return gps, notes
-    notes.append("GPS: the drive's own recorded fixes")
-    return drive.gps, notes
+        return gps, [f"GPS: {fixes_description(condition)}: intervals {cfg.intervals}, "
+                     f"latency {cfg.gps_latency_s:g} s, seed {seed}"]
+    return drive.gps, [f"GPS: {fixes_description(condition)}"]
 
 
 def _speed_at(drive: Drive, tq: np.ndarray, ref_t: np.ndarray, ref_xy: np.ndarray) -> np.ndarray:
@@ -94,7 +96,8 @@ def _labels(drive: Drive, tq: np.ndarray, grid_t: np.ndarray, grid_xy: np.ndarra
 def prepare_drive(drive: Drive, cfg: RunConfig) -> PreparedDrive:
     """Draw the input GPS, apply dropouts, place the queries and their references."""
     seed = drive_seed(cfg.seed, drive.name)
-    gps, notes = _input_gps(drive, cfg, seed)
+    condition = gps_condition(cfg, drive)
+    gps, notes = _input_gps(drive, cfg, seed, condition)
     gps_all = gps
     outages: list[tuple[float, float]] = []
     if cfg.dropouts != "none":
@@ -141,4 +144,4 @@ def prepare_drive(drive: Drive, cfg: RunConfig) -> PreparedDrive:
     future = queries("future", f_issue, f_query)
     now = queries("now", n_query, n_query)
     return PreparedDrive(drive, drive.meta.format, gps, gps_all, reference, future, now, outages,
-                         notes)
+                         notes, condition)

@@ -13,7 +13,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from posbench.config import RunConfig, gps_condition
+from posbench.config import RunConfig
 from posbench.predictors.gate import GatedPredictor
 from posbench.predictors.registry import create
 from posbench.replay.loop import replay
@@ -78,7 +78,7 @@ def run_drive(drive: Drive, cfg: RunConfig) -> DriveRun:
     # its now rows (score_many tiles the table once per predictor)
     queries = pd.concat([query_frame(prep, "future"), query_frame(prep, "now")],
                         ignore_index=True)
-    condition = gps_condition(cfg, drive.truth is not None) if cfg.use_tuned else None
+    condition = prep.gps_condition if cfg.use_tuned else None
     for name in cfg.predictors:
         pred = create(name, condition, tuning_file=cfg.tuning,
                       **cfg.predictor_options.get(name, {}))
@@ -97,7 +97,7 @@ def run_drive(drive: Drive, cfg: RunConfig) -> DriveRun:
                     traces, step_ns, query_ns, prep.outages, gps_count=len(prep.gps),
                     duration_s=drive.duration_s, fixes=_fixes_frame(prep), track=_track_frame(prep),
                     sensor_frames=sensor_frames(drive),
-                    rejected=rejected, cov_ns=cov_ns)
+                    rejected=rejected, cov_ns=cov_ns, gps_condition=prep.gps_condition)
 
 
 def _init_worker() -> None:

@@ -19,6 +19,7 @@ from posbench.report.notes import (
     MISSING_NOTE,
     block_note,
     excluded_note,
+    fixes_lines,
     has_held_out_paired,
     has_paired,
     model_text,
@@ -152,8 +153,9 @@ def render_markdown(res: dict[str, Any], plots: list[str],
              f"Command: `{res['command']}`", "",
              f"posbench {res['versions'].get('posbench')} at commit `{res.get('git_commit')}`; "
              f"horizon {cfg['horizon_s']} s; now-queries every {cfg['now_step_s']} s; "
-             f"GPS profile `{cfg['gps_profile']}` (drives with truth); dropouts `{cfg['dropouts']}`; "
+             f"GPS profile `{cfg['gps_profile']}`; dropouts `{cfg['dropouts']}`; "
              f"seed {cfg['seed']}.", "",
+             *[f"- {line[0].upper()}{line[1:]}." for line in fixes_lines(res)], "",
              "Errors are Euclidean distances in metres in a local ENU frame (true metres). "
              "`future` = position at fix time + horizon, asked at the fix; `now` = current position, "
              "asked every now-step between fixes. Latency: `step` = one `observe_gps` plus the "
@@ -198,8 +200,11 @@ def render_markdown(res: dict[str, Any], plots: list[str],
     for ds in res["by_dataset"]:
         drives = [d for d in res["drives"] if d["dataset"] == ds]
         refs = sorted({d["reference"] for d in drives if d["reference"]})
+        fixes = fixes_lines(res, ds)
+        fed = f"; fixes: {fixes[0].split(': ', 1)[1]}" if fixes else ""
         lines += [f"## Data set `{ds}`", "",
-                  f"{len(drives)} drives; reference: {', '.join(refs) or '-'}.", ""]
+                  f"{len(drives)} drives; reference: {', '.join(refs) or '-'}{fed}.",
+                  ""]
         lines += [dataset_table(res, ds).markdown(), ""]
         note = block_note([s[k] for s in res["by_dataset"][ds].values() for k in KINDS],
                           f"`{ds}`")

@@ -36,16 +36,59 @@ def trained_note(res: dict[str, Any]) -> str:
     return "* " + "; ".join(parts) + ": its figures on them flatter it; see the held-out table."
 
 
-def excluded_note(res: dict[str, Any]) -> str:
-    """One sentence: how many queries the headline figures leave out, and why."""
+def drive_condition(res: dict[str, Any], drive: dict[str, Any]) -> str:
+    """The GPS condition a drive of a saved run was fed under; runs before schema 1.6 did
+    not record it: their profile for a drive scored against its truth, else ``native``."""
+    if drive.get("gps_condition"):
+        return str(drive["gps_condition"])
+    profile = res["config"].get("gps_profile", "native")
+    return profile if drive.get("reference") == "truth" and profile != "auto" else "native"
+
+
+def fixes_lines(res: dict[str, Any], dataset: str | None = None) -> list[str]:
+    """Per data set (or for ``dataset`` only), which fixes the run fed and scored: the
+    recording's own receiver or fixes simulated from the truth (with drive counts when a
+    data set mixes them)."""
+    from posbench.config import GPS_CONDITIONS, fixes_description
+    from posbench.naming import plural
+
+    by_ds: dict[str, dict[str, int]] = {}
+    for d in res["drives"]:
+        if d["skipped"] or (dataset is not None and d["dataset"] != dataset):
+            continue
+        conds = by_ds.setdefault(d["dataset"], {})
+        cond = drive_condition(res, d)
+        conds[cond] = conds.get(cond, 0) + 1
+    out = []
+    for ds, conds in by_ds.items():
+        if len(conds) == 1:
+            text = fixes_description(next(iter(conds)))
+        else:
+            text = "; ".join(f"{fixes_description(c)} ({plural(n, 'drive')})"
+                             for c, n in sorted(conds.items(),
+                                                key=lambda cn: GPS_CONDITIONS.index(cn[0])))
+        out.append(f"fixes scored in `{ds}`: {text}")
+    return out
+
+
+def excluded_counts(res: dict[str, Any]) -> tuple[int, int]:
+    """Per predictor (the first: every predictor is asked the same queries), the queries the
+    headline figures leave out: ``(warm-up, without a reference position)``."""
     ex = res.get("excluded", {})
     first = next(iter(res["predictors"]), None)
     if first is None:
-        return ""
+        return 0, 0
     warm = ex.get("warmup", {}).get(first, {})
     n_warm = sum(warm.get(k, {}).get("count", 0) + warm.get(k, {}).get("missing", 0)
                  for k in KINDS)
-    n_noref = sum(ex.get("no_reference", {}).get(first, {}).values())
+    return n_warm, sum(ex.get("no_reference", {}).get(first, {}).values())
+
+
+def excluded_note(res: dict[str, Any]) -> str:
+    """One sentence: how many queries the headline figures leave out, and why."""
+    if next(iter(res["predictors"]), None) is None:
+        return ""
+    n_warm, n_noref = excluded_counts(res)
     return (f"Excluded from these figures, per predictor: {n_warm} warm-up queries (issued before "
             f"a drive's second received fix, when no predictor can know a velocity) and "
             f"{n_noref} queries without a reference position (past the end of the truth or of "

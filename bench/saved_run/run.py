@@ -31,7 +31,7 @@ from posbench.scenarios.errors import DataError
 
 #: MAJOR.MINOR of results.json: a reader accepts every MINOR of its MAJOR; MINOR grows when
 #: keys are added, MAJOR when a key changes meaning or goes
-SCHEMA_VERSION = "1.5"
+SCHEMA_VERSION = "1.6"
 RESULTS = "results.json"
 TRACES = "traces.parquet"
 PROVENANCE_KEYS = ("command", "versions", "git_commit", "data")

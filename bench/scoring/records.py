@@ -34,6 +34,9 @@ class DriveRun:
     sensor_frames: dict[str, Any] = field(default_factory=dict)  # see sensor_frames()
     #: covariance_at durations [ns] of the predictors that report one (timed apart)
     cov_ns: dict[str, np.ndarray] = field(default_factory=dict)
+    #: the GPS condition its fixes were fed under (``native``: the recording's own receiver;
+    #: a profile: drawn from the truth); "" for a skipped drive
+    gps_condition: str = ""
 
 
 def merge_predictor_runs(parts: Sequence[DriveRun]) -> DriveRun:
