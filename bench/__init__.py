@@ -88,7 +88,8 @@ def run(data: str | Path | Sequence[str | Path] | None = None,
 
     Raises:
         UsageError: an option that cannot work (before any drive is loaded).
-        DataError: a recording that cannot be read.
+        DataError: a recording that cannot be read, or a run that scored no query of any
+            drive (report.md is written to ``out`` first; the message says why).
     """
     from dataclasses import fields
 
