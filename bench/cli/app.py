@@ -23,6 +23,7 @@ import typer
 import posbench.blas_threads  # noqa: F401  (before numpy: one OpenBLAS thread)
 import posbench.cli.check as check
 import posbench.cli.compare as compare
+import posbench.cli.export as export
 import posbench.cli.inspect as inspect
 import posbench.cli.latency as latency
 import posbench.cli.predictors as predictors
@@ -111,7 +112,8 @@ def command(fn: Callable[..., Any]) -> Callable[..., Any]:
 for name, fn in (("run", run.run), ("queries", queries.queries), ("score", score.score),
                  ("view", view.view), ("predictors", predictors.list_predictors),
                  ("train", train.train), ("latency", latency.latency), ("tune", tune.tune),
-                 ("check", check.check), ("compare", compare.compare)):
+                 ("check", check.check), ("compare", compare.compare),
+                 ("export", export.export)):
     app.command(name)(command(fn))
 data_app.command("inspect")(command(inspect.inspect))
 

@@ -25,7 +25,8 @@ def score(
     answers: Annotated[Path, typer.Argument(
         metavar="ANSWERS", show_default=False,
         help="CSV or Parquet file: one row per answer, columns drive, kind (future|now), "
-             "t_query [s], x, y [m], optional latency_us [us].")],
+             "t_query [s], x, y [m], optional latency_us [us]. Or a TUM file (.tum): the now "
+             "answers of one drive, lines `t_query x y z qx qy qz qw`.")],
     queries: Annotated[Path, typer.Option(
         "--queries", metavar="DIR", show_default=False,
         help="The folder `bench queries` wrote (its key/ holds the references).")],
@@ -51,6 +52,13 @@ def score(
     not in the queries folder, an empty or non-finite cell are errors naming the file and line.
     Answers from outside cannot be checked for look-ahead (use of inputs after t_issue); a
     predictor run by `bench run` can.
+
+    A TUM file (name ending .tum; `t_query x y z qx qy qz qw` per line, whitespace-separated,
+    # comments; z and the quaternion are ignored) answers the now queries of one drive, its
+    other queries counted as missing: the drive a `# drive: NAME` line names, else the drive
+    id the file name starts with (ID.tum, ID.mynode.now.tum). Its timestamps are t_query as
+    in queries.csv (seconds from the drive's first input sample, not Unix time). `bench
+    export RUN_DIR --format tum` writes such files from a saved run (DRIVE.PREDICTOR.now.tum).
 
     Example: bench score answers.csv --queries bench-queries --name mynode --out mynode-run
     """

@@ -14,6 +14,16 @@ scored as ``missing`` (never dropped); an answer to no query, two answers to one
 drive the queries folder does not hold, a missing or non-finite cell: a :class:`DataError`
 naming the file and the first such row (CSV line number, header = line 1; Parquet row).
 
+A TUM trajectory file (suffix ``.tum``: lines ``timestamp x y z qx qy qz qw`` separated
+by whitespace, ``#`` comments; :mod:`posbench.offline.tum`) answers the ``now`` queries of
+one drive: ``timestamp`` is ``t_query`` [s] on the queries folder's clock (as in
+``queries.csv``: from the drive's first input sample, not Unix time), ``x``, ``y`` [m] the
+local ENU position; ``z`` and the quaternion are read and ignored. Its drive is the one a
+comment line ``# drive: NAME`` names (the drive's id in the queries folder or its name, as
+``bench export`` writes it), else the drive id its file name starts with (``ID.tum``,
+``ID.anything.tum``; the longest such id). A line that is not 8 numbers, a drive it cannot
+name and a timestamp matching no now query are errors naming the file and line.
+
 The answers are turned into the same :class:`~posbench.scoring.records.DriveRun` records as a replay
 (:func:`score_answers`), through :func:`posbench.scoring.score.score`, so aggregation, the report and
 ``results.json`` are those of ``bench run``.
@@ -30,6 +40,7 @@ import numpy as np
 import pandas as pd
 
 from posbench.offline.queries_folder import QueryFolder
+from posbench.offline.tum import is_tum, read_tum
 from posbench.scenarios.errors import DataError
 from posbench.scoring.records import DriveRun
 from posbench.scoring.schema import COV_COLUMNS, KINDS
@@ -49,9 +60,21 @@ class Answers:
     frame: pd.DataFrame
     is_csv: bool
     ignored: list[str] = field(default_factory=list)
+    #: a TUM file: the line of each data row (1-based), its ``# drive:`` comment (None: none;
+    #: the drive is then told by the file name when matched to a queries folder)
+    lines: np.ndarray | None = None
+    tum_drive: str | None = None
+
+    @property
+    def is_tum(self) -> bool:
+        """Whether these answers came from a TUM file (``now`` answers of one drive)."""
+        return self.lines is not None
 
     def where(self, row: int) -> str:
-        """Data row ``row`` (0-based) as the user finds it: ``line N`` (CSV) or ``row N``."""
+        """Data row ``row`` (0-based) as the user finds it: ``line N`` (CSV, TUM) or
+        ``row N`` (Parquet)."""
+        if self.lines is not None:
+            return f"line {int(self.lines[row])}"
         return f"line {row + 2}" if self.is_csv else f"row {row + 1}"
 
     def fail(self, row: int, detail: str) -> DataError:
@@ -72,7 +95,8 @@ def _text(tab, col: str) -> np.ndarray:
 
 
 def read_answers(path: str | Path) -> Answers:
-    """Read and check an answers file (see the module docstring).
+    """Read and check an answers file (see the module docstring; a ``.tum`` file:
+    :func:`read_tum_answers`).
 
     Raises:
         DataError: missing file or columns, a non-numeric, missing or non-finite t_query, x or
@@ -81,6 +105,8 @@ def read_answers(path: str | Path) -> Answers:
     from posbench.scenarios.loaders.table import numeric_column, read_table_file
 
     path = Path(path)
+    if is_tum(path):
+        return read_tum_answers(path)
     tab = read_table_file(path, text_columns=("drive", "kind"))
     df = tab.df
     missing = [c for c in REQUIRED if c not in df.columns]
@@ -118,6 +144,54 @@ def read_answers(path: str | Path) -> Answers:
     frame = pd.DataFrame({"drive": drive, "kind": kind, **num, "latency_us": lat,
                           **_covariance(tab, path)})
     return Answers(path, frame, tab.is_csv, ignored)
+
+
+def read_tum_answers(path: str | Path) -> Answers:
+    """Read and check a TUM file as ``now`` answers (see the module docstring): times
+    ``t_query`` [s], positions ``x``, ``y`` [m] ENU, no latency, no covariance. Its drive is
+    left empty here and told when the answers are matched to a queries folder
+    (:func:`tum_drive`).
+
+    Raises:
+        DataError: as :func:`posbench.offline.tum.read_tum` (file and line named).
+    """
+    tum = read_tum(path)
+    n = tum.t.size
+    frame = pd.DataFrame({"drive": np.full(n, "", dtype=object), "kind": "now",
+                          "t_query": tum.t, "x": tum.x, "y": tum.y,
+                          "latency_us": np.full(n, np.nan),
+                          **{c: np.full(n, np.nan) for c in COVARIANCE}})
+    return Answers(Path(path), frame, False, [], lines=tum.line, tum_drive=tum.drive)
+
+
+def tum_drive(folder: QueryFolder, answers: Answers) -> str:
+    """The id (in ``folder``) of the drive a TUM file answers: the drive its ``# drive:``
+    comment names (by id or by name), else the longest drive id its file name starts with,
+    followed by ``.`` (``ID.tum``, ``ID.kf.now.tum``).
+
+    Raises:
+        DataError: a ``# drive:`` comment naming no drive of the folder, or no comment and
+            a file name that starts with no drive id.
+    """
+    ids = [str(d["id"]) for d in folder.drives]
+    by_name = {str(d["name"]): str(d["id"]) for d in folder.drives}
+    shown = ", ".join(ids[:5]) + (", ..." if len(ids) > 5 else "")
+    name = answers.tum_drive
+    if name is not None:
+        if name in ids:
+            return name
+        if name in by_name:
+            return by_name[name]
+        raise DataError(answers.path, f"'# drive: {name}' names no drive of the queries "
+                                      f"folder {folder.folder} (its drives: {shown})")
+    file = answers.path.name
+    hits = [i for i in ids if file.startswith(i + ".")]
+    if not hits:
+        raise DataError(answers.path, f"cannot tell which drive it answers: no '# drive: ID' "
+                                      f"line and its name does not start with a drive id of "
+                                      f"the queries folder {folder.folder} followed by '.' "
+                                      f"(its drives: {shown}); name it ID.tum or add the line")
+    return max(hits, key=len)
 
 
 def _covariance(tab: Any, path: Path) -> dict[str, np.ndarray]:
@@ -166,13 +240,15 @@ def _nearest_hint(times: np.ndarray, t: float) -> str:
     if times.size == 0:
         return "that drive has no such queries"
     j = int(np.argmin(np.abs(times - t)))
-    return f"nearest: {times[j]!r} s, {abs(times[j] - t):.3g} s away"
+    return f"nearest: {float(times[j])!r} s, {abs(float(times[j]) - t):.3g} s away"
 
 
 def match(folder: QueryFolder, answers: Answers) -> np.ndarray:
     """For each answer row, the row of ``folder.key`` it answers (raising on answers to no
     query, to a drive not in the folder or skipped there, and on a second answer to one query)."""
     a = answers.frame
+    if answers.is_tum:
+        a["drive"] = tum_drive(folder, answers)
     ids = {d["id"]: d for d in folder.drives}
     known = np.isin(a["drive"].to_numpy(), list(ids))
     if not known.all():
@@ -193,8 +269,12 @@ def match(folder: QueryFolder, answers: Answers) -> np.ndarray:
         row = a.iloc[i]
         same = (public["drive"] == row["drive"]) & (public["kind"] == row["kind"])
         hint = _nearest_hint(public.loc[same, "t_query"].to_numpy(float), float(row["t_query"]))
+        if answers.is_tum:
+            hint += ("; a TUM timestamp is the query's t_query as in queries.csv: seconds from "
+                     "the drive's first input sample, not Unix time")
         raise answers.fail(int(a.index[i]), f"no query of drive {row['drive']!r}, kind "
-                                            f"{row['kind']} at t_query {row['t_query']!r} s "
+                                            f"{row['kind']} at t_query "
+                                            f"{float(row['t_query'])!r} s "
                                             f"({hint}; times match within "
                                             f"{MATCH_TOLERANCE_S:g} s)")
     dup = pd.Series(pos).duplicated().to_numpy()
@@ -205,7 +285,7 @@ def match(folder: QueryFolder, answers: Answers) -> np.ndarray:
         raise answers.fail(int(a.index[i]), f"a second answer to the query answered on "
                                             f"{answers.where(int(a.index[first]))} (drive "
                                             f"{row['drive']!r}, kind {row['kind']}, t_query "
-                                            f"{public['t_query'].iloc[pos[i]]!r} s)")
+                                            f"{float(public['t_query'].iloc[pos[i]])!r} s)")
     return pos
 
 
