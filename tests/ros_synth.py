@@ -14,7 +14,17 @@ A reusable writer: :func:`write_bag` takes a :class:`SynthBag` of options and wr
   positions scaled by ``odom_scale`` (drift), heading rotated by ``odom_heading_deg`` and
   drifting by ``odom_yaw_drift_dps`` [deg/s];
 - ``/ground_truth`` (when ``ground_truth``) ``nav_msgs/Odometry`` in ``map``: the exact path,
-  rotated by ``truth_rot_deg`` and shifted by ``truth_shift_m``.
+  rotated by ``truth_rot_deg`` and shifted by ``truth_shift_m``;
+- ``/pose`` (when ``pose_truth`` names ``PoseStamped`` or ``PoseWithCovarianceStamped``) the same
+  map-frame path at ``odom_hz`` (scaled by ``pose_scale`` to make it a bad truth; the
+  PoseWithCovarianceStamped states ``pose_sigma_m``);
+- ``/gnss/rtk`` (when ``rtk``) a second ``sensor_msgs/NavSatFix`` at ``rtk_hz``: the exact path
+  plus ``rtk_noise_m`` white noise per axis, its covariance stated (``rtk_cov_type``); every
+  ``rtk_no_fix_every``-th fix (0: none) has ``status = -1`` and a wild position;
+- ``/vel`` (when ``twist`` names ``TwistStamped`` or ``TwistWithCovarianceStamped``) the speed
+  at ``odom_hz`` (linear.x = v [m/s] in base_link).
+
+``gps_topic`` renames ``/fix``, ``gps_bias_m`` shifts its fixes (east, north) [m]; ``gps_interval_s = (0.1, 0.1)`` gives regular 10 Hz fixes.
 
 The path is :func:`posbench.scenarios.synthetic.generate_drive`'s truth (turns, stops), cut to
 ``duration_s``; :func:`synth_truth` returns it (ENU about the first fix's origin) for asserts.
@@ -65,6 +75,17 @@ class SynthBag:
     ground_truth: bool = False
     truth_rot_deg: float = 40.0
     truth_shift_m: tuple[float, float] = (120.0, -35.0)
+    gps_topic: str = "/fix"
+    gps_bias_m: tuple[float, float] = (0.0, 0.0)
+    pose_truth: str = ""  # "", "PoseStamped" or "PoseWithCovarianceStamped"
+    pose_scale: float = 1.0
+    pose_sigma_m: float = 0.05
+    rtk: bool = False
+    rtk_noise_m: float = 0.02
+    rtk_hz: float = 10.0
+    rtk_no_fix_every: int = 0
+    rtk_cov_type: int = 2
+    twist: str = ""  # "", "TwistStamped" or "TwistWithCovarianceStamped"
 
 
 def synth_truth(opts: SynthBag) -> TruthStream:
@@ -125,15 +146,15 @@ def _messages(opts: SynthBag, m: _Msgs) -> list[tuple[str, str, int, object]]:
     lo, hi = opts.gps_interval_s
     tf = np.cumsum(rng.uniform(lo, hi, int(t[-1] / lo) + 2))
     tf = tf[tf < t[-1]]
-    gx = np.interp(tf, t, tr.x) + rng.normal(0.0, opts.gps_noise_m, tf.size)
-    gy = np.interp(tf, t, tr.y) + rng.normal(0.0, opts.gps_noise_m, tf.size)
+    gx = np.interp(tf, t, tr.x) + rng.normal(0.0, opts.gps_noise_m, tf.size) + opts.gps_bias_m[0]
+    gy = np.interp(tf, t, tr.y) + rng.normal(0.0, opts.gps_noise_m, tf.size) + opts.gps_bias_m[1]
     lat, lon = enu_to_latlon(gx, gy, ORIGIN_LAT, ORIGIN_LON)
     cov = np.zeros(9)
     cov[0] = cov[4] = opts.gps_noise_m ** 2
     cov[8] = (2 * opts.gps_noise_m) ** 2
     st = T["sensor_msgs/msg/NavSatStatus"](status=0, service=1)
     for k, tk in enumerate(tf):
-        out.append(("/fix", "sensor_msgs/msg/NavSatFix", _ns(tk) + 20_000_000,
+        out.append((opts.gps_topic, "sensor_msgs/msg/NavSatFix", _ns(tk) + 20_000_000,
                     T["sensor_msgs/msg/NavSatFix"](
                         header=m.header(_ns(tk), "gps"), status=st, latitude=float(lat[k]),
                         longitude=float(lon[k]), altitude=120.0, position_covariance=cov,
@@ -193,7 +214,76 @@ def _messages(opts: SynthBag, m: _Msgs) -> list[tuple[str, str, int, object]]:
                         m.odom(_ns(tk), "map", float(np.interp(tk, t, gx_)),
                                float(np.interp(tk, t, gy_)), float(np.interp(tk, t, yaw_u)) + a,
                                float(np.interp(tk, t, v)))))
+    out += _extras(opts, m, tr, rng)
     out.sort(key=lambda r: r[2])
+    return out
+
+
+def _map_frame(opts: SynthBag, x: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """ENU [m] -> the map frame of the truths: rotated by truth_rot_deg, shifted, scaled."""
+    a = math.radians(opts.truth_rot_deg)
+    k = opts.pose_scale
+    return (k * (math.cos(a) * x - math.sin(a) * y) + opts.truth_shift_m[0],
+            k * (math.sin(a) * x + math.cos(a) * y) + opts.truth_shift_m[1])
+
+
+def _extras(opts: SynthBag, m: _Msgs, tr: TruthStream, rng: np.random.Generator
+            ) -> list[tuple[str, str, int, object]]:
+    """The optional pose truth, RTK receiver and twist topics (see the module doc)."""
+    T = m.T
+    out: list[tuple[str, str, int, object]] = []
+    t, yaw_u = tr.t, np.unwrap(tr.yaw)
+    to = np.arange(0.007, t[-1], 1.0 / opts.odom_hz)
+    if opts.pose_truth:
+        mt = f"geometry_msgs/msg/{opts.pose_truth}"
+        px, py = _map_frame(opts, np.interp(to, t, tr.x), np.interp(to, t, tr.y))
+        yaw = np.interp(to, t, yaw_u) + math.radians(opts.truth_rot_deg)
+        cov = np.zeros(36)
+        cov[0] = cov[7] = opts.pose_sigma_m ** 2
+        for k, tk in enumerate(to):
+            q = np.array([math.cos(yaw[k] / 2), 0.0, 0.0, math.sin(yaw[k] / 2)])
+            pose = T["geometry_msgs/msg/Pose"](
+                position=T["geometry_msgs/msg/Point"](x=float(px[k]), y=float(py[k]), z=0.0),
+                orientation=m.quat(q))
+            if opts.pose_truth == "PoseStamped":
+                msg = T[mt](header=m.header(_ns(tk), "map"), pose=pose)
+            else:
+                msg = T[mt](header=m.header(_ns(tk), "map"),
+                            pose=T["geometry_msgs/msg/PoseWithCovariance"](pose=pose,
+                                                                           covariance=cov))
+            out.append(("/pose", mt, _ns(tk) + 1_000_000, msg))
+    if opts.rtk:
+        tk_ = np.arange(0.05, t[-1], 1.0 / opts.rtk_hz)
+        rx = np.interp(tk_, t, tr.x) + rng.normal(0.0, opts.rtk_noise_m, tk_.size)
+        ry = np.interp(tk_, t, tr.y) + rng.normal(0.0, opts.rtk_noise_m, tk_.size)
+        bad = (np.arange(tk_.size) % opts.rtk_no_fix_every == opts.rtk_no_fix_every - 1
+               if opts.rtk_no_fix_every else np.zeros(tk_.size, bool))
+        rx[bad] += 500.0
+        lat, lon = enu_to_latlon(rx, ry, ORIGIN_LAT, ORIGIN_LON)
+        cov = np.zeros(9)
+        cov[0] = cov[4] = opts.rtk_noise_m ** 2
+        cov[8] = (2 * opts.rtk_noise_m) ** 2
+        for k, tk in enumerate(tk_):
+            st = T["sensor_msgs/msg/NavSatStatus"](status=-1 if bad[k] else 2, service=1)
+            out.append(("/gnss/rtk", "sensor_msgs/msg/NavSatFix", _ns(tk) + 5_000_000,
+                        T["sensor_msgs/msg/NavSatFix"](
+                            header=m.header(_ns(tk), "gps_rtk"), status=st,
+                            latitude=float(lat[k]), longitude=float(lon[k]), altitude=120.0,
+                            position_covariance=cov,
+                            position_covariance_type=opts.rtk_cov_type)))
+    if opts.twist:
+        mt = f"geometry_msgs/msg/{opts.twist}"
+        vv = np.interp(to, t, tr.v)
+        for k, tk in enumerate(to):
+            tw = T["geometry_msgs/msg/Twist"](linear=m.vec([vv[k], 0.0, 0.0]),
+                                              angular=m.vec([0.0, 0.0, 0.0]))
+            if opts.twist == "TwistStamped":
+                msg = T[mt](header=m.header(_ns(tk), "base_link"), twist=tw)
+            else:
+                msg = T[mt](header=m.header(_ns(tk), "base_link"),
+                            twist=T["geometry_msgs/msg/TwistWithCovariance"](
+                                twist=tw, covariance=np.zeros(36)))
+            out.append(("/vel", mt, _ns(tk) + 1_000_000, msg))
     return out
 
 

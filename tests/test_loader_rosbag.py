@@ -293,7 +293,7 @@ def test_ambiguous_gps_topics_listed_then_resolved(tmp_path: Path, kind: str) ->
     msg = str(ei.value)
     assert "/fix" in msg and "/gps/fix" in msg and "--topic gps=" in msg
     d = loaders.load(path, topics={"gps": "/gps/fix"})[0]
-    assert len(d.gps) == 20 and d.meta.extra["topics"]["gps"] == "/gps/fix"
+    assert len(d.gps) == 20 and d.meta.extra["topics"]["gps"]["topic"] == "/gps/fix"
 
 
 def test_ambiguous_optional_role_can_be_skipped(tmp_path: Path) -> None:
@@ -304,17 +304,19 @@ def test_ambiguous_optional_role_can_be_skipped(tmp_path: Path) -> None:
     # odometry is never the truth by default: two of them are only ambiguous if they would
     # feed the speed (here /vel does), and a named one is the truth
     d = load_rosbag(path)
-    assert d.truth is None and d.meta.extra["topics"]["speed"] == "/vel"
+    assert d.truth is None and d.meta.extra["topics"]["speed"]["topic"] == "/vel"
     d = load_rosbag(path, topics={"truth": "/odom2"})
-    assert d.truth is not None and d.meta.extra["topics"]["truth"] == "/odom2"
+    assert d.truth is not None and d.meta.extra["topics"]["truth"]["topic"] == "/odom2"
     path2 = _write_bag(tmp_path / "two_odom_no_vel", "mcap",
                        sorted([r for r in msgs if r[0] != "/vel"], key=lambda r: r[2]))
     with pytest.raises(DataError, match=r"several speed topics .*/odom, /odom2.*speed=none"):
         load_rosbag(path2)
     assert load_rosbag(path2, topics={"speed": "none"}).speed is None
     d = load_rosbag(path2, topics={"truth": "/odom2"})  # the other odometry feeds the speed
-    assert d.meta.extra["topics"] == {"gps": "/fix", "imu": "/imu", "speed": "/odom",
-                                      "truth": "/odom2"}
+    assert {r: v["topic"] for r, v in d.meta.extra["topics"].items()} == {
+        "gps": "/fix", "imu": "/imu", "speed": "/odom", "truth": "/odom2"}
+    assert d.meta.extra["topics"]["speed"]["why"] == (
+        "fallback: no TwistStamped or TwistWithCovarianceStamped")
 
 
 def test_named_topic_validated(tmp_path: Path) -> None:

@@ -1,41 +1,45 @@
 """Loader for ROS 1 (``.bag``) and ROS 2 (``.db3``, ``.mcap`` or a folder with
 ``metadata.yaml``) bags through :class:`rosbags.highlevel.AnyReader`.
 
-Roles and the message types that fill them (found by type; ``topics`` maps a
-role to a topic name when a bag has several candidates):
+Roles and the message types that fill them (found by type,
+:mod:`~posbench.scenarios.loaders.ros_topics`; ``topics`` maps a role to a topic name when a
+bag has several candidates). Which topic plays which role and why is in
+``meta.extra["topics"]`` (role -> {"topic", "type", "why"}), the other topics in
+``meta.extra["unused_topics"]`` (topic -> {"type", "why"}); ``bench data inspect`` prints both.
 
 - ``gps``   ``sensor_msgs/NavSatFix`` -> :class:`GpsStream` (required). Fixes
   with ``status.status < 0`` (no fix) are skipped and counted; accuracy [m] (per-axis
   1-sigma, :class:`~posbench.scenarios.drive.GpsStream`) is ``sqrt(mean(cov[0], cov[4]))``, the
   east and north variances of ``position_covariance`` (ENU, m^2), when its type is not
   UNKNOWN (> 0), else NaN; a stream with no stated fix at all has accuracy None.
-  lat/lon are projected about the first valid fix (``projection``).
+  lat/lon are projected about the first valid fix (``projection``). They are a receiver of
+  their own (``meta.fix_source = "receiver"``) unless the named truth is the same topic.
 - ``imu``   ``sensor_msgs/Imu`` -> :class:`ImuStream`. REP 145: ``linear_acceleration`` is in
   the sensor frame (``header.frame_id``) and includes gravity; the mount comes from
   ``/tf_static`` (or ``/tf``). :mod:`posbench.scenarios.loaders.ros_imu` levels it (orientation),
   rotates it into the vehicle frame (tf mount, or a mount estimated from the data), removes
   gravity and checks the orientation's yaw against the GPS course; the path taken is in
   ``meta.extra["imu_frame"]``. A field with covariance[0] == -1 is absent.
-- ``speed`` ``geometry_msgs/TwistStamped`` -> :class:`SpeedStream`, v = |(linear.x,
-  linear.y)| [m/s]; when the bag has none, a ``nav_msgs/Odometry`` topic's twist (wheel
-  odometry is a speed sensor, REP 105).
-- ``truth`` only when named (``topics={"truth": "/name"}``, ``nav_msgs/Odometry``): a pose
-  in a drifting or local frame is no independent truth (REP 105), so nothing becomes the
-  truth automatically; without one the drive is scored against its own GPS fixes, as the
-  paper's routes (``meta.extra["truth_kind"] = "gps-fixes"``). A named truth is aligned to
-  the GPS ENU frame by a 2-D rigid fit over the drive (:mod:`posbench.scenarios.align`, frame names
-  are not trusted: ``map``/``earth``/``utm`` are not our ENU about the first fix either); the
-  transform and residual RMS are in ``meta.extra["truth_alignment"]``, and a residual above
-  :func:`posbench.scenarios.align.alignment_limit_m` is a DataError.
+- ``speed`` ``geometry_msgs/TwistStamped`` or ``geometry_msgs/TwistWithCovarianceStamped``
+  -> :class:`SpeedStream`, v = |(linear.x, linear.y)| [m/s]; when the bag has neither, a
+  ``nav_msgs/Odometry`` topic's twist (wheel odometry is a speed sensor, REP 105). A topic
+  named as the truth is never taken as the speed.
+- ``truth`` only when named (``topics={"truth": "/name"}``): ``sensor_msgs/NavSatFix`` (a second
+  receiver such as RTK: projected like the fixes, no fit), ``geometry_msgs/PoseStamped``,
+  ``geometry_msgs/PoseWithCovarianceStamped`` or ``nav_msgs/Odometry`` (aligned to the GPS
+  ENU frame by a 2-D rigid fit, refused when its residual is over the limit):
+  :mod:`posbench.scenarios.loaders.ros_truth`. A pose in a drifting or local frame is no
+  independent truth (REP 105), so nothing becomes the truth automatically; without one the
+  drive is scored against its own GPS fixes, as the paper's routes
+  (``meta.extra["truth_kind"] = "gps-fixes"``).
 
 A role mapped to ``""`` or ``"none"`` is not loaded. Times: a message's header
 stamp when non-zero, its receive (log) time otherwise; ``meta.time_source``
-records which per role. t = 0 is the earliest sample of any stream.
+records which per role. t = 0 is the earliest sample of any stream [s].
 """
 
 from __future__ import annotations
 
-import math
 import sqlite3
 import struct
 from collections.abc import Iterable
@@ -44,123 +48,48 @@ from typing import Any
 
 import numpy as np
 
-from posbench.scenarios.align import alignment_limit_m, umeyama_2d
 from posbench.scenarios.cleaning import clean_times
 from posbench.scenarios.drive import (
+    FIXES_FROM_TRUTH,
+    FIXES_RECEIVER,
     Drive,
     DriveMeta,
     GpsStream,
     ImuStream,
     SpeedStream,
-    TruthStream,
 )
 from posbench.scenarios.errors import DataError
-from posbench.scenarios.imu_frames import wrap
 from posbench.scenarios.loaders.ros_imu import imu_to_vehicle
+from posbench.scenarios.loaders.ros_msgs import (
+    IMU,
+    NAVSATFIX,
+    ODOMETRY,
+    POSE_COV_STAMPED,
+    POSE_STAMPED,
+    TWIST_COV_STAMPED,
+    TWIST_STAMPED,
+    navsat_fields,
+    normalize_msgtype,
+    quat_yaw,
+    short_type,
+    speed_fields,
+    stamp_ns,
+    times,
+)
 from posbench.scenarios.loaders.ros_tf import TF_TOPICS, TFMESSAGE, edges_from_messages, find_mount
+from posbench.scenarios.loaders.ros_topics import (
+    FALLBACK_TYPES,
+    ROLE_TYPES,
+    describe,
+    select_topics,
+    unused_topics,
+)
+from posbench.scenarios.loaders.ros_truth import truth_fields, truth_stream
 from posbench.scenarios.projection import PROJECTIONS, to_local
 
-NAVSATFIX = "sensor_msgs/msg/NavSatFix"
-IMU = "sensor_msgs/msg/Imu"
-TWIST_STAMPED = "geometry_msgs/msg/TwistStamped"
-ODOMETRY = "nav_msgs/msg/Odometry"
-
-#: role -> (types found automatically, types accepted when the topic is named)
-ROLE_TYPES: dict[str, tuple[tuple[str, ...], tuple[str, ...]]] = {
-    "gps": ((NAVSATFIX,), (NAVSATFIX,)),
-    "imu": ((IMU,), (IMU,)),
-    "speed": ((TWIST_STAMPED,), (TWIST_STAMPED, ODOMETRY)),
-    "truth": ((), (ODOMETRY,)),  # never chosen automatically: see the module notes
-}
-#: a role's fallback types when the bag has none of its automatic ones
-FALLBACK_TYPES: dict[str, tuple[str, ...]] = {"speed": (ODOMETRY,)}
-_OFF = ("", "none", "-")
-
-
-def normalize_msgtype(msgtype: str) -> str:
-    """``pkg/Type`` (ROS 1 spelling) -> ``pkg/msg/Type``; ROS 2 names pass through."""
-    parts = msgtype.split("/")
-    return f"{parts[0]}/msg/{parts[1]}" if len(parts) == 2 else msgtype
-
-
-def quat_yaw(w: np.ndarray, x: np.ndarray, y: np.ndarray, z: np.ndarray) -> np.ndarray:
-    """Yaw [rad] (rotation about z, ENU: 0 = east, CCW) of quaternions; NaN for zero norm."""
-    w, x, y, z = (np.asarray(a, dtype=float) for a in (w, x, y, z))
-    yaw = np.arctan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
-    norm = w * w + x * x + y * y + z * z
-    return np.where(norm > 1e-12, yaw, np.nan)
-
-
-def _describe(topic_types: dict[str, str]) -> str:
-    return ", ".join(f"{t} ({m})" for t, m in sorted(topic_types.items())) or "none"
-
-
-def select_topics(topic_types: dict[str, str], topics: dict[str, str] | None,
-                  path: Path) -> dict[str, str | None]:
-    """Choose one topic (or ``None``) per role.
-
-    Args:
-        topic_types: topic -> normalized message type, for every topic in the bag.
-        topics: user's role -> topic choices (validated: role known, topic present,
-            type acceptable for the role).
-    Raises:
-        DataError: unknown role / topic, wrong type, or several candidates for a role
-            the user did not name.
-    """
-    topics = dict(topics or {})
-    unknown = sorted(set(topics) - set(ROLE_TYPES))
-    if unknown:
-        raise DataError(path, f"unknown topic role(s) {', '.join(unknown)}; "
-                              f"roles are {', '.join(ROLE_TYPES)}")
-    chosen: dict[str, str | None] = {}
-    for role, (auto, accepted) in ROLE_TYPES.items():
-        if role in topics:
-            name = topics[role]
-            if name.strip().lower() in _OFF:
-                chosen[role] = None
-                continue
-            if name not in topic_types:
-                raise DataError(path, f"--topic {role}={name}: no such topic; the bag has "
-                                      f"{_describe(topic_types)}")
-            if topic_types[name] not in accepted:
-                raise DataError(path, f"--topic {role}={name}: topic has type "
-                                      f"{topic_types[name]}, expected "
-                                      f"{' or '.join(accepted)}")
-            chosen[role] = name
-            continue
-        cands = sorted(t for t, m in topic_types.items() if m in auto)
-        kind = auto[0] if auto else ""
-        if not cands and role in FALLBACK_TYPES:
-            fb = FALLBACK_TYPES[role]
-            cands = sorted(t for t, m in topic_types.items()
-                           if m in fb and t != topics.get("truth"))
-            kind = fb[0]
-        if len(cands) > 1:
-            off = "" if role == "gps" else f" (or --topic {role}=none to skip it)"
-            raise DataError(path, f"several {role} topics ({kind}): {', '.join(cands)}; "
-                                  f"choose one with --topic {role}=/name{off}")
-        chosen[role] = cands[0] if cands else None
-    if chosen["gps"] is None:
-        raise DataError(path, f"no GPS topic ({NAVSATFIX}); the bag has "
-                              f"{_describe(topic_types)}")
-    return chosen
-
-
-def _stamp_ns(msg: Any) -> int:
-    st = msg.header.stamp
-    return int(st.sec) * 1_000_000_000 + int(st.nanosec)
-
-
-def _times(stamps: list[int], recv: list[int]) -> tuple[np.ndarray, str]:
-    """Header stamps [ns] where non-zero, receive times otherwise; and which were used."""
-    s = np.asarray(stamps, dtype=np.int64)
-    r = np.asarray(recv, dtype=np.int64)
-    zero = s == 0
-    if not np.any(zero):
-        return s, "header"
-    if np.all(zero):
-        return r, "receive"
-    return np.where(zero, r, s), f"header ({int(zero.sum())} of {s.size} zero stamps: receive)"
+__all__ = ["FALLBACK_TYPES", "IMU", "NAVSATFIX", "ODOMETRY", "POSE_COV_STAMPED", "POSE_STAMPED",
+           "ROLE_TYPES", "TWIST_COV_STAMPED", "TWIST_STAMPED", "load_rosbag", "normalize_msgtype",
+           "quat_yaw", "select_topics"]
 
 
 _READ_ERRORS: tuple[type[BaseException], ...] = (
@@ -228,37 +157,6 @@ def _read_tf(reader: Any, topic_types: dict[str, str], imu_frame: str | None
     return edges
 
 
-def _gps(items: list, topic: str, path: Path, warnings: list[str]) -> dict[str, Any]:
-    stamps, recv, lat, lon, acc, idx = [], [], [], [], [], []
-    skipped = 0
-    for i, (t_ns, m) in enumerate(items):
-        if int(m.status.status) < 0:
-            skipped += 1
-            continue
-        stamps.append(_stamp_ns(m))
-        recv.append(t_ns)
-        lat.append(float(m.latitude))
-        lon.append(float(m.longitude))
-        idx.append(i)
-        cov = np.asarray(m.position_covariance, dtype=float)
-        acc.append(math.sqrt(max(0.5 * (cov[0] + cov[4]), 0.0))
-                   if int(m.position_covariance_type) > 0 and cov.size >= 5 else math.nan)
-    if skipped:
-        warnings.append(f"gps: skipped {skipped} of {len(items)} NavSatFix messages on {topic} "
-                        "with status < 0 (no fix)")
-    if not lat:
-        raise DataError(path, f"topic {topic}: no valid GPS fixes ({len(items)} messages, "
-                              f"{skipped} without fix)")
-    lat_a, lon_a = np.asarray(lat), np.asarray(lon)
-    bad = ~np.isfinite(lat_a) | ~np.isfinite(lon_a) | (np.abs(lat_a) > 90) | (np.abs(lon_a) > 180)
-    if np.any(bad):
-        j = int(np.flatnonzero(bad)[0])
-        raise DataError(path, f"topic {topic} message {idx[j]}: invalid lat/lon "
-                              f"({float(lat_a[j])!r}, {float(lon_a[j])!r}); {int(bad.sum())} invalid in all")
-    t, src = _times(stamps, recv)
-    return {"t": t, "lat": lat_a, "lon": lon_a, "acc": np.asarray(acc), "src": src}
-
-
 def _imu(items: list) -> dict[str, Any]:
     """Raw IMU fields in the sensor frame: f (N, 3) [m/s^2], w (N, 3) [rad/s], q (N, 4) w x y z
     (NaN rows where REP 145's covariance[0] == -1 marks the field absent, or a zero quaternion)."""
@@ -266,7 +164,7 @@ def _imu(items: list) -> dict[str, Any]:
     n = len(items)
     f, w, q = np.full((n, 3), np.nan), np.full((n, 3), np.nan), np.full((n, 4), np.nan)
     for i, (t_ns, m) in enumerate(items):
-        stamps.append(_stamp_ns(m))
+        stamps.append(stamp_ns(m))
         recv.append(t_ns)
         if float(m.linear_acceleration_covariance[0]) != -1.0:
             a = m.linear_acceleration
@@ -278,36 +176,10 @@ def _imu(items: list) -> dict[str, Any]:
             g = m.angular_velocity
             w[i] = (g.x, g.y, g.z)
     q[np.sum(q * q, axis=1) < 1e-12] = np.nan
-    t, src = _times(stamps, recv)
+    t, src = times(stamps, recv)
     frames = sorted({str(m.header.frame_id) for _, m in items})
     return {"t": t, "f": f, "q": q if np.any(np.isfinite(q)) else None,
             "w": w if np.any(np.isfinite(w)) else None, "src": src, "frames": frames}
-
-
-def _twist_v(m: Any) -> float:
-    lin = m.twist.twist.linear if hasattr(m.twist, "twist") else m.twist.linear
-    return math.hypot(float(lin.x), float(lin.y))
-
-
-def _speed(items: list) -> dict[str, Any]:
-    t, src = _times([_stamp_ns(m) for _, m in items], [t for t, _ in items])
-    return {"t": t, "v": np.asarray([_twist_v(m) for _, m in items], dtype=float), "src": src}
-
-
-def _truth(items: list) -> dict[str, Any]:
-    t, src = _times([_stamp_ns(m) for _, m in items], [t for t, _ in items])
-    pos = np.asarray([(m.pose.pose.position.x, m.pose.pose.position.y) for _, m in items],
-                     dtype=float).reshape(-1, 2)
-    q = np.asarray([(m.pose.pose.orientation.w, m.pose.pose.orientation.x,
-                     m.pose.pose.orientation.y, m.pose.pose.orientation.z) for _, m in items],
-                   dtype=float).reshape(-1, 4)
-    cov = np.asarray([(m.pose.covariance[0], m.pose.covariance[7]) for _, m in items],
-                     dtype=float).reshape(-1, 2)
-    acc = np.sqrt(np.clip(cov.mean(axis=1), 0.0, None))
-    frames = {str(m.header.frame_id) for _, m in items}
-    return {"t": t, "x": pos[:, 0], "y": pos[:, 1], "yaw": quat_yaw(*q.T),
-            "v": np.asarray([_twist_v(m) for _, m in items], dtype=float),
-            "acc": acc if np.any(cov > 0) else None, "frames": sorted(frames), "src": src}
 
 
 def _open_reader(path: Path) -> Any:
@@ -341,9 +213,9 @@ def load_rosbag(path: Path, projection: str = "enu",
         with reader:
             if reader.message_count == 0:
                 raise DataError(path, "empty bag: it holds no messages "
-                                      f"(topics: {_describe(_topic_types(reader.connections))})")
+                                      f"(topics: {describe(_topic_types(reader.connections))})")
             topic_types = _topic_types(reader.connections)
-            chosen = select_topics(topic_types, topics, path)
+            chosen, why = select_topics(topic_types, topics, path)
             items = _read(path, chosen, reader)
             imu_items = items.get("imu") or []
             edges = _read_tf(reader, topic_types,
@@ -355,88 +227,68 @@ def load_rosbag(path: Path, projection: str = "enu",
     except errors as exc:
         raise DataError(path, f"cannot read bag (truncated or corrupt?): "
                               f"{type(exc).__name__}: {exc}") from None
-    return _assemble(path, fmt, projection, chosen, items, topic_types, edges)
+    roles = {r: {"topic": t, "type": topic_types[t], "why": why.get(r, "")}
+             for r in ROLE_TYPES if (t := chosen.get(r)) is not None}
+    return _assemble(path, fmt, projection, chosen, items, topic_types, edges, roles,
+                     unused_topics(topic_types, chosen, topics))
 
 
 def _topic_types(connections: Iterable[Any]) -> dict[str, str]:
     return {c.topic: normalize_msgtype(c.msgtype) for c in connections}
 
 
-def _align_truth(c: dict[str, Any], gps: GpsStream, topic: str, path: Path,
-                 extra: dict[str, Any], warnings: list[str]) -> dict[str, Any]:
-    """Rotate and shift a named truth (local frame) onto the GPS fixes (2-D rigid fit)."""
-    tt = c["t"]
-    inside = (gps.t >= tt[0]) & (gps.t <= tt[-1])
-    if inside.sum() < 3 or tt.size < 2:
-        raise DataError(path, f"--topic truth={topic}: cannot align it to the GPS: only "
-                              f"{int(inside.sum())} fixes fall inside its time span")
-    src = np.column_stack([np.interp(gps.t[inside], tt, c["x"]),
-                           np.interp(gps.t[inside], tt, c["y"])])
-    dst = np.column_stack([gps.x[inside], gps.y[inside]])
-    rot, tr, rms = umeyama_2d(src, dst)
-    acc = gps.accuracy[inside] if gps.accuracy is not None else np.empty(0)
-    acc = acc[np.isfinite(acc)]
-    med = float(np.median(acc)) if acc.size else None
-    limit = alignment_limit_m(med)
-    ang = float(np.degrees(np.arctan2(rot[1, 0], rot[0, 0])))
-    fit = f"rotation {ang:+.1f} deg, translation ({tr[0]:+.1f}, {tr[1]:+.1f}) m"
-    what = f"{fit}, residual RMS {rms:.2f} m over {int(inside.sum())} fixes"
-    extra["truth_alignment"] = {"rotation_deg": round(ang, 3),
-                                "translation_m": [round(float(tr[0]), 3), round(float(tr[1]), 3)],
-                                "residual_rms_m": round(rms, 3), "limit_m": round(limit, 3),
-                                "fixes": int(inside.sum())}
-    if rms > limit:
-        stated = f"3 x median stated GPS accuracy {med:.2f} m, " if med is not None else ""
-        raise DataError(path, f"--topic truth={topic}: residual RMS {rms:.2f} m after aligning it "
-                              f"to the GPS fixes exceeds the limit {limit:.2f} m (max({stated}"
-                              f"5 m); {fit}): it drifts or is mis-scaled, so it is no truth")
-    warnings.append(f"truth: {topic} (frame {extra.get('truth_frame') or '?'}) aligned to the GPS "
-                    f"ENU frame by a 2-D rigid fit: {what} (limit {limit:.2f} m)")
-    xy = np.column_stack([c["x"], c["y"]]) @ rot.T + tr
-    out = dict(c)
-    out["x"], out["y"] = xy[:, 0], xy[:, 1]
-    if c["yaw"] is not None:
-        out["yaw"] = wrap(c["yaw"] + np.radians(ang))
-    return out
+def _no_truth_notes(topic_types: dict[str, str], chosen: dict[str, str | None],
+                    warnings: list[str]) -> None:
+    """Why a drive without a named truth is scored against its own fixes (REP 105)."""
+    odoms = sorted(t for t, m in topic_types.items() if m == ODOMETRY)
+    if odoms:
+        used = [t for t in odoms if t == chosen["speed"]]
+        how = (f"its twist feeds the speed stream ({used[0]})" if used
+               else "not used (speed from " + (chosen["speed"] or "nowhere") + ")")
+        warnings.append(f"truth: odometry {', '.join(odoms)} is not used as truth (a pose in a "
+                        f"drifting frame such as odom is no independent reference, REP 105): "
+                        f"{how}; scored against the GPS fixes themselves, as the paper's "
+                        f"routes (name it with --topic truth=/name to align it to the GPS "
+                        f"and score against it)")
+    others = sorted(f"{t} ({short_type(m)})" for t, m in topic_types.items()
+                    if m in (NAVSATFIX, POSE_STAMPED, POSE_COV_STAMPED) and t != chosen["gps"])
+    if others:
+        warnings.append(f"truth: {', '.join(others)} could be the truth but nothing is the truth "
+                        f"unless named: scored against the GPS fixes themselves (name one with "
+                        f"--topic truth=/name)")
 
 
 def _assemble(path: Path, fmt: str, projection: str, chosen: dict[str, str | None],
-              items: dict[str, list], topic_types: dict[str, str] | None = None,
-              edges: dict[tuple[str, str], np.ndarray] | None = None) -> Drive:
+              items: dict[str, list], topic_types: dict[str, str],
+              edges: dict[tuple[str, str], np.ndarray], roles: dict[str, dict[str, str]],
+              unused: dict[str, dict[str, str]]) -> Drive:
     warnings: list[str] = []
-    topic_types = topic_types or {}
-    extra: dict[str, Any] = {"topics": {r: t for r, t in chosen.items() if t is not None}}
+    extra: dict[str, Any] = {"topics": roles, "unused_topics": unused}
     sources: dict[str, str] = {}
 
     gps_topic = chosen["gps"]
     assert gps_topic is not None
-    g = _gps(items["gps"], gps_topic, path, warnings)
+    g = navsat_fields(items["gps"], gps_topic, path, warnings)
     sources["gps"] = g["src"]
     streams: dict[str, dict[str, Any]] = {"gps": g}
     if chosen["imu"] is not None and items["imu"]:
         streams["imu"] = _imu(items["imu"])
     if chosen["speed"] is not None and items["speed"]:
-        streams["speed"] = _speed(items["speed"])
-    if chosen["truth"] is not None and items["truth"]:
-        streams["truth"] = tr = _truth(items["truth"])
+        streams["speed"] = speed_fields(items["speed"])
+    truth_topic = chosen["truth"]
+    if truth_topic is not None and items["truth"]:
+        ttype = topic_types[truth_topic]
+        streams["truth"] = tr = truth_fields(items["truth"], ttype, truth_topic, path,
+                                             warnings if truth_topic != gps_topic else [])
         extra["truth_frame"] = ",".join(tr["frames"])
     for role in ("imu", "speed", "truth"):
         if chosen[role] is not None and not items[role]:
             warnings.append(f"{role}: topic {chosen[role]} has no messages")
         if role in streams:
             sources[role] = streams[role]["src"]
-    odoms = sorted(t for t, m in topic_types.items() if m == ODOMETRY and t != chosen["truth"])
     if "truth" not in streams:
         extra["truth_kind"] = "gps-fixes"
-        if odoms:
-            used = [t for t in odoms if t == chosen["speed"]]
-            how = (f"its twist feeds the speed stream ({used[0]})" if used
-                   else "not used (speed from " + (chosen["speed"] or "nowhere") + ")")
-            warnings.append(f"truth: odometry {', '.join(odoms)} is not used as truth (a pose in a "
-                            f"drifting frame such as odom is no independent reference, REP 105): "
-                            f"{how}; scored against the GPS fixes themselves, as the paper's "
-                            f"routes (name it with --topic truth=/name to align it to the GPS "
-                            f"and score against it)")
+        _no_truth_notes(topic_types, chosen, warnings)
     else:
         extra["truth_kind"] = "named"
 
@@ -463,23 +315,24 @@ def _assemble(path: Path, fmt: str, projection: str, chosen: dict[str, str | Non
         if len(s["frames"]) > 1:
             warnings.append(f"imu: several frame ids {', '.join(s['frames'])}: the mount of "
                             f"'{s['frames'][0]}' used for all")
-        cols, info = imu_to_vehicle(t, c["f"], c["w"], c["q"], s["frames"][0], edges or {},
+        cols, info = imu_to_vehicle(t, c["f"], c["w"], c["q"], s["frames"][0], edges,
                                     (gps.t, gps.x, gps.y),
                                     None if speed is None else (speed.t, speed.v),
                                     str(chosen["imu"]), warnings)
         extra["imu_frame"] = info
         imu = ImuStream(t, cols["ax"], cols["ay"], cols["yaw"], cols["yaw_rate"])
     if "truth" in streams:
-        s = streams["truth"]
-        t, c = clean_times(rel(s), {k: s[k] for k in ("x", "y", "yaw", "v", "acc")}, "truth",
-                           warnings)
-        c["t"] = t
-        c = _align_truth(c, gps, str(chosen["truth"]), path, extra, warnings)
-        truth = TruthStream(t, c["x"], c["y"], c["yaw"], c["v"], c["acc"])
+        truth = truth_stream(streams["truth"], rel(streams["truth"]), gps, lat0, lon0, projection,
+                             str(truth_topic), path, extra, warnings)
+        al = extra.get("truth_alignment", {})
+        if "residual_rms_m" in al:
+            roles["truth"]["why"] += (f": rotation {al['rotation_deg']:+.1f} deg, residual RMS "
+                                      f"{al['residual_rms_m']:.2f} m, limit {al['limit_m']:.2f} m")
 
     name = path.name if path.is_dir() else path.stem
     meta = DriveMeta(name=name, source=str(path), format=fmt, epoch_s=t0 / 1e9,
                      origin_lat=lat0, origin_lon=lon0, projection=projection,
                      time_source="; ".join(f"{r}={s}" for r, s in sources.items()),
-                     warnings=warnings, extra=extra)
+                     warnings=warnings, extra=extra,
+                     fix_source=FIXES_FROM_TRUTH if gps_topic == truth_topic else FIXES_RECEIVER)
     return Drive(meta=meta, gps=gps, imu=imu, speed=speed, truth=truth)

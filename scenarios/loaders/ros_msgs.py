@@ -1,0 +1,148 @@
+"""ROS message types the bag loader reads, and the numpy fields it takes from them.
+
+Every reader takes ``items``: a list of ``(receive_ns, msg)`` of one topic, in log order, and
+returns a dict of numpy arrays with ``t`` [ns, int64] and ``src`` (which time was used):
+the header stamp where non-zero, the receive (log) time otherwise.
+
+Units: positions [m] in the message's own frame (``header.frame_id``), lat/lon [deg],
+yaw [rad] about z (ENU convention: 0 = x axis / east, counter-clockwise), speeds [m/s],
+accuracies as per-axis 1-sigma [m].
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from posbench.scenarios.errors import DataError
+
+NAVSATFIX = "sensor_msgs/msg/NavSatFix"
+IMU = "sensor_msgs/msg/Imu"
+TWIST_STAMPED = "geometry_msgs/msg/TwistStamped"
+TWIST_COV_STAMPED = "geometry_msgs/msg/TwistWithCovarianceStamped"
+ODOMETRY = "nav_msgs/msg/Odometry"
+POSE_STAMPED = "geometry_msgs/msg/PoseStamped"
+POSE_COV_STAMPED = "geometry_msgs/msg/PoseWithCovarianceStamped"
+#: message types with a pose (``pose.position``/``orientation``, or ``pose.pose.*``)
+POSE_TYPES = (POSE_STAMPED, POSE_COV_STAMPED, ODOMETRY)
+#: message types with a twist (``twist.linear``, or ``twist.twist.linear``)
+TWIST_TYPES = (TWIST_STAMPED, TWIST_COV_STAMPED, ODOMETRY)
+
+
+def normalize_msgtype(msgtype: str) -> str:
+    """``pkg/Type`` (ROS 1 spelling) -> ``pkg/msg/Type``; ROS 2 names pass through."""
+    parts = msgtype.split("/")
+    return f"{parts[0]}/msg/{parts[1]}" if len(parts) == 2 else msgtype
+
+
+def short_type(msgtype: str) -> str:
+    """``sensor_msgs/msg/NavSatFix`` -> ``NavSatFix``."""
+    return msgtype.rsplit("/", 1)[-1]
+
+
+def quat_yaw(w: np.ndarray, x: np.ndarray, y: np.ndarray, z: np.ndarray) -> np.ndarray:
+    """Yaw [rad] (rotation about z, ENU: 0 = east, CCW) of quaternions; NaN for zero norm."""
+    w, x, y, z = (np.asarray(a, dtype=float) for a in (w, x, y, z))
+    yaw = np.arctan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
+    norm = w * w + x * x + y * y + z * z
+    return np.where(norm > 1e-12, yaw, np.nan)
+
+
+def stamp_ns(msg: Any) -> int:
+    """A message's header stamp [ns]."""
+    st = msg.header.stamp
+    return int(st.sec) * 1_000_000_000 + int(st.nanosec)
+
+
+def times(stamps: list[int], recv: list[int]) -> tuple[np.ndarray, str]:
+    """Header stamps [ns] where non-zero, receive times otherwise; and which were used."""
+    s = np.asarray(stamps, dtype=np.int64)
+    r = np.asarray(recv, dtype=np.int64)
+    zero = s == 0
+    if not np.any(zero):
+        return s, "header"
+    if np.all(zero):
+        return r, "receive"
+    return np.where(zero, r, s), f"header ({int(zero.sum())} of {s.size} zero stamps: receive)"
+
+
+def item_times(items: list) -> tuple[np.ndarray, str]:
+    """:func:`times` of ``(receive_ns, msg)`` items."""
+    return times([stamp_ns(m) for _, m in items], [t for t, _ in items])
+
+
+def navsat_fields(items: list, topic: str, path: Path, warnings: list[str],
+                  role: str = "gps") -> dict[str, Any]:
+    """``sensor_msgs/NavSatFix``: t, lat, lon [deg] and acc [m].
+
+    Fixes with ``status.status < 0`` (no fix) are skipped and counted in ``warnings``. acc is
+    the per-axis 1-sigma ``sqrt(mean(cov[0], cov[4]))`` of the east and north variances
+    (ENU, m^2) of ``position_covariance``, NaN where its type is UNKNOWN (0).
+
+    Raises:
+        DataError: no valid fix, or an invalid lat/lon (naming the bag, topic and message).
+    """
+    keep = [i for i, (_, m) in enumerate(items) if int(m.status.status) >= 0]
+    skipped = len(items) - len(keep)
+    if skipped:
+        warnings.append(f"{role}: skipped {skipped} of {len(items)} NavSatFix messages on {topic} "
+                        "with status < 0 (no fix)")
+    if not keep:
+        raise DataError(path, f"topic {topic}: no valid {'GPS' if role == 'gps' else role} fixes "
+                              f"({len(items)} messages, {skipped} without fix)")
+    ms = [items[i][1] for i in keep]
+    lat_a = np.asarray([float(m.latitude) for m in ms])
+    lon_a = np.asarray([float(m.longitude) for m in ms])
+    cov = np.asarray([np.asarray(m.position_covariance, dtype=float)[:5] for m in ms],
+                     dtype=float).reshape(len(ms), -1)
+    known = np.asarray([int(m.position_covariance_type) > 0 for m in ms]) & (cov.shape[1] >= 5)
+    acc = np.full(len(ms), math.nan)
+    if cov.shape[1] >= 5:
+        acc[known] = np.sqrt(np.clip(0.5 * (cov[known, 0] + cov[known, 4]), 0.0, None))
+    bad = ~np.isfinite(lat_a) | ~np.isfinite(lon_a) | (np.abs(lat_a) > 90) | (np.abs(lon_a) > 180)
+    if np.any(bad):
+        j = int(np.flatnonzero(bad)[0])
+        raise DataError(path, f"topic {topic} message {keep[j]}: invalid lat/lon "
+                              f"({float(lat_a[j])!r}, {float(lon_a[j])!r}); {int(bad.sum())} invalid in all")
+    t, src = times([stamp_ns(m) for m in ms], [items[i][0] for i in keep])
+    return {"t": t, "lat": lat_a, "lon": lon_a, "acc": acc, "src": src}
+
+
+def twist_v(m: Any) -> float:
+    """Horizontal speed [m/s] |(linear.x, linear.y)| of a message's twist (TwistStamped,
+    TwistWithCovarianceStamped or Odometry, whose twist is in ``child_frame_id``)."""
+    lin = m.twist.twist.linear if hasattr(m.twist, "twist") else m.twist.linear
+    return math.hypot(float(lin.x), float(lin.y))
+
+
+def speed_fields(items: list) -> dict[str, Any]:
+    """A twist topic as speed: t [ns] and v [m/s] (:func:`twist_v`)."""
+    t, src = item_times(items)
+    return {"t": t, "v": np.asarray([twist_v(m) for _, m in items], dtype=float), "src": src}
+
+
+def pose_fields(items: list, msgtype: str) -> dict[str, Any]:
+    """A pose topic (PoseStamped, PoseWithCovarianceStamped or Odometry) in its own frame:
+    t [ns], x, y [m], yaw [rad, about the frame's z], v [m/s] (Odometry's twist, else None),
+    acc [m] (per-axis 1-sigma ``sqrt(mean(cov[0], cov[7]))`` of the pose covariance where
+    stated, i.e. any positive, else None) and the frame ids."""
+    t, src = item_times(items)
+    poses = [m.pose if msgtype == POSE_STAMPED else m.pose.pose for _, m in items]
+    pos = np.asarray([(p.position.x, p.position.y) for p in poses], dtype=float).reshape(-1, 2)
+    q = np.asarray([(p.orientation.w, p.orientation.x, p.orientation.y, p.orientation.z)
+                    for p in poses], dtype=float).reshape(-1, 4)
+    acc = None
+    if msgtype != POSE_STAMPED:
+        cov = np.asarray([(m.pose.covariance[0], m.pose.covariance[7]) for _, m in items],
+                         dtype=float).reshape(-1, 2)
+        if np.any(cov > 0):
+            acc = np.sqrt(np.clip(cov.mean(axis=1), 0.0, None))
+    v = (np.asarray([twist_v(m) for _, m in items], dtype=float) if msgtype in TWIST_TYPES
+         else None)
+    yaw = quat_yaw(*q.T)
+    return {"t": t, "x": pos[:, 0], "y": pos[:, 1],
+            "yaw": yaw if np.any(np.isfinite(yaw)) else None, "v": v, "acc": acc,
+            "frames": sorted({str(m.header.frame_id) for _, m in items}), "src": src}
