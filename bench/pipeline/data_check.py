@@ -1,5 +1,6 @@
 """The data consistency check before a run: every stream of every drive judged
-(:mod:`posbench.scenarios.consistency`, pure), the predictors that used a failing stream,
+(:mod:`posbench.scenarios.consistency`, pure: against the truth where a drive has one, else
+against its fixes), the predictors that used a failing stream,
 ``--strict`` and the ``consistency`` key of results.json. How it reads, in the terminal and
 in report.md, is :mod:`posbench.report.data_check`."""
 

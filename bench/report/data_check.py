@@ -24,7 +24,8 @@ _CELL = {
     "imu.ax": (("scale", "x{:.2f}"), ("corr", "r {:.2f}"), ("bias_mps2", "{:+.2f} m/s²")),
     "imu.yaw": (("offset_deg", "{:+.1f}°"), ("spread_deg", "sd {:.1f}°")),
     "speed": (("scale", "x{:.3f}"),),
-    "gps": (("scatter_m", "{:.2f} m"), ("stated_m", "/ {:.2f} m")),
+    "gps": (("scatter_m", "{:.2f} m"), ("stated_m", "/ {:.2f} m"),
+            ("truth_offset_m", "off {:.1f} m")),
     "truth": (("offset_m", "{:.2f} m"), ("rms_m", "rms {:.2f} m"), ("rotation_deg", "{:+.2f}°"),
               ("scale", "x{:.3f}")),
 }
@@ -86,8 +87,10 @@ def report_lines(res: dict[str, Any]) -> list[str]:
         return ["Data consistency check: every stream of every drive passed or could not be "
                 "judged (n/a); see `bench data inspect`.", ""]
     lines = ["## Data consistency check", "",
-             "Each stream was compared with what the GPS fixes imply (and the GPS with the "
-             "truth); a `fail` means figures computed from that stream are not valid.", ""]
+             "Each IMU and speed stream was compared with the truth's motion where the drive "
+             "has a truth (else with what the GPS fixes imply), and the GPS with the truth "
+             "relative to the accuracy the fixes state; a `fail` means figures computed from "
+             "that stream are not valid.", ""]
     lines += [f"- **{v}** `{d}` {s}: {why}" for v, d, s, why in found]
     aff = section.get("affected_predictors", {})
     if aff:
