@@ -164,15 +164,15 @@ def test_bad_invocation_is_one_error_line(ws, args, needle, workers):
 
 
 def test_data_error_inside_a_worker_is_one_line(tmp_path):
-    """Drives that load but fail in the workers' preparation (truth of one sample): the
-    worker's DataError is the one error line, with 1 worker and with 2."""
+    """Drives that load but fail in the workers' preparation (fixes drawn from a truth of
+    one sample): the worker's DataError is the one error line, with 1 worker and with 2."""
     data = tmp_path / "drives"
     data.mkdir()
     for k in (1, 2):
         rows = ["stream,t,x,y"] + [f"gps,{0.2 * i:.1f},{2 * i},0" for i in range(50)]
         (data / f"drive{k}.csv").write_text("\n".join([*rows, "truth,5.0,10,0"]) + "\n")
     for w in ("1", "2"):
-        r = bench("run", "-p", "cv", "--data", str(data), "--workers", w,
+        r = bench("run", "-p", "cv", "--data", str(data), "--workers", w, "--gps-profile", "rtk",
                   "--out", str(tmp_path / "out"), cwd=tmp_path)
         assert_one_error_line(r, "truth: need at least 2 samples")
         assert not (tmp_path / "out").exists()

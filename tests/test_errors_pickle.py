@@ -120,10 +120,11 @@ def test_runner_with_two_workers_raises_the_data_error(tmp_path):
         f.write_text(one_sample_truth_csv())
         drives += load(f)
     with pytest.raises(DataError, match="truth: need at least 2 samples"):
-        run(drives, RunConfig(predictors=("cv",)), workers=2)
+        run(drives, RunConfig(predictors=("cv",), gps_profile="rtk"), workers=2)
 
 
 def one_sample_truth_csv() -> str:
-    """A drive whose truth has one sample: it loads, but no GPS can be drawn from it."""
+    """A drive whose truth has one sample: it loads, but no GPS can be drawn from it
+    (``--gps-profile rtk``; by default its own fixes are fed)."""
     rows = ["stream,t,x,y"] + [f"gps,{0.2 * i:.1f},{2 * i},0" for i in range(50)]
     return "\n".join([*rows, "truth,5.0,10,0"]) + "\n"

@@ -135,7 +135,7 @@ def print_inspect(rows: list[dict[str, Any]], checks: dict[str, Any]) -> None:
     section = {d: c.to_dict() for d, c in checks.items()}
     header, cells = table_rows(section)
     print_table(console, header, cells, key_columns=1, left_columns=len(header),
-                title="data consistency: each stream against what the GPS fixes imply "
-                      "(pass / warn / fail / n/a)")
+                title="data consistency: each stream against the truth's motion, else what "
+                      "the GPS fixes imply (pass / warn / fail / n/a)")
     for verdict, d, s, why in flagged(section, ("fail", "warn", "n/a")):
         console.print(f"{verdict} {escape(d)}: {s}: {escape(why)}", highlight=False)
