@@ -225,6 +225,31 @@ def test_exported_now_track_scored_by_bench_score_gives_the_runs_figures(saved, 
             assert res["answers"]["file"].endswith(".now.tum")
 
 
+def test_exported_track_on_a_later_queries_clock_scores_as_the_run(tmp_path):
+    """A drive whose inputs start after its t = 0 (queries folder ``t0_s`` > 0): the exported
+    file says it is on the run's clock (``# clock: run``) and ``bench score`` moves it onto
+    the folder's, so the round trip still gives the run's figures."""
+    drive = default_drives()[0].window(7.3, 30.0)
+    cfg = RunConfig(predictors=("kf",), seed=2)
+    runs = run([drive], cfg)
+    traces = all_traces(runs)
+    r = Run.from_results(build_results(runs, cfg, [], "test", traces=traces, models={}), traces)
+    save_run(tmp_path / "run", r)
+    write_queries([drive], RunConfig(predictors=(), seed=2), tmp_path / "q", command="test",
+                  data=[])
+    man = json.loads((tmp_path / "q" / MANIFEST).read_text())
+    assert man["drives"][0]["t0_s"] > 7.0
+    ok(bench("export", str(tmp_path / "run"), "--out", str(tmp_path / "tum")))
+    f = tmp_path / "tum" / f"{drive.name}.kf.now.tum"
+    assert "# clock: run" in f.read_text()
+    s = score_answers(read_queries(tmp_path / "q"), read_answers(f), "kf")
+    got = all_traces(s.runs)
+    want = traces[(traces.kind == "now") & scored_mask(traces)]
+    assert s.answered == len(want)
+    np.testing.assert_array_equal(np.sort(got.loc[got.x.notna(), "error_m"].to_numpy()),
+                                  np.sort(want["error_m"].to_numpy()))
+
+
 def test_tum_drive_from_the_file_name_when_no_comment(saved, tum_dir, tmp_path):
     d = _drives(saved / "run")[1]["name"]
     body = [ln for ln in (tum_dir / f"{d}.kf.now.tum").read_text().splitlines()

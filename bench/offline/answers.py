@@ -64,6 +64,9 @@ class Answers:
     #: the drive is then told by the file name when matched to a queries folder)
     lines: np.ndarray | None = None
     tum_drive: str | None = None
+    #: a TUM file on a saved run's clock (``# clock: run``, ``bench export``): its times are
+    #: moved onto the queries folder's clock (minus the drive's ``t0_s``) when matched
+    tum_run_clock: bool = False
 
     @property
     def is_tum(self) -> bool:
@@ -161,7 +164,8 @@ def read_tum_answers(path: str | Path) -> Answers:
                           "t_query": tum.t, "x": tum.x, "y": tum.y,
                           "latency_us": np.full(n, np.nan),
                           **{c: np.full(n, np.nan) for c in COVARIANCE}})
-    return Answers(Path(path), frame, False, [], lines=tum.line, tum_drive=tum.drive)
+    return Answers(Path(path), frame, False, [], lines=tum.line, tum_drive=tum.drive,
+                   tum_run_clock=tum.run_clock)
 
 
 def tum_drive(folder: QueryFolder, answers: Answers) -> str:
@@ -247,9 +251,11 @@ def match(folder: QueryFolder, answers: Answers) -> np.ndarray:
     """For each answer row, the row of ``folder.key`` it answers (raising on answers to no
     query, to a drive not in the folder or skipped there, and on a second answer to one query)."""
     a = answers.frame
+    ids = {d["id"]: d for d in folder.drives}
     if answers.is_tum:
         a["drive"] = tum_drive(folder, answers)
-    ids = {d["id"]: d for d in folder.drives}
+        if answers.tum_run_clock and a["drive"].iloc[0] in ids:
+            a["t_query"] = a["t_query"] - float(ids[a["drive"].iloc[0]]["t0_s"])
     known = np.isin(a["drive"].to_numpy(), list(ids))
     if not known.all():
         i = int(np.flatnonzero(~known)[0])

@@ -52,6 +52,7 @@ import numpy as np
 import pandas as pd
 
 from posbench.naming import unique_file_safe
+from posbench.offline.tum import RUN_CLOCK_COMMENT
 from posbench.saved_run.run import Run
 from posbench.scoring.schema import scored_mask
 
@@ -149,6 +150,7 @@ def _comments(track: Track, run: Run) -> list[str]:
     return [f"posbench export of {run.folder}: {who}, {track.kind} queries scored "
             f"({len(track)} rows)",
             f"drive: {track.drive}",
+            RUN_CLOCK_COMMENT,
             "timestamp: t_query [s] from the drive's t = 0; x east, y north [m] in the drive's "
             "local ENU frame; z = 0; identity quaternion (no orientation)"]
 

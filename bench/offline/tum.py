@@ -34,6 +34,9 @@ from posbench.scenarios.errors import DataError
 COLUMNS = ("timestamp", "x", "y", "z", "qx", "qy", "qz", "qw")
 #: the comment that names a file's drive: ``# drive: NAME``
 DRIVE_COMMENT = "drive:"
+#: the comment ``bench export`` writes: the timestamps are a saved run's drive times
+#: (``traces.parquet``'s clock), not a queries folder's (which may start ``t0_s`` later)
+RUN_CLOCK_COMMENT = "clock: run"
 SUFFIX = ".tum"
 
 
@@ -64,7 +67,8 @@ def write_tum(path: Path, t: np.ndarray, x: np.ndarray, y: np.ndarray,
 class TumFile:
     """A TUM file read back: per pose its time ``t`` [s], ``x``, ``y`` [m] (z and the
     quaternion are read, checked to be numbers and dropped), the 1-based ``line`` it is on,
-    and the drive a ``# drive: NAME`` comment names (None: no such comment)."""
+    and the drive a ``# drive: NAME`` comment names (None: no such comment); ``run_clock``:
+    the file says its times are a saved run's (``# clock: run``, written by ``bench export``)."""
 
     path: Path
     t: np.ndarray
@@ -72,6 +76,7 @@ class TumFile:
     y: np.ndarray
     line: np.ndarray
     drive: str | None
+    run_clock: bool = False
 
 
 def read_tum(path: str | Path) -> TumFile:
@@ -91,6 +96,7 @@ def read_tum(path: str | Path) -> TumFile:
     rows: list[list[float]] = []
     lines: list[int] = []
     drive = None
+    run_clock = False
     for n, raw in enumerate(text.splitlines(), start=1):
         s = raw.strip()
         if not s:
@@ -99,6 +105,7 @@ def read_tum(path: str | Path) -> TumFile:
             body = s[1:].strip()
             if drive is None and body.lower().startswith(DRIVE_COMMENT):
                 drive = body[len(DRIVE_COMMENT):].strip() or None
+            run_clock = run_clock or body.lower() == RUN_CLOCK_COMMENT
             continue
         parts = s.split()
         if len(parts) != len(COLUMNS):
@@ -120,7 +127,7 @@ def read_tum(path: str | Path) -> TumFile:
                               f"{' '.join(COLUMNS)})")
     a = np.asarray(rows, dtype=float)
     return TumFile(path, a[:, 0].copy(), a[:, 1].copy(), a[:, 2].copy(),
-                   np.asarray(lines, dtype=np.int64), drive)
+                   np.asarray(lines, dtype=np.int64), drive, run_clock)
 
 
 def _is_float(s: str) -> bool:
