@@ -38,7 +38,8 @@ def comparison_table(runs: Sequence[Run], labels: Sequence[str], metric: Metric,
                      scopes: Sequence[str], seed: int = 0) -> tuple[Any, pd.DataFrame]:
     """The comparison as a display :class:`posbench.tables.table.Table` (``value [CI]`` cells, one
     column per run, then ``Δ`` columns: each later run minus the first, paired over shared
-    drives, ``*`` where the CI excludes 0) and the numeric frame behind it (for CSV).
+    drives, ``*`` where the CI excludes 0) and the numeric frame behind it (for CSV). The
+    figure columns are text but marked as ``figures``: right-aligned in LaTeX and Markdown.
 
     ``scopes``: which rows, among ``all``, ``dataset``, ``route type``, ``drive``. Paired
     CIs are given for ``all`` and ``dataset`` rows; route-type and drive rows show the
@@ -97,7 +98,8 @@ def comparison_table(runs: Sequence[Run], labels: Sequence[str], metric: Metric,
     table = pd.DataFrame(shown)
     if (table["group"] == "-").all():  # only whole-run and data-set rows: no route or drive
         table = table.drop(columns="group")
-    return Table(table, "comparison", heads, title=title), frame
+    figures = [*labels, *(f"{lab} n" for lab in labels), *(f"Δ {lab}" for lab in labels[1:])]
+    return Table(table, "comparison", heads, title=title, figures=figures), frame
 
 
 def comparison_figure(runs: Sequence[Run], labels: Sequence[str], metric: Metric) -> Any:
