@@ -15,7 +15,9 @@ The convention every page follows:
   files such as ``reports/``;
 * a block preceded by ``<!-- skip: next -->`` is not run (sybil's markdown skip syntax,
   ``<!-- skip: start -->`` ... ``<!-- skip: end -->`` too);
-* ```` ```text ````, ```` ```console ```` and every other language are never run.
+* ```` ```text ````, ```` ```console ```` and every other language are never run;
+* a setup step the reader need not see may be an HTML comment
+  ``<!-- invisible-code-block: python ... -->`` (sybil's syntax): it runs like a python block.
 
 A failing bash block fails its test with the exit status and the tail of its stdout and
 stderr. Python scripts under docs/examples/ are not collected as tests.
