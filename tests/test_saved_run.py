@@ -1,12 +1,11 @@
 """A run as data: save_run / load_run, the shipped JSON Schema, scoring as its own step,
-the golden synthetic run and the README's notebook example."""
+the golden synthetic run."""
 
 from __future__ import annotations
 
 import json
 import math
 import os
-import re
 import subprocess
 import sys
 from pathlib import Path
@@ -23,7 +22,7 @@ from posbench.saved_run.run import SCHEMA_VERSION, Run, load_run, results_schema
 from posbench.scenarios.errors import DataError
 from posbench.scenarios.synthetic import default_drives
 from posbench.scoring.records import all_traces
-from posbench.scoring.schema import TRACE_COLUMNS, trace_columns_markdown
+from posbench.scoring.schema import TRACE_COLUMNS
 from posbench.scoring.score import score
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -126,10 +125,6 @@ def test_runner_traces_are_the_scoring_of_its_answers():
     np.testing.assert_allclose(r.traces.error_m, err)
 
 
-def test_readme_documents_every_trace_column():
-    assert trace_columns_markdown() in (ROOT / "README.md").read_text()
-
-
 # ---------------------------------------------------------------- golden run
 #: the error figures of a synthetic run are deterministic for a given seed; onnxruntime and
 #: BLAS may differ in the last bits across CPUs, hence a relative tolerance
@@ -192,15 +187,3 @@ def test_committed_reports_follow_the_schema(name):
     validate(load_run(ROOT / "reports" / name).results)
 
 
-def test_readme_notebook_example_runs(saved):
-    """The README's "Analyse a run in Python" block, run as written on a real run folder."""
-    out, _ = saved
-    text = (ROOT / "README.md").read_text()
-    block = re.search(r"## Analyse a run in Python.*?```python\n(.*?)```", text, re.S)
-    assert block, "README lost its 'Analyse a run in Python' example"
-    code = block.group(1).replace('"bench-out"', repr(str(out)))
-    ns: dict = {}
-    exec(compile(code, "README.md", "exec"), ns)  # noqa: S102 - our own documentation
-    by_speed = ns["by_speed"]
-    assert set(by_speed.columns) >= {"cv", "kf"} and len(by_speed) >= 3
-    assert (by_speed.to_numpy()[np.isfinite(by_speed.to_numpy())] >= 0).all()
