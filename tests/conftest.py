@@ -3,21 +3,24 @@ machine without it, but fail when the ``CI`` environment variable is set."""
 
 from __future__ import annotations
 
-import os
 from pathlib import Path
 
 import pytest
+from needs import chromium_executable, missing
 
 SHARED = Path(__file__).resolve().parents[1].parent / "shared"
 
 
 def _need(path: Path) -> Path:
     if not path.exists():
-        msg = f"shared data not found at {path}"
-        if os.environ.get("CI"):
-            pytest.fail(msg + " (CI is set: data tests must run)")
-        pytest.skip(msg)
+        missing(f"shared data not found at {path}")
     return path
+
+
+@pytest.fixture(scope="session")
+def chromium() -> str:
+    """The system Chromium's executable, for the browser tests (:mod:`needs`)."""
+    return chromium_executable()
 
 
 @pytest.fixture(scope="session")

@@ -36,6 +36,7 @@ import time
 from pathlib import Path
 
 import pytest
+from needs import CHROMIUM_ARGS
 from test_cli_errors import bench
 from test_view_web import ROOT, free_port_pair, read_until
 
@@ -44,9 +45,6 @@ from posbench.recording import web as rerun_web
 pytestmark = [pytest.mark.browser, pytest.mark.slow]
 
 PREDICTORS = ("cv", "kf")
-#: Chromium flags: no sandbox (CI runs as root), WebGL through ANGLE on SwiftShader
-CHROMIUM_ARGS = ["--no-sandbox", "--use-gl=angle", "--use-angle=swiftshader",
-                 "--enable-unsafe-swiftshader", "--disable-dev-shm-usage"]
 VIEWPORT = {"width": 1600, "height": 1000}
 #: how long the viewer may take to start and load the recording [s]
 LOAD_TIMEOUT_S = 90
@@ -59,26 +57,6 @@ LOADED_JS = """(needle) => {
     if (h.has_panicked()) return true;
     return new TextDecoder("latin1").decode(h.viewer_state()).includes(needle);
 }"""
-
-
-def _need(what: str) -> None:
-    msg = f"{what} (the browser test needs it; .ci/run installs it)"
-    if os.environ.get("CI"):
-        pytest.fail(msg + " - CI is set: the browser test must run")
-    pytest.skip(msg)
-
-
-@pytest.fixture(scope="module")
-def chromium() -> str:
-    """The system Chromium's executable."""
-    exe = shutil.which("chromium") or shutil.which("chromium-browser")
-    if exe is None:
-        _need("no chromium on PATH")
-    try:
-        import playwright.sync_api  # noqa: F401
-    except ImportError:
-        _need("the playwright package is not installed")
-    return exe
 
 
 @pytest.fixture(scope="module")

@@ -19,7 +19,6 @@ import http.server
 import json
 import os
 import re
-import shutil
 import subprocess
 import sys
 import threading
@@ -27,6 +26,7 @@ from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
+from needs import CHROMIUM_ARGS
 
 pytestmark = pytest.mark.slow
 
@@ -38,9 +38,6 @@ COMMANDS = ("run", "compare", "score", "queries", "check", "data inspect", "view
 BROWSER_PAGES = (("", "posbench"), ("reference/cli/", "bench data inspect"))
 #: where mkdocs-material's repository facts (stars, forks) come from
 GITHUB_API = "https://api.github.com/"
-#: Chromium flags, as tests/test_browser_view.py: no sandbox (CI runs as root), software GL
-CHROMIUM_ARGS = ["--no-sandbox", "--use-gl=angle", "--use-angle=swiftshader",
-                 "--enable-unsafe-swiftshader", "--disable-dev-shm-usage"]
 
 
 @pytest.fixture(scope="module")
@@ -119,26 +116,6 @@ def test_results_come_from_the_reports(site: Path) -> None:
 
 
 # ---------------------------------------------------------------------------- browser
-def _need(what: str) -> None:
-    msg = f"{what} (the docs browser test needs it; .ci/run installs it)"
-    if os.environ.get("CI"):
-        pytest.fail(msg + " - CI is set: the browser test must run")
-    pytest.skip(msg)
-
-
-@pytest.fixture(scope="module")
-def chromium() -> str:
-    """The system Chromium's executable."""
-    exe = shutil.which("chromium") or shutil.which("chromium-browser")
-    if exe is None:
-        _need("no chromium on PATH")
-    try:
-        import playwright.sync_api  # noqa: F401
-    except ImportError:
-        _need("the playwright package is not installed")
-    return exe
-
-
 class _QuietHandler(http.server.SimpleHTTPRequestHandler):
     def log_message(self, format: str, *args: object) -> None:  # noqa: A002
         pass

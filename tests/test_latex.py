@@ -18,6 +18,7 @@ import warnings
 from pathlib import Path
 
 import pytest
+from needs import missing
 from test_cli_errors import bench
 
 from posbench.tables.table import TEX_CHARACTERS, Table, TexWarning, tex_escape
@@ -200,15 +201,11 @@ def test_pdflatex_compiles_the_tables(small_run: Path, tmp_path: Path) -> None:
     """Every table of a run, and one of every character the escaping knows, in a minimal
     document (booktabs; the default OT1 font encoding). `.ci/run` installs pdflatex (TeX
     Live), so under CI its absence fails; elsewhere the test is skipped without it."""
-    import os
-
     import pandas as pd
 
     if shutil.which("pdflatex") is None:
-        if os.environ.get("CI"):
-            pytest.fail("no pdflatex: .ci/run installs texlive-latex-base and "
-                        "texlive-latex-recommended")
-        pytest.skip("no pdflatex on this machine")
+        missing("no pdflatex (.ci/run installs texlive-latex-base and "
+                "texlive-latex-recommended)")
 
     symbols = Table(pd.DataFrame({"char": [f"a{c}b" for c in TEX_CHARACTERS],
                                   "n": range(len(TEX_CHARACTERS))}), "symbols")
