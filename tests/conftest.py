@@ -18,6 +18,18 @@ def _need(path: Path) -> Path:
 
 
 @pytest.fixture(scope="session")
+def cv_kf_run(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """``bench run -p cv,kf --drive-plots 0`` on the built-in drives, once per session: a
+    saved run folder that tests read (copy it before changing anything in it)."""
+    from test_cli_errors import bench
+
+    out = tmp_path_factory.mktemp("cv-kf-run") / "old"
+    r = bench("run", "-p", "cv,kf", "--out", str(out), "--drive-plots", "0", timeout=300)
+    assert r.returncode == 0, r.stderr
+    return out
+
+
+@pytest.fixture(scope="session")
 def chromium() -> str:
     """The system Chromium's executable, for the browser tests (:mod:`needs`)."""
     return chromium_executable()

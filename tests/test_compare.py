@@ -26,11 +26,9 @@ STATS = ("mean_m", "median_m", "rmse_m", "p95_m", "max_m")
 
 
 @pytest.fixture(scope="module")
-def base_run(tmp_path_factory) -> Path:
-    out = tmp_path_factory.mktemp("cmp") / "old"
-    r = bench("run", "-p", "cv,kf", "--out", str(out), "--drive-plots", "0", timeout=300)
-    assert r.returncode == 0, r.stderr
-    return out
+def base_run(cv_kf_run: Path) -> Path:
+    """The session's cv,kf run (conftest), read only: the tests change copies of it."""
+    return cv_kf_run
 
 
 def _copy(src: Path, dst: Path, kf_scale: float = 1.0, config: dict | None = None,

@@ -160,11 +160,9 @@ def test_report_tables_of_the_committed_reports() -> None:
 
 
 @pytest.fixture(scope="module")
-def small_run(tmp_path_factory) -> Path:
-    out = tmp_path_factory.mktemp("latex") / "old"
-    r = bench("run", "-p", "cv,kf", "--out", str(out), "--drive-plots", "0", timeout=300)
-    assert r.returncode == 0, r.stderr
-    return out
+def small_run(cv_kf_run: Path) -> Path:
+    """The session's cv,kf run (conftest), read only."""
+    return cv_kf_run
 
 
 def test_a_run_writes_ascii_tex_with_numbers_right(small_run: Path) -> None:
