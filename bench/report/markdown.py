@@ -20,6 +20,7 @@ from posbench.report.notes import (
     block_note,
     excluded_note,
     fixes_lines,
+    fixes_scored,
     has_held_out_paired,
     has_paired,
     model_text,
@@ -197,11 +198,12 @@ def render_markdown(res: dict[str, Any], plots: list[str],
         lines += ["## Warm-up queries (left out above)", "",
                   "Queries issued before a drive's second received fix: a cold start, not a "
                   "prediction.", "", warm.markdown(), ""]
+    fixes_by_dataset = fixes_scored(res)
     for ds in res["by_dataset"]:
         drives = [d for d in res["drives"] if d["dataset"] == ds]
         refs = sorted({d["reference"] for d in drives if d["reference"]})
-        fixes = fixes_lines(res, ds)
-        fed = f"; fixes: {fixes[0].split(': ', 1)[1]}" if fixes else ""
+        fixes = fixes_by_dataset.get(ds)
+        fed = f"; fixes: {fixes}" if fixes else ""
         lines += [f"## Data set `{ds}`", "",
                   f"{len(drives)} drives; reference: {', '.join(refs) or '-'}{fed}.",
                   ""]

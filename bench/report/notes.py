@@ -45,8 +45,8 @@ def drive_condition(res: dict[str, Any], drive: dict[str, Any]) -> str:
     return profile if drive.get("reference") == "truth" and profile != "auto" else "native"
 
 
-def fixes_lines(res: dict[str, Any], dataset: str | None = None) -> list[str]:
-    """Per data set (or for ``dataset`` only), which fixes the run fed and scored: the
+def fixes_scored(res: dict[str, Any]) -> dict[str, str]:
+    """Per data set (of the drives scored), which fixes the run fed and scored, in words: the
     recording's own receiver or fixes simulated from the truth (with drive counts when a
     data set mixes them)."""
     from posbench.config import GPS_CONDITIONS, fixes_description
@@ -54,21 +54,27 @@ def fixes_lines(res: dict[str, Any], dataset: str | None = None) -> list[str]:
 
     by_ds: dict[str, dict[str, int]] = {}
     for d in res["drives"]:
-        if d["skipped"] or (dataset is not None and d["dataset"] != dataset):
+        if d["skipped"]:
             continue
         conds = by_ds.setdefault(d["dataset"], {})
         cond = drive_condition(res, d)
         conds[cond] = conds.get(cond, 0) + 1
-    out = []
+    out = {}
     for ds, conds in by_ds.items():
         if len(conds) == 1:
-            text = fixes_description(next(iter(conds)))
+            out[ds] = fixes_description(next(iter(conds)))
         else:
-            text = "; ".join(f"{fixes_description(c)} ({plural(n, 'drive')})"
-                             for c, n in sorted(conds.items(),
-                                                key=lambda cn: GPS_CONDITIONS.index(cn[0])))
-        out.append(f"fixes scored in `{ds}`: {text}")
+            out[ds] = "; ".join(f"{fixes_description(c)} ({plural(n, 'drive')})"
+                                for c, n in sorted(conds.items(),
+                                                   key=lambda cn: GPS_CONDITIONS.index(cn[0])))
     return out
+
+
+def fixes_lines(res: dict[str, Any], dataset: str | None = None) -> list[str]:
+    """``fixes scored in `DATA SET`: ...`` per data set (or for ``dataset`` only):
+    :func:`fixes_scored` as lines for the terminal and report.md."""
+    return [f"fixes scored in `{ds}`: {text}" for ds, text in fixes_scored(res).items()
+            if dataset is None or ds == dataset]
 
 
 def excluded_counts(res: dict[str, Any]) -> tuple[int, int]:
