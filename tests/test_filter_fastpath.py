@@ -36,8 +36,7 @@ from posbench.config import RunConfig
 from posbench.predictors._cubic_xy import fit_cubic_xy
 from posbench.predictors._geometry import wrap_angle
 from posbench.predictors.base import Predictor
-from posbench.predictors.cubic import fit_cubic
-from posbench.predictors.ekf import (
+from posbench.predictors.ctra import (
     IA,
     IBA,
     IBW,
@@ -49,9 +48,10 @@ from posbench.predictors.ekf import (
     IY,
     IYAW,
     N_STATE,
-    CtraEkf,
     ctra_integrals,
 )
+from posbench.predictors.cubic import fit_cubic
+from posbench.predictors.ekf import CtraEkf
 from posbench.predictors.kf import LinearKalman, ca_process_noise, ca_transition
 from posbench.predictors.kf_paper import PaperKalman
 from posbench.predictors.poly import PolyExtrapolator
