@@ -55,13 +55,8 @@ from posbench.predictors.base import ModelFileSeams, Predictor
 from posbench.predictors.kf import LinearKalman
 from posbench.predictors.lstm.features import N_FEATURES
 from posbench.predictors.lstm.fused import FusedStep
-from posbench.predictors.lstm.predictor import (
-    RESTART_GAP_S,
-    STILL_SPEED_MPS,
-    ImuHistory,
-    _Buf,
-    fit_fused_window,
-)
+from posbench.predictors.lstm.history import FIX_CAP, ImuHistory, RowBuffer, fit_fused_window
+from posbench.predictors.lstm.predictor import RESTART_GAP_S, STILL_SPEED_MPS
 from posbench.predictors.lstm.resample import DT, GRID_OFFSETS, N_STEPS
 from posbench.predictors.lstm.runtime import OnnxModel
 from posbench.scenarios.errors import DataError
@@ -76,7 +71,6 @@ OUTPUT = "correction"
 #: back to ``native``, then to the kf's defaults
 CONDITIONS = ("none", "rtk", "consumer", "native")
 FALLBACK_CONDITION = "native"
-FIX_CAP = 512
 #: text recorded in results for the bundled model
 BUNDLED_TEXT = "bundled (predictors/hybrid/bundled/model.onnx)"
 #: a log variance above this [log m^2] counts as not finite (exp would overflow)
@@ -207,7 +201,7 @@ class HybridPredictor(ModelFileSeams, Predictor):
     # ------------------------------------------------------------------ state
     def reset(self) -> None:
         self.kf.reset()
-        self._fix = _Buf(FIX_CAP, 3)        # t, x, y of real fixes
+        self._fix = RowBuffer(FIX_CAP, 3)        # t, x, y of real fixes
         self._imu = ImuHistory()
         self._t_real = math.nan
         self._can_v: float | None = None

@@ -45,9 +45,6 @@ from __future__ import annotations
 
 import json
 import math
-from bisect import bisect_left, bisect_right
-from collections.abc import Callable
-from dataclasses import dataclass
 from importlib import resources
 from pathlib import Path
 from time import perf_counter_ns
@@ -58,8 +55,13 @@ from posbench.predictors.base import ModelFileSeams, Predictor
 from posbench.predictors.lstm.core_net import CoreNet, has_core
 from posbench.predictors.lstm.features import FRAMES, features_one, gps_substitute_imu
 from posbench.predictors.lstm.fused import FusedStep
+from posbench.predictors.lstm.history import (
+    FIX_CAP,
+    ImuHistory,
+    RowBuffer,
+    fit_fused_window,
+)
 from posbench.predictors.lstm.resample import (
-    ACCEL_GLITCH,
     DT,
     GRID_OFFSETS,
     MIN_SPAN_S,
@@ -70,6 +72,14 @@ from posbench.predictors.lstm.resample import (
     window_start,
 )
 from posbench.predictors.lstm.runtime import OnnxModel
+from posbench.predictors.lstm.stages import (
+    FUSED_STAGES,
+    STAGES,
+    LstmStep,
+    StageRecorder,  # noqa: F401  (re-exported: a seam of this predictor, see above)
+    StageTimer,
+    lap,
+)
 from posbench.scenarios.errors import DataError
 
 STILL_SPEED_MPS = 0.15 / 3.6
@@ -78,8 +88,6 @@ MAX_BRIDGE_STEPS = 1500
 #: a real fix this long [s] after the previous real one restarts the fix history: the
 #: bridging pseudo-fixes of a long outage (metres off by then) must not shape the new fit
 RESTART_GAP_S = 5.0
-FIX_CAP = 512
-IMU_CAP = 8192
 FITS = ("closed", "lbfgs")
 #: ``fused`` (default): the fix step in few numpy calls (:mod:`posbench.predictors.lstm.fused`);
 #: ``staged``: the readable reference, stage by stage (same answers to float rounding)
@@ -87,67 +95,6 @@ STEPS = ("fused", "staged")
 N_FEATURES = 6
 #: text recorded in results for the bundled model (:meth:`~posbench.predictors.base.ModelFileSeams.model_description`)
 BUNDLED_TEXT = "bundled (predictors/lstm/bundled/model.onnx)"
-
-#: the stages of a network step, in the order :attr:`LstmPredictor.stage_timer` receives them:
-#: ``resample_positions`` (fix bookkeeping, window search, position cubic, 8-point grid,
-#: heading), ``resample_imu`` (IMU cubic on the grid or its GPS stand-ins), ``features``
-#: (the network input), ``inference`` (the ONNX run), ``current_position_fit`` (network
-#: output to a world displacement, cubic through grid and prediction, state update)
-STAGES = ("resample_positions", "resample_imu", "features", "inference", "current_position_fit")
-#: the stages of a *fused* network step (``step="fused"``, the default): ``resample`` (fix
-#: bookkeeping, window search, both cubics in one solve, their values on the grid),
-#: ``features``, ``inference``, ``current_position_fit`` (as in :data:`STAGES`)
-FUSED_STAGES = ("resample", "features", "inference", "current_position_fit")
-
-#: a stage-timer hook: called with (stage name, duration [ns])
-StageTimer = Callable[[str, int], None]
-
-
-def _lap(timer: StageTimer, stage: str, c0: int) -> int:
-    """Report the stage that began at ``c0`` [ns]; the clock after the report (so the
-    hook's own time is charged to no stage)."""
-    timer(stage, perf_counter_ns() - c0)
-    return perf_counter_ns()
-
-
-class StageRecorder:
-    """A :data:`StageTimer` that keeps every duration [ns] per stage name.
-
-    ``ns[stage]`` lists the durations in the order received; :meth:`clear` empties them.
-    """
-
-    def __init__(self) -> None:
-        self.ns: dict[str, list[int]] = {s: [] for s in STAGES}
-
-    def __call__(self, stage: str, duration_ns: int) -> None:
-        self.ns.setdefault(stage, []).append(duration_ns)
-
-    def clear(self) -> None:
-        for v in self.ns.values():
-            v.clear()
-
-
-@dataclass(frozen=True, eq=False)
-class LstmStep:
-    """One network step of :class:`LstmPredictor`, copied out of its state (read-only arrays).
-
-    Attributes:
-        grid: (8, 2) resampled input positions [m, ENU], oldest first, 200 ms apart,
-            the last at ``t_fix``.
-        pred: (2,) the predicted position [m, ENU] at ``t_fix + horizon_s``.
-        t_fix: time [s] of the newest grid point: the fix the step ran on (for a bridging
-            step, the pseudo-fix that stood in for a missing one).
-        horizon_s: how far [s] past ``t_fix`` the network predicts (0.2 s).
-        bridged: True if a missing fix was bridged (the step ran inside ``position_at``
-            on the previous prediction, not on a real fix).
-    """
-
-    grid: np.ndarray
-    pred: np.ndarray
-    t_fix: float
-    horizon_s: float
-    bridged: bool
-
 
 def bundled_model() -> Path:
     """Path of the bundled ``model.onnx`` (package data of predictors.lstm)."""
@@ -184,94 +131,6 @@ def _check_model(onnx_path: Path, info: dict, net: OnnxModel) -> None:
     if len(got) != 2 or any(isinstance(g, int) and g != w for g, w in zip(got, want, strict=True)):
         raise DataError(onnx_path, f"network input shape {net.input_shape} does not match the "
                                    f"features [batch, {N_STEPS}, {N_FEATURES}]")
-
-
-class _Buf:
-    """Append-only float64 rows with a capacity; keeps the newest half when full.
-
-    ``t`` mirrors the first column (times [s], increasing) as a list of floats, for
-    :mod:`bisect` searches (~10x cheaper than ``np.searchsorted`` on one value)."""
-
-    def __init__(self, cap: int, k: int) -> None:
-        self.a = np.empty((cap, k))
-        self.n = 0
-        self.t: list[float] = []
-
-    def append(self, row: tuple) -> None:
-        if self.n == self.a.shape[0]:
-            h = self.a.shape[0] // 2
-            self.a[:h] = self.a[self.n - h:self.n]
-            del self.t[:self.n - h]
-            self.n = h
-        self.a[self.n] = row
-        self.t.append(float(row[0]))
-        self.n += 1
-
-    def pop(self) -> None:
-        """Drop the newest row."""
-        self.n -= 1
-        self.t.pop()
-
-    def clear(self) -> None:
-        self.n = 0
-        self.t.clear()
-
-    def view(self) -> np.ndarray:
-        return self.a[:self.n]
-
-
-class ImuHistory(_Buf):
-    """The IMU samples a step fits: rows t [s], ax, ay [m/s^2, vehicle frame], yaw [rad,
-    unwrapped across samples; NaN if unknown], in time order. ``t_yaw_nan`` is the time [s]
-    of the newest sample without yaw (windows older than it use the yaw)."""
-
-    def __init__(self, cap: int = IMU_CAP) -> None:
-        super().__init__(cap, 4)
-        self._yaw_raw = math.nan
-        self._yaw_u = math.nan
-        self.t_yaw_nan = -math.inf
-
-    def add(self, t: float, ax: float, ay: float, yaw: float) -> None:
-        """One sample; dropped if ax or ay is not finite or beyond ACCEL_GLITCH, or if it is
-        not newer than the newest kept sample."""
-        if not (math.isfinite(ax) and math.isfinite(ay)) or max(abs(ax), abs(ay)) > ACCEL_GLITCH:
-            return
-        if self.n and t <= self.t[-1]:
-            return
-        if math.isfinite(yaw):
-            if math.isfinite(self._yaw_u):
-                self._yaw_u += (yaw - self._yaw_raw + math.pi) % (2 * math.pi) - math.pi
-            else:
-                self._yaw_u = yaw
-            self._yaw_raw = yaw
-            yu = self._yaw_u
-        else:
-            yu = math.nan
-            self.t_yaw_nan = t
-        self.append((t, ax, ay, yu))
-
-
-def fit_fused_window(f: FusedStep, fb: _Buf, im: ImuHistory, t_end: float) -> bool:
-    """The fused step's window at the newest fix (time ``t_end`` [s], the last row of ``fb``):
-    the fixes spanning >= MIN_SPAN_S and the IMU samples within them, fitted by ``f.fit``.
-    False (nothing fitted) when the window has fewer than 4 fixes or spans < MIN_SPAN_S."""
-    tl = fb.t
-    end = fb.n - 1
-    start = max(bisect_right(tl, t_end - MIN_SPAN_S) - 1, 0)
-    t0 = tl[start]
-    if end - start < 3 or t_end - t0 < MIN_SPAN_S:
-        return False
-    imu = None
-    yaw_ok = True
-    if im.n > 3:
-        it = im.t
-        i0 = bisect_left(it, t0)
-        i1 = bisect_right(it, t_end)
-        if i1 - i0 > 3:
-            imu = im.a[i0:i1]
-            yaw_ok = im.t_yaw_nan < it[i0]
-    f.fit(fb.a[start:end + 1], imu, t_end, yaw_ok)
-    return True
 
 
 class LstmPredictor(ModelFileSeams, Predictor):
@@ -357,7 +216,7 @@ class LstmPredictor(ModelFileSeams, Predictor):
 
     # ------------------------------------------------------------------ state
     def reset(self) -> None:
-        self._fix = _Buf(FIX_CAP, 3)        # t, x, y (real fixes and bridging pseudo-fixes)
+        self._fix = RowBuffer(FIX_CAP, 3)        # t, x, y (real fixes and bridging pseudo-fixes)
         self._t_real = math.nan             # time of the newest real fix
         self._imu = ImuHistory()
         self._can_v: float | None = None
@@ -421,13 +280,13 @@ class LstmPredictor(ModelFileSeams, Predictor):
             return False
         f = self._fused
         if timer is not None:
-            c0 = _lap(timer, "resample", c0)
+            c0 = lap(timer, "resample", c0)
         f.features()
         if timer is not None:
-            c0 = _lap(timer, "features", c0)
+            c0 = lap(timer, "features", c0)
         d0, d1 = f.infer()
         if timer is not None:
-            c0 = _lap(timer, "inference", c0)
+            c0 = lap(timer, "inference", c0)
         if not f.finish(d0, d1):
             return False
         pts = f.pts
@@ -440,7 +299,7 @@ class LstmPredictor(ModelFileSeams, Predictor):
         self.steps += 1
         self.fused_steps += 1
         if timer is not None:
-            _lap(timer, "current_position_fit", c0)
+            lap(timer, "current_position_fit", c0)
         return True
 
     def _step_on_fixes(self, timer: StageTimer | None, c0: int) -> None:
@@ -467,7 +326,7 @@ class LstmPredictor(ModelFileSeams, Predictor):
         self._gps_v = math.hypot(coef[1, 0], coef[1, 1]) / scale
         psi = math.atan2(coef[1, 1], coef[1, 0])
         if timer is not None:
-            c0 = _lap(timer, "resample_positions", c0)
+            c0 = lap(timer, "resample_positions", c0)
         self._run_net(grid, t_end, float(tt[0]), psi, coef, scale, timer, c0)
 
     def _imu_on_grid(self, t0: float, t_end: float, coef: np.ndarray, scale: float
@@ -502,13 +361,13 @@ class LstmPredictor(ModelFileSeams, Predictor):
                  coef: np.ndarray, scale: float, timer: StageTimer | None, c0: int) -> None:
         ax, ay, yaw = self._imu_on_grid(t0, t_end, coef, scale)
         if timer is not None:
-            c0 = _lap(timer, "resample_imu", c0)
+            c0 = lap(timer, "resample_imu", c0)
         x = self._net_input(grid, ax, ay, yaw, psi, coef, scale)
         if timer is not None:
-            c0 = _lap(timer, "features", c0)
+            c0 = lap(timer, "features", c0)
         out = self.net.run(x)
         if timer is not None:
-            c0 = _lap(timer, "inference", c0)
+            c0 = lap(timer, "inference", c0)
         d0, d1 = self._net_output(out, grid, psi)
         pts = self._pts
         pts[:N_STEPS] = grid
@@ -522,7 +381,7 @@ class LstmPredictor(ModelFileSeams, Predictor):
         self._mode = "net"
         self.steps += 1
         if timer is not None:
-            _lap(timer, "current_position_fit", c0)
+            lap(timer, "current_position_fit", c0)
 
     def _net_input(self, grid: np.ndarray, ax: np.ndarray, ay: np.ndarray, yaw: np.ndarray,
                    psi: float, coef: np.ndarray, scale: float) -> np.ndarray:
