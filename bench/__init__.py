@@ -64,9 +64,14 @@ def _call(name: str, args: Mapping[str, Any]) -> str:
     return f"posbench.{name}({shown})"
 
 
-def run(data: str | Path | Sequence[str | Path] | None = None,
-        predictors: str | Sequence[str] | None = None, out: str | Path | None = None,
-        *, progress: bool = False, **options: Any) -> Run:
+def run(
+    data: str | Path | Sequence[str | Path] | None = None,
+    predictors: str | Sequence[str] | None = None,
+    out: str | Path | None = None,
+    *,
+    progress: bool = False,
+    **options: Any,
+) -> Run:
     """Replay drives through predictors, as ``bench run`` does; the run, saved in ``out`` if
     given (report.md, results.json, traces, figures), else kept in memory.
 
@@ -99,8 +104,10 @@ def run(data: str | Path | Sequence[str | Path] | None = None,
     known = {f.name for f in fields(RunOptions)}
     unknown = sorted(set(options) - known)
     if unknown:
-        raise TypeError(f"run() got unknown option(s) {', '.join(unknown)}; options: "
-                        f"{', '.join(sorted(known - {'data', 'predictors', 'out'}))}")
+        raise TypeError(
+            f"run() got unknown option(s) {', '.join(unknown)}; options: "
+            f"{', '.join(sorted(known - {'data', 'predictors', 'out'}))}"
+        )
     if "table_formats" in options:
         options["table_formats"] = _formats(options["table_formats"])
     for key in ("rerun",):
@@ -112,19 +119,33 @@ def run(data: str | Path | Sequence[str | Path] | None = None,
         options["seeds"] = tuple(parse_seeds(options["seeds"]))
     if options.get("drive_plots") == "all":
         options["drive_plots"] = None
-    opts = RunOptions(data=_tuple(data), predictors=_tuple(predictors) or DEFAULT_PREDICTORS,
-                      out=None if out is None else Path(out), **options)
-    given = {(n, k): f"options={{{n!r}: {{{k!r}: {v!r}}}}}"
-             for n, o in opts.options.items() for k, v in o.items()}
+    opts = RunOptions(
+        data=_tuple(data),
+        predictors=_tuple(predictors) or DEFAULT_PREDICTORS,
+        out=None if out is None else Path(out),
+        **options,
+    )
+    given = {
+        (n, k): f"options={{{n!r}: {{{k!r}: {v!r}}}}}"
+        for n, o in opts.options.items()
+        for k, v in o.items()
+    }
     plan = plan_run(opts, given)
     command = _call("run", {"data": data, "predictors": predictors, "out": out, **options})
     return execute_run(plan, command, _reporter(progress)).run
 
 
-def score(answers: str | Path, queries: str | Path, name: str = "answers",
-          out: str | Path | None = None, *, plot_formats: str | Sequence[str] = ("png",),
-          drive_plots: int | None = 20, table_formats: str | Sequence[str] = ("csv", "latex"),
-          progress: bool = False) -> Run:
+def score(
+    answers: str | Path,
+    queries: str | Path,
+    name: str = "answers",
+    out: str | Path | None = None,
+    *,
+    plot_formats: str | Sequence[str] = ("png",),
+    drive_plots: int | None = 20,
+    table_formats: str | Sequence[str] = ("csv", "latex"),
+    progress: bool = False,
+) -> Run:
     """Score answers produced elsewhere (a CSV or Parquet file: drive, kind, t_query [s],
     x, y [m]) against the queries folder ``bench queries`` wrote, exactly as ``bench run``
     scores a predictor, as predictor ``name``; the run, saved in ``out`` if given.
@@ -139,13 +160,20 @@ def score(answers: str | Path, queries: str | Path, name: str = "answers",
     answers, queries = Path(answers), Path(queries)
     out_path = None if out is None else Path(out)
     check_score_options(answers, queries, name, out_path)
-    command = _call("score", {"answers": str(answers), "queries": str(queries), "name": name,
-                              "out": out})
-    return score_answers_file(answers, queries, name, out_path, command,
-                              plot_formats=parse_plot_formats(plot_formats),
-                              drive_plots=drive_plots,
-                              table_formats=_formats(table_formats),
-                              reporter=_reporter(progress)).run
+    command = _call(
+        "score", {"answers": str(answers), "queries": str(queries), "name": name, "out": out}
+    )
+    return score_answers_file(
+        answers,
+        queries,
+        name,
+        out_path,
+        command,
+        plot_formats=parse_plot_formats(plot_formats),
+        drive_plots=drive_plots,
+        table_formats=_formats(table_formats),
+        reporter=_reporter(progress),
+    ).run
 
 
 def load(path: str | Path) -> Run:
@@ -161,10 +189,15 @@ def load(path: str | Path) -> Run:
     return load_run(path)
 
 
-def compare(*runs: Run | str | Path, metric: str = "future.mean_m",
-            scopes: Sequence[str] = ("all", "dataset"), bootstrap_seed: int = 0,
-            gates: Sequence[str] = (), uncertainty: bool = False,
-            allow_config_change: bool = False) -> Comparison:
+def compare(
+    *runs: Run | str | Path,
+    metric: str = "future.mean_m",
+    scopes: Sequence[str] = ("all", "dataset"),
+    bootstrap_seed: int = 0,
+    gates: Sequence[str] = (),
+    uncertainty: bool = False,
+    allow_config_change: bool = False,
+) -> Comparison:
     """Compare saved runs (:class:`Run` objects or their folders) as ``bench compare``
     does: ``metric`` (``KIND.STAT``, e.g. ``now.p95_m``) aligned per predictor, data set,
     route type and drive (``scopes``), each later run's paired difference from the first
@@ -177,13 +210,19 @@ def compare(*runs: Run | str | Path, metric: str = "future.mean_m",
     """
     from posbench.comparison.comparison import compare_runs
 
-    return compare_runs(runs, metric, scopes, bootstrap_seed, gates, uncertainty,
-                        allow_config_change)
+    return compare_runs(
+        runs, metric, scopes, bootstrap_seed, gates, uncertainty, allow_config_change
+    )
 
 
-def check(predictor: str, *, model: str | Path | None = None,
-          options: Mapping[str, Any] | None = None, gate: bool = True,
-          clauses: Sequence[str] | None = None) -> ContractReport:
+def check(
+    predictor: str,
+    *,
+    model: str | Path | None = None,
+    options: Mapping[str, Any] | None = None,
+    gate: bool = True,
+    clauses: Sequence[str] | None = None,
+) -> ContractReport:
     """Check a predictor against the streaming contract as ``bench check`` does: a
     registered name, ``NAME@ALIAS`` or ``module:Class``, built with ``options`` (and its
     ``model`` file), behind the GPS outlier gate unless ``gate=False``; every clause, or

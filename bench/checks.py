@@ -58,8 +58,9 @@ def check_at_least(value: float, minimum: float, option: str, unit: str = "") ->
 def check_horizon(seconds: float, option: str = "--horizon") -> float:
     """A look-ahead [s]: more than 0 and at most :data:`MAX_HORIZON_S`."""
     if not (math.isfinite(seconds) and 0.0 < seconds <= MAX_HORIZON_S):
-        raise UsageError(f"{option} must be more than 0 s and at most {MAX_HORIZON_S:g} s; "
-                         f"got {_num(seconds)}")
+        raise UsageError(
+            f"{option} must be more than 0 s and at most {MAX_HORIZON_S:g} s; got {_num(seconds)}"
+        )
     return seconds
 
 
@@ -80,16 +81,20 @@ def check_synthetic_duration(seconds: float | None, data: Sequence[Any] | None) 
     if seconds is None:
         return None
     if data:
-        raise UsageError("--synthetic-duration is for runs without --data (it sets the length "
-                         "of the synthetic drive)")
+        raise UsageError(
+            "--synthetic-duration is for runs without --data (it sets the length "
+            "of the synthetic drive)"
+        )
     if not (math.isfinite(seconds) and seconds > MIN_SYNTHETIC_S):
-        raise UsageError(f"--synthetic-duration must be more than {MIN_SYNTHETIC_S:g} s; "
-                         f"got {_num(seconds)}")
+        raise UsageError(
+            f"--synthetic-duration must be more than {MIN_SYNTHETIC_S:g} s; got {_num(seconds)}"
+        )
     return seconds
 
 
-def parse_predictor_names(values: str | Iterable[str], option: str = "--predictors"
-                          ) -> tuple[str, ...]:
+def parse_predictor_names(
+    values: str | Iterable[str], option: str = "--predictors"
+) -> tuple[str, ...]:
     """Predictor names, in order (not yet checked against the registry): comma-separated
     text, or several such texts (``-p kf -p lstm`` as well as ``-p kf,lstm``)."""
     texts = [values] if isinstance(values, str) else list(values)
@@ -117,8 +122,10 @@ def parse_seeds(value: str | int | Sequence[int], option: str = "--seeds") -> li
                     raise UsageError(f"{option}: seeds must be >= 0; got {values[0]}")
                 return values
     except (TypeError, ValueError):
-        raise UsageError(f"{option} takes a count (e.g. 5: seeds 0..4) or a list of seeds "
-                         f"(e.g. 0,1,2,3,4); got {value!r}") from None
+        raise UsageError(
+            f"{option} takes a count (e.g. 5: seeds 0..4) or a list of seeds "
+            f"(e.g. 0,1,2,3,4); got {value!r}"
+        ) from None
     if len(values) == 1:
         if values[0] < 1:
             raise UsageError(f"{option} count must be at least 1; got {values[0]}")
@@ -144,13 +151,16 @@ def resolve_baseline(value: str | None, names: Sequence[str]) -> str | None:
     if value.lower() == "none":
         return None
     if value not in names:
-        raise UsageError(f"--baseline {value}: not among the predictors to run "
-                         f"({', '.join(names)}); name one of them, or 'none'")
+        raise UsageError(
+            f"--baseline {value}: not among the predictors to run "
+            f"({', '.join(names)}); name one of them, or 'none'"
+        )
     return value
 
 
-def check_topics(topics: Mapping[str, str] | None,
-                 roles: Iterable[str] = ("gps", "imu", "speed", "truth")) -> None:
+def check_topics(
+    topics: Mapping[str, str] | None, roles: Iterable[str] = ("gps", "imu", "speed", "truth")
+) -> None:
     """``--topic ROLE=NAME`` pairs: known roles, non-empty names."""
     roles = tuple(roles)
     bad = sorted(set(topics or {}) - set(roles))
@@ -190,8 +200,9 @@ def parse_drive_plots(value: str | int | None, option: str = "--drive-plots") ->
     return n
 
 
-def parse_plot_formats(value: str | Iterable[str], option: str = "--plot-format"
-                       ) -> tuple[str, ...]:
+def parse_plot_formats(
+    value: str | Iterable[str], option: str = "--plot-format"
+) -> tuple[str, ...]:
     """Figure formats (``png,pdf`` or ``("png", "pdf")``) as a tuple of known ones, in the
     order given (:func:`posbench.figures.style.check_formats`)."""
     from posbench.figures.style import check_formats
@@ -223,11 +234,15 @@ def resolve_color_by(value: str | None, names: Sequence[str], rerun: Path | None
         return names[0] if names else None
     value = value.strip()
     if rerun is None:
-        raise UsageError(f"--rerun-color-by {value}: colours the track of a rerun recording; "
-                         f"give --rerun FILE.rrd too")
+        raise UsageError(
+            f"--rerun-color-by {value}: colours the track of a rerun recording; "
+            f"give --rerun FILE.rrd too"
+        )
     if value not in names:
-        raise UsageError(f"--rerun-color-by {value}: not among the predictors to run "
-                         f"({', '.join(names)}); name one of them")
+        raise UsageError(
+            f"--rerun-color-by {value}: not among the predictors to run "
+            f"({', '.join(names)}); name one of them"
+        )
     return value
 
 
@@ -252,10 +267,16 @@ def check_data_paths(paths: Sequence[str | Path] | None, option: str = "--data")
             raise UsageError(f"{option} {p}: no such file or folder")
 
 
-def check_drive_options(gps_profile: str, projection: str, horizon_s: float,
-                        gps_latency_s: float, dropouts: str, seed: int,
-                        synthetic_duration_s: float | None,
-                        data: Sequence[str | Path] | None) -> None:
+def check_drive_options(
+    gps_profile: str,
+    projection: str,
+    horizon_s: float,
+    gps_latency_s: float,
+    dropouts: str,
+    seed: int,
+    synthetic_duration_s: float | None,
+    data: Sequence[str | Path] | None,
+) -> None:
     """The options that place drives, fixes and queries (``bench run``, ``bench queries``),
     checked before any work: GPS profile, projection, horizon [s], GPS latency [s], dropout
     profile, seed, synthetic duration [s] and data paths."""

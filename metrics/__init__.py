@@ -10,5 +10,12 @@ from posbench.metrics.accuracy import (
 )
 from posbench.metrics.latency import latency_summary
 
-__all__ = ["error_cdf", "euclidean_error", "latency_summary", "speed_bin_labels",
-           "speed_bin_order", "summarize", "summarize_groups"]
+__all__ = [
+    "error_cdf",
+    "euclidean_error",
+    "latency_summary",
+    "speed_bin_labels",
+    "speed_bin_order",
+    "summarize",
+    "summarize_groups",
+]

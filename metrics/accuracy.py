@@ -19,7 +19,7 @@ SUMMARY_KEYS = ("count", "missing", "mean_m", "median_m", "rmse_m", "p95_m", "ma
 #: figure is over the errors of the queries its row or cell covers, pooled over drives
 DEFINITIONS = {
     "error": "Euclidean distance [m] between a predictor's answer and the reference position "
-             "at the query time, in the drive's local ENU frame.",
+    "at the query time, in the drive's local ENU frame.",
     "mean": "arithmetic mean of the errors [m] (pooled: each drive weighs by its queries).",
     "median": "50th percentile of the errors [m] (linear interpolation, as numpy).",
     "RMSE": "root mean square of the errors [m].",
@@ -27,7 +27,7 @@ DEFINITIONS = {
     "max": "largest error [m].",
     "n": "number of answered queries a figure is over (in parentheses after a value).",
     "missing": "queries answered with no position (NaN) although a reference exists; counted, "
-               "never averaged, so abstaining cannot flatter a predictor.",
+    "never averaged, so abstaining cannot flatter a predictor.",
     "speed bin": "the reference speed at the query time [m/s], in bins [a, b).",
 }
 
@@ -59,8 +59,9 @@ def summarize(errors: np.ndarray) -> dict[str, float | int]:
     return out
 
 
-def summarize_groups(errors: np.ndarray, keys: np.ndarray,
-                     order: Sequence[str] | None = None) -> dict[str, dict[str, float | int]]:
+def summarize_groups(
+    errors: np.ndarray, keys: np.ndarray, order: Sequence[str] | None = None
+) -> dict[str, dict[str, float | int]]:
     """:func:`summarize` per distinct key (e.g. scenario label), in ``order`` if given
     (keys in ``order`` with no samples get count 0), else sorted."""
     e = np.asarray(errors, dtype=float)
@@ -69,12 +70,15 @@ def summarize_groups(errors: np.ndarray, keys: np.ndarray,
     return {str(n): summarize(e[k == n]) for n in names}
 
 
-def speed_bin_labels(speed_mps: np.ndarray, edges_mps: Sequence[float] = (0.5, 5, 10, 15, 20, 30)
-                     ) -> np.ndarray:
+def speed_bin_labels(
+    speed_mps: np.ndarray, edges_mps: Sequence[float] = (0.5, 5, 10, 15, 20, 30)
+) -> np.ndarray:
     """Bin names like ``"5-10 m/s"`` for each speed [m/s]; ``"<0.5 m/s"`` and ``">=30 m/s"`` at the ends."""
     s = np.asarray(speed_mps, dtype=float)
     edges = list(edges_mps)
-    names = [f"<{edges[0]:g} m/s"] + [f"{a:g}-{b:g} m/s" for a, b in zip(edges[:-1], edges[1:], strict=True)]
+    names = [f"<{edges[0]:g} m/s"] + [
+        f"{a:g}-{b:g} m/s" for a, b in zip(edges[:-1], edges[1:], strict=True)
+    ]
     names.append(f">={edges[-1]:g} m/s")
     idx = np.searchsorted(edges, s, side="right")
     out = np.asarray(names, dtype=object)[idx]
@@ -85,8 +89,11 @@ def speed_bin_labels(speed_mps: np.ndarray, edges_mps: Sequence[float] = (0.5, 5
 def speed_bin_order(edges_mps: Sequence[float] = (0.5, 5, 10, 15, 20, 30)) -> list[str]:
     """The bin names of :func:`speed_bin_labels` in increasing speed."""
     edges = list(edges_mps)
-    return ([f"<{edges[0]:g} m/s"] + [f"{a:g}-{b:g} m/s" for a, b in zip(edges[:-1], edges[1:], strict=True)]
-            + [f">={edges[-1]:g} m/s"])
+    return (
+        [f"<{edges[0]:g} m/s"]
+        + [f"{a:g}-{b:g} m/s" for a, b in zip(edges[:-1], edges[1:], strict=True)]
+        + [f">={edges[-1]:g} m/s"]
+    )
 
 
 def error_cdf(errors: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

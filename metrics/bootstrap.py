@@ -50,7 +50,8 @@ DEFINITIONS = {
         "the figure recomputed on B seeded resamples (B and the seed: the report's header). "
         "Cluster bootstrap: each resample draws, with replacement, as many "
         "drives as contribute to the figure and pools every scored query of the drawn drives "
-        "(queries inside a drive are correlated, so they are never resampled one by one)."),
+        "(queries inside a drive are correlated, so they are never resampled one by one)."
+    ),
     "block bootstrap": (
         "For a figure from a single drive: the drive's queries (in time order) are resampled "
         "as circular blocks of contiguous queries instead of drives; the block length follows "
@@ -58,17 +59,21 @@ DEFINITIONS = {
         "autocorrelation (longer the longer errors stay correlated; at least 10 blocks per "
         "resample; for a whole drive, the longest among its predictors, so that they are "
         "resampled alike), is rounded to the block grid, and is given in queries where it is "
-        "used."),
+        "used."
+    ),
     "paired difference": (
         "Δ mean = mean error of the predictor minus mean error of the baseline, over the "
         "queries both answered (negative: the predictor is better); its 95 % CI resamples "
-        "drives jointly for both, so their shared difficulty cancels."),
+        "drives jointly for both, so their shared difficulty cancels."
+    ),
     "wins": (
         "drives (among those with paired queries) on which the predictor's mean error is "
-        "below the baseline's; win share = wins / drives."),
+        "below the baseline's; win share = wins / drives."
+    ),
     "conclusive": (
         "`*` beside a paired difference: its 95 % CI excludes 0. `?` beside a route-type "
-        "cell: not conclusive, its 95 % CI is wider than the value itself."),
+        "cell: not conclusive, its 95 % CI is wider than the value itself."
+    ),
 }
 
 
@@ -84,8 +89,9 @@ def _cluster_counts(n_clusters: int, n_resamples: int, seed: int) -> np.ndarray:
     return out
 
 
-def resample_counts(n_clusters: int, n_resamples: int = DEFAULT_RESAMPLES,
-                    seed: int = 0) -> np.ndarray:
+def resample_counts(
+    n_clusters: int, n_resamples: int = DEFAULT_RESAMPLES, seed: int = 0
+) -> np.ndarray:
     """Multiplicity of each cluster in each cluster-bootstrap resample.
 
     Row ``b`` is one multinomial draw of ``n_clusters`` clusters with replacement (equal
@@ -96,18 +102,21 @@ def resample_counts(n_clusters: int, n_resamples: int = DEFAULT_RESAMPLES,
         (n_resamples, n_clusters) int64 array.
     """
     if n_clusters < 1 or n_resamples < 1:
-        raise ValueError(f"need at least one cluster and one resample, got {n_clusters}, "
-                         f"{n_resamples}")
+        raise ValueError(
+            f"need at least one cluster and one resample, got {n_clusters}, {n_resamples}"
+        )
     return _cluster_counts(int(n_clusters), int(n_resamples), int(seed)).astype(np.int64)
 
 
-def cluster_weights(n_clusters: int, n_resamples: int = DEFAULT_RESAMPLES,
-                    seed: int = 0) -> np.ndarray:
+def cluster_weights(
+    n_clusters: int, n_resamples: int = DEFAULT_RESAMPLES, seed: int = 0
+) -> np.ndarray:
     """:func:`resample_counts` as a read-only float32 array (integers, exact), cached: what
     the interval functions multiply with; the same arguments return the same array."""
     if n_clusters < 1 or n_resamples < 1:
-        raise ValueError(f"need at least one cluster and one resample, got {n_clusters}, "
-                         f"{n_resamples}")
+        raise ValueError(
+            f"need at least one cluster and one resample, got {n_clusters}, {n_resamples}"
+        )
     return _cluster_counts(int(n_clusters), int(n_resamples), int(seed))
 
 
@@ -127,8 +136,7 @@ def percentile_interval(stats: np.ndarray, level: float = LEVEL) -> tuple[float,
 
 
 # --------------------------------------------------------------------- means
-def resampled_means(sums: np.ndarray, counts: np.ndarray, counts_matrix: np.ndarray
-                    ) -> np.ndarray:
+def resampled_means(sums: np.ndarray, counts: np.ndarray, counts_matrix: np.ndarray) -> np.ndarray:
     """Pooled mean sum(w * sums) / sum(w * counts) for each row w of ``counts_matrix``
     (NaN where a resample holds no query). ``sums``, ``counts``: per cluster. A float32
     ``counts_matrix`` (the cached ones) is multiplied in float32 (relative precision ~1e-7,
@@ -142,8 +150,9 @@ def resampled_means(sums: np.ndarray, counts: np.ndarray, counts_matrix: np.ndar
         return np.where(den > 0, num / np.where(den > 0, den, 1.0), np.nan)
 
 
-def ratio_ci(sums: np.ndarray, counts: np.ndarray, counts_matrix: np.ndarray,
-             level: float = LEVEL) -> tuple[float, float]:
+def ratio_ci(
+    sums: np.ndarray, counts: np.ndarray, counts_matrix: np.ndarray, level: float = LEVEL
+) -> tuple[float, float]:
     """Percentile interval of the pooled mean under the resamples of ``counts_matrix``.
 
     Args:
@@ -158,9 +167,14 @@ def ratio_ci(sums: np.ndarray, counts: np.ndarray, counts_matrix: np.ndarray,
     return percentile_interval(resampled_means(sums, counts, counts_matrix), level)
 
 
-def paired_ratio_diff(sum_a: np.ndarray, count_a: np.ndarray, sum_b: np.ndarray,
-                      count_b: np.ndarray, counts_matrix: np.ndarray,
-                      level: float = LEVEL) -> dict[str, float]:
+def paired_ratio_diff(
+    sum_a: np.ndarray,
+    count_a: np.ndarray,
+    sum_b: np.ndarray,
+    count_b: np.ndarray,
+    counts_matrix: np.ndarray,
+    level: float = LEVEL,
+) -> dict[str, float]:
     """Difference of two pooled means over the same clusters, with its interval.
 
     Sign convention (kept everywhere): ``diff = mean_b - mean_a``, where mean_x =
@@ -176,18 +190,26 @@ def paired_ratio_diff(sum_a: np.ndarray, count_a: np.ndarray, sum_b: np.ndarray,
         ``{"diff": ..., "lo": ..., "hi": ...}`` (NaN without values).
     """
     ca, cb = float(np.sum(count_a)), float(np.sum(count_b))
-    diff = (float(np.sum(sum_b)) / cb - float(np.sum(sum_a)) / ca) if ca > 0 and cb > 0 \
+    diff = (
+        (float(np.sum(sum_b)) / cb - float(np.sum(sum_a)) / ca)
+        if ca > 0 and cb > 0
         else float("nan")
-    d = resampled_means(sum_b, count_b, counts_matrix) - resampled_means(sum_a, count_a,
-                                                                         counts_matrix)
+    )
+    d = resampled_means(sum_b, count_b, counts_matrix) - resampled_means(
+        sum_a, count_a, counts_matrix
+    )
     lo, hi = percentile_interval(d, level)
     return {"diff": diff, "lo": lo, "hi": hi}
 
 
 # ----------------------------------------------------------------- quantiles
-def quantile_ci(sorted_values: np.ndarray, units: np.ndarray, counts_matrix: np.ndarray,
-                qs: tuple[float, ...] = (0.5, 0.95), level: float = LEVEL
-                ) -> list[tuple[float, float]]:
+def quantile_ci(
+    sorted_values: np.ndarray,
+    units: np.ndarray,
+    counts_matrix: np.ndarray,
+    qs: tuple[float, ...] = (0.5, 0.95),
+    level: float = LEVEL,
+) -> list[tuple[float, float]]:
     """Percentile interval of each quantile in ``qs`` of the pooled values under the
     resamples of ``counts_matrix`` (see :func:`resampled_quantiles`)."""
     stats = resampled_quantiles(sorted_values, units, counts_matrix, qs)
@@ -201,7 +223,7 @@ def _autocovariance(x: np.ndarray, max_lag: int) -> np.ndarray:
     d = x - x.mean()
     size = 1 << (2 * n - 1).bit_length()
     f = np.fft.rfft(d, size)
-    return np.fft.irfft(f * np.conj(f), size)[:max_lag + 1] / n
+    return np.fft.irfft(f * np.conj(f), size)[: max_lag + 1] / n
 
 
 def block_length(x: np.ndarray) -> int:
@@ -234,8 +256,8 @@ def block_length(x: np.ndarray) -> int:
     k = np.arange(1, m + 1)
     t = k / m
     lam = np.where(t <= 0.5, 1.0, 2.0 * (1.0 - t))
-    g0 = acv[0] + 2.0 * float(np.sum(lam * acv[1:m + 1]))
-    g = 2.0 * float(np.sum(lam * k * acv[1:m + 1]))
+    g0 = acv[0] + 2.0 * float(np.sum(lam * acv[1 : m + 1]))
+    g = 2.0 * float(np.sum(lam * k * acv[1 : m + 1]))
     if not g0 > 0 or g == 0:
         return 1
     b = (2.0 * g * g / (4.0 / 3.0 * g0 * g0)) ** (1.0 / 3.0) * n ** (1.0 / 3.0)
@@ -266,8 +288,7 @@ def _block_counts(n_units: int, per_block: int, n_resamples: int, seed: int) -> 
     n_blocks = -(-n_units // per_block)
     starts = rng.integers(0, n_units, size=(n_resamples, n_blocks))
     starts += (np.arange(n_resamples) * n_units)[:, None]
-    c = np.bincount(starts.ravel(), minlength=n_resamples * n_units).reshape(n_resamples,
-                                                                             n_units)
+    c = np.bincount(starts.ravel(), minlength=n_resamples * n_units).reshape(n_resamples, n_units)
     # a block starting at unit s covers s .. s+per_block-1 (circularly): the weight of
     # unit u is the number of starts in u-per_block+1 .. u, a circular moving sum
     m = min(per_block, n_units)
@@ -276,11 +297,11 @@ def _block_counts(n_units: int, per_block: int, n_resamples: int, seed: int) -> 
         flat_w, flat_c = w.ravel(), c.ravel()
         for j in range(1, m):
             flat_w[j:] += flat_c[:-j]
-            w[1:, :j] -= c[:-1, n_units - j:]
-            w[:, :j] += c[:, n_units - j:]
+            w[1:, :j] -= c[:-1, n_units - j :]
+            w[:, :j] += c[:, n_units - j :]
     else:  # a cumulative sum over the row with its last m-1 units in front
         ext = np.zeros((n_resamples, n_units + m), dtype=np.int32)
-        ext[:, 1:m] = c[:, n_units - m + 1:]
+        ext[:, 1:m] = c[:, n_units - m + 1 :]
         ext[:, m:] = c
         np.cumsum(ext, axis=1, out=ext)
         w = (ext[:, m:] - ext[:, :n_units]).astype(np.float32)
@@ -297,12 +318,14 @@ def unit_length(n: int, block_len: int = 1) -> int:
     ``block_len``: a quarter block (:data:`UNITS_PER_BLOCK`), but at least half of n^(1/3)
     (finer grids cost time and change little) and long enough for at most
     :data:`MAX_UNITS` units."""
-    return int(max(1, round(n ** (1.0 / 3.0) / 2.0), -(-block_len // UNITS_PER_BLOCK),
-                   -(-n // MAX_UNITS)))
+    return int(
+        max(1, round(n ** (1.0 / 3.0) / 2.0), -(-block_len // UNITS_PER_BLOCK), -(-n // MAX_UNITS))
+    )
 
 
-def block_resample(n: int, block_len: int, n_resamples: int = DEFAULT_RESAMPLES,
-                   seed: int = 0) -> BlockResample:
+def block_resample(
+    n: int, block_len: int, n_resamples: int = DEFAULT_RESAMPLES, seed: int = 0
+) -> BlockResample:
     """Circular block bootstrap of a series of ``n`` samples in time order.
 
     The series is cut into units of :func:`unit_length` contiguous samples; a block is
@@ -344,9 +367,14 @@ def _time_order(values: np.ndarray, times: np.ndarray | None) -> np.ndarray:
     return np.argsort(t, kind="stable")
 
 
-def summary_ci(errors: np.ndarray, clusters: np.ndarray, times: np.ndarray | None = None,
-               n_resamples: int = DEFAULT_RESAMPLES, seed: int = 0,
-               level: float = LEVEL) -> dict[str, object]:
+def summary_ci(
+    errors: np.ndarray,
+    clusters: np.ndarray,
+    times: np.ndarray | None = None,
+    n_resamples: int = DEFAULT_RESAMPLES,
+    seed: int = 0,
+    level: float = LEVEL,
+) -> dict[str, object]:
     """Intervals of the mean, median and p95 of the finite ``errors`` (what
     :func:`posbench.metrics.accuracy.summarize` reports), resampling ``clusters`` (e.g. the drive of
     each query); with a single cluster, a block bootstrap over the queries in time order
@@ -360,21 +388,31 @@ def summary_ci(errors: np.ndarray, clusters: np.ndarray, times: np.ndarray | Non
     return interval_batch([(errors, clusters, times)], False, n_resamples, seed, level)[0]
 
 
-def summary_cis(errors: Sequence[np.ndarray], clusters: np.ndarray,
-                times: np.ndarray | None = None, n_resamples: int = DEFAULT_RESAMPLES,
-                seed: int = 0, level: float = LEVEL) -> list[dict[str, object]]:
+def summary_cis(
+    errors: Sequence[np.ndarray],
+    clusters: np.ndarray,
+    times: np.ndarray | None = None,
+    n_resamples: int = DEFAULT_RESAMPLES,
+    seed: int = 0,
+    level: float = LEVEL,
+) -> list[dict[str, object]]:
     """:func:`summary_ci` of several error arrays over the same queries (``clusters`` and
     ``times`` shared; e.g. each predictor's errors on one drive), in one pass per set of
     resamples. With a single cluster, the series with the same number of finite errors are
     resampled alike: in blocks of the longest of their :func:`block_length` (so one
     series alone gets exactly what :func:`summary_ci` gives it)."""
-    return interval_batch([(e, clusters, times) for e in errors], True, n_resamples, seed,
-                          level)
+    return interval_batch([(e, clusters, times) for e in errors], True, n_resamples, seed, level)
 
 
-def group_cis(errors: np.ndarray, keys: np.ndarray, clusters: np.ndarray,
-              times: np.ndarray | None = None, n_resamples: int = DEFAULT_RESAMPLES,
-              seed: int = 0, level: float = LEVEL) -> dict[object, dict[str, object]]:
+def group_cis(
+    errors: np.ndarray,
+    keys: np.ndarray,
+    clusters: np.ndarray,
+    times: np.ndarray | None = None,
+    n_resamples: int = DEFAULT_RESAMPLES,
+    seed: int = 0,
+    level: float = LEVEL,
+) -> dict[object, dict[str, object]]:
     """:func:`summary_ci` of the errors of each distinct key (e.g. scenario label, speed
     bin, query kind): key -> intervals, exactly what :func:`summary_ci` gives each group."""
     k = np.asarray(keys)
@@ -395,14 +433,19 @@ def group_cis(errors: np.ndarray, keys: np.ndarray, clusters: np.ndarray,
     e = np.asarray(errors, dtype=np.float64)[order]
     c = np.asarray(clusters)[order]
     t = None if times is None else np.asarray(times, dtype=np.float64)[order]
-    items = [(e[a:b], c[a:b], None if t is None else t[a:b]) for a, b in zip(starts, bounds,
-                                                                             strict=True)]
+    items = [
+        (e[a:b], c[a:b], None if t is None else t[a:b]) for a, b in zip(starts, bounds, strict=True)
+    ]
     return dict(zip(names, interval_batch(items, False, n_resamples, seed, level), strict=True))
 
 
-def interval_batch(items: Sequence[tuple[np.ndarray, np.ndarray, np.ndarray | None]],
-                   share_blocks: bool, n_resamples: int = DEFAULT_RESAMPLES, seed: int = 0,
-                   level: float = LEVEL) -> list[dict[str, object]]:
+def interval_batch(
+    items: Sequence[tuple[np.ndarray, np.ndarray, np.ndarray | None]],
+    share_blocks: bool,
+    n_resamples: int = DEFAULT_RESAMPLES,
+    seed: int = 0,
+    level: float = LEVEL,
+) -> list[dict[str, object]]:
     """:func:`summary_ci` of each (errors, clusters, times) of ``items``; those that end up
     with the same resamples (as many clusters, or one cluster and the same block) share one
     quantile pass. ``share_blocks``: the items are series over the same queries, and the
@@ -414,8 +457,15 @@ def interval_batch(items: Sequence[tuple[np.ndarray, np.ndarray, np.ndarray | No
         e = np.asarray(err, dtype=np.float64)
         ok = np.isfinite(e)
         e = e[ok]
-        out.append({"mean_m": list(nan2), "median_m": list(nan2), "p95_m": list(nan2),
-                    "clusters": 0, "block_len": None})
+        out.append(
+            {
+                "mean_m": list(nan2),
+                "median_m": list(nan2),
+                "p95_m": list(nan2),
+                "clusters": 0,
+                "block_len": None,
+            }
+        )
         if e.size == 0:
             continue
         c, d = _compact(np.asarray(clusters)[ok])
@@ -432,32 +482,41 @@ def interval_batch(items: Sequence[tuple[np.ndarray, np.ndarray, np.ndarray | No
     shared: dict[tuple[int, int], tuple[np.ndarray, list[tuple[int, np.ndarray, np.ndarray]]]] = {}
     for i, e, c, d in prepared:
         if c is None:
-            br = block_resample(e.size, blocks.get(e.size, d) if share_blocks else d,
-                                n_resamples, seed)
+            br = block_resample(
+                e.size, blocks.get(e.size, d) if share_blocks else d, n_resamples, seed
+            )
             units, w, block, n_clusters = br.units, br.counts, br.block_len, 1
         else:
             units, w, block, n_clusters = c, cluster_weights(d, n_resamples, seed), None, d
         n_units = w.shape[1]
         sums = np.bincount(units, weights=e, minlength=n_units)
         counts = np.bincount(units, minlength=n_units)
-        out[i].update(mean_m=list(ratio_ci(sums, counts, w, level)), clusters=n_clusters,
-                      block_len=block)
+        out[i].update(
+            mean_m=list(ratio_ci(sums, counts, w, level)), clusters=n_clusters, block_len=block
+        )
         order = np.argsort(e)  # ties hold equal values: any order of them gives the same
         # series over the same queries share a pass when they share their resamples
         key = (id(w), e.size) if share_blocks else (id(w), i)
         shared.setdefault(key, (w, []))[1].append((i, e[order], units[order]))
     for w, members in shared.values():
-        stats = resampled_quantiles_many([(v, u) for _, v, u in members], w,
-                                         tuple(QUANTILES.values()))
+        stats = resampled_quantiles_many(
+            [(v, u) for _, v, u in members], w, tuple(QUANTILES.values())
+        )
         for (i, _, _), st in zip(members, stats, strict=True):
             for j, key in enumerate(QUANTILES):
                 out[i][key] = list(percentile_interval(st[:, j], level))
     return out
 
 
-def paired_summary(errors_a: np.ndarray, errors_b: np.ndarray, clusters: np.ndarray,
-                   times: np.ndarray | None = None, n_resamples: int = DEFAULT_RESAMPLES,
-                   seed: int = 0, level: float = LEVEL) -> dict[str, object]:
+def paired_summary(
+    errors_a: np.ndarray,
+    errors_b: np.ndarray,
+    clusters: np.ndarray,
+    times: np.ndarray | None = None,
+    n_resamples: int = DEFAULT_RESAMPLES,
+    seed: int = 0,
+    level: float = LEVEL,
+) -> dict[str, object]:
     """Paired comparison of two sets of errors on the same queries (a: baseline, b: the
     predictor compared), over the queries both answered (finite in both); ``times`` [s]
     order the queries of a single cluster for its block bootstrap.
@@ -476,8 +535,16 @@ def paired_summary(errors_a: np.ndarray, errors_b: np.ndarray, clusters: np.ndar
     a, b = a[ok], b[ok]
     nan = float("nan")
     if a.size == 0:
-        return {"diff_m": nan, "ci95": [nan, nan], "drives": 0, "wins": 0, "win_share": nan,
-                "conclusive": False, "queries": 0, "block_len": None}
+        return {
+            "diff_m": nan,
+            "ci95": [nan, nan],
+            "drives": 0,
+            "wins": 0,
+            "win_share": nan,
+            "conclusive": False,
+            "queries": 0,
+            "block_len": None,
+        }
     c, d = _compact(np.asarray(clusters)[ok])
     per_a = np.bincount(c, weights=a, minlength=d)
     per_b = np.bincount(c, weights=b, minlength=d)
@@ -493,9 +560,22 @@ def paired_summary(errors_a: np.ndarray, errors_b: np.ndarray, clusters: np.ndar
         units, w = c, cluster_weights(d, n_resamples, seed)
     n_units = w.shape[1]
     cnt = np.bincount(units, minlength=n_units)
-    r = paired_ratio_diff(np.bincount(units, weights=a, minlength=n_units), cnt,
-                          np.bincount(units, weights=b, minlength=n_units), cnt, w, level)
+    r = paired_ratio_diff(
+        np.bincount(units, weights=a, minlength=n_units),
+        cnt,
+        np.bincount(units, weights=b, minlength=n_units),
+        cnt,
+        w,
+        level,
+    )
     conclusive = bool(r["lo"] > 0 or r["hi"] < 0)
-    return {"diff_m": r["diff"], "ci95": [r["lo"], r["hi"]], "drives": d, "wins": wins,
-            "win_share": wins / d, "conclusive": conclusive, "queries": int(a.size),
-            "block_len": block}
+    return {
+        "diff_m": r["diff"],
+        "ci95": [r["lo"], r["hi"]],
+        "drives": d,
+        "wins": wins,
+        "win_share": wins / d,
+        "conclusive": conclusive,
+        "queries": int(a.size),
+        "block_len": block,
+    }

@@ -53,13 +53,13 @@ CALIBRATED, OVERCONFIDENT, UNDERCONFIDENT = "calibrated", "overconfident", "unde
 #: what each figure means (the report's glossary collects these)
 DEFINITIONS = {
     "NEES": "mean normalised estimation error squared, mean of e' P^-1 e over the queries "
-            "(e: answer - reference [m], P: the reported 2x2 covariance [m^2]); 2 when the "
-            "covariance is honest, above 2: overconfident, below: underconfident.",
+    "(e: answer - reference [m], P: the reported 2x2 covariance [m^2]); 2 when the "
+    "covariance is honest, above 2: overconfident, below: underconfident.",
     "coverage": "share of queries whose reference lies inside the reported p-ellipse "
-                "(e' P^-1 e <= -2 ln(1 - p)); p when calibrated.",
+    "(e' P^-1 e <= -2 ln(1 - p)); p when calibrated.",
     "sharpness": "median area of the reported 95 % ellipse, pi (-2 ln 0.05) sqrt(det P) [m^2].",
     "log-likelihood": "mean log density of the reference under N(answer, P) [nats]; higher is "
-                      "better (sharp and honest).",
+    "better (sharp and honest).",
 }
 
 
@@ -99,8 +99,10 @@ def nees_interval(n: int, level: float = 0.95) -> tuple[float, float]:
     from scipy.special import gammaincinv
 
     a = (1.0 - level) / 2.0
-    return (float(2.0 * gammaincinv(float(n), a) / n),
-            float(2.0 * gammaincinv(float(n), 1.0 - a) / n))
+    return (
+        float(2.0 * gammaincinv(float(n), a) / n),
+        float(2.0 * gammaincinv(float(n), 1.0 - a) / n),
+    )
 
 
 def coverage(d2: np.ndarray, levels: Sequence[float] = COVERAGE_LEVELS) -> np.ndarray:
@@ -113,8 +115,9 @@ def coverage(d2: np.ndarray, levels: Sequence[float] = COVERAGE_LEVELS) -> np.nd
     return (d[:, None] <= r2[None, :]).mean(axis=0)
 
 
-def calibration_curve(d2: np.ndarray, levels: Sequence[float] = CURVE_LEVELS
-                      ) -> list[tuple[float, float]]:
+def calibration_curve(
+    d2: np.ndarray, levels: Sequence[float] = CURVE_LEVELS
+) -> list[tuple[float, float]]:
     """(expected, observed) coverage pairs over ``levels``: the calibration curve (on the
     diagonal when calibrated; below it: overconfident)."""
     obs = coverage(d2, levels)
@@ -156,8 +159,9 @@ def coverage_band(n: int, p: float = 0.95) -> tuple[float, float]:
     return p - h, min(1.0, p + h)
 
 
-def verdict(nees: float, cov95: float, n: int,
-            nees_ci: Sequence[float] | None = None) -> str | None:
+def verdict(
+    nees: float, cov95: float, n: int, nees_ci: Sequence[float] | None = None
+) -> str | None:
     """``calibrated`` / ``overconfident`` / ``underconfident`` from the mean NEES, the
     observed 95 % coverage, the query count n and optionally the NEES's bootstrap CI
     (see the module doc); None with n = 0."""
@@ -178,9 +182,13 @@ def verdict(nees: float, cov95: float, n: int,
     return CALIBRATED
 
 
-def calibration_summary(err: np.ndarray, cov: np.ndarray, clusters: np.ndarray | None = None,
-                        times: np.ndarray | None = None, with_ci: bool = True
-                        ) -> dict[str, Any]:
+def calibration_summary(
+    err: np.ndarray,
+    cov: np.ndarray,
+    clusters: np.ndarray | None = None,
+    times: np.ndarray | None = None,
+    with_ci: bool = True,
+) -> dict[str, Any]:
     """Every figure of one group of queries.
 
     Args:
@@ -200,13 +208,17 @@ def calibration_summary(err: np.ndarray, cov: np.ndarray, clusters: np.ndarray |
     covered = coverage(d2[ok])
     nees = float(d2[ok].mean()) if n else math.nan
     out: dict[str, Any] = {
-        "count": n, "nees": nees, "nees_ci95": None,
+        "count": n,
+        "nees": nees,
+        "nees_ci95": None,
         "nees_chi2_95": list(nees_interval(n)),
-        "coverage": {f"{round(p * 100):d}": float(c) for p, c in
-                     zip(COVERAGE_LEVELS, covered, strict=True)},
+        "coverage": {
+            f"{round(p * 100):d}": float(c) for p, c in zip(COVERAGE_LEVELS, covered, strict=True)
+        },
         "sharpness_m2": sharpness_m2(np.asarray(cov, dtype=float).reshape(-1, 3)[ok]),
         "loglik": float(np.mean(log_likelihood(d2[ok], np.asarray(cov).reshape(-1, 3)[ok])))
-        if n else math.nan,
+        if n
+        else math.nan,
     }
     if with_ci and n:
         from posbench.metrics.bootstrap import summary_ci
@@ -214,19 +226,21 @@ def calibration_summary(err: np.ndarray, cov: np.ndarray, clusters: np.ndarray |
         cl = np.zeros(n, dtype=np.int64) if clusters is None else np.asarray(clusters)[ok]
         tt = None if times is None else np.asarray(times, dtype=float)[ok]
         out["nees_ci95"] = list(summary_ci(d2[ok], cl, tt)["mean_m"])
-    out["verdict"] = verdict(nees, float(covered[COVERAGE_LEVELS.index(0.95)]), n,
-                             out["nees_ci95"])
+    out["verdict"] = verdict(nees, float(covered[COVERAGE_LEVELS.index(0.95)]), n, out["nees_ci95"])
     return out
 
 
-def since_fix_bin(since_fix_s: np.ndarray, edges: Sequence[float] = SINCE_FIX_EDGES_S
-                  ) -> tuple[np.ndarray, list[str]]:
+def since_fix_bin(
+    since_fix_s: np.ndarray, edges: Sequence[float] = SINCE_FIX_EDGES_S
+) -> tuple[np.ndarray, list[str]]:
     """Bin index of each time since the last fix [s] (-1: NaN or outside) and the bins'
     names (``"0-0.25s"``, ..., ``">=2s"``)."""
     from posbench.metrics.outages import since_fix_bins
 
     e = np.asarray(edges, dtype=float)
     idx = since_fix_bins(since_fix_s, e)
-    names = [f"{a:g}-{b:g}s" if math.isfinite(b) else f">={a:g}s"
-             for a, b in zip(e[:-1], e[1:], strict=True)]
+    names = [
+        f"{a:g}-{b:g}s" if math.isfinite(b) else f">={a:g}s"
+        for a, b in zip(e[:-1], e[1:], strict=True)
+    ]
     return idx, names

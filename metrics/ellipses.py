@@ -48,8 +48,9 @@ def ellipse_axes(cov: np.ndarray, p: float = 0.95) -> tuple[np.ndarray, np.ndarr
     return major, minor, theta
 
 
-def ellipse_outlines(cov: np.ndarray, p: float = 0.95, segments: int = ELLIPSE_SEGMENTS
-                     ) -> np.ndarray:
+def ellipse_outlines(
+    cov: np.ndarray, p: float = 0.95, segments: int = ELLIPSE_SEGMENTS
+) -> np.ndarray:
     """Closed outlines of the p-ellipses, relative to their centres.
 
     Args:

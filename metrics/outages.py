@@ -19,8 +19,33 @@ from posbench.metrics.accuracy import summarize
 SINCE_FIX_CHECKPOINTS_S = (0.2, 0.5, 1.0, 2.0, 5.0)
 #: edges [s] of the time-since-last-fix bins of a curve of error over it, 0.1 s to 10 min
 #: (:func:`since_fix_bins` with ``open_last``: the last bin takes everything past 300 s)
-SINCE_FIX_CURVE_EDGES_S = (0, 0.1, 0.2, 0.3, 0.5, 0.75, 1, 1.5, 2, 3, 4, 5, 6, 8, 10, 15, 20,
-                           30, 45, 60, 90, 120, 180, 300, 600)
+SINCE_FIX_CURVE_EDGES_S = (
+    0,
+    0.1,
+    0.2,
+    0.3,
+    0.5,
+    0.75,
+    1,
+    1.5,
+    2,
+    3,
+    4,
+    5,
+    6,
+    8,
+    10,
+    15,
+    20,
+    30,
+    45,
+    60,
+    90,
+    120,
+    180,
+    300,
+    600,
+)
 #: a query counts for a checkpoint when its time since the last fix is this close to it [s]
 SINCE_FIX_TOLERANCE_S = 0.05
 #: an outage is missed when its FDE exceeds this [m]
@@ -28,13 +53,15 @@ MISS_THRESHOLD_M = 2.0
 
 #: what each figure of this module means (the report's glossary collects these)
 DEFINITIONS = {
-    "after fix": ("mean current-position (now) error over the queries whose time since the "
-                  f"last received fix is within {SINCE_FIX_TOLERANCE_S:g} s of the checkpoint "
-                  "(0.2 s, 0.5 s, ...), in runs with GPS dropouts."),
+    "after fix": (
+        "mean current-position (now) error over the queries whose time since the "
+        f"last received fix is within {SINCE_FIX_TOLERANCE_S:g} s of the checkpoint "
+        "(0.2 s, 0.5 s, ...), in runs with GPS dropouts."
+    ),
     "ADE": "average displacement error: mean now-error over one GPS outage's queries, then "
-           "averaged over outages [m].",
+    "averaged over outages [m].",
     "FDE": "final displacement error: now-error of an outage's last query, just before the "
-           "fix returns, averaged over outages (FDE p95: its 95th percentile) [m].",
+    "fix returns, averaged over outages (FDE p95: its 95th percentile) [m].",
     "miss rate": f"share of outages whose FDE exceeds {MISS_THRESHOLD_M:g} m.",
 }
 
@@ -70,17 +97,21 @@ def outage_drive(keys: np.ndarray) -> np.ndarray:
     return np.asarray(keys) // OUTAGE_ID_BASE
 
 
-def error_vs_since_fix(errors: np.ndarray, since_fix_s: np.ndarray,
-                       checkpoints_s: Sequence[float] = SINCE_FIX_CHECKPOINTS_S,
-                       tolerance_s: float = SINCE_FIX_TOLERANCE_S) -> dict[str, dict]:
+def error_vs_since_fix(
+    errors: np.ndarray,
+    since_fix_s: np.ndarray,
+    checkpoints_s: Sequence[float] = SINCE_FIX_CHECKPOINTS_S,
+    tolerance_s: float = SINCE_FIX_TOLERANCE_S,
+) -> dict[str, dict]:
     """Summary of errors at each checkpoint of time since the last fix, keyed like ``"1s"``."""
     e = np.asarray(errors, dtype=float)
     s = np.asarray(since_fix_s, dtype=float)
     return {f"{c:g}s": summarize(e[np.abs(s - c) <= tolerance_s]) for c in checkpoints_s}
 
 
-def since_fix_bins(since_fix_s: np.ndarray, edges: Sequence[float],
-                   open_last: bool = False) -> np.ndarray:
+def since_fix_bins(
+    since_fix_s: np.ndarray, edges: Sequence[float], open_last: bool = False
+) -> np.ndarray:
     """The bin of each time since the last fix [s] among ``edges`` (bin i holds
     ``edges[i] <= s < edges[i + 1]``); -1 for NaN, before the first edge and past the last
     one, unless ``open_last`` puts those past it into the last bin."""
@@ -93,9 +124,11 @@ def since_fix_bins(since_fix_s: np.ndarray, edges: Sequence[float],
     return idx
 
 
-def since_fix_checkpoint(since_fix_s: np.ndarray,
-                         checkpoints_s: Sequence[float] = SINCE_FIX_CHECKPOINTS_S,
-                         tolerance_s: float = SINCE_FIX_TOLERANCE_S) -> np.ndarray:
+def since_fix_checkpoint(
+    since_fix_s: np.ndarray,
+    checkpoints_s: Sequence[float] = SINCE_FIX_CHECKPOINTS_S,
+    tolerance_s: float = SINCE_FIX_TOLERANCE_S,
+) -> np.ndarray:
     """The key of :func:`error_vs_since_fix` (``"1s"``, ...) each query counts for, ``""``
     for none (the checkpoints are further apart than twice the tolerance)."""
     s = np.asarray(since_fix_s, dtype=float)
@@ -105,8 +138,9 @@ def since_fix_checkpoint(since_fix_s: np.ndarray,
     return out
 
 
-def per_outage(errors: np.ndarray, t_query: np.ndarray, ids: np.ndarray
-               ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+def per_outage(
+    errors: np.ndarray, t_query: np.ndarray, ids: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Per outage with at least one finite error, in increasing id: its id, ADE [m] (mean
     error over its queries), FDE [m] (error of its last query) and the time of that last
     query [s]."""
@@ -123,12 +157,20 @@ def per_outage(errors: np.ndarray, t_query: np.ndarray, ids: np.ndarray
         ade.append(e[sel].mean())
         fde.append(e[last])
         t_end.append(t[last])
-    return (np.asarray(out_id, dtype=np.int64), np.asarray(ade, dtype=float),
-            np.asarray(fde, dtype=float), np.asarray(t_end, dtype=float))
+    return (
+        np.asarray(out_id, dtype=np.int64),
+        np.asarray(ade, dtype=float),
+        np.asarray(fde, dtype=float),
+        np.asarray(t_end, dtype=float),
+    )
 
 
-def outage_scores(errors: np.ndarray, t_query: np.ndarray, ids: np.ndarray,
-                  miss_threshold_m: float = MISS_THRESHOLD_M) -> dict[str, float | int]:
+def outage_scores(
+    errors: np.ndarray,
+    t_query: np.ndarray,
+    ids: np.ndarray,
+    miss_threshold_m: float = MISS_THRESHOLD_M,
+) -> dict[str, float | int]:
     """ADE / FDE statistics over outages and the miss rate.
 
     Args:

@@ -28,8 +28,9 @@ SUMMARY_STATS = ("mean_m", "rmse_m")
 QUANTILE_STATS = {"median_m": 0.5, "p95_m": 0.95}
 
 
-def pooled_mean_by_resample(counts: np.ndarray, means: np.ndarray, weights: np.ndarray
-                            ) -> tuple[float, np.ndarray]:
+def pooled_mean_by_resample(
+    counts: np.ndarray, means: np.ndarray, weights: np.ndarray
+) -> tuple[float, np.ndarray]:
     """The mean error [m] pooled over drives from their query counts and means, and its
     value under each resample."""
     n = np.asarray(counts, dtype=float)
@@ -37,8 +38,9 @@ def pooled_mean_by_resample(counts: np.ndarray, means: np.ndarray, weights: np.n
     return float(x.sum() / n.sum()), resampled_means(x, n, weights)
 
 
-def pooled_rmse_by_resample(counts: np.ndarray, rmses: np.ndarray, weights: np.ndarray
-                            ) -> tuple[float, np.ndarray]:
+def pooled_rmse_by_resample(
+    counts: np.ndarray, rmses: np.ndarray, weights: np.ndarray
+) -> tuple[float, np.ndarray]:
     """The RMSE [m] pooled over drives from their query counts and RMSEs, and its value under
     each resample."""
     n = np.asarray(counts, dtype=float)
@@ -53,19 +55,23 @@ def pooled_max_by_resample(maxes: np.ndarray, weights: np.ndarray) -> tuple[floa
     return float(m.max()), np.where(weights > 0, m, -np.inf).max(axis=1)
 
 
-def pooled_quantile_by_resample(errors: Sequence[np.ndarray], q: float, weights: np.ndarray
-                                ) -> tuple[float, np.ndarray]:
+def pooled_quantile_by_resample(
+    errors: Sequence[np.ndarray], q: float, weights: np.ndarray
+) -> tuple[float, np.ndarray]:
     """Quantile ``q`` (0..1, linear interpolation) of the pooled errors [m] of drives (one
     array per drive), and its value under each resample; exact (weights are drive
     multiplicities)."""
     values = np.concatenate(errors)
     units = np.concatenate([np.full(len(e), i, dtype=np.int64) for i, e in enumerate(errors)])
     order = np.argsort(values, kind="stable")
-    return (float(np.quantile(values, q)),
-            resampled_quantiles(values[order], units[order], weights, (q,))[:, 0])
+    return (
+        float(np.quantile(values, q)),
+        resampled_quantiles(values[order], units[order], weights, (q,))[:, 0],
+    )
 
 
-def paired_interval(old_resampled: np.ndarray, new_resampled: np.ndarray,
-                    level: float = LEVEL) -> tuple[float, float]:
+def paired_interval(
+    old_resampled: np.ndarray, new_resampled: np.ndarray, level: float = LEVEL
+) -> tuple[float, float]:
     """The percentile interval of NEW - OLD over the shared resamples."""
     return percentile_interval(np.asarray(new_resampled) - np.asarray(old_resampled), level)

@@ -45,9 +45,12 @@ def _last_at_most(table: np.ndarray, rank: np.ndarray) -> np.ndarray:
     return lo
 
 
-def resampled_quantiles(sorted_values: np.ndarray, units: np.ndarray,
-                        counts_matrix: np.ndarray, qs: tuple[float, ...] = (0.5, 0.95)
-                        ) -> np.ndarray:
+def resampled_quantiles(
+    sorted_values: np.ndarray,
+    units: np.ndarray,
+    counts_matrix: np.ndarray,
+    qs: tuple[float, ...] = (0.5, 0.95),
+) -> np.ndarray:
     """Quantiles of every resample, exactly as ``np.percentile`` (linear interpolation)
     would give them on the resample written out (each value repeated as often as its unit
     is drawn).
@@ -71,9 +74,11 @@ def resampled_quantiles(sorted_values: np.ndarray, units: np.ndarray,
     return resampled_quantiles_many([(sorted_values, units)], counts_matrix, qs)[0]
 
 
-def resampled_quantiles_many(series: Sequence[tuple[np.ndarray, np.ndarray]],
-                             counts_matrix: np.ndarray, qs: tuple[float, ...] = (0.5, 0.95)
-                             ) -> list[np.ndarray]:
+def resampled_quantiles_many(
+    series: Sequence[tuple[np.ndarray, np.ndarray]],
+    counts_matrix: np.ndarray,
+    qs: tuple[float, ...] = (0.5, 0.95),
+) -> list[np.ndarray]:
     """:func:`resampled_quantiles` of several series (each: sorted values and their units)
     whose units share the resamples ``counts_matrix`` (e.g. each predictor's errors on the
     same queries), in one pass: one matrix product and one search for all of them."""
@@ -85,7 +90,7 @@ def resampled_quantiles_many(series: Sequence[tuple[np.ndarray, np.ndarray]],
         return outs
     n_max = max(np.asarray(series[i][0]).size for i in live)
     # a resample holds at most n * n_units values: exact in float32 below 2**23
-    ftype = np.float32 if float(n_max) * n_units < 2.0 ** 23 else np.float64
+    ftype = np.float32 if float(n_max) * n_units < 2.0**23 else np.float64
     wf = np.ascontiguousarray(w, dtype=ftype)  # no copy for the cached float32 weights
     k = _coarse_blocks(n_max, n_units)
     length = -(-n_max // k)
@@ -104,14 +109,15 @@ def resampled_quantiles_many(series: Sequence[tuple[np.ndarray, np.ndarray]],
         sizes[:, j] = hist.sum(axis=1)
         # positions past n pad the last block: weight there only adds after the
         # resample's last value, so it is never counted
-        unit_blocks[j, :v.size] = u
-        value_blocks[j, :v.size] = v
-        value_blocks[j, v.size:] = v[-1]
+        unit_blocks[j, : v.size] = u
+        value_blocks[j, : v.size] = v
+        value_blocks[j, v.size :] = v[-1]
     unit_blocks = unit_blocks.reshape(n_ser * k, length)
     value_blocks = value_blocks.reshape(n_ser * k, length)
     # per (series, resample) row: weight before each block start, and the resample's size
-    wm = np.ascontiguousarray((wf @ before.reshape(n_units, n_ser * k))
-                              .reshape(n_res, n_ser, k).transpose(1, 0, 2)).reshape(-1, k)
+    wm = np.ascontiguousarray(
+        (wf @ before.reshape(n_units, n_ser * k)).reshape(n_res, n_ser, k).transpose(1, 0, 2)
+    ).reshape(-1, k)
     total = (wf @ sizes).T.ravel().astype(np.float64)
     n_rows = n_ser * n_res
     rows = np.arange(n_rows)
@@ -124,8 +130,7 @@ def resampled_quantiles_many(series: Sequence[tuple[np.ndarray, np.ndarray]],
     def count_le(cum: np.ndarray, limit: np.ndarray) -> np.ndarray:
         return (cum <= limit[:, None]).view(np.int8).sum(axis=1, dtype=np.int64)
 
-    def locate(rank: np.ndarray, which: np.ndarray | None = None
-               ) -> tuple[np.ndarray, np.ndarray]:
+    def locate(rank: np.ndarray, which: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
         """Row of the block table and cumulative weights of the block holding ``rank``
         (in rows ``which``, default all)."""
         sub = wm if which is None else wm[which]
@@ -162,5 +167,5 @@ def resampled_quantiles_many(series: Sequence[tuple[np.ndarray, np.ndarray]],
         hi = np.where(r + 1.0 <= last, hi, lo)
         res[:, j] = np.where(ok, lo + (h - r) * (hi - lo), np.nan)
     for j, i in enumerate(live):
-        outs[i] = res[j * n_res:(j + 1) * n_res]
+        outs[i] = res[j * n_res : (j + 1) * n_res]
     return outs

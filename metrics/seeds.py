@@ -16,7 +16,8 @@ DEFINITIONS = {
         "the run repeated with other GPS-noise and dropout seeds (same drives, same "
         "predictors): mean, sd (sample standard deviation, n - 1), min and max of the figure "
         "over the seeds. It measures the effect of the random draw, not of the choice of "
-        "drives (that is the 95 % CI)."),
+        "drives (that is the 95 % CI)."
+    ),
 }
 
 
@@ -28,8 +29,13 @@ def spread(values: np.ndarray) -> dict[str, float | int]:
     nan = float("nan")
     if v.size == 0:
         return {"mean": nan, "sd": nan, "min": nan, "max": nan, "n": 0}
-    return {"mean": float(v.mean()), "sd": float(v.std(ddof=1)) if v.size > 1 else nan,
-            "min": float(v.min()), "max": float(v.max()), "n": int(v.size)}
+    return {
+        "mean": float(v.mean()),
+        "sd": float(v.std(ddof=1)) if v.size > 1 else nan,
+        "min": float(v.min()),
+        "max": float(v.max()),
+        "n": int(v.size),
+    }
 
 
 def paired_mean_difference(baseline: np.ndarray, other: np.ndarray) -> float:

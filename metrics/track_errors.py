@@ -33,26 +33,38 @@ TURN_RATE_RAD_S = 0.05
 #: half the time between the reference positions the heading is taken from [s]
 HEADING_DT_S = 0.1
 
-TRACK_SUMMARY_KEYS = ("count", "standstill", "along_mean_m", "along_p95_abs_m", "cross_mean_m",
-                      "cross_p95_abs_m", "turning", "inward_mean_m")
+TRACK_SUMMARY_KEYS = (
+    "count",
+    "standstill",
+    "along_mean_m",
+    "along_p95_abs_m",
+    "cross_mean_m",
+    "cross_p95_abs_m",
+    "turning",
+    "inward_mean_m",
+)
 
 #: what each figure means (a report's glossary may collect these)
 DEFINITIONS = {
     "along-track": "component [m] of answer - reference along the reference's direction of "
-                   "travel: positive = ahead, negative = lagging behind.",
+    "travel: positive = ahead, negative = lagging behind.",
     "cross-track": "component [m] of answer - reference to the left of the reference's "
-                   "direction of travel (ENU): positive = left, negative = right.",
+    "direction of travel (ENU): positive = left, negative = right.",
     "inward": f"cross-track [m] signed by the turn direction while the reference turns at "
-              f">= {TURN_RATE_RAD_S:g} rad/s: positive = toward the inside of the turn "
-              f"(cutting the corner), negative = outside (running wide).",
+    f">= {TURN_RATE_RAD_S:g} rad/s: positive = toward the inside of the turn "
+    f"(cutting the corner), negative = outside (running wide).",
     "standstill": f"queries whose reference moves slower than {STANDSTILL_MPS:g} m/s: no "
-                  f"direction of travel, no along/cross-track error (counted, not averaged).",
+    f"direction of travel, no along/cross-track error (counted, not averaged).",
 }
 
 
-def reference_motion(before_xy: np.ndarray, at_xy: np.ndarray, after_xy: np.ndarray,
-                     dt_s: float = HEADING_DT_S, min_speed_mps: float = STANDSTILL_MPS
-                     ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def reference_motion(
+    before_xy: np.ndarray,
+    at_xy: np.ndarray,
+    after_xy: np.ndarray,
+    dt_s: float = HEADING_DT_S,
+    min_speed_mps: float = STANDSTILL_MPS,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Heading, speed and yaw rate of a reference track from its positions at t - dt, t, t + dt.
 
     Args:
@@ -73,35 +85,42 @@ def reference_motion(before_xy: np.ndarray, at_xy: np.ndarray, after_xy: np.ndar
     forward = (f - a) / dt_s
     backward = (a - b) / dt_s
     ok_c = np.all(np.isfinite(central), axis=1)
-    v = np.where(ok_c[:, None], central,
-                 np.where(np.all(np.isfinite(forward), axis=1)[:, None], forward, backward))
+    v = np.where(
+        ok_c[:, None],
+        central,
+        np.where(np.all(np.isfinite(forward), axis=1)[:, None], forward, backward),
+    )
     speed = np.hypot(v[:, 0], v[:, 1])
     moving = speed >= min_speed_mps  # False for NaN
     heading = np.where(moving, np.arctan2(v[:, 1], v[:, 0]), np.nan)
     d1, d2 = a - b, f - a
-    turn = np.arctan2(d1[:, 0] * d2[:, 1] - d1[:, 1] * d2[:, 0],
-                      d1[:, 0] * d2[:, 0] + d1[:, 1] * d2[:, 1])  # signed angle d1 -> d2
+    turn = np.arctan2(
+        d1[:, 0] * d2[:, 1] - d1[:, 1] * d2[:, 0], d1[:, 0] * d2[:, 0] + d1[:, 1] * d2[:, 1]
+    )  # signed angle d1 -> d2
     yaw_rate = np.where(moving & ok_c, turn / dt_s, np.nan)
     return heading, speed, yaw_rate
 
 
-def track_errors(answer_xy: np.ndarray, ref_xy: np.ndarray, heading_rad: np.ndarray
-                 ) -> tuple[np.ndarray, np.ndarray]:
+def track_errors(
+    answer_xy: np.ndarray, ref_xy: np.ndarray, heading_rad: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
     """Along-track and cross-track errors [m] of (N, 2) answers against (N, 2) references
     [m, ENU] whose direction of travel is ``heading_rad`` [rad, counter-clockwise from east].
 
     along = d . (cos h, sin h), cross = d . (-sin h, cos h) with d = answer - reference, so
     along**2 + cross**2 = |d|**2. NaN where the answer, the reference or the heading is.
     """
-    d = np.asarray(answer_xy, dtype=float).reshape(-1, 2) - np.asarray(ref_xy, dtype=float
-                                                                       ).reshape(-1, 2)
+    d = np.asarray(answer_xy, dtype=float).reshape(-1, 2) - np.asarray(ref_xy, dtype=float).reshape(
+        -1, 2
+    )
     h = np.asarray(heading_rad, dtype=float).ravel()
     c, s = np.cos(h), np.sin(h)
     return d[:, 0] * c + d[:, 1] * s, -d[:, 0] * s + d[:, 1] * c
 
 
-def inward_cross(cross_m: np.ndarray, yaw_rate_rad_s: np.ndarray,
-                 min_rate_rad_s: float = TURN_RATE_RAD_S) -> np.ndarray:
+def inward_cross(
+    cross_m: np.ndarray, yaw_rate_rad_s: np.ndarray, min_rate_rad_s: float = TURN_RATE_RAD_S
+) -> np.ndarray:
     """Cross-track error [m] signed by the turn: positive toward the inside of the turn.
 
     In a left turn (yaw rate > 0) the inside is left, so inward = cross; in a right turn
@@ -114,8 +133,9 @@ def inward_cross(cross_m: np.ndarray, yaw_rate_rad_s: np.ndarray,
     return np.where(turning, c * np.sign(r), np.nan)
 
 
-def track_summary(along_m: np.ndarray, cross_m: np.ndarray, inward_m: np.ndarray,
-                  error_m: np.ndarray) -> dict[str, float | int]:
+def track_summary(
+    along_m: np.ndarray, cross_m: np.ndarray, inward_m: np.ndarray, error_m: np.ndarray
+) -> dict[str, float | int]:
     """Summary of along/cross-track errors [m] over one group of queries.
 
     ``count``: queries with a finite along/cross error; ``standstill``: queries with a

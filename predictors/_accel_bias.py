@@ -40,8 +40,9 @@ class AccelBiasEstimator:
             heading is dropped.
     """
 
-    def __init__(self, tau_s: float = 30.0, min_window_s: float = 2.0,
-                 max_window_s: float = 10.0) -> None:
+    def __init__(
+        self, tau_s: float = 30.0, min_window_s: float = 2.0, max_window_s: float = 10.0
+    ) -> None:
         self.tau_s = float(tau_s)
         self.min_window_s = float(min_window_s)
         self.max_window_s = float(max_window_s)
@@ -87,7 +88,7 @@ class AccelBiasEstimator:
             return
         ref = self._ref
         if not self._ready:
-            ref.init(x, y, var, REF_INIT_VEL_SIGMA ** 2, REF_INIT_ACC_SIGMA ** 2)
+            ref.init(x, y, var, REF_INIT_VEL_SIGMA**2, REF_INIT_ACC_SIGMA**2)
             self._ready, self._t_ref = True, t
             return
         if t > self._t_ref:

@@ -38,8 +38,14 @@ def predict_sym(m: tuple, d: float, h: float, q: tuple) -> tuple:
     g02 = m02 + d * m12 + h * m22
     g11 = m11 + d * m12
     g12 = m12 + d * m22
-    return (g00 + d * g01 + h * g02 + q[0], g01 + d * g02 + q[1], g02 + q[2],
-            g11 + d * g12 + q[3], g12 + q[4], m22 + q[5])
+    return (
+        g00 + d * g01 + h * g02 + q[0],
+        g01 + d * g02 + q[1],
+        g02 + q[2],
+        g11 + d * g12 + q[3],
+        g12 + q[4],
+        m22 + q[5],
+    )
 
 
 def predict_cross(c: tuple, d: float, h: float) -> tuple:
@@ -51,17 +57,31 @@ def predict_cross(c: tuple, d: float, h: float) -> tuple:
     g10 = c10 + d * c20
     g11 = c11 + d * c21
     g12 = c12 + d * c22
-    return (g00 + d * g01 + h * g02, g01 + d * g02, g02,
-            g10 + d * g11 + h * g12, g11 + d * g12, g12,
-            c20 + d * c21 + h * c22, c21 + d * c22, c22)
+    return (
+        g00 + d * g01 + h * g02,
+        g01 + d * g02,
+        g02,
+        g10 + d * g11 + h * g12,
+        g11 + d * g12,
+        g12,
+        c20 + d * c21 + h * c22,
+        c21 + d * c22,
+        c22,
+    )
 
 
 def ca_noise_block(d: float, psd: float) -> tuple:
     """Six upper entries of the per-axis white-jerk Q (psd [m^2/s^5]) over d [s]."""
     d2 = d * d
     d3 = d2 * d
-    return (psd * (d3 * d2 / 20.0), psd * (d2 * d2 / 8.0), psd * (d3 / 6.0),
-            psd * (d3 / 3.0), psd * (d2 / 2.0), psd * d)
+    return (
+        psd * (d3 * d2 / 20.0),
+        psd * (d2 * d2 / 8.0),
+        psd * (d3 / 6.0),
+        psd * (d3 / 3.0),
+        psd * (d2 / 2.0),
+        psd * d,
+    )
 
 
 class CaFilter2D:
@@ -111,15 +131,35 @@ class CaFilter2D:
         u0, u1, u2 = x0 * w, x1 * w, x2 * w
         v0, v1, v2 = y0 * w, y1 * w, y2 * w
         a00, a01, a02, a11, a12, a22 = self.A
-        self.A = (a00 - u0 * x0, a01 - u0 * x1, a02 - u0 * x2,
-                  a11 - u1 * x1, a12 - u1 * x2, a22 - u2 * x2)
+        self.A = (
+            a00 - u0 * x0,
+            a01 - u0 * x1,
+            a02 - u0 * x2,
+            a11 - u1 * x1,
+            a12 - u1 * x2,
+            a22 - u2 * x2,
+        )
         b00, b01, b02, b11, b12, b22 = self.B
-        self.B = (b00 - v0 * y0, b01 - v0 * y1, b02 - v0 * y2,
-                  b11 - v1 * y1, b12 - v1 * y2, b22 - v2 * y2)
+        self.B = (
+            b00 - v0 * y0,
+            b01 - v0 * y1,
+            b02 - v0 * y2,
+            b11 - v1 * y1,
+            b12 - v1 * y2,
+            b22 - v2 * y2,
+        )
         c00, c01, c02, c10, c11, c12, c20, c21, c22 = self.C
-        self.C = (c00 - u0 * y0, c01 - u0 * y1, c02 - u0 * y2,
-                  c10 - u1 * y0, c11 - u1 * y1, c12 - u1 * y2,
-                  c20 - u2 * y0, c21 - u2 * y1, c22 - u2 * y2)
+        self.C = (
+            c00 - u0 * y0,
+            c01 - u0 * y1,
+            c02 - u0 * y2,
+            c10 - u1 * y0,
+            c11 - u1 * y1,
+            c12 - u1 * y2,
+            c20 - u2 * y0,
+            c21 - u2 * y1,
+            c22 - u2 * y2,
+        )
 
     def update_pair(self, k: int, zx: float, zy: float, r: float) -> None:
         """Measurement of component k (0 position, 1 velocity, 2 acceleration) on both

@@ -46,8 +46,14 @@ def fit_cubic_xy(t: np.ndarray, xy: np.ndarray) -> tuple[Cubic, Cubic, float, fl
     np.multiply(M[2], s, out=M[3])
     np.subtract(xy, xy[:, -1:], out=M[4:])
     x0, y0 = float(xy[0, -1]), float(xy[1, -1])
-    ((g00, g01, g02, g03), (_, g11, g12, g13), (_, _, g22, g23), (_, _, _, g33),
-     (bx0, bx1, bx2, bx3), (by0, by1, by2, by3)) = (M @ M[:4].T).tolist()
+    (
+        (g00, g01, g02, g03),
+        (_, g11, g12, g13),
+        (_, _, g22, g23),
+        (_, _, _, g33),
+        (bx0, bx1, bx2, bx3),
+        (by0, by1, by2, by3),
+    ) = (M @ M[:4].T).tolist()
     # G = L D L' (L unit lower triangular); e_ij = l_ij d_j
     d0 = g00
     l10, l20, l30 = g01 / d0, g02 / d0, g03 / d0

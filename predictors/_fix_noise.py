@@ -29,8 +29,14 @@ class FixNoise:
         warmup: samples before the estimate replaces ``initial_var``.
     """
 
-    def __init__(self, initial_var: float, memory: float = 30.0, floor_var: float = 1e-6,
-                 clip: float = 9.0, warmup: int = 5) -> None:
+    def __init__(
+        self,
+        initial_var: float,
+        memory: float = 30.0,
+        floor_var: float = 1e-6,
+        clip: float = 9.0,
+        warmup: int = 5,
+    ) -> None:
         self.initial_var = float(initial_var)
         self.memory = float(memory)
         self.floor_var = float(floor_var)

@@ -63,7 +63,7 @@ class FixBuffer:
         end = self._start + self.n
         if end == self._data.shape[1]:
             keep = min(self.n, self.capacity - 1)
-            self._data[:, :keep] = self._data[:, end - keep:end]
+            self._data[:, :keep] = self._data[:, end - keep : end]
             self._start, self.n, end = 0, keep, keep
         self._data[0, end] = t
         self._data[1, end] = x
@@ -75,24 +75,24 @@ class FixBuffer:
 
     @property
     def t(self) -> np.ndarray:
-        return self._data[0, self._start:self._start + self.n]
+        return self._data[0, self._start : self._start + self.n]
 
     @property
     def x(self) -> np.ndarray:
-        return self._data[1, self._start:self._start + self.n]
+        return self._data[1, self._start : self._start + self.n]
 
     @property
     def y(self) -> np.ndarray:
-        return self._data[2, self._start:self._start + self.n]
+        return self._data[2, self._start : self._start + self.n]
 
     def xy_from(self, i: int) -> np.ndarray:
         """Positions of the fixes from view index i to the newest, shape (n - i, 2) (a view)."""
-        return self._data[1:3, self._start + i:self._start + self.n].T
+        return self._data[1:3, self._start + i : self._start + self.n].T
 
     def xy_rows_from(self, i: int) -> np.ndarray:
         """Positions of the fixes from view index i to the newest as rows x, y: shape
         (2, n - i), a view with contiguous rows."""
-        return self._data[1:3, self._start + i:self._start + self.n]
+        return self._data[1:3, self._start + i : self._start + self.n]
 
     def last(self, k: int = 1) -> tuple[float, float, float]:
         """The k-th newest fix (k = 1: newest) as (t, x, y)."""

@@ -36,8 +36,13 @@ class CourseHeading:
         hold_psd: heading variance growth [rad^2/s] without a yaw rate.
     """
 
-    def __init__(self, gate: float = 3.0, max_chord_s: float = 10.0, rate_psd: float = 1e-3,
-                 hold_psd: float = 0.05) -> None:
+    def __init__(
+        self,
+        gate: float = 3.0,
+        max_chord_s: float = 10.0,
+        rate_psd: float = 1e-3,
+        hold_psd: float = 0.05,
+    ) -> None:
         self.gate = float(gate)
         self.max_chord_s = float(max_chord_s)
         self.rate_psd = float(rate_psd)

@@ -53,10 +53,20 @@ class ModelBank(Predictor):
 
     name = "bank"
 
-    def __init__(self, members: Sequence[Predictor], labels: Sequence[str],
-                 memory_fixes: float = 20.0, huber_k: float = 3.0, cov_scale: float = 1.0) -> None:
-        check_config("bank", memory_fixes=(memory_fixes, 1.0, 1e6), huber_k=(huber_k, 0.1, 1e3),
-                     cov_scale=(cov_scale, 1e-6, 1e6))
+    def __init__(
+        self,
+        members: Sequence[Predictor],
+        labels: Sequence[str],
+        memory_fixes: float = 20.0,
+        huber_k: float = 3.0,
+        cov_scale: float = 1.0,
+    ) -> None:
+        check_config(
+            "bank",
+            memory_fixes=(memory_fixes, 1.0, 1e6),
+            huber_k=(huber_k, 0.1, 1e3),
+            cov_scale=(cov_scale, 1e-6, 1e6),
+        )
         if not members or len(members) != len(labels):
             raise ValueError("ModelBank needs members and one label each")
         self.members = list(members)

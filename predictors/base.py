@@ -90,8 +90,10 @@ class ModelFileSeams:
 
     def model_description(self) -> dict:
         """``{"model": the model file's path (or :attr:`bundled_text`), "bundled": bool}``."""
-        return {"model": self.bundled_text if self.bundled else str(self.model_path),
-                "bundled": self.bundled}
+        return {
+            "model": self.bundled_text if self.bundled else str(self.model_path),
+            "bundled": self.bundled,
+        }
 
     def training_drives(self) -> tuple[str, ...]:
         """The drive names model.json records under ``data.train_drives`` (() if none)."""
@@ -116,5 +118,9 @@ def accepts_sigma(observe_gps: Callable[..., object]) -> bool:
         params = inspect.signature(observe_gps).parameters.values()
     except (TypeError, ValueError):  # a builtin without a signature: the old form
         return False
-    return any(p.name == "sigma" and p.kind in (p.POSITIONAL_OR_KEYWORD, p.KEYWORD_ONLY)
-               or p.kind is p.VAR_KEYWORD for p in params)
+    return any(
+        p.name == "sigma"
+        and p.kind in (p.POSITIONAL_OR_KEYWORD, p.KEYWORD_ONLY)
+        or p.kind is p.VAR_KEYWORD
+        for p in params
+    )

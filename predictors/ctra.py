@@ -97,7 +97,7 @@ def ctra_step(x: np.ndarray, T: float, F: np.ndarray) -> None:
     F (C order, at least 6x6) must hold the identity outside rows 0-3's model entries (it is
     fully rewritten there).
     """
-    px, py, yaw, v, w, a = x[:IA + 1].tolist()
+    px, py, yaw, v, w, a = x[: IA + 1].tolist()
     C0, S0, C1, S1, C2, S2 = ctra_integrals(w, T)
     dxb = v * C0 + a * C1
     dyb = v * S0 + a * S1
@@ -108,18 +108,51 @@ def ctra_step(x: np.ndarray, T: float, F: np.ndarray) -> None:
     ddxb_dw = -(v * S1 + a * S2)
     ddyb_dw = v * C1 + a * C2
     # F[0, 2], F[1, 2], F[0, 3], F[1, 3], F[0, 4], F[1, 4], F[0, 5], F[1, 5], F[2, 4], F[3, 5]
-    F.put(_flat("jac", F.shape[1]), (-dy, dx, c * C0 - s * S0, s * C0 + c * S0,
-                     c * ddxb_dw - s * ddyb_dw, s * ddxb_dw + c * ddyb_dw,
-                     c * C1 - s * S1, s * C1 + c * S1, T, T))
+    F.put(
+        _flat("jac", F.shape[1]),
+        (
+            -dy,
+            dx,
+            c * C0 - s * S0,
+            s * C0 + c * S0,
+            c * ddxb_dw - s * ddyb_dw,
+            s * ddxb_dw + c * ddyb_dw,
+            c * C1 - s * S1,
+            s * C1 + c * S1,
+            T,
+            T,
+        ),
+    )
     x[:IW] = (px + dx, py + dy, wrap_angle(yaw + w * T), v + a * T)
 
 
-_Q_ENTRIES = ((0, 0), (1, 1), (0, 1), (1, 0), (0, 3), (3, 0), (1, 3), (3, 1), (0, 5), (5, 0),
-              (1, 5), (5, 1), (3, 3), (3, 5), (5, 3), (5, 5), (2, 2), (2, 4), (4, 2), (4, 4))
+_Q_ENTRIES = (
+    (0, 0),
+    (1, 1),
+    (0, 1),
+    (1, 0),
+    (0, 3),
+    (3, 0),
+    (1, 3),
+    (3, 1),
+    (0, 5),
+    (5, 0),
+    (1, 5),
+    (5, 1),
+    (3, 3),
+    (3, 5),
+    (5, 3),
+    (5, 5),
+    (2, 2),
+    (2, 4),
+    (4, 2),
+    (4, 4),
+)
 
 
-def ctra_process_noise(yaw: float, T: float, jerk_psd: float, yaw_acc_psd: float,
-                       pos_psd: float, out: np.ndarray) -> np.ndarray:
+def ctra_process_noise(
+    yaw: float, T: float, jerk_psd: float, yaw_acc_psd: float, pos_psd: float, out: np.ndarray
+) -> np.ndarray:
     """Write the process noise over T [s] at heading yaw into the motion block (6x6) of
     ``out`` (C order, at least 6x6; its other entries are left as they are: zeros in a
     Q buffer)."""
@@ -136,8 +169,29 @@ def ctra_process_noise(yaw: float, T: float, jerk_psd: float, yaw_acc_psd: float
     q_va = qj * T2 / 2.0
     qw = yaw_acc_psd
     q_yw = qw * T2 / 2.0
-    out.put(_flat("q", out.shape[1]), (pp * c * c + pos_psd * T, pp * s * s + pos_psd * T,  # (0,0), (1,1)
-                     pcs, pcs, pvc, pvc, pvs, pvs, pac, pac, pas, pas,  # (0|1, 1|3|5), sym.
-                     qj * T3 / 3.0, q_va, q_va, qj * T,  # (3,3), (3,5), (5,3), (5,5)
-                     qw * T3 / 3.0, q_yw, q_yw, qw * T))  # (2,2), (2,4), (4,2), (4,4)
+    out.put(
+        _flat("q", out.shape[1]),
+        (
+            pp * c * c + pos_psd * T,
+            pp * s * s + pos_psd * T,  # (0,0), (1,1)
+            pcs,
+            pcs,
+            pvc,
+            pvc,
+            pvs,
+            pvs,
+            pac,
+            pac,
+            pas,
+            pas,  # (0|1, 1|3|5), sym.
+            qj * T3 / 3.0,
+            q_va,
+            q_va,
+            qj * T,  # (3,3), (3,5), (5,3), (5,5)
+            qw * T3 / 3.0,
+            q_yw,
+            q_yw,
+            qw * T,
+        ),
+    )  # (2,2), (2,4), (4,2), (4,4)
     return out

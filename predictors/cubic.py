@@ -42,8 +42,9 @@ def vandermonde(s: np.ndarray, degree: int = DEGREE) -> np.ndarray:
     return np.vander(np.asarray(s, dtype=float), degree + 1, increasing=True)
 
 
-def _prepare(t: np.ndarray, values: np.ndarray, t_ref: float | None, scale: float | None
-             ) -> tuple[np.ndarray, np.ndarray, float, float]:
+def _prepare(
+    t: np.ndarray, values: np.ndarray, t_ref: float | None, scale: float | None
+) -> tuple[np.ndarray, np.ndarray, float, float]:
     """Times and values as float arrays ((n,), (n, k)) and the time origin / scale [s]
     (defaults: the first time; the span of t, or 1 s if it is zero)."""
     t = np.asarray(t, dtype=float)
@@ -56,8 +57,13 @@ def _prepare(t: np.ndarray, values: np.ndarray, t_ref: float | None, scale: floa
     return t, y, t_ref, scale
 
 
-def fit_cubic(t: np.ndarray, values: np.ndarray, t_ref: float | None = None,
-              scale: float | None = None, degree: int = DEGREE) -> CubicFit:
+def fit_cubic(
+    t: np.ndarray,
+    values: np.ndarray,
+    t_ref: float | None = None,
+    scale: float | None = None,
+    degree: int = DEGREE,
+) -> CubicFit:
     """Closed-form least-squares polynomial fit.
 
     Args:
@@ -76,8 +82,9 @@ def fit_cubic(t: np.ndarray, values: np.ndarray, t_ref: float | None = None,
     return CubicFit(coef, t_ref, scale)
 
 
-def fit_cubic_lbfgs(t: np.ndarray, values: np.ndarray, t_ref: float | None = None,
-                    scale: float | None = None) -> CubicFit:
+def fit_cubic_lbfgs(
+    t: np.ndarray, values: np.ndarray, t_ref: float | None = None, scale: float | None = None
+) -> CubicFit:
     """The paper's iterative fit: minimise the squared residual with L-BFGS-B
     (analytic gradient), per channel. Slow (~ms); kept for latency comparison."""
     from scipy.optimize import minimize
@@ -92,7 +99,12 @@ def fit_cubic_lbfgs(t: np.ndarray, values: np.ndarray, t_ref: float | None = Non
             r = V @ c - yk
             return float(r @ r), 2.0 * (V.T @ r)
 
-        res = minimize(loss, np.zeros(DEGREE + 1), jac=True, method="L-BFGS-B",
-                       options={"ftol": 1e-15, "gtol": 1e-12, "maxiter": 500})
+        res = minimize(
+            loss,
+            np.zeros(DEGREE + 1),
+            jac=True,
+            method="L-BFGS-B",
+            options={"ftol": 1e-15, "gtol": 1e-12, "maxiter": 500},
+        )
         coefs.append(res.x)
     return CubicFit(np.stack(coefs, axis=1), t_ref, scale)

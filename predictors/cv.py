@@ -51,10 +51,20 @@ class ConstantVelocity(Predictor):
 
     name = "cv"
 
-    def __init__(self, window_s: float = 0.0, fix_sigma: float = 0.06,
-                 accel_sigma: float = 1.0, cov_scale: float = 1.0) -> None:
-        check_config("cv", window_s=(window_s, 0.0, 60.0), fix_sigma=(fix_sigma, 1e-4, 1e3),
-                     accel_sigma=(accel_sigma, 0.0, 1e3), cov_scale=(cov_scale, 1e-6, 1e6))
+    def __init__(
+        self,
+        window_s: float = 0.0,
+        fix_sigma: float = 0.06,
+        accel_sigma: float = 1.0,
+        cov_scale: float = 1.0,
+    ) -> None:
+        check_config(
+            "cv",
+            window_s=(window_s, 0.0, 60.0),
+            fix_sigma=(fix_sigma, 1e-4, 1e3),
+            accel_sigma=(accel_sigma, 0.0, 1e3),
+            cov_scale=(cov_scale, 1e-6, 1e6),
+        )
         self.window_s = float(window_s)
         self.fix_sigma = float(fix_sigma)
         self.accel_sigma = float(accel_sigma)
@@ -63,8 +73,12 @@ class ConstantVelocity(Predictor):
         self.reset()
 
     def config(self) -> dict:
-        return {"window_s": self.window_s, "fix_sigma": self.fix_sigma,
-                "accel_sigma": self.accel_sigma, "cov_scale": self.cov_scale}
+        return {
+            "window_s": self.window_s,
+            "fix_sigma": self.fix_sigma,
+            "accel_sigma": self.accel_sigma,
+            "cov_scale": self.cov_scale,
+        }
 
     def reset(self) -> None:
         self._buf.clear()

@@ -105,28 +105,53 @@ class CtraEkf(Predictor):
 
     name = "ekf"
 
-    def __init__(self, jerk_psd: float = 2.0, yaw_acc_psd: float = 0.1, pos_psd: float = 0.01,
-                 gps_sigma: float = 0.3, yaw_rate_sigma: float = 0.02, accel_sigma: float = 0.3,
-                 yaw_sigma: float = 0.05, speed_sigma: float = 0.2, speed_rel_sigma: float = 0.03,
-                 use_imu_yaw: bool = True,
-                 use_speed: bool = True, init_vel_sigma: float = 15.0,
-                 accel_bias_psd: float = 1e-3, gyro_bias_psd: float = 1e-6,
-                 accel_bias_sigma0: float = 0.5, gyro_bias_sigma0: float = 0.01,
-                 yaw_offset_sigma0: float = 0.1, speed_scale_sigma0: float = 0.05,
-                 calib_psd: float = 1e-6, gps_sigma_scale: float = 1.0,
-                 cov_scale: float = 1.0, fix_noise_memory: float = 0.0) -> None:
-        check_config("ekf", jerk_psd=(jerk_psd, 1e-9, 1e6), yaw_acc_psd=(yaw_acc_psd, 1e-12, 1e6),
-                     pos_psd=(pos_psd, 0.0, 1e6), gps_sigma=(gps_sigma, 1e-4, 1e3),
-                     yaw_rate_sigma=(yaw_rate_sigma, 1e-6, 1e3),
-                     accel_sigma=(accel_sigma, 1e-4, 1e3), yaw_sigma=(yaw_sigma, 1e-6, 10.0),
-                     speed_sigma=(speed_sigma, 1e-4, 1e3), speed_rel_sigma=(speed_rel_sigma, 0.0, 1.0),
-                     init_vel_sigma=(init_vel_sigma, 1e-3, 1e3),
-                     gps_sigma_scale=(gps_sigma_scale, 1e-3, 1e3),
-                     cov_scale=(cov_scale, 1e-6, 1e6),
-                     fix_noise_memory=(fix_noise_memory, 0.0, 1e6))
+    def __init__(
+        self,
+        jerk_psd: float = 2.0,
+        yaw_acc_psd: float = 0.1,
+        pos_psd: float = 0.01,
+        gps_sigma: float = 0.3,
+        yaw_rate_sigma: float = 0.02,
+        accel_sigma: float = 0.3,
+        yaw_sigma: float = 0.05,
+        speed_sigma: float = 0.2,
+        speed_rel_sigma: float = 0.03,
+        use_imu_yaw: bool = True,
+        use_speed: bool = True,
+        init_vel_sigma: float = 15.0,
+        accel_bias_psd: float = 1e-3,
+        gyro_bias_psd: float = 1e-6,
+        accel_bias_sigma0: float = 0.5,
+        gyro_bias_sigma0: float = 0.01,
+        yaw_offset_sigma0: float = 0.1,
+        speed_scale_sigma0: float = 0.05,
+        calib_psd: float = 1e-6,
+        gps_sigma_scale: float = 1.0,
+        cov_scale: float = 1.0,
+        fix_noise_memory: float = 0.0,
+    ) -> None:
+        check_config(
+            "ekf",
+            jerk_psd=(jerk_psd, 1e-9, 1e6),
+            yaw_acc_psd=(yaw_acc_psd, 1e-12, 1e6),
+            pos_psd=(pos_psd, 0.0, 1e6),
+            gps_sigma=(gps_sigma, 1e-4, 1e3),
+            yaw_rate_sigma=(yaw_rate_sigma, 1e-6, 1e3),
+            accel_sigma=(accel_sigma, 1e-4, 1e3),
+            yaw_sigma=(yaw_sigma, 1e-6, 10.0),
+            speed_sigma=(speed_sigma, 1e-4, 1e3),
+            speed_rel_sigma=(speed_rel_sigma, 0.0, 1.0),
+            init_vel_sigma=(init_vel_sigma, 1e-3, 1e3),
+            gps_sigma_scale=(gps_sigma_scale, 1e-3, 1e3),
+            cov_scale=(cov_scale, 1e-6, 1e6),
+            fix_noise_memory=(fix_noise_memory, 0.0, 1e6),
+        )
         self.fix_noise_memory = float(fix_noise_memory)
-        self._fix_noise = (FixNoise(float(gps_sigma) ** 2, self.fix_noise_memory)
-                           if self.fix_noise_memory > 0.0 else None)
+        self._fix_noise = (
+            FixNoise(float(gps_sigma) ** 2, self.fix_noise_memory)
+            if self.fix_noise_memory > 0.0
+            else None
+        )
         self.jerk_psd = float(jerk_psd)
         self.yaw_acc_psd = float(yaw_acc_psd)
         self.pos_psd = float(pos_psd)
@@ -148,12 +173,12 @@ class CtraEkf(Predictor):
         self.yaw_offset_sigma0 = float(yaw_offset_sigma0)
         self.speed_scale_sigma0 = float(speed_scale_sigma0)
         self.calib_psd = float(calib_psd)
-        self._r_gps = self.gps_sigma ** 2
+        self._r_gps = self.gps_sigma**2
         self._r_fix = self._r_gps  # R per axis [m^2] of the fix being observed
-        self._r_w = self.yaw_rate_sigma ** 2
-        self._r_a = self.accel_sigma ** 2
-        self._r_yaw = self.yaw_sigma ** 2
-        self._r_v = self.speed_sigma ** 2
+        self._r_w = self.yaw_rate_sigma**2
+        self._r_a = self.accel_sigma**2
+        self._r_yaw = self.yaw_sigma**2
+        self._r_v = self.speed_sigma**2
         self.x = np.zeros(N_STATE)
         self.P = np.eye(N_STATE)
         self._F = np.eye(N_STATE)
@@ -171,19 +196,30 @@ class CtraEkf(Predictor):
         self.reset()
 
     def config(self) -> dict:
-        return {"jerk_psd": self.jerk_psd, "yaw_acc_psd": self.yaw_acc_psd,
-                "pos_psd": self.pos_psd, "gps_sigma": self.gps_sigma,
-                "gps_sigma_scale": self.gps_sigma_scale, "cov_scale": self.cov_scale,
-                "yaw_rate_sigma": self.yaw_rate_sigma, "accel_sigma": self.accel_sigma,
-                "yaw_sigma": self.yaw_sigma, "speed_sigma": self.speed_sigma,
-                "speed_rel_sigma": self.speed_rel_sigma,
-                "use_imu_yaw": self.use_imu_yaw, "use_speed": self.use_speed,
-                "init_vel_sigma": self.init_vel_sigma, "accel_bias_psd": self.accel_bias_psd,
-                "gyro_bias_psd": self.gyro_bias_psd, "accel_bias_sigma0": self.accel_bias_sigma0,
-                "gyro_bias_sigma0": self.gyro_bias_sigma0,
-                "yaw_offset_sigma0": self.yaw_offset_sigma0,
-                "speed_scale_sigma0": self.speed_scale_sigma0, "calib_psd": self.calib_psd,
-                "fix_noise_memory": self.fix_noise_memory}
+        return {
+            "jerk_psd": self.jerk_psd,
+            "yaw_acc_psd": self.yaw_acc_psd,
+            "pos_psd": self.pos_psd,
+            "gps_sigma": self.gps_sigma,
+            "gps_sigma_scale": self.gps_sigma_scale,
+            "cov_scale": self.cov_scale,
+            "yaw_rate_sigma": self.yaw_rate_sigma,
+            "accel_sigma": self.accel_sigma,
+            "yaw_sigma": self.yaw_sigma,
+            "speed_sigma": self.speed_sigma,
+            "speed_rel_sigma": self.speed_rel_sigma,
+            "use_imu_yaw": self.use_imu_yaw,
+            "use_speed": self.use_speed,
+            "init_vel_sigma": self.init_vel_sigma,
+            "accel_bias_psd": self.accel_bias_psd,
+            "gyro_bias_psd": self.gyro_bias_psd,
+            "accel_bias_sigma0": self.accel_bias_sigma0,
+            "gyro_bias_sigma0": self.gyro_bias_sigma0,
+            "yaw_offset_sigma0": self.yaw_offset_sigma0,
+            "speed_scale_sigma0": self.speed_scale_sigma0,
+            "calib_psd": self.calib_psd,
+            "fix_noise_memory": self.fix_noise_memory,
+        }
 
     def reset(self) -> None:
         self._ready = False
@@ -198,13 +234,25 @@ class CtraEkf(Predictor):
             self._fix_noise.reset()
 
     # -- filter core ---------------------------------------------------------------
-    def _init(self, t: float, x: float, y: float, yaw: float, v: float,
-              var_yaw: float, var_v: float) -> None:
+    def _init(
+        self, t: float, x: float, y: float, yaw: float, v: float, var_yaw: float, var_v: float
+    ) -> None:
         self.x[:] = (x, y, wrap_angle(yaw), v, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
         r = self._r_fix
-        self.P[:] = np.diag([r, r, var_yaw, var_v, 0.3 ** 2, 2.0 ** 2,
-                             self.accel_bias_sigma0 ** 2, self.gyro_bias_sigma0 ** 2,
-                             self.yaw_offset_sigma0 ** 2, self.speed_scale_sigma0 ** 2])
+        self.P[:] = np.diag(
+            [
+                r,
+                r,
+                var_yaw,
+                var_v,
+                0.3**2,
+                2.0**2,
+                self.accel_bias_sigma0**2,
+                self.gyro_bias_sigma0**2,
+                self.yaw_offset_sigma0**2,
+                self.speed_scale_sigma0**2,
+            ]
+        )
         self._ts = t
         self._ready = True
         self._s = self.x.tolist()
@@ -215,8 +263,9 @@ class CtraEkf(Predictor):
             return
         F = self._F
         ctra_step(self.x, T, F)
-        Q = ctra_process_noise(self._s[IYAW], T, self.jerk_psd, self.yaw_acc_psd,
-                               self.pos_psd, self._Q)
+        Q = ctra_process_noise(
+            self._s[IYAW], T, self.jerk_psd, self.yaw_acc_psd, self.pos_psd, self._Q
+        )
         Q[IBA, IBA] = self.accel_bias_psd * T
         Q[IBW, IBW] = self.gyro_bias_psd * T
         Q[IBY, IBY] = Q[IKV, IKV] = self.calib_psd * T
@@ -293,8 +342,11 @@ class CtraEkf(Predictor):
         """IMU yaw z = yaw + b_y (innovation wrapped to [-pi, pi))."""
         P, x = self.P, self.x
         ph = P[:, IYAW] + P[:, IBY]
-        self._gain(ph, ph.item(IYAW) + ph.item(IBY) + self._r_yaw,
-                   wrap_angle(z - x.item(IYAW) - x.item(IBY)))
+        self._gain(
+            ph,
+            ph.item(IYAW) + ph.item(IBY) + self._r_yaw,
+            wrap_angle(z - x.item(IYAW) - x.item(IBY)),
+        )
         x[IYAW] = wrap_angle(x.item(IYAW))
 
     def _update_speed(self, z: float, r: float) -> None:
@@ -310,8 +362,9 @@ class CtraEkf(Predictor):
         ``(gps_sigma_scale * sigma)^2``, or when it states none (None, not finite, or <= 0)
         ``gps_sigma^2`` or, with ``fix_noise_memory``, the variance estimated so far."""
         fn = self._fix_noise
-        return stated_fix_variance(sigma, self.gps_sigma_scale,
-                                   self._r_gps if fn is None else fn.var)
+        return stated_fix_variance(
+            sigma, self.gps_sigma_scale, self._r_gps if fn is None else fn.var
+        )
 
     #: the newest fix's innovation and its covariance before the update, ``(nu_x, nu_y,
     #: S_xx, S_xy, S_yy)`` [m, m^2]; None before the filter is initialised (read by
@@ -335,7 +388,7 @@ class CtraEkf(Predictor):
     def _try_init(self, t: float, x: float, y: float) -> None:
         v_known = math.isfinite(self._speed_meas)
         v0 = self._speed_meas if v_known else 0.0
-        var_v = self._r_v if v_known else self.init_vel_sigma ** 2
+        var_v = self._r_v if v_known else self.init_vel_sigma**2
         if math.isfinite(self._yaw_meas):
             self._init(t, x, y, self._yaw_meas, v0, self._r_yaw, var_v)
             return
@@ -345,7 +398,7 @@ class CtraEkf(Predictor):
             return
         d = math.hypot(x - x0, y - y0)
         r = self._r_fix
-        var_yaw = min(4.0 * r / (d * d), math.pi ** 2) if d > 0 else math.pi ** 2
+        var_yaw = min(4.0 * r / (d * d), math.pi**2) if d > 0 else math.pi**2
         if not v_known:
             v0 = d / (t - t0)
             var_v = 2.0 * r / (t - t0) ** 2 + 1.0
@@ -401,8 +454,14 @@ class CtraEkf(Predictor):
             return self.cov_scale * P[:2, :2]
         F = np.eye(N_STATE)
         ctra_step(np.array(self._s), T, F)  # the mean position_at extrapolates
-        Q = ctra_process_noise(self._s[IYAW], T, self.jerk_psd, self.yaw_acc_psd,
-                               self.pos_psd, np.zeros((N_STATE, N_STATE)))
-        Fp = F[:2, :IA + 1]
-        out = Fp @ P[:IA + 1, :IA + 1] @ Fp.T + Q[:2, :2]
+        Q = ctra_process_noise(
+            self._s[IYAW],
+            T,
+            self.jerk_psd,
+            self.yaw_acc_psd,
+            self.pos_psd,
+            np.zeros((N_STATE, N_STATE)),
+        )
+        Fp = F[:2, : IA + 1]
+        out = Fp @ P[: IA + 1, : IA + 1] @ Fp.T + Q[:2, :2]
         return (0.5 * self.cov_scale) * (out + out.T)

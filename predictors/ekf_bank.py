@@ -43,30 +43,56 @@ class EkfBank(ModelBank):
 
     name = "ekf"
 
-    def __init__(self, noise_levels: Sequence[Sequence[float]] = NOISE_LEVELS,
-                 jerk_psd: float | None = None, yaw_acc_psd: float | None = None,
-                 memory_fixes: float = 20.0, cov_scale: float = 1.0, **options: float | bool) -> None:
+    def __init__(
+        self,
+        noise_levels: Sequence[Sequence[float]] = NOISE_LEVELS,
+        jerk_psd: float | None = None,
+        yaw_acc_psd: float | None = None,
+        memory_fixes: float = 20.0,
+        cov_scale: float = 1.0,
+        **options: float | bool,
+    ) -> None:
         if jerk_psd is not None or yaw_acc_psd is not None:
-            noise_levels = ((2.0 if jerk_psd is None else jerk_psd,
-                             0.1 if yaw_acc_psd is None else yaw_acc_psd),)
+            noise_levels = (
+                (
+                    2.0 if jerk_psd is None else jerk_psd,
+                    0.1 if yaw_acc_psd is None else yaw_acc_psd,
+                ),
+            )
         levels = tuple((float(j), float(w)) for j, w in noise_levels)
-        check_config("ekf", **{f"noise_levels[{i}]": (j, 1e-9, 1e6)
-                              for i, (j, _) in enumerate(levels)})
+        check_config(
+            "ekf", **{f"noise_levels[{i}]": (j, 1e-9, 1e6) for i, (j, _) in enumerate(levels)}
+        )
         options.setdefault("fix_noise_memory", 30.0)  # members check the options
         self._options = dict(options)
         self.noise_levels = levels
         members, labels = [], []
         for j, w in levels:
             for aided in (True, False):
-                extra = {} if aided else {"yaw_rate_sigma": 1e3, "accel_sigma": 1e3,
-                                          "use_imu_yaw": False, "use_speed": False}
+                extra = (
+                    {}
+                    if aided
+                    else {
+                        "yaw_rate_sigma": 1e3,
+                        "accel_sigma": 1e3,
+                        "use_imu_yaw": False,
+                        "use_speed": False,
+                    }
+                )
                 members.append(CtraEkf(jerk_psd=j, yaw_acc_psd=w, **{**options, **extra}))
                 labels.append(f"{'aided' if aided else 'fixes'} j{j:g} w{w:g}")
         super().__init__(members, labels, memory_fixes=memory_fixes, cov_scale=cov_scale)
 
     def config(self) -> dict:
-        member = {k: v for k, v in self.members[0].config().items()
-                  if k not in ("jerk_psd", "yaw_acc_psd", "cov_scale")}
-        return {**member, **self._options,
-                "noise_levels": [list(p) for p in self.noise_levels],
-                "memory_fixes": self.memory_fixes, "cov_scale": self.cov_scale}
+        member = {
+            k: v
+            for k, v in self.members[0].config().items()
+            if k not in ("jerk_psd", "yaw_acc_psd", "cov_scale")
+        }
+        return {
+            **member,
+            **self._options,
+            "noise_levels": [list(p) for p in self.noise_levels],
+            "memory_fixes": self.memory_fixes,
+            "cov_scale": self.cov_scale,
+        }

@@ -65,13 +65,24 @@ class FixGate:
             estimate (running mean) and are judged by speed alone.
     """
 
-    def __init__(self, speed_limit: float = 60.0, accel_limit: float = 15.0,
-                 pos_sigma: float = 0.05, n_sigma: float = 4.0, max_consecutive: int = 3,
-                 warmup: int = 10) -> None:
-        check_config("gate", speed_limit=(speed_limit, 0.1, 1e4),
-                     accel_limit=(accel_limit, 0.1, 1e4), pos_sigma=(pos_sigma, 1e-4, 1e3),
-                     n_sigma=(n_sigma, 0.5, 100.0), max_consecutive=(max_consecutive, 1, 10_000),
-                     warmup=(warmup, 0, 10_000))
+    def __init__(
+        self,
+        speed_limit: float = 60.0,
+        accel_limit: float = 15.0,
+        pos_sigma: float = 0.05,
+        n_sigma: float = 4.0,
+        max_consecutive: int = 3,
+        warmup: int = 10,
+    ) -> None:
+        check_config(
+            "gate",
+            speed_limit=(speed_limit, 0.1, 1e4),
+            accel_limit=(accel_limit, 0.1, 1e4),
+            pos_sigma=(pos_sigma, 1e-4, 1e3),
+            n_sigma=(n_sigma, 0.5, 100.0),
+            max_consecutive=(max_consecutive, 1, 10_000),
+            warmup=(warmup, 0, 10_000),
+        )
         self.speed_limit = float(speed_limit)
         self.accel_limit = float(accel_limit)
         self.pos_sigma = float(pos_sigma)
@@ -81,15 +92,20 @@ class FixGate:
         self.reset()
 
     def config(self) -> dict:
-        return {"speed_limit": self.speed_limit, "accel_limit": self.accel_limit,
-                "pos_sigma": self.pos_sigma, "n_sigma": self.n_sigma,
-                "max_consecutive": self.max_consecutive, "warmup": self.warmup}
+        return {
+            "speed_limit": self.speed_limit,
+            "accel_limit": self.accel_limit,
+            "pos_sigma": self.pos_sigma,
+            "n_sigma": self.n_sigma,
+            "max_consecutive": self.max_consecutive,
+            "warmup": self.warmup,
+        }
 
     def reset(self) -> None:
         """Forget all fixes and counts (a new drive)."""
         self._t0 = self._x0 = self._y0 = math.nan  # accepted fix before the newest
         self._t1 = self._x1 = self._y1 = math.nan  # newest accepted fix (the anchor)
-        self._var = self.pos_sigma ** 2  # fix-to-fix noise variance estimate [m^2]
+        self._var = self.pos_sigma**2  # fix-to-fix noise variance estimate [m^2]
         self._n_noise = 0  # noise updates so far
         self.run = 0  # current run of consecutive rejections
         self.rejected = 0
@@ -155,8 +171,9 @@ class FixGate:
             q = miss2 / (2.0 * c2)
             self._n_noise += 1
             if warm:  # winsorised: one large miss moves the estimate by a bounded step
-                self._var += NOISE_ALPHA * (min(q, NOISE_CLIP * self._var) / WINSOR_MEAN
-                                            - self._var)
+                self._var += NOISE_ALPHA * (
+                    min(q, NOISE_CLIP * self._var) / WINSOR_MEAN - self._var
+                )
             else:
                 self._var += (q - self._var) / self._n_noise
         return self._accept(t, x, y)
@@ -179,8 +196,9 @@ class GatedPredictor(Predictor):
     """
 
     #: the names stored on the gate itself (everything else may be the wrapped predictor's)
-    _OWN = frozenset({"inner", "gate", "name", "observe_imu", "observe_speed", "position_at",
-                      "_inner_sigma"})
+    _OWN = frozenset(
+        {"inner", "gate", "name", "observe_imu", "observe_speed", "position_at", "_inner_sigma"}
+    )
 
     def __init__(self, inner: Predictor, gate: FixGate | None = None) -> None:
         self.inner = inner

@@ -70,9 +70,11 @@ def ca_process_noise(dt: float, jerk_psd: float, out: np.ndarray) -> np.ndarray:
     d2 = dt * dt
     d3 = d2 * dt
     q = jerk_psd
-    blk = ((d3 * d2 / 20.0, d2 * d2 / 8.0, d3 / 6.0),
-           (d2 * d2 / 8.0, d3 / 3.0, d2 / 2.0),
-           (d3 / 6.0, d2 / 2.0, dt))
+    blk = (
+        (d3 * d2 / 20.0, d2 * d2 / 8.0, d3 / 6.0),
+        (d2 * d2 / 8.0, d3 / 3.0, d2 / 2.0),
+        (d3 / 6.0, d2 / 2.0, dt),
+    )
     for i in range(3):
         for j in range(3):
             v = q * blk[i][j]
@@ -128,27 +130,49 @@ class LinearKalman(Predictor):
 
     name = "kf"
 
-    def __init__(self, jerk_psd: float = 2.0, gps_sigma: float = 0.3, accel_sigma: float = 0.3,
-                 speed_sigma: float = 0.2, speed_rel_sigma: float = 0.03, use_speed: bool = True,
-                 stop_speed: float = 0.15 * KMH,
-                 init_vel_sigma: float = 15.0, init_acc_sigma: float = 3.0,
-                 heading_min_speed: float = 1.0, gps_sigma_scale: float = 1.0,
-                 cov_scale: float = 1.0, use_imu: bool = True, heading_from_fixes: bool = False,
-                 heading_sigma_max: float = 0.15, accel_bias_tau_s: float = 0.0,
-                 imu_gate: float = 0.0, imu_noise_tau_s: float = 0.0,
-                 fix_noise_memory: float = 0.0, course: CourseHeading | None = None,
-                 bias_estimator: AccelBiasEstimator | None = None) -> None:
-        check_config("kf", jerk_psd=(jerk_psd, 1e-9, 1e6), gps_sigma=(gps_sigma, 1e-4, 1e3),
-                     gps_sigma_scale=(gps_sigma_scale, 1e-3, 1e3),
-                     accel_sigma=(accel_sigma, 1e-4, 1e3), speed_sigma=(speed_sigma, 1e-4, 1e3),
-                     speed_rel_sigma=(speed_rel_sigma, 0.0, 1.0), stop_speed=(stop_speed, 0.0, 10.0), init_vel_sigma=(init_vel_sigma, 1e-3, 1e3),
-                     init_acc_sigma=(init_acc_sigma, 1e-3, 1e3),
-                     heading_min_speed=(heading_min_speed, 0.0, 100.0),
-                     cov_scale=(cov_scale, 1e-6, 1e6),
-                     heading_sigma_max=(heading_sigma_max, 1e-4, 3.2),
-                     accel_bias_tau_s=(accel_bias_tau_s, 0.0, 1e6), imu_gate=(imu_gate, 0.0, 1e9),
-                     imu_noise_tau_s=(imu_noise_tau_s, 0.0, 1e6),
-                     fix_noise_memory=(fix_noise_memory, 0.0, 1e6))
+    def __init__(
+        self,
+        jerk_psd: float = 2.0,
+        gps_sigma: float = 0.3,
+        accel_sigma: float = 0.3,
+        speed_sigma: float = 0.2,
+        speed_rel_sigma: float = 0.03,
+        use_speed: bool = True,
+        stop_speed: float = 0.15 * KMH,
+        init_vel_sigma: float = 15.0,
+        init_acc_sigma: float = 3.0,
+        heading_min_speed: float = 1.0,
+        gps_sigma_scale: float = 1.0,
+        cov_scale: float = 1.0,
+        use_imu: bool = True,
+        heading_from_fixes: bool = False,
+        heading_sigma_max: float = 0.15,
+        accel_bias_tau_s: float = 0.0,
+        imu_gate: float = 0.0,
+        imu_noise_tau_s: float = 0.0,
+        fix_noise_memory: float = 0.0,
+        course: CourseHeading | None = None,
+        bias_estimator: AccelBiasEstimator | None = None,
+    ) -> None:
+        check_config(
+            "kf",
+            jerk_psd=(jerk_psd, 1e-9, 1e6),
+            gps_sigma=(gps_sigma, 1e-4, 1e3),
+            gps_sigma_scale=(gps_sigma_scale, 1e-3, 1e3),
+            accel_sigma=(accel_sigma, 1e-4, 1e3),
+            speed_sigma=(speed_sigma, 1e-4, 1e3),
+            speed_rel_sigma=(speed_rel_sigma, 0.0, 1.0),
+            stop_speed=(stop_speed, 0.0, 10.0),
+            init_vel_sigma=(init_vel_sigma, 1e-3, 1e3),
+            init_acc_sigma=(init_acc_sigma, 1e-3, 1e3),
+            heading_min_speed=(heading_min_speed, 0.0, 100.0),
+            cov_scale=(cov_scale, 1e-6, 1e6),
+            heading_sigma_max=(heading_sigma_max, 1e-4, 3.2),
+            accel_bias_tau_s=(accel_bias_tau_s, 0.0, 1e6),
+            imu_gate=(imu_gate, 0.0, 1e9),
+            imu_noise_tau_s=(imu_noise_tau_s, 0.0, 1e6),
+            fix_noise_memory=(fix_noise_memory, 0.0, 1e6),
+        )
         self.fix_noise_memory = float(fix_noise_memory)
         self.use_imu = bool(use_imu)
         self.heading_from_fixes = bool(heading_from_fixes)
@@ -158,10 +182,16 @@ class LinearKalman(Predictor):
         self.imu_noise_tau_s = float(imu_noise_tau_s)
         # heading tracker and bias estimator: shared ones where a bank passes them
         self._course = (course or CourseHeading()) if self.heading_from_fixes else None
-        self._fix_noise = (FixNoise(float(gps_sigma) ** 2, self.fix_noise_memory)
-                           if self.fix_noise_memory > 0.0 else None)
-        self._bias_est = ((bias_estimator or AccelBiasEstimator(self.accel_bias_tau_s))
-                          if self.accel_bias_tau_s > 0.0 else None)
+        self._fix_noise = (
+            FixNoise(float(gps_sigma) ** 2, self.fix_noise_memory)
+            if self.fix_noise_memory > 0.0
+            else None
+        )
+        self._bias_est = (
+            (bias_estimator or AccelBiasEstimator(self.accel_bias_tau_s))
+            if self.accel_bias_tau_s > 0.0
+            else None
+        )
         self.jerk_psd = float(jerk_psd)
         self.gps_sigma = float(gps_sigma)
         self.gps_sigma_scale = float(gps_sigma_scale)
@@ -174,9 +204,9 @@ class LinearKalman(Predictor):
         self.init_vel_sigma = float(init_vel_sigma)
         self.init_acc_sigma = float(init_acc_sigma)
         self.heading_min_speed = float(heading_min_speed)
-        self._r_pos = self.gps_sigma ** 2
-        self._r_acc = self.accel_sigma ** 2
-        self._r_spd = self.speed_sigma ** 2
+        self._r_pos = self.gps_sigma**2
+        self._r_acc = self.accel_sigma**2
+        self._r_spd = self.speed_sigma**2
         self.kf = self.filter_core()
         self.reset()
 
@@ -184,17 +214,27 @@ class LinearKalman(Predictor):
     filter_core: type = CaFilter2D
 
     def config(self) -> dict:
-        return {"jerk_psd": self.jerk_psd, "gps_sigma": self.gps_sigma,
-                "accel_sigma": self.accel_sigma, "speed_sigma": self.speed_sigma,
-                "speed_rel_sigma": self.speed_rel_sigma, "use_speed": self.use_speed, "stop_speed": self.stop_speed,
-                "init_vel_sigma": self.init_vel_sigma, "init_acc_sigma": self.init_acc_sigma,
-                "heading_min_speed": self.heading_min_speed,
-                "gps_sigma_scale": self.gps_sigma_scale, "cov_scale": self.cov_scale,
-                "use_imu": self.use_imu, "heading_from_fixes": self.heading_from_fixes,
-                "heading_sigma_max": self.heading_sigma_max,
-                "accel_bias_tau_s": self.accel_bias_tau_s, "imu_gate": self.imu_gate,
-                "imu_noise_tau_s": self.imu_noise_tau_s,
-                "fix_noise_memory": self.fix_noise_memory}
+        return {
+            "jerk_psd": self.jerk_psd,
+            "gps_sigma": self.gps_sigma,
+            "accel_sigma": self.accel_sigma,
+            "speed_sigma": self.speed_sigma,
+            "speed_rel_sigma": self.speed_rel_sigma,
+            "use_speed": self.use_speed,
+            "stop_speed": self.stop_speed,
+            "init_vel_sigma": self.init_vel_sigma,
+            "init_acc_sigma": self.init_acc_sigma,
+            "heading_min_speed": self.heading_min_speed,
+            "gps_sigma_scale": self.gps_sigma_scale,
+            "cov_scale": self.cov_scale,
+            "use_imu": self.use_imu,
+            "heading_from_fixes": self.heading_from_fixes,
+            "heading_sigma_max": self.heading_sigma_max,
+            "accel_bias_tau_s": self.accel_bias_tau_s,
+            "imu_gate": self.imu_gate,
+            "imu_noise_tau_s": self.imu_noise_tau_s,
+            "fix_noise_memory": self.fix_noise_memory,
+        }
 
     # -- state -------------------------------------------------------------------------
     def reset(self) -> None:
@@ -228,8 +268,9 @@ class LinearKalman(Predictor):
         ``(gps_sigma_scale * sigma)^2``, or when it states none (None, not finite, or <= 0)
         ``gps_sigma^2`` or, with ``fix_noise_memory``, the variance estimated so far."""
         fn = self._fix_noise
-        return stated_fix_variance(sigma, self.gps_sigma_scale,
-                                   self._r_pos if fn is None else fn.var)
+        return stated_fix_variance(
+            sigma, self.gps_sigma_scale, self._r_pos if fn is None else fn.var
+        )
 
     #: the newest fix's innovation and its covariance before the update, ``(nu_x, nu_y,
     #: S_xx, S_xy, S_yy)`` [m, m^2]; None before the filter's second fix (read by
@@ -248,7 +289,7 @@ class LinearKalman(Predictor):
         if self._bias_est is not None:
             self._bias_est.observe_fix(t, x, y, r)
         if not self._ready:
-            self.kf.init(x, y, r, self.init_vel_sigma ** 2, self.init_acc_sigma ** 2)
+            self.kf.init(x, y, r, self.init_vel_sigma**2, self.init_acc_sigma**2)
             self._ts = t
             self._ready = True
             self._sync()
@@ -341,8 +382,9 @@ class LinearKalman(Predictor):
         else:
             h = self._speed_heading(t)
             if math.isfinite(h):  # no heading: no update, but the prediction stands
-                self.kf.update_speed(math.cos(h), math.sin(h), v,
-                                     self._r_spd + (self.speed_rel_sigma * v) ** 2)
+                self.kf.update_speed(
+                    math.cos(h), math.sin(h), v, self._r_spd + (self.speed_rel_sigma * v) ** 2
+                )
         self._sync()  # the mean was predicted to t: answers must start from it
 
     def _speed_heading(self, t: float) -> float:

@@ -31,8 +31,13 @@ from posbench.predictors.kf import KMH, LinearKalman
 #: motorway) to ~16 m/s^3 (hard city manoeuvres); a factor 8 apart
 JERK_PSDS = (0.5, 4.0, 32.0, 256.0)
 #: the options a fixes-only member takes (it has no IMU or speed to weigh)
-FIXES_ONLY_OPTIONS = ("gps_sigma", "gps_sigma_scale", "init_vel_sigma", "init_acc_sigma",
-                      "fix_noise_memory")
+FIXES_ONLY_OPTIONS = (
+    "gps_sigma",
+    "gps_sigma_scale",
+    "init_vel_sigma",
+    "init_acc_sigma",
+    "fix_noise_memory",
+)
 
 
 class KalmanBank(ModelBank):
@@ -55,28 +60,47 @@ class KalmanBank(ModelBank):
 
     name = "kf"
 
-    def __init__(self, gps_sigma: float = 0.3, gps_sigma_scale: float = 1.0,
-                 accel_sigma: float = 0.3, speed_sigma: float = 0.2,
-                 speed_rel_sigma: float = 0.03, use_speed: bool = True,
-                 stop_speed: float = 0.15 * KMH, init_vel_sigma: float = 15.0,
-                 init_acc_sigma: float = 3.0, heading_sigma_max: float = 0.15,
-                 accel_bias_tau_s: float = 30.0, imu_gate: float = 13.8,
-                 imu_noise_tau_s: float = 5.0, fix_noise_memory: float = 30.0,
-                 jerk_psds: Sequence[float] = JERK_PSDS, jerk_psd: float | None = None,
-                 memory_fixes: float = 20.0, cov_scale: float = 1.0) -> None:
+    def __init__(
+        self,
+        gps_sigma: float = 0.3,
+        gps_sigma_scale: float = 1.0,
+        accel_sigma: float = 0.3,
+        speed_sigma: float = 0.2,
+        speed_rel_sigma: float = 0.03,
+        use_speed: bool = True,
+        stop_speed: float = 0.15 * KMH,
+        init_vel_sigma: float = 15.0,
+        init_acc_sigma: float = 3.0,
+        heading_sigma_max: float = 0.15,
+        accel_bias_tau_s: float = 30.0,
+        imu_gate: float = 13.8,
+        imu_noise_tau_s: float = 5.0,
+        fix_noise_memory: float = 30.0,
+        jerk_psds: Sequence[float] = JERK_PSDS,
+        jerk_psd: float | None = None,
+        memory_fixes: float = 20.0,
+        cov_scale: float = 1.0,
+    ) -> None:
         if jerk_psd is not None:
             check_config("kf", jerk_psd=(jerk_psd, 1e-9, 1e6))
             jerk_psds = (jerk_psd,)
         check_config("kf", **{f"jerk_psds[{i}]": (j, 1e-9, 1e6) for i, j in enumerate(jerk_psds)})
         jerks = tuple(float(j) for j in jerk_psds)
         self._options = {
-            "gps_sigma": gps_sigma, "gps_sigma_scale": gps_sigma_scale,
-            "accel_sigma": accel_sigma, "speed_sigma": speed_sigma,
-            "speed_rel_sigma": speed_rel_sigma, "stop_speed": stop_speed,
-            "init_vel_sigma": init_vel_sigma, "init_acc_sigma": init_acc_sigma,
-            "heading_sigma_max": heading_sigma_max, "accel_bias_tau_s": accel_bias_tau_s,
-            "imu_gate": imu_gate, "imu_noise_tau_s": imu_noise_tau_s,
-            "fix_noise_memory": fix_noise_memory}
+            "gps_sigma": gps_sigma,
+            "gps_sigma_scale": gps_sigma_scale,
+            "accel_sigma": accel_sigma,
+            "speed_sigma": speed_sigma,
+            "speed_rel_sigma": speed_rel_sigma,
+            "stop_speed": stop_speed,
+            "init_vel_sigma": init_vel_sigma,
+            "init_acc_sigma": init_acc_sigma,
+            "heading_sigma_max": heading_sigma_max,
+            "accel_bias_tau_s": accel_bias_tau_s,
+            "imu_gate": imu_gate,
+            "imu_noise_tau_s": imu_noise_tau_s,
+            "fix_noise_memory": fix_noise_memory,
+        }
         self.use_speed = bool(use_speed)
         self.jerk_psds = jerks
         members, labels = [], []
@@ -85,16 +109,26 @@ class KalmanBank(ModelBank):
         bias = AccelBiasEstimator(accel_bias_tau_s) if accel_bias_tau_s > 0.0 else None
         fixes_only = {k: v for k, v in o.items() if k in FIXES_ONLY_OPTIONS}
         for j in jerks:
-            members.append(LinearKalman(jerk_psd=j, use_speed=self.use_speed,
-                                        heading_from_fixes=True, course=course,
-                                        bias_estimator=bias, **o))
+            members.append(
+                LinearKalman(
+                    jerk_psd=j,
+                    use_speed=self.use_speed,
+                    heading_from_fixes=True,
+                    course=course,
+                    bias_estimator=bias,
+                    **o,
+                )
+            )
             labels.append(f"aided j{j:g}")
-            members.append(LinearKalman(jerk_psd=j, use_imu=False, use_speed=False,
-                                        **fixes_only))
+            members.append(LinearKalman(jerk_psd=j, use_imu=False, use_speed=False, **fixes_only))
             labels.append(f"fixes j{j:g}")
         super().__init__(members, labels, memory_fixes=memory_fixes, cov_scale=cov_scale)
 
     def config(self) -> dict:
-        return {**self._options, "use_speed": self.use_speed,
-                "jerk_psds": list(self.jerk_psds), "memory_fixes": self.memory_fixes,
-                "cov_scale": self.cov_scale}
+        return {
+            **self._options,
+            "use_speed": self.use_speed,
+            "jerk_psds": list(self.jerk_psds),
+            "memory_fixes": self.memory_fixes,
+            "cov_scale": self.cov_scale,
+        }

@@ -64,9 +64,15 @@ from posbench.predictors.cubic import fit_cubic
 NAN2 = (math.nan, math.nan)
 
 
-def paper_window_predict(points: np.ndarray | list[list[float]], accel: np.ndarray,
-                         accel_next: np.ndarray, dt: float = 0.05, q: float = 0.05,
-                         r: float = 0.05, steps: int = 1) -> tuple[float, float]:
+def paper_window_predict(
+    points: np.ndarray | list[list[float]],
+    accel: np.ndarray,
+    accel_next: np.ndarray,
+    dt: float = 0.05,
+    q: float = 0.05,
+    r: float = 0.05,
+    steps: int = 1,
+) -> tuple[float, float]:
     """The authors' per-window filter: points (n, 2) [m] (an array or a list of pairs),
     accel (n, 2) [m/s^2] (accel[i]
     drives the step into point i; accel[0] unused), accel_next (2,) for the future
@@ -124,12 +130,27 @@ class PaperKalman(Predictor):
 
     name = "kf-paper"
 
-    def __init__(self, dt: float = 0.05, q: float = 0.05, r: float = 0.05, window: int = 8,
-                 step_s: float = 0.2, horizon_steps: int = 1, resample: bool = True,
-                 fit_span_s: float = 2.0) -> None:
-        check_config("kf-paper", dt=(dt, 1e-6, 10.0), q=(q, 0.0, 1e6), r=(r, 1e-9, 1e6),
-                     window=(window, 2, 1000), step_s=(step_s, 1e-3, 10.0),
-                     horizon_steps=(horizon_steps, 1, 1000), fit_span_s=(fit_span_s, 0.0, 60.0))
+    def __init__(
+        self,
+        dt: float = 0.05,
+        q: float = 0.05,
+        r: float = 0.05,
+        window: int = 8,
+        step_s: float = 0.2,
+        horizon_steps: int = 1,
+        resample: bool = True,
+        fit_span_s: float = 2.0,
+    ) -> None:
+        check_config(
+            "kf-paper",
+            dt=(dt, 1e-6, 10.0),
+            q=(q, 0.0, 1e6),
+            r=(r, 1e-9, 1e6),
+            window=(window, 2, 1000),
+            step_s=(step_s, 1e-3, 10.0),
+            horizon_steps=(horizon_steps, 1, 1000),
+            fit_span_s=(fit_span_s, 0.0, 60.0),
+        )
         self.dt = float(dt)
         self.q = float(q)
         self.r = float(r)
@@ -144,9 +165,16 @@ class PaperKalman(Predictor):
         self.reset()
 
     def config(self) -> dict:
-        return {"dt": self.dt, "q": self.q, "r": self.r, "window": self.window,
-                "step_s": self.step_s, "horizon_steps": self.horizon_steps,
-                "resample": self.resample, "fit_span_s": self.fit_span_s}
+        return {
+            "dt": self.dt,
+            "q": self.q,
+            "r": self.r,
+            "window": self.window,
+            "step_s": self.step_s,
+            "horizon_steps": self.horizon_steps,
+            "resample": self.resample,
+            "fit_span_s": self.fit_span_s,
+        }
 
     def reset(self) -> None:
         self._fixes.clear()
@@ -189,14 +217,16 @@ class PaperKalman(Predictor):
             times = buf.t[i:]
             points = buf.xy_from(i)
         accel = self._accel_at(times)
-        px, py = paper_window_predict(points, accel, accel[-1], self.dt, self.q, self.r,
-                                      self.horizon_steps)
+        px, py = paper_window_predict(
+            points, accel, accel[-1], self.dt, self.q, self.r, self.horizon_steps
+        )
         h = self.horizon_steps * self.step_s
         self._vx = (px - x) / h
         self._vy = (py - y) / h
 
-    def _resample(self, t: np.ndarray, xy: np.ndarray, times: np.ndarray
-                  ) -> np.ndarray | list[list[float]]:
+    def _resample(
+        self, t: np.ndarray, xy: np.ndarray, times: np.ndarray
+    ) -> np.ndarray | list[list[float]]:
         """The least-squares cubics through the fixes (times t [s], positions xy [m] as rows
         (2, n)) at ``times`` [s]: :func:`posbench.predictors._cubic_xy.fit_cubic_xy` evaluated in
         plain floats, or ``fit_cubic`` (lstsq) for a window with fewer than four distinct

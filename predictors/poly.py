@@ -44,11 +44,22 @@ class PolyExtrapolator(Predictor):
 
     name = "poly"
 
-    def __init__(self, span_s: float = 2.0, min_points: int = 4, max_points: int = 50,
-                 stop_speed: float = 0.15 * KMH, extrapolate_s: float = 2.0) -> None:
-        check_config("poly", span_s=(span_s, 0.0, 60.0), min_points=(min_points, 4, 1000),
-                     max_points=(max_points, min_points, 1000), stop_speed=(stop_speed, 0.0, 10.0),
-                     extrapolate_s=(extrapolate_s, 0.0, math.inf))
+    def __init__(
+        self,
+        span_s: float = 2.0,
+        min_points: int = 4,
+        max_points: int = 50,
+        stop_speed: float = 0.15 * KMH,
+        extrapolate_s: float = 2.0,
+    ) -> None:
+        check_config(
+            "poly",
+            span_s=(span_s, 0.0, 60.0),
+            min_points=(min_points, 4, 1000),
+            max_points=(max_points, min_points, 1000),
+            stop_speed=(stop_speed, 0.0, 10.0),
+            extrapolate_s=(extrapolate_s, 0.0, math.inf),
+        )
         self.span_s = float(span_s)
         self.min_points = int(min_points)
         self.max_points = int(max_points)
@@ -58,9 +69,13 @@ class PolyExtrapolator(Predictor):
         self.reset()
 
     def config(self) -> dict:
-        return {"span_s": self.span_s, "min_points": self.min_points,
-                "max_points": self.max_points, "stop_speed": self.stop_speed,
-                "extrapolate_s": self.extrapolate_s}
+        return {
+            "span_s": self.span_s,
+            "min_points": self.min_points,
+            "max_points": self.max_points,
+            "stop_speed": self.stop_speed,
+            "extrapolate_s": self.extrapolate_s,
+        }
 
     def reset(self) -> None:
         self._buf.clear()
@@ -103,8 +118,12 @@ class PolyExtrapolator(Predictor):
             return fit
         f = fit_cubic(t, xy.T)
         c = f.coef
-        return (tuple(c[:, 0].tolist()), tuple(c[:, 1].tolist()),  # type: ignore[return-value]
-                f.t_ref, 1.0 / f.scale)
+        return (
+            tuple(c[:, 0].tolist()),
+            tuple(c[:, 1].tolist()),  # type: ignore[return-value]
+            f.t_ref,
+            1.0 / f.scale,
+        )
 
     def position_at(self, t: float) -> tuple[float, float]:
         if self._t != self._t:
@@ -119,11 +138,16 @@ class PolyExtrapolator(Predictor):
         if t > t_cap:  # long outage: straight on from the cubic at t_cap
             s = (t_cap - self._t_ref) * self._inv_scale
             ds = (t - t_cap) * self._inv_scale
-            return (((cx[3] * s + cx[2]) * s + cx[1]) * s + cx[0]
-                    + ((3 * cx[3] * s + 2 * cx[2]) * s + cx[1]) * ds,
-                    ((cy[3] * s + cy[2]) * s + cy[1]) * s + cy[0]
-                    + ((3 * cy[3] * s + 2 * cy[2]) * s + cy[1]) * ds)
+            return (
+                ((cx[3] * s + cx[2]) * s + cx[1]) * s
+                + cx[0]
+                + ((3 * cx[3] * s + 2 * cx[2]) * s + cx[1]) * ds,
+                ((cy[3] * s + cy[2]) * s + cy[1]) * s
+                + cy[0]
+                + ((3 * cy[3] * s + 2 * cy[2]) * s + cy[1]) * ds,
+            )
         s = (t - self._t_ref) * self._inv_scale
-        return (((cx[3] * s + cx[2]) * s + cx[1]) * s + cx[0],
-                ((cy[3] * s + cy[2]) * s + cy[1]) * s + cy[0])
-
+        return (
+            ((cx[3] * s + cx[2]) * s + cx[1]) * s + cx[0],
+            ((cy[3] * s + cy[2]) * s + cy[1]) * s + cy[0],
+        )

@@ -71,25 +71,39 @@ class Entry:
 
 
 _REGISTRY: dict[str, Entry] = {
-    "cv": Entry("posbench.predictors.cv:ConstantVelocity",
-                "constant velocity from the last two fixes"),
-    "poly": Entry("posbench.predictors.poly:PolyExtrapolator",
-                  "the paper's cubic regression over recent fixes, extrapolated"),
-    "kf": Entry("posbench.predictors.kf_bank:KalmanBank",
-                "linear Kalman filters (constant acceleration; IMU-aided and fixes-only, "
-                "4 process noises), the one that predicts the fixes best answers"),
-    "kf-paper": Entry("posbench.predictors.kf_paper:PaperKalman",
-                      "the paper's Kalman baseline as its authors published it"),
-    "ekf": Entry("posbench.predictors.ekf_bank:EkfBank",
-                 "extended Kalman filters (CTRA; IMU- and speed-aided and fixes-only, "
-                 "4 process noises), the one that predicts the fixes best answers"),
-    "lstm": Entry("posbench.predictors.lstm.predictor:LstmPredictor",
-                  "the paper's system: cubic resampling + MLP-LSTM-MLP (ONNX) + cubic"),
-    "lstm-authors": Entry("posbench.predictors.lstm.authors:AuthorsLstmPredictor",
-                          "the paper authors' published ONNX network (needs --model PATH)"),
-    "hybrid": Entry("posbench.predictors.hybrid.predictor:HybridPredictor",
-                    "one CA Kalman filter (the pre-bank kf) as prior + learned residual "
-                    "(ONNX), 200 ms ahead"),
+    "cv": Entry(
+        "posbench.predictors.cv:ConstantVelocity", "constant velocity from the last two fixes"
+    ),
+    "poly": Entry(
+        "posbench.predictors.poly:PolyExtrapolator",
+        "the paper's cubic regression over recent fixes, extrapolated",
+    ),
+    "kf": Entry(
+        "posbench.predictors.kf_bank:KalmanBank",
+        "linear Kalman filters (constant acceleration; IMU-aided and fixes-only, "
+        "4 process noises), the one that predicts the fixes best answers",
+    ),
+    "kf-paper": Entry(
+        "posbench.predictors.kf_paper:PaperKalman",
+        "the paper's Kalman baseline as its authors published it",
+    ),
+    "ekf": Entry(
+        "posbench.predictors.ekf_bank:EkfBank",
+        "extended Kalman filters (CTRA; IMU- and speed-aided and fixes-only, "
+        "4 process noises), the one that predicts the fixes best answers",
+    ),
+    "lstm": Entry(
+        "posbench.predictors.lstm.predictor:LstmPredictor",
+        "the paper's system: cubic resampling + MLP-LSTM-MLP (ONNX) + cubic",
+    ),
+    "lstm-authors": Entry(
+        "posbench.predictors.lstm.authors:AuthorsLstmPredictor",
+        "the paper authors' published ONNX network (needs --model PATH)",
+    ),
+    "hybrid": Entry(
+        "posbench.predictors.hybrid.predictor:HybridPredictor",
+        "one CA Kalman filter (the pre-bank kf) as prior + learned residual (ONNX), 200 ms ahead",
+    ),
 }
 
 #: a constructor parameter of this name receives the run's GPS condition (:func:`create`)
@@ -98,8 +112,12 @@ CONDITION_PARAM = "gps_condition"
 
 def register(name: str, target: str, description: str, **defaults: Any) -> None:
     """Add (or replace) a predictor under ``name``; ``target`` is ``"module:Class"``."""
-    _REGISTRY[name] = Entry(target, description, dict(defaults),
-                            source=BUILT_IN if name in _BUILT_IN_NAMES else REGISTERED)
+    _REGISTRY[name] = Entry(
+        target,
+        description,
+        dict(defaults),
+        source=BUILT_IN if name in _BUILT_IN_NAMES else REGISTERED,
+    )
 
 
 _BUILT_IN_NAMES = frozenset(_REGISTRY)
@@ -129,22 +147,29 @@ def _read_entry_points() -> _Plugins:
     try:
         eps = list(importlib.metadata.entry_points(group=ENTRY_POINT_GROUP))
     except Exception as e:  # noqa: BLE001 - a malformed installation must not break a run
-        return _Plugins({}, (f"entry points of group {ENTRY_POINT_GROUP} cannot be read: "
-                             f"{_raised(e)}",))
+        return _Plugins(
+            {}, (f"entry points of group {ENTRY_POINT_GROUP} cannot be read: {_raised(e)}",)
+        )
     entries: dict[str, Entry] = {}
     notes: list[str] = []
     for ep in eps:
         dist = getattr(ep, "dist", None)
         who = f"{dist.name} {dist.version}" if dist is not None else "unknown distribution"
         if not _EP_NAME.fullmatch(ep.name):
-            notes.append(f"entry point {ep.name!r} of {who} is ignored: a predictor name "
-                         "takes letters, digits and _ . + - only")
+            notes.append(
+                f"entry point {ep.name!r} of {who} is ignored: a predictor name "
+                "takes letters, digits and _ . + - only"
+            )
         elif ep.name in _REGISTRY:
-            notes.append(f"entry point {ep.name} of {who} is ignored: {ep.name} is "
-                         f"{_REGISTRY[ep.name].source}")
+            notes.append(
+                f"entry point {ep.name} of {who} is ignored: {ep.name} is "
+                f"{_REGISTRY[ep.name].source}"
+            )
         elif ep.name in entries:
-            notes.append(f"entry point {ep.name} of {who} is ignored: "
-                         f"{entries[ep.name].distribution} declares {ep.name} too")
+            notes.append(
+                f"entry point {ep.name} of {who} is ignored: "
+                f"{entries[ep.name].distribution} declares {ep.name} too"
+            )
         else:
             target = f"{ep.module}:{ep.attr}" if ep.attr else ep.value.strip()  # no [extras]
             entries[ep.name] = Entry(target, "", source=ENTRY_POINT, distribution=who)
@@ -200,18 +225,24 @@ def resolve(name: str) -> Entry:
     for an unknown name, an empty alias or a malformed import path."""
     base, sep, alias = name.partition(ALIAS_SEP)
     if sep and not alias.strip():
-        raise PredictorError(f"unknown predictor {name!r}: the alias after {ALIAS_SEP} is empty "
-                             f"(NAME{ALIAS_SEP}ALIAS runs a second instance)")
+        raise PredictorError(
+            f"unknown predictor {name!r}: the alias after {ALIAS_SEP} is empty "
+            f"(NAME{ALIAS_SEP}ALIAS runs a second instance)"
+        )
     if ":" in base:
         if not _IMPORT_PATH.fullmatch(base):
-            raise PredictorError(f"{base!r} is not a predictor name: expected a registered name "
-                                 "or module:Class (e.g. mypkg.mymodule:MyPredictor)")
+            raise PredictorError(
+                f"{base!r} is not a predictor name: expected a registered name "
+                "or module:Class (e.g. mypkg.mymodule:MyPredictor)"
+            )
         return Entry(base, "", source=IMPORT_PATH)
     entry = available().get(base)
     if entry is None:
-        raise PredictorError(f"unknown predictor {base!r}; known: {known_names_text()} (or "
-                             f"module:Class for a Predictor subclass of your own; "
-                             f"NAME{ALIAS_SEP}ALIAS runs a second instance)")
+        raise PredictorError(
+            f"unknown predictor {base!r}; known: {known_names_text()} (or "
+            f"module:Class for a Predictor subclass of your own; "
+            f"NAME{ALIAS_SEP}ALIAS runs a second instance)"
+        )
     return entry
 
 
@@ -222,8 +253,12 @@ def _raised(exc: BaseException) -> str:
 
 
 #: what posbench 0.1 installed at the top of site-packages; since 0.2 all of it is posbench
-OLD_TOP_LEVEL = {"predictors": "posbench.predictors", "scenarios": "posbench.scenarios",
-                 "metrics": "posbench.metrics", "bench": "posbench"}
+OLD_TOP_LEVEL = {
+    "predictors": "posbench.predictors",
+    "scenarios": "posbench.scenarios",
+    "metrics": "posbench.metrics",
+    "bench": "posbench",
+}
 
 
 def _renamed_hint(missing: str | None) -> str:
@@ -232,9 +267,10 @@ def _renamed_hint(missing: str | None) -> str:
     top = (missing or "").partition(".")[0]
     if top not in OLD_TOP_LEVEL:
         return ""
-    new = OLD_TOP_LEVEL[top] + missing[len(top):]
-    return (f" (posbench 0.2 installs its packages under posbench: import {new} instead of "
-            f"{missing})")
+    new = OLD_TOP_LEVEL[top] + missing[len(top) :]
+    return (
+        f" (posbench 0.2 installs its packages under posbench: import {new} instead of {missing})"
+    )
 
 
 def _import_target(target: str, label: str, hint: bool = True) -> Any:
@@ -247,11 +283,15 @@ def _import_target(target: str, label: str, hint: bool = True) -> Any:
         obj: Any = importlib.import_module(mod_name)
     except ModuleNotFoundError as e:
         if e.name == mod_name or mod_name.startswith(f"{e.name}."):
-            where = (" (put the folder that holds it on PYTHONPATH, or run from that folder)"
-                     if hint else "")
+            where = (
+                " (put the folder that holds it on PYTHONPATH, or run from that folder)"
+                if hint
+                else ""
+            )
             raise PredictorError(f"{label}: no module named {mod_name!r}{where}") from None
-        raise PredictorError(f"{label}: importing {mod_name} raised {_raised(e)}"
-                             f"{_renamed_hint(e.name)}") from None
+        raise PredictorError(
+            f"{label}: importing {mod_name} raised {_raised(e)}{_renamed_hint(e.name)}"
+        ) from None
     except Exception as e:  # noqa: BLE001 - the plugin's own import error, in one line
         raise PredictorError(f"{label}: importing {mod_name} raised {_raised(e)}") from None
     where = mod_name
@@ -265,16 +305,25 @@ def _import_target(target: str, label: str, hint: bool = True) -> Any:
 
 def load_class(entry: Entry, name: str) -> type[Predictor]:
     """Import the class of ``entry`` (named ``name``), checking it is a Predictor subclass."""
-    label = name if entry.source == IMPORT_PATH else (
-        f"predictor {name} (entry point {entry.target} of {entry.distribution})"
-        if entry.source == ENTRY_POINT else f"predictor {name}")
+    label = (
+        name
+        if entry.source == IMPORT_PATH
+        else (
+            f"predictor {name} (entry point {entry.target} of {entry.distribution})"
+            if entry.source == ENTRY_POINT
+            else f"predictor {name}"
+        )
+    )
     cls = _import_target(entry.target, label, hint=entry.source == IMPORT_PATH)
     if not isinstance(cls, type):
-        raise PredictorError(f"{label}: {entry.target.partition(':')[2]} is not a class (it is "
-                             f"a {type(cls).__name__}); expected a Predictor subclass")
+        raise PredictorError(
+            f"{label}: {entry.target.partition(':')[2]} is not a class (it is "
+            f"a {type(cls).__name__}); expected a Predictor subclass"
+        )
     if not issubclass(cls, Predictor):
-        raise PredictorError(f"{label}: {cls.__name__} is not a subclass of "
-                             "posbench.predictors.base.Predictor")
+        raise PredictorError(
+            f"{label}: {cls.__name__} is not a subclass of posbench.predictors.base.Predictor"
+        )
     return cls
 
 
@@ -300,8 +349,9 @@ def constructor_options(cls: type[Predictor]) -> tuple[dict[str, Any], bool]:
         params = inspect.signature(cls).parameters.values()
     except (TypeError, ValueError):  # no signature to read: accept anything
         return {}, True
-    options = {p.name: p.default for p in params
-               if p.kind in (p.POSITIONAL_OR_KEYWORD, p.KEYWORD_ONLY)}
+    options = {
+        p.name: p.default for p in params if p.kind in (p.POSITIONAL_OR_KEYWORD, p.KEYWORD_ONLY)
+    }
     return options, any(p.kind is p.VAR_KEYWORD for p in params)
 
 
@@ -325,18 +375,25 @@ def read_tuning(path: Path | str) -> dict[str, Any]:
         except (OSError, UnicodeDecodeError, json.JSONDecodeError) as e:
             raise PredictorError(f"tuning file {path}: not readable JSON ({e})") from None
         ok = isinstance(data, dict) and all(
-            isinstance(conds, dict) and all(isinstance(e, dict) and isinstance(e.get("params", {}), dict)
-                                            for e in conds.values())
-            for conds in data.values())
+            isinstance(conds, dict)
+            and all(
+                isinstance(e, dict) and isinstance(e.get("params", {}), dict)
+                for e in conds.values()
+            )
+            for conds in data.values()
+        )
         if not ok:
-            raise PredictorError(f"tuning file {path}: expected {{predictor: {{gps condition: "
-                                 f'{{"params": {{...}}}}}}}} as `bench tune --out` writes')
+            raise PredictorError(
+                f"tuning file {path}: expected {{predictor: {{gps condition: "
+                f'{{"params": {{...}}}}}}}} as `bench tune --out` writes'
+            )
         _tuning_cache[key] = data
     return _tuning_cache[key]
 
 
-def tuning_entry(name: str, condition: str | None, tuning: Path | str | None = None
-                 ) -> tuple[Path, dict[str, Any]] | None:
+def tuning_entry(
+    name: str, condition: str | None, tuning: Path | str | None = None
+) -> tuple[Path, dict[str, Any]] | None:
     """(file, entry) of the tuning ``name`` gets under a GPS ``condition`` (``none``,
     ``rtk``, ``consumer``, ``native``): the entry of the user's ``tuning`` file if it holds
     one, else the package's :data:`TUNED_FILE`; None where neither does (the predictor's
@@ -352,16 +409,18 @@ def tuning_entry(name: str, condition: str | None, tuning: Path | str | None = N
     return None
 
 
-def tuned_params(name: str, condition: str | None, tuning: Path | str | None = None
-                 ) -> dict[str, Any]:
+def tuned_params(
+    name: str, condition: str | None, tuning: Path | str | None = None
+) -> dict[str, Any]:
     """Tuned parameters of ``name`` for a GPS condition (:func:`tuning_entry`); empty if
     none were tuned."""
     found = tuning_entry(name, condition, tuning)
     return dict(found[1].get("params", {})) if found else {}
 
 
-def create(name: str, condition: str | None = None, *, tuning_file: Path | str | None = None,
-           **config: Any) -> Predictor:
+def create(
+    name: str, condition: str | None = None, *, tuning_file: Path | str | None = None, **config: Any
+) -> Predictor:
     """A new predictor ``name`` (any form :func:`resolve` takes): its registry defaults, then
     tuned parameters for the GPS ``condition`` (if given and tuned; from ``tuning_file``
     where it holds them, else the package's), then ``config``.

@@ -23,12 +23,24 @@ class FitResult:
     stopped_by: str = "epochs"
 
 
-def fit_epochs(net, batch_loss: Callable, validate: Callable[[], tuple[float, float]],
-               weights, *, epochs: int, batch_size: int, lr: float, patience: int, gen,
-               t_start: float, max_minutes: float, select: str = "val_loss",
-               include_initial: bool = False,
-               progress: Callable | None = None,
-               on_early_stop: Callable[[int, int, int], None] | None = None) -> FitResult:
+def fit_epochs(
+    net,
+    batch_loss: Callable,
+    validate: Callable[[], tuple[float, float]],
+    weights,
+    *,
+    epochs: int,
+    batch_size: int,
+    lr: float,
+    patience: int,
+    gen,
+    t_start: float,
+    max_minutes: float,
+    select: str = "val_loss",
+    include_initial: bool = False,
+    progress: Callable | None = None,
+    on_early_stop: Callable[[int, int, int], None] | None = None,
+) -> FitResult:
     """Train ``net`` in place and leave it holding its best weights (eval mode).
 
     Args:
@@ -59,7 +71,7 @@ def fit_epochs(net, batch_loss: Callable, validate: Callable[[], tuple[float, fl
         tot, cnt = 0.0, 0
         order = torch.multinomial(weights, n, replacement=True, generator=gen)
         for i in range(0, n, batch_size):
-            idx = order[i:i + batch_size]
+            idx = order[i : i + batch_size]
             opt.zero_grad()
             loss = batch_loss(idx)
             loss.backward()
@@ -67,9 +79,14 @@ def fit_epochs(net, batch_loss: Callable, validate: Callable[[], tuple[float, fl
             tot += loss.item() * idx.shape[0]
             cnt += idx.shape[0]
         vl, vm = validate()
-        rec = {"epoch": epoch, "train_loss": tot / max(cnt, 1), "val_loss": vl,
-               "val_future_mean_m": vm, "lr": opt.param_groups[0]["lr"],
-               "elapsed_s": round(time.perf_counter() - t_start, 1)}
+        rec = {
+            "epoch": epoch,
+            "train_loss": tot / max(cnt, 1),
+            "val_loss": vl,
+            "val_future_mean_m": vm,
+            "lr": opt.param_groups[0]["lr"],
+            "elapsed_s": round(time.perf_counter() - t_start, 1),
+        }
         res.history.append(rec)
         sched.step(rec[select])
         if progress is not None:

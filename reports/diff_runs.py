@@ -61,7 +61,8 @@ def diff_traces(old: Path, new: Path) -> Iterator[str]:
         if x.dtype.kind == "f":
             xv, yv = x.to_numpy(), y.to_numpy()
             same = np.array_equal(xv.view(np.int64), yv.view(np.int64)) or bool(
-                np.all((xv == yv) | (np.isnan(xv) & np.isnan(yv))))
+                np.all((xv == yv) | (np.isnan(xv) & np.isnan(yv)))
+            )
         else:
             same = x.astype(str).equals(y.astype(str)) if x.dtype == object else x.equals(y)
         if not same:

@@ -12,6 +12,15 @@ from posbench.scenarios.errors import DataError
 from posbench.scenarios.loaders import find_recordings, iter_load, load, load_many
 
 __all__ = [
-    "DataError", "Drive", "DriveMeta", "GpsStream", "ImuStream", "SpeedStream", "TruthStream",
-    "find_recordings", "iter_load", "load", "load_many",
+    "DataError",
+    "Drive",
+    "DriveMeta",
+    "GpsStream",
+    "ImuStream",
+    "SpeedStream",
+    "TruthStream",
+    "find_recordings",
+    "iter_load",
+    "load",
+    "load_many",
 ]

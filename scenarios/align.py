@@ -22,8 +22,9 @@ ALIGN_ACC_FACTOR = 3.0
 ALIGN_MIN_LIMIT_M = 5.0
 
 
-def _umeyama(src: np.ndarray, dst: np.ndarray, with_scale: bool
-             ) -> tuple[float, np.ndarray, np.ndarray, float]:
+def _umeyama(
+    src: np.ndarray, dst: np.ndarray, with_scale: bool
+) -> tuple[float, np.ndarray, np.ndarray, float]:
     """Umeyama's least-squares fit dst ~ s R src + t: (s, R, t, residual RMS [m])."""
     src = np.asarray(src, dtype=float).reshape(-1, 2)
     dst = np.asarray(dst, dtype=float).reshape(-1, 2)

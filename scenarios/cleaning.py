@@ -9,8 +9,9 @@ from __future__ import annotations
 import numpy as np
 
 
-def clean_times(t: np.ndarray, cols: dict[str, np.ndarray | None], what: str,
-                warnings: list[str]) -> tuple[np.ndarray, dict[str, np.ndarray | None]]:
+def clean_times(
+    t: np.ndarray, cols: dict[str, np.ndarray | None], what: str, warnings: list[str]
+) -> tuple[np.ndarray, dict[str, np.ndarray | None]]:
     """Sort by time, drop non-finite times and exact duplicate stamps (keeping the first).
 
     Args:
@@ -28,7 +29,9 @@ def clean_times(t: np.ndarray, cols: dict[str, np.ndarray | None], what: str,
     idx = np.flatnonzero(keep)
     order = np.argsort(t[idx], kind="stable")
     if np.any(np.diff(t[idx]) < 0):
-        warnings.append(f"{what}: re-sorted {int((np.diff(t[idx]) < 0).sum())} out-of-order time stamps")
+        warnings.append(
+            f"{what}: re-sorted {int((np.diff(t[idx]) < 0).sum())} out-of-order time stamps"
+        )
     idx = idx[order]
     ts = t[idx]
     dup = np.zeros(ts.size, dtype=bool)
@@ -41,8 +44,13 @@ def clean_times(t: np.ndarray, cols: dict[str, np.ndarray | None], what: str,
     return t[idx], out
 
 
-def drop_nonfinite(t: np.ndarray, cols: dict[str, np.ndarray | None], required: tuple[str, ...],
-                   what: str, warnings: list[str]) -> tuple[np.ndarray, dict[str, np.ndarray | None]]:
+def drop_nonfinite(
+    t: np.ndarray,
+    cols: dict[str, np.ndarray | None],
+    required: tuple[str, ...],
+    what: str,
+    warnings: list[str],
+) -> tuple[np.ndarray, dict[str, np.ndarray | None]]:
     """Drop samples whose required columns are NaN/inf, counting them in ``warnings``."""
     keep = np.ones(np.asarray(t).size, dtype=bool)
     for k in required:

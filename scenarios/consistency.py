@@ -88,16 +88,44 @@ from posbench.scenarios.consistency_stats import best_lag, fix_scatter, slope_co
 from posbench.scenarios.drive import Drive
 
 __all__ = [
-    "FAIL", "NA", "PASS", "STREAMS", "TOLERANCES", "VERDICTS", "WARN", "Check", "Consistency",
-    "GpsKinematics", "GpsVsTruth", "Reference", "Tolerances", "best_lag", "check_ax",
-    "check_drive", "check_gps", "check_speed", "check_truth", "check_yaw", "check_yaw_rate",
-    "derivative_noise_gains", "fix_scatter", "gps_kinematics", "gps_vs_truth", "course_gate_mps",
-    "position_noise_m", "rate_gate_mps", "reference_kinematics", "slope_corr", "truth_kinematics", "worst",
+    "FAIL",
+    "NA",
+    "PASS",
+    "STREAMS",
+    "TOLERANCES",
+    "VERDICTS",
+    "WARN",
+    "Check",
+    "Consistency",
+    "GpsKinematics",
+    "GpsVsTruth",
+    "Reference",
+    "Tolerances",
+    "best_lag",
+    "check_ax",
+    "check_drive",
+    "check_gps",
+    "check_speed",
+    "check_truth",
+    "check_yaw",
+    "check_yaw_rate",
+    "derivative_noise_gains",
+    "fix_scatter",
+    "gps_kinematics",
+    "gps_vs_truth",
+    "course_gate_mps",
+    "position_noise_m",
+    "rate_gate_mps",
+    "reference_kinematics",
+    "slope_corr",
+    "truth_kinematics",
+    "worst",
 ]
 
 
-def reference_kinematics(drive: Drive, tol: Tolerances = TOLERANCES,
-                         truth_check: Check | None = None) -> Reference | None:
+def reference_kinematics(
+    drive: Drive, tol: Tolerances = TOLERANCES, truth_check: Check | None = None
+) -> Reference | None:
     """The reference the motion streams are judged against: the truth's kinematics when
     the drive has a truth that did not fail its check (``truth_check``), else the fixes';
     None when neither has enough samples."""
@@ -113,7 +141,12 @@ def check_drive(drive: Drive, tol: Tolerances = TOLERANCES) -> Consistency:
     cmp = gps_vs_truth(drive, tol)
     truth = check_truth(drive, tol, cmp)
     kin = reference_kinematics(drive, tol, truth)
-    checks = [check_yaw_rate(drive, kin, tol), check_ax(drive, kin, tol),
-              check_yaw(drive, kin, tol), check_speed(drive, kin, tol),
-              check_gps(drive, tol, cmp), truth]
+    checks = [
+        check_yaw_rate(drive, kin, tol),
+        check_ax(drive, kin, tol),
+        check_yaw(drive, kin, tol),
+        check_speed(drive, kin, tol),
+        check_gps(drive, tol, cmp),
+        truth,
+    ]
     return Consistency(drive.name, {c.stream: c for c in checks})

@@ -43,8 +43,11 @@ def _on_grid(t: np.ndarray, v: np.ndarray, ref: Reference, tol: Tolerances) -> n
 def _too_little(s: str, secs: float, ref: Reference, heading: bool, tol: Tolerances) -> Check:
     """n/a for too few usable samples, saying which gate left them out."""
     if heading:
-        return na(s, f"too little motion ({secs:.0f} s rolling above {tol.rolling_mps:g} m/s)",
-                  moving_s=secs)
+        return na(
+            s,
+            f"too little motion ({secs:.0f} s rolling above {tol.rolling_mps:g} m/s)",
+            moving_s=secs,
+        )
     rate = s == "imu.yaw_rate"
     gate = ref.rate_gate_mps if rate else ref.course_gate_mps
     what = f"the {ref.source} {'course rate' if rate else 'course'}"
@@ -52,15 +55,16 @@ def _too_little(s: str, secs: float, ref: Reference, heading: bool, tol: Toleran
     if not np.isfinite(gate):
         why = f"{what} is noise at the speeds driven ({noise}): no usable reference"
     elif gate > tol.moving_mps:
-        why = (f"too little usable motion: {secs:.0f} s above {gate:.1f} m/s, the speed below "
-               f"which {what} is noise ({noise})")
+        why = (
+            f"too little usable motion: {secs:.0f} s above {gate:.1f} m/s, the speed below "
+            f"which {what} is noise ({noise})"
+        )
     else:
         why = f"too little motion ({secs:.0f} s above {gate:.1f} m/s)"
     return na(s, why, moving_s=secs, gate_mps=gate)
 
 
-def check_yaw_rate(drive: Drive, kin: Reference | None, tol: Tolerances = TOLERANCES
-                   ) -> Check:
+def check_yaw_rate(drive: Drive, kin: Reference | None, tol: Tolerances = TOLERANCES) -> Check:
     """``imu.yaw_rate`` [rad/s] against the reference's heading rate (truth yaw) or course
     rate (positions, above its noise gate): sign, scale (reduced major axis slope),
     correlation and time offset (cross-correlation)."""
@@ -86,16 +90,25 @@ def check_yaw_rate(drive: Drive, kin: Reference | None, tol: Tolerances = TOLERA
     # the lag of a sign-flipped gyro is that of its negation (else the peak sits at an edge)
     sign = -1.0 if slope < 0 else 1.0
     lag, peak = best_lag(ref_all, sign * w, 1.0 / tol.grid_hz, tol.max_lag_s)
-    fig = {"sign": float(np.sign(slope)), "scale": slope, "corr": corr, "lag_s": lag,
-           "lag_corr": peak, "bias_rad_s": icpt, "moving_s": secs}
-    return (_contradiction(s, slope, corr, name, fig, tol)
-            or _weak_agreement(s, corr, lag, peak, name, name, fig, tol)
-            or Check(s, PASS, f"scale {slope:.2f}, corr {corr:.2f}, lag {lag:+.2f} s vs {name}",
-                     fig))
+    fig = {
+        "sign": float(np.sign(slope)),
+        "scale": slope,
+        "corr": corr,
+        "lag_s": lag,
+        "lag_corr": peak,
+        "bias_rad_s": icpt,
+        "moving_s": secs,
+    }
+    return (
+        _contradiction(s, slope, corr, name, fig, tol)
+        or _weak_agreement(s, corr, lag, peak, name, name, fig, tol)
+        or Check(s, PASS, f"scale {slope:.2f}, corr {corr:.2f}, lag {lag:+.2f} s vs {name}", fig)
+    )
 
 
-def _sign_only(s: str, kin: Reference, gyro: np.ndarray, name: str, tol: Tolerances
-               ) -> Check | None:
+def _sign_only(
+    s: str, kin: Reference, gyro: np.ndarray, name: str, tol: Tolerances
+) -> Check | None:
     """The gyro's sign against a course rate too noisy for its scale (noise up to
     :attr:`Tolerances.sign_noise_ratio` x its signal): fail on a clear negative
     correlation, pass on a clear positive one (scale not judged); None when unclear or
@@ -107,10 +120,16 @@ def _sign_only(s: str, kin: Reference, gyro: np.ndarray, name: str, tol: Toleran
     if secs < tol.min_samples_s or min(np.std(ref), np.std(val)) < tol.min_turn_rad_s:
         return None
     _, corr, _ = slope_corr(ref_all, gyro)
-    fig = {"sign": float(np.sign(corr)), "corr": corr, "moving_s": secs,
-           "gate_mps": kin.sign_gate_mps}
-    why = (f"(correlation {corr:.2f} with {name} above {kin.sign_gate_mps:.1f} m/s; scale not "
-           f"judged: its noise, from {kin.noise_m:.2f} m of position noise, is too large)")
+    fig = {
+        "sign": float(np.sign(corr)),
+        "corr": corr,
+        "moving_s": secs,
+        "gate_mps": kin.sign_gate_mps,
+    }
+    why = (
+        f"(correlation {corr:.2f} with {name} above {kin.sign_gate_mps:.1f} m/s; scale not "
+        f"judged: its noise, from {kin.noise_m:.2f} m of position noise, is too large)"
+    )
     if corr <= -tol.corr_fail:
         return Check(s, FAIL, f"sign -1 {why}", fig)
     if corr >= tol.corr_fail:
@@ -149,8 +168,13 @@ def check_ax(drive: Drive, kin: Reference | None, tol: Tolerances = TOLERANCES) 
         return Check(s, FAIL, f"bias {bias:+.2f} m/s^2 vs {name} (gravity left in?)", fig)
     if float(np.std(ref)) < tol.min_accel_mps2:
         v_ = WARN if abs(bias) > tol.bias_warn_mps2 else NA
-        return Check(s, v_, f"too little speed change ({name} sd {np.std(ref):.2f} m/s^2)"
-                     + (f"; bias {bias:+.2f} m/s^2" if v_ == WARN else ""), fig)
+        return Check(
+            s,
+            v_,
+            f"too little speed change ({name} sd {np.std(ref):.2f} m/s^2)"
+            + (f"; bias {bias:+.2f} m/s^2" if v_ == WARN else ""),
+            fig,
+        )
     slope, corr, _ = slope_corr(ref_u, ax_u)
     lag, peak = best_lag(ref_u, ax_u, dt, tol.max_lag_s)
     fig.update(scale=slope, corr=corr, lag_s=lag, lag_corr=peak)
@@ -158,13 +182,14 @@ def check_ax(drive: Drive, kin: Reference | None, tol: Tolerances = TOLERANCES) 
         return found
     if abs(bias) > tol.bias_warn_mps2:
         return Check(s, WARN, f"bias {bias:+.2f} m/s^2 vs {name}", fig)
-    return (_weak_agreement(s, corr, lag, peak, name, name, fig, tol)
-            or Check(s, PASS, f"scale {slope:.2f}, corr {corr:.2f}, bias {bias:+.2f} m/s^2 "
-                              f"vs {name}", fig))
+    return _weak_agreement(s, corr, lag, peak, name, name, fig, tol) or Check(
+        s, PASS, f"scale {slope:.2f}, corr {corr:.2f}, bias {bias:+.2f} m/s^2 vs {name}", fig
+    )
 
 
-def _contradiction(s: str, slope: float, corr: float, ref: str, fig: dict[str, Any],
-                   tol: Tolerances) -> Check | None:
+def _contradiction(
+    s: str, slope: float, corr: float, ref: str, fig: dict[str, Any], tol: Tolerances
+) -> Check | None:
     """The verdict of a stream against its reference ``ref`` when its sign, correlation or
     scale contradicts it (fail, or a scale warning); None when they agree."""
     why = f"(correlation {corr:.2f} with {ref})"
@@ -176,8 +201,16 @@ def _contradiction(s: str, slope: float, corr: float, ref: str, fig: dict[str, A
     return Check(s, v, f"scale {slope:.2f} {why}", fig) if v != PASS else None
 
 
-def _weak_agreement(s: str, corr: float, lag: float, peak: float, ref: str, lag_ref: str,
-                    fig: dict[str, Any], tol: Tolerances) -> Check | None:
+def _weak_agreement(
+    s: str,
+    corr: float,
+    lag: float,
+    peak: float,
+    ref: str,
+    lag_ref: str,
+    fig: dict[str, Any],
+    tol: Tolerances,
+) -> Check | None:
     """A warning for a weak correlation with ``ref`` or a time offset against ``lag_ref``
     (judged only where the cross-correlation peak is clear); None otherwise."""
     if corr < tol.corr_warn:
@@ -215,8 +248,7 @@ def check_yaw(drive: Drive, kin: Reference | None, tol: Tolerances = TOLERANCES)
     return Check(s, PASS, f"offset {od:+.1f} deg, spread {sd:.1f} deg vs {name}", fig)
 
 
-def check_speed(drive: Drive, kin: Reference | None, tol: Tolerances = TOLERANCES
-                ) -> Check:
+def check_speed(drive: Drive, kin: Reference | None, tol: Tolerances = TOLERANCES) -> Check:
     """``speed`` [m/s] against the reference speed: the truth's speed (rolling, with a
     ``v`` column; else above the course gate) or the GPS speed (above the course gate):
     scale (ratio of the means) and correlation."""

@@ -66,25 +66,49 @@ def gps_vs_truth(drive: Drive, tol: Tolerances = TOLERANCES) -> GpsVsTruth | str
     src = np.column_stack([tx[ok], ty[ok]])
     d = np.column_stack([g.x[ok], g.y[ok]]) - src
     off = float(np.hypot(*d.mean(0)))
-    rms = float(np.sqrt((d ** 2).sum(1).mean()))
+    rms = float(np.sqrt((d**2).sum(1).mean()))
     sigma = _stated_sigma(drive, ok)
     fig = {"offset_m": off, "rms_m": rms, "fixes": float(ok.sum()), "stated_m": sigma}
     if float(np.max(np.hypot(*d.T))) < ONE_SOURCE_M:
         return GpsVsTruth(fig, one_source=True)
     h = np.sqrt(2) * sigma if np.isfinite(sigma) else 0.0
-    tests = [("offset", off, max(tol.gps_truth_offset_warn_m, tol.gps_truth_sigma_warn * h),
-              max(tol.gps_truth_offset_fail_m, tol.gps_truth_sigma_fail * h), " m"),
-             ("RMS", rms, max(tol.gps_truth_rms_warn_m, tol.gps_truth_sigma_warn * h),
-              max(tol.gps_truth_rms_fail_m, tol.gps_truth_sigma_fail * h), " m")]
+    tests = [
+        (
+            "offset",
+            off,
+            max(tol.gps_truth_offset_warn_m, tol.gps_truth_sigma_warn * h),
+            max(tol.gps_truth_offset_fail_m, tol.gps_truth_sigma_fail * h),
+            " m",
+        ),
+        (
+            "RMS",
+            rms,
+            max(tol.gps_truth_rms_warn_m, tol.gps_truth_sigma_warn * h),
+            max(tol.gps_truth_rms_fail_m, tol.gps_truth_sigma_fail * h),
+            " m",
+        ),
+    ]
     extent = float(np.sqrt(((src - src.mean(0)) ** 2).sum(1).mean()))
     if extent >= tol.min_extent_m:
         sc, rot, _, res = similarity_2d(src, src + d)
         fig.update(scale=sc, rotation_deg=float(np.degrees(rot)), fit_rms_m=res)
         explained = tol.fit_explained_k * h / extent  # [rad] and [-]
-        tests += [("rotation", abs(fig["rotation_deg"]), tol.rot_warn_deg + np.degrees(explained),
-                   tol.rot_fail_deg + np.degrees(explained), " deg"),
-                  ("scale error", abs(sc - 1), tol.truth_scale_warn + explained,
-                   tol.truth_scale_fail + explained, "")]
+        tests += [
+            (
+                "rotation",
+                abs(fig["rotation_deg"]),
+                tol.rot_warn_deg + np.degrees(explained),
+                tol.rot_fail_deg + np.degrees(explained),
+                " deg",
+            ),
+            (
+                "scale error",
+                abs(sc - 1),
+                tol.truth_scale_warn + explained,
+                tol.truth_scale_fail + explained,
+                "",
+            ),
+        ]
     return GpsVsTruth(fig, tests)
 
 
@@ -106,8 +130,9 @@ def _stated_sigma(drive: Drive, ok: np.ndarray) -> float:
     return float(np.median(comb))
 
 
-def check_truth(drive: Drive, tol: Tolerances = TOLERANCES,
-                cmp: GpsVsTruth | str | None = None) -> Check:
+def check_truth(
+    drive: Drive, tol: Tolerances = TOLERANCES, cmp: GpsVsTruth | str | None = None
+) -> Check:
     """GPS fixes against the truth at the same times [m]: mean offset, RMS and the
     similarity fit truth -> GPS (scale, rotation [deg], residual RMS), each judged against
     what the accuracy the fixes (and truth) state explains (:class:`GpsVsTruth`; absolute
@@ -122,16 +147,22 @@ def check_truth(drive: Drive, tol: Tolerances = TOLERANCES,
     own = drive.truth_median_accuracy_m
     if own is not None and own > tol.max_fix_accuracy_m:
         fig = {**fig, "truth_stated_m": own}
-        return Check(s, WARN, f"the truth states a median accuracy of {own:.1f} m > "
-                              f"{tol.max_fix_accuracy_m:g} m: no reference for the other "
-                              "streams", fig)
+        return Check(
+            s,
+            WARN,
+            f"the truth states a median accuracy of {own:.1f} m > "
+            f"{tol.max_fix_accuracy_m:g} m: no reference for the other "
+            "streams",
+            fig,
+        )
     if cmp.one_source:
         return Check(s, PASS, "GPS fixes are the truth's own samples (one source)", fig)
     verdict, why = cmp.verdict()
     if verdict != PASS:
         return Check(s, verdict, f"GPS vs truth {why}{_stated(fig)}", fig)
-    return Check(s, PASS, f"offset {fig['offset_m']:.2f} m, RMS {fig['rms_m']:.2f} m"
-                          f"{_stated(fig)}", fig)
+    return Check(
+        s, PASS, f"offset {fig['offset_m']:.2f} m, RMS {fig['rms_m']:.2f} m{_stated(fig)}", fig
+    )
 
 
 def _stated(fig: dict[str, float]) -> str:
@@ -151,8 +182,9 @@ def _poor_receiver(cmp: GpsVsTruth | str, tol: Tolerances) -> str:
     return ""
 
 
-def check_gps(drive: Drive, tol: Tolerances = TOLERANCES,
-              cmp: GpsVsTruth | str | None = None) -> Check:
+def check_gps(
+    drive: Drive, tol: Tolerances = TOLERANCES, cmp: GpsVsTruth | str | None = None
+) -> Check:
     """Scatter of the fixes [m] (:func:`fix_scatter`) against the median accuracy the
     source states [m]; with a truth, also how far the fixes sit from it: a receiver beyond
     :attr:`Tolerances.gps_truth_offset_warn_m` (or the RMS one) that its stated accuracy
@@ -184,11 +216,20 @@ def check_gps(drive: Drive, tol: Tolerances = TOLERANCES,
     if one_source:
         return Check(s, PASS, f"{why} (the truth's own positions)", fig)
     if stated > tol.max_fix_accuracy_m:
-        use = ("the other streams are judged against the truth" if drive.truth is not None
-               else "no reference for other streams")
-        return Check(s, WARN, f"median stated accuracy {stated:.1f} m > "
-                              f"{tol.max_fix_accuracy_m:g} m" + (f", {poor}" if poor else "")
-                              + f": a poor receiver ({use})", fig)
+        use = (
+            "the other streams are judged against the truth"
+            if drive.truth is not None
+            else "no reference for other streams"
+        )
+        return Check(
+            s,
+            WARN,
+            f"median stated accuracy {stated:.1f} m > "
+            f"{tol.max_fix_accuracy_m:g} m"
+            + (f", {poor}" if poor else "")
+            + f": a poor receiver ({use})",
+            fig,
+        )
     if poor:
         return Check(s, WARN, f"{poor}, stated accuracy {stated:.2f} m: a poor receiver", fig)
     return Check(s, PASS, why, fig)

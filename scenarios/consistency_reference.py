@@ -85,8 +85,10 @@ class Reference:
 
     def gate_note(self) -> str:
         """Why a position-derived course rate was gated (for an n/a reason)."""
-        return (f"{self.source} course rate unusable below {self.rate_gate_mps:.1f} m/s "
-                f"(position noise {self.noise_m:.2f} m)")
+        return (
+            f"{self.source} course rate unusable below {self.rate_gate_mps:.1f} m/s "
+            f"(position noise {self.noise_m:.2f} m)"
+        )
 
 
 #: the kinematics of a drive as the GPS implies them (the name the checks had first)
@@ -99,9 +101,11 @@ def derivative_noise_gains(sample_dt: float, sigma_s: float) -> tuple[float, flo
     [s]: sqrt(T / (4 sqrt(pi) s^3)) and sqrt(3 T / (8 sqrt(pi) s^5)), with s widened to
     sqrt(s^2 + T^2 / 6) by the linear interpolation onto the grid (a triangle of width T)."""
     t = float(sample_dt)
-    s = float(np.sqrt(sigma_s ** 2 + t ** 2 / 6))
-    return (float(np.sqrt(t / (4 * np.sqrt(np.pi) * s ** 3))),
-            float(np.sqrt(3 * t / (8 * np.sqrt(np.pi) * s ** 5))))
+    s = float(np.sqrt(sigma_s**2 + t**2 / 6))
+    return (
+        float(np.sqrt(t / (4 * np.sqrt(np.pi) * s**3))),
+        float(np.sqrt(3 * t / (8 * np.sqrt(np.pi) * s**5))),
+    )
 
 
 def course_gate_mps(noise_m: float, sample_dt: float, tol: Tolerances = TOLERANCES) -> float:
@@ -112,8 +116,14 @@ def course_gate_mps(noise_m: float, sample_dt: float, tol: Tolerances = TOLERANC
     return float(max(tol.moving_mps, g_v * noise_m / np.radians(tol.course_noise_deg)))
 
 
-def rate_gate_mps(speed: np.ndarray, rate: np.ndarray, noise_m: float, sample_dt: float,
-                  tol: Tolerances = TOLERANCES, ratio: float | None = None) -> float:
+def rate_gate_mps(
+    speed: np.ndarray,
+    rate: np.ndarray,
+    noise_m: float,
+    sample_dt: float,
+    tol: Tolerances = TOLERANCES,
+    ratio: float | None = None,
+) -> float:
     """The lowest speed [m/s] (>= :attr:`Tolerances.moving_mps`) such that, on the samples
     of the course rate ``rate`` [rad/s] at ``speed`` [m/s] above it, the predicted noise
     N (RMS of g_a ``noise_m`` / v) is at most ``ratio`` (default
@@ -129,9 +139,9 @@ def rate_gate_mps(speed: np.ndarray, rate: np.ndarray, noise_m: float, sample_dt
     k = np.arange(1, v.size + 1)
     n2 = np.cumsum((g_a * noise_m / v) ** 2) / k
     mean = np.cumsum(r) / k
-    var = np.cumsum(r * r) / k - mean ** 2
+    var = np.cumsum(r * r) / k - mean**2
     q2 = (tol.course_rate_noise_ratio if ratio is None else ratio) ** 2
-    good = (n2 * (1 + q2) <= q2 * var) & (var - n2 >= tol.min_turn_rad_s ** 2) & (k >= 3)
+    good = (n2 * (1 + q2) <= q2 * var) & (var - n2 >= tol.min_turn_rad_s**2) & (k >= 3)
     if not good.any():
         return float("inf")
     last = int(np.flatnonzero(good)[-1])
@@ -140,16 +150,24 @@ def rate_gate_mps(speed: np.ndarray, rate: np.ndarray, noise_m: float, sample_dt
     return float(0.5 * (v[last] + v[last + 1]))  # between the slowest used and the next
 
 
-def position_noise_m(t: np.ndarray, x: np.ndarray, y: np.ndarray,
-                     accuracy: np.ndarray | None, tol: Tolerances = TOLERANCES) -> float:
+def position_noise_m(
+    t: np.ndarray,
+    x: np.ndarray,
+    y: np.ndarray,
+    accuracy: np.ndarray | None,
+    tol: Tolerances = TOLERANCES,
+) -> float:
     """White noise [m, per axis] of sampled positions: their measured scatter
     (:func:`fix_scatter` / sqrt(2)), or the median stated accuracy where fewer than 8
     samples measure it; at least :attr:`Tolerances.min_position_noise_m`."""
     sigma = fix_scatter(t, x, y) / np.sqrt(2) if t.size >= 8 else float("nan")
     if not np.isfinite(sigma) and accuracy is not None and np.any(np.isfinite(accuracy)):
         sigma = float(np.nanmedian(accuracy))
-    return float(max(sigma, tol.min_position_noise_m)) if np.isfinite(sigma) else \
-        tol.min_position_noise_m
+    return (
+        float(max(sigma, tol.min_position_noise_m))
+        if np.isfinite(sigma)
+        else tol.min_position_noise_m
+    )
 
 
 def _grid(t: np.ndarray, tol: Tolerances) -> np.ndarray | None:
@@ -169,8 +187,16 @@ def _gated(speed: np.ndarray, gate: float, values: np.ndarray) -> tuple[np.ndarr
     return ok, np.where(ok, values, np.nan)
 
 
-def _reference(source: str, t: np.ndarray, x: np.ndarray, y: np.ndarray, grid: np.ndarray,
-               noise: float, v_col: np.ndarray | None, tol: Tolerances) -> Reference:
+def _reference(
+    source: str,
+    t: np.ndarray,
+    x: np.ndarray,
+    y: np.ndarray,
+    grid: np.ndarray,
+    noise: float,
+    v_col: np.ndarray | None,
+    tol: Tolerances,
+) -> Reference:
     """Kinematics of positions ``x``, ``y`` [m] at times ``t`` [s] on ``grid``, with a
     speed column ``v_col`` [m/s] on the grid (NaN where absent) preferred to theirs."""
     dt = 1.0 / tol.grid_hz
@@ -185,8 +211,11 @@ def _reference(source: str, t: np.ndarray, x: np.ndarray, y: np.ndarray, grid: n
     dc = np.angle(np.exp(1j * (course[2:] - course[:-2]))) / (2 * dt)
     rate = np.concatenate([[np.nan], dc, [np.nan]])
     gaps = np.diff(t)
-    sample_dt = float(np.mean(gaps[gaps <= tol.max_fix_gap_s])) if np.any(
-        gaps <= tol.max_fix_gap_s) else float(np.median(gaps))
+    sample_dt = (
+        float(np.mean(gaps[gaps <= tol.max_fix_gap_s]))
+        if np.any(gaps <= tol.max_fix_gap_s)
+        else float(np.median(gaps))
+    )
     g_course = course_gate_mps(noise, sample_dt, tol)
     moving, course = _gated(speed, g_course, course)
     _, rate = _gated(speed, tol.moving_mps, rate)
@@ -196,9 +225,21 @@ def _reference(source: str, t: np.ndarray, x: np.ndarray, y: np.ndarray, grid: n
     _, rate = _gated(speed, g_rate, rate)
     with np.errstate(invalid="ignore"):
         rolling = speed > tol.rolling_mps
-    return Reference(source, grid, speed, np.gradient(speed, dt), course, rate, rolling,
-                     moving, noise, g_course, g_rate, sign_gate_mps=g_sign,
-                     course_rate_sign=rate_sign)
+    return Reference(
+        source,
+        grid,
+        speed,
+        np.gradient(speed, dt),
+        course,
+        rate,
+        rolling,
+        moving,
+        noise,
+        g_course,
+        g_rate,
+        sign_gate_mps=g_sign,
+        course_rate_sign=rate_sign,
+    )
 
 
 def gps_kinematics(drive: Drive, tol: Tolerances = TOLERANCES) -> Reference | None:
@@ -247,22 +288,23 @@ def truth_kinematics(drive: Drive, tol: Tolerances = TOLERANCES) -> Reference | 
     return _with(ref, heading=heading, heading_rate=h_rate)
 
 
-def _interp_finite(t: np.ndarray, v: np.ndarray, grid: np.ndarray, tol: Tolerances
-                   ) -> np.ndarray:
+def _interp_finite(t: np.ndarray, v: np.ndarray, grid: np.ndarray, tol: Tolerances) -> np.ndarray:
     ok = np.isfinite(v)
     if ok.sum() < 2:
         return np.full(grid.shape, np.nan)
     return interp_gapped(t[ok], v[ok], grid, tol.max_fix_gap_s)
 
 
-def _heading_refused(heading: np.ndarray, course: np.ndarray, yaw_scatter: float,
-                     t: np.ndarray, tol: Tolerances) -> str:
+def _heading_refused(
+    heading: np.ndarray, course: np.ndarray, yaw_scatter: float, t: np.ndarray, tol: Tolerances
+) -> str:
     """Why a truth yaw column is no heading reference ("" when it is): its rate noisier
     than :attr:`Tolerances.min_turn_rad_s`, or an offset or spread about the
     truth's own course beyond :attr:`Tolerances.yaw_offset_fail_deg` (checked where
     enough moving samples allow)."""
-    g_v, _ = derivative_noise_gains(max(float(np.median(np.diff(t))), 1.0 / tol.grid_hz),
-                                    tol.smooth_s)
+    g_v, _ = derivative_noise_gains(
+        max(float(np.median(np.diff(t))), 1.0 / tol.grid_hz), tol.smooth_s
+    )
     if np.isfinite(yaw_scatter) and g_v * yaw_scatter > tol.min_turn_rad_s:
         return f"truth yaw too noisy (scatter {np.degrees(yaw_scatter):.1f} deg)"
     ok = np.isfinite(heading) & np.isfinite(course)
@@ -270,8 +312,9 @@ def _heading_refused(heading: np.ndarray, course: np.ndarray, yaw_scatter: float
         return ""
     off, spread = (float(np.degrees(a)) for a in circular_offset(heading[ok] - course[ok]))
     if abs(off) > tol.yaw_offset_fail_deg or spread > tol.yaw_offset_fail_deg:
-        return (f"truth yaw does not follow its course (offset {off:+.0f} deg, "
-                f"spread {spread:.0f} deg)")
+        return (
+            f"truth yaw does not follow its course (offset {off:+.0f} deg, spread {spread:.0f} deg)"
+        )
     return ""
 
 

@@ -48,7 +48,7 @@ def best_lag(ref: np.ndarray, val: np.ndarray, dt: float, max_lag_s: float) -> t
         return float("nan"), float("nan")
     j = int(np.nanargmax(cc))
     frac = 0.0
-    if 0 < j < lags.size - 1 and np.all(np.isfinite(cc[j - 1:j + 2])):
+    if 0 < j < lags.size - 1 and np.all(np.isfinite(cc[j - 1 : j + 2])):
         den = cc[j - 1] - 2 * cc[j] + cc[j + 1]
         if den < 0:
             frac = 0.5 * (cc[j - 1] - cc[j + 1]) / den
@@ -72,7 +72,7 @@ def scatter_1d(t: np.ndarray, v: np.ndarray) -> float:
         return float("nan")
     d1, d2 = t[1:-1] - t[:-2], t[2:] - t[1:-1]
     w = d2 / (d1 + d2)
-    e = (v[1:-1] - (w * v[:-2] + (1 - w) * v[2:])) / np.sqrt(1 + w ** 2 + (1 - w) ** 2)
+    e = (v[1:-1] - (w * v[:-2] + (1 - w) * v[2:])) / np.sqrt(1 + w**2 + (1 - w) ** 2)
     return float(1.4826 * np.median(np.abs(e - np.median(e))))
 
 

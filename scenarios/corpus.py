@@ -64,11 +64,22 @@ from posbench.scenarios.synthetic import (
 
 PROFILES = ("urban", "rural", "highway")
 #: the finer manoeuvre kinds of ``meta.extra["manoeuvres"]``
-MANOEUVRES = ("straight", "turn", "curve", "roundabout", "lane_change", "u_turn",
-              "start_stop", "creep")
+MANOEUVRES = (
+    "straight",
+    "turn",
+    "curve",
+    "roundabout",
+    "lane_change",
+    "u_turn",
+    "start_stop",
+    "creep",
+)
 #: speed targets [m/s] of each profile's straights
 PROFILE_SPEEDS_MPS: dict[str, tuple[float, float]] = {
-    "urban": (3.0, 16.0), "rural": (10.0, 27.0), "highway": (22.0, 40.0)}
+    "urban": (3.0, 16.0),
+    "rural": (10.0, 27.0),
+    "highway": (22.0, 40.0),
+}
 DEFAULT_MIX = (0.4, 0.35, 0.25)
 SEED_BASE = 100_000
 LANE_WIDTH_M = 3.5
@@ -109,19 +120,25 @@ def _loguniform(rng: np.random.Generator, lo: float, hi: float) -> float:
 
 def draw_limits(rng: np.random.Generator) -> VehicleLimits:
     """A vehicle's limits, uniform in the ranges of the module doc."""
-    return VehicleLimits(a_acc=float(rng.uniform(1.0, 3.5)), a_dec=float(rng.uniform(1.5, 6.0)),
-                         ay_max=float(rng.uniform(2.0, 5.0)),
-                         v_smooth_s=float(rng.uniform(0.8, 1.6)),
-                         kappa_smooth_m=float(rng.uniform(4.0, 10.0)))
+    return VehicleLimits(
+        a_acc=float(rng.uniform(1.0, 3.5)),
+        a_dec=float(rng.uniform(1.5, 6.0)),
+        ay_max=float(rng.uniform(2.0, 5.0)),
+        v_smooth_s=float(rng.uniform(0.8, 1.6)),
+        kappa_smooth_m=float(rng.uniform(4.0, 10.0)),
+    )
 
 
 def draw_sensors(rng: np.random.Generator) -> SensorSpec:
     """An IMU: rate 50 or 100 Hz; noises log-uniform, biases uniform (module doc ranges)."""
-    return SensorSpec(imu_hz=int(rng.choice([50, 100])),
-                      accel_sd=_loguniform(rng, 0.02, 0.2), bias_sd=float(rng.uniform(0.02, 0.3)),
-                      yaw_sd=_loguniform(rng, 0.002, 0.02),
-                      yaw_rate_sd=_loguniform(rng, 0.002, 0.02),
-                      gyro_bias_sd=float(rng.uniform(0.0, 0.005)))
+    return SensorSpec(
+        imu_hz=int(rng.choice([50, 100])),
+        accel_sd=_loguniform(rng, 0.02, 0.2),
+        bias_sd=float(rng.uniform(0.02, 0.3)),
+        yaw_sd=_loguniform(rng, 0.002, 0.02),
+        yaw_rate_sd=_loguniform(rng, 0.002, 0.02),
+        gyro_bias_sd=float(rng.uniform(0.0, 0.005)),
+    )
 
 
 def _arc_label(radius_m: float, speed_mps: float, ay_max: float) -> str:
@@ -131,10 +148,23 @@ def _arc_label(radius_m: float, speed_mps: float, ay_max: float) -> str:
     return "turn" if (v / radius_m > _TURN_YAW_RATE or radius_m < _TURN_RADIUS_M) else "straight"
 
 
-def _arc(angle_deg: float, radius_m: float, speed_mps: float, label: str, manoeuvre: str,
-         cont: bool = False) -> Segment:
-    return Segment("arc", angle_rad=math.radians(angle_deg), radius_m=radius_m,
-                   speed_mps=speed_mps, label=label, manoeuvre=manoeuvre, cont=cont)
+def _arc(
+    angle_deg: float,
+    radius_m: float,
+    speed_mps: float,
+    label: str,
+    manoeuvre: str,
+    cont: bool = False,
+) -> Segment:
+    return Segment(
+        "arc",
+        angle_rad=math.radians(angle_deg),
+        radius_m=radius_m,
+        speed_mps=speed_mps,
+        label=label,
+        manoeuvre=manoeuvre,
+        cont=cont,
+    )
 
 
 def lane_change(length_m: float, speed_mps: float, side: float) -> list[Segment]:
@@ -144,8 +174,10 @@ def lane_change(length_m: float, speed_mps: float, side: float) -> list[Segment]
     radius = length_m / (2.0 * math.sin(theta))
     deg = math.degrees(theta) * side
     # labelled straight: the two arcs are too short and gentle for the labeller's turn
-    return [_arc(deg, radius, speed_mps, "straight", "lane_change"),
-            _arc(-deg, radius, speed_mps, "straight", "lane_change", cont=True)]
+    return [
+        _arc(deg, radius, speed_mps, "straight", "lane_change"),
+        _arc(-deg, radius, speed_mps, "straight", "lane_change", cont=True),
+    ]
 
 
 class _Route:
@@ -164,18 +196,22 @@ class _Route:
     def speed(self) -> float:
         return self.u(self.v_lo, self.v_hi)
 
-    def turn(self, r_lo: float, r_hi: float, a_lo: float, a_hi: float, v: float,
-             kind: str = "turn") -> list[Segment]:
+    def turn(
+        self, r_lo: float, r_hi: float, a_lo: float, a_hi: float, v: float, kind: str = "turn"
+    ) -> list[Segment]:
         r = self.u(r_lo, r_hi)
-        return [_arc(self.side() * self.u(a_lo, a_hi), r, v, _arc_label(r, v, self.lim.ay_max),
-                     kind)]
+        return [
+            _arc(self.side() * self.u(a_lo, a_hi), r, v, _arc_label(r, v, self.lim.ay_max), kind)
+        ]
 
     def roundabout(self, r_lo: float, r_hi: float) -> list[Segment]:
         r = self.u(r_lo, r_hi)
         # the labeller calls a ring of radius >= its roundabout_radius_m (30 m) a turn
         lab = "roundabout" if r < _ROUNDABOUT_RADIUS_M else "turn"
-        return [replace(g, label=lab, manoeuvre="roundabout")
-                for g in roundabout(self.rng, self.u, radius_m=r, speed_mps=self.u(5.0, 10.0))]
+        return [
+            replace(g, label=lab, manoeuvre="roundabout")
+            for g in roundabout(self.rng, self.u, radius_m=r, speed_mps=self.u(5.0, 10.0))
+        ]
 
     def u_turn(self) -> list[Segment]:
         r, v = self.u(6.0, 12.0), self.u(2.5, 5.0)
@@ -184,12 +220,21 @@ class _Route:
     def stop_and_go(self, v_hi: float) -> list[Segment]:
         out: list[Segment] = []
         for _ in range(int(self.rng.integers(1, 5))):
-            out += [straight(self.u(10, 60), self.u(3.0, v_hi)),
-                    stop(_loguniform(self.rng, 1.0, 30.0))]
+            out += [
+                straight(self.u(10, 60), self.u(3.0, v_hi)),
+                stop(_loguniform(self.rng, 1.0, 30.0)),
+            ]
             if self.rng.random() < 0.5:  # creep up the queue and stop again
-                out += [Segment("straight", length_m=self.u(2, 15), speed_mps=self.u(0.5, 2.0),
-                                label="straight", manoeuvre="creep"),
-                        stop(_loguniform(self.rng, 1.0, 10.0))]
+                out += [
+                    Segment(
+                        "straight",
+                        length_m=self.u(2, 15),
+                        speed_mps=self.u(0.5, 2.0),
+                        label="straight",
+                        manoeuvre="creep",
+                    ),
+                    stop(_loguniform(self.rng, 1.0, 10.0)),
+                ]
         return out
 
     def lane_change(self, l_lo: float, l_hi: float, v: float) -> list[Segment]:
@@ -207,9 +252,17 @@ class _Route:
                 "lane_change": lambda: self.lane_change(30, 80, v),
                 "u_turn": self.u_turn,
                 "stop_and_go": lambda: self.stop_and_go(8.0),
-                "stop": lambda: [stop(_loguniform(self.rng, 1.0, 30.0))]}
-            w = {"straight": .15, "turn": .25, "roundabout": .12, "lane_change": .15,
-                 "u_turn": .06, "stop_and_go": .12, "stop": .15}
+                "stop": lambda: [stop(_loguniform(self.rng, 1.0, 30.0))],
+            }
+            w = {
+                "straight": 0.15,
+                "turn": 0.25,
+                "roundabout": 0.12,
+                "lane_change": 0.15,
+                "u_turn": 0.06,
+                "stop_and_go": 0.12,
+                "stop": 0.15,
+            }
         elif self.profile == "rural":
             lead = straight(self.u(100, 800), v)
             opts = {
@@ -219,20 +272,33 @@ class _Route:
                 "curve": lambda: self.turn(300, 1000, 5, 30, v, "curve"),
                 "roundabout": lambda: self.roundabout(15, 40),
                 "lane_change": lambda: self.lane_change(60, 120, v),
-                "stop": lambda: [straight(self.u(30, 60), self.u(5.0, 10.0)),
-                                 stop(_loguniform(self.rng, 1.0, 15.0))],
+                "stop": lambda: [
+                    straight(self.u(30, 60), self.u(5.0, 10.0)),
+                    stop(_loguniform(self.rng, 1.0, 15.0)),
+                ],
                 "u_turn": self.u_turn,
-                "stop_and_go": lambda: self.stop_and_go(10.0)}
-            w = {"straight": .13, "turn": .2, "junction": .08, "curve": .2, "roundabout": .1,
-                 "lane_change": .15, "stop": .07, "u_turn": .04, "stop_and_go": .03}
+                "stop_and_go": lambda: self.stop_and_go(10.0),
+            }
+            w = {
+                "straight": 0.13,
+                "turn": 0.2,
+                "junction": 0.08,
+                "curve": 0.2,
+                "roundabout": 0.1,
+                "lane_change": 0.15,
+                "stop": 0.07,
+                "u_turn": 0.04,
+                "stop_and_go": 0.03,
+            }
         else:
             lead = straight(self.u(300, 2000), v)
             opts = {
                 "straight": lambda: [straight(self.u(500, 3000), self.speed())],
                 "curve": lambda: self.turn(300, 2000, 3, 30, v, "curve"),
                 "lane_change": lambda: self.lane_change(60, 120, v),
-                "stop_and_go": lambda: self.stop_and_go(8.0)}
-            w = {"straight": .3, "curve": .4, "lane_change": .25, "stop_and_go": .05}
+                "stop_and_go": lambda: self.stop_and_go(8.0),
+            }
+            w = {"straight": 0.3, "curve": 0.4, "lane_change": 0.25, "stop_and_go": 0.05}
         keys = list(w)
         p = np.array([w[k] for k in keys])
         pick = keys[int(self.rng.choice(len(keys), p=p / p.sum()))]
@@ -242,8 +308,10 @@ class _Route:
         """A standstill, and for the highway an on-ramp."""
         out = [stop(self.u(1.0, 5.0))]
         if self.profile == "highway":
-            out += [straight(self.u(20, 60), self.u(8.0, 12.0)),
-                    *self.turn(50, 150, 60, 120, self.u(10.0, 16.0))]
+            out += [
+                straight(self.u(20, 60), self.u(8.0, 12.0)),
+                *self.turn(50, 150, 60, 120, self.u(10.0, 16.0)),
+            ]
         return out
 
 
@@ -284,7 +352,8 @@ def corpus_drive(seed: int, profile: str, duration_s: float = 600.0) -> Drive:
         raise ValueError(f"duration_s must be > 1 s, got {duration_s!r}")
     ss = np.random.SeedSequence([int(seed), zlib.crc32(f"corpus:{profile}".encode())])
     r_route, r_veh, r_sens, r_imu, r_speed, r_times, r_gps, r_drop = (
-        np.random.default_rng(q) for q in ss.spawn(8))
+        np.random.default_rng(q) for q in ss.spawn(8)
+    )
     lim, sens = draw_limits(r_veh), draw_sensors(r_sens)
     route = _Route(profile, r_route, lim)
     yaw0 = float(r_route.uniform(-np.pi, np.pi))
@@ -304,9 +373,20 @@ def corpus_drive(seed: int, profile: str, duration_s: float = 600.0) -> Drive:
     t, x, y, yaw, v = sim.t[:n], sim.x[:n], sim.y[:n], sim.yaw[:n], sim.v[:n]
     yaw_rate, ax = sim.yaw_rate[:n], sim.ax[:n]
     truth = TruthStream(t, x, y, (yaw + np.pi) % (2 * np.pi) - np.pi, v)
-    imu = imu_stream(t, yaw, v, yaw_rate, ax, r_imu, step=100 // sens.imu_hz,
-                     accel_sd=sens.accel_sd, bias_sd=sens.bias_sd, yaw_sd=sens.yaw_sd,
-                     yaw_rate_sd=sens.yaw_rate_sd, gyro_bias_sd=sens.gyro_bias_sd)
+    imu = imu_stream(
+        t,
+        yaw,
+        v,
+        yaw_rate,
+        ax,
+        r_imu,
+        step=100 // sens.imu_hz,
+        accel_sd=sens.accel_sd,
+        bias_sd=sens.bias_sd,
+        yaw_sd=sens.yaw_sd,
+        yaw_rate_sd=sens.yaw_rate_sd,
+        gyro_bias_sd=sens.gyro_bias_sd,
+    )
     speed = can_speed_stream(t, v, r_speed)
     gps, outages = gps_stream(t, x, y, yaw, v, r_times, r_gps, r_drop)
 
@@ -316,19 +396,33 @@ def corpus_drive(seed: int, profile: str, duration_s: float = 600.0) -> Drive:
             out[-1][2] = min(out[-1][2], float(t[-1]))
         return out
 
-    meta = DriveMeta(fix_source=FIXES_FROM_TRUTH,
-        name=f"corpus-{profile}-s{seed}", source=f"synthetic:corpus:{profile}:s{seed}",
-        format="synthetic", epoch_s=EPOCH_S, origin_lat=ORIGIN_LAT, origin_lon=ORIGIN_LON,
-        projection="enu", time_source="simulated",
-        extra={"seed": int(seed), "profile": profile, "route": f"corpus-{profile}",
-               "segments": cut(sim.segments), "manoeuvres": cut(sim.manoeuvres),
-               "gps_outages": [list(o) for o in outages],
-               "vehicle": asdict(lim), "sensors": asdict(sens)})
+    meta = DriveMeta(
+        fix_source=FIXES_FROM_TRUTH,
+        name=f"corpus-{profile}-s{seed}",
+        source=f"synthetic:corpus:{profile}:s{seed}",
+        format="synthetic",
+        epoch_s=EPOCH_S,
+        origin_lat=ORIGIN_LAT,
+        origin_lon=ORIGIN_LON,
+        projection="enu",
+        time_source="simulated",
+        extra={
+            "seed": int(seed),
+            "profile": profile,
+            "route": f"corpus-{profile}",
+            "segments": cut(sim.segments),
+            "manoeuvres": cut(sim.manoeuvres),
+            "gps_outages": [list(o) for o in outages],
+            "vehicle": asdict(lim),
+            "sensors": asdict(sens),
+        },
+    )
     return Drive(meta=meta, gps=gps, imu=imu, speed=speed, truth=truth)
 
 
-def corpus_plan(hours: float, seed: int = 0, duration_s: float = 600.0,
-                mix: Sequence[float] = DEFAULT_MIX) -> list[tuple[int, str]]:
+def corpus_plan(
+    hours: float, seed: int = 0, duration_s: float = 600.0, mix: Sequence[float] = DEFAULT_MIX
+) -> list[tuple[int, str]]:
     """The ``(generator seed, profile)`` of each drive of a corpus of >= ``hours`` [h].
 
     ``ceil(hours * 3600 / duration_s)`` drives, profiles interleaved so that every prefix
@@ -341,13 +435,17 @@ def corpus_plan(hours: float, seed: int = 0, duration_s: float = 600.0,
         raise ValueError(f"duration_s must be > 1 s, got {duration_s!r}")
     w = np.asarray(mix, dtype=float)
     if w.shape != (len(PROFILES),) or not np.all(np.isfinite(w)) or np.any(w < 0) or w.sum() <= 0:
-        raise ValueError(f"mix must be {len(PROFILES)} shares >= 0 (urban, rural, highway) "
-                         f"with a positive sum, got {tuple(mix)!r}")
+        raise ValueError(
+            f"mix must be {len(PROFILES)} shares >= 0 (urban, rural, highway) "
+            f"with a positive sum, got {tuple(mix)!r}"
+        )
     w = w / w.sum()
     n = math.ceil(hours * 3600.0 / duration_s - 1e-9)
     if n > 1000:
-        raise ValueError(f"{n} drives would leave corpus seed {seed}'s block of 1000 generator "
-                         "seeds; use longer drives (duration_s) or fewer hours")
+        raise ValueError(
+            f"{n} drives would leave corpus seed {seed}'s block of 1000 generator "
+            "seeds; use longer drives (duration_s) or fewer hours"
+        )
     counts = np.zeros(len(PROFILES))
     plan = []
     for i in range(n):
@@ -357,15 +455,17 @@ def corpus_plan(hours: float, seed: int = 0, duration_s: float = 600.0,
     return plan
 
 
-def iter_corpus(hours: float, seed: int = 0, duration_s: float = 600.0,
-                mix: Sequence[float] = DEFAULT_MIX) -> Iterator[Drive]:
+def iter_corpus(
+    hours: float, seed: int = 0, duration_s: float = 600.0, mix: Sequence[float] = DEFAULT_MIX
+) -> Iterator[Drive]:
     """The drives of :func:`corpus_plan`, generated one at a time (constant memory)."""
     for s, profile in corpus_plan(hours, seed, duration_s, mix):
         yield corpus_drive(s, profile, duration_s)
 
 
-def corpus_drives(hours: float, seed: int = 0, duration_s: float = 600.0,
-                  mix: Sequence[float] = DEFAULT_MIX) -> list[Drive]:
+def corpus_drives(
+    hours: float, seed: int = 0, duration_s: float = 600.0, mix: Sequence[float] = DEFAULT_MIX
+) -> list[Drive]:
     """A corpus of >= ``hours`` [h] of drives (see :func:`corpus_plan`), as a list.
     20 h are ~120 drives and ~1.3 GB in memory: prefer :func:`iter_corpus` for that."""
     return list(iter_corpus(hours, seed, duration_s, mix))
@@ -381,12 +481,21 @@ def drive_dynamics(d: Drive) -> dict[str, np.ndarray]:
     yr = np.gradient(np.unwrap(tr.yaw), tr.t)
     v = tr.v
     kappa = np.where(v > 0.5, yr / np.maximum(v, 0.5), 0.0)
-    return {"v": v, "a_lat": v * yr, "kappa": kappa,
-            "jerk": np.gradient(np.gradient(v, tr.t), tr.t)}
+    return {
+        "v": v,
+        "a_lat": v * yr,
+        "kappa": kappa,
+        "jerk": np.gradient(np.gradient(v, tr.t), tr.t),
+    }
 
 
-def _stats(parts: dict[str, list[np.ndarray]], maxima: dict[str, float],
-           seconds: float, label_s: dict[str, float], man_s: dict[str, float]) -> dict:
+def _stats(
+    parts: dict[str, list[np.ndarray]],
+    maxima: dict[str, float],
+    seconds: float,
+    label_s: dict[str, float],
+    man_s: dict[str, float],
+) -> dict:
     v = np.concatenate(parts["v"]) if parts["v"] else np.zeros(1)
     al = np.concatenate(parts["a_lat"]) if parts["a_lat"] else np.zeros(1)
     jk = np.concatenate(parts["jerk"]) if parts["jerk"] else np.zeros(1)
@@ -394,9 +503,11 @@ def _stats(parts: dict[str, list[np.ndarray]], maxima: dict[str, float],
     tot = max(seconds, 1e-9)
     return {
         "hours": seconds / 3600.0,
-        "speed_min_mps": maxima["v_min"], "speed_max_mps": maxima["v_max"],
-        "speed_percentiles_mps": {str(p): float(q) for p, q in zip(pct, np.percentile(v, pct),
-                                                                    strict=True)},
+        "speed_min_mps": maxima["v_min"],
+        "speed_max_mps": maxima["v_max"],
+        "speed_percentiles_mps": {
+            str(p): float(q) for p, q in zip(pct, np.percentile(v, pct), strict=True)
+        },
         "abs_lat_accel_max_mps2": maxima["a_lat"],
         "abs_lat_accel_p99_mps2": float(np.percentile(np.abs(al), 99)),
         "abs_curvature_max_inv_m": maxima["kappa"],
@@ -423,10 +534,13 @@ def envelope(drives: Iterable[Drive], subsample: int = 10) -> dict:
 
     def group(name: str) -> dict:
         if name not in groups:
-            groups[name] = {"parts": {"v": [], "a_lat": [], "jerk": []},
-                            "max": {"v_min": math.inf, "v_max": 0.0, "a_lat": 0.0,
-                                    "kappa": 0.0, "jerk": 0.0},
-                            "seconds": 0.0, "labels": {}, "man": {}}
+            groups[name] = {
+                "parts": {"v": [], "a_lat": [], "jerk": []},
+                "max": {"v_min": math.inf, "v_max": 0.0, "a_lat": 0.0, "kappa": 0.0, "jerk": 0.0},
+                "seconds": 0.0,
+                "labels": {},
+                "man": {},
+            }
         return groups[name]
 
     n = 0
@@ -452,6 +566,8 @@ def envelope(drives: Iterable[Drive], subsample: int = 10) -> dict:
                     g[key][lab] = g[key].get(lab, 0.0) + float(b - a)
     if not groups:
         raise ValueError("envelope needs at least one drive")
-    out = {name: _stats(g["parts"], g["max"], g["seconds"], g["labels"], g["man"])
-           for name, g in groups.items()}
+    out = {
+        name: _stats(g["parts"], g["max"], g["seconds"], g["labels"], g["man"])
+        for name, g in groups.items()
+    }
     return {"all": out.pop("all"), "profiles": out, "drives": n}

@@ -85,8 +85,10 @@ CONSUMER_UNDERSTATEMENT: float = float(np.hypot(0.5, 1.0) / 0.5)
 
 # ----------------------------------------------------------------------------- fix times
 
-def _quantile_table(q: Mapping[float, float] | Sequence[float] | np.ndarray
-                    ) -> tuple[np.ndarray, np.ndarray]:
+
+def _quantile_table(
+    q: Mapping[float, float] | Sequence[float] | np.ndarray,
+) -> tuple[np.ndarray, np.ndarray]:
     """(probabilities, intervals) from a {p: q} mapping or a sequence of quantiles at even p."""
     if isinstance(q, Mapping):
         p = np.asarray(sorted(q), dtype=float)
@@ -103,12 +105,13 @@ def _parse_intervals(intervals: str) -> tuple[np.ndarray, np.ndarray]:
         return _quantile_table(ASLAN_FIX_INTERVAL_QUANTILES_S)
     if intervals.startswith("uniform:"):
         try:
-            lo, hi = (float(v) for v in intervals[len("uniform:"):].split(","))
+            lo, hi = (float(v) for v in intervals[len("uniform:") :].split(","))
         except ValueError:
             lo = hi = float("nan")
         if not (np.isfinite(lo) and np.isfinite(hi) and 0.0 < lo <= hi):
-            raise DataError(None, f"fix intervals {intervals!r}: expected 'uniform:a,b' "
-                                  "with 0 < a <= b seconds")
+            raise DataError(
+                None, f"fix intervals {intervals!r}: expected 'uniform:a,b' with 0 < a <= b seconds"
+            )
         return np.array([0.0, 1.0]), np.array([lo, hi])
     raise DataError(None, f"unknown fix intervals {intervals!r}; use 'aslan' or 'uniform:a,b'")
 
@@ -119,8 +122,9 @@ def draw_intervals(n: int, rng: np.random.Generator, intervals: str = "aslan") -
     return np.interp(rng.random(n), p, v)
 
 
-def draw_fix_times(t_start: float, t_end: float, rng: np.random.Generator,
-                   intervals: str = "aslan") -> np.ndarray:
+def draw_fix_times(
+    t_start: float, t_end: float, rng: np.random.Generator, intervals: str = "aslan"
+) -> np.ndarray:
     """Irregular fix times [s] in [t_start, t_end].
 
     The first fix falls a random fraction of one interval after ``t_start`` (random
@@ -142,8 +146,10 @@ def draw_fix_times(t_start: float, t_end: float, rng: np.random.Generator,
 
 # ----------------------------------------------------------------------------- noise
 
-def gauss_markov(t: np.ndarray, sigma: float, tau_s: float, rng: np.random.Generator,
-                 dims: int = 2) -> np.ndarray:
+
+def gauss_markov(
+    t: np.ndarray, sigma: float, tau_s: float, rng: np.random.Generator, dims: int = 2
+) -> np.ndarray:
     """Stationary first-order Gauss-Markov error [m] at times t [s], shape (len(t), dims).
 
     Simulated on a regular grid (step min(0.1 s, tau/20)) as the AR(1) recursion
@@ -163,17 +169,22 @@ def gauss_markov(t: np.ndarray, sigma: float, tau_s: float, rng: np.random.Gener
     block = max(1, int(40.0 * tau_s / step))  # phi**-block stays ~e^40
     prev = np.zeros(dims)
     for b0 in range(0, n, block):
-        wb = w[b0:b0 + block]
+        wb = w[b0 : b0 + block]
         k = np.arange(1, wb.shape[0] + 1, dtype=float)[:, None]
         g = np.exp(-step / tau_s * k)  # phi**k
-        out[b0:b0 + block] = g * (prev + np.cumsum(wb / g, axis=0))
+        out[b0 : b0 + block] = g * (prev + np.cumsum(wb / g, axis=0))
         prev = out[b0 + wb.shape[0] - 1]
     grid = t[0] + step * np.arange(n)
     return np.stack([np.interp(t, grid, out[:, k]) for k in range(dims)], axis=1)
 
 
-def gps_noise(t: np.ndarray, rng: np.random.Generator, white_sd: float, gm_sd: float = 0.0,
-              gm_tau_s: float = 45.0) -> np.ndarray:
+def gps_noise(
+    t: np.ndarray,
+    rng: np.random.Generator,
+    white_sd: float,
+    gm_sd: float = 0.0,
+    gm_tau_s: float = 45.0,
+) -> np.ndarray:
     """Position error [m] (len(t), 2): white (sigma ``white_sd``) plus Gauss-Markov (``gm_sd``)."""
     t = np.asarray(t, dtype=float)
     e = rng.standard_normal((t.size, 2)) * white_sd
@@ -218,8 +229,14 @@ def stated_sigma_m(profile: str) -> float | None:
     return STATED_SIGMA_M[profile]
 
 
-def degrade_gps(truth: TruthStream, profile: str = "rtk", seed: int = 0, latency_s: float = 0.0,
-                intervals: str = "aslan", origin: tuple[float, float] | None = None) -> GpsStream:
+def degrade_gps(
+    truth: TruthStream,
+    profile: str = "rtk",
+    seed: int = 0,
+    latency_s: float = 0.0,
+    intervals: str = "aslan",
+    origin: tuple[float, float] | None = None,
+) -> GpsStream:
     """A GPS stream sampled from ``truth`` at irregular fix times, with profile noise.
 
     Args:
@@ -238,8 +255,9 @@ def degrade_gps(truth: TruthStream, profile: str = "rtk", seed: int = 0, latency
     if not (np.isfinite(latency_s) and latency_s >= 0):
         raise DataError(None, f"latency {latency_s!r} s: must be >= 0")
     ss_times, ss_noise = np.random.SeedSequence(seed).spawn(2)
-    t_fix = draw_fix_times(truth.t[0] + latency_s, truth.t[-1], np.random.default_rng(ss_times),
-                           intervals)
+    t_fix = draw_fix_times(
+        truth.t[0] + latency_s, truth.t[-1], np.random.default_rng(ss_times), intervals
+    )
     x, y = interpolate_truth(truth, t_fix - latency_s)
     if profile != "none":
         w, g, tau = NOISE_PARAMS[profile]
@@ -253,20 +271,27 @@ def degrade_gps(truth: TruthStream, profile: str = "rtk", seed: int = 0, latency
     return GpsStream(t_fix, x, y, lat, lon, acc)
 
 
-def enu_to_latlon(x: np.ndarray, y: np.ndarray, origin_lat: float,
-                  origin_lon: float) -> tuple[np.ndarray, np.ndarray]:
+def enu_to_latlon(
+    x: np.ndarray, y: np.ndarray, origin_lat: float, origin_lon: float
+) -> tuple[np.ndarray, np.ndarray]:
     """Inverse of the ENU projection: (lat, lon) [deg] of local (x east, y north) [m], up = 0."""
     import pymap3d
 
-    lat, lon, _ = pymap3d.enu2geodetic(np.asarray(x, float), np.asarray(y, float),
-                                       np.zeros(np.size(x)), origin_lat, origin_lon, 0.0)
+    lat, lon, _ = pymap3d.enu2geodetic(
+        np.asarray(x, float),
+        np.asarray(y, float),
+        np.zeros(np.size(x)),
+        origin_lat,
+        origin_lon,
+        0.0,
+    )
     return np.asarray(lat, dtype=float), np.asarray(lon, dtype=float)
 
 
 # ----------------------------------------------------------------------------- dropouts
 
-def _free_intervals(lo: float, hi: float, forbidden: list[tuple[float, float]]
-                    ) -> np.ndarray:
+
+def _free_intervals(lo: float, hi: float, forbidden: list[tuple[float, float]]) -> np.ndarray:
     """[lo, hi] minus the union of open ``forbidden`` intervals, as an (k, 2) array."""
     if hi < lo:
         return np.empty((0, 2))
@@ -296,9 +321,15 @@ def _sample_in(free: np.ndarray, rng: np.random.Generator) -> float:
     return float(free[k, 0] + rng.random() * w[k])
 
 
-def outage_windows(t_start: float, t_end: float, lengths: Sequence[float],
-                   rng: np.random.Generator, t_turns: np.ndarray | None = None,
-                   min_sep_s: float = OUTAGE_SEPARATION_S, repeat: bool = True) -> np.ndarray:
+def outage_windows(
+    t_start: float,
+    t_end: float,
+    lengths: Sequence[float],
+    rng: np.random.Generator,
+    t_turns: np.ndarray | None = None,
+    min_sep_s: float = OUTAGE_SEPARATION_S,
+    repeat: bool = True,
+) -> np.ndarray:
     """Seeded non-overlapping outage windows, shape (k, 2) of [start, end] [s], sorted.
 
     Each window is preceded by >= ``min_sep_s`` of reception (from ``t_start`` or the
@@ -337,18 +368,22 @@ def outage_windows(t_start: float, t_end: float, lengths: Sequence[float],
 
 
 def parse_dropouts(profile: str) -> tuple[str, float]:
-    bad = DataError(None, f"unknown dropout profile {profile!r}; use 'none', 'random:p' "
-                          "(0 <= p < 1), 'outages' or 'outage:L' (L > 0 seconds)")
+    bad = DataError(
+        None,
+        f"unknown dropout profile {profile!r}; use 'none', 'random:p' "
+        "(0 <= p < 1), 'outages' or 'outage:L' (L > 0 seconds)",
+    )
     if profile in ("none", "outages"):
         return profile, float("nan")
     for kind in ("random", "outage"):
         if profile.startswith(kind + ":"):
             try:
-                val = float(profile[len(kind) + 1:])
+                val = float(profile[len(kind) + 1 :])
             except ValueError:
                 raise bad from None
-            if (kind == "random" and 0.0 <= val < 1.0) or (kind == "outage" and 0.0 < val
-                                                          and np.isfinite(val)):
+            if (kind == "random" and 0.0 <= val < 1.0) or (
+                kind == "outage" and 0.0 < val and np.isfinite(val)
+            ):
                 return kind, val
             raise bad
     raise bad
@@ -367,8 +402,9 @@ def _outage_bounds(t_kept: np.ndarray, a: np.ndarray, b: np.ndarray) -> list[tup
     return [(float(p), float(q)) for p, q in zip(before, after, strict=True)]
 
 
-def apply_dropouts(gps: GpsStream, profile: str, seed: int, t_turns: np.ndarray | None = None
-                   ) -> tuple[GpsStream, list[tuple[float, float]]]:
+def apply_dropouts(
+    gps: GpsStream, profile: str, seed: int, t_turns: np.ndarray | None = None
+) -> tuple[GpsStream, list[tuple[float, float]]]:
     """Remove fixes by a dropout profile (see module doc).
 
     Returns:
@@ -388,16 +424,22 @@ def apply_dropouts(gps: GpsStream, profile: str, seed: int, t_turns: np.ndarray 
         edges = np.diff(np.concatenate([[0], lost.astype(np.int8), [0]]))
         s, e = np.flatnonzero(edges == 1), np.flatnonzero(edges == -1) - 1
         keep = ~lost
-        out = [(float(t[i - 1]) if i > 0 else float(t[i]),
-                float(t[j + 1]) if j + 1 < t.size else float(t[j]))
-               for i, j in zip(s, e, strict=True)]
+        out = [
+            (
+                float(t[i - 1]) if i > 0 else float(t[i]),
+                float(t[j + 1]) if j + 1 < t.size else float(t[j]),
+            )
+            for i, j in zip(s, e, strict=True)
+        ]
         return gps.take(keep), out
     lengths = OUTAGE_LENGTHS_S if kind == "outages" else (val,)
     win = outage_windows(float(t[0]), float(t[-1]), lengths, rng, t_turns)
     return drop_windows(gps, win)
 
 
-def drop_windows(gps: GpsStream, windows: np.ndarray) -> tuple[GpsStream, list[tuple[float, float]]]:
+def drop_windows(
+    gps: GpsStream, windows: np.ndarray
+) -> tuple[GpsStream, list[tuple[float, float]]]:
     """Remove fixes stamped inside closed windows [a, b] (k, 2); return stream and outages."""
     windows = np.asarray(windows, dtype=float).reshape(-1, 2)
     t = gps.t

@@ -67,18 +67,25 @@ class GpsStream:
             object.__setattr__(self, k, _f64(getattr(self, k)))
         for k in ("lat", "lon", "accuracy"):
             object.__setattr__(self, k, _opt(getattr(self, k)))
-        _check("gps", self.t, {"x": self.x, "y": self.y, "lat": self.lat, "lon": self.lon,
-                               "accuracy": self.accuracy})
+        _check(
+            "gps",
+            self.t,
+            {"x": self.x, "y": self.y, "lat": self.lat, "lon": self.lon, "accuracy": self.accuracy},
+        )
 
     def __len__(self) -> int:
         return int(self.t.size)
 
     def take(self, idx: np.ndarray) -> GpsStream:
         """A sub-stream of the fixes selected by a boolean mask or index array."""
-        return GpsStream(self.t[idx], self.x[idx], self.y[idx],
-                         None if self.lat is None else self.lat[idx],
-                         None if self.lon is None else self.lon[idx],
-                         None if self.accuracy is None else self.accuracy[idx])
+        return GpsStream(
+            self.t[idx],
+            self.x[idx],
+            self.y[idx],
+            None if self.lat is None else self.lat[idx],
+            None if self.lon is None else self.lon[idx],
+            None if self.accuracy is None else self.accuracy[idx],
+        )
 
 
 @dataclass(frozen=True)
@@ -96,8 +103,11 @@ class ImuStream:
             object.__setattr__(self, k, _f64(getattr(self, k)))
         for k in ("yaw", "yaw_rate"):
             object.__setattr__(self, k, _opt(getattr(self, k)))
-        _check("imu", self.t, {"ax": self.ax, "ay": self.ay, "yaw": self.yaw,
-                               "yaw_rate": self.yaw_rate})
+        _check(
+            "imu",
+            self.t,
+            {"ax": self.ax, "ay": self.ay, "yaw": self.yaw, "yaw_rate": self.yaw_rate},
+        )
 
     def __len__(self) -> int:
         return int(self.t.size)
@@ -135,8 +145,11 @@ class TruthStream:
             object.__setattr__(self, k, _f64(getattr(self, k)))
         for k in ("yaw", "v", "accuracy"):
             object.__setattr__(self, k, _opt(getattr(self, k)))
-        _check("truth", self.t, {"x": self.x, "y": self.y, "yaw": self.yaw, "v": self.v,
-                                 "accuracy": self.accuracy})
+        _check(
+            "truth",
+            self.t,
+            {"x": self.x, "y": self.y, "yaw": self.yaw, "v": self.v, "accuracy": self.accuracy},
+        )
 
     def __len__(self) -> int:
         return int(self.t.size)
@@ -196,10 +209,14 @@ class Drive:
     @property
     def duration_s(self) -> float:
         """Time span [s] covered by any stream."""
-        ends = [s.t[-1] for s in (self.gps, self.imu, self.speed, self.truth)
-                if s is not None and len(s)]
-        starts = [s.t[0] for s in (self.gps, self.imu, self.speed, self.truth)
-                  if s is not None and len(s)]
+        ends = [
+            s.t[-1]
+            for s in (self.gps, self.imu, self.speed, self.truth)
+            if s is not None and len(s)
+        ]
+        starts = [
+            s.t[0] for s in (self.gps, self.imu, self.speed, self.truth) if s is not None and len(s)
+        ]
         return float(max(ends) - min(starts)) if ends else 0.0
 
     @property
@@ -230,16 +247,20 @@ class Drive:
 
     def window(self, t0: float, t1: float) -> Drive:
         """A copy holding only the samples with t0 <= t <= t1 [s] of every stream."""
+
         def cut(stream: Any) -> Any:
             if stream is None:
                 return None
             m = (stream.t >= t0) & (stream.t <= t1)
-            kw = {f: (None if getattr(stream, f) is None else getattr(stream, f)[m])
-                  for f in stream.__dataclass_fields__}
+            kw = {
+                f: (None if getattr(stream, f) is None else getattr(stream, f)[m])
+                for f in stream.__dataclass_fields__
+            }
             return type(stream)(**kw)
 
-        return replace(self, gps=cut(self.gps), imu=cut(self.imu), speed=cut(self.speed),
-                       truth=cut(self.truth))
+        return replace(
+            self, gps=cut(self.gps), imu=cut(self.imu), speed=cut(self.speed), truth=cut(self.truth)
+        )
 
     def with_gps(self, gps: GpsStream, note: str | None = None) -> Drive:
         """A copy with another GPS stream (e.g. degraded), noting why in the warnings."""

@@ -41,8 +41,7 @@ def bin_mean(t: np.ndarray, v: np.ndarray, grid: np.ndarray) -> np.ndarray:
         return np.where(n > 0, s / np.maximum(n, 1), np.nan)
 
 
-def interp_gapped(t: np.ndarray, v: np.ndarray, grid: np.ndarray, max_gap_s: float
-                  ) -> np.ndarray:
+def interp_gapped(t: np.ndarray, v: np.ndarray, grid: np.ndarray, max_gap_s: float) -> np.ndarray:
     """``v`` linearly interpolated at ``grid``; NaN outside ``t`` or inside a gap between
     samples longer than ``max_gap_s`` [s]."""
     out = np.interp(grid, t, v)

@@ -44,11 +44,14 @@ def quat_to_matrix(w: np.ndarray, x: np.ndarray, y: np.ndarray, z: np.ndarray) -
     n = np.linalg.norm(q, axis=1, keepdims=True)
     q = np.where(n > 1e-12, q / np.where(n > 1e-12, n, 1.0), np.nan)
     w, x, y, z = q.T
-    return np.stack([
-        np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)], -1),
-        np.stack([2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)], -1),
-        np.stack([2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)], -1),
-    ], axis=-2)
+    return np.stack(
+        [
+            np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)], -1),
+            np.stack([2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)], -1),
+            np.stack([2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)], -1),
+        ],
+        axis=-2,
+    )
 
 
 def matrix_to_quat(r: np.ndarray) -> np.ndarray:
@@ -67,8 +70,14 @@ def matrix_to_quat(r: np.ndarray) -> np.ndarray:
 
 def rpy_to_matrix(roll: float, pitch: float, yaw: float) -> np.ndarray:
     """(3, 3) rotation Rz(yaw) Ry(pitch) Rx(roll) [rad] (REP 103 fixed-axis roll, pitch, yaw)."""
-    cr, sr, cp, sp, cy, sy = (np.cos(roll), np.sin(roll), np.cos(pitch), np.sin(pitch),
-                              np.cos(yaw), np.sin(yaw))
+    cr, sr, cp, sp, cy, sy = (
+        np.cos(roll),
+        np.sin(roll),
+        np.cos(pitch),
+        np.sin(pitch),
+        np.cos(yaw),
+        np.sin(yaw),
+    )
     rx = np.array([[1, 0, 0], [0, cr, -sr], [0, sr, cr]])
     ry = np.array([[cp, 0, sp], [0, 1, 0], [-sp, 0, cp]])
     rz = np.array([[cy, -sy, 0], [sy, cy, 0], [0, 0, 1]])
@@ -78,8 +87,11 @@ def rpy_to_matrix(roll: float, pitch: float, yaw: float) -> np.ndarray:
 def matrix_to_rpy(r: np.ndarray) -> tuple[float, float, float]:
     """(roll, pitch, yaw) [rad] of one (3, 3) rotation, inverse of :func:`rpy_to_matrix`."""
     r = np.asarray(r, dtype=float)
-    return (float(np.arctan2(r[2, 1], r[2, 2])), float(np.arcsin(np.clip(-r[2, 0], -1, 1))),
-            float(np.arctan2(r[1, 0], r[0, 0])))
+    return (
+        float(np.arctan2(r[2, 1], r[2, 2])),
+        float(np.arcsin(np.clip(-r[2, 0], -1, 1))),
+        float(np.arctan2(r[1, 0], r[0, 0])),
+    )
 
 
 def matrix_yaw(r: np.ndarray) -> np.ndarray:
@@ -93,8 +105,9 @@ def wrap(a: np.ndarray) -> np.ndarray:
     return (np.asarray(a, dtype=float) + np.pi) % (2 * np.pi) - np.pi
 
 
-def level_vehicle_accel(f_s: np.ndarray, r_ws: np.ndarray, r_bs: np.ndarray | None = None
-                        ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def level_vehicle_accel(
+    f_s: np.ndarray, r_ws: np.ndarray, r_bs: np.ndarray | None = None
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Gravity-free level acceleration in the vehicle frame from an IMU with orientation.
 
     Args:
@@ -137,8 +150,12 @@ def _smooth(x: np.ndarray, width: int) -> np.ndarray:
     return np.stack([np.convolve(x[:, j], k, mode="same") for j in range(x.shape[1])], axis=1)
 
 
-def estimate_mount(t: np.ndarray, f_s: np.ndarray, speed_t: np.ndarray | None = None,
-                   speed_v: np.ndarray | None = None) -> tuple[np.ndarray, dict[str, object]]:
+def estimate_mount(
+    t: np.ndarray,
+    f_s: np.ndarray,
+    speed_t: np.ndarray | None = None,
+    speed_v: np.ndarray | None = None,
+) -> tuple[np.ndarray, dict[str, object]]:
     """Estimate the mount R_bs of an IMU without orientation from its data.
 
     Up: the mean specific force at standstill (speed < :data:`STANDSTILL_MPS`), or over the
@@ -158,8 +175,11 @@ def estimate_mount(t: np.ndarray, f_s: np.ndarray, speed_t: np.ndarray | None = 
     f_s = np.asarray(f_s, dtype=float)
     ok = np.all(np.isfinite(f_s), axis=1)
     t, f_s = t[ok], f_s[ok]
-    info: dict[str, object] = {"up_from": "whole drive", "forward_from": "sensor x (no speed)",
-                               "forward_corr": float("nan")}
+    info: dict[str, object] = {
+        "up_from": "whole drive",
+        "forward_from": "sensor x (no speed)",
+        "forward_corr": float("nan"),
+    }
     have_speed = speed_t is not None and speed_v is not None and np.size(speed_t) > 3
     still = np.zeros(t.size, dtype=bool)
     if have_speed:
@@ -182,8 +202,7 @@ def estimate_mount(t: np.ndarray, f_s: np.ndarray, speed_t: np.ndarray | None = 
             width = 10  # 1 s
             v = _smooth(np.interp(grid, speed_t, speed_v), width)
             dv = np.gradient(v, grid)
-            f = _smooth(np.stack([np.interp(grid, t, f_s[:, j]) for j in range(3)], axis=1),
-                        width)
+            f = _smooth(np.stack([np.interp(grid, t, f_s[:, j]) for j in range(3)], axis=1), width)
             h = f - np.outer(f @ up, up)
             h -= h.mean(axis=0)
             dv0 = dv - dv.mean()
@@ -201,8 +220,9 @@ def estimate_mount(t: np.ndarray, f_s: np.ndarray, speed_t: np.ndarray | None = 
     return np.stack([fwd, left, up]), info
 
 
-def vehicle_from_mount(f_s: np.ndarray, w_s: np.ndarray | None, r_bs: np.ndarray
-                       ) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
+def vehicle_from_mount(
+    f_s: np.ndarray, w_s: np.ndarray | None, r_bs: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
     """(ax, ay, yaw_rate) in the vehicle frame for a level vehicle: f_b = R_bs f_s; gravity
     (on base z) does not enter x, y; yaw rate = base-z component of R_bs w_s [rad/s]."""
     f_b = np.asarray(f_s, dtype=float) @ np.asarray(r_bs).T
@@ -210,8 +230,9 @@ def vehicle_from_mount(f_s: np.ndarray, w_s: np.ndarray | None, r_bs: np.ndarray
     return f_b[:, 0], f_b[:, 1], yr
 
 
-def gps_chords(t: np.ndarray, x: np.ndarray, y: np.ndarray, chord_s: float = COURSE_CHORD_S
-               ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def gps_chords(
+    t: np.ndarray, x: np.ndarray, y: np.ndarray, chord_s: float = COURSE_CHORD_S
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Chords from each fix to the first fix at least ``chord_s`` [s] later: (midpoint times
     [s], mean speed [m/s], course [rad, ENU]) - long enough for metre-level fix noise to
     average out."""
@@ -223,8 +244,13 @@ def gps_chords(t: np.ndarray, x: np.ndarray, y: np.ndarray, chord_s: float = COU
     return 0.5 * (t[i] + t[j]), np.hypot(dx, dy) / dt, np.arctan2(dy, dx)
 
 
-def gps_course(t: np.ndarray, x: np.ndarray, y: np.ndarray, chord_s: float = COURSE_CHORD_S,
-               min_disp_m: float = COURSE_MIN_DISPLACEMENT_M) -> tuple[np.ndarray, np.ndarray]:
+def gps_course(
+    t: np.ndarray,
+    x: np.ndarray,
+    y: np.ndarray,
+    chord_s: float = COURSE_CHORD_S,
+    min_disp_m: float = COURSE_MIN_DISPLACEMENT_M,
+) -> tuple[np.ndarray, np.ndarray]:
     """(times [s], course [rad, ENU]) of the :func:`gps_chords` longer than ``min_disp_m``
     (moving: the fix noise adds only a few degrees); course of a chord = the heading at its
     middle for a constant-rate turn."""
@@ -237,8 +263,9 @@ def gps_course(t: np.ndarray, x: np.ndarray, y: np.ndarray, chord_s: float = COU
     return 0.5 * (t[i] + t[j])[moving], np.arctan2(dy, dx)[moving]
 
 
-def yaw_offset(yaw_t: np.ndarray, yaw: np.ndarray, course_t: np.ndarray, course: np.ndarray
-               ) -> tuple[float, float, int]:
+def yaw_offset(
+    yaw_t: np.ndarray, yaw: np.ndarray, course_t: np.ndarray, course: np.ndarray
+) -> tuple[float, float, int]:
     """Offset [rad] to add to an IMU yaw to make it ENU, from the GPS course while moving.
 
     The circular mean of (course - yaw) over the course samples (yaw interpolated, unwrapped,

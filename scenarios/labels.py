@@ -86,10 +86,10 @@ def _savgol(a: np.ndarray, win: int, deriv: int, dt: float) -> np.ndarray:
     k = np.arange(4)
     fact = np.array([np.prod(np.arange(j - deriv + 1, j + 1)) if j >= deriv else 0.0 for j in k])
     powz = np.where(k >= deriv, z[:, None] ** np.maximum(k - deriv, 0), 0.0) * fact
-    ev = powz @ pinv / dt ** deriv  # (win, win): window data -> derivative at each position
+    ev = powz @ pinv / dt**deriv  # (win, win): window data -> derivative at each position
     out = np.convolve(a, ev[h][::-1], mode="same")
     out[:h] = ev[:h] @ a[:win]
-    out[-h:] = ev[h + 1:] @ a[-win:]
+    out[-h:] = ev[h + 1 :] @ a[-win:]
     return out
 
 
@@ -108,8 +108,12 @@ def _resample(t: np.ndarray, a: np.ndarray, tq: np.ndarray) -> np.ndarray:
     h = t[k + 1] - t[k]
     u = np.clip((tq - t[k]) / h, 0.0, 1.0)
     u2, u3 = u * u, u * u * u
-    return ((2 * u3 - 3 * u2 + 1) * a[k] + (u3 - 2 * u2 + u) * h * m[k]
-            + (-2 * u3 + 3 * u2) * a[k + 1] + (u3 - u2) * h * m[k + 1])
+    return (
+        (2 * u3 - 3 * u2 + 1) * a[k]
+        + (u3 - 2 * u2 + u) * h * m[k]
+        + (-2 * u3 + 3 * u2) * a[k + 1]
+        + (u3 - u2) * h * m[k + 1]
+    )
 
 
 def _dilate(mask: np.ndarray, h: int) -> np.ndarray:
@@ -147,14 +151,16 @@ def _bridge(mask: np.ndarray, n_gap: int) -> np.ndarray:
     return mask | _fill(mask.size, s[inner], e[inner])
 
 
-def _roundabouts(yr: np.ndarray, v: np.ndarray, moving: np.ndarray, dt: float,
-                 th: LabelThresholds) -> np.ndarray:
+def _roundabouts(
+    yr: np.ndarray, v: np.ndarray, moving: np.ndarray, dt: float, th: LabelThresholds
+) -> np.ndarray:
     n = yr.size
     n_gap = max(1, int(round(th.roundabout_gap_s / dt)))
     heading = np.concatenate([[0.0], np.cumsum(yr * dt)])
     dist = np.concatenate([[0.0], np.cumsum(v * dt)])
-    member = {sg: _bridge(moving & (sg * yr > th.roundabout_yaw_rate_rps), n_gap)
-              for sg in (1.0, -1.0)}
+    member = {
+        sg: _bridge(moving & (sg * yr > th.roundabout_yaw_rate_rps), n_gap) for sg in (1.0, -1.0)
+    }
     runs = {sg: _runs(m) for sg, m in member.items()}
     out = np.zeros(n, dtype=bool)
     h_min = np.radians(th.roundabout_heading_deg)
@@ -164,8 +170,11 @@ def _roundabouts(yr: np.ndarray, v: np.ndarray, moving: np.ndarray, dt: float,
         turned = np.abs(heading[e + 1] - heading[s])
         length = dist[e + 1] - dist[s]
         dur = (e - s + 1) * dt
-        ok = ((turned > h_min) & (length < th.roundabout_radius_m * turned)
-              & (turned / dur >= h_min / th.roundabout_window_s))
+        ok = (
+            (turned > h_min)
+            & (length < th.roundabout_radius_m * turned)
+            & (turned / dur >= h_min / th.roundabout_window_s)
+        )
         rs, re = s[ok], e[ok]
         if rs.size == 0:
             continue
@@ -177,14 +186,20 @@ def _roundabouts(yr: np.ndarray, v: np.ndarray, moving: np.ndarray, dt: float,
         exit_ = ((os_[None, :] - re[:, None]) >= 0) & ((os_[None, :] - re[:, None]) <= gap)
         ie = np.nonzero(entry)
         ix = np.nonzero(exit_)
-        out |= _fill(n, np.concatenate([os_[ie[1]], re[ix[0]]]),
-                     np.concatenate([rs[ie[0]], oe[ix[1]]]))
+        out |= _fill(
+            n, np.concatenate([os_[ie[1]], re[ix[0]]]), np.concatenate([rs[ie[0]], oe[ix[1]]])
+        )
     return out
 
 
-def label_grid(t: np.ndarray, x: np.ndarray, y: np.ndarray, speed_t: np.ndarray | None = None,
-               speed_v: np.ndarray | None = None,
-               thresholds: LabelThresholds | None = None) -> tuple[np.ndarray, np.ndarray]:
+def label_grid(
+    t: np.ndarray,
+    x: np.ndarray,
+    y: np.ndarray,
+    speed_t: np.ndarray | None = None,
+    speed_v: np.ndarray | None = None,
+    thresholds: LabelThresholds | None = None,
+) -> tuple[np.ndarray, np.ndarray]:
     """Labels on the regular grid: (grid times [s], labels '<U10'). See the module doc."""
     th = thresholds or LabelThresholds()
     t = np.asarray(t, dtype=float)
@@ -193,8 +208,9 @@ def label_grid(t: np.ndarray, x: np.ndarray, y: np.ndarray, speed_t: np.ndarray 
     if t.ndim != 1 or t.shape != x.shape or t.shape != y.shape:
         raise DataError(None, "labels: t, x, y must be 1-D arrays of one length")
     if t.size < 2 or not np.all(np.diff(t) > 0) or not np.all(np.isfinite(x) & np.isfinite(y)):
-        raise DataError(None, "labels: reference track needs >= 2 finite samples with "
-                              "strictly increasing times")
+        raise DataError(
+            None, "labels: reference track needs >= 2 finite samples with strictly increasing times"
+        )
     dt = th.grid_dt_s
     g = t[0] + dt * np.arange(int(np.floor((t[-1] - t[0]) / dt)) + 1)
     n = g.size
@@ -226,7 +242,8 @@ def label_grid(t: np.ndarray, x: np.ndarray, y: np.ndarray, speed_t: np.ndarray 
     kappa = np.where(has_heading, yr / np.maximum(v_pos, 1e-9), 0.0)
     moving = v_pos > th.moving_mps
     turning = (np.abs(yr) > th.turn_yaw_rate_rps) | (
-        moving & (np.abs(kappa) > th.turn_curvature_inv_m))
+        moving & (np.abs(kappa) > th.turn_curvature_inv_m)
+    )
     turn = _keep_long(turning, max(1, int(round(th.turn_min_duration_s / dt))))
     rb = _roundabouts(yr, v_pos, has_heading, dt, th)
 
@@ -237,9 +254,15 @@ def label_grid(t: np.ndarray, x: np.ndarray, y: np.ndarray, speed_t: np.ndarray 
     return g, labels
 
 
-def label_times(t_query: np.ndarray, t: np.ndarray, x: np.ndarray, y: np.ndarray,
-                speed_t: np.ndarray | None = None, speed_v: np.ndarray | None = None,
-                thresholds: LabelThresholds | None = None) -> np.ndarray:
+def label_times(
+    t_query: np.ndarray,
+    t: np.ndarray,
+    x: np.ndarray,
+    y: np.ndarray,
+    speed_t: np.ndarray | None = None,
+    speed_v: np.ndarray | None = None,
+    thresholds: LabelThresholds | None = None,
+) -> np.ndarray:
     """Scenario label of each query time [s] from a reference track (see the module doc).
 
     Args:

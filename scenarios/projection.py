@@ -27,8 +27,11 @@ def validate_latlon(lat: np.ndarray, lon: np.ndarray, source: str, what: str = "
     bad = ~np.isfinite(lat) | ~np.isfinite(lon) | (np.abs(lat) > 90.0) | (np.abs(lon) > 180.0)
     if np.any(bad):
         i = int(np.flatnonzero(bad)[0])
-        raise DataError(source, f"{what} {i}: invalid lat/lon ({lat[i]!r}, {lon[i]!r}); "
-                                f"{int(bad.sum())} invalid in all")
+        raise DataError(
+            source,
+            f"{what} {i}: invalid lat/lon ({lat[i]!r}, {lon[i]!r}); "
+            f"{int(bad.sum())} invalid in all",
+        )
 
 
 def mercator_scale_error(lat_deg: float) -> float:
@@ -36,8 +39,9 @@ def mercator_scale_error(lat_deg: float) -> float:
     return 1.0 / np.cos(np.radians(lat_deg)) - 1.0
 
 
-def to_local(lat: np.ndarray, lon: np.ndarray, origin_lat: float, origin_lon: float,
-             projection: str = "enu") -> tuple[np.ndarray, np.ndarray]:
+def to_local(
+    lat: np.ndarray, lon: np.ndarray, origin_lat: float, origin_lon: float, projection: str = "enu"
+) -> tuple[np.ndarray, np.ndarray]:
     """Project lat/lon [deg] to local (x, y) [m] about the origin [deg]."""
     lat = np.asarray(lat, dtype=float)
     lon = np.asarray(lon, dtype=float)
@@ -47,6 +51,7 @@ def to_local(lat: np.ndarray, lon: np.ndarray, origin_lat: float, origin_lon: fl
         e, n, _ = pymap3d.geodetic2enu(lat, lon, np.zeros_like(lat), origin_lat, origin_lon, 0.0)
         return np.asarray(e, dtype=float), np.asarray(n, dtype=float)
     if projection == "mercator":
+
         def merc(la: np.ndarray, lo: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
             x = EARTH_RADIUS_M * np.radians(lo) + 500000.0
             y = EARTH_RADIUS_M * np.log(np.tan(np.pi / 4 + np.radians(la) / 2))
@@ -58,8 +63,9 @@ def to_local(lat: np.ndarray, lon: np.ndarray, origin_lat: float, origin_lon: fl
     raise ValueError(f"unknown projection {projection!r}; choose one of {PROJECTIONS}")
 
 
-def ecef_to_local(xyz: np.ndarray, origin_lat: float, origin_lon: float,
-                  origin_alt: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
+def ecef_to_local(
+    xyz: np.ndarray, origin_lat: float, origin_lon: float, origin_alt: float = 0.0
+) -> tuple[np.ndarray, np.ndarray]:
     """ECEF positions [m] (N, 3) to local ENU (east, north) [m] about an origin."""
     import pymap3d
 

@@ -44,8 +44,11 @@ def fetch(url: str, dest: Path) -> Path:
     try:
         import fsspec
     except ImportError:
-        raise DataError(url, "URL data paths need fsspec (pip install fsspec, plus s3fs / gcsfs "
-                             "for s3:// / gs://); without it give a local path") from None
+        raise DataError(
+            url,
+            "URL data paths need fsspec (pip install fsspec, plus s3fs / gcsfs "
+            "for s3:// / gs://); without it give a local path",
+        ) from None
     try:
         fs, root = fsspec.core.url_to_fs(url)
     except (ImportError, ValueError) as e:  # unknown protocol or its backend not installed

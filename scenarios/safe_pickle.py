@@ -51,8 +51,7 @@ def _const(obj: Any) -> Callable[[], Any]:
 
 def _latin1_encode(obj: str, encoding: str = "utf-8", errors: str = "strict") -> bytes:
     """``_codecs.encode`` as protocol 0-2 pickles use it for ``bytes``: Latin-1 only."""
-    if not isinstance(obj, str) or encoding.lower().replace("_", "-") not in ("latin1",
-                                                                              "latin-1"):
+    if not isinstance(obj, str) or encoding.lower().replace("_", "-") not in ("latin1", "latin-1"):
         raise ValueError(f"refused _codecs.encode with encoding {encoding!r} (only latin1)")
     return obj.encode("latin-1", errors)
 
@@ -101,14 +100,20 @@ class SafeUnpickler(pickle.Unpickler):
             module = _compat_pickle.IMPORT_MAPPING[module]
         resolver = ALLOWED.get((module, name))
         if resolver is None:
-            raise DataError(self.source, f"refused to unpickle '{module}.{name}': only NumPy "
-                                         "arrays and plain containers are allowed in data "
-                                         "pickles (this one would run code when opened)")
+            raise DataError(
+                self.source,
+                f"refused to unpickle '{module}.{name}': only NumPy "
+                "arrays and plain containers are allowed in data "
+                "pickles (this one would run code when opened)",
+            )
         return resolver()
 
     def persistent_load(self, pid: Any) -> Any:
-        raise DataError(self.source, "refused to unpickle a persistent id: only NumPy arrays "
-                                     "and plain containers are allowed in data pickles")
+        raise DataError(
+            self.source,
+            "refused to unpickle a persistent id: only NumPy arrays "
+            "and plain containers are allowed in data pickles",
+        )
 
 
 def safe_loads(data: bytes, source: str | Path) -> Any:
@@ -117,10 +122,20 @@ def safe_loads(data: bytes, source: str | Path) -> Any:
         return SafeUnpickler(io.BytesIO(data), source).load()
     except DataError:
         raise
-    except (pickle.UnpicklingError, EOFError, ValueError, TypeError, AttributeError,
-            IndexError, KeyError, MemoryError, OverflowError) as exc:
-        raise DataError(source, f"not a readable pickle (truncated or corrupt?): "
-                                f"{type(exc).__name__}: {exc}") from None
+    except (
+        pickle.UnpicklingError,
+        EOFError,
+        ValueError,
+        TypeError,
+        AttributeError,
+        IndexError,
+        KeyError,
+        MemoryError,
+        OverflowError,
+    ) as exc:
+        raise DataError(
+            source, f"not a readable pickle (truncated or corrupt?): {type(exc).__name__}: {exc}"
+        ) from None
 
 
 def safe_load(path: str | Path) -> Any:

@@ -42,8 +42,14 @@ def drive_label_shares(drive: Drive, step_s: float = 0.1) -> dict[str, float]:
         return {lab: float("nan") for lab in LABELS}
     tq = np.arange(track.t[0], track.t[-1], step_s)
     sp = drive.speed
-    labels = label_times(tq, track.t, track.x, track.y,
-                         speed_t=None if sp is None else sp.t, speed_v=None if sp is None else sp.v)
+    labels = label_times(
+        tq,
+        track.t,
+        track.x,
+        track.y,
+        speed_t=None if sp is None else sp.t,
+        speed_v=None if sp is None else sp.v,
+    )
     return label_shares(labels)
 
 
@@ -53,12 +59,18 @@ def summarize_drive(drive: Drive) -> dict[str, Any]:
     scenario label, truth and its median accuracy [m], warnings."""
     gps = drive.gps
     dt_ms = np.diff(gps.t) * 1e3
-    q = (np.percentile(dt_ms, [5, 50, 95]).tolist() + [float(dt_ms.max())]) if dt_ms.size else [
-        float("nan")] * 4
+    q = (
+        (np.percentile(dt_ms, [5, 50, 95]).tolist() + [float(dt_ms.max())])
+        if dt_ms.size
+        else [float("nan")] * 4
+    )
     track = drive.truth if drive.truth is not None else gps
     v = _speed_series(drive)
-    imu_rate = (float((len(drive.imu) - 1) / (drive.imu.t[-1] - drive.imu.t[0]))
-                if drive.imu is not None and len(drive.imu) > 1 else 0.0)
+    imu_rate = (
+        float((len(drive.imu) - 1) / (drive.imu.t[-1] - drive.imu.t[0]))
+        if drive.imu is not None and len(drive.imu) > 1
+        else 0.0
+    )
     return {
         "name": drive.name,
         "format": drive.meta.format,
@@ -70,8 +82,10 @@ def summarize_drive(drive: Drive) -> dict[str, Any]:
         "imu_rate_hz": imu_rate,
         "imu_has_yaw": bool(drive.imu is not None and drive.imu.yaw is not None),
         "has_speed": drive.speed is not None,
-        "speed_mps": {"min": float(np.min(v)) if v.size else float("nan"),
-                      "max": float(np.max(v)) if v.size else float("nan")},
+        "speed_mps": {
+            "min": float(np.min(v)) if v.size else float("nan"),
+            "max": float(np.max(v)) if v.size else float("nan"),
+        },
         "fraction_stopped": float(np.mean(v < STANDSTILL_MPS)) if v.size else float("nan"),
         "label_shares": drive_label_shares(drive),
         "has_truth": drive.truth is not None,

@@ -108,16 +108,21 @@ def straight(length_m: float, speed_mps: float) -> Segment:
 
 
 def turn(angle_deg: float, radius_m: float, speed_mps: float, label: str = "turn") -> Segment:
-    return Segment("arc", angle_rad=np.radians(angle_deg), radius_m=radius_m,
-                   speed_mps=speed_mps, label=label)
+    return Segment(
+        "arc", angle_rad=np.radians(angle_deg), radius_m=radius_m, speed_mps=speed_mps, label=label
+    )
 
 
 def stop(dwell_s: float) -> Segment:
     return Segment("stop", dwell_s=dwell_s, label="start_stop")
 
 
-def roundabout(rng: np.random.Generator, j: Callable[[float, float], float],
-               radius_m: float | None = None, speed_mps: float | None = None) -> list[Segment]:
+def roundabout(
+    rng: np.random.Generator,
+    j: Callable[[float, float], float],
+    radius_m: float | None = None,
+    speed_mps: float | None = None,
+) -> list[Segment]:
     """Enter with a right turn, ~270 deg counter-clockwise around the ring, exit right.
 
     Default (both ``None``): ring radius 15-20 m at 7 m/s, entry / exit radius 10-12 m at
@@ -128,18 +133,39 @@ def roundabout(rng: np.random.Generator, j: Callable[[float, float], float],
     entry = j(30, 40)
     if radius_m is None:
         r_in = j(10, 12)
-        ring = Segment("arc", angle_rad=np.radians(j(260, 280)), radius_m=j(15, 20),
-                       speed_mps=7.0, label="roundabout", cont=True)
+        ring = Segment(
+            "arc",
+            angle_rad=np.radians(j(260, 280)),
+            radius_m=j(15, 20),
+            speed_mps=7.0,
+            label="roundabout",
+            cont=True,
+        )
         r_out, v_io = j(10, 12), 6.0
     else:
         v_ring = 7.0 if speed_mps is None else float(speed_mps)
         r_in = r_out = float(np.clip(0.6 * radius_m, 6.0, 15.0))
-        ring = Segment("arc", angle_rad=np.radians(j(240, 300)), radius_m=float(radius_m),
-                       speed_mps=v_ring, label="roundabout", cont=True)
+        ring = Segment(
+            "arc",
+            angle_rad=np.radians(j(240, 300)),
+            radius_m=float(radius_m),
+            speed_mps=v_ring,
+            label="roundabout",
+            cont=True,
+        )
         v_io = 0.85 * v_ring
-    return [turn(-entry, r_in, v_io, "roundabout"), ring,
-            Segment("arc", angle_rad=np.radians(-entry), radius_m=r_out, speed_mps=v_io,
-                    label="roundabout", cont=True)]
+    return [
+        turn(-entry, r_in, v_io, "roundabout"),
+        ring,
+        Segment(
+            "arc",
+            angle_rad=np.radians(-entry),
+            radius_m=r_out,
+            speed_mps=v_io,
+            label="roundabout",
+            cont=True,
+        ),
+    ]
 
 
 def route_segments(route: str, rng: np.random.Generator) -> list[Segment]:
@@ -150,35 +176,64 @@ def route_segments(route: str, rng: np.random.Generator) -> list[Segment]:
 
     side = 1.0 if rng.random() < 0.5 else -1.0
     if route == "mixed":
-        return [straight(j(70, 90), j(13, 15)), turn(-90, j(10, 13), 6.0),
-                straight(j(110, 140), j(15, 18)), *roundabout(rng, j),
-                straight(j(80, 100), j(11, 13)), stop(j(4, 6)),
-                straight(j(100, 120), j(14, 16)), turn(90, j(12, 15), 6.5),
-                straight(j(120, 150), j(16, 19))]
+        return [
+            straight(j(70, 90), j(13, 15)),
+            turn(-90, j(10, 13), 6.0),
+            straight(j(110, 140), j(15, 18)),
+            *roundabout(rng, j),
+            straight(j(80, 100), j(11, 13)),
+            stop(j(4, 6)),
+            straight(j(100, 120), j(14, 16)),
+            turn(90, j(12, 15), 6.5),
+            straight(j(120, 150), j(16, 19)),
+        ]
     if route == "turns":
-        return [straight(j(60, 80), j(11, 13)), turn(90 * side, j(10, 12), 5.5),
-                straight(j(90, 110), j(12, 14)), turn(-90 * side, j(10, 12), 5.5),
-                straight(j(70, 90), j(11, 13)), turn(-90 * side, j(12, 14), 6.0),
-                straight(j(100, 120), j(13, 15)), turn(90 * side, j(10, 12), 5.5),
-                straight(j(80, 100), j(12, 14)), stop(j(3, 5)),
-                straight(j(60, 80), j(10, 12)), turn(90 * side, j(10, 12), 5.5),
-                straight(j(80, 100), j(13, 15))]
+        return [
+            straight(j(60, 80), j(11, 13)),
+            turn(90 * side, j(10, 12), 5.5),
+            straight(j(90, 110), j(12, 14)),
+            turn(-90 * side, j(10, 12), 5.5),
+            straight(j(70, 90), j(11, 13)),
+            turn(-90 * side, j(12, 14), 6.0),
+            straight(j(100, 120), j(13, 15)),
+            turn(90 * side, j(10, 12), 5.5),
+            straight(j(80, 100), j(12, 14)),
+            stop(j(3, 5)),
+            straight(j(60, 80), j(10, 12)),
+            turn(90 * side, j(10, 12), 5.5),
+            straight(j(80, 100), j(13, 15)),
+        ]
     if route == "roundabout":
-        return [straight(j(100, 120), j(13, 15)), *roundabout(rng, j),
-                straight(j(170, 200), j(15, 18)), *roundabout(rng, j),
-                straight(j(140, 170), j(14, 17))]
+        return [
+            straight(j(100, 120), j(13, 15)),
+            *roundabout(rng, j),
+            straight(j(170, 200), j(15, 18)),
+            *roundabout(rng, j),
+            straight(j(140, 170), j(14, 17)),
+        ]
     if route == "stop_and_go":
-        return [straight(j(50, 70), j(10, 12)), stop(j(5, 8)),
-                straight(j(60, 80), j(11, 13)), stop(j(3, 5)),
-                straight(j(30, 40), j(8, 10)), stop(j(6, 9)),
-                straight(j(90, 110), j(12, 14)), turn(90 * side, j(10, 12), 5.5),
-                straight(j(50, 70), j(10, 12)), stop(j(4, 6)),
-                straight(j(80, 100), j(12, 14))]
+        return [
+            straight(j(50, 70), j(10, 12)),
+            stop(j(5, 8)),
+            straight(j(60, 80), j(11, 13)),
+            stop(j(3, 5)),
+            straight(j(30, 40), j(8, 10)),
+            stop(j(6, 9)),
+            straight(j(90, 110), j(12, 14)),
+            turn(90 * side, j(10, 12), 5.5),
+            straight(j(50, 70), j(10, 12)),
+            stop(j(4, 6)),
+            straight(j(80, 100), j(12, 14)),
+        ]
     if route == "straight":
-        return [straight(j(400, 500), j(16, 20)), straight(j(300, 400), j(10, 12)),
-                straight(j(400, 500), j(17, 20))]
-    raise ValueError(f"unknown synthetic route {route!r}; choose one of "
-                     f"{(*DEFAULT_ROUTES, 'straight')}")
+        return [
+            straight(j(400, 500), j(16, 20)),
+            straight(j(300, 400), j(10, 12)),
+            straight(j(400, 500), j(17, 20)),
+        ]
+    raise ValueError(
+        f"unknown synthetic route {route!r}; choose one of {(*DEFAULT_ROUTES, 'straight')}"
+    )
 
 
 ROUTES = (*DEFAULT_ROUTES, "straight")
@@ -196,18 +251,26 @@ class _Sim:
     t: np.ndarray
     x: np.ndarray
     y: np.ndarray
-    yaw: np.ndarray          # unwrapped [rad]
+    yaw: np.ndarray  # unwrapped [rad]
     v: np.ndarray
     yaw_rate: np.ndarray
     ax: np.ndarray
-    segments: list[list]     # [label, t_start, t_end], label in scenarios.labels.LABELS
-    manoeuvres: list[list]   # [manoeuvre, t_start, t_end], the finer kinds
+    segments: list[list]  # [label, t_start, t_end], label in scenarios.labels.LABELS
+    manoeuvres: list[list]  # [manoeuvre, t_start, t_end], the finer kinds
 
 
-def simulate(segments: list[Segment], yaw0: float = 0.0, dt: float = DT_TRUTH, *,
-             a_acc: float = A_ACC, a_dec: float = A_DEC, ay_max: float = AY_MAX,
-             v_smooth_s: float = V_SMOOTH_S, kappa_smooth_m: float = KAPPA_SMOOTH_M,
-             ay_window_m: float = 0.0) -> _Sim:
+def simulate(
+    segments: list[Segment],
+    yaw0: float = 0.0,
+    dt: float = DT_TRUTH,
+    *,
+    a_acc: float = A_ACC,
+    a_dec: float = A_DEC,
+    ay_max: float = AY_MAX,
+    v_smooth_s: float = V_SMOOTH_S,
+    kappa_smooth_m: float = KAPPA_SMOOTH_M,
+    ay_window_m: float = 0.0,
+) -> _Sim:
     """Kinematic simulation of a route at ``dt`` [s] (see module doc). Starts at the first
     segment's target speed (0 if it is a stop).
 
@@ -226,8 +289,9 @@ def simulate(segments: list[Segment], yaw0: float = 0.0, dt: float = DT_TRUTH, *
     n_s = int(round(edges[-1] / DS)) + 1
     s = np.arange(n_s) * DS
     idx = np.clip(np.searchsorted(edges, s, side="right") - 1, 0, len(segments) - 1)
-    kseg = np.array([np.sign(g.angle_rad) / g.radius_m if g.kind == "arc" else 0.0
-                     for g in segments])
+    kseg = np.array(
+        [np.sign(g.angle_rad) / g.radius_m if g.kind == "arc" else 0.0 for g in segments]
+    )
     vseg = np.array([g.speed_mps for g in segments])
     kappa = _box(kseg[idx], int(kappa_smooth_m / DS) | 1)
     theta = yaw0 + np.concatenate([[0.0], np.cumsum(0.5 * (kappa[1:] + kappa[:-1]) * DS)])
@@ -239,13 +303,14 @@ def simulate(segments: list[Segment], yaw0: float = 0.0, dt: float = DT_TRUTH, *
     vlat = np.sqrt(ay_max / np.maximum(np.abs(kappa), 1e-9))
     if ay_window_m > 0.0:
         from scipy.ndimage import minimum_filter1d
+
         vlat = minimum_filter1d(vlat, 2 * int(np.ceil(ay_window_m / DS)) + 1, mode="nearest")
     vlim = np.minimum(vseg[idx], vlat)
     stops = [(k, g.dwell_s) for k, g in enumerate(segments) if g.kind == "stop"]
     k_stop = np.array([int(round(edges[k] / DS)) for k, _ in stops], dtype=int)
     dwell = np.array([d for _, d in stops], dtype=float)
     vlim[k_stop] = 0.0
-    u = vlim ** 2
+    u = vlim**2
     i = np.arange(n_s)
     uf = 2 * a_acc * DS * i + np.minimum.accumulate(u - 2 * a_acc * DS * i)
     ub = -2 * a_dec * DS * i + np.minimum.accumulate((u + 2 * a_dec * DS * i)[::-1])[::-1]
@@ -293,8 +358,9 @@ def simulate(segments: list[Segment], yaw0: float = 0.0, dt: float = DT_TRUTH, *
                 spans.append(["start_stop", float(t[r0[m[0]]]), float(t[r1[m[0]]])])
                 mans.append([g.manoeuvre or "start_stop", *spans[-1][1:]])
             continue
-        if spans and (spans[-1][0] == g.label == "roundabout"
-                      or (g.cont and spans[-1][0] == g.label)):
+        if spans and (
+            spans[-1][0] == g.label == "roundabout" or (g.cont and spans[-1][0] == g.label)
+        ):
             spans[-1][2] = float(t_to[k + 1])
         else:
             spans.append([g.label, float(t_from[k]), float(t_to[k + 1])])
@@ -305,14 +371,15 @@ def simulate(segments: list[Segment], yaw0: float = 0.0, dt: float = DT_TRUTH, *
     return _Sim(t, x, y, yaw, v, yaw_rate, ax, spans, mans)
 
 
-def _hermite(t: np.ndarray, x: np.ndarray, y: np.ndarray, vx: np.ndarray, vy: np.ndarray,
-             tq: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def _hermite(
+    t: np.ndarray, x: np.ndarray, y: np.ndarray, vx: np.ndarray, vy: np.ndarray, tq: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
     """Cubic Hermite interpolation of the truth (positions and velocities) at times tq."""
     k = np.clip(np.searchsorted(t, tq, side="right") - 1, 0, t.size - 2)
     h = t[k + 1] - t[k]
     u = (tq - t[k]) / h
-    h00, h10 = 2 * u ** 3 - 3 * u ** 2 + 1, u ** 3 - 2 * u ** 2 + u
-    h01, h11 = -2 * u ** 3 + 3 * u ** 2, u ** 3 - u ** 2
+    h00, h10 = 2 * u**3 - 3 * u**2 + 1, u**3 - 2 * u**2 + u
+    h01, h11 = -2 * u**3 + 3 * u**2, u**3 - u**2
 
     def f(p: np.ndarray, dp: np.ndarray) -> np.ndarray:
         return h00 * p[k] + h10 * h * dp[k] + h01 * p[k + 1] + h11 * h * dp[k + 1]
@@ -324,10 +391,20 @@ def _wrap(a: np.ndarray) -> np.ndarray:
     return (a + np.pi) % (2 * np.pi) - np.pi
 
 
-def imu_stream(t: np.ndarray, yaw: np.ndarray, v: np.ndarray, yaw_rate: np.ndarray,
-               ax: np.ndarray, rng: np.random.Generator, step: int = 2, accel_sd: float = 0.05,
-               bias_sd: float = 0.05, yaw_sd: float = 0.005, yaw_rate_sd: float = 0.005,
-               gyro_bias_sd: float = 0.0) -> ImuStream:
+def imu_stream(
+    t: np.ndarray,
+    yaw: np.ndarray,
+    v: np.ndarray,
+    yaw_rate: np.ndarray,
+    ax: np.ndarray,
+    rng: np.random.Generator,
+    step: int = 2,
+    accel_sd: float = 0.05,
+    bias_sd: float = 0.05,
+    yaw_sd: float = 0.005,
+    yaw_rate_sd: float = 0.005,
+    gyro_bias_sd: float = 0.0,
+) -> ImuStream:
     """IMU samples from the 100 Hz truth: every ``step``-th sample (2 = 50 Hz, 1 = 100 Hz).
 
     ax = dv/dt, ay = v * yaw_rate [m/s^2, vehicle frame x forward, y left] with white noise
@@ -356,9 +433,16 @@ def can_speed_stream(t: np.ndarray, v: np.ndarray, rng: np.random.Generator) -> 
     return SpeedStream(t[jj], vc)
 
 
-def gps_stream(t: np.ndarray, x: np.ndarray, y: np.ndarray, yaw: np.ndarray, v: np.ndarray,
-               r_times: np.random.Generator, r_gps: np.random.Generator,
-               r_drop: np.random.Generator) -> tuple[GpsStream, list[tuple[float, float]]]:
+def gps_stream(
+    t: np.ndarray,
+    x: np.ndarray,
+    y: np.ndarray,
+    yaw: np.ndarray,
+    v: np.ndarray,
+    r_times: np.random.Generator,
+    r_gps: np.random.Generator,
+    r_drop: np.random.Generator,
+) -> tuple[GpsStream, list[tuple[float, float]]]:
     """GPS fixes from the truth (t [s], x/y [m ENU], yaw [rad], v [m/s]) and the dropouts.
 
     Fix intervals from the paper's distribution clipped to 0.1-0.6 s with ~4 % late fixes
@@ -382,13 +466,20 @@ def gps_stream(t: np.ndarray, x: np.ndarray, y: np.ndarray, yaw: np.ndarray, v: 
     acc = np.full(tf.size, float(np.hypot(GPS_WHITE_SD, GPS_GM_SD)))
     gps = GpsStream(tf, gx, gy, lat, lon, acc)
     n_out = max(1, int(round(span / 40.0)))
-    win = outage_windows(float(tf[0]), float(tf[-1]), r_drop.uniform(1.0, 2.0, n_out), r_drop,
-                         min_sep_s=10.0, repeat=False)
+    win = outage_windows(
+        float(tf[0]),
+        float(tf[-1]),
+        r_drop.uniform(1.0, 2.0, n_out),
+        r_drop,
+        min_sep_s=10.0,
+        repeat=False,
+    )
     return drop_windows(gps, win)
 
 
-def generate_drive(seed: int = 0, name: str | None = None, route: str = "mixed",
-                   duration_s: float | None = None) -> Drive:
+def generate_drive(
+    seed: int = 0, name: str | None = None, route: str = "mixed", duration_s: float | None = None
+) -> Drive:
     """One synthetic drive (see module doc). Deterministic for (seed, route, duration_s).
 
     Args:
@@ -402,8 +493,9 @@ def generate_drive(seed: int = 0, name: str | None = None, route: str = "mixed",
     if duration_s is not None and not duration_s > 1.0:
         raise ValueError(f"duration_s must be > 1 s, got {duration_s!r}")
     ss = np.random.SeedSequence([int(seed), zlib.crc32(route.encode())])
-    r_route, r_imu, r_speed, r_times, r_gps, r_drop = (np.random.default_rng(q)
-                                                       for q in ss.spawn(6))
+    r_route, r_imu, r_speed, r_times, r_gps, r_drop = (
+        np.random.default_rng(q) for q in ss.spawn(6)
+    )
     segs = route_segments(route, r_route)
     yaw0 = float(r_route.uniform(-np.pi, np.pi))
     sim = simulate(segs, yaw0)
@@ -422,12 +514,23 @@ def generate_drive(seed: int = 0, name: str | None = None, route: str = "mixed",
     segments = [sp for sp in sim.segments if sp[1] < t[-1]]
     if segments:
         segments[-1][2] = min(segments[-1][2], float(t[-1]))
-    meta = DriveMeta(fix_source=FIXES_FROM_TRUTH,
-        name=name or f"synthetic-{route}-s{seed}", source=f"synthetic:{route}:s{seed}",
-        format="synthetic", epoch_s=EPOCH_S, origin_lat=ORIGIN_LAT, origin_lon=ORIGIN_LON,
-        projection="enu", time_source="simulated",
-        extra={"seed": int(seed), "route": route, "segments": segments,
-               "gps_outages": [list(o) for o in outages]})
+    meta = DriveMeta(
+        fix_source=FIXES_FROM_TRUTH,
+        name=name or f"synthetic-{route}-s{seed}",
+        source=f"synthetic:{route}:s{seed}",
+        format="synthetic",
+        epoch_s=EPOCH_S,
+        origin_lat=ORIGIN_LAT,
+        origin_lon=ORIGIN_LON,
+        projection="enu",
+        time_source="simulated",
+        extra={
+            "seed": int(seed),
+            "route": route,
+            "segments": segments,
+            "gps_outages": [list(o) for o in outages],
+        },
+    )
     return Drive(meta=meta, gps=gps, imu=imu, speed=speed, truth=truth)
 
 

@@ -113,7 +113,7 @@ class WithCovariance(Cv):
 
     def covariance_at(self, t: float) -> np.ndarray:
         h = max(0.0, t - self.t1) if self.t1 == self.t1 else 0.0
-        s2 = self.sigma ** 2 * (1.0 + 4.0 * h * h)
+        s2 = self.sigma**2 * (1.0 + 4.0 * h * h)
         return np.array([[s2, 0.3 * s2], [0.3 * s2, s2]])
 
 

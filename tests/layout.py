@@ -10,8 +10,12 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 #: source folder -> the installed package it becomes
-FOLDERS = {"bench": "posbench", "predictors": "posbench.predictors",
-           "scenarios": "posbench.scenarios", "metrics": "posbench.metrics"}
+FOLDERS = {
+    "bench": "posbench",
+    "predictors": "posbench.predictors",
+    "scenarios": "posbench.scenarios",
+    "metrics": "posbench.metrics",
+}
 
 
 def module_name(path: Path) -> str:

@@ -12,8 +12,13 @@ import pytest
 
 #: Chromium flags for the browser tests: no sandbox (CI runs as root), WebGL through ANGLE on
 #: SwiftShader (no GPU)
-CHROMIUM_ARGS = ["--no-sandbox", "--use-gl=angle", "--use-angle=swiftshader",
-                 "--enable-unsafe-swiftshader", "--disable-dev-shm-usage"]
+CHROMIUM_ARGS = [
+    "--no-sandbox",
+    "--use-gl=angle",
+    "--use-angle=swiftshader",
+    "--enable-unsafe-swiftshader",
+    "--disable-dev-shm-usage",
+]
 
 
 def missing(what: str) -> NoReturn:

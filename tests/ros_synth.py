@@ -110,22 +110,27 @@ class _Msgs:
         return self.T["geometry_msgs/msg/Vector3"](x=float(v[0]), y=float(v[1]), z=float(v[2]))
 
     def quat(self, q: np.ndarray) -> object:
-        return self.T["geometry_msgs/msg/Quaternion"](w=float(q[0]), x=float(q[1]),
-                                                      y=float(q[2]), z=float(q[3]))
+        return self.T["geometry_msgs/msg/Quaternion"](
+            w=float(q[0]), x=float(q[1]), y=float(q[2]), z=float(q[3])
+        )
 
     def odom(self, t_ns: int, frame: str, x: float, y: float, yaw: float, v: float) -> object:
         T = self.T
         q = np.array([math.cos(yaw / 2), 0.0, 0.0, math.sin(yaw / 2)])
-        pose = T["geometry_msgs/msg/Pose"](position=T["geometry_msgs/msg/Point"](x=x, y=y, z=0.0),
-                                           orientation=self.quat(q))
+        pose = T["geometry_msgs/msg/Pose"](
+            position=T["geometry_msgs/msg/Point"](x=x, y=y, z=0.0), orientation=self.quat(q)
+        )
         cov = np.zeros(36)
         cov[0] = cov[7] = 0.01
-        tw = T["geometry_msgs/msg/Twist"](linear=self.vec([v, 0.0, 0.0]),
-                                          angular=self.vec([0.0, 0.0, 0.0]))
+        tw = T["geometry_msgs/msg/Twist"](
+            linear=self.vec([v, 0.0, 0.0]), angular=self.vec([0.0, 0.0, 0.0])
+        )
         return T["nav_msgs/msg/Odometry"](
-            header=self.header(t_ns, frame), child_frame_id="base_link",
+            header=self.header(t_ns, frame),
+            child_frame_id="base_link",
             pose=T["geometry_msgs/msg/PoseWithCovariance"](pose=pose, covariance=cov),
-            twist=T["geometry_msgs/msg/TwistWithCovariance"](twist=tw, covariance=np.zeros(36)))
+            twist=T["geometry_msgs/msg/TwistWithCovariance"](twist=tw, covariance=np.zeros(36)),
+        )
 
 
 def _ns(t: float) -> int:
@@ -150,15 +155,26 @@ def _messages(opts: SynthBag, m: _Msgs) -> list[tuple[str, str, int, object]]:
     gy = np.interp(tf, t, tr.y) + rng.normal(0.0, opts.gps_noise_m, tf.size) + opts.gps_bias_m[1]
     lat, lon = enu_to_latlon(gx, gy, ORIGIN_LAT, ORIGIN_LON)
     cov = np.zeros(9)
-    cov[0] = cov[4] = opts.gps_noise_m ** 2
+    cov[0] = cov[4] = opts.gps_noise_m**2
     cov[8] = (2 * opts.gps_noise_m) ** 2
     st = T["sensor_msgs/msg/NavSatStatus"](status=0, service=1)
     for k, tk in enumerate(tf):
-        out.append((opts.gps_topic, "sensor_msgs/msg/NavSatFix", _ns(tk) + 20_000_000,
-                    T["sensor_msgs/msg/NavSatFix"](
-                        header=m.header(_ns(tk), "gps"), status=st, latitude=float(lat[k]),
-                        longitude=float(lon[k]), altitude=120.0, position_covariance=cov,
-                        position_covariance_type=2)))
+        out.append(
+            (
+                opts.gps_topic,
+                "sensor_msgs/msg/NavSatFix",
+                _ns(tk) + 20_000_000,
+                T["sensor_msgs/msg/NavSatFix"](
+                    header=m.header(_ns(tk), "gps"),
+                    status=st,
+                    latitude=float(lat[k]),
+                    longitude=float(lon[k]),
+                    altitude=120.0,
+                    position_covariance=cov,
+                    position_covariance_type=2,
+                ),
+            )
+        )
 
     # IMU in its own, rotated frame, gravity included
     r_bs = rpy_to_matrix(*np.radians(opts.mount_rpy_deg))
@@ -178,21 +194,40 @@ def _messages(opts: SynthBag, m: _Msgs) -> list[tuple[str, str, int, object]]:
     ocov = np.zeros(9)
     ocov[0] = 1e-4 if opts.orientation else -1.0
     for k, tk in enumerate(ti):
-        out.append(("/imu", "sensor_msgs/msg/Imu", _ns(tk) + 2_000_000, T["sensor_msgs/msg/Imu"](
-            header=m.header(_ns(tk), "imu_link"),
-            orientation=m.quat(q[k] if opts.orientation else np.zeros(4)),
-            orientation_covariance=ocov, angular_velocity=m.vec(w_s[k]),
-            angular_velocity_covariance=np.zeros(9), linear_acceleration=m.vec(f_s[k]),
-            linear_acceleration_covariance=np.zeros(9))))
+        out.append(
+            (
+                "/imu",
+                "sensor_msgs/msg/Imu",
+                _ns(tk) + 2_000_000,
+                T["sensor_msgs/msg/Imu"](
+                    header=m.header(_ns(tk), "imu_link"),
+                    orientation=m.quat(q[k] if opts.orientation else np.zeros(4)),
+                    orientation_covariance=ocov,
+                    angular_velocity=m.vec(w_s[k]),
+                    angular_velocity_covariance=np.zeros(9),
+                    linear_acceleration=m.vec(f_s[k]),
+                    linear_acceleration_covariance=np.zeros(9),
+                ),
+            )
+        )
 
     if opts.tf_static:
         qm = matrix_to_quat(r_bs)[0]
         tfs = T["geometry_msgs/msg/TransformStamped"](
-            header=m.header(_ns(0.0), "base_link"), child_frame_id="imu_link",
+            header=m.header(_ns(0.0), "base_link"),
+            child_frame_id="imu_link",
             transform=T["geometry_msgs/msg/Transform"](
-                translation=m.vec([0.2, 0.0, 0.3]), rotation=m.quat(qm)))
-        out.append(("/tf_static", "tf2_msgs/msg/TFMessage", _ns(0.0),
-                    T["tf2_msgs/msg/TFMessage"](transforms=[tfs])))
+                translation=m.vec([0.2, 0.0, 0.3]), rotation=m.quat(qm)
+            ),
+        )
+        out.append(
+            (
+                "/tf_static",
+                "tf2_msgs/msg/TFMessage",
+                _ns(0.0),
+                T["tf2_msgs/msg/TFMessage"](transforms=[tfs]),
+            )
+        )
 
     to = np.arange(0.007, t[-1], 1.0 / opts.odom_hz)
     if opts.odom:
@@ -201,19 +236,41 @@ def _messages(opts: SynthBag, m: _Msgs) -> list[tuple[str, str, int, object]]:
         dt = np.diff(t, prepend=t[0])
         ox, oy = np.cumsum(vs * np.cos(h) * dt), np.cumsum(vs * np.sin(h) * dt)
         for tk in to:
-            out.append(("/odom", "nav_msgs/msg/Odometry", _ns(tk) + 1_000_000,
-                        m.odom(_ns(tk), "odom", float(np.interp(tk, t, ox)),
-                               float(np.interp(tk, t, oy)), float(np.interp(tk, t, h)),
-                               float(np.interp(tk, t, vs)))))
+            out.append(
+                (
+                    "/odom",
+                    "nav_msgs/msg/Odometry",
+                    _ns(tk) + 1_000_000,
+                    m.odom(
+                        _ns(tk),
+                        "odom",
+                        float(np.interp(tk, t, ox)),
+                        float(np.interp(tk, t, oy)),
+                        float(np.interp(tk, t, h)),
+                        float(np.interp(tk, t, vs)),
+                    ),
+                )
+            )
     if opts.ground_truth:
         a = math.radians(opts.truth_rot_deg)
         gx_ = math.cos(a) * tr.x - math.sin(a) * tr.y + opts.truth_shift_m[0]
         gy_ = math.sin(a) * tr.x + math.cos(a) * tr.y + opts.truth_shift_m[1]
         for tk in to:
-            out.append(("/ground_truth", "nav_msgs/msg/Odometry", _ns(tk) + 1_000_000,
-                        m.odom(_ns(tk), "map", float(np.interp(tk, t, gx_)),
-                               float(np.interp(tk, t, gy_)), float(np.interp(tk, t, yaw_u)) + a,
-                               float(np.interp(tk, t, v)))))
+            out.append(
+                (
+                    "/ground_truth",
+                    "nav_msgs/msg/Odometry",
+                    _ns(tk) + 1_000_000,
+                    m.odom(
+                        _ns(tk),
+                        "map",
+                        float(np.interp(tk, t, gx_)),
+                        float(np.interp(tk, t, gy_)),
+                        float(np.interp(tk, t, yaw_u)) + a,
+                        float(np.interp(tk, t, v)),
+                    ),
+                )
+            )
     out += _extras(opts, m, tr, rng)
     out.sort(key=lambda r: r[2])
     return out
@@ -223,12 +280,15 @@ def _map_frame(opts: SynthBag, x: np.ndarray, y: np.ndarray) -> tuple[np.ndarray
     """ENU [m] -> the map frame of the truths: rotated by truth_rot_deg, shifted, scaled."""
     a = math.radians(opts.truth_rot_deg)
     k = opts.pose_scale
-    return (k * (math.cos(a) * x - math.sin(a) * y) + opts.truth_shift_m[0],
-            k * (math.sin(a) * x + math.cos(a) * y) + opts.truth_shift_m[1])
+    return (
+        k * (math.cos(a) * x - math.sin(a) * y) + opts.truth_shift_m[0],
+        k * (math.sin(a) * x + math.cos(a) * y) + opts.truth_shift_m[1],
+    )
 
 
-def _extras(opts: SynthBag, m: _Msgs, tr: TruthStream, rng: np.random.Generator
-            ) -> list[tuple[str, str, int, object]]:
+def _extras(
+    opts: SynthBag, m: _Msgs, tr: TruthStream, rng: np.random.Generator
+) -> list[tuple[str, str, int, object]]:
     """The optional pose truth, RTK receiver and twist topics (see the module doc)."""
     T = m.T
     out: list[tuple[str, str, int, object]] = []
@@ -239,50 +299,69 @@ def _extras(opts: SynthBag, m: _Msgs, tr: TruthStream, rng: np.random.Generator
         px, py = _map_frame(opts, np.interp(to, t, tr.x), np.interp(to, t, tr.y))
         yaw = np.interp(to, t, yaw_u) + math.radians(opts.truth_rot_deg)
         cov = np.zeros(36)
-        cov[0] = cov[7] = opts.pose_sigma_m ** 2
+        cov[0] = cov[7] = opts.pose_sigma_m**2
         for k, tk in enumerate(to):
             q = np.array([math.cos(yaw[k] / 2), 0.0, 0.0, math.sin(yaw[k] / 2)])
             pose = T["geometry_msgs/msg/Pose"](
                 position=T["geometry_msgs/msg/Point"](x=float(px[k]), y=float(py[k]), z=0.0),
-                orientation=m.quat(q))
+                orientation=m.quat(q),
+            )
             if opts.pose_truth == "PoseStamped":
                 msg = T[mt](header=m.header(_ns(tk), "map"), pose=pose)
             else:
-                msg = T[mt](header=m.header(_ns(tk), "map"),
-                            pose=T["geometry_msgs/msg/PoseWithCovariance"](pose=pose,
-                                                                           covariance=cov))
+                msg = T[mt](
+                    header=m.header(_ns(tk), "map"),
+                    pose=T["geometry_msgs/msg/PoseWithCovariance"](pose=pose, covariance=cov),
+                )
             out.append(("/pose", mt, _ns(tk) + 1_000_000, msg))
     if opts.rtk:
         tk_ = np.arange(0.05, t[-1], 1.0 / opts.rtk_hz)
         rx = np.interp(tk_, t, tr.x) + rng.normal(0.0, opts.rtk_noise_m, tk_.size)
         ry = np.interp(tk_, t, tr.y) + rng.normal(0.0, opts.rtk_noise_m, tk_.size)
-        bad = (np.arange(tk_.size) % opts.rtk_no_fix_every == opts.rtk_no_fix_every - 1
-               if opts.rtk_no_fix_every else np.zeros(tk_.size, bool))
+        bad = (
+            np.arange(tk_.size) % opts.rtk_no_fix_every == opts.rtk_no_fix_every - 1
+            if opts.rtk_no_fix_every
+            else np.zeros(tk_.size, bool)
+        )
         rx[bad] += 500.0
         lat, lon = enu_to_latlon(rx, ry, ORIGIN_LAT, ORIGIN_LON)
         cov = np.zeros(9)
-        cov[0] = cov[4] = opts.rtk_noise_m ** 2
+        cov[0] = cov[4] = opts.rtk_noise_m**2
         cov[8] = (2 * opts.rtk_noise_m) ** 2
         for k, tk in enumerate(tk_):
             st = T["sensor_msgs/msg/NavSatStatus"](status=-1 if bad[k] else 2, service=1)
-            out.append(("/gnss/rtk", "sensor_msgs/msg/NavSatFix", _ns(tk) + 5_000_000,
-                        T["sensor_msgs/msg/NavSatFix"](
-                            header=m.header(_ns(tk), "gps_rtk"), status=st,
-                            latitude=float(lat[k]), longitude=float(lon[k]), altitude=120.0,
-                            position_covariance=cov,
-                            position_covariance_type=opts.rtk_cov_type)))
+            out.append(
+                (
+                    "/gnss/rtk",
+                    "sensor_msgs/msg/NavSatFix",
+                    _ns(tk) + 5_000_000,
+                    T["sensor_msgs/msg/NavSatFix"](
+                        header=m.header(_ns(tk), "gps_rtk"),
+                        status=st,
+                        latitude=float(lat[k]),
+                        longitude=float(lon[k]),
+                        altitude=120.0,
+                        position_covariance=cov,
+                        position_covariance_type=opts.rtk_cov_type,
+                    ),
+                )
+            )
     if opts.twist:
         mt = f"geometry_msgs/msg/{opts.twist}"
         vv = np.interp(to, t, tr.v)
         for k, tk in enumerate(to):
-            tw = T["geometry_msgs/msg/Twist"](linear=m.vec([vv[k], 0.0, 0.0]),
-                                              angular=m.vec([0.0, 0.0, 0.0]))
+            tw = T["geometry_msgs/msg/Twist"](
+                linear=m.vec([vv[k], 0.0, 0.0]), angular=m.vec([0.0, 0.0, 0.0])
+            )
             if opts.twist == "TwistStamped":
                 msg = T[mt](header=m.header(_ns(tk), "base_link"), twist=tw)
             else:
-                msg = T[mt](header=m.header(_ns(tk), "base_link"),
-                            twist=T["geometry_msgs/msg/TwistWithCovariance"](
-                                twist=tw, covariance=np.zeros(36)))
+                msg = T[mt](
+                    header=m.header(_ns(tk), "base_link"),
+                    twist=T["geometry_msgs/msg/TwistWithCovariance"](
+                        twist=tw, covariance=np.zeros(36)
+                    ),
+                )
             out.append(("/vel", mt, _ns(tk) + 1_000_000, msg))
     return out
 

@@ -218,9 +218,17 @@ def _slow_quantiles(values, units, w, qs):
     return out
 
 
-@pytest.mark.parametrize(("n", "d", "ties"), [(1, 1, False), (7, 3, False), (300, 5, True),
-                                               (4000, 40, False), (2500, 2500, False),
-                                               (20000, 4, True)])
+@pytest.mark.parametrize(
+    ("n", "d", "ties"),
+    [
+        (1, 1, False),
+        (7, 3, False),
+        (300, 5, True),
+        (4000, 40, False),
+        (2500, 2500, False),
+        (20000, 4, True),
+    ],
+)
 def test_resampled_quantiles_equal_the_slow_exact_reference(n, d, ties):
     rng = np.random.default_rng(n + d)
     v = rng.gamma(2.0, 1.0, n)
@@ -246,8 +254,9 @@ def test_block_quantiles_and_several_series_equal_the_reference():
         series.append((v[o], br.units[o]))
     many = resampled_quantiles_many(series, br.counts, (0.5, 0.95))
     for (v, u), got in zip(series, many, strict=True):
-        np.testing.assert_allclose(got, _slow_quantiles(v, u, br.counts, (0.5, 0.95)),
-                                   rtol=1e-12, atol=1e-12)
+        np.testing.assert_allclose(
+            got, _slow_quantiles(v, u, br.counts, (0.5, 0.95)), rtol=1e-12, atol=1e-12
+        )
 
 
 def test_quantile_intervals_are_percentiles_of_the_exact_resampled_quantiles():
@@ -255,7 +264,7 @@ def test_quantile_intervals_are_percentiles_of_the_exact_resampled_quantiles():
     v = np.sort(rng.gamma(2.0, 1.0, 500))
     u = rng.integers(0, 10, 500)
     w = resample_counts(10, 400, seed=0)
-    (lo, hi), = quantile_ci(v, u, w, (0.5,))
+    ((lo, hi),) = quantile_ci(v, u, w, (0.5,))
     ref = np.quantile(_slow_quantiles(v, u, w, (0.5,))[:, 0], [0.025, 0.975])
     assert (lo, hi) == pytest.approx(tuple(ref))
 
@@ -264,8 +273,7 @@ def test_means_are_pooled_per_resample():
     sums = np.array([10.0, 2.0, 30.0])
     counts = np.array([10, 1, 10])
     w = np.array([[1, 1, 1], [3, 0, 0], [0, 2, 1]])
-    np.testing.assert_allclose(resampled_means(sums, counts, w),
-                               [42 / 21, 1.0, (4 + 30) / 12])
+    np.testing.assert_allclose(resampled_means(sums, counts, w), [42 / 21, 1.0, (4 + 30) / 12])
     assert ratio_ci(sums, counts, np.ones((5, 3))) == pytest.approx((2.0, 2.0))
 
 
@@ -288,5 +296,6 @@ def test_summary_cis_resample_the_series_of_one_drive_alike():
 
 
 def test_definitions_name_the_figures_of_the_report():
-    assert {"95 % CI", "block bootstrap", "paired difference", "wins",
-            "conclusive"} <= set(DEFINITIONS)
+    assert {"95 % CI", "block bootstrap", "paired difference", "wins", "conclusive"} <= set(
+        DEFINITIONS
+    )

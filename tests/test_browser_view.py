@@ -64,9 +64,22 @@ def recording(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, list[str]
     """A 20 s synthetic drive through cv and kf as an .rrd file; and its drive names."""
     d = tmp_path_factory.mktemp("browser")
     rrd = d / "run.rrd"
-    r = bench("run", "-p", ",".join(PREDICTORS), "--synthetic-duration", "20",
-              "--workers", "1", "--drive-plots", "0", "--out", str(d / "out"),
-              "--rerun", str(rrd), cwd=d)
+    r = bench(
+        "run",
+        "-p",
+        ",".join(PREDICTORS),
+        "--synthetic-duration",
+        "20",
+        "--workers",
+        "1",
+        "--drive-plots",
+        "0",
+        "--out",
+        str(d / "out"),
+        "--rerun",
+        str(rrd),
+        cwd=d,
+    )
     assert r.returncode == 0, r.stderr
     drives = [x["name"] for x in json.loads((d / "out" / "results.json").read_text())["drives"]]
     assert rrd.is_file() and drives
@@ -105,8 +118,9 @@ def entity_paths(rrd: Path, recording_id: str | None = None) -> tuple[str, set[s
 
     reader = rr.chunk.RrdReader(rrd)
     recs = reader.recordings()
-    rec = recs[0] if recording_id is None else next(
-        r for r in recs if r.recording_id == recording_id)
+    rec = (
+        recs[0] if recording_id is None else next(r for r in recs if r.recording_id == recording_id)
+    )
     return rec.recording_id, {c.entity_path for c in reader.stream(store=rec).to_chunks()}
 
 
@@ -131,11 +145,19 @@ def test_recording_renders_in_rerun_web_viewer(chromium, recording, tmp_path):
     rrd, drives = recording
     t0 = time.monotonic()
     n = free_port_pair()
-    env = {**os.environ, "COLUMNS": "200",
-           "PYTHONPATH": os.pathsep.join(filter(None, [str(ROOT), os.environ.get("PYTHONPATH")]))}
-    server = subprocess.Popen([sys.executable, "-m", "posbench", "view", str(rrd), "--web",
-                               "--port", str(n)], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                              text=True, env=env, cwd=ROOT)
+    env = {
+        **os.environ,
+        "COLUMNS": "200",
+        "PYTHONPATH": os.pathsep.join(filter(None, [str(ROOT), os.environ.get("PYTHONPATH")])),
+    }
+    server = subprocess.Popen(
+        [sys.executable, "-m", "posbench", "view", str(rrd), "--web", "--port", str(n)],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        env=env,
+        cwd=ROOT,
+    )
     spawned: set[int] = set()
     try:
         url = read_until(server, "open: ", timeout_s=60)[-1].removeprefix("open: ")
@@ -149,8 +171,9 @@ def test_recording_renders_in_rerun_web_viewer(chromium, recording, tmp_path):
                 errors: list[str] = []
                 page.on("console", lambda m: errors.append(m.text) if m.type == "error" else None)
                 page.goto(url)
-                page.wait_for_function(LOADED_JS, arg=drives[0], polling=500,
-                                       timeout=LOAD_TIMEOUT_S * 1000)
+                page.wait_for_function(
+                    LOADED_JS, arg=drives[0], polling=500, timeout=LOAD_TIMEOUT_S * 1000
+                )
                 loaded_s = time.monotonic() - t0
                 shot = tmp_path / SCREENSHOT_NAME
                 stable = stable_screenshot(page, shot)
@@ -158,11 +181,14 @@ def test_recording_renders_in_rerun_web_viewer(chromium, recording, tmp_path):
                 text = page.inner_text("body")
                 state = bytes(page.evaluate("Array.from(window._handle.viewer_state())"))
                 (tmp_path / "viewer.rrd").write_bytes(
-                    bytes(page.evaluate("Array.from(window._handle.save_recording())")))
+                    bytes(page.evaluate("Array.from(window._handle.save_recording())"))
+                )
             finally:
                 browser.close()
-        print(f"viewer loaded the recording {loaded_s:.1f} s after `bench view` started; "
-              f"screenshot {'stable' if stable else 'still changing'}: {shot}")
+        print(
+            f"viewer loaded the recording {loaded_s:.1f} s after `bench view` started; "
+            f"screenshot {'stable' if stable else 'still changing'}: {shot}"
+        )
         if os.environ.get("POSBENCH_SCREENSHOT_DIR"):
             out = Path(os.environ["POSBENCH_SCREENSHOT_DIR"])
             out.mkdir(parents=True, exist_ok=True)

@@ -30,8 +30,9 @@ from posbench.predictors.kf import LinearKalman
 # ----------------------------------------------------------------------- pure metrics
 def test_mahalanobis_known_values():
     err = np.array([[1.0, 0.0], [0.0, 2.0], [1.0, 1.0], [np.nan, 0.0], [1.0, 0.0]])
-    cov = np.array([[1.0, 0.0, 1.0], [1.0, 0.0, 4.0], [2.0, 1.0, 2.0], [1.0, 0.0, 1.0],
-                    [1.0, 2.0, 1.0]])  # the last is not positive definite
+    cov = np.array(
+        [[1.0, 0.0, 1.0], [1.0, 0.0, 4.0], [2.0, 1.0, 2.0], [1.0, 0.0, 1.0], [1.0, 2.0, 1.0]]
+    )  # the last is not positive definite
     d2 = mahalanobis_sq(err, cov)
     # [1 1] inv([[2 1] [1 2]]) [1 1]' = 2/3
     np.testing.assert_allclose(d2[:3], [1.0, 1.0, 2.0 / 3.0])
@@ -53,8 +54,7 @@ def test_chi2_interval_is_scipy_stats_to_the_bit(n):
     from scipy.stats import chi2
 
     a = (1.0 - 0.95) / 2.0  # as nees_interval forms it (0.025000000000000022)
-    assert nees_interval(n) == (float(chi2.ppf(a, 2 * n) / n),
-                                float(chi2.ppf(1.0 - a, 2 * n) / n))
+    assert nees_interval(n) == (float(chi2.ppf(a, 2 * n) / n), float(chi2.ppf(1.0 - a, 2 * n) / n))
 
 
 def test_gaussian_errors_with_their_covariance_are_calibrated():
@@ -72,8 +72,9 @@ def test_gaussian_errors_with_their_covariance_are_calibrated():
     # sharpness: pi r95^2 sqrt(det) with det = 4 - 1.44
     assert s["sharpness_m2"] == pytest.approx(math.pi * ellipse_r2(0.95) * math.sqrt(2.56))
     # log-likelihood: E[-ln 2pi - ln det / 2 - d2 / 2] = -ln 2pi - ln 2.56 / 2 - 1
-    assert s["loglik"] == pytest.approx(-math.log(2 * math.pi) - 0.5 * math.log(2.56) - 1.0,
-                                        abs=0.03)
+    assert s["loglik"] == pytest.approx(
+        -math.log(2 * math.pi) - 0.5 * math.log(2.56) - 1.0, abs=0.03
+    )
     curve = calibration_curve(mahalanobis_sq(err, cov))
     assert all(abs(o - p) < 0.015 for p, o in curve)
 
@@ -93,8 +94,9 @@ def test_coverage_and_loglik_by_hand():
     np.testing.assert_allclose(coverage(d2), [0.4, 0.6, 0.8, 0.8])
     cov = np.array([[1.0, 0.0, 1.0]])
     assert log_likelihood(np.array([0.0]), cov)[0] == pytest.approx(-math.log(2 * math.pi))
-    assert sharpness_m2(np.array([[1.0, 0.0, 1.0], [4.0, 0.0, 4.0], [9.0, 0.0, 9.0]])) == \
-        pytest.approx(math.pi * ellipse_r2(0.95) * 4.0)
+    assert sharpness_m2(
+        np.array([[1.0, 0.0, 1.0], [4.0, 0.0, 4.0], [9.0, 0.0, 9.0]])
+    ) == pytest.approx(math.pi * ellipse_r2(0.95) * 4.0)
 
 
 def test_since_fix_bins():

@@ -24,8 +24,9 @@ def coverage95(drives, profile: str, names=("kf", "ekf")) -> dict[tuple[str, str
     out = {}
     for (name, kind), g in t.groupby(["predictor", "kind"]):
         err = g[["x", "y"]].to_numpy(float) - g[["x_ref", "y_ref"]].to_numpy(float)
-        out[(str(name), str(kind))] = float(coverage(mahalanobis_sq(
-            err, g[list(COV_COLUMNS)].to_numpy(float)), (0.95,))[0])
+        out[(str(name), str(kind))] = float(
+            coverage(mahalanobis_sq(err, g[list(COV_COLUMNS)].to_numpy(float)), (0.95,))[0]
+        )
     return out
 
 

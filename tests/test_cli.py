@@ -14,8 +14,14 @@ import pytest
 
 def bench(*args: str, cwd: Path | None = None, timeout: float = 300) -> subprocess.CompletedProcess:
     env = {**os.environ, "COLUMNS": "200"}
-    return subprocess.run([sys.executable, "-m", "posbench", *args], capture_output=True,
-                          text=True, cwd=cwd, timeout=timeout, env=env)
+    return subprocess.run(
+        [sys.executable, "-m", "posbench", *args],
+        capture_output=True,
+        text=True,
+        cwd=cwd,
+        timeout=timeout,
+        env=env,
+    )
 
 
 def assert_user_error(r: subprocess.CompletedProcess, *needles: str) -> None:
@@ -119,8 +125,12 @@ def test_run_with_lstm_writes_paper_figures(tmp_path):
     assert r.returncode == 0, r.stderr
     res = json.loads((out / "results.json").read_text())
     files = [f["file"] for f in res["paper_figures"]]
-    assert files == ["paper_fig_prediction.png", "paper_fig_current_position.png",
-                     "paper_fig_path.png", "paper_fig_kalman.png"]
+    assert files == [
+        "paper_fig_prediction.png",
+        "paper_fig_current_position.png",
+        "paper_fig_path.png",
+        "paper_fig_kalman.png",
+    ]
     for f in res["paper_figures"]:
         assert (out / f["file"]).stat().st_size > 10_000
         assert "drive `synthetic-" in f["caption"] and "t = " in f["caption"]
@@ -140,19 +150,36 @@ def test_latency_json_shape():
     assert r.returncode == 0, r.stderr
     res = json.loads(r.stdout)
     for name in ("cv", "lstm"):
-        assert {"p50", "p99"} <= set(res[name]["step_us"]) and {"p50", "p99"} <= set(res[name]["query_us"])
+        assert {"p50", "p99"} <= set(res[name]["step_us"]) and {"p50", "p99"} <= set(
+            res[name]["query_us"]
+        )
         assert 0 < res[name]["step_us"]["p50"] <= res[name]["step_us"]["p99"]
-    assert {"resample_positions", "resample_imu", "features", "inference",
-            "current_position_fit", "cubic_fit_lbfgs"} <= set(res["lstm_stages"])
-    assert res["lstm_stages"]["cubic_fit_lbfgs"]["p50"] > res["lstm_stages"]["cubic_fit_closed_form"]["p50"]
-    assert list(res["lstm_fused_stages"]) == ["resample", "features", "inference",
-                                              "current_position_fit"]
+    assert {
+        "resample_positions",
+        "resample_imu",
+        "features",
+        "inference",
+        "current_position_fit",
+        "cubic_fit_lbfgs",
+    } <= set(res["lstm_stages"])
+    assert (
+        res["lstm_stages"]["cubic_fit_lbfgs"]["p50"]
+        > res["lstm_stages"]["cubic_fit_closed_form"]["p50"]
+    )
+    assert list(res["lstm_fused_stages"]) == [
+        "resample",
+        "features",
+        "inference",
+        "current_position_fit",
+    ]
     assert set(res["batch"]) == {"1", "64", "1024"}
 
 
 def test_run_writes_rerun_recording(tmp_path):
     rrd = tmp_path / "run.rrd"
-    r = bench("run", "-p", "cv", "--out", str(tmp_path / "o"), "--rerun", str(rrd), "--workers", "1")
+    r = bench(
+        "run", "-p", "cv", "--out", str(tmp_path / "o"), "--rerun", str(rrd), "--workers", "1"
+    )
     assert r.returncode == 0, r.stderr
     assert rrd.stat().st_size > 10_000
     assert "bench view" in r.stdout
@@ -165,8 +192,17 @@ def test_train_command_writes_a_usable_model(tmp_path):
     assert r.returncode == 0, r.stderr
     info = json.loads((out / "model.json").read_text())
     assert info["command"].startswith("bench train") and "--synthetic 2" in info["command"]
-    r = bench("run", "-p", "lstm", "--model", f"lstm={out / 'model.onnx'}", "--out", str(tmp_path / "o"),
-              "--workers", "1")
+    r = bench(
+        "run",
+        "-p",
+        "lstm",
+        "--model",
+        f"lstm={out / 'model.onnx'}",
+        "--out",
+        str(tmp_path / "o"),
+        "--workers",
+        "1",
+    )
     assert r.returncode == 0, r.stderr
     res = json.loads((tmp_path / "o" / "results.json").read_text())
     assert res["predictors"]["lstm"]["future"]["count"] > 1000

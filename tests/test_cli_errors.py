@@ -22,12 +22,22 @@ from hypothesis import strategies as st
 ROOT = Path(__file__).resolve().parents[1]
 
 
-def bench(*args: str, cwd: Path | None = None, env: dict[str, str] | None = None,
-          timeout: float = 120) -> subprocess.CompletedProcess:
-    base = {**os.environ, "COLUMNS": "80",
-            "PYTHONPATH": os.pathsep.join(filter(None, [str(ROOT), os.environ.get("PYTHONPATH")]))}
-    return subprocess.run([sys.executable, "-m", "posbench", *args], capture_output=True,
-                          text=True, cwd=cwd, timeout=timeout, env={**base, **(env or {})})
+def bench(
+    *args: str, cwd: Path | None = None, env: dict[str, str] | None = None, timeout: float = 120
+) -> subprocess.CompletedProcess:
+    base = {
+        **os.environ,
+        "COLUMNS": "80",
+        "PYTHONPATH": os.pathsep.join(filter(None, [str(ROOT), os.environ.get("PYTHONPATH")])),
+    }
+    return subprocess.run(
+        [sys.executable, "-m", "posbench", *args],
+        capture_output=True,
+        text=True,
+        cwd=cwd,
+        timeout=timeout,
+        env={**base, **(env or {})},
+    )
 
 
 def assert_one_error_line(r: subprocess.CompletedProcess, *needles: str) -> str:
@@ -43,8 +53,10 @@ def assert_one_error_line(r: subprocess.CompletedProcess, *needles: str) -> str:
 
 def snapshot(folder: Path) -> dict[str, tuple[int, int]]:
     """Every path under ``folder`` with its size and modification time [ns]."""
-    return {str(p.relative_to(folder)): (p.stat().st_size, p.stat().st_mtime_ns)
-            for p in sorted(folder.rglob("*"))}
+    return {
+        str(p.relative_to(folder)): (p.stat().st_size, p.stat().st_mtime_ns)
+        for p in sorted(folder.rglob("*"))
+    }
 
 
 @pytest.fixture(scope="module")
@@ -68,8 +80,7 @@ CASES = [
     ("dropouts-random-1", "run --dropouts random:1.5", "--dropouts", True),
     ("model-missing", "run -p lstm --model lstm={ws}/nope.onnx", "{ws}/nope.onnx", True),
     ("model-not-onnx", "run -p lstm --model lstm={ws}/bad.onnx", "{ws}/bad.onnx", True),
-    ("authors-not-onnx", "run -p lstm-authors --model lstm-authors={ws}/bad.onnx",
-     "ONNX", True),
+    ("authors-not-onnx", "run -p lstm-authors --model lstm-authors={ws}/bad.onnx", "ONNX", True),
     ("model-not-run", "run -p cv --model lstm={ws}/bad.onnx", "not among", True),
     ("horizon-negative", "run --horizon -1", "--horizon", True),
     ("horizon-zero", "run --horizon 0", "--horizon", True),
@@ -84,35 +95,75 @@ CASES = [
     ("out-is-a-file", "run -p cv --out {ws}/notes.txt", "{ws}/notes.txt", True),
     ("out-under-a-file", "run -p cv --out {ws}/notes.txt/out", "{ws}/notes.txt", True),
     ("rerun-is-a-folder", "run -p cv --rerun {ws}/folder", "--rerun", True),
-    ("rerun-color-by-not-run", "run -p cv,kf --rerun {ws}/x.rrd --rerun-color-by ekf",
-     "--rerun-color-by ekf: not among the predictors to run (cv, kf)", True),
-    ("rerun-color-by-without-rerun", "run -p cv --rerun-color-by cv",
-     "--rerun-color-by cv: colours the track of a rerun recording; give --rerun", True),
+    (
+        "rerun-color-by-not-run",
+        "run -p cv,kf --rerun {ws}/x.rrd --rerun-color-by ekf",
+        "--rerun-color-by ekf: not among the predictors to run (cv, kf)",
+        True,
+    ),
+    (
+        "rerun-color-by-without-rerun",
+        "run -p cv --rerun-color-by cv",
+        "--rerun-color-by cv: colours the track of a rerun recording; give --rerun",
+        True,
+    ),
     ("unknown-predictor", "run -p cv,magic", "magic", True),
     ("predictor-twice", "run -p cv,cv", "more than once", True),
     ("unknown-predictor-lists-known", "run -p kf,nope", "known: cv, ekf, hybrid, kf", True),
     ("import-path-no-module", "run -p kf,nosuchmodule:X", "no module named 'nosuchmodule'", True),
     ("import-path-not-a-class", "run -p os:path", "path is not a class", True),
-    ("import-path-not-a-predictor", "run -p collections:OrderedDict",
-     "OrderedDict is not a subclass of posbench.predictors.base.Predictor", True),
+    (
+        "import-path-not-a-predictor",
+        "run -p collections:OrderedDict",
+        "OrderedDict is not a subclass of posbench.predictors.base.Predictor",
+        True,
+    ),
     ("import-path-no-class", "run -p module:", "expected a registered name or module:Class", True),
-    ("import-path-no-module-name", "run -p :Class", "expected a registered name or module:Class",
-     True),
-    ("set-unknown-option", "run -p kf --set kf.nosuch=1",
-     "--set kf.nosuch=1: predictor kf has no option 'nosuch'; its options: gps_sigma, ", True),
+    (
+        "import-path-no-module-name",
+        "run -p :Class",
+        "expected a registered name or module:Class",
+        True,
+    ),
+    (
+        "set-unknown-option",
+        "run -p kf --set kf.nosuch=1",
+        "--set kf.nosuch=1: predictor kf has no option 'nosuch'; its options: gps_sigma, ",
+        True,
+    ),
     ("set-no-option", "run -p kf --set kf=1", "--set kf=1: names no option", True),
     ("set-no-equals", "run -p kf --set kf.jerk_psd", "expected NAME.OPTION=VALUE", True),
-    ("set-not-in-run", "run -p kf --set nope.x=1",
-     "--set nope.x=1: nope is not among the predictors to run (kf)", True),
-    ("set-bad-json-rejected", "run -p kf --set kf.jerk_psd=[1,",
-     "--set kf.jerk_psd=[1,: predictor kf rejects jerk_psd='[1,'", True),
-    ("set-bad-value-of-alias", "run -p cv,kf@slow --set kf@slow.gps_sigma=0.1 --set kf@slow.jerk_psd=-1",
-     "--set kf@slow.jerk_psd=-1: predictor kf@slow rejects jerk_psd=-1", True),
+    (
+        "set-not-in-run",
+        "run -p kf --set nope.x=1",
+        "--set nope.x=1: nope is not among the predictors to run (kf)",
+        True,
+    ),
+    (
+        "set-bad-json-rejected",
+        "run -p kf --set kf.jerk_psd=[1,",
+        "--set kf.jerk_psd=[1,: predictor kf rejects jerk_psd='[1,'",
+        True,
+    ),
+    (
+        "set-bad-value-of-alias",
+        "run -p cv,kf@slow --set kf@slow.gps_sigma=0.1 --set kf@slow.jerk_psd=-1",
+        "--set kf@slow.jerk_psd=-1: predictor kf@slow rejects jerk_psd=-1",
+        True,
+    ),
     ("set-twice", "run -p kf --set kf.jerk_psd=1 --set kf.jerk_psd=2", "set twice", True),
-    ("set-model-disagrees", "run -p lstm --model lstm={ws}/bad.onnx --set lstm.model={ws}/x.onnx",
-     "disagree", True),
-    ("set-model-not-onnx", "run -p lstm --set lstm.model={ws}/bad.onnx",
-     "--set lstm.model={ws}/bad.onnx: lstm cannot load it", True),
+    (
+        "set-model-disagrees",
+        "run -p lstm --model lstm={ws}/bad.onnx --set lstm.model={ws}/x.onnx",
+        "disagree",
+        True,
+    ),
+    (
+        "set-model-not-onnx",
+        "run -p lstm --set lstm.model={ws}/bad.onnx",
+        "--set lstm.model={ws}/bad.onnx: lstm cannot load it",
+        True,
+    ),
     ("predictors-import-path-bad", "predictors collections:OrderedDict", "not a subclass", False),
     ("unknown-option", "run --bogus", "bench run --help", True),
     ("seed-not-a-number", "run --seed x", "--seed", True),
@@ -145,7 +196,7 @@ CASES = [
 
 def _expand(cases: list[tuple[str, str, str, bool]]):
     for cid, args, needle, has_workers in cases:
-        for w in ((1, 2) if has_workers else (None,)):
+        for w in (1, 2) if has_workers else (None,):
             yield pytest.param(args, needle, w, id=cid + (f"-w{w}" if w else ""))
 
 
@@ -172,8 +223,20 @@ def test_data_error_inside_a_worker_is_one_line(tmp_path):
         rows = ["stream,t,x,y"] + [f"gps,{0.2 * i:.1f},{2 * i},0" for i in range(50)]
         (data / f"drive{k}.csv").write_text("\n".join([*rows, "truth,5.0,10,0"]) + "\n")
     for w in ("1", "2"):
-        r = bench("run", "-p", "cv", "--data", str(data), "--workers", w, "--gps-profile", "rtk",
-                  "--out", str(tmp_path / "out"), cwd=tmp_path)
+        r = bench(
+            "run",
+            "-p",
+            "cv",
+            "--data",
+            str(data),
+            "--workers",
+            w,
+            "--gps-profile",
+            "rtk",
+            "--out",
+            str(tmp_path / "out"),
+            cwd=tmp_path,
+        )
         assert_one_error_line(r, "truth: need at least 2 samples")
         assert not (tmp_path / "out").exists()
 
@@ -190,8 +253,14 @@ def test_view_without_display_says_how_to_open_it_elsewhere(tmp_path):
     rerun.chmod(0o755)
     env = {k: v for k, v in os.environ.items() if k not in ("DISPLAY", "WAYLAND_DISPLAY")}
     env["PATH"] = f"{fake_bin}{os.pathsep}{env.get('PATH', '')}"
-    r = subprocess.run([sys.executable, "-m", "posbench", "view", str(rrd)], capture_output=True,
-                       text=True, timeout=120, cwd=ROOT, env={**env, "COLUMNS": "80"})
+    r = subprocess.run(
+        [sys.executable, "-m", "posbench", "view", str(rrd)],
+        capture_output=True,
+        text=True,
+        timeout=120,
+        cwd=ROOT,
+        env={**env, "COLUMNS": "80"},
+    )
     line = assert_one_error_line(r, "no display", f"rerun {rrd}", f"bench view {rrd} --web")
     assert "URL" in line
     assert not (tmp_path / "viewer-started").exists()
@@ -203,11 +272,16 @@ def test_view_reports_a_failing_viewer_in_one_line(tmp_path):
     fake_bin = tmp_path / "bin"
     fake_bin.mkdir()
     rerun = fake_bin / "rerun"
-    rerun.write_text("#!/bin/sh\necho 'loading...' >&2\necho 'Failed to open connection to X "
-                     "server' >&2\nexit 3\n")
+    rerun.write_text(
+        "#!/bin/sh\necho 'loading...' >&2\necho 'Failed to open connection to X "
+        "server' >&2\nexit 3\n"
+    )
     rerun.chmod(0o755)
-    r = bench("view", str(rrd), env={"DISPLAY": ":99",
-                                     "PATH": f"{fake_bin}{os.pathsep}{os.environ['PATH']}"})
+    r = bench(
+        "view",
+        str(rrd),
+        env={"DISPLAY": ":99", "PATH": f"{fake_bin}{os.pathsep}{os.environ['PATH']}"},
+    )
     assert_one_error_line(r, "status 3", str(rrd), "X server")
 
 
@@ -219,8 +293,11 @@ def test_view_runs_the_viewer_and_exits_0(tmp_path):
     rerun = fake_bin / "rerun"
     rerun.write_text(f'#!/bin/sh\necho "$1" > {tmp_path / "opened"}\n')
     rerun.chmod(0o755)
-    r = bench("view", str(rrd), env={"DISPLAY": ":99",
-                                     "PATH": f"{fake_bin}{os.pathsep}{os.environ['PATH']}"})
+    r = bench(
+        "view",
+        str(rrd),
+        env={"DISPLAY": ":99", "PATH": f"{fake_bin}{os.pathsep}{os.environ['PATH']}"},
+    )
     assert r.returncode == 0, r.stderr
     assert (tmp_path / "opened").read_text().strip() == str(rrd)
 
@@ -261,23 +338,38 @@ def test_shell_completion_is_enabled():
     assert "--install-completion" in r.stdout and "--show-completion" in r.stdout
     # the shell named, not detected from the parent process (which fails where pytest runs
     # without a shell above it, e.g. started in the background): typer's switch for that
-    r = bench("--show-completion", "bash",
-              env={"_TYPER_COMPLETE_TEST_DISABLE_SHELL_DETECTION": "1"})
+    r = bench(
+        "--show-completion", "bash", env={"_TYPER_COMPLETE_TEST_DISABLE_SHELL_DETECTION": "1"}
+    )
     assert r.returncode == 0 and "_BENCH_COMPLETE" in r.stdout
-    r = bench(env={"_BENCH_COMPLETE": "complete_bash", "COMP_WORDS": "bench lat",
-                   "COMP_CWORD": "1"})
+    r = bench(
+        env={"_BENCH_COMPLETE": "complete_bash", "COMP_WORDS": "bench lat", "COMP_CWORD": "1"}
+    )
     assert r.returncode == 0 and r.stdout.split() == ["latency"]
 
 
-@pytest.mark.parametrize(("cmd", "placeholders"), [
-    ("run", ["--data PATH", "--model NAME=PATH", "--topic ROLE=TOPIC", "--out DIR",
-             "--rerun FILE", "--projection enu|mercator", "--set NAME.OPTION=VALUE",
-             "--config FILE.toml"]),
-    ("data inspect", ["--topic ROLE=TOPIC"]),
-    ("train", ["--data PATH", "--out DIR", "--network NAME"]),
-    ("latency", ["--data PATH", "--model NAME=PATH"]),
-    ("tune", ["--data PATH"]),
-])
+@pytest.mark.parametrize(
+    ("cmd", "placeholders"),
+    [
+        (
+            "run",
+            [
+                "--data PATH",
+                "--model NAME=PATH",
+                "--topic ROLE=TOPIC",
+                "--out DIR",
+                "--rerun FILE",
+                "--projection enu|mercator",
+                "--set NAME.OPTION=VALUE",
+                "--config FILE.toml",
+            ],
+        ),
+        ("data inspect", ["--topic ROLE=TOPIC"]),
+        ("train", ["--data PATH", "--out DIR", "--network NAME"]),
+        ("latency", ["--data PATH", "--model NAME=PATH"]),
+        ("tune", ["--data PATH"]),
+    ],
+)
 def test_help_placeholders(cmd, placeholders):
     r = bench(*cmd.split(), "--help")
     options = r.stdout.split("Options:", 1)[1]
@@ -364,10 +456,12 @@ def test_validate_predictors_resolves_a_model_folder(tmp_path):
         validate_predictors(["lstm-authors"], {})
 
 
-@settings(max_examples=40, deadline=None,
-          suppress_health_check=[HealthCheck.function_scoped_fixture])
-@given(horizon=st.one_of(st.text(max_size=12), st.floats().map(repr)),
-       dropouts=st.text(max_size=16))
+@settings(
+    max_examples=40, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture]
+)
+@given(
+    horizon=st.one_of(st.text(max_size=12), st.floats().map(repr)), dropouts=st.text(max_size=16)
+)
 def test_random_option_values_give_one_error_line(tmp_path, capsys, horizon, dropouts):
     """In-process ``main``: any --horizon / --dropouts text with a bad --seed (checked
     after them, so the run never starts) ends in one error line and status 2."""
@@ -375,8 +469,16 @@ def test_random_option_values_give_one_error_line(tmp_path, capsys, horizon, dro
 
     out = tmp_path / "out"
     with pytest.raises(SystemExit) as e:
-        cli.main(["run", f"--horizon={horizon}", f"--dropouts={dropouts}", "--seed=-1",
-                  "--out", str(out)])
+        cli.main(
+            [
+                "run",
+                f"--horizon={horizon}",
+                f"--dropouts={dropouts}",
+                "--seed=-1",
+                "--out",
+                str(out),
+            ]
+        )
     err = capsys.readouterr().err
     assert e.value.code == 2, err
     assert len(err.splitlines()) == 1 and err.startswith("error: "), err

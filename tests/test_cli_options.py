@@ -17,8 +17,14 @@ from ros_synth import SynthBag, write_bag
 
 def bench(*args: str, cwd: Path | None = None, columns: int = 200) -> subprocess.CompletedProcess:
     env = {**os.environ, "COLUMNS": str(columns)}
-    return subprocess.run([sys.executable, "-m", "posbench", *map(str, args)],
-                          capture_output=True, text=True, timeout=600, cwd=cwd, env=env)
+    return subprocess.run(
+        [sys.executable, "-m", "posbench", *map(str, args)],
+        capture_output=True,
+        text=True,
+        timeout=600,
+        cwd=cwd,
+        env=env,
+    )
 
 
 def ok(r: subprocess.CompletedProcess) -> subprocess.CompletedProcess:
@@ -47,21 +53,37 @@ def test_a_topic_never_takes_the_path_after_it(bag: Path):
 def test_a_model_never_takes_the_predictor_after_it():
     r = bench("check", "--model", "cv=somewhere", "cv")
     assert r.returncode == 2 and "ROLE=VALUE" not in r.stderr
-    assert r.stderr.startswith("error: --model cv=somewhere: predictor cv has no option "
-                               "'model'"), r.stderr  # cv was read as the predictor to check
+    assert r.stderr.startswith("error: --model cv=somewhere: predictor cv has no option 'model'"), (
+        r.stderr
+    )  # cv was read as the predictor to check
 
 
 def test_predictors_repeat_or_split_on_commas(tmp_path: Path):
-    ok(bench("run", "-p", "kf", "-p", "cv,poly", "--workers", "1", "--drive-plots", "0",
-             "--synthetic-duration", "30", "--out", tmp_path / "a", "-q"))
+    ok(
+        bench(
+            "run",
+            "-p",
+            "kf",
+            "-p",
+            "cv,poly",
+            "--workers",
+            "1",
+            "--drive-plots",
+            "0",
+            "--synthetic-duration",
+            "30",
+            "--out",
+            tmp_path / "a",
+            "-q",
+        )
+    )
     assert config_of(tmp_path / "a")["predictors"] == ["kf", "cv", "poly"]
     r = bench("run", "-p", "kf", "-p", "kf", "--out", tmp_path / "b")
     assert r.returncode == 2 and "lists kf more than once" in r.stderr
 
 
 def test_quiet_and_verbose(tmp_path: Path):
-    args = ("run", "-p", "cv", "--workers", "1", "--drive-plots", "0", "--synthetic-duration",
-            "30")
+    args = ("run", "-p", "cv", "--workers", "1", "--drive-plots", "0", "--synthetic-duration", "30")
     quiet = ok(bench(*args, "--out", tmp_path / "q", "-q"))
     assert quiet.stdout == "" and quiet.stderr == ""
     assert (tmp_path / "q" / "report.md").is_file()
@@ -77,8 +99,10 @@ def test_quiet_and_verbose(tmp_path: Path):
 
 def test_config_file_gives_defaults_the_command_line_overrides(tmp_path: Path):
     cfg = tmp_path / "run.toml"
-    cfg.write_text('[run]\npredictors = ["cv"]\nworkers = 1\ndrive-plots = "0"\n'
-                   'synthetic_duration = 30.0\ngps-profile = "consumer"\ngate = false\n')
+    cfg.write_text(
+        '[run]\npredictors = ["cv"]\nworkers = 1\ndrive-plots = "0"\n'
+        'synthetic_duration = 30.0\ngps-profile = "consumer"\ngate = false\n'
+    )
     ok(bench("run", "--config", cfg, "--out", tmp_path / "a", "-q"))
     c = config_of(tmp_path / "a")
     assert c["predictors"] == ["cv"] and c["gps_profile"] == "consumer" and c["gate"] is False
@@ -89,7 +113,7 @@ def test_config_file_gives_defaults_the_command_line_overrides(tmp_path: Path):
 
 def test_config_file_mistakes_are_one_line(tmp_path: Path):
     bad = tmp_path / "bad.toml"
-    bad.write_text('[run]\nhorizon_secs = 0.2\n')
+    bad.write_text("[run]\nhorizon_secs = 0.2\n")
     r = bench("run", "--config", bad)
     lines = r.stderr.strip().splitlines()
     assert r.returncode == 2 and len(lines) == 1, r.stderr
@@ -103,9 +127,24 @@ def test_config_file_mistakes_are_one_line(tmp_path: Path):
 
 
 def test_print_config_round_trips(tmp_path: Path):
-    r = ok(bench("run", "-p", "cv,kf", "--data", tmp_path, "--gps-profile", "consumer",
-                 "--set", "kf.jerk_psd=4", "--topic", "gps=/fix", "--no-gate", "--print-config",
-                 cwd=tmp_path))
+    r = ok(
+        bench(
+            "run",
+            "-p",
+            "cv,kf",
+            "--data",
+            tmp_path,
+            "--gps-profile",
+            "consumer",
+            "--set",
+            "kf.jerk_psd=4",
+            "--topic",
+            "gps=/fix",
+            "--no-gate",
+            "--print-config",
+            cwd=tmp_path,
+        )
+    )
     assert sorted(p.name for p in tmp_path.iterdir()) == []  # printed, nothing run
     table = tomllib.loads(r.stdout)["run"]
     assert table["predictors"] == ["cv,kf"] and table["data"] == [str(tmp_path)]
@@ -134,21 +173,59 @@ def _notice(r: subprocess.CompletedProcess, *words: str) -> None:
 
 def test_old_spellings_work_for_one_release_with_a_notice(tmp_path: Path, bag: Path):
     base = ("--workers", "1", "--drive-plots", "0", "-p", "cv")
-    r = ok(bench("run", "--data", bag, bag, "--topic", "gps=/fix", *base,
-                 "--out", tmp_path / "a", "-q"))
+    r = ok(
+        bench(
+            "run", "--data", bag, bag, "--topic", "gps=/fix", *base, "--out", tmp_path / "a", "-q"
+        )
+    )
     _notice(r, "--data")
     assert len(json.loads((tmp_path / "a" / "results.json").read_text())["data"]) == 2
-    r = ok(bench("run", "--synthetic-duration", "30", *base, "--format", "md",
-                 "--out", tmp_path / "b", "-q"))
+    r = ok(
+        bench(
+            "run",
+            "--synthetic-duration",
+            "30",
+            *base,
+            "--format",
+            "md",
+            "--out",
+            tmp_path / "b",
+            "-q",
+        )
+    )
     _notice(r, "--format", "--table-format")
     assert not (tmp_path / "b" / "tables").exists()
-    r = ok(bench("run", "--synthetic-duration", "30", *base, "--set", "cv.fix_sigma=0.1",
-                 "cv.accel_sigma=1", "--out", tmp_path / "c", "-q"))
+    r = ok(
+        bench(
+            "run",
+            "--synthetic-duration",
+            "30",
+            *base,
+            "--set",
+            "cv.fix_sigma=0.1",
+            "cv.accel_sigma=1",
+            "--out",
+            tmp_path / "c",
+            "-q",
+        )
+    )
     _notice(r, "--set")
-    assert config_of(tmp_path / "c")["predictor_options"]["cv"] == {"fix_sigma": 0.1,
-                                                                    "accel_sigma": 1}
-    r = ok(bench("queries", "--synthetic-duration", "30", "--format", "parquet",
-                 "--out", tmp_path / "q", "-q"))
+    assert config_of(tmp_path / "c")["predictor_options"]["cv"] == {
+        "fix_sigma": 0.1,
+        "accel_sigma": 1,
+    }
+    r = ok(
+        bench(
+            "queries",
+            "--synthetic-duration",
+            "30",
+            "--format",
+            "parquet",
+            "--out",
+            tmp_path / "q",
+            "-q",
+        )
+    )
     _notice(r, "--format", "--file-format")
     assert (tmp_path / "q" / "queries.parquet").is_file()
     r = bench("train", "--model", "gru")
@@ -159,8 +236,9 @@ def test_old_spellings_work_for_one_release_with_a_notice(tmp_path: Path, bag: P
 
 
 def test_a_plugin_written_for_the_old_layout_is_told_the_new_name(tmp_path: Path):
-    (tmp_path / "oldplug.py").write_text("from predictors.base import Predictor\n\n\n"
-                                         "class Mine(Predictor):\n    pass\n")
+    (tmp_path / "oldplug.py").write_text(
+        "from predictors.base import Predictor\n\n\nclass Mine(Predictor):\n    pass\n"
+    )
     r = bench("predictors", "oldplug:Mine", cwd=tmp_path)
     assert r.returncode == 2 and len(r.stderr.strip().splitlines()) == 1, r.stderr
     assert "import posbench.predictors instead of predictors" in r.stderr

@@ -31,8 +31,9 @@ def base_run(cv_kf_run: Path) -> Path:
     return cv_kf_run
 
 
-def _copy(src: Path, dst: Path, kf_scale: float = 1.0, config: dict | None = None,
-          drop_drives: int = 0) -> Path:
+def _copy(
+    src: Path, dst: Path, kf_scale: float = 1.0, config: dict | None = None, drop_drives: int = 0
+) -> Path:
     """A copy of run ``src`` whose kf figures (whole run and per drive) are ``kf_scale``
     times larger, with ``config`` keys overridden and the last ``drop_drives`` drives gone."""
     shutil.copytree(src, dst)
@@ -71,8 +72,13 @@ def test_metric_and_gate_parsing() -> None:
     for bad in ("future", "later.mean_m", "future.mean"):
         with pytest.raises(UsageError, match="not a metric"):
             Metric.parse(bad)
-    for bad in ("lstm", "lstm:future.mean_m", "lstm:future.mean_m:5", "lstm:future.mean_m:x%",
-                ":future.mean_m:5%"):
+    for bad in (
+        "lstm",
+        "lstm:future.mean_m",
+        "lstm:future.mean_m:5",
+        "lstm:future.mean_m:x%",
+        ":future.mean_m:5%",
+    ):
         with pytest.raises(UsageError):
             Gate.parse(bad)
 
@@ -126,8 +132,9 @@ def test_aligned_keeps_rows_missing_from_one_run(base_run: Path, tmp_path: Path)
 
 def test_config_differences_are_named(base_run: Path, tmp_path: Path) -> None:
     old = load_run(base_run)
-    new = load_run(_copy(base_run, tmp_path / "new", config={"horizon_s": 0.4,
-                                                            "gps_profile": "consumer"}))
+    new = load_run(
+        _copy(base_run, tmp_path / "new", config={"horizon_s": 0.4, "gps_profile": "consumer"})
+    )
     lines = config_differences([old, new], ["old", "new"])
     assert any(x.startswith("horizon_s: 0.2 (old), 0.4 (new)") for x in lines), lines
     assert any(x.startswith("gps_profile:") for x in lines), lines
@@ -135,8 +142,15 @@ def test_config_differences_are_named(base_run: Path, tmp_path: Path) -> None:
 
 def test_cli_gate_fails_on_a_real_regression(base_run: Path, tmp_path: Path) -> None:
     new = _copy(base_run, tmp_path / "new", kf_scale=1.3)
-    r = bench("compare", str(base_run), str(new), "--fail-if-worse", "kf:future.mean_m:5%",
-              "--fail-if-worse", "cv:future.mean_m:5%")
+    r = bench(
+        "compare",
+        str(base_run),
+        str(new),
+        "--fail-if-worse",
+        "kf:future.mean_m:5%",
+        "--fail-if-worse",
+        "cv:future.mean_m:5%",
+    )
     assert r.returncode == 1, (r.stdout, r.stderr)
     assert "Traceback" not in r.stdout + r.stderr
     failed = [x for x in r.stdout.splitlines() if x.startswith("FAILED")]
@@ -151,8 +165,17 @@ def test_cli_gate_fails_on_a_real_regression(base_run: Path, tmp_path: Path) -> 
 def test_cli_table_csv_and_outputs(base_run: Path, tmp_path: Path) -> None:
     new = _copy(base_run, tmp_path / "new", kf_scale=1.3)
     out = tmp_path / "cmp"
-    r = bench("compare", str(base_run), str(new), "--table-format", "csv", "--scope", "all,drive",
-              "--out", str(out))
+    r = bench(
+        "compare",
+        str(base_run),
+        str(new),
+        "--table-format",
+        "csv",
+        "--scope",
+        "all,drive",
+        "--out",
+        str(out),
+    )
     assert r.returncode == 0, r.stderr
     from io import StringIO
 
@@ -171,8 +194,14 @@ def test_cli_config_mismatch_is_flagged_and_blocks_a_gate(base_run: Path, tmp_pa
     assert r.returncode == 0 and "note: runs differ in horizon_s" in r.stderr, r.stderr
     r = bench("compare", str(base_run), str(new), "--fail-if-worse", "kf:future.mean_m:5%")
     assert_one_error_line(r, "configurations differ", "horizon_s", "--allow-config-change")
-    r = bench("compare", str(base_run), str(new), "--fail-if-worse", "kf:future.mean_m:5%",
-              "--allow-config-change")
+    r = bench(
+        "compare",
+        str(base_run),
+        str(new),
+        "--fail-if-worse",
+        "kf:future.mean_m:5%",
+        "--allow-config-change",
+    )
     assert r.returncode == 0, r.stderr
 
 
@@ -186,12 +215,18 @@ def test_cli_bad_input_is_one_line(base_run: Path, tmp_path: Path) -> None:
         (("compare", str(base_run), "--metric", "future.avg"), ("--metric", "not a metric")),
         (("compare", str(base_run), "--table-format", "xlsx"), ("--table-format",)),
         (("compare", str(base_run), "--scope", "everything"), ("--scope",)),
-        (("compare", str(base_run), "--fail-if-worse", "kf:future.mean_m:5%"),
-         ("exactly two runs",)),
-        (("compare", str(base_run), str(base_run), "--fail-if-worse", "lstm:future.mean_m:5%"),
-         ("no predictor 'lstm'",)),
-        (("compare", str(base_run), str(base_run), "--fail-if-worse", "kf:future.mean_m"),
-         ("PREDICTOR:KIND.STAT:TOLERANCE",)),
+        (
+            ("compare", str(base_run), "--fail-if-worse", "kf:future.mean_m:5%"),
+            ("exactly two runs",),
+        ),
+        (
+            ("compare", str(base_run), str(base_run), "--fail-if-worse", "lstm:future.mean_m:5%"),
+            ("no predictor 'lstm'",),
+        ),
+        (
+            ("compare", str(base_run), str(base_run), "--fail-if-worse", "kf:future.mean_m"),
+            ("PREDICTOR:KIND.STAT:TOLERANCE",),
+        ),
         (("compare", str(base_run), "--out", str(base_run / "results.json")), ("--out",)),
         (("compare",), ("RUN_DIR",)),
     ]
@@ -225,8 +260,9 @@ def test_uncertainty_figures_side_by_side(base_run: Path, tmp_path: Path) -> Non
     new = load_run(_uncertainty_copy(base_run, tmp_path / "new", kf="none"))
     u = old.results["uncertainty"]
     assert set(u["predictors"]) == {"cv", "kf"}  # both report covariance in this run
-    f = uncertainty_aligned([old, new], ["old", "new"], ["all", "dataset", "route type",
-                                                           "since fix"])
+    f = uncertainty_aligned(
+        [old, new], ["old", "new"], ["all", "dataset", "route type", "since fix"]
+    )
     assert list(f["scope"].unique()) == ["all", "dataset", "route type", "since fix"]
     for pred in ("cv", "kf"):
         for kind in ("future", "now"):
@@ -245,7 +281,9 @@ def test_uncertainty_figures_side_by_side(base_run: Path, tmp_path: Path) -> Non
             assert row["old cov95"] == pytest.approx(ds["coverage"]["95"])
     # cv is unchanged in NEW; kf reports no covariance there: said so, no figure made up
     cv = f[f.predictor == "cv"]
-    assert (cv["new nees"] == cv["old nees"]).all() and (cv["new verdict"] == cv["old verdict"]).all()
+    assert (cv["new nees"] == cv["old nees"]).all() and (
+        cv["new verdict"] == cv["old verdict"]
+    ).all()
     kf = f[f.predictor == "kf"]
     assert len(kf) > 4 and (kf["new verdict"] == "no uncertainty").all()
     assert kf[["new nees", "new cov95", "new area", "new loglik"]].isna().all().all()
@@ -286,15 +324,26 @@ def test_cli_uncertainty_table_csv_and_outputs(base_run: Path, tmp_path: Path) -
     assert r.returncode == 0, r.stderr
     assert "Traceback" not in r.stdout + r.stderr
     assert "Uncertainty" in r.stdout and "NEES" in r.stdout  # headers wrap at 80 columns
-    verdict = json.loads((base_run / "results.json").read_text())[
-        "uncertainty"]["predictors"]["cv"]["future"]["verdict"]
+    verdict = json.loads((base_run / "results.json").read_text())["uncertainty"]["predictors"][
+        "cv"
+    ]["future"]["verdict"]
     for needle in ("no uncertainty", "pre-1.4 run", verdict):
         assert needle in r.stdout, needle
     assert "note: old13 has no uncertainty figures (results.json schema 1.3" in r.stderr
     # CSV: the error table, an empty line, the uncertainty table, full precision
     out = tmp_path / "cmp"
-    r = bench("compare", str(base_run), str(new), "--uncertainty", "--table-format", "csv",
-              "--scope", "all,since-fix", "--out", str(out))
+    r = bench(
+        "compare",
+        str(base_run),
+        str(new),
+        "--uncertainty",
+        "--table-format",
+        "csv",
+        "--scope",
+        "all,since-fix",
+        "--out",
+        str(out),
+    )
     assert r.returncode == 0, r.stderr
     errors, unc = r.stdout.split("written:")[0].split("\n\n")
     assert set(pd.read_csv(StringIO(errors))["scope"]) == {"all"}
@@ -305,10 +354,12 @@ def test_cli_uncertainty_table_csv_and_outputs(base_run: Path, tmp_path: Path) -
     assert row["old nees"] == pytest.approx(res["predictors"]["cv"]["now"]["nees"], rel=1e-12)
     assert row["new nees"] == row["old nees"]
     since = frame[(frame.scope == "since fix") & (frame.predictor == "kf")]
-    assert set(since["group"]) <= set(res["by_since_fix"]["kf"]["now"]) | set(
-        res["by_since_fix"]["kf"]["future"]) and (since["new verdict"] == "no uncertainty").all()
-    written = pd.read_csv(out / "uncertainty_comparison.csv", keep_default_na=False,
-                          na_values=[""])
+    assert (
+        set(since["group"])
+        <= set(res["by_since_fix"]["kf"]["now"]) | set(res["by_since_fix"]["kf"]["future"])
+        and (since["new verdict"] == "no uncertainty").all()
+    )
+    written = pd.read_csv(out / "uncertainty_comparison.csv", keep_default_na=False, na_values=[""])
     pd.testing.assert_frame_equal(written, frame)
     assert (out / "comparison.csv").is_file()
     r = bench("compare", str(base_run), str(new), "--uncertainty", "--out", str(tmp_path / "md"))
@@ -320,8 +371,17 @@ def test_cli_uncertainty_option_is_taught_and_checked(base_run: Path) -> None:
     r = bench("compare", "--help")
     assert r.returncode == 0
     text = " ".join(r.stdout.split())
-    for needle in ("--uncertainty", "NEES", "no uncertainty", "pre-1.4 run", "since-fix",
-                   "uncertainty_comparison"):
+    for needle in (
+        "--uncertainty",
+        "NEES",
+        "no uncertainty",
+        "pre-1.4 run",
+        "since-fix",
+        "uncertainty_comparison",
+    ):
         assert needle in text, needle
-    assert_one_error_line(bench("compare", str(base_run), "--scope", "all,since-fix"),
-                          "--scope since-fix", "--uncertainty")
+    assert_one_error_line(
+        bench("compare", str(base_run), "--scope", "all,since-fix"),
+        "--scope since-fix",
+        "--uncertainty",
+    )

@@ -113,15 +113,21 @@ def test_similarity_fit_recovers_transform():
 
 def test_understated_gps_accuracy_flagged(drive):
     g = drive.gps
-    noisy = GpsStream(g.t, g.x + np.random.default_rng(1).normal(0, 1.0, len(g)), g.y,
-                      g.lat, g.lon, g.accuracy)  # 1 m scatter, ~0.08 m stated
+    noisy = GpsStream(
+        g.t, g.x + np.random.default_rng(1).normal(0, 1.0, len(g)), g.y, g.lat, g.lon, g.accuracy
+    )  # 1 m scatter, ~0.08 m stated
     c = check_drive(replace(drive, gps=noisy)).checks["gps"]
     assert c.verdict == FAIL and 0.8 < c.figures["scatter_m"] < 1.3, c
 
 
 def test_missing_streams_are_na_with_a_reason(drive):
-    d = replace(drive, imu=None, speed=None, truth=None,
-                gps=GpsStream(drive.gps.t, drive.gps.x, drive.gps.y))
+    d = replace(
+        drive,
+        imu=None,
+        speed=None,
+        truth=None,
+        gps=GpsStream(drive.gps.t, drive.gps.x, drive.gps.y),
+    )
     res = check_drive(d)
     for c in res.checks.values():
         assert c.verdict == NA and c.reason
@@ -178,6 +184,7 @@ def test_every_shared_drive_has_no_failure(aslan_dir, kitti_dir, comma_dir):
 
 # ---------------------------------------------------------------- command line
 
+
 @pytest.fixture(scope="module")
 def flipped_csv(tmp_path_factory) -> Path:
     from posbench.scenarios.loaders.table import write_table
@@ -205,8 +212,19 @@ def test_run_strict_fails_before_predictors(flipped_csv, tmp_path):
 
 def test_run_without_strict_reports_failure(flipped_csv, tmp_path):
     out = tmp_path / "out"
-    r = bench("run", "--data", str(flipped_csv), "-p", "cv,kf", "--out", str(out),
-              "--drive-plots", "0", "--table-format", "md")
+    r = bench(
+        "run",
+        "--data",
+        str(flipped_csv),
+        "-p",
+        "cv,kf",
+        "--out",
+        str(out),
+        "--drive-plots",
+        "0",
+        "--table-format",
+        "md",
+    )
     assert r.returncode == 0, r.stderr
     assert "data check FAIL flipped: imu.yaw_rate: sign -1" in r.stdout
     assert "kf used a failing stream" in r.stdout and "cv used" not in r.stdout

@@ -47,9 +47,19 @@ def _wrap(a: np.ndarray) -> np.ndarray:
     return np.angle(np.exp(1j * a))
 
 
-def _build(segs, *, seed: int, fix_hz: float, fix_noise_m: float, stated_m: float,
-           bias_m: float = 0.0, truth_noise_m: float = 0.02, one_source: bool = False,
-           truth_yaw: bool = True, name: str = "built") -> Drive:
+def _build(
+    segs,
+    *,
+    seed: int,
+    fix_hz: float,
+    fix_noise_m: float,
+    stated_m: float,
+    bias_m: float = 0.0,
+    truth_noise_m: float = 0.02,
+    one_source: bool = False,
+    truth_yaw: bool = True,
+    name: str = "built",
+) -> Drive:
     """A drive from the kinematics of ``segs``: truth at 50 Hz (positions with
     ``truth_noise_m`` white noise, yaw with 0.1 deg, v), IMU at 100 Hz (correct gyro and
     accelerometer with small noise), wheel speed at 50 Hz, fixes at ``fix_hz`` with white
@@ -64,15 +74,19 @@ def _build(segs, *, seed: int, fix_hz: float, fix_noise_m: float, stated_m: floa
     ty = y[it] + rng.normal(0, truth_noise_m, it.size)
     tyaw = _wrap(yaw[it] + rng.normal(0, np.radians(0.1), it.size)) if truth_yaw else None
     truth = TruthStream(t[it], tx, ty, tyaw, v[it] + rng.normal(0, 0.02, it.size))
-    imu = ImuStream(t, sim.ax + rng.normal(0, 0.05, t.size),
-                    v * sim.yaw_rate + rng.normal(0, 0.05, t.size),
-                    _wrap(yaw + rng.normal(0, np.radians(0.3), t.size)),
-                    sim.yaw_rate + rng.normal(0, 0.005, t.size))
+    imu = ImuStream(
+        t,
+        sim.ax + rng.normal(0, 0.05, t.size),
+        v * sim.yaw_rate + rng.normal(0, 0.05, t.size),
+        _wrap(yaw + rng.normal(0, np.radians(0.3), t.size)),
+        sim.yaw_rate + rng.normal(0, 0.005, t.size),
+    )
     jj = np.arange(1, t.size, 2)
     speed = SpeedStream(t[jj], np.maximum(v[jj] + rng.normal(0, 0.02, jj.size), 0.0))
     if one_source:
-        gps = GpsStream(truth.t[::5], truth.x[::5], truth.y[::5],
-                        accuracy=np.full(truth.t[::5].size, stated_m))
+        gps = GpsStream(
+            truth.t[::5], truth.x[::5], truth.y[::5], accuracy=np.full(truth.t[::5].size, stated_m)
+        )
     else:
         step = int(round(1.0 / (fix_hz * (t[1] - t[0]))))
         ig = np.arange(0, t.size, step)
@@ -80,19 +94,32 @@ def _build(segs, *, seed: int, fix_hz: float, fix_noise_m: float, stated_m: floa
         gx = x[ig] + bias_m * np.cos(phase) + rng.normal(0, fix_noise_m, ig.size)
         gy = y[ig] + bias_m * np.sin(phase) + rng.normal(0, fix_noise_m, ig.size)
         gps = GpsStream(t[ig], gx, gy, accuracy=np.full(ig.size, stated_m))
-    meta = DriveMeta(name=name, source=f"test:{name}", format="csv",
-                     fix_source=FIXES_FROM_TRUTH if one_source else "receiver")
+    meta = DriveMeta(
+        name=name,
+        source=f"test:{name}",
+        format="csv",
+        fix_source=FIXES_FROM_TRUTH if one_source else "receiver",
+    )
     return Drive(meta, gps, imu, speed, truth)
 
 
 def urban_canyon_drive(**kw) -> Drive:
     """A ~4 min car drive (8-15 m/s, turns, a stop) whose receiver states 8 m and sits
     ~11 m off (multipath), with a NovAtel-like GNSS/INS truth."""
-    segs = [straight(250, 12), turn(90, 25, 8), straight(300, 14), stop(5),
-            straight(200, 10), turn(-90, 30, 9), straight(350, 15), turn(60, 40, 10),
-            straight(250, 13), turn(-120, 25, 8), straight(300, 12)]
-    args = dict(seed=7, fix_hz=5.0, fix_noise_m=1.5, stated_m=8.0, bias_m=11.0,
-                name="urban-canyon")
+    segs = [
+        straight(250, 12),
+        turn(90, 25, 8),
+        straight(300, 14),
+        stop(5),
+        straight(200, 10),
+        turn(-90, 30, 9),
+        straight(350, 15),
+        turn(60, 40, 10),
+        straight(250, 13),
+        turn(-120, 25, 8),
+        straight(300, 12),
+    ]
+    args = dict(seed=7, fix_hz=5.0, fix_noise_m=1.5, stated_m=8.0, bias_m=11.0, name="urban-canyon")
     return _build(segs, **(args | kw))
 
 
@@ -101,10 +128,16 @@ def slow_city_drive(**kw) -> Drive:
     fixes are the truth's, as KITTI's OXTS) carry 0.2 m of white noise."""
     segs = []
     for i in range(6):
-        segs += [straight(40, 4.0), turn(90 if i % 2 else -90, 10, 2.5), straight(30, 3.5),
-                 stop(4)]
-    args = dict(seed=11, fix_hz=10.0, fix_noise_m=0.0, stated_m=0.2, truth_noise_m=0.2,
-                one_source=True, name="slow-city")
+        segs += [straight(40, 4.0), turn(90 if i % 2 else -90, 10, 2.5), straight(30, 3.5), stop(4)]
+    args = dict(
+        seed=11,
+        fix_hz=10.0,
+        fix_noise_m=0.0,
+        stated_m=0.2,
+        truth_noise_m=0.2,
+        one_source=True,
+        name="slow-city",
+    )
     return _build(segs, **(args | kw))
 
 
@@ -157,8 +190,9 @@ def test_truth_far_beyond_stated_accuracy_fails(canyon):
     c = check_drive(far).checks["truth"]
     assert c.verdict == FAIL and "offset" in c.reason, c  # 8 m stated: 113 m is explained
     a = np.radians(20)
-    rot = TruthStream(tr.t, np.cos(a) * tr.x - np.sin(a) * tr.y,
-                      np.sin(a) * tr.x + np.cos(a) * tr.y, tr.yaw, tr.v)
+    rot = TruthStream(
+        tr.t, np.cos(a) * tr.x - np.sin(a) * tr.y, np.sin(a) * tr.x + np.cos(a) * tr.y, tr.yaw, tr.v
+    )
     res = check_drive(replace(canyon, truth=rot))
     assert res.checks["truth"].verdict == FAIL, res.checks["truth"]
     assert abs(res.checks["truth"].figures["rotation_deg"] + 20) < 1.5
@@ -169,8 +203,9 @@ def test_truth_far_beyond_stated_accuracy_fails(canyon):
 def test_truth_offset_beyond_a_small_stated_accuracy_fails():
     d = urban_canyon_drive(stated_m=0.5, fix_noise_m=0.3, bias_m=0.0)
     tr = d.truth
-    c = check_drive(replace(d, truth=TruthStream(tr.t, tr.x + 12.0, tr.y, tr.yaw, tr.v))
-                    ).checks["truth"]
+    c = check_drive(replace(d, truth=TruthStream(tr.t, tr.x + 12.0, tr.y, tr.yaw, tr.v))).checks[
+        "truth"
+    ]
     assert c.verdict == FAIL and 11 < c.figures["offset_m"] < 13, c
 
 
@@ -196,8 +231,9 @@ def test_slow_city_gyro_is_not_failed(variant):
 def test_slow_city_flipped_gyro_still_fails_against_truth_heading():
     d = slow_city_drive()
     imu = d.imu
-    c = check_drive(replace(d, imu=ImuStream(imu.t, imu.ax, imu.ay, imu.yaw, -imu.yaw_rate))
-                    ).checks["imu.yaw_rate"]
+    c = check_drive(
+        replace(d, imu=ImuStream(imu.t, imu.ax, imu.ay, imu.yaw, -imu.yaw_rate))
+    ).checks["imu.yaw_rate"]
     assert c.verdict == FAIL and c.figures["sign"] == -1, c
 
 

@@ -41,8 +41,11 @@ ROOT = Path(__file__).resolve().parents[1]
 
 #: every registered predictor but the spies test modules register for themselves
 #: (tests/test_runner.py registers ``spy`` and ``line`` when it is imported)
-REGISTERED = [n for n, e in available().items()
-              if not e.target.startswith(("test_", "tests.", "contract_broken"))]
+REGISTERED = [
+    n
+    for n, e in available().items()
+    if not e.target.startswith(("test_", "tests.", "contract_broken"))
+]
 #: the model file a predictor of NEEDS_MODEL is checked with, in ../shared/models/authors
 MODEL_FILES = {"lstm-authors": "gps_interpolation_model3.onnx"}
 
@@ -52,7 +55,8 @@ KNOWN_FAILURES = {
     ("lstm-authors", "straight_line"): (
         "the authors' network lags on an exact straight line: its future answers are "
         "~0.17 s x speed behind (2.6 m at 15 m/s, 1.5 m at 9 m/s)",
-        "line: error 2."),
+        "line: error 2.",
+    ),
 }
 
 
@@ -60,11 +64,19 @@ def _params():
     for name in REGISTERED:
         for clause in CLAUSE_IDS:
             known = KNOWN_FAILURES.get((name, clause))
-            marks = ([pytest.mark.xfail(reason=known[0], raises=AssertionError, strict=True)]
-                     if known else [])
+            marks = (
+                [pytest.mark.xfail(reason=known[0], raises=AssertionError, strict=True)]
+                if known
+                else []
+            )
             for gated in (False, True):
-                yield pytest.param(name, clause, gated, marks=marks,
-                                   id=f"{name}-{clause}{'-gated' if gated else ''}")
+                yield pytest.param(
+                    name,
+                    clause,
+                    gated,
+                    marks=marks,
+                    id=f"{name}-{clause}{'-gated' if gated else ''}",
+                )
 
 
 def test_registered_predictors_cover_the_registry():
@@ -73,8 +85,9 @@ def test_registered_predictors_cover_the_registry():
 
 
 @pytest.mark.parametrize(("name", "clause", "gated"), list(_params()))
-def test_registered_predictor_obeys_clause(name: str, clause: str, gated: bool,
-                                           request: pytest.FixtureRequest) -> None:
+def test_registered_predictor_obeys_clause(
+    name: str, clause: str, gated: bool, request: pytest.FixtureRequest
+) -> None:
     opts = {}
     if name in NEEDS_MODEL:
         models = request.getfixturevalue("authors_models_dir")  # fails under CI if absent
@@ -87,8 +100,9 @@ def test_registered_predictor_obeys_clause(name: str, clause: str, gated: bool,
     assert res.clause == clause and res.evidence
     known = KNOWN_FAILURES.get((name, clause))
     if known and not res.passed and known[1] not in res.evidence:
-        pytest.fail(f"{name} {clause} fails for another reason than the known one: "
-                    f"{res.evidence}")  # not an AssertionError: not covered by the xfail
+        pytest.fail(
+            f"{name} {clause} fails for another reason than the known one: {res.evidence}"
+        )  # not an AssertionError: not covered by the xfail
     assert res.passed, f"{name} {clause}: {res.evidence}"
 
 
@@ -102,19 +116,35 @@ def test_the_plain_core_of_the_broken_predictors_passes():
     assert _failed(check_predictor(Cv, "cv-core")) == {}
 
 
-@pytest.mark.parametrize(("cls", "clause", "evidence"), [
-    (LookAhead, "no_look_ahead",
-     r"^answer for t=\d+\.\d\d s \(asked at (\d+\.\d\d) s\) changed by 0\.\d{3} m when the "
-     r"observations stamped after \1 s were withheld$"),
-    (NoReset, "reset",
-     r"^answer for t=\d+\.\d\d s right after reset\(\) was \(-?\d+\.\d{3}, -?\d+\.\d{3}\), a "
-     r"fresh instance answered \(nan, nan\)$"),
-    (NanAtStandstill, "straight_line",
-     r"^line: max error \S+ m over (\d+) answers; standstill: \1 of \1 answers not finite, "
-     r"first for t=3\.20 s$"),
-    (BadCovariance, "covariance_psd",
-     r"^covariance_at\(\d+\.\d\d s\) has eigenvalue -\S+ m\^2 < 0$"),
-], ids=lambda v: v.__name__ if isinstance(v, type) else None)
+@pytest.mark.parametrize(
+    ("cls", "clause", "evidence"),
+    [
+        (
+            LookAhead,
+            "no_look_ahead",
+            r"^answer for t=\d+\.\d\d s \(asked at (\d+\.\d\d) s\) changed by 0\.\d{3} m when the "
+            r"observations stamped after \1 s were withheld$",
+        ),
+        (
+            NoReset,
+            "reset",
+            r"^answer for t=\d+\.\d\d s right after reset\(\) was \(-?\d+\.\d{3}, -?\d+\.\d{3}\), a "
+            r"fresh instance answered \(nan, nan\)$",
+        ),
+        (
+            NanAtStandstill,
+            "straight_line",
+            r"^line: max error \S+ m over (\d+) answers; standstill: \1 of \1 answers not finite, "
+            r"first for t=3\.20 s$",
+        ),
+        (
+            BadCovariance,
+            "covariance_psd",
+            r"^covariance_at\(\d+\.\d\d s\) has eigenvalue -\S+ m\^2 < 0$",
+        ),
+    ],
+    ids=lambda v: v.__name__ if isinstance(v, type) else None,
+)
 def test_a_broken_predictor_fails_exactly_its_clause(cls, clause, evidence):
     failed = _failed(check_predictor(cls, cls.__name__))
     assert set(failed) == {clause}, failed
@@ -132,15 +162,17 @@ def test_look_ahead_is_caught_at_the_cut_and_only_there():
     d_future = np.hypot(*(part.xy[:nf] - whole.xy[:nf]).T)
     assert np.flatnonzero(d_future > 1e-9).tolist() == [nf - 1]
     assert part.t_query[nf - 1] == pytest.approx(t_cut + 0.2)
-    honest_whole, honest_part = (run_replay(Cv, p) for p in (inp.drive,
-                                                              cut_prepared(inp.drive, t_cut)))
+    honest_whole, honest_part = (
+        run_replay(Cv, p) for p in (inp.drive, cut_prepared(inp.drive, t_cut))
+    )
     np.testing.assert_array_equal(honest_part.xy[:nf], honest_whole.xy[:nf])
 
 
 def test_a_reported_covariance_is_checked():
     [res] = check_predictor(WithCovariance, "cov", clauses=("covariance_psd",))
-    assert res.passed and re.match(r"^\d+ matrices symmetric, smallest eigenvalue \S+ m\^2$",
-                                   res.evidence), res.evidence
+    assert res.passed and re.match(
+        r"^\d+ matrices symmetric, smallest eigenvalue \S+ m\^2$", res.evidence
+    ), res.evidence
     [res] = check_predictor(Cv, "cv", clauses=("covariance_psd",))
     assert res.passed and res.evidence.startswith("not reported"), res.evidence
 
@@ -190,16 +222,24 @@ def test_resolve_module_class_and_alias():
     assert resolve_predictor("cv@mine", {"window_s": 0.5})().config()["window_s"] == 0.5
 
 
-@pytest.mark.parametrize(("spec", "needle"), [
-    ("nosuch", "unknown predictor 'nosuch'; known: "),
-    ("cv@", "unknown predictor 'cv@'"),
-    ("no_such_module_x:Foo", "no module named 'no_such_module_x'"),
-    ("contract_broken:Missing", "module contract_broken has no 'Missing'"),
-    ("contract_broken:NotAPredictor", "NotAPredictor is not a subclass of "
-                                      "posbench.predictors.base.Predictor"),
-    ("contract_broken:", "expected a registered name or module:Class"),
-    ("posbench.predictors.base:Predictor", "predictors.base:Predictor cannot be created: raised TypeError"),
-])
+@pytest.mark.parametrize(
+    ("spec", "needle"),
+    [
+        ("nosuch", "unknown predictor 'nosuch'; known: "),
+        ("cv@", "unknown predictor 'cv@'"),
+        ("no_such_module_x:Foo", "no module named 'no_such_module_x'"),
+        ("contract_broken:Missing", "module contract_broken has no 'Missing'"),
+        (
+            "contract_broken:NotAPredictor",
+            "NotAPredictor is not a subclass of posbench.predictors.base.Predictor",
+        ),
+        ("contract_broken:", "expected a registered name or module:Class"),
+        (
+            "posbench.predictors.base:Predictor",
+            "predictors.base:Predictor cannot be created: raised TypeError",
+        ),
+    ],
+)
 def test_resolve_errors_are_one_line(spec, needle):
     with pytest.raises(UsageError) as e:
         resolve_predictor(spec)
@@ -212,16 +252,27 @@ def test_resolve_names_the_missing_dependency_of_a_plugin(tmp_path, monkeypatch)
     with pytest.raises(UsageError) as e:
         resolve_predictor("plugin_with_missing_dep:P")
     msg = str(e.value)
-    assert msg.startswith("plugin_with_missing_dep:P: importing plugin_with_missing_dep raised "
-                          "ModuleNotFoundError: No module named 'no_such_dependency_x'"), msg
+    assert msg.startswith(
+        "plugin_with_missing_dep:P: importing plugin_with_missing_dep raised "
+        "ModuleNotFoundError: No module named 'no_such_dependency_x'"
+    ), msg
 
 
 # ------------------------------------------------------------------------------- CLI
 def bench(*args: str) -> subprocess.CompletedProcess:
-    env = {**os.environ, "COLUMNS": "100",
-           "PYTHONPATH": os.pathsep.join(filter(None, [str(ROOT), os.environ.get("PYTHONPATH")]))}
-    return subprocess.run([sys.executable, "-m", "posbench", "check", *args], capture_output=True,
-                          text=True, cwd=ROOT, timeout=300, env=env)
+    env = {
+        **os.environ,
+        "COLUMNS": "100",
+        "PYTHONPATH": os.pathsep.join(filter(None, [str(ROOT), os.environ.get("PYTHONPATH")])),
+    }
+    return subprocess.run(
+        [sys.executable, "-m", "posbench", "check", *args],
+        capture_output=True,
+        text=True,
+        cwd=ROOT,
+        timeout=300,
+        env=env,
+    )
 
 
 def test_cli_cv_passes_every_clause():
@@ -251,16 +302,23 @@ def test_cli_json_gated():
     by = {p["predictor"]: p for p in out["predictors"]}
     assert by["cv"]["passed"] and by["cv"]["gated"]
     assert [c["clause"] for c in by["cv"]["clauses"]] == list(CLAUSE_IDS)
-    failed = [c["clause"] for c in by["tests.contract_broken:NoReset"]["clauses"]
-              if not c["passed"]]
+    failed = [
+        c["clause"] for c in by["tests.contract_broken:NoReset"]["clauses"] if not c["passed"]
+    ]
     assert failed == ["reset"]
 
 
-@pytest.mark.parametrize(("args", "needle"), [
-    (("nosuch",), "unknown predictor(s) nosuch"),
-    (("tests.contract_broken:NotAPredictor",), "is not a subclass of posbench.predictors.base.Predictor"),
-    (("cv", "--model", "kf=/nonexistent.onnx"), "--model kf=/nonexistent.onnx"),
-])
+@pytest.mark.parametrize(
+    ("args", "needle"),
+    [
+        (("nosuch",), "unknown predictor(s) nosuch"),
+        (
+            ("tests.contract_broken:NotAPredictor",),
+            "is not a subclass of posbench.predictors.base.Predictor",
+        ),
+        (("cv", "--model", "kf=/nonexistent.onnx"), "--model kf=/nonexistent.onnx"),
+    ],
+)
 def test_cli_user_errors_are_one_line_exit_2(args, needle):
     r = bench(*args)
     assert r.returncode == 2, (r.stdout, r.stderr)

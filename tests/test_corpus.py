@@ -81,9 +81,18 @@ def test_plan_seeds_mix_and_hours(corpus: list[Drive]) -> None:
         assert d.meta.extra["profile"] in PROFILES
 
 
-@pytest.mark.parametrize("kw", [{"hours": 0}, {"hours": float("nan")}, {"hours": 200},
-                                {"hours": 1, "mix": (1, 1)}, {"hours": 1, "mix": (0, 0, 0)},
-                                {"hours": 1, "mix": (1, -1, 1)}, {"hours": 1, "duration_s": 0.5}])
+@pytest.mark.parametrize(
+    "kw",
+    [
+        {"hours": 0},
+        {"hours": float("nan")},
+        {"hours": 200},
+        {"hours": 1, "mix": (1, 1)},
+        {"hours": 1, "mix": (0, 0, 0)},
+        {"hours": 1, "mix": (1, -1, 1)},
+        {"hours": 1, "duration_s": 0.5},
+    ],
+)
 def test_plan_rejects_bad_arguments(kw: dict) -> None:
     with pytest.raises(ValueError):
         corpus_plan(**kw)

@@ -24,7 +24,9 @@ def executable_blocks(page: Path) -> list[tuple[str, str]]:
     events = []
     for region in FencedCodeBlockLexer(language=r".+")(doc):
         if region.lexemes["language"] in RUN_LANGUAGES:
-            events.append((region.start, "block", (region.lexemes["language"], region.lexemes["source"])))
+            events.append(
+                (region.start, "block", (region.lexemes["language"], region.lexemes["source"]))
+            )
     for region in DirectiveInHTMLCommentLexer("skip")(doc):
         events.append((region.start, "skip", region.lexemes["arguments"].split()[0]))
     blocks, skip_next, skipping = [], False, False
@@ -45,7 +47,9 @@ def executable_blocks(page: Path) -> list[tuple[str, str]]:
 
 
 def all_pages() -> dict[str, list[tuple[str, str]]]:
-    return {p.relative_to(DOCS).as_posix(): executable_blocks(p) for p in sorted(DOCS.rglob("*.md"))}
+    return {
+        p.relative_to(DOCS).as_posix(): executable_blocks(p) for p in sorted(DOCS.rglob("*.md"))
+    }
 
 
 def test_the_parser_follows_the_skip_convention(tmp_path: Path) -> None:
@@ -93,6 +97,9 @@ def test_offline_scoring_runs_queries_score_and_export() -> None:
 
 
 def test_some_page_loads_a_run_in_python() -> None:
-    pages = [p for p, blocks in all_pages().items()
-             if any(lang == "python" and "posbench.load(" in src for lang, src in blocks)]
+    pages = [
+        p
+        for p, blocks in all_pages().items()
+        if any(lang == "python" and "posbench.load(" in src for lang, src in blocks)
+    ]
     assert pages, "no executable python block in docs/ calls posbench.load(...)"

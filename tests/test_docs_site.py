@@ -32,8 +32,20 @@ pytestmark = pytest.mark.slow
 
 ROOT = Path(__file__).resolve().parents[1]
 #: every command the CLI reference must name
-COMMANDS = ("run", "compare", "score", "queries", "check", "data inspect", "view", "latency",
-            "tune", "train", "predictors", "export")
+COMMANDS = (
+    "run",
+    "compare",
+    "score",
+    "queries",
+    "check",
+    "data inspect",
+    "view",
+    "latency",
+    "tune",
+    "train",
+    "predictors",
+    "export",
+)
 #: the pages opened in the browser: path below the site, a text the page must show
 BROWSER_PAGES = (("", "posbench"), ("reference/cli/", "bench data inspect"))
 #: where mkdocs-material's repository facts (stars, forks) come from
@@ -45,9 +57,14 @@ def site(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """The site as ``mkdocs build --strict`` writes it (any warning fails the build)."""
     out = tmp_path_factory.mktemp("site")
     env = {**os.environ, "NO_MKDOCS_2_WARNING": "1"}
-    r = subprocess.run([sys.executable, "-m", "mkdocs", "build", "--strict", "--site-dir",
-                        str(out)], cwd=ROOT, env=env, capture_output=True, text=True,
-                       timeout=600)
+    r = subprocess.run(
+        [sys.executable, "-m", "mkdocs", "build", "--strict", "--site-dir", str(out)],
+        cwd=ROOT,
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=600,
+    )
     assert r.returncode == 0, r.stdout + r.stderr
     assert (out / "index.html").is_file()
     return out
@@ -73,11 +90,18 @@ def test_cli_reference_names_every_command(site: Path) -> None:
 
 def test_api_reference_has_the_run_api(site: Path) -> None:
     api = page(site, "reference/api")
-    for ident in ("posbench.run", "posbench.score", "posbench.load",
-                  "posbench.saved_run.run.Run", "posbench.saved_run.run.load_run",
-                  "posbench.predictors.base.Predictor", "posbench.scenarios.drive.Drive",
-                  "posbench.scenarios.drive.GpsStream", "posbench.scenarios.loaders.load",
-                  "posbench.metrics.accuracy.summarize"):
+    for ident in (
+        "posbench.run",
+        "posbench.score",
+        "posbench.load",
+        "posbench.saved_run.run.Run",
+        "posbench.saved_run.run.load_run",
+        "posbench.predictors.base.Predictor",
+        "posbench.scenarios.drive.Drive",
+        "posbench.scenarios.drive.GpsStream",
+        "posbench.scenarios.loaders.load",
+        "posbench.metrics.accuracy.summarize",
+    ):
         assert f'id="{ident}"' in api, ident
     assert ":class:" not in api  # the docstrings' RST roles read as Markdown
 
@@ -147,8 +171,14 @@ def test_pages_render_in_chromium(chromium: str, served: str, path: str, text: s
             tab = browser.new_page(viewport={"width": 1400, "height": 900})
             errors: list[tuple[str, str]] = []
             failed: list[str] = []
-            tab.on("console", lambda m: errors.append((m.text, m.location.get("url", "")))
-                   if m.type == "error" else None)
+            tab.on(
+                "console",
+                lambda m: (
+                    errors.append((m.text, m.location.get("url", "")))
+                    if m.type == "error"
+                    else None
+                ),
+            )
             tab.on("pageerror", lambda e: errors.append((str(e), "")))
             tab.on("requestfailed", lambda r: failed.append(r.url))
             response = tab.goto(served + path, wait_until="load")

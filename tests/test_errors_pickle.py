@@ -26,18 +26,25 @@ def samples() -> dict[str, list[BaseException]]:
     from posbench.scenarios.errors import DataError
 
     return {
-        "posbench.scenarios.errors.DataError": [DataError("/data/drive.bag", "topic /fix: no messages"),
-                                       DataError(Path("/data/x.csv"), "line 3: 'a' is not a number"),
-                                       DataError(None, "truth: need at least 2 samples")],
+        "posbench.scenarios.errors.DataError": [
+            DataError("/data/drive.bag", "topic /fix: no messages"),
+            DataError(Path("/data/x.csv"), "line 3: 'a' is not a number"),
+            DataError(None, "truth: need at least 2 samples"),
+        ],
         "posbench.errors.UsageError": [UsageError("--horizon must be more than 0 s; got -1")],
-        "posbench.replay.executors.ExecutorError": [ExecutorError("cannot start Ray at auto: no cluster")],
+        "posbench.replay.executors.ExecutorError": [
+            ExecutorError("cannot start Ray at auto: no cluster")
+        ],
         "posbench.figures.style.NothingToPlot": [NothingToPlot("no query with a known speed")],
         "posbench.recording.web.ServeError": [
-            ServeError("the rerun web viewer stopped on its own (exit 1): port 9090 in use")],
+            ServeError("the rerun web viewer stopped on its own (exit 1): port 9090 in use")
+        ],
         "posbench.predictors.registry.PredictorError": [
-            PredictorError("nosuchmodule:X: no module named 'nosuchmodule'")],
+            PredictorError("nosuchmodule:X: no module named 'nosuchmodule'")
+        ],
         "posbench.predictors.lstm.core_graph.NoCoreGraph": [
-            NoCoreGraph("not a speed-form posbench model (no net.res_std)")],
+            NoCoreGraph("not a speed-form posbench model (no net.res_std)")
+        ],
     }
 
 
@@ -54,7 +61,8 @@ def project_exception_classes() -> set[str]:
         module = module_name(f)
         for node in ast.walk(ast.parse(f.read_text())):
             if isinstance(node, ast.ClassDef) and any(
-                    _is_exception_base(b, set(found)) for b in node.bases):
+                _is_exception_base(b, set(found)) for b in node.bases
+            ):
                 found[node.name] = f"{module}.{node.name}"
     return set(found.values())
 
@@ -98,8 +106,7 @@ def test_raised_in_a_worker_process_arrives_intact(method):
     if method not in multiprocessing.get_all_start_methods():
         pytest.skip(f"no {method} start method here")
     cases = [(k, i) for k, v in sorted(samples().items()) for i in range(len(v))]
-    with ProcessPoolExecutor(max_workers=1,
-                             mp_context=multiprocessing.get_context(method)) as pool:
+    with ProcessPoolExecutor(max_workers=1, mp_context=multiprocessing.get_context(method)) as pool:
         for key, i in cases:
             with pytest.raises(BaseException) as info:
                 pool.submit(raise_sample, key, i).result(timeout=60)

@@ -37,9 +37,15 @@ LATENCY = ("latency_us", "query_us", "covariance_us")
 def error_figures(res: dict) -> str:
     """results.json without what may differ between executors (latencies, command, versions),
     as canonical JSON text: exact floats, and NaN (empty groups) compares equal to NaN."""
-    preds = {p: {k: v for k, v in e.items() if k not in LATENCY} for p, e in res["predictors"].items()}
-    keep = {"predictors": preds, **{k: res[k] for k in ("by_dataset", "by_label", "by_speed",
-                                                        "outages", "drives", "config")}}
+    preds = {
+        p: {k: v for k, v in e.items() if k not in LATENCY} for p, e in res["predictors"].items()
+    }
+    keep = {
+        "predictors": preds,
+        **{
+            k: res[k] for k in ("by_dataset", "by_label", "by_speed", "outages", "drives", "config")
+        },
+    }
     return json.dumps(keep, sort_keys=True, default=float)
 
 
@@ -91,23 +97,47 @@ def test_cli_ray_equals_local(tmp_path):
     outs = {}
     for ex in ("local", "ray"):
         outs[ex] = tmp_path / ex
-        r = subprocess.run([sys.executable, "-m", "posbench", "run", "-p", "cv,kf", "--workers", "2",
-                            "--executor", ex, "--out", str(outs[ex])],
-                           capture_output=True, text=True, timeout=240,
-                           env={**os.environ, "COLUMNS": "200"})
+        r = subprocess.run(
+            [
+                sys.executable,
+                "-m",
+                "posbench",
+                "run",
+                "-p",
+                "cv,kf",
+                "--workers",
+                "2",
+                "--executor",
+                ex,
+                "--out",
+                str(outs[ex]),
+            ],
+            capture_output=True,
+            text=True,
+            timeout=240,
+            env={**os.environ, "COLUMNS": "200"},
+        )
         assert r.returncode == 0, r.stdout + r.stderr
     res = {ex: json.loads((o / "results.json").read_text()) for ex, o in outs.items()}
     assert len(res["ray"]["drives"]) == 4
     assert error_figures(res["ray"]) == error_figures(res["local"])
-    assert res["ray"]["predictors"]["kf"]["latency_us"]["count"] == \
-        res["local"]["predictors"]["kf"]["latency_us"]["count"]
-    no_ray = ("import sys; sys.modules['ray'] = None; sys.argv = ['bench', 'run', '--executor', "
-              "'ray']; from posbench.cli.app import main; main()")
+    assert (
+        res["ray"]["predictors"]["kf"]["latency_us"]["count"]
+        == res["local"]["predictors"]["kf"]["latency_us"]["count"]
+    )
+    no_ray = (
+        "import sys; sys.modules['ray'] = None; sys.argv = ['bench', 'run', '--executor', "
+        "'ray']; from posbench.cli.app import main; main()"
+    )
     r = subprocess.run([sys.executable, "-c", no_ray], capture_output=True, text=True, timeout=60)
     assert r.returncode == 2 and "pip install 'posbench-harness[ray]'" in r.stderr, r.stderr
     assert "Traceback" not in r.stderr
-    r = subprocess.run([sys.executable, "-m", "posbench", "run", "--address", "auto"],
-                       capture_output=True, text=True, timeout=60)
+    r = subprocess.run(
+        [sys.executable, "-m", "posbench", "run", "--address", "auto"],
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
     assert r.returncode == 2 and "--address is for --executor ray" in r.stderr, r.stderr
 
 
@@ -124,16 +154,23 @@ def test_ray_traces_identical_to_local(drives, ray_session):
         assert list(b.step_ns) == ["cv", "kf"] and len(b.step_ns["kf"]) == len(a.step_ns["kf"])
     la, ra = (build_results(runs, CFG, [], "test") for runs in (local, remote))
     assert error_figures(ra) == error_figures(la)
-    assert np.array_equal(all_traces(remote)["error_m"].to_numpy(),
-                          all_traces(local)["error_m"].to_numpy(), equal_nan=True)
+    assert np.array_equal(
+        all_traces(remote)["error_m"].to_numpy(),
+        all_traces(local)["error_m"].to_numpy(),
+        equal_nan=True,
+    )
 
 
 def test_failed_task_retried_then_reported(drives, ray_session, tmp_path):
     ray.cloudpickle.register_pickle_by_value(sys.modules[__name__])
     attempts = tmp_path / "attempts.txt"
     bad = drives[0]
-    broken = replace(bad, meta=replace(bad.meta, name="broken-drive",
-                                       extra=ExplodingExtra(attempts_file=str(attempts))))
+    broken = replace(
+        bad,
+        meta=replace(
+            bad.meta, name="broken-drive", extra=ExplodingExtra(attempts_file=str(attempts))
+        ),
+    )
     runs = run_ray([broken, drives[1]], CFG, max_retries=1)
     assert [r.name for r in runs] == ["broken-drive", drives[1].name]
     # 2 predictor tasks x (1 try + 1 retry)
@@ -147,6 +184,7 @@ def test_failed_task_retried_then_reported(drives, ray_session, tmp_path):
     assert res["drives"][0]["skipped"] == failed.skipped
     # the figures are those of the surviving drive alone: nothing of the failed one leaks in
     assert json.dumps(res["predictors"], sort_keys=True) == json.dumps(
-        build_results(runs[1:], CFG, [], "test")["predictors"], sort_keys=True)
+        build_results(runs[1:], CFG, [], "test")["predictors"], sort_keys=True
+    )
     md = render_markdown(res, [])
     assert "| broken-drive |" in md and "skipped: worker failed" in md

@@ -69,16 +69,20 @@ def saved(tmp_path_factory):
     cfg = RunConfig(predictors=("cv", "kf"), **OPTIONS)
     runs = run(drives, cfg)
     tr = runs[0].traces
-    pick = np.flatnonzero(((tr.predictor == "cv") & (tr.kind == "now")).to_numpy()
-                          & scored_mask(tr))[::9]
+    pick = np.flatnonzero(
+        ((tr.predictor == "cv") & (tr.kind == "now")).to_numpy() & scored_mask(tr)
+    )[::9]
     tr.loc[tr.index[pick], ["x", "y", "error_m", "along_m", "cross_m"]] = np.nan
     traces = all_traces(runs)
     r = Run.from_results(build_results(runs, cfg, [], "test", traces=traces, models={}), traces)
     save_run(d / "run", r)
     r.report(d / "run", drive_plots=0, table_formats=())
     write_queries(drives, RunConfig(predictors=(), **OPTIONS), d / "q", command="test", data=[])
-    assert load_run(d / "run").results["drives"][0]["predictors"]["cv"]["now"]["missing"] == \
-        len(pick) > 0
+    assert (
+        load_run(d / "run").results["drives"][0]["predictors"]["cv"]["now"]["missing"]
+        == len(pick)
+        > 0
+    )
     return d
 
 
@@ -108,15 +112,21 @@ def test_evo_ape_of_the_exported_tracks_is_the_runs_per_drive_figures(saved, tum
                 # exact association: every answer paired with its own query
                 np.testing.assert_array_equal(t_ref.timestamps, t_est.timestamps)
                 assert t_est.num_poses == want["count"], (d["name"], p, kind)
-                res = main_ape.ape(t_ref, t_est, metrics.PoseRelation.translation_part,
-                                   align=False, correct_scale=False)
+                res = main_ape.ape(
+                    t_ref,
+                    t_est,
+                    metrics.PoseRelation.translation_part,
+                    align=False,
+                    correct_scale=False,
+                )
                 for ours, theirs in FIGURES:
                     diff = abs(res.stats[theirs] - want[ours])
                     worst = max(worst, diff)
                     assert diff <= TOL_M, (d["name"], p, kind, ours, res.stats[theirs], want[ours])
                 if kind == "future":  # report.md's per-drive figure: the future mean
-                    row = next(ln for ln in report.splitlines()
-                               if ln.startswith(f"| {d['name']} |"))
+                    row = next(
+                        ln for ln in report.splitlines() if ln.startswith(f"| {d['name']} |")
+                    )
                     assert f"{res.stats['mean']:.3f}" in row, (row, res.stats["mean"])
     print(f"largest difference evo - posbench: {worst:.3g} m")
 
@@ -128,10 +138,20 @@ def test_evo_ape_console_script_prints_the_now_figures(saved, tum_dir, tmp_path)
         missing("evo_ape console script not found beside this Python")
     d = _drives(saved / "run")[0]
     want = d["predictors"]["kf"]["now"]
-    r = ok(subprocess.run(
-        [exe, "tum", str(tum_dir / f"{d['name']}.reference.tum"),
-         str(tum_dir / f"{d['name']}.kf.now.tum")],
-        capture_output=True, text=True, timeout=120, env={**os.environ, "HOME": str(tmp_path)}))
+    r = ok(
+        subprocess.run(
+            [
+                exe,
+                "tum",
+                str(tum_dir / f"{d['name']}.reference.tum"),
+                str(tum_dir / f"{d['name']}.kf.now.tum"),
+            ],
+            capture_output=True,
+            text=True,
+            timeout=120,
+            env={**os.environ, "HOME": str(tmp_path)},
+        )
+    )
     printed = dict(re.findall(r"^\s*(\w+)\s+([-\d.e+]+)\s*$", r.stdout, re.M))
     assert "not aligned" in r.stdout
     for ours, theirs in FIGURES:  # printed with 6 decimals
@@ -143,8 +163,12 @@ def test_export_writes_the_scored_rows_and_says_so(saved, tum_dir):
     r = load_run(saved / "run")
     tr = r.traces[scored_mask(r.traces)]
     names = sorted(p.name for p in tum_dir.iterdir())
-    expect = sorted(f"{track_stem(d['name'], p, k)}.tum" for d in _drives(saved / "run")
-                    for p in (None, "cv", "kf") for k in ("now", "future"))
+    expect = sorted(
+        f"{track_stem(d['name'], p, k)}.tum"
+        for d in _drives(saved / "run")
+        for p in (None, "cv", "kf")
+        for k in ("now", "future")
+    )
     assert names == expect
     for d in _drives(saved / "run"):
         for kind in ("now", "future"):
@@ -155,8 +179,11 @@ def test_export_writes_the_scored_rows_and_says_so(saved, tum_dir):
             np.testing.assert_array_equal(ref.t, q.t_query.to_numpy())
             np.testing.assert_array_equal(ref.x, q.x_ref.to_numpy())
             np.testing.assert_array_equal(ref.y, q.y_ref.to_numpy())
-    lines = (tum_dir / f"{track_stem(_drives(saved / 'run')[0]['name'], 'kf', 'now')}.tum"
-             ).read_text().splitlines()
+    lines = (
+        (tum_dir / f"{track_stem(_drives(saved / 'run')[0]['name'], 'kf', 'now')}.tum")
+        .read_text()
+        .splitlines()
+    )
     pose = next(ln for ln in lines if not ln.startswith("#")).split(" ")
     assert len(pose) == 8 and pose[3:] == ["0.0", "0.0", "0.0", "0.0", "1.0"]
 
@@ -171,18 +198,29 @@ def test_csv_export_round_trips_the_traces(saved, tmp_path):
             ref = pd.read_csv(tmp_path / f"{track_stem(d['name'], None, kind)}.csv")
             assert list(ref.columns) == ["t", "x", "y", "drive", "kind"]
             q = tr[(tr.drive == d["name"]) & (tr.kind == kind) & (tr.predictor == "kf")]
-            np.testing.assert_array_equal(ref[["t", "x", "y"]].to_numpy(),
-                                          q[["t_query", "x_ref", "y_ref"]].to_numpy())
+            np.testing.assert_array_equal(
+                ref[["t", "x", "y"]].to_numpy(), q[["t_query", "x_ref", "y_ref"]].to_numpy()
+            )
             assert set(ref.drive) == {d["name"]} and set(ref.kind) == {kind}
             for p in ("cv", "kf"):
                 got = pd.read_csv(tmp_path / f"{track_stem(d['name'], p, kind)}.csv")
-                assert list(got.columns) == ["t", "x", "y", "drive", "predictor", "kind",
-                                             "t_issue", "error_m"]
-                a = tr[(tr.drive == d["name"]) & (tr.kind == kind) & (tr.predictor == p)
-                       & tr.x.notna()]
+                assert list(got.columns) == [
+                    "t",
+                    "x",
+                    "y",
+                    "drive",
+                    "predictor",
+                    "kind",
+                    "t_issue",
+                    "error_m",
+                ]
+                a = tr[
+                    (tr.drive == d["name"]) & (tr.kind == kind) & (tr.predictor == p) & tr.x.notna()
+                ]
                 np.testing.assert_array_equal(
                     got[["t", "x", "y", "t_issue", "error_m"]].to_numpy(),
-                    a[["t_query", "x", "y", "t_issue", "error_m"]].to_numpy())
+                    a[["t_query", "x", "y", "t_issue", "error_m"]].to_numpy(),
+                )
                 assert set(got.predictor) == {p} and set(got.kind) == {kind}
                 # the run's figures, from the file: count and mean
                 want = d["predictors"][p][kind]
@@ -208,9 +246,22 @@ def test_exported_now_track_scored_by_bench_score_gives_the_runs_figures(saved, 
     for i, d in enumerate(_drives(saved / "run")):
         for p in ("cv", "kf"):
             out = saved / f"scored-{p}-{i}"
-            r = ok(bench("score", str(tum_dir / f"{d['name']}.{p}.now.tum"), "--queries",
-                         str(saved / "q"), "--name", p, "--out", str(out), "--drive-plots", "0",
-                         "--plot-format", "png"))
+            r = ok(
+                bench(
+                    "score",
+                    str(tum_dir / f"{d['name']}.{p}.now.tum"),
+                    "--queries",
+                    str(saved / "q"),
+                    "--name",
+                    p,
+                    "--out",
+                    str(out),
+                    "--drive-plots",
+                    "0",
+                    "--plot-format",
+                    "png",
+                )
+            )
             assert "queries without an answer" in " ".join(r.stdout.split())
             res = load_run(out).results
             got = {e["name"]: e["predictors"] for e in res["drives"]}
@@ -230,8 +281,9 @@ def test_exported_track_on_a_later_queries_clock_scores_as_the_run(tmp_path):
     traces = all_traces(runs)
     r = Run.from_results(build_results(runs, cfg, [], "test", traces=traces, models={}), traces)
     save_run(tmp_path / "run", r)
-    write_queries([drive], RunConfig(predictors=(), seed=2), tmp_path / "q", command="test",
-                  data=[])
+    write_queries(
+        [drive], RunConfig(predictors=(), seed=2), tmp_path / "q", command="test", data=[]
+    )
     man = json.loads((tmp_path / "q" / MANIFEST).read_text())
     assert man["drives"][0]["t0_s"] > 7.0
     ok(bench("export", str(tmp_path / "run"), "--out", str(tmp_path / "tum")))
@@ -241,14 +293,18 @@ def test_exported_track_on_a_later_queries_clock_scores_as_the_run(tmp_path):
     got = all_traces(s.runs)
     want = traces[(traces.kind == "now") & scored_mask(traces)]
     assert s.answered == len(want)
-    np.testing.assert_array_equal(np.sort(got.loc[got.x.notna(), "error_m"].to_numpy()),
-                                  np.sort(want["error_m"].to_numpy()))
+    np.testing.assert_array_equal(
+        np.sort(got.loc[got.x.notna(), "error_m"].to_numpy()), np.sort(want["error_m"].to_numpy())
+    )
 
 
 def test_tum_drive_from_the_file_name_when_no_comment(saved, tum_dir, tmp_path):
     d = _drives(saved / "run")[1]["name"]
-    body = [ln for ln in (tum_dir / f"{d}.kf.now.tum").read_text().splitlines()
-            if not ln.startswith("#")]
+    body = [
+        ln
+        for ln in (tum_dir / f"{d}.kf.now.tum").read_text().splitlines()
+        if not ln.startswith("#")
+    ]
     path = tmp_path / f"{d}.mine.tum"
     path.write_text("\n".join(body) + "\n")
     a = read_answers(path)
@@ -256,21 +312,25 @@ def test_tum_drive_from_the_file_name_when_no_comment(saved, tum_dir, tmp_path):
     s = score_answers(read_queries(saved / "q"), a, "kf")
     tr = all_traces(s.runs)
     want = load_run(saved / "run").traces
-    want = want[(want.predictor == "kf") & (want.drive == d) & (want.kind == "now")
-                & scored_mask(want)]
+    want = want[
+        (want.predictor == "kf") & (want.drive == d) & (want.kind == "now") & scored_mask(want)
+    ]
     got = tr[(tr.drive == d) & (tr.kind == "now") & tr.x.notna()]
     drop = ["predictor", "cov_xx", "cov_xy", "cov_yy"]  # a TUM file carries no covariance
     assert got[drop[1:]].isna().all(axis=None)
-    pd.testing.assert_frame_equal(got.drop(columns=drop).reset_index(drop=True),
-                                  want.drop(columns=drop).reset_index(drop=True),
-                                  check_categorical=False)
+    pd.testing.assert_frame_equal(
+        got.drop(columns=drop).reset_index(drop=True),
+        want.drop(columns=drop).reset_index(drop=True),
+        check_categorical=False,
+    )
     assert s.answered == len(body)
 
 
 def test_read_tum_reads_whitespace_comments_and_ignores_z_and_orientation(tmp_path):
     p = tmp_path / "a.tum"
-    p.write_text("# a comment\n\n  1.5\t2.0  3.0 9 0.1 0.2 0.3 0.9\n# drive: seg/40\n"
-                 "2.5 -1e-3 4 0 0 0 0 1\n")
+    p.write_text(
+        "# a comment\n\n  1.5\t2.0  3.0 9 0.1 0.2 0.3 0.9\n# drive: seg/40\n2.5 -1e-3 4 0 0 0 0 1\n"
+    )
     t = read_tum(p)
     np.testing.assert_array_equal(t.t, [1.5, 2.5])
     np.testing.assert_array_equal(t.x, [2.0, -1e-3])
@@ -290,17 +350,34 @@ def _tum(tmp_path: Path, name: str, text: str) -> Path:
 
 
 SCORE_CASES = {
-    "columns": ("synthetic-mixed-s0.x.tum", "# drive: synthetic-mixed-s0\n1.0 0 0 0 0 0 0 1\n"
-                "1.05 0 0 0 0 1\n", ["line 3: 6 columns, a TUM line has 8"]),
-    "not a number": ("synthetic-mixed-s0.tum", "1.0 0 east 0 0 0 0 1\n",
-                     ["line 1: 'east' is not a number"]),
-    "no drive": ("answers.tum", "1.0 0 0 0 0 0 0 1\n",
-                 ["cannot tell which drive it answers", "synthetic-mixed-s0, synthetic-turns-s0"]),
-    "unknown drive": ("a.tum", "# drive: kitti-42\n1.0 0 0 0 0 0 0 1\n",
-                      ["'# drive: kitti-42' names no drive"]),
-    "no such time": ("synthetic-turns-s0.tum", "# c\n1700000000.25 0 0 0 0 0 0 1\n",
-                     ["line 2: no query of drive 'synthetic-turns-s0', kind now at t_query "
-                      "1700000000.25 s", "not Unix time"]),
+    "columns": (
+        "synthetic-mixed-s0.x.tum",
+        "# drive: synthetic-mixed-s0\n1.0 0 0 0 0 0 0 1\n1.05 0 0 0 0 1\n",
+        ["line 3: 6 columns, a TUM line has 8"],
+    ),
+    "not a number": (
+        "synthetic-mixed-s0.tum",
+        "1.0 0 east 0 0 0 0 1\n",
+        ["line 1: 'east' is not a number"],
+    ),
+    "no drive": (
+        "answers.tum",
+        "1.0 0 0 0 0 0 0 1\n",
+        ["cannot tell which drive it answers", "synthetic-mixed-s0, synthetic-turns-s0"],
+    ),
+    "unknown drive": (
+        "a.tum",
+        "# drive: kitti-42\n1.0 0 0 0 0 0 0 1\n",
+        ["'# drive: kitti-42' names no drive"],
+    ),
+    "no such time": (
+        "synthetic-turns-s0.tum",
+        "# c\n1700000000.25 0 0 0 0 0 0 1\n",
+        [
+            "line 2: no query of drive 'synthetic-turns-s0', kind now at t_query 1700000000.25 s",
+            "not Unix time",
+        ],
+    ),
 }
 
 
@@ -329,8 +406,17 @@ def test_export_mistakes_are_one_error_line(saved, tmp_path):
 def test_export_help_teaches():
     r = ok(bench("export", "--help"))
     text = " ".join(r.stdout.split())
-    for s in ("RUN_DIR", "--out DIR", "--format tum|csv", "evo_ape tum", "reference.future.tum",
-              "identity quaternion", "local ENU", "Example:", "not Unix time"):
+    for s in (
+        "RUN_DIR",
+        "--out DIR",
+        "--format tum|csv",
+        "evo_ape tum",
+        "reference.future.tum",
+        "identity quaternion",
+        "local ENU",
+        "Example:",
+        "not Unix time",
+    ):
         assert s in text, s
     r = ok(bench("score", "--help"))
     assert "TUM" in r.stdout and "# drive:" in " ".join(r.stdout.split())

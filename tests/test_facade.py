@@ -21,24 +21,42 @@ VOLATILE = ("latency_us", "query_us", "covariance_us")
 
 
 def bench(*args: str, cwd: Path | None = None) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "posbench", *args], capture_output=True,
-                          text=True, timeout=600, cwd=cwd)
+    return subprocess.run(
+        [sys.executable, "-m", "posbench", *args],
+        capture_output=True,
+        text=True,
+        timeout=600,
+        cwd=cwd,
+    )
 
 
 def _figures(res: dict) -> dict:
     """results.json's figures without timings and provenance."""
     drop = {"command", "versions", "git_commit", "outputs", "data"}
-    preds = {p: {k: v for k, v in e.items() if k not in VOLATILE}
-             for p, e in res["predictors"].items()}
-    return {**{k: v for k, v in res.items() if k not in drop | {"predictors"}},
-            "predictors": preds}
+    preds = {
+        p: {k: v for k, v in e.items() if k not in VOLATILE} for p, e in res["predictors"].items()
+    }
+    return {**{k: v for k, v in res.items() if k not in drop | {"predictors"}}, "predictors": preds}
 
 
 @pytest.fixture(scope="module")
 def cli_run(tmp_path_factory) -> Path:
     out = tmp_path_factory.mktemp("cli") / "run"
-    r = bench("run", "-p", "cv", "-p", "kf", "--workers", "1", "--dropouts", "outages",
-              "--out", str(out), "--drive-plots", "0")
+    r = bench(
+        "run",
+        "-p",
+        "cv",
+        "-p",
+        "kf",
+        "--workers",
+        "1",
+        "--dropouts",
+        "outages",
+        "--out",
+        str(out),
+        "--drive-plots",
+        "0",
+    )
     assert r.returncode == 0, r.stderr
     return out
 
@@ -48,8 +66,9 @@ def test_run_in_memory_gives_the_commands_figures(cli_run: Path):
     assert run.folder is None and run.predictors == ["cv", "kf"]
     cli = json.loads((cli_run / "results.json").read_text())
     assert _figures(run.results) == _figures(cli)
-    assert run.results["command"] == ("posbench.run(predictors=('cv', 'kf'), workers=1, "
-                                      "dropouts='outages')")
+    assert run.results["command"] == (
+        "posbench.run(predictors=('cv', 'kf'), workers=1, dropouts='outages')"
+    )
 
 
 def test_summary_is_a_table_per_predictor_and_kind(cli_run: Path):
@@ -63,8 +82,10 @@ def test_summary_is_a_table_per_predictor_and_kind(cli_run: Path):
     assert table.loc[("kf", "now"), "mean_m"] == res["mean_m"]
     assert table.loc[("kf", "now"), "mean_m_lo"] == res["ci95"]["mean_m"][0]
     future = run.summary("future")  # one kind: the table of schema 1.x, by predictor
-    assert list(future.index) == ["cv", "kf"] and future.loc["kf", "mean_m"] == \
-        run.results["predictors"]["kf"]["future"]["mean_m"]
+    assert (
+        list(future.index) == ["cv", "kf"]
+        and future.loc["kf", "mean_m"] == run.results["predictors"]["kf"]["future"]["mean_m"]
+    )
 
 
 def test_repr_is_a_few_lines(cli_run: Path):
@@ -75,13 +96,15 @@ def test_repr_is_a_few_lines(cli_run: Path):
 
 
 def test_run_writes_the_commands_folder_and_save_report_write_one(tmp_path: Path, cli_run: Path):
-    run = posbench.run(predictors="cv,kf", out=tmp_path / "a", workers=1, dropouts="outages",
-                       drive_plots=0)
+    run = posbench.run(
+        predictors="cv,kf", out=tmp_path / "a", workers=1, dropouts="outages", drive_plots=0
+    )
     assert run.folder == tmp_path / "a"
     for name in ("report.md", "results.json", "traces.parquet", "error_cdf.png"):
         assert (tmp_path / "a" / name).is_file(), name
-    assert _figures(posbench.load(tmp_path / "a").results) == \
-        _figures(json.loads((cli_run / "results.json").read_text()))
+    assert _figures(posbench.load(tmp_path / "a").results) == _figures(
+        json.loads((cli_run / "results.json").read_text())
+    )
     loaded = posbench.load(cli_run)
     written = loaded.save(tmp_path / "b")
     assert {p.name for p in written} == {"results.json", "traces.parquet"}
@@ -91,17 +114,22 @@ def test_run_writes_the_commands_folder_and_save_report_write_one(tmp_path: Path
 
 
 def test_compare_and_its_gate(cli_run: Path, tmp_path: Path):
-    other = posbench.run(predictors="cv,kf", workers=1, dropouts="outages",
-                         options={"kf": {"jerk_psd": 2000.0}}, out=tmp_path / "worse",
-                         drive_plots=0)
-    cmp = posbench.compare(cli_run, other, gates=["kf:future.mean_m:1%"],
-                           allow_config_change=True)
+    other = posbench.run(
+        predictors="cv,kf",
+        workers=1,
+        dropouts="outages",
+        options={"kf": {"jerk_psd": 2000.0}},
+        out=tmp_path / "worse",
+        drive_plots=0,
+    )
+    cmp = posbench.compare(cli_run, other, gates=["kf:future.mean_m:1%"], allow_config_change=True)
     assert cmp.labels[0] != cmp.labels[1] and len(cmp.gates) == 1
     assert cmp.differences and "options of kf" in cmp.differences[0]
     kf = cmp.frame[(cmp.frame["scope"] == "all") & (cmp.frame["predictor"] == "kf")].iloc[0]
     assert kf[f"delta {cmp.labels[1]}"] == pytest.approx(
         other.results["predictors"]["kf"]["future"]["mean_m"]
-        - posbench.load(cli_run).results["predictors"]["kf"]["future"]["mean_m"])
+        - posbench.load(cli_run).results["predictors"]["kf"]["future"]["mean_m"]
+    )
     assert cmp.passed == (not cmp.gates[0].failed)
     assert repr(cmp).startswith("Comparison of 2 runs")
     same = posbench.compare(cli_run, cli_run)
@@ -128,8 +156,16 @@ def test_score_as_the_command_does(tmp_path: Path):
     run = posbench.score(tmp_path / "a.csv", q, name="shifted")
     assert run.predictors == ["shifted"]
     assert run.results["predictors"]["shifted"]["future"]["mean_m"] == pytest.approx(0.1)
-    r = bench("score", str(tmp_path / "a.csv"), "--queries", str(q), "--name", "shifted",
-              "--out", str(tmp_path / "s"))
+    r = bench(
+        "score",
+        str(tmp_path / "a.csv"),
+        "--queries",
+        str(q),
+        "--name",
+        "shifted",
+        "--out",
+        str(tmp_path / "s"),
+    )
     assert r.returncode == 0, r.stderr
     cli = json.loads((tmp_path / "s" / "results.json").read_text())
     assert _figures(run.results) == _figures({**cli, "paper_figures": []})
@@ -140,8 +176,11 @@ def test_mistakes_are_the_commands_errors(tmp_path: Path):
         posbench.run(horizon_s=-1)
     with pytest.raises(UsageError, match="unknown predictor"):
         posbench.run(predictors="nosuch")
-    with pytest.raises(UsageError, match=r"options=\{'kf': \{'bogus': 1\}\}: predictor kf has no "
-                                         r"option 'bogus'"):
+    with pytest.raises(
+        UsageError,
+        match=r"options=\{'kf': \{'bogus': 1\}\}: predictor kf has no "
+        r"option 'bogus'",
+    ):
         posbench.run(predictors="kf", options={"kf": {"bogus": 1}})
     with pytest.raises(TypeError, match="unknown option.*horizon"):
         posbench.run(horizon=0.2)

@@ -28,16 +28,19 @@ def write_csv_drive(folder: Path, name: str = "drive_a", n: int = 300) -> Path:
     return path
 
 
-@pytest.mark.parametrize(("given", "url"), [
-    ("s3://bucket/drives/a", "s3://bucket/drives/a"),
-    ("s3:/bucket/drives/a", "s3://bucket/drives/a"),  # str(Path("s3://bucket/drives/a"))
-    ("https://example.org/x.csv", "https://example.org/x.csv"),
-    ("file:///tmp/drives", "file:///tmp/drives"),
-    (str(Path("file:///tmp/drives")), "file:///tmp/drives"),
-    ("/tmp/drives", None),
-    ("relative/drive.csv", None),
-    ("C:/drives/a.csv", None),  # a Windows drive letter, not a scheme
-])
+@pytest.mark.parametrize(
+    ("given", "url"),
+    [
+        ("s3://bucket/drives/a", "s3://bucket/drives/a"),
+        ("s3:/bucket/drives/a", "s3://bucket/drives/a"),  # str(Path("s3://bucket/drives/a"))
+        ("https://example.org/x.csv", "https://example.org/x.csv"),
+        ("file:///tmp/drives", "file:///tmp/drives"),
+        (str(Path("file:///tmp/drives")), "file:///tmp/drives"),
+        ("/tmp/drives", None),
+        ("relative/drive.csv", None),
+        ("C:/drives/a.csv", None),  # a Windows drive letter, not a scheme
+    ],
+)
 def test_as_url(given, url):
     assert as_url(given) == url
     assert as_url(Path(given)) == url
@@ -84,15 +87,47 @@ def test_cli_run_on_url_equals_local_path(tmp_path):
     res = {}
     for key, arg in (("path", str(src)), ("url", f"file://{src}")):
         out = tmp_path / key
-        r = subprocess.run([sys.executable, "-m", "posbench", "run", "--data", arg, "-p", "cv",
-                            "--workers", "1", "--out", str(out)], capture_output=True, text=True,
-                           timeout=120, env={**os.environ, "COLUMNS": "200"})
+        r = subprocess.run(
+            [
+                sys.executable,
+                "-m",
+                "posbench",
+                "run",
+                "--data",
+                arg,
+                "-p",
+                "cv",
+                "--workers",
+                "1",
+                "--out",
+                str(out),
+            ],
+            capture_output=True,
+            text=True,
+            timeout=120,
+            env={**os.environ, "COLUMNS": "200"},
+        )
         assert r.returncode == 0, r.stdout + r.stderr
         res[key] = json.loads((out / "results.json").read_text())
     assert [d["name"] for d in res["url"]["drives"]] == ["drive_a"]
-    assert json.dumps(res["url"]["predictors"]["cv"]["future"]) == \
-        json.dumps(res["path"]["predictors"]["cv"]["future"])
-    r = subprocess.run([sys.executable, "-m", "posbench", "run", "--data",
-                        f"file://{tmp_path}/missing", "-p", "cv"], capture_output=True, text=True,
-                       timeout=60)
-    assert r.returncode == 2 and "no such file or folder" in r.stderr and "Traceback" not in r.stderr
+    assert json.dumps(res["url"]["predictors"]["cv"]["future"]) == json.dumps(
+        res["path"]["predictors"]["cv"]["future"]
+    )
+    r = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "posbench",
+            "run",
+            "--data",
+            f"file://{tmp_path}/missing",
+            "-p",
+            "cv",
+        ],
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
+    assert (
+        r.returncode == 2 and "no such file or folder" in r.stderr and "Traceback" not in r.stderr
+    )

@@ -210,8 +210,9 @@ def variants(drive: Drive) -> list[Drive]:
 SYNTHETIC = default_drives()
 
 
-@pytest.mark.parametrize("drive", [v for d in SYNTHETIC[:2] for v in variants(d)],
-                         ids=lambda d: d.name)
+@pytest.mark.parametrize(
+    "drive", [v for d in SYNTHETIC[:2] for v in variants(d)], ids=lambda d: d.name
+)
 def test_kf_matches_filterpy_on_synthetic(drive: Drive) -> None:
     ls = lockstep_run(drive, LinearKalman(), FilterpyKalman(), compare_kf)
     assert ls.worst < TOL_M
@@ -219,21 +220,35 @@ def test_kf_matches_filterpy_on_synthetic(drive: Drive) -> None:
 
 def test_kf_matches_filterpy_with_other_settings() -> None:
     """Non-default noise settings, ZUPT threshold and no speed use."""
-    opts = dict(jerk_psd=30.0, gps_sigma=0.02, accel_sigma=1.5, speed_sigma=0.05,
-                speed_rel_sigma=0.0, stop_speed=0.5, init_vel_sigma=2.0, init_acc_sigma=0.5)
+    opts = dict(
+        jerk_psd=30.0,
+        gps_sigma=0.02,
+        accel_sigma=1.5,
+        speed_sigma=0.05,
+        speed_rel_sigma=0.0,
+        stop_speed=0.5,
+        init_vel_sigma=2.0,
+        init_acc_sigma=0.5,
+    )
     for d in SYNTHETIC[2:]:
         lockstep_run(d, LinearKalman(**opts), FilterpyKalman(**opts), compare_kf)
-        lockstep_run(d, LinearKalman(use_speed=False), FilterpyKalman(use_speed=False),
-                     compare_kf)
-        robust = dict(heading_from_fixes=True, accel_bias_tau_s=30.0, imu_gate=13.8,
-                      imu_noise_tau_s=5.0, fix_noise_memory=30.0)  # the kf bank's members
+        lockstep_run(d, LinearKalman(use_speed=False), FilterpyKalman(use_speed=False), compare_kf)
+        robust = dict(
+            heading_from_fixes=True,
+            accel_bias_tau_s=30.0,
+            imu_gate=13.8,
+            imu_noise_tau_s=5.0,
+            fix_noise_memory=30.0,
+        )  # the kf bank's members
         lockstep_run(d, LinearKalman(**robust), FilterpyKalman(**robust), compare_kf)
 
 
 def shared_drives(aslan_dir: Path, kitti_dir: Path, comma_dir: Path) -> list[Drive]:
-    return [load(aslan_dir / "aslan-20220409115940.pickle")[0],
-            load(kitti_dir / "2011_09_26" / "2011_09_26_drive_0005_sync")[0],
-            load(comma_dir)[0]]
+    return [
+        load(aslan_dir / "aslan-20220409115940.pickle")[0],
+        load(kitti_dir / "2011_09_26" / "2011_09_26_drive_0005_sync")[0],
+        load(comma_dir)[0],
+    ]
 
 
 @pytest.fixture(scope="module")
@@ -333,9 +348,15 @@ class FilterpyEkf(CtraEkf):
 
     def _scalar(self, z: float, H: np.ndarray, hx: float, r: float, angle: bool = False) -> None:
         f = self._load()
-        f.update(z, HJacobian=lambda _x: H, Hx=lambda _x: np.array([hx]), R=r,
-                 residual=(lambda a, b: np.array([wrap_angle(float(a[0] - b[0]))])) if angle
-                 else np.subtract)
+        f.update(
+            z,
+            HJacobian=lambda _x: H,
+            Hx=lambda _x: np.array([hx]),
+            R=r,
+            residual=(lambda a, b: np.array([wrap_angle(float(a[0] - b[0]))]))
+            if angle
+            else np.subtract,
+        )
         self._store()
 
     def _predict_to(self, t: float) -> None:
@@ -370,8 +391,13 @@ class FilterpyEkf(CtraEkf):
         self._scalar(z, _row(**{f"i{j}": 1.0, f"i{k}": 1.0}), float(self.x[j] + self.x[k]), r)
 
     def _update_yaw_offset(self, z: float) -> None:
-        self._scalar(z, _row(**{f"i{IYAW}": 1.0, f"i{IBY}": 1.0}),
-                     float(self.x[IYAW] + self.x[IBY]), self._r_yaw, angle=True)
+        self._scalar(
+            z,
+            _row(**{f"i{IYAW}": 1.0, f"i{IBY}": 1.0}),
+            float(self.x[IYAW] + self.x[IBY]),
+            self._r_yaw,
+            angle=True,
+        )
         self.x[IYAW] = wrap_angle(float(self.x[IYAW]))
 
     def _update_speed(self, z: float, r: float) -> None:
@@ -394,8 +420,9 @@ def compare_ekf(fast: CtraEkf, ref: CtraEkf) -> str | None:
     return None
 
 
-@pytest.mark.parametrize("drive", [v for d in SYNTHETIC[:2] for v in variants(d)],
-                         ids=lambda d: d.name)
+@pytest.mark.parametrize(
+    "drive", [v for d in SYNTHETIC[:2] for v in variants(d)], ids=lambda d: d.name
+)
 def test_ekf_matches_filterpy_on_synthetic(drive: Drive) -> None:
     ls = lockstep_run(drive, CtraEkf(), FilterpyEkf(), compare_ekf)
     assert ls.worst < TOL_M
@@ -408,8 +435,9 @@ def test_ekf_matches_filterpy_on_shared_drives(shared: list[Drive], which: int) 
 
 
 # --- poly: the normal equations in plain floats against lstsq ---------------------------
-def random_window(rng: np.random.Generator, min_span_s: float = 0.0
-                  ) -> tuple[np.ndarray, np.ndarray]:
+def random_window(
+    rng: np.random.Generator, min_span_s: float = 0.0
+) -> tuple[np.ndarray, np.ndarray]:
     """4-50 fixes 0.05-0.5 s apart with jitter (at least ``min_span_s`` in all), at ENU
     offsets up to 20 km and times up to 3 h into a drive, accelerating, with noise."""
     while True:
@@ -419,9 +447,12 @@ def random_window(rng: np.random.Generator, min_span_s: float = 0.0
         if t[-1] - t[0] >= min_span_s:
             break
     v = rng.uniform(-30.0, 30.0, 2)
-    xy = (rng.uniform(-2e4, 2e4, 2) + np.outer(t - t[0], v)
-          + 0.5 * rng.uniform(-3, 3, 2) * ((t - t[0]) ** 2)[:, None]
-          + rng.normal(0.0, rng.choice([0.0, 0.01, 0.3, 3.0]), (n, 2)))
+    xy = (
+        rng.uniform(-2e4, 2e4, 2)
+        + np.outer(t - t[0], v)
+        + 0.5 * rng.uniform(-3, 3, 2) * ((t - t[0]) ** 2)[:, None]
+        + rng.normal(0.0, rng.choice([0.0, 0.01, 0.3, 3.0]), (n, 2))
+    )
     return t, xy
 
 
@@ -430,8 +461,12 @@ def fast_curve(t: np.ndarray, xy: np.ndarray, tq: np.ndarray) -> np.ndarray:
     assert fit is not None
     cx, cy, t_ref, inv = fit
     s = (tq - t_ref) * inv
-    return np.column_stack([((cx[3] * s + cx[2]) * s + cx[1]) * s + cx[0],
-                            ((cy[3] * s + cy[2]) * s + cy[1]) * s + cy[0]])
+    return np.column_stack(
+        [
+            ((cx[3] * s + cx[2]) * s + cx[1]) * s + cx[0],
+            ((cy[3] * s + cy[2]) * s + cy[1]) * s + cy[0],
+        ]
+    )
 
 
 def exact_curve(t: np.ndarray, xy: np.ndarray, tq: np.ndarray) -> np.ndarray:
@@ -441,9 +476,11 @@ def exact_curve(t: np.ndarray, xy: np.ndarray, tq: np.ndarray) -> np.ndarray:
     T = [Fraction(float(a)) - Fraction(float(t[-1])) for a in t]
     out = np.empty((tq.size, 2))
     for k in range(2):
-        A = [[sum(x ** (i + j) for x in T) for j in range(4)]
-             + [sum(x ** i * Fraction(float(y)) for x, y in zip(T, xy[:, k], strict=True))]
-             for i in range(4)]
+        A = [
+            [sum(x ** (i + j) for x in T) for j in range(4)]
+            + [sum(x**i * Fraction(float(y)) for x, y in zip(T, xy[:, k], strict=True))]
+            for i in range(4)
+        ]
         for c in range(4):  # Gauss-Jordan
             A[c] = [v / A[c][c] for v in A[c]]
             for r in range(4):

@@ -30,13 +30,17 @@ COMMA_SEG = "b0c9d2329ad1606b_2018-08-02--08-34-47/40"
 
 # --------------------------------------------------------------------------- real files
 
+
 @pytest.mark.shared
 def test_kitti_pos_accuracy_parsed(kitti_dir: Path) -> None:
     """KITTI OXTS ``pos_accuracy`` (column 24 of 30) becomes gps.accuracy unchanged [m]."""
     folder = kitti_dir / KITTI_SMALL
     (d,) = loaders.load(folder)
-    names = [ln.split(":")[0] for ln in (folder / "oxts/dataformat.txt").read_text().splitlines()
-             if ln.strip()]
+    names = [
+        ln.split(":")[0]
+        for ln in (folder / "oxts/dataformat.txt").read_text().splitlines()
+        if ln.strip()
+    ]
     col = names.index("pos_accuracy")
     files = sorted((folder / "oxts/data").glob("*.txt"))
     raw = np.array([float(f.read_text().split()[col]) for f in files])
@@ -65,6 +69,7 @@ def test_comma2k19_layout_has_no_fix_accuracy(comma_dir: Path) -> None:
 
 # --------------------------------------------------------------------------- ROS NavSatFix
 
+
 def _fix_bag(tmp_path: Path, cov_type: int, var_e: float, var_n: float) -> Path:
     tr = _trajectory()
     m = _Msgs(False)
@@ -92,6 +97,7 @@ def test_navsatfix_unknown_covariance_is_none(tmp_path: Path) -> None:
 
 # --------------------------------------------------------------------------- CSV column
 
+
 def test_csv_accuracy_column(tmp_path: Path) -> None:
     p = tmp_path / "drive.csv"
     rows = ["stream,t,x,y,accuracy"]
@@ -105,6 +111,7 @@ def test_csv_accuracy_column(tmp_path: Path) -> None:
 
 
 # --------------------------------------------------------------------------- degradation
+
 
 def _truth(duration: float = 600.0) -> TruthStream:
     t = np.arange(0.0, duration, 0.01)
@@ -139,12 +146,14 @@ def test_rtk_states_the_truth_consumer_understates() -> None:
             assert true_sigma_m("rtk") == stated_sigma_m("rtk")
         else:
             assert sd.mean() / stated_sigma_m("consumer") == pytest.approx(
-                CONSUMER_UNDERSTATEMENT, rel=0.15)
+                CONSUMER_UNDERSTATEMENT, rel=0.15
+            )
             step = np.concatenate([np.diff(x, axis=0) for x in errs]) / math.sqrt(2.0)
             assert np.allclose(step.std(axis=0), 0.5, rtol=0.1)
 
 
 # --------------------------------------------------------------------------- observe_gps(sigma=)
+
 
 class _OldStyle(Predictor):
     """A user predictor written before fix accuracy existed: three-argument observe_gps."""
@@ -268,15 +277,22 @@ def test_filters_use_stated_sigma_as_R(name: str) -> None:
     np.testing.assert_allclose(stated, constant, rtol=0, atol=1e-9)
     plain = answers(create(name, gps_sigma=0.3, **const), ["old"] * t.size)
     for missing in (None, math.nan, 0.0):
-        np.testing.assert_array_equal(answers(create(
-            name, gps_sigma=0.3, gps_sigma_scale=2.0, **const), [missing] * t.size), plain)
+        np.testing.assert_array_equal(
+            answers(create(name, gps_sigma=0.3, gps_sigma_scale=2.0, **const), [missing] * t.size),
+            plain,
+        )
     assert not np.allclose(stated, plain)  # the stated sigma really changes the answers
     # by default the noise of unstated fixes is estimated from them (0.5 m here), so the
     # assumed gps_sigma hardly matters: 0.05 m and 3 m give nearly the same answers
     a = answers(create(name, gps_sigma=0.05), ["old"] * t.size)
     b = answers(create(name, gps_sigma=3.0), ["old"] * t.size)
     late = slice(60, None)  # after the estimate's warm-up and the bank's memory
-    assert np.abs(a[late] - b[late]).max() < 0.1 * np.abs(
-        answers(create(name, gps_sigma=0.05, **const), ["old"] * t.size)[late]
-        - answers(create(name, gps_sigma=3.0, **const), ["old"] * t.size)[late]).max()
+    assert (
+        np.abs(a[late] - b[late]).max()
+        < 0.1
+        * np.abs(
+            answers(create(name, gps_sigma=0.05, **const), ["old"] * t.size)[late]
+            - answers(create(name, gps_sigma=3.0, **const), ["old"] * t.size)[late]
+        ).max()
+    )
     assert create(name, gps_sigma_scale=1.5).config()["gps_sigma_scale"] == 1.5

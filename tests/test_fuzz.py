@@ -20,17 +20,43 @@ from posbench.predictors.lstm.resample import fit_poly
 from posbench.scenarios.errors import DataError
 from posbench.scenarios.safe_pickle import safe_loads
 
-FUZZ = settings(max_examples=30, deadline=None,
-                suppress_health_check=[HealthCheck.function_scoped_fixture, HealthCheck.too_slow])
+FUZZ = settings(
+    max_examples=30,
+    deadline=None,
+    suppress_health_check=[HealthCheck.function_scoped_fixture, HealthCheck.too_slow],
+)
 
 # ---------------------------------------------------------------------------- loaders
-CELL = st.one_of(st.sampled_from(["", "nan", "inf", "-1", "0", "1e300", "abc", "1.5", '"',
-                                  "1e9", "gps", "imu", "speed", "truth", " "]),
-                 st.floats(allow_nan=True, allow_infinity=True).map(repr),
-                 st.text(alphabet=",.-e0123456789 \"x", max_size=6))
-HEADERS = st.lists(st.sampled_from(["stream", "t", "t_ns", "x", "y", "lat", "lon", "ax", "ay",
-                                    "v", "yaw", "accuracy", "junk"]),
-                   min_size=1, max_size=7)
+CELL = st.one_of(
+    st.sampled_from(
+        [
+            "",
+            "nan",
+            "inf",
+            "-1",
+            "0",
+            "1e300",
+            "abc",
+            "1.5",
+            '"',
+            "1e9",
+            "gps",
+            "imu",
+            "speed",
+            "truth",
+            " ",
+        ]
+    ),
+    st.floats(allow_nan=True, allow_infinity=True).map(repr),
+    st.text(alphabet=',.-e0123456789 "x', max_size=6),
+)
+HEADERS = st.lists(
+    st.sampled_from(
+        ["stream", "t", "t_ns", "x", "y", "lat", "lon", "ax", "ay", "v", "yaw", "accuracy", "junk"]
+    ),
+    min_size=1,
+    max_size=7,
+)
 
 
 @FUZZ
@@ -49,16 +75,27 @@ def test_table_loader_random_csv(tmp_path_factory, header, rows):
     assert np.all(np.isfinite(d.gps.t)) and np.all(np.isfinite(d.gps.x))
 
 
-LEAF = st.one_of(st.none(), st.booleans(), st.integers(), st.floats(), st.text(max_size=5),
-                 st.binary(max_size=5))
-OBJ = st.recursive(LEAF, lambda c: st.one_of(st.lists(c, max_size=4), st.tuples(c, c),
-                                             st.dictionaries(st.text(max_size=3), c, max_size=3)),
-                   max_leaves=12)
+LEAF = st.one_of(
+    st.none(), st.booleans(), st.integers(), st.floats(), st.text(max_size=5), st.binary(max_size=5)
+)
+OBJ = st.recursive(
+    LEAF,
+    lambda c: st.one_of(
+        st.lists(c, max_size=4),
+        st.tuples(c, c),
+        st.dictionaries(st.text(max_size=3), c, max_size=3),
+    ),
+    max_leaves=12,
+)
 
 
 @FUZZ
-@given(obj=OBJ, cuts=st.lists(st.tuples(st.integers(0, 10_000), st.integers(0, 255)), max_size=4),
-       truncate=st.integers(0, 10_000), protocol=st.sampled_from([0, 2, 4]))
+@given(
+    obj=OBJ,
+    cuts=st.lists(st.tuples(st.integers(0, 10_000), st.integers(0, 255)), max_size=4),
+    truncate=st.integers(0, 10_000),
+    protocol=st.sampled_from([0, 2, 4]),
+)
 def test_safe_unpickler_random_and_mutated_pickles(obj, cuts, truncate, protocol):
     data = bytearray(pickle.dumps({"a": np.arange(4.0), "o": obj}, protocol=protocol))
     for pos, val in cuts:
@@ -80,12 +117,22 @@ def test_safe_unpickler_random_bytes(data):
 
 
 @FUZZ
-@given(windows=st.dictionaries(st.integers(0, 5), st.dictionaries(
-    st.sampled_from(["tstamps", "ground_truth", "ACCEL", "theta", "X", "Y"]),
-    st.one_of(st.lists(st.integers(0, 2**62), max_size=8),
-              st.lists(st.lists(st.floats(-1e3, 1e3), min_size=2, max_size=2), max_size=8),
-              st.lists(st.tuples(st.text(max_size=4), st.floats(), st.floats()), max_size=4),
-              st.floats()), max_size=6), max_size=4))
+@given(
+    windows=st.dictionaries(
+        st.integers(0, 5),
+        st.dictionaries(
+            st.sampled_from(["tstamps", "ground_truth", "ACCEL", "theta", "X", "Y"]),
+            st.one_of(
+                st.lists(st.integers(0, 2**62), max_size=8),
+                st.lists(st.lists(st.floats(-1e3, 1e3), min_size=2, max_size=2), max_size=8),
+                st.lists(st.tuples(st.text(max_size=4), st.floats(), st.floats()), max_size=4),
+                st.floats(),
+            ),
+            max_size=6,
+        ),
+        max_size=4,
+    )
+)
 def test_route_pickle_loader_random_contents(tmp_path_factory, windows):
     from posbench.scenarios.loaders.aslan import load_aslan_pickle
 
@@ -101,9 +148,14 @@ def test_route_pickle_loader_random_contents(tmp_path_factory, windows):
 
 # ---------------------------------------------------------------------------- cubic fits
 @FUZZ
-@given(n=st.integers(1, 12), offset=st.sampled_from([0.0, 1e3, 1.7e9]),
-       gap=st.sampled_from([1e-9, 1e-6, 1e-3, 0.2]), slope=st.floats(-50, 50),
-       noise=st.floats(0, 1), seed=st.integers(0, 100))
+@given(
+    n=st.integers(1, 12),
+    offset=st.sampled_from([0.0, 1e3, 1.7e9]),
+    gap=st.sampled_from([1e-9, 1e-6, 1e-3, 0.2]),
+    slope=st.floats(-50, 50),
+    noise=st.floats(0, 1),
+    seed=st.integers(0, 100),
+)
 def test_cubic_fits_are_finite(n, offset, gap, slope, noise, seed):
     rng = np.random.default_rng(seed)
     t = offset + np.cumsum(np.full(n, gap) * rng.uniform(1.0, 1.01, n))
@@ -118,11 +170,18 @@ def test_cubic_fits_are_finite(n, offset, gap, slope, noise, seed):
 
 
 # ---------------------------------------------------------------------------- predictors
-EVENTS = st.lists(st.tuples(st.sampled_from(["gps", "imu", "speed"]),
-                            st.floats(0.001, 2.0),  # time step [s]
-                            st.floats(-1e4, 1e4), st.floats(-1e4, 1e4),
-                            st.floats(-50, 50), st.floats(-4, 4)),
-                  min_size=1, max_size=60)
+EVENTS = st.lists(
+    st.tuples(
+        st.sampled_from(["gps", "imu", "speed"]),
+        st.floats(0.001, 2.0),  # time step [s]
+        st.floats(-1e4, 1e4),
+        st.floats(-1e4, 1e4),
+        st.floats(-50, 50),
+        st.floats(-4, 4),
+    ),
+    min_size=1,
+    max_size=60,
+)
 
 
 @pytest.mark.parametrize("name", ["cv", "poly", "kf", "kf-paper", "ekf", "lstm"])

@@ -22,12 +22,19 @@ from posbench.scenarios.synthetic import generate_drive
 
 
 def run_gate(gate: FixGate, t, x, y) -> np.ndarray:
-    return np.array([gate.check(float(a), float(b), float(c)) for a, b, c in zip(t, x, y,
-                                                                                   strict=True)])
+    return np.array(
+        [gate.check(float(a), float(b), float(c)) for a, b, c in zip(t, x, y, strict=True)]
+    )
 
 
-def line_fixes(n: int = 200, v: float = 9.0, dt: float = 0.2, noise: float = 0.0, seed: int = 0,
-               jitter: float = 0.0):
+def line_fixes(
+    n: int = 200,
+    v: float = 9.0,
+    dt: float = 0.2,
+    noise: float = 0.0,
+    seed: int = 0,
+    jitter: float = 0.0,
+):
     rng = np.random.default_rng(seed)
     t = np.arange(n) * dt + rng.uniform(-jitter, jitter, n)
     x = v * t + rng.normal(0, noise, n) if noise else v * t
@@ -206,16 +213,25 @@ def test_runner_counts_rejections_and_no_gate_turns_it_off():
     # the predictions differ around the jumps: the gated cv never chases them
     fa = on.traces[(on.traces.kind == "future") & (on.traces.predictor == "cv")].iloc[1:]
     fb = off.traces[(off.traces.kind == "future") & (off.traces.predictor == "cv")].iloc[1:]
-    assert np.nanmax(np.abs(fa.x - 9.0 * fa.t_query)) < 0.5 < np.nanmax(np.abs(fb.x - 9.0 * fb.t_query))
+    assert (
+        np.nanmax(np.abs(fa.x - 9.0 * fa.t_query))
+        < 0.5
+        < np.nanmax(np.abs(fb.x - 9.0 * fb.t_query))
+    )
 
     summ = gate_summary([on], cfg)
-    assert summ["predictors"]["cv"] == {"rejected": 3, "fixes_fed": 300, "drives_with_rejections": 1}
+    assert summ["predictors"]["cv"] == {
+        "rejected": 3,
+        "fixes_fed": 300,
+        "drives_with_rejections": 1,
+    }
     res = {"gate": summ, "drives": [{"name": "jumpy", "gps_fed": 300, "rejected": on.rejected}]}
     text = "\n".join(gate_lines(res))
     assert "fixes rejected per predictor" in text and "| cv | 3 | 300 | 1.00 | 1 |" in text
     assert "| jumpy | 300 | 3 | 3 |" in text
-    off_text = "\n".join(gate_lines({"gate": gate_summary([off], RunConfig(gate=False)),
-                                     "drives": []}))
+    off_text = "\n".join(
+        gate_lines({"gate": gate_summary([off], RunConfig(gate=False)), "drives": []})
+    )
     assert "--no-gate" in off_text
 
 

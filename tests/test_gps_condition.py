@@ -26,8 +26,9 @@ from posbench.scenarios.drive import (
 from posbench.scenarios.synthetic import generate_drive
 
 
-def _drive(fixes: str = "receiver", offset_m: float = 3.0, with_truth: bool = True,
-           n_fix: int = 300) -> Drive:
+def _drive(
+    fixes: str = "receiver", offset_m: float = 3.0, with_truth: bool = True, n_fix: int = 300
+) -> Drive:
     """A 60 s straight drive at 10 m/s: truth at 100 Hz, fixes at 5 Hz ``offset_m`` north
     of it (a receiver of its own) or on it."""
     t = np.arange(0.0, 60.0, 0.01)
@@ -38,13 +39,16 @@ def _drive(fixes: str = "receiver", offset_m: float = 3.0, with_truth: bool = Tr
     return Drive(meta, gps, truth=truth if with_truth else None)
 
 
-@pytest.mark.parametrize(("drive", "expected"), [
-    (_drive(), "native"),  # a receiver beside an INS truth: scored as it is
-    (_drive(with_truth=False), "native"),  # no truth: its own fixes, always
-    (_drive(fixes=FIXES_FROM_TRUTH), "rtk"),  # KITTI: the fixes are the truth
-    (_drive(offset_m=0.0), "rtk"),  # fixes lying on the truth are no receiver of their own
-    (_drive(n_fix=0), "rtk"),  # a truth without fixes: fixes must be drawn
-])
+@pytest.mark.parametrize(
+    ("drive", "expected"),
+    [
+        (_drive(), "native"),  # a receiver beside an INS truth: scored as it is
+        (_drive(with_truth=False), "native"),  # no truth: its own fixes, always
+        (_drive(fixes=FIXES_FROM_TRUTH), "rtk"),  # KITTI: the fixes are the truth
+        (_drive(offset_m=0.0), "rtk"),  # fixes lying on the truth are no receiver of their own
+        (_drive(n_fix=0), "rtk"),  # a truth without fixes: fixes must be drawn
+    ],
+)
 def test_auto_condition_per_drive(drive, expected):
     assert gps_condition(RunConfig(), drive) == expected
 
@@ -83,9 +87,12 @@ def test_native_on_a_truth_without_fixes_draws_them():
 def _csv(path, offset_m: float = 3.0) -> None:
     """The issue's case in small: a CSV with the receiver's fixes (stating 8 m) and a truth."""
     d = _drive(offset_m=offset_m)
-    rows = [pd.DataFrame({"stream": "truth", "t": d.truth.t, "x": d.truth.x, "y": d.truth.y}),
-            pd.DataFrame({"stream": "gps", "t": d.gps.t, "x": d.gps.x, "y": d.gps.y,
-                          "accuracy": d.gps.accuracy})]
+    rows = [
+        pd.DataFrame({"stream": "truth", "t": d.truth.t, "x": d.truth.x, "y": d.truth.y}),
+        pd.DataFrame(
+            {"stream": "gps", "t": d.gps.t, "x": d.gps.x, "y": d.gps.y, "accuracy": d.gps.accuracy}
+        ),
+    ]
     pd.concat(rows).sort_values("t", kind="stable").to_csv(path, index=False)
 
 
@@ -93,8 +100,24 @@ def test_bench_run_scores_the_users_receiver_by_default(tmp_path):
     csv = tmp_path / "canyon.csv"
     _csv(csv)
     out = tmp_path / "o"
-    r = subprocess.run([sys.executable, "-m", "posbench", "run", "--data", str(csv), "-p", "cv",
-                        "--out", str(out), "--workers", "1"], capture_output=True, text=True)
+    r = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "posbench",
+            "run",
+            "--data",
+            str(csv),
+            "-p",
+            "cv",
+            "--out",
+            str(out),
+            "--workers",
+            "1",
+        ],
+        capture_output=True,
+        text=True,
+    )
     assert r.returncode == 0, r.stderr
     assert "fixes scored in table: the recording's own receiver" in r.stdout
     res = json.loads((out / "results.json").read_text())
@@ -108,9 +131,27 @@ def test_bench_run_scores_the_users_receiver_by_default(tmp_path):
     assert "fixes: the recording's own receiver." in md
 
     out2 = tmp_path / "o2"
-    r = subprocess.run([sys.executable, "-m", "posbench", "run", "--data", str(csv), "-p", "cv",
-                        "--out", str(out2), "--workers", "1", "--gps-profile", "rtk", "-q"],
-                       capture_output=True, text=True)
+    r = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "posbench",
+            "run",
+            "--data",
+            str(csv),
+            "-p",
+            "cv",
+            "--out",
+            str(out2),
+            "--workers",
+            "1",
+            "--gps-profile",
+            "rtk",
+            "-q",
+        ],
+        capture_output=True,
+        text=True,
+    )
     assert r.returncode == 0, r.stderr
     res2 = json.loads((out2 / "results.json").read_text())
     assert res2["drives"][0]["gps_condition"] == "rtk"
@@ -123,17 +164,24 @@ def test_reports_of_older_runs_name_their_fixes():
     run's profile and the drive's reference."""
     from posbench.report.notes import fixes_lines
 
-    res = {"config": {"gps_profile": "consumer"},
-           "drives": [{"name": "a", "dataset": "kitti", "reference": "truth", "skipped": None},
-                      {"name": "b", "dataset": "aslan", "reference": "cubic", "skipped": None}]}
+    res = {
+        "config": {"gps_profile": "consumer"},
+        "drives": [
+            {"name": "a", "dataset": "kitti", "reference": "truth", "skipped": None},
+            {"name": "b", "dataset": "aslan", "reference": "cubic", "skipped": None},
+        ],
+    }
     assert fixes_lines(res) == [
         "fixes scored in `kitti`: simulated `consumer` fixes drawn from the truth",
-        "fixes scored in `aslan`: the recording's own receiver"]
-    mixed = replace_drives(res, [{"name": "c", "dataset": "kitti", "reference": "cubic",
-                                  "skipped": None}])
+        "fixes scored in `aslan`: the recording's own receiver",
+    ]
+    mixed = replace_drives(
+        res, [{"name": "c", "dataset": "kitti", "reference": "cubic", "skipped": None}]
+    )
     assert fixes_lines(mixed, "kitti") == [
         "fixes scored in `kitti`: the recording's own receiver (1 drive); simulated `consumer` "
-        "fixes drawn from the truth (1 drive)"]
+        "fixes drawn from the truth (1 drive)"
+    ]
 
 
 def replace_drives(res: dict, more: list[dict]) -> dict:
@@ -158,8 +206,24 @@ def test_urban_canyon_csv_is_scored_on_its_receiver_without_blaming_the_truth(tm
     d = urban_canyon_drive()
     write_table(d, csv)
     out = tmp_path / "o"
-    r = subprocess.run([sys.executable, "-m", "posbench", "run", "--data", str(csv), "-p", "cv",
-                        "--out", str(out), "--workers", "1"], capture_output=True, text=True)
+    r = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "posbench",
+            "run",
+            "--data",
+            str(csv),
+            "-p",
+            "cv",
+            "--out",
+            str(out),
+            "--workers",
+            "1",
+        ],
+        capture_output=True,
+        text=True,
+    )
     assert r.returncode == 0, r.stderr
     assert "FAIL" not in r.stdout + r.stderr and "poor receiver" in r.stdout + r.stderr
     res = json.loads((out / "results.json").read_text())

@@ -29,8 +29,11 @@ needs_fork = pytest.mark.skipif(not can_fork(), reason="no fork on this platform
 
 
 def _files(folder: Path) -> dict[str, bytes]:
-    return {p.relative_to(folder).as_posix(): p.read_bytes()
-            for p in sorted(folder.rglob("*")) if p.is_file()}
+    return {
+        p.relative_to(folder).as_posix(): p.read_bytes()
+        for p in sorted(folder.rglob("*"))
+        if p.is_file()
+    }
 
 
 @needs_fork
@@ -38,11 +41,13 @@ def test_figures_drawn_in_children_are_the_same_bytes(tmp_path):
     # PNG and PDF: matplotlib's SVG ids differ even between two drawings in one process
     tr = make_traces(n_fix=120, drives=3)
     here = write_plots(tr, res_for(tr), tmp_path / "here", formats=("png", "pdf"), drive_plots=2)
-    jobs = FigureJobs(tr, list(res_for(tr)["predictors"]), tmp_path / "forked", ("png", "pdf"),
-                      drive_plots=2)
+    jobs = FigureJobs(
+        tr, list(res_for(tr)["predictors"]), tmp_path / "forked", ("png", "pdf"), drive_plots=2
+    )
     forked = jobs.plots()
-    assert [p.relative_to(tmp_path / "forked") for p in forked.files] == \
-        [p.relative_to(tmp_path / "here") for p in here.files]
+    assert [p.relative_to(tmp_path / "forked") for p in forked.files] == [
+        p.relative_to(tmp_path / "here") for p in here.files
+    ]
     assert forked.notes == here.notes and "error_over_time" in forked.notes  # 2 of 3 drives
     assert len(here.files) > 4
     assert _files(tmp_path / "forked") == _files(tmp_path / "here")
@@ -51,8 +56,9 @@ def test_figures_drawn_in_children_are_the_same_bytes(tmp_path):
 
 def test_figures_without_background_are_drawn_when_asked(tmp_path):
     tr = make_traces(n_fix=60, drives=1)
-    jobs = FigureJobs(tr, ["cv", "kf"], tmp_path, ("png",), paper=lambda: [("f.png", "c")],
-                      background=False)
+    jobs = FigureJobs(
+        tr, ["cv", "kf"], tmp_path, ("png",), paper=lambda: [("f.png", "c")], background=False
+    )
     assert not any(tmp_path.iterdir())  # nothing drawn yet
     assert jobs.paper() == [("f.png", "c")]
     assert any(p.name == "error_cdf.png" for p in jobs.plots().files)
@@ -154,10 +160,13 @@ def test_the_cli_runs_one_blas_thread_unless_told(preset, expected):
     env = {k: v for k, v in os.environ.items() if k != "OPENBLAS_NUM_THREADS"}
     if preset:
         env["OPENBLAS_NUM_THREADS"] = preset
-    code = ("import sys, posbench.cli.app, os; assert 'numpy' in sys.modules; "
-            "print(os.environ['OPENBLAS_NUM_THREADS'])")
-    out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True,
-                         check=True).stdout.strip()
+    code = (
+        "import sys, posbench.cli.app, os; assert 'numpy' in sys.modules; "
+        "print(os.environ['OPENBLAS_NUM_THREADS'])"
+    )
+    out = subprocess.run(
+        [sys.executable, "-c", code], env=env, capture_output=True, text=True, check=True
+    ).stdout.strip()
     assert out == expected
 
 
@@ -169,13 +178,19 @@ def test_score_many_is_the_concatenation_of_score():
     prep = prepare_drive(default_drives()[0], RunConfig())
     qf, qn = query_frame(prep, "future"), query_frame(prep, "now")
     rng = np.random.default_rng(0)
-    ans = {n: (rng.normal(size=(len(qf), 2)), rng.normal(size=(len(qn), 2)))
-           for n in ("cv", "kf", "lstm@mine")}
+    ans = {
+        n: (rng.normal(size=(len(qf), 2)), rng.normal(size=(len(qn), 2)))
+        for n in ("cv", "kf", "lstm@mine")
+    }
     ans["cv"][0][3] = np.nan  # no answer
-    old = pd.concat([f for n, (a, b) in ans.items()
-                     for f in (score(qf, n, a), score(qn, n, b))], ignore_index=True)
-    new = score_many(pd.concat([qf, qn], ignore_index=True),
-                     [(n, np.concatenate([a, b])) for n, (a, b) in ans.items()])
+    old = pd.concat(
+        [f for n, (a, b) in ans.items() for f in (score(qf, n, a), score(qn, n, b))],
+        ignore_index=True,
+    )
+    new = score_many(
+        pd.concat([qf, qn], ignore_index=True),
+        [(n, np.concatenate([a, b])) for n, (a, b) in ans.items()],
+    )
     pd.testing.assert_frame_equal(new, old, check_exact=True)
     assert score_many(qf, []).empty
     with pytest.raises(ValueError, match="answers for 2 x"):

@@ -40,10 +40,18 @@ from posbench.scenarios.synthetic import generate_drive  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 #: a hand-set correction per horizon: dx, dy [m, heading frame], log var along, across
-CORR = np.array([[0.05, -0.02, -4.0, -5.0],
-                 [0.11, 0.03, -3.0, -4.5],
-                 [0.20, 0.07, -2.5, -4.0],
-                 [0.31, -0.10, -2.0, -3.0]]).astype(np.float32).astype(np.float64)
+CORR = (
+    np.array(
+        [
+            [0.05, -0.02, -4.0, -5.0],
+            [0.11, 0.03, -3.0, -4.5],
+            [0.20, 0.07, -2.5, -4.0],
+            [0.31, -0.10, -2.0, -3.0],
+        ]
+    )
+    .astype(np.float32)
+    .astype(np.float64)
+)
 
 
 @pytest.fixture(scope="module")
@@ -84,8 +92,7 @@ def _rot(psi: float, v: np.ndarray) -> np.ndarray:
 def _corr_at(h: float) -> np.ndarray:
     """CORR's (dx, dy) interpolated as the hybrid does (0 at h = 0, held beyond 0.8 s)."""
     knots = np.concatenate([[0.0], HORIZONS])
-    return np.array([np.interp(h, knots, np.concatenate([[0.0], CORR[:, j]]))
-                     for j in (0, 1)])
+    return np.array([np.interp(h, knots, np.concatenate([[0.0], CORR[:, j]])) for j in (0, 1)])
 
 
 # --------------------------------------------------------------- the prior, exactly
@@ -111,9 +118,27 @@ def test_untrained_hybrid_equals_kf_through_the_runner_command(untrained, tmp_pa
     out = tmp_path / "out"
     cls = "posbench.predictors.kf:LinearKalman"
     sets = [a for k, v in prior_kf_params()["rtk"].items() for a in ("--set", f"{cls}.{k}={v}")]
-    r = subprocess.run([sys.executable, "-m", "posbench", "run", "-p", f"{cls},hybrid",
-                        "--model", f"hybrid={untrained}", "--out", str(out), "--workers", "1",
-                        *sets], capture_output=True, text=True, cwd=ROOT, timeout=300)
+    r = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "posbench",
+            "run",
+            "-p",
+            f"{cls},hybrid",
+            "--model",
+            f"hybrid={untrained}",
+            "--out",
+            str(out),
+            "--workers",
+            "1",
+            *sets,
+        ],
+        capture_output=True,
+        text=True,
+        cwd=ROOT,
+        timeout=300,
+    )
     assert r.returncode == 0, r.stderr
     res = json.loads((out / "results.json").read_text())["predictors"]
     for kind in ("future", "now"):
@@ -142,9 +167,9 @@ def test_a_hand_set_correction_shifts_answers_by_exactly_R_psi_corr(constant, pr
             c, s = math.cos(psi), math.sin(psi)
             r = np.array([[c, -s], [s, c]])
             extra = r @ np.diag(np.exp(CORR[j, 2:])) @ r.T
-            np.testing.assert_allclose(hy.covariance_at(t + h),
-                                       hy.kf.covariance_at(t + h) + extra, rtol=1e-9,
-                                       atol=1e-12)
+            np.testing.assert_allclose(
+                hy.covariance_at(t + h), hy.kf.covariance_at(t + h) + extra, rtol=1e-9, atol=1e-12
+            )
         checked += 1
     assert checked > 100
 
@@ -253,7 +278,7 @@ def test_hybrid_windows_prior_is_what_kf_answers_in_a_real_replay(prep):
     np.testing.assert_array_equal(hw.X, ws.X[keep])
     assert hw.target.shape == (len(hw), 4, 2) and np.isfinite(hw.target).all()
     # residuals of a tuned kf with RTK fixes are centimetres at 0.2 s, larger at 0.8 s
-    rms = np.sqrt((hw.target ** 2).sum(-1).mean(0))
+    rms = np.sqrt((hw.target**2).sum(-1).mean(0))
     assert rms[0] < 0.2 and rms[3] > rms[0]
 
 
@@ -276,7 +301,7 @@ def test_pickle_round_trip_mid_drive(constant, prep):
     first = feed(a, evs, HORIZON_S, 0, half)
     b = pickle.loads(pickle.dumps(a))
     ra, rb = feed(a, evs, HORIZON_S, half), feed(b, evs, HORIZON_S, half)
-    assert rb == ra == full[len(first):]
+    assert rb == ra == full[len(first) :]
     assert b.steps == a.steps > 100 and b.last_step() == a.last_step()
     fresh = pickle.loads(pickle.dumps(HybridPredictor(str(constant), "rtk")))
     assert feed(fresh, evs, HORIZON_S) == full
@@ -292,8 +317,10 @@ def test_gps_condition_picks_the_prior_params(untrained, tmp_path):
         for k, v in tuned[cond].items():
             assert getattr(hy.kf, k) == v
     assert create("hybrid", None, model=str(untrained)).prior_condition == "native"
-    assert create("hybrid", "rtk", model=str(untrained),
-                  gps_condition="consumer").prior_condition == "consumer"  # explicit wins
+    assert (
+        create("hybrid", "rtk", model=str(untrained), gps_condition="consumer").prior_condition
+        == "consumer"
+    )  # explicit wins
     # a model without "native" and an unknown condition: the kf's defaults
     shutil.copy(untrained / "model.onnx", tmp_path / "model.onnx")
     info = json.loads((untrained / "model.json").read_text())
@@ -308,8 +335,10 @@ def test_gps_condition_picks_the_prior_params(untrained, tmp_path):
 
 def test_the_bundled_model_loads_and_records_itself():
     hy = create("hybrid", "rtk")
-    assert hy.model_description() == {"model": "bundled (predictors/hybrid/bundled/model.onnx)",
-                                      "bundled": True}
+    assert hy.model_description() == {
+        "model": "bundled (predictors/hybrid/bundled/model.onnx)",
+        "bundled": True,
+    }
     assert isinstance(hy.training_drives(), tuple)
     json.dumps(hy.config())
 
@@ -322,10 +351,16 @@ def _bad_models(untrained: Path, root: Path) -> dict[str, tuple[Path, str]]:
         "format": (json.dumps({**info, "format": "posbench-lstm"}), "posbench-hybrid"),
         "horizons": (json.dumps({**info, "horizons_s": [0.2, 0.4]}), "horizons_s"),
         "prior": (json.dumps({**info, "prior": {"predictor": "ekf"}}), "'prior'"),
-        "kf-param": (json.dumps({**info, "prior": {"predictor": "kf", "params": {
-            "native": {"warp": 1.0}}}}), "not a kf configuration"),
-        "kf-range": (json.dumps({**info, "prior": {"predictor": "kf", "params": {
-            "native": {"jerk_psd": -1.0}}}}), "jerk_psd"),
+        "kf-param": (
+            json.dumps({**info, "prior": {"predictor": "kf", "params": {"native": {"warp": 1.0}}}}),
+            "not a kf configuration",
+        ),
+        "kf-range": (
+            json.dumps(
+                {**info, "prior": {"predictor": "kf", "params": {"native": {"jerk_psd": -1.0}}}}
+            ),
+            "jerk_psd",
+        ),
     }
     out = {}
     for name, (text, needle) in cases.items():
@@ -337,6 +372,7 @@ def _bad_models(untrained: Path, root: Path) -> dict[str, tuple[Path, str]]:
     d = root / "lstm-net"
     d.mkdir()
     from posbench.predictors.lstm.predictor import bundled_model
+
     shutil.copy(bundled_model(), d / "model.onnx")
     shutil.copy(untrained / "model.json", d / "model.json")
     out["lstm-net"] = (d, "no output 'correction'")
@@ -354,9 +390,24 @@ def test_a_bad_model_is_a_one_line_data_error(untrained, tmp_path):
 
 def test_a_bad_model_on_the_command_line_is_one_error_line(untrained, tmp_path):
     d, needle = _bad_models(untrained, tmp_path)["kf-param"]
-    r = subprocess.run([sys.executable, "-m", "posbench", "run", "-p", "hybrid", "--model",
-                        f"hybrid={d}", "--out", str(tmp_path / "out")], capture_output=True,
-                       text=True, cwd=ROOT, timeout=300)
+    r = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "posbench",
+            "run",
+            "-p",
+            "hybrid",
+            "--model",
+            f"hybrid={d}",
+            "--out",
+            str(tmp_path / "out"),
+        ],
+        capture_output=True,
+        text=True,
+        cwd=ROOT,
+        timeout=300,
+    )
     assert r.returncode == 2
     lines = r.stderr.strip().splitlines()
     assert len(lines) == 1 and lines[0].startswith("error: ") and needle in lines[0], r.stderr

@@ -20,11 +20,21 @@ from posbench.scenarios.synthetic import generate_drive  # noqa: E402
 
 @pytest.mark.slow
 def test_tiny_hybrid_training_end_to_end(tmp_path) -> None:
-    drives = [generate_drive(seed=200 + i, route=r, duration_s=60.0)
-              for i, r in enumerate(("mixed", "turns", "roundabout"))]
+    drives = [
+        generate_drive(seed=200 + i, route=r, duration_s=60.0)
+        for i, r in enumerate(("mixed", "turns", "roundabout"))
+    ]
     calls = []
-    info = run_training([], tmp_path, epochs=2, drives=drives, hidden=16, command="test",
-                        profiles=("rtk",), progress=lambda *a: calls.append(a))
+    info = run_training(
+        [],
+        tmp_path,
+        epochs=2,
+        drives=drives,
+        hidden=16,
+        command="test",
+        profiles=("rtk",),
+        progress=lambda *a: calls.append(a),
+    )
     assert [c[0] for c in calls] == [1, 2] and all(np.isfinite(c[4]) for c in calls)
     js = json.loads((tmp_path / "model.json").read_text())
     assert js["format"] == "posbench-hybrid" and js["trained"] is True
@@ -52,15 +62,17 @@ def test_future_answers_rotate_the_correction() -> None:
     np.testing.assert_allclose(got, np.stack([np.cos(hw.psi), np.sin(hw.psi)], 1), atol=1e-12)
 
 
-@pytest.mark.parametrize("args, message", [
-    (["--network", "gru"], "--network 'gru': choose one of lstm, hybrid"),
-    (["--profiles", "rtk,gnss"], "--profiles 'rtk,gnss': choose from none, rtk, consumer"),
-    (["--corpus-hours", "-1"], "--corpus-hours must be >= 0"),
-    (["--max-minutes", "0"], "--max-minutes must be > 0"),
-])
+@pytest.mark.parametrize(
+    "args, message",
+    [
+        (["--network", "gru"], "--network 'gru': choose one of lstm, hybrid"),
+        (["--profiles", "rtk,gnss"], "--profiles 'rtk,gnss': choose from none, rtk, consumer"),
+        (["--corpus-hours", "-1"], "--corpus-hours must be >= 0"),
+        (["--max-minutes", "0"], "--max-minutes must be > 0"),
+    ],
+)
 def test_train_option_errors_are_one_line(tmp_path, args, message) -> None:
-    r = CliRunner().invoke(app, ["train", "--synthetic", "1", "--out", str(tmp_path / "o"),
-                                 *args])
+    r = CliRunner().invoke(app, ["train", "--synthetic", "1", "--out", str(tmp_path / "o"), *args])
     assert r.exit_code == 2
     lines = [x for x in r.output.splitlines() if x.strip()]
     assert len(lines) == 1 and lines[0].startswith("error: ") and message in lines[0]

@@ -31,10 +31,18 @@ ROOT = Path(__file__).resolve().parents[1]
 
 
 def bench(*args: str) -> subprocess.CompletedProcess:
-    env = {**os.environ, "COLUMNS": "120",
-           "PYTHONPATH": os.pathsep.join(filter(None, [str(ROOT), os.environ.get("PYTHONPATH")]))}
-    return subprocess.run([sys.executable, "-m", "posbench", *args], capture_output=True,
-                          text=True, timeout=600, env=env)
+    env = {
+        **os.environ,
+        "COLUMNS": "120",
+        "PYTHONPATH": os.pathsep.join(filter(None, [str(ROOT), os.environ.get("PYTHONPATH")])),
+    }
+    return subprocess.run(
+        [sys.executable, "-m", "posbench", *args],
+        capture_output=True,
+        text=True,
+        timeout=600,
+        env=env,
+    )
 
 
 @pytest.fixture(scope="module")
@@ -96,14 +104,19 @@ def test_identical_predictors_compare_as_exactly_equal(twin_run):
     assert paired["baseline"] == "kf" and set(paired["overall"]) == {"cv", "kf@twin"}
     entries = [paired["overall"]["kf@twin"][k] for k in ("future", "now")]
     entries += [paired["by_dataset"]["synthetic"]["kf@twin"][k] for k in ("future", "now")]
-    entries += [e for k in ("future", "now")
-                for e in paired["by_label"]["synthetic"]["kf@twin"][k].values() if e["queries"]]
+    entries += [
+        e
+        for k in ("future", "now")
+        for e in paired["by_label"]["synthetic"]["kf@twin"][k].values()
+        if e["queries"]
+    ]
     for e in entries:
         assert e["diff_m"] == 0.0 and e["ci95"] == [0.0, 0.0], e
         assert e["wins"] == 0 and not e["conclusive"]
     cv = paired["overall"]["cv"]["future"]
-    assert cv["diff_m"] == pytest.approx(res["predictors"]["cv"]["future"]["mean_m"]
-                                         - res["predictors"]["kf"]["future"]["mean_m"])
+    assert cv["diff_m"] == pytest.approx(
+        res["predictors"]["cv"]["future"]["mean_m"] - res["predictors"]["kf"]["future"]["mean_m"]
+    )
     assert cv["ci95"][0] > 0 and cv["conclusive"] and cv["wins"] == 0
     assert cv["drives"] == 4 and cv["queries"] == res["predictors"]["cv"]["future"]["count"]
 
@@ -139,9 +152,12 @@ def test_paired_and_label_tables_mark_what_is_and_is_not_conclusive(twin_run):
 def test_glossary_is_the_metrics_definitions(twin_run):
     _, _, res = twin_run
     md = render_markdown(Run.from_results(res).results, [])
-    glossary = md[md.index("## Glossary"):]
-    for text in (bootstrap.DEFINITIONS["95 % CI"], bootstrap.DEFINITIONS["paired difference"],
-                 bootstrap.DEFINITIONS["conclusive"]):
+    glossary = md[md.index("## Glossary") :]
+    for text in (
+        bootstrap.DEFINITIONS["95 % CI"],
+        bootstrap.DEFINITIONS["paired difference"],
+        bootstrap.DEFINITIONS["conclusive"],
+    ):
         assert text in glossary
     assert outages.DEFINITIONS["ADE"] not in glossary  # no outage figure in this report
     assert md.rstrip().endswith(glossary.rstrip())  # the report ends with it
@@ -151,8 +167,19 @@ def test_seeds_repeat_the_run_and_report_the_spread(tmp_path):
     import jsonschema
 
     out = tmp_path / "o"
-    r = bench("run", "-p", "cv,kf", "--seeds", "2", "--out", str(out), "--workers", "1",
-              "--drive-plots", "0")
+    r = bench(
+        "run",
+        "-p",
+        "cv,kf",
+        "--seeds",
+        "2",
+        "--out",
+        str(out),
+        "--workers",
+        "1",
+        "--drive-plots",
+        "0",
+    )
     assert r.returncode == 0, r.stderr
     res = json.loads((out / "results.json").read_text())
     jsonschema.validate(res, results_schema())
@@ -173,8 +200,11 @@ def test_seeds_repeat_the_run_and_report_the_spread(tmp_path):
 def _without_intervals(tree):
     """A results tree as schema 1.0 wrote it: no ci95, paired, statistics or seeds."""
     if isinstance(tree, dict):
-        return {k: _without_intervals(v) for k, v in tree.items()
-                if k not in ("ci95", "paired", "statistics", "seeds")}
+        return {
+            k: _without_intervals(v)
+            for k, v in tree.items()
+            if k not in ("ci95", "paired", "statistics", "seeds")
+        }
     if isinstance(tree, list):
         return [_without_intervals(v) for v in tree]
     return tree
@@ -197,16 +227,23 @@ def test_held_out_paired_leaves_the_training_drives_out(twin_run):
     the table marks the trained predictor in the all-drives comparison only."""
     runs, cfg, _ = twin_run
     trained = runs[0].name
-    res = build_results(runs, cfg, [], "test",
-                    models={"cv": {"model": "m.onnx", "bundled": False, "train_drives": [trained]}})
+    res = build_results(
+        runs,
+        cfg,
+        [],
+        "test",
+        models={"cv": {"model": "m.onnx", "bundled": False, "train_drives": [trained]}},
+    )
     held = res["paired"]["held_out"]
     assert held["drives"] == sorted(r.name for r in runs[1:])
     entry = held["overall"]["cv"]["future"]
     assert entry["drives"] == len(runs) - 1
     tr = pd.concat([r.traces for r in runs[1:]])
     tr = tr[(tr["kind"] == "future") & ~tr["warmup"] & tr["x_ref"].notna()]
-    want = (tr.loc[tr["predictor"] == "cv", "error_m"].mean()
-            - tr.loc[tr["predictor"] == "kf", "error_m"].mean())
+    want = (
+        tr.loc[tr["predictor"] == "cv", "error_m"].mean()
+        - tr.loc[tr["predictor"] == "kf", "error_m"].mean()
+    )
     assert entry["diff_m"] == pytest.approx(want, rel=1e-9)
     assert res["paired"]["overall"]["cv"]["future"]["drives"] == len(runs)
     assert paired_table(res).frame["predictor"].tolist()[0] == "cv *"

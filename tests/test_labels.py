@@ -11,12 +11,24 @@ from posbench.scenarios.synthetic import generate_drive, simulate, stop, straigh
 
 
 def _roundabout() -> list:
-    return [turn(-35, 11, 6.0, "roundabout"), turn(270, 18, 7.0, "roundabout"),
-            turn(-35, 11, 6.0, "roundabout")]
+    return [
+        turn(-35, 11, 6.0, "roundabout"),
+        turn(270, 18, 7.0, "roundabout"),
+        turn(-35, 11, 6.0, "roundabout"),
+    ]
 
 
-ROUTE = [straight(150, 14), turn(90, 12, 6.0), straight(150, 14), *_roundabout(),
-         straight(150, 14), stop(6.0), straight(150, 14), turn(-90, 10, 5.5), straight(100, 13)]
+ROUTE = [
+    straight(150, 14),
+    turn(90, 12, 6.0),
+    straight(150, 14),
+    *_roundabout(),
+    straight(150, 14),
+    stop(6.0),
+    straight(150, 14),
+    turn(-90, 10, 5.5),
+    straight(100, 13),
+]
 
 
 @pytest.fixture(scope="module")
@@ -83,8 +95,11 @@ def test_speed_stream_drives_standstill() -> None:
 
 def test_city_block_loop_is_turns_not_roundabout() -> None:
     # four left 90-deg turns at r = 10 m within ~30 s: 360 deg, but separate turns
-    segs = [straight(60, 10)] + [seg for _ in range(4) for seg in
-                                 (turn(90, 10, 5.0), straight(25, 8))] + [straight(60, 10)]
+    segs = (
+        [straight(60, 10)]
+        + [seg for _ in range(4) for seg in (turn(90, 10, 5.0), straight(25, 8))]
+        + [straight(60, 10)]
+    )
     s = simulate(segs)
     labels = label_times(s.t, s.t, s.x, s.y)
     assert "roundabout" not in set(labels)

@@ -60,6 +60,7 @@ def step_fn(p, fix):
     def step():
         p.observe_gps(t, x, y)  # a repeated fix at the same time replaces itself: same state
         p.position_at(t + 0.2)
+
     return step
 
 
@@ -102,9 +103,11 @@ def test_latency_gate(prepared):
     pos50, _ = percentiles_us(lambda: p.position_at(t + 0.1))
     pl, fix = warmed("lstm", prepared, fit="lbfgs")
     lbfgs50, _ = percentiles_us(step_fn(pl, fix), n=100, repeats=1)
-    print(f"\nstep p50/p99 us: {results}; lstm fused {fused[0]:.1f}/{fused[1]:.1f}, staged "
-          f"{staged[0]:.1f}/{staged[1]:.1f}; lstm position_at p50 {pos50:.1f} us; "
-          f"lstm step with L-BFGS fit p50 {lbfgs50:.0f} us")
+    print(
+        f"\nstep p50/p99 us: {results}; lstm fused {fused[0]:.1f}/{fused[1]:.1f}, staged "
+        f"{staged[0]:.1f}/{staged[1]:.1f}; lstm position_at p50 {pos50:.1f} us; "
+        f"lstm step with L-BFGS fit p50 {lbfgs50:.0f} us"
+    )
     assert results["lstm"][0] <= BUDGETS["lstm_step_p50_us"]
     assert results["lstm"][1] <= BUDGETS["lstm_step_p99_us"]
     assert fused[0] <= BUDGETS["lstm_step_p50_us"] and fused[1] <= BUDGETS["lstm_step_p99_us"]

@@ -40,12 +40,18 @@ ROW_END = " \\\\"
 def _tabulars(tex: str) -> list[tuple[str, list[str], list[list[str]]]]:
     """Every ``tabular`` in ``tex``: (column spec, header cells, body rows)."""
     out = []
-    for m in re.finditer(r"\\begin\{tabular\}\{([a-z]*)\}\n\\toprule\n(.*?)\n\\midrule\n(.*?)"
-                         r"\\bottomrule\n\\end\{tabular\}", tex, re.S):
+    for m in re.finditer(
+        r"\\begin\{tabular\}\{([a-z]*)\}\n\\toprule\n(.*?)\n\\midrule\n(.*?)"
+        r"\\bottomrule\n\\end\{tabular\}",
+        tex,
+        re.S,
+    ):
         spec, head, body = m.groups()
+
         def cells(line: str) -> list[str]:
             assert line.endswith(ROW_END), line
-            return [c.strip() for c in re.split(r"(?<!\\)&", line[:-len(ROW_END)])]
+            return [c.strip() for c in re.split(r"(?<!\\)&", line[: -len(ROW_END)])]
+
         out.append((spec, cells(head), [cells(r) for r in body.splitlines() if r]))
     return out
 
@@ -63,8 +69,9 @@ def check_tex(tex: str, where: str) -> int:
             column = [r[j] for r in rows]
             assert all(len(r) == len(spec) for r in rows), (where, rows)
             figures = [FIGURE.match(c) is not None for c in column]
-            if any(figures) and all(f or NO_FIGURE.match(c)
-                                    for f, c in zip(figures, column, strict=True)):
+            if any(figures) and all(
+                f or NO_FIGURE.match(c) for f, c in zip(figures, column, strict=True)
+            ):
                 assert align == "r", f"{where}: numbers in '{head[j]}' not right-aligned ({spec})"
             elif not any(figures) and any(re.search("[A-Za-z]", c) for c in column):
                 assert align == "l", f"{where}: text in '{head[j]}' not left-aligned ({spec})"
@@ -73,18 +80,42 @@ def check_tex(tex: str, where: str) -> int:
 
 # --- the escaping -----------------------------------------------------------------------
 
+
 def test_tex_escape_maps_symbols_units_and_letters_to_ascii() -> None:
     cases = {
-        "Δ mean": r"$\Delta$ mean", "±0.5": r"$\pm$0.5", "12°": r"12$^\circ$",
-        "m/s²": r"m/s$^2$", "µs": r"$\mu$s", "μs": r"$\mu$s", "0–5 s": "0--5 s",
-        "≤ 2": r"$\leq$ 2", "≥ 2": r"$\geq$ 2", "a—b": "a---b", "2 × 3": r"2 $\times$ 3",
-        "−1": "$-$1", "σ": r"$\sigma$", "Ω": r"$\Omega$", "Α": "A",
-        "50 %": r"50 \%", "a_b & c#d": r"a\_b \& c\#d", "<0.5 m/s": "$<$0.5 m/s",
-        "m^2": r"m\textasciicircum{}2", "x\\y": r"x\textbackslash{}y", "{~$}": r"\{\textasciitilde{}\$\}",
-        "Straße": r"Stra\ss{}e", "café": r"caf\'{e}", "Zürich": r'Z\"{u}rich',
-        "Ñandú": r"\~{N}and\'{u}", "ï": r'\"{\i{}}', "ﬁx": "fix", "Ｋ": "K",
+        "Δ mean": r"$\Delta$ mean",
+        "±0.5": r"$\pm$0.5",
+        "12°": r"12$^\circ$",
+        "m/s²": r"m/s$^2$",
+        "µs": r"$\mu$s",
+        "μs": r"$\mu$s",
+        "0–5 s": "0--5 s",
+        "≤ 2": r"$\leq$ 2",
+        "≥ 2": r"$\geq$ 2",
+        "a—b": "a---b",
+        "2 × 3": r"2 $\times$ 3",
+        "−1": "$-$1",
+        "σ": r"$\sigma$",
+        "Ω": r"$\Omega$",
+        "Α": "A",
+        "50 %": r"50 \%",
+        "a_b & c#d": r"a\_b \& c\#d",
+        "<0.5 m/s": "$<$0.5 m/s",
+        "m^2": r"m\textasciicircum{}2",
+        "x\\y": r"x\textbackslash{}y",
+        "{~$}": r"\{\textasciitilde{}\$\}",
+        "Straße": r"Stra\ss{}e",
+        "café": r"caf\'{e}",
+        "Zürich": r"Z\"{u}rich",
+        "Ñandú": r"\~{N}and\'{u}",
+        "ï": r"\"{\i{}}",
+        "ﬁx": "fix",
+        "Ｋ": "K",
         # adjacent symbols share one math run: never ``$$`` (display math) nor ``^a^b``
-        "<−1": "$<{}-$1", "°²": r"$^\circ{}^2$", "$Δ": r"\$$\Delta$", "Δ|": r"$\Delta{}|$",
+        "<−1": "$<{}-$1",
+        "°²": r"$^\circ{}^2$",
+        "$Δ": r"\$$\Delta$",
+        "Δ|": r"$\Delta{}|$",
     }
     for text, tex in cases.items():
         assert tex_escape(text) == tex, text
@@ -123,9 +154,16 @@ def test_every_non_ascii_character_of_the_package_has_latex() -> None:
 def test_value_columns_are_right_aligned_in_latex_and_markdown() -> None:
     import pandas as pd
 
-    frame = pd.DataFrame({"name": ["a", "b"], "x": [1.0, float("nan")], "won": ["1/2", "0/2"],
-                          "paper": ["16.6", "11 (LSTM), 46 (Kalman)"], "note": ["ok", "-"],
-                          "pre": ["0.1 [0.0, 0.2] *", "-"]})
+    frame = pd.DataFrame(
+        {
+            "name": ["a", "b"],
+            "x": [1.0, float("nan")],
+            "won": ["1/2", "0/2"],
+            "paper": ["16.6", "11 (LSTM), 46 (Kalman)"],
+            "note": ["ok", "-"],
+            "pre": ["0.1 [0.0, 0.2] *", "-"],
+        }
+    )
     t = Table(frame, "t", {"x": "Δ x"}, digits={"paper": 1})
     assert t.alignment() == "lrrrlr"
     assert t.markdown().splitlines()[1] == "|---|---:|---:|---:|---|---:|"
@@ -136,6 +174,7 @@ def test_value_columns_are_right_aligned_in_latex_and_markdown() -> None:
 
 
 # --- every table posbench writes ----------------------------------------------------------
+
 
 def test_report_tables_of_the_committed_reports() -> None:
     """Every report table of every committed run, rendered by the code as it is now."""
@@ -151,8 +190,9 @@ def test_report_tables_of_the_committed_reports() -> None:
             n += check_tex(t.latex(), where)
             assert t.alignment()[0] == "l", where  # a name first
             rule = t.markdown().splitlines()[1]
-            assert rule == "|" + "|".join("---:" if a == "r" else "---"
-                                          for a in t.alignment()) + "|", where
+            assert (
+                rule == "|" + "|".join("---:" if a == "r" else "---" for a in t.alignment()) + "|"
+            ), where
         for t in report_tables(res):  # the paper's column, text in its last row, is figures
             if t.name.startswith("route-type-") and "paper LSTM [cm]" in t.frame.columns:
                 assert t.alignment().endswith("r"), t.name
@@ -182,8 +222,19 @@ def test_bench_compare_latex_is_ascii_and_right_aligned(small_run: Path, tmp_pat
     new = tmp_path / "new"
     shutil.copytree(small_run, new)
     out = tmp_path / "cmp"
-    r = bench("compare", str(small_run), str(new), "--table-format", "latex", "--uncertainty",
-              "--scope", "all,dataset,route", "--out", str(out), timeout=300)
+    r = bench(
+        "compare",
+        str(small_run),
+        str(new),
+        "--table-format",
+        "latex",
+        "--uncertainty",
+        "--scope",
+        "all,dataset,route",
+        "--out",
+        str(out),
+        timeout=300,
+    )
     assert r.returncode == 0, r.stderr
     assert check_tex(r.stdout, "bench compare stdout") == 2
     spec, head, rows = _tabulars(r.stdout)[0]
@@ -192,7 +243,8 @@ def test_bench_compare_latex_is_ascii_and_right_aligned(small_run: Path, tmp_pat
     for name in ("comparison.tex", "uncertainty_comparison.tex"):
         check_tex((out / name).read_text(), name)
     assert (out / "comparison.tex").read_text() == "".join(
-        r.stdout.partition("\\end{tabular}\n")[:2])
+        r.stdout.partition("\\end{tabular}\n")[:2]
+    )
 
 
 def test_pdflatex_compiles_the_tables(small_run: Path, tmp_path: Path) -> None:
@@ -202,16 +254,25 @@ def test_pdflatex_compiles_the_tables(small_run: Path, tmp_path: Path) -> None:
     import pandas as pd
 
     if shutil.which("pdflatex") is None:
-        missing("no pdflatex (.ci/run installs texlive-latex-base and "
-                "texlive-latex-recommended)")
+        missing("no pdflatex (.ci/run installs texlive-latex-base and texlive-latex-recommended)")
 
-    symbols = Table(pd.DataFrame({"char": [f"a{c}b" for c in TEX_CHARACTERS],
-                                  "n": range(len(TEX_CHARACTERS))}), "symbols")
+    symbols = Table(
+        pd.DataFrame({"char": [f"a{c}b" for c in TEX_CHARACTERS], "n": range(len(TEX_CHARACTERS))}),
+        "symbols",
+    )
     tables = [p.read_text() for p in sorted((small_run / "tables").glob("*.tex"))]
-    doc = ("\\documentclass{article}\n\\usepackage{booktabs}\n\\begin{document}\n"
-           + "\n\\bigskip\n".join([*tables, symbols.latex()]) + "\\end{document}\n")
+    doc = (
+        "\\documentclass{article}\n\\usepackage{booktabs}\n\\begin{document}\n"
+        + "\n\\bigskip\n".join([*tables, symbols.latex()])
+        + "\\end{document}\n"
+    )
     (tmp_path / "t.tex").write_text(doc)
-    r = subprocess.run(["pdflatex", "-interaction=nonstopmode", "-halt-on-error", "t.tex"],
-                       cwd=tmp_path, capture_output=True, text=True, timeout=120)
+    r = subprocess.run(
+        ["pdflatex", "-interaction=nonstopmode", "-halt-on-error", "t.tex"],
+        cwd=tmp_path,
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
     assert r.returncode == 0, r.stdout[-3000:]
     assert (tmp_path / "t.pdf").is_file()

@@ -17,8 +17,7 @@ from layout import FOLDERS, ROOT, module_name, source_files
 #: packages that read saved runs or draw from traces: never the replay, the aggregation,
 #: the pipelines, the predictors or the command line
 READERS = ("tables", "report", "comparison", "figures", "saved_run", "recording", "scoring")
-WRITERS = ("replay", "aggregation", "pipeline", "predictor_tools", "offline", "cli",
-           "predictors")
+WRITERS = ("replay", "aggregation", "pipeline", "predictor_tools", "offline", "cli", "predictors")
 
 
 def _imports(path: Path, top_level_only: bool) -> set[str]:
@@ -27,8 +26,11 @@ def _imports(path: Path, top_level_only: bool) -> set[str]:
     for node in ast.walk(tree):
         if isinstance(node, ast.If) and "TYPE_CHECKING" in ast.unparse(node.test):
             node.body = []
-    nodes = [n for n in tree.body if not isinstance(n, ast.If)] if top_level_only \
+    nodes = (
+        [n for n in tree.body if not isinstance(n, ast.If)]
+        if top_level_only
         else list(ast.walk(tree))
+    )
     out: set[str] = set()
     for n in nodes:
         if isinstance(n, ast.ImportFrom) and n.module and n.module.startswith("posbench"):
@@ -123,8 +125,9 @@ def test_packages_import_one_way():
 
 
 def test_modules_are_small_and_bench_has_few_of_its_own():
-    big = {module_name(f): n for f in source_files()
-           if (n := len(f.read_text().splitlines())) > 600}
+    big = {
+        module_name(f): n for f in source_files() if (n := len(f.read_text().splitlines())) > 600
+    }
     assert big == {}
     own = sorted(p.name for p in (ROOT / "bench").glob("*.py"))
     assert len(own) <= 12, own
@@ -136,28 +139,41 @@ def test_every_package_is_installed_under_posbench():
     import tomllib
 
     cfg = tomllib.loads((ROOT / "pyproject.toml").read_text())["tool"]["setuptools"]
-    found = sorted(module_name(p) for folder in FOLDERS for p in (ROOT / folder).rglob("__init__.py"))
+    found = sorted(
+        module_name(p) for folder in FOLDERS for p in (ROOT / folder).rglob("__init__.py")
+    )
     assert sorted(cfg["packages"]) == found
     assert cfg["package-dir"] == {name: folder for folder, name in FOLDERS.items()}
     assert all(p == "posbench" or p.startswith("posbench.") for p in cfg["packages"])
 
 
 def _run_python(code: str, cwd: Path | None = None) -> str:
-    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=cwd,
-                       timeout=300)
+    r = subprocess.run(
+        [sys.executable, "-c", code], capture_output=True, text=True, cwd=cwd, timeout=300
+    )
     assert r.returncode == 0, r.stderr
     return r.stdout
 
 
 def test_import_posbench_is_cheap():
-    out = _run_python("import sys, posbench; print(sorted(m for m in ('numpy', 'pandas', "
-                      "'typer', 'rich') if m in sys.modules))")
+    out = _run_python(
+        "import sys, posbench; print(sorted(m for m in ('numpy', 'pandas', "
+        "'typer', 'rich') if m in sys.modules))"
+    )
     assert out.strip() == "[]"
 
 
-FORBIDDEN = ("posbench.replay", "posbench.pipeline", "posbench.predictors",
-             "posbench.aggregation", "posbench.predictor_tools", "onnxruntime", "torch",
-             "rerun", "ray")
+FORBIDDEN = (
+    "posbench.replay",
+    "posbench.pipeline",
+    "posbench.predictors",
+    "posbench.aggregation",
+    "posbench.predictor_tools",
+    "onnxruntime",
+    "torch",
+    "rerun",
+    "ray",
+)
 
 
 @pytest.mark.slow
@@ -165,8 +181,10 @@ def test_loading_and_rendering_a_saved_run_imports_no_replay_or_predictor(tmp_pa
     """A saved run (with traces) loaded in a fresh process: its summary, every report
     table in every form, report.md and the figures, and a comparison with itself."""
     out = tmp_path / "run"
-    _run_python(f"import posbench; posbench.run(predictors='cv,kf', out={str(out)!r}, "
-                f"workers=1, drive_plots=1)")
+    _run_python(
+        f"import posbench; posbench.run(predictors='cv,kf', out={str(out)!r}, "
+        f"workers=1, drive_plots=1)"
+    )
     code = f"""
 import sys
 import posbench
@@ -175,7 +193,7 @@ run.summary(); run.traces
 from posbench.report.markdown import report_tables
 for t in report_tables(run.results):
     t.markdown(); t.csv(); t.latex()
-run.report({str(tmp_path / 'rendered')!r}, drive_plots=1)
+run.report({str(tmp_path / "rendered")!r}, drive_plots=1)
 posbench.compare(run, {str(out)!r})
 print(sorted({{m.split('.')[0] if not m.startswith('posbench') else '.'.join(m.split('.')[:2])
               for m in sys.modules if m.startswith({FORBIDDEN!r})}}))

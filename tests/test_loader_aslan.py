@@ -28,6 +28,7 @@ def _wrap(a: np.ndarray) -> np.ndarray:
 
 # --------------------------------------------------------------------------- synthetic
 
+
 def _route(n_fix: int = 30, heading: float = 0.5, v: float = 5.0) -> dict[int, dict]:
     """Windows of 8 fixes (stride 1) of a straight drive, as the paper's pickles hold them."""
     tf = T0 + np.arange(n_fix, dtype=np.int64) * 200_000_000
@@ -40,10 +41,11 @@ def _route(n_fix: int = 30, heading: float = 0.5, v: float = 5.0) -> dict[int, d
         in_win = (ta >= tf[k]) & (ta <= tf[k + 7])
         windows[k] = {
             "ground_truth": pos[sl].copy(),
-            "ground_truth_old": [] if k == 0 else pos[k - 1:k + 7].copy(),
-            "old_tstamps": [] if k == 0 else [int(t) for t in tf[k - 1:k + 7]],
+            "ground_truth_old": [] if k == 0 else pos[k - 1 : k + 7].copy(),
+            "old_tstamps": [] if k == 0 else [int(t) for t in tf[k - 1 : k + 7]],
             "tstamps": [int(t) for t in tf[sl]],
-            "X": [float(pos[k + 6, 0] + 0.3)], "Y": [float(pos[k + 6, 1] + 0.2)],
+            "X": [float(pos[k + 6, 0] + 0.3)],
+            "Y": [float(pos[k + 6, 1] + 0.2)],
             "ACCEL": [(str(int(t)), 0.25, -0.05) for t in ta[in_win]],
             "theta": heading + 0.001 * k,
         }
@@ -101,8 +103,9 @@ def test_glitches_duplicates_and_conflicts_counted(tmp_path: Path) -> None:
     # an acceleration glitch, repeated in every window that holds its stamp
     t_g = w[3]["ACCEL"][5][0]
     for k in w:
-        w[k]["ACCEL"] = [(t, -164.0, 55.2) if t == t_g else (t, ax, ay)
-                         for t, ax, ay in w[k]["ACCEL"]]
+        w[k]["ACCEL"] = [
+            (t, -164.0, 55.2) if t == t_g else (t, ax, ay) for t, ax, ay in w[k]["ACCEL"]
+        ]
     # a duplicated IMU message 10 us after a real one
     t_d = int(w[6]["ACCEL"][2][0])
     w[6]["ACCEL"].append((str(t_d + 10_000), 0.25, -0.05))
@@ -173,6 +176,7 @@ def test_interval_quantiles_constant_shape() -> None:
 
 
 # --------------------------------------------------------------------------- real routes
+
 
 @pytest.fixture(scope="module")
 def routes(aslan_dir: Path) -> list:

@@ -21,6 +21,7 @@ LAT0, LON0 = 45.8, 15.97
 
 # --------------------------------------------------------------------------- trajectory
 
+
 def _trajectory(n_gps: int = 20) -> dict[str, np.ndarray]:
     """A car on a 50 m circle at 5 m/s: GPS 5 Hz, IMU 50 Hz, speed and odometry 10 Hz."""
     r, v = 50.0, 5.0
@@ -38,16 +39,29 @@ def _trajectory(n_gps: int = 20) -> dict[str, np.ndarray]:
     _, _, yaw_i = pose(ti)
     tt = np.arange(n_gps * 2) * 0.1 + 0.005
     xt, yt, yaw_t = pose(tt)
-    return {"tg": tg, "lat": lat, "lon": lon, "ti": ti, "yaw_i": yaw_i,
-            "ax": np.full(ti.size, 0.1), "ay": np.full(ti.size, v * w),
-            "tt": tt, "xt": xt, "yt": yt, "yaw_t": yaw_t, "v": np.full(tt.size, v),
-            "yaw_rate": np.full(ti.size, w)}
+    return {
+        "tg": tg,
+        "lat": lat,
+        "lon": lon,
+        "ti": ti,
+        "yaw_i": yaw_i,
+        "ax": np.full(ti.size, 0.1),
+        "ay": np.full(ti.size, v * w),
+        "tt": tt,
+        "xt": xt,
+        "yt": yt,
+        "yaw_t": yaw_t,
+        "v": np.full(tt.size, v),
+        "yaw_rate": np.full(ti.size, w),
+    }
 
 
 def _latlon_of(x: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """lat/lon [deg] of local metres, the way _trajectory makes the GPS's."""
-    return (LAT0 + np.degrees(y / 6378137.0),
-            LON0 + np.degrees(x / (6378137.0 * math.cos(math.radians(LAT0)))))
+    return (
+        LAT0 + np.degrees(y / 6378137.0),
+        LON0 + np.degrees(x / (6378137.0 * math.cos(math.radians(LAT0)))),
+    )
 
 
 def _ns(t: float) -> int:
@@ -55,6 +69,7 @@ def _ns(t: float) -> int:
 
 
 # --------------------------------------------------------------------------- message makers
+
 
 class _Msgs:
     """Message builders for one typestore (ROS 1 headers carry ``seq``)."""
@@ -70,33 +85,58 @@ class _Msgs:
             return self.T["std_msgs/msg/Header"](seq=0, stamp=stamp, frame_id=frame)
         return self.T["std_msgs/msg/Header"](stamp=stamp, frame_id=frame)
 
-    def navsatfix(self, t_ns: int, lat: float, lon: float, status: int = 0,
-                  cov_type: int = 2, var: float = 4.0) -> object:
+    def navsatfix(
+        self,
+        t_ns: int,
+        lat: float,
+        lon: float,
+        status: int = 0,
+        cov_type: int = 2,
+        var: float = 4.0,
+    ) -> object:
         st = self.T["sensor_msgs/msg/NavSatStatus"](status=status, service=1)
         cov = np.zeros(9)
         cov[0] = cov[4] = var
         cov[8] = 9.0
         return self.T["sensor_msgs/msg/NavSatFix"](
-            header=self.header(t_ns, "gps"), status=st, latitude=lat, longitude=lon,
-            altitude=100.0, position_covariance=cov, position_covariance_type=cov_type)
+            header=self.header(t_ns, "gps"),
+            status=st,
+            latitude=lat,
+            longitude=lon,
+            altitude=100.0,
+            position_covariance=cov,
+            position_covariance_type=cov_type,
+        )
 
     def vec(self, x: float, y: float, z: float = 0.0) -> object:
         return self.T["geometry_msgs/msg/Vector3"](x=x, y=y, z=z)
 
     def quat(self, yaw: float) -> object:
-        return self.T["geometry_msgs/msg/Quaternion"](x=0.0, y=0.0, z=math.sin(yaw / 2),
-                                                      w=math.cos(yaw / 2))
+        return self.T["geometry_msgs/msg/Quaternion"](
+            x=0.0, y=0.0, z=math.sin(yaw / 2), w=math.cos(yaw / 2)
+        )
 
-    def imu(self, t_ns: int, ax: float, ay: float, yaw: float, yaw_rate: float,
-            no_orientation: bool = False) -> object:
+    def imu(
+        self,
+        t_ns: int,
+        ax: float,
+        ay: float,
+        yaw: float,
+        yaw_rate: float,
+        no_orientation: bool = False,
+    ) -> object:
         ocov = np.zeros(9)
         if no_orientation:
             ocov[0] = -1.0
         return self.T["sensor_msgs/msg/Imu"](
-            header=self.header(t_ns), orientation=self.quat(yaw), orientation_covariance=ocov,
-            angular_velocity=self.vec(0.0, 0.0, yaw_rate), angular_velocity_covariance=np.zeros(9),
+            header=self.header(t_ns),
+            orientation=self.quat(yaw),
+            orientation_covariance=ocov,
+            angular_velocity=self.vec(0.0, 0.0, yaw_rate),
+            angular_velocity_covariance=np.zeros(9),
             linear_acceleration=self.vec(ax, ay, 9.81),
-            linear_acceleration_covariance=np.zeros(9))
+            linear_acceleration_covariance=np.zeros(9),
+        )
 
     def twist(self, t_ns: int, vx: float, vy: float) -> object:
         tw = self.T["geometry_msgs/msg/Twist"](linear=self.vec(vx, vy), angular=self.vec(0, 0, 0))
@@ -104,19 +144,23 @@ class _Msgs:
 
     def odom(self, t_ns: int, x: float, y: float, yaw: float, v: float) -> object:
         T = self.T
-        pose = T["geometry_msgs/msg/Pose"](position=T["geometry_msgs/msg/Point"](x=x, y=y, z=0.0),
-                                           orientation=self.quat(yaw))
+        pose = T["geometry_msgs/msg/Pose"](
+            position=T["geometry_msgs/msg/Point"](x=x, y=y, z=0.0), orientation=self.quat(yaw)
+        )
         cov = np.zeros(36)
         cov[0] = cov[7] = 0.01
         pwc = T["geometry_msgs/msg/PoseWithCovariance"](pose=pose, covariance=cov)
-        tw = T["geometry_msgs/msg/Twist"](linear=self.vec(v * math.cos(yaw), v * math.sin(yaw)),
-                                          angular=self.vec(0, 0, 0))
+        tw = T["geometry_msgs/msg/Twist"](
+            linear=self.vec(v * math.cos(yaw), v * math.sin(yaw)), angular=self.vec(0, 0, 0)
+        )
         twc = T["geometry_msgs/msg/TwistWithCovariance"](twist=tw, covariance=np.zeros(36))
-        return T["nav_msgs/msg/Odometry"](header=self.header(t_ns, "odom"),
-                                          child_frame_id="base_link", pose=pwc, twist=twc)
+        return T["nav_msgs/msg/Odometry"](
+            header=self.header(t_ns, "odom"), child_frame_id="base_link", pose=pwc, twist=twc
+        )
 
 
 # --------------------------------------------------------------------------- bag writers
+
 
 def _write_bag(path: Path, kind: str, messages: list[tuple[str, str, int, object]]) -> Path:
     """Write ``(topic, msgtype, t_ns, msg)`` records; kind is ros1, sqlite3 or mcap.
@@ -145,28 +189,57 @@ def _write_bag(path: Path, kind: str, messages: list[tuple[str, str, int, object
     return path
 
 
-def _messages(kind: str, tr: dict[str, np.ndarray], *, gps_topics: tuple[str, ...] = ("/fix",),
-              no_fix_at: tuple[int, ...] = (), nan_at: int | None = None,
-              with_others: bool = True) -> list[tuple[str, str, int, object]]:
+def _messages(
+    kind: str,
+    tr: dict[str, np.ndarray],
+    *,
+    gps_topics: tuple[str, ...] = ("/fix",),
+    no_fix_at: tuple[int, ...] = (),
+    nan_at: int | None = None,
+    with_others: bool = True,
+) -> list[tuple[str, str, int, object]]:
     m = _Msgs(kind == "ros1")
     out: list[tuple[str, str, int, object]] = []
     for topic in gps_topics:
         for i, t in enumerate(tr["tg"]):
             lat = math.nan if i == nan_at else float(tr["lat"][i])
             status = -1 if i in no_fix_at else 0
-            out.append((topic, "sensor_msgs/msg/NavSatFix", _ns(t) + 3_000_000,
-                        m.navsatfix(_ns(t), lat, float(tr["lon"][i]), status=status)))
+            out.append(
+                (
+                    topic,
+                    "sensor_msgs/msg/NavSatFix",
+                    _ns(t) + 3_000_000,
+                    m.navsatfix(_ns(t), lat, float(tr["lon"][i]), status=status),
+                )
+            )
     if with_others:
         for i, t in enumerate(tr["ti"]):
-            out.append(("/imu", "sensor_msgs/msg/Imu", _ns(t) + 1_000_000,
-                        m.imu(_ns(t), tr["ax"][i], tr["ay"][i], tr["yaw_i"][i],
-                              tr["yaw_rate"][i])))
+            out.append(
+                (
+                    "/imu",
+                    "sensor_msgs/msg/Imu",
+                    _ns(t) + 1_000_000,
+                    m.imu(_ns(t), tr["ax"][i], tr["ay"][i], tr["yaw_i"][i], tr["yaw_rate"][i]),
+                )
+            )
         for i, t in enumerate(tr["tt"]):
             yaw = float(tr["yaw_t"][i])
-            out.append(("/vel", "geometry_msgs/msg/TwistStamped", _ns(t) + 1_000_000,
-                        m.twist(_ns(t), 5.0 * math.cos(yaw), 5.0 * math.sin(yaw))))
-            out.append(("/odom", "nav_msgs/msg/Odometry", _ns(t) + 1_000_000,
-                        m.odom(_ns(t), tr["xt"][i], tr["yt"][i], yaw, 5.0)))
+            out.append(
+                (
+                    "/vel",
+                    "geometry_msgs/msg/TwistStamped",
+                    _ns(t) + 1_000_000,
+                    m.twist(_ns(t), 5.0 * math.cos(yaw), 5.0 * math.sin(yaw)),
+                )
+            )
+            out.append(
+                (
+                    "/odom",
+                    "nav_msgs/msg/Odometry",
+                    _ns(t) + 1_000_000,
+                    m.odom(_ns(t), tr["xt"][i], tr["yt"][i], yaw, 5.0),
+                )
+            )
     out.sort(key=lambda r: r[2])
     return out
 
@@ -180,6 +253,7 @@ def _bag(tmp_path: Path, kind: str, name: str = "drive", **kw: object) -> Path:
 
 
 # --------------------------------------------------------------------------- round trips
+
 
 @pytest.mark.parametrize("kind", ["ros1", "sqlite3", "mcap"])
 def test_round_trip_values_equal(tmp_path: Path, kind: str) -> None:
@@ -266,8 +340,15 @@ def test_orientation_unknown_gives_no_yaw(tmp_path: Path) -> None:
     m = _Msgs(False)
     tr = _trajectory()
     msgs = _messages("sqlite3", tr, with_others=False)
-    msgs += [("/imu", "sensor_msgs/msg/Imu", _ns(t),
-              m.imu(_ns(t), 0.1, 0.2, 1.0, 0.0, no_orientation=True)) for t in tr["ti"]]
+    msgs += [
+        (
+            "/imu",
+            "sensor_msgs/msg/Imu",
+            _ns(t),
+            m.imu(_ns(t), 0.1, 0.2, 1.0, 0.0, no_orientation=True),
+        )
+        for t in tr["ti"]
+    ]
     d = load_rosbag(_write_bag(tmp_path / "b", "sqlite3", sorted(msgs, key=lambda r: r[2])))
     assert d.imu is not None and d.imu.yaw is None
     np.testing.assert_allclose(d.imu.ay, 0.2)
@@ -276,14 +357,17 @@ def test_orientation_unknown_gives_no_yaw(tmp_path: Path) -> None:
 def test_zero_header_stamps_use_receive_time(tmp_path: Path) -> None:
     m = _Msgs(True)
     tr = _trajectory()
-    msgs = [("/fix", "sensor_msgs/msg/NavSatFix", _ns(t), m.navsatfix(0, la, lo))
-            for t, la, lo in zip(tr["tg"], tr["lat"], tr["lon"], strict=True)]
+    msgs = [
+        ("/fix", "sensor_msgs/msg/NavSatFix", _ns(t), m.navsatfix(0, la, lo))
+        for t, la, lo in zip(tr["tg"], tr["lat"], tr["lon"], strict=True)
+    ]
     d = load_rosbag(_write_bag(tmp_path / "z.bag", "ros1", msgs))
     assert d.meta.time_source == "gps=receive"
     np.testing.assert_allclose(d.gps.t, tr["tg"], atol=1e-9)
 
 
 # --------------------------------------------------------------------------- errors
+
 
 @pytest.mark.parametrize("kind", ["ros1", "mcap"])
 def test_ambiguous_gps_topics_listed_then_resolved(tmp_path: Path, kind: str) -> None:
@@ -307,16 +391,24 @@ def test_ambiguous_optional_role_can_be_skipped(tmp_path: Path) -> None:
     assert d.truth is None and d.meta.extra["topics"]["speed"]["topic"] == "/vel"
     d = load_rosbag(path, topics={"truth": "/odom2"})
     assert d.truth is not None and d.meta.extra["topics"]["truth"]["topic"] == "/odom2"
-    path2 = _write_bag(tmp_path / "two_odom_no_vel", "mcap",
-                       sorted([r for r in msgs if r[0] != "/vel"], key=lambda r: r[2]))
+    path2 = _write_bag(
+        tmp_path / "two_odom_no_vel",
+        "mcap",
+        sorted([r for r in msgs if r[0] != "/vel"], key=lambda r: r[2]),
+    )
     with pytest.raises(DataError, match=r"several speed topics .*/odom, /odom2.*speed=none"):
         load_rosbag(path2)
     assert load_rosbag(path2, topics={"speed": "none"}).speed is None
     d = load_rosbag(path2, topics={"truth": "/odom2"})  # the other odometry feeds the speed
     assert {r: v["topic"] for r, v in d.meta.extra["topics"].items()} == {
-        "gps": "/fix", "imu": "/imu", "speed": "/odom", "truth": "/odom2"}
+        "gps": "/fix",
+        "imu": "/imu",
+        "speed": "/odom",
+        "truth": "/odom2",
+    }
     assert d.meta.extra["topics"]["speed"]["why"] == (
-        "fallback: no TwistStamped or TwistWithCovarianceStamped")
+        "fallback: no TwistStamped or TwistWithCovarianceStamped"
+    )
 
 
 def test_named_topic_validated(tmp_path: Path) -> None:
@@ -351,8 +443,9 @@ def test_empty_bag(tmp_path: Path, kind: str) -> None:
         load_rosbag(path)
 
 
-@pytest.mark.parametrize(("kind", "keep"), [("ros1", 0.5), ("mcap", 0.5), ("sqlite3", 0.5),
-                                            ("sqlite3", 0.99)])
+@pytest.mark.parametrize(
+    ("kind", "keep"), [("ros1", 0.5), ("mcap", 0.5), ("sqlite3", 0.5), ("sqlite3", 0.99)]
+)
 def test_truncated_bag(tmp_path: Path, kind: str, keep: float) -> None:
     path = _bag(tmp_path, kind)
     f = path if kind == "ros1" else next(p for p in path.iterdir() if p.suffix != ".yaml")

@@ -186,8 +186,14 @@ def test_parquet_errors_name_rows(tmp_path: Path):
     import pandas as pd
 
     p = tmp_path / "bad.parquet"
-    pd.DataFrame({"stream": ["gps", "gps", "lidar"], "t": [0.0, 1.0, 2.0],
-                  "x": [0.0, 1.0, 2.0], "y": [0.0, 1.0, 2.0]}).to_parquet(p)
+    pd.DataFrame(
+        {
+            "stream": ["gps", "gps", "lidar"],
+            "t": [0.0, 1.0, 2.0],
+            "x": [0.0, 1.0, 2.0],
+            "y": [0.0, 1.0, 2.0],
+        }
+    ).to_parquet(p)
     with pytest.raises(DataError, match=r"bad\.parquet: row 3, column 'stream': unknown stream"):
         load_table(p)
     p.write_bytes(b"PAR1 garbage")

@@ -69,17 +69,20 @@ def test_30s_outage_finite_bounded_smooth_and_recovers(outage_run, name):
 
 def _cut(d: Drive, t0: float, t1: float) -> Drive:
     """The drive between t0 and t1 [s] (times kept as they are)."""
+
     def keep(t):
         return (t >= t0) & (t < t1)
 
     g, i, s, tr = d.gps, d.imu, d.speed, d.truth
     k = keep(g.t)
     ki, ks, kt = keep(i.t), keep(s.t), keep(tr.t)
-    return Drive(DriveMeta(d.name + "-cut", "mem", "synthetic", projection="source"),
-                 GpsStream(g.t[k], g.x[k], g.y[k]),
-                 ImuStream(i.t[ki], i.ax[ki], i.ay[ki], i.yaw[ki], i.yaw_rate[ki]),
-                 SpeedStream(s.t[ks], s.v[ks]),
-                 TruthStream(tr.t[kt], tr.x[kt], tr.y[kt], tr.yaw[kt], tr.v[kt]))
+    return Drive(
+        DriveMeta(d.name + "-cut", "mem", "synthetic", projection="source"),
+        GpsStream(g.t[k], g.x[k], g.y[k]),
+        ImuStream(i.t[ki], i.ax[ki], i.ay[ki], i.yaw[ki], i.yaw_rate[ki]),
+        SpeedStream(s.t[ks], s.v[ks]),
+        TruthStream(tr.t[kt], tr.x[kt], tr.y[kt], tr.yaw[kt], tr.v[kt]),
+    )
 
 
 def _check(tr, name: str, mean_max: float) -> None:
@@ -103,23 +106,44 @@ def odd_runs():
     ti = np.arange(0.01, 200.0, 0.02)
     ts = np.arange(0.015, 200.0, 0.02)
     tt = np.arange(0.0, 200.0, 0.01)
-    parked = Drive(DriveMeta("parked", "mem", "synthetic", projection="source"),
-                   GpsStream(tg, xs + rng.normal(0, 0.02, tg.size), rng.normal(0, 0.02, tg.size)),
-                   ImuStream(ti, rng.normal(0, 0.05, ti.size), rng.normal(0, 0.05, ti.size),
-                             np.zeros(ti.size), rng.normal(0, 0.005, ti.size)),
-                   SpeedStream(ts, np.where(ts < 180.0, 0.0, 5.0)),
-                   TruthStream(tt, np.where(tt < 180.0, 0.0, 5.0 * (tt - 180.0)), 0 * tt,
-                               0 * tt, np.where(tt < 180.0, 0.0, 5.0)))
+    parked = Drive(
+        DriveMeta("parked", "mem", "synthetic", projection="source"),
+        GpsStream(tg, xs + rng.normal(0, 0.02, tg.size), rng.normal(0, 0.02, tg.size)),
+        ImuStream(
+            ti,
+            rng.normal(0, 0.05, ti.size),
+            rng.normal(0, 0.05, ti.size),
+            np.zeros(ti.size),
+            rng.normal(0, 0.005, ti.size),
+        ),
+        SpeedStream(ts, np.where(ts < 180.0, 0.0, 5.0)),
+        TruthStream(
+            tt,
+            np.where(tt < 180.0, 0.0, 5.0 * (tt - 180.0)),
+            0 * tt,
+            0 * tt,
+            np.where(tt < 180.0, 0.0, 5.0),
+        ),
+    )
 
     # GPS without IMU (and speed) between 30 and 60 s
     d = generate_drive(seed=5, route="mixed", duration_s=90)
     i, s = d.imu, d.speed
     ki = (i.t < 30) | (i.t >= 60)
     ks = (s.t < 30) | (s.t >= 60)
-    no_imu = Drive(d.meta, d.gps, ImuStream(i.t[ki], i.ax[ki], i.ay[ki], i.yaw[ki], i.yaw_rate[ki]),
-                   SpeedStream(s.t[ks], s.v[ks]), d.truth)
-    return {"mid_turn": _run(mid_turn), "parked": _run(parked), "no_imu": _run(no_imu),
-            "no_imu_ref": _run(d)}
+    no_imu = Drive(
+        d.meta,
+        d.gps,
+        ImuStream(i.t[ki], i.ax[ki], i.ay[ki], i.yaw[ki], i.yaw_rate[ki]),
+        SpeedStream(s.t[ks], s.v[ks]),
+        d.truth,
+    )
+    return {
+        "mid_turn": _run(mid_turn),
+        "parked": _run(parked),
+        "no_imu": _run(no_imu),
+        "no_imu_ref": _run(d),
+    }
 
 
 @pytest.mark.parametrize("name", NAMES)

@@ -28,8 +28,9 @@ from posbench.scenarios.synthetic import generate_drive  # noqa: E402
 def _speed_net(seed: int, hidden: int = 16) -> LstmNet:
     torch.manual_seed(seed)
     net = LstmNet(hidden=hidden, form="speed", fix_offset=True).eval()
-    net.set_stats(torch.tensor([2.0, 0.0, 0.1, -0.1, 0.0, 0.7]),
-                  torch.tensor([1.5, 0.3, 0.8, 0.9, 0.1, 0.46]))
+    net.set_stats(
+        torch.tensor([2.0, 0.0, 0.1, -0.1, 0.0, 0.7]), torch.tensor([1.5, 0.3, 0.8, 0.9, 0.1, 0.46])
+    )
     net.set_speed_stats(0.7, 0.9, torch.tensor([0.035, 0.024]))
     return net
 
@@ -77,7 +78,8 @@ def _copy_bundled(dst: Path, with_core: bool = True) -> Path:
 
 
 def test_model_copied_without_its_core_runs_the_full_graph_with_the_same_answers(
-        tmp_path: Path) -> None:
+    tmp_path: Path,
+) -> None:
     bare = LstmPredictor(str(_copy_bundled(tmp_path / "bare", with_core=False)))
     assert bare.core is None and bare.config()["core_graph"] is False
     cored = LstmPredictor()
@@ -104,9 +106,24 @@ def test_a_core_that_does_not_reproduce_its_model_is_refused(tmp_path: Path) -> 
     shutil.copy(other / "model.core.onnx", d / "model.core.onnx")
     with pytest.raises(DataError, match="does not reproduce model.onnx"):
         LstmPredictor(str(d))
-    r = subprocess.run([sys.executable, "-m", "posbench", "run", "-p", "lstm", "--model",
-                        f"lstm={d}", "--synthetic-duration", "30", "--out", str(tmp_path / "o")],
-                       capture_output=True, text=True)
+    r = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "posbench",
+            "run",
+            "-p",
+            "lstm",
+            "--model",
+            f"lstm={d}",
+            "--synthetic-duration",
+            "30",
+            "--out",
+            str(tmp_path / "o"),
+        ],
+        capture_output=True,
+        text=True,
+    )
     assert r.returncode == 2, r.stderr
     lines = r.stderr.strip().splitlines()
     assert len(lines) == 1 and lines[0].startswith("error: ") and "model.core.onnx" in lines[0]

@@ -60,18 +60,28 @@ def test_heading_frame_is_rotation_invariant() -> None:
     straight = np.stack([np.arange(8.0) * np.cos(psi), np.arange(8.0) * np.sin(psi)], 1)
     h = compute_features(straight, ax, ay, yaw, psi, "heading")
     np.testing.assert_allclose(h[1:, :2], [[1.0, 0.0]] * 7, atol=1e-12)
-    np.testing.assert_allclose(displacement_to_world(np.array([1.0, 0.0]), psi),
-                               [np.cos(psi), np.sin(psi)])
+    np.testing.assert_allclose(
+        displacement_to_world(np.array([1.0, 0.0]), psi), [np.cos(psi), np.sin(psi)]
+    )
 
 
 @pytest.mark.parametrize("frame", ["heading", "world"])
 def test_fast_path_equals_general(frame: str) -> None:
     pos, ax, ay, yaw, psi = _window(2)
     out = np.empty((8, 6))
-    np.testing.assert_allclose(features_one(pos, ax, ay, yaw, psi, frame, out),
-                               compute_features(pos, ax, ay, yaw, psi, frame), atol=1e-12)
-    batch = compute_features(np.stack([pos, pos + 1]), np.stack([ax, ax]), np.stack([ay, ay]),
-                             np.stack([yaw, yaw]), np.array([psi, psi]), frame)
+    np.testing.assert_allclose(
+        features_one(pos, ax, ay, yaw, psi, frame, out),
+        compute_features(pos, ax, ay, yaw, psi, frame),
+        atol=1e-12,
+    )
+    batch = compute_features(
+        np.stack([pos, pos + 1]),
+        np.stack([ax, ax]),
+        np.stack([ay, ay]),
+        np.stack([yaw, yaw]),
+        np.array([psi, psi]),
+        frame,
+    )
     np.testing.assert_allclose(batch[1], compute_features(pos + 1, ax, ay, yaw, psi, frame))
 
 

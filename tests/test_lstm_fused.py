@@ -66,8 +66,10 @@ def test_fused_step_equals_the_staged_one_on_every_shared_drive(shared_dir: Path
         n_drives += 1
         steps += fused.steps
         fused_steps += fused.fused_steps
-    print(f"\n{n_drives} drives, {steps} network steps ({fused_steps} fused), "
-          f"largest difference {worst:.2e} m")
+    print(
+        f"\n{n_drives} drives, {steps} network steps ({fused_steps} fused), "
+        f"largest difference {worst:.2e} m"
+    )
     assert n_drives >= 60  # aslan 15, KITTI raw 46, comma2k19 1 (../shared/data/README.md)
     # the fused step is what runs: only bridging steps (inside position_at) are staged
     assert fused_steps > 0.8 * steps
@@ -92,8 +94,9 @@ def _no_yaw(d: Drive) -> Drive:
 def _one_hz(d: Drive) -> Drive:
     """Every fifth fix: ~3 fixes per 2 s window, so the fit's degree drops (staged step)."""
     g = d.gps
-    kw = {f: (None if getattr(g, f) is None else getattr(g, f)[::5])
-          for f in g.__dataclass_fields__}
+    kw = {
+        f: (None if getattr(g, f) is None else getattr(g, f)[::5]) for f in g.__dataclass_fields__
+    }
     return _renamed(d, "-1hz", gps=type(g)(**kw))
 
 

@@ -21,8 +21,14 @@ def _truth(t: float) -> tuple[float, float]:
     return r * math.sin(W * t), r - r * math.cos(W * t)
 
 
-def _feed(p: LstmPredictor, t0: float, t1: float, fixes: bool = True, imu_ay: float = V * W,
-          rng: np.random.Generator | None = None) -> None:
+def _feed(
+    p: LstmPredictor,
+    t0: float,
+    t1: float,
+    fixes: bool = True,
+    imu_ay: float = V * W,
+    rng: np.random.Generator | None = None,
+) -> None:
     """IMU at 50 Hz and (optionally) fixes every 0.2 s, in time order, on the curve."""
     ti = np.round(np.arange(t0, t1, 0.02), 6)
     for t in ti:
@@ -35,11 +41,14 @@ def _feed(p: LstmPredictor, t0: float, t1: float, fixes: bool = True, imu_ay: fl
 
 
 def test_runtime_does_not_import_torch() -> None:
-    code = ("import sys; import posbench.predictors.lstm.predictor, posbench.predictors.lstm.authors; "
-            "p = posbench.predictors.lstm.predictor.LstmPredictor(); p.observe_gps(0.0, 0.0, 0.0); "
-            "print('torch' in sys.modules)")
-    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
-                         timeout=60, check=True)
+    code = (
+        "import sys; import posbench.predictors.lstm.predictor, posbench.predictors.lstm.authors; "
+        "p = posbench.predictors.lstm.predictor.LstmPredictor(); p.observe_gps(0.0, 0.0, 0.0); "
+        "print('torch' in sys.modules)"
+    )
+    out = subprocess.run(
+        [sys.executable, "-c", code], capture_output=True, text=True, timeout=60, check=True
+    )
     assert out.stdout.strip() == "False"
 
 
@@ -86,8 +95,13 @@ def test_dropout_feedback_loop_bridges_with_real_imu() -> None:
         while t < 9.0:
             t = round(t + 0.05, 6)
             while _feed_t <= t:  # the real IMU keeps arriving; no fixes
-                p.observe_imu(_feed_t + 0.001, 0.0, ay, W * _feed_t if ay > 0 else
-                              W * 6.0 - W * (_feed_t - 6.0), W if ay > 0 else -W)
+                p.observe_imu(
+                    _feed_t + 0.001,
+                    0.0,
+                    ay,
+                    W * _feed_t if ay > 0 else W * 6.0 - W * (_feed_t - 6.0),
+                    W if ay > 0 else -W,
+                )
                 _feed_t = round(_feed_t + 0.02, 6)
             track.append(p.position_at(t))
         track = np.array(track)

@@ -40,9 +40,11 @@ def test_closed_form_equals_lbfgs() -> None:
 
 def test_known_cubic_resamples_exactly_from_irregular_fixes() -> None:
     t = _irregular_times(14, seed=3)
+
     def f(tt: np.ndarray) -> np.ndarray:
         u = tt - 100.0
-        return np.stack([5 + 10 * u - 0.3 * u ** 2 + 0.02 * u ** 3, -2 + u ** 2 - 0.1 * u ** 3], 1)
+        return np.stack([5 + 10 * u - 0.3 * u**2 + 0.02 * u**3, -2 + u**2 - 0.1 * u**3], 1)
+
     end = t.size - 1
     start = window_start(t, end)
     assert t[end] - t[start] >= 2.0 and t[end] - t[start + 1] < 2.0
@@ -50,17 +52,18 @@ def test_known_cubic_resamples_exactly_from_irregular_fixes() -> None:
     np.testing.assert_allclose(grid, f(t[end] + GRID_OFFSETS), atol=1e-9)
     # speed of the fit: derivative of the known cubic at the newest fix
     u = t[end] - 100.0
-    v = np.array([10 - 0.6 * u + 0.06 * u ** 2, 2 * u - 0.3 * u ** 2])
+    v = np.array([10 - 0.6 * u + 0.06 * u**2, 2 * u - 0.3 * u**2])
     np.testing.assert_allclose(coef[1] / scale, v, atol=1e-8)
 
 
 def test_imu_resampled_on_the_same_grid() -> None:
     ti = np.arange(0.0, 5.0, 0.02) + 0.003
-    vals = np.stack([0.5 + 0.1 * ti, -0.2 * ti ** 2, 0.3 * ti], 1)
+    vals = np.stack([0.5 + 0.1 * ti, -0.2 * ti**2, 0.3 * ti], 1)
     out = resample_imu(ti, vals, 2.5, 4.7)
     tg = 4.7 + GRID_OFFSETS
-    np.testing.assert_allclose(out, np.stack([0.5 + 0.1 * tg, -0.2 * tg ** 2, 0.3 * tg], 1),
-                               atol=1e-9)
+    np.testing.assert_allclose(
+        out, np.stack([0.5 + 0.1 * tg, -0.2 * tg**2, 0.3 * tg], 1), atol=1e-9
+    )
     # glitches are left out of the fit
     vals_g = vals.copy()
     vals_g[200, 0] = 400.0
@@ -90,11 +93,11 @@ def test_batched_paths_equal_single_window() -> None:
 def test_fixed_grid_fit_and_centred_cubic() -> None:
     times = np.append(GRID_OFFSETS, 0.2)
     fit = FixedGridFit(times)
-    y = np.stack([1 + 2 * times + times ** 3, times ** 2], 1)
+    y = np.stack([1 + 2 * times + times**3, times**2], 1)
     np.testing.assert_allclose(fit.fit(y), fit_poly(times, y, 0.0, 1.0), atol=1e-10)
     np.testing.assert_allclose(eval_poly(fit.fit(y), times), y, atol=1e-10)
     t = _irregular_times(40, seed=7)
-    xy = np.stack([t ** 2 / 10, -t], 1)
+    xy = np.stack([t**2 / 10, -t], 1)
     tq = np.array([t[0] - 1, t[10] + 0.05, t[-1]])
     ref, ok = centred_cubic_batch(t, xy, tq)
     assert ok.tolist() == [False, True, False]

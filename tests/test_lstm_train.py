@@ -21,8 +21,9 @@ from posbench.scenarios.synthetic import generate_drive  # noqa: E402
 def test_onnx_matches_torch(tmp_path) -> None:
     torch.manual_seed(0)
     net = LstmNet(hidden=32, lstm_layers=2).eval()
-    net.set_stats(torch.tensor([0.1, 0.0, 0.2, -0.1, 0.0, 0.7]),
-                  torch.tensor([1.5, 0.3, 0.8, 0.9, 0.1, 0.46]))
+    net.set_stats(
+        torch.tensor([0.1, 0.0, 0.2, -0.1, 0.0, 0.7]), torch.tensor([1.5, 0.3, 0.8, 0.9, 0.1, 0.46])
+    )
     report = export_best(net, tmp_path / "m.onnx", n_calls=20)
     assert report["chosen"] == "legacy_opset17"
     x = np.random.default_rng(0).normal(0, 1, (5, 8, 6)).astype(np.float32)
@@ -46,12 +47,23 @@ def test_split_is_by_route_and_weights_favour_turns() -> None:
 
 @pytest.mark.slow
 def test_tiny_retrain_end_to_end(tmp_path) -> None:
-    drives = [generate_drive(seed=100 + i, route=r, duration_s=40.0)
-              for i, r in enumerate(("mixed", "turns", "straight"))]
+    drives = [
+        generate_drive(seed=100 + i, route=r, duration_s=40.0)
+        for i, r in enumerate(("mixed", "turns", "straight"))
+    ]
     calls = []
-    info = run_training([], tmp_path, epochs=2, seed=0, drives=drives, hidden=16,
-                        gps_seeds=1, timing_calls=20, command="test",
-                        progress=lambda *a: calls.append(a))
+    info = run_training(
+        [],
+        tmp_path,
+        epochs=2,
+        seed=0,
+        drives=drives,
+        hidden=16,
+        gps_seeds=1,
+        timing_calls=20,
+        command="test",
+        progress=lambda *a: calls.append(a),
+    )
     assert [c[0] for c in calls] == [1, 2] and all(math.isfinite(c[2]) for c in calls)
     js = json.loads((tmp_path / "model.json").read_text())
     assert js["command"] == "test" and js["frame"] == "heading"
@@ -76,8 +88,9 @@ def test_speed_form_onnx_matches_torch_and_is_a_residual(tmp_path) -> None:
     predicts exactly the previous grid step (its skip)."""
     torch.manual_seed(1)
     net = LstmNet(hidden=16, form="speed").eval()
-    net.set_stats(torch.tensor([1.0, 0.0, 0.2, -0.1, 0.0, 0.7]),
-                  torch.tensor([1.5, 0.3, 0.8, 0.9, 0.1, 0.46]))
+    net.set_stats(
+        torch.tensor([1.0, 0.0, 0.2, -0.1, 0.0, 0.7]), torch.tensor([1.5, 0.3, 0.8, 0.9, 0.1, 0.46])
+    )
     net.set_speed_stats(0.5, 0.8, torch.tensor([0.04, 0.03]))
     rng = np.random.default_rng(2)
     x = rng.normal(0, 1, (6, 8, 6)).astype(np.float32)
@@ -121,9 +134,12 @@ def test_mirroring_is_exact_left_right() -> None:
 
     d = generate_drive(seed=5, route="turns", duration_s=60.0)
     g, imu, tr = d.gps, d.imu, d.truth
-    m = replace(d, gps=replace(g, y=-g.y), imu=replace(imu, ay=-imu.ay, yaw=-imu.yaw,
-                                                           yaw_rate=-imu.yaw_rate),
-                truth=replace(tr, y=-tr.y, yaw=-tr.yaw))
+    m = replace(
+        d,
+        gps=replace(g, y=-g.y),
+        imu=replace(imu, ay=-imu.ay, yaw=-imu.yaw, yaw_rate=-imu.yaw_rate),
+        truth=replace(tr, y=-tr.y, yaw=-tr.yaw),
+    )
     a, b = drive_windows(d), drive_windows(m)
     sign = np.array([1, -1, 1, -1, -1, 1.0])
     np.testing.assert_allclose(b.X, a.X * sign, atol=1e-6)

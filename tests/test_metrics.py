@@ -35,7 +35,9 @@ def test_summarize_empty_is_nan_not_zero():
 
 
 def test_groups_and_order():
-    g = summarize_groups(np.array([1.0, 3.0, 10.0]), np.array(["a", "a", "b"]), order=["b", "a", "c"])
+    g = summarize_groups(
+        np.array([1.0, 3.0, 10.0]), np.array(["a", "a", "b"]), order=["b", "a", "c"]
+    )
     assert list(g) == ["b", "a", "c"]
     assert g["a"]["mean_m"] == 2.0 and g["b"]["count"] == 1 and g["c"]["count"] == 0
 

@@ -52,10 +52,15 @@ def answers_from_traces(run_dir: Path, q_dir: Path, predictor: str, path: Path) 
     drives = {d["name"]: d for d in json.loads((q_dir / MANIFEST).read_text())["drives"]}
     t = tr[(tr.predictor == predictor) & tr.x.notna() & tr.y.notna()]
     names = t.drive.astype(str)
-    ans = pd.DataFrame({"drive": names.map(lambda n: drives[n]["drive"]),
-                        "kind": t.kind.astype(str),
-                        "t_query": t.t_query - names.map(lambda n: drives[n]["t0_s"]),
-                        "x": t.x, "y": t.y})
+    ans = pd.DataFrame(
+        {
+            "drive": names.map(lambda n: drives[n]["drive"]),
+            "kind": t.kind.astype(str),
+            "t_query": t.t_query - names.map(lambda n: drives[n]["t0_s"]),
+            "x": t.x,
+            "y": t.y,
+        }
+    )
     cov = ["cov_xx", "cov_xy", "cov_yy"]
     if t[cov].notna().any(axis=None):  # the reported covariance travels with the answers
         ans[cov] = t[cov]
@@ -86,11 +91,27 @@ def assert_same_figures(run_dir: Path, scored_dir: Path, p: str) -> None:
     assert len(rb["drives"]) == len(ra["drives"])
     for da, db in zip(ra["drives"], rb["drives"], strict=True):
         assert db["predictors"] == ({p: da["predictors"][p]} if da["predictors"] else {})
-        for k in ("name", "dataset", "reference", "duration_s", "gps_fed", "notes", "warnings",
-                  "skipped"):
+        for k in (
+            "name",
+            "dataset",
+            "reference",
+            "duration_s",
+            "gps_fed",
+            "notes",
+            "warnings",
+            "skipped",
+        ):
             assert db[k] == da[k], (da["name"], k)
-    same_cfg = ("horizon_s", "now_step_s", "gps_profile", "gps_latency_s", "intervals",
-                "dropouts", "seed", "exclude_poor_truth")
+    same_cfg = (
+        "horizon_s",
+        "now_step_s",
+        "gps_profile",
+        "gps_latency_s",
+        "intervals",
+        "dropouts",
+        "seed",
+        "exclude_poor_truth",
+    )
     assert {k: rb["config"][k] for k in same_cfg} == {k: ra["config"][k] for k in same_cfg}
     assert rb["config"]["predictors"] == [p] and rb["data"][:-1] == ra["data"]
     ta = a.traces[a.traces.predictor == p].reset_index(drop=True)
@@ -106,8 +127,11 @@ def synthetic_outages(tmp_path_factory):
     """`bench run -p cv,kf` and `bench queries` with the same options (outages), synthetic."""
     d = tmp_path_factory.mktemp("syn")
     opts = ["--dropouts", "outages", "--seed", "3"]
-    ok(bench("run", "-p", "cv,kf", *opts, "--out", str(d / "run"), "--drive-plots", "0",
-             timeout=600))
+    ok(
+        bench(
+            "run", "-p", "cv,kf", *opts, "--out", str(d / "run"), "--drive-plots", "0", timeout=600
+        )
+    )
     ok(bench("queries", *opts, "--out", str(d / "q")))
     return d
 
@@ -117,8 +141,20 @@ def synthetic_outages(tmp_path_factory):
 def test_builtin_answers_scored_offline_equal_bench_run(synthetic_outages, predictor):
     d = synthetic_outages
     n = answers_from_traces(d / "run", d / "q", predictor, d / f"{predictor}.csv")
-    r = ok(bench("score", str(d / f"{predictor}.csv"), "--queries", str(d / "q"), "--name",
-                 predictor, "--out", str(d / f"s-{predictor}"), "--drive-plots", "0"))
+    r = ok(
+        bench(
+            "score",
+            str(d / f"{predictor}.csv"),
+            "--queries",
+            str(d / "q"),
+            "--name",
+            predictor,
+            "--out",
+            str(d / f"s-{predictor}"),
+            "--drive-plots",
+            "0",
+        )
+    )
     assert f"{n} answers to {n} queries; every query answered" in " ".join(r.stdout.split())
     res = load_run(d / "run").results
     assert res["outages"][predictor]["scores"], "the run should have GPS outages to compare"
@@ -133,15 +169,38 @@ def test_real_drive_scored_offline_equals_bench_run(comma_dir, tmp_path):
     """comma2k19: inputs start 32 ms after the drive's t = 0 and the drive's name holds a
     '/', so the public files use another clock and another drive id; Parquet both ways."""
     opts = ["--data", str(comma_dir), "--dropouts", "outages"]
-    ok(bench("run", "-p", "cv", *opts, "--out", str(tmp_path / "run"), "--drive-plots", "0",
-             timeout=600))
+    ok(
+        bench(
+            "run",
+            "-p",
+            "cv",
+            *opts,
+            "--out",
+            str(tmp_path / "run"),
+            "--drive-plots",
+            "0",
+            timeout=600,
+        )
+    )
     ok(bench("queries", *opts, "--out", str(tmp_path / "q"), "--file-format", "parquet"))
     man = json.loads((tmp_path / "q" / MANIFEST).read_text())
     (d,) = man["drives"]
     assert d["t0_s"] > 0 and d["drive"] != d["name"] and "/" not in d["drive"]
     answers_from_traces(tmp_path / "run", tmp_path / "q", "cv", tmp_path / "a.parquet")
-    ok(bench("score", str(tmp_path / "a.parquet"), "--queries", str(tmp_path / "q"), "--name",
-             "cv", "--out", str(tmp_path / "s"), "--drive-plots", "0"))
+    ok(
+        bench(
+            "score",
+            str(tmp_path / "a.parquet"),
+            "--queries",
+            str(tmp_path / "q"),
+            "--name",
+            "cv",
+            "--out",
+            str(tmp_path / "s"),
+            "--drive-plots",
+            "0",
+        )
+    )
     assert load_run(tmp_path / "run").results["outages"]["cv"]["scores"]
     assert_same_figures(tmp_path / "run", tmp_path / "s", "cv")
 
@@ -153,9 +212,11 @@ def _late_inputs(drive):
     m, ms = imu.t >= 1.5, sp.t >= 1.5
     from dataclasses import replace
 
-    return replace(drive, imu=ImuStream(imu.t[m], imu.ax[m], imu.ay[m], imu.yaw[m],
-                                        imu.yaw_rate[m]),
-                   speed=SpeedStream(sp.t[ms], sp.v[ms]))
+    return replace(
+        drive,
+        imu=ImuStream(imu.t[m], imu.ax[m], imu.ay[m], imu.yaw[m], imu.yaw_rate[m]),
+        speed=SpeedStream(sp.t[ms], sp.v[ms]),
+    )
 
 
 @pytest.mark.parametrize("fmt", ["csv", "parquet"])
@@ -166,8 +227,11 @@ def test_inputs_read_back_with_the_table_reader_on_the_queries_clock(tmp_path, f
     write_queries(drives, cfg, tmp_path, command="test", data=[], fmt=fmt)
     man = json.loads((tmp_path / MANIFEST).read_text())
     assert man["give"] == [f"queries.{fmt}", "inputs/"] and man["keep"] == ["key/"]
-    queries = (pd.read_csv(tmp_path / "queries.csv") if fmt == "csv"
-               else pd.read_parquet(tmp_path / "queries.parquet"))
+    queries = (
+        pd.read_csv(tmp_path / "queries.csv")
+        if fmt == "csv"
+        else pd.read_parquet(tmp_path / "queries.parquet")
+    )
     assert list(queries.columns) == ["drive", "kind", "t_issue", "t_query"]
     key = pd.read_parquet(tmp_path / KEY_QUERIES)
     for drive, listed in zip(drives, man["drives"], strict=True):
@@ -189,8 +253,9 @@ def test_inputs_read_back_with_the_table_reader_on_the_queries_clock(tmp_path, f
         mine = queries[queries.drive == listed["drive"]]
         kq = key[key.drive == drive.name]
         assert len(mine) == len(kq) == listed["queries"]
-        np.testing.assert_allclose(mine.t_query.to_numpy() + t0, kq.t_query.to_numpy(),
-                                   rtol=0, atol=1e-12)
+        np.testing.assert_allclose(
+            mine.t_query.to_numpy() + t0, kq.t_query.to_numpy(), rtol=0, atol=1e-12
+        )
         # every future query is issued at a fed fix; now queries are asked at their time
         fut = mine[mine.kind == "future"]
         np.testing.assert_array_equal(fut.t_issue.to_numpy(), back.gps.t)
@@ -202,7 +267,12 @@ def test_inputs_read_back_with_the_table_reader_on_the_queries_clock(tmp_path, f
 
 def test_drive_ids_are_file_names_and_unique():
     assert drive_ids(["a", "seg/40", "seg:40", "Seg_40", " x "]) == [
-        "a", "seg_40", "seg_40-2", "Seg_40-3", "x"]
+        "a",
+        "seg_40",
+        "seg_40-2",
+        "Seg_40-3",
+        "x",
+    ]
 
 
 # --------------------------------------------------------------- answers, matching, missing
@@ -223,8 +293,17 @@ def small(tmp_path_factory):
         res = replay(create("cv"), prep, cfg.horizon_s)
         for kind, xy in (("future", res.future_xy), ("now", res.now_xy)):
             q = query_frame(prep, kind)
-            rows.append(pd.DataFrame({"drive": drive.name, "kind": kind, "t_query": q.t_query,
-                                      "x": xy[:, 0], "y": xy[:, 1]}))
+            rows.append(
+                pd.DataFrame(
+                    {
+                        "drive": drive.name,
+                        "kind": kind,
+                        "t_query": q.t_query,
+                        "x": xy[:, 0],
+                        "y": xy[:, 1],
+                    }
+                )
+            )
     ans = pd.concat(rows, ignore_index=True)
     ans = ans[ans.x.notna()].reset_index(drop=True)
     ans.to_csv(d / "all.csv", index=False)
@@ -249,11 +328,14 @@ def test_unanswered_queries_are_counted_as_missing_never_dropped(small, tmp_path
     some.to_csv(tmp_path / "some.csv", index=False)
     part = score_answers(folder, read_answers(tmp_path / "some.csv"), "cv")
     assert part.missing == len(pick) and part.answered == len(some)
-    assert {n: m["now"] for n, m in part.unanswered.items()} == \
-        pick.groupby("drive", observed=True).size().to_dict()
+    assert {n: m["now"] for n, m in part.unanswered.items()} == pick.groupby(
+        "drive", observed=True
+    ).size().to_dict()
     cfg = folder.config("cv")
     res = build_results(part.runs, cfg, [], "t", traces=all_traces(part.runs), models={})
-    full_now = build_results(full.runs, cfg, [], "t", traces=tr, models={})["predictors"]["cv"]["now"]
+    full_now = build_results(full.runs, cfg, [], "t", traces=tr, models={})["predictors"]["cv"][
+        "now"
+    ]
     now = res["predictors"]["cv"]["now"]
     assert now["missing"] == len(pick) and now["count"] == full_now["count"] - len(pick)
     assert res["predictors"]["cv"]["future"]["missing"] == 0
@@ -300,25 +382,45 @@ def _answers(small, tmp_path, edit=None, text=None) -> Path:
 
 
 CASES = {
-    "duplicate": (lambda a: pd.concat([a, a.iloc[[2]]]),
-                  ["line 8: a second answer to the query answered on line 4"]),
-    "nan x": (lambda a: a.assign(x=[0.0, 1.0, np.nan, 3.0, 4.0, 5.0]),
-              ["line 4, column 'x': missing or non-finite", "leave the row out"]),
-    "inf y": (lambda a: a.assign(y=[0.0, np.inf, 2.0, 3.0, 4.0, 5.0]),
-              ["line 3, column 'y': missing or non-finite"]),
-    "missing column": (lambda a: a.drop(columns=["y", "t_query"]),
-                       ["missing column(s) t_query, y"]),
-    "wrong type": (lambda a: a.assign(x=["0", "1", "2", "east", "4", "5"]),
-                   ["line 5, column 'x': not a number: 'east'"]),
-    "bad kind": (lambda a: a.assign(kind=["future"] * 5 + ["later"]),
-                 ["line 7, column 'kind': 'later' is not a query kind"]),
-    "negative latency": (lambda a: a.assign(latency_us=[1.0, 2.0, -3.0, 4.0, 5.0, 6.0]),
-                         ["line 4, column 'latency_us'", "not a duration >= 0"]),
-    "unknown drive": (lambda a: a.assign(drive=["synthetic-mixed-s0"] * 5 + ["kitti-42"]),
-                      ["line 7: drive 'kitti-42' is not in the queries folder",
-                       "its drives: synthetic-mixed-s0, synthetic-turns-s0"]),
-    "unknown query": (lambda a: a.assign(t_query=a.t_query + np.r_[0, 0, 0, 0.01, 0, 0]),
-                      ["line 5: no query of drive 'synthetic-mixed-s0'", "nearest:"]),
+    "duplicate": (
+        lambda a: pd.concat([a, a.iloc[[2]]]),
+        ["line 8: a second answer to the query answered on line 4"],
+    ),
+    "nan x": (
+        lambda a: a.assign(x=[0.0, 1.0, np.nan, 3.0, 4.0, 5.0]),
+        ["line 4, column 'x': missing or non-finite", "leave the row out"],
+    ),
+    "inf y": (
+        lambda a: a.assign(y=[0.0, np.inf, 2.0, 3.0, 4.0, 5.0]),
+        ["line 3, column 'y': missing or non-finite"],
+    ),
+    "missing column": (
+        lambda a: a.drop(columns=["y", "t_query"]),
+        ["missing column(s) t_query, y"],
+    ),
+    "wrong type": (
+        lambda a: a.assign(x=["0", "1", "2", "east", "4", "5"]),
+        ["line 5, column 'x': not a number: 'east'"],
+    ),
+    "bad kind": (
+        lambda a: a.assign(kind=["future"] * 5 + ["later"]),
+        ["line 7, column 'kind': 'later' is not a query kind"],
+    ),
+    "negative latency": (
+        lambda a: a.assign(latency_us=[1.0, 2.0, -3.0, 4.0, 5.0, 6.0]),
+        ["line 4, column 'latency_us'", "not a duration >= 0"],
+    ),
+    "unknown drive": (
+        lambda a: a.assign(drive=["synthetic-mixed-s0"] * 5 + ["kitti-42"]),
+        [
+            "line 7: drive 'kitti-42' is not in the queries folder",
+            "its drives: synthetic-mixed-s0, synthetic-turns-s0",
+        ],
+    ),
+    "unknown query": (
+        lambda a: a.assign(t_query=a.t_query + np.r_[0, 0, 0, 0.01, 0, 0]),
+        ["line 5: no query of drive 'synthetic-mixed-s0'", "nearest:"],
+    ),
 }
 
 
@@ -368,13 +470,31 @@ def test_queries_folder_problems_are_one_error_line(small, tmp_path):
 def test_help_teaches_the_offline_commands():
     r = ok(bench("queries", "--help"))
     text = " ".join(r.stdout.split())
-    for s in ("--data PATH", "--out DIR", "--dropouts PROFILE", "--horizon SECONDS",
-              "--seed INT", "--file-format csv|parquet", "t_issue", "keep q/key/", "Example:"):
+    for s in (
+        "--data PATH",
+        "--out DIR",
+        "--dropouts PROFILE",
+        "--horizon SECONDS",
+        "--seed INT",
+        "--file-format csv|parquet",
+        "t_issue",
+        "keep q/key/",
+        "Example:",
+    ):
         assert s in text, s
     r = ok(bench("score", "--help"))
     text = " ".join(r.stdout.split())
-    for s in ("--queries DIR", "--name NAME", "--plot-format FORMATS", "within 1e-6 s",
-              "9 decimals", "counted as missing", "look-ahead", "latency_us [us]", "Example:"):
+    for s in (
+        "--queries DIR",
+        "--name NAME",
+        "--plot-format FORMATS",
+        "within 1e-6 s",
+        "9 decimals",
+        "counted as missing",
+        "look-ahead",
+        "latency_us [us]",
+        "Example:",
+    ):
         assert s in text, s
     assert "<str>" not in text and "<path>" not in text
 
@@ -384,8 +504,9 @@ def test_answers_covariance_columns_checked(tmp_path):
     where given (empty = no uncertainty for that answer), else one error naming the row."""
     base = "drive,kind,t_query,x,y"
     ok_file = tmp_path / "ok.csv"
-    ok_file.write_text(f"{base},cov_xx,cov_xy,cov_yy\nd,now,0.5,1,2,0.04,0.01,0.09\n"
-                       "d,now,1.0,1,2,,,\n")
+    ok_file.write_text(
+        f"{base},cov_xx,cov_xy,cov_yy\nd,now,0.5,1,2,0.04,0.01,0.09\nd,now,1.0,1,2,,,\n"
+    )
     frame = read_answers(ok_file).frame
     np.testing.assert_array_equal(frame["cov_xy"].to_numpy()[:1], [0.01])
     assert frame[["cov_xx", "cov_xy", "cov_yy"]].iloc[1].isna().all()
@@ -394,8 +515,10 @@ def test_answers_covariance_columns_checked(tmp_path):
     with pytest.raises(DataError, match="cov_xx, cov_yy without cov_xy"):
         read_answers(partial)
     not_psd = tmp_path / "not_psd.csv"
-    not_psd.write_text(f"{base},cov_xx,cov_xy,cov_yy\nd,now,0.5,1,2,0.04,0.01,0.09\n"
-                       "d,now,1.0,1,2,0.01,0.5,0.01\n")
-    with pytest.raises(DataError, match="line 3, columns cov_xx, cov_xy, cov_yy: .* is not a "
-                                        "covariance"):
+    not_psd.write_text(
+        f"{base},cov_xx,cov_xy,cov_yy\nd,now,0.5,1,2,0.04,0.01,0.09\nd,now,1.0,1,2,0.01,0.5,0.01\n"
+    )
+    with pytest.raises(
+        DataError, match="line 3, columns cov_xx, cov_xy, cov_yy: .* is not a covariance"
+    ):
         read_answers(not_psd)

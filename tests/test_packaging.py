@@ -20,9 +20,23 @@ GENERIC = ("bench", "metrics", "predictors", "scenarios")
 def installed(tmp_path_factory) -> Path:
     """``pip install --no-deps --target DIR .`` of this checkout (not editable)."""
     target = tmp_path_factory.mktemp("site")
-    r = subprocess.run([sys.executable, "-m", "pip", "install", "--no-deps", "--quiet",
-                        "--disable-pip-version-check", "--target", str(target), str(ROOT)],
-                       capture_output=True, text=True, timeout=600)
+    r = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "pip",
+            "install",
+            "--no-deps",
+            "--quiet",
+            "--disable-pip-version-check",
+            "--target",
+            str(target),
+            str(ROOT),
+        ],
+        capture_output=True,
+        text=True,
+        timeout=600,
+    )
     assert r.returncode == 0, r.stderr[-2000:]
     return target
 
@@ -35,8 +49,12 @@ def test_a_plain_install_puts_nothing_generic_at_the_top(installed: Path):
     dist = next(p for p in top if p.endswith(".dist-info"))
     assert dist.startswith("posbench_harness-")
     pkg = installed / "posbench"
-    for data in ("saved_run/schemas/results.schema.json", "predictors/tuned.json",
-                 "predictors/lstm/bundled/model.onnx", "predictors/hybrid/bundled/model.onnx"):
+    for data in (
+        "saved_run/schemas/results.schema.json",
+        "predictors/tuned.json",
+        "predictors/lstm/bundled/model.onnx",
+        "predictors/hybrid/bundled/model.onnx",
+    ):
         assert (pkg / data).is_file(), data
 
 
@@ -63,7 +81,8 @@ def test_the_api_works_beside_a_users_own_metrics_package(installed: Path, tmp_p
         print(repr(loaded))
     """)
     env = {**os.environ, "PYTHONPATH": str(installed)}
-    r = subprocess.run([sys.executable, "-c", code], cwd=work, env=env, capture_output=True,
-                       text=True, timeout=600)
+    r = subprocess.run(
+        [sys.executable, "-c", code], cwd=work, env=env, capture_output=True, text=True, timeout=600
+    )
     assert r.returncode == 0, r.stderr[-3000:]
     assert r.stdout.startswith("Run(out: 4 drives (synthetic), 2 predictors")

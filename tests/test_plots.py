@@ -24,8 +24,13 @@ MAGIC = {"png": b"\x89PNG", "pdf": b"%PDF", "svg": b"<?xml"}
 ALL = [*FIGURES, "error_over_time"]
 
 
-def make_traces(n_fix: int = 200, preds: tuple[str, ...] = ("cv", "kf"), drives: int = 2,
-                dt: float = 0.5, seed: int = 0) -> pd.DataFrame:
+def make_traces(
+    n_fix: int = 200,
+    preds: tuple[str, ...] = ("cv", "kf"),
+    drives: int = 2,
+    dt: float = 0.5,
+    seed: int = 0,
+) -> pd.DataFrame:
     """Synthetic traces: per drive, a car on a 60 m circle at 10 m/s; one future query per
     fix (every ``dt`` s) and three now queries between fixes; errors ~ 5-50 cm; an outage
     (ids 0) from 30 to 34 s where the drive is long enough; labels straight / turn."""
@@ -34,27 +39,50 @@ def make_traces(n_fix: int = 200, preds: tuple[str, ...] = ("cv", "kf"), drives:
     for d in range(drives):
         t_fix = np.arange(n_fix) * dt
         for p_i, p in enumerate(preds):
-            for kind, tq in (("future", t_fix + 0.2),
-                             ("now", (t_fix[:, None] + np.array([0.1, 0.2, 0.3])).ravel())):
+            for kind, tq in (
+                ("future", t_fix + 0.2),
+                ("now", (t_fix[:, None] + np.array([0.1, 0.2, 0.3])).ravel()),
+            ):
                 a = tq * 10 / 60
                 ref = np.c_[60 * np.cos(a), 60 * np.sin(a)]
                 err = rng.lognormal(np.log(0.05 * (p_i + 1)), 0.5, tq.size)
                 ang = rng.uniform(0, 2 * np.pi, tq.size)
                 xy = ref + err[:, None] * np.c_[np.cos(ang), np.sin(ang)]
                 outage = np.where((tq > 30) & (tq < 34), 0, -1)
-                frames.append(pd.DataFrame({
-                    "dataset": "synthetic", "drive": f"drive-{d}", "predictor": p, "kind": kind,
-                    "t_issue": tq - (0.2 if kind == "future" else 0.0), "t_query": tq,
-                    "x": xy[:, 0], "y": xy[:, 1], "x_ref": ref[:, 0], "y_ref": ref[:, 1],
-                    "error_m": np.hypot(*(xy - ref).T),
-                    "label": pd.Categorical(np.where((tq % 40) < 20, "straight", "turn"),
-                                            categories=["straight", "turn", "roundabout",
-                                                        "start_stop", "unlabelled"]),
-                    "speed_mps": np.full(tq.size, 10.0), "since_fix_s": tq - np.floor(tq / dt) * dt,
-                    "outage": outage,
-                    # reported covariance: isotropic, per-axis sigma near the error's size
-                    "cov_xx": np.full(tq.size, (0.05 * (p_i + 1)) ** 2), "cov_xy": 0.0,
-                    "cov_yy": np.full(tq.size, (0.05 * (p_i + 1)) ** 2)}))
+                frames.append(
+                    pd.DataFrame(
+                        {
+                            "dataset": "synthetic",
+                            "drive": f"drive-{d}",
+                            "predictor": p,
+                            "kind": kind,
+                            "t_issue": tq - (0.2 if kind == "future" else 0.0),
+                            "t_query": tq,
+                            "x": xy[:, 0],
+                            "y": xy[:, 1],
+                            "x_ref": ref[:, 0],
+                            "y_ref": ref[:, 1],
+                            "error_m": np.hypot(*(xy - ref).T),
+                            "label": pd.Categorical(
+                                np.where((tq % 40) < 20, "straight", "turn"),
+                                categories=[
+                                    "straight",
+                                    "turn",
+                                    "roundabout",
+                                    "start_stop",
+                                    "unlabelled",
+                                ],
+                            ),
+                            "speed_mps": np.full(tq.size, 10.0),
+                            "since_fix_s": tq - np.floor(tq / dt) * dt,
+                            "outage": outage,
+                            # reported covariance: isotropic, per-axis sigma near the error's size
+                            "cov_xx": np.full(tq.size, (0.05 * (p_i + 1)) ** 2),
+                            "cov_xy": 0.0,
+                            "cov_yy": np.full(tq.size, (0.05 * (p_i + 1)) ** 2),
+                        }
+                    )
+                )
     return pd.concat(frames, ignore_index=True)
 
 
@@ -82,21 +110,36 @@ def test_full_traces_write_every_figure_and_one_file_per_drive(tmp_path):
     check_files(w)
     assert w.notes == {}
     assert {f.name for f in w.files if f.parent == tmp_path} == {f"{n}.png" for n in FIGURES}
-    assert sorted(f.relative_to(tmp_path).as_posix() for f in w.files
-                  if f.parent.name == "drives") == [
-        "drives/drive-0-error_over_time.png", "drives/drive-1-error_over_time.png"]
+    assert sorted(
+        f.relative_to(tmp_path).as_posix() for f in w.files if f.parent.name == "drives"
+    ) == ["drives/drive-0-error_over_time.png", "drives/drive-1-error_over_time.png"]
 
 
-@pytest.mark.parametrize("case", ["no columns", "0 rows", "1 row", "3 rows", "all NaN errors",
-                                  "all zero errors", "single predictor", "no speed"])
+@pytest.mark.parametrize(
+    "case",
+    [
+        "no columns",
+        "0 rows",
+        "1 row",
+        "3 rows",
+        "all NaN errors",
+        "all zero errors",
+        "single predictor",
+        "no speed",
+    ],
+)
 def test_thin_traces_never_raise(tmp_path, case):
     full = make_traces(n_fix=3, drives=1)
-    tr = {"no columns": pd.DataFrame(), "0 rows": full.iloc[:0], "1 row": full.iloc[:1],
-          "3 rows": full[full.kind == "future"].iloc[:3],
-          "all NaN errors": full.assign(error_m=np.nan, x_ref=np.nan, y_ref=np.nan),
-          "all zero errors": full.assign(error_m=0.0, x=full.x_ref, y=full.y_ref),
-          "single predictor": make_traces(preds=("kf",), drives=1),
-          "no speed": full.assign(speed_mps=np.nan)}[case]
+    tr = {
+        "no columns": pd.DataFrame(),
+        "0 rows": full.iloc[:0],
+        "1 row": full.iloc[:1],
+        "3 rows": full[full.kind == "future"].iloc[:3],
+        "all NaN errors": full.assign(error_m=np.nan, x_ref=np.nan, y_ref=np.nan),
+        "all zero errors": full.assign(error_m=0.0, x=full.x_ref, y=full.y_ref),
+        "single predictor": make_traces(preds=("kf",), drives=1),
+        "no speed": full.assign(speed_mps=np.nan),
+    }[case]
     w = write_plots(tr, res_for(tr), tmp_path)
     check_files(w)
     if case in ("no columns", "0 rows"):
@@ -164,13 +207,18 @@ def test_paper_figures_reject_unknown_format_before_anything(tmp_path):
     from posbench.predictor_tools.paper_figures import paper_figures
 
     with pytest.raises(ValueError, match="tiff"):
-        paper_figures([], RunConfig(predictors=("cv",)), make_traces(n_fix=5), tmp_path,
-                      formats=("tiff",))
+        paper_figures(
+            [], RunConfig(predictors=("cv",)), make_traces(n_fix=5), tmp_path, formats=("tiff",)
+        )
 
 
 def _line_max(fig) -> float:
-    return max(float(np.nanmax(ln.get_xdata())) for ax in fig.axes for ln in ax.get_lines()
-               if len(ln.get_xdata()))
+    return max(
+        float(np.nanmax(ln.get_xdata()))
+        for ax in fig.axes
+        for ln in ax.get_lines()
+        if len(ln.get_xdata())
+    )
 
 
 def test_warmup_rows_excluded_from_headline_figures_and_shaded_over_time():
@@ -208,8 +256,9 @@ def test_error_over_time_shades_each_outage_min_to_max():
     draw_error_over_time(ax, tr, ["cv", "kf"], style.colors_for(["cv", "kf"]))
     hatched = [c for c in ax.collections if c.get_hatch()]
     assert len(hatched) == 1
-    spans = sorted((round(p.get_extents().x0, 2), round(p.get_extents().x1, 2))
-                   for p in hatched[0].get_paths())
+    spans = sorted(
+        (round(p.get_extents().x0, 2), round(p.get_extents().x1, 2)) for p in hatched[0].get_paths()
+    )
     o = tr[tr.outage >= 0].groupby("outage").t_query.agg(["min", "max"]).round(2)
     assert spans == list(zip(o["min"], o["max"], strict=True))
     assert ax.get_xlabel() == "drive time [s]" and "[m]" in ax.get_ylabel()
@@ -225,8 +274,9 @@ def test_empty_bins_are_dropped_and_axes_have_units():
     assert ax.get_xlabel().startswith("speed [m/s]") and "[m]" in ax.get_ylabel()
     assert all(np.isfinite(ln.get_ydata()).all() for ln in ax.get_lines())
     sf = plot_error_vs_since_fix(tr, ["cv", "kf"])
-    occupied = np.unique(since_fix_bins(tr[tr.kind == "now"].since_fix_s,
-                                        SINCE_FIX_CURVE_EDGES_S, open_last=True))
+    occupied = np.unique(
+        since_fix_bins(tr[tr.kind == "now"].since_fix_s, SINCE_FIX_CURVE_EDGES_S, open_last=True)
+    )
     assert all(len(ln.get_xdata()) == occupied.size for ln in sf.axes[0].get_lines())
     assert sf.axes[0].get_xlabel().startswith("time since last fix [s]")
     no_outage = tr.assign(outage=-1)
@@ -244,8 +294,10 @@ def test_trajectory_error_one_panel_per_predictor_one_colour_scale():
     norms = {id(c.norm) for ax in panels for c in ax.collections if isinstance(c, LineCollection)}
     assert len(norms) == 1
     # the colour of a segment is its predictor's error there: kf (2x cv's median) is brighter
-    arrays = [next(c for c in ax.collections if isinstance(c, LineCollection)).get_array()
-              for ax in panels[:2]]
+    arrays = [
+        next(c for c in ax.collections if isinstance(c, LineCollection)).get_array()
+        for ax in panels[:2]
+    ]
     assert np.median(np.asarray(arrays[1])) > np.median(np.asarray(arrays[0]))
 
 
@@ -268,7 +320,8 @@ def test_drive_plots_limit_picks_the_worst_drives(tmp_path):
     assert per_drive.drives_to_plot(tr, 0)[0] == []
     w = write_plots(tr, res_for(tr), tmp_path, drive_plots=1)
     assert [f.name for f in w.files if f.parent.name == "drives"] == [
-        f"{worst}-error_over_time.png"]
+        f"{worst}-error_over_time.png"
+    ]
 
 
 def test_report_prints_notes_and_links_per_drive_files(tmp_path):
@@ -291,7 +344,9 @@ def test_report_prints_notes_and_links_per_drive_files(tmp_path):
     assert f"- [{drive}](drives/{drive}-error_over_time.png)" in md
     assert "![path.png](path.png)" in md and "![trajectory_error.png](trajectory_error.png)" in md
     assert "- error_vs_since_fix: no GPS outage in this run" in md
-    assert (tmp_path / "path.svg").exists() and (tmp_path / f"drives/{drive}-error_over_time.svg").exists()
+    assert (tmp_path / "path.svg").exists() and (
+        tmp_path / f"drives/{drive}-error_over_time.svg"
+    ).exists()
 
 
 def test_paper_figures_have_titles_and_every_format(tmp_path, monkeypatch):
@@ -308,15 +363,21 @@ def test_paper_figures_have_titles_and_every_format(tmp_path, monkeypatch):
 
     def spy(fig, folder, stem, formats, dpi=style.DPI):
         titles.append([ax.get_title() for ax in fig.axes])
-        assert all(ax.get_xlabel() == "east [m]" and ax.get_ylabel() == "north [m]"
-                   for ax in fig.axes)
+        assert all(
+            ax.get_xlabel() == "east [m]" and ax.get_ylabel() == "north [m]" for ax in fig.axes
+        )
         return style.save_figure(fig, folder, stem, formats, dpi)
 
     monkeypatch.setattr(figures, "save_figure", spy)
-    figs = figures.paper_figures([drive], cfg, all_traces(runs), tmp_path, runs,
-                                 formats=("svg", "png"))
-    assert [f for f, _ in figs] == ["paper_fig_prediction.png", "paper_fig_current_position.png",
-                                    "paper_fig_path.png", "paper_fig_kalman.png"]
+    figs = figures.paper_figures(
+        [drive], cfg, all_traces(runs), tmp_path, runs, formats=("svg", "png")
+    )
+    assert [f for f, _ in figs] == [
+        "paper_fig_prediction.png",
+        "paper_fig_current_position.png",
+        "paper_fig_path.png",
+        "paper_fig_kalman.png",
+    ]
     assert len(titles) == 4 and all(t and all(t) for t in titles)
     for f, _ in figs:
         stem = f.removesuffix(".png")

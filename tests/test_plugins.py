@@ -49,10 +49,17 @@ ROOT = Path(__file__).resolve().parents[1]
 GUIDE = ROOT / "docs" / "guides" / "own-predictor.md"
 SECTION = GUIDE.read_text(encoding="utf-8")
 #: the runs of the example: by import path, an alias of it with an option, an entry point
-RUNS = (["run", "-p", "kf,damped:DampedVelocity", "--out", "damped-run"],
-        ["run", "-p", "cv,damped:DampedVelocity,damped:DampedVelocity@fast",
-         "--set", "damped:DampedVelocity@fast.tau_s=0.5"],
-        ["run", "-p", "kf,damped", "--set", "damped.tau_s=4"])
+RUNS = (
+    ["run", "-p", "kf,damped:DampedVelocity", "--out", "damped-run"],
+    [
+        "run",
+        "-p",
+        "cv,damped:DampedVelocity,damped:DampedVelocity@fast",
+        "--set",
+        "damped:DampedVelocity@fast.tau_s=0.5",
+    ],
+    ["run", "-p", "kf,damped", "--set", "damped.tau_s=4"],
+)
 #: summary-table columns that are the same in every run of a seed: errors, counts, missing
 #: (the last three, step/query latency, are not)
 ERROR_CELLS = slice(0, 10)
@@ -103,7 +110,8 @@ def install_dist_info(site: Path, name: str, version: str, entry_points: dict[st
     d.mkdir(parents=True)
     (d / "METADATA").write_text(f"Metadata-Version: 2.1\nName: {name}\nVersion: {version}\n")
     (d / "entry_points.txt").write_text(
-        "[posbench.predictors]\n" + "".join(f"{k} = {v}\n" for k, v in entry_points.items()))
+        "[posbench.predictors]\n" + "".join(f"{k} = {v}\n" for k, v in entry_points.items())
+    )
 
 
 @pytest.fixture(scope="module")
@@ -121,19 +129,33 @@ def site_dir(tmp_path_factory, plugin_dir) -> Path:
     site = tmp_path_factory.mktemp("site")
     (site / "damped.py").write_text(readme_predictor_code())
     install_dist_info(site, *readme_distribution())
-    install_dist_info(site, "broken-plugin", "1.0", {"broken": "no_such_plugin_module_x:Nope",
-                                                     "kf": "damped:DampedVelocity"})
+    install_dist_info(
+        site,
+        "broken-plugin",
+        "1.0",
+        {"broken": "no_such_plugin_module_x:Nope", "kf": "damped:DampedVelocity"},
+    )
     return site
 
 
-def bench(*args: str, cwd: Path, path: list[Path] = (), timeout: float = 300
-          ) -> subprocess.CompletedProcess:
+def bench(
+    *args: str, cwd: Path, path: list[Path] = (), timeout: float = 300
+) -> subprocess.CompletedProcess:
     """``bench ARGS`` in a subprocess, ``path`` in front of PYTHONPATH; tables printed whole."""
-    pythonpath = [str(p) for p in path] + [str(ROOT)] + [
-        p for p in os.environ.get("PYTHONPATH", "").split(os.pathsep) if p]
+    pythonpath = (
+        [str(p) for p in path]
+        + [str(ROOT)]
+        + [p for p in os.environ.get("PYTHONPATH", "").split(os.pathsep) if p]
+    )
     env = {**os.environ, "PYTHONPATH": os.pathsep.join(pythonpath), "COLUMNS": "300"}
-    return subprocess.run([sys.executable, "-m", "posbench", *args], capture_output=True,
-                          text=True, cwd=cwd, timeout=timeout, env=env)
+    return subprocess.run(
+        [sys.executable, "-m", "posbench", *args],
+        capture_output=True,
+        text=True,
+        cwd=cwd,
+        timeout=timeout,
+        env=env,
+    )
 
 
 def one_error_line(r: subprocess.CompletedProcess) -> str:
@@ -144,8 +166,13 @@ def one_error_line(r: subprocess.CompletedProcess) -> str:
     return lines[0]
 
 
-def run_readme_command(args: list[str], readme_rows: dict[str, list[str]], cwd: Path,
-                       path: list[Path], extra: tuple[str, ...] = ()) -> dict:
+def run_readme_command(
+    args: list[str],
+    readme_rows: dict[str, list[str]],
+    cwd: Path,
+    path: list[Path],
+    extra: tuple[str, ...] = (),
+) -> dict:
     """Run one example command (its --out moved into ``cwd``); its table must show the error
     figures of ``readme_rows`` (where given); returns its results.json (the printed rows in
     its ``_rows``)."""
@@ -174,24 +201,37 @@ def test_readme_example_by_import_path(plugin_dir, tmp_path):
     assert "damped:DampedVelocity" in args[args.index("-p") + 1]
     res = run_readme_command(args, rows, tmp_path / "a", [plugin_dir])
     assert res["config"]["predictors"] == ["kf", "damped:DampedVelocity"]
-    assert res["predictors"]["damped:DampedVelocity"]["future"]["count"] == \
-        res["predictors"]["kf"]["future"]["count"] > 0
+    assert (
+        res["predictors"]["damped:DampedVelocity"]["future"]["count"]
+        == res["predictors"]["kf"]["future"]["count"]
+        > 0
+    )
     res = run_readme_command(args2, rows2, tmp_path / "b", [plugin_dir])
     assert res["config"]["predictor_options"] == {"damped:DampedVelocity@fast": {"tau_s": 0.5}}
     # the alias with tau_s = 0.5 and the default (2 s) are different predictors
-    assert res["predictors"]["damped:DampedVelocity@fast"]["future"]["mean_m"] != \
-        res["predictors"]["damped:DampedVelocity"]["future"]["mean_m"]
+    assert (
+        res["predictors"]["damped:DampedVelocity@fast"]["future"]["mean_m"]
+        != res["predictors"]["damped:DampedVelocity"]["future"]["mean_m"]
+    )
 
 
 def test_import_path_from_the_current_folder(plugin_dir, tmp_path):
     """As the installed ``bench`` script runs (its own folder first on sys.path, not the
     current one): a module in the current folder is found all the same."""
-    script = ("import sys; sys.path[:] = [p for p in sys.path if p not in ('', '.')]; "
-              "sys.argv = ['bench', 'run', '-p', 'damped:DampedVelocity', '--workers', '1', "
-              f"'--out', {str(tmp_path / 'o')!r}]; from posbench.cli.app import main; main()")
+    script = (
+        "import sys; sys.path[:] = [p for p in sys.path if p not in ('', '.')]; "
+        "sys.argv = ['bench', 'run', '-p', 'damped:DampedVelocity', '--workers', '1', "
+        f"'--out', {str(tmp_path / 'o')!r}]; from posbench.cli.app import main; main()"
+    )
     env = {**os.environ, "PYTHONPATH": str(ROOT), "COLUMNS": "300"}
-    r = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True,
-                       cwd=plugin_dir, env=env, timeout=300)
+    r = subprocess.run(
+        [sys.executable, "-c", script],
+        capture_output=True,
+        text=True,
+        cwd=plugin_dir,
+        env=env,
+        timeout=300,
+    )
     assert r.returncode == 0, r.stdout + r.stderr
     assert "damped:DampedVelocity" in table_rows(r.stdout)
 
@@ -206,19 +246,25 @@ def test_readme_example_as_entry_point(site_dir, tmp_path):
     assert r.returncode == 0, r.stderr
     listing = json.loads(r.stdout)
     by = {p["name"]: p for p in listing["predictors"]}
-    assert by["damped"] == {"name": "damped", "source": "entry point",
-                            "distribution": f"{name} {version}",
-                            "target": "damped:DampedVelocity", "error": None,
-                            "description": "Velocity from the last two fixes, decaying with "
-                                           "time constant tau_s [s] after the newest."}
+    assert by["damped"] == {
+        "name": "damped",
+        "source": "entry point",
+        "distribution": f"{name} {version}",
+        "target": "damped:DampedVelocity",
+        "error": None,
+        "description": "Velocity from the last two fixes, decaying with "
+        "time constant tau_s [s] after the newest.",
+    }
     assert by["kf"]["source"] == "built-in"  # a built-in wins over an entry point
     assert "no_such_plugin_module_x" in by["broken"]["error"]
     assert any("entry point kf of broken-plugin 1.0 is ignored" in n for n in listing["notes"])
     assert any("no_such_plugin_module_x" in n for n in listing["notes"])
     r = bench("predictors", cwd=tmp_path, path=[site_dir])
     assert r.returncode == 0 and "entry point (posbench-damped 0.1.0)" in r.stdout, r.stderr
-    assert "note: predictor broken (entry point no_such_plugin_module_x:Nope of broken-plugin " \
-           "1.0): no module named 'no_such_plugin_module_x'" in " ".join(r.stdout.split())
+    assert (
+        "note: predictor broken (entry point no_such_plugin_module_x:Nope of broken-plugin "
+        "1.0): no module named 'no_such_plugin_module_x'" in " ".join(r.stdout.split())
+    )
 
     _, _, (args, rows) = readme_runs()
     assert args[:3] == ["run", "-p", "kf,damped"]
@@ -226,18 +272,25 @@ def test_readme_example_as_entry_point(site_dir, tmp_path):
     assert res["config"]["predictor_options"] == {"damped": {"tau_s": 4}}
     r = bench("run", "-p", "kf", "--out", str(tmp_path / "kf"), cwd=tmp_path, path=[site_dir])
     assert r.returncode == 0, r.stderr
-    line = one_error_line(bench("run", "-p", "kf,broken", "--out", str(tmp_path / "x"),
-                                cwd=tmp_path, path=[site_dir]))
-    assert "predictor broken (entry point no_such_plugin_module_x:Nope of broken-plugin 1.0)" \
-           in line
+    line = one_error_line(
+        bench("run", "-p", "kf,broken", "--out", str(tmp_path / "x"), cwd=tmp_path, path=[site_dir])
+    )
+    assert (
+        "predictor broken (entry point no_such_plugin_module_x:Nope of broken-plugin 1.0)" in line
+    )
     assert not (tmp_path / "x").exists()
 
 
 def test_check_accepts_import_paths_and_entry_points(site_dir, tmp_path):
     for spec in ("damped:DampedVelocity", "damped"):
-        r = subprocess.run([sys.executable, "-m", "posbench", "check", spec, "--json"],
-                           capture_output=True, text=True, cwd=tmp_path, timeout=300,
-                           env={**os.environ, "PYTHONPATH": f"{site_dir}{os.pathsep}{ROOT}"})
+        r = subprocess.run(
+            [sys.executable, "-m", "posbench", "check", spec, "--json"],
+            capture_output=True,
+            text=True,
+            cwd=tmp_path,
+            timeout=300,
+            env={**os.environ, "PYTHONPATH": f"{site_dir}{os.pathsep}{ROOT}"},
+        )
         assert r.returncode == 0, r.stdout + r.stderr
         assert json.loads(r.stdout)["passed"] is True
 
@@ -246,6 +299,7 @@ def test_check_accepts_import_paths_and_entry_points(site_dir, tmp_path):
 def _ray():
     if os.environ.get("CI"):
         import ray  # CI installs the dev extra, which has ray: the test must run there
+
         return ray
     return pytest.importorskip("ray")
 
@@ -275,7 +329,8 @@ def test_ray_workers_get_the_plugin_folder(plugin_dir, monkeypatch):
     cfg = RunConfig(predictors=("cv", "damped:DampedVelocity"))
     predictor_class("damped:DampedVelocity")
     assert worker_runtime_env(cfg.predictors) == {
-        "env_vars": {"PYTHONPATH": f"{os.path.realpath(plugin_dir)}{os.pathsep}${{PYTHONPATH}}"}}
+        "env_vars": {"PYTHONPATH": f"{os.path.realpath(plugin_dir)}{os.pathsep}${{PYTHONPATH}}"}
+    }
     assert worker_runtime_env(("cv", "kf")) is None
     drives = default_drives(seed=0)[:1]
     ray.init(num_cpus=1, include_dashboard=False, log_to_driver=False)
@@ -298,21 +353,29 @@ def test_resolve_every_form_without_importing():
     assert (e.source, e.target) == (IMPORT_PATH, "mypkg.mod:Outer.Inner")
     assert is_import_path("a.b:C@x") and not is_import_path("kf@slow")
     assert base_name("a.b:C@x") == "a.b:C"
-    for bad, needle in [("module:", "expected a registered name or module:Class"),
-                        (":Class", "expected a registered name or module:Class"),
-                        ("a-b:C", "expected a registered name or module:Class"),
-                        ("kf@", "alias after @ is empty"),
-                        ("nope", "unknown predictor 'nope'; known: cv, ekf, hybrid, kf")]:
+    for bad, needle in [
+        ("module:", "expected a registered name or module:Class"),
+        (":Class", "expected a registered name or module:Class"),
+        ("a-b:C", "expected a registered name or module:Class"),
+        ("kf@", "alias after @ is empty"),
+        ("nope", "unknown predictor 'nope'; known: cv, ekf, hybrid, kf"),
+    ]:
         with pytest.raises(PredictorError, match=re.escape(needle)):
             resolve(bad)
 
 
-@pytest.mark.parametrize(("spec", "needle"), [
-    ("nosuchmodule:X", "nosuchmodule:X: no module named 'nosuchmodule' (put the folder"),
-    ("os:path", "os:path: path is not a class (it is a module)"),
-    ("collections:OrderedDict", "OrderedDict is not a subclass of posbench.predictors.base.Predictor"),
-    ("collections:Nope", "module collections has no 'Nope'"),
-])
+@pytest.mark.parametrize(
+    ("spec", "needle"),
+    [
+        ("nosuchmodule:X", "nosuchmodule:X: no module named 'nosuchmodule' (put the folder"),
+        ("os:path", "os:path: path is not a class (it is a module)"),
+        (
+            "collections:OrderedDict",
+            "OrderedDict is not a subclass of posbench.predictors.base.Predictor",
+        ),
+        ("collections:Nope", "module collections has no 'Nope'"),
+    ],
+)
 def test_import_path_errors(spec, needle):
     with pytest.raises(PredictorError) as e:
         predictor_class(spec)
@@ -325,10 +388,14 @@ def test_entry_points_are_lazy(tmp_path, monkeypatch):
     (tmp_path / "lazy_plugin_x.py").write_text(
         "import pathlib\npathlib.Path(__file__).with_name('imported').write_text('yes')\n"
         "from posbench.predictors.cv import ConstantVelocity\n\n\n"
-        "class Lazy(ConstantVelocity):\n    '''A lazy one.\n\n    More text.'''\n")
-    install_dist_info(tmp_path, "lazy-x", "2.0", {"lazy": "lazy_plugin_x:Lazy",
-                                                  "gone": "gone_module_x:G",
-                                                  "bad@name": "lazy_plugin_x:Lazy"})
+        "class Lazy(ConstantVelocity):\n    '''A lazy one.\n\n    More text.'''\n"
+    )
+    install_dist_info(
+        tmp_path,
+        "lazy-x",
+        "2.0",
+        {"lazy": "lazy_plugin_x:Lazy", "gone": "gone_module_x:G", "bad@name": "lazy_plugin_x:Lazy"},
+    )
     monkeypatch.syspath_prepend(str(tmp_path))
     names = available()
     assert names["lazy"].source == ENTRY_POINT and names["lazy"].distribution == "lazy-x 2.0"
@@ -341,8 +408,11 @@ def test_entry_points_are_lazy(tmp_path, monkeypatch):
     assert (tmp_path / "imported").exists()
     p = create("lazy@two", None, window_s=0.5)
     assert isinstance(p, Predictor) and p.window_s == 0.5
-    with pytest.raises(UsageError, match=r"predictor gone \(entry point gone_module_x:G of "
-                                         r"lazy-x 2.0\): no module named 'gone_module_x'"):
+    with pytest.raises(
+        UsageError,
+        match=r"predictor gone \(entry point gone_module_x:G of "
+        r"lazy-x 2.0\): no module named 'gone_module_x'",
+    ):
         validate_predictors(["kf", "gone"], {})
     sys.modules.pop("lazy_plugin_x", None)
 
@@ -365,38 +435,65 @@ class TakesAnything(Predictor):
 
 def test_constructor_options():
     opts, any_kw = constructor_options(predictor_class("cv"))
-    assert opts == {"window_s": 0.0, "fix_sigma": 0.06, "accel_sigma": 1.0,
-                    "cov_scale": 1.0} and not any_kw
+    assert (
+        opts == {"window_s": 0.0, "fix_sigma": 0.06, "accel_sigma": 1.0, "cov_scale": 1.0}
+        and not any_kw
+    )
     assert constructor_options(TakesAnything) == ({}, True)
-    validate_predictors([f"{__name__}:TakesAnything"],
-                        {f"{__name__}:TakesAnything": {"whatever": [1, 2]}})
+    validate_predictors(
+        [f"{__name__}:TakesAnything"], {f"{__name__}:TakesAnything": {"whatever": [1, 2]}}
+    )
 
 
 # ------------------------------------------------------------------------ --set
-@pytest.mark.parametrize(("text", "value"), [
-    ("4", 4), ("0.5", 0.5), ("true", True), ("null", None), ('"4"', "4"), ("[1, 2]", [1, 2]),
-    ("lbfgs", "lbfgs"), ("[1,", "[1,"), ("path/to/m.onnx", "path/to/m.onnx")])
+@pytest.mark.parametrize(
+    ("text", "value"),
+    [
+        ("4", 4),
+        ("0.5", 0.5),
+        ("true", True),
+        ("null", None),
+        ('"4"', "4"),
+        ("[1, 2]", [1, 2]),
+        ("lbfgs", "lbfgs"),
+        ("[1,", "[1,"),
+        ("path/to/m.onnx", "path/to/m.onnx"),
+    ],
+)
 def test_set_values_are_json_else_text(text, value):
     assert parse_value(text) == value
 
 
 def test_set_splits_at_the_last_dot():
-    opts, given = parse_set(["kf.jerk_psd=4.0", "kf@v1.2.gps_sigma=0.1",
-                             "mypkg.mod:Damped@fast.tau_s=0.5", "lstm.fit=lbfgs"])
-    assert opts == {"kf": {"jerk_psd": 4.0}, "kf@v1.2": {"gps_sigma": 0.1},
-                    "mypkg.mod:Damped@fast": {"tau_s": 0.5}, "lstm": {"fit": "lbfgs"}}
+    opts, given = parse_set(
+        [
+            "kf.jerk_psd=4.0",
+            "kf@v1.2.gps_sigma=0.1",
+            "mypkg.mod:Damped@fast.tau_s=0.5",
+            "lstm.fit=lbfgs",
+        ]
+    )
+    assert opts == {
+        "kf": {"jerk_psd": 4.0},
+        "kf@v1.2": {"gps_sigma": 0.1},
+        "mypkg.mod:Damped@fast": {"tau_s": 0.5},
+        "lstm": {"fit": "lbfgs"},
+    }
     assert given["kf@v1.2", "gps_sigma"] == "--set kf@v1.2.gps_sigma=0.1"
 
 
-@pytest.mark.parametrize(("values", "needle"), [
-    (["kf=1"], "--set kf=1: names no option"),
-    (["kf.jerk_psd"], "expected NAME.OPTION=VALUE"),
-    ([".x=1"], "names no predictor"),
-    (["kf.=1"], "is not an option name"),
-    (["kf.jerk-psd=1"], "'jerk-psd' is not an option name"),
-    (["kf.jerk_psd="], "no value"),
-    (["kf.jerk_psd=1", "kf.jerk_psd=1"], "set twice"),
-])
+@pytest.mark.parametrize(
+    ("values", "needle"),
+    [
+        (["kf=1"], "--set kf=1: names no option"),
+        (["kf.jerk_psd"], "expected NAME.OPTION=VALUE"),
+        ([".x=1"], "names no predictor"),
+        (["kf.=1"], "is not an option name"),
+        (["kf.jerk-psd=1"], "'jerk-psd' is not an option name"),
+        (["kf.jerk_psd="], "no value"),
+        (["kf.jerk_psd=1", "kf.jerk_psd=1"], "set twice"),
+    ],
+)
 def test_set_syntax_errors(values, needle):
     with pytest.raises(UsageError, match=re.escape(needle)):
         parse_set(values)
@@ -430,9 +527,14 @@ def test_set_errors_name_the_predictor_and_option():
     opts, given = parse_set(["kf.gps_sigma=0.1", "kf.jerk_psd=[1,"])
     with pytest.raises(UsageError) as e:
         validate_predictors(["kf"], opts, given)
-    assert str(e.value).startswith("--set kf.jerk_psd=[1,: predictor kf rejects "
-                                   "jerk_psd='[1,': kf: jerk_psd='[1,' must be in")
+    assert str(e.value).startswith(
+        "--set kf.jerk_psd=[1,: predictor kf rejects jerk_psd='[1,': kf: jerk_psd='[1,' must be in"
+    )
     opts, given = parse_set(["cv.nosuch=1"])
-    with pytest.raises(UsageError, match=re.escape(
-            "--set cv.nosuch=1: predictor cv has no option 'nosuch'; its options: window_s")):
+    with pytest.raises(
+        UsageError,
+        match=re.escape(
+            "--set cv.nosuch=1: predictor cv has no option 'nosuch'; its options: window_s"
+        ),
+    ):
         validate_predictors(["cv"], opts, given)

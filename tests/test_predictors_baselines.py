@@ -46,13 +46,24 @@ class Motion:
         if self.kind == "line":  # straight, speed v + accel t
             s = self.v * t + 0.5 * self.accel * t * t
             c, sn = math.cos(self.heading), math.sin(self.heading)
-            return (self.x0 + c * s, self.y0 + sn * s, z + self.heading,
-                    self.v + self.accel * t, z, z + self.accel)
+            return (
+                self.x0 + c * s,
+                self.y0 + sn * s,
+                z + self.heading,
+                self.v + self.accel * t,
+                z,
+                z + self.accel,
+            )
         if self.kind == "circle":  # counter-clockwise, starting at (x0, y0) heading east
             w = self.v / self.radius
-            return (self.x0 + self.radius * np.sin(w * t),
-                    self.y0 + self.radius * (1.0 - np.cos(w * t)),
-                    wrap_angle_arr(w * t), z + self.v, z + w, z)
+            return (
+                self.x0 + self.radius * np.sin(w * t),
+                self.y0 + self.radius * (1.0 - np.cos(w * t)),
+                wrap_angle_arr(w * t),
+                z + self.v,
+                z + w,
+                z,
+            )
         if self.kind == "stop":
             return z + self.x0, z + self.y0, z + self.heading, z, z, z
         raise ValueError(self.kind)
@@ -66,10 +77,19 @@ def wrap_angle_arr(a: np.ndarray) -> np.ndarray:
     return (a + np.pi) % (2 * np.pi) - np.pi
 
 
-def make_events(m: Motion, duration: float, fix_dt: float = 0.2, jitter: float = 0.02,
-                imu_hz: float = 50.0, gps_noise: float = 0.0, imu_noise: float = 0.0,
-                yaw_nan: bool = False, speed_hz: float | None = None, seed: int = 0,
-                imu: bool = True) -> list[tuple]:
+def make_events(
+    m: Motion,
+    duration: float,
+    fix_dt: float = 0.2,
+    jitter: float = 0.02,
+    imu_hz: float = 50.0,
+    gps_noise: float = 0.0,
+    imu_noise: float = 0.0,
+    yaw_nan: bool = False,
+    speed_hz: float | None = None,
+    seed: int = 0,
+    imu: bool = True,
+) -> list[tuple]:
     """Time-ordered observations: ("gps", t, x, y), ("imu", t, ax, ay, yaw, w), ("speed", t, v)."""
     rng = np.random.default_rng(seed)
     n = int(duration / fix_dt)
@@ -77,15 +97,19 @@ def make_events(m: Motion, duration: float, fix_dt: float = 0.2, jitter: float =
     xf, yf, *_ = m.state(tf)
     xf = xf + rng.normal(0, gps_noise, n) if gps_noise else xf
     yf = yf + rng.normal(0, gps_noise, n) if gps_noise else yf
-    ev: list[tuple] = [("gps", float(t), float(x), float(y)) for t, x, y in zip(tf, xf, yf, strict=True)]
+    ev: list[tuple] = [
+        ("gps", float(t), float(x), float(y)) for t, x, y in zip(tf, xf, yf, strict=True)
+    ]
     if imu:
         ti = np.arange(0.013, duration, 1.0 / imu_hz)
         _, _, yaw, v, w, a = m.state(ti)
         ax = a + rng.normal(0, imu_noise, ti.size) if imu_noise else a
         ay = v * w + (rng.normal(0, imu_noise, ti.size) if imu_noise else 0.0)
         yw = np.full(ti.size, np.nan) if yaw_nan else yaw
-        ev += [("imu", float(t), float(p), float(q), float(r), float(s))
-               for t, p, q, r, s in zip(ti, ax, ay, yw, w, strict=True)]
+        ev += [
+            ("imu", float(t), float(p), float(q), float(r), float(s))
+            for t, p, q, r, s in zip(ti, ax, ay, yw, w, strict=True)
+        ]
     if speed_hz:
         ts = np.arange(0.007, duration, 1.0 / speed_hz)
         _, _, _, v, _, _ = m.state(ts)
@@ -159,8 +183,11 @@ def test_rotation_and_wrap() -> None:
 def test_ctra_integrals_match_quadrature(w: float) -> None:
     T = 0.2
     got = ctra_integrals(w, T)
-    ref = [quad(lambda s, n=n, f=f: s ** n * f(w * s), 0.0, T, epsabs=1e-16)[0]
-           for n in range(3) for f in (math.cos, math.sin)]
+    ref = [
+        quad(lambda s, n=n, f=f: s**n * f(w * s), 0.0, T, epsabs=1e-16)[0]
+        for n in range(3)
+        for f in (math.cos, math.sin)
+    ]
     np.testing.assert_allclose(got, ref, rtol=1e-9, atol=1e-15)
 
 
@@ -195,7 +222,7 @@ def test_ctra_jacobian_matches_finite_differences(w: float) -> None:
 def _authors_window(points, accel, accel_next, dt=0.05, q=0.05, r=0.05):
     """Transcription of the authors' kalman.py matrices (predict/correct per point)."""
     A = np.array([[1, 0, dt, 0], [0, 1, 0, dt], [0, 0, 1, 0], [0, 0, 0, 1]], dtype=float)
-    B = np.array([[dt ** 2, 0], [0, dt ** 2], [dt, 0], [0, dt]])
+    B = np.array([[dt**2, 0], [0, dt**2], [dt, 0], [0, dt]])
     Hm = np.array([[1, 0, 0, 0], [0, 1, 0, 0]], dtype=float)
     s = np.array([*points[0], *((points[1] - points[0]) / dt)])
     P = np.eye(4)
@@ -215,8 +242,9 @@ def test_paper_window_equals_authors_matrix_code() -> None:
     for _ in range(20):
         pts = np.cumsum(rng.normal(0, 1, (8, 2)), axis=0)
         acc = rng.normal(0, 2, (8, 2))
-        np.testing.assert_allclose(paper_window_predict(pts, acc, acc[-1]),
-                                   _authors_window(pts, acc, acc[-1]), atol=1e-9)
+        np.testing.assert_allclose(
+            paper_window_predict(pts, acc, acc[-1]), _authors_window(pts, acc, acc[-1]), atol=1e-9
+        )
 
 
 # --- contract --------------------------------------------------------------------------
@@ -265,7 +293,7 @@ def test_cv_line_fit_window() -> None:
     ev = make_events(STOP, 60.0, gps_noise=SIGMA, seed=2, imu=False)
     d_fit = replay(cv, ev).future - STOP.xy(0.0)
     d_two = replay(ConstantVelocity(), ev).future - STOP.xy(0.0)
-    assert (d_fit ** 2).sum(axis=1).mean() < 0.7 * (d_two ** 2).sum(axis=1).mean()
+    assert (d_fit**2).sum(axis=1).mean() < 0.7 * (d_two**2).sum(axis=1).mean()
 
 
 def test_kf_paper_raw_fixes_horizon_mismatch() -> None:
@@ -293,9 +321,11 @@ def test_kf_paper_constant_acceleration_lags_like_constant_velocity() -> None:
     (0.0025 a + 0.05 a * 0.05 = 0.01 m), plus a position lag of some centimetres."""
     m = Motion("line", v=5.0, heading=0.0, accel=2.0)
     err = future_errors(m, replay(PaperKalman(), make_events(m, 8.0, jitter=0.0)))
-    first_difference_miss = 7 * 2.0 * 0.2 ** 2 - 0.01
+    first_difference_miss = 7 * 2.0 * 0.2**2 - 0.01
     assert err.min() > first_difference_miss and err.max() < first_difference_miss + 0.15, (
-        err.min(), err.max())
+        err.min(),
+        err.max(),
+    )
     # ... whereas the continuous kf with the IMU as a measurement of acceleration is exact
     err_kf = future_errors(m, replay(registry.create("kf"), make_events(m, 8.0, jitter=0.0)))
     assert err_kf.max() < 0.02
@@ -311,12 +341,12 @@ def test_cv_circle_error_matches_chord_formula() -> None:
     v = 10 m/s, R = 30 m: 0.1333 m (v^2 h^2 / 2R = 6.7 cm is the tangent-velocity part)."""
     r = replay(ConstantVelocity(), make_events(CIRCLE, 20.0, jitter=0.0))
     err = future_errors(CIRCLE, r, warmup=1.0)
-    expect = CIRCLE.v ** 2 * H * (H + 0.2) / (2 * CIRCLE.radius)
+    expect = CIRCLE.v**2 * H * (H + 0.2) / (2 * CIRCLE.radius)
     np.testing.assert_allclose(err, expect, rtol=0.01)
     # irregular fixes: each error follows the same formula with that fix's own interval
     r = replay(ConstantVelocity(), make_events(CIRCLE, 20.0, jitter=0.03, seed=3))
     T = np.diff(r.t_fix)
-    expect = CIRCLE.v ** 2 * H * (H + T) / (2 * CIRCLE.radius)
+    expect = CIRCLE.v**2 * H * (H + T) / (2 * CIRCLE.radius)
     got = np.linalg.norm(r.future[1:] - CIRCLE.xy(r.t_fix[1:] + H), axis=1)
     np.testing.assert_allclose(got, expect, rtol=0.02)
 
@@ -341,8 +371,10 @@ def test_circle_ekf_near_zero_kf_within_model_error() -> None:
 def test_circle_without_imu_yaw_never_nan() -> None:
     """comma2k19-like IMU: yaw NaN, yaw rate present, some accel samples missing."""
     ev = make_events(CIRCLE, 20.0, yaw_nan=True, imu_noise=0.05)
-    ev = [("imu", e[1], math.nan, e[3], e[4], e[5]) if e[0] == "imu" and i % 7 == 0 else e
-          for i, e in enumerate(ev)]
+    ev = [
+        ("imu", e[1], math.nan, e[3], e[4], e[5]) if e[0] == "imu" and i % 7 == 0 else e
+        for i, e in enumerate(ev)
+    ]
     for name in NAMES:
         r = replay(registry.create(name), ev)
         assert r.now_ok and np.isfinite(r.future).all(), name
@@ -370,12 +402,13 @@ def test_standstill_noisy_fixes_no_drift(name: str, with_speed: bool) -> None:
     fixes 0.2 s apart evaluated 0.2 s past the newest, or exactly 1 when a zero wheel speed
     makes it hold the newest fix; the filters and kf-paper (whose frozen velocity is a
     difference of cubic-smoothed points) average the noise down, below 1."""
-    ev = make_events(STOP, 60.0, gps_noise=SIGMA, imu_noise=0.05,
-                     speed_hz=20.0 if with_speed else None, seed=7)
+    ev = make_events(
+        STOP, 60.0, gps_noise=SIGMA, imu_noise=0.05, speed_hz=20.0 if with_speed else None, seed=7
+    )
     r = replay(registry.create(name), ev)
     assert r.now_ok and np.isfinite(r.future).all()
     d = r.future - STOP.xy(r.t_fix)
-    gain = float(np.sqrt((d ** 2).sum(axis=1).mean())) / (SIGMA * math.sqrt(2))
+    gain = float(np.sqrt((d**2).sum(axis=1).mean())) / (SIGMA * math.sqrt(2))
     t = np.arange(11) * 0.2
     V = np.vander(t, 4, increasing=True)
     v = np.vander([t[-1] + H], 4, increasing=True)[0]
@@ -427,8 +460,10 @@ def test_print_per_call_timing() -> None:
                 cost[e[0]].append(t1 - t0)
                 cost["query"].append(t2 - t1)
         rows.append((name, *(1e6 * float(np.median(cost[k])) for k in cost)))
-    print("\nmedian per-call cost [us]: predictor, observe_gps, observe_imu, observe_speed, "
-          "position_at")
+    print(
+        "\nmedian per-call cost [us]: predictor, observe_gps, observe_imu, observe_speed, "
+        "position_at"
+    )
     for row in rows:
         print(f"  {row[0]:9s} {row[1]:8.1f} {row[2]:8.1f} {row[3]:8.1f} {row[4]:8.2f}")
     assert all(np.isfinite(r[1:]).all() for r in rows)

@@ -40,8 +40,14 @@ from posbench.scoring.schema import COV_COLUMNS
 rr = pytest.importorskip("rerun", reason="needs the viz extra")
 
 
-def fake_run(name: str = "my drive/01", preds=("cv", "kf-paper"), dur: float = 20.0,
-             now_step: float = 0.05, seed: int = 0, cov: Sequence[str] = ()) -> DriveRun:
+def fake_run(
+    name: str = "my drive/01",
+    preds=("cv", "kf-paper"),
+    dur: float = 20.0,
+    now_step: float = 0.05,
+    seed: int = 0,
+    cov: Sequence[str] = (),
+) -> DriveRun:
     """A DriveRun by hand: circle track, fixes every 0.2 s (every 7th dropped), one outage.
     Predictors in ``cov`` report a covariance (NaN for the first 10 queries of each kind,
     as before a filter is warm); the others' cov columns are NaN, as in real traces."""
@@ -49,8 +55,9 @@ def fake_run(name: str = "my drive/01", preds=("cv", "kf-paper"), dur: float = 2
     tf = np.arange(0.0, dur, 0.2)
     received = np.arange(tf.size) % 7 != 3
     received[(tf > 8.0) & (tf < 9.5)] = False
-    fixes = pd.DataFrame({"t": tf, "x": 30 * np.cos(tf / 10), "y": 30 * np.sin(tf / 10),
-                          "received": received})
+    fixes = pd.DataFrame(
+        {"t": tf, "x": 30 * np.cos(tf / 10), "y": 30 * np.sin(tf / 10), "received": received}
+    )
     tt = np.arange(0.0, dur, 0.1)
     track = pd.DataFrame({"t": tt, "x": 30 * np.cos(tt / 10), "y": 30 * np.sin(tt / 10)})
     track.loc[50:54, ["x", "y"]] = np.nan  # a gap: two strips
@@ -65,20 +72,53 @@ def fake_run(name: str = "my drive/01", preds=("cv", "kf-paper"), dur: float = 2
             ref = 30 * np.column_stack([np.cos(tq / 10), np.sin(tq / 10)])
             heading = tq / 10 + np.pi / 2  # counter-clockwise on the circle
             along, cross = track_errors(ref + np.column_stack([err, 0 * err]), ref, heading)
-            frames.append(pd.DataFrame({
-                "dataset": "mem", "drive": name, "predictor": p, "kind": kind,
-                "t_issue": tq, "t_query": tq, "x": ref[:, 0] + err,
-                "y": ref[:, 1], "x_ref": ref[:, 0],
-                "y_ref": ref[:, 1], "error_m": err, "along_m": along, "cross_m": cross,
-                "label": lab, "speed_mps": 3.0, "since_fix_s": 0.1, "outage": -1,
-                "heading_ref": heading, "yaw_rate_ref": 0.1,
-                **dict(zip(COV_COLUMNS, _covariances(rng, n) if p in cov
-                           else np.full((3, n), np.nan), strict=True))}))
+            frames.append(
+                pd.DataFrame(
+                    {
+                        "dataset": "mem",
+                        "drive": name,
+                        "predictor": p,
+                        "kind": kind,
+                        "t_issue": tq,
+                        "t_query": tq,
+                        "x": ref[:, 0] + err,
+                        "y": ref[:, 1],
+                        "x_ref": ref[:, 0],
+                        "y_ref": ref[:, 1],
+                        "error_m": err,
+                        "along_m": along,
+                        "cross_m": cross,
+                        "label": lab,
+                        "speed_mps": 3.0,
+                        "since_fix_s": 0.1,
+                        "outage": -1,
+                        "heading_ref": heading,
+                        "yaw_rate_ref": 0.1,
+                        **dict(
+                            zip(
+                                COV_COLUMNS,
+                                _covariances(rng, n) if p in cov else np.full((3, n), np.nan),
+                                strict=True,
+                            )
+                        ),
+                    }
+                )
+            )
         frames[-1].loc[0, ["x", "y"]] = np.nan  # no answer before the first fix
     outages = [(float(tf[received & (tf <= 8.0)][-1]), float(tf[received & (tf >= 9.5)][0]))]
-    return DriveRun(name, "mem", "truth", ["a note"], ["a warning"], pd.concat(frames),
-                    outages=outages, gps_count=int(received.sum()), duration_s=dur, fixes=fixes,
-                    track=track)
+    return DriveRun(
+        name,
+        "mem",
+        "truth",
+        ["a note"],
+        ["a warning"],
+        pd.concat(frames),
+        outages=outages,
+        gps_count=int(received.sum()),
+        duration_s=dur,
+        fixes=fixes,
+        track=track,
+    )
 
 
 def _covariances(rng: np.random.Generator, n: int) -> np.ndarray:
@@ -110,7 +150,8 @@ def read_back(path: Path, one: bool = True):
             if not c.is_static:
                 assert c.timeline_names == ["time"]
             ents[c.entity_path.lstrip("/")]["static" if c.is_static else "temporal"].append(
-                c.to_record_batch())
+                c.to_record_batch()
+            )
         views, bounds = {}, {}
         for c in reader.stream(store=blueprints[recording.application_id]).to_chunks():
             rb = c.to_record_batch()
@@ -118,12 +159,16 @@ def read_back(path: Path, one: bool = True):
                 views[c.entity_path] = (
                     rb.column("ViewBlueprint:display_name").to_pylist()[0][0],
                     rb.column("ViewBlueprint:class_identifier").to_pylist()[0][0],
-                    rb.column("ViewBlueprint:space_origin").to_pylist()[0][0])
+                    rb.column("ViewBlueprint:space_origin").to_pylist()[0][0],
+                )
             if "VisualBounds2D:range" in rb.schema.names:
-                bounds[c.entity_path.rsplit("/", 1)[0]] = \
-                    rb.column("VisualBounds2D:range").to_pylist()[0][0]
-        out[recording.recording_id] = (ents, {name: (cls, origin, bounds.get(vp))
-                                              for vp, (name, cls, origin) in views.items()})
+                bounds[c.entity_path.rsplit("/", 1)[0]] = rb.column(
+                    "VisualBounds2D:range"
+                ).to_pylist()[0][0]
+        out[recording.recording_id] = (
+            ents,
+            {name: (cls, origin, bounds.get(vp)) for vp, (name, cls, origin) in views.items()},
+        )
     if one:
         [pair] = out.values()
         return pair
@@ -166,14 +211,37 @@ def test_hand_made_run_round_trips(tmp_path):
     assert path.stat().st_size > 10_000
     ents, views = read_back(path)
     root = "drives/my_drive_01"
-    per_pred = ("map/{p}/future", "map/{p}/now", "errors/{p}/future", "errors/{p}/now",
-                "along/{p}/future", "along/{p}/now", "cross/{p}/future", "cross/{p}/now",
-                "around/{p}/future", "around/{p}/error", "vehicle_frame/{p}")
-    expected = {f"{root}/{e}" for e in (
-        "info", "map/truth", "map/track_error", "colour_scale", "map/fixes/received",
-        "map/fixes/dropped", "labels", "outages", "around/reference", "around/road",
-        "around/fixes", "vehicle_frame/axes",
-        *(e.format(p=p) for p in ("cv", "kf-paper") for e in per_pred))}
+    per_pred = (
+        "map/{p}/future",
+        "map/{p}/now",
+        "errors/{p}/future",
+        "errors/{p}/now",
+        "along/{p}/future",
+        "along/{p}/now",
+        "cross/{p}/future",
+        "cross/{p}/now",
+        "around/{p}/future",
+        "around/{p}/error",
+        "vehicle_frame/{p}",
+    )
+    expected = {
+        f"{root}/{e}"
+        for e in (
+            "info",
+            "map/truth",
+            "map/track_error",
+            "colour_scale",
+            "map/fixes/received",
+            "map/fixes/dropped",
+            "labels",
+            "outages",
+            "around/reference",
+            "around/road",
+            "around/fixes",
+            "vehicle_frame/axes",
+            *(e.format(p=p) for p in ("cv", "kf-paper") for e in per_pred),
+        )
+    }
     assert expected <= set(ents), expected - set(ents)
     assert {e for e in ents if e.startswith("drives/")} == expected
 
@@ -201,9 +269,14 @@ def test_hand_made_run_round_trips(tmp_path):
             vals = np.array([v[0] for v in column(b, "Scalars:scalars")])
             np.testing.assert_array_equal(np.isnan(vals), np.isnan(g.error_m))
             np.testing.assert_allclose(vals[1:], g.error_m.to_numpy()[1:])
-            names = column(ents[f"{root}/errors/{p}/{kind}"]["static"], next(
-                n for n in ents[f"{root}/errors/{p}/{kind}"]["static"][0].schema.names
-                if n.endswith(":names")))
+            names = column(
+                ents[f"{root}/errors/{p}/{kind}"]["static"],
+                next(
+                    n
+                    for n in ents[f"{root}/errors/{p}/{kind}"]["static"][0].schema.names
+                    if n.endswith(":names")
+                ),
+            )
             assert names == [[f"{p} {kind}"]]
     now_t = times_s(ents[f"{root}/errors/cv/now"]["temporal"])
     assert now_t.min() == pytest.approx(0.0) and now_t.max() == pytest.approx(19.95)
@@ -218,16 +291,20 @@ def test_hand_made_run_round_trips(tmp_path):
     # outages: 1 exactly between the last fix before and the first fix after
     b = ents[f"{root}/outages"]["temporal"]
     t, v = times_s(b), np.array([x[0] for x in column(b, "Scalars:scalars")])
-    (a, e), = r.outages
+    ((a, e),) = r.outages
     np.testing.assert_allclose(t[v == 1.0], [a], atol=1e-9)
     assert t[np.flatnonzero(v == 1.0)[0] + 1] == pytest.approx(e)
 
     info = column(ents[f"{root}/info"]["static"], "TextDocument:text")[0][0]
     assert "a note" in info and "a warning" in info
     assert {(c, o) for c, o, _ in views.values()} == {
-        ("2D", f"{root}/map"), ("2D", f"{root}/around"), ("2D", f"{root}/vehicle_frame"),
-        ("TimeSeries", root), ("TextLog", f"{root}/labels"),
-        ("TextDocument", f"{root}/colour_scale")}
+        ("2D", f"{root}/map"),
+        ("2D", f"{root}/around"),
+        ("2D", f"{root}/vehicle_frame"),
+        ("TimeSeries", root),
+        ("TextLog", f"{root}/labels"),
+        ("TextDocument", f"{root}/colour_scale"),
+    }
     assert sum(c == "TimeSeries" for c, _, _ in views.values()) == 3  # error, along, cross
 
 
@@ -247,10 +324,20 @@ def test_runner_output_with_cv_and_skipped_drive(tmp_path):
     assert ("2D", "drives/bad_drive/map") in {(c, o) for c, o, _ in bad_views.values()}
     assert list(bad) == ["drives/bad_drive/info"]
     assert not any("bad_drive" in e for e in ents)
-    assert "SKIPPED: poor truth" in column(bad["drives/bad_drive/info"]["static"],
-                                           "TextDocument:text")[0][0]
-    for e in ("map/cv/future", "map/cv/now", "errors/cv/future", "errors/cv/now",
-              "map/fixes/received", "map/truth", "labels", "outages"):
+    assert (
+        "SKIPPED: poor truth"
+        in column(bad["drives/bad_drive/info"]["static"], "TextDocument:text")[0][0]
+    )
+    for e in (
+        "map/cv/future",
+        "map/cv/now",
+        "errors/cv/future",
+        "errors/cv/now",
+        "map/fixes/received",
+        "map/truth",
+        "labels",
+        "outages",
+    ):
         assert f"{root}/{e}" in ents
     # the recorded time range is the drive's (now queries span first to last received fix)
     t = times_s(ents[f"{root}/errors/cv/now"]["temporal"])
@@ -303,8 +390,12 @@ def test_around_the_vehicle_is_reference_relative_and_metre_scaled(tmp_path):
         assert origins == [[[0.0, 0.0]]]
         gf = tr[(tr.predictor == p) & (tr.kind == "future")].sort_values("t_query")
         relf = gf[["x", "y"]].to_numpy() - gf[["x_ref", "y_ref"]].to_numpy()
-        pos = np.array([v[0] for v in column(ents[f"{root}/around/{p}/future"]["temporal"],
-                                             "Points2D:positions")])
+        pos = np.array(
+            [
+                v[0]
+                for v in column(ents[f"{root}/around/{p}/future"]["temporal"], "Points2D:positions")
+            ]
+        )
         np.testing.assert_allclose(pos, screen(relf[np.isfinite(relf).all(axis=1)]), atol=1e-5)
         # the vehicle frame: (along, cross), left up
         b = ents[f"{root}/vehicle_frame/{p}"]["temporal"]
@@ -312,8 +403,9 @@ def test_around_the_vehicle_is_reference_relative_and_metre_scaled(tmp_path):
         pos = np.array([v[0] for v in column(b, "Points2D:positions")])
         np.testing.assert_allclose(pos, screen(ac[np.isfinite(ac).all(axis=1)]), atol=1e-5)
         # along/cross series: every query, NaN kept
-        vals = np.array([v[0] for v in column(ents[f"{root}/along/{p}/now"]["temporal"],
-                                               "Scalars:scalars")])
+        vals = np.array(
+            [v[0] for v in column(ents[f"{root}/along/{p}/now"]["temporal"], "Scalars:scalars")]
+        )
         np.testing.assert_allclose(vals[1:], g.along_m.to_numpy()[1:])
     # fixes around the vehicle: at each 'now' time the last received fixes, relative
     b = ents[f"{root}/around/fixes"]["temporal"]
@@ -328,17 +420,24 @@ def test_around_the_vehicle_is_reference_relative_and_metre_scaled(tmp_path):
     np.testing.assert_allclose(np.array(rows[k]), screen(want), atol=1e-4)
     # the views around the vehicle are a few metres wide, not the whole drive
     by_origin = {o: b for c, o, b in views.values() if c == "2D"}
-    assert by_origin[f"{root}/around"] == {"x_range": [-AROUND_M, AROUND_M],
-                                           "y_range": [-AROUND_M, AROUND_M]}
-    assert by_origin[f"{root}/vehicle_frame"] == {"x_range": [-VEHICLE_M, VEHICLE_M],
-                                                  "y_range": [-VEHICLE_M, VEHICLE_M]}
+    assert by_origin[f"{root}/around"] == {
+        "x_range": [-AROUND_M, AROUND_M],
+        "y_range": [-AROUND_M, AROUND_M],
+    }
+    assert by_origin[f"{root}/vehicle_frame"] == {
+        "x_range": [-VEHICLE_M, VEHICLE_M],
+        "y_range": [-VEHICLE_M, VEHICLE_M],
+    }
     assert AROUND_M <= 10 and VEHICLE_M <= 2
     assert by_origin[f"{root}/map"] is None  # the overview fits the drive
     # the track coloured by kf-paper's error, with its scale in words
     text = column(ents[f"{root}/colour_scale"]["static"], "TextDocument:text")[0][0]
     assert "kf-paper" in text and "red >=" in text
-    [strips] = [b for b in ents[f"{root}/map/track_error"]["static"]
-                if "LineStrips2D:strips" in b.schema.names]
+    [strips] = [
+        b
+        for b in ents[f"{root}/map/track_error"]["static"]
+        if "LineStrips2D:strips" in b.schema.names
+    ]
     n_seg = len(column([strips], "LineStrips2D:strips")[0])
     assert n_seg == 200 - 1 - 6  # every segment with both ends known (the gap cuts 6)
     colours = column([strips], "LineStrips2D:colors")[0]
@@ -348,17 +447,19 @@ def test_around_the_vehicle_is_reference_relative_and_metre_scaled(tmp_path):
 def test_one_recording_per_drive_each_on_its_own_time(tmp_path):
     a = fake_run("drive a", dur=10.0)
     b = fake_run("drive b", dur=12.0, seed=1)
-    b.traces = b.traces.assign(t_issue=b.traces.t_issue + 1000.0,
-                               t_query=b.traces.t_query + 1000.0)
+    b.traces = b.traces.assign(t_issue=b.traces.t_issue + 1000.0, t_query=b.traces.t_query + 1000.0)
     path = tmp_path / "two.rrd"
     write_recording(path, [a, b], ["cv", "kf-paper"])
     recs = read_back(path, one=False)
     assert list(recs) == ["mem/drive a", "mem/drive b"]
     reader = rr.chunk.RrdReader(path)
     assert sorted(e.application_id for e in reader.recordings()) == sorted(
-        e.application_id for e in reader.blueprints())  # a layout of its own each
-    for rid, root, t0 in (("mem/drive a", "drives/drive_a", 0.0),
-                          ("mem/drive b", "drives/drive_b", 1000.0)):
+        e.application_id for e in reader.blueprints()
+    )  # a layout of its own each
+    for rid, root, t0 in (
+        ("mem/drive a", "drives/drive_a", 0.0),
+        ("mem/drive b", "drives/drive_b", 1000.0),
+    ):
         ents, views = recs[rid]
         assert {e.split("/")[1] for e in ents} == {root.split("/")[1]}
         assert all(o.startswith(root) for _, o, _ in views.values())
@@ -411,16 +512,18 @@ def test_95_percent_ellipses_of_predictors_with_covariance(tmp_path):
         np.testing.assert_allclose(strips[:, 0], strips[:, -1])  # closed
         enu = np.stack([strips[..., 0], -strips[..., 1]], axis=-1)  # back from (x, -y)
         rel = enu - xy[drawn][:, None, :]
-        d2 = mahalanobis_sq(rel.reshape(-1, 2),
-                            np.repeat(cov[drawn], ELLIPSE_SEGMENTS + 1, axis=0))
+        d2 = mahalanobis_sq(rel.reshape(-1, 2), np.repeat(cov[drawn], ELLIPSE_SEGMENTS + 1, axis=0))
         np.testing.assert_allclose(d2, 5.991, rtol=2e-3)  # on the 95 % boundary (float32)
         # the centre is the answer: the outline's mean point
         np.testing.assert_allclose(rel[:, :-1].mean(axis=1), 0.0, atol=1e-3)
         [style] = e["static"]
-        assert column([style], "LineStrips2D:colors")[0] == column(
-            ents[f"{root}/map/cv/{kind}"]["static"], "Points2D:colors")[0]
+        assert (
+            column([style], "LineStrips2D:colors")[0]
+            == column(ents[f"{root}/map/cv/{kind}"]["static"], "Points2D:colors")[0]
+        )
         assert column([style], "LineStrips2D:colors")[0][0] == int.from_bytes(
-            bytes([*PALETTE[0], 255]), "big")  # cv's colour, the first predictor's
+            bytes([*PALETTE[0], 255]), "big"
+        )  # cv's colour, the first predictor's
         assert column([style], "LineStrips2D:radii")[0] == [ELLIPSE_RADIUS]
 
 
@@ -434,11 +537,16 @@ def test_ellipses_keep_the_recording_small(tmp_path):
     write_recording(with_cov, [r], list(preds))
     assert not any("ellipse" in e for e in read_back(plain)[0])
     tr = r.traces
-    n = int((np.isfinite(tr[list(COV_COLUMNS)]).all(axis=1)
-             & np.isfinite(tr[["x", "y"]]).all(axis=1)).sum())
+    n = int(
+        (
+            np.isfinite(tr[list(COV_COLUMNS)]).all(axis=1) & np.isfinite(tr[["x", "y"]]).all(axis=1)
+        ).sum()
+    )
     extra = with_cov.stat().st_size - plain.stat().st_size
     per = extra / n
-    print(f"{n} ellipses: {plain.stat().st_size} -> {with_cov.stat().st_size} bytes, "
-          f"{per:.0f} bytes each")
+    print(
+        f"{n} ellipses: {plain.stat().st_size} -> {with_cov.stat().st_size} bytes, "
+        f"{per:.0f} bytes each"
+    )
     assert n > 5000
     assert 150 < per < 300, per

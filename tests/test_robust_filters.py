@@ -29,8 +29,16 @@ from posbench.scenarios.synthetic import (
 BIAS = (0.45, -0.25)  # accelerometer bias, vehicle frame [m/s^2] (~2.6 deg of pitch)
 
 
-def raw_imu(drive: Drive, seed: int, *, bias=BIAS, noise_sd: float = 0.4,
-            mount_deg: float = 4.0, late_s: float = 0.08, gyro_bias: float = 0.01) -> ImuStream:
+def raw_imu(
+    drive: Drive,
+    seed: int,
+    *,
+    bias=BIAS,
+    noise_sd: float = 0.4,
+    mount_deg: float = 4.0,
+    late_s: float = 0.08,
+    gyro_bias: float = 0.01,
+) -> ImuStream:
     """The drive's IMU as a raw consumer unit gives it: true vehicle-frame acceleration
     rotated by a mount misalignment, plus a constant bias and white noise, stamped
     ``late_s`` late, no yaw, a gyro with a bias; from the truth at 100 Hz."""
@@ -73,8 +81,15 @@ def walking_drive(seed: int) -> Drive:
     """A ground robot at <= 1 m/s: straights, turns and a stop; fixes at 2.5 Hz with 0.3 m
     white + 0.3 m correlated noise (stating 0.45 m); a levelled consumer IMU with no yaw."""
     rng = np.random.default_rng(seed)
-    segs = [straight(15.0, 1.0), turn(90.0, 3.0, 0.8), straight(10.0, 1.0), stop(5.0),
-            straight(8.0, 0.6), turn(-120.0, 4.0, 0.8), straight(15.0, 1.0)]
+    segs = [
+        straight(15.0, 1.0),
+        turn(90.0, 3.0, 0.8),
+        straight(10.0, 1.0),
+        stop(5.0),
+        straight(8.0, 0.6),
+        turn(-120.0, 4.0, 0.8),
+        straight(15.0, 1.0),
+    ]
     sim = simulate(segs, yaw0=0.3)
     truth = TruthStream(sim.t, sim.x, sim.y, sim.yaw, sim.v)
     tf = np.arange(sim.t[0] + 0.1, sim.t[-1], 0.4)
@@ -85,10 +100,19 @@ def walking_drive(seed: int) -> Drive:
     lat, lon = enu_to_latlon(gx, gy, ORIGIN_LAT, ORIGIN_LON)
     gps = GpsStream(tf, gx, gy, lat, lon, np.full(tf.size, math.hypot(0.3, 0.3)))
     d = generate_drive(seed=seed, route="mixed")
-    drive = Drive(meta=replace(d.meta, name=f"walking-s{seed}", source=f"test:walking:{seed}"),
-                  gps=gps, imu=None, speed=None, truth=truth)
-    return replace(drive, imu=raw_imu(drive, seed, bias=(0.1, -0.05), noise_sd=0.2,
-                                      mount_deg=0.0, late_s=0.0, gyro_bias=0.005))
+    drive = Drive(
+        meta=replace(d.meta, name=f"walking-s{seed}", source=f"test:walking:{seed}"),
+        gps=gps,
+        imu=None,
+        speed=None,
+        truth=truth,
+    )
+    return replace(
+        drive,
+        imu=raw_imu(
+            drive, seed, bias=(0.1, -0.05), noise_sd=0.2, mount_deg=0.0, late_s=0.0, gyro_bias=0.005
+        ),
+    )
 
 
 def test_walking_speed_platform_filters_do_not_lose_to_cv():
@@ -100,10 +124,17 @@ def test_walking_speed_platform_filters_do_not_lose_to_cv():
 def test_kf_recovers_the_accelerometer_bias():
     d = generate_drive(seed=1103, route="mixed")
     imu = raw_imu(d, 1103, mount_deg=0.0, late_s=0.0)
-    kf = LinearKalman(jerk_psd=4.0, heading_from_fixes=True, accel_bias_tau_s=30.0,
-                      imu_gate=13.8, imu_noise_tau_s=5.0, use_speed=False)
-    events = sorted([(t, 0, i) for i, t in enumerate(d.gps.t)]
-                    + [(t, 1, i) for i, t in enumerate(imu.t)])
+    kf = LinearKalman(
+        jerk_psd=4.0,
+        heading_from_fixes=True,
+        accel_bias_tau_s=30.0,
+        imu_gate=13.8,
+        imu_noise_tau_s=5.0,
+        use_speed=False,
+    )
+    events = sorted(
+        [(t, 0, i) for i, t in enumerate(d.gps.t)] + [(t, 1, i) for i, t in enumerate(imu.t)]
+    )
     for t, kind, i in events:
         if kind == 0:
             kf.observe_gps(t, d.gps.x[i], d.gps.y[i], d.gps.accuracy[i])

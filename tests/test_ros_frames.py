@@ -66,16 +66,20 @@ def test_yaw_offset_against_course() -> None:
     x = np.cumsum(10 * np.cos(heading)) * (t[1] - t[0])
     y = np.cumsum(10 * np.sin(heading)) * (t[1] - t[0])
     tf = t[::10]
-    ct, course = fr.gps_course(tf, x[::10] + rng.normal(0, 1, tf.size),
-                               y[::10] + rng.normal(0, 1, tf.size))
+    ct, course = fr.gps_course(
+        tf, x[::10] + rng.normal(0, 1, tf.size), y[::10] + rng.normal(0, 1, tf.size)
+    )
     off, spread, n = fr.yaw_offset(t, fr.wrap(heading - 1.2), ct, course)
     assert n > 100 and off == pytest.approx(1.2, abs=math.radians(1.5))
     assert math.degrees(spread) < fr.YAW_MAX_SPREAD_DEG
     # a yaw unrelated to the motion spreads widely
     _, spread, _ = fr.yaw_offset(t, rng.uniform(-np.pi, np.pi, t.size), ct, course)
     assert math.degrees(spread) > fr.YAW_MAX_SPREAD_DEG
-    assert fr.yaw_offset(t, heading, ct[:0], course[:0]) == (pytest.approx(np.nan, nan_ok=True),
-                                                             pytest.approx(np.nan, nan_ok=True), 0)
+    assert fr.yaw_offset(t, heading, ct[:0], course[:0]) == (
+        pytest.approx(np.nan, nan_ok=True),
+        pytest.approx(np.nan, nan_ok=True),
+        0,
+    )
 
 
 def test_level_vehicle_accel_rolled_sensor_and_yaw_reference_cancels() -> None:
@@ -120,6 +124,7 @@ def test_tf_chain_both_ways() -> None:
 
 # --------------------------------------------------------------------------- bags
 
+
 @pytest.fixture(scope="module")
 def bags(tmp_path_factory: pytest.TempPathFactory) -> dict[str, tuple[Path, SynthBag]]:
     root = tmp_path_factory.mktemp("ros_frames")
@@ -138,18 +143,24 @@ def bags(tmp_path_factory: pytest.TempPathFactory) -> dict[str, tuple[Path, Synt
 def _truth_at(o: SynthBag, t: np.ndarray) -> dict[str, np.ndarray]:
     tr = synth_truth(o)
     yaw = np.unwrap(tr.yaw)
-    return {"dv": np.interp(t, tr.t, np.gradient(tr.v, tr.t)),
-            "lat": np.interp(t, tr.t, tr.v * np.gradient(yaw, tr.t)),
-            "yaw": np.interp(t, tr.t, yaw), "w": np.interp(t, tr.t, np.gradient(yaw, tr.t))}
+    return {
+        "dv": np.interp(t, tr.t, np.gradient(tr.v, tr.t)),
+        "lat": np.interp(t, tr.t, tr.v * np.gradient(yaw, tr.t)),
+        "yaw": np.interp(t, tr.t, yaw),
+        "w": np.interp(t, tr.t, np.gradient(yaw, tr.t)),
+    }
 
 
-@pytest.mark.parametrize(("case", "method", "yaw"), [
-    ("orient_tf", "orientation+tf_static", "enu"),
-    ("orient_tf_ros2", "orientation+tf_static", "enu"),
-    ("orient_magnetic", "orientation", "offset-corrected"),
-    ("noorient_tf", "tf_static", "none"),
-    ("noorient_notf", "estimated", "none"),
-])
+@pytest.mark.parametrize(
+    ("case", "method", "yaw"),
+    [
+        ("orient_tf", "orientation+tf_static", "enu"),
+        ("orient_tf_ros2", "orientation+tf_static", "enu"),
+        ("orient_magnetic", "orientation", "offset-corrected"),
+        ("noorient_tf", "tf_static", "none"),
+        ("noorient_notf", "estimated", "none"),
+    ],
+)
 def test_gravity_removed_in_vehicle_frame(bags, case: str, method: str, yaw: str) -> None:
     path, o = bags[case]
     d = load_rosbag(path)
@@ -196,9 +207,12 @@ def test_odometry_is_speed_not_truth_and_scored_against_fixes(bags) -> None:
     d = load_rosbag(path)
     assert d.truth is None and d.meta.extra["truth_kind"] == "gps-fixes"
     assert d.meta.extra["topics"]["speed"]["topic"] == "/odom" and d.speed is not None
-    np.testing.assert_allclose(np.median(d.speed.v[d.speed.v > 1]) /
-                               np.median(synth_truth(SynthBag()).v[synth_truth(SynthBag()).v > 1]),
-                               1.02, atol=0.01)
+    np.testing.assert_allclose(
+        np.median(d.speed.v[d.speed.v > 1])
+        / np.median(synth_truth(SynthBag()).v[synth_truth(SynthBag()).v > 1]),
+        1.02,
+        atol=0.01,
+    )
     assert sum("/odom is not used as truth" in w for w in d.meta.warnings) == 1
     # default profile (rtk) on a drive without truth: its own fixes, reference from the fixes
     run = run_drive(d, RunConfig(predictors=("cv", "kf")))
@@ -217,11 +231,13 @@ def test_named_local_truth_aligned(bags) -> None:
     assert al["rotation_deg"] == pytest.approx(-o.truth_rot_deg, abs=0.5)
     assert 0.8 < al["residual_rms_m"] < 2.0 and al["limit_m"] == pytest.approx(5.0)
     tr = synth_truth(o)  # ENU about the synthetic origin; the drive's is its first fix
-    ex, ey = to_local(*enu_to_latlon(tr.x, tr.y, ORIGIN_LAT, ORIGIN_LON), d.meta.origin_lat,
-                      d.meta.origin_lon)
-    err = np.hypot(d.truth.x - np.interp(d.truth.t, tr.t, ex),
-                   d.truth.y - np.interp(d.truth.t, tr.t, ey))
-    assert np.sqrt(np.mean(err ** 2)) < 0.5  # back in the GPS's ENU frame
+    ex, ey = to_local(
+        *enu_to_latlon(tr.x, tr.y, ORIGIN_LAT, ORIGIN_LON), d.meta.origin_lat, d.meta.origin_lon
+    )
+    err = np.hypot(
+        d.truth.x - np.interp(d.truth.t, tr.t, ex), d.truth.y - np.interp(d.truth.t, tr.t, ey)
+    )
+    assert np.sqrt(np.mean(err**2)) < 0.5  # back in the GPS's ENU frame
     assert any("aligned to the GPS ENU frame" in w for w in d.meta.warnings)
     run = run_drive(d, RunConfig(predictors=("cv", "kf"), gps_profile="native"))
     assert run.reference == TRUTH
@@ -234,9 +250,13 @@ def test_drifting_odometry_named_as_truth_refused(bags) -> None:
     with pytest.raises(DataError, match=r"residual RMS \d+\.\d\d m .* exceeds the limit 5\.00 m"):
         load_rosbag(path, topics={"truth": "/odom"})
     env = {**os.environ, "COLUMNS": "200"}
-    r = subprocess.run([sys.executable, "-m", "posbench", "data", "inspect", str(path),
-                        "--topic", "truth=/odom"], capture_output=True, text=True, env=env,
-                       timeout=300)
+    r = subprocess.run(
+        [sys.executable, "-m", "posbench", "data", "inspect", str(path), "--topic", "truth=/odom"],
+        capture_output=True,
+        text=True,
+        env=env,
+        timeout=300,
+    )
     assert r.returncode == 2, r.stdout + r.stderr
     lines = r.stderr.strip().splitlines()
     assert len(lines) == 1 and lines[0].startswith("error:") and "residual RMS" in lines[0]
@@ -261,15 +281,34 @@ def test_consistency_check_flags_the_flipped_gyro_of_a_bag(bags) -> None:
     assert good["imu.yaw_rate"].verdict == PASS
     # gravity removed: the longitudinal acceleration passes its bias check on both
     assert by["imu.ax"].verdict == PASS
-    r = bench("run", "--data", str(bags["flip"][0]), "-p", "cv,kf", "--strict", "--out",
-              str(bags["flip"][0].parent / "strict-out"), timeout=300)
+    r = bench(
+        "run",
+        "--data",
+        str(bags["flip"][0]),
+        "-p",
+        "cv,kf",
+        "--strict",
+        "--out",
+        str(bags["flip"][0].parent / "strict-out"),
+        timeout=300,
+    )
     assert_one_error_line(r, "--strict", "imu.yaw_rate", "sign -1")
 
 
 def test_run_records_sensor_frames_in_results(bags, tmp_path: Path) -> None:
     out = tmp_path / "out"
-    r = bench("run", "--data", str(bags["orient_tf"][0]), "-p", "cv,kf", "--out", str(out),
-              "--drive-plots", "0", timeout=300)
+    r = bench(
+        "run",
+        "--data",
+        str(bags["orient_tf"][0]),
+        "-p",
+        "cv,kf",
+        "--out",
+        str(out),
+        "--drive-plots",
+        "0",
+        timeout=300,
+    )
     assert r.returncode == 0, r.stderr
     res = json.loads((out / "results.json").read_text())
     (drive,) = res["drives"]

@@ -25,8 +25,14 @@ from posbench.tables.run_tables import label_table
 
 def bench(*args: str, cwd: Path | None = None, columns: int = 200) -> subprocess.CompletedProcess:
     env = {**os.environ, "COLUMNS": str(columns)}
-    return subprocess.run([sys.executable, "-m", "posbench", *args], capture_output=True,
-                          text=True, cwd=cwd, timeout=600, env=env)
+    return subprocess.run(
+        [sys.executable, "-m", "posbench", *args],
+        capture_output=True,
+        text=True,
+        cwd=cwd,
+        timeout=600,
+        env=env,
+    )
 
 
 @pytest.fixture(scope="module")
@@ -57,17 +63,25 @@ def test_headline_excludes_the_cold_start(cv_kf_result):
         assert warm["future"]["count"] == len(runs)  # one future query per drive: at its first fix
         assert warm["future"]["max_m"] > 1.0  # ... and that is where the 3 m errors went
     total = sum(len(r.traces[r.traces.predictor == "cv"]) for r in runs)
-    counted = sum(res["predictors"]["cv"][k]["count"] + res["predictors"]["cv"][k]["missing"]
-                  for k in ("future", "now"))
-    excluded = (sum(res["excluded"]["warmup"]["cv"][k]["count"]
-                    + res["excluded"]["warmup"]["cv"][k]["missing"] for k in ("future", "now"))
-                + sum(res["excluded"]["no_reference"]["cv"].values()))
+    counted = sum(
+        res["predictors"]["cv"][k]["count"] + res["predictors"]["cv"][k]["missing"]
+        for k in ("future", "now")
+    )
+    excluded = sum(
+        res["excluded"]["warmup"]["cv"][k]["count"] + res["excluded"]["warmup"]["cv"][k]["missing"]
+        for k in ("future", "now")
+    ) + sum(res["excluded"]["no_reference"]["cv"].values())
     assert counted + excluded == total  # every query is in exactly one place
 
 
 def test_missing_counts_only_unanswered_queries_with_a_reference():
-    tr = pd.DataFrame({"x_ref": [0.0, np.nan, 1.0, 2.0], "y_ref": [0.0, 0.0, 1.0, 2.0],
-                       "warmup": [False, False, True, False]})
+    tr = pd.DataFrame(
+        {
+            "x_ref": [0.0, np.nan, 1.0, 2.0],
+            "y_ref": [0.0, 0.0, 1.0, 2.0],
+            "warmup": [False, False, True, False],
+        }
+    )
     assert scored_mask(tr).tolist() == [True, False, False, True]
 
 
@@ -139,8 +153,9 @@ def test_two_models_of_one_predictor_named_and_marked(tmp_path):
     follows in the terminal too."""
     model = _model_copy(tmp_path, ["synthetic-mixed-s0", "synthetic-turns-s0"])
     out = tmp_path / "o"
-    r = bench("run", "-p", "cv,lstm", "--model", f"lstm@mine={model}", "--out", str(out),
-              "--workers", "1")
+    r = bench(
+        "run", "-p", "cv,lstm", "--model", f"lstm@mine={model}", "--out", str(out), "--workers", "1"
+    )
     assert r.returncode == 0, r.stderr
     res = json.loads((out / "results.json").read_text())
     assert list(res["predictors"]) == ["cv", "lstm", "lstm@mine"]
@@ -160,8 +175,9 @@ def test_rerun_into_the_same_folder_replaces_only_its_own_files(tmp_path):
     out = tmp_path / "o"
     out.mkdir()
     (out / "my-notes.txt").write_text("keep me")
-    (out / "results.json").write_text(json.dumps({"outputs": ["old_plot.png", "../outside.txt",
-                                                              "drives/x.png"]}))
+    (out / "results.json").write_text(
+        json.dumps({"outputs": ["old_plot.png", "../outside.txt", "drives/x.png"]})
+    )
     (out / "old_plot.png").write_bytes(b"x")
     (out / "drives").mkdir()
     (out / "drives" / "x.png").write_bytes(b"x")
@@ -186,8 +202,10 @@ def test_every_drive_skipped_writes_the_report_and_fails(tmp_path, monkeypatch):
     from posbench.scoring.records import DriveRun
 
     def all_skipped(drives, cfg, *a, **k):
-        return [DriveRun(d.name, "synthetic", "", [], [], pd.DataFrame(), skipped="poor truth")
-                for d in drives]
+        return [
+            DriveRun(d.name, "synthetic", "", [], [], pd.DataFrame(), skipped="poor truth")
+            for d in drives
+        ]
 
     monkeypatch.setattr(ex, "run_drives", all_skipped)
     out = tmp_path / "o"
@@ -259,8 +277,19 @@ def test_report_formats_choose_the_table_files(tmp_path):
     """--table-format md,csv: report.md and tables/*.csv (no .tex); --table-format md: no tables/ at all;
     the CSV holds the interval bounds as numbers in their own columns."""
     out = tmp_path / "o"
-    r = bench("run", "-p", "cv,kf", "--out", str(out), "--workers", "1", "--table-format", "md,csv",
-              "--drive-plots", "0")
+    r = bench(
+        "run",
+        "-p",
+        "cv,kf",
+        "--out",
+        str(out),
+        "--workers",
+        "1",
+        "--table-format",
+        "md,csv",
+        "--drive-plots",
+        "0",
+    )
     assert r.returncode == 0, r.stderr
     csvs = sorted(p.name for p in (out / "tables").iterdir())
     assert "summary.csv" in csvs and all(n.endswith(".csv") for n in csvs), csvs
@@ -270,12 +299,25 @@ def test_report_formats_choose_the_table_files(tmp_path):
     lo = [c for c in summary.columns if "lo" in c and "future" in c.lower()]
     assert lo and pd.api.types.is_float_dtype(summary[lo[0]]), summary.columns
     out2 = tmp_path / "p"
-    r = bench("run", "-p", "cv", "--out", str(out2), "--workers", "1", "--table-format", "md",
-              "--drive-plots", "0")
+    r = bench(
+        "run",
+        "-p",
+        "cv",
+        "--out",
+        str(out2),
+        "--workers",
+        "1",
+        "--table-format",
+        "md",
+        "--drive-plots",
+        "0",
+    )
     assert r.returncode == 0, r.stderr
     assert (out2 / "report.md").is_file() and not (out2 / "tables").exists()
     bad = bench("run", "-p", "cv", "--out", str(tmp_path / "b"), "--table-format", "md,xlsx")
-    assert bad.returncode == 2 and bad.stderr.startswith("error: --table-format: unknown format 'xlsx'")
+    assert bad.returncode == 2 and bad.stderr.startswith(
+        "error: --table-format: unknown format 'xlsx'"
+    )
     assert not (tmp_path / "b").exists()
 
 
@@ -300,7 +342,9 @@ def test_tables_are_numeric_until_rendered(cv_kf_result, tmp_path):
     print_table(Console(file=buf, width=300), t.header(), t.cells())
     assert f"{res['predictors']['kf']['future']['mean_m']:.3f}" in buf.getvalue()
     csv = pd.read_csv(io.StringIO(label_table(res, "synthetic", "future").csv()))
-    assert csv.loc[4, "kf [cm]"] == pytest.approx(100 * res["by_dataset"]["synthetic"]["kf"]["future"]["mean_m"])
+    assert csv.loc[4, "kf [cm]"] == pytest.approx(
+        100 * res["by_dataset"]["synthetic"]["kf"]["future"]["mean_m"]
+    )
     assert csv.loc[4, "kf n"] == res["by_dataset"]["synthetic"]["kf"]["future"]["count"]
     tex = label_table(res, "synthetic", "future").latex()
     assert tex.startswith("\\begin{tabular}{l") and "Starting / stopping" in tex

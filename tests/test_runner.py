@@ -77,10 +77,12 @@ def line_drive(name: str = "line", seed: int = 0, n: int = 200) -> Drive:
     t = np.cumsum(rng.uniform(0.1, 0.4, n))
     imu_t = np.arange(t[0], t[-1], 0.02)
     sp_t = np.arange(t[0], t[-1], 0.05)
-    return Drive(DriveMeta(name, "mem", "test", projection="source"),
-                 GpsStream(t, 10.0 * t, np.zeros(n)),
-                 ImuStream(imu_t, np.zeros_like(imu_t), np.zeros_like(imu_t)),
-                 SpeedStream(sp_t, np.full_like(sp_t, 10.0)))
+    return Drive(
+        DriveMeta(name, "mem", "test", projection="source"),
+        GpsStream(t, 10.0 * t, np.zeros(n)),
+        ImuStream(imu_t, np.zeros_like(imu_t), np.zeros_like(imu_t)),
+        SpeedStream(sp_t, np.full_like(sp_t, 10.0)),
+    )
 
 
 def test_no_observation_after_query_time():

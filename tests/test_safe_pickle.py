@@ -32,14 +32,23 @@ def _marker_cmd(marker: Path) -> str:
 @pytest.mark.parametrize("protocol", [0, 2, 5])
 def test_numpy_and_containers_round_trip(protocol: int) -> None:
     obj = {
-        0: {"a": np.arange(12, dtype=np.float64).reshape(4, 3), "b": [1, 2, 3],
-            "c": ("1649851224769416716", 0.13, -0.15), "theta": -1.35},
+        0: {
+            "a": np.arange(12, dtype=np.float64).reshape(4, 3),
+            "b": [1, 2, 3],
+            "c": ("1649851224769416716", 0.13, -0.15),
+            "theta": -1.35,
+        },
         "ints": np.array([1649851224583364005, 1649851224680112130], dtype=np.int64),
         "f32": np.linspace(0, 1, 5, dtype=np.float32),
         "fortran": np.asfortranarray(np.arange(6.0).reshape(2, 3)),
-        "scalar": np.float64(2.5), "i32": np.int32(7),
+        "scalar": np.float64(2.5),
+        "i32": np.int32(7),
         "od": collections.OrderedDict([("x", 1), ("y", 2)]),
-        "set": {1, 2}, "fs": frozenset({3}), "cx": 1 + 2j, "none": None, "bytes": b"\x00\x01",
+        "set": {1, 2},
+        "fs": frozenset({3}),
+        "cx": 1 + 2j,
+        "none": None,
+        "bytes": b"\x00\x01",
     }
     got = safe_loads(pickle.dumps(obj, protocol=protocol), "mem")
     np.testing.assert_array_equal(got[0]["a"], obj[0]["a"])
@@ -79,8 +88,11 @@ def test_frombuffer_name_admitted() -> None:
 def test_os_system_refused_and_not_run(tmp_path: Path, protocol: int) -> None:
     marker = tmp_path / "pwned.txt"
     evil = tmp_path / "evil.pickle"
-    evil.write_bytes(pickle.dumps({"ok": np.zeros(3), "x": _Evil(os.system, _marker_cmd(marker))},
-                                  protocol=protocol))
+    evil.write_bytes(
+        pickle.dumps(
+            {"ok": np.zeros(3), "x": _Evil(os.system, _marker_cmd(marker))}, protocol=protocol
+        )
+    )
     with pytest.raises(DataError) as ei:
         safe_load(evil)
     msg = str(ei.value)
@@ -89,8 +101,9 @@ def test_os_system_refused_and_not_run(tmp_path: Path, protocol: int) -> None:
     assert not marker.exists()
 
 
-@pytest.mark.parametrize("func", [eval, exec, getattr, __import__, subprocess.Popen,
-                                  np.load, collections.namedtuple])
+@pytest.mark.parametrize(
+    "func", [eval, exec, getattr, __import__, subprocess.Popen, np.load, collections.namedtuple]
+)
 def test_other_callables_refused(tmp_path: Path, func: object) -> None:
     marker = tmp_path / "m"
     data = pickle.dumps(_Evil(func, f"open({str(marker)!r}, 'w')"), protocol=2)

@@ -106,14 +106,22 @@ def test_scoring_answers_from_a_file_equals_the_live_scoring():
     q = query_frame(prep, "now")
     res = replay(create("cv"), prep, cfg.horizon_s)
     live = score(q, "cv", res.now_xy)
-    answers = pd.DataFrame({"drive": d.name, "kind": "now", "t_query": q.t_query,
-                            "x": res.now_xy[:, 0], "y": res.now_xy[:, 1]})
+    answers = pd.DataFrame(
+        {
+            "drive": d.name,
+            "kind": "now",
+            "t_query": q.t_query,
+            "x": res.now_xy[:, 0],
+            "y": res.now_xy[:, 1],
+        }
+    )
     answers = answers.sample(frac=1.0, random_state=0).drop(index=answers.index[5])
     from_file = score(q, "cv", answers)
     assert np.isnan(from_file.error_m.iloc[5])
     keep = np.arange(len(q)) != 5
-    pd.testing.assert_frame_equal(from_file[keep].reset_index(drop=True),
-                                  live[keep].reset_index(drop=True))
+    pd.testing.assert_frame_equal(
+        from_file[keep].reset_index(drop=True), live[keep].reset_index(drop=True)
+    )
     with pytest.raises(ValueError, match="two answers"):
         score(q, "cv", pd.concat([answers, answers.iloc[:1]]))
 
@@ -130,8 +138,7 @@ def test_runner_traces_are_the_scoring_of_its_answers():
 #: BLAS may differ in the last bits across CPUs, hence a relative tolerance
 GOLDEN_RTOL = 1e-6
 GOLDEN_ATOL_M = 1e-9
-NOT_COMPARED = {"command", "versions", "git_commit", "outputs", "paper_figures",
-                "schema_version"}
+NOT_COMPARED = {"command", "versions", "git_commit", "outputs", "paper_figures", "schema_version"}
 
 
 def _minor(res: dict) -> int:
@@ -170,20 +177,27 @@ def test_golden_synthetic_run_equals_the_committed_report(tmp_path):
     args = golden.results["command"].split()[2:]  # "bench run ..." as recorded
     out_i = args.index("--out")
     args[out_i + 1] = str(tmp_path / "o")
-    r = subprocess.run([sys.executable, "-m", "posbench", "run", *args], capture_output=True,
-                       text=True, timeout=900, env={**os.environ, "COLUMNS": "200"})
+    r = subprocess.run(
+        [sys.executable, "-m", "posbench", "run", *args],
+        capture_output=True,
+        text=True,
+        timeout=900,
+        env={**os.environ, "COLUMNS": "200"},
+    )
     assert r.returncode == 0, r.stderr
     fresh = load_run(tmp_path / "o")
     validate(fresh.results)
     assert _minor(fresh.results) >= _minor(golden.results)
-    diffs = list(_compare(fresh.results, golden.results,
-                          added_ok=_minor(fresh.results) > _minor(golden.results)))
+    diffs = list(
+        _compare(
+            fresh.results, golden.results, added_ok=_minor(fresh.results) > _minor(golden.results)
+        )
+    )
     assert not diffs, "\n".join(diffs[:20])
 
 
-@pytest.mark.parametrize("name", ["synthetic", "kitti", "all-data", "outages", "aslan-gate",
-                                  "aslan-no-gate"])
+@pytest.mark.parametrize(
+    "name", ["synthetic", "kitti", "all-data", "outages", "aslan-gate", "aslan-no-gate"]
+)
 def test_committed_reports_follow_the_schema(name):
     validate(load_run(ROOT / "reports" / name).results)
-
-

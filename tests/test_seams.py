@@ -118,7 +118,7 @@ def test_last_step_is_the_step_behind_the_future_answer(prepared) -> None:
         assert step.grid.shape == (8, 2) and step.pred.shape == (2,)
         # the future answer is the cubic through exactly these 8 inputs and the prediction
         cf = final.fit(np.vstack([step.grid, step.pred]))
-        want = cf[0] + cf[1] * DT + cf[2] * DT ** 2 + cf[3] * DT ** 3
+        want = cf[0] + cf[1] * DT + cf[2] * DT**2 + cf[3] * DT**3
         got = p.position_at(t + DT)
         np.testing.assert_allclose(got, want, atol=1e-9)
         assert np.hypot(*(np.asarray(got) - step.pred)) < 0.05  # and it is near the prediction
@@ -175,15 +175,24 @@ def _model_copy(tmp_path: Path, train_drives: list[str]) -> Path:
 
 def test_learned_models_asks_the_predictors(tmp_path) -> None:
     model = _model_copy(tmp_path, ["a", "b"])
-    cfg = RunConfig(predictors=("cv", "lstm", "lstm@mine"),
-                    predictor_options={"lstm@mine": {"model": str(model)}})
+    cfg = RunConfig(
+        predictors=("cv", "lstm", "lstm@mine"),
+        predictor_options={"lstm@mine": {"model": str(model)}},
+    )
     out = learned_models(cfg)
     bundled = list(LstmPredictor().training_drives())
     assert out == {
-        "lstm": {"model": "bundled (predictors/lstm/bundled/model.onnx)", "bundled": True,
-                 "train_drives": bundled},
-        "lstm@mine": {"model": str(model / "model.onnx"), "bundled": False,
-                      "train_drives": ["a", "b"]}}
+        "lstm": {
+            "model": "bundled (predictors/lstm/bundled/model.onnx)",
+            "bundled": True,
+            "train_drives": bundled,
+        },
+        "lstm@mine": {
+            "model": str(model / "model.onnx"),
+            "bundled": False,
+            "train_drives": ["a", "b"],
+        },
+    }
 
 
 class Learned(Predictor):

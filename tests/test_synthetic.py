@@ -128,7 +128,7 @@ def test_gps_within_noise_and_fix_intervals(drives: list[Drive]) -> None:
         tx, ty = interpolate_truth(d.truth, g.t)
         err = np.hypot(g.x - tx, g.y - ty)
         assert err.max() < 0.5
-        assert 0.02 < np.sqrt(np.mean(err ** 2)) < 0.2
+        assert 0.02 < np.sqrt(np.mean(err**2)) < 0.2
         dt = np.diff(g.t)
         assert dt.min() >= 0.1 - 1e-9
         long_gaps = dt > 0.6 + 1e-6
@@ -173,8 +173,9 @@ def test_duration_cut_and_extend() -> None:
 
 
 def test_simulate_custom_route_segments_in_order() -> None:
-    sim = simulate([straight(100, 12), turn(90, 12, 6), straight(50, 10), stop(5),
-                    straight(50, 10)])
+    sim = simulate(
+        [straight(100, 12), turn(90, 12, 6), straight(50, 10), stop(5), straight(50, 10)]
+    )
     labels = [s[0] for s in sim.segments]
     assert labels == ["straight", "turn", "straight", "start_stop", "straight"]
     starts = [s[1] for s in sim.segments]

@@ -13,8 +13,10 @@ from rich.console import Console
 
 from posbench.cli.terminal import column_widths, print_table, split_columns, table_width
 
-HEADER = ["predictor", *(f"{m} {q} [m]" for m in ("along", "cross", "total")
-                         for q in ("p50", "p90", "p99", "max"))]
+HEADER = [
+    "predictor",
+    *(f"{m} {q} [m]" for m in ("along", "cross", "total") for q in ("p50", "p90", "p99", "max")),
+]
 
 
 def numeric_rows() -> list[list[str]]:
@@ -109,8 +111,13 @@ def test_inspect_at_100_columns_cuts_nothing() -> None:
     from posbench.scenarios.synthetic import default_drives
 
     env = {**os.environ, "COLUMNS": "100"}
-    r = subprocess.run([sys.executable, "-m", "posbench", "data", "inspect"], capture_output=True,
-                       text=True, env=env, timeout=300)
+    r = subprocess.run(
+        [sys.executable, "-m", "posbench", "data", "inspect"],
+        capture_output=True,
+        text=True,
+        env=env,
+        timeout=300,
+    )
     assert r.returncode == 0, r.stderr
     lines = r.stdout.splitlines()
     assert "…" not in r.stdout and max(len(line) for line in lines) <= 100

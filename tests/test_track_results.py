@@ -45,8 +45,12 @@ def test_results_block_matches_the_traces(drive):
     for c in ("along_m", "cross_m", "heading_ref", "yaw_rate_ref"):
         assert c in traces
     both = traces[["along_m", "cross_m"]].notna().all(axis=1)
-    np.testing.assert_allclose(np.hypot(traces.along_m[both], traces.cross_m[both]),
-                               traces.error_m[both], rtol=1e-9, atol=1e-12)
+    np.testing.assert_allclose(
+        np.hypot(traces.along_m[both], traces.cross_m[both]),
+        traces.error_m[both],
+        rtol=1e-9,
+        atol=1e-12,
+    )
     res = build_results(runs, cfg, [], "test", traces=traces)
     block = res["track_errors"]
     scored = ~traces.warmup & traces.x_ref.notna()
@@ -54,14 +58,18 @@ def test_results_block_matches_the_traces(drive):
         for k in ("future", "now"):
             m = scored & (traces.predictor == p) & (traces.kind == k)
             g = traces[m]
-            want = track_summary(g.along_m, g.cross_m, inward_cross(g.cross_m, g.yaw_rate_ref),
-                                 g.error_m)
+            want = track_summary(
+                g.along_m, g.cross_m, inward_cross(g.cross_m, g.yaw_rate_ref), g.error_m
+            )
             assert block["predictors"][p][k] == pytest.approx(want, nan_ok=True)
-            assert block["predictors"][p][k]["count"] + block["predictors"][p][k][
-                "standstill"] == res["predictors"][p][k]["count"]
+            assert (
+                block["predictors"][p][k]["count"] + block["predictors"][p][k]["standstill"]
+                == res["predictors"][p][k]["count"]
+            )
             turns = block["by_label"][p][k]["turn"]
-            assert turns["count"] == int((m & (traces.label == "turn") & g.reindex(
-                traces.index).along_m.notna()).sum())
+            assert turns["count"] == int(
+                (m & (traces.label == "turn") & g.reindex(traces.index).along_m.notna()).sum()
+            )
     # constant velocity runs wide in turns (its straight extrapolation leaves the curve)
     assert block["predictors"]["cv"]["future"]["inward_mean_m"] < 0
     table = track_table(res).markdown()

@@ -19,8 +19,9 @@ WIDTH = 100
 
 
 def train_cli(out: Path, *args: str) -> str:
-    r = CliRunner().invoke(app, ["train", "--synthetic", "2", "--out", str(out), *args],
-                           env={"COLUMNS": str(WIDTH)})
+    r = CliRunner().invoke(
+        app, ["train", "--synthetic", "2", "--out", str(out), *args], env={"COLUMNS": str(WIDTH)}
+    )
     assert r.exit_code == 0, r.output
     return r.output
 
@@ -38,25 +39,37 @@ def test_train_ends_with_summary_table(tmp_path) -> None:
     assert "2 of 2" in out and "early stop at" not in out
     rows = {line.split("│")[1].strip(): line for line in lines if line.startswith("│")}
     assert rows["early stopping"].split("│")[2].strip() == (
-        f"no (patience {js['training']['early_stopping_patience']})")
+        f"no (patience {js['training']['early_stopping_patience']})"
+    )
     assert rows["train"].split("│")[3].strip() == str(len(js["data"]["train_drives"]))
     assert str(js["data"]["val_windows"]) in rows["validation"]
     cells = [[c.strip() for c in line.split("│")[1:-1]] for line in lines if line.startswith("│")]
-    for key, label in (("lstm", "lstm (this model)"), ("cubic", "cubic extrapolation"),
-                       ("cv", "constant velocity")):
+    for key, label in (
+        ("lstm", "lstm (this model)"),
+        ("cubic", "cubic extrapolation"),
+        ("cv", "constant velocity"),
+    ):
         e = js["validation"]["all"][key]
-        assert [label, str(e["n"]), f"{e['mean_m']:.3f}", f"{e['p50_m']:.3f}",
-                f"{e['p95_m']:.3f}"] in cells
+        assert [
+            label,
+            str(e["n"]),
+            f"{e['mean_m']:.3f}",
+            f"{e['p50_m']:.3f}",
+            f"{e['p95_m']:.3f}",
+        ] in cells
 
 
 def test_early_stop_is_announced(tmp_path, monkeypatch) -> None:
     # lr 0: the weights never change, so the validation loss cannot improve after epoch 1
-    monkeypatch.setattr(lstm_train, "run_training",
-                        functools.partial(lstm_train.run_training, patience=1, lr=0.0,
-                                          timing_calls=50))
+    monkeypatch.setattr(
+        lstm_train,
+        "run_training",
+        functools.partial(lstm_train.run_training, patience=1, lr=0.0, timing_calls=50),
+    )
     out = train_cli(tmp_path, "--epochs", "5")
-    assert ("early stop at epoch 2: validation loss did not improve for 1 epoch (best epoch 1)"
-            in out)
+    assert (
+        "early stop at epoch 2: validation loss did not improve for 1 epoch (best epoch 1)" in out
+    )
     js = json.loads((tmp_path / "model.json").read_text())
     assert js["training"]["epochs_run"] == 2 and js["training"]["best_epoch"] == 1
     assert "2 of 5" in out

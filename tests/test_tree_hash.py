@@ -25,8 +25,15 @@ def pathlib_hash(path: Path) -> dict:
 def test_tree_hash_matches_the_pathlib_reference(tmp_path: Path) -> None:
     root = tmp_path / "data"
     # "a-b" sorts before "a/..." as a string but after it part by part ("a" < "a-b")
-    for rel, text in {"a-b": "1", "a/b": "2", "a/c/d.bin": "3" * 3_000_000, "A": "",
-                      ".hidden": "h", "z/a.txt": "z", "a0/x": "x"}.items():
+    for rel, text in {
+        "a-b": "1",
+        "a/b": "2",
+        "a/c/d.bin": "3" * 3_000_000,
+        "A": "",
+        ".hidden": "h",
+        "z/a.txt": "z",
+        "a0/x": "x",
+    }.items():
         f = root / rel
         f.parent.mkdir(parents=True, exist_ok=True)
         f.write_text(text)

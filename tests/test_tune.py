@@ -7,8 +7,9 @@ from posbench.scenarios.synthetic import generate_drive
 def test_grid_search_prefers_matching_fix_noise():
     # rtk fixes state 0.02 m: R = (scale * 0.02)^2, so scale 1 matches the noise, 150 (3 m) not
     drives = [generate_drive(seed=1001, route="turns", duration_s=40)]
-    best, trials = grid_search("kf", drives, "rtk",
-                               {"gps_sigma_scale": [1.0, 150.0], "jerk_psd": [32.0]}, workers=1)
+    best, trials = grid_search(
+        "kf", drives, "rtk", {"gps_sigma_scale": [1.0, 150.0], "jerk_psd": [32.0]}, workers=1
+    )
     assert len(trials) == 2
     scores = {t[0]["gps_sigma_scale"]: t[1] for t in trials}
     assert best["gps_sigma_scale"] == 1.0 and scores[1.0] < scores[150.0]
@@ -40,8 +41,12 @@ def test_calibration_makes_95_percent_of_the_development_ellipses_cover():
     for name, params in (("kf", {"gps_sigma_scale": 3.0, "jerk_psd": 32.0}), ("cv", {})):
         k = calibrate(name, drives, "consumer", params, workers=1)
         assert np.isfinite(k) and k > 0
-        cfg = RunConfig(predictors=(name,), gps_profile="consumer",
-                        predictor_options={name: {**params, "cov_scale": k}}, use_tuned=False)
+        cfg = RunConfig(
+            predictors=(name,),
+            gps_profile="consumer",
+            predictor_options={name: {**params, "cov_scale": k}},
+            use_tuned=False,
+        )
         t = run(drives, cfg, workers=1)[0].traces
         t = t[scored_mask(t)]
         err = t[["x", "y"]].to_numpy(float) - t[["x_ref", "y_ref"]].to_numpy(float)

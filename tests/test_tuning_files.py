@@ -46,8 +46,13 @@ class HoldLast(Predictor):
 
 
 def bench(*args: str, cwd: Path = ROOT) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "posbench", *args], capture_output=True,
-                          text=True, cwd=cwd, timeout=600)
+    return subprocess.run(
+        [sys.executable, "-m", "posbench", *args],
+        capture_output=True,
+        text=True,
+        cwd=cwd,
+        timeout=600,
+    )
 
 
 def sha256(path: Path) -> str:
@@ -57,15 +62,41 @@ def sha256(path: Path) -> str:
 def test_tune_out_round_trip_leaves_the_package_tuning_alone(tmp_path, comma_dir):
     before = sha256(TUNED_FILE)
     mine = tmp_path / "my-tuning.json"
-    r = bench("tune", "kf", "--gps-profile", "native", "--calibrate-only", "--data",
-              str(comma_dir), "--out", str(mine), "--workers", "1")
+    r = bench(
+        "tune",
+        "kf",
+        "--gps-profile",
+        "native",
+        "--calibrate-only",
+        "--data",
+        str(comma_dir),
+        "--out",
+        str(mine),
+        "--workers",
+        "1",
+    )
     assert r.returncode == 0, r.stderr
     assert sha256(TUNED_FILE) == before
     entry = json.loads(mine.read_text())["kf"]["native"]
     assert entry["params"]["cov_scale"] > 0 and entry["drives"] and "bench tune kf" in entry["how"]
     out = tmp_path / "run"
-    r = bench("run", "-p", "cv,kf", "--data", str(comma_dir), "--gps-profile", "native",
-              "--tuning", str(mine), "--out", str(out), "--workers", "1", "--drive-plots", "0")
+    r = bench(
+        "run",
+        "-p",
+        "cv,kf",
+        "--data",
+        str(comma_dir),
+        "--gps-profile",
+        "native",
+        "--tuning",
+        str(mine),
+        "--out",
+        str(out),
+        "--workers",
+        "1",
+        "--drive-plots",
+        "0",
+    )
     assert r.returncode == 0, r.stderr
     assert sha256(TUNED_FILE) == before
     res = json.loads((out / "results.json").read_text())
@@ -104,8 +135,18 @@ def test_a_bad_tuning_file_is_one_error_line(tmp_path):
 def test_sanity_names_a_plugin_that_loses_to_cv(tmp_path):
     (tmp_path / "hold.py").write_text(HOLD)
     out = tmp_path / "run"
-    r = bench("run", "-p", "cv,kf,hold:HoldLast", "--out", str(out), "--workers", "1",
-              "--drive-plots", "0", cwd=tmp_path)
+    r = bench(
+        "run",
+        "-p",
+        "cv,kf,hold:HoldLast",
+        "--out",
+        str(out),
+        "--workers",
+        "1",
+        "--drive-plots",
+        "0",
+        cwd=tmp_path,
+    )
     assert r.returncode == 0, r.stderr
     res = json.loads((out / "results.json").read_text())
     losses = res["sanity"]["losses"]
@@ -114,5 +155,9 @@ def test_sanity_names_a_plugin_that_loses_to_cv(tmp_path):
     assert fut["dataset"] == "synthetic" and fut["diff_m"] > 0 and fut["ci95"][0] > 0
     assert fut["queries"] == res["predictors"]["cv"]["future"]["count"]
     line = next(x for x in r.stderr.splitlines() if "loses to constant velocity" in x)
-    assert line.startswith("warning: hold:HoldLast loses to constant velocity on synthetic: future +")
-    assert "hold:HoldLast loses to constant velocity on synthetic" in (out / "report.md").read_text()
+    assert line.startswith(
+        "warning: hold:HoldLast loses to constant velocity on synthetic: future +"
+    )
+    assert (
+        "hold:HoldLast loses to constant velocity on synthetic" in (out / "report.md").read_text()
+    )

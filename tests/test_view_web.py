@@ -45,14 +45,15 @@ def test_web_port_and_data_port():
 def test_viewer_url_is_what_rerun_prints_with_webgl():
     # rerun 0.41 prints http://127.0.0.1:9090?url=rerun%2Bhttp%3A%2F%2Flocalhost%3A9876%2Fproxy
     assert rerun_web.viewer_url(9090, 9091) == (
-        "http://127.0.0.1:9090/?url=rerun%2Bhttp%3A%2F%2F127.0.0.1%3A9091%2Fproxy"
-        "&renderer=webgl")
+        "http://127.0.0.1:9090/?url=rerun%2Bhttp%3A%2F%2F127.0.0.1%3A9091%2Fproxy&renderer=webgl"
+    )
     assert rerun_web.viewer_url(8000, 8001, renderer=None).endswith("%3A8001%2Fproxy")
 
 
 def test_ssh_line_forwards_both_ports():
     assert rerun_web.ssh_forward_command(9090, 9091, "gpu-box") == (
-        "ssh -L 9090:localhost:9090 -L 9091:localhost:9091 gpu-box")
+        "ssh -L 9090:localhost:9090 -L 9091:localhost:9091 gpu-box"
+    )
 
 
 def test_server_command_listens_locally_with_webgl(tmp_path):
@@ -131,11 +132,20 @@ def fake_rerun(tmp_path: Path, mode: str = "serve") -> tuple[dict[str, str], Pat
 
 
 def start_view(rrd: Path, port: int, env: dict[str, str]) -> subprocess.Popen:
-    base = {**os.environ, "COLUMNS": "200", **env,
-            "PYTHONPATH": os.pathsep.join(filter(None, [str(ROOT), os.environ.get("PYTHONPATH")]))}
-    return subprocess.Popen([sys.executable, "-m", "posbench", "view", str(rrd), "--web",
-                             "--port", str(port)], stdout=subprocess.PIPE,
-                            stderr=subprocess.PIPE, text=True, env=base, cwd=ROOT)
+    base = {
+        **os.environ,
+        "COLUMNS": "200",
+        **env,
+        "PYTHONPATH": os.pathsep.join(filter(None, [str(ROOT), os.environ.get("PYTHONPATH")])),
+    }
+    return subprocess.Popen(
+        [sys.executable, "-m", "posbench", "view", str(rrd), "--web", "--port", str(port)],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        env=base,
+        cwd=ROOT,
+    )
 
 
 def cleanup(proc: subprocess.Popen, note: Path | None = None) -> None:
@@ -184,8 +194,10 @@ def read_until(proc: subprocess.Popen, prefix: str, timeout_s: float = 60.0) -> 
         lines.append(line)
         if line.startswith(prefix):
             return lines
-    raise AssertionError(f"no {prefix!r} line in {lines}; stderr: "
-                         f"{proc.stderr.read() if proc.poll() is not None else '(running)'}")
+    raise AssertionError(
+        f"no {prefix!r} line in {lines}; stderr: "
+        f"{proc.stderr.read() if proc.poll() is not None else '(running)'}"
+    )
 
 
 def test_web_serves_prints_the_url_and_stops_cleanly_on_ctrl_c(tmp_path):
@@ -255,8 +267,7 @@ def test_web_server_that_fails_to_start_is_one_error_line(tmp_path):
     rrd.write_bytes(b"RRF2")
     env, _ = fake_rerun(tmp_path, mode="fail")
     r = bench("view", str(rrd), "--web", "--port", str(free_port_pair()), env=env)
-    assert_one_error_line(r, "the rerun web server exited with status 1",
-                          "Address already in use")
+    assert_one_error_line(r, "the rerun web server exited with status 1", "Address already in use")
 
 
 def test_web_server_that_dies_while_serving_is_one_error_line(tmp_path):
@@ -268,12 +279,15 @@ def test_web_server_that_dies_while_serving_is_one_error_line(tmp_path):
     assert "open: " in r.stdout  # it did come up before it died
 
 
-@pytest.mark.parametrize(("args", "needle"), [
-    (["--port", "9090"], "--port is the web viewer's port: use it with --web"),
-    (["--web", "--port", "0"], "--port must be a TCP port from 1 to 65534"),
-    (["--web", "--port", "65535"], "--port must be a TCP port from 1 to 65534"),
-    (["--web", "--port", "x"], "--port"),
-])
+@pytest.mark.parametrize(
+    ("args", "needle"),
+    [
+        (["--port", "9090"], "--port is the web viewer's port: use it with --web"),
+        (["--web", "--port", "0"], "--port must be a TCP port from 1 to 65534"),
+        (["--web", "--port", "65535"], "--port must be a TCP port from 1 to 65534"),
+        (["--web", "--port", "x"], "--port"),
+    ],
+)
 def test_bad_port_options_are_one_error_line(tmp_path, args, needle):
     rrd = tmp_path / "run.rrd"
     rrd.write_bytes(b"RRF2")

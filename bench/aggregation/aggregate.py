@@ -36,12 +36,23 @@ from posbench.scoring.records import DriveRun, all_traces
 from posbench.scoring.schema import KINDS, scored_mask
 
 #: the trace columns aggregation reads (positions are not needed once errors exist)
-AGGREGATED = ("dataset", "drive", "predictor", "kind", "t_query", "error_m", "label", "speed_mps",
-              "since_fix_s", "outage")
+AGGREGATED = (
+    "dataset",
+    "drive",
+    "predictor",
+    "kind",
+    "t_query",
+    "error_m",
+    "label",
+    "speed_mps",
+    "since_fix_s",
+    "outage",
+)
 
 
-def excluded_summary(traces: pd.DataFrame, preds: Sequence[str],
-                     stats: Statistics | None = None) -> dict[str, Any]:
+def excluded_summary(
+    traces: pd.DataFrame, preds: Sequence[str], stats: Statistics | None = None
+) -> dict[str, Any]:
     """What the headline figures leave out, per predictor and kind: warm-up queries (with
     their error summaries, and intervals given ``stats``) and queries without a reference
     (beyond the truth's or the fixes' span: nothing to score against)."""
@@ -53,8 +64,9 @@ def excluded_summary(traces: pd.DataFrame, preds: Sequence[str],
     for name in preds:
         mine = traces["predictor"] == name
         out["warmup"][name] = _kind_summaries(_with_codes(traces[mine & warm & ~no_ref]), stats)
-        out["no_reference"][name] = {k: int((mine & no_ref & (traces["kind"] == k)).sum())
-                                     for k in KINDS}
+        out["no_reference"][name] = {
+            k: int((mine & no_ref & (traces["kind"] == k)).sum()) for k in KINDS
+        }
     return out
 
 
@@ -66,8 +78,12 @@ def _with_codes(df: pd.DataFrame) -> pd.DataFrame:
 def _columns(df: pd.DataFrame, kind: str) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Errors [m], drive codes, query times [s] and the row mask of one kind's rows."""
     m = (df["kind"] == kind).to_numpy()
-    return (df["error_m"].to_numpy(dtype=float)[m], df["code"].to_numpy()[m],
-            df["t_query"].to_numpy(dtype=float)[m], m)
+    return (
+        df["error_m"].to_numpy(dtype=float)[m],
+        df["code"].to_numpy()[m],
+        df["t_query"].to_numpy(dtype=float)[m],
+        m,
+    )
 
 
 def _kind_summaries(df: pd.DataFrame, stats: Statistics | None = None) -> dict[str, Any]:
@@ -77,8 +93,14 @@ def _kind_summaries(df: pd.DataFrame, stats: Statistics | None = None) -> dict[s
         return {k: summarize(df.loc[df["kind"] == k, "error_m"].to_numpy()) for k in KINDS}
     kind = df["kind"].to_numpy()
     out = {k: summarize(df["error_m"].to_numpy(dtype=float)[kind == k]) for k in KINDS}
-    add_group_cis(out, df["error_m"].to_numpy(dtype=float), kind, df["code"].to_numpy(),
-                  df["t_query"].to_numpy(dtype=float), stats)
+    add_group_cis(
+        out,
+        df["error_m"].to_numpy(dtype=float),
+        kind,
+        df["code"].to_numpy(),
+        df["t_query"].to_numpy(dtype=float),
+        stats,
+    )
     return out
 
 
@@ -90,21 +112,34 @@ def _label_summaries(df: pd.DataFrame, stats: Statistics | None = None) -> dict[
         labels = df["label"].to_numpy()[m]
         out[kind] = summarize_groups(e, labels, order=list(LABELS))
         if stats is not None:
-            add_group_cis(out[kind], e, labels, df["code"].to_numpy()[m],
-                          df["t_query"].to_numpy(dtype=float)[m], stats)
+            add_group_cis(
+                out[kind],
+                e,
+                labels,
+                df["code"].to_numpy()[m],
+                df["t_query"].to_numpy(dtype=float)[m],
+                stats,
+            )
     return out
 
 
-def _per_drive(df: pd.DataFrame, name: str, per_drive: dict[tuple[str, str], dict[str, Any]],
-               queries: dict[tuple[str, str, str], dict[str, tuple[np.ndarray, np.ndarray]]]
-               ) -> None:
+def _per_drive(
+    df: pd.DataFrame,
+    name: str,
+    per_drive: dict[tuple[str, str], dict[str, Any]],
+    queries: dict[tuple[str, str, str], dict[str, tuple[np.ndarray, np.ndarray]]],
+) -> None:
     """Each drive's summaries of predictor ``name`` (``df``: its scored rows with ``code``)
     into ``per_drive[(dataset, drive)][name]``, and each drive's errors and query times per
     kind into ``queries[(dataset, drive, kind)][name]`` (for the intervals, drive by drive)."""
     first = df.drop_duplicates("code")
-    keys = dict(zip(first["code"].to_numpy(), zip(first["dataset"].astype(str),
-                                                  first["drive"].astype(str), strict=True),
-                    strict=True))
+    keys = dict(
+        zip(
+            first["code"].to_numpy(),
+            zip(first["dataset"].astype(str), first["drive"].astype(str), strict=True),
+            strict=True,
+        )
+    )
     for key in keys.values():
         per_drive.setdefault(key, {})[name] = {k: summarize(np.empty(0)) for k in KINDS}
     for k in KINDS:
@@ -113,7 +148,7 @@ def _per_drive(df: pd.DataFrame, name: str, per_drive: dict[tuple[str, str], dic
         present, starts, counts = np.unique(codes[order], return_index=True, return_counts=True)
         for code, a, n in zip(present.tolist(), starts.tolist(), counts.tolist(), strict=True):
             ds, drive = keys[code]
-            idx = order[a:a + n]
+            idx = order[a : a + n]
             per_drive[(ds, drive)][name][k] = summarize(e[idx])
             queries.setdefault((ds, drive, k), {})[name] = (e[idx], t[idx])
 
@@ -123,9 +158,14 @@ def _empty_kinds(stats: Statistics | None = None) -> dict[str, Any]:
     return {k: with_ci(summarize(empty), empty, empty, None, stats) for k in KINDS}
 
 
-def aggregate(runs: Sequence[DriveRun], cfg: RunConfig, *,
-              models: Mapping[str, Mapping[str, Any]], traces: pd.DataFrame | None = None,
-              statistics: Statistics | None = None) -> dict[str, Any]:
+def aggregate(
+    runs: Sequence[DriveRun],
+    cfg: RunConfig,
+    *,
+    models: Mapping[str, Mapping[str, Any]],
+    traces: pd.DataFrame | None = None,
+    statistics: Statistics | None = None,
+) -> dict[str, Any]:
     """The figures of ``results.json``, from its key ``predictors`` on (``traces``:
     :func:`all_traces` if already made; ``models``: the learned models behind the
     predictors, per name ``{"model", "bundled", "train_drives"}``, ``{}`` for none, e.g.
@@ -157,18 +197,26 @@ def aggregate(runs: Sequence[DriveRun], cfg: RunConfig, *,
     trained_on = {n for names in res["training_drives"].values() for n in names}
     keep = scored_mask(traces)
     cols = [c for c in AGGREGATED if c in traces.columns] if not traces.empty else list(AGGREGATED)
-    scored_pairs = (traces.loc[keep, ["dataset", "drive"]].drop_duplicates() if not traces.empty
-                    else pd.DataFrame(columns=["dataset", "drive"]))
+    scored_pairs = (
+        traces.loc[keep, ["dataset", "drive"]].drop_duplicates()
+        if not traces.empty
+        else pd.DataFrame(columns=["dataset", "drive"])
+    )
     datasets = sorted(set(scored_pairs["dataset"].astype(str)))
-    drives_of = {ds: set(scored_pairs.loc[scored_pairs["dataset"].astype(str) == ds, "drive"]
-                         .astype(str)) for ds in datasets}
+    drives_of = {
+        ds: set(scored_pairs.loc[scored_pairs["dataset"].astype(str) == ds, "drive"].astype(str))
+        for ds in datasets
+    }
     all_drives = set().union(*drives_of.values()) if drives_of else set()
     with_outages = not traces.empty and bool((traces.loc[keep, "outage"] >= 0).any())
     held_ds = [ds for ds in datasets if drives_of[ds] & trained_on]
     for ds in held_ds:
-        res["held_out"][ds] = {"drives": sorted(drives_of[ds] - trained_on),
-                               "excluded_training_drives": sorted(drives_of[ds] & trained_on),
-                               "predictors": {}, "by_label": {}}
+        res["held_out"][ds] = {
+            "drives": sorted(drives_of[ds] - trained_on),
+            "excluded_training_drives": sorted(drives_of[ds] & trained_on),
+            "predictors": {},
+            "by_label": {},
+        }
     held_all = bool(all_drives & trained_on) and bool(all_drives - trained_on)
     if held_all:
         res["held_out_all"] = {"drives": sorted(all_drives - trained_on), "predictors": {}}
@@ -189,8 +237,12 @@ def aggregate(runs: Sequence[DriveRun], cfg: RunConfig, *,
     for name in preds:
         df = base_df if name == stats.baseline else scored_rows(name)
         entry = _kind_summaries(df, stats) if not df.empty else _empty_kinds(stats)
-        steps = np.concatenate([r.step_ns[name] for r in runs if name in r.step_ns] or [np.empty(0)])
-        queries = np.concatenate([r.query_ns[name] for r in runs if name in r.query_ns] or [np.empty(0)])
+        steps = np.concatenate(
+            [r.step_ns[name] for r in runs if name in r.step_ns] or [np.empty(0)]
+        )
+        queries = np.concatenate(
+            [r.query_ns[name] for r in runs if name in r.query_ns] or [np.empty(0)]
+        )
         entry["latency_us"] = latency_summary(steps)
         entry["query_us"] = latency_summary(queries)
         covs = [r.cov_ns[name] for r in runs if name in getattr(r, "cov_ns", {})]
@@ -221,11 +273,20 @@ def aggregate(runs: Sequence[DriveRun], cfg: RunConfig, *,
                 res["paired"]["by_dataset"].setdefault(ds, {})[name] = pr["by_dataset"][ds]
                 res["paired"]["by_label"].setdefault(ds, {})[name] = pr["by_label"][ds]
             if held_all or held_ds:  # the same comparison without the training drives
-                ph = paired_results(df[~df["drive"].isin(trained_on)],
-                                    base_df[~base_df["drive"].isin(trained_on)], held_ds, stats)
+                ph = paired_results(
+                    df[~df["drive"].isin(trained_on)],
+                    base_df[~base_df["drive"].isin(trained_on)],
+                    held_ds,
+                    stats,
+                )
                 held = res["paired"].setdefault(
-                    "held_out", {"drives": sorted(all_drives - trained_on), "overall": {},
-                                 "by_dataset": {ds: {} for ds in held_ds}})
+                    "held_out",
+                    {
+                        "drives": sorted(all_drives - trained_on),
+                        "overall": {},
+                        "by_dataset": {ds: {} for ds in held_ds},
+                    },
+                )
                 held["overall"][name] = ph["overall"]
                 for ds in held_ds:
                     held["by_dataset"][ds][name] = ph["by_dataset"][ds]
@@ -240,7 +301,8 @@ def aggregate(runs: Sequence[DriveRun], cfg: RunConfig, *,
                 res["held_out"][ds]["by_label"][name] = _label_summaries(held, stats)
         if held_all:
             res["held_out_all"]["predictors"][name] = _kind_summaries(
-                df[~df["drive"].isin(trained_on)], stats)
+                df[~df["drive"].isin(trained_on)], stats
+            )
         if not df.empty:
             _per_drive(df, name, per_drive, drive_queries)
         del df, groups
@@ -259,11 +321,16 @@ def aggregate(runs: Sequence[DriveRun], cfg: RunConfig, *,
     pairs = {ds: {(ds, d) for d in drives_of[ds]} for ds in datasets}
     one_drive = [(res["predictors"], set().union(*pairs.values()) if pairs else set())]
     one_drive += [(res["by_dataset"][ds], pairs[ds]) for ds in datasets]
-    one_drive += [(h["predictors"], {(ds, d) for d in h["drives"]})
-                  for ds, h in res["held_out"].items()]
+    one_drive += [
+        (h["predictors"], {(ds, d) for d in h["drives"]}) for ds, h in res["held_out"].items()
+    ]
     if held_all:
-        one_drive.append((res["held_out_all"]["predictors"],
-                          {p for ds in datasets for p in pairs[ds] if p[1] not in trained_on}))
+        one_drive.append(
+            (
+                res["held_out_all"]["predictors"],
+                {p for ds in datasets for p in pairs[ds] if p[1] not in trained_on},
+            )
+        )
     for summaries, drives in one_drive:
         if len(drives) == 1 and next(iter(drives)) in per_drive:
             mine = per_drive[next(iter(drives))]
@@ -272,14 +339,20 @@ def aggregate(runs: Sequence[DriveRun], cfg: RunConfig, *,
                     if name in mine and "ci95" in kinds.get(k, {}):
                         kinds[k]["ci95"] = dict(mine[name][k]["ci95"])
     for r in runs:
-        d: dict[str, Any] = {"name": r.name, "dataset": r.dataset, "reference": r.reference,
-                             "gps_condition": r.gps_condition,
-                             "duration_s": r.duration_s, "gps_fed": r.gps_count,
-                             "notes": r.notes, "warnings": r.warnings, "skipped": r.skipped,
-                             "trained_on": [n for n, names in res["training_drives"].items()
-                                            if r.name in names],
-                             "rejected": dict(r.rejected),
-                             "predictors": {}}
+        d: dict[str, Any] = {
+            "name": r.name,
+            "dataset": r.dataset,
+            "reference": r.reference,
+            "gps_condition": r.gps_condition,
+            "duration_s": r.duration_s,
+            "gps_fed": r.gps_count,
+            "notes": r.notes,
+            "warnings": r.warnings,
+            "skipped": r.skipped,
+            "trained_on": [n for n, names in res["training_drives"].items() if r.name in names],
+            "rejected": dict(r.rejected),
+            "predictors": {},
+        }
         if r.sensor_frames:
             d["sensor_frames"] = r.sensor_frames
         if not r.traces.empty:
@@ -308,6 +381,9 @@ def gate_summary(runs: Sequence[DriveRun], cfg: RunConfig) -> dict[str, Any]:
     fed = sum(r.gps_count for r in runs if not r.skipped)
     for name in cfg.predictors:
         counts = [r.rejected.get(name, 0) for r in runs if not r.skipped]
-        out["predictors"][name] = {"rejected": int(sum(counts)), "fixes_fed": int(fed),
-                                   "drives_with_rejections": int(sum(c > 0 for c in counts))}
+        out["predictors"][name] = {
+            "rejected": int(sum(counts)),
+            "fixes_fed": int(fed),
+            "drives_with_rejections": int(sum(c > 0 for c in counts)),
+        }
     return out

@@ -57,12 +57,16 @@ class Statistics:
 
     def to_dict(self) -> dict[str, Any]:
         """``results["statistics"]``."""
-        return {"method": "cluster bootstrap over drives, percentile interval",
-                "single_drive_method": "circular block bootstrap of contiguous queries "
-                                       "(block length: Politis & White 2004/2009 automatic "
-                                       f"rule, at least {MIN_BLOCKS} blocks per resample)",
-                "resamples": self.resamples, "seed": self.seed, "level": self.level,
-                "baseline": self.baseline}
+        return {
+            "method": "cluster bootstrap over drives, percentile interval",
+            "single_drive_method": "circular block bootstrap of contiguous queries "
+            "(block length: Politis & White 2004/2009 automatic "
+            f"rule, at least {MIN_BLOCKS} blocks per resample)",
+            "resamples": self.resamples,
+            "seed": self.seed,
+            "level": self.level,
+            "baseline": self.baseline,
+        }
 
 
 def drive_codes(df: pd.DataFrame) -> np.ndarray:
@@ -74,20 +78,30 @@ def drive_codes(df: pd.DataFrame) -> np.ndarray:
     return pd.factorize(ds * (int(dr.max()) + 1) + dr)[0].astype(np.int64)
 
 
-def ci_entry(errors: np.ndarray, codes: np.ndarray, times: np.ndarray | None,
-             stats: Statistics) -> dict[str, Any]:
+def ci_entry(
+    errors: np.ndarray, codes: np.ndarray, times: np.ndarray | None, stats: Statistics
+) -> dict[str, Any]:
     """The ``ci95`` dict of one summary from its queries' errors [m], drive codes, times [s]."""
-    return _entry(summary_ci(errors, codes, times, n_resamples=stats.resamples,
-                             seed=stats.seed, level=stats.level))
+    return _entry(
+        summary_ci(
+            errors, codes, times, n_resamples=stats.resamples, seed=stats.seed, level=stats.level
+        )
+    )
 
 
 def _entry(r: Mapping[str, Any]) -> dict[str, Any]:
-    return {"mean_m": r["mean_m"], "median_m": r["median_m"], "p95_m": r["p95_m"],
-            "drives": r["clusters"], "block_len": r["block_len"]}
+    return {
+        "mean_m": r["mean_m"],
+        "median_m": r["median_m"],
+        "p95_m": r["p95_m"],
+        "drives": r["clusters"],
+        "block_len": r["block_len"],
+    }
 
 
-def one_drive_cis(queries: Mapping[str, tuple[np.ndarray, np.ndarray]], stats: Statistics
-                  ) -> dict[str, dict[str, Any]]:
+def one_drive_cis(
+    queries: Mapping[str, tuple[np.ndarray, np.ndarray]], stats: Statistics
+) -> dict[str, dict[str, Any]]:
     """``ci95`` per predictor of one drive and kind (block bootstrap): ``queries`` maps each
     predictor to its errors [m] and query times [s]. Each predictor is resampled in blocks
     of its own :func:`posbench.metrics.bootstrap.block_length`, so its interval does not depend on
@@ -95,23 +109,40 @@ def one_drive_cis(queries: Mapping[str, tuple[np.ndarray, np.ndarray]], stats: S
     ``bench score``, give ``cv`` the same interval as a run of every predictor)."""
     out: dict[str, dict[str, Any]] = {}
     for name, (errors, times) in queries.items():
-        out[name] = _entry(summary_ci(errors, np.zeros(times.size, dtype=np.int64), times,
-                                      n_resamples=stats.resamples, seed=stats.seed,
-                                      level=stats.level))
+        out[name] = _entry(
+            summary_ci(
+                errors,
+                np.zeros(times.size, dtype=np.int64),
+                times,
+                n_resamples=stats.resamples,
+                seed=stats.seed,
+                level=stats.level,
+            )
+        )
     return out
 
 
-def with_ci(summary: dict[str, Any], errors: np.ndarray, codes: np.ndarray,
-            times: np.ndarray | None, stats: Statistics | None) -> dict[str, Any]:
+def with_ci(
+    summary: dict[str, Any],
+    errors: np.ndarray,
+    codes: np.ndarray,
+    times: np.ndarray | None,
+    stats: Statistics | None,
+) -> dict[str, Any]:
     """``summary`` with its ``ci95`` added (unchanged when ``stats`` is None)."""
     if stats is not None:
         summary["ci95"] = ci_entry(errors, codes, times, stats)
     return summary
 
 
-def add_group_cis(summaries: Mapping[str, dict[str, Any]], errors: np.ndarray,
-                  keys: np.ndarray, codes: np.ndarray, times: np.ndarray | None,
-                  stats: Statistics | None) -> None:
+def add_group_cis(
+    summaries: Mapping[str, dict[str, Any]],
+    errors: np.ndarray,
+    keys: np.ndarray,
+    codes: np.ndarray,
+    times: np.ndarray | None,
+    stats: Statistics | None,
+) -> None:
     """Add ``ci95`` to each summary of :func:`posbench.metrics.accuracy.summarize_groups` (key ->
     summary), the queries of key k being those with ``keys == k``."""
     if stats is None:
@@ -119,16 +150,24 @@ def add_group_cis(summaries: Mapping[str, dict[str, Any]], errors: np.ndarray,
     code, names = pd.factorize(np.asarray(keys))
     wanted = {str(n): i for i, n in enumerate(names) if str(n) in summaries}
     m = np.isin(code, list(wanted.values()))  # only the groups that have a summary
-    cis = group_cis(errors[m], code[m], codes[m], None if times is None else times[m],
-                    n_resamples=stats.resamples, seed=stats.seed, level=stats.level)
+    cis = group_cis(
+        errors[m],
+        code[m],
+        codes[m],
+        None if times is None else times[m],
+        n_resamples=stats.resamples,
+        seed=stats.seed,
+        level=stats.level,
+    )
     empty = _entry(summary_ci(np.empty(0), np.empty(0, dtype=np.int64)))
     for k, s in summaries.items():
         i = wanted.get(str(k))
         s["ci95"] = _entry(cis[i]) if i is not None else dict(empty)
 
 
-def outage_cis(errors: np.ndarray, t_query: np.ndarray, ids: np.ndarray,
-               stats: Statistics | None) -> dict[str, Any] | None:
+def outage_cis(
+    errors: np.ndarray, t_query: np.ndarray, ids: np.ndarray, stats: Statistics | None
+) -> dict[str, Any] | None:
     """Intervals of the outage scores (ADE mean, FDE mean and p95, miss rate), resampling the
     drives the outages belong to (``ids``: :func:`posbench.metrics.outages.outage_keys`)."""
     if stats is None:
@@ -139,8 +178,14 @@ def outage_cis(errors: np.ndarray, t_query: np.ndarray, ids: np.ndarray,
     a = summary_ci(ade, drive, t_end, **kw)
     f = summary_ci(fde, drive, t_end, **kw)
     miss = summary_ci((fde > MISS_THRESHOLD_M).astype(float), drive, t_end, **kw)
-    return {"ade_mean_m": a["mean_m"], "fde_mean_m": f["mean_m"], "fde_p95_m": f["p95_m"],
-            "miss_rate": miss["mean_m"], "drives": f["clusters"], "block_len": f["block_len"]}
+    return {
+        "ade_mean_m": a["mean_m"],
+        "fde_mean_m": f["mean_m"],
+        "fde_p95_m": f["p95_m"],
+        "miss_rate": miss["mean_m"],
+        "drives": f["clusters"],
+        "block_len": f["block_len"],
+    }
 
 
 # --------------------------------------------------------------- paired
@@ -151,11 +196,14 @@ def _aligned(df: pd.DataFrame, base: pd.DataFrame) -> tuple[pd.DataFrame, np.nda
     ``code`` column of :func:`drive_codes`); otherwise the queries are matched on data set,
     drive, kind and query time."""
     keys = ["dataset", "drive", "kind", "t_query"]
-    same = (len(df) == len(base)
-            and all(np.array_equal(df[k].to_numpy(), base[k].to_numpy())
-                    for k in ("code", "kind", "t_query"))
-            and all(np.array_equal(pd.unique(df[k]), pd.unique(base[k]))
-                    for k in ("dataset", "drive")))
+    same = (
+        len(df) == len(base)
+        and all(
+            np.array_equal(df[k].to_numpy(), base[k].to_numpy())
+            for k in ("code", "kind", "t_query")
+        )
+        and all(np.array_equal(pd.unique(df[k]), pd.unique(base[k])) for k in ("dataset", "drive"))
+    )
     if same:  # the same drives in the same order, the same queries in each
         out = df.assign(error_base=base["error_m"].to_numpy())
     else:
@@ -164,26 +212,43 @@ def _aligned(df: pd.DataFrame, base: pd.DataFrame) -> tuple[pd.DataFrame, np.nda
     return out, (out["code"].to_numpy() if same else drive_codes(out))
 
 
-def _paired_columns(df: pd.DataFrame, base: pd.DataFrame
-                    ) -> tuple[pd.DataFrame, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+def _paired_columns(
+    df: pd.DataFrame, base: pd.DataFrame
+) -> tuple[pd.DataFrame, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """The queries both answered (:func:`_aligned`), their drive codes, and as arrays their
     kind, the predictor's error, the baseline's error [m] and the query time [s]."""
     both, codes = _aligned(df, base)
-    return (both, codes, both["kind"].to_numpy(), both["error_m"].to_numpy(dtype=float),
-            both["error_base"].to_numpy(dtype=float), both["t_query"].to_numpy(dtype=float))
+    return (
+        both,
+        codes,
+        both["kind"].to_numpy(),
+        both["error_m"].to_numpy(dtype=float),
+        both["error_base"].to_numpy(dtype=float),
+        both["t_query"].to_numpy(dtype=float),
+    )
 
 
-def _paired(e_base: np.ndarray, e: np.ndarray, codes: np.ndarray, times: np.ndarray,
-            stats: Statistics) -> dict[str, Any]:
-    r = paired_summary(e_base, e, codes, times, n_resamples=stats.resamples, seed=stats.seed,
-                       level=stats.level)
-    return {"diff_m": r["diff_m"], "ci95": r["ci95"], "drives": r["drives"], "wins": r["wins"],
-            "win_share": r["win_share"], "conclusive": r["conclusive"], "queries": r["queries"],
-            "block_len": r["block_len"]}
+def _paired(
+    e_base: np.ndarray, e: np.ndarray, codes: np.ndarray, times: np.ndarray, stats: Statistics
+) -> dict[str, Any]:
+    r = paired_summary(
+        e_base, e, codes, times, n_resamples=stats.resamples, seed=stats.seed, level=stats.level
+    )
+    return {
+        "diff_m": r["diff_m"],
+        "ci95": r["ci95"],
+        "drives": r["drives"],
+        "wins": r["wins"],
+        "win_share": r["win_share"],
+        "conclusive": r["conclusive"],
+        "queries": r["queries"],
+        "block_len": r["block_len"],
+    }
 
 
-def paired_by_dataset(df: pd.DataFrame, base: pd.DataFrame, datasets: Sequence[str],
-                      stats: Statistics) -> dict[str, dict[str, Any]]:
+def paired_by_dataset(
+    df: pd.DataFrame, base: pd.DataFrame, datasets: Sequence[str], stats: Statistics
+) -> dict[str, dict[str, Any]]:
     """``{ds: {kind: entry}}`` of :func:`paired_results` alone (no overall, no labels): one
     predictor's scored rows ``df`` against ``base`` per data set and query kind."""
     both, codes, kind, e, eb, t = _paired_columns(df, base)
@@ -197,8 +262,9 @@ def paired_by_dataset(df: pd.DataFrame, base: pd.DataFrame, datasets: Sequence[s
     return out
 
 
-def paired_results(df: pd.DataFrame, base: pd.DataFrame, datasets: Sequence[str],
-                   stats: Statistics) -> dict[str, Any]:
+def paired_results(
+    df: pd.DataFrame, base: pd.DataFrame, datasets: Sequence[str], stats: Statistics
+) -> dict[str, Any]:
     """One predictor against the baseline: its scored rows ``df`` and the baseline's
     ``base`` (both with columns dataset, drive, kind, t_query, error_m, label).
 
@@ -209,8 +275,11 @@ def paired_results(df: pd.DataFrame, base: pd.DataFrame, datasets: Sequence[str]
         the baseline), ``ci95``, ``drives``, ``wins``, ``win_share``, ``conclusive``,
         ``queries``, ``block_len`` (see :func:`posbench.metrics.bootstrap.paired_summary`).
     """
-    out: dict[str, Any] = {"overall": {}, "by_dataset": {ds: {} for ds in datasets},
-                           "by_label": {ds: {} for ds in datasets}}
+    out: dict[str, Any] = {
+        "overall": {},
+        "by_dataset": {ds: {} for ds in datasets},
+        "by_label": {ds: {} for ds in datasets},
+    }
     both, codes, kind, e, eb, t = _paired_columns(df, base)
     ds_code, ds_names = pd.factorize(both["dataset"])
     lab_code, lab_names = pd.factorize(both["label"])

@@ -25,8 +25,13 @@ REFERENCE = "cv"
 COLUMNS = ["dataset", "drive", "kind", "t_query", "error_m", "label"]
 
 
-def sanity_section(traces: pd.DataFrame, keep: np.ndarray, predictors: Sequence[str],
-                   datasets: Sequence[str], stats: Statistics) -> dict[str, Any]:
+def sanity_section(
+    traces: pd.DataFrame,
+    keep: np.ndarray,
+    predictors: Sequence[str],
+    datasets: Sequence[str],
+    stats: Statistics,
+) -> dict[str, Any]:
     """``{"reference": "cv", "checked": bool, "losses": [...]}``; each loss: dataset,
     predictor, kind, ``diff_m`` (its mean error minus cv's [m], > 0), ``ci95``, ``queries``.
     ``checked`` is False (no losses listed) when cv is not in the run."""
@@ -53,7 +58,14 @@ def sanity_section(traces: pd.DataFrame, keep: np.ndarray, predictors: Sequence[
                 e = by_ds[ds][kind]
                 lo = e["ci95"][0] if e.get("ci95") else None
                 if e["queries"] and lo is not None and np.isfinite(lo) and lo > 0.0:
-                    out["losses"].append({"dataset": ds, "predictor": name, "kind": kind,
-                                          "diff_m": e["diff_m"], "ci95": list(e["ci95"]),
-                                          "queries": e["queries"]})
+                    out["losses"].append(
+                        {
+                            "dataset": ds,
+                            "predictor": name,
+                            "kind": kind,
+                            "diff_m": e["diff_m"],
+                            "ci95": list(e["ci95"]),
+                            "queries": e["queries"],
+                        }
+                    )
     return out

@@ -23,8 +23,9 @@ from posbench.scoring.schema import KINDS, scored_mask
 SPREAD_FIGURES = ("mean_m", "median_m", "rmse_m", "p95_m")
 
 
-def seed_figures(traces: pd.DataFrame, predictors: Sequence[str], baseline: str | None,
-                 seed: int) -> dict[str, Any]:
+def seed_figures(
+    traces: pd.DataFrame, predictors: Sequence[str], baseline: str | None, seed: int
+) -> dict[str, Any]:
     """One seed's headline figures from its traces: per predictor and kind the summary of
     the scored queries (as ``results["predictors"]``, without latency and intervals), the
     same per data set, and each predictor's paired difference of mean error against the
@@ -45,15 +46,17 @@ def seed_figures(traces: pd.DataFrame, predictors: Sequence[str], baseline: str 
             out["predictors"][name][k] = summarize(e)
         for ds, g in mine.groupby("dataset", sort=True, observed=True):
             out["by_dataset"].setdefault(str(ds), {})[name] = {
-                k: summarize(g.loc[g["kind"] == k, "error_m"].to_numpy()) for k in KINDS}
+                k: summarize(g.loc[g["kind"] == k, "error_m"].to_numpy()) for k in KINDS
+            }
     if baseline in predictors:
         for name in predictors:
             if name == baseline:
                 continue
             out["paired"][name] = {}
             for k in KINDS:
-                out["paired"][name][k] = paired_mean_difference(errors[(baseline, k)],
-                                                                errors[(name, k)])
+                out["paired"][name][k] = paired_mean_difference(
+                    errors[(baseline, k)], errors[(name, k)]
+                )
     return out
 
 
@@ -62,19 +65,25 @@ def seeds_section(seeds: Sequence[int], figures: Sequence[dict[str, Any]]) -> di
     from (the first), each seed's figures, and per predictor, kind and figure the spread
     across seeds (:func:`posbench.metrics.seeds.spread`: mean, sd, min, max, n), also of the paired
     difference (figure ``diff_m``)."""
-    out: dict[str, Any] = {"seeds": [int(s) for s in seeds], "traces_seed": int(seeds[0]),
-                           "runs": list(figures), "spread": {}}
+    out: dict[str, Any] = {
+        "seeds": [int(s) for s in seeds],
+        "traces_seed": int(seeds[0]),
+        "runs": list(figures),
+        "spread": {},
+    }
     if not figures:
         return out
     for name in figures[0]["predictors"]:
         out["spread"][name] = {}
         for k in KINDS:
             # a figure a seed lacks (None) is NaN: spread leaves it out
-            fig = {f: spread(np.array([r["predictors"][name][k].get(f) for r in figures],
-                                      dtype=float))
-                   for f in SPREAD_FIGURES}
+            fig = {
+                f: spread(np.array([r["predictors"][name][k].get(f) for r in figures], dtype=float))
+                for f in SPREAD_FIGURES
+            }
             if name in figures[0].get("paired", {}):
-                fig["diff_m"] = spread(np.array([r["paired"].get(name, {}).get(k)
-                                                 for r in figures], dtype=float))
+                fig["diff_m"] = spread(
+                    np.array([r["paired"].get(name, {}).get(k) for r in figures], dtype=float)
+                )
             out["spread"][name][k] = fig
     return out

@@ -21,8 +21,9 @@ from posbench.scoring.schema import KINDS
 NEEDED = ("predictor", "kind", "label", "error_m", "along_m", "cross_m", "yaw_rate_ref")
 
 
-def track_section(traces: pd.DataFrame, keep: np.ndarray, predictors: Sequence[str]
-                  ) -> dict[str, Any]:
+def track_section(
+    traces: pd.DataFrame, keep: np.ndarray, predictors: Sequence[str]
+) -> dict[str, Any]:
     """``{"predictors": {name: {kind: summary}}, "by_label": {name: {kind: {label: summary}}}}``
     over the rows ``keep`` (the headline figures' scored rows) of ``traces``; empty dicts
     when the traces have no along/cross-track columns (answers scored before they existed)."""
@@ -33,8 +34,14 @@ def track_section(traces: pd.DataFrame, keep: np.ndarray, predictors: Sequence[s
     pred_codes, pred_names = pd.factorize(traces["predictor"])
     kind_codes, kind_names = pd.factorize(traces["kind"])
     label_codes, label_names = pd.factorize(traces["label"])
-    cols = np.column_stack([traces["along_m"].to_numpy(float), traces["cross_m"].to_numpy(float),
-                            np.zeros(len(traces)), traces["error_m"].to_numpy(float)])
+    cols = np.column_stack(
+        [
+            traces["along_m"].to_numpy(float),
+            traces["cross_m"].to_numpy(float),
+            np.zeros(len(traces)),
+            traces["error_m"].to_numpy(float),
+        ]
+    )
     cols[:, 2] = inward_cross(cols[:, 1], traces["yaw_rate_ref"].to_numpy(float))
     pred_of = {str(n): i for i, n in enumerate(pred_names)}
     kind_of = {str(n): i for i, n in enumerate(kind_names)}
@@ -48,5 +55,6 @@ def track_section(traces: pd.DataFrame, keep: np.ndarray, predictors: Sequence[s
             sub, labels = cols[rows], label_codes[rows]
             out["predictors"][name][k] = track_summary(*sub.T)
             out["by_label"][name][k] = {
-                lab: track_summary(*sub[labels == label_of.get(lab, -1)].T) for lab in LABELS}
+                lab: track_summary(*sub[labels == label_of.get(lab, -1)].T) for lab in LABELS
+            }
     return out

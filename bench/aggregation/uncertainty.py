@@ -28,8 +28,20 @@ from posbench.metrics.calibration import (
 from posbench.scoring.schema import COV_COLUMNS, KINDS
 
 COV = list(COV_COLUMNS)
-NEEDED = ("predictor", "kind", "dataset", "drive", "label", "since_fix_s", "x", "y",
-          "x_ref", "y_ref", "t_query", *COV)
+NEEDED = (
+    "predictor",
+    "kind",
+    "dataset",
+    "drive",
+    "label",
+    "since_fix_s",
+    "x",
+    "y",
+    "x_ref",
+    "y_ref",
+    "t_query",
+    *COV,
+)
 
 
 def _arrays(rows: pd.DataFrame) -> tuple[np.ndarray, np.ndarray]:
@@ -37,15 +49,22 @@ def _arrays(rows: pd.DataFrame) -> tuple[np.ndarray, np.ndarray]:
     return err, rows[COV].to_numpy(float)
 
 
-def uncertainty_section(traces: pd.DataFrame, keep: np.ndarray, predictors: Sequence[str]
-                        ) -> dict[str, Any]:
+def uncertainty_section(
+    traces: pd.DataFrame, keep: np.ndarray, predictors: Sequence[str]
+) -> dict[str, Any]:
     """``{"predictors": {name: {kind: summary}}, "by_dataset": {name: {kind: {ds: summary}}},
     "by_label": {...}, "by_since_fix": {name: {kind: {bin: summary}}}, "curve": {name:
     {kind: [[expected, observed], ...]}}, "none": [names without covariance]}`` over the
     rows ``keep`` of ``traces``. Traces without covariance columns (older runs, answers
     without them): every predictor under ``none``."""
-    out: dict[str, Any] = {"predictors": {}, "by_dataset": {}, "by_label": {},
-                           "by_since_fix": {}, "curve": {}, "none": []}
+    out: dict[str, Any] = {
+        "predictors": {},
+        "by_dataset": {},
+        "by_label": {},
+        "by_since_fix": {},
+        "curve": {},
+        "none": [],
+    }
     if traces.empty or any(c not in traces for c in NEEDED):
         out["none"] = list(predictors)
         return out
@@ -62,16 +81,19 @@ def uncertainty_section(traces: pd.DataFrame, keep: np.ndarray, predictors: Sequ
             rows = sub[(sub["kind"] == k).to_numpy()]
             err, cov = _arrays(rows)
             out["predictors"][name][k] = calibration_summary(
-                err, cov, clusters=drive_codes(rows), times=rows["t_query"].to_numpy(float))
-            out["curve"][name][k] = [list(pq) for pq in
-                                     calibration_curve(mahalanobis_sq(err, cov))]
+                err, cov, clusters=drive_codes(rows), times=rows["t_query"].to_numpy(float)
+            )
+            out["curve"][name][k] = [list(pq) for pq in calibration_curve(mahalanobis_sq(err, cov))]
             for block, col in (("by_dataset", "dataset"), ("by_label", "label")):
                 code, groups = pd.factorize(rows[col])  # in order of appearance
                 out[block][name][k] = {
                     str(g): calibration_summary(err[code == i], cov[code == i], with_ci=False)
-                    for i, g in enumerate(groups)}
+                    for i, g in enumerate(groups)
+                }
             idx, names = since_fix_bin(rows["since_fix_s"].to_numpy(float))
             out["by_since_fix"][name][k] = {
                 b: calibration_summary(err[idx == i], cov[idx == i], with_ci=False)
-                for i, b in enumerate(names) if (idx == i).any()}
+                for i, b in enumerate(names)
+                if (idx == i).any()
+            }
     return out

@@ -46,13 +46,17 @@ def _argument_type(self: typer.core.TyperArgument, ctx: object) -> str | None:
 typer.core.TyperArgument.display_type_rich = _argument_type  # typer has no hook for this
 app = typer.Typer(
     help="posbench: benchmark real-time vehicle position predictors on your drives.\n\n"
-         "Start with `bench run` (built-in synthetic drives, no data needed), then point it at "
-         "your recordings: `bench run --data PATH -p lstm,kf`. Every command takes -q/-v and "
-         "--config FILE.toml.",
-    no_args_is_help=True, add_completion=True, pretty_exceptions_enable=False,
-    rich_markup_mode=None)
-data_app = typer.Typer(help="Look at recordings before benchmarking them.", no_args_is_help=True,
-                       rich_markup_mode=None)
+    "Start with `bench run` (built-in synthetic drives, no data needed), then point it at "
+    "your recordings: `bench run --data PATH -p lstm,kf`. Every command takes -q/-v and "
+    "--config FILE.toml.",
+    no_args_is_help=True,
+    add_completion=True,
+    pretty_exceptions_enable=False,
+    rich_markup_mode=None,
+)
+data_app = typer.Typer(
+    help="Look at recordings before benchmarking them.", no_args_is_help=True, rich_markup_mode=None
+)
 app.add_typer(data_app, name="data")
 
 
@@ -75,9 +79,17 @@ def _show_version(value: bool) -> None:
 
 
 @app.callback()
-def _root(version: Annotated[bool, typer.Option(
-        "--version", callback=_show_version, is_eager=True,
-        help="Print the posbench version and exit.")] = False) -> None:
+def _root(
+    version: Annotated[
+        bool,
+        typer.Option(
+            "--version",
+            callback=_show_version,
+            is_eager=True,
+            help="Print the posbench version and exit.",
+        ),
+    ] = False,
+) -> None:
     pass
 
 
@@ -96,6 +108,7 @@ def user_errors() -> tuple[type[BaseException], ...]:
 def command(fn: Callable[..., Any]) -> Callable[..., Any]:
     """``fn`` with the one error wrapper every command has: a user error (:func:`user_errors`)
     is one line on stderr and exit 2; a dead worker process too (:data:`WORKER_DIED`)."""
+
     @functools.wraps(fn)
     def wrapper(*args: Any, **kwargs: Any) -> Any:
         from concurrent.futures.process import BrokenProcessPool
@@ -106,14 +119,23 @@ def command(fn: Callable[..., Any]) -> Callable[..., Any]:
             raise fail(str(e)) from None
         except BrokenProcessPool:
             raise fail(WORKER_DIED) from None
+
     return wrapper
 
 
-for name, fn in (("run", run.run), ("queries", queries.queries), ("score", score.score),
-                 ("view", view.view), ("predictors", predictors.list_predictors),
-                 ("train", train.train), ("latency", latency.latency), ("tune", tune.tune),
-                 ("check", check.check), ("compare", compare.compare),
-                 ("export", export.export)):
+for name, fn in (
+    ("run", run.run),
+    ("queries", queries.queries),
+    ("score", score.score),
+    ("view", view.view),
+    ("predictors", predictors.list_predictors),
+    ("train", train.train),
+    ("latency", latency.latency),
+    ("tune", tune.tune),
+    ("check", check.check),
+    ("compare", compare.compare),
+    ("export", export.export),
+):
     app.command(name)(command(fn))
 data_app.command("inspect")(command(inspect.inspect))
 
@@ -153,8 +175,10 @@ def upgrade_argv(argv: list[str]) -> list[str]:
             out += argv[i:]
             break
         if cmd == "score" and a == "-q" and i + 1 < len(argv) and Path(argv[i + 1]).is_dir():
-            warn("-q DIR is deprecated in bench score: -q is --quiet now, use --queries DIR "
-                 "(the old spelling goes in the next release)")
+            warn(
+                "-q DIR is deprecated in bench score: -q is --quiet now, use --queries DIR "
+                "(the old spelling goes in the next release)"
+            )
             out += ["--queries", argv[i + 1]]
             i += 2
             continue
@@ -166,13 +190,15 @@ def upgrade_argv(argv: list[str]) -> list[str]:
             continue
         if current is not None:
             taken += 1
-            more = (cmd in NO_ARGUMENTS if current == "--data" else "=" in a)
+            more = cmd in NO_ARGUMENTS if current == "--data" else "=" in a
             if taken > 1 and more:
                 if current not in noted:
                     noted.add(current)
-                    warn(f"several values after one {current} are deprecated: repeat it "
-                         f"({current} A {current} B; the old spelling goes in the next "
-                         f"release)")
+                    warn(
+                        f"several values after one {current} are deprecated: repeat it "
+                        f"({current} A {current} B; the old spelling goes in the next "
+                        f"release)"
+                    )
                 out += [current, a]
                 i += 1
                 continue

@@ -37,23 +37,34 @@ def _print_text(report) -> None:
 
     results = report.clauses
     failed = report.failed
-    verdict = (f"all {len(results)} clauses pass" if not failed else
-               f"[bold red]{len(failed)} of {len(results)} clauses fail[/]")
-    console.print(f"[bold]{escape(report.predictor)}[/]: {verdict} ({report.seconds:.1f} s)",
-                  highlight=False, soft_wrap=True)
+    verdict = (
+        f"all {len(results)} clauses pass"
+        if not failed
+        else f"[bold red]{len(failed)} of {len(results)} clauses fail[/]"
+    )
+    console.print(
+        f"[bold]{escape(report.predictor)}[/]: {verdict} ({report.seconds:.1f} s)",
+        highlight=False,
+        soft_wrap=True,
+    )
     width = max(len(r.clause) for r in results)
     for r in results:
         mark = "[green]PASS[/]" if r.passed else "[bold red]FAIL[/]"
-        console.print(f"  {mark} {r.clause:<{width}}  {escape(r.evidence)}", highlight=False,
-                      soft_wrap=True)
+        console.print(
+            f"  {mark} {r.clause:<{width}}  {escape(r.evidence)}", highlight=False, soft_wrap=True
+        )
 
 
 def check(
-    predictors: Annotated[list[str] | None, typer.Argument(
-        metavar="PREDICTOR",
-        help="Registered names (see `bench predictors`; NAME@ALIAS too) or module:Class for a "
-             "Predictor subclass of your own, importable from the current folder. Default: every "
-             "registered predictor (lstm-authors only with --model lstm-authors=PATH).")] = None,
+    predictors: Annotated[
+        list[str] | None,
+        typer.Argument(
+            metavar="PREDICTOR",
+            help="Registered names (see `bench predictors`; NAME@ALIAS too) or module:Class for a "
+            "Predictor subclass of your own, importable from the current folder. Default: every "
+            "registered predictor (lstm-authors only with --model lstm-authors=PATH).",
+        ),
+    ] = None,
     model: ModelOpt = None,
     gate: GateOpt = True,
     as_json: Annotated[bool, typer.Option("--json", help="Print JSON instead of lines.")] = False,
@@ -99,7 +110,15 @@ def check(
             _print_text(report)
     passed = all(r.passed for r in reports)
     if as_json:
-        print(json.dumps({"passed": passed, "predictors": [r.to_dict() for r in reports],
-                          "not_checked": left_out}, indent=2))
+        print(
+            json.dumps(
+                {
+                    "passed": passed,
+                    "predictors": [r.to_dict() for r in reports],
+                    "not_checked": left_out,
+                },
+                indent=2,
+            )
+        )
     if not passed:
         raise typer.Exit(1)

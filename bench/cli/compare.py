@@ -20,48 +20,87 @@ KEY_COLUMNS = ("scope", "dataset", "group", "predictor", "kind")
 
 
 def compare(
-    runs: Annotated[list[Path], typer.Argument(
-        metavar="RUN_DIR...",
-        help="Folders written by `bench run` (or their results.json). With --fail-if-worse: "
-             "exactly two, OLD then NEW.")],
-    metric: Annotated[str, typer.Option(
-        metavar="KIND.STAT",
-        help="The figure to compare: KIND future|now, STAT mean_m|median_m|rmse_m|p95_m|max_m.")
+    runs: Annotated[
+        list[Path],
+        typer.Argument(
+            metavar="RUN_DIR...",
+            help="Folders written by `bench run` (or their results.json). With --fail-if-worse: "
+            "exactly two, OLD then NEW.",
+        ),
+    ],
+    metric: Annotated[
+        str,
+        typer.Option(
+            metavar="KIND.STAT",
+            help="The figure to compare: KIND future|now, STAT mean_m|median_m|rmse_m|p95_m|max_m.",
+        ),
     ] = "future.mean_m",
-    table_format: Annotated[str, typer.Option(
-        "--table-format", metavar="md|csv|latex",
-        help="How the table is printed and written (comparison.md / .csv / .tex).")] = "md",
-    scope: Annotated[list[str] | None, typer.Option(
-        metavar="SCOPES",
-        help="Rows to show, comma-separated or repeated: all (whole run), dataset, route (route "
-             "type per data set; over all data sets in the uncertainty table), drive (error "
-             "table only), since-fix (time since the last fix bins; uncertainty table only). "
-             "Default: all,dataset.")] = None,
-    out: Annotated[Path | None, typer.Option(
-        "--out", "-o", metavar="DIR",
-        help="Also write the table and comparison.png (bars per predictor, 95 % CI whiskers) "
-             "into DIR.")] = None,
-    fail_if_worse: Annotated[list[str] | None, typer.Option(
-        "--fail-if-worse", metavar="PRED:KIND.STAT:TOL",
-        help="Gate (repeatable): exit 1 when NEW is worse than OLD by more than TOL (5% or "
-             "0.01m) AND the paired 95 % CI of NEW - OLD (cluster bootstrap over shared drives) "
-             "is above 0. Example: 'lstm:future.mean_m:5%'.")] = None,
-    allow_config_change: Annotated[bool, typer.Option(
-        "--allow-config-change",
-        help="Gate runs whose configurations differ (horizon, GPS profile, data, ...); "
-             "by default that is an error.")] = False,
-    bootstrap_seed: Annotated[int, typer.Option(
-        "--bootstrap-seed", metavar="INT",
-        help="Seed of the paired bootstrap (not a run's --seed: that draws GPS noise).")] = 0,
-    uncertainty: Annotated[bool, typer.Option(
-        "--uncertainty",
-        help="Also compare the reported uncertainty (results.json `uncertainty`, schema 1.4), "
-             "in a second table: per predictor that reports covariance and kind, mean NEES "
-             "(2 = honest) [95 % CI over drives, whole run only], coverage of the 95 % "
-             "ellipse, sharpness (median 95 % ellipse area, m^2), log-likelihood [nats], "
-             "verdict, n. A predictor reporting none reads 'no uncertainty'; a run saved "
-             "before schema 1.4 reads 'pre-1.4 run' (with a note). CSV: a second block "
-             "after an empty line; --out also writes uncertainty_comparison.{md,csv,tex}.")
+    table_format: Annotated[
+        str,
+        typer.Option(
+            "--table-format",
+            metavar="md|csv|latex",
+            help="How the table is printed and written (comparison.md / .csv / .tex).",
+        ),
+    ] = "md",
+    scope: Annotated[
+        list[str] | None,
+        typer.Option(
+            metavar="SCOPES",
+            help="Rows to show, comma-separated or repeated: all (whole run), dataset, route (route "
+            "type per data set; over all data sets in the uncertainty table), drive (error "
+            "table only), since-fix (time since the last fix bins; uncertainty table only). "
+            "Default: all,dataset.",
+        ),
+    ] = None,
+    out: Annotated[
+        Path | None,
+        typer.Option(
+            "--out",
+            "-o",
+            metavar="DIR",
+            help="Also write the table and comparison.png (bars per predictor, 95 % CI whiskers) "
+            "into DIR.",
+        ),
+    ] = None,
+    fail_if_worse: Annotated[
+        list[str] | None,
+        typer.Option(
+            "--fail-if-worse",
+            metavar="PRED:KIND.STAT:TOL",
+            help="Gate (repeatable): exit 1 when NEW is worse than OLD by more than TOL (5% or "
+            "0.01m) AND the paired 95 % CI of NEW - OLD (cluster bootstrap over shared drives) "
+            "is above 0. Example: 'lstm:future.mean_m:5%'.",
+        ),
+    ] = None,
+    allow_config_change: Annotated[
+        bool,
+        typer.Option(
+            "--allow-config-change",
+            help="Gate runs whose configurations differ (horizon, GPS profile, data, ...); "
+            "by default that is an error.",
+        ),
+    ] = False,
+    bootstrap_seed: Annotated[
+        int,
+        typer.Option(
+            "--bootstrap-seed",
+            metavar="INT",
+            help="Seed of the paired bootstrap (not a run's --seed: that draws GPS noise).",
+        ),
+    ] = 0,
+    uncertainty: Annotated[
+        bool,
+        typer.Option(
+            "--uncertainty",
+            help="Also compare the reported uncertainty (results.json `uncertainty`, schema 1.4), "
+            "in a second table: per predictor that reports covariance and kind, mean NEES "
+            "(2 = honest) [95 % CI over drives, whole run only], coverage of the 95 % "
+            "ellipse, sharpness (median 95 % ellipse area, m^2), log-likelihood [nats], "
+            "verdict, n. A predictor reporting none reads 'no uncertainty'; a run saved "
+            "before schema 1.4 reads 'pre-1.4 run' (with a note). CSV: a second block "
+            "after an empty line; --out also writes uncertainty_comparison.{md,csv,tex}.",
+        ),
     ] = False,
     config: ConfigOpt = None,
     quiet: QuietOpt = False,
@@ -99,13 +138,16 @@ def compare(
     check_choice(table_format, FORMATS, "--table-format")
     if out is not None:
         check_out_dir(out)
-    scopes = [s.strip() for text in (scope or ["all,dataset"]) for s in text.split(",")
-              if s.strip()]
-    result = compare_runs(runs, metric, scopes, bootstrap_seed, fail_if_worse or [],
-                          uncertainty, allow_config_change)
+    scopes = [
+        s.strip() for text in (scope or ["all,dataset"]) for s in text.split(",") if s.strip()
+    ]
+    result = compare_runs(
+        runs, metric, scopes, bootstrap_seed, fail_if_worse or [], uncertainty, allow_config_change
+    )
     for line in result.differences:
-        err_console.print(f"note: runs differ in {line}", highlight=False, soft_wrap=True,
-                          markup=False)
+        err_console.print(
+            f"note: runs differ in {line}", highlight=False, soft_wrap=True, markup=False
+        )
     for line in result.notes:
         err_console.print(f"note: {line}", highlight=False, soft_wrap=True, markup=False)
     _print(result.table, result.frame, table_format)
@@ -119,9 +161,12 @@ def compare(
         console.print(c.line(), highlight=False, soft_wrap=True, markup=False)
     if not result.passed:
         failed = sum(c.failed for c in result.gates)
-        err_console.print(f"accuracy gate failed: {failed} of {len(result.gates)} "
-                          f"(NEW {result.labels[1]} vs OLD {result.labels[0]})", highlight=False,
-                          markup=False)
+        err_console.print(
+            f"accuracy gate failed: {failed} of {len(result.gates)} "
+            f"(NEW {result.labels[1]} vs OLD {result.labels[0]})",
+            highlight=False,
+            markup=False,
+        )
         raise typer.Exit(1)
 
 
@@ -136,8 +181,14 @@ def _print(table, frame, fmt: str) -> None:
         print(table.latex(), end="")
     else:
         keys = sum(c in KEY_COLUMNS for c in table.frame.columns)
-        print_table(console, table.header(), table.cells(), title=table.title, key_columns=keys,
-                    left_columns=keys)
+        print_table(
+            console,
+            table.header(),
+            table.cells(),
+            title=table.title,
+            key_columns=keys,
+            left_columns=keys,
+        )
 
 
 def _write_table(out: Path, stem: str, table, frame, fmt: str) -> Path:

@@ -48,8 +48,7 @@ def _section(data: Mapping[str, Any], path: list[str]) -> Mapping[str, Any] | No
     return node if isinstance(node, Mapping) else None
 
 
-def read_section(file: Path, command_path: list[str], params: list[Any]
-                 ) -> dict[str, Any]:
+def read_section(file: Path, command_path: list[str], params: list[Any]) -> dict[str, Any]:
     """The table of ``command_path`` (``["run"]``, ``["data", "inspect"]``) in the TOML
     ``file`` as ``{parameter name: value}`` for the command's ``params``; empty when the file
     has no such table.
@@ -80,8 +79,10 @@ def read_section(file: Path, command_path: list[str], params: list[Any]
         p = keys.get(key) or keys.get(key.replace("_", "-"))
         if p is None:
             shown = sorted({option_key(q) for q in keys.values()})
-            raise UsageError(f"--config {file}: [{name}] has no option {key!r}; `bench "
-                             f"{name.replace('.', ' ')}` takes {', '.join(shown)}")
+            raise UsageError(
+                f"--config {file}: [{name}] has no option {key!r}; `bench "
+                f"{name.replace('.', ' ')}` takes {', '.join(shown)}"
+            )
         out[str(p.name)] = value
     return out
 
@@ -106,8 +107,11 @@ def _toml_value(v: Any) -> str:
     if isinstance(v, int):
         return str(v)
     if isinstance(v, float):
-        return ("nan" if math.isnan(v) else ("inf" if v > 0 else "-inf")) if not math.isfinite(v) \
+        return (
+            ("nan" if math.isnan(v) else ("inf" if v > 0 else "-inf"))
+            if not math.isfinite(v)
             else repr(v)
+        )
     if isinstance(v, (list, tuple)):
         return "[" + ", ".join(_toml_value(x) for x in v) + "]"
     return json.dumps(str(v), ensure_ascii=False)  # a TOML basic string
@@ -126,8 +130,9 @@ def to_toml(ctx: typer.Context) -> str:
         v = ctx.params.get(str(p.name))
         if v is None or (isinstance(v, (list, tuple)) and not v and p.multiple):
             continue
-        if isinstance(v, Path) or (isinstance(v, (list, tuple)) and
-                                   any(isinstance(x, Path) for x in v)):
+        if isinstance(v, Path) or (
+            isinstance(v, (list, tuple)) and any(isinstance(x, Path) for x in v)
+        ):
             v = [str(x) for x in v] if isinstance(v, (list, tuple)) else str(v)
         lines.append(f"{option_key(p)} = {_toml_value(v)}")
     return "\n".join(lines) + "\n"

@@ -12,18 +12,36 @@ from posbench.cli.options import ConfigOpt, QuietOpt, VerboseOpt
 
 
 def export(
-    run_dir: Annotated[Path, typer.Argument(
-        metavar="RUN_DIR", show_default=False,
-        help="A folder written by `bench run` or `bench score` (or its results.json); its "
-             "traces.parquet is read.")],
-    out: Annotated[Path, typer.Option(
-        "--out", "-o", metavar="DIR", show_default=False,
-        help="Folder to write the tracks into (made if missing; files of the same names "
-             "are replaced).")],
-    fmt: Annotated[str, typer.Option(
-        "--format", "-f", metavar="tum|csv",
-        help="tum: `t x y z qx qy qz qw` lines (evo, TUM RGB-D tools); csv: header "
-             "t,x,y,drive[,predictor],kind[,t_issue,error_m].")] = "tum",
+    run_dir: Annotated[
+        Path,
+        typer.Argument(
+            metavar="RUN_DIR",
+            show_default=False,
+            help="A folder written by `bench run` or `bench score` (or its results.json); its "
+            "traces.parquet is read.",
+        ),
+    ],
+    out: Annotated[
+        Path,
+        typer.Option(
+            "--out",
+            "-o",
+            metavar="DIR",
+            show_default=False,
+            help="Folder to write the tracks into (made if missing; files of the same names "
+            "are replaced).",
+        ),
+    ],
+    fmt: Annotated[
+        str,
+        typer.Option(
+            "--format",
+            "-f",
+            metavar="tum|csv",
+            help="tum: `t x y z qx qy qz qw` lines (evo, TUM RGB-D tools); csv: header "
+            "t,x,y,drive[,predictor],kind[,t_issue,error_m].",
+        ),
+    ] = "tum",
     config: ConfigOpt = None,
     quiet: QuietOpt = False,
     verbose: VerboseOpt = False,
@@ -59,17 +77,18 @@ def export(
 
     fmt = fmt.strip().lower()
     if fmt not in FORMATS:
-        raise UsageError(f"--format {fmt}: not an export format; give one of "
-                         f"{', '.join(FORMATS)}")
+        raise UsageError(f"--format {fmt}: not an export format; give one of {', '.join(FORMATS)}")
     check_out_dir(out)
     run = load_run(run_dir)
     try:
         done = export_run(run, out, fmt)
     except OSError as e:
         raise DataError(out, f"cannot write the tracks: {e.strerror or e}") from None
-    say(f"{out}: {plural(len(done.files), f'{fmt.upper()} file')} (reference and "
+    say(
+        f"{out}: {plural(len(done.files), f'{fmt.upper()} file')} (reference and "
         f"{plural(len(run.predictors), 'predictor')}, now and future queries scored, "
-        f"{plural(len(done.drives), 'drive')})")
+        f"{plural(len(done.drives), 'drive')})"
+    )
     if done.skipped:
         say(f"drives the run skipped (no tracks): {', '.join(done.skipped)}")
     if done.empty:

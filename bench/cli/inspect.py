@@ -19,9 +19,21 @@ from posbench.cli.options import (
 )
 from posbench.cli.terminal import console, print_table
 
-HEADER = ("drive", "format", "dur [s]", "dist [m]", "fixes", "fix dt p5/p50/p95/max [ms]",
-          "IMU [Hz]", "speed [m/s]", "stopped", "str/turn/rbt/stop [%]", "truth (acc.)",
-          "scored fixes", "warn.")
+HEADER = (
+    "drive",
+    "format",
+    "dur [s]",
+    "dist [m]",
+    "fixes",
+    "fix dt p5/p50/p95/max [ms]",
+    "IMU [Hz]",
+    "speed [m/s]",
+    "stopped",
+    "str/turn/rbt/stop [%]",
+    "truth (acc.)",
+    "scored fixes",
+    "warn.",
+)
 #: the bag roles in the order inspect lists them
 ROLES = ("gps", "truth", "imu", "speed")
 
@@ -41,10 +53,15 @@ def topic_lines(extra: dict[str, Any]) -> list[str]:
     roles = extra.get("topics")
     if not isinstance(roles, dict) or not all(isinstance(v, dict) for v in roles.values()):
         return []
-    rows = [(r, roles[r]["topic"], roles[r]["type"], roles[r].get("why", ""))
-            for r in (*ROLES, *sorted(set(roles) - set(ROLES))) if r in roles]
-    rows += [("-", t, v["type"], v.get("why", ""))
-             for t, v in sorted((extra.get("unused_topics") or {}).items())]
+    rows = [
+        (r, roles[r]["topic"], roles[r]["type"], roles[r].get("why", ""))
+        for r in (*ROLES, *sorted(set(roles) - set(ROLES)))
+        if r in roles
+    ]
+    rows += [
+        ("-", t, v["type"], v.get("why", ""))
+        for t, v in sorted((extra.get("unused_topics") or {}).items())
+    ]
     w = [max(len(str(r[i])) for r in rows) for i in range(3)]
     return [f"{r[0]:<{w[0]}}  {r[1]:<{w[1]}}  {r[2]:<{w[2]}}  ({r[3]})" for r in rows]
 
@@ -60,23 +77,36 @@ def inspect_rows(summaries: list[dict[str, Any]]) -> tuple[tuple[str, ...], list
         q = r["gps_interval_ms"]
         acc = r["truth_median_accuracy_m"]
         truth = ("yes" + (f" ({acc:.2f} m)" if acc is not None else "")) if r["has_truth"] else "no"
-        out.append([r["name"], r["format"], f"{r['duration_s']:.1f}", f"{r['distance_m']:.0f}",
-                    str(r["gps_count"]),
-                    f"{q['p5']:.0f}/{q['p50']:.0f}/{q['p95']:.0f}/{q['max']:.0f}",
-                    f"{r['imu_rate_hz']:.0f}",
-                    f"{r['speed_mps']['min']:.1f}-{r['speed_mps']['max']:.1f}",
-                    f"{100 * r['fraction_stopped']:.0f}%",
-                    "/".join(f"{100 * v:.0f}" for v in r["label_shares"].values()), truth,
-                    *([r["scored_fixes"]] if scored else []), str(len(r["warnings"]))])
+        out.append(
+            [
+                r["name"],
+                r["format"],
+                f"{r['duration_s']:.1f}",
+                f"{r['distance_m']:.0f}",
+                str(r["gps_count"]),
+                f"{q['p5']:.0f}/{q['p50']:.0f}/{q['p95']:.0f}/{q['max']:.0f}",
+                f"{r['imu_rate_hz']:.0f}",
+                f"{r['speed_mps']['min']:.1f}-{r['speed_mps']['max']:.1f}",
+                f"{100 * r['fraction_stopped']:.0f}%",
+                "/".join(f"{100 * v:.0f}" for v in r["label_shares"].values()),
+                truth,
+                *([r["scored_fixes"]] if scored else []),
+                str(len(r["warnings"])),
+            ]
+        )
     return (HEADER if scored else tuple(h for h in HEADER if h != "scored fixes")), out
 
 
 def inspect(
-    paths: Annotated[list[Path] | None, typer.Argument(
-        metavar="PATH",
-        help="Recordings or folders (default: the built-in synthetic drives).")] = None,
-    as_json: Annotated[bool, typer.Option("--json", help="Print a JSON list, one object per drive.")
-                       ] = False,
+    paths: Annotated[
+        list[Path] | None,
+        typer.Argument(
+            metavar="PATH", help="Recordings or folders (default: the built-in synthetic drives)."
+        ),
+    ] = None,
+    as_json: Annotated[
+        bool, typer.Option("--json", help="Print a JSON list, one object per drive.")
+    ] = False,
     topic: TopicOpt = None,
     projection: ProjectionOpt = "enu",
     strict: StrictOpt = False,
@@ -91,8 +121,7 @@ def inspect(
     from posbench.pipeline.drives import load_drives
     from posbench.scenarios.summary import summarize_drive
 
-    drives = load_drives(paths, projection, parse_topics(topic) or None,
-                         reporter=reporter())
+    drives = load_drives(paths, projection, parse_topics(topic) or None, reporter=reporter())
     checks = check_drives(drives)
     rows = [summarize_drive(d) for d in drives]
     for r, d in zip(rows, drives, strict=True):
@@ -119,14 +148,21 @@ def print_inspect(rows: list[dict[str, Any]], checks: dict[str, Any]) -> None:
     from posbench.report.data_check import flagged, table_rows
 
     header, cells = inspect_rows(rows)
-    print_table(console, header, cells, title=f"{len(rows)} drive{'' if len(rows) == 1 else 's'}",
-                key_columns=1, left_columns=2)
+    print_table(
+        console,
+        header,
+        cells,
+        title=f"{len(rows)} drive{'' if len(rows) == 1 else 's'}",
+        key_columns=1,
+        left_columns=2,
+    )
     from rich.markup import escape
 
     for r in rows:
         if r.get("topic_lines"):
-            console.print(f"{r['name']}: bag topics (role, topic, type, why)", markup=False,
-                          highlight=False)
+            console.print(
+                f"{r['name']}: bag topics (role, topic, type, why)", markup=False, highlight=False
+            )
             for line in r["topic_lines"]:
                 console.print(f"  {line}", markup=False, highlight=False, soft_wrap=True)
     for r in rows:
@@ -134,8 +170,14 @@ def print_inspect(rows: list[dict[str, Any]], checks: dict[str, Any]) -> None:
             console.print(f"[yellow]warning[/] {escape(r['name'])}: {escape(w)}", highlight=False)
     section = {d: c.to_dict() for d, c in checks.items()}
     header, cells = table_rows(section)
-    print_table(console, header, cells, key_columns=1, left_columns=len(header),
-                title="data consistency: each stream against the truth's motion, else what "
-                      "the GPS fixes imply (pass / warn / fail / n/a)")
+    print_table(
+        console,
+        header,
+        cells,
+        key_columns=1,
+        left_columns=len(header),
+        title="data consistency: each stream against the truth's motion, else what "
+        "the GPS fixes imply (pass / warn / fail / n/a)",
+    )
     for verdict, d, s, why in flagged(section, ("fail", "warn", "n/a")):
         console.print(f"{verdict} {escape(d)}: {s}: {escape(why)}", highlight=False)

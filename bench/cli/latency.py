@@ -27,10 +27,13 @@ DEFAULT_TIMED = (*DEFAULT_PREDICTORS, "hybrid")
 
 
 def latency(
-    predictors: Annotated[list[str] | None, predictors_option(
-        "those of `bench run` and hybrid (which the CI latency gate times)")] = None,
-    steps: Annotated[int, typer.Option(help="Fix steps to time per predictor (after warm-up).")
-                     ] = 2000,
+    predictors: Annotated[
+        list[str] | None,
+        predictors_option("those of `bench run` and hybrid (which the CI latency gate times)"),
+    ] = None,
+    steps: Annotated[
+        int, typer.Option(help="Fix steps to time per predictor (after warm-up).")
+    ] = 2000,
     data: DataOpt = None,
     as_json: Annotated[bool, typer.Option("--json", help="Print JSON instead of tables.")] = False,
     model: ModelOpt = None,
@@ -83,23 +86,55 @@ def latency(
     rows = []
     for n in names:
         s, q = res[n]["step_us"], res[n]["query_us"]
-        rows.append([n, f"{s['p50']:.1f}", f"{s['p90']:.1f}", f"{s['p99']:.1f}", f"{s['max']:.0f}",
-                     f"{q['p50']:.1f}", f"{q['p99']:.1f}", paper.get(n, "")])
-    print_table(console, ("predictor", "step p50", "p90", "p99", "max", "query p50", "query p99",
-                          "paper"), rows,
-                title=f"per-call latency (us) on {drive.name} (one process, one thread)")
+        rows.append(
+            [
+                n,
+                f"{s['p50']:.1f}",
+                f"{s['p90']:.1f}",
+                f"{s['p99']:.1f}",
+                f"{s['max']:.0f}",
+                f"{q['p50']:.1f}",
+                f"{q['p99']:.1f}",
+                paper.get(n, ""),
+            ]
+        )
+    print_table(
+        console,
+        ("predictor", "step p50", "p90", "p99", "max", "query p50", "query p99", "paper"),
+        rows,
+        title=f"per-call latency (us) on {drive.name} (one process, one thread)",
+    )
     if "lstm_stages" in res:
-        pp = {"resample_positions": "~2000 (L-BFGS regression)", "inference": "~2000 (LSTM)",
-              "cubic_fit_lbfgs": "~2000"}
-        print_table(console, ("stage", "p50", "p90", "p99", "paper"),
-                    [[k, f"{v['p50']:.1f}", f"{v['p90']:.1f}", f"{v['p99']:.1f}", pp.get(k, "")]
-                     for k, v in res["lstm_stages"].items()],
-                    title="lstm fix step by stage (us), staged reference (step=staged)")
-        print_table(console, ("stage", "p50", "p90", "p99"),
-                    [[k, f"{v['p50']:.1f}", f"{v['p90']:.1f}", f"{v['p99']:.1f}"]
-                     for k, v in res["lstm_fused_stages"].items()],
-                    title="lstm fix step by stage (us), fused (the default)")
-        print_table(console, ("batch", "windows/s", "us/window"),
-                    [[str(b), f"{v['windows_per_s']:.0f}", f"{v['us_per_window']:.1f}"]
-                     for b, v in res["batch"].items()],
-                    title="batch throughput (onnxruntime, one thread)", left_columns=0)
+        pp = {
+            "resample_positions": "~2000 (L-BFGS regression)",
+            "inference": "~2000 (LSTM)",
+            "cubic_fit_lbfgs": "~2000",
+        }
+        print_table(
+            console,
+            ("stage", "p50", "p90", "p99", "paper"),
+            [
+                [k, f"{v['p50']:.1f}", f"{v['p90']:.1f}", f"{v['p99']:.1f}", pp.get(k, "")]
+                for k, v in res["lstm_stages"].items()
+            ],
+            title="lstm fix step by stage (us), staged reference (step=staged)",
+        )
+        print_table(
+            console,
+            ("stage", "p50", "p90", "p99"),
+            [
+                [k, f"{v['p50']:.1f}", f"{v['p90']:.1f}", f"{v['p99']:.1f}"]
+                for k, v in res["lstm_fused_stages"].items()
+            ],
+            title="lstm fix step by stage (us), fused (the default)",
+        )
+        print_table(
+            console,
+            ("batch", "windows/s", "us/window"),
+            [
+                [str(b), f"{v['windows_per_s']:.0f}", f"{v['us_per_window']:.1f}"]
+                for b, v in res["batch"].items()
+            ],
+            title="batch throughput (onnxruntime, one thread)",
+            left_columns=0,
+        )

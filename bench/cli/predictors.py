@@ -44,23 +44,35 @@ def predictor_info(name: str, options: bool = False, tuning: Path | None = None)
     )
 
     entry = resolve(name)
-    info: dict[str, Any] = {"name": name, "source": entry.source,
-                            "distribution": entry.distribution, "target": entry.target,
-                            "description": entry.description, "error": None}
+    info: dict[str, Any] = {
+        "name": name,
+        "source": entry.source,
+        "distribution": entry.distribution,
+        "target": entry.target,
+        "description": entry.description,
+        "error": None,
+    }
     try:
         info["description"] = description(name)
         if options:
             accepted, any_option = constructor_options(predictor_class(name))
-            info["options"] = [{"name": k, "default": None if v is inspect.Parameter.empty
-                                else _jsonable(v), "required": v is inspect.Parameter.empty}
-                               for k, v in accepted.items()]
+            info["options"] = [
+                {
+                    "name": k,
+                    "default": None if v is inspect.Parameter.empty else _jsonable(v),
+                    "required": v is inspect.Parameter.empty,
+                }
+                for k, v in accepted.items()
+            ]
             info["any_option"] = any_option
             info["by_condition"] = {}
             for cond in GPS_CONDITIONS:
                 found = tuning_entry(base_name(name), cond, tuning)
                 if found:
-                    info["by_condition"][cond] = {"params": found[1].get("params", {}),
-                                                  "tuning": str(found[0])}
+                    info["by_condition"][cond] = {
+                        "params": found[1].get("params", {}),
+                        "tuning": str(found[0]),
+                    }
     except PredictorError as e:
         info["error"] = str(e)
     return info
@@ -88,23 +100,33 @@ def listing(names: list[str] | None = None, tuning: Path | None = None) -> dict[
 
 
 def _option_text(opts: list[dict[str, Any]], any_option: bool) -> str:
-    parts = [f"{o['name']} (required)" if o["required"] else f"{o['name']}={o['default']!r}"
-             for o in opts]
+    parts = [
+        f"{o['name']} (required)" if o["required"] else f"{o['name']}={o['default']!r}"
+        for o in opts
+    ]
     if any_option:
         parts.append("and any other (**kwargs)")
     return ", ".join(parts) if parts else "none"
 
 
 def list_predictors(
-    names: Annotated[list[str] | None, typer.Argument(
-        metavar="NAME",
-        help="Show these predictors with their options (--set NAME.OPTION=VALUE): registered "
-             "names, entry points or module:Class. Default: list every available one.")] = None,
-    as_json: Annotated[bool, typer.Option("--json", help="Print JSON instead of a table.")
-                       ] = False,
-    tuning: Annotated[Path | None, typer.Option(
-        "--tuning", metavar="FILE",
-        help="Show the values a run with `bench run --tuning FILE` would use.")] = None,
+    names: Annotated[
+        list[str] | None,
+        typer.Argument(
+            metavar="NAME",
+            help="Show these predictors with their options (--set NAME.OPTION=VALUE): registered "
+            "names, entry points or module:Class. Default: list every available one.",
+        ),
+    ] = None,
+    as_json: Annotated[bool, typer.Option("--json", help="Print JSON instead of a table.")] = False,
+    tuning: Annotated[
+        Path | None,
+        typer.Option(
+            "--tuning",
+            metavar="FILE",
+            help="Show the values a run with `bench run --tuning FILE` would use.",
+        ),
+    ] = None,
     config: ConfigOpt = None,
     quiet: QuietOpt = False,
     verbose: VerboseOpt = False,
@@ -125,19 +147,30 @@ def list_predictors(
     if as_json:
         print(json.dumps(res, indent=2))
         return
-    rows = [[i["name"], i["source"] + (f" ({i['distribution']})" if i["distribution"] else ""),
-             i["description"] if not i["error"] else "(cannot be loaded: see the note below)"]
-            for i in res["predictors"]]
+    rows = [
+        [
+            i["name"],
+            i["source"] + (f" ({i['distribution']})" if i["distribution"] else ""),
+            i["description"] if not i["error"] else "(cannot be loaded: see the note below)",
+        ]
+        for i in res["predictors"]
+    ]
     print_table(console, ["name", "from", "description"], rows, left_columns=3)
     for i in res["predictors"]:
         if "options" in i:
-            console.print(f"{escape(i['name'])} ({escape(i['target'])}) options: "
-                          f"{escape(_option_text(i['options'], i['any_option']))}",
-                          highlight=False, soft_wrap=True)
+            console.print(
+                f"{escape(i['name'])} ({escape(i['target'])}) options: "
+                f"{escape(_option_text(i['options'], i['any_option']))}",
+                highlight=False,
+                soft_wrap=True,
+            )
             for cond, tuned in i.get("by_condition", {}).items():
                 values = ", ".join(f"{k}={v!r}" for k, v in tuned["params"].items())
-                console.print(f"  under GPS condition {cond}: {escape(values or 'the defaults')} "
-                              f"(tuning {escape(tuned['tuning'])})", highlight=False,
-                              soft_wrap=True)
+                console.print(
+                    f"  under GPS condition {cond}: {escape(values or 'the defaults')} "
+                    f"(tuning {escape(tuned['tuning'])})",
+                    highlight=False,
+                    soft_wrap=True,
+                )
     for note in res["notes"]:
         say(f"note: {note}")

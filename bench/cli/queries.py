@@ -31,10 +31,16 @@ from posbench.cli.options import (
 
 def queries(
     data: DataOpt = None,
-    out: Annotated[Path, typer.Option(
-        "--out", "-o", metavar="DIR",
-        help="Queries folder to write: queries.csv and inputs/ (give these to the system under "
-             "test), key/ (the answer key: keep it), manifest.json.")] = Path("bench-queries"),
+    out: Annotated[
+        Path,
+        typer.Option(
+            "--out",
+            "-o",
+            metavar="DIR",
+            help="Queries folder to write: queries.csv and inputs/ (give these to the system under "
+            "test), key/ (the answer key: keep it), manifest.json.",
+        ),
+    ] = Path("bench-queries"),
     horizon: HorizonOpt = 0.2,
     gps_profile: GpsProfileOpt = "auto",
     gps_latency: GpsLatencyOpt = 0.0,
@@ -44,9 +50,14 @@ def queries(
     projection: ProjectionOpt = "enu",
     include_poor_truth: IncludePoorTruthOpt = False,
     synthetic_duration: SyntheticDurationOpt = None,
-    file_format: Annotated[str, typer.Option(
-        "--file-format", metavar="csv|parquet",
-        help="File format of the queries list and the inputs.")] = "csv",
+    file_format: Annotated[
+        str,
+        typer.Option(
+            "--file-format",
+            metavar="csv|parquet",
+            help="File format of the queries list and the inputs.",
+        ),
+    ] = "csv",
     config: ConfigOpt = None,
     quiet: QuietOpt = False,
     verbose: VerboseOpt = False,
@@ -78,26 +89,49 @@ def queries(
     if old_format is not None:
         renamed("--format", "--file-format", "bench queries")
         file_format = old_format
-    check_drive_options(gps_profile, projection, horizon, gps_latency, dropouts, seed,
-                        synthetic_duration, data)
+    check_drive_options(
+        gps_profile, projection, horizon, gps_latency, dropouts, seed, synthetic_duration, data
+    )
     topics = parse_topics(topic)
     check_choice(file_format, FORMATS, "--file-format")
     check_out_dir(out)
     # no predictor runs here, and no gate: the system under test gets every fed fix
-    cfg = RunConfig(predictors=(), horizon_s=horizon, gps_profile=gps_profile,
-                    gps_latency_s=gps_latency, dropouts=dropouts, seed=seed,
-                    exclude_poor_truth=not include_poor_truth, gate=False)
+    cfg = RunConfig(
+        predictors=(),
+        horizon_s=horizon,
+        gps_profile=gps_profile,
+        gps_latency_s=gps_latency,
+        dropouts=dropouts,
+        seed=seed,
+        exclude_poor_truth=not include_poor_truth,
+        gate=False,
+    )
     reporter = reporter()
     with local_paths(data) as local:
-        drives = load_drives(local, projection, topics or None, seed=seed,
-                             synthetic_duration_s=synthetic_duration, reporter=reporter)
-        with reporter.steps(f"{plural(len(drives), 'drive')}: queries and inputs",
-                            len(drives)) as done:
-            written = write_queries(drives, cfg, out, command=command_line(),
-                                    data=data_provenance(local, cfg.seed), fmt=file_format,
-                                    on_done=done)
+        drives = load_drives(
+            local,
+            projection,
+            topics or None,
+            seed=seed,
+            synthetic_duration_s=synthetic_duration,
+            reporter=reporter,
+        )
+        with reporter.steps(
+            f"{plural(len(drives), 'drive')}: queries and inputs", len(drives)
+        ) as done:
+            written = write_queries(
+                drives,
+                cfg,
+                out,
+                command=command_line(),
+                data=data_provenance(local, cfg.seed),
+                fmt=file_format,
+                on_done=done,
+            )
     skipped = f" ({written.skipped} skipped, named in manifest.json)" if written.skipped else ""
-    say(f"wrote {out}/: {written.files[0]} ({written.queries} queries), "
+    say(
+        f"wrote {out}/: {written.files[0]} ({written.queries} queries), "
         f"{plural(written.drives, 'input file')} in inputs/{skipped}, key/ (the answer "
-        f"key: keep it from the system under test), manifest.json")
+        f"key: keep it from the system under test), manifest.json"
+    )
     say(f"score the answers with: bench score ANSWERS.csv --queries {out}")

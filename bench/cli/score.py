@@ -22,18 +22,31 @@ from posbench.cli.options import (
 
 
 def score(
-    answers: Annotated[Path, typer.Argument(
-        metavar="ANSWERS", show_default=False,
-        help="CSV or Parquet file: one row per answer, columns drive, kind (future|now), "
-             "t_query [s], x, y [m], optional latency_us [us]. Or a TUM file (.tum): the now "
-             "answers of one drive, lines `t_query x y z qx qy qz qw`.")],
-    queries: Annotated[Path, typer.Option(
-        "--queries", metavar="DIR", show_default=False,
-        help="The folder `bench queries` wrote (its key/ holds the references).")],
-    name: Annotated[str, typer.Option(
-        metavar="NAME", help="Name of the system under test in the report.")] = "answers",
-    out: Annotated[Path, typer.Option("--out", "-o", metavar="DIR", help="Output folder.")
-                   ] = Path("bench-out"),
+    answers: Annotated[
+        Path,
+        typer.Argument(
+            metavar="ANSWERS",
+            show_default=False,
+            help="CSV or Parquet file: one row per answer, columns drive, kind (future|now), "
+            "t_query [s], x, y [m], optional latency_us [us]. Or a TUM file (.tum): the now "
+            "answers of one drive, lines `t_query x y z qx qy qz qw`.",
+        ),
+    ],
+    queries: Annotated[
+        Path,
+        typer.Option(
+            "--queries",
+            metavar="DIR",
+            show_default=False,
+            help="The folder `bench queries` wrote (its key/ holds the references).",
+        ),
+    ],
+    name: Annotated[
+        str, typer.Option(metavar="NAME", help="Name of the system under test in the report.")
+    ] = "answers",
+    out: Annotated[Path, typer.Option("--out", "-o", metavar="DIR", help="Output folder.")] = Path(
+        "bench-out"
+    ),
     table_format: TableFormatOpt = "md,csv,latex",
     plot_format: PlotFormatOpt = "png",
     drive_plots: DrivePlotsOpt = "20",
@@ -73,8 +86,14 @@ def score(
         table_format = old_format
     check_score_options(answers, queries, name, out)
     published = score_answers_file(
-        answers, queries, name, out, command_line(), plot_formats=parse_plot_formats(plot_format),
+        answers,
+        queries,
+        name,
+        out,
+        command_line(),
+        plot_formats=parse_plot_formats(plot_format),
         drive_plots=parse_drive_plots(drive_plots),
         table_formats=parse_report_formats(table_format, "--table-format"),
-        reporter=reporter())
+        reporter=reporter(),
+    )
     print_run_summary(published)

@@ -34,33 +34,52 @@ def print_run_summary(published: Published) -> None:
     for line in fixes_lines(res):
         say(line.replace("`", ""))
     headline = summary_table(res, compact=True)
-    print_table(console, headline.header(), headline.cells(),
-                title=f"{plural(scored, 'drive')} - errors in metres [95 % CI], latency in "
-                      f"microseconds")
+    print_table(
+        console,
+        headline.header(),
+        headline.cells(),
+        title=f"{plural(scored, 'drive')} - errors in metres [95 % CI], latency in microseconds",
+    )
     for note in (trained_note(res), excluded_note(res)):
         if note:
             say(note)
     if has_paired(res):
         paired = paired_table(res)
-        print_table(console, paired.header(), paired.cells(),
-                    title=f"vs {res['paired']['baseline']}: Δ mean error [m], same queries "
-                          f"[95 % CI]; * CI excludes 0")
+        print_table(
+            console,
+            paired.header(),
+            paired.cells(),
+            title=f"vs {res['paired']['baseline']}: Δ mean error [m], same queries "
+            f"[95 % CI]; * CI excludes 0",
+        )
     if res.get("seeds"):
         st = seeds_table(res)
-        print_table(console, st.header(), st.cells(),
-                    title=f"over seeds {', '.join(map(str, res['seeds']['seeds']))}: mean error "
-                          f"[m] (figures and traces: seed {res['seeds']['traces_seed']})")
+        print_table(
+            console,
+            st.header(),
+            st.cells(),
+            title=f"over seeds {', '.join(map(str, res['seeds']['seeds']))}: mean error "
+            f"[m] (figures and traces: seed {res['seeds']['traces_seed']})",
+        )
     if res.get("held_out_all"):
         ho = res["held_out_all"]
         held = summary_table(res, held_out=True, compact=True)
-        print_table(console, held.header(), held.cells(),
-                    title=f"held-out {plural(len(ho['drives']), 'drive')} (no learned predictor "
-                          f"trained on them) - errors in metres")
+        print_table(
+            console,
+            held.header(),
+            held.cells(),
+            title=f"held-out {plural(len(ho['drives']), 'drive')} (no learned predictor "
+            f"trained on them) - errors in metres",
+        )
         if has_held_out_paired(res):
             hp = paired_table(res, held_out=True)
-            print_table(console, hp.header(), hp.cells(),
-                        title=f"held-out drives vs {res['paired']['baseline']}: Δ mean error [m] "
-                              f"[95 % CI]; * CI excludes 0")
+            print_table(
+                console,
+                hp.header(),
+                hp.cells(),
+                title=f"held-out drives vs {res['paired']['baseline']}: Δ mean error [m] "
+                f"[95 % CI]; * CI excludes 0",
+            )
     if published.run.folder is not None:
         say(written_summary(published.run.folder, published.written, published.removed))
     if published.recording is not None:

@@ -48,8 +48,9 @@ def fail(msg: str) -> typer.Exit:
     """Print ``error: msg`` as one line on stderr; return the exit (status 2) to raise."""
     from rich.markup import escape  # "posbench-harness[ray]" is text, not markup
 
-    err_console.print(f"[bold red]error:[/] {escape(msg)}", highlight=False, soft_wrap=True,
-                      emoji=False)
+    err_console.print(
+        f"[bold red]error:[/] {escape(msg)}", highlight=False, soft_wrap=True, emoji=False
+    )
     return typer.Exit(2)
 
 
@@ -57,8 +58,9 @@ def warn(msg: str) -> None:
     """One line ``warning: msg`` on stderr, whatever the verbosity (deprecations)."""
     from rich.markup import escape
 
-    err_console.print(f"[yellow]warning:[/] {escape(msg)}", highlight=False, soft_wrap=True,
-                      emoji=False)
+    err_console.print(
+        f"[yellow]warning:[/] {escape(msg)}", highlight=False, soft_wrap=True, emoji=False
+    )
 
 
 def say(text: str, level: int = INFO) -> None:
@@ -80,8 +82,9 @@ EDGE_OVERHEAD = 1
 """... plus the closing border of the row."""
 
 
-def column_widths(header: Sequence[str], rows: Sequence[Sequence[str]],
-                  measure: Callable[[str], int] = len) -> list[int]:
+def column_widths(
+    header: Sequence[str], rows: Sequence[Sequence[str]], measure: Callable[[str], int] = len
+) -> list[int]:
     """Width [characters] of each column: its longest cell or longest header word, at least 1.
 
     ``measure`` gives a string's width on screen (``len``; rich's ``cell_len`` for wide glyphs).
@@ -116,8 +119,9 @@ def _greedy(widths: Sequence[int], keys: list[int], limit: int) -> list[list[int
     return groups
 
 
-def split_columns(widths: Sequence[int], limit: int | None,
-                  key_columns: int = 1) -> list[list[int]] | None:
+def split_columns(
+    widths: Sequence[int], limit: int | None, key_columns: int = 1
+) -> list[list[int]] | None:
     """Column indices of each table to print so that every table is at most ``limit`` wide.
 
     One table with every column when it fits (or ``limit`` is None). Otherwise consecutive
@@ -165,8 +169,14 @@ class _AtWidth:
         yield from console.render(self.renderable, options.update_width(self.width))
 
 
-def _rich_table(header: Sequence[str], rows: Sequence[Sequence[str]], cols: Sequence[int],
-                widths: Sequence[int], title: str | None, left: int):
+def _rich_table(
+    header: Sequence[str],
+    rows: Sequence[Sequence[str]],
+    cols: Sequence[int],
+    widths: Sequence[int],
+    title: str | None,
+    left: int,
+):
     from rich.cells import cell_len
     from rich.table import Table
     from rich.text import Text
@@ -180,16 +190,26 @@ def _rich_table(header: Sequence[str], rows: Sequence[Sequence[str]], cols: Sequ
     t = Table(title=Text(title) if title else None)
     for j in cols:
         # fixed width = longest cell: headers wrap at spaces, cells fit exactly
-        t.add_column(Text(header[j]), justify="left" if j < left else "right",
-                     width=widths[j], min_width=widths[j], overflow="fold")
+        t.add_column(
+            Text(header[j]),
+            justify="left" if j < left else "right",
+            width=widths[j],
+            min_width=widths[j],
+            overflow="fold",
+        )
     for r in rows:
         t.add_row(*(cell(j, r[j]) for j in cols))
     return t
 
 
-def print_table(console: Console, header: Sequence[str], rows: Sequence[Sequence[str]],
-                title: str | None = None, key_columns: int = 1,
-                left_columns: int | None = None) -> None:
+def print_table(
+    console: Console,
+    header: Sequence[str],
+    rows: Sequence[Sequence[str]],
+    title: str | None = None,
+    key_columns: int = 1,
+    left_columns: int | None = None,
+) -> None:
     """Print ``rows`` under ``header`` so that no cell is ever cut, wrapped or ellipsised.
 
     Args:
@@ -217,16 +237,18 @@ def print_table(console: Console, header: Sequence[str], rows: Sequence[Sequence
         return
     for i, cols in enumerate(groups):
         part = f"({i + 1}/{len(groups)})" if len(groups) > 1 else ""
-        t = _rich_table(header, rows, cols, widths,
-                        " ".join(s for s in (title, part) if s) or None, left)
+        t = _rich_table(
+            header, rows, cols, widths, " ".join(s for s in (title, part) if s) or None, left
+        )
         if limit is None:
             console.print(_AtWidth(t, table_width(widths[j] for j in cols)), crop=False)
         else:
             console.print(t)
 
 
-def _print_lines(console: Console, header: Sequence[str], rows: Sequence[Sequence[str]],
-                 title: str | None) -> None:
+def _print_lines(
+    console: Console, header: Sequence[str], rows: Sequence[Sequence[str]], title: str | None
+) -> None:
     """The narrow-terminal fallback: one ``header: value`` line per cell (the value alone under
     an empty header), rows apart."""
     if title:
@@ -235,5 +257,6 @@ def _print_lines(console: Console, header: Sequence[str], rows: Sequence[Sequenc
         if i or title:
             console.print()
         for h, c in zip(header, r, strict=True):
-            console.print(f"{h}: {c}" if h.strip() else c, markup=False, highlight=False,
-                          soft_wrap=True)
+            console.print(
+                f"{h}: {c}" if h.strip() else c, markup=False, highlight=False, soft_wrap=True
+            )

@@ -28,28 +28,57 @@ DEFAULT_PROFILES = {"lstm": "none,rtk", "hybrid": "none,rtk,consumer"}
 
 def train(
     data: DataOpt = None,
-    network: Annotated[str, typer.Option(
-        "--network", "-n", metavar="NAME",
-        help="Which network: lstm (the paper's MLP-LSTM-MLP) or hybrid (kf prior + learned "
-             "residual).")] = "lstm",
-    out: Annotated[Path, typer.Option("--out", "-o", metavar="DIR",
-                                      help="Folder for model.onnx, model.json, MODEL_CARD.md and (lstm) model.core.onnx.")
-                   ] = Path("model-out"),
-    epochs: Annotated[int, typer.Option(help="Maximum epochs (early stopping may end sooner).")] = 40,
+    network: Annotated[
+        str,
+        typer.Option(
+            "--network",
+            "-n",
+            metavar="NAME",
+            help="Which network: lstm (the paper's MLP-LSTM-MLP) or hybrid (kf prior + learned "
+            "residual).",
+        ),
+    ] = "lstm",
+    out: Annotated[
+        Path,
+        typer.Option(
+            "--out",
+            "-o",
+            metavar="DIR",
+            help="Folder for model.onnx, model.json, MODEL_CARD.md and (lstm) model.core.onnx.",
+        ),
+    ] = Path("model-out"),
+    epochs: Annotated[
+        int, typer.Option(help="Maximum epochs (early stopping may end sooner).")
+    ] = 40,
     seed: Annotated[int, typer.Option(help="Seed for split, sampling and initialisation.")] = 0,
     synthetic: Annotated[int, typer.Option(help="Number of synthetic drives to add.")] = 0,
-    corpus_hours: Annotated[float, typer.Option(
-        "--corpus-hours", metavar="H",
-        help="Hours of the vehicle-dynamics corpus (0-40 m/s, urban/rural/highway; "
-             "scenarios.corpus) to add, e.g. 20.")] = 0.0,
-    profiles: Annotated[str | None, typer.Option(
-        metavar="P,P", help="GPS profiles drawn from the truth of drives that have one "
-                            "(none, rtk, consumer). Default: none,rtk for lstm, "
-                            "none,rtk,consumer for hybrid.")] = None,
+    corpus_hours: Annotated[
+        float,
+        typer.Option(
+            "--corpus-hours",
+            metavar="H",
+            help="Hours of the vehicle-dynamics corpus (0-40 m/s, urban/rural/highway; "
+            "scenarios.corpus) to add, e.g. 20.",
+        ),
+    ] = 0.0,
+    profiles: Annotated[
+        str | None,
+        typer.Option(
+            metavar="P,P",
+            help="GPS profiles drawn from the truth of drives that have one "
+            "(none, rtk, consumer). Default: none,rtk for lstm, "
+            "none,rtk,consumer for hybrid.",
+        ),
+    ] = None,
     hidden: Annotated[int, typer.Option(help="Width of encoder, LSTM and decoder.")] = 64,
-    max_minutes: Annotated[float, typer.Option(
-        "--max-minutes", metavar="MIN",
-        help="Wall-clock budget for the epochs; the best epoch so far is kept.")] = 30.0,
+    max_minutes: Annotated[
+        float,
+        typer.Option(
+            "--max-minutes",
+            metavar="MIN",
+            help="Wall-clock budget for the epochs; the best epoch so far is kept.",
+        ),
+    ] = 30.0,
     config: ConfigOpt = None,
     quiet: QuietOpt = False,
     verbose: VerboseOpt = False,
@@ -83,15 +112,17 @@ def train(
     if bad or not prof:
         raise UsageError(f"--profiles {profiles!r}: choose from {', '.join(GPS_PROFILES)}")
     if not data and synthetic == 0 and corpus_hours == 0:
-        raise UsageError("no training drives: give --data PATH..., --synthetic N or "
-                         "--corpus-hours H")
+        raise UsageError(
+            "no training drives: give --data PATH..., --synthetic N or --corpus-hours H"
+        )
     check_data_paths(data)
     check_out_dir(out)
     try:
         import torch  # noqa: F401
     except ImportError:
-        raise UsageError("bench train needs PyTorch: pip install 'posbench-harness[train]'"
-                         ) from None
+        raise UsageError(
+            "bench train needs PyTorch: pip install 'posbench-harness[train]'"
+        ) from None
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
     if network == "hybrid":
@@ -101,33 +132,59 @@ def train(
 
     command = command_line()
     stopped: list[tuple[int, int, int]] = []
-    with Progress(TextColumn(f"[bold]training {network}"), BarColumn(), MofNCompleteColumn(),
-                  TimeElapsedColumn(), TextColumn("{task.fields[loss]}"), console=console,
-                  disable=verbosity() <= QUIET) as prog:
+    with Progress(
+        TextColumn(f"[bold]training {network}"),
+        BarColumn(),
+        MofNCompleteColumn(),
+        TimeElapsedColumn(),
+        TextColumn("{task.fields[loss]}"),
+        console=console,
+        disable=verbosity() <= QUIET,
+    ) as prog:
         task = prog.add_task("train", total=epochs, loss="preparing windows")
 
-        def progress(epoch: int, n_epochs: int, train_loss: float, val_loss: float,
-                     val_m: float = float("nan")) -> None:
-            prog.update(task, completed=epoch, total=n_epochs,
-                        loss=f"train {train_loss:.4f} val {val_loss:.4f} "
-                             f"val future {val_m:.4f} m")
+        def progress(
+            epoch: int,
+            n_epochs: int,
+            train_loss: float,
+            val_loss: float,
+            val_m: float = float("nan"),
+        ) -> None:
+            prog.update(
+                task,
+                completed=epoch,
+                total=n_epochs,
+                loss=f"train {train_loss:.4f} val {val_loss:.4f} val future {val_m:.4f} m",
+            )
 
         def early_stop(epoch: int, best_epoch: int, patience: int) -> None:
             stopped.append((epoch, best_epoch, patience))
             say(early_stop_message(epoch, best_epoch))
 
-        info = run_training([str(p) for p in data or []], out, epochs=epochs, seed=seed,
-                            synthetic=synthetic, progress=progress, command=command,
-                            on_early_stop=early_stop, corpus_hours=corpus_hours,
-                            profiles=tuple(prof), hidden=hidden, max_minutes=max_minutes)
+        info = run_training(
+            [str(p) for p in data or []],
+            out,
+            epochs=epochs,
+            seed=seed,
+            synthetic=synthetic,
+            progress=progress,
+            command=command,
+            on_early_stop=early_stop,
+            corpus_hours=corpus_hours,
+            profiles=tuple(prof),
+            hidden=hidden,
+            max_minutes=max_minutes,
+        )
     if verbosity() > QUIET:
         print_summary(console, info, out, stopped[0] if stopped else None)
 
 
 def early_stop_message(epoch: int, best_epoch: int) -> str:
     """The line announcing that early stopping ended training after ``epoch``."""
-    return (f"early stop at epoch {epoch}: validation loss did not improve for "
-            f"{_plural(epoch - best_epoch, 'epoch')} (best epoch {best_epoch})")
+    return (
+        f"early stop at epoch {epoch}: validation loss did not improve for "
+        f"{_plural(epoch - best_epoch, 'epoch')} (best epoch {best_epoch})"
+    )
 
 
 def _sources(names: list[str], info: dict) -> str:
@@ -136,11 +193,20 @@ def _sources(names: list[str], info: dict) -> str:
     seeds = {f"-s{s}" for s in data["synthetic"]["generator_seeds"]}
     in_memory = set(data["in_memory_drives"])
     n_mem = sum(n in in_memory for n in names)
-    n_syn = sum(n not in in_memory and n.startswith("synthetic-") and "-s" in n
-                and n[n.rindex("-s"):] in seeds for n in names)
+    n_syn = sum(
+        n not in in_memory
+        and n.startswith("synthetic-")
+        and "-s" in n
+        and n[n.rindex("-s") :] in seeds
+        for n in names
+    )
     n_corpus = sum(n not in in_memory and n.startswith("corpus-") for n in names)
-    parts = [(len(names) - n_mem - n_syn - n_corpus, "--data"), (n_syn, "synthetic"),
-             (n_corpus, "corpus"), (n_mem, "in memory")]
+    parts = [
+        (len(names) - n_mem - n_syn - n_corpus, "--data"),
+        (n_syn, "synthetic"),
+        (n_corpus, "corpus"),
+        (n_mem, "in memory"),
+    ]
     return ", ".join(f"{k} {what}" for k, what in parts if k)
 
 
@@ -148,22 +214,32 @@ def _plural(n: int, word: str) -> str:
     return f"{n} {word}{'' if n == 1 else 's'}"
 
 
-def print_summary(console: Console, info: dict, out: Path,
-                  early_stop: tuple[int, int, int] | None) -> None:
+def print_summary(
+    console: Console, info: dict, out: Path, early_stop: tuple[int, int, int] | None
+) -> None:
     """The end of ``bench train``: data, epochs and early stopping, validation error [m] of the
     model beside the cubic-extrapolation and constant-velocity baselines, export timing [us]
     and where model.onnx and its model card model.json are. ``info`` is ``run_training``'s
     result; ``early_stop`` is ``(epoch, best_epoch, patience)`` when early stopping fired."""
     data, tr = info["data"], info["training"]
-    print_table(console, ("split", "sources", "drives", "windows"),
-                [[split, _sources(data[f"{key}_drives"], info), str(len(data[f"{key}_drives"])),
-                  str(data[f"{key}_windows"])] for split, key in (("train", "train"),
-                                                                  ("validation", "val"))],
-                title="training data", left_columns=2)
+    print_table(
+        console,
+        ("split", "sources", "drives", "windows"),
+        [
+            [
+                split,
+                _sources(data[f"{key}_drives"], info),
+                str(len(data[f"{key}_drives"])),
+                str(data[f"{key}_windows"]),
+            ]
+            for split, key in (("train", "train"), ("validation", "val"))
+        ],
+        title="training data",
+        left_columns=2,
+    )
     paths = [p["path"] for p in data["paths"]]
     if paths:
-        console.print("--data: " + ", ".join(paths), markup=False, highlight=False,
-                      soft_wrap=True)
+        console.print("--data: " + ", ".join(paths), markup=False, highlight=False, soft_wrap=True)
 
     patience = tr["early_stopping_patience"]
     stop = f"after epoch {early_stop[0]}" if early_stop else "no"
@@ -172,10 +248,12 @@ def print_summary(console: Console, info: dict, out: Path,
     export = info.get("export") or {}
     chosen = export.get("chosen")
     p50 = (export.get("candidates") or {}).get(chosen, {}).get("p50_us")
-    rows = [["epochs run", f"{tr['epochs_run']} of {tr['epochs_max']}"],
-            ["early stopping", f"{stop} (patience {patience})"],
-            ["best epoch", f"{tr['best_epoch']} (its weights exported)"],
-            ["training time", f"{tr['seconds']:.1f} s"]]
+    rows = [
+        ["epochs run", f"{tr['epochs_run']} of {tr['epochs_max']}"],
+        ["early stopping", f"{stop} (patience {patience})"],
+        ["best epoch", f"{tr['best_epoch']} (its weights exported)"],
+        ["training time", f"{tr['seconds']:.1f} s"],
+    ]
     if chosen:
         rows.append(["ONNX exporter", chosen])
     if p50 is not None:
@@ -185,22 +263,41 @@ def print_summary(console: Console, info: dict, out: Path,
     val = info["validation"]
     groups = [k for k in val if k.startswith("group:")]
     subsets = ["all", *groups] if len(groups) > 1 else ["all"]
-    labels = {"lstm": "lstm (this model)", "hybrid": "hybrid (this model)",
-              "kf": "kf (its prior)", "cubic": "cubic extrapolation", "cv": "constant velocity"}
+    labels = {
+        "lstm": "lstm (this model)",
+        "hybrid": "hybrid (this model)",
+        "kf": "kf (its prior)",
+        "cubic": "cubic extrapolation",
+        "cv": "constant velocity",
+    }
     methods = [(k, labels.get(k, k)) for k in val["all"]]
     by_source = len(subsets) > 1  # a source column only when the windows come from several
     rows = []
     for sub in subsets:
         for key, label in methods:
             e = val[sub][key]
-            rows.append([*([sub.removeprefix("group:")] if by_source else []), label, str(e["n"]),
-                         *(f"{e[k]:.3f}" if e["n"] else "-" for k in ("mean_m", "p50_m", "p95_m"))])
+            rows.append(
+                [
+                    *([sub.removeprefix("group:")] if by_source else []),
+                    label,
+                    str(e["n"]),
+                    *(f"{e[k]:.3f}" if e["n"] else "-" for k in ("mean_m", "p50_m", "p95_m")),
+                ]
+            )
     header = ("predictor", "windows", "mean [m]", "p50 [m]", "p95 [m]")
-    print_table(console, ("source", *header) if by_source else header, rows,
-                title="validation: future-point error", key_columns=1 + by_source,
-                left_columns=1 + by_source)
+    print_table(
+        console,
+        ("source", *header) if by_source else header,
+        rows,
+        title="validation: future-point error",
+        key_columns=1 + by_source,
+        left_columns=1 + by_source,
+    )
     core = (info.get("core") or {}).get("file")
-    for what, name in (("model", "model.onnx"), ("model card", "model.json"),
-                       ("model card (text)", "MODEL_CARD.md"),
-                       *((("core graph", core),) if core else ())):
+    for what, name in (
+        ("model", "model.onnx"),
+        ("model card", "model.json"),
+        ("model card (text)", "MODEL_CARD.md"),
+        *((("core graph", core),) if core else ()),
+    ):
         console.print(f"{what}: {out / name}", markup=False, highlight=False, soft_wrap=True)

@@ -15,30 +15,53 @@ from posbench.errors import UsageError
 
 
 def tune(
-    predictor: Annotated[str, typer.Argument(
-        metavar="PREDICTOR", help="Predictor to tune: kf, ekf (noise grid, then calibration) or "
-                                 "cv (calibration only).")],
-    gps_profile: Annotated[str, typer.Option(
-        metavar="PROFILE",
-        help="GPS condition to tune for: none, rtk, consumer (fixes drawn from the truth of "
-             "--data, or of synthetic development drives, seeds 1000+) or native (the "
-             "recordings' own fixes; give --data).")] = "rtk",
+    predictor: Annotated[
+        str,
+        typer.Argument(
+            metavar="PREDICTOR",
+            help="Predictor to tune: kf, ekf (noise grid, then calibration) or "
+            "cv (calibration only).",
+        ),
+    ],
+    gps_profile: Annotated[
+        str,
+        typer.Option(
+            metavar="PROFILE",
+            help="GPS condition to tune for: none, rtk, consumer (fixes drawn from the truth of "
+            "--data, or of synthetic development drives, seeds 1000+) or native (the "
+            "recordings' own fixes; give --data).",
+        ),
+    ] = "rtk",
     data: DataOpt = None,
-    drives: Annotated[int, typer.Option(
-        metavar="N", help="Synthetic development drives per route type (seeds 1000+).")] = 1,
-    calibrate_only: Annotated[bool, typer.Option(
-        "--calibrate-only",
-        help="Keep the noise parameters of the tuning in force for this profile (the --out "
-             "file's where it holds them, else the built-in ones) and fit only cov_scale (no "
-             "position changes).")] = False,
+    drives: Annotated[
+        int,
+        typer.Option(
+            metavar="N", help="Synthetic development drives per route type (seeds 1000+)."
+        ),
+    ] = 1,
+    calibrate_only: Annotated[
+        bool,
+        typer.Option(
+            "--calibrate-only",
+            help="Keep the noise parameters of the tuning in force for this profile (the --out "
+            "file's where it holds them, else the built-in ones) and fit only cov_scale (no "
+            "position changes).",
+        ),
+    ] = False,
     workers: WorkersOpt = 2,
-    out: Annotated[Path, typer.Option(
-        "--out", "-o", metavar="FILE",
-        help="The tuning file to write (merged into if it exists); use it with `bench run "
-             "--tuning FILE`. The package's built-in tuning is never written.")
-                   ] = Path("tuning.json"),
-    save: Annotated[bool, typer.Option(help="Write the result to --out (--no-save: print "
-                                            "it only).")] = True,
+    out: Annotated[
+        Path,
+        typer.Option(
+            "--out",
+            "-o",
+            metavar="FILE",
+            help="The tuning file to write (merged into if it exists); use it with `bench run "
+            "--tuning FILE`. The package's built-in tuning is never written.",
+        ),
+    ] = Path("tuning.json"),
+    save: Annotated[
+        bool, typer.Option(help="Write the result to --out (--no-save: print it only).")
+    ] = True,
     config: ConfigOpt = None,
     quiet: QuietOpt = False,
     verbose: VerboseOpt = False,
@@ -80,8 +103,9 @@ def tune(
     grid = {} if calibrate_only else grid_for(predictor, gps_profile)
     mine = out if out.exists() else None
     try:
-        kept = {k: v for k, v in tuned_params(predictor, gps_profile, mine).items()
-                if k != "cov_scale"}
+        kept = {
+            k: v for k, v in tuned_params(predictor, gps_profile, mine).items() if k != "cov_scale"
+        }
     except PredictorError as e:
         raise UsageError(f"--out: {e}") from None
     if gps_profile == "native" and not data:
@@ -94,34 +118,51 @@ def tune(
 
         dev = [d for s in range(1000, 1000 + drives) for d in default_drives(seed=s)]
         source = f"synthetic development drives, seeds 1000-{999 + drives}"
-    n = len(list(product(*list(grid.values())[:2]))) + sum(
-        len(v) for v in list(grid.values())[2:]) + 1  # + the calibration replay
+    n = (
+        len(list(product(*list(grid.values())[:2])))
+        + sum(len(v) for v in list(grid.values())[2:])
+        + 1
+    )  # + the calibration replay
     with reporter().steps(f"tuning {predictor} ({gps_profile})", n) as done:
         if calibrate_only:
             best, trials = kept, []
         else:
-            best, trials = grid_search(predictor, dev, gps_profile, grid, workers=workers,
-                                       on_step=lambda p, v: done(f"{p}: {v:.4f} m"))
+            best, trials = grid_search(
+                predictor,
+                dev,
+                gps_profile,
+                grid,
+                workers=workers,
+                on_step=lambda p, v: done(f"{p}: {v:.4f} m"),
+            )
         cov_scale = calibrate(predictor, dev, gps_profile, best, workers=workers)
         done("calibration")
     if trials:
         best_val = min(v for _, v in trials)
         say(f"best {best} -> future+now mean error {best_val:.4f} m over {len(dev)} drives")
     else:
-        say(f"kept {best or 'the defaults'} from the tuning in force "
-            f"({out if mine else 'built-in'})")
+        say(
+            f"kept {best or 'the defaults'} from the tuning in force "
+            f"({out if mine else 'built-in'})"
+        )
     if cov_scale == cov_scale:
         best = {**best, "cov_scale": cov_scale}
-        say(f"calibrated: cov_scale {cov_scale:g} (95 % of the 95 % ellipses cover "
-            f"on {len(dev)} drives)")
+        say(
+            f"calibrated: cov_scale {cov_scale:g} (95 % of the 95 % ellipses cover "
+            f"on {len(dev)} drives)"
+        )
     else:
         say("no covariance reported on these drives: nothing to calibrate")
     if save:
         command = command_line()
-        how = (f"cov_scale for 95 % coverage by `{command}` on {source}" if calibrate_only else
-               f"`{command}`: {source}; objective mean future + mean now error "
-               f"{best_val:.4f} m; {len(trials)} trials; then cov_scale for 95 % coverage"
-               if trials else f"`{command}`: cov_scale for 95 % coverage on {source}")
+        how = (
+            f"cov_scale for 95 % coverage by `{command}` on {source}"
+            if calibrate_only
+            else f"`{command}`: {source}; objective mean future + mean now error "
+            f"{best_val:.4f} m; {len(trials)} trials; then cov_scale for 95 % coverage"
+            if trials
+            else f"`{command}`: cov_scale for 95 % coverage on {source}"
+        )
         if calibrate_only:
             how = tuning_note(predictor, gps_profile, how, out)
         save_tuned(predictor, gps_profile, best, how, out, drives=[d.name for d in dev])
@@ -135,6 +176,8 @@ def check_tuning_out(out: Path) -> None:
     from posbench.predictors.registry import TUNED_FILE
 
     if out.resolve() == TUNED_FILE.resolve():
-        raise UsageError(f"--out {out}: that is the package's built-in tuning, which commands "
-                         "never change; write a file of your own and run with --tuning FILE")
+        raise UsageError(
+            f"--out {out}: that is the package's built-in tuning, which commands "
+            "never change; write a file of your own and run with --tuning FILE"
+        )
     check_out_file(out, "--out")

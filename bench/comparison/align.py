@@ -25,8 +25,19 @@ from posbench.scoring.schema import KINDS
 
 STATS = ("mean_m", "median_m", "rmse_m", "p95_m", "max_m")
 #: config keys that make two runs' figures incomparable when they differ
-CONFIG_KEYS = ("horizon_s", "now_step_s", "gps_profile", "gps_latency_s", "intervals", "dropouts",
-               "seed", "seeds", "exclude_poor_truth", "use_tuned", "gate")
+CONFIG_KEYS = (
+    "horizon_s",
+    "now_step_s",
+    "gps_profile",
+    "gps_latency_s",
+    "intervals",
+    "dropouts",
+    "seed",
+    "seeds",
+    "exclude_poor_truth",
+    "use_tuned",
+    "gate",
+)
 
 
 @dataclass(frozen=True)
@@ -41,9 +52,11 @@ class Metric:
         """``future.mean_m`` -> Metric; a :class:`UsageError` naming the choices otherwise."""
         kind, _, stat = text.strip().partition(".")
         if kind not in KINDS or stat not in STATS:
-            raise UsageError(f"{option}: {text!r} is not a metric; use KIND.STAT with KIND one of "
-                             f"{', '.join(KINDS)} and STAT one of {', '.join(STATS)} "
-                             f"(e.g. future.mean_m)")
+            raise UsageError(
+                f"{option}: {text!r} is not a metric; use KIND.STAT with KIND one of "
+                f"{', '.join(KINDS)} and STAT one of {', '.join(STATS)} "
+                f"(e.g. future.mean_m)"
+            )
         return cls(kind, stat)
 
     def __str__(self) -> str:
@@ -53,8 +66,10 @@ class Metric:
 # ------------------------------------------------------------------ run labels and config
 def run_labels(runs: Sequence[Run]) -> list[str]:
     """Short unique names for runs: their folder names, with parents added until unique."""
-    paths = [Path(r.folder).resolve() if r.folder is not None else Path(f"run{i}")
-             for i, r in enumerate(runs)]
+    paths = [
+        Path(r.folder).resolve() if r.folder is not None else Path(f"run{i}")
+        for i, r in enumerate(runs)
+    ]
     depth = 1
     while True:
         labels = [Path(*p.parts[-depth:]).as_posix() for p in paths]
@@ -83,18 +98,27 @@ def config_differences(runs: Sequence[Run], labels: Sequence[str]) -> list[str]:
     for key in CONFIG_KEYS:
         values = [c.get(key) for c in configs]
         if any(v != values[0] for v in values[1:]):
-            lines.append(f"{key}: " + ", ".join(f"{v!r} ({lab})" for v, lab in zip(values, labels, strict=True)))
+            lines.append(
+                f"{key}: "
+                + ", ".join(f"{v!r} ({lab})" for v, lab in zip(values, labels, strict=True))
+            )
     shared = set.intersection(*(set(r.predictors) for r in runs)) if runs else set()
     for name in sorted(shared):
         opts = [c.get("predictor_options", {}).get(name, {}) for c in configs]
         if any(o != opts[0] for o in opts[1:]):
-            lines.append(f"options of {name}: " + ", ".join(
-                f"{o!r} ({lab})" for o, lab in zip(opts, labels, strict=True)))
+            lines.append(
+                f"options of {name}: "
+                + ", ".join(f"{o!r} ({lab})" for o, lab in zip(opts, labels, strict=True))
+            )
     hashes = [_data_hashes(r) for r in runs]
     if any(h != hashes[0] for h in hashes[1:]):
-        lines.append("data: " + ", ".join(
-            f"{', '.join(f'{Path(p).name}:{s[:8]}' for p, s in sorted(h.items())) or 'synthetic'} ({lab})"
-            for h, lab in zip(hashes, labels, strict=True)))
+        lines.append(
+            "data: "
+            + ", ".join(
+                f"{', '.join(f'{Path(p).name}:{s[:8]}' for p, s in sorted(h.items())) or 'synthetic'} ({lab})"
+                for h, lab in zip(hashes, labels, strict=True)
+            )
+        )
     return lines
 
 
@@ -150,8 +174,10 @@ def aligned(runs: Sequence[Run], labels: Sequence[str], metric: Metric) -> pd.Da
     cols = ["scope", "dataset", "group", "predictor"]
     for lab in labels:
         cols += [lab, f"{lab} lo", f"{lab} hi", f"{lab} n"]
-    rows = [{"scope": k[0], "dataset": k[1], "group": k[2], "predictor": k[3], **v}
-            for k, v in keys.items()]
+    rows = [
+        {"scope": k[0], "dataset": k[1], "group": k[2], "predictor": k[3], **v}
+        for k, v in keys.items()
+    ]
     frame = pd.DataFrame(rows, columns=cols)
     for lab in labels:
         frame[f"{lab} n"] = frame[f"{lab} n"].fillna(0).astype(int)

@@ -71,8 +71,10 @@ class Comparison:
 
     def __repr__(self) -> str:
         rows = (self.frame["scope"] == "all").sum() if "scope" in self.frame else 0
-        lines = [f"Comparison of {len(self.runs)} runs ({', '.join(self.labels)}): {self.metric}, "
-                 f"{len(self.frame)} rows ({rows} whole-run)"]
+        lines = [
+            f"Comparison of {len(self.runs)} runs ({', '.join(self.labels)}): {self.metric}, "
+            f"{len(self.frame)} rows ({rows} whole-run)"
+        ]
         if self.differences:
             lines.append(f"  configurations differ: {'; '.join(self.differences)}")
         if self.gates:
@@ -88,15 +90,19 @@ def row_scopes(scopes: Sequence[str], uncertainty: bool) -> list[str]:
     for s in scopes:
         check_choice(s, SCOPES, "--scope")
     if "since-fix" in scopes and not uncertainty:
-        raise UsageError("--scope since-fix: rows of the uncertainty table only; add "
-                         "--uncertainty")
+        raise UsageError("--scope since-fix: rows of the uncertainty table only; add --uncertainty")
     return [SCOPE_ROWS.get(s, s) for s in scopes]
 
 
-def compare_runs(runs: Sequence[Run | str | Path], metric: str | Metric = "future.mean_m",
-                 scopes: Sequence[str] = ("all", "dataset"), seed: int = 0,
-                 gates: Sequence[str] = (), uncertainty: bool = False,
-                 allow_config_change: bool = False) -> Comparison:
+def compare_runs(
+    runs: Sequence[Run | str | Path],
+    metric: str | Metric = "future.mean_m",
+    scopes: Sequence[str] = ("all", "dataset"),
+    seed: int = 0,
+    gates: Sequence[str] = (),
+    uncertainty: bool = False,
+    allow_config_change: bool = False,
+) -> Comparison:
     """Compare saved runs (objects or folders): ``metric`` of each aligned per predictor,
     data set, route type and drive (``scopes``), each later run's paired difference from the
     first (cluster bootstrap seeded ``seed``), with ``uncertainty`` the uncertainty figures
@@ -121,9 +127,12 @@ def compare_runs(runs: Sequence[Run | str | Path], metric: str | Metric = "futur
     labels = run_labels(loaded)
     diffs = config_differences(loaded, labels)
     if parsed and diffs and not allow_config_change:
-        raise UsageError("the runs' configurations differ (" + "; ".join(diffs) +
-                         "): their figures are not comparable; re-run one, or pass "
-                         "--allow-config-change")
+        raise UsageError(
+            "the runs' configurations differ ("
+            + "; ".join(diffs)
+            + "): their figures are not comparable; re-run one, or pass "
+            "--allow-config-change"
+        )
     table, frame = comparison_table(loaded, labels, m, rows, seed)
     out = Comparison(loaded, labels, m, table, frame, diffs)
     if uncertainty:

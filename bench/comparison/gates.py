@@ -33,17 +33,25 @@ class Gate:
         option = f"--fail-if-worse {text!r}"
         parts = text.strip().split(":")
         if len(parts) != 3 or not all(p.strip() for p in parts):
-            raise UsageError(f"{option}: expected PREDICTOR:KIND.STAT:TOLERANCE, e.g. "
-                             f"'lstm:future.mean_m:5%' or 'kf:now.p95_m:0.01m'")
+            raise UsageError(
+                f"{option}: expected PREDICTOR:KIND.STAT:TOLERANCE, e.g. "
+                f"'lstm:future.mean_m:5%' or 'kf:now.p95_m:0.01m'"
+            )
         pred, metric, tol = (p.strip() for p in parts)
         m = re.fullmatch(r"([0-9]*\.?[0-9]+)\s*(%|m)", tol)
         if not m:
-            raise UsageError(f"{option}: tolerance {tol!r} must be a percentage (5%) or metres "
-                             f"(0.01m)")
+            raise UsageError(
+                f"{option}: tolerance {tol!r} must be a percentage (5%) or metres (0.01m)"
+            )
         value = float(m.group(1))
         relative = m.group(2) == "%"
-        return cls(pred, Metric.parse(metric, option), value / 100 if relative else value,
-                   relative, text.strip())
+        return cls(
+            pred,
+            Metric.parse(metric, option),
+            value / 100 if relative else value,
+            relative,
+            text.strip(),
+        )
 
     def limit(self, old: float) -> float:
         """The largest NEW figure that passes, given the OLD one [m]."""
@@ -66,9 +74,11 @@ class GateCheck:
     def line(self) -> str:
         p = self.paired
         verdict = "FAILED" if self.failed else "passed"
-        return (f"{verdict}: {self.gate.predictor} {self.gate.metric} {p.new:.4f} m (NEW) vs "
-                f"{p.old:.4f} m (OLD), limit {self.limit:.4f} m; NEW - OLD {p.diff:+.4f} m, "
-                f"95 % CI [{p.lo:+.4f}, {p.hi:+.4f}] over {p.drives} shared drives")
+        return (
+            f"{verdict}: {self.gate.predictor} {self.gate.metric} {p.new:.4f} m (NEW) vs "
+            f"{p.old:.4f} m (OLD), limit {self.limit:.4f} m; NEW - OLD {p.diff:+.4f} m, "
+            f"95 % CI [{p.lo:+.4f}, {p.hi:+.4f}] over {p.drives} shared drives"
+        )
 
 
 def check_gates(old: Run, new: Run, gates: Sequence[Gate], seed: int = 0) -> list[GateCheck]:
@@ -78,8 +88,10 @@ def check_gates(old: Run, new: Run, gates: Sequence[Gate], seed: int = 0) -> lis
     for g in gates:
         for run, which in ((old, "OLD"), (new, "NEW")):
             if g.predictor not in run.predictors:
-                raise UsageError(f"--fail-if-worse {g.text!r}: the {which} run has no predictor "
-                                 f"{g.predictor!r} (it has {', '.join(run.predictors)})")
+                raise UsageError(
+                    f"--fail-if-worse {g.text!r}: the {which} run has no predictor "
+                    f"{g.predictor!r} (it has {', '.join(run.predictors)})"
+                )
         paired = paired_difference(old, new, g.predictor, g.metric, seed)
         if paired is None:
             raise UsageError(f"--fail-if-worse {g.text!r}: the runs share no scored drive")

@@ -50,8 +50,9 @@ class PairedDifference:
         return bool(self.lo > 0 or self.hi < 0)
 
 
-def drive_summaries(run: Run, predictor: str, kind: str, dataset: str | None = None
-                    ) -> dict[tuple[str, str], Mapping[str, Any]]:
+def drive_summaries(
+    run: Run, predictor: str, kind: str, dataset: str | None = None
+) -> dict[tuple[str, str], Mapping[str, Any]]:
     """``(dataset, drive) -> summary`` of ``predictor``'s ``kind`` queries in every scored
     drive of ``run`` (of ``dataset`` only, if given) that has any."""
     out = {}
@@ -64,16 +65,22 @@ def drive_summaries(run: Run, predictor: str, kind: str, dataset: str | None = N
     return out
 
 
-def drive_errors(run: Run, predictor: str, kind: str, drives: Sequence[tuple[str, str]]
-                 ) -> list[np.ndarray]:
+def drive_errors(
+    run: Run, predictor: str, kind: str, drives: Sequence[tuple[str, str]]
+) -> list[np.ndarray]:
     """The scored errors [m] of ``predictor`` per drive, in ``drives`` order (from traces)."""
     from posbench.scoring.schema import scored_mask
 
     tr = run.traces
-    tr = tr[scored_mask(tr) & (tr["predictor"] == predictor).to_numpy()
-            & (tr["kind"] == kind).to_numpy()]
-    groups = {(str(ds), str(dr)): g["error_m"].to_numpy(dtype=float)
-              for (ds, dr), g in tr.groupby(["dataset", "drive"], observed=True, sort=False)}
+    tr = tr[
+        scored_mask(tr)
+        & (tr["predictor"] == predictor).to_numpy()
+        & (tr["kind"] == kind).to_numpy()
+    ]
+    groups = {
+        (str(ds), str(dr)): g["error_m"].to_numpy(dtype=float)
+        for (ds, dr), g in tr.groupby(["dataset", "drive"], observed=True, sort=False)
+    }
     out = []
     for k in drives:
         e = groups.get(k, np.empty(0))
@@ -81,13 +88,20 @@ def drive_errors(run: Run, predictor: str, kind: str, drives: Sequence[tuple[str
     return out
 
 
-def _pooled(run: Run, summaries: Sequence[Mapping[str, Any]], predictor: str, metric: Metric,
-            drives: Sequence[tuple[str, str]], weights: np.ndarray) -> tuple[float, np.ndarray]:
+def _pooled(
+    run: Run,
+    summaries: Sequence[Mapping[str, Any]],
+    predictor: str,
+    metric: Metric,
+    drives: Sequence[tuple[str, str]],
+    weights: np.ndarray,
+) -> tuple[float, np.ndarray]:
     """``metric`` of one run pooled over ``drives`` and under each resample."""
     stat = metric.stat
     if stat in QUANTILE_STATS:
-        return pooled_quantile_by_resample(drive_errors(run, predictor, metric.kind, drives),
-                                           QUANTILE_STATS[stat], weights)
+        return pooled_quantile_by_resample(
+            drive_errors(run, predictor, metric.kind, drives), QUANTILE_STATS[stat], weights
+        )
     column = {"mean_m": "mean_m", "rmse_m": "rmse_m", "max_m": "max_m"}[stat]
     values = np.array([float(s[column]) for s in summaries])
     if stat == "max_m":
@@ -97,9 +111,15 @@ def _pooled(run: Run, summaries: Sequence[Mapping[str, Any]], predictor: str, me
     return pooled(counts, values, weights)
 
 
-def paired_difference(old: Run, new: Run, predictor: str, metric: Metric,
-                      seed: int = 0, resamples: int = DEFAULT_RESAMPLES, dataset: str | None = None
-                      ) -> PairedDifference | None:
+def paired_difference(
+    old: Run,
+    new: Run,
+    predictor: str,
+    metric: Metric,
+    seed: int = 0,
+    resamples: int = DEFAULT_RESAMPLES,
+    dataset: str | None = None,
+) -> PairedDifference | None:
     """The paired cluster-bootstrap difference of ``metric`` (NEW - OLD) for ``predictor``
     over the drives both runs scored (of ``dataset`` only, if given); None when they share
     no drive.
@@ -112,8 +132,11 @@ def paired_difference(old: Run, new: Run, predictor: str, metric: Metric,
     if not common:
         return None
     enough = len(common) >= MIN_DRIVES
-    w = (resample_counts(len(common), resamples, seed) if enough
-         else np.ones((1, len(common)), dtype=np.int64))
+    w = (
+        resample_counts(len(common), resamples, seed)
+        if enough
+        else np.ones((1, len(common)), dtype=np.int64)
+    )
     va, ra = _pooled(old, [a[k] for k in common], predictor, metric, common, w)
     vb, rb = _pooled(new, [b[k] for k in common], predictor, metric, common, w)
     lo, hi = paired_interval(ra, rb) if enough else (math.nan, math.nan)

@@ -33,11 +33,21 @@ from posbench.scoring.schema import KINDS
 from posbench.tables.table import Table, as_float
 
 #: row scope -> the block of results.json ``uncertainty`` holding it
-SCOPE_BLOCKS = {"all": "predictors", "dataset": "by_dataset", "route type": "by_label",
-                "since fix": "by_since_fix"}
+SCOPE_BLOCKS = {
+    "all": "predictors",
+    "dataset": "by_dataset",
+    "route type": "by_label",
+    "since fix": "by_since_fix",
+}
 #: the figures per run: frame column suffix -> header text
-FIGURES = {"nees": "NEES", "cov95": "cov 95 %", "area": "95 % area [m^2]",
-           "loglik": "log-lik", "verdict": "verdict", "n": "n"}
+FIGURES = {
+    "nees": "NEES",
+    "cov95": "cov 95 %",
+    "area": "95 % area [m^2]",
+    "loglik": "log-lik",
+    "verdict": "verdict",
+    "n": "n",
+}
 NO_UNCERTAINTY = "no uncertainty"
 PRE_SCHEMA = "pre-1.4 run"
 
@@ -49,14 +59,18 @@ def has_uncertainty(run: Run) -> bool:
 
 def missing_notes(runs: Sequence[Run], labels: Sequence[str]) -> list[str]:
     """One line per run without uncertainty figures (written before schema 1.4)."""
-    return [f"{lab} has no uncertainty figures (results.json schema "
-            f"{run.results.get('schema_version', '?')}, written before schema 1.4 added "
-            f"them): its cells read '{PRE_SCHEMA}'; re-run it with this posbench to compare them"
-            for run, lab in zip(runs, labels, strict=True) if not has_uncertainty(run)]
+    return [
+        f"{lab} has no uncertainty figures (results.json schema "
+        f"{run.results.get('schema_version', '?')}, written before schema 1.4 added "
+        f"them): its cells read '{PRE_SCHEMA}'; re-run it with this posbench to compare them"
+        for run, lab in zip(runs, labels, strict=True)
+        if not has_uncertainty(run)
+    ]
 
 
-def _summaries(block: Mapping[str, Any], scope: str
-               ) -> list[tuple[str, str, str, str, Mapping[str, Any]]]:
+def _summaries(
+    block: Mapping[str, Any], scope: str
+) -> list[tuple[str, str, str, str, Mapping[str, Any]]]:
     """(dataset, group, predictor, kind, summary) of one scope of an ``uncertainty`` block."""
     src = block.get(SCOPE_BLOCKS[scope]) or {}
     out = []
@@ -78,20 +92,34 @@ def _figures(s: Mapping[str, Any]) -> dict[str, Any]:
     ci = s.get("nees_ci95") or [None, None]
     cov = s.get("coverage") or {}
     num = as_float
-    return {"nees": num(s.get("nees")), "nees lo": num(ci[0]), "nees hi": num(ci[1]),
-            "cov95": num(cov.get("95")), "area": num(s.get("sharpness_m2")),
-            "loglik": num(s.get("loglik")), "verdict": s.get("verdict") or "-",
-            "n": int(s.get("count") or 0)}
+    return {
+        "nees": num(s.get("nees")),
+        "nees lo": num(ci[0]),
+        "nees hi": num(ci[1]),
+        "cov95": num(cov.get("95")),
+        "area": num(s.get("sharpness_m2")),
+        "loglik": num(s.get("loglik")),
+        "verdict": s.get("verdict") or "-",
+        "n": int(s.get("count") or 0),
+    }
 
 
-_EMPTY = {"nees": float("nan"), "nees lo": float("nan"), "nees hi": float("nan"),
-          "cov95": float("nan"), "area": float("nan"), "loglik": float("nan"), "n": 0}
+_EMPTY = {
+    "nees": float("nan"),
+    "nees lo": float("nan"),
+    "nees hi": float("nan"),
+    "cov95": float("nan"),
+    "area": float("nan"),
+    "loglik": float("nan"),
+    "n": 0,
+}
 #: the per-run columns of the aligned frame, in order
 COLUMNS = ("nees", "nees lo", "nees hi", "cov95", "area", "loglik", "verdict", "n")
 
 
-def uncertainty_aligned(runs: Sequence[Run], labels: Sequence[str], scopes: Sequence[str]
-                        ) -> pd.DataFrame:
+def uncertainty_aligned(
+    runs: Sequence[Run], labels: Sequence[str], scopes: Sequence[str]
+) -> pd.DataFrame:
     """The uncertainty figures of every run, aligned: one row per (scope, dataset, group,
     predictor, kind) among ``scopes`` (keys of :data:`SCOPE_BLOCKS`), in that scope order
     and the runs' order, and, per run label ``L``, columns ``L nees``, ``L nees lo``,
@@ -115,8 +143,13 @@ def uncertainty_aligned(runs: Sequence[Run], labels: Sequence[str], scopes: Sequ
                         keys[("all", "", "", pred, "-")] = {}
     rows = []
     for (scope, ds, group, pred, k), figs in keys.items():
-        row: dict[str, Any] = {"scope": scope, "dataset": ds, "group": group,
-                               "predictor": pred, "kind": k}
+        row: dict[str, Any] = {
+            "scope": scope,
+            "dataset": ds,
+            "group": group,
+            "predictor": pred,
+            "kind": k,
+        }
         for run, lab in zip(runs, labels, strict=True):
             mine = figs.get(lab)
             if mine is None:
@@ -143,8 +176,9 @@ def _status(run: Run, predictor: str) -> str:
     return "-"
 
 
-def uncertainty_comparison(runs: Sequence[Run], labels: Sequence[str], scopes: Sequence[str]
-                           ) -> tuple[Table, pd.DataFrame]:
+def uncertainty_comparison(
+    runs: Sequence[Run], labels: Sequence[str], scopes: Sequence[str]
+) -> tuple[Table, pd.DataFrame]:
     """The comparison as a display :class:`posbench.tables.table.Table` (per run: NEES [95 % CI],
     95 % coverage, 95 % ellipse area [m^2], log-likelihood, verdict, n) and the numeric
     frame behind it (:func:`uncertainty_aligned`, for CSV)."""
@@ -152,8 +186,13 @@ def uncertainty_comparison(runs: Sequence[Run], labels: Sequence[str], scopes: S
     shown = frame.copy()
     for c in ("scope", "dataset", "group", "predictor", "kind"):
         shown[c] = shown[c].astype(str).replace("", "-")
-    heads = {"scope": "scope", "dataset": "data set", "group": "route/since fix",
-             "predictor": "predictor", "kind": "kind"}
+    heads = {
+        "scope": "scope",
+        "dataset": "data set",
+        "group": "route/since fix",
+        "predictor": "predictor",
+        "kind": "kind",
+    }
     ci, digits = {}, {}
     for lab in labels:
         for c, h in FIGURES.items():
@@ -162,7 +201,8 @@ def uncertainty_comparison(runs: Sequence[Run], labels: Sequence[str], scopes: S
         digits[f"{lab} area"] = 4
     if (shown["group"] == "-").all():  # no route-type or since-fix rows
         shown = shown.drop(columns="group")
-    title = ("Uncertainty [NEES 2 = honest, 95 % CI over drives where stored]; "
-             "no uncertainty: the predictor reports none")
-    return Table(shown, "uncertainty_comparison", heads, digits=digits, ci=ci,
-                 title=title), frame
+    title = (
+        "Uncertainty [NEES 2 = honest, 95 % CI over drives where stored]; "
+        "no uncertainty: the predictor reports none"
+    )
+    return Table(shown, "uncertainty_comparison", heads, digits=digits, ci=ci, title=title), frame

@@ -34,8 +34,9 @@ def _delta_cell(diff: float, lo: float, hi: float, digits: int = 3) -> str:
     return text
 
 
-def comparison_table(runs: Sequence[Run], labels: Sequence[str], metric: Metric,
-                     scopes: Sequence[str], seed: int = 0) -> tuple[Any, pd.DataFrame]:
+def comparison_table(
+    runs: Sequence[Run], labels: Sequence[str], metric: Metric, scopes: Sequence[str], seed: int = 0
+) -> tuple[Any, pd.DataFrame]:
     """The comparison as a display :class:`posbench.tables.table.Table` (``value [CI]`` cells, one
     column per run, then ``Δ`` columns: each later run minus the first, paired over shared
     drives, ``*`` where the CI excludes 0) and the numeric frame behind it (for CSV). The
@@ -53,10 +54,19 @@ def comparison_table(runs: Sequence[Run], labels: Sequence[str], metric: Metric,
         diffs, los, his, nd = [], [], [], []
         for _, row in frame.iterrows():
             p = None
-            if row["scope"] in ("all", "dataset") and row["predictor"] in run.predictors \
-                    and row["predictor"] in runs[0].predictors:
-                p = paired_difference(runs[0], run, row["predictor"], metric, seed,
-                                      dataset=row["dataset"] if row["scope"] == "dataset" else None)
+            if (
+                row["scope"] in ("all", "dataset")
+                and row["predictor"] in run.predictors
+                and row["predictor"] in runs[0].predictors
+            ):
+                p = paired_difference(
+                    runs[0],
+                    run,
+                    row["predictor"],
+                    metric,
+                    seed,
+                    dataset=row["dataset"] if row["scope"] == "dataset" else None,
+                )
             if p is None:
                 d = row[lab] - row[first]
                 diffs.append(d)
@@ -85,10 +95,15 @@ def comparison_table(runs: Sequence[Run], labels: Sequence[str], metric: Metric,
             shown[lab].append(_cell(row[lab], row[f"{lab} lo"], row[f"{lab} hi"]))
             shown[f"{lab} n"].append(str(int(row[f"{lab} n"])))
         for lab in labels[1:]:
-            shown[f"Δ {lab}"].append(_delta_cell(row[f"delta {lab}"], row[f"delta {lab} lo"],
-                                                 row[f"delta {lab} hi"]))
-    heads = {"scope": "scope", "dataset": "data set", "group": "route/drive",
-             "predictor": "predictor"}
+            shown[f"Δ {lab}"].append(
+                _delta_cell(row[f"delta {lab}"], row[f"delta {lab} lo"], row[f"delta {lab} hi"])
+            )
+    heads = {
+        "scope": "scope",
+        "dataset": "data set",
+        "group": "route/drive",
+        "predictor": "predictor",
+    }
     for lab in labels:
         heads[lab] = lab
         heads[f"{lab} n"] = "n"
@@ -121,10 +136,20 @@ def comparison_figure(runs: Sequence[Run], labels: Sequence[str], metric: Metric
         lo = frame[f"{lab} lo"].to_numpy(dtype=float)
         hi = frame[f"{lab} hi"].to_numpy(dtype=float)
         # a percentile interval need not hold its point value (a skewed median): clip at 0
-        err = np.vstack([np.where(np.isfinite(lo), np.maximum(v - lo, 0.0), 0.0),
-                         np.where(np.isfinite(hi), np.maximum(hi - v, 0.0), 0.0)])
-        ax.bar(x + (i - (len(labels) - 1) / 2) * width, np.nan_to_num(v), width, yerr=err,
-               capsize=3, label=lab)
+        err = np.vstack(
+            [
+                np.where(np.isfinite(lo), np.maximum(v - lo, 0.0), 0.0),
+                np.where(np.isfinite(hi), np.maximum(hi - v, 0.0), 0.0),
+            ]
+        )
+        ax.bar(
+            x + (i - (len(labels) - 1) / 2) * width,
+            np.nan_to_num(v),
+            width,
+            yerr=err,
+            capsize=3,
+            label=lab,
+        )
     ax.set_xticks(x, preds, rotation=30, ha="right")
     ax.set_ylabel(f"{metric} [m]")
     ax.set_title(f"{metric} per predictor (whiskers: 95 % cluster-bootstrap CI)")

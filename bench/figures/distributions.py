@@ -52,8 +52,14 @@ def plot_error_cdf(traces: pd.DataFrame, preds: Sequence[str]) -> Figure:
             clipped |= low
             ax.step(v, c, where="post", label=f"{p} (n={n})", color=colors.get(p))
         if tk.empty:
-            ax.text(0.5, 0.5, f"no {kind} query with a known error", transform=ax.transAxes,
-                    ha="center", va="center")
+            ax.text(
+                0.5,
+                0.5,
+                f"no {kind} query with a known error",
+                transform=ax.transAxes,
+                ha="center",
+                va="center",
+            )
         else:
             ax.set_xscale("log")
             ax.legend(fontsize=8, loc="lower right")
@@ -63,8 +69,10 @@ def plot_error_cdf(traces: pd.DataFrame, preds: Sequence[str]) -> Figure:
     for ax in axes:
         ax.set_xlabel("error [m] (log" + floor_note(clipped) + ")")
     axes[0].set_ylabel("fraction of queries")
-    fig.suptitle("Error distribution per predictor"
-                 + (" (warm-up excluded)" if warmup_mask(traces).any() else ""))
+    fig.suptitle(
+        "Error distribution per predictor"
+        + (" (warm-up excluded)" if warmup_mask(traces).any() else "")
+    )
     return fig
 
 
@@ -89,9 +97,14 @@ def plot_error_vs_speed(traces: pd.DataFrame, preds: Sequence[str]) -> Figure:
     if fut.empty:
         raise NothingToPlot("no query with a known speed")
     order = speed_bin_order()
-    stats = {p: summarize_groups(g["error_m"].to_numpy(dtype=float),
-                                 speed_bin_labels(g["speed_mps"].to_numpy(dtype=float)), order)
-             for p, g in fut.groupby("predictor", observed=True, sort=False)}
+    stats = {
+        p: summarize_groups(
+            g["error_m"].to_numpy(dtype=float),
+            speed_bin_labels(g["speed_mps"].to_numpy(dtype=float)),
+            order,
+        )
+        for p, g in fut.groupby("predictor", observed=True, sort=False)
+    }
     bins = [b for b in order if any(s[b]["count"] for s in stats.values())]
     colors = colors_for(preds)
     fig = Figure(figsize=(8, 4.5), layout="constrained")
@@ -102,11 +115,18 @@ def plot_error_vs_speed(traces: pd.DataFrame, preds: Sequence[str]) -> Figure:
         clipped |= low
         ax.plot(range(len(bins)), ys, marker="o", label=p, color=colors.get(p))
     counts = [max(s[b]["count"] for s in stats.values()) for b in bins]
-    ax.set_xticks(range(len(bins)), [f"{b.removesuffix(' m/s')}\nn={n}"
-                                     for b, n in zip(bins, counts, strict=True)])
+    ax.set_xticks(
+        range(len(bins)),
+        [f"{b.removesuffix(' m/s')}\nn={n}" for b, n in zip(bins, counts, strict=True)],
+    )
     ax.set_xlim(-0.5, len(bins) - 0.5)
-    _mean_error_axes(ax, "speed [m/s] (n = queries per predictor)",
-                     "mean future-point error [m]", clipped, "Future-point error vs speed")
+    _mean_error_axes(
+        ax,
+        "speed [m/s] (n = queries per predictor)",
+        "mean future-point error [m]",
+        clipped,
+        "Future-point error vs speed",
+    )
     return fig
 
 
@@ -124,8 +144,9 @@ def plot_error_vs_since_fix(traces: pd.DataFrame, preds: Sequence[str]) -> Figur
         raise NothingToPlot("no current-position query with a known error")
     edges = np.asarray(SINCE_FIX_CURVE_EDGES_S, dtype=float)
     b_all = since_fix_bins(now["since_fix_s"].to_numpy(dtype=float), edges, open_last=True)
-    frame = pd.DataFrame({"p": now["predictor"].to_numpy(), "b": b_all,
-                          "e": now["error_m"].to_numpy(dtype=float)})
+    frame = pd.DataFrame(
+        {"p": now["predictor"].to_numpy(), "b": b_all, "e": now["error_m"].to_numpy(dtype=float)}
+    )
     mean = frame.groupby(["p", "b"], sort=True)["e"].mean()
     used = np.unique(b_all)  # bins where some predictor has a query
     mid = 0.5 * (edges[:-1] + edges[1:])
@@ -142,9 +163,13 @@ def plot_error_vs_since_fix(traces: pd.DataFrame, preds: Sequence[str]) -> Figur
         ax.plot(mid[used], ys, marker="o", label=p, color=colors.get(p))
     if mid[used].max() > 10:
         ax.set_xscale("log")
-    _mean_error_axes(ax, "time since last fix [s] (bin centres)",
-                     "mean current-position error [m]", clipped,
-                     "Current-position error vs time since the last fix")
+    _mean_error_axes(
+        ax,
+        "time since last fix [s] (bin centres)",
+        "mean current-position error [m]",
+        clipped,
+        "Current-position error vs time since the last fix",
+    )
     return fig
 
 
@@ -157,8 +182,18 @@ def plot_calibration(traces: pd.DataFrame, preds: Sequence[str]) -> Figure:
 
     from posbench.metrics.calibration import calibration_curve, mahalanobis_sq
 
-    cols = ["predictor", "kind", "x", "y", "x_ref", "y_ref", "error_m", "cov_xx", "cov_xy",
-            "cov_yy"]
+    cols = [
+        "predictor",
+        "kind",
+        "x",
+        "y",
+        "x_ref",
+        "y_ref",
+        "error_m",
+        "cov_xx",
+        "cov_xy",
+        "cov_yy",
+    ]
     if any(c not in traces for c in cols):
         raise NothingToPlot("traces without covariance columns")
     t = finite_errors(headline(traces, cols))
@@ -175,8 +210,9 @@ def plot_calibration(traces: pd.DataFrame, preds: Sequence[str]) -> Figure:
         for p in [q for q in preds if q in present]:
             r = rows[rows.predictor == p]
             err = r[["x", "y"]].to_numpy(float) - r[["x_ref", "y_ref"]].to_numpy(float)
-            curve = np.array(calibration_curve(mahalanobis_sq(
-                err, r[list(COV_COLUMNS)].to_numpy(float))))
+            curve = np.array(
+                calibration_curve(mahalanobis_sq(err, r[list(COV_COLUMNS)].to_numpy(float)))
+            )
             ax.plot(curve[:, 0], curve[:, 1], marker="o", ms=3, label=p, color=colors.get(p))
         ax.set_title(f"{kind}: reported ellipse vs truth")
         ax.set_xlabel("expected coverage p of the reported p-ellipse")

@@ -34,8 +34,9 @@ def _worst_moments(win: pd.DataFrame, k: int, gap_s: float) -> list[tuple[float,
     ``win``, at least ``gap_s`` apart."""
     w = finite_errors(win).sort_values("error_m", ascending=False)
     picked: list[tuple[float, float, str]] = []
-    for tq, e, p in zip(w.t_query.to_numpy(), w.error_m.to_numpy(), w.predictor.to_numpy(),
-                        strict=True):
+    for tq, e, p in zip(
+        w.t_query.to_numpy(), w.error_m.to_numpy(), w.predictor.to_numpy(), strict=True
+    ):
         if all(abs(tq - q) >= gap_s for q, _, _ in picked):
             picked.append((float(tq), float(e), str(p)))
             if len(picked) == k:
@@ -49,8 +50,22 @@ def plot_path(traces: pd.DataFrame, preds: Sequence[str]) -> Figure:
     error of any predictor), each scaled to that error so the misses are visible."""
     from matplotlib.figure import Figure
 
-    t = headline(traces, ["drive", "predictor", "kind", "t_issue", "t_query", "x", "y", "x_ref",
-                          "y_ref", "error_m", "label"])
+    t = headline(
+        traces,
+        [
+            "drive",
+            "predictor",
+            "kind",
+            "t_issue",
+            "t_query",
+            "x",
+            "y",
+            "x_ref",
+            "y_ref",
+            "error_m",
+            "label",
+        ],
+    )
     fut = t[(t.kind == "future") & np.isfinite(t["x_ref"].to_numpy(dtype=float))]
     if fut.empty:
         raise NothingToPlot("no future query with a reference position")
@@ -60,8 +75,12 @@ def plot_path(traces: pd.DataFrame, preds: Sequence[str]) -> Figure:
     tc = float(dfd.t_issue.iloc[int(np.argmin(np.abs(dfd.t_issue.to_numpy(float) - med)))])
     half = PATH_WINDOW_S / 2
     win = dfd[(dfd.t_issue > tc - half) & (dfd.t_issue < tc + half)]
-    ref_rows = t[(t.drive == drive) & (t.predictor == win.predictor.iloc[0])
-                 & (t.t_query > tc - half) & (t.t_query < tc + half + 1)]
+    ref_rows = t[
+        (t.drive == drive)
+        & (t.predictor == win.predictor.iloc[0])
+        & (t.t_query > tc - half)
+        & (t.t_query < tc + half + 1)
+    ]
     ref = ref_rows.dropna(subset=["x_ref"]).sort_values("t_query")
     moments = _worst_moments(win, ZOOMS, gap_s=3.0)
     colors = colors_for(preds)
@@ -80,12 +99,25 @@ def plot_path(traces: pd.DataFrame, preds: Sequence[str]) -> Figure:
         ax.plot(w.x, w.y, ".", ms=3, color=colors.get(p), label=f"{p} future points")
     for i, (tq, _, _) in enumerate(moments, 1):
         r = win.loc[(win.t_query - tq).abs().idxmin()]
-        ax.annotate(str(i), (r.x_ref, r.y_ref), xytext=(8, 8), textcoords="offset points",
-                    fontsize=11, fontweight="bold", color="crimson",
-                    arrowprops={"arrowstyle": "-", "color": "crimson"})
+        ax.annotate(
+            str(i),
+            (r.x_ref, r.y_ref),
+            xytext=(8, 8),
+            textcoords="offset points",
+            fontsize=11,
+            fontweight="bold",
+            color="crimson",
+            arrowprops={"arrowstyle": "-", "color": "crimson"},
+        )
     if moments:
-        ax.plot([], [], "-", color="0.4", lw=0.8,
-                label=f"zooms 1-{len(moments)}: prediction -> reference\nat the same time (the error)")
+        ax.plot(
+            [],
+            [],
+            "-",
+            color="0.4",
+            lw=0.8,
+            label=f"zooms 1-{len(moments)}: prediction -> reference\nat the same time (the error)",
+        )
     ax.set_aspect("equal", adjustable="datalim")
     ax.set_xlabel("east [m]")
     ax.set_ylabel("north [m]")
@@ -99,8 +131,15 @@ def plot_path(traces: pd.DataFrame, preds: Sequence[str]) -> Figure:
     return fig
 
 
-def _zoom_panel(ax: Any, win: pd.DataFrame, ref: pd.DataFrame, tq: float, err: float,
-                names: Sequence[str], colors: dict[str, Any]) -> None:
+def _zoom_panel(
+    ax: Any,
+    win: pd.DataFrame,
+    ref: pd.DataFrame,
+    tq: float,
+    err: float,
+    names: Sequence[str],
+    colors: dict[str, Any],
+) -> None:
     """One zoomed panel: a box of half-width ~2.5x the worst error around the reference at
     ``tq`` [s]; future points joined to their reference point (the error vectors)."""
     from matplotlib.collections import LineCollection
@@ -135,8 +174,9 @@ def plot_trajectory_error(traces: pd.DataFrame, preds: Sequence[str]) -> Figure:
     from matplotlib.colors import LogNorm, Normalize
     from matplotlib.figure import Figure
 
-    t = headline(traces, ["drive", "predictor", "kind", "t_query", "x_ref", "y_ref", "error_m",
-                          "label"])
+    t = headline(
+        traces, ["drive", "predictor", "kind", "t_query", "x_ref", "y_ref", "error_m", "label"]
+    )
     fut = finite_errors(t[(t.kind == "future") & np.isfinite(t["x_ref"].to_numpy(dtype=float))])
     if fut.empty:
         raise NothingToPlot("no future query with a known error")
@@ -150,8 +190,9 @@ def plot_trajectory_error(traces: pd.DataFrame, preds: Sequence[str]) -> Figure:
     lo = max(lo, FLOOR_M)
     hi = max(hi, lo * 1.01)
     norm = LogNorm(lo, hi, clip=True) if hi / lo > 10 else Normalize(lo, hi, clip=True)
-    allxy = np.vstack([track[["x_ref", "y_ref"]].to_numpy(float),
-                       dfd[["x_ref", "y_ref"]].to_numpy(float)])
+    allxy = np.vstack(
+        [track[["x_ref", "y_ref"]].to_numpy(float), dfd[["x_ref", "y_ref"]].to_numpy(float)]
+    )
     lo_xy, hi_xy = allxy.min(axis=0), allxy.max(axis=0)
     pad = 0.05 * max(float((hi_xy - lo_xy).max()), 1.0)
     lo_xy, hi_xy = lo_xy - pad, hi_xy + pad
@@ -184,16 +225,23 @@ def plot_trajectory_error(traces: pd.DataFrame, preds: Sequence[str]) -> Figure:
         ax.set_xlabel("east [m]")
         ax.set_ylabel("north [m]")
         ax.grid(True, alpha=0.3)
-    for ax in axes[len(names):]:
+    for ax in axes[len(names) :]:
         ax.set_visible(False)
     axes[0].set_xlim(lo_xy[0], hi_xy[0])  # shared by every panel
     axes[0].set_ylim(lo_xy[1], hi_xy[1])
     sm = lc if lc is not None else ScalarMappable(norm=norm, cmap="viridis")
-    extend = ("both" if e_all.min() < lo else "max") if e_all.max() > hi else (
-        "min" if e_all.min() < lo else "neither")
-    fig.colorbar(sm, ax=list(axes[:len(names)]), label="future-point error [m]", extend=extend,
-                 shrink=0.9)
-    fig.suptitle(f"{drive}: reference path coloured by future-point error\n(grey: no future "
-                 "query there, e.g. warm-up or outage; colours clipped to the 1st-99th "
-                 "percentile)", fontsize=10)
+    extend = (
+        ("both" if e_all.min() < lo else "max")
+        if e_all.max() > hi
+        else ("min" if e_all.min() < lo else "neither")
+    )
+    fig.colorbar(
+        sm, ax=list(axes[: len(names)]), label="future-point error [m]", extend=extend, shrink=0.9
+    )
+    fig.suptitle(
+        f"{drive}: reference path coloured by future-point error\n(grey: no future "
+        "query there, e.g. warm-up or outage; colours clipped to the 1st-99th "
+        "percentile)",
+        fontsize=10,
+    )
     return fig

@@ -45,8 +45,9 @@ def _runs(t: np.ndarray, values: np.ndarray) -> list[tuple[Any, float, float]]:
     return [(values[s], float(t[s]), float(t[e])) for s, e in zip(starts, ends, strict=True)]
 
 
-def draw_error_over_time(ax: Any, drive_rows: pd.DataFrame, preds: Sequence[str],
-                         colors: dict[str, Any]) -> bool:
+def draw_error_over_time(
+    ax: Any, drive_rows: pd.DataFrame, preds: Sequence[str], colors: dict[str, Any]
+) -> bool:
     """Draw one drive's future-point error [m] over drive time [s] into ``ax`` (log y);
     shade scenario labels (background bands), GPS outages (hatched: t_query min..max of
     each outage) and the warm-up (grey). False (nothing drawn) without a finite error.
@@ -70,8 +71,14 @@ def draw_error_over_time(ax: Any, drive_rows: pd.DataFrame, preds: Sequence[str]
         lo_hi = (min(lo_hi[0], v.min()), max(lo_hi[1], v.max()))
         tq = d.t_query.to_numpy(dtype=float)
         gap = np.flatnonzero(gap_steps(tq)) + 1  # break the line across outages
-        (h,) = ax.plot(np.insert(tq, gap, np.nan), np.insert(v, gap, np.nan), "-", lw=0.8,
-                       color=colors.get(p), label=f"{p} (mean {e.mean():.3f} m)")
+        (h,) = ax.plot(
+            np.insert(tq, gap, np.nan),
+            np.insert(v, gap, np.nan),
+            "-",
+            lw=0.8,
+            color=colors.get(p),
+            label=f"{p} (mean {e.mean():.3f} m)",
+        )
         handles.append(h)
     xband = ax.get_xaxis_transform()  # x in data, y in axes fraction
     one = drive_rows[drive_rows.predictor == drive_rows.predictor.iloc[0]].sort_values("t_query")
@@ -87,30 +94,52 @@ def draw_error_over_time(ax: Any, drive_rows: pd.DataFrame, preds: Sequence[str]
     out = drive_rows[drive_rows.outage >= 0]
     if not out.empty:
         g = out.groupby("outage")["t_query"].agg(["min", "max"])
-        ax.broken_barh(list(zip(g["min"], g["max"] - g["min"], strict=True)), (0, 1),
-                       transform=xband, facecolors="none", edgecolors="0.3", hatch="////",
-                       lw=0, zorder=0.5)
-        handles.append(Patch(facecolor="none", edgecolor="0.3", hatch="////",
-                             label=f"GPS outage ({len(g)})"))
+        ax.broken_barh(
+            list(zip(g["min"], g["max"] - g["min"], strict=True)),
+            (0, 1),
+            transform=xband,
+            facecolors="none",
+            edgecolors="0.3",
+            hatch="////",
+            lw=0,
+            zorder=0.5,
+        )
+        handles.append(
+            Patch(facecolor="none", edgecolor="0.3", hatch="////", label=f"GPS outage ({len(g)})")
+        )
     w = warmup_mask(drive_rows)
     if w.any():
         tw = drive_rows.t_query.to_numpy(dtype=float)[w]
-        ax.broken_barh([(tw.min(), tw.max() - tw.min())], (0, 1), transform=xband,
-                       facecolors="0.55", alpha=0.6, zorder=0.6)
+        ax.broken_barh(
+            [(tw.min(), tw.max() - tw.min())],
+            (0, 1),
+            transform=xband,
+            facecolors="0.55",
+            alpha=0.6,
+            zorder=0.6,
+        )
         handles.append(Patch(facecolor="0.55", alpha=0.6, label="warm-up"))
     k = np.arange(np.floor(lo_hi[0]), np.ceil(lo_hi[1]) + 1)
-    ax.set_yticks(k, [f"{10.0 ** i:g}" for i in k])
+    ax.set_yticks(k, [f"{10.0**i:g}" for i in k])
     ax.set_ylim(k[0] - 0.05, k[-1] + 0.05) if k.size > 1 else ax.set_ylim(k[0] - 1, k[0] + 1)
     t0, t1 = float(np.nanmin(drive_rows.t_query)), float(np.nanmax(drive_rows.t_query))
     ax.set_xlim(t0, t1 if t1 > t0 else t0 + 1.0)
     ax.set_xlabel("drive time [s]")
     ax.set_ylabel("future-point error [m] (log scale)")
     if clipped:
-        ax.text(1.0, 1.01, f"< {1000 * FLOOR_M:g} mm drawn at {1000 * FLOOR_M:g} mm",
-                transform=ax.transAxes, ha="right", va="bottom", fontsize=7)
+        ax.text(
+            1.0,
+            1.01,
+            f"< {1000 * FLOOR_M:g} mm drawn at {1000 * FLOOR_M:g} mm",
+            transform=ax.transAxes,
+            ha="right",
+            va="bottom",
+            fontsize=7,
+        )
     ax.grid(True, which="major", axis="y", alpha=0.3)
-    ax.legend(handles=handles, fontsize=7, loc="upper left", bbox_to_anchor=(1.01, 1.0),
-              borderaxespad=0)
+    ax.legend(
+        handles=handles, fontsize=7, loc="upper left", bbox_to_anchor=(1.01, 1.0), borderaxespad=0
+    )
     return True
 
 
@@ -126,19 +155,32 @@ def drives_to_plot(traces: pd.DataFrame, limit: int | None) -> tuple[list[str], 
     if cap == 0:
         return [], f"not drawn for the {len(drives)} drives (--drive-plots 0)"
     fut = headline(traces[traces.kind == "future"])
-    worst = (fut.groupby(fut.drive, sort=False, observed=True)["error_m"].mean()
-             .sort_values(ascending=False, kind="stable").index[:cap])
+    worst = (
+        fut.groupby(fut.drive, sort=False, observed=True)["error_m"]
+        .mean()
+        .sort_values(ascending=False, kind="stable")
+        .index[:cap]
+    )
     worst = {str(d) for d in worst}
     chosen = [d for d in drives if d in worst]
-    why = ("cap MAX_DRIVE_FIGURES in bench/plots.py" if limit is None or limit > MAX_DRIVE_FIGURES
-           else "--drive-plots all for every drive")
-    return chosen, (f"drawn for the {len(chosen)} of {len(drives)} drives with the largest mean "
-                    f"future-point error ({why})")
+    why = (
+        "cap MAX_DRIVE_FIGURES in bench/plots.py"
+        if limit is None or limit > MAX_DRIVE_FIGURES
+        else "--drive-plots all for every drive"
+    )
+    return chosen, (
+        f"drawn for the {len(chosen)} of {len(drives)} drives with the largest mean "
+        f"future-point error ({why})"
+    )
 
 
-def write_error_over_time(traces: pd.DataFrame, preds: Sequence[str], out: Path,
-                          formats: Sequence[str], limit: int | None = DEFAULT_DRIVE_PLOTS
-                          ) -> tuple[list[Path], str | None]:
+def write_error_over_time(
+    traces: pd.DataFrame,
+    preds: Sequence[str],
+    out: Path,
+    formats: Sequence[str],
+    limit: int | None = DEFAULT_DRIVE_PLOTS,
+) -> tuple[list[Path], str | None]:
     """``out/drives/<drive>-error_over_time.<fmt>`` for the drives of :func:`drives_to_plot`,
     drawn into one reused figure at :data:`DRIVE_DPI`; return the files and a note (drives
     left out and why), or None."""
@@ -151,8 +193,11 @@ def write_error_over_time(traces: pd.DataFrame, preds: Sequence[str], out: Path,
     files: list[Path] = []
     empty: list[str] = []
     chosen, chosen_note = drives_to_plot(traces, limit)
-    used = [c for c in ("drive", "predictor", "kind", "t_query", "error_m", "label", "outage",
-                        "warmup") if c in traces.columns]
+    used = [
+        c
+        for c in ("drive", "predictor", "kind", "t_query", "error_m", "label", "outage", "warmup")
+        if c in traces.columns
+    ]
     picked = traces.loc[traces.drive.isin(chosen).to_numpy(), used]
     stems = dict(zip(chosen, unique_file_safe(chosen), strict=True))  # two names, one file name
     # iterate the groups (first appearance order): get_group fails on 1-row groups (pandas 3.1)
@@ -162,12 +207,15 @@ def write_error_over_time(traces: pd.DataFrame, preds: Sequence[str], out: Path,
             empty.append(str(drive))
             continue
         ax.set_title(f"{drive}: future-point error over time", fontsize=10, loc="left")
-        files += save_figure(fig, out / "drives", f"{stems[str(drive)]}-error_over_time", formats,
-                             dpi=DRIVE_DPI)
+        files += save_figure(
+            fig, out / "drives", f"{stems[str(drive)]}-error_over_time", formats, dpi=DRIVE_DPI
+        )
     notes = []
     if empty:
-        notes.append(f"{len(empty)} of {len(chosen)} drives have no future query with a known "
-                     f"error ({', '.join(empty[:5])}{', ...' if len(empty) > 5 else ''})")
+        notes.append(
+            f"{len(empty)} of {len(chosen)} drives have no future query with a known "
+            f"error ({', '.join(empty[:5])}{', ...' if len(empty) > 5 else ''})"
+        )
     if chosen_note:
         notes.append(chosen_note)
     return files, "; ".join(notes) or None

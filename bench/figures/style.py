@@ -25,8 +25,13 @@ FLOOR_M = 1e-3
 DPI = 110
 DRIVE_DPI = 80
 TURN_LABELS = ("turn", "roundabout")
-LABEL_COLORS = {"straight": "#c7e9c0", "turn": "#fdd0a2", "roundabout": "#d4b9da",
-                "start_stop": "#fff2ae", "unlabelled": "#ffffff"}
+LABEL_COLORS = {
+    "straight": "#c7e9c0",
+    "turn": "#fdd0a2",
+    "roundabout": "#d4b9da",
+    "start_stop": "#fff2ae",
+    "unlabelled": "#ffffff",
+}
 
 
 @dataclass
@@ -78,8 +83,9 @@ def in_order(preds: Sequence[str], column: pd.Series) -> list[str]:
     return [p for p in preds if p in present] + sorted(present - set(preds))
 
 
-def save_figure(fig: Figure, folder: Path, stem: str, formats: Sequence[str],
-                dpi: int = DPI) -> list[Path]:
+def save_figure(
+    fig: Figure, folder: Path, stem: str, formats: Sequence[str], dpi: int = DPI
+) -> list[Path]:
     """Write ``fig`` as ``folder/stem.<fmt>`` for each format (already checked by
     :func:`check_formats`); return the paths. No timestamps in the files, so the same run
     gives the same bytes."""
@@ -87,7 +93,9 @@ def save_figure(fig: Figure, folder: Path, stem: str, formats: Sequence[str],
     paths = []
     for fmt in formats:
         p = folder / f"{stem}.{fmt}"
-        extra = {"pil_kwargs": {"compress_level": 1}} if fmt == "png" else {}  # quicker; ~10 % larger
+        extra = (
+            {"pil_kwargs": {"compress_level": 1}} if fmt == "png" else {}
+        )  # quicker; ~10 % larger
         fig.savefig(p, format=fmt, dpi=dpi, metadata=_METADATA[fmt], **extra)
         paths.append(p)
     return paths

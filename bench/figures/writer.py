@@ -20,11 +20,29 @@ from posbench.figures.maps import plot_path, plot_trajectory_error
 from posbench.figures.per_drive import DEFAULT_DRIVE_PLOTS, write_error_over_time
 from posbench.figures.style import NothingToPlot, PlotsWritten, check_formats, save_figure
 
-FIGURES = {"error_cdf": plot_error_cdf, "error_vs_speed": plot_error_vs_speed,
-           "error_vs_since_fix": plot_error_vs_since_fix, "path": plot_path,
-           "trajectory_error": plot_trajectory_error, "calibration": plot_calibration}
-REQUIRED = ("drive", "predictor", "kind", "t_query", "x", "y", "x_ref", "y_ref", "error_m",
-            "label", "speed_mps", "since_fix_s", "outage")
+FIGURES = {
+    "error_cdf": plot_error_cdf,
+    "error_vs_speed": plot_error_vs_speed,
+    "error_vs_since_fix": plot_error_vs_since_fix,
+    "path": plot_path,
+    "trajectory_error": plot_trajectory_error,
+    "calibration": plot_calibration,
+}
+REQUIRED = (
+    "drive",
+    "predictor",
+    "kind",
+    "t_query",
+    "x",
+    "y",
+    "x_ref",
+    "y_ref",
+    "error_m",
+    "label",
+    "speed_mps",
+    "since_fix_s",
+    "outage",
+)
 
 
 def _plottable(traces: pd.DataFrame) -> str | None:
@@ -41,8 +59,9 @@ def plot_predictors(traces: pd.DataFrame, res: dict[str, Any]) -> list[str]:
     return list(res.get("predictors") or [str(p) for p in pd.unique(traces.predictor)])
 
 
-def write_summary_plots(traces: pd.DataFrame, preds: Sequence[str], out: Path,
-                        formats: Iterable[str] = ("png",)) -> PlotsWritten:
+def write_summary_plots(
+    traces: pd.DataFrame, preds: Sequence[str], out: Path, formats: Iterable[str] = ("png",)
+) -> PlotsWritten:
     """The run's figures of :data:`FIGURES` (not the per-drive ones) into ``out``; see
     :func:`write_plots`."""
     fmts = check_formats(formats)
@@ -63,9 +82,13 @@ def write_summary_plots(traces: pd.DataFrame, preds: Sequence[str], out: Path,
     return written
 
 
-def write_drive_plots(traces: pd.DataFrame, preds: Sequence[str], out: Path,
-                      formats: Iterable[str] = ("png",),
-                      drive_plots: int | None = DEFAULT_DRIVE_PLOTS) -> PlotsWritten:
+def write_drive_plots(
+    traces: pd.DataFrame,
+    preds: Sequence[str],
+    out: Path,
+    formats: Iterable[str] = ("png",),
+    drive_plots: int | None = DEFAULT_DRIVE_PLOTS,
+) -> PlotsWritten:
     """The per-drive error-over-time figures into ``out/drives`` (:func:`write_error_over_time`);
     never raises on thin data (see :func:`write_plots`)."""
     fmts = check_formats(formats)
@@ -93,9 +116,13 @@ def joined(*parts: PlotsWritten) -> PlotsWritten:
     return out
 
 
-def write_plots(traces: pd.DataFrame, res: dict[str, Any], out: Path,
-                formats: Iterable[str] = ("png",),
-                drive_plots: int | None = DEFAULT_DRIVE_PLOTS) -> PlotsWritten:
+def write_plots(
+    traces: pd.DataFrame,
+    res: dict[str, Any],
+    out: Path,
+    formats: Iterable[str] = ("png",),
+    drive_plots: int | None = DEFAULT_DRIVE_PLOTS,
+) -> PlotsWritten:
     """Write the run's figures into ``out`` (per-drive ones into ``out/drives``, for the
     drives of :func:`drives_to_plot` with limit ``drive_plots``), each in every one of
     ``formats`` (from :data:`FORMATS`). Never raises on thin data: a figure with nothing to
@@ -108,5 +135,7 @@ def write_plots(traces: pd.DataFrame, res: dict[str, Any], out: Path,
     """
     fmts = check_formats(formats)
     preds = plot_predictors(traces, res) if _plottable(traces) is None else []
-    return joined(write_summary_plots(traces, preds, out, fmts),
-                  write_drive_plots(traces, preds, out, fmts, drive_plots))
+    return joined(
+        write_summary_plots(traces, preds, out, fmts),
+        write_drive_plots(traces, preds, out, fmts, drive_plots),
+    )

@@ -92,8 +92,9 @@ def _text(tab, col: str) -> np.ndarray:
     empty = (txt.isna() | (txt == "")).to_numpy()
     if empty.any():
         i = int(np.flatnonzero(empty)[0])
-        raise DataError(tab.path, f"{tab.where(i)}, column {col!r}: empty; "
-                                  f"{int(empty.sum())} such rows in all")
+        raise DataError(
+            tab.path, f"{tab.where(i)}, column {col!r}: empty; {int(empty.sum())} such rows in all"
+        )
     return txt.to_numpy(dtype=object).astype(str)
 
 
@@ -114,8 +115,11 @@ def read_answers(path: str | Path) -> Answers:
     df = tab.df
     missing = [c for c in REQUIRED if c not in df.columns]
     if missing:
-        raise DataError(path, f"missing column(s) {', '.join(missing)}: an answers file has "
-                              f"columns {', '.join(REQUIRED)} and optionally latency_us")
+        raise DataError(
+            path,
+            f"missing column(s) {', '.join(missing)}: an answers file has "
+            f"columns {', '.join(REQUIRED)} and optionally latency_us",
+        )
     ignored = [c for c in df.columns if c not in REQUIRED + OPTIONAL]
     where = tab.where
     drive = _text(tab, "drive")
@@ -123,8 +127,11 @@ def read_answers(path: str | Path) -> Answers:
     bad = ~np.isin(kind, KINDS)
     if bad.any():
         i = int(np.flatnonzero(bad)[0])
-        raise DataError(path, f"{where(i)}, column 'kind': {df['kind'].iloc[i]!r} is not a query "
-                              f"kind (future or now)")
+        raise DataError(
+            path,
+            f"{where(i)}, column 'kind': {df['kind'].iloc[i]!r} is not a query "
+            f"kind (future or now)",
+        )
     num = {}
     for c in ("t_query", "x", "y"):
         v = numeric_column(tab, c)
@@ -132,9 +139,12 @@ def read_answers(path: str | Path) -> Answers:
         if nonfinite.any():
             i = int(np.flatnonzero(nonfinite)[0])
             hint = "; leave the row out to give no answer" if c in ("x", "y") else ""
-            raise DataError(path, f"{where(i)}, column {c!r}: missing or non-finite value "
-                                  f"({df[c].iloc[i]!r}){hint}; {int(nonfinite.sum())} such rows "
-                                  f"in all")
+            raise DataError(
+                path,
+                f"{where(i)}, column {c!r}: missing or non-finite value "
+                f"({df[c].iloc[i]!r}){hint}; {int(nonfinite.sum())} such rows "
+                f"in all",
+            )
         num[c] = v
     lat = np.full(len(df), np.nan)
     if "latency_us" in df.columns:
@@ -142,10 +152,14 @@ def read_answers(path: str | Path) -> Answers:
         bad = np.isinf(lat) | (lat < 0)
         if bad.any():
             i = int(np.flatnonzero(bad)[0])
-            raise DataError(path, f"{where(i)}, column 'latency_us': {df['latency_us'].iloc[i]!r} "
-                                  f"is not a duration >= 0 [us] (leave it empty if not timed)")
-    frame = pd.DataFrame({"drive": drive, "kind": kind, **num, "latency_us": lat,
-                          **_covariance(tab, path)})
+            raise DataError(
+                path,
+                f"{where(i)}, column 'latency_us': {df['latency_us'].iloc[i]!r} "
+                f"is not a duration >= 0 [us] (leave it empty if not timed)",
+            )
+    frame = pd.DataFrame(
+        {"drive": drive, "kind": kind, **num, "latency_us": lat, **_covariance(tab, path)}
+    )
     return Answers(path, frame, tab.is_csv, ignored)
 
 
@@ -160,12 +174,26 @@ def read_tum_answers(path: str | Path) -> Answers:
     """
     tum = read_tum(path)
     n = tum.t.size
-    frame = pd.DataFrame({"drive": np.full(n, "", dtype=object), "kind": "now",
-                          "t_query": tum.t, "x": tum.x, "y": tum.y,
-                          "latency_us": np.full(n, np.nan),
-                          **{c: np.full(n, np.nan) for c in COVARIANCE}})
-    return Answers(Path(path), frame, False, [], lines=tum.line, tum_drive=tum.drive,
-                   tum_run_clock=tum.run_clock)
+    frame = pd.DataFrame(
+        {
+            "drive": np.full(n, "", dtype=object),
+            "kind": "now",
+            "t_query": tum.t,
+            "x": tum.x,
+            "y": tum.y,
+            "latency_us": np.full(n, np.nan),
+            **{c: np.full(n, np.nan) for c in COVARIANCE},
+        }
+    )
+    return Answers(
+        Path(path),
+        frame,
+        False,
+        [],
+        lines=tum.line,
+        tum_drive=tum.drive,
+        tum_run_clock=tum.run_clock,
+    )
 
 
 def tum_drive(folder: QueryFolder, answers: Answers) -> str:
@@ -186,15 +214,21 @@ def tum_drive(folder: QueryFolder, answers: Answers) -> str:
             return name
         if name in by_name:
             return by_name[name]
-        raise DataError(answers.path, f"'# drive: {name}' names no drive of the queries "
-                                      f"folder {folder.folder} (its drives: {shown})")
+        raise DataError(
+            answers.path,
+            f"'# drive: {name}' names no drive of the queries "
+            f"folder {folder.folder} (its drives: {shown})",
+        )
     file = answers.path.name
     hits = [i for i in ids if file.startswith(i + ".")]
     if not hits:
-        raise DataError(answers.path, f"cannot tell which drive it answers: no '# drive: ID' "
-                                      f"line and its name does not start with a drive id of "
-                                      f"the queries folder {folder.folder} followed by '.' "
-                                      f"(its drives: {shown}); name it ID.tum or add the line")
+        raise DataError(
+            answers.path,
+            f"cannot tell which drive it answers: no '# drive: ID' "
+            f"line and its name does not start with a drive id of "
+            f"the queries folder {folder.folder} followed by '.' "
+            f"(its drives: {shown}); name it ID.tum or add the line",
+        )
     return max(hits, key=len)
 
 
@@ -208,19 +242,31 @@ def _covariance(tab: Any, path: Path) -> dict[str, np.ndarray]:
     if not given:
         return {c: np.full(len(df), np.nan) for c in COVARIANCE}
     if len(given) < len(COVARIANCE):
-        raise DataError(path, f"covariance column(s) {', '.join(given)} without "
-                              f"{', '.join(c for c in COVARIANCE if c not in given)}: give all "
-                              f"of {', '.join(COVARIANCE)} [m^2] or none")
+        raise DataError(
+            path,
+            f"covariance column(s) {', '.join(given)} without "
+            f"{', '.join(c for c in COVARIANCE if c not in given)}: give all "
+            f"of {', '.join(COVARIANCE)} [m^2] or none",
+        )
     xx, xy, yy = (numeric_column(tab, c) for c in COVARIANCE)
     some = np.isfinite(xx) | np.isfinite(xy) | np.isfinite(yy)
-    bad = some & ~(np.isfinite(xx) & np.isfinite(xy) & np.isfinite(yy)
-                   & (xx >= 0) & (yy >= 0) & (xx * yy - xy * xy >= -1e-12 * (xx * yy + 1e-300)))
+    bad = some & ~(
+        np.isfinite(xx)
+        & np.isfinite(xy)
+        & np.isfinite(yy)
+        & (xx >= 0)
+        & (yy >= 0)
+        & (xx * yy - xy * xy >= -1e-12 * (xx * yy + 1e-300))
+    )
     if bad.any():
         i = int(np.flatnonzero(bad)[0])
-        raise DataError(path, f"{tab.where(i)}, columns cov_xx, cov_xy, cov_yy: "
-                              f"({xx[i]!r}, {xy[i]!r}, {yy[i]!r}) is not a covariance (all three "
-                              f"finite, variances >= 0, cov_xy^2 <= cov_xx cov_yy; leave all "
-                              f"three empty for no uncertainty)")
+        raise DataError(
+            path,
+            f"{tab.where(i)}, columns cov_xx, cov_xy, cov_yy: "
+            f"({xx[i]!r}, {xy[i]!r}, {yy[i]!r}) is not a covariance (all three "
+            f"finite, variances >= 0, cov_xy^2 <= cov_xx cov_yy; leave all "
+            f"three empty for no uncertainty)",
+        )
     return {"cov_xx": xx, "cov_xy": xy, "cov_yy": yy}
 
 
@@ -260,14 +306,19 @@ def match(folder: QueryFolder, answers: Answers) -> np.ndarray:
     if not known.all():
         i = int(np.flatnonzero(~known)[0])
         shown = ", ".join(list(ids)[:5]) + (", ..." if len(ids) > 5 else "")
-        raise answers.fail(int(a.index[i]), f"drive {a['drive'].iloc[i]!r} is not in the queries "
-                                            f"folder {folder.folder} (its drives: {shown})")
+        raise answers.fail(
+            int(a.index[i]),
+            f"drive {a['drive'].iloc[i]!r} is not in the queries "
+            f"folder {folder.folder} (its drives: {shown})",
+        )
     skipped = np.array([ids[d]["skipped"] is not None for d in a["drive"].to_numpy()], dtype=bool)
     if skipped.any():
         i = int(np.flatnonzero(skipped)[0])
         d = ids[a["drive"].iloc[i]]
-        raise answers.fail(int(a.index[i]), f"drive {d['id']!r} has no queries (skipped by "
-                                            f"bench queries: {d['skipped']})")
+        raise answers.fail(
+            int(a.index[i]),
+            f"drive {d['id']!r} has no queries (skipped by bench queries: {d['skipped']})",
+        )
     public = folder.public_times()
     pos = answer_positions(public, a)
     if (pos < 0).any():
@@ -276,27 +327,39 @@ def match(folder: QueryFolder, answers: Answers) -> np.ndarray:
         same = (public["drive"] == row["drive"]) & (public["kind"] == row["kind"])
         hint = _nearest_hint(public.loc[same, "t_query"].to_numpy(float), float(row["t_query"]))
         if answers.is_tum:
-            hint += ("; a TUM timestamp is the query's t_query as in queries.csv: seconds from "
-                     "the drive's first input sample, not Unix time")
-        raise answers.fail(int(a.index[i]), f"no query of drive {row['drive']!r}, kind "
-                                            f"{row['kind']} at t_query "
-                                            f"{float(row['t_query'])!r} s "
-                                            f"({hint}; times match within "
-                                            f"{MATCH_TOLERANCE_S:g} s)")
+            hint += (
+                "; a TUM timestamp is the query's t_query as in queries.csv: seconds from "
+                "the drive's first input sample, not Unix time"
+            )
+        raise answers.fail(
+            int(a.index[i]),
+            f"no query of drive {row['drive']!r}, kind "
+            f"{row['kind']} at t_query "
+            f"{float(row['t_query'])!r} s "
+            f"({hint}; times match within "
+            f"{MATCH_TOLERANCE_S:g} s)",
+        )
     dup = pd.Series(pos).duplicated().to_numpy()
     if dup.any():
         i = int(np.flatnonzero(dup)[0])
         first = int(np.flatnonzero(pos == pos[i])[0])
         row = a.iloc[i]
-        raise answers.fail(int(a.index[i]), f"a second answer to the query answered on "
-                                            f"{answers.where(int(a.index[first]))} (drive "
-                                            f"{row['drive']!r}, kind {row['kind']}, t_query "
-                                            f"{float(public['t_query'].iloc[pos[i]])!r} s)")
+        raise answers.fail(
+            int(a.index[i]),
+            f"a second answer to the query answered on "
+            f"{answers.where(int(a.index[first]))} (drive "
+            f"{row['drive']!r}, kind {row['kind']}, t_query "
+            f"{float(public['t_query'].iloc[pos[i]])!r} s)",
+        )
     return pos
 
 
-def score_answers(folder: QueryFolder, answers: Answers, predictor: str,
-                  on_done: Callable[[str], None] | None = None) -> Scored:
+def score_answers(
+    folder: QueryFolder,
+    answers: Answers,
+    predictor: str,
+    on_done: Callable[[str], None] | None = None,
+) -> Scored:
     """Score ``answers`` as predictor ``predictor`` against ``folder``: per drive (folder
     order) the :class:`~posbench.scoring.records.DriveRun` a replay would give, traces from
     :func:`posbench.scoring.score.score` (unanswered queries NaN, i.e. ``missing``), step latency from
@@ -330,9 +393,12 @@ def score_answers(folder: QueryFolder, answers: Answers, predictor: str,
         miss = {k: int(((kind[rows] == k) & ~answered[rows]).sum()) for k in KINDS}
         if sum(miss.values()):
             unanswered[d["name"]] = miss
-            run.notes = [*run.notes, f"answers: {sum(miss.values())} of {rows.size} queries "
-                                     f"without an answer (future {miss['future']}, now "
-                                     f"{miss['now']}), scored as missing"]
+            run.notes = [
+                *run.notes,
+                f"answers: {sum(miss.values())} of {rows.size} queries "
+                f"without an answer (future {miss['future']}, now "
+                f"{miss['now']}), scored as missing",
+            ]
         runs.append(run)
         if on_done:
             on_done(d["name"])

@@ -108,8 +108,9 @@ def run_tracks(run: Run) -> tuple[list[Track], list[str]]:
     reference, then per predictor its now and future tracks) and the drives the run skipped."""
     res = run.results
     drives = res.get("drives", [])
-    ids = dict(zip([d["name"] for d in drives], unique_file_safe([d["name"] for d in drives]),
-                   strict=True))
+    ids = dict(
+        zip([d["name"] for d in drives], unique_file_safe([d["name"] for d in drives]), strict=True)
+    )
     preds = run.predictors
     pids = dict(zip(preds, unique_file_safe(preds, empty="predictor"), strict=True))
     skipped = [d["name"] for d in drives if d.get("skipped")]
@@ -117,8 +118,10 @@ def run_tracks(run: Run) -> tuple[list[Track], list[str]]:
     tr = run.traces if wanted else pd.DataFrame()
     if tr.empty:
         return [], skipped
-    tr = tr.loc[scored_mask(tr), ["drive", "predictor", "kind", "t_issue", "t_query", "x", "y",
-                                  "x_ref", "y_ref", "error_m"]]
+    tr = tr.loc[
+        scored_mask(tr),
+        ["drive", "predictor", "kind", "t_issue", "t_query", "x", "y", "x_ref", "y_ref", "error_m"],
+    ]
     drive = tr["drive"].astype(str).to_numpy()
     pred = tr["predictor"].astype(str).to_numpy()
     kind = tr["kind"].astype(str).to_numpy()
@@ -128,31 +131,53 @@ def run_tracks(run: Run) -> tuple[list[Track], list[str]]:
         for k in EXPORT_KINDS:
             rows = tr.loc[mine & (kind == k)]
             ref = rows.drop_duplicates("t_query").sort_values("t_query", kind="stable")
-            tracks.append(Track(name, k, None, track_stem(ids[name], None, k),
-                                ref["t_query"].to_numpy(float), ref["x_ref"].to_numpy(float),
-                                ref["y_ref"].to_numpy(float)))
+            tracks.append(
+                Track(
+                    name,
+                    k,
+                    None,
+                    track_stem(ids[name], None, k),
+                    ref["t_query"].to_numpy(float),
+                    ref["x_ref"].to_numpy(float),
+                    ref["y_ref"].to_numpy(float),
+                )
+            )
         for p in preds:
             for k in EXPORT_KINDS:
                 m = mine & (kind == k) & (pred == p)
                 rows = tr.loc[m]
                 rows = rows[rows["x"].notna() & rows["y"].notna()].sort_values(
-                    "t_query", kind="stable")
-                tracks.append(Track(name, k, p, track_stem(ids[name], pids[p], k),
-                                    rows["t_query"].to_numpy(float), rows["x"].to_numpy(float),
-                                    rows["y"].to_numpy(float), rows["t_issue"].to_numpy(float),
-                                    rows["error_m"].to_numpy(float)))
+                    "t_query", kind="stable"
+                )
+                tracks.append(
+                    Track(
+                        name,
+                        k,
+                        p,
+                        track_stem(ids[name], pids[p], k),
+                        rows["t_query"].to_numpy(float),
+                        rows["x"].to_numpy(float),
+                        rows["y"].to_numpy(float),
+                        rows["t_issue"].to_numpy(float),
+                        rows["error_m"].to_numpy(float),
+                    )
+                )
     return tracks, skipped
 
 
 def _comments(track: Track, run: Run) -> list[str]:
-    who = ("reference position" if track.predictor is None
-           else f"predictor {track.predictor}'s answers")
-    return [f"posbench export of {run.folder}: {who}, {track.kind} queries scored "
-            f"({len(track)} rows)",
-            f"drive: {track.drive}",
-            RUN_CLOCK_COMMENT,
-            "timestamp: t_query [s] from the drive's t = 0; x east, y north [m] in the drive's "
-            "local ENU frame; z = 0; identity quaternion (no orientation)"]
+    who = (
+        "reference position"
+        if track.predictor is None
+        else f"predictor {track.predictor}'s answers"
+    )
+    return [
+        f"posbench export of {run.folder}: {who}, {track.kind} queries scored ({len(track)} rows)",
+        f"drive: {track.drive}",
+        RUN_CLOCK_COMMENT,
+        "timestamp: t_query [s] from the drive's t = 0; x east, y north [m] in the drive's "
+        "local ENU frame; z = 0; identity quaternion (no orientation)",
+    ]
 
 
 def _csv(track: Track) -> pd.DataFrame:
@@ -166,8 +191,9 @@ def _csv(track: Track) -> pd.DataFrame:
     return pd.DataFrame(cols)
 
 
-def export_run(run: Run, out: Path, fmt: str = "tum",
-               on_file: Callable[[Path], None] | None = None) -> Exported:
+def export_run(
+    run: Run, out: Path, fmt: str = "tum", on_file: Callable[[Path], None] | None = None
+) -> Exported:
     """Write ``run``'s tracks into folder ``out`` (made if missing) as ``fmt`` (tum or csv;
     layout in the module docstring); a track without rows is not written (its stem is in
     :attr:`Exported.empty`). Files of the same names there are replaced, others left alone.

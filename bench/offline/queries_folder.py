@@ -64,8 +64,18 @@ FORMATS = ("csv", "parquet")
 #: the columns of the public queries list
 PUBLIC_COLUMNS = ("drive", "kind", "t_issue", "t_query")
 #: the DriveRun fields the key keeps per drive (what aggregation and the report read)
-DRIVE_FIELDS = ("name", "dataset", "reference", "notes", "warnings", "outages", "skipped",
-                "gps_count", "duration_s", "gps_condition")
+DRIVE_FIELDS = (
+    "name",
+    "dataset",
+    "reference",
+    "notes",
+    "warnings",
+    "outages",
+    "skipped",
+    "gps_count",
+    "duration_s",
+    "gps_condition",
+)
 
 
 def drive_ids(names: Sequence[str]) -> list[str]:
@@ -90,8 +100,7 @@ def inputs_drive(drive: Drive, gps: GpsStream, t0: float) -> Drive:
     speed = drive.speed
     if speed is not None:
         speed = SpeedStream(speed.t - t0, speed.v)
-    return replace(drive, gps=GpsStream(gps.t - t0, gps.x, gps.y), imu=imu, speed=speed,
-                   truth=None)
+    return replace(drive, gps=GpsStream(gps.t - t0, gps.x, gps.y), imu=imu, speed=speed, truth=None)
 
 
 def sha256_file(path: Path) -> str:
@@ -125,9 +134,16 @@ class QueriesWritten:
     skipped: int
 
 
-def write_queries(drives: Sequence[Drive], cfg: RunConfig, out: Path, *, command: str,
-                  data: list[dict[str, Any]], fmt: str = "csv",
-                  on_done: Callable[[str], None] | None = None) -> QueriesWritten:
+def write_queries(
+    drives: Sequence[Drive],
+    cfg: RunConfig,
+    out: Path,
+    *,
+    command: str,
+    data: list[dict[str, Any]],
+    fmt: str = "csv",
+    on_done: Callable[[str], None] | None = None,
+) -> QueriesWritten:
     """Prepare ``drives`` as ``bench run`` does under ``cfg`` and write the queries folder
     ``out`` (layout in the module docstring); ``data`` is the data block of the manifest
     (:func:`posbench.saved_run.provenance.data_provenance`), ``fmt`` csv or parquet for the queries list and
@@ -147,41 +163,81 @@ def write_queries(drives: Sequence[Drive], cfg: RunConfig, out: Path, *, command
         reason = skip_reason(drive, cfg)
         if reason:
             records.append(_drive_record(skipped_run(drive, reason)))
-            listed.append({"drive": did, "name": drive.name, "inputs": None, "t0_s": 0.0,
-                           "queries": 0, "skipped": reason})
+            listed.append(
+                {
+                    "drive": did,
+                    "name": drive.name,
+                    "inputs": None,
+                    "t0_s": 0.0,
+                    "queries": 0,
+                    "skipped": reason,
+                }
+            )
         else:
             prep = prepare_drive(drive, cfg)
             q = pd.concat([query_frame(prep, k) for k in KINDS], ignore_index=True)
             t0 = input_start_s(drive, prep.gps)
             rel = f"{INPUTS}/{did}{ext}"
             _write_frame(drive_to_frame(inputs_drive(drive, prep.gps, t0)), out / rel)
-            public.append(pd.DataFrame({
-                "drive": did, "kind": q["kind"].astype(str),
-                "t_issue": q["t_issue"].to_numpy() - t0, "t_query": q["t_query"].to_numpy() - t0}))
+            public.append(
+                pd.DataFrame(
+                    {
+                        "drive": did,
+                        "kind": q["kind"].astype(str),
+                        "t_issue": q["t_issue"].to_numpy() - t0,
+                        "t_query": q["t_query"].to_numpy() - t0,
+                    }
+                )
+            )
             key.append(q)
-            run = DriveRun(drive.name, prep.dataset, prep.reference, prep.notes,
-                           list(drive.meta.warnings), pd.DataFrame(), outages=prep.outages,
-                           gps_count=len(prep.gps), duration_s=drive.duration_s,
-                           gps_condition=prep.gps_condition)
+            run = DriveRun(
+                drive.name,
+                prep.dataset,
+                prep.reference,
+                prep.notes,
+                list(drive.meta.warnings),
+                pd.DataFrame(),
+                outages=prep.outages,
+                gps_count=len(prep.gps),
+                duration_s=drive.duration_s,
+                gps_condition=prep.gps_condition,
+            )
             records.append(_drive_record(run))
-            listed.append({"drive": did, "name": drive.name, "inputs": rel, "t0_s": t0,
-                           "queries": len(q), "skipped": None})
+            listed.append(
+                {
+                    "drive": did,
+                    "name": drive.name,
+                    "inputs": rel,
+                    "t0_s": t0,
+                    "queries": len(q),
+                    "skipped": None,
+                }
+            )
         if on_done:
             on_done(drive.name)
     queries_rel = "queries" + ext
-    pub = (pd.concat(public, ignore_index=True) if public
-           else pd.DataFrame({c: [] for c in PUBLIC_COLUMNS}))
+    pub = (
+        pd.concat(public, ignore_index=True)
+        if public
+        else pd.DataFrame({c: [] for c in PUBLIC_COLUMNS})
+    )
     _write_frame(pub, out / queries_rel)
     keyf = pd.concat(key, ignore_index=True) if key else pd.DataFrame(columns=list(QUERY_COLUMNS))
     keyf.to_parquet(out / KEY_QUERIES, index=False)
     (out / KEY_DRIVES).write_text(json.dumps(records, indent=1, allow_nan=False) + "\n")
     files = [queries_rel, *[d["inputs"] for d in listed if d["inputs"]], KEY_QUERIES, KEY_DRIVES]
     manifest = {
-        "format": FORMAT, "format_version": FORMAT_VERSION,
-        "posbench": package_versions()["posbench"], "versions": package_versions(),
-        "git_commit": git_commit(), "command": command, "config": cfg.to_dict(), "data": data,
+        "format": FORMAT,
+        "format_version": FORMAT_VERSION,
+        "posbench": package_versions()["posbench"],
+        "versions": package_versions(),
+        "git_commit": git_commit(),
+        "command": command,
+        "config": cfg.to_dict(),
+        "data": data,
         "queries": queries_rel,
-        "give": [queries_rel, INPUTS + "/"], "keep": ["key/"],
+        "give": [queries_rel, INPUTS + "/"],
+        "keep": ["key/"],
         "drives": listed,
         "files": {f: sha256_file(out / f) for f in files},
     }
@@ -225,8 +281,9 @@ class QueryFolder:
 
     def config(self, predictor: str) -> RunConfig:
         """The ``bench queries`` config with ``predictor`` as the one predictor run."""
-        return RunConfig(**{**self.manifest["config"], "predictors": (predictor,),
-                            "predictor_options": {}})
+        return RunConfig(
+            **{**self.manifest["config"], "predictors": (predictor,), "predictor_options": {}}
+        )
 
     def public_times(self) -> pd.DataFrame:
         """The key's drive, kind and t_query as the public files give them (drive id, times
@@ -234,10 +291,13 @@ class QueryFolder:
         ids = {d["name"]: d["id"] for d in self.drives}
         t0 = {d["name"]: d["t0_s"] for d in self.drives}
         names = self.key["drive"].astype(str)
-        return pd.DataFrame({"drive": names.map(ids).to_numpy(),
-                             "kind": self.key["kind"].astype(str).to_numpy(),
-                             "t_query": self.key["t_query"].to_numpy(float)
-                             - names.map(t0).to_numpy(float)})
+        return pd.DataFrame(
+            {
+                "drive": names.map(ids).to_numpy(),
+                "kind": self.key["kind"].astype(str).to_numpy(),
+                "t_query": self.key["t_query"].to_numpy(float) - names.map(t0).to_numpy(float),
+            }
+        )
 
     def drive_run(self, d: dict[str, Any], traces: pd.DataFrame) -> DriveRun:
         """The :class:`~posbench.scoring.records.DriveRun` of drive record ``d`` with ``traces``."""
@@ -257,24 +317,32 @@ def _manifest(folder: Path) -> dict[str, Any]:
     except (OSError, ValueError) as e:
         raise DataError(path, f"not readable as JSON: {e}") from None
     if not isinstance(man, dict) or man.get("format") != FORMAT:
-        raise DataError(path, f"not a `bench queries` manifest (no \"format\": \"{FORMAT}\")")
+        raise DataError(path, f'not a `bench queries` manifest (no "format": "{FORMAT}")')
     version = str(man.get("format_version", "?"))
     if version.split(".")[0] != FORMAT_VERSION.split(".")[0]:
-        raise DataError(path, f"format_version {version}, written by posbench "
-                              f"{man.get('posbench', '?')}; this posbench reads "
-                              f"{FORMAT_VERSION.split('.')[0]}.x: write the queries again with "
-                              f"this posbench (bench queries) or score with a matching one")
+        raise DataError(
+            path,
+            f"format_version {version}, written by posbench "
+            f"{man.get('posbench', '?')}; this posbench reads "
+            f"{FORMAT_VERSION.split('.')[0]}.x: write the queries again with "
+            f"this posbench (bench queries) or score with a matching one",
+        )
     missing = [k for k in ("config", "drives", "files", "data", "command") if k not in man]
     if missing:
         raise DataError(path, f"incomplete manifest: no {', '.join(missing)}")
     known = set(RunConfig.__dataclass_fields__)
     if not isinstance(man["config"], dict) or set(man["config"]) - known:
         extra = sorted(set(man["config"]) - known) if isinstance(man["config"], dict) else []
-        raise DataError(path, f"config keys this posbench does not know: {', '.join(extra)} "
-                              f"(written by posbench {man.get('posbench', '?')})"
-                        if extra else "config is not an object")
+        raise DataError(
+            path,
+            f"config keys this posbench does not know: {', '.join(extra)} "
+            f"(written by posbench {man.get('posbench', '?')})"
+            if extra
+            else "config is not an object",
+        )
     if not isinstance(man["drives"], list) or not all(
-            isinstance(d, dict) and {"drive", "name", "t0_s"} <= set(d) for d in man["drives"]):
+        isinstance(d, dict) and {"drive", "name", "t0_s"} <= set(d) for d in man["drives"]
+    ):
         raise DataError(path, "malformed drives list (each needs drive, name, t0_s)")
     return man
 
@@ -291,29 +359,44 @@ def read_queries(folder: str | Path) -> QueryFolder:
     for rel in (KEY_QUERIES, KEY_DRIVES):
         path = folder / rel
         if not path.is_file():
-            raise DataError(path, "missing: the answer key of this queries folder is gone "
-                                  "(write the folder again with bench queries)")
+            raise DataError(
+                path,
+                "missing: the answer key of this queries folder is gone "
+                "(write the folder again with bench queries)",
+            )
         want = man["files"].get(rel)
         if want != sha256_file(path):
-            raise DataError(path, "changed since `bench queries` wrote it (sha256 differs from "
-                                  "the manifest): write the folder again")
+            raise DataError(
+                path,
+                "changed since `bench queries` wrote it (sha256 differs from "
+                "the manifest): write the folder again",
+            )
     try:
         records = json.loads((folder / KEY_DRIVES).read_text())
         key = pd.read_parquet(folder / KEY_QUERIES)
     except Exception as e:  # noqa: BLE001 - pyarrow raises several types for damaged files
-        raise DataError(folder / "key", f"cannot read the answer key: {str(e).splitlines()[0]}"
-                        ) from None
+        raise DataError(
+            folder / "key", f"cannot read the answer key: {str(e).splitlines()[0]}"
+        ) from None
     listed = man["drives"]
-    if (not isinstance(records, list) or len(records) != len(listed)
-            or any(not isinstance(r, dict) or set(DRIVE_FIELDS) - set(r) or r["name"] != d["name"]
-                   for r, d in zip(records, listed, strict=False))):
+    if (
+        not isinstance(records, list)
+        or len(records) != len(listed)
+        or any(
+            not isinstance(r, dict) or set(DRIVE_FIELDS) - set(r) or r["name"] != d["name"]
+            for r, d in zip(records, listed, strict=False)
+        )
+    ):
         raise DataError(folder / KEY_DRIVES, "does not list the drives of the manifest")
-    drives = [{**r, "id": d["drive"], "t0_s": float(d["t0_s"])}
-              for r, d in zip(records, listed, strict=True)]
+    drives = [
+        {**r, "id": d["drive"], "t0_s": float(d["t0_s"])}
+        for r, d in zip(records, listed, strict=True)
+    ]
     for c in TRACK_QUERY_COLUMNS:  # a key written before the along/cross-track columns
         if c not in key.columns:
             key[c] = float("nan")
     if list(key.columns) != list(QUERY_COLUMNS):
-        raise DataError(folder / KEY_QUERIES, f"columns {list(key.columns)}, expected "
-                                              f"{list(QUERY_COLUMNS)}")
+        raise DataError(
+            folder / KEY_QUERIES, f"columns {list(key.columns)}, expected {list(QUERY_COLUMNS)}"
+        )
     return QueryFolder(folder, man, key, drives)

@@ -48,14 +48,20 @@ def is_tum(path: str | Path) -> bool:
 def tum_lines(t: np.ndarray, x: np.ndarray, y: np.ndarray) -> list[str]:
     """One TUM line per pose: time ``t`` [s], east ``x`` and north ``y`` [m], z = 0, the
     identity quaternion; every number as the float's ``repr`` (exact)."""
-    return [f"{ti!r} {xi!r} {yi!r} 0.0 0.0 0.0 0.0 1.0"
-            for ti, xi, yi in zip(np.asarray(t, dtype=float).tolist(),
-                                  np.asarray(x, dtype=float).tolist(),
-                                  np.asarray(y, dtype=float).tolist(), strict=True)]
+    return [
+        f"{ti!r} {xi!r} {yi!r} 0.0 0.0 0.0 0.0 1.0"
+        for ti, xi, yi in zip(
+            np.asarray(t, dtype=float).tolist(),
+            np.asarray(x, dtype=float).tolist(),
+            np.asarray(y, dtype=float).tolist(),
+            strict=True,
+        )
+    ]
 
 
-def write_tum(path: Path, t: np.ndarray, x: np.ndarray, y: np.ndarray,
-              comments: Sequence[str] = ()) -> Path:
+def write_tum(
+    path: Path, t: np.ndarray, x: np.ndarray, y: np.ndarray, comments: Sequence[str] = ()
+) -> Path:
     """Write a TUM file: ``comments`` (each a ``# `` line), then one line per pose (see
     :func:`tum_lines`; times [s], ENU positions [m]). Returns ``path``."""
     head = [f"# {c}" for c in comments] + ["# " + " ".join(COLUMNS)]
@@ -104,30 +110,45 @@ def read_tum(path: str | Path) -> TumFile:
         if s.startswith("#"):
             body = s[1:].strip()
             if drive is None and body.lower().startswith(DRIVE_COMMENT):
-                drive = body[len(DRIVE_COMMENT):].strip() or None
+                drive = body[len(DRIVE_COMMENT) :].strip() or None
             run_clock = run_clock or body.lower() == RUN_CLOCK_COMMENT
             continue
         parts = s.split()
         if len(parts) != len(COLUMNS):
-            raise DataError(path, f"line {n}: {len(parts)} columns, a TUM line has 8 ("
-                                  f"{' '.join(COLUMNS)}, separated by spaces)")
+            raise DataError(
+                path,
+                f"line {n}: {len(parts)} columns, a TUM line has 8 ("
+                f"{' '.join(COLUMNS)}, separated by spaces)",
+            )
         try:
             vals = [float(p) for p in parts]
         except ValueError:
             bad = next(p for p in parts if not _is_float(p))
-            raise DataError(path, f"line {n}: {bad!r} is not a number (a TUM line is "
-                                  f"{' '.join(COLUMNS)})") from None
+            raise DataError(
+                path, f"line {n}: {bad!r} is not a number (a TUM line is {' '.join(COLUMNS)})"
+            ) from None
         if not all(np.isfinite(vals[:3])):
-            raise DataError(path, f"line {n}: non-finite timestamp, x or y ({' '.join(parts[:3])}"
-                                  f"); leave the line out to give no answer")
+            raise DataError(
+                path,
+                f"line {n}: non-finite timestamp, x or y ({' '.join(parts[:3])}"
+                f"); leave the line out to give no answer",
+            )
         rows.append(vals)
         lines.append(n)
     if not rows:
-        raise DataError(path, "no poses: every line is empty or a comment (a TUM line is "
-                              f"{' '.join(COLUMNS)})")
+        raise DataError(
+            path, f"no poses: every line is empty or a comment (a TUM line is {' '.join(COLUMNS)})"
+        )
     a = np.asarray(rows, dtype=float)
-    return TumFile(path, a[:, 0].copy(), a[:, 1].copy(), a[:, 2].copy(),
-                   np.asarray(lines, dtype=np.int64), drive, run_clock)
+    return TumFile(
+        path,
+        a[:, 0].copy(),
+        a[:, 1].copy(),
+        a[:, 2].copy(),
+        np.asarray(lines, dtype=np.int64),
+        drive,
+        run_clock,
+    )
 
 
 def _is_float(s: str) -> bool:

@@ -20,8 +20,12 @@ from posbench.scenarios.errors import DataError
 
 #: streams whose failure marks only the predictors that observe them (by overriding the
 #: named method of :class:`posbench.predictors.base.Predictor`); every other stream marks all
-STREAM_METHODS = {"imu.yaw_rate": "observe_imu", "imu.ax": "observe_imu",
-                  "imu.yaw": "observe_imu", "speed": "observe_speed"}
+STREAM_METHODS = {
+    "imu.yaw_rate": "observe_imu",
+    "imu.ax": "observe_imu",
+    "imu.yaw": "observe_imu",
+    "speed": "observe_speed",
+}
 
 
 def check_drives(drives: Iterable[Any]) -> dict[str, Consistency]:
@@ -40,8 +44,9 @@ def uses_stream(cls: type, stream: str) -> bool:
     return getattr(cls, method, None) is not getattr(Predictor, method)
 
 
-def affected_predictors(names: Sequence[str], checks: dict[str, Consistency]
-                        ) -> dict[str, list[str]]:
+def affected_predictors(
+    names: Sequence[str], checks: dict[str, Consistency]
+) -> dict[str, list[str]]:
     """Predictor name -> ``"drive: stream"`` for every failing stream it used."""
     from posbench.predictors.registry import predictor_class
 
@@ -66,13 +71,16 @@ def strict_error(checks: dict[str, Consistency]) -> DataError | None:
 def to_results(checks: dict[str, Consistency], names: Sequence[str] = ()) -> dict[str, Any]:
     """The ``consistency`` key of results.json: tolerances, per drive and stream the
     verdict, reason and figures, and the predictors that used a failing stream."""
-    return {"tolerances": asdict(TOLERANCES),
-            "drives": {d: r.to_dict() for d, r in checks.items()},
-            "affected_predictors": affected_predictors(names, checks) if names else {}}
+    return {
+        "tolerances": asdict(TOLERANCES),
+        "drives": {d: r.to_dict() for d, r in checks.items()},
+        "affected_predictors": affected_predictors(names, checks) if names else {},
+    }
 
 
-def run_data_check(drives: Iterable[Any], names: Sequence[str], strict: bool = False,
-                   reporter: Reporter = SILENT) -> dict[str, Any]:
+def run_data_check(
+    drives: Iterable[Any], names: Sequence[str], strict: bool = False, reporter: Reporter = SILENT
+) -> dict[str, Any]:
     """The data consistency check of every loaded drive, before any predictor runs: the
     ``consistency`` key of results.json; its failures and warnings told to ``reporter``.
 

@@ -10,10 +10,15 @@ from posbench.pipeline.reporter import SILENT, Reporter
 from posbench.scenarios.drive import Drive
 
 
-def load_drives(paths: Sequence[str | Path] | None, projection: str = "enu",
-                topics: dict[str, str] | None = None, seed: int = 0,
-                synthetic_duration_s: float | None = None, workers: int = 1,
-                reporter: Reporter = SILENT) -> list[Drive]:
+def load_drives(
+    paths: Sequence[str | Path] | None,
+    projection: str = "enu",
+    topics: dict[str, str] | None = None,
+    seed: int = 0,
+    synthetic_duration_s: float | None = None,
+    workers: int = 1,
+    reporter: Reporter = SILENT,
+) -> list[Drive]:
     """The drives at ``paths`` in order (``workers`` processes load recordings in parallel;
     ``projection``: the local frame of lat/lon sources, ``topics``: bag topics by role), or
     without paths the built-in synthetic drives of generator ``seed`` (one mixed drive of

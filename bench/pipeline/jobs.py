@@ -112,19 +112,33 @@ class FigureJobs:
             platforms without fork this is what happens anyway).
     """
 
-    def __init__(self, traces: pd.DataFrame, preds: Sequence[str], out: Path,
-                 formats: Sequence[str] = ("png",), drive_plots: int | None = 20,
-                 paper: Callable[[], list[tuple[str, str]]] | None = None,
-                 background: bool = True) -> None:
+    def __init__(
+        self,
+        traces: pd.DataFrame,
+        preds: Sequence[str],
+        out: Path,
+        formats: Sequence[str] = ("png",),
+        drive_plots: int | None = 20,
+        paper: Callable[[], list[tuple[str, str]]] | None = None,
+        background: bool = True,
+    ) -> None:
         if background and can_fork():
             import matplotlib.figure  # noqa: F401  (once here, not once per child)
         preds = list(preds)
         traces = lean_traces(traces)
         self._paper = Job(paper, background=background) if paper is not None else None
-        self._drives = Job(write_drive_plots, traces, preds, out, tuple(formats), drive_plots,
-                           background=background)
-        self._summary = Job(write_summary_plots, traces, preds, out, tuple(formats),
-                            background=background)
+        self._drives = Job(
+            write_drive_plots,
+            traces,
+            preds,
+            out,
+            tuple(formats),
+            drive_plots,
+            background=background,
+        )
+        self._summary = Job(
+            write_summary_plots, traces, preds, out, tuple(formats), background=background
+        )
 
     def paper(self) -> list[tuple[str, str]]:
         """The paper's figures written: (file, caption) pairs ([] without ``paper``)."""

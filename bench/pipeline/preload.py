@@ -21,12 +21,21 @@ import threading
 #: imported by every replay worker (the reference cubic, the scenario labels)
 REPLAY_MODULES = ("scipy.interpolate", "posbench.scenarios.labels")
 #: imported after the replay by the main process or by every figure child
-MODULES = ("matplotlib.figure", "matplotlib.backends.backend_agg", "scipy.special",
-           "posbench.pipeline.results", "posbench.aggregation.aggregate",
-           "posbench.aggregation.uncertainty", "posbench.aggregation.track",
-           "posbench.figures.writer", "posbench.predictor_tools.paper_figures",
-           "posbench.report.markdown", "posbench.saved_run.run", "posbench.tables.run_tables",
-           "posbench.tables.stat_tables")
+MODULES = (
+    "matplotlib.figure",
+    "matplotlib.backends.backend_agg",
+    "scipy.special",
+    "posbench.pipeline.results",
+    "posbench.aggregation.aggregate",
+    "posbench.aggregation.uncertainty",
+    "posbench.aggregation.track",
+    "posbench.figures.writer",
+    "posbench.predictor_tools.paper_figures",
+    "posbench.report.markdown",
+    "posbench.saved_run.run",
+    "posbench.tables.run_tables",
+    "posbench.tables.stat_tables",
+)
 
 
 def _import_all(modules: tuple[str, ...]) -> None:
@@ -47,8 +56,9 @@ class Preload:
 
     def start(self) -> None:
         if self._thread is None:
-            self._thread = threading.Thread(target=_import_all, args=(self._modules,),
-                                            name="bench-preload", daemon=True)
+            self._thread = threading.Thread(
+                target=_import_all, args=(self._modules,), name="bench-preload", daemon=True
+            )
             self._thread.start()
 
     def join(self) -> None:

@@ -40,14 +40,21 @@ class Published:
     recording: Path | None = None
 
 
-def publish(res: dict[str, Any], traces: pd.DataFrame, runs: Sequence[DriveRun],
-            out: Path | None, *, plot_formats: tuple[str, ...] = ("png",),
-            drive_plots: int | None = 20,
-            figures: Callable[[Run], list[tuple[str, str]]] | None = None,
-            table_formats: tuple[str, ...] = TABLE_FORMATS, plots: FigureJobs | None = None,
-            removed: list[Path] | None = None,
-            traces_written: Callable[[], Path | None] | None = None,
-            reporter: Reporter = SILENT) -> Published:
+def publish(
+    res: dict[str, Any],
+    traces: pd.DataFrame,
+    runs: Sequence[DriveRun],
+    out: Path | None,
+    *,
+    plot_formats: tuple[str, ...] = ("png",),
+    drive_plots: int | None = 20,
+    figures: Callable[[Run], list[tuple[str, str]]] | None = None,
+    table_formats: tuple[str, ...] = TABLE_FORMATS,
+    plots: FigureJobs | None = None,
+    removed: list[Path] | None = None,
+    traces_written: Callable[[], Path | None] | None = None,
+    reporter: Reporter = SILENT,
+) -> Published:
     """The :class:`Run` of aggregated results ``res``, written into ``out`` (report.md,
     figures, tables, results.json, traces.parquet; an earlier run's files there are
     replaced) or, with ``out`` None, kept in memory.
@@ -84,24 +91,36 @@ def publish(res: dict[str, Any], traces: pd.DataFrame, runs: Sequence[DriveRun],
         drawn = figures(run) if figures is not None else []
         run.results["paper_figures"] = [{"file": f, "caption": c} for f, c in drawn]
         written = [(out / f).with_suffix("." + fmt) for f, _ in drawn for fmt in plot_formats]
-        written += write_report(run, out, formats=plot_formats, drive_plots=drive_plots,
-                                table_formats=table_formats,
-                                plots=plots.plots() if plots is not None else None)
+        written += write_report(
+            run,
+            out,
+            formats=plot_formats,
+            drive_plots=drive_plots,
+            table_formats=table_formats,
+            plots=plots.plots() if plots is not None else None,
+        )
         written += save_run(out, run, also_written=written, traces_written=traces_written)
     else:
         run.results["paper_figures"] = []
     skipped = [r for r in runs if r.skipped]
     if skipped:
-        reporter.line(f"skipped {plural(len(skipped), 'drive')}: "
-                      + "; ".join(f"{r.name} ({r.skipped})" for r in skipped))
+        reporter.line(
+            f"skipped {plural(len(skipped), 'drive')}: "
+            + "; ".join(f"{r.name} ({r.skipped})" for r in skipped)
+        )
     if len(skipped) == len(runs):
-        where = (f"the reasons are in {out / 'report.md'}" if out is not None else
-                 "; ".join(f"{r.name}: {r.skipped}" for r in skipped[:3])
-                 + ("; ..." if len(skipped) > 3 else ""))
-        raise UsageError(f"every drive was skipped ({plural(len(runs), 'drive')}), nothing was "
-                         f"scored; {where}")
-    if not any(p[k]["count"] + p[k]["missing"] for p in run.results["predictors"].values()
-               for k in KINDS):
+        where = (
+            f"the reasons are in {out / 'report.md'}"
+            if out is not None
+            else "; ".join(f"{r.name}: {r.skipped}" for r in skipped[:3])
+            + ("; ..." if len(skipped) > 3 else "")
+        )
+        raise UsageError(
+            f"every drive was skipped ({plural(len(runs), 'drive')}), nothing was scored; {where}"
+        )
+    if not any(
+        p[k]["count"] + p[k]["missing"] for p in run.results["predictors"].values() for k in KINDS
+    ):
         raise DataError(None, nothing_scored(run.results, runs, out))
     return Published(run, written, list(removed or []))
 
@@ -115,17 +134,24 @@ def nothing_scored(res: dict[str, Any], runs: Sequence[DriveRun], out: Path | No
     few = [r for r in runs if not r.skipped and r.gps_count < 2]
     parts = []
     if few:
-        parts.append("; ".join(f"drive {r.name} was fed {r.gps_count} "
-                               f"fix{'' if r.gps_count == 1 else 'es'}"
-                               for r in few[:3]) + ("; ..." if len(few) > 3 else "")
-                     + " (queries start at a drive's second fix)")
+        parts.append(
+            "; ".join(
+                f"drive {r.name} was fed {r.gps_count} fix{'' if r.gps_count == 1 else 'es'}"
+                for r in few[:3]
+            )
+            + ("; ..." if len(few) > 3 else "")
+            + " (queries start at a drive's second fix)"
+        )
     n_warm, n_noref = excluded_counts(res)
     if n_warm:
-        parts.append(f"{n_warm} warm-up quer{'y' if n_warm == 1 else 'ies'} (before a "
-                     f"drive's second received fix)")
+        parts.append(
+            f"{n_warm} warm-up quer{'y' if n_warm == 1 else 'ies'} (before a "
+            f"drive's second received fix)"
+        )
     if n_noref:
-        parts.append(f"{n_noref} quer{'y' if n_noref == 1 else 'ies'} without a reference "
-                     f"position (past the end of the truth or of the fixes)")
+        parts.append(
+            f"{n_noref} quer{'y' if n_noref == 1 else 'ies'} without a reference "
+            f"position (past the end of the truth or of the fixes)"
+        )
     where = f"; wrote {out / 'report.md'} all the same" if out is not None else ""
-    return ("no query of any drive could be scored: " + ("; ".join(parts) or "no queries")
-            + where)
+    return "no query of any drive could be scored: " + ("; ".join(parts) or "no queries") + where

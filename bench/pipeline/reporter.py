@@ -82,18 +82,25 @@ class RichReporter(Reporter):
 
         t0 = time.perf_counter()
         count = [0]
-        with Progress(TextColumn("[bold]{task.description}"), BarColumn(),
-                      MofNCompleteColumn(), TimeElapsedColumn(),
-                      TextColumn("{task.fields[last]}"), console=self.console) as prog:
+        with Progress(
+            TextColumn("[bold]{task.description}"),
+            BarColumn(),
+            MofNCompleteColumn(),
+            TimeElapsedColumn(),
+            TextColumn("{task.fields[last]}"),
+            console=self.console,
+        ) as prog:
             task = prog.add_task(text, total=total, last="")
 
             def done(name: str) -> None:
                 count[0] += 1
                 prog.update(task, advance=1, last=name)
                 if self.level >= DETAIL:
-                    prog.console.print(f"  {name} done ({count[0]}/{total}, "
-                                       f"{time.perf_counter() - t0:.1f} s)",
-                                       highlight=False, markup=False)
+                    prog.console.print(
+                        f"  {name} done ({count[0]}/{total}, {time.perf_counter() - t0:.1f} s)",
+                        highlight=False,
+                        markup=False,
+                    )
 
             yield done
 

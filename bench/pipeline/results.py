@@ -16,10 +16,16 @@ from posbench.saved_run.provenance import git_commit, package_versions
 from posbench.scoring.records import DriveRun
 
 
-def build_results(runs: Sequence[DriveRun], cfg: RunConfig, data: list[dict[str, Any]],
-                  command: str, *, traces: pd.DataFrame | None = None,
-                  models: Mapping[str, Mapping[str, Any]] | None = None,
-                  statistics: Statistics | None = None) -> dict[str, Any]:
+def build_results(
+    runs: Sequence[DriveRun],
+    cfg: RunConfig,
+    data: list[dict[str, Any]],
+    command: str,
+    *,
+    traces: pd.DataFrame | None = None,
+    models: Mapping[str, Mapping[str, Any]] | None = None,
+    statistics: Statistics | None = None,
+) -> dict[str, Any]:
     """``results.json`` of ``runs`` replayed under ``cfg``: its provenance (``command``, the
     config, package versions, the git commit, ``data``: the data block,
     :func:`posbench.saved_run.provenance.data_provenance`) then the figures of
@@ -31,11 +37,26 @@ def build_results(runs: Sequence[DriveRun], cfg: RunConfig, data: list[dict[str,
 
         models = learned_models(cfg)
     tuning = tuning_provenance(cfg, runs)
-    models = {**models, **{n: {"model": f"tuning {t['file']}", "bundled": t["built_in"],
-                               "train_drives": t["drives"]}
-                           for n, t in tuning.items() if t["drives"] and n not in models}}
-    head = {"command": command, "config": cfg.to_dict(), "versions": package_versions(),
-            "git_commit": git_commit(), "data": data, "tuning": tuning}
+    models = {
+        **models,
+        **{
+            n: {
+                "model": f"tuning {t['file']}",
+                "bundled": t["built_in"],
+                "train_drives": t["drives"],
+            }
+            for n, t in tuning.items()
+            if t["drives"] and n not in models
+        },
+    }
+    head = {
+        "command": command,
+        "config": cfg.to_dict(),
+        "versions": package_versions(),
+        "git_commit": git_commit(),
+        "data": data,
+        "tuning": tuning,
+    }
     return {**head, **aggregate(runs, cfg, traces=traces, models=models, statistics=statistics)}
 
 
@@ -69,9 +90,20 @@ def tuning_provenance(cfg: RunConfig, runs: Sequence[DriveRun]) -> dict[str, dic
             file = BUILT_IN_TUNING if built_in else str(path)
             if path not in sha256:
                 sha256[path] = hashlib.sha256(path.read_bytes()).hexdigest()
-            t = out.setdefault(name, {"file": file, "built_in": built_in, "sha256": sha256[path],
-                                      "conditions": {}, "drives": []})
-            t["conditions"][cond] = {"params": entry.get("params", {}),
-                                     "how": entry.get("how", ""), "file": file}
+            t = out.setdefault(
+                name,
+                {
+                    "file": file,
+                    "built_in": built_in,
+                    "sha256": sha256[path],
+                    "conditions": {},
+                    "drives": [],
+                },
+            )
+            t["conditions"][cond] = {
+                "params": entry.get("params", {}),
+                "how": entry.get("how", ""),
+                "file": file,
+            }
             t["drives"] = sorted(set(t["drives"]) | set(entry.get("drives", [])))
     return out

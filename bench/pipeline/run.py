@@ -121,8 +121,7 @@ class RunPlan:
     color_by: str | None = None
 
 
-def plan_run(options: RunOptions, given: Mapping[tuple[str, str], str] | None = None
-             ) -> RunPlan:
+def plan_run(options: RunOptions, given: Mapping[tuple[str, str], str] | None = None) -> RunPlan:
     """Check every option of a run before any work, and resolve them.
 
     ``given``: how each ``(predictor, option)`` was written (``--set kf.jerk_psd=4``), for
@@ -165,16 +164,28 @@ def plan_run(options: RunOptions, given: Mapping[tuple[str, str], str] | None = 
     plot_formats = parse_plot_formats(o.plot_formats)
     bad = [f for f in o.table_formats if f not in TABLE_FORMATS]
     if bad:
-        raise UsageError(f"--table-format: unknown table format {bad[0]!r}; use "
-                         f"{', '.join(TABLE_FORMATS)} (report.md is always written)")
+        raise UsageError(
+            f"--table-format: unknown table format {bad[0]!r}; use "
+            f"{', '.join(TABLE_FORMATS)} (report.md is always written)"
+        )
     drive_plots = parse_drive_plots(o.drive_plots)
     if o.seeds is not None and o.seed != 0:
-        raise UsageError("--seed and --seeds together: give one seed (--seed 3) or the "
-                         "seeds to repeat the run over (--seeds 0,1,2)")
+        raise UsageError(
+            "--seed and --seeds together: give one seed (--seed 3) or the "
+            "seeds to repeat the run over (--seeds 0,1,2)"
+        )
     seeds = tuple(parse_seeds(o.seeds)) if o.seeds is not None else None
     seed = seeds[0] if seeds else o.seed
-    check_drive_options(o.gps_profile, o.projection, o.horizon_s, o.gps_latency_s, o.dropouts,
-                        seed, o.synthetic_duration_s, o.data)
+    check_drive_options(
+        o.gps_profile,
+        o.projection,
+        o.horizon_s,
+        o.gps_latency_s,
+        o.dropouts,
+        seed,
+        o.synthetic_duration_s,
+        o.data,
+    )
     check_at_least(o.workers, 1, "--workers")
     check_topics(o.topics)
     if o.out is not None:
@@ -184,21 +195,37 @@ def plan_run(options: RunOptions, given: Mapping[tuple[str, str], str] | None = 
         try:
             import rerun as _rr  # noqa: F401
         except ImportError:
-            raise UsageError("--rerun needs the viz extra: "
-                             "pip install 'posbench-harness[viz]'") from None
-    opts, given = merge_options(model_options(dict(o.models)),
-                                {n: dict(v) for n, v in o.options.items()}, dict(given or {}))
+            raise UsageError(
+                "--rerun needs the viz extra: pip install 'posbench-harness[viz]'"
+            ) from None
+    opts, given = merge_options(
+        model_options(dict(o.models)), {n: dict(v) for n, v in o.options.items()}, dict(given or {})
+    )
     names = with_model_aliases(names, opts)
     color_by = resolve_color_by(o.rerun_color_by, names, o.rerun)
     resolved = validate_predictors(names, opts, given)
     check_tuning_file(o.tuning, names, resolved)
     stats = Statistics(baseline=resolve_baseline(o.baseline, names))
-    cfg = RunConfig(predictors=names, horizon_s=o.horizon_s, gps_profile=o.gps_profile,
-                    gps_latency_s=o.gps_latency_s, dropouts=o.dropouts, seed=seed,
-                    exclude_poor_truth=not o.include_poor_truth, predictor_options=resolved,
-                    gate=o.gate, tuning=str(o.tuning) if o.tuning is not None else None)
-    o = replace(o, predictors=names, plot_formats=plot_formats, drive_plots=drive_plots,
-                seeds=seeds, table_formats=tuple(o.table_formats))
+    cfg = RunConfig(
+        predictors=names,
+        horizon_s=o.horizon_s,
+        gps_profile=o.gps_profile,
+        gps_latency_s=o.gps_latency_s,
+        dropouts=o.dropouts,
+        seed=seed,
+        exclude_poor_truth=not o.include_poor_truth,
+        predictor_options=resolved,
+        gate=o.gate,
+        tuning=str(o.tuning) if o.tuning is not None else None,
+    )
+    o = replace(
+        o,
+        predictors=names,
+        plot_formats=plot_formats,
+        drive_plots=drive_plots,
+        seeds=seeds,
+        table_formats=tuple(o.table_formats),
+    )
     return RunPlan(o, cfg, stats, seeds, color_by)
 
 
@@ -219,16 +246,27 @@ def execute_run(plan: RunPlan, command: str, reporter: Reporter = SILENT) -> Pub
 
     o = plan.options
     with local_paths(list(o.data) or None) as data:  # fsspec URLs -> local copies for loaders
-        drives = load_drives(data, o.projection, dict(o.topics) or None, seed=plan.config.seed,
-                             synthetic_duration_s=o.synthetic_duration_s,
-                             workers=o.workers if o.executor == "local" else 1,
-                             reporter=reporter)
+        drives = load_drives(
+            data,
+            o.projection,
+            dict(o.topics) or None,
+            seed=plan.config.seed,
+            synthetic_duration_s=o.synthetic_duration_s,
+            workers=o.workers if o.executor == "local" else 1,
+            reporter=reporter,
+        )
         consistency = run_data_check(drives, plan.config.predictors, o.strict, reporter)
         return _replay_and_publish(drives, plan, data, command, consistency, reporter)
 
 
-def replay_drives(drives: Sequence[Drive], cfg: RunConfig, options: RunOptions,
-                  reporter: Reporter = SILENT, label: str = "", preload: Any = None) -> list:
+def replay_drives(
+    drives: Sequence[Drive],
+    cfg: RunConfig,
+    options: RunOptions,
+    reporter: Reporter = SILENT,
+    label: str = "",
+    preload: Any = None,
+) -> list:
     """Every drive through every predictor of ``cfg`` on the options' executor, as
     :class:`~posbench.scoring.records.DriveRun` records in drive order; one reporter step
     per drive. ``preload`` (:class:`~posbench.pipeline.preload.Preload`) starts when the
@@ -237,20 +275,34 @@ def replay_drives(drives: Sequence[Drive], cfg: RunConfig, options: RunOptions,
     from posbench.replay.executors import run_drives
 
     elsewhere = options.executor != "local" or (options.workers > 1 and len(drives) > 1)
-    with reporter.steps(f"{label}{plural(len(drives), 'drive')} x "
-                        f"{plural(len(cfg.predictors), 'predictor')}", len(drives)) as done:
+    with reporter.steps(
+        f"{label}{plural(len(drives), 'drive')} x {plural(len(cfg.predictors), 'predictor')}",
+        len(drives),
+    ) as done:
+
         def on_done(r: Any) -> None:
             done(r.name)
             if preload is not None and elsewhere:
                 preload.start()
 
-        return run_drives(drives, cfg, options.executor, workers=options.workers,
-                          address=options.address, on_done=on_done)
+        return run_drives(
+            drives,
+            cfg,
+            options.executor,
+            workers=options.workers,
+            address=options.address,
+            on_done=on_done,
+        )
 
 
-def _replay_and_publish(drives: list[Drive], plan: RunPlan, data: list[Path] | None,
-                        command: str, consistency: dict[str, Any],
-                        reporter: Reporter) -> Published:
+def _replay_and_publish(
+    drives: list[Drive],
+    plan: RunPlan,
+    data: list[Path] | None,
+    command: str,
+    consistency: dict[str, Any],
+    reporter: Reporter,
+) -> Published:
     from posbench.aggregation.seeds import seed_figures, seeds_section
     from posbench.pipeline.jobs import FigureJobs, Job
     from posbench.pipeline.preload import Preload
@@ -278,28 +330,45 @@ def _replay_and_publish(drives: list[Drive], plan: RunPlan, data: list[Path] | N
 
         out.mkdir(parents=True, exist_ok=True)
         removed = remove_previous_outputs(out)
-        jobs = FigureJobs(lean, cfg.predictors, out, o.plot_formats, o.drive_plots,
-                          paper=lambda: paper_figures(list(drives), cfg, traces, out, runs,
-                                                      formats=o.plot_formats))
+        jobs = FigureJobs(
+            lean,
+            cfg.predictors,
+            out,
+            o.plot_formats,
+            o.drive_plots,
+            paper=lambda: paper_figures(
+                list(drives), cfg, traces, out, runs, formats=o.plot_formats
+            ),
+        )
         traces_file = Job(write_traces, out, traces)  # the parquet (~0.5 s) meanwhile too
-    res = build_results(runs, cfg, provenance.result(), command, traces=lean,
-                        statistics=plan.statistics)
+    res = build_results(
+        runs, cfg, provenance.result(), command, traces=lean, statistics=plan.statistics
+    )
     res["consistency"] = consistency
     if seeds:
         base = res["paired"]["baseline"]
         figures = [seed_figures(traces, cfg.predictors, base, cfg.seed)]
         for i, s in enumerate(seeds[1:], start=2):
-            runs_s = replay_drives(drives, replace(cfg, seed=s), o, reporter,
-                                   f"seed {s} ({i}/{len(seeds)}): ")
+            runs_s = replay_drives(
+                drives, replace(cfg, seed=s), o, reporter, f"seed {s} ({i}/{len(seeds)}): "
+            )
             figures.append(seed_figures(all_traces(runs_s), cfg.predictors, base, s))
             del runs_s
         res["seeds"] = seeds_section(seeds, figures)
-    published = publish(res, traces, runs, out, plot_formats=o.plot_formats,
-                        drive_plots=o.drive_plots,
-                        figures=(lambda _: jobs.paper()) if jobs is not None else None,
-                        table_formats=o.table_formats, plots=jobs, removed=removed,
-                        traces_written=traces_file.result if traces_file is not None else None,
-                        reporter=reporter)
+    published = publish(
+        res,
+        traces,
+        runs,
+        out,
+        plot_formats=o.plot_formats,
+        drive_plots=o.drive_plots,
+        figures=(lambda _: jobs.paper()) if jobs is not None else None,
+        table_formats=o.table_formats,
+        plots=jobs,
+        removed=removed,
+        traces_written=traces_file.result if traces_file is not None else None,
+        reporter=reporter,
+    )
     if o.rerun is not None:
         from posbench.recording.writer import write_recording
         from posbench.scenarios.errors import DataError

@@ -27,22 +27,31 @@ def check_score_options(answers: Path, queries: Path, name: str, out: Path | Non
     from posbench.checks import check_out_dir
 
     if not NAME_PATTERN.match(name):
-        raise UsageError(f"--name {name!r}: use letters, digits and _ . + @ - (starting with "
-                         f"a letter or digit)")
+        raise UsageError(
+            f"--name {name!r}: use letters, digits and _ . + @ - (starting with a letter or digit)"
+        )
     if not answers.is_file():
         raise UsageError(f"ANSWERS {answers}: no such file")
     if not queries.is_dir():
-        raise UsageError(f"--queries {queries}: no such folder (give the folder `bench "
-                         f"queries` wrote)")
+        raise UsageError(
+            f"--queries {queries}: no such folder (give the folder `bench queries` wrote)"
+        )
     if out is not None:
         check_out_dir(out)
 
 
-def score_answers_file(answers: Path, queries: Path, name: str, out: Path | None,
-                       command: str, *, plot_formats: tuple[str, ...] = ("png",),
-                       drive_plots: int | None = 20,
-                       table_formats: tuple[str, ...] = TABLE_FORMATS,
-                       reporter: Reporter = SILENT) -> Published:
+def score_answers_file(
+    answers: Path,
+    queries: Path,
+    name: str,
+    out: Path | None,
+    command: str,
+    *,
+    plot_formats: tuple[str, ...] = ("png",),
+    drive_plots: int | None = 20,
+    table_formats: tuple[str, ...] = TABLE_FORMATS,
+    reporter: Reporter = SILENT,
+) -> Published:
     """Score the answers file ``answers`` as predictor ``name`` against the queries folder
     ``queries`` and publish the run (into ``out``, or in memory with None): the same
     report.md, results.json (config of the queries folder), traces and figures as
@@ -71,15 +80,29 @@ def score_answers_file(answers: Path, queries: Path, name: str, out: Path | None
     data = [*folder.manifest["data"], tree_hash(answers)]
     traces = all_traces(scored.runs)
     res = build_results(scored.runs, cfg, data, command, traces=traces, models={})
-    res["answers"] = {"file": str(answers), "queries_folder": str(queries),
-                      "queries": scored.queries, "answered": scored.answered,
-                      "unanswered": scored.unanswered, "look_ahead_checked": False}
-    return publish(res, traces, scored.runs, out, plot_formats=plot_formats,
-                   drive_plots=drive_plots, table_formats=table_formats, reporter=reporter)
+    res["answers"] = {
+        "file": str(answers),
+        "queries_folder": str(queries),
+        "queries": scored.queries,
+        "answered": scored.answered,
+        "unanswered": scored.unanswered,
+        "look_ahead_checked": False,
+    }
+    return publish(
+        res,
+        traces,
+        scored.runs,
+        out,
+        plot_formats=plot_formats,
+        drive_plots=drive_plots,
+        table_formats=table_formats,
+        reporter=reporter,
+    )
 
 
-def answers_line(path: Path, scored: Scored, ignored: list[str],
-                 ids: dict[str, str] | None = None) -> str:
+def answers_line(
+    path: Path, scored: Scored, ignored: list[str], ids: dict[str, str] | None = None
+) -> str:
     """One line: how many queries were answered, and which were not (counted as missing),
     naming drives as the answers file does (``ids``: drive name -> id)."""
     ids = ids or {}
@@ -89,8 +112,10 @@ def answers_line(path: Path, scored: Scored, ignored: list[str],
         fut = sum(m["future"] for m in scored.unanswered.values())
         shown = ", ".join(f"{ids.get(d, d)} {sum(m.values())}" for d, m in per[:5])
         more = f", {len(per) - 5} more drives" if len(per) > 5 else ""
-        text += (f"; {scored.missing} queries without an answer (future {fut}, now "
-                 f"{scored.missing - fut}; {shown}{more}): scored as missing")
+        text += (
+            f"; {scored.missing} queries without an answer (future {fut}, now "
+            f"{scored.missing - fut}; {shown}{more}): scored as missing"
+        )
     else:
         text += "; every query answered"
     if ignored:

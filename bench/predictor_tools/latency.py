@@ -36,8 +36,9 @@ def single_thread() -> None:
         pass
 
 
-def time_predictor(name: str, drive: Drive, steps: int, options: dict[str, Any] | None = None
-                   ) -> dict[str, Any]:
+def time_predictor(
+    name: str, drive: Drive, steps: int, options: dict[str, Any] | None = None
+) -> dict[str, Any]:
     """p50/p90/p99/max [us] of fix steps (observe_gps + future query) and between-fix queries."""
     cfg = RunConfig(predictors=(name,), gps_profile="rtk")
     prep = prepare_drive(drive, cfg)
@@ -50,8 +51,10 @@ def time_predictor(name: str, drive: Drive, steps: int, options: dict[str, Any] 
         step.append(r.step_ns)
         query.append(r.query_ns)
         n += r.step_ns.size
-    return {"step_us": latency_summary(np.concatenate(step)[:steps]),
-            "query_us": latency_summary(np.concatenate(query))}
+    return {
+        "step_us": latency_summary(np.concatenate(step)[:steps]),
+        "query_us": latency_summary(np.concatenate(query)),
+    }
 
 
 def lstm_stages(drive: Drive, steps: int) -> dict[str, Any]:
@@ -80,7 +83,7 @@ def lstm_stages(drive: Drive, steps: int) -> dict[str, Any]:
         step = p.last_step()
         end = int(np.searchsorted(t, step.t_fix))  # the fix this step ran on
         i = window_start(t, end)
-        tt, w = t[i:end + 1], xy[i:end + 1]
+        tt, w = t[i : end + 1], xy[i : end + 1]
         c0 = clock()
         fit_poly(tt, w, float(tt[-1]), float(tt[-1] - tt[0]))
         fit_alone.append(clock() - c0)
@@ -104,8 +107,13 @@ def lstm_fused_stages(drive: Drive, steps: int) -> dict[str, Any]:
     return _stage_times(prepare_drive(drive, cfg), cfg.horizon_s, steps, "fused")
 
 
-def _stage_times(prep: Any, horizon_s: float, steps: int, step: str,
-                 after_step: Callable[[Any], None] | None = None) -> dict[str, Any]:
+def _stage_times(
+    prep: Any,
+    horizon_s: float,
+    steps: int,
+    step: str,
+    after_step: Callable[[Any], None] | None = None,
+) -> dict[str, Any]:
     """Replay ``prep`` through ``LstmPredictor(step=step)`` with a stage hook until ``steps``
     network steps were timed; percentiles [us] per stage, in the predictor's stage order.
     ``after_step(predictor)`` runs after each step's last stage (outside every stage)."""
@@ -130,8 +138,9 @@ def _stage_times(prep: Any, horizon_s: float, steps: int, step: str,
     return {n: latency_summary(np.asarray(rec.ns.get(n, [])[:steps])) for n in stages}
 
 
-def batch_throughput(batches: tuple[int, ...] = (1, 64, 1024), seconds: float = 1.0
-                     ) -> dict[str, Any]:
+def batch_throughput(
+    batches: tuple[int, ...] = (1, 64, 1024), seconds: float = 1.0
+) -> dict[str, Any]:
     """Windows per second of the bundled network through onnxruntime at several batch sizes."""
     from time import perf_counter
 

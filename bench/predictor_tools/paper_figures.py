@@ -65,13 +65,25 @@ def _prepared_window(drive: Drive, fixes: pd.DataFrame, t0: float, t1: float) ->
     gps = GpsStream(f.t.to_numpy(), f.x.to_numpy(), f.y.to_numpy())
     e = np.empty(0)
     none = Queries(e, e, np.empty((0, 2)), e, np.empty(0, dtype=str), e)
-    return PreparedDrive(sub, drive.meta.format, gps, gps,
-                         TRUTH if drive.truth is not None else FIX_CUBIC, none, none)
+    return PreparedDrive(
+        sub,
+        drive.meta.format,
+        gps,
+        gps,
+        TRUTH if drive.truth is not None else FIX_CUBIC,
+        none,
+        none,
+    )
 
 
-def paper_figures(drives: list[Drive], cfg: RunConfig, traces: pd.DataFrame, out: Path,
-                  runs: list | None = None, formats: Iterable[str] = ("png",)
-                  ) -> list[tuple[str, str]]:
+def paper_figures(
+    drives: list[Drive],
+    cfg: RunConfig,
+    traces: pd.DataFrame,
+    out: Path,
+    runs: list | None = None,
+    formats: Iterable[str] = ("png",),
+) -> list[tuple[str, str]]:
     """Write the figures, each in every one of ``formats`` (png, svg, pdf); return
     (file name, caption) pairs, the file in the format a report shows
     (:func:`posbench.figures.style.shown_format`: png, else svg, else pdf). Needs ``lstm`` in
@@ -135,17 +147,21 @@ def paper_figures(drives: list[Drive], cfg: RunConfig, traces: pd.DataFrame, out
         save_figure(fig, out, stem, fmts)
         figs.append((f"{stem}.{shown_format(fmts)}", caption))
 
-    fig, ax = new(f"Model prediction: lstm, {cfg.horizon_s:g} s ahead of the fix at "
-                  f"t = {t_fix:.2f} s")
+    fig, ax = new(
+        f"Model prediction: lstm, {cfg.horizon_s:g} s ahead of the fix at t = {t_fix:.2f} s"
+    )
     ax.plot(ref_path[:, 0], ref_path[:, 1], "k-", lw=0.8, label="reference path")
     ax.plot(prep.gps.x[fixes], prep.gps.y[fixes], "rx", label="GPS fixes received")
     ax.plot(grid[:, 0], grid[:, 1], "o", color="tab:green", label="resampled input (8 x 200 ms)")
     ax.plot(*pred, "X", color="gold", ms=12, mec="k", label="lstm prediction (+0.2 s)")
     ax.plot(*ref_now[-1], "*", color="k", ms=14, label="reference at +0.2 s")
     err = float(np.hypot(*(pred - ref_now[-1])))
-    save(fig, "paper_fig_prediction",
-         f"Model prediction: drive `{name}`, fix at t = {t_fix:.2f} s; the 8 resampled inputs, "
-         f"the predicted point 0.2 s ahead and the reference there (error {100 * err:.1f} cm).")
+    save(
+        fig,
+        "paper_fig_prediction",
+        f"Model prediction: drive `{name}`, fix at t = {t_fix:.2f} s; the 8 resampled inputs, "
+        f"the predicted point 0.2 s ahead and the reference there (error {100 * err:.1f} cm).",
+    )
 
     fig, ax = new("Current-position estimates between the fix and the prediction")
     ax.plot(ref_path[:, 0], ref_path[:, 1], "k-", lw=0.8, label="reference path")
@@ -154,34 +170,48 @@ def paper_figures(drives: list[Drive], cfg: RunConfig, traces: pd.DataFrame, out
     ax.plot(now[:, 0], now[:, 1], "*", color="m", ms=10, label="current-position estimates")
     ax.plot(ref_now[:, 0], ref_now[:, 1], "k.", ms=6, label="reference at those times")
     e_now = np.hypot(*(now - ref_now).T)
-    save(fig, "paper_fig_current_position",
-         f"Current position between the fix and the prediction: drive `{name}`, "
-         f"t = {t_fix:.2f}-{t_fix + cfg.horizon_s:.2f} s every {cfg.horizon_s / 4:.2f} s; "
-         f"errors {', '.join(f'{100 * e:.1f}' for e in e_now)} cm.")
+    save(
+        fig,
+        "paper_fig_current_position",
+        f"Current position between the fix and the prediction: drive `{name}`, "
+        f"t = {t_fix:.2f}-{t_fix + cfg.horizon_s:.2f} s every {cfg.horizon_s / 4:.2f} s; "
+        f"errors {', '.join(f'{100 * e:.1f}' for e in e_now)} cm.",
+    )
 
-    f = traces[(traces.drive == name) & (traces.kind == "future")
-               & (traces.t_issue > t_fix - 20) & (traces.t_issue < t_fix + 20)]
+    f = traces[
+        (traces.drive == name)
+        & (traces.kind == "future")
+        & (traces.t_issue > t_fix - 20)
+        & (traces.t_issue < t_fix + 20)
+    ]
     fig = Figure(figsize=(7, 7), layout="constrained")
     ax = fig.add_subplot()
     ax.set_title(f"Predicted path against the reference: lstm, {name}", fontsize=11)
     r = f[f.predictor == "lstm"].sort_values("t_query")
     ax.plot(r.x_ref, r.y_ref, "k-", lw=1, label="reference")
     ax.plot(r.x, r.y, ".", ms=4, color="tab:orange", label="lstm future points")
-    save(fig, "paper_fig_path",
-         f"Predicted path against the reference: drive `{name}`, t = {max(t_fix - 20, 0):.0f}-"
-         f"{t_fix + 20:.0f} s, lstm future points (mean error {100 * r.error_m.mean():.1f} cm).")
+    save(
+        fig,
+        "paper_fig_path",
+        f"Predicted path against the reference: drive `{name}`, t = {max(t_fix - 20, 0):.0f}-"
+        f"{t_fix + 20:.0f} s, lstm future points (mean error {100 * r.error_m.mean():.1f} cm).",
+    )
 
     if "kf-paper" in cfg.predictors:
         kfp = create("kf-paper", cond, **cfg.predictor_options.get("kf-paper", {}))
         replay(kfp, prep, cfg.horizon_s)
         kp = np.asarray(kfp.position_at(t_fix + cfg.horizon_s))
-        fig, ax = new(f"The paper's Kalman filter (kf-paper), {cfg.horizon_s:g} s ahead of the "
-                      f"same fix")
+        fig, ax = new(
+            f"The paper's Kalman filter (kf-paper), {cfg.horizon_s:g} s ahead of the same fix"
+        )
         ax.plot(ref_path[:, 0], ref_path[:, 1], "k-", lw=0.8, label="reference path")
         ax.plot(prep.gps.x[fixes], prep.gps.y[fixes], "rx", label="known points (fixes)")
         ax.plot(*kp, "X", color="gold", ms=12, mec="k", label="kf-paper prediction")
         ax.plot(*ref_now[-1], "*", color="k", ms=14, label="reference at +0.2 s")
-        save(fig, "paper_fig_kalman",
-             f"The paper's Kalman filter at the same fix: drive `{name}`, t = {t_fix:.2f} s "
-             f"(error {100 * float(np.hypot(*(kp - ref_now[-1]))):.1f} cm).")
+        save(
+            fig,
+            "paper_fig_kalman",
+            f"The paper's Kalman filter at the same fix: drive `{name}`, t = {t_fix:.2f} s "
+            f"(error {100 * float(np.hypot(*(kp - ref_now[-1]))):.1f} cm).",
+        )
     return figs

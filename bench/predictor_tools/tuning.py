@@ -37,11 +37,9 @@ from posbench.scenarios.drive import Drive
 TUNED_PATH = TUNED_FILE
 #: Search grids per predictor (values tried for each parameter).
 GRIDS: dict[str, dict[str, list[float]]] = {
-    "kf": {"gps_sigma": [0.01, 0.02, 0.05, 0.1, 0.3, 1.0],
-           "accel_sigma": [0.1, 0.3, 1.0, 3.0]},
+    "kf": {"gps_sigma": [0.01, 0.02, 0.05, 0.1, 0.3, 1.0], "accel_sigma": [0.1, 0.3, 1.0, 3.0]},
     "cv": {},
-    "ekf": {"gps_sigma": [0.01, 0.02, 0.05, 0.1, 0.3, 1.0],
-            "yaw_rate_sigma": [0.005, 0.02, 0.05]},
+    "ekf": {"gps_sigma": [0.01, 0.02, 0.05, 0.1, 0.3, 1.0], "yaw_rate_sigma": [0.005, 0.02, 0.05]},
 }
 #: values of ``gps_sigma_scale`` tried where the fixes state their accuracy (rtk, consumer):
 #: there R = (scale * stated sigma)^2 and ``gps_sigma`` is never used, so the scale takes its
@@ -58,8 +56,10 @@ def grid_for(predictor: str, gps_profile: str) -> dict[str, list[float]]:
     grid = GRIDS[predictor]
     if gps_profile not in GPS_PROFILES or stated_sigma_m(gps_profile) is None:
         return dict(grid)
-    return {("gps_sigma_scale" if k == "gps_sigma" else k): (SCALE_GRID if k == "gps_sigma" else v)
-            for k, v in grid.items()}
+    return {
+        ("gps_sigma_scale" if k == "gps_sigma" else k): (SCALE_GRID if k == "gps_sigma" else v)
+        for k, v in grid.items()
+    }
 
 
 def objective(runs) -> float:
@@ -67,21 +67,33 @@ def objective(runs) -> float:
     import pandas as pd
 
     t = pd.concat([r.traces for r in runs if not r.traces.empty], ignore_index=True)
-    return float(t.loc[t.kind == "future", "error_m"].mean() + t.loc[t.kind == "now", "error_m"].mean())
+    return float(
+        t.loc[t.kind == "future", "error_m"].mean() + t.loc[t.kind == "now", "error_m"].mean()
+    )
 
 
-def grid_search(predictor: str, drives: Sequence[Drive], gps_profile: str,
-                grid: dict[str, list[float]], workers: int = 2, seed: int = 0,
-                on_step: Callable[[dict[str, Any], float], None] | None = None
-                ) -> tuple[dict[str, Any], list[tuple[dict[str, Any], float]]]:
+def grid_search(
+    predictor: str,
+    drives: Sequence[Drive],
+    gps_profile: str,
+    grid: dict[str, list[float]],
+    workers: int = 2,
+    seed: int = 0,
+    on_step: Callable[[dict[str, Any], float], None] | None = None,
+) -> tuple[dict[str, Any], list[tuple[dict[str, Any], float]]]:
     """Coordinate-wise grid search: the first two parameters jointly, then each further
     one alone with the best so far. Returns (best parameters, every trial)."""
     names = list(grid)
     trials: list[tuple[dict[str, Any], float]] = []
 
     def score(params: dict[str, Any]) -> float:
-        cfg = RunConfig(predictors=(predictor,), gps_profile=gps_profile, seed=seed,
-                        predictor_options={predictor: params}, use_tuned=False)
+        cfg = RunConfig(
+            predictors=(predictor,),
+            gps_profile=gps_profile,
+            seed=seed,
+            predictor_options={predictor: params},
+            use_tuned=False,
+        )
         val = objective(run(drives, cfg, workers=workers))
         trials.append((dict(params), val))
         if on_step:
@@ -106,8 +118,14 @@ def grid_search(predictor: str, drives: Sequence[Drive], gps_profile: str,
     return best, trials
 
 
-def calibrate(predictor: str, drives: Sequence[Drive], gps_profile: str,
-              params: dict[str, Any], workers: int = 2, seed: int = 0) -> float:
+def calibrate(
+    predictor: str,
+    drives: Sequence[Drive],
+    gps_profile: str,
+    params: dict[str, Any],
+    workers: int = 2,
+    seed: int = 0,
+) -> float:
     """``cov_scale`` for ``params``: replay ``drives`` once and return the factor that makes
     95 % of the scored queries' 95 % ellipses cover the truth, rounded to 3 significant
     digits (NaN when the predictor reports no covariance on these drives)."""
@@ -116,10 +134,13 @@ def calibrate(predictor: str, drives: Sequence[Drive], gps_profile: str,
     from posbench.metrics.calibration import coverage_scale, mahalanobis_sq
     from posbench.scoring.schema import COV_COLUMNS, scored_mask
 
-    cfg = RunConfig(predictors=(predictor,), gps_profile=gps_profile, seed=seed,
-                    predictor_options={predictor: {k: v for k, v in params.items()
-                                                   if k != "cov_scale"}},
-                    use_tuned=False)
+    cfg = RunConfig(
+        predictors=(predictor,),
+        gps_profile=gps_profile,
+        seed=seed,
+        predictor_options={predictor: {k: v for k, v in params.items() if k != "cov_scale"}},
+        use_tuned=False,
+    )
     traces = [r.traces for r in run(drives, cfg, workers=workers) if not r.traces.empty]
     if not traces:
         return float("nan")
@@ -136,8 +157,7 @@ def calibrate(predictor: str, drives: Sequence[Drive], gps_profile: str,
 CALIBRATION_NOTE = "; cov_scale for 95 % coverage by"
 
 
-def tuning_note(predictor: str, condition: str, calibration: str,
-                path: Path | None = None) -> str:
+def tuning_note(predictor: str, condition: str, calibration: str, path: Path | None = None) -> str:
     """The note of an entry whose noise is kept and whose scale is refitted: the note the
     tuning in force holds (``path``'s entry if it has one, else the package's) on how its
     noise was tuned (without an older calibration note), then ``calibration``;
@@ -150,13 +170,22 @@ def tuning_note(predictor: str, condition: str, calibration: str,
     return f"{noise}; {calibration}" if noise else calibration
 
 
-def save_tuned(predictor: str, condition: str, params: dict[str, Any], note: str,
-               path: Path, drives: Sequence[str] = ()) -> None:
+def save_tuned(
+    predictor: str,
+    condition: str,
+    params: dict[str, Any],
+    note: str,
+    path: Path,
+    drives: Sequence[str] = (),
+) -> None:
     """Merge one result into the tuning file ``path`` (created if missing): its
     ``params``, ``how`` they were obtained and the ``drives`` they were tuned on."""
     if path.resolve() == TUNED_PATH.resolve():
         raise ValueError("the package's tuning is not written by a command")
     data = json.loads(path.read_text()) if path.exists() else {}
-    data.setdefault(predictor, {})[condition] = {"params": params, "how": note,
-                                                 "drives": sorted(drives)}
+    data.setdefault(predictor, {})[condition] = {
+        "params": params,
+        "how": note,
+        "drives": sorted(drives),
+    }
     path.write_text(json.dumps(data, indent=2, sort_keys=True) + "\n")

@@ -23,9 +23,11 @@ ERROR_TRAIL_S = 3.0  # how much history the vehicle-frame error view shows [s]
 
 
 def _trail(rrb: Any, seconds: float) -> Any:
-    return rrb.VisibleTimeRange(TIMELINE,
-                                start=rrb.TimeRangeBoundary.cursor_relative(seconds=-seconds),
-                                end=rrb.TimeRangeBoundary.cursor_relative(seconds=0.0))
+    return rrb.VisibleTimeRange(
+        TIMELINE,
+        start=rrb.TimeRangeBoundary.cursor_relative(seconds=-seconds),
+        end=rrb.TimeRangeBoundary.cursor_relative(seconds=0.0),
+    )
 
 
 def _bounds(rrb: Any, half_m: float) -> Any:
@@ -33,9 +35,12 @@ def _bounds(rrb: Any, half_m: float) -> Any:
 
 
 def _plot(rrb: Any, root: str, name: str, contents: list[str]) -> Any:
-    return rrb.TimeSeriesView(origin=root, name=name, contents=contents,
-                              plot_legend=rrb.PlotLegend(corner=rrb.Corner2D.RightTop,
-                                                         visible=True))
+    return rrb.TimeSeriesView(
+        origin=root,
+        name=name,
+        contents=contents,
+        plot_legend=rrb.PlotLegend(corner=rrb.Corner2D.RightTop, visible=True),
+    )
 
 
 def blueprint(rrb: Any, root: str) -> Any:
@@ -43,25 +48,38 @@ def blueprint(rrb: Any, root: str) -> Any:
     return rrb.Blueprint(
         rrb.Horizontal(
             rrb.Vertical(
-                rrb.Spatial2DView(origin=f"{root}/map", name="map (whole drive, north up)",
-                                  time_ranges=[_trail(rrb, TRAIL_S)]),
+                rrb.Spatial2DView(
+                    origin=f"{root}/map",
+                    name="map (whole drive, north up)",
+                    time_ranges=[_trail(rrb, TRAIL_S)],
+                ),
                 rrb.TextDocumentView(origin=f"{root}/colour_scale", name="map colours"),
-                row_shares=[5, 1]),
+                row_shares=[5, 1],
+            ),
             rrb.Vertical(
-                rrb.Spatial2DView(origin=f"{root}/around",
-                                  name=f"around the vehicle (north up, +-{AROUND_M:g} m)",
-                                  visual_bounds=_bounds(rrb, AROUND_M)),
-                rrb.Spatial2DView(origin=f"{root}/vehicle_frame",
-                                  name="errors in the vehicle frame (ahead ->, left up)",
-                                  visual_bounds=_bounds(rrb, VEHICLE_M),
-                                  time_ranges=[_trail(rrb, ERROR_TRAIL_S)]),
-                row_shares=[1, 1]),
+                rrb.Spatial2DView(
+                    origin=f"{root}/around",
+                    name=f"around the vehicle (north up, +-{AROUND_M:g} m)",
+                    visual_bounds=_bounds(rrb, AROUND_M),
+                ),
+                rrb.Spatial2DView(
+                    origin=f"{root}/vehicle_frame",
+                    name="errors in the vehicle frame (ahead ->, left up)",
+                    visual_bounds=_bounds(rrb, VEHICLE_M),
+                    time_ranges=[_trail(rrb, ERROR_TRAIL_S)],
+                ),
+                row_shares=[1, 1],
+            ),
             rrb.Vertical(
                 _plot(rrb, root, "error [m]", ["$origin/errors/**", "$origin/outages"]),
-                _plot(rrb, root, "along-track error [m] (+ ahead, - lagging)",
-                      ["$origin/along/**"]),
+                _plot(
+                    rrb, root, "along-track error [m] (+ ahead, - lagging)", ["$origin/along/**"]
+                ),
                 _plot(rrb, root, "cross-track error [m] (+ left, - right)", ["$origin/cross/**"]),
                 rrb.TextLogView(origin=f"{root}/labels", name="scenario labels"),
-                row_shares=[3, 2, 2, 1]),
-            column_shares=[3, 3, 3]),
-        collapse_panels=False)
+                row_shares=[3, 2, 2, 1],
+            ),
+            column_shares=[3, 3, 3],
+        ),
+        collapse_panels=False,
+    )

@@ -21,10 +21,21 @@ N_LAST_FIXES = 5  # fixes shown around the vehicle
 ROAD_S = (-2.0, 1.0)  # the stretch of reference shown around the vehicle [s], relative
 ROAD_STEP_S = 0.25
 # tab10, as RGB
-PALETTE = np.array([
-    [31, 119, 180], [255, 127, 14], [44, 160, 44], [214, 39, 40], [148, 103, 189],
-    [140, 86, 75], [227, 119, 194], [127, 127, 127], [188, 189, 34], [23, 190, 207],
-], dtype=np.uint8)
+PALETTE = np.array(
+    [
+        [31, 119, 180],
+        [255, 127, 14],
+        [44, 160, 44],
+        [214, 39, 40],
+        [148, 103, 189],
+        [140, 86, 75],
+        [227, 119, 194],
+        [127, 127, 127],
+        [188, 189, 34],
+        [23, 190, 207],
+    ],
+    dtype=np.uint8,
+)
 RECEIVED_RGB = (20, 20, 20)
 DROPPED_RGB = (230, 30, 30)
 TRUTH_RGB = (160, 160, 160)
@@ -90,8 +101,9 @@ def change_points(labels: np.ndarray) -> np.ndarray:
     return np.concatenate([[0], np.flatnonzero(labels[1:] != labels[:-1]) + 1])
 
 
-def outage_steps(outages: Sequence[tuple[float, float]], t0: float, t1: float
-                 ) -> tuple[np.ndarray, np.ndarray]:
+def outage_steps(
+    outages: Sequence[tuple[float, float]], t0: float, t1: float
+) -> tuple[np.ndarray, np.ndarray]:
     """Times [s] and 1/0 values of a step series that is 1 inside each outage
     ``(t_last_fix, t_next_fix)`` and 0 elsewhere over ``[t0, t1]`` (plot with StepAfter)."""
     o = np.asarray(sorted(outages), dtype=float).reshape(-1, 2)
@@ -101,8 +113,9 @@ def outage_steps(outages: Sequence[tuple[float, float]], t0: float, t1: float
     return t[order], v[order]
 
 
-def last_fixes(t_now: np.ndarray, t_fix: np.ndarray, n: int = N_LAST_FIXES
-               ) -> tuple[np.ndarray, np.ndarray]:
+def last_fixes(
+    t_now: np.ndarray, t_fix: np.ndarray, n: int = N_LAST_FIXES
+) -> tuple[np.ndarray, np.ndarray]:
     """For each time of ``t_now`` [s], the indices of the last ``n`` fixes of sorted ``t_fix``
     at or before it: (flat indices in row order, row lengths)."""
     j = np.searchsorted(t_fix, t_now, side="right")
@@ -111,9 +124,13 @@ def last_fixes(t_now: np.ndarray, t_fix: np.ndarray, n: int = N_LAST_FIXES
     return idx[ok], ok.sum(axis=1)
 
 
-def road_around(t_now: np.ndarray, track_t: np.ndarray, track_xy: np.ndarray,
-                span_s: tuple[float, float] = ROAD_S, step_s: float = ROAD_STEP_S
-                ) -> np.ndarray:
+def road_around(
+    t_now: np.ndarray,
+    track_t: np.ndarray,
+    track_xy: np.ndarray,
+    span_s: tuple[float, float] = ROAD_S,
+    step_s: float = ROAD_STEP_S,
+) -> np.ndarray:
     """(K, M, 2) reference positions [m] from ``span_s[0]`` to ``span_s[1]`` around each
     time of ``t_now`` (linear between track samples, clamped at the track's ends)."""
     off = np.arange(span_s[0], span_s[1] + 1e-9, step_s)

@@ -50,8 +50,10 @@ def check_web_port(port: int, option: str = "--port") -> tuple[int, int]:
     """``(web port, data port)`` for ``--port N``: N serves the page, N+1 the recording."""
     top = 65535 - DATA_PORT_OFFSET
     if not 1 <= port <= top:
-        raise UsageError(f"{option} must be a TCP port from 1 to {top} (the recording is "
-                         f"served on the next port, {option} + {DATA_PORT_OFFSET}); got {port}")
+        raise UsageError(
+            f"{option} must be a TCP port from 1 to {top} (the recording is "
+            f"served on the next port, {option} + {DATA_PORT_OFFSET}); got {port}"
+        )
     return port, port + DATA_PORT_OFFSET
 
 
@@ -71,17 +73,24 @@ def port_in_use(port: int, host: str = HOST) -> bool:
     return False
 
 
-def check_ports_free(web_port: int, data_port: int, option: str = "--port",
-                     in_use: Callable[[int], bool] = port_in_use) -> None:
+def check_ports_free(
+    web_port: int,
+    data_port: int,
+    option: str = "--port",
+    in_use: Callable[[int], bool] = port_in_use,
+) -> None:
     """A :class:`UsageError` naming the first of the two ports that is taken."""
     for port, what in ((web_port, "the web viewer's page"), (data_port, "the recording")):
         if in_use(port):
-            raise UsageError(f"port {port} ({what}) is already in use on {HOST}: pick other "
-                             f"ports with {option} N (uses N and N+{DATA_PORT_OFFSET})")
+            raise UsageError(
+                f"port {port} ({what}) is already in use on {HOST}: pick other "
+                f"ports with {option} N (uses N and N+{DATA_PORT_OFFSET})"
+            )
 
 
-def viewer_url(web_port: int, data_port: int, host: str = HOST,
-               renderer: str | None = RENDERER) -> str:
+def viewer_url(
+    web_port: int, data_port: int, host: str = HOST, renderer: str | None = RENDERER
+) -> str:
     """The address to open in a browser: the page on ``web_port`` reading the recording
     from rerun's gRPC proxy on ``data_port``, with the renderer forced (None: the
     browser's default, WebGPU where it has one)."""
@@ -92,14 +101,24 @@ def viewer_url(web_port: int, data_port: int, host: str = HOST,
 
 def ssh_forward_command(web_port: int, data_port: int, host: str) -> str:
     """The ``ssh`` line to run on your own machine to reach both ports of ``host``."""
-    return (f"ssh -L {web_port}:localhost:{web_port} "
-            f"-L {data_port}:localhost:{data_port} {host}")
+    return f"ssh -L {web_port}:localhost:{web_port} -L {data_port}:localhost:{data_port} {host}"
 
 
 def server_command(exe: str, recording: Path, web_port: int, data_port: int) -> list[str]:
     """The ``rerun`` command line that serves ``recording`` (see the module docstring)."""
-    return [exe, "--web-viewer", "--web-viewer-port", str(web_port), "--port", str(data_port),
-            "--bind", HOST, "--renderer", RENDERER, str(recording)]
+    return [
+        exe,
+        "--web-viewer",
+        "--web-viewer-port",
+        str(web_port),
+        "--port",
+        str(data_port),
+        "--bind",
+        HOST,
+        "--renderer",
+        RENDERER,
+        str(recording),
+    ]
 
 
 def server_env(base: Mapping[str, str]) -> dict[str, str]:
@@ -162,8 +181,14 @@ def _raise_keyboard_interrupt(signum: int, frame: object) -> None:
     raise KeyboardInterrupt
 
 
-def serve(exe: str, recording: Path, web_port: int, data_port: int,
-          on_ready: Callable[[], None], ready_timeout_s: float = READY_TIMEOUT_S) -> None:
+def serve(
+    exe: str,
+    recording: Path,
+    web_port: int,
+    data_port: int,
+    on_ready: Callable[[], None],
+    ready_timeout_s: float = READY_TIMEOUT_S,
+) -> None:
     """Run rerun's web server on ``recording`` until Ctrl-C (or SIGTERM/SIGHUP), then stop
     it and return. ``on_ready`` is called once both ports answer.
 
@@ -177,16 +202,23 @@ def serve(exe: str, recording: Path, web_port: int, data_port: int,
             handlers[sig] = signal.signal(sig, _raise_keyboard_interrupt)
     try:
         with tempfile.TemporaryFile() as log:
-            proc = subprocess.Popen(server_command(exe, recording, web_port, data_port),
-                                    stdin=subprocess.DEVNULL, stdout=log, stderr=log,
-                                    env=server_env(os.environ), start_new_session=True)
+            proc = subprocess.Popen(
+                server_command(exe, recording, web_port, data_port),
+                stdin=subprocess.DEVNULL,
+                stdout=log,
+                stderr=log,
+                env=server_env(os.environ),
+                start_new_session=True,
+            )
             try:
                 _wait_ready(proc, log, (web_port, data_port), ready_timeout_s)
                 on_ready()
                 status = proc.wait()
                 why = _last_line(log)
-                raise ServeError(f"the rerun web server stopped with status {status}"
-                                 + (f": {why}" if why else ""))
+                raise ServeError(
+                    f"the rerun web server stopped with status {status}"
+                    + (f": {why}" if why else "")
+                )
             except KeyboardInterrupt:
                 return
             finally:
@@ -196,15 +228,20 @@ def serve(exe: str, recording: Path, web_port: int, data_port: int,
             signal.signal(sig, old)
 
 
-def _wait_ready(proc: subprocess.Popen, log: IO[bytes], ports: tuple[int, ...],
-                timeout_s: float) -> None:
+def _wait_ready(
+    proc: subprocess.Popen, log: IO[bytes], ports: tuple[int, ...], timeout_s: float
+) -> None:
     deadline = time.monotonic() + timeout_s
     while not all(_listening(p) for p in ports):
         if proc.poll() is not None:
             why = _last_line(log)
-            raise ServeError(f"the rerun web server exited with status {proc.returncode}"
-                             + (f": {why}" if why else ""))
+            raise ServeError(
+                f"the rerun web server exited with status {proc.returncode}"
+                + (f": {why}" if why else "")
+            )
         if time.monotonic() > deadline:
-            raise ServeError(f"the rerun web server did not open ports "
-                             f"{', '.join(map(str, ports))} within {timeout_s:g} s")
+            raise ServeError(
+                f"the rerun web server did not open ports "
+                f"{', '.join(map(str, ports))} within {timeout_s:g} s"
+            )
         time.sleep(0.1)

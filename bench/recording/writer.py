@@ -99,13 +99,13 @@ VIZ_HINT = "rerun recordings need the viz extra: pip install 'posbench-harness[v
 class _Writer:
     """Sends one drive to a recording stream."""
 
-    def __init__(self, rr: Any, rec: Any, predictors: Sequence[str], color_by: str | None
-                 ) -> None:
+    def __init__(self, rr: Any, rec: Any, predictors: Sequence[str], color_by: str | None) -> None:
         self.rr, self.rec = rr, rec
         self.predictors = list(predictors)
         self.pred_parts = [sanitise(p) for p in predictors]
-        self.color_by = color_by if color_by is not None else (
-            self.predictors[0] if self.predictors else None)
+        self.color_by = (
+            color_by if color_by is not None else (self.predictors[0] if self.predictors else None)
+        )
 
     def _time(self, t: np.ndarray) -> Any:
         return self.rr.TimeColumn(TIMELINE, duration=np.asarray(t, dtype=np.float64))
@@ -117,12 +117,14 @@ class _Writer:
         ok = np.isfinite(t) & np.all(np.isfinite(xy), axis=1)
         self.rec.log(path, rr.Points2D.from_fields(colors=[color], radii=[radius]), static=True)
         if ok.any():
-            rr.send_columns(path, indexes=[self._time(t[ok])],
-                            columns=rr.Points2D.columns(positions=screen(xy[ok])),
-                            recording=self.rec)
+            rr.send_columns(
+                path,
+                indexes=[self._time(t[ok])],
+                columns=rr.Points2D.columns(positions=screen(xy[ok])),
+                recording=self.rec,
+            )
 
-    def ellipses(self, path: str, t: np.ndarray, xy: np.ndarray, cov: np.ndarray, color
-                 ) -> None:
+    def ellipses(self, path: str, t: np.ndarray, xy: np.ndarray, cov: np.ndarray, color) -> None:
         """The 95 % ellipse of each answer (centre ``xy`` [m, ENU], covariance ``cov`` (N, 3)
         (xx, xy, yy) [m^2]) as a closed line strip at its time, in screen coordinates; a
         row without a valid covariance or position holds no strip (the previous ellipse is
@@ -136,33 +138,48 @@ class _Writer:
             return
         pts = outline[has] + xy[has, None, :]
         k, m, _ = pts.shape
-        self.rec.log(path, rr.LineStrips2D.from_fields(colors=[color], radii=[ELLIPSE_RADIUS]),
-                     static=True)
-        rr.send_columns(path, indexes=[self._time(t)],
-                        columns=rr.LineStrips2D.columns(
-                            strips=screen(pts.reshape(-1, 2)).reshape(k, m, 2)
-                        ).partition(has.astype(np.int64)), recording=self.rec)
+        self.rec.log(
+            path, rr.LineStrips2D.from_fields(colors=[color], radii=[ELLIPSE_RADIUS]), static=True
+        )
+        rr.send_columns(
+            path,
+            indexes=[self._time(t)],
+            columns=rr.LineStrips2D.columns(
+                strips=screen(pts.reshape(-1, 2)).reshape(k, m, 2)
+            ).partition(has.astype(np.int64)),
+            recording=self.rec,
+        )
 
     def scalars(self, path: str, t: np.ndarray, v: np.ndarray) -> None:
         ok = np.isfinite(t)
         if ok.any():
-            self.rr.send_columns(path, indexes=[self._time(t[ok])],
-                                 columns=self.rr.Scalars.columns(scalars=v[ok]), recording=self.rec)
+            self.rr.send_columns(
+                path,
+                indexes=[self._time(t[ok])],
+                columns=self.rr.Scalars.columns(scalars=v[ok]),
+                recording=self.rec,
+            )
 
-    def series(self, path: str, t: np.ndarray, v: np.ndarray, name: str, color, kind: str
-               ) -> None:
+    def series(self, path: str, t: np.ndarray, v: np.ndarray, name: str, color, kind: str) -> None:
         """A time series: a line for ``now`` queries, points for ``future`` ones."""
         rr = self.rr
-        style = (rr.SeriesLines(colors=[color], names=[name], widths=[1.5]) if kind == "now"
-                 else rr.SeriesPoints(colors=[color], names=[name], marker_sizes=[2.0]))
+        style = (
+            rr.SeriesLines(colors=[color], names=[name], widths=[1.5])
+            if kind == "now"
+            else rr.SeriesPoints(colors=[color], names=[name], marker_sizes=[2.0])
+        )
         self.rec.log(path, style, static=True)
         self.scalars(path, t, v)
 
     def drive(self, root: str, run: DriveRun) -> None:
         rr, rec = self.rr, self.rec
-        info = [f"drive: {run.name}", f"dataset: {run.dataset}",
-                f"reference: {run.reference or '-'}", f"duration: {run.duration_s:.1f} s",
-                f"fixes received: {run.gps_count}"]
+        info = [
+            f"drive: {run.name}",
+            f"dataset: {run.dataset}",
+            f"reference: {run.reference or '-'}",
+            f"duration: {run.duration_s:.1f} s",
+            f"fixes received: {run.gps_count}",
+        ]
         info += [f"note: {n}" for n in run.notes] + [f"warning: {w}" for w in run.warnings]
         if run.skipped:
             info.append(f"SKIPPED: {run.skipped}")
@@ -173,9 +190,11 @@ class _Writer:
         if run.track is not None and len(run.track):
             strips = finite_runs(run.track[["x", "y"]].to_numpy(np.float64))
             if strips:
-                rec.log(f"{root}/map/truth", rr.LineStrips2D([screen(s) for s in strips],
-                                                             colors=[TRUTH_RGB], radii=[0.15]),
-                        static=True)
+                rec.log(
+                    f"{root}/map/truth",
+                    rr.LineStrips2D([screen(s) for s in strips], colors=[TRUTH_RGB], radii=[0.15]),
+                    static=True,
+                )
         fix_t = fix_xy = None
         if run.fixes is not None and len(run.fixes):
             f = run.fixes
@@ -188,14 +207,22 @@ class _Writer:
         tr = run.traces
         if tr is None or tr.empty:
             return
-        groups = {key: g.sort_values("t_query", kind="stable")
-                  for key, g in tr.groupby(["predictor", "kind"], sort=False, observed=True)}
+        groups = {
+            key: g.sort_values("t_query", kind="stable")
+            for key, g in tr.groupby(["predictor", "kind"], sort=False, observed=True)
+        }
         self._around_common(root, run, groups, fix_t, fix_xy)
         self._track_colours(root, run, groups)
-        rec.log(f"{root}/vehicle_frame/axes",
-                rr.LineStrips2D([[[-100.0, 0.0], [100.0, 0.0]], [[0.0, -100.0], [0.0, 100.0]]],
-                                colors=[TRUTH_RGB], radii=[0.003],
-                                labels=["along (ahead ->)", "cross (left up)"]), static=True)
+        rec.log(
+            f"{root}/vehicle_frame/axes",
+            rr.LineStrips2D(
+                [[[-100.0, 0.0], [100.0, 0.0]], [[0.0, -100.0], [0.0, 100.0]]],
+                colors=[TRUTH_RGB],
+                radii=[0.003],
+                labels=["along (ahead ->)", "cross (left up)"],
+            ),
+            static=True,
+        )
         for i, (pred, part) in enumerate(zip(self.predictors, self.pred_parts, strict=True)):
             color = predictor_color(i)
             for kind, radius in (("future", 0.4), ("now", 0.25)):
@@ -207,22 +234,40 @@ class _Writer:
                 ref = g[["x_ref", "y_ref"]].to_numpy(np.float64)
                 self.points(f"{root}/map/{part}/{kind}", t, xy, color, radius)
                 if all(c in g for c in COV_COLUMNS):
-                    self.ellipses(f"{root}/map/{part}/ellipse_{kind}", t, xy,
-                                  g[list(COV_COLUMNS)].to_numpy(np.float64), color)
-                self.series(f"{root}/errors/{part}/{kind}", t, g["error_m"].to_numpy(np.float64),
-                            f"{pred} {kind}", color, kind)
+                    self.ellipses(
+                        f"{root}/map/{part}/ellipse_{kind}",
+                        t,
+                        xy,
+                        g[list(COV_COLUMNS)].to_numpy(np.float64),
+                        color,
+                    )
+                self.series(
+                    f"{root}/errors/{part}/{kind}",
+                    t,
+                    g["error_m"].to_numpy(np.float64),
+                    f"{pred} {kind}",
+                    color,
+                    kind,
+                )
                 if kind == "future":  # the current answer is the tip of its error arrow
                     self.points(f"{root}/around/{part}/future", t, xy - ref, color, 0.09)
                 if "along_m" in g and "cross_m" in g:
                     along = g["along_m"].to_numpy(np.float64)
                     cross = g["cross_m"].to_numpy(np.float64)
-                    self.series(f"{root}/along/{part}/{kind}", t, along, f"{pred} {kind} along",
-                                color, kind)
-                    self.series(f"{root}/cross/{part}/{kind}", t, cross, f"{pred} {kind} cross",
-                                color, kind)
+                    self.series(
+                        f"{root}/along/{part}/{kind}", t, along, f"{pred} {kind} along", color, kind
+                    )
+                    self.series(
+                        f"{root}/cross/{part}/{kind}", t, cross, f"{pred} {kind} cross", color, kind
+                    )
                     if kind == "now":
-                        self.points(f"{root}/vehicle_frame/{part}", t,
-                                    np.column_stack([along, cross]), color, 0.02)
+                        self.points(
+                            f"{root}/vehicle_frame/{part}",
+                            t,
+                            np.column_stack([along, cross]),
+                            color,
+                            0.02,
+                        )
                 if kind == "now":
                     self._arrows(f"{root}/around/{part}/error", t, xy - ref, color)
         self._labels(root, tr)
@@ -232,12 +277,18 @@ class _Writer:
         """Arrows from (0, 0) (the reference) to each relative answer, at their times."""
         rr = self.rr
         ok = np.isfinite(t) & np.all(np.isfinite(rel), axis=1)
-        self.rec.log(path, rr.Arrows2D.from_fields(colors=[color], radii=[0.03],
-                                                   origins=[[0.0, 0.0]]), static=True)
+        self.rec.log(
+            path,
+            rr.Arrows2D.from_fields(colors=[color], radii=[0.03], origins=[[0.0, 0.0]]),
+            static=True,
+        )
         if ok.any():
-            rr.send_columns(path, indexes=[self._time(t[ok])],
-                            columns=rr.Arrows2D.columns(vectors=screen(rel[ok])),
-                            recording=self.rec)
+            rr.send_columns(
+                path,
+                indexes=[self._time(t[ok])],
+                columns=rr.Arrows2D.columns(vectors=screen(rel[ok])),
+                recording=self.rec,
+            )
 
     def _now_reference(self, groups: dict) -> tuple[np.ndarray, np.ndarray] | None:
         """Times [s] and reference positions [m] of the 'now' queries (any predictor's rows:
@@ -245,18 +296,28 @@ class _Writer:
         for pred in self.predictors:
             g = groups.get((pred, "now"))
             if g is not None and not g.empty:
-                return (g["t_query"].to_numpy(np.float64),
-                        g[["x_ref", "y_ref"]].to_numpy(np.float64))
+                return (
+                    g["t_query"].to_numpy(np.float64),
+                    g[["x_ref", "y_ref"]].to_numpy(np.float64),
+                )
         return None
 
-    def _around_common(self, root: str, run: DriveRun, groups: dict,
-                       fix_t: np.ndarray | None, fix_xy: np.ndarray | None) -> None:
+    def _around_common(
+        self,
+        root: str,
+        run: DriveRun,
+        groups: dict,
+        fix_t: np.ndarray | None,
+        fix_xy: np.ndarray | None,
+    ) -> None:
         """The reference at (0, 0), and at each 'now' query time the last fixes and the road
         ahead and behind, relative to the reference then."""
         rr, rec = self.rr, self.rec
-        rec.log(f"{root}/around/reference",
-                rr.Points2D([[0.0, 0.0]], colors=[(0, 0, 0)], radii=[0.15],
-                            labels=["reference"]), static=True)
+        rec.log(
+            f"{root}/around/reference",
+            rr.Points2D([[0.0, 0.0]], colors=[(0, 0, 0)], radii=[0.15], labels=["reference"]),
+            static=True,
+        )
         now = self._now_reference(groups)
         if now is None:
             return
@@ -268,25 +329,36 @@ class _Writer:
         if fix_t is not None and fix_t.size:
             idx, lengths = last_fixes(t, fix_t)
             rel = fix_xy[idx] - np.repeat(ref, lengths, axis=0)
-            rec.log(f"{root}/around/fixes",
-                    rr.Points2D.from_fields(colors=[RECEIVED_RGB], radii=[0.1]), static=True)
-            rr.send_columns(f"{root}/around/fixes", indexes=[self._time(t)],
-                            columns=rr.Points2D.columns(positions=screen(rel)).partition(lengths),
-                            recording=rec)
+            rec.log(
+                f"{root}/around/fixes",
+                rr.Points2D.from_fields(colors=[RECEIVED_RGB], radii=[0.1]),
+                static=True,
+            )
+            rr.send_columns(
+                f"{root}/around/fixes",
+                indexes=[self._time(t)],
+                columns=rr.Points2D.columns(positions=screen(rel)).partition(lengths),
+                recording=rec,
+            )
         if run.track is not None and len(run.track) >= 2:
             tt = run.track["t"].to_numpy(np.float64)
             txy = run.track[["x", "y"]].to_numpy(np.float64)
             if np.all(np.isfinite(txy), axis=1).sum() >= 2:
                 road = road_around(t, tt, txy) - ref[:, None, :]
                 k, m, _ = road.shape
-                rec.log(f"{root}/around/road",
-                        rr.LineStrips2D.from_fields(colors=[TRUTH_RGB], radii=[0.05]),
-                        static=True)
-                rr.send_columns(f"{root}/around/road", indexes=[self._time(t)],
-                                columns=rr.LineStrips2D.columns(
-                                    strips=screen(road.reshape(-1, 2)).reshape(k, m, 2)
-                                ).partition(np.ones(k, dtype=np.int64)),
-                                recording=rec)
+                rec.log(
+                    f"{root}/around/road",
+                    rr.LineStrips2D.from_fields(colors=[TRUTH_RGB], radii=[0.05]),
+                    static=True,
+                )
+                rr.send_columns(
+                    f"{root}/around/road",
+                    indexes=[self._time(t)],
+                    columns=rr.LineStrips2D.columns(
+                        strips=screen(road.reshape(-1, 2)).reshape(k, m, 2)
+                    ).partition(np.ones(k, dtype=np.int64)),
+                    recording=rec,
+                )
 
     def _track_colours(self, root: str, run: DriveRun, groups: dict) -> None:
         """The reference track in segments coloured by ``color_by``'s 'now' error, and the
@@ -307,8 +379,10 @@ class _Writer:
         seg_e = np.interp(mid, te, e, left=np.nan, right=np.nan)
         # no colour where the nearest answer is far (an outage of the predictor's answers)
         j = np.searchsorted(te, mid)
-        near = np.minimum(np.abs(mid - te[np.clip(j - 1, 0, te.size - 1)]),
-                          np.abs(te[np.clip(j, 0, te.size - 1)] - mid))
+        near = np.minimum(
+            np.abs(mid - te[np.clip(j - 1, 0, te.size - 1)]),
+            np.abs(te[np.clip(j, 0, te.size - 1)] - mid),
+        )
         seg_e[near > 0.5] = np.nan
         seg = np.stack([xy[:-1], xy[1:]], axis=1)
         good = np.all(np.isfinite(seg), axis=(1, 2))
@@ -318,14 +392,20 @@ class _Writer:
             path = f"{root}/map/track_error"
             rec.log(path, rr.LineStrips2D.from_fields(radii=[0.4]), static=True)
             # one static row of all segments (indexes=[]: static), the fast columnar path
-            rr.send_columns(path, indexes=[],
-                            columns=rr.LineStrips2D.columns(
-                                strips=strips, colors=error_colours(seg_e[good], top)
-                            ).partition([len(strips)]), recording=rec)
-        text = (f"Reference track coloured by the current-position (now) error of "
-                f"{self.color_by}: green 0 m, yellow {top / 2:g} m, red >= {top:g} m "
-                f"(the scale's top is the drive's p95 rounded up); grey: no answer. "
-                f"Choose the predictor with --rerun-color-by.")
+            rr.send_columns(
+                path,
+                indexes=[],
+                columns=rr.LineStrips2D.columns(
+                    strips=strips, colors=error_colours(seg_e[good], top)
+                ).partition([len(strips)]),
+                recording=rec,
+            )
+        text = (
+            f"Reference track coloured by the current-position (now) error of "
+            f"{self.color_by}: green 0 m, yellow {top / 2:g} m, red >= {top:g} m "
+            f"(the scale's top is the drive's p95 rounded up); grey: no answer. "
+            f"Choose the predictor with --rerun-color-by."
+        )
         rec.log(f"{root}/colour_scale", rr.TextDocument(text), static=True)
 
     def _labels(self, root: str, tr: pd.DataFrame) -> None:
@@ -338,24 +418,32 @@ class _Writer:
         lab = now["label"].astype(str).to_numpy()
         idx = change_points(lab)
         if idx.size:
-            rr.send_columns(f"{root}/labels",
-                            indexes=[self._time(now["t_query"].to_numpy(np.float64)[idx])],
-                            columns=rr.TextLog.columns(text=lab[idx], level=["INFO"] * idx.size),
-                            recording=self.rec)
+            rr.send_columns(
+                f"{root}/labels",
+                indexes=[self._time(now["t_query"].to_numpy(np.float64)[idx])],
+                columns=rr.TextLog.columns(text=lab[idx], level=["INFO"] * idx.size),
+                recording=self.rec,
+            )
 
     def _outages(self, root: str, run: DriveRun, tr: pd.DataFrame) -> None:
         rr = self.rr
-        span = np.concatenate([tr["t_query"].to_numpy(np.float64),
-                               np.asarray(run.outages, dtype=float).ravel()])
+        span = np.concatenate(
+            [tr["t_query"].to_numpy(np.float64), np.asarray(run.outages, dtype=float).ravel()]
+        )
         span = span[np.isfinite(span)]
         if span.size == 0:
             return
         t0, t1 = float(span.min()), float(span.max())
         t, v = outage_steps(run.outages, t0, t1)
-        self.rec.log(f"{root}/outages",
-                     rr.SeriesLines(colors=[DROPPED_RGB], names=["GPS outage (1 = in outage)"],
-                                    interpolation_mode=rr.components.InterpolationMode.StepAfter),
-                     static=True)
+        self.rec.log(
+            f"{root}/outages",
+            rr.SeriesLines(
+                colors=[DROPPED_RGB],
+                names=["GPS outage (1 = in outage)"],
+                interpolation_mode=rr.components.InterpolationMode.StepAfter,
+            ),
+            static=True,
+        )
         self.scalars(f"{root}/outages", t, v)
 
 
@@ -373,15 +461,20 @@ def merge_rrd(parts: Sequence[Path], path: Path) -> None:
         return
     with tempfile.TemporaryDirectory(prefix="posbench-rerun-home-") as home:
         env = {**os.environ, "HOME": home, "RERUN_ANALYTICS": "0"}
-        p = subprocess.run([sys.executable, "-m", "rerun_cli", "rrd", "merge", *map(str, parts),
-                            "-o", str(path)], capture_output=True, text=True, env=env)
+        p = subprocess.run(
+            [sys.executable, "-m", "rerun_cli", "rrd", "merge", *map(str, parts), "-o", str(path)],
+            capture_output=True,
+            text=True,
+            env=env,
+        )
     if p.returncode != 0:
         lines = [ln for ln in p.stderr.splitlines() if ln.strip()] or ["no message"]
         raise RuntimeError(f"rerun rrd merge failed: {lines[-1]}")
 
 
-def write_recording(path: Path, runs: Sequence[DriveRun], predictors: Sequence[str],
-                    color_by: str | None = None) -> None:
+def write_recording(
+    path: Path, runs: Sequence[DriveRun], predictors: Sequence[str], color_by: str | None = None
+) -> None:
     """Write ``runs`` to the Rerun file ``path``, one recording per drive (no viewer starts).
 
     Args:

@@ -55,14 +55,19 @@ def ray_available() -> bool:
         return False
 
 
-def run_local(drives: Sequence[Drive], cfg: RunConfig, workers: int = 2,
-              on_done: Callable[[DriveRun], None] | None = None) -> list[DriveRun]:
+def run_local(
+    drives: Sequence[Drive],
+    cfg: RunConfig,
+    workers: int = 2,
+    on_done: Callable[[DriveRun], None] | None = None,
+) -> list[DriveRun]:
     """The local executor: :func:`posbench.replay.runner.run` in ``workers`` processes."""
     return run(drives, cfg, workers=workers, on_done=on_done)
 
 
-def run_predictor(drive: Drive, cfg: RunConfig, name: str | None,
-                  entries: dict[str, Entry]) -> DriveRun:
+def run_predictor(
+    drive: Drive, cfg: RunConfig, name: str | None, entries: dict[str, Entry]
+) -> DriveRun:
     """One task: ``drive`` replayed through predictor ``name`` only (all of ``cfg``'s when
     None). ``entries`` re-registers the driver's predictors, so predictors registered at
     run time are known in a fresh worker (their module must be importable there)."""
@@ -80,9 +85,16 @@ class _Failed:
 def failed_run(drive: Drive, predictor: str | None, error: str, attempts: int) -> DriveRun:
     """The record of a drive whose task failed after all retries: skipped, with the reason."""
     what = f"predictor {predictor}: " if predictor else ""
-    return DriveRun(drive.name, drive.meta.format, "", [], list(drive.meta.warnings), pd.DataFrame(),
-                    skipped=f"worker failed: {what}{error} (after {attempts} attempts)",
-                    duration_s=drive.duration_s)
+    return DriveRun(
+        drive.name,
+        drive.meta.format,
+        "",
+        [],
+        list(drive.meta.warnings),
+        pd.DataFrame(),
+        skipped=f"worker failed: {what}{error} (after {attempts} attempts)",
+        duration_s=drive.duration_s,
+    )
 
 
 def _error_line(exc: BaseException) -> str:
@@ -99,9 +111,14 @@ def _import_ray() -> Any:
     return ray
 
 
-def run_ray(drives: Sequence[Drive], cfg: RunConfig, address: str | None = None,
-            num_cpus: int = 2, max_retries: int = DEFAULT_RETRIES,
-            on_done: Callable[[DriveRun], None] | None = None) -> list[DriveRun]:
+def run_ray(
+    drives: Sequence[Drive],
+    cfg: RunConfig,
+    address: str | None = None,
+    num_cpus: int = 2,
+    max_retries: int = DEFAULT_RETRIES,
+    on_done: Callable[[DriveRun], None] | None = None,
+) -> list[DriveRun]:
     """Run every (drive, predictor) pair as a Ray task; the result is in drive order.
 
     Without ``address`` a local Ray instance with ``num_cpus`` CPUs is started and shut
@@ -118,11 +135,17 @@ def run_ray(drives: Sequence[Drive], cfg: RunConfig, address: str | None = None,
                 ray.init(address=address, log_to_driver=False)
             else:
                 # a local instance talks over loopback only, never the machine's interfaces
-                ray.init(num_cpus=num_cpus, include_dashboard=False, log_to_driver=False,
-                         ignore_reinit_error=True, _node_ip_address="127.0.0.1")
+                ray.init(
+                    num_cpus=num_cpus,
+                    include_dashboard=False,
+                    log_to_driver=False,
+                    ignore_reinit_error=True,
+                    _node_ip_address="127.0.0.1",
+                )
         except (ConnectionError, RuntimeError, ValueError) as e:
-            raise ExecutorError(f"cannot start Ray{' at ' + address if address else ''}: "
-                                f"{_error_line(e)}") from None
+            raise ExecutorError(
+                f"cannot start Ray{' at ' + address if address else ''}: {_error_line(e)}"
+            ) from None
     try:
         return _fan_out(ray, drives, cfg, max_retries, on_done)
     finally:
@@ -175,8 +198,13 @@ def worker_runtime_env(names: Sequence[str]) -> dict[str, Any] | None:
     return {"env_vars": {"PYTHONPATH": os.pathsep.join([*roots, "${PYTHONPATH}"])}}
 
 
-def _fan_out(ray: Any, drives: Sequence[Drive], cfg: RunConfig, max_retries: int,
-             on_done: Callable[[DriveRun], None] | None) -> list[DriveRun]:
+def _fan_out(
+    ray: Any,
+    drives: Sequence[Drive],
+    cfg: RunConfig,
+    max_retries: int,
+    on_done: Callable[[DriveRun], None] | None,
+) -> list[DriveRun]:
     task = ray.remote(num_cpus=1, max_retries=max_retries, retry_exceptions=True)(run_predictor)
     env = worker_runtime_env(cfg.predictors)
     if env:
@@ -205,18 +233,25 @@ def _fan_out(ray: Any, drives: Sequence[Drive], cfg: RunConfig, max_retries: int
             left[i] -= 1
             if left[i] == 0:
                 failed = [p for p in parts[i] if isinstance(p, _Failed)]
-                out[i] = (failed_run(drives[i], failed[0].predictor, failed[0].error,
-                                     max_retries + 1) if failed
-                          else merge_predictor_runs([p for p in parts[i] if p is not None]))
+                out[i] = (
+                    failed_run(drives[i], failed[0].predictor, failed[0].error, max_retries + 1)
+                    if failed
+                    else merge_predictor_runs([p for p in parts[i] if p is not None])
+                )
                 parts[i] = []  # free the traces once merged
                 if on_done:
                     on_done(out[i])
     return [r for r in out if r is not None]
 
 
-def run_drives(drives: Sequence[Drive], cfg: RunConfig, executor: str = "local",
-               workers: int = 2, address: str | None = None,
-               on_done: Callable[[DriveRun], None] | None = None) -> list[DriveRun]:
+def run_drives(
+    drives: Sequence[Drive],
+    cfg: RunConfig,
+    executor: str = "local",
+    workers: int = 2,
+    address: str | None = None,
+    on_done: Callable[[DriveRun], None] | None = None,
+) -> list[DriveRun]:
     """Run ``drives`` on ``executor`` (``local`` or ``ray``); results in drive order."""
     if executor == "local":
         if address:

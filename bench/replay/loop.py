@@ -95,7 +95,9 @@ CHUNK_EVENTS = 1 << 16
 def _columns(prep: PreparedDrive) -> dict[int, list[np.ndarray | None]]:
     d = prep.drive
     cols: dict[int, list[np.ndarray | None]] = {
-        GPS: [prep.gps.t, prep.gps.x, prep.gps.y, prep.gps.accuracy], QUERY: [prep.now.t_query]}
+        GPS: [prep.gps.t, prep.gps.x, prep.gps.y, prep.gps.accuracy],
+        QUERY: [prep.now.t_query],
+    }
     if d.imu is not None:
         cols[IMU] = [d.imu.t, d.imu.ax, d.imu.ay, d.imu.yaw, d.imu.yaw_rate]
     if d.speed is not None:
@@ -140,7 +142,7 @@ def replay(predictor: Predictor, prep: PreparedDrive, horizon_s: float) -> Repla
     with_sigma = accepts_sigma(observe_gps)
     predictor.reset()
     for c in range(0, kinds.size, CHUNK_EVENTS):
-        kc, ic = kinds[c:c + CHUNK_EVENTS], idxs[c:c + CHUNK_EVENTS]
+        kc, ic = kinds[c : c + CHUNK_EVENTS], idxs[c : c + CHUNK_EVENTS]
         go, (gt, gx, gy, gs) = _window(cols[GPS], ic[kc == GPS])
         if with_sigma:
             gs = [fix_sigma(a) for a in gs]
@@ -203,9 +205,14 @@ def events(prep: PreparedDrive) -> list[Event]:
     return out
 
 
-def feed(pred: Predictor, evs: list[Event], horizon_s: float, start: int = 0,
-         stop: int | None = None, after: Callable[[int], None] | None = None
-         ) -> list[tuple[float, float, float]]:
+def feed(
+    pred: Predictor,
+    evs: list[Event],
+    horizon_s: float,
+    start: int = 0,
+    stop: int | None = None,
+    after: Callable[[int], None] | None = None,
+) -> list[tuple[float, float, float]]:
     """Feed ``evs[start:stop]`` to ``pred`` (no ``reset()``) as :func:`replay` does, each fix
     followed by its future query ``horizon_s`` [s] ahead; ``after(i)`` is called after event
     ``i``. Returns ``(t_query, x, y)`` per answer."""

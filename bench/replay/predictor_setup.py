@@ -57,13 +57,14 @@ def parse_set(values: Sequence[str] | None) -> tuple[dict[str, dict[str, Any]], 
         if not name:
             raise UsageError(f"{flag}: names no predictor; expected NAME.OPTION=VALUE, {EXAMPLE}")
         if not option.isidentifier():
-            raise UsageError(f"{flag}: {option!r} is not an option name (a Python identifier); "
-                             f"expected NAME.OPTION=VALUE, {EXAMPLE}")
+            raise UsageError(
+                f"{flag}: {option!r} is not an option name (a Python identifier); "
+                f"expected NAME.OPTION=VALUE, {EXAMPLE}"
+            )
         if not value.strip():
             raise UsageError(f"{flag}: no value; write '\"\"' for an empty text, {EXAMPLE}")
         if (name, option) in given:
-            raise UsageError(f"{flag}: {name}.{option} is set twice "
-                             f"(also {given[name, option]})")
+            raise UsageError(f"{flag}: {name}.{option} is set twice (also {given[name, option]})")
         options.setdefault(name, {})[option] = parse_value(value.strip())
         given[name, option] = flag
     return options, given
@@ -71,18 +72,21 @@ def parse_set(values: Sequence[str] | None) -> tuple[dict[str, dict[str, Any]], 
 
 def _same_file(a: Any, b: Any) -> bool:
     """Whether two model values name the same file (a folder stands for its model.onnx)."""
+
     def norm(v: Any) -> str:
         p = Path(str(v))
         p = p / "model.onnx" if p.is_dir() else p
         return os.path.realpath(p)
+
     return norm(a) == norm(b)
 
 
 _MISSING = object()
 
 
-def merge_options(models: Mapping[str, Mapping[str, Any]], sets: Mapping[str, Mapping[str, Any]],
-                  given: Given) -> tuple[dict[str, dict[str, Any]], Given]:
+def merge_options(
+    models: Mapping[str, Mapping[str, Any]], sets: Mapping[str, Mapping[str, Any]], given: Given
+) -> tuple[dict[str, dict[str, Any]], Given]:
     """``--model`` options and ``--set`` options as one ``{name: {option: value}}``, with
     the text of each option as given. ``--model lstm=A`` with ``--set lstm.model=B`` is an
     error unless A and B name the same file."""
@@ -93,8 +97,7 @@ def merge_options(models: Mapping[str, Mapping[str, Any]], sets: Mapping[str, Ma
             flag = flag_text(given, name, option, value)
             before = merged.get(name, {}).get(option, _MISSING)
             if before is not _MISSING and not (option == "model" and _same_file(before, value)):
-                raise UsageError(f"{out_given[name, option]} and {flag} disagree; "
-                                 "give one of them")
+                raise UsageError(f"{out_given[name, option]} and {flag} disagree; give one of them")
             merged.setdefault(name, {})[option] = value
             out_given.setdefault((name, option), flag)
     return merged, out_given
@@ -112,12 +115,14 @@ def model_options(models: Mapping[str, str | Path]) -> dict[str, dict[str, str]]
 
 def flag_text(given: Mapping[tuple[str, str], str], name: str, option: str, value: Any) -> str:
     """How option ``option`` of ``name`` was given (``--model NAME=PATH`` when unknown)."""
-    return given.get((name, option)) or (f"--model {name}={value}" if option == "model"
-                                         else f"--set {name}.{option}={value}")
+    return given.get((name, option)) or (
+        f"--model {name}={value}" if option == "model" else f"--set {name}.{option}={value}"
+    )
 
 
-def check_option_names(name: str, options: Mapping[str, Any],
-                       given: Mapping[tuple[str, str], str]) -> None:
+def check_option_names(
+    name: str, options: Mapping[str, Any], given: Mapping[tuple[str, str], str]
+) -> None:
     """Every option in ``options`` is a keyword of the constructor of predictor ``name``
     (found with :func:`inspect.signature`; a constructor with ``**kwargs`` takes any)."""
     from posbench.predictors.registry import constructor_options, predictor_class
@@ -127,10 +132,11 @@ def check_option_names(name: str, options: Mapping[str, Any],
         return
     for option, value in options.items():
         if option not in accepted:
-            takes = (f"its options: {', '.join(accepted)}" if accepted
-                     else "it takes no options")
-            raise UsageError(f"{flag_text(given, name, option, value)}: predictor {name} has no "
-                             f"option {option!r}; {takes} (see `bench predictors {name}`)")
+            takes = f"its options: {', '.join(accepted)}" if accepted else "it takes no options"
+            raise UsageError(
+                f"{flag_text(given, name, option, value)}: predictor {name} has no "
+                f"option {option!r}; {takes} (see `bench predictors {name}`)"
+            )
 
 
 # -------------------------------------------------------------- predictors
@@ -142,18 +148,25 @@ def _first_line(exc: BaseException) -> str:
 def _failure_detail(exc: BaseException) -> str:
     """``Type: first line`` of an exception (a DataError's own line, without its type)."""
 
-    return _first_line(exc) if isinstance(exc, DataError) else \
-        f"{type(exc).__name__}: {_first_line(exc)}"
+    return (
+        _first_line(exc)
+        if isinstance(exc, DataError)
+        else f"{type(exc).__name__}: {_first_line(exc)}"
+    )
 
 
-def _load_failure(name: str, given: Any, path: str | None, exc: BaseException,
-                  flag: str | None = None) -> str:
+def _load_failure(
+    name: str, given: Any, path: str | None, exc: BaseException, flag: str | None = None
+) -> str:
     """One line: which predictor (and model file, given as ``flag``) could not be built, and why."""
 
     if isinstance(exc, DataError):
         # the path is in the message already unless it is the model file itself
-        detail = exc.detail if exc.path is not None and exc.path in (str(given), path) \
+        detail = (
+            exc.detail
+            if exc.path is not None and exc.path in (str(given), path)
             else _first_line(exc)
+        )
     else:
         detail = _failure_detail(exc)
     if given is None:
@@ -185,9 +198,11 @@ def with_model_aliases(names: Sequence[str], options: Mapping[str, Any]) -> tupl
     return tuple(names) + tuple(n for n in options if ALIAS_SEP in n and n not in names)
 
 
-def validate_predictors(names: Sequence[str], options: Mapping[str, Mapping[str, Any]],
-                        given: Mapping[tuple[str, str], str] | None = None
-                        ) -> dict[str, dict[str, Any]]:
+def validate_predictors(
+    names: Sequence[str],
+    options: Mapping[str, Mapping[str, Any]],
+    given: Mapping[tuple[str, str], str] | None = None,
+) -> dict[str, dict[str, Any]]:
     """Check the requested predictors and their constructor options before any work.
 
     Each name must be a built-in, an entry point or an importable ``module:Class`` of a
@@ -218,9 +233,11 @@ def validate_predictors(names: Sequence[str], options: Mapping[str, Mapping[str,
     given = given or {}
     unknown = [n for n in names if not is_import_path(n) and not is_known(n)]
     if unknown:
-        raise UsageError(f"unknown predictor(s) {', '.join(unknown)}; known: "
-                         f"{known_names_text()} (NAME@ALIAS runs a second instance; "
-                         "module:Class a Predictor subclass of your own)")
+        raise UsageError(
+            f"unknown predictor(s) {', '.join(unknown)}; known: "
+            f"{known_names_text()} (NAME@ALIAS runs a second instance; "
+            "module:Class a Predictor subclass of your own)"
+        )
     for n in names:
         try:
             predictor_class(n)
@@ -231,14 +248,21 @@ def validate_predictors(names: Sequence[str], options: Mapping[str, Mapping[str,
         n = stray[0]
         option, value = next(iter(options[n].items()), ("model", "..."))
         alias = f"{n}@NAME=PATH" if option == "model" else f"{n}@NAME.{option}=VALUE"
-        hint = (f"add it, or use {alias} for a second {n}" if is_known(n) or n in names
-                else "add it to --predictors")
-        raise UsageError(f"{flag_text(given, n, option, value)}: {n} is not among the "
-                         f"predictors to run ({', '.join(names)}); {hint}")
+        hint = (
+            f"add it, or use {alias} for a second {n}"
+            if is_known(n) or n in names
+            else "add it to --predictors"
+        )
+        raise UsageError(
+            f"{flag_text(given, n, option, value)}: {n} is not among the "
+            f"predictors to run ({', '.join(names)}); {hint}"
+        )
     for n in names:
         if base_name(n) == "lstm-authors" and "model" not in options.get(n, {}):
-            raise UsageError(f"{n} needs the authors' network: --model {n}=PATH.onnx "
-                             "(e.g. ../shared/models/authors/gps_interpolation_model2.onnx)")
+            raise UsageError(
+                f"{n} needs the authors' network: --model {n}=PATH.onnx "
+                "(e.g. ../shared/models/authors/gps_interpolation_model2.onnx)"
+            )
     for name, opts in options.items():
         check_option_names(name, opts, given)
     resolved: dict[str, dict[str, Any]] = {}
@@ -251,8 +275,12 @@ def validate_predictors(names: Sequence[str], options: Mapping[str, Mapping[str,
     return resolved
 
 
-def _build_once(name: str, opts: Mapping[str, Any], as_given: Mapping[str, Any],
-                given: Mapping[tuple[str, str], str]) -> None:
+def _build_once(
+    name: str,
+    opts: Mapping[str, Any],
+    as_given: Mapping[str, Any],
+    given: Mapping[tuple[str, str], str],
+) -> None:
     """Build predictor ``name`` with ``opts``; a failure names the option to blame. The model
     file (if any) is tried first, then the other options are added one at a time in the order
     given: the first that makes the constructor fail is named."""
@@ -278,11 +306,15 @@ def _build_once(name: str, opts: Mapping[str, Any], as_given: Mapping[str, Any],
         kw[k] = opts[k]
         failed = build(kw)
         if failed is not None:
-            raise UsageError(f"{flag_text(given, name, k, as_given.get(k))}: predictor {name} "
-                             f"rejects {k}={opts[k]!r}: {_failure_detail(failed)}")
-    raise UsageError(f"predictor {name} cannot be created with "
-                     f"{', '.join(flag_text(given, name, k, as_given.get(k)) for k in others)}: "
-                     f"{_failure_detail(exc)}")
+            raise UsageError(
+                f"{flag_text(given, name, k, as_given.get(k))}: predictor {name} "
+                f"rejects {k}={opts[k]!r}: {_failure_detail(failed)}"
+            )
+    raise UsageError(
+        f"predictor {name} cannot be created with "
+        f"{', '.join(flag_text(given, name, k, as_given.get(k)) for k in others)}: "
+        f"{_failure_detail(exc)}"
+    )
 
 
 def learned_models(cfg: RunConfig) -> dict[str, dict[str, Any]]:
@@ -297,8 +329,10 @@ def learned_models(cfg: RunConfig) -> dict[str, dict[str, Any]]:
     out: dict[str, dict[str, Any]] = {}
     for name in cfg.predictors:
         cls = predictor_class(name)
-        if (cls.model_description is Predictor.model_description
-                and cls.training_drives is Predictor.training_drives):
+        if (
+            cls.model_description is Predictor.model_description
+            and cls.training_drives is Predictor.training_drives
+        ):
             continue  # no learned model: not worth building (an ONNX session, ...)
         pred = create(name, None, **cfg.predictor_options.get(name, {}))
         desc = pred.model_description()
@@ -306,13 +340,17 @@ def learned_models(cfg: RunConfig) -> dict[str, dict[str, Any]]:
         if desc is None and not drives:
             continue
         desc = desc or {}
-        out[name] = {"model": str(desc.get("model", "")), "bundled": bool(desc.get("bundled")),
-                     "train_drives": drives}
+        out[name] = {
+            "model": str(desc.get("model", "")),
+            "bundled": bool(desc.get("bundled")),
+            "train_drives": drives,
+        }
     return out
 
 
-def check_tuning_file(path: Path | str | None, names: Sequence[str],
-                      options: Mapping[str, Mapping[str, Any]]) -> None:
+def check_tuning_file(
+    path: Path | str | None, names: Sequence[str], options: Mapping[str, Mapping[str, Any]]
+) -> None:
     """Check a ``--tuning`` file before any work: readable, shaped as ``bench tune --out``
     writes it, and each of its entries accepted by the run's predictor of that name
     (each such predictor is built once per GPS condition the file holds for it)."""
@@ -329,5 +367,7 @@ def check_tuning_file(path: Path | str | None, names: Sequence[str],
             try:
                 create(name, condition, tuning_file=path, **options.get(name, {}))
             except Exception as e:  # noqa: BLE001 - any constructor failure is the file's
-                raise UsageError(f"--tuning {path}: {base_name(name)} ({condition}) cannot be "
-                                 f"created with its parameters: {_failure_detail(e)}") from None
+                raise UsageError(
+                    f"--tuning {path}: {base_name(name)} ({condition}) cannot be "
+                    f"created with its parameters: {_failure_detail(e)}"
+                ) from None

@@ -51,17 +51,25 @@ class PreparedDrive:
     gps_condition: str = "native"
 
 
-def _input_gps(drive: Drive, cfg: RunConfig, seed: int, condition: str
-               ) -> tuple[GpsStream, list[str]]:
+def _input_gps(
+    drive: Drive, cfg: RunConfig, seed: int, condition: str
+) -> tuple[GpsStream, list[str]]:
     """The fixes fed under GPS ``condition``: the drive's own, or drawn from its truth."""
     if condition != "native":
         from posbench.scenarios.degrade import degrade_gps
 
         assert drive.truth is not None  # gps_condition gives a profile only with a truth
-        gps = degrade_gps(drive.truth, profile=condition, seed=seed,
-                          latency_s=cfg.gps_latency_s, intervals=cfg.intervals)
-        return gps, [f"GPS: {fixes_description(condition)}: intervals {cfg.intervals}, "
-                     f"latency {cfg.gps_latency_s:g} s, seed {seed}"]
+        gps = degrade_gps(
+            drive.truth,
+            profile=condition,
+            seed=seed,
+            latency_s=cfg.gps_latency_s,
+            intervals=cfg.intervals,
+        )
+        return gps, [
+            f"GPS: {fixes_description(condition)}: intervals {cfg.intervals}, "
+            f"latency {cfg.gps_latency_s:g} s, seed {seed}"
+        ]
     return drive.gps, [f"GPS: {fixes_description(condition)}"]
 
 
@@ -89,8 +97,9 @@ def _labels(drive: Drive, tq: np.ndarray, grid_t: np.ndarray, grid_xy: np.ndarra
         return np.full(tq.size, "unlabelled")
     st = drive.speed.t if drive.speed is not None else None
     sv = drive.speed.v if drive.speed is not None else None
-    return np.asarray(label_times(tq, grid_t[ok], grid_xy[ok, 0], grid_xy[ok, 1],
-                                  speed_t=st, speed_v=sv))
+    return np.asarray(
+        label_times(tq, grid_t[ok], grid_xy[ok, 0], grid_xy[ok, 1], speed_t=st, speed_v=sv)
+    )
 
 
 def prepare_drive(drive: Drive, cfg: RunConfig) -> PreparedDrive:
@@ -126,22 +135,33 @@ def prepare_drive(drive: Drive, cfg: RunConfig) -> PreparedDrive:
     tq_all = np.concatenate([f_query, n_query])
     dt = HEADING_DT_S
     all_ref = reference_at(drive, np.concatenate([grid_t, tq_all, tq_all - dt, tq_all + dt]))
-    grid_xy = all_ref[:grid_t.size]
-    at, before, after = np.split(all_ref[grid_t.size:], 3)
+    grid_xy = all_ref[: grid_t.size]
+    at, before, after = np.split(all_ref[grid_t.size :], 3)
     heading, _, yaw_rate = reference_motion(before, at, after, dt)
     nf = f_query.size
-    refs = {"future": (at[:nf], heading[:nf], yaw_rate[:nf]),
-            "now": (at[nf:], heading[nf:], yaw_rate[nf:])}
+    refs = {
+        "future": (at[:nf], heading[:nf], yaw_rate[:nf]),
+        "now": (at[nf:], heading[nf:], yaw_rate[nf:]),
+    }
     del all_ref, before, after
 
     def queries(kind: str, t_issue: np.ndarray, t_query: np.ndarray) -> Queries:
         ref, heading, yaw_rate = refs[kind]
         last_fix = np.searchsorted(gps.t, t_issue, side="right") - 1
         since = t_query - gps.t[np.clip(last_fix, 0, None)]
-        return Queries(t_issue, t_query, ref, _speed_at(drive, t_query, grid_t, grid_xy),
-                       _labels(drive, t_query, grid_t, grid_xy), since, heading, yaw_rate)
+        return Queries(
+            t_issue,
+            t_query,
+            ref,
+            _speed_at(drive, t_query, grid_t, grid_xy),
+            _labels(drive, t_query, grid_t, grid_xy),
+            since,
+            heading,
+            yaw_rate,
+        )
 
     future = queries("future", f_issue, f_query)
     now = queries("now", n_query, n_query)
-    return PreparedDrive(drive, drive.meta.format, gps, gps_all, reference, future, now, outages,
-                         notes, condition)
+    return PreparedDrive(
+        drive, drive.meta.format, gps, gps_all, reference, future, now, outages, notes, condition
+    )

@@ -26,17 +26,24 @@ def query_frame(prep: PreparedDrive, kind: str) -> pd.DataFrame:
     """One drive's queries of one kind (``future`` or ``now``) with what they are scored
     against: the :data:`QUERY_COLUMNS` of the traces."""
     q: Queries = prep.future if kind == "future" else prep.now
-    return pd.DataFrame({
-        "dataset": prep.dataset, "drive": prep.drive.name, "kind": kind,
-        "t_issue": q.t_issue, "t_query": q.t_query,
-        "x_ref": q.ref_xy[:, 0], "y_ref": q.ref_xy[:, 1],
-        "label": pd.Categorical(q.label, categories=LABEL_CATEGORIES),
-        "speed_mps": q.speed_mps, "since_fix_s": q.since_fix_s,
-        "outage": outage_ids(q.t_query, prep.outages),
-        "warmup": q.t_issue < warmup_end_s(prep),
-        "heading_ref": _or_nan(q.heading_rad, q.t_query.size),
-        "yaw_rate_ref": _or_nan(q.yaw_rate, q.t_query.size),
-    }).astype({"kind": KIND_DTYPE})
+    return pd.DataFrame(
+        {
+            "dataset": prep.dataset,
+            "drive": prep.drive.name,
+            "kind": kind,
+            "t_issue": q.t_issue,
+            "t_query": q.t_query,
+            "x_ref": q.ref_xy[:, 0],
+            "y_ref": q.ref_xy[:, 1],
+            "label": pd.Categorical(q.label, categories=LABEL_CATEGORIES),
+            "speed_mps": q.speed_mps,
+            "since_fix_s": q.since_fix_s,
+            "outage": outage_ids(q.t_query, prep.outages),
+            "warmup": q.t_issue < warmup_end_s(prep),
+            "heading_ref": _or_nan(q.heading_rad, q.t_query.size),
+            "yaw_rate_ref": _or_nan(q.yaw_rate, q.t_query.size),
+        }
+    ).astype({"kind": KIND_DTYPE})
 
 
 def _or_nan(values: np.ndarray | None, n: int) -> np.ndarray:

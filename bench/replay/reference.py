@@ -31,8 +31,9 @@ def reference_at(drive: Drive, tq: np.ndarray) -> np.ndarray:
     return cubic_through_fixes(g.t, g.x, g.y, tq)
 
 
-def truth_at(t_truth: np.ndarray, x: np.ndarray, y: np.ndarray, tq: np.ndarray,
-             max_gap_s: float = 0.5) -> np.ndarray:
+def truth_at(
+    t_truth: np.ndarray, x: np.ndarray, y: np.ndarray, tq: np.ndarray, max_gap_s: float = 0.5
+) -> np.ndarray:
     """(N, 2) truth positions [m] at times tq [s] by cubic spline; NaN where not covered."""
     from scipy.interpolate import CubicSpline
 
@@ -49,8 +50,14 @@ def truth_at(t_truth: np.ndarray, x: np.ndarray, y: np.ndarray, tq: np.ndarray,
     return out
 
 
-def cubic_through_fixes(t_fix: np.ndarray, x: np.ndarray, y: np.ndarray, tq: np.ndarray,
-                        n_side: int = 4, max_gap_s: float = 1.0) -> np.ndarray:
+def cubic_through_fixes(
+    t_fix: np.ndarray,
+    x: np.ndarray,
+    y: np.ndarray,
+    tq: np.ndarray,
+    n_side: int = 4,
+    max_gap_s: float = 1.0,
+) -> np.ndarray:
     """(N, 2) positions [m] at tq from a least-squares cubic through the ``n_side`` fixes
     before and ``n_side`` after each query time (vectorised: batched normal equations
     on times centred at the query and scaled to seconds)."""

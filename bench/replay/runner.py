@@ -26,8 +26,9 @@ from posbench.scoring.score import score_many
 
 def _fixes_frame(prep: PreparedDrive) -> pd.DataFrame:
     received = np.isin(prep.gps_all.t, prep.gps.t)
-    return pd.DataFrame({"t": prep.gps_all.t, "x": prep.gps_all.x, "y": prep.gps_all.y,
-                         "received": received})
+    return pd.DataFrame(
+        {"t": prep.gps_all.t, "x": prep.gps_all.x, "y": prep.gps_all.y, "received": received}
+    )
 
 
 def _track_frame(prep: PreparedDrive) -> pd.DataFrame:
@@ -63,8 +64,16 @@ def skip_reason(drive: Drive, cfg: RunConfig) -> str | None:
 
 def skipped_run(drive: Drive, reason: str) -> DriveRun:
     """The record of a drive that is not scored, with the reason."""
-    return DriveRun(drive.name, drive.meta.format, "", [], list(drive.meta.warnings),
-                    pd.DataFrame(), skipped=reason, sensor_frames=sensor_frames(drive))
+    return DriveRun(
+        drive.name,
+        drive.meta.format,
+        "",
+        [],
+        list(drive.meta.warnings),
+        pd.DataFrame(),
+        skipped=reason,
+        sensor_frames=sensor_frames(drive),
+    )
 
 
 def run_drive(drive: Drive, cfg: RunConfig) -> DriveRun:
@@ -76,12 +85,12 @@ def run_drive(drive: Drive, cfg: RunConfig) -> DriveRun:
     answers, step_ns, query_ns, cov_ns, rejected = [], {}, {}, {}, {}
     # one query table, future then now: each predictor's traces are its future rows, then
     # its now rows (score_many tiles the table once per predictor)
-    queries = pd.concat([query_frame(prep, "future"), query_frame(prep, "now")],
-                        ignore_index=True)
+    queries = pd.concat([query_frame(prep, "future"), query_frame(prep, "now")], ignore_index=True)
     condition = prep.gps_condition if cfg.use_tuned else None
     for name in cfg.predictors:
-        pred = create(name, condition, tuning_file=cfg.tuning,
-                      **cfg.predictor_options.get(name, {}))
+        pred = create(
+            name, condition, tuning_file=cfg.tuning, **cfg.predictor_options.get(name, {})
+        )
         if cfg.gate:
             pred = GatedPredictor(pred)
         res = replay(pred, prep, cfg.horizon_s)
@@ -93,11 +102,25 @@ def run_drive(drive: Drive, cfg: RunConfig) -> DriveRun:
         if res.cov_ns is not None:
             cov_ns[name] = res.cov_ns
     traces = score_many(queries, answers)
-    return DriveRun(drive.name, prep.dataset, prep.reference, prep.notes, list(drive.meta.warnings),
-                    traces, step_ns, query_ns, prep.outages, gps_count=len(prep.gps),
-                    duration_s=drive.duration_s, fixes=_fixes_frame(prep), track=_track_frame(prep),
-                    sensor_frames=sensor_frames(drive),
-                    rejected=rejected, cov_ns=cov_ns, gps_condition=prep.gps_condition)
+    return DriveRun(
+        drive.name,
+        prep.dataset,
+        prep.reference,
+        prep.notes,
+        list(drive.meta.warnings),
+        traces,
+        step_ns,
+        query_ns,
+        prep.outages,
+        gps_count=len(prep.gps),
+        duration_s=drive.duration_s,
+        fixes=_fixes_frame(prep),
+        track=_track_frame(prep),
+        sensor_frames=sensor_frames(drive),
+        rejected=rejected,
+        cov_ns=cov_ns,
+        gps_condition=prep.gps_condition,
+    )
 
 
 def _init_worker() -> None:
@@ -114,8 +137,9 @@ def replay_cost(drive: Drive, cfg: RunConfig) -> float:
     return n + (len(drive.speed) if drive.speed is not None else 0)
 
 
-def plan_tasks(drives: Sequence[Drive], cfg: RunConfig, workers: int
-               ) -> list[tuple[int, str | None]]:
+def plan_tasks(
+    drives: Sequence[Drive], cfg: RunConfig, workers: int
+) -> list[tuple[int, str | None]]:
     """The local runner's tasks, costliest first: (drive index, None) replays a drive through
     every predictor; (drive index, name) through predictor ``name`` only. A drive holding
     more than 1 / (2 x workers) of the run's work (:func:`replay_cost`) is split by
@@ -132,8 +156,12 @@ def plan_tasks(drives: Sequence[Drive], cfg: RunConfig, workers: int
     return [(i, name) for _, i, name in tasks]
 
 
-def run(drives: Sequence[Drive], cfg: RunConfig, workers: int = 1,
-        on_done: Callable[[DriveRun], None] | None = None) -> list[DriveRun]:
+def run(
+    drives: Sequence[Drive],
+    cfg: RunConfig,
+    workers: int = 1,
+    on_done: Callable[[DriveRun], None] | None = None,
+) -> list[DriveRun]:
     """Run all drives; ``on_done`` is called as each finishes (for a progress bar).
     The returned list is in the order of ``drives`` whatever ``workers`` is. With several
     workers the costliest drives start first, and a drive long enough to hold a worker
@@ -149,11 +177,15 @@ def run(drives: Sequence[Drive], cfg: RunConfig, workers: int = 1,
     tasks = plan_tasks(drives, cfg, workers)
     parts: dict[int, dict[str, DriveRun]] = {}
     n_parts = {i: sum(1 for j, _ in tasks if j == i) for i in range(len(drives))}
-    with ProcessPoolExecutor(max_workers=min(workers, len(tasks)),
-                             initializer=_init_worker) as pool:
-        futures = {pool.submit(run_drive, drives[i], cfg if name is None
-                               else replace(cfg, predictors=(name,))): (i, name)
-                   for i, name in tasks}
+    with ProcessPoolExecutor(
+        max_workers=min(workers, len(tasks)), initializer=_init_worker
+    ) as pool:
+        futures = {
+            pool.submit(
+                run_drive, drives[i], cfg if name is None else replace(cfg, predictors=(name,))
+            ): (i, name)
+            for i, name in tasks
+        }
         from concurrent.futures import as_completed
 
         for fut in as_completed(futures):

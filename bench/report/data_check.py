@@ -24,10 +24,17 @@ _CELL = {
     "imu.ax": (("scale", "x{:.2f}"), ("corr", "r {:.2f}"), ("bias_mps2", "{:+.2f} m/s²")),
     "imu.yaw": (("offset_deg", "{:+.1f}°"), ("spread_deg", "sd {:.1f}°")),
     "speed": (("scale", "x{:.3f}"),),
-    "gps": (("scatter_m", "{:.2f} m"), ("stated_m", "/ {:.2f} m"),
-            ("truth_offset_m", "off {:.1f} m")),
-    "truth": (("offset_m", "{:.2f} m"), ("rms_m", "rms {:.2f} m"), ("rotation_deg", "{:+.2f}°"),
-              ("scale", "x{:.3f}")),
+    "gps": (
+        ("scatter_m", "{:.2f} m"),
+        ("stated_m", "/ {:.2f} m"),
+        ("truth_offset_m", "off {:.1f} m"),
+    ),
+    "truth": (
+        ("offset_m", "{:.2f} m"),
+        ("rms_m", "rms {:.2f} m"),
+        ("rotation_deg", "{:+.2f}°"),
+        ("scale", "x{:.3f}"),
+    ),
 }
 
 
@@ -35,8 +42,11 @@ def cell(c: Check) -> str:
     """One table cell: the verdict and the stream's main figures."""
     if c.verdict == NA:
         return NA
-    figs = [fmt.format(c.figures[k]) for k, fmt in _CELL[c.stream]
-            if c.figures.get(k) is not None and c.figures[k] == c.figures[k]]
+    figs = [
+        fmt.format(c.figures[k])
+        for k, fmt in _CELL[c.stream]
+        if c.figures.get(k) is not None and c.figures[k] == c.figures[k]
+    ]
     return " ".join([c.verdict, *figs])
 
 
@@ -51,11 +61,16 @@ def table_rows(drives: dict[str, dict[str, Any]]) -> tuple[list[str], list[list[
     return header, rows
 
 
-def flagged(drives: dict[str, dict[str, Any]], verdicts: tuple[str, ...] = (FAIL, WARN)
-            ) -> list[tuple[str, str, str, str]]:
+def flagged(
+    drives: dict[str, dict[str, Any]], verdicts: tuple[str, ...] = (FAIL, WARN)
+) -> list[tuple[str, str, str, str]]:
     """(verdict, drive, stream, reason) of every check with one of ``verdicts``, fails first."""
-    out = [(c["verdict"], d, s, c["reason"]) for d, streams in drives.items()
-           for s, c in streams.items() if c["verdict"] in verdicts]
+    out = [
+        (c["verdict"], d, s, c["reason"])
+        for d, streams in drives.items()
+        for s, c in streams.items()
+        if c["verdict"] in verdicts
+    ]
     return sorted(out, key=lambda r: verdicts.index(r[0]))
 
 
@@ -69,11 +84,14 @@ def summary_lines(section: dict[str, Any]) -> list[str]:
     if warns:
         shown = "; ".join(f"{d}: {s}: {why}" for _, d, s, why in warns[:3])
         more = f" (+{len(warns) - 3} more in report.md)" if len(warns) > 3 else ""
-        lines.append(f"data check: {len(warns)} warning{'s' if len(warns) != 1 else ''}: "
-                     f"{shown}{more}")
+        lines.append(
+            f"data check: {len(warns)} warning{'s' if len(warns) != 1 else ''}: {shown}{more}"
+        )
     for p, hits in section.get("affected_predictors", {}).items():
-        lines.append(f"data check: {p} used a failing stream ({'; '.join(hits)}): its figures "
-                     "on those drives are not valid")
+        lines.append(
+            f"data check: {p} used a failing stream ({'; '.join(hits)}): its figures "
+            "on those drives are not valid"
+        )
     return lines
 
 
@@ -84,17 +102,27 @@ def report_lines(res: dict[str, Any]) -> list[str]:
         return []
     found = flagged(section["drives"])
     if not found:
-        return ["Data consistency check: every stream of every drive passed or could not be "
-                "judged (n/a); see `bench data inspect`.", ""]
-    lines = ["## Data consistency check", "",
-             "Each IMU and speed stream was compared with the truth's motion where the drive "
-             "has a truth (else with what the GPS fixes imply), and the GPS with the truth "
-             "relative to the accuracy the fixes state; a `fail` means figures computed from "
-             "that stream are not valid.", ""]
+        return [
+            "Data consistency check: every stream of every drive passed or could not be "
+            "judged (n/a); see `bench data inspect`.",
+            "",
+        ]
+    lines = [
+        "## Data consistency check",
+        "",
+        "Each IMU and speed stream was compared with the truth's motion where the drive "
+        "has a truth (else with what the GPS fixes imply), and the GPS with the truth "
+        "relative to the accuracy the fixes state; a `fail` means figures computed from "
+        "that stream are not valid.",
+        "",
+    ]
     lines += [f"- **{v}** `{d}` {s}: {why}" for v, d, s, why in found]
     aff = section.get("affected_predictors", {})
     if aff:
-        lines += ["", "Predictors that used a failing stream (their figures on those drives "
-                  "are not valid):", ""]
+        lines += [
+            "",
+            "Predictors that used a failing stream (their figures on those drives are not valid):",
+            "",
+        ]
         lines += [f"- `{p}`: " + "; ".join(hits) for p, hits in aff.items()]
     return lines + [""]

@@ -16,8 +16,10 @@ def glossary(res: Mapping[str, Any]) -> list[tuple[str, str]]:
     """(term, definition) for every kind of figure in the report of ``res``, in reading
     order: queries and errors, the summary figures, intervals, the paired comparison, seeds,
     outages, latency."""
-    terms: list[tuple[str, str]] = [("future / now", TRACE_COLUMNS["kind"][2]),
-                                    *DEFINITIONS.items()]
+    terms: list[tuple[str, str]] = [
+        ("future / now", TRACE_COLUMNS["kind"][2]),
+        *DEFINITIONS.items(),
+    ]
     acc = dict(accuracy.DEFINITIONS)
     if not res.get("by_speed"):
         acc.pop("speed bin")

@@ -64,15 +64,21 @@ def parse_report_formats(text: str, option: str = "--format") -> tuple[str, ...]
         raise UsageError(f"{option}: give one or more of {', '.join(REPORT_FORMATS)}")
     for f in items:
         if f not in REPORT_FORMATS:
-            raise UsageError(f"{option}: unknown format {f!r}; use one or more of "
-                             f"{', '.join(REPORT_FORMATS)} (e.g. md,csv)")
+            raise UsageError(
+                f"{option}: unknown format {f!r}; use one or more of "
+                f"{', '.join(REPORT_FORMATS)} (e.g. md,csv)"
+            )
     return tuple(f for f in REPORT_FORMATS[1:] if f in items)
 
 
-def write_report(run: Run, out: Path, formats: Iterable[str] = ("png",),
-                 drive_plots: int | None = DEFAULT_DRIVE_PLOTS,
-                 table_formats: Iterable[str] = TABLE_FORMATS,
-                 plots: PlotsWritten | None = None) -> list[Path]:
+def write_report(
+    run: Run,
+    out: Path,
+    formats: Iterable[str] = ("png",),
+    drive_plots: int | None = DEFAULT_DRIVE_PLOTS,
+    table_formats: Iterable[str] = TABLE_FORMATS,
+    plots: PlotsWritten | None = None,
+) -> list[Path]:
     """Write the run's plots (in each of ``formats``: png, svg, pdf; ValueError on others),
     ``report.md`` and its tables as files (``table_formats``: csv, latex; see
     :func:`write_tables`) into ``out``; return the paths written. The run itself
@@ -83,11 +89,18 @@ def write_report(run: Run, out: Path, formats: Iterable[str] = ("png",),
     out.mkdir(parents=True, exist_ok=True)
     if plots is None:
         plots = write_plots(run.traces, run.results, out, formats, drive_plots)
-    (out / "report.md").write_text(render_markdown(
-        run.results, [p.relative_to(out).as_posix() for p in plots.files if p.suffix == shown],
-        plot_notes=plots.notes))
-    return [*plots.files, out / "report.md",
-            *write_tables(run.results, out / "tables", table_formats)]
+    (out / "report.md").write_text(
+        render_markdown(
+            run.results,
+            [p.relative_to(out).as_posix() for p in plots.files if p.suffix == shown],
+            plot_notes=plots.notes,
+        )
+    )
+    return [
+        *plots.files,
+        out / "report.md",
+        *write_tables(run.results, out / "tables", table_formats),
+    ]
 
 
 def report_tables(res: dict[str, Any]) -> list[Table]:
@@ -104,8 +117,11 @@ def report_tables(res: dict[str, Any]) -> list[Table]:
     if has_held_out_paired(res):
         tables.append(paired_table(res, held_out=True))
     for ds in res["by_dataset"]:
-        tables += [dataset_table(res, ds), label_table(res, ds, "future"),
-                   label_table(res, ds, "now")]
+        tables += [
+            dataset_table(res, ds),
+            label_table(res, ds, "future"),
+            label_table(res, ds, "now"),
+        ]
         if has_paired(res):
             tables += [paired_table(res, ds), paired_label_table(res, ds, "future")]
         if res.get("held_out", {}).get(ds, {}).get("drives"):
@@ -128,8 +144,9 @@ def report_tables(res: dict[str, Any]) -> list[Table]:
     return tables
 
 
-def write_tables(res: dict[str, Any], folder: Path,
-                 table_formats: Iterable[str] = TABLE_FORMATS) -> list[Path]:
+def write_tables(
+    res: dict[str, Any], folder: Path, table_formats: Iterable[str] = TABLE_FORMATS
+) -> list[Path]:
     """Each report table as ``NAME.csv`` (full precision) and/or ``NAME.tex`` (booktabs) in
     ``folder``, as ``table_formats`` asks; return the paths written."""
     written = []
@@ -144,23 +161,31 @@ def write_tables(res: dict[str, Any], folder: Path,
     return written
 
 
-def render_markdown(res: dict[str, Any], plots: list[str],
-                    plot_notes: dict[str, str] | None = None) -> str:
+def render_markdown(
+    res: dict[str, Any], plots: list[str], plot_notes: dict[str, str] | None = None
+) -> str:
     """The report as Markdown. ``plots``: figure files relative to the report (those under
     ``drives/`` are listed as links, the others shown); ``plot_notes``: figure name -> why it
     was not written."""
     cfg = res["config"]
-    lines = ["# posbench report", "",
-             f"Command: `{res['command']}`", "",
-             f"posbench {res['versions'].get('posbench')} at commit `{res.get('git_commit')}`; "
-             f"horizon {cfg['horizon_s']} s; now-queries every {cfg['now_step_s']} s; "
-             f"GPS profile `{cfg['gps_profile']}`; dropouts `{cfg['dropouts']}`; "
-             f"seed {cfg['seed']}.", "",
-             *[f"- {line[0].upper()}{line[1:]}." for line in fixes_lines(res)], "",
-             "Errors are Euclidean distances in metres in a local ENU frame (true metres). "
-             "`future` = position at fix time + horizon, asked at the fix; `now` = current position, "
-             "asked every now-step between fixes. Latency: `step` = one `observe_gps` plus the "
-             "future query, `query` = one between-fix `position_at`, single process.", ""]
+    lines = [
+        "# posbench report",
+        "",
+        f"Command: `{res['command']}`",
+        "",
+        f"posbench {res['versions'].get('posbench')} at commit `{res.get('git_commit')}`; "
+        f"horizon {cfg['horizon_s']} s; now-queries every {cfg['now_step_s']} s; "
+        f"GPS profile `{cfg['gps_profile']}`; dropouts `{cfg['dropouts']}`; "
+        f"seed {cfg['seed']}.",
+        "",
+        *[f"- {line[0].upper()}{line[1:]}." for line in fixes_lines(res)],
+        "",
+        "Errors are Euclidean distances in metres in a local ENU frame (true metres). "
+        "`future` = position at fix time + horizon, asked at the fix; `now` = current position, "
+        "asked every now-step between fixes. Latency: `step` = one `observe_gps` plus the "
+        "future query, `query` = one between-fix `position_at`, single process.",
+        "",
+    ]
     lines += consistency_lines(res)
     lines += answers_lines(res)
     if statistics_note(res):
@@ -172,92 +197,172 @@ def render_markdown(res: dict[str, Any], plots: list[str],
     lines += sanity_report_lines(res)
     lines += tuning_lines(res)
     if has_paired(res):
-        lines += [f"### Against the baseline `{res['paired']['baseline']}`", "", paired_note(res),
-                  "", paired_table(res).markdown(), ""]
+        lines += [
+            f"### Against the baseline `{res['paired']['baseline']}`",
+            "",
+            paired_note(res),
+            "",
+            paired_table(res).markdown(),
+            "",
+        ]
         if trained_note(res):
-            lines += ["`*` after a name: a learned predictor trained on some of these drives; "
-                      "its comparison over the held-out drives only is below.", ""]
+            lines += [
+                "`*` after a name: a learned predictor trained on some of these drives; "
+                "its comparison over the held-out drives only is below.",
+                "",
+            ]
     if res.get("track_errors", {}).get("predictors"):
         lines += ["### Where the error points", "", TRACK_NOTE, "", track_table(res).markdown(), ""]
     if "uncertainty" in res:
-        lines += ["### Uncertainty", "", UNCERTAINTY_NOTE, "", uncertainty_table(res).markdown(), ""]
+        lines += [
+            "### Uncertainty",
+            "",
+            UNCERTAINTY_NOTE,
+            "",
+            uncertainty_table(res).markdown(),
+            "",
+        ]
         if res["uncertainty"].get("by_since_fix"):
-            lines += ["By time since the last fix (no CI):", "",
-                      uncertainty_table(res, "by_since_fix").markdown(), ""]
+            lines += [
+                "By time since the last fix (no CI):",
+                "",
+                uncertainty_table(res, "by_since_fix").markdown(),
+                "",
+            ]
     lines += seeds_lines(res)
     if res.get("held_out_all"):
         ho = res["held_out_all"]
-        lines += [f"## Held-out drives ({len(ho['drives'])}: no learned predictor of this run "
-                  f"was trained on them)", "", summary_table(res, held_out=True).markdown(),
-                  ""]
+        lines += [
+            f"## Held-out drives ({len(ho['drives'])}: no learned predictor of this run "
+            f"was trained on them)",
+            "",
+            summary_table(res, held_out=True).markdown(),
+            "",
+        ]
         if has_held_out_paired(res):
-            lines += [paired_note(res, " on the held-out drives"), "",
-                      paired_table(res, held_out=True).markdown(), ""]
+            lines += [
+                paired_note(res, " on the held-out drives"),
+                "",
+                paired_table(res, held_out=True).markdown(),
+                "",
+            ]
     warm = warmup_table(res)
     if (warm.frame[["future_n", "now_n", "missing"]].to_numpy() > 0).any():
-        lines += ["## Warm-up queries (left out above)", "",
-                  "Queries issued before a drive's second received fix: a cold start, not a "
-                  "prediction.", "", warm.markdown(), ""]
+        lines += [
+            "## Warm-up queries (left out above)",
+            "",
+            "Queries issued before a drive's second received fix: a cold start, not a prediction.",
+            "",
+            warm.markdown(),
+            "",
+        ]
     fixes_by_dataset = fixes_scored(res)
     for ds in res["by_dataset"]:
         drives = [d for d in res["drives"] if d["dataset"] == ds]
         refs = sorted({d["reference"] for d in drives if d["reference"]})
         fixes = fixes_by_dataset.get(ds)
         fed = f"; fixes: {fixes}" if fixes else ""
-        lines += [f"## Data set `{ds}`", "",
-                  f"{len(drives)} drives; reference: {', '.join(refs) or '-'}{fed}.",
-                  ""]
+        lines += [
+            f"## Data set `{ds}`",
+            "",
+            f"{len(drives)} drives; reference: {', '.join(refs) or '-'}{fed}.",
+            "",
+        ]
         lines += [dataset_table(res, ds).markdown(), ""]
-        note = block_note([s[k] for s in res["by_dataset"][ds].values() for k in KINDS],
-                          f"`{ds}`")
+        note = block_note([s[k] for s in res["by_dataset"][ds].values() for k in KINDS], f"`{ds}`")
         if note:
             lines += [note, ""]
         if has_paired(res):
             lines += [paired_note(res, f" in `{ds}`"), "", paired_table(res, ds).markdown(), ""]
-        lines += ["### Route type (paper's Table I layout), future point, mean error in cm (queries)",
-                  "", label_table(res, ds, "future").markdown(), ""]
+        lines += [
+            "### Route type (paper's Table I layout), future point, mean error in cm (queries)",
+            "",
+            label_table(res, ds, "future").markdown(),
+            "",
+        ]
         if res.get("statistics"):
-            lines += [f"`{NOT_CONCLUSIVE}`: not conclusive, the cell's 95 % interval is wider "
-                      f"than its value.", ""]
-        lines += ["### Route type, current position (now), mean error in cm (queries)", "",
-                  label_table(res, ds, "now").markdown(), ""]
+            lines += [
+                f"`{NOT_CONCLUSIVE}`: not conclusive, the cell's 95 % interval is wider "
+                f"than its value.",
+                "",
+            ]
+        lines += [
+            "### Route type, current position (now), mean error in cm (queries)",
+            "",
+            label_table(res, ds, "now").markdown(),
+            "",
+        ]
         if has_paired(res):
             base = res["paired"]["baseline"]
-            lines += [f"### Route type, future point, Δ mean vs `{base}` in cm (queries both "
-                      f"answered)", "", paired_label_table(res, ds, "future").markdown(), ""]
+            lines += [
+                f"### Route type, future point, Δ mean vs `{base}` in cm (queries both answered)",
+                "",
+                paired_label_table(res, ds, "future").markdown(),
+                "",
+            ]
         ho = res.get("held_out", {}).get(ds)
         if ho:
             who = "; ".join(
                 f"`{p}` ({model_text(res['models'][p])}) was trained on "
                 + ", ".join(sorted(set(names) & set(ho["excluded_training_drives"])))
                 for p, names in res.get("training_drives", {}).items()
-                if set(names) & set(ho["excluded_training_drives"]))
-            lines += [f"### Held-out drives only ({len(ho['drives'])} of {len(drives)})", "",
-                      f"{who}: figures on those drives flatter it. On the held-out drives "
-                      f"({', '.join(ho['drives']) or 'none'}):", ""]
+                if set(names) & set(ho["excluded_training_drives"])
+            )
+            lines += [
+                f"### Held-out drives only ({len(ho['drives'])} of {len(drives)})",
+                "",
+                f"{who}: figures on those drives flatter it. On the held-out drives "
+                f"({', '.join(ho['drives']) or 'none'}):",
+                "",
+            ]
             if ho["drives"] and has_held_out_paired(res, ds):
-                lines += [paired_note(res, f" on the held-out drives of `{ds}`"), "",
-                          paired_table(res, ds, held_out=True).markdown(), ""]
+                lines += [
+                    paired_note(res, f" on the held-out drives of `{ds}`"),
+                    "",
+                    paired_table(res, ds, held_out=True).markdown(),
+                    "",
+                ]
             if ho["drives"]:
-                lines += ["Future point, mean error in cm (queries):", "",
-                          label_table(res, ds, "future", held_out=True).markdown(), "",
-                          "Current position (now), mean error in cm (queries):", "",
-                          label_table(res, ds, "now", held_out=True).markdown(), ""]
+                lines += [
+                    "Future point, mean error in cm (queries):",
+                    "",
+                    label_table(res, ds, "future", held_out=True).markdown(),
+                    "",
+                    "Current position (now), mean error in cm (queries):",
+                    "",
+                    label_table(res, ds, "now", held_out=True).markdown(),
+                    "",
+                ]
     if res.get("by_speed"):
-        lines += ["## Future-point error by speed, mean [m] (queries)", "",
-                  speed_table(res).markdown(), ""]
+        lines += [
+            "## Future-point error by speed, mean [m] (queries)",
+            "",
+            speed_table(res).markdown(),
+            "",
+        ]
     if res.get("outages"):
-        lines += ["## GPS outages", "",
-                  "Current-position (now) error by time since the last received fix, mean [m] "
-                  "(queries within 0.05 s of each checkpoint), and per outage: ADE (mean error "
-                  "over the outage), FDE (error just before the fix returns), miss rate (share of "
-                  "outages with FDE > 2 m).", ""]
+        lines += [
+            "## GPS outages",
+            "",
+            "Current-position (now) error by time since the last received fix, mean [m] "
+            "(queries within 0.05 s of each checkpoint), and per outage: ADE (mean error "
+            "over the outage), FDE (error just before the fix returns), miss rate (share of "
+            "outages with FDE > 2 m).",
+            "",
+        ]
         lines += [outage_table(res).markdown(), ""]
     lines += gate_lines(res)
     lines += ["## Drives", ""]
     lines += [drives_table(res).markdown(), ""]
-    note = block_note([d["predictors"][p]["future"] for d in res["drives"] if not d["skipped"]
-                       for p in d.get("predictors", {})], "Each row")
+    note = block_note(
+        [
+            d["predictors"][p]["future"]
+            for d in res["drives"]
+            if not d["skipped"]
+            for p in d.get("predictors", {})
+        ],
+        "Each row",
+    )
     if note:
         lines += [note, ""]
     warn = [(d["name"], w) for d in res["drives"] for w in d["warnings"]]
@@ -267,20 +372,29 @@ def render_markdown(res: dict[str, Any], plots: list[str],
         shown = [p for p in plots if not p.startswith("drives/")]
         per_drive = [p for p in plots if p.startswith("drives/")]
         lines += ["## Plots", ""]
-        lines += [f"![{p}]({p})" if p.endswith((".png", ".svg")) else f"- [{p}]({p})"
-                  for p in shown] + [""] * bool(shown)
+        lines += [
+            f"![{p}]({p})" if p.endswith((".png", ".svg")) else f"- [{p}]({p})" for p in shown
+        ] + [""] * bool(shown)
         if plot_notes:
             lines += ["Not drawn:", ""] + [f"- {k}: {v}" for k, v in plot_notes.items()] + [""]
         if per_drive:
             lines += ["Future-point error over time, per drive:", ""]
-            lines += [f"- [{Path(p).stem.removesuffix('-error_over_time')}]({p})"
-                      for p in per_drive] + [""]
+            lines += [
+                f"- [{Path(p).stem.removesuffix('-error_over_time')}]({p})" for p in per_drive
+            ] + [""]
     if res.get("paper_figures"):
         lines += ["## The paper's figures, from this run", ""]
         for f in res["paper_figures"]:
             lines += [f"![{f['file']}]({f['file']})", "", f"*{f['caption']}*", ""]
-    lines += ["## Data", ""] + [f"- `{m['path']}`: {m['files']} files, {m['bytes']} bytes, "
-                                f"sha256 `{m['sha256'][:16]}...`" for m in res["data"]] + [""]
+    lines += (
+        ["## Data", ""]
+        + [
+            f"- `{m['path']}`: {m['files']} files, {m['bytes']} bytes, "
+            f"sha256 `{m['sha256'][:16]}...`"
+            for m in res["data"]
+        ]
+        + [""]
+    )
     lines += glossary_lines(res)
     return "\n".join(lines)
 
@@ -295,12 +409,20 @@ def sanity_report_lines(res: dict[str, Any]) -> list[str]:
         return []
     lines = sanity_lines(res)
     if not lines:
-        return ["Sanity check: no predictor loses to constant velocity (`cv`) on any data set "
-                "(paired 95 % CI of the difference in mean error above 0).", ""]
-    return ["### Implausible results", "",
-            "A predictor that loses to constant velocity (`cv`, the last two fixes extrapolated) "
-            "on the same queries, with the paired 95 % interval of the difference above 0:", "",
-            *[f"- {line}" for line in lines], ""]
+        return [
+            "Sanity check: no predictor loses to constant velocity (`cv`) on any data set "
+            "(paired 95 % CI of the difference in mean error above 0).",
+            "",
+        ]
+    return [
+        "### Implausible results",
+        "",
+        "A predictor that loses to constant velocity (`cv`, the last two fixes extrapolated) "
+        "on the same queries, with the paired 95 % interval of the difference above 0:",
+        "",
+        *[f"- {line}" for line in lines],
+        "",
+    ]
 
 
 def answers_lines(res: dict[str, Any]) -> list[str]:
@@ -310,13 +432,20 @@ def answers_lines(res: dict[str, Any]) -> list[str]:
     if not a:
         return []
     missing = a["queries"] - a["answered"]
-    return [f"Answers produced outside posbench (`{a['file']}`), scored against the queries "
-            f"folder `{a['queries_folder']}`: {a['answered']} of {a['queries']} queries answered"
-            + (f", {missing} without an answer (scored as `missing`; per drive in the drive "
-               f"notes of results.json)" if missing else "")
-            + ". posbench cannot check such answers for look-ahead (use of inputs stamped after "
-              "the query's t_issue), as it does for a predictor it replays; latency is what the "
-              "file's `latency_us` column gives (`-`: none given).", ""]
+    return [
+        f"Answers produced outside posbench (`{a['file']}`), scored against the queries "
+        f"folder `{a['queries_folder']}`: {a['answered']} of {a['queries']} queries answered"
+        + (
+            f", {missing} without an answer (scored as `missing`; per drive in the drive "
+            f"notes of results.json)"
+            if missing
+            else ""
+        )
+        + ". posbench cannot check such answers for look-ahead (use of inputs stamped after "
+        "the query's t_issue), as it does for a predictor it replays; latency is what the "
+        "file's `latency_us` column gives (`-`: none given).",
+        "",
+    ]
 
 
 def seeds_lines(res: dict[str, Any]) -> list[str]:
@@ -325,13 +454,18 @@ def seeds_lines(res: dict[str, Any]) -> list[str]:
     if not seeds:
         return []
     listed = ", ".join(str(s) for s in seeds["seeds"])
-    return [f"## Repeated over {len(seeds['seeds'])} seeds ({listed})", "",
-            f"The same drives and predictors replayed with each seed's GPS noise and dropouts. "
-            f"Every other figure, interval, table and plot of this report, and traces.parquet, "
-            f"are from seed {seeds['traces_seed']}; results.json keeps each seed's headline "
-            f"figures (`seeds.runs`). Beside seed {seeds['traces_seed']}'s mean and its 95 % "
-            f"interval (other drives), the spread over seeds (other random draws):", "",
-            seeds_table(res).markdown(), ""]
+    return [
+        f"## Repeated over {len(seeds['seeds'])} seeds ({listed})",
+        "",
+        f"The same drives and predictors replayed with each seed's GPS noise and dropouts. "
+        f"Every other figure, interval, table and plot of this report, and traces.parquet, "
+        f"are from seed {seeds['traces_seed']}; results.json keeps each seed's headline "
+        f"figures (`seeds.runs`). Beside seed {seeds['traces_seed']}'s mean and its 95 % "
+        f"interval (other drives), the spread over seeds (other random draws):",
+        "",
+        seeds_table(res).markdown(),
+        "",
+    ]
 
 
 def gate_lines(res: dict[str, Any]) -> list[str]:
@@ -342,13 +476,19 @@ def gate_lines(res: dict[str, Any]) -> list[str]:
     lines = ["## GPS outlier gate: fixes rejected per predictor", ""]
     if not gate.get("enabled"):
         if res.get("answers"):
-            return lines + ["None: answers scored by `bench score` come from a system that got "
-                            "every fed fix; any gating is its own.", ""]
+            return lines + [
+                "None: answers scored by `bench score` come from a system that got "
+                "every fed fix; any gating is its own.",
+                "",
+            ]
         return lines + ["Off (`--no-gate`): every fix reached the predictors, as in the paper.", ""]
-    lines += ["A fix implying impossible motion (speed > 60 m/s, or a miss of the constant-velocity "
-              "prediction beyond 15 m/s^2 of acceleration plus 4 sigma of fix noise; a repeated "
-              "stale fix while moving) is dropped before the predictor and bridged like a "
-              "missing fix. Scores still use the ungated reference.", ""]
+    lines += [
+        "A fix implying impossible motion (speed > 60 m/s, or a miss of the constant-velocity "
+        "prediction beyond 15 m/s^2 of acceleration plus 4 sigma of fix noise; a repeated "
+        "stale fix while moving) is dropped before the predictor and bridged like a "
+        "missing fix. Scores still use the ungated reference.",
+        "",
+    ]
     lines += [gate_table(res).markdown(), ""]
     per_drive = gate_drive_table(res)
     if not per_drive.frame.empty:

@@ -10,17 +10,22 @@ from posbench.scoring.schema import KINDS
 from posbench.tables.run_tables import trained_in_run
 from posbench.tables.stat_tables import block_lengths
 
-MISSING_NOTE = ("`missing`: queries a predictor answered with no position (NaN) although a "
-                "reference exists, e.g. before its first fix; they are counted, not averaged, so "
-                "a predictor cannot look better by abstaining.")
+MISSING_NOTE = (
+    "`missing`: queries a predictor answered with no position (NaN) although a "
+    "reference exists, e.g. before its first fix; they are counted, not averaged, so "
+    "a predictor cannot look better by abstaining."
+)
 
 
 def model_text(model: dict[str, Any]) -> str:
     """How a report names a learned predictor's model: the bundled one, or its file."""
     if model.get("bundled"):
         text = str(model.get("model", ""))  # "bundled (predictors/<pkg>/bundled/model.onnx)"
-        path = text[text.find("(") + 1:text.rfind(")")] if "(" in text else \
-            "predictors/lstm/bundled/model.onnx"
+        path = (
+            text[text.find("(") + 1 : text.rfind(")")]
+            if "(" in text
+            else "predictors/lstm/bundled/model.onnx"
+        )
         return f"the bundled model, {path}"
     return f"model {model['model']}"
 
@@ -31,8 +36,10 @@ def trained_note(res: dict[str, Any]) -> str:
     if not trained:
         return ""
     n_drives = sum(1 for d in res["drives"] if not d["skipped"])
-    parts = [f"{p} ({model_text(res['models'][p])}) was trained on {len(d)} of these "
-             f"{n_drives} drives" for p, d in trained.items()]
+    parts = [
+        f"{p} ({model_text(res['models'][p])}) was trained on {len(d)} of these {n_drives} drives"
+        for p, d in trained.items()
+    ]
     return "* " + "; ".join(parts) + ": its figures on them flatter it; see the held-out table."
 
 
@@ -64,17 +71,21 @@ def fixes_scored(res: dict[str, Any]) -> dict[str, str]:
         if len(conds) == 1:
             out[ds] = fixes_description(next(iter(conds)))
         else:
-            out[ds] = "; ".join(f"{fixes_description(c)} ({plural(n, 'drive')})"
-                                for c, n in sorted(conds.items(),
-                                                   key=lambda cn: GPS_CONDITIONS.index(cn[0])))
+            out[ds] = "; ".join(
+                f"{fixes_description(c)} ({plural(n, 'drive')})"
+                for c, n in sorted(conds.items(), key=lambda cn: GPS_CONDITIONS.index(cn[0]))
+            )
     return out
 
 
 def fixes_lines(res: dict[str, Any], dataset: str | None = None) -> list[str]:
     """``fixes scored in `DATA SET`: ...`` per data set (or for ``dataset`` only):
     :func:`fixes_scored` as lines for the terminal and report.md."""
-    return [f"fixes scored in `{ds}`: {text}" for ds, text in fixes_scored(res).items()
-            if dataset is None or ds == dataset]
+    return [
+        f"fixes scored in `{ds}`: {text}"
+        for ds, text in fixes_scored(res).items()
+        if dataset is None or ds == dataset
+    ]
 
 
 def excluded_counts(res: dict[str, Any]) -> tuple[int, int]:
@@ -85,8 +96,7 @@ def excluded_counts(res: dict[str, Any]) -> tuple[int, int]:
     if first is None:
         return 0, 0
     warm = ex.get("warmup", {}).get(first, {})
-    n_warm = sum(warm.get(k, {}).get("count", 0) + warm.get(k, {}).get("missing", 0)
-                 for k in KINDS)
+    n_warm = sum(warm.get(k, {}).get("count", 0) + warm.get(k, {}).get("missing", 0) for k in KINDS)
     return n_warm, sum(ex.get("no_reference", {}).get(first, {}).values())
 
 
@@ -95,10 +105,12 @@ def excluded_note(res: dict[str, Any]) -> str:
     if next(iter(res["predictors"]), None) is None:
         return ""
     n_warm, n_noref = excluded_counts(res)
-    return (f"Excluded from these figures, per predictor: {n_warm} warm-up queries (issued before "
-            f"a drive's second received fix, when no predictor can know a velocity) and "
-            f"{n_noref} queries without a reference position (past the end of the truth or of "
-            f"the fixes).")
+    return (
+        f"Excluded from these figures, per predictor: {n_warm} warm-up queries (issued before "
+        f"a drive's second received fix, when no predictor can know a velocity) and "
+        f"{n_noref} queries without a reference position (past the end of the truth or of "
+        f"the fixes)."
+    )
 
 
 def has_paired(res: dict[str, Any]) -> bool:
@@ -121,19 +133,23 @@ def statistics_note(res: dict[str, Any]) -> str:
     st = res.get("statistics")
     if not st:
         return ""
-    return (f"`value [lo, hi]`: {100 * st['level']:g} % confidence interval, cluster bootstrap "
-            f"over drives ({st['resamples']} resamples, seed {st['seed']}); a figure from a "
-            f"single drive resamples blocks of contiguous queries instead (block bootstrap). "
-            f"See the glossary at the end.")
+    return (
+        f"`value [lo, hi]`: {100 * st['level']:g} % confidence interval, cluster bootstrap "
+        f"over drives ({st['resamples']} resamples, seed {st['seed']}); a figure from a "
+        f"single drive resamples blocks of contiguous queries instead (block bootstrap). "
+        f"See the glossary at the end."
+    )
 
 
 def paired_note(res: dict[str, Any], where: str = "") -> str:
     """What the paired table shows."""
     base = res["paired"]["baseline"]
-    return (f"Each predictor against `{base}`{where}, on the queries both answered: Δ mean = "
-            f"its mean error minus `{base}`'s (negative: better than `{base}`), with its 95 % "
-            f"interval (drives resampled jointly), `*` where the interval excludes 0; drives "
-            f"won = drives on which its mean error is below `{base}`'s.")
+    return (
+        f"Each predictor against `{base}`{where}, on the queries both answered: Δ mean = "
+        f"its mean error minus `{base}`'s (negative: better than `{base}`), with its 95 % "
+        f"interval (drives resampled jointly), `*` where the interval excludes 0; drives "
+        f"won = drives on which its mean error is below `{base}`'s."
+    )
 
 
 def block_note(summaries: list[dict[str, Any]], what: str) -> str:
@@ -141,9 +157,11 @@ def block_note(summaries: list[dict[str, Any]], what: str) -> str:
     lengths = block_lengths(summaries)
     if not lengths:
         return ""
-    span = (f"{lengths[0]}" if len(lengths) == 1 else f"{lengths[0]} to {lengths[-1]}")
-    return (f"{what}: one drive, so the intervals come from a block bootstrap of its "
-            f"contiguous queries (blocks of {span} queries), not from resampling drives.")
+    span = f"{lengths[0]}" if len(lengths) == 1 else f"{lengths[0]} to {lengths[-1]}"
+    return (
+        f"{what}: one drive, so the intervals come from a block bootstrap of its "
+        f"contiguous queries (blocks of {span} queries), not from resampling drives."
+    )
 
 
 def _interval(ci: list[float] | None) -> str:
@@ -162,11 +180,15 @@ def sanity_lines(res: dict[str, Any]) -> list[str]:
         grouped.setdefault((loss["predictor"], loss["dataset"]), []).append(loss)
     lines = []
     for (name, ds), losses in grouped.items():
-        parts = "; ".join(f"{x['kind']} +{x['diff_m']:.3f} m{_interval(x.get('ci95'))} "
-                          f"({x['queries']} queries)" for x in losses)
-        hint = ("its tuning or inputs may not fit these sensors (see bench tune)"
-                if name in (res.get("tuning") or {}) else
-                "a win of it over another method proves nothing on this data")
+        parts = "; ".join(
+            f"{x['kind']} +{x['diff_m']:.3f} m{_interval(x.get('ci95'))} ({x['queries']} queries)"
+            for x in losses
+        )
+        hint = (
+            "its tuning or inputs may not fit these sensors (see bench tune)"
+            if name in (res.get("tuning") or {})
+            else "a win of it over another method proves nothing on this data"
+        )
         lines.append(f"{name} loses to constant velocity on {ds}: {parts}; {hint}")
     return lines
 
@@ -174,8 +196,12 @@ def sanity_lines(res: dict[str, Any]) -> list[str]:
 def _condition_text(condition: str, entry: dict[str, Any], file: str) -> str:
     """``rtk: cov_scale=0.708 (how)``: one GPS condition's tuned values, how they were
     obtained, and their file where it is not the predictor's."""
-    values = ", ".join(f"{k}={v:g}" if isinstance(v, float) else f"{k}={v}"
-                       for k, v in entry["params"].items()) or "defaults"
+    values = (
+        ", ".join(
+            f"{k}={v:g}" if isinstance(v, float) else f"{k}={v}" for k, v in entry["params"].items()
+        )
+        or "defaults"
+    )
     other = entry.get("file", file)
     source = f" from `{other}`" if other != file else ""
     how = f" ({entry['how']})" if entry.get("how") else ""
@@ -189,9 +215,18 @@ def tuning_lines(res: dict[str, Any]) -> list[str]:
     tuning = res.get("tuning") or {}
     lines = []
     for name, t in tuning.items():
-        where = ("built-in (predictors/tuned.json)" if t.get("built_in")
-                 else f"`{t['file']}`") + f", sha256 {t['sha256'][:12]}"
+        where = (
+            "built-in (predictors/tuned.json)" if t.get("built_in") else f"`{t['file']}`"
+        ) + f", sha256 {t['sha256'][:12]}"
         conds = "; ".join(_condition_text(c, e, t["file"]) for c, e in t["conditions"].items())
         lines.append(f"- `{name}`: tuning {where}; {conds}")
-    return (["Tuning of the baselines (their development drives are marked like training "
-             "drives):", "", *lines, ""] if lines else [])
+    return (
+        [
+            "Tuning of the baselines (their development drives are marked like training drives):",
+            "",
+            *lines,
+            "",
+        ]
+        if lines
+        else []
+    )

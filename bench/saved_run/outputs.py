@@ -13,10 +13,19 @@ import json
 from pathlib import Path
 
 #: what runs wrote before ``outputs`` was recorded (exact names, in the folder itself)
-LEGACY_OUTPUTS = ("results.json", "report.md", "traces.parquet", "error_cdf.png",
-                  "error_vs_speed.png", "error_vs_since_fix.png", "path.png",
-                  "paper_fig_prediction.png", "paper_fig_current_position.png",
-                  "paper_fig_path.png", "paper_fig_kalman.png")
+LEGACY_OUTPUTS = (
+    "results.json",
+    "report.md",
+    "traces.parquet",
+    "error_cdf.png",
+    "error_vs_speed.png",
+    "error_vs_since_fix.png",
+    "path.png",
+    "paper_fig_prediction.png",
+    "paper_fig_current_position.png",
+    "paper_fig_path.png",
+    "paper_fig_kalman.png",
+)
 
 
 def previous_outputs(out: Path) -> list[Path]:

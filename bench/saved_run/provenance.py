@@ -13,7 +13,16 @@ from pathlib import Path
 from typing import Any
 
 #: the packages whose versions results.json records (``posbench``: this harness)
-VERSIONED = ("posbench", "numpy", "scipy", "pandas", "filterpy", "onnxruntime", "rosbags", "pymap3d")
+VERSIONED = (
+    "posbench",
+    "numpy",
+    "scipy",
+    "pandas",
+    "filterpy",
+    "onnxruntime",
+    "rosbags",
+    "pymap3d",
+)
 
 
 def package_versions() -> dict[str, str]:
@@ -34,18 +43,35 @@ def data_provenance(paths: Sequence[str | Path] | None, seed: int) -> list[dict[
     synthetic drives' generator seed when there is none."""
     if paths:
         return [tree_hash(p) for p in paths]
-    return [{"path": "built-in synthetic drives", "files": 0, "bytes": 0,
-             "sha256": f"generator seed {seed}"}]
+    return [
+        {
+            "path": "built-in synthetic drives",
+            "files": 0,
+            "bytes": 0,
+            "sha256": f"generator seed {seed}",
+        }
+    ]
 
 
 def git_commit() -> str | None:
     """The commit of the posbench checkout, with ``-dirty`` if it has changes; None outside git."""
     root = Path(__file__).resolve().parents[1]
     try:
-        rev = subprocess.run(["git", "rev-parse", "HEAD"], cwd=root, capture_output=True, text=True,
-                             timeout=5, check=True).stdout.strip()
-        dirty = subprocess.run(["git", "status", "--porcelain", "--untracked-files=no"], cwd=root,
-                               capture_output=True, text=True, timeout=5).stdout.strip()
+        rev = subprocess.run(
+            ["git", "rev-parse", "HEAD"],
+            cwd=root,
+            capture_output=True,
+            text=True,
+            timeout=5,
+            check=True,
+        ).stdout.strip()
+        dirty = subprocess.run(
+            ["git", "status", "--porcelain", "--untracked-files=no"],
+            cwd=root,
+            capture_output=True,
+            text=True,
+            timeout=5,
+        ).stdout.strip()
         return rev + ("-dirty" if dirty else "")
     except (OSError, subprocess.SubprocessError):
         return None
@@ -76,8 +102,11 @@ def _tree_files(root: str) -> list[tuple[str, ...]]:
 def tree_hash(path: str | Path) -> dict[str, Any]:
     """sha256 over the sorted relative paths and contents of every file at or under ``path``."""
     p = Path(path)
-    files = ([(p.name, str(p))] if p.is_file() else
-             [("/".join(parts), os.path.join(p, *parts)) for parts in _tree_files(str(p))])
+    files = (
+        [(p.name, str(p))]
+        if p.is_file()
+        else [("/".join(parts), os.path.join(p, *parts)) for parts in _tree_files(str(p))]
+    )
     h = hashlib.sha256()
     size = 0
     for name, full in files:

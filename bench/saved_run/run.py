@@ -39,7 +39,9 @@ PROVENANCE_KEYS = ("command", "versions", "git_commit", "data")
 
 def results_schema() -> dict[str, Any]:
     """The JSON Schema of ``results.json`` (shipped with the package)."""
-    return json.loads((resources.files("posbench.saved_run") / "schemas" / "results.schema.json").read_text())
+    return json.loads(
+        (resources.files("posbench.saved_run") / "schemas" / "results.schema.json").read_text()
+    )
 
 
 def to_json_value(o: Any) -> Any:
@@ -75,12 +77,17 @@ class Run:
     _traces: pd.DataFrame | None = field(default=None, repr=False)
 
     @classmethod
-    def from_results(cls, results: dict[str, Any], traces: pd.DataFrame | None = None,
-                     folder: Path | None = None) -> Run:
+    def from_results(
+        cls, results: dict[str, Any], traces: pd.DataFrame | None = None, folder: Path | None = None
+    ) -> Run:
         """A run from freshly aggregated ``results``: stamped with :data:`SCHEMA_VERSION`
         and converted to strict JSON values (NaN -> None), exactly as a load would give it."""
-        res = to_json_value({"schema_version": SCHEMA_VERSION,
-                             **{k: v for k, v in results.items() if k != "schema_version"}})
+        res = to_json_value(
+            {
+                "schema_version": SCHEMA_VERSION,
+                **{k: v for k, v in results.items() if k != "schema_version"},
+            }
+        )
         return cls(res, folder, traces)
 
     @property
@@ -128,11 +135,12 @@ class Run:
 
         rows = {}
         for p, v in self.results["predictors"].items():
-            for k in (KINDS if kind is None else (kind,)):
+            for k in KINDS if kind is None else (kind,):
                 s = v[k]
                 row = {f: s.get(f) for f in SUMMARY_KEYS}
-                for fig, (lo, hi) in ((f, b) for f, b in s.get("ci95", {}).items()
-                                      if isinstance(b, list)):
+                for fig, (lo, hi) in (
+                    (f, b) for f, b in s.get("ci95", {}).items() if isinstance(b, list)
+                ):
                     row[f"{fig}_lo"], row[f"{fig}_hi"] = lo, hi
                 rows[(p, k) if kind is None else p] = row
         frame = pd.DataFrame.from_dict(rows, orient="index").astype(float)
@@ -148,20 +156,30 @@ class Run:
 
         block = self.results.get("track_errors", {}).get("predictors", {})
         rows = {p: {k: v[kind].get(k) for k in TRACK_SUMMARY_KEYS} for p, v in block.items()}
-        return pd.DataFrame.from_dict(rows, orient="index", columns=list(TRACK_SUMMARY_KEYS)
-                                      ).astype(float)
+        return pd.DataFrame.from_dict(
+            rows, orient="index", columns=list(TRACK_SUMMARY_KEYS)
+        ).astype(float)
 
-    def report(self, out: str | Path, plot_formats: Sequence[str] = ("png",),
-               drive_plots: int | None = 20, table_formats: Sequence[str] = ("csv", "latex")
-               ) -> list[Path]:
+    def report(
+        self,
+        out: str | Path,
+        plot_formats: Sequence[str] = ("png",),
+        drive_plots: int | None = 20,
+        table_formats: Sequence[str] = ("csv", "latex"),
+    ) -> list[Path]:
         """Write this run's report into folder ``out``: its figures (in ``plot_formats``;
         per-drive ones for at most ``drive_plots`` drives, None: all), ``report.md`` and its
         tables as files (``table_formats``: csv, latex); the paths written. Needs the traces
         for the figures (:attr:`traces`)."""
         from posbench.report.markdown import write_report
 
-        return write_report(self, Path(out), formats=tuple(plot_formats),
-                            drive_plots=drive_plots, table_formats=tuple(table_formats))
+        return write_report(
+            self,
+            Path(out),
+            formats=tuple(plot_formats),
+            drive_plots=drive_plots,
+            table_formats=tuple(table_formats),
+        )
 
     def save(self, out: str | Path) -> list[Path]:
         """Write ``results.json`` and ``traces.parquet`` into folder ``out``
@@ -177,12 +195,17 @@ class Run:
         sets = sorted({str(d.get("dataset")) for d in drives})
         cfg = res.get("config", {})
         where = str(self.folder) if self.folder is not None else "in memory"
-        head = (f"Run({where}: {len(drives)} drive{'' if len(drives) == 1 else 's'} "
-                f"({', '.join(sets) or 'none'}), {len(self.predictors)} predictors, horizon "
-                f"{cfg.get('horizon_s')} s, GPS {cfg.get('gps_profile')})")
-        means = ", ".join(f"{p} {v['future'].get('mean_m'):.3f}"
-                          if v["future"].get("mean_m") is not None else f"{p} -"
-                          for p, v in res.get("predictors", {}).items())
+        head = (
+            f"Run({where}: {len(drives)} drive{'' if len(drives) == 1 else 's'} "
+            f"({', '.join(sets) or 'none'}), {len(self.predictors)} predictors, horizon "
+            f"{cfg.get('horizon_s')} s, GPS {cfg.get('gps_profile')})"
+        )
+        means = ", ".join(
+            f"{p} {v['future'].get('mean_m'):.3f}"
+            if v["future"].get("mean_m") is not None
+            else f"{p} -"
+            for p, v in res.get("predictors", {}).items()
+        )
         return f"{head}\n  future mean error [m]: {means}"
 
 
@@ -195,8 +218,12 @@ def write_traces(out: Path, traces: pd.DataFrame | None) -> Path | None:
     return out / TRACES
 
 
-def save_run(out: Path, run: Run, also_written: Sequence[Path] = (),
-             traces_written: Callable[[], Path | None] | None = None) -> list[Path]:
+def save_run(
+    out: Path,
+    run: Run,
+    also_written: Sequence[Path] = (),
+    traces_written: Callable[[], Path | None] | None = None,
+) -> list[Path]:
     """Write ``run`` into folder ``out``: ``traces.parquet`` (when there are traces) and
     ``results.json`` last, listing under ``outputs`` every file the run wrote there
     (``also_written``: report, figures) so the next run into ``out`` replaces exactly those.
@@ -206,13 +233,13 @@ def save_run(out: Path, run: Run, also_written: Sequence[Path] = (),
     from posbench.saved_run.outputs import relative_outputs
 
     out.mkdir(parents=True, exist_ok=True)
-    traces = (traces_written() if traces_written is not None
-              else write_traces(out, run._traces))
+    traces = traces_written() if traces_written is not None else write_traces(out, run._traces)
     written = [traces] if traces is not None else []
     written.append(out / RESULTS)
     run.results["outputs"] = relative_outputs(out, [*also_written, *written])
-    (out / RESULTS).write_text(json.dumps(to_json_value(run.results), indent=2,
-                                          allow_nan=False) + "\n")
+    (out / RESULTS).write_text(
+        json.dumps(to_json_value(run.results), indent=2, allow_nan=False) + "\n"
+    )
     run.folder = out
     return written
 
@@ -227,7 +254,9 @@ def load_run(path: str | Path) -> Run:
     p = Path(path)
     res_path = p / RESULTS if p.is_dir() else p
     if not res_path.is_file():
-        raise DataError(res_path, "no such file: give a bench run output folder or its results.json")
+        raise DataError(
+            res_path, "no such file: give a bench run output folder or its results.json"
+        )
     try:
         results = json.loads(res_path.read_text())
     except (OSError, ValueError) as e:
@@ -236,7 +265,10 @@ def load_run(path: str | Path) -> Run:
         raise DataError(res_path, "not a posbench results.json (no 'predictors')")
     version = str(results.get("schema_version", "0"))
     if version.split(".")[0] != SCHEMA_VERSION.split(".")[0]:
-        raise DataError(res_path, f"schema_version {version} (this posbench reads "
-                                  f"{SCHEMA_VERSION.split('.')[0]}.x): re-run it or use a matching "
-                                  f"posbench")
+        raise DataError(
+            res_path,
+            f"schema_version {version} (this posbench reads "
+            f"{SCHEMA_VERSION.split('.')[0]}.x): re-run it or use a matching "
+            f"posbench",
+        )
     return Run(results, res_path.parent)

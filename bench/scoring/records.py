@@ -48,7 +48,8 @@ def merge_predictor_runs(parts: Sequence[DriveRun]) -> DriveRun:
     first = parts[0]
     frames = [p.traces for p in parts if not p.traces.empty]
     merged: dict[str, Any] = {
-        "traces": pd.concat(frames, ignore_index=True) if frames else pd.DataFrame()}
+        "traces": pd.concat(frames, ignore_index=True) if frames else pd.DataFrame()
+    }
     for f in fields(DriveRun):
         if isinstance(getattr(first, f.name), dict):
             merged[f.name] = {k: v for p in parts for k, v in getattr(p, f.name).items()}
@@ -73,6 +74,9 @@ def lean_traces(traces: pd.DataFrame) -> pd.DataFrame:
     instead of strings (on the shared data ~0.5-0.9 CPU-s less aggregation and ~0.2-0.3 less
     per figure process; results and files the same to the bit). Saved traces keep their
     text columns."""
-    cols = {c: "category" for c in TEXT_COLUMNS
-            if c in traces.columns and not isinstance(traces[c].dtype, pd.CategoricalDtype)}
+    cols = {
+        c: "category"
+        for c in TEXT_COLUMNS
+        if c in traces.columns and not isinstance(traces[c].dtype, pd.CategoricalDtype)
+    }
     return traces.astype(cols) if cols else traces

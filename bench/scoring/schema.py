@@ -22,9 +22,9 @@ KINDS = ("future", "now")
 #: which queries the figures are over (the report's glossary collects this)
 DEFINITIONS = {
     "scored queries": "every figure is over the queries of its row and cell (predictor; data "
-                      "set, route type, speed bin, drive) that are past their drive's warm-up "
-                      "(issued after its second received fix) and have a reference position; "
-                      "`future` and `now` queries are never mixed.",
+    "set, route type, speed bin, drive) that are past their drive's warm-up "
+    "(issued after its second received fix) and have a reference position; "
+    "`future` and `now` queries are never mixed.",
 }
 
 
@@ -44,34 +44,70 @@ TRACE_COLUMNS: dict[str, tuple[str, str, str]] = {
     "dataset": ("str", "", "data set (the loader's format, e.g. kitti, aslan, synthetic)"),
     "drive": ("str", "", "drive name"),
     "predictor": ("str", "", "predictor name as run (NAME or NAME@ALIAS)"),
-    "kind": ("category", "", "`future`: position at fix time + horizon, asked at the fix; "
-             "`now`: current position, asked every now-step"),
-    "t_issue": ("float64", "s", "when the query was asked (every observation given is at or before it)"),
+    "kind": (
+        "category",
+        "",
+        "`future`: position at fix time + horizon, asked at the fix; "
+        "`now`: current position, asked every now-step",
+    ),
+    "t_issue": (
+        "float64",
+        "s",
+        "when the query was asked (every observation given is at or before it)",
+    ),
     "t_query": ("float64", "s", "the instant whose position was asked for"),
     "x": ("float64", "m", "answer, east (NaN: no answer)"),
     "y": ("float64", "m", "answer, north"),
-    "x_ref": ("float64", "m", "reference position, east (truth, or a cubic through the fixes; "
-              "NaN: none)"),
+    "x_ref": (
+        "float64",
+        "m",
+        "reference position, east (truth, or a cubic through the fixes; NaN: none)",
+    ),
     "y_ref": ("float64", "m", "reference position, north"),
     "error_m": ("float64", "m", "Euclidean distance answer - reference"),
-    "along_m": ("float64", "m", "error along the reference's direction of travel: + ahead, "
-                "- lagging (NaN at standstill, below 0.5 m/s)"),
-    "cross_m": ("float64", "m", "error across the reference's direction of travel: + left, "
-                "- right (ENU; NaN at standstill)"),
-    "label": ("category", "", "scenario at t_query: straight, turn, roundabout, start_stop, "
-              "unlabelled"),
+    "along_m": (
+        "float64",
+        "m",
+        "error along the reference's direction of travel: + ahead, "
+        "- lagging (NaN at standstill, below 0.5 m/s)",
+    ),
+    "cross_m": (
+        "float64",
+        "m",
+        "error across the reference's direction of travel: + left, "
+        "- right (ENU; NaN at standstill)",
+    ),
+    "label": (
+        "category",
+        "",
+        "scenario at t_query: straight, turn, roundabout, start_stop, unlabelled",
+    ),
     "speed_mps": ("float64", "m/s", "reference speed at t_query (NaN: unknown)"),
     "since_fix_s": ("float64", "s", "t_query minus the time of the last fix received by t_issue"),
     "outage": ("int64", "", "index of the GPS outage t_query falls in within its drive, -1: none"),
-    "warmup": ("bool", "", "asked before the drive's second received fix (left out of headline "
-               "figures)"),
-    "heading_ref": ("float64", "rad", "the reference's direction of travel at t_query, "
-                    "counter-clockwise from east (from the reference 0.1 s before and after; "
-                    "NaN: standstill or unknown)"),
-    "yaw_rate_ref": ("float64", "rad/s", "the reference's yaw rate at t_query, + = turning left "
-                     "(NaN: unknown)"),
-    "cov_xx": ("float64", "m^2", "the answer's reported covariance (`covariance_at`, ENU): "
-               "variance east (NaN: the predictor reports no uncertainty for it)"),
+    "warmup": (
+        "bool",
+        "",
+        "asked before the drive's second received fix (left out of headline figures)",
+    ),
+    "heading_ref": (
+        "float64",
+        "rad",
+        "the reference's direction of travel at t_query, "
+        "counter-clockwise from east (from the reference 0.1 s before and after; "
+        "NaN: standstill or unknown)",
+    ),
+    "yaw_rate_ref": (
+        "float64",
+        "rad/s",
+        "the reference's yaw rate at t_query, + = turning left (NaN: unknown)",
+    ),
+    "cov_xx": (
+        "float64",
+        "m^2",
+        "the answer's reported covariance (`covariance_at`, ENU): "
+        "variance east (NaN: the predictor reports no uncertainty for it)",
+    ),
     "cov_xy": ("float64", "m^2", "reported covariance east-north"),
     "cov_yy": ("float64", "m^2", "reported variance north"),
 }

@@ -19,8 +19,9 @@ from posbench.scoring.schema import COV_COLUMNS, TRACK_QUERY_COLUMNS
 MATCH_TOLERANCE_S = 1e-6
 
 
-def answer_positions(queries: pd.DataFrame, answers: pd.DataFrame,
-                     tolerance_s: float = MATCH_TOLERANCE_S) -> np.ndarray:
+def answer_positions(
+    queries: pd.DataFrame, answers: pd.DataFrame, tolerance_s: float = MATCH_TOLERANCE_S
+) -> np.ndarray:
     """For each answer row, the 0-based row of ``queries`` it answers: same ``drive`` and
     ``kind``, the nearest ``t_query`` [s] within ``tolerance_s``; -1 where there is none.
 
@@ -33,7 +34,7 @@ def answer_positions(queries: pd.DataFrame, answers: pd.DataFrame,
     d_codes, _ = pd.factorize(np.concatenate([q_drive, a_drive]))
     k_codes, kinds = pd.factorize(np.concatenate([q_kind, a_kind]))
     group = d_codes.astype(np.int64) * max(len(kinds), 1) + k_codes
-    gq, ga = group[:len(queries)], group[len(queries):]
+    gq, ga = group[: len(queries)], group[len(queries) :]
     tq = queries["t_query"].to_numpy(float)
     ta = answers["t_query"].to_numpy(float)
     out = np.full(len(answers), -1, dtype=np.int64)
@@ -48,8 +49,9 @@ def answer_positions(queries: pd.DataFrame, answers: pd.DataFrame,
         times = tq[rows]
         i = np.searchsorted(times, ta[mine])
         left, right = np.clip(i - 1, 0, times.size - 1), np.clip(i, 0, times.size - 1)
-        nearest = np.where(np.abs(ta[mine] - times[left]) <= np.abs(times[right] - ta[mine]),
-                           left, right)
+        nearest = np.where(
+            np.abs(ta[mine] - times[left]) <= np.abs(times[right] - ta[mine]), left, right
+        )
         ok = np.abs(times[nearest] - ta[mine]) <= tolerance_s
         out[mine[ok]] = rows[nearest[ok]]
     return out
@@ -66,21 +68,29 @@ def match_answers(queries: pd.DataFrame, answers: pd.DataFrame) -> np.ndarray:
     pos = answer_positions(queries, answers)
     if (pos < 0).any():
         a = answers.iloc[int(np.flatnonzero(pos < 0)[0])]
-        raise ValueError(f"no query for drive {a['drive']}, kind {a['kind']}, "
-                         f"t_query {float(a['t_query']):.9f} s")
+        raise ValueError(
+            f"no query for drive {a['drive']}, kind {a['kind']}, "
+            f"t_query {float(a['t_query']):.9f} s"
+        )
     seen, first = np.unique(pos, return_index=True)
     if seen.size < pos.size:
         twice = np.setdiff1d(np.arange(pos.size), first)[0]
         a = answers.iloc[int(twice)]
-        raise ValueError(f"two answers for drive {a['drive']}, kind {a['kind']}, "
-                         f"t_query {float(a['t_query']):.9f} s")
+        raise ValueError(
+            f"two answers for drive {a['drive']}, kind {a['kind']}, "
+            f"t_query {float(a['t_query']):.9f} s"
+        )
     xy = np.full((len(queries), 2), np.nan)
     xy[pos] = answers[["x", "y"]].to_numpy(float)
     return xy
 
 
-def score(queries: pd.DataFrame, predictor: str, answers: np.ndarray | pd.DataFrame,
-          cov: np.ndarray | None = None) -> pd.DataFrame:
+def score(
+    queries: pd.DataFrame,
+    predictor: str,
+    answers: np.ndarray | pd.DataFrame,
+    cov: np.ndarray | None = None,
+) -> pd.DataFrame:
     """Traces of one predictor: ``queries`` (a :func:`query_frame`, or several concatenated)
     with the predictor's answers and their errors, columns as :data:`TRACE_COLUMNS`.
 
@@ -93,8 +103,11 @@ def score(queries: pd.DataFrame, predictor: str, answers: np.ndarray | pd.DataFr
         cov: with array answers, their (N, 3) reported covariances cov_xx, cov_xy, cov_yy
             [m^2] (NaN: none); a frame of answers brings its own columns.
     """
-    cov = (np.full((len(queries), 3), np.nan) if cov is None
-           else np.asarray(cov, dtype=float).reshape(-1, 3).copy())
+    cov = (
+        np.full((len(queries), 3), np.nan)
+        if cov is None
+        else np.asarray(cov, dtype=float).reshape(-1, 3).copy()
+    )
     if isinstance(answers, pd.DataFrame):
         xy = match_answers(queries, answers)
         if all(c in answers for c in COV_COLUMNS):
@@ -132,22 +145,34 @@ def score_many(queries: pd.DataFrame, answers: Sequence[tuple[Any, ...]]) -> pd.
         return pd.array(np.tile(col.to_numpy(), k), dtype=col.dtype)
 
     ref = np.tile(queries[["x_ref", "y_ref"]].to_numpy(float), (k, 1))
-    heading = (np.tile(queries["heading_ref"].to_numpy(float), k) if "heading_ref" in queries
-               else np.full(n * k, np.nan))
+    heading = (
+        np.tile(queries["heading_ref"].to_numpy(float), k)
+        if "heading_ref" in queries
+        else np.full(n * k, np.nan)
+    )
     along, cross = track_errors(xy, ref, heading)
     names = np.empty(k, dtype=object)
     names[:] = [a[0] for a in answers]
     cols: dict[str, Any] = {c: tiled(c) for c in ("dataset", "drive")}
     cols["predictor"] = pd.array(np.repeat(names, n), dtype=cols["drive"].dtype)
     cols.update({c: tiled(c) for c in ("kind", "t_issue", "t_query")})
-    cols.update({"x": xy[:, 0], "y": xy[:, 1], "x_ref": ref[:, 0], "y_ref": ref[:, 1],
-                 "error_m": euclidean_error(xy, ref), "along_m": along, "cross_m": cross})
+    cols.update(
+        {
+            "x": xy[:, 0],
+            "y": xy[:, 1],
+            "x_ref": ref[:, 0],
+            "y_ref": ref[:, 1],
+            "error_m": euclidean_error(xy, ref),
+            "along_m": along,
+            "cross_m": cross,
+        }
+    )
     cols.update({c: tiled(c) for c in ("label", "speed_mps", "since_fix_s", "outage", "warmup")})
     for c in TRACK_QUERY_COLUMNS:
         cols[c] = tiled(c) if c in queries else np.nan
     cov = np.full((n * k, 3), np.nan)
     for j, a in enumerate(answers):
         if len(a) > 2 and a[2] is not None:
-            cov[j * n:(j + 1) * n] = a[2]
+            cov[j * n : (j + 1) * n] = a[2]
     cols.update({c: cov[:, i] for i, c in enumerate(COV_COLUMNS)})
     return pd.DataFrame(cols)

@@ -14,8 +14,12 @@ from posbench.tables.table import Table, as_float, is_finite, rows_frame
 
 PAPER_TABLE_CM = {"straight": 16.6, "turn": 12.1, "roundabout": 9.7, "start_stop": 4.2}
 PAPER_OVERALL = "11 (LSTM), 46 (Kalman)"
-LABEL_TITLES = {"straight": "Straight path / full speed", "turn": "Turn",
-                "roundabout": "Roundabout", "start_stop": "Starting / stopping"}
+LABEL_TITLES = {
+    "straight": "Straight path / full speed",
+    "turn": "Turn",
+    "roundabout": "Roundabout",
+    "start_stop": "Starting / stopping",
+}
 TRAINED_MARK = " *"
 
 
@@ -31,8 +35,13 @@ def trained_in_run(res: Mapping[str, Any]) -> dict[str, list[str]]:
     return out
 
 
-def put_figure(row: dict[str, Any], col: str, summary: Mapping[str, Any] | None, figure: str,
-         scale: float = 1.0) -> None:
+def put_figure(
+    row: dict[str, Any],
+    col: str,
+    summary: Mapping[str, Any] | None,
+    figure: str,
+    scale: float = 1.0,
+) -> None:
     """``row[col]``: ``summary[figure]`` x ``scale``; ``row[col_lo]``, ``row[col_hi]``: its
     95 % interval (``ci95``; NaN when the run has none)."""
     summary = summary or {}
@@ -50,11 +59,22 @@ def ci_map(cols: Sequence[str]) -> dict[str, tuple[str, str]]:
     return {c: (f"{c}_lo", f"{c}_hi") for c in cols}
 
 
-SUMMARY_LABELS = {"predictor": "predictor", "future_mean": "future mean [m]", "future_median": "median",
-                  "future_rmse": "RMSE", "future_p95": "p95", "future_max": "max", "future_n": "n",
-                  "now_mean": "now mean [m]", "now_p95": "now p95", "now_n": "n",
-                  "missing": "missing", "step_p50": "step p50 [us]", "step_p99": "step p99 [us]",
-                  "query_p50": "query p50 [us]"}
+SUMMARY_LABELS = {
+    "predictor": "predictor",
+    "future_mean": "future mean [m]",
+    "future_median": "median",
+    "future_rmse": "RMSE",
+    "future_p95": "p95",
+    "future_max": "max",
+    "future_n": "n",
+    "now_mean": "now mean [m]",
+    "now_p95": "now p95",
+    "now_n": "n",
+    "missing": "missing",
+    "step_p50": "step p50 [us]",
+    "step_p99": "step p99 [us]",
+    "query_p50": "query p50 [us]",
+}
 LATENCY_DIGITS = {"step_p50": 1, "step_p99": 1, "query_p50": 1}
 #: the columns of the summary table that carry a 95 % interval (all means, medians, p95s)
 SUMMARY_CI = ("future_mean", "future_median", "future_p95", "now_mean", "now_p95")
@@ -70,25 +90,39 @@ def summary_table(res: Mapping[str, Any], held_out: bool = False, compact: bool 
     rows = []
     for name, p in src.items():
         f, n = p["future"], p["now"]
-        row: dict[str, Any] = {"predictor": name + (TRAINED_MARK if name in trained and not held_out
-                                                    else "")}
-        for col, summ, fig in (("future_mean", f, "mean_m"), ("future_median", f, "median_m"),
-                               ("future_rmse", f, "rmse_m"), ("future_p95", f, "p95_m"),
-                               ("future_max", f, "max_m"), ("now_mean", n, "mean_m"),
-                               ("now_p95", n, "p95_m")):
+        row: dict[str, Any] = {
+            "predictor": name + (TRAINED_MARK if name in trained and not held_out else "")
+        }
+        for col, summ, fig in (
+            ("future_mean", f, "mean_m"),
+            ("future_median", f, "median_m"),
+            ("future_rmse", f, "rmse_m"),
+            ("future_p95", f, "p95_m"),
+            ("future_max", f, "max_m"),
+            ("now_mean", n, "mean_m"),
+            ("now_p95", n, "p95_m"),
+        ):
             put_figure(row, col, summ, fig)
-        row.update(future_n=f["count"], now_n=n["count"],
-                   missing=f.get("missing", 0) + n.get("missing", 0))
+        row.update(
+            future_n=f["count"], now_n=n["count"], missing=f.get("missing", 0) + n.get("missing", 0)
+        )
         if not held_out:
             lat = res["predictors"][name]
-            row.update(step_p50=as_float(lat["latency_us"].get("p50")),
-                       step_p99=as_float(lat["latency_us"].get("p99")),
-                       query_p50=as_float(lat["query_us"].get("p50")))
+            row.update(
+                step_p50=as_float(lat["latency_us"].get("p50")),
+                step_p99=as_float(lat["latency_us"].get("p99")),
+                query_p50=as_float(lat["query_us"].get("p50")),
+            )
         rows.append(row)
     shown_ci = ("future_mean", "now_mean") if compact else SUMMARY_CI
     cols = list(SUMMARY_LABELS) if not held_out else list(SUMMARY_LABELS)[:11]
-    return Table(rows_frame(rows, with_ci_columns(cols, shown_ci)), "held_out" if held_out else "summary",
-                 SUMMARY_LABELS, LATENCY_DIGITS, ci=ci_map(shown_ci))
+    return Table(
+        rows_frame(rows, with_ci_columns(cols, shown_ci)),
+        "held_out" if held_out else "summary",
+        SUMMARY_LABELS,
+        LATENCY_DIGITS,
+        ci=ci_map(shown_ci),
+    )
 
 
 def warmup_table(res: Mapping[str, Any]) -> Table:
@@ -99,14 +133,29 @@ def warmup_table(res: Mapping[str, Any]) -> Table:
         row: dict[str, Any] = {"predictor": name}
         put_figure(row, "future_mean", f, "mean_m")
         put_figure(row, "now_mean", n, "mean_m")
-        row.update(future_max=as_float(f["max_m"]), future_n=f["count"], now_max=as_float(n["max_m"]),
-                   now_n=n["count"], missing=f.get("missing", 0) + n.get("missing", 0))
+        row.update(
+            future_max=as_float(f["max_m"]),
+            future_n=f["count"],
+            now_max=as_float(n["max_m"]),
+            now_n=n["count"],
+            missing=f.get("missing", 0) + n.get("missing", 0),
+        )
         rows.append(row)
-    labels = {"future_mean": "future mean [m]", "future_max": "max", "future_n": "n",
-              "now_mean": "now mean [m]", "now_max": "max", "now_n": "n"}
+    labels = {
+        "future_mean": "future mean [m]",
+        "future_max": "max",
+        "future_n": "n",
+        "now_mean": "now mean [m]",
+        "now_max": "max",
+        "now_n": "n",
+    }
     with_ci = ("future_mean", "now_mean")
-    return Table(rows_frame(rows, with_ci_columns(["predictor", *labels, "missing"], with_ci)), "warmup",
-                 labels, ci=ci_map(with_ci))
+    return Table(
+        rows_frame(rows, with_ci_columns(["predictor", *labels, "missing"], with_ci)),
+        "warmup",
+        labels,
+        ci=ci_map(with_ci),
+    )
 
 
 DATASET_CI = ("future_mean", "future_median", "future_p95", "now_mean", "now_p95")
@@ -118,16 +167,31 @@ def dataset_table(res: Mapping[str, Any], dataset: str) -> Table:
     for name, s in res["by_dataset"][dataset].items():
         f, n = s["future"], s["now"]
         row: dict[str, Any] = {"predictor": name}
-        for col, summ, fig in (("future_mean", f, "mean_m"), ("future_median", f, "median_m"),
-                               ("future_p95", f, "p95_m"), ("now_mean", n, "mean_m"),
-                               ("now_p95", n, "p95_m")):
+        for col, summ, fig in (
+            ("future_mean", f, "mean_m"),
+            ("future_median", f, "median_m"),
+            ("future_p95", f, "p95_m"),
+            ("now_mean", n, "mean_m"),
+            ("now_p95", n, "p95_m"),
+        ):
             put_figure(row, col, summ, fig)
         row.update(future_n=f["count"], now_n=n["count"])
         rows.append(row)
-    labels = {"future_mean": "future mean [m]", "future_median": "median", "future_p95": "p95",
-              "future_n": "n", "now_mean": "now mean [m]", "now_p95": "now p95", "now_n": "n"}
-    return Table(rows_frame(rows, with_ci_columns(["predictor", *labels], DATASET_CI)),
-                 f"dataset-{dataset}", labels, ci=ci_map(DATASET_CI))
+    labels = {
+        "future_mean": "future mean [m]",
+        "future_median": "median",
+        "future_p95": "p95",
+        "future_n": "n",
+        "now_mean": "now mean [m]",
+        "now_p95": "now p95",
+        "now_n": "n",
+    }
+    return Table(
+        rows_frame(rows, with_ci_columns(["predictor", *labels], DATASET_CI)),
+        f"dataset-{dataset}",
+        labels,
+        ci=ci_map(DATASET_CI),
+    )
 
 
 #: the marker of a route-type cell whose 95 % interval is wider than its value
@@ -159,39 +223,56 @@ def label_table(res: Mapping[str, Any], dataset: str, kind: str, held_out: bool 
             s = summaries.get(p) or {}
             col = f"{p} [cm]"
             put_figure(out, col, s if s.get("count") else {}, "mean_m", 100.0)
-            out[f"{p} mark"] = (NOT_CONCLUSIVE if not_conclusive(out[col], out[f"{col}_lo"],
-                                                                 out[f"{col}_hi"]) else "")
+            out[f"{p} mark"] = (
+                NOT_CONCLUSIVE
+                if not_conclusive(out[col], out[f"{col}_lo"], out[f"{col}_hi"])
+                else ""
+            )
             out[f"{p} n"] = int(s.get("count", 0))
         return out
 
     rows = []
     for lab in LABELS:
-        row = {"route type": LABEL_TITLES[lab],
-               **cells({p: by_label.get(p, {}).get(kind, {}).get(lab, {}) for p in preds})}
+        row = {
+            "route type": LABEL_TITLES[lab],
+            **cells({p: by_label.get(p, {}).get(kind, {}).get(lab, {}) for p in preds}),
+        }
         if paper:
             row["paper LSTM [cm]"] = PAPER_TABLE_CM[lab]
         rows.append(row)
-    overall = {"route type": "all", **cells({p: overall_src.get(p, {}).get(kind, {}) for p in preds})}
+    overall = {
+        "route type": "all",
+        **cells({p: overall_src.get(p, {}).get(kind, {}) for p in preds}),
+    }
     if paper:
         overall["paper LSTM [cm]"] = PAPER_OVERALL
     rows.append(overall)
-    cols = ["route type"] + [c for p in preds for c in (f"{p} [cm]", f"{p} [cm]_lo",
-                                                        f"{p} [cm]_hi", f"{p} mark", f"{p} n")]
+    cols = ["route type"] + [
+        c
+        for p in preds
+        for c in (f"{p} [cm]", f"{p} [cm]_lo", f"{p} [cm]_hi", f"{p} mark", f"{p} n")
+    ]
     cols += ["paper LSTM [cm]"] if paper else []
-    return Table(rows_frame(rows, cols), f"route-type-{dataset}-{kind}" + ("-held-out" if held_out else ""),
-                 {f"{p} [cm]": f"{p} [cm] (n)" for p in preds},
-                 {c: 1 for c in cols if c.endswith("[cm]")},
-                 {f"{p} [cm]": f"{p} n" for p in preds},
-                 ci=ci_map([f"{p} [cm]" for p in preds]),
-                 marks={f"{p} [cm]": f"{p} mark" for p in preds})
+    return Table(
+        rows_frame(rows, cols),
+        f"route-type-{dataset}-{kind}" + ("-held-out" if held_out else ""),
+        {f"{p} [cm]": f"{p} [cm] (n)" for p in preds},
+        {c: 1 for c in cols if c.endswith("[cm]")},
+        {f"{p} [cm]": f"{p} n" for p in preds},
+        ci=ci_map([f"{p} [cm]" for p in preds]),
+        marks={f"{p} [cm]": f"{p} mark" for p in preds},
+    )
 
 
 def speed_table(res: Mapping[str, Any]) -> Table:
     """Future-point error by speed bin, mean [m] with its 95 % interval (queries); bins
     without queries left out."""
     by_speed = res["by_speed"]
-    bins = [b for b in speed_bin_order() + ["unknown"]
-            if any(by_speed[p]["future"].get(b, {}).get("count", 0) for p in by_speed)]
+    bins = [
+        b
+        for b in speed_bin_order() + ["unknown"]
+        if any(by_speed[p]["future"].get(b, {}).get("count", 0) for p in by_speed)
+    ]
     rows = []
     for p, s in by_speed.items():
         row: dict[str, Any] = {"predictor": p}
@@ -200,8 +281,9 @@ def speed_table(res: Mapping[str, Any]) -> Table:
             row[f"{b} n"] = s["future"][b]["count"]
         rows.append(row)
     cols = ["predictor"] + [c for b in bins for c in (b, f"{b}_lo", f"{b}_hi", f"{b} n")]
-    return Table(rows_frame(rows, cols), "speed", counts={b: f"{b} n" for b in bins},
-                 ci=ci_map(bins))
+    return Table(
+        rows_frame(rows, cols), "speed", counts={b: f"{b} n" for b in bins}, ci=ci_map(bins)
+    )
 
 
 def outage_table(res: Mapping[str, Any]) -> Table:
@@ -217,8 +299,12 @@ def outage_table(res: Mapping[str, Any]) -> Table:
             row[f"{c} n"] = o["since_fix"][c]["count"]
         row["outages"] = sc["outages"]
         ci = sc.get("ci95") or {}
-        for col, fig in (("ade", "ade_mean_m"), ("fde", "fde_mean_m"), ("fde_p95", "fde_p95_m"),
-                         ("miss_rate", "miss_rate")):
+        for col, fig in (
+            ("ade", "ade_mean_m"),
+            ("fde", "fde_mean_m"),
+            ("fde_p95", "fde_p95_m"),
+            ("miss_rate", "miss_rate"),
+        ):
             put_figure(row, col, {fig: sc[fig], "ci95": ci}, fig)
         rows.append(row)
     scores = ["ade", "fde", "fde_p95", "miss_rate"]
@@ -226,16 +312,30 @@ def outage_table(res: Mapping[str, Any]) -> Table:
     cols += ["outages"] + with_ci_columns(scores, scores)
     labels = {c: f"{c} after fix" for c in cps}
     labels.update(ade="ADE [m]", fde="FDE [m]", fde_p95="FDE p95 [m]", miss_rate="miss rate")
-    return Table(rows_frame(rows, cols), "outages", labels, {"miss_rate": 2},
-                 {c: f"{c} n" for c in cps}, ci=ci_map([*cps, *scores]))
+    return Table(
+        rows_frame(rows, cols),
+        "outages",
+        labels,
+        {"miss_rate": 2},
+        {c: f"{c} n" for c in cps},
+        ci=ci_map([*cps, *scores]),
+    )
 
 
 def gate_table(res: Mapping[str, Any]) -> Table:
     """Fixes the outlier gate rejected, per predictor."""
-    rows = [{"predictor": p, "rejected": g["rejected"], "fixes fed": g["fixes_fed"],
-             "rejected [%]": 100.0 * g["rejected"] / g["fixes_fed"] if g["fixes_fed"] else float("nan"),
-             "drives with rejections": g["drives_with_rejections"]}
-            for p, g in res["gate"]["predictors"].items()]
+    rows = [
+        {
+            "predictor": p,
+            "rejected": g["rejected"],
+            "fixes fed": g["fixes_fed"],
+            "rejected [%]": 100.0 * g["rejected"] / g["fixes_fed"]
+            if g["fixes_fed"]
+            else float("nan"),
+            "drives with rejections": g["drives_with_rejections"],
+        }
+        for p, g in res["gate"]["predictors"].items()
+    ]
     cols = ["predictor", "rejected", "fixes fed", "rejected [%]", "drives with rejections"]
     return Table(rows_frame(rows, cols), "gate", digits={"rejected [%]": 2})
 
@@ -243,11 +343,18 @@ def gate_table(res: Mapping[str, Any]) -> Table:
 def gate_drive_table(res: Mapping[str, Any]) -> Table:
     """Per drive with a rejection: fixes fed and rejected per predictor."""
     preds = list(res["gate"]["predictors"])
-    rows = [{"drive": d["name"], "fixes fed": d["gps_fed"],
-             **{f"{p} rejected": d["rejected"].get(p, 0) for p in preds}}
-            for d in res["drives"] if any(d.get("rejected", {}).values())]
-    return Table(rows_frame(rows, ["drive", "fixes fed"] + [f"{p} rejected" for p in preds]),
-                 "gate-drives")
+    rows = [
+        {
+            "drive": d["name"],
+            "fixes fed": d["gps_fed"],
+            **{f"{p} rejected": d["rejected"].get(p, 0) for p in preds},
+        }
+        for d in res["drives"]
+        if any(d.get("rejected", {}).values())
+    ]
+    return Table(
+        rows_frame(rows, ["drive", "fixes fed"] + [f"{p} rejected" for p in preds]), "gate-drives"
+    )
 
 
 def drives_table(res: Mapping[str, Any]) -> Table:
@@ -256,14 +363,24 @@ def drives_table(res: Mapping[str, Any]) -> Table:
     rows = []
     for d in res["drives"]:
         if d["skipped"]:
-            rows.append({"drive": d["name"], "data set": d["dataset"],
-                         "reference": f"skipped: {d['skipped']}"})
+            rows.append(
+                {
+                    "drive": d["name"],
+                    "data set": d["dataset"],
+                    "reference": f"skipped: {d['skipped']}",
+                }
+            )
             continue
         mark = "".join(f" ({p} trained on it)" for p in d.get("trained_on", []))
         row = {"drive": d["name"] + mark, "data set": d["dataset"], "reference": d["reference"]}
         for p in preds:
-            put_figure(row, f"{p} future mean [m]", d["predictors"].get(p, {}).get("future"), "mean_m")
+            put_figure(
+                row, f"{p} future mean [m]", d["predictors"].get(p, {}).get("future"), "mean_m"
+            )
         rows.append(row)
     cols = [f"{p} future mean [m]" for p in preds]
-    return Table(rows_frame(rows, with_ci_columns(["drive", "data set", "reference", *cols], cols)),
-                 "drives", ci=ci_map(cols))
+    return Table(
+        rows_frame(rows, with_ci_columns(["drive", "data set", "reference", *cols], cols)),
+        "drives",
+        ci=ci_map(cols),
+    )

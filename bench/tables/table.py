@@ -58,8 +58,12 @@ class Table:
     figures: Sequence[str] = ()
 
     def shown_columns(self) -> list[str]:
-        hidden = (set(self.counts.values()) | {c for b in self.ci.values() for c in b}
-                  | set(self.marks.values()) | set(self.hidden))
+        hidden = (
+            set(self.counts.values())
+            | {c for b in self.ci.values() for c in b}
+            | set(self.marks.values())
+            | set(self.hidden)
+        )
         return [c for c in self.frame.columns if c not in hidden]
 
     def header(self) -> list[str]:
@@ -96,13 +100,20 @@ class Table:
         rows = self.cells() if cells is None else cells
         out = []
         for j, c in enumerate(cols):
-            if (c in self.counts or c in self.ci or c in self.marks or c in self.digits
-                    or c in self.figures or pd.api.types.is_numeric_dtype(self.frame[c])):
+            if (
+                c in self.counts
+                or c in self.ci
+                or c in self.marks
+                or c in self.digits
+                or c in self.figures
+                or pd.api.types.is_numeric_dtype(self.frame[c])
+            ):
                 out.append(c)
                 continue
             texts = [r[j] for r in rows]
-            if (any(_FIGURE.match(t) for t in texts)
-                    and all(_FIGURE.match(t) or _NO_FIGURE.match(t) for t in texts)):
+            if any(_FIGURE.match(t) for t in texts) and all(
+                _FIGURE.match(t) or _NO_FIGURE.match(t) for t in texts
+            ):
                 out.append(c)
         return out
 
@@ -131,8 +142,12 @@ class Table:
         """A booktabs ``tabular``, figures as in the Markdown form, value columns ``r`` and
         text columns ``l``; every text through :func:`tex_escape` (pure ASCII out)."""
         rows = self.cells()
-        lines = [f"\\begin{{tabular}}{{{self.alignment(rows)}}}", "\\toprule",
-                 " & ".join(tex_escape(h) for h in self.header()) + " \\\\", "\\midrule"]
+        lines = [
+            f"\\begin{{tabular}}{{{self.alignment(rows)}}}",
+            "\\toprule",
+            " & ".join(tex_escape(h) for h in self.header()) + " \\\\",
+            "\\midrule",
+        ]
         lines += [" & ".join(tex_escape(c) for c in row) + " \\\\" for row in rows]
         lines += ["\\bottomrule", "\\end{tabular}"]
         return "\n".join(lines) + "\n"
@@ -175,53 +190,174 @@ class TexWarning(UserWarning):
 #: may hold (labels, units, run and drive names), as pdflatex takes it in any font encoding
 TEX_CHARACTERS: dict[str, str] = {
     # special to TeX, or wrong glyphs in the OT1 encoding
-    "\\": r"\textbackslash{}", "&": r"\&", "%": r"\%", "$": r"\$", "#": r"\#", "_": r"\_",
-    "{": r"\{", "}": r"\}", "~": r"\textasciitilde{}", "^": r"\textasciicircum{}",
-    "<": r"$<$", ">": r"$>$", "|": r"$|$",
+    "\\": r"\textbackslash{}",
+    "&": r"\&",
+    "%": r"\%",
+    "$": r"\$",
+    "#": r"\#",
+    "_": r"\_",
+    "{": r"\{",
+    "}": r"\}",
+    "~": r"\textasciitilde{}",
+    "^": r"\textasciicircum{}",
+    "<": r"$<$",
+    ">": r"$>$",
+    "|": r"$|$",
     # signs, units and punctuation
-    "\u00b1": r"$\pm$", "\u00b0": r"$^\circ$", "\u00b9": r"$^1$", "\u00b2": r"$^2$",
-    "\u00b3": r"$^3$", "\u00b5": r"$\mu$", "\u00d7": r"$\times$", "\u00f7": r"$\div$",
-    "\u00b7": r"$\cdot$", "\u2022": r"$\bullet$", "\u2212": r"$-$", "\u2013": "--",
-    "\u2014": "---", "\u2010": "-", "\u2011": "-", "\u2026": r"\ldots{}",
-    "\u2018": "`", "\u2019": "'", "\u201c": "``", "\u201d": "''", "\u00ab": r"$\ll$",
-    "\u00bb": r"$\gg$", "\u00a0": "~", "\u2009": r"\,", "\u202f": r"\,", "\u200b": "",
-    "\u2030": r"\textperthousand{}", "\u00a7": r"\S{}", "\u00b6": r"\P{}",
-    "\u00a9": r"\copyright{}", "\u00ae": r"\textregistered{}", "\u2122": r"\texttrademark{}",
-    "\u20ac": "EUR", "\u00a3": r"\pounds{}", "\u221e": r"$\infty$", "\u221a": r"$\surd$",
-    "\u2264": r"$\leq$", "\u2265": r"$\geq$", "\u2260": r"$\neq$", "\u2248": r"$\approx$",
-    "\u2243": r"$\simeq$", "\u223c": r"$\sim$", "\u2261": r"$\equiv$", "\u221d": r"$\propto$",
-    "\u2190": r"$\leftarrow$", "\u2192": r"$\rightarrow$", "\u2191": r"$\uparrow$",
-    "\u2193": r"$\downarrow$", "\u2194": r"$\leftrightarrow$", "\u21d2": r"$\Rightarrow$",
-    "\u2202": r"$\partial$", "\u2207": r"$\nabla$", "\u2211": r"$\sum$", "\u220f": r"$\prod$",
-    "\u222b": r"$\int$", "\u2208": r"$\in$", "\u2205": r"$\emptyset$", "\u2206": r"$\Delta$",
-    "\u2032": r"$'$", "\u2033": r"$''$", "\u2713": r"$\surd$",
+    "\u00b1": r"$\pm$",
+    "\u00b0": r"$^\circ$",
+    "\u00b9": r"$^1$",
+    "\u00b2": r"$^2$",
+    "\u00b3": r"$^3$",
+    "\u00b5": r"$\mu$",
+    "\u00d7": r"$\times$",
+    "\u00f7": r"$\div$",
+    "\u00b7": r"$\cdot$",
+    "\u2022": r"$\bullet$",
+    "\u2212": r"$-$",
+    "\u2013": "--",
+    "\u2014": "---",
+    "\u2010": "-",
+    "\u2011": "-",
+    "\u2026": r"\ldots{}",
+    "\u2018": "`",
+    "\u2019": "'",
+    "\u201c": "``",
+    "\u201d": "''",
+    "\u00ab": r"$\ll$",
+    "\u00bb": r"$\gg$",
+    "\u00a0": "~",
+    "\u2009": r"\,",
+    "\u202f": r"\,",
+    "\u200b": "",
+    "\u2030": r"\textperthousand{}",
+    "\u00a7": r"\S{}",
+    "\u00b6": r"\P{}",
+    "\u00a9": r"\copyright{}",
+    "\u00ae": r"\textregistered{}",
+    "\u2122": r"\texttrademark{}",
+    "\u20ac": "EUR",
+    "\u00a3": r"\pounds{}",
+    "\u221e": r"$\infty$",
+    "\u221a": r"$\surd$",
+    "\u2264": r"$\leq$",
+    "\u2265": r"$\geq$",
+    "\u2260": r"$\neq$",
+    "\u2248": r"$\approx$",
+    "\u2243": r"$\simeq$",
+    "\u223c": r"$\sim$",
+    "\u2261": r"$\equiv$",
+    "\u221d": r"$\propto$",
+    "\u2190": r"$\leftarrow$",
+    "\u2192": r"$\rightarrow$",
+    "\u2191": r"$\uparrow$",
+    "\u2193": r"$\downarrow$",
+    "\u2194": r"$\leftrightarrow$",
+    "\u21d2": r"$\Rightarrow$",
+    "\u2202": r"$\partial$",
+    "\u2207": r"$\nabla$",
+    "\u2211": r"$\sum$",
+    "\u220f": r"$\prod$",
+    "\u222b": r"$\int$",
+    "\u2208": r"$\in$",
+    "\u2205": r"$\emptyset$",
+    "\u2206": r"$\Delta$",
+    "\u2032": r"$'$",
+    "\u2033": r"$''$",
+    "\u2713": r"$\surd$",
     # letters without a composed form
-    "\u00df": r"\ss{}", "\u00f8": r"\o{}", "\u00d8": r"\O{}", "\u00e6": r"\ae{}",
-    "\u00c6": r"\AE{}", "\u0153": r"\oe{}", "\u0152": r"\OE{}", "\u0142": r"\l{}",
-    "\u0141": r"\L{}", "\u0131": r"\i{}", "\u00bf": r"?`", "\u00a1": r"!`",
+    "\u00df": r"\ss{}",
+    "\u00f8": r"\o{}",
+    "\u00d8": r"\O{}",
+    "\u00e6": r"\ae{}",
+    "\u00c6": r"\AE{}",
+    "\u0153": r"\oe{}",
+    "\u0152": r"\OE{}",
+    "\u0142": r"\l{}",
+    "\u0141": r"\L{}",
+    "\u0131": r"\i{}",
+    "\u00bf": r"?`",
+    "\u00a1": r"!`",
 }
 # Greek: the letters with a macro of their own (the capitals that look Latin are Latin)
-for _name, _tex in (("ALPHA", "alpha"), ("BETA", "beta"), ("GAMMA", "gamma"),
-                    ("DELTA", "delta"), ("EPSILON", "epsilon"), ("ZETA", "zeta"),
-                    ("ETA", "eta"), ("THETA", "theta"), ("IOTA", "iota"), ("KAPPA", "kappa"),
-                    ("LAMDA", "lambda"), ("MU", "mu"), ("NU", "nu"), ("XI", "xi"),
-                    ("OMICRON", "o"), ("PI", "pi"), ("RHO", "rho"), ("SIGMA", "sigma"),
-                    ("FINAL SIGMA", "varsigma"), ("TAU", "tau"), ("UPSILON", "upsilon"),
-                    ("PHI", "phi"), ("CHI", "chi"), ("PSI", "psi"), ("OMEGA", "omega")):
+for _name, _tex in (
+    ("ALPHA", "alpha"),
+    ("BETA", "beta"),
+    ("GAMMA", "gamma"),
+    ("DELTA", "delta"),
+    ("EPSILON", "epsilon"),
+    ("ZETA", "zeta"),
+    ("ETA", "eta"),
+    ("THETA", "theta"),
+    ("IOTA", "iota"),
+    ("KAPPA", "kappa"),
+    ("LAMDA", "lambda"),
+    ("MU", "mu"),
+    ("NU", "nu"),
+    ("XI", "xi"),
+    ("OMICRON", "o"),
+    ("PI", "pi"),
+    ("RHO", "rho"),
+    ("SIGMA", "sigma"),
+    ("FINAL SIGMA", "varsigma"),
+    ("TAU", "tau"),
+    ("UPSILON", "upsilon"),
+    ("PHI", "phi"),
+    ("CHI", "chi"),
+    ("PSI", "psi"),
+    ("OMEGA", "omega"),
+):
     TEX_CHARACTERS[unicodedata.lookup(f"GREEK SMALL LETTER {_name}")] = f"$\\{_tex}$"
     if _name != "FINAL SIGMA":
         _cap = _tex.capitalize()
         TEX_CHARACTERS[unicodedata.lookup(f"GREEK CAPITAL LETTER {_name}")] = (
-            f"$\\{_cap}$" if _cap in ("Gamma", "Delta", "Theta", "Lambda", "Xi", "Pi", "Sigma",
-                                     "Upsilon", "Phi", "Psi", "Omega")
-            else {"Alpha": "A", "Beta": "B", "Epsilon": "E", "Zeta": "Z", "Eta": "H",
-                  "Iota": "I", "Kappa": "K", "Mu": "M", "Nu": "N", "O": "O", "Rho": "P",
-                  "Tau": "T", "Chi": "X"}[_cap])
+            f"$\\{_cap}$"
+            if _cap
+            in (
+                "Gamma",
+                "Delta",
+                "Theta",
+                "Lambda",
+                "Xi",
+                "Pi",
+                "Sigma",
+                "Upsilon",
+                "Phi",
+                "Psi",
+                "Omega",
+            )
+            else {
+                "Alpha": "A",
+                "Beta": "B",
+                "Epsilon": "E",
+                "Zeta": "Z",
+                "Eta": "H",
+                "Iota": "I",
+                "Kappa": "K",
+                "Mu": "M",
+                "Nu": "N",
+                "O": "O",
+                "Rho": "P",
+                "Tau": "T",
+                "Chi": "X",
+            }[_cap]
+        )
 
 #: combining accents -> the LaTeX accent commands of the OT1 encoding (``é`` -> ``\'{e}``)
-_TEX_ACCENTS = {"\u0300": "`", "\u0301": "'", "\u0302": "^", "\u0303": "~", "\u0304": "=",
-                "\u0306": "u", "\u0307": ".", "\u0308": '"', "\u030a": "r", "\u030b": "H",
-                "\u030c": "v", "\u0327": "c"}
+_TEX_ACCENTS = {
+    "\u0300": "`",
+    "\u0301": "'",
+    "\u0302": "^",
+    "\u0303": "~",
+    "\u0304": "=",
+    "\u0306": "u",
+    "\u0307": ".",
+    "\u0308": '"',
+    "\u030a": "r",
+    "\u030b": "H",
+    "\u030c": "v",
+    "\u0327": "c",
+}
 
 
 def _tex_char(ch: str) -> str | None:
@@ -250,9 +386,12 @@ def tex_escape(text: str) -> str:
     for ch in str(text):
         tex = TEX_CHARACTERS.get(ch, ch) if ch.isascii() else _tex_char(ch)
         if tex is None:
-            warnings.warn(f"no LaTeX for {ch!r} (U+{ord(ch):04X} "
-                          f"{unicodedata.name(ch, 'unnamed')}) in {text!r}: written as '?'",
-                          TexWarning, stacklevel=2)
+            warnings.warn(
+                f"no LaTeX for {ch!r} (U+{ord(ch):04X} "
+                f"{unicodedata.name(ch, 'unnamed')}) in {text!r}: written as '?'",
+                TexWarning,
+                stacklevel=2,
+            )
             tex = "?"
         if out and tex.startswith("$") and out[-1].endswith("$") and out[-1] != r"\$":
             # one math run, never ``$$`` (display math); ``{}`` between two superscripts

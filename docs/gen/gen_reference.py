@@ -49,8 +49,11 @@ def schema_type(node: Mapping[str, Any]) -> str:
     for k in kinds:
         if k == "array" and isinstance(node.get("items"), Mapping):
             words.append(f"array of {schema_type(node['items'])}")
-        elif k == "object" and isinstance(node.get("additionalProperties"), Mapping) \
-                and not node.get("properties"):
+        elif (
+            k == "object"
+            and isinstance(node.get("additionalProperties"), Mapping)
+            and not node.get("properties")
+        ):
             words.append(f"object of {schema_type(node['additionalProperties'])}")
         else:
             words.append(str(k))
@@ -58,14 +61,21 @@ def schema_type(node: Mapping[str, Any]) -> str:
 
 
 def _limits(node: Mapping[str, Any]) -> str:
-    marks = {"minimum": ">=", "exclusiveMinimum": ">", "maximum": "<=",
-             "exclusiveMaximum": "<", "pattern": "matches", "minItems": "items >=",
-             "maxItems": "items <="}
+    marks = {
+        "minimum": ">=",
+        "exclusiveMinimum": ">",
+        "maximum": "<=",
+        "exclusiveMaximum": "<",
+        "pattern": "matches",
+        "minItems": "items >=",
+        "maxItems": "items <=",
+    }
     return ", ".join(f"{m} `{node[k]}`" for k, m in marks.items() if k in node)
 
 
-def schema_rows(node: Mapping[str, Any], path: str = "",
-                required: bool = True) -> Iterator[tuple[str, str, bool, str]]:
+def schema_rows(
+    node: Mapping[str, Any], path: str = "", required: bool = True
+) -> Iterator[tuple[str, str, bool, str]]:
     """(key path, type, required, description) of ``node`` and of every key inside it:
     nested objects' keys as ``a.b``, any key of a map as ``a.*``, array items as ``a[]``;
     a ``$ref`` is named, not followed (its definition has its own table)."""
@@ -84,8 +94,11 @@ def schema_rows(node: Mapping[str, Any], path: str = "",
     if isinstance(extra, Mapping) and props and "$ref" not in extra:
         yield from schema_rows(extra, f"{path}.*" if path else "*", False)
     elif isinstance(extra, Mapping) and not props and _has_keys(extra):
-        yield from (r for r in schema_rows(extra, f"{path}.*" if path else "*", False)
-                    if r[0] != f"{path}.*")
+        yield from (
+            r
+            for r in schema_rows(extra, f"{path}.*" if path else "*", False)
+            if r[0] != f"{path}.*"
+        )
     items = node.get("items")
     if isinstance(items, Mapping) and _has_keys(items):
         yield from (r for r in schema_rows(items, f"{path}[]", True) if r[0] != f"{path}[]")
@@ -96,15 +109,20 @@ def _has_keys(node: Mapping[str, Any]) -> bool:
     if "$ref" in node:
         return False
     extra = node.get("additionalProperties")
-    return bool(node.get("properties")) or (isinstance(extra, Mapping) and _has_keys(extra)) \
+    return (
+        bool(node.get("properties"))
+        or (isinstance(extra, Mapping) and _has_keys(extra))
         or (isinstance(node.get("items"), Mapping) and _has_keys(node["items"]))
+    )
 
 
 def schema_table(node: Mapping[str, Any]) -> str:
     """The Markdown table of :func:`schema_rows`."""
     lines = ["| key | type | required | description |", "|---|---|---|---|"]
-    lines += [f"| `{p}` | {cell(t)} | {'yes' if r else ''} | {cell(d)} |"
-              for p, t, r, d in schema_rows(node)]
+    lines += [
+        f"| `{p}` | {cell(t)} | {'yes' if r else ''} | {cell(d)} |"
+        for p, t, r, d in schema_rows(node)
+    ]
     return "\n".join(lines)
 
 
@@ -115,11 +133,21 @@ def results_schema_markdown(schema: Mapping[str, Any] | None = None) -> str:
         from posbench.saved_run.run import results_schema
 
         schema = results_schema()
-    out = [f"Schema `{schema.get('$id', '')}` (JSON Schema "
-           f"`{schema.get('$schema', '').rstrip('#')}`): {schema.get('title', '')}.", "",
-           cell(schema.get("description", "")), "", "## Top-level keys", "",
-           schema_table(schema), "", "## Definitions", "",
-           "Shared shapes the keys above refer to (`$defs`).", ""]
+    out = [
+        f"Schema `{schema.get('$id', '')}` (JSON Schema "
+        f"`{schema.get('$schema', '').rstrip('#')}`): {schema.get('title', '')}.",
+        "",
+        cell(schema.get("description", "")),
+        "",
+        "## Top-level keys",
+        "",
+        schema_table(schema),
+        "",
+        "## Definitions",
+        "",
+        "Shared shapes the keys above refer to (`$defs`).",
+        "",
+    ]
     for name, node in (schema.get("$defs") or {}).items():
         out += [f"### `{name}` {{#def-{name}}}", ""]
         if node.get("description"):
@@ -137,16 +165,27 @@ def trace_columns_markdown() -> str:
     from posbench.scoring import schema
 
     kinds = ", ".join(f"`{k}`" for k in schema.KINDS)
-    return "\n".join([schema.trace_columns_markdown(), "",
-                      f"Query kinds: {kinds}. Reported covariance columns (NaN in traces "
-                      f"written before they existed): "
-                      + ", ".join(f"`{c}`" for c in schema.COV_COLUMNS) + "."])
+    return "\n".join(
+        [
+            schema.trace_columns_markdown(),
+            "",
+            f"Query kinds: {kinds}. Reported covariance columns (NaN in traces "
+            f"written before they existed): "
+            + ", ".join(f"`{c}`" for c in schema.COV_COLUMNS)
+            + ".",
+        ]
+    )
 
 
 # ----------------------------------------------------------------------------- glossary
 #: a results.json with every part the glossary looks at, so every term is listed
-_EVERY_PART = {"by_speed": {"x": 1}, "statistics": {"method": "x"},
-               "paired": {"baseline": "x"}, "seeds": {"seeds": [0]}, "outages": {"x": 1}}
+_EVERY_PART = {
+    "by_speed": {"x": 1},
+    "statistics": {"method": "x"},
+    "paired": {"baseline": "x"},
+    "seeds": {"seeds": [0]},
+    "outages": {"x": 1},
+}
 
 
 def glossary_markdown() -> str:

@@ -25,8 +25,16 @@ REPO_URL = ""
 #: the branch the report links point at
 BRANCH = "main"
 #: reports in the order reports/regenerate.sh makes them (others follow, by name)
-ORDER = ("synthetic", "kitti", "kitti-none", "kitti-consumer", "all-data", "outages",
-         "aslan-no-gate", "aslan-gate")
+ORDER = (
+    "synthetic",
+    "kitti",
+    "kitti-none",
+    "kitti-consumer",
+    "all-data",
+    "outages",
+    "aslan-no-gate",
+    "aslan-gate",
+)
 
 
 def report_dirs(root: Path | None = None) -> list[Path]:
@@ -67,15 +75,18 @@ def predictor_table(res: Mapping[str, Any]) -> list[str]:
     means = {p: _num((v.get("future") or {}).get("mean_m")) for p, v in preds.items()}
     finite = [m for m in means.values() if not math.isnan(m)]
     best = min(finite) if finite else None
-    lines = ["| predictor | future mean [m] (95 % CI) | n | now mean [m] (95 % CI) | n |",
-             "|---|---|---|---|---|"]
+    lines = [
+        "| predictor | future mean [m] (95 % CI) | n | now mean [m] (95 % CI) | n |",
+        "|---|---|---|---|---|",
+    ]
     for p, v in preds.items():
         fut, now = v.get("future") or {}, v.get("now") or {}
         f = figure(fut)
         if best is not None and means[p] == best:
             f = f"**{f}**"
-        lines.append(f"| `{p}` | {f} | {fut.get('count', 0)} | {figure(now)} | "
-                     f"{now.get('count', 0)} |")
+        lines.append(
+            f"| `{p}` | {f} | {fut.get('count', 0)} | {figure(now)} | {now.get('count', 0)} |"
+        )
     return lines
 
 
@@ -86,8 +97,10 @@ def dataset_table(res: Mapping[str, Any]) -> list[str]:
     if len(by) < 2:
         return []
     sets = list(by)
-    lines = ["| predictor | " + " | ".join(f"{d} future mean [m]" for d in sets) + " |",
-             "|---|" + "---|" * len(sets)]
+    lines = [
+        "| predictor | " + " | ".join(f"{d} future mean [m]" for d in sets) + " |",
+        "|---|" + "---|" * len(sets),
+    ]
     for p in res.get("predictors") or {}:
         cells = [figure((by[d].get(p) or {}).get("future")) for d in sets]
         lines.append(f"| `{p}` | " + " | ".join(cells) + " |")
@@ -103,20 +116,30 @@ def report_section(folder: Path, repo_url: str | None = None) -> str:
     scored = [d for d in drives if not d.get("skipped")]
     sets = ", ".join(f"`{d}`" for d in res.get("by_dataset") or {}) or "-"
     url = report_url(name, repo_url)
-    out = [f"## {name}", "", f"```console\n$ {res.get('command', '')}\n```", "",
-           f"GPS profile `{cfg.get('gps_profile', '?')}`, dropouts `{cfg.get('dropouts', '?')}`, "
-           f"horizon {cfg.get('horizon_s', '?')} s, outlier gate "
-           f"{'on' if cfg.get('gate', True) else 'off'}; data sets {sets}; "
-           f"{len(scored)} drives scored"
-           + (f" ({len(drives) - len(scored)} skipped)" if len(scored) < len(drives) else "")
-           + f"; results.json schema {res.get('schema_version', '?')}.", "",
-           *predictor_table(res), ""]
+    out = [
+        f"## {name}",
+        "",
+        f"```console\n$ {res.get('command', '')}\n```",
+        "",
+        f"GPS profile `{cfg.get('gps_profile', '?')}`, dropouts `{cfg.get('dropouts', '?')}`, "
+        f"horizon {cfg.get('horizon_s', '?')} s, outlier gate "
+        f"{'on' if cfg.get('gate', True) else 'off'}; data sets {sets}; "
+        f"{len(scored)} drives scored"
+        + (f" ({len(drives) - len(scored)} skipped)" if len(scored) < len(drives) else "")
+        + f"; results.json schema {res.get('schema_version', '?')}.",
+        "",
+        *predictor_table(res),
+        "",
+    ]
     per_set = dataset_table(res)
     if per_set:
         out += ["Per data set:", "", *per_set, ""]
     if url:
-        out += [f"The full report (every table, figure and the glossary): "
-                f"[reports/{name}/report.md]({url}).", ""]
+        out += [
+            f"The full report (every table, figure and the glossary): "
+            f"[reports/{name}/report.md]({url}).",
+            "",
+        ]
     else:
         out += [f"The full report: `reports/{name}/report.md` in the repository.", ""]
     return "\n".join(out)
@@ -128,8 +151,10 @@ def results_markdown(root: Path | None = None, repo_url: str | None = None) -> s
     dirs = report_dirs(root)
     if not dirs:
         return "No reference reports found (`reports/*/results.json`)."
-    lines = ["| report | data sets | GPS profile | dropouts | predictors | best future mean [m] |",
-             "|---|---|---|---|---|---|"]
+    lines = [
+        "| report | data sets | GPS profile | dropouts | predictors | best future mean [m] |",
+        "|---|---|---|---|---|---|",
+    ]
     sections = []
     for d in dirs:
         res = json.loads((d / "results.json").read_text())
@@ -140,7 +165,9 @@ def results_markdown(root: Path | None = None, repo_url: str | None = None) -> s
         best_txt = f"`{best}` {figure(preds[best]['future'])}" if best else "-"
         cfg = res.get("config") or {}
         sets = ", ".join(res.get("by_dataset") or {}) or "-"
-        lines.append(f"| [{d.name}](#{d.name}) | {sets} | `{cfg.get('gps_profile', '?')}` | "
-                     f"`{cfg.get('dropouts', '?')}` | {len(preds)} | {best_txt} |")
+        lines.append(
+            f"| [{d.name}](#{d.name}) | {sets} | `{cfg.get('gps_profile', '?')}` | "
+            f"`{cfg.get('dropouts', '?')}` | {len(preds)} | {best_txt} |"
+        )
         sections.append(report_section(d, repo_url))
     return "\n".join([*lines, "", *sections])

@@ -38,16 +38,16 @@ _GPS, _IMU, _SPEED = 0, 1, 2
 class HybridWindows:
     """Training rows of one or more drives. B rows; metres; see the module doc."""
 
-    X: np.ndarray             # (B, 8, 6) lstm features (heading frame)
-    prior: np.ndarray         # (B, 4, 2) kf answer minus p_last, heading frame [m]
-    target: np.ndarray        # (B, 4, 2) reference minus kf answer, heading frame [m]
-    psi: np.ndarray           # (B,) heading of the window's cubic at the fix [rad]
-    p_last: np.ndarray        # (B, 2) newest grid point [m, ENU]
-    kf_future: np.ndarray     # (B, 2) kf answer at t_fix + 0.2 s [m, ENU]
+    X: np.ndarray  # (B, 8, 6) lstm features (heading frame)
+    prior: np.ndarray  # (B, 4, 2) kf answer minus p_last, heading frame [m]
+    target: np.ndarray  # (B, 4, 2) reference minus kf answer, heading frame [m]
+    psi: np.ndarray  # (B,) heading of the window's cubic at the fix [rad]
+    p_last: np.ndarray  # (B, 2) newest grid point [m, ENU]
+    kf_future: np.ndarray  # (B, 2) kf answer at t_fix + 0.2 s [m, ENU]
     truth_future: np.ndarray  # (B, 2) reference at t_fix + 0.2 s [m, ENU]
-    t_end: np.ndarray         # (B,) fix time [s]
-    label: np.ndarray         # (B,) scenario label (str)
-    drive: np.ndarray         # (B,) drive name (str)
+    t_end: np.ndarray  # (B,) fix time [s]
+    label: np.ndarray  # (B,) scenario label (str)
+    drive: np.ndarray  # (B,) drive name (str)
 
     def __len__(self) -> int:
         return int(self.X.shape[0])
@@ -60,15 +60,28 @@ class HybridWindows:
         sets = [s for s in sets if len(s)]
         if not sets:
             return empty_hybrid_windows()
-        return HybridWindows(**{f.name: np.concatenate([getattr(s, f.name) for s in sets])
-                                for f in fields(HybridWindows)})
+        return HybridWindows(
+            **{
+                f.name: np.concatenate([getattr(s, f.name) for s in sets])
+                for f in fields(HybridWindows)
+            }
+        )
 
 
 def empty_hybrid_windows() -> HybridWindows:
     z = np.zeros
-    return HybridWindows(z((0, N_STEPS, 6)), z((0, N_H, 2)), z((0, N_H, 2)), z(0), z((0, 2)),
-                         z((0, 2)), z((0, 2)), z(0), np.array([], dtype=object),
-                         np.array([], dtype=object))
+    return HybridWindows(
+        z((0, N_STEPS, 6)),
+        z((0, N_H, 2)),
+        z((0, N_H, 2)),
+        z(0),
+        z((0, 2)),
+        z((0, 2)),
+        z((0, 2)),
+        z(0),
+        np.array([], dtype=object),
+        np.array([], dtype=object),
+    )
 
 
 def _to_heading(v: np.ndarray, psi: np.ndarray) -> np.ndarray:
@@ -77,8 +90,9 @@ def _to_heading(v: np.ndarray, psi: np.ndarray) -> np.ndarray:
     return np.stack([c * v[..., 0] + s * v[..., 1], c * v[..., 1] - s * v[..., 0]], axis=-1)
 
 
-def kf_prior_at_fixes(drive: Drive, gps: GpsStream, kf_params: dict,
-                      horizons: tuple[float, ...] = HORIZONS) -> np.ndarray:
+def kf_prior_at_fixes(
+    drive: Drive, gps: GpsStream, kf_params: dict, horizons: tuple[float, ...] = HORIZONS
+) -> np.ndarray:
     """(n_fixes, len(horizons), 2) [m, ENU]: ``kf.position_at(t_fix + h)`` asked right after
     each fix of ``gps``, from a fresh ``LinearKalman(**kf_params)`` fed the drive's IMU and
     speed and ``gps`` (sigma = the stated accuracy where finite and positive, else None) in
@@ -109,8 +123,12 @@ def kf_prior_at_fixes(drive: Drive, gps: GpsStream, kf_params: dict,
         st, sv = spd.t.tolist(), spd.v.tolist()
     out = np.full((len(gps), len(horizons), 2), np.nan)
     hz = list(horizons)
-    obs_gps, obs_imu, obs_speed, pos = kf.observe_gps, kf.observe_imu, kf.observe_speed, \
-        kf.position_at
+    obs_gps, obs_imu, obs_speed, pos = (
+        kf.observe_gps,
+        kf.observe_imu,
+        kf.observe_speed,
+        kf.position_at,
+    )
     for kind, i in zip(k[order].tolist(), idx[order].tolist(), strict=True):
         if kind == _IMU:
             obs_imu(it[i], iax[i], iay[i], iyaw[i], irate[i])
@@ -123,8 +141,12 @@ def kf_prior_at_fixes(drive: Drive, gps: GpsStream, kf_params: dict,
     return out
 
 
-def hybrid_windows(drive: Drive, gps: GpsStream | None = None, kf_params: dict | None = None,
-                   frame: str = "heading") -> HybridWindows:
+def hybrid_windows(
+    drive: Drive,
+    gps: GpsStream | None = None,
+    kf_params: dict | None = None,
+    frame: str = "heading",
+) -> HybridWindows:
     """The hybrid's training rows of one drive (see the module doc); ``gps`` replaces the
     drive's fixes (e.g. degraded), ``kf_params`` configure the prior's kf (its defaults if
     None). Only the heading frame is supported."""
@@ -155,7 +177,14 @@ def hybrid_windows(drive: Drive, gps: GpsStream | None = None, kf_params: dict |
     ws = ws.take(np.flatnonzero(ok))
     kf_at, ref = kf_at[ok], ref[ok]
     return HybridWindows(
-        X=ws.X, prior=_to_heading(kf_at - ws.p_last[:, None, :], ws.psi),
-        target=_to_heading(ref - kf_at, ws.psi), psi=ws.psi, p_last=ws.p_last,
-        kf_future=kf_at[:, 0], truth_future=ref[:, 0], t_end=ws.t_end, label=ws.label,
-        drive=ws.drive)
+        X=ws.X,
+        prior=_to_heading(kf_at - ws.p_last[:, None, :], ws.psi),
+        target=_to_heading(ref - kf_at, ws.psi),
+        psi=ws.psi,
+        p_last=ws.p_last,
+        kf_future=kf_at[:, 0],
+        truth_future=ref[:, 0],
+        t_end=ws.t_end,
+        label=ws.label,
+        drive=ws.drive,
+    )

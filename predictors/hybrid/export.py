@@ -49,14 +49,23 @@ def export_onnx(net: HybridNet, path: Path) -> None:
         # the legacy exporter's deprecation and tracer notes; the batch-size note on LSTMs
         # does not apply (no h0/c0 inputs; parity is checked at batch 1 and 256)
         warnings.simplefilter("ignore")
-        torch.onnx.export(net, example, str(path), dynamo=False, opset_version=OPSET,
-                          input_names=list(INPUTS), output_names=[OUTPUT],
-                          dynamic_axes={INPUTS[0]: {0: BATCH_DIM}, INPUTS[1]: {0: BATCH_DIM},
-                                        OUTPUT: {0: BATCH_DIM}})
+        torch.onnx.export(
+            net,
+            example,
+            str(path),
+            dynamo=False,
+            opset_version=OPSET,
+            input_names=list(INPUTS),
+            output_names=[OUTPUT],
+            dynamic_axes={
+                INPUTS[0]: {0: BATCH_DIM},
+                INPUTS[1]: {0: BATCH_DIM},
+                OUTPUT: {0: BATCH_DIM},
+            },
+        )
 
 
-def random_inputs(net: HybridNet, n: int = 256, seed: int = 0
-                  ) -> tuple[np.ndarray, np.ndarray]:
+def random_inputs(net: HybridNet, n: int = 256, seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
     """Random raw inputs around the net's statistics: features ~ N(mean, std), prior ~
     N(0, (3 prior_std)^2); float32 (n, 8, 6) and (n, 4, 2)."""
     rng = np.random.default_rng(seed)
@@ -70,8 +79,9 @@ def random_inputs(net: HybridNet, n: int = 256, seed: int = 0
 def parity(net: HybridNet, path: Path, n: int = 256, seed: int = 0) -> float:
     """Largest |onnxruntime - torch| over ``n`` random input pairs (raw output units)."""
     f, p = random_inputs(net, n, seed)
-    sess = ort.InferenceSession(str(path), sess_options=session_options(),
-                                providers=["CPUExecutionProvider"])
+    sess = ort.InferenceSession(
+        str(path), sess_options=session_options(), providers=["CPUExecutionProvider"]
+    )
     got = sess.run([OUTPUT], {INPUTS[0]: f, INPUTS[1]: p})[0]
     with torch.no_grad():
         want = net.eval()(torch.from_numpy(f), torch.from_numpy(p)).numpy()
@@ -83,36 +93,52 @@ def fit_stats(hw: HybridWindows) -> dict[str, np.ndarray]:
     prior RMS (4, 2) and target (residual) RMS (4, 2) [m], floored at 1e-3."""
     X = hw.X.reshape(-1, N_FEATURES)
     floor = 1e-3
-    return {"feature_mean": X.mean(axis=0), "feature_std": np.maximum(X.std(axis=0), floor),
-            "prior_std": np.maximum(np.sqrt((hw.prior ** 2).mean(axis=0)), floor),
-            "res_std": np.maximum(np.sqrt((hw.target ** 2).mean(axis=0)), floor)}
+    return {
+        "feature_mean": X.mean(axis=0),
+        "feature_std": np.maximum(X.std(axis=0), floor),
+        "prior_std": np.maximum(np.sqrt((hw.prior**2).mean(axis=0)), floor),
+        "res_std": np.maximum(np.sqrt((hw.target**2).mean(axis=0)), floor),
+    }
 
 
 def architecture(net: HybridNet) -> dict[str, Any]:
     """The network's shape, for model.json."""
     hidden = net.lstm.hidden_size
-    return {"encoder": f"{len(net.encoder) // 2} x (Linear -> LeakyReLU(0.1)), width {hidden}",
-            "lstm": {"hidden": hidden, "layers": net.lstm.num_layers},
-            "decoder": f"Linear({hidden}+{2 * N_H},{hidden}) -> LeakyReLU(0.1) -> "
-                       f"Linear({hidden},{4 * N_H})",
-            "parameters": int(sum(p.numel() for p in net.parameters()))}
+    return {
+        "encoder": f"{len(net.encoder) // 2} x (Linear -> LeakyReLU(0.1)), width {hidden}",
+        "lstm": {"hidden": hidden, "layers": net.lstm.num_layers},
+        "decoder": f"Linear({hidden}+{2 * N_H},{hidden}) -> LeakyReLU(0.1) -> "
+        f"Linear({hidden},{4 * N_H})",
+        "parameters": int(sum(p.numel() for p in net.parameters())),
+    }
 
 
 def model_info(net: HybridNet, prior_params: dict[str, dict], **extra: Any) -> dict[str, Any]:
     """model.json's content (format ``posbench-hybrid``) for ``net`` with the kf prior's
     parameters per GPS condition; ``extra`` keys (data, training, command, ...) are added."""
     info: dict[str, Any] = {
-        "format": FORMAT, "version": 1, "frame": "heading", "features": list(FEATURES),
-        "n_steps": N_STEPS, "dt_s": DT, "min_span_s": MIN_SPAN_S,
-        "horizons_s": list(HORIZONS), "inputs": list(INPUTS), "output": OUTPUT,
-        "input_shapes": {INPUTS[0]: [BATCH_DIM, N_STEPS, N_FEATURES],
-                         INPUTS[1]: [BATCH_DIM, N_H, 2]},
+        "format": FORMAT,
+        "version": 1,
+        "frame": "heading",
+        "features": list(FEATURES),
+        "n_steps": N_STEPS,
+        "dt_s": DT,
+        "min_span_s": MIN_SPAN_S,
+        "horizons_s": list(HORIZONS),
+        "inputs": list(INPUTS),
+        "output": OUTPUT,
+        "input_shapes": {
+            INPUTS[0]: [BATCH_DIM, N_STEPS, N_FEATURES],
+            INPUTS[1]: [BATCH_DIM, N_H, 2],
+        },
         "output_shape": [BATCH_DIM, N_H, 4],
         "output_units": "per horizon: dx, dy [m, heading frame] added to the kf's answer; "
-                        "log var along, across the heading [log m^2]",
+        "log var along, across the heading [log m^2]",
         "normalisation": "in-graph (raw inputs in, raw correction out)",
-        "feature_mean": net.feature_mean.tolist(), "feature_std": net.feature_std.tolist(),
-        "prior_std": net.prior_std.tolist(), "res_std": net.res_std.tolist(),
+        "feature_mean": net.feature_mean.tolist(),
+        "feature_std": net.feature_std.tolist(),
+        "prior_std": net.prior_std.tolist(),
+        "res_std": net.res_std.tolist(),
         "prior": {"predictor": "kf", "params": {c: dict(p) for c, p in prior_params.items()}},
         "architecture": architecture(net),
     }
@@ -120,8 +146,9 @@ def model_info(net: HybridNet, prior_params: dict[str, dict], **extra: Any) -> d
     return info
 
 
-def save_model(net: HybridNet, out_dir: Path, prior_params: dict[str, dict],
-               **extra: Any) -> dict[str, Any]:
+def save_model(
+    net: HybridNet, out_dir: Path, prior_params: dict[str, dict], **extra: Any
+) -> dict[str, Any]:
     """Write ``out_dir/model.onnx`` and ``model.json``; raises RuntimeError if the ONNX graph
     differs from torch by more than :data:`PARITY_TOL`. Returns model.json's content."""
     out_dir.mkdir(parents=True, exist_ok=True)
@@ -149,8 +176,12 @@ def prior_kf_params() -> dict[str, dict]:
     return {c: dict(params.get(c, {})) for c in CONDITIONS}
 
 
-def write_untrained(out_dir: Path, seeds: tuple[int, ...] = (0, 1, 2, 3),
-                    stats_condition: str = "rtk", hidden: int = 48) -> dict[str, Any]:
+def write_untrained(
+    out_dir: Path,
+    seeds: tuple[int, ...] = (0, 1, 2, 3),
+    stats_condition: str = "rtk",
+    hidden: int = 48,
+) -> dict[str, Any]:
     """An untrained (zero last layer) model: statistics from synthetic drives ``seeds`` (their
     fixes degraded by the ``stats_condition`` profile, the kf prior with that condition's
     tuned parameters), the tuned kf parameters of every condition as prior."""
@@ -171,23 +202,37 @@ def write_untrained(out_dir: Path, seeds: tuple[int, ...] = (0, 1, 2, 3),
     st = fit_stats(hw)
     net.set_stats(st["feature_mean"], st["feature_std"], st["prior_std"], st["res_std"])
     cmd = f"python -m predictors.hybrid.export {out_dir}"
-    return save_model(net, out_dir, prior, command=cmd, trained=False,
-                      note="UNTRAINED placeholder: the last layer is zero, so the correction "
-                           "is 0 and the hybrid answers exactly as its kf prior; the variance "
-                           "added is res_std^2",
-                      data={"stats_drives": names, "stats_gps_profile": stats_condition,
-                            "stats_windows": len(hw), "train_drives": []})
+    return save_model(
+        net,
+        out_dir,
+        prior,
+        command=cmd,
+        trained=False,
+        note="UNTRAINED placeholder: the last layer is zero, so the correction "
+        "is 0 and the hybrid answers exactly as its kf prior; the variance "
+        "added is res_std^2",
+        data={
+            "stats_drives": names,
+            "stats_gps_profile": stats_condition,
+            "stats_windows": len(hw),
+            "train_drives": [],
+        },
+    )
 
 
 def main(argv: list[str] | None = None) -> int:
     args = sys.argv[1:] if argv is None else argv
     if len(args) != 1:
-        print("usage: python -m predictors.hybrid.export OUT_DIR  (writes an untrained model)",
-              file=sys.stderr)
+        print(
+            "usage: python -m predictors.hybrid.export OUT_DIR  (writes an untrained model)",
+            file=sys.stderr,
+        )
         return 2
     info = write_untrained(Path(args[0]))
-    print(f"wrote {args[0]}/model.onnx, model.json ({info['data']['stats_windows']} windows "
-          f"for the statistics; parity {info['parity_max_abs']:.2g})")
+    print(
+        f"wrote {args[0]}/model.onnx, model.json ({info['data']['stats_windows']} windows "
+        f"for the statistics; parity {info['parity_max_abs']:.2g})"
+    )
     return 0
 
 

@@ -42,8 +42,14 @@ def _stat(v: ArrayLike, shape: tuple[int, ...]) -> torch.Tensor:
 class HybridNet(nn.Module):
     """Encoder MLP -> LSTM(hidden, lstm_layers) -> [h_last, prior] -> decoder MLP -> [B, 4, 4]."""
 
-    def __init__(self, hidden: int = 48, lstm_layers: int = 1, enc_layers: int = 1,
-                 slope: float = 0.1, n_features: int = N_FEATURES) -> None:
+    def __init__(
+        self,
+        hidden: int = 48,
+        lstm_layers: int = 1,
+        enc_layers: int = 1,
+        slope: float = 0.1,
+        n_features: int = N_FEATURES,
+    ) -> None:
         super().__init__()
         enc: list[nn.Module] = []
         width = n_features
@@ -52,8 +58,9 @@ class HybridNet(nn.Module):
             width = hidden
         self.encoder = nn.Sequential(*enc)
         self.lstm = nn.LSTM(hidden, hidden, num_layers=lstm_layers, batch_first=True)
-        self.decoder = nn.Sequential(nn.Linear(hidden + 2 * N_H, hidden), nn.LeakyReLU(slope),
-                                     nn.Linear(hidden, 4 * N_H))
+        self.decoder = nn.Sequential(
+            nn.Linear(hidden + 2 * N_H, hidden), nn.LeakyReLU(slope), nn.Linear(hidden, 4 * N_H)
+        )
         last = self.decoder[-1]
         nn.init.zeros_(last.weight)
         nn.init.zeros_(last.bias)
@@ -63,8 +70,13 @@ class HybridNet(nn.Module):
         self.register_buffer("res_std", torch.ones(N_H, 2))
         self.register_buffer("log_res_var", torch.zeros(N_H, 2))
 
-    def set_stats(self, feature_mean: ArrayLike, feature_std: ArrayLike, prior_std: ArrayLike,
-                  res_std: ArrayLike) -> None:
+    def set_stats(
+        self,
+        feature_mean: ArrayLike,
+        feature_std: ArrayLike,
+        prior_std: ArrayLike,
+        res_std: ArrayLike,
+    ) -> None:
         """Normalisation statistics in raw units: feature mean / std (6,), prior scale [m]
         and residual scale [m] (scalars, (4,) per horizon or (4, 2) per horizon and axis)."""
         self.feature_mean.copy_(_stat(feature_mean, (N_FEATURES,)))

@@ -96,19 +96,32 @@ def load_model_info(onnx_path: Path) -> dict:
     if not isinstance(info, dict) or info.get("format") != FORMAT:
         raise DataError(js, f"not a {FORMAT} model description (key 'format')")
     if info.get("frame", "heading") != "heading":
-        raise DataError(js, f"frame {info.get('frame')!r} is not supported (key 'frame'; "
-                            "the hybrid works in the heading frame)")
+        raise DataError(
+            js,
+            f"frame {info.get('frame')!r} is not supported (key 'frame'; "
+            "the hybrid works in the heading frame)",
+        )
     hz = info.get("horizons_s", list(HORIZONS))
-    if not (isinstance(hz, list) and len(hz) == N_H
-            and all(isinstance(h, int | float) and abs(h - w) < 1e-9
-                    for h, w in zip(hz, HORIZONS, strict=True))):
+    if not (
+        isinstance(hz, list)
+        and len(hz) == N_H
+        and all(
+            isinstance(h, int | float) and abs(h - w) < 1e-9
+            for h, w in zip(hz, HORIZONS, strict=True)
+        )
+    ):
         raise DataError(js, f"horizons_s {hz!r} must be {list(HORIZONS)}")
     prior = info.get("prior")
-    if not (isinstance(prior, dict) and prior.get("predictor") == "kf"
-            and isinstance(prior.get("params", {}), dict)
-            and all(isinstance(v, dict) for v in prior.get("params", {}).values())):
-        raise DataError(js, "key 'prior' must be {\"predictor\": \"kf\", \"params\": "
-                            "{CONDITION: {kf option: value}}}")
+    if not (
+        isinstance(prior, dict)
+        and prior.get("predictor") == "kf"
+        and isinstance(prior.get("params", {}), dict)
+        and all(isinstance(v, dict) for v in prior.get("params", {}).values())
+    ):
+        raise DataError(
+            js,
+            'key \'prior\' must be {"predictor": "kf", "params": {CONDITION: {kf option: value}}}',
+        )
     return info
 
 
@@ -130,16 +143,20 @@ def _check_net(onnx_path: Path, net: OnnxModel) -> None:
     want = ([N_STEPS, N_FEATURES], [N_H, 2])
     for name, shape, w in zip(INPUTS, net.input_shapes, want, strict=True):
         got = shape[1:]
-        if len(got) != 2 or any(isinstance(g, int) and g != x for g, x in zip(got, w,
-                                                                              strict=True)):
-            raise DataError(onnx_path, f"network input {name} has shape {shape}, expected "
-                                       f"[batch, {w[0]}, {w[1]}]")
+        if len(got) != 2 or any(isinstance(g, int) and g != x for g, x in zip(got, w, strict=True)):
+            raise DataError(
+                onnx_path,
+                f"network input {name} has shape {shape}, expected [batch, {w[0]}, {w[1]}]",
+            )
     out = next(o for o in net.session.get_outputs() if o.name == net.output_name)
     got = list(out.shape)[1:]
-    if len(got) != 2 or any(isinstance(g, int) and g != x for g, x in zip(got, (N_H, 4),
-                                                                          strict=True)):
-        raise DataError(onnx_path, f"network output {OUTPUT} has shape {list(out.shape)}, "
-                                   f"expected [batch, {N_H}, 4]")
+    if len(got) != 2 or any(
+        isinstance(g, int) and g != x for g, x in zip(got, (N_H, 4), strict=True)
+    ):
+        raise DataError(
+            onnx_path,
+            f"network output {OUTPUT} has shape {list(out.shape)}, expected [batch, {N_H}, 4]",
+        )
 
 
 class HybridPredictor(ModelFileSeams, Predictor):
@@ -169,13 +186,16 @@ class HybridPredictor(ModelFileSeams, Predictor):
         try:
             self.kf = LinearKalman(**self.prior_params)
         except (TypeError, DataError) as exc:
-            raise DataError(self.model_path.with_suffix(".json"),
-                            f"prior.params[{self.prior_condition!r}] is not a kf "
-                            f"configuration: {str(exc).splitlines()[0]}") from None
+            raise DataError(
+                self.model_path.with_suffix(".json"),
+                f"prior.params[{self.prior_condition!r}] is not a kf "
+                f"configuration: {str(exc).splitlines()[0]}",
+            ) from None
         shape = (self.info.get("input_shapes") or {}).get(INPUTS[0]) or [None]
         batch_dim = shape[0] if isinstance(shape[0], str) else None
-        self.net = OnnxModel(self.model_path, output=self.info.get("output", OUTPUT),
-                             batch_dim=batch_dim)
+        self.net = OnnxModel(
+            self.model_path, output=self.info.get("output", OUTPUT), batch_dim=batch_dim
+        )
         _check_net(self.model_path, self.net)
         pinv = np.linalg.pinv(np.vander(np.append(GRID_OFFSETS, DT), 4, increasing=True))
         self._fused = FusedStep(self.net, "heading", pinv)
@@ -183,11 +203,17 @@ class HybridPredictor(ModelFileSeams, Predictor):
         self.reset()
 
     def config(self) -> dict:
-        return {"model": str(self.model_path), "gps_condition": self.gps_condition,
-                "prior": {"predictor": "kf", "condition": self.prior_condition,
-                          "params": self.kf.config()},
-                "architecture": self.info.get("architecture"),
-                "command": self.info.get("command")}
+        return {
+            "model": str(self.model_path),
+            "gps_condition": self.gps_condition,
+            "prior": {
+                "predictor": "kf",
+                "condition": self.prior_condition,
+                "params": self.kf.config(),
+            },
+            "architecture": self.info.get("architecture"),
+            "command": self.info.get("command"),
+        }
 
     # ------------------------------------------------------------------ seams
     def last_step(self) -> tuple[float, float] | None:
@@ -201,7 +227,7 @@ class HybridPredictor(ModelFileSeams, Predictor):
     # ------------------------------------------------------------------ state
     def reset(self) -> None:
         self.kf.reset()
-        self._fix = RowBuffer(FIX_CAP, 3)        # t, x, y of real fixes
+        self._fix = RowBuffer(FIX_CAP, 3)  # t, x, y of real fixes
         self._imu = ImuHistory()
         self._t_real = math.nan
         self._can_v: float | None = None
@@ -214,7 +240,7 @@ class HybridPredictor(ModelFileSeams, Predictor):
         self._has = False
         self._t_fix = math.nan
         self._cs = (1.0, 0.0)
-        self._kx = self._ky = (0.0,) * (N_H + 1)   # world correction at the knots [m]
+        self._kx = self._ky = (0.0,) * (N_H + 1)  # world correction at the knots [m]
         self._lva = self._lvc = (0.0,) * (N_H + 1)  # log variances at the knots (index 0 unused)
 
     def observe_imu(self, t: float, ax: float, ay: float, yaw: float, yaw_rate: float) -> None:
@@ -317,8 +343,10 @@ class HybridPredictor(ModelFileSeams, Predictor):
             return u * math.exp(la[1]), u * math.exp(lc[1])
         k = int(u)
         f = u - k
-        return (math.exp(la[k] + f * (la[k + 1] - la[k])),
-                math.exp(lc[k] + f * (lc[k + 1] - lc[k])))
+        return (
+            math.exp(la[k] + f * (la[k + 1] - la[k])),
+            math.exp(lc[k] + f * (lc[k + 1] - lc[k])),
+        )
 
     def covariance_at(self, t: float) -> np.ndarray | None:
         """2x2 ENU covariance [m^2]: the kf's plus the residual's, R(psi) diag(var) R(psi)^T."""

@@ -49,21 +49,29 @@ BETA = 0.5
 FUTURE_WEIGHT = 4.0
 
 
-def drive_rows(drive: Drive, profiles: Sequence[str], kf_params: dict[str, dict], seed: int
-               ) -> HybridWindows:
+def drive_rows(
+    drive: Drive, profiles: Sequence[str], kf_params: dict[str, dict], seed: int
+) -> HybridWindows:
     """Training rows of one drive: per profile for a drive with truth, else its own fixes."""
     if drive.truth is None or len(drive.truth) < 2:
         return hybrid_windows(drive, drive.gps, kf_params.get("native") or {})
     from posbench.scenarios.degrade import degrade_gps
 
-    return HybridWindows.concat([
-        hybrid_windows(drive, degrade_gps(drive.truth, p, seed=seed * 1000 + 100 * j),
-                       kf_params.get(p) or {})
-        for j, p in enumerate(profiles)])
+    return HybridWindows.concat(
+        [
+            hybrid_windows(
+                drive,
+                degrade_gps(drive.truth, p, seed=seed * 1000 + 100 * j),
+                kf_params.get(p) or {},
+            )
+            for j, p in enumerate(profiles)
+        ]
+    )
 
 
-def build_rows(drives: Sequence[Drive], profiles: Sequence[str], kf_params: dict[str, dict],
-               seed: int) -> HybridWindows:
+def build_rows(
+    drives: Sequence[Drive], profiles: Sequence[str], kf_params: dict[str, dict], seed: int
+) -> HybridWindows:
     return HybridWindows.concat([drive_rows(d, profiles, kf_params, seed) for d in drives])
 
 
@@ -71,16 +79,20 @@ def future_answers(hw: HybridWindows, corr: np.ndarray) -> np.ndarray:
     """World positions at t_fix + 0.2 s [m]: the kf's answer plus the 0.2 s correction
     (B, 2) [m, heading frame] rotated by psi."""
     c, s = np.cos(hw.psi), np.sin(hw.psi)
-    return hw.kf_future + np.stack([c * corr[:, 0] - s * corr[:, 1],
-                                    s * corr[:, 0] + c * corr[:, 1]], axis=1)
+    return hw.kf_future + np.stack(
+        [c * corr[:, 0] - s * corr[:, 1], s * corr[:, 0] + c * corr[:, 1]], axis=1
+    )
 
 
 def evaluate(hw: HybridWindows, future: np.ndarray, groups: dict[str, str]) -> dict:
     """Future-point error [m] of the hybrid and of its kf prior alone, overall, per label and
     per source group."""
+
     def both(m: np.ndarray) -> dict:
-        return {"hybrid": error_stats(future[m], hw.truth_future[m]),
-                "kf": error_stats(hw.kf_future[m], hw.truth_future[m])}
+        return {
+            "hybrid": error_stats(future[m], hw.truth_future[m]),
+            "kf": error_stats(hw.kf_future[m], hw.truth_future[m]),
+        }
 
     out = {"all": both(np.ones(len(hw), dtype=bool))}
     for lab in sorted(set(hw.label.tolist())):
@@ -90,15 +102,29 @@ def evaluate(hw: HybridWindows, future: np.ndarray, groups: dict[str, str]) -> d
     return out
 
 
-def run_training(data_paths: Sequence[str | Path], out_dir: Path, epochs: int = 40,
-                 seed: int = 0, synthetic: int = 0, progress: Progress | None = None,
-                 command: str | None = None, drives: Sequence[Drive] | None = None,
-                 hidden: int = 48, lstm_layers: int = 1, batch_size: int = 512,
-                 lr: float = 2e-3, patience: int = 6, threads: int = 2,
-                 on_early_stop: EarlyStop | None = None, corpus_hours: float = 0.0,
-                 profiles: Sequence[str] = ("none", "rtk", "consumer"), mirror: bool = True,
-                 max_minutes: float = 30.0, max_val_windows: int = 60_000,
-                 kf_params: dict[str, dict] | None = None) -> dict:
+def run_training(
+    data_paths: Sequence[str | Path],
+    out_dir: Path,
+    epochs: int = 40,
+    seed: int = 0,
+    synthetic: int = 0,
+    progress: Progress | None = None,
+    command: str | None = None,
+    drives: Sequence[Drive] | None = None,
+    hidden: int = 48,
+    lstm_layers: int = 1,
+    batch_size: int = 512,
+    lr: float = 2e-3,
+    patience: int = 6,
+    threads: int = 2,
+    on_early_stop: EarlyStop | None = None,
+    corpus_hours: float = 0.0,
+    profiles: Sequence[str] = ("none", "rtk", "consumer"),
+    mirror: bool = True,
+    max_minutes: float = 30.0,
+    max_val_windows: int = 60_000,
+    kf_params: dict[str, dict] | None = None,
+) -> dict:
     """Train, export and describe a hybrid model; returns the dict written to model.json.
 
     Args as :func:`posbench.predictors.lstm.train.run_training`; ``hidden`` is the network width
@@ -121,8 +147,11 @@ def run_training(data_paths: Sequence[str | Path], out_dir: Path, epochs: int = 
     tr = build_rows(train_d, profiles, prior, seed)
     va = subsample(build_rows(val_d, profiles, prior, seed + 7919), max_val_windows, seed)
     if len(tr) == 0 or len(va) == 0:
-        raise DataError(None, f"too few windows (train {len(tr)}, validation {len(va)}): "
-                              "drives need >= 2 s of moving GPS")
+        raise DataError(
+            None,
+            f"too few windows (train {len(tr)}, validation {len(va)}): "
+            "drives need >= 2 s of moving GPS",
+        )
     t_data = time.perf_counter() - t_start
 
     net = HybridNet(hidden=hidden, lstm_layers=lstm_layers)
@@ -169,10 +198,23 @@ def run_training(data_paths: Sequence[str | Path], out_dir: Path, epochs: int = 
             tb = tb * (1 - flip + flip * vec_sign)
         return loss_fn(xb, pb, tb)
 
-    fit = fit_epochs(net, batch_loss, validate, torch.tensor(sample_weights(tr.label)),
-                     epochs=epochs, batch_size=batch_size, lr=lr, patience=patience, gen=gen,
-                     t_start=t_start, max_minutes=max_minutes, select="val_future_mean_m",
-                     include_initial=True, progress=progress, on_early_stop=on_early_stop)
+    fit = fit_epochs(
+        net,
+        batch_loss,
+        validate,
+        torch.tensor(sample_weights(tr.label)),
+        epochs=epochs,
+        batch_size=batch_size,
+        lr=lr,
+        patience=patience,
+        gen=gen,
+        t_start=t_start,
+        max_minutes=max_minutes,
+        select="val_future_mean_m",
+        include_initial=True,
+        progress=progress,
+        on_early_stop=on_early_stop,
+    )
     history, stopped_by = fit.history, fit.stopped_by
     train_s = time.perf_counter() - t_start
 
@@ -181,41 +223,59 @@ def run_training(data_paths: Sequence[str | Path], out_dir: Path, epochs: int = 
 
     extra = {
         "trained": True,
-        "training": {"epochs_max": epochs, "epochs_run": len(history) - 1,
-                     "best_epoch": fit.best_epoch, "stopped_by": stopped_by,
-                     "max_minutes": max_minutes, "seed": seed, "batch_size": batch_size,
-                     "lr": lr, "optimizer": "Adam",
-                     "scheduler": "ReduceLROnPlateau(factor 0.5, patience 2) on the "
-                                  "validation future error",
-                     "early_stopping_patience": patience,
-                     "selection": "validation future-point mean error [m] (development "
-                                  "drives; epoch 0 = the untrained net = the kf alone)",
-                     "loss": f"beta-NLL (beta {BETA}) of the residual per horizon and axis, "
-                             f"in residual units; the 0.2 s horizon weighted {FUTURE_WEIGHT}x",
-                     "oversampling": "turn/roundabout weight n_other/n_turn clipped to [1, 5]",
-                     "augmentation": {"mirror": mirror, "gps_profiles": list(profiles),
-                                      "time_jitter": "fix times drawn afresh per GPS draw"},
-                     "threads": threads, "data_seconds": round(t_data, 1),
-                     "seconds": round(train_s, 1), "history": history},
-        "data": {"paths": manifest(data_paths),
-                 "synthetic": {"drives": synthetic,
-                               "generator": "posbench.scenarios.synthetic.generate_drive",
-                               "generator_seeds": synthetic_seeds(synthetic, seed)},
-                 "corpus": corpus_card(corpus_d, corpus_hours, seed),
-                 "in_memory_drives": [d.name for d in (drives or [])],
-                 "train_drives": [d.name for d in train_d],
-                 "val_drives": [d.name for d in val_d],
-                 "split": "by route (predictors.lstm.train.split_by_route)",
-                 "train_windows": len(tr), "val_windows": len(va),
-                 "train_labels": {k: int(v) for k, v in
-                                  zip(*np.unique(tr.label, return_counts=True), strict=True)}},
+        "training": {
+            "epochs_max": epochs,
+            "epochs_run": len(history) - 1,
+            "best_epoch": fit.best_epoch,
+            "stopped_by": stopped_by,
+            "max_minutes": max_minutes,
+            "seed": seed,
+            "batch_size": batch_size,
+            "lr": lr,
+            "optimizer": "Adam",
+            "scheduler": "ReduceLROnPlateau(factor 0.5, patience 2) on the validation future error",
+            "early_stopping_patience": patience,
+            "selection": "validation future-point mean error [m] (development "
+            "drives; epoch 0 = the untrained net = the kf alone)",
+            "loss": f"beta-NLL (beta {BETA}) of the residual per horizon and axis, "
+            f"in residual units; the 0.2 s horizon weighted {FUTURE_WEIGHT}x",
+            "oversampling": "turn/roundabout weight n_other/n_turn clipped to [1, 5]",
+            "augmentation": {
+                "mirror": mirror,
+                "gps_profiles": list(profiles),
+                "time_jitter": "fix times drawn afresh per GPS draw",
+            },
+            "threads": threads,
+            "data_seconds": round(t_data, 1),
+            "seconds": round(train_s, 1),
+            "history": history,
+        },
+        "data": {
+            "paths": manifest(data_paths),
+            "synthetic": {
+                "drives": synthetic,
+                "generator": "posbench.scenarios.synthetic.generate_drive",
+                "generator_seeds": synthetic_seeds(synthetic, seed),
+            },
+            "corpus": corpus_card(corpus_d, corpus_hours, seed),
+            "in_memory_drives": [d.name for d in (drives or [])],
+            "train_drives": [d.name for d in train_d],
+            "val_drives": [d.name for d in val_d],
+            "split": "by route (predictors.lstm.train.split_by_route)",
+            "train_windows": len(tr),
+            "val_windows": len(va),
+            "train_labels": {
+                k: int(v) for k, v in zip(*np.unique(tr.label, return_counts=True), strict=True)
+            },
+        },
         "packages": package_versions(),
         "command": command,
     }
     info = save_model(net, out_dir, prior, **extra)
     onnx = OnnxModel(out_dir / "model.onnx")
-    outs = onnx.session.run(None, {"features": va.X.astype(np.float32),
-                                   "prior": va.prior.astype(np.float32)})[0]
+    outs = onnx.session.run(
+        None, {"features": va.X.astype(np.float32), "prior": va.prior.astype(np.float32)}
+    )[0]
     future = future_answers(va, outs[:, 0, :2].astype(float))
     info["validation"] = evaluate(va, future, {d.name: group_of(d) for d in val_d})
     (out_dir / "model.json").write_text(json.dumps(info, indent=1) + "\n")

@@ -55,12 +55,16 @@ class AuthorsLstmPredictor(LstmPredictor):
 
     name = "lstm-authors"
 
-    def __init__(self, model: str | None = None, fit: str = "closed",
-                 origin: str = "window") -> None:
+    def __init__(
+        self, model: str | None = None, fit: str = "closed", origin: str = "window"
+    ) -> None:
         if model is None:
-            raise DataError(None, "lstm-authors needs the authors' ONNX file: pass --model PATH "
-                                  "(e.g. ../shared/models/authors/gps_interpolation_model3.onnx); "
-                                  "it is not bundled")
+            raise DataError(
+                None,
+                "lstm-authors needs the authors' ONNX file: pass --model PATH "
+                "(e.g. ../shared/models/authors/gps_interpolation_model3.onnx); "
+                "it is not bundled",
+            )
         if fit not in ("closed", "lbfgs"):
             raise ValueError(f"fit must be 'closed' or 'lbfgs', not {fit!r}")
         if origin not in ORIGINS:
@@ -82,11 +86,16 @@ class AuthorsLstmPredictor(LstmPredictor):
         self._init_buffers()
 
     def config(self) -> dict:
-        return {"model": str(self.model_path), "fit": self.fit, "origin": self.origin,
-                "batch": self.net.batch}
+        return {
+            "model": str(self.model_path),
+            "fit": self.fit,
+            "origin": self.origin,
+            "batch": self.net.batch,
+        }
 
-    def features(self, grid: np.ndarray, ax: np.ndarray, ay: np.ndarray, coef: np.ndarray,
-                 scale: float) -> tuple[np.ndarray, np.ndarray]:
+    def features(
+        self, grid: np.ndarray, ax: np.ndarray, ay: np.ndarray, coef: np.ndarray, scale: float
+    ) -> tuple[np.ndarray, np.ndarray]:
         """The authors' input (6, 8) and the x, y offset subtracted from positions."""
         d = deriv_poly(coef, GRID_OFFSETS / scale)
         off = grid[0].copy() if self.origin == "window" else np.zeros(2)
@@ -99,8 +108,16 @@ class AuthorsLstmPredictor(LstmPredictor):
         x[5] = _T
         return x, off
 
-    def _net_input(self, grid: np.ndarray, ax: np.ndarray, ay: np.ndarray, yaw: np.ndarray,
-                   psi: float, coef: np.ndarray, scale: float) -> np.ndarray:
+    def _net_input(
+        self,
+        grid: np.ndarray,
+        ax: np.ndarray,
+        ay: np.ndarray,
+        yaw: np.ndarray,
+        psi: float,
+        coef: np.ndarray,
+        scale: float,
+    ) -> np.ndarray:
         x, self._off = self.features(grid, ax, ay, coef, scale)
         return x
 

@@ -62,9 +62,18 @@ def core_model(full: onnx.ModelProto) -> onnx.ModelProto:
     """
     g = full.graph
     init = {i.name: numpy_helper.to_array(i).astype(np.float64) for i in g.initializer}
-    need = ("net.mean", "net.std", "net.log_s_mean", "net.log_s_std", "net.res_std",
-            "net.encoder.0.bias", "net.decoder.0.weight", "net.decoder.0.bias",
-            "net.decoder.2.weight", "net.decoder.2.bias")
+    need = (
+        "net.mean",
+        "net.std",
+        "net.log_s_mean",
+        "net.log_s_std",
+        "net.res_std",
+        "net.encoder.0.bias",
+        "net.decoder.0.weight",
+        "net.decoder.0.bias",
+        "net.decoder.2.weight",
+        "net.decoder.2.bias",
+    )
     missing = [k for k in need if k not in init]
     if missing:
         raise NoCoreGraph(f"not a speed-form posbench model (no {', '.join(missing)})")
@@ -108,8 +117,10 @@ def core_model(full: onnx.ModelProto) -> onnx.ModelProto:
 
     f32 = np.float32
     tensors = {
-        "enc_w": w.T.astype(f32), "enc_b": b.astype(f32),
-        "lstm_w": init[lstm.input[1]].astype(f32), "lstm_r": init[lstm.input[2]].astype(f32),
+        "enc_w": w.T.astype(f32),
+        "enc_b": b.astype(f32),
+        "lstm_w": init[lstm.input[1]].astype(f32),
+        "lstm_r": init[lstm.input[2]].astype(f32),
         "lstm_b": init[lstm.input[3]].astype(f32),
         "dec0_w": init["net.decoder.0.weight"].astype(f32),
         "dec0_b": init["net.decoder.0.bias"].astype(f32),
@@ -122,20 +133,26 @@ def core_model(full: onnx.ModelProto) -> onnx.ModelProto:
         helper.make_node("Gemm", ["z", "enc_w", "enc_b"], ["e"], transB=1),
         helper.make_node("LeakyRelu", ["e"], ["e_act"], alpha=slope),
         helper.make_node("Reshape", ["e_act", "seq_shape"], ["seq"]),
-        helper.make_node("LSTM", ["seq", "lstm_w", "lstm_r", "lstm_b"], ["", "h_last"],
-                         hidden_size=hidden),
+        helper.make_node(
+            "LSTM", ["seq", "lstm_w", "lstm_r", "lstm_b"], ["", "h_last"], hidden_size=hidden
+        ),
         helper.make_node("Reshape", ["h_last", "row_shape"], ["h"]),
         helper.make_node("Gemm", ["h", "dec0_w", "dec0_b"], ["d"], transB=1),
         helper.make_node("LeakyRelu", ["d"], ["d_act"], alpha=slope),
         helper.make_node("Gemm", ["d_act", "dec2_w", "dec2_b"], ["o"], transB=1),
     ]
     graph = helper.make_graph(
-        nodes, "posbench_lstm_core",
+        nodes,
+        "posbench_lstm_core",
         [helper.make_tensor_value_info("z", TensorProto.FLOAT, [N_STEPS, N_FEATURES + 1])],
         [helper.make_tensor_value_info("o", TensorProto.FLOAT, [1, 2])],
-        [numpy_helper.from_array(v, k) for k, v in tensors.items()])
-    model = helper.make_model(graph, opset_imports=[helper.make_opsetid("", CORE_OPSET)],
-                              producer_name="posbench.core_graph")
+        [numpy_helper.from_array(v, k) for k, v in tensors.items()],
+    )
+    model = helper.make_model(
+        graph,
+        opset_imports=[helper.make_opsetid("", CORE_OPSET)],
+        producer_name="posbench.core_graph",
+    )
     model.ir_version = min(full.ir_version, model.ir_version)
     onnx.checker.check_model(model)
     return model
@@ -154,9 +171,15 @@ def write_core(onnx_path: Path) -> dict:
     core = core_model(full)
     out = onnx_path.with_name(onnx_path.stem + ".core.onnx")
     onnx.save(core, str(out))
-    res_std = next(numpy_helper.to_array(i) for i in full.graph.initializer
-                   if i.name == "net.res_std")
-    return {"file": out.name, "input": "z", "output": "o",
-            "res_std_m": [float(v) for v in res_std], "speed_eps_m": SPEED_EPS_M,
-            "about": "the network without its in-graph normalisation, for the fused step "
-                     "(predictors.lstm.core_graph); checked against model.onnx on load"}
+    res_std = next(
+        numpy_helper.to_array(i) for i in full.graph.initializer if i.name == "net.res_std"
+    )
+    return {
+        "file": out.name,
+        "input": "z",
+        "output": "o",
+        "res_std_m": [float(v) for v in res_std],
+        "speed_eps_m": SPEED_EPS_M,
+        "about": "the network without its in-graph normalisation, for the fused step "
+        "(predictors.lstm.core_graph); checked against model.onnx on load",
+    }

@@ -39,8 +39,9 @@ def check_windows(n: int = CHECK_WINDOWS, seed: int = 0) -> np.ndarray:
     float32-representable, so both graphs see the same numbers."""
     rng = np.random.default_rng(seed)
     x = np.zeros((n, N_STEPS, N_FEATURES))
-    step = rng.uniform(0.0, 8.0, n)[:, None] * (1 + rng.uniform(-0.2, 0.2, n)[:, None]
-                                                * np.linspace(-1, 1, N_STEPS))
+    step = rng.uniform(0.0, 8.0, n)[:, None] * (
+        1 + rng.uniform(-0.2, 0.2, n)[:, None] * np.linspace(-1, 1, N_STEPS)
+    )
     turn = rng.normal(0.0, 0.1, n)[:, None] * np.arange(N_STEPS)
     x[:, :, 0] = step * np.cos(turn)
     x[:, :, 1] = step * np.sin(turn)
@@ -55,8 +56,11 @@ def has_core(onnx_path: Path, info: dict) -> bool:
     """``model.json`` names a core graph and its file is beside the model (a model copied
     without it runs its full graph: slower, same answers)."""
     entry = info.get("core")
-    return (isinstance(entry, dict) and bool(entry.get("file"))
-            and Path(onnx_path).with_name(str(entry["file"])).is_file())
+    return (
+        isinstance(entry, dict)
+        and bool(entry.get("file"))
+        and Path(onnx_path).with_name(str(entry["file"])).is_file()
+    )
 
 
 class CoreNet:
@@ -77,8 +81,10 @@ class CoreNet:
         self.path = path
         self.net = OnnxModel(path, output=entry.get("output"))
         if list(self.net.input_shape) != [N_STEPS, N_FEATURES + 1]:
-            raise DataError(path, f"core input shape {self.net.input_shape}, expected "
-                                  f"[{N_STEPS}, {N_FEATURES + 1}]")
+            raise DataError(
+                path,
+                f"core input shape {self.net.input_shape}, expected [{N_STEPS}, {N_FEATURES + 1}]",
+            )
         self.res_std = (float(entry["res_std_m"][0]), float(entry["res_std_m"][1]))
         self.eps = float(entry["speed_eps_m"])
         #: per-element input scale: rows 1-7 of the displacement columns are set to 1/s per
@@ -87,9 +93,12 @@ class CoreNet:
         self._scale[0, :2] = (1.0 / self.res_std[0], 1.0 / self.res_std[1])
         worst = self.difference(full)
         if not worst <= CORE_TOL_M:
-            raise DataError(path, f"does not reproduce {Path(onnx_path).name}: displacements "
-                                  f"differ by up to {worst:.3g} m (allowed {CORE_TOL_M:g}); "
-                                  "export the model again with `bench train`")
+            raise DataError(
+                path,
+                f"does not reproduce {Path(onnx_path).name}: displacements "
+                f"differ by up to {worst:.3g} m (allowed {CORE_TOL_M:g}); "
+                "export the model again with `bench train`",
+            )
 
     def load(self, x: np.ndarray) -> None:
         """Write the raw window ``x`` (8, 6) float64 (row 0: the fix offset) into the core's
@@ -106,8 +115,10 @@ class CoreNet:
         """The core on the loaded window: the displacement 200 ms ahead [m, the model's
         frame] = the last grid displacement of ``x`` + the residual x ``res_std``."""
         o0, o1 = self.net.run_buffer().tolist()
-        return (float(x[N_STEPS - 1, 0]) + o0 * self.res_std[0],
-                float(x[N_STEPS - 1, 1]) + o1 * self.res_std[1])
+        return (
+            float(x[N_STEPS - 1, 0]) + o0 * self.res_std[0],
+            float(x[N_STEPS - 1, 1]) + o1 * self.res_std[1],
+        )
 
     def difference(self, full: OnnxModel) -> float:
         """Largest |displacement| difference [m] between this core and ``full`` on

@@ -36,13 +36,26 @@ def _export(module: torch.nn.Module, path: Path, dynamo: bool) -> None:
     example = torch.zeros(2, N_STEPS, N_FEATURES)
     if dynamo:
         batch = torch.export.Dim("batch", min=1, max=65536)
-        torch.onnx.export(module, (example,), str(path), dynamo=True,
-                          input_names=[INPUT_NAME], output_names=[OUTPUT_NAME],
-                          dynamic_shapes={"x": {0: batch}})
+        torch.onnx.export(
+            module,
+            (example,),
+            str(path),
+            dynamo=True,
+            input_names=[INPUT_NAME],
+            output_names=[OUTPUT_NAME],
+            dynamic_shapes={"x": {0: batch}},
+        )
     else:
-        torch.onnx.export(module, (example,), str(path), dynamo=False, opset_version=OPSET,
-                          input_names=[INPUT_NAME], output_names=[OUTPUT_NAME],
-                          dynamic_axes={INPUT_NAME: {0: "batch"}, OUTPUT_NAME: {0: "batch"}})
+        torch.onnx.export(
+            module,
+            (example,),
+            str(path),
+            dynamo=False,
+            opset_version=OPSET,
+            input_names=[INPUT_NAME],
+            output_names=[OUTPUT_NAME],
+            dynamic_axes={INPUT_NAME: {0: "batch"}, OUTPUT_NAME: {0: "batch"}},
+        )
 
 
 def time_onnx(path: Path, n_calls: int = 2000, seed: int = 0) -> dict[str, float]:
@@ -56,8 +69,11 @@ def time_onnx(path: Path, n_calls: int = 2000, seed: int = 0) -> dict[str, float
         t0 = time.perf_counter()
         model.run(x)
         ts[i] = time.perf_counter() - t0
-    return {"p50_us": float(np.median(ts) * 1e6), "p10_us": float(np.percentile(ts, 10) * 1e6),
-            "p90_us": float(np.percentile(ts, 90) * 1e6)}
+    return {
+        "p50_us": float(np.median(ts) * 1e6),
+        "p10_us": float(np.percentile(ts, 10) * 1e6),
+        "p90_us": float(np.percentile(ts, 90) * 1e6),
+    }
 
 
 def export_best(net: LstmNet, out_path: Path, n_calls: int = 2000) -> dict:
@@ -66,8 +82,10 @@ def export_best(net: LstmNet, out_path: Path, n_calls: int = 2000) -> dict:
     Returns a report: per exporter its timing or the reason it was skipped, and the choice.
     """
     head = FuturePoint(net).eval()
-    report: dict = {"candidates": {}, "onnxscript_installed":
-                    importlib.util.find_spec("onnxscript") is not None}
+    report: dict = {
+        "candidates": {},
+        "onnxscript_installed": importlib.util.find_spec("onnxscript") is not None,
+    }
     with tempfile.TemporaryDirectory() as tmp:
         best: tuple[float, Path, str] | None = None
         for name, dynamo in (("legacy_opset17", False), ("dynamo", True)):

@@ -49,8 +49,9 @@ def rotate(x: np.ndarray, y: np.ndarray, ang: np.ndarray | float) -> tuple[np.nd
     return c * x - s * y, s * x + c * y
 
 
-def vehicle_to_world(ax: np.ndarray, ay: np.ndarray, yaw: np.ndarray
-                     ) -> tuple[np.ndarray, np.ndarray]:
+def vehicle_to_world(
+    ax: np.ndarray, ay: np.ndarray, yaw: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
     """Vehicle-frame acceleration (x fwd, y left) [m/s^2] -> world (ENU) with yaw [rad]."""
     return rotate(ax, ay, yaw)
 
@@ -65,10 +66,17 @@ def time_feature(n: int = N_STEPS) -> np.ndarray:
     return np.arange(n) * DT
 
 
-def compute_features(pos: np.ndarray, ax: np.ndarray, ay: np.ndarray, yaw: np.ndarray,
-                     psi_ref: np.ndarray | float, frame: str = "heading",
-                     anchor: int = N_STEPS - 1, out: np.ndarray | None = None,
-                     fix_xy: np.ndarray | None = None) -> np.ndarray:
+def compute_features(
+    pos: np.ndarray,
+    ax: np.ndarray,
+    ay: np.ndarray,
+    yaw: np.ndarray,
+    psi_ref: np.ndarray | float,
+    frame: str = "heading",
+    anchor: int = N_STEPS - 1,
+    out: np.ndarray | None = None,
+    fix_xy: np.ndarray | None = None,
+) -> np.ndarray:
     """Features (..., n, 6) for grid samples with any leading batch shape.
 
     Args:
@@ -93,7 +101,7 @@ def compute_features(pos: np.ndarray, ax: np.ndarray, ay: np.ndarray, yaw: np.nd
     if frame == "heading":
         ref = np.asarray(psi_ref)[..., None]
         out[..., 0], out[..., 1] = rotate(dxy[..., 0], dxy[..., 1], -ref)
-        yaw_a = yaw[..., anchor:anchor + 1]
+        yaw_a = yaw[..., anchor : anchor + 1]
         out[..., 2], out[..., 3] = rotate(awx, awy, -yaw_a)
         out[..., 4] = yaw - yaw_a
     elif frame == "world":
@@ -109,9 +117,16 @@ def compute_features(pos: np.ndarray, ax: np.ndarray, ay: np.ndarray, yaw: np.nd
 _T = time_feature()
 
 
-def features_one(pos: np.ndarray, ax: np.ndarray, ay: np.ndarray, yaw: np.ndarray,
-                 psi_ref: float, frame: str, out: np.ndarray,
-                 fix_xy: tuple[float, float] | None = None) -> np.ndarray:
+def features_one(
+    pos: np.ndarray,
+    ax: np.ndarray,
+    ay: np.ndarray,
+    yaw: np.ndarray,
+    psi_ref: float,
+    frame: str,
+    out: np.ndarray,
+    fix_xy: tuple[float, float] | None = None,
+) -> np.ndarray:
     """:func:`compute_features` for one window of 8 samples (the runtime's hot path, ~4x
     fewer numpy calls); writes into ``out`` (8, 6) and returns it. Equal to
     ``compute_features`` (tested)."""
@@ -141,8 +156,9 @@ def features_one(pos: np.ndarray, ax: np.ndarray, ay: np.ndarray, yaw: np.ndarra
     return out
 
 
-def displacement_to_world(dxy: np.ndarray, psi_ref: np.ndarray | float, frame: str = "heading"
-                          ) -> np.ndarray:
+def displacement_to_world(
+    dxy: np.ndarray, psi_ref: np.ndarray | float, frame: str = "heading"
+) -> np.ndarray:
     """A predicted displacement (..., 2) in the feature frame -> world metres (..., 2)."""
     if frame == "world":
         return np.asarray(dxy, dtype=float)
@@ -150,8 +166,9 @@ def displacement_to_world(dxy: np.ndarray, psi_ref: np.ndarray | float, frame: s
     return np.stack([x, y], axis=-1)
 
 
-def gps_substitute_imu(coef: np.ndarray, scale: float | np.ndarray, s: np.ndarray
-                       ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def gps_substitute_imu(
+    coef: np.ndarray, scale: float | np.ndarray, s: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Stand-ins for a missing IMU from the GPS position cubic(s).
 
     ``coef`` (..., 4, 2) in s = (t - t_end) / scale, evaluated at scaled times s (..., n).

@@ -49,6 +49,7 @@ except (ImportError, AttributeError):  # pragma: no cover - other NumPy layouts
         out[...] = np.linalg.solve(a, b)
         return out
 
+
 #: columns of a fit block: s^2, s^3, 1, s, then 3 value channels (x, y, 0 for the fixes;
 #: ax, ay, yaw for the IMU). With this order one subtraction of (t_end, 0, ...) from the
 #: buffer's rows (t, values...) writes s and the values at once, and the basis columns
@@ -91,8 +92,14 @@ class FusedStep:
     ``pts`` is overwritten by the next step: copy what must be kept.
     """
 
-    def __init__(self, net: OnnxModel, frame: str, final_pinv: np.ndarray,
-                 fix_offset: bool = False, core: CoreNet | None = None) -> None:
+    def __init__(
+        self,
+        net: OnnxModel,
+        frame: str,
+        final_pinv: np.ndarray,
+        fix_offset: bool = False,
+        core: CoreNet | None = None,
+    ) -> None:
         self.net = net
         self.frame = frame
         self.final_pinv = np.ascontiguousarray(final_pinv)
@@ -102,8 +109,13 @@ class FusedStep:
 
     # scratch buffers are rebuilt, not pickled (a pickled view would lose its base)
     def __getstate__(self) -> dict:
-        return {"net": self.net, "frame": self.frame, "final_pinv": self.final_pinv,
-                "fix_offset": self.fix_offset, "core": self.core}
+        return {
+            "net": self.net,
+            "frame": self.frame,
+            "final_pinv": self.final_pinv,
+            "fix_offset": self.fix_offset,
+            "core": self.core,
+        }
 
     def __setstate__(self, state: dict) -> None:
         self.__dict__.update(state)
@@ -143,7 +155,7 @@ class FusedStep:
         w = self._w
         if n > w.shape[2]:
             g = np.zeros((2, _COLS, max(n, 2 * w.shape[2])))
-            g[:, :, :w.shape[2]] = w
+            g[:, :, : w.shape[2]] = w
             self._w = w = g
         live = self._live[k]
         if n > live:
@@ -153,8 +165,9 @@ class FusedStep:
         self._live[k] = n
         return w[k]
 
-    def fit(self, fix: np.ndarray, imu: np.ndarray | None, t_end: float,
-            yaw_ok: bool = True) -> None:
+    def fit(
+        self, fix: np.ndarray, imu: np.ndarray | None, t_end: float, yaw_ok: bool = True
+    ) -> None:
         """Both cubics and their values on the grid (and 0.2 s past the fix).
 
         Args:
@@ -178,7 +191,7 @@ class FusedStep:
             np.subtract(imu.T, t4, out=b[3:7, :ni])
             if not yaw_ok:
                 b[6, :ni] = 0.0
-        w = self._w[:, :, :max(nf, ni)]
+        w = self._w[:, :, : max(nf, ni)]
         s = w[:, _C1]
         np.multiply(s, s, out=w[:, _C2])
         np.multiply(w[:, _C2], s, out=w[:, _C3])
@@ -236,8 +249,11 @@ class FusedStep:
             rel = imu[:8, 2]
             x64[:, 4] = np.pi - np.mod(np.pi - rel, 2 * np.pi)
         if self.fix_offset:
-            xc[0, 0] = (off if core is None else
-                        complex(off.real / core.res_std[0], off.imag / core.res_std[1]))
+            xc[0, 0] = (
+                off
+                if core is None
+                else complex(off.real / core.res_std[0], off.imag / core.res_std[1])
+            )
         cs = self._cs
         np.cos(rel, out=cs[:, 0])
         np.sin(rel, out=cs[:, 1])

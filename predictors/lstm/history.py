@@ -30,8 +30,8 @@ class RowBuffer:
     def append(self, row: tuple) -> None:
         if self.n == self.a.shape[0]:
             h = self.a.shape[0] // 2
-            self.a[:h] = self.a[self.n - h:self.n]
-            del self.t[:self.n - h]
+            self.a[:h] = self.a[self.n - h : self.n]
+            del self.t[: self.n - h]
             self.n = h
         self.a[self.n] = row
         self.t.append(float(row[0]))
@@ -47,7 +47,7 @@ class RowBuffer:
         self.t.clear()
 
     def view(self) -> np.ndarray:
-        return self.a[:self.n]
+        return self.a[: self.n]
 
 
 class ImuHistory(RowBuffer):
@@ -100,5 +100,5 @@ def fit_fused_window(f: FusedStep, fb: RowBuffer, im: ImuHistory, t_end: float) 
         if i1 - i0 > 3:
             imu = im.a[i0:i1]
             yaw_ok = im.t_yaw_nan < it[i0]
-    f.fit(fb.a[start:end + 1], imu, t_end, yaw_ok)
+    f.fit(fb.a[start : end + 1], imu, t_end, yaw_ok)
     return True

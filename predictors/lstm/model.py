@@ -44,9 +44,16 @@ class LstmNet(nn.Module):
     """Encoder MLP (``enc_layers`` x Linear+LeakyReLU) -> LSTM(hidden, lstm_layers) ->
     decoder MLP (Linear+LeakyReLU, Linear -> 6); ``form`` see the module doc."""
 
-    def __init__(self, hidden: int = 64, lstm_layers: int = 1, enc_layers: int = 1,
-                 slope: float = 0.1, n_features: int = N_FEATURES, form: str = "paper",
-                 fix_offset: bool = False) -> None:
+    def __init__(
+        self,
+        hidden: int = 64,
+        lstm_layers: int = 1,
+        enc_layers: int = 1,
+        slope: float = 0.1,
+        n_features: int = N_FEATURES,
+        form: str = "paper",
+        fix_offset: bool = False,
+    ) -> None:
         super().__init__()
         if form not in FORMS:
             raise ValueError(f"form must be one of {FORMS}, not {form!r}")
@@ -59,8 +66,9 @@ class LstmNet(nn.Module):
             width = hidden
         self.encoder = nn.Sequential(*enc)
         self.lstm = nn.LSTM(hidden, hidden, num_layers=lstm_layers, batch_first=True)
-        self.decoder = nn.Sequential(nn.Linear(hidden, hidden), nn.LeakyReLU(slope),
-                                     nn.Linear(hidden, n_features))
+        self.decoder = nn.Sequential(
+            nn.Linear(hidden, hidden), nn.LeakyReLU(slope), nn.Linear(hidden, n_features)
+        )
         self.register_buffer("mean", torch.zeros(n_features))
         self.register_buffer("std", torch.ones(n_features))
         # "speed" form: log-scale standardisation and the residual's scale [m]

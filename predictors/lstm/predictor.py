@@ -96,6 +96,7 @@ N_FEATURES = 6
 #: text recorded in results for the bundled model (:meth:`~posbench.predictors.base.ModelFileSeams.model_description`)
 BUNDLED_TEXT = "bundled (predictors/lstm/bundled/model.onnx)"
 
+
 def bundled_model() -> Path:
     """Path of the bundled ``model.onnx`` (package data of predictors.lstm)."""
     return Path(str(resources.files("posbench.predictors.lstm") / "bundled" / "model.onnx"))
@@ -120,17 +121,23 @@ def _check_model(onnx_path: Path, info: dict, net: OnnxModel) -> None:
     (frame, window of N_STEPS x 6): a one-line :class:`DataError` naming the file if not."""
     js = onnx_path.with_suffix(".json")
     if info.get("frame", "heading") not in FRAMES:
-        raise DataError(js, f"unknown frame {info.get('frame')!r} (key 'frame'; known: "
-                            f"{', '.join(FRAMES)})")
+        raise DataError(
+            js, f"unknown frame {info.get('frame')!r} (key 'frame'; known: {', '.join(FRAMES)})"
+        )
     want = [N_STEPS, N_FEATURES]
     declared = info.get("input_shape")
     if declared is not None and list(declared)[1:] != want:
-        raise DataError(js, f"input_shape {declared} does not match the features "
-                            f"[batch, {N_STEPS}, {N_FEATURES}]")
+        raise DataError(
+            js,
+            f"input_shape {declared} does not match the features [batch, {N_STEPS}, {N_FEATURES}]",
+        )
     got = list(net.input_shape)[1:]
     if len(got) != 2 or any(isinstance(g, int) and g != w for g, w in zip(got, want, strict=True)):
-        raise DataError(onnx_path, f"network input shape {net.input_shape} does not match the "
-                                   f"features [batch, {N_STEPS}, {N_FEATURES}]")
+        raise DataError(
+            onnx_path,
+            f"network input shape {net.input_shape} does not match the "
+            f"features [batch, {N_STEPS}, {N_FEATURES}]",
+        )
 
 
 class LstmPredictor(ModelFileSeams, Predictor):
@@ -151,8 +158,7 @@ class LstmPredictor(ModelFileSeams, Predictor):
     #: network step a fix triggers (see the module doc); set it on an instance
     stage_timer: StageTimer | None = None
 
-    def __init__(self, model: str | None = None, fit: str = "closed", step: str = "fused"
-                 ) -> None:
+    def __init__(self, model: str | None = None, fit: str = "closed", step: str = "fused") -> None:
         if fit not in FITS:
             raise ValueError(f"fit must be one of {FITS}, not {fit!r}")
         if step not in STEPS:
@@ -181,18 +187,30 @@ class LstmPredictor(ModelFileSeams, Predictor):
         fused = getattr(self, "step", "staged") == "fused" and self.fit == "closed"
         #: the model's core graph (model.json "core"; :mod:`posbench.predictors.lstm.core_net`), run by
         #: the fused step; a model copied without its core file runs the full graph
-        self.core = (CoreNet(self.model_path, self.info["core"], self.net)
-                     if fused and has_core(self.model_path, self.info) else None)
-        self._fused = (FusedStep(self.net, self.frame, self._final.pinv, self.fix_offset,
-                                 self.core) if fused else None)
+        self.core = (
+            CoreNet(self.model_path, self.info["core"], self.net)
+            if fused and has_core(self.model_path, self.info)
+            else None
+        )
+        self._fused = (
+            FusedStep(self.net, self.frame, self._final.pinv, self.fix_offset, self.core)
+            if fused
+            else None
+        )
         self.stage_timer = None
         self.reset()
 
     def config(self) -> dict:
-        return {"model": str(self.model_path), "fit": self.fit, "frame": self.frame,
-                "fix_offset": self.fix_offset,
-                "step": self.step, "core_graph": self.core is not None, "architecture": self.info.get("architecture"),
-                "command": self.info.get("command")}
+        return {
+            "model": str(self.model_path),
+            "fit": self.fit,
+            "frame": self.frame,
+            "fix_offset": self.fix_offset,
+            "step": self.step,
+            "core_graph": self.core is not None,
+            "architecture": self.info.get("architecture"),
+            "command": self.info.get("command"),
+        }
 
     @property
     def stages(self) -> tuple[str, ...]:
@@ -216,18 +234,18 @@ class LstmPredictor(ModelFileSeams, Predictor):
 
     # ------------------------------------------------------------------ state
     def reset(self) -> None:
-        self._fix = RowBuffer(FIX_CAP, 3)        # t, x, y (real fixes and bridging pseudo-fixes)
-        self._t_real = math.nan             # time of the newest real fix
+        self._fix = RowBuffer(FIX_CAP, 3)  # t, x, y (real fixes and bridging pseudo-fixes)
+        self._t_real = math.nan  # time of the newest real fix
         self._imu = ImuHistory()
         self._can_v: float | None = None
         self._gps_v = math.nan
         self._hold: tuple[float, float] | None = None
         self._still: list[tuple[float, float]] = []  # newest fixes received at standstill
-        self._mode = "empty"                # empty | line | net
+        self._mode = "empty"  # empty | line | net
         self._t_end = math.nan
         self._grid = np.zeros((N_STEPS, 2))
         self._pred = np.zeros(2)
-        self._c = (0.0,) * 8                # final cubic (x0..x3, y0..y3) in s = t - t_end
+        self._c = (0.0,) * 8  # final cubic (x0..x3, y0..y3) in s = t - t_end
         self._line = (0.0, 0.0, 0.0, 0.0, 0.0)  # t0, x0, vx, y0, vy
         self.steps = 0
         self.bridge_steps = 0
@@ -313,8 +331,8 @@ class LstmPredictor(ModelFileSeams, Predictor):
         if t_end - t[start] < MIN_SPAN_S:
             self._fallback_line(a)
             return
-        tt = t[start:end + 1]
-        xy = a[start:end + 1, 1:]
+        tt = t[start : end + 1]
+        xy = a[start : end + 1, 1:]
         scale = t_end - float(tt[0])
         if self.fit == "lbfgs":
             from posbench.predictors.cubic import fit_cubic_lbfgs
@@ -329,8 +347,9 @@ class LstmPredictor(ModelFileSeams, Predictor):
             c0 = lap(timer, "resample_positions", c0)
         self._run_net(grid, t_end, float(tt[0]), psi, coef, scale, timer, c0)
 
-    def _imu_on_grid(self, t0: float, t_end: float, coef: np.ndarray, scale: float
-                     ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    def _imu_on_grid(
+        self, t0: float, t_end: float, coef: np.ndarray, scale: float
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """ax, ay [vehicle frame] and yaw on the grid: IMU cubic over [t0, t_end], or the
         GPS curve's stand-ins where the IMU (or its yaw) is missing."""
         im = self._imu.view()
@@ -357,8 +376,17 @@ class LstmPredictor(ModelFileSeams, Predictor):
             return vals[:, 0], vals[:, 1], syaw
         return sax, say, syaw
 
-    def _run_net(self, grid: np.ndarray, t_end: float, t0: float, psi: float,
-                 coef: np.ndarray, scale: float, timer: StageTimer | None, c0: int) -> None:
+    def _run_net(
+        self,
+        grid: np.ndarray,
+        t_end: float,
+        t0: float,
+        psi: float,
+        coef: np.ndarray,
+        scale: float,
+        timer: StageTimer | None,
+        c0: int,
+    ) -> None:
         ax, ay, yaw = self._imu_on_grid(t0, t_end, coef, scale)
         if timer is not None:
             c0 = lap(timer, "resample_imu", c0)
@@ -383,8 +411,16 @@ class LstmPredictor(ModelFileSeams, Predictor):
         if timer is not None:
             lap(timer, "current_position_fit", c0)
 
-    def _net_input(self, grid: np.ndarray, ax: np.ndarray, ay: np.ndarray, yaw: np.ndarray,
-                   psi: float, coef: np.ndarray, scale: float) -> np.ndarray:
+    def _net_input(
+        self,
+        grid: np.ndarray,
+        ax: np.ndarray,
+        ay: np.ndarray,
+        yaw: np.ndarray,
+        psi: float,
+        coef: np.ndarray,
+        scale: float,
+    ) -> np.ndarray:
         """The network's input window from the grid [m], IMU on the grid and heading [rad]
         (and, for a ``fix_offset`` model, the newest fix: the fix buffer's last row)."""
         fix = None
@@ -421,8 +457,13 @@ class LstmPredictor(ModelFileSeams, Predictor):
             self._line = (float(t[0]), float(a[0, 1]), 0.0, float(a[0, 2]), 0.0)
         else:
             c = fit_poly(t, a[:, 1:], float(t[-1]), 1.0, degree=1)
-            self._line = (float(t[-1]), float(c[0, 0]), float(c[1, 0]), float(c[0, 1]),
-                          float(c[1, 1]))
+            self._line = (
+                float(t[-1]),
+                float(c[0, 0]),
+                float(c[1, 0]),
+                float(c[0, 1]),
+                float(c[1, 1]),
+            )
         self._gps_v = math.hypot(self._line[2], self._line[4]) if t.size > 1 else math.nan
         self._mode = "line"
 
@@ -439,8 +480,10 @@ class LstmPredictor(ModelFileSeams, Predictor):
                 n += 1
             s = t - self._t_end
             c = self._c
-            return (((c[3] * s + c[2]) * s + c[1]) * s + c[0],
-                    ((c[7] * s + c[6]) * s + c[5]) * s + c[4])
+            return (
+                ((c[3] * s + c[2]) * s + c[1]) * s + c[0],
+                ((c[7] * s + c[6]) * s + c[5]) * s + c[4],
+            )
         if self._mode == "line":
             t0, x0, vx, y0, vy = self._line
             return x0 + vx * (t - t0), y0 + vy * (t - t0)

@@ -68,8 +68,9 @@ except (ImportError, AttributeError):  # pragma: no cover - other NumPy layouts
     _solve = np.linalg.solve
 
 
-def fit_poly(t: np.ndarray, values: np.ndarray, t_ref: float, scale: float,
-             degree: int = DEGREE) -> np.ndarray:
+def fit_poly(
+    t: np.ndarray, values: np.ndarray, t_ref: float, scale: float, degree: int = DEGREE
+) -> np.ndarray:
     """Closed-form least-squares polynomial through (t, values) in s = (t - t_ref) / scale.
 
     The normal equations come from one product ``V.T @ [V | values]`` (V the Vandermonde
@@ -130,7 +131,7 @@ class FixedGridFit:
         V = powers(self.times / self.scale, degree)
         pinv = np.linalg.pinv(V)
         self.pinv = np.zeros((DEGREE + 1, self.times.size))
-        self.pinv[:degree + 1] = pinv
+        self.pinv[: degree + 1] = pinv
 
     def fit(self, values: np.ndarray) -> np.ndarray:
         """Coefficients (DEGREE+1, k) in s = t / scale."""
@@ -178,22 +179,22 @@ class Resampled:
         return float(np.hypot(self.coef[1, 0], self.coef[1, 1]) / self.scale)
 
 
-def resample_positions(t: np.ndarray, xy: np.ndarray, start: int, end: int
-                       ) -> tuple[np.ndarray, np.ndarray, float]:
+def resample_positions(
+    t: np.ndarray, xy: np.ndarray, start: int, end: int
+) -> tuple[np.ndarray, np.ndarray, float]:
     """Cubic through fixes ``start..end`` (inclusive) evaluated on the grid ending at t[end].
 
     Returns (positions (8, 2) [m], coef (4, 2) in s = (t - t[end]) / scale, scale [s]).
     """
-    tt = t[start:end + 1]
+    tt = t[start : end + 1]
     t_end = float(t[end])
     span = t_end - float(tt[0])
     scale = span if span > 0 else 1.0
-    coef = fit_poly(tt, xy[start:end + 1], t_end, scale)
+    coef = fit_poly(tt, xy[start : end + 1], t_end, scale)
     return eval_poly(coef, GRID_OFFSETS / scale), coef, scale
 
 
-def resample_imu(t_imu: np.ndarray, vals: np.ndarray, t0: float, t_end: float
-                 ) -> np.ndarray | None:
+def resample_imu(t_imu: np.ndarray, vals: np.ndarray, t0: float, t_end: float) -> np.ndarray | None:
     """IMU channels (n, k) fitted with a cubic over [t0, t_end] and evaluated on the grid.
 
     Glitches (|ax| or |ay| > ACCEL_GLITCH, columns 0 and 1) are left out. Returns (8, k)
@@ -214,6 +215,7 @@ def resample_imu(t_imu: np.ndarray, vals: np.ndarray, t0: float, t_end: float
 
 
 # ----------------------------------------------------------------- batched (training) path
+
 
 def fit_poly_batch(s: np.ndarray, values: np.ndarray, mask: np.ndarray) -> np.ndarray:
     """Masked least-squares cubics for many windows at once.
@@ -240,8 +242,9 @@ def eval_poly_batch(coef: np.ndarray, s: np.ndarray) -> np.ndarray:
     return ((c[..., 3, :] * s + c[..., 2, :]) * s + c[..., 1, :]) * s + c[..., 0, :]
 
 
-def gather_windows(t: np.ndarray, vals: np.ndarray, lo: np.ndarray, hi: np.ndarray
-                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def gather_windows(
+    t: np.ndarray, vals: np.ndarray, lo: np.ndarray, hi: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Pad the runs ``lo[b] .. hi[b]-1`` of (t, vals) into (B, M) arrays with a mask."""
     counts = hi - lo
     m = int(counts.max()) if counts.size else 0
@@ -251,9 +254,13 @@ def gather_windows(t: np.ndarray, vals: np.ndarray, lo: np.ndarray, hi: np.ndarr
     return t[idx], vals[idx], mask
 
 
-def resample_positions_batch(t: np.ndarray, xy: np.ndarray, starts: np.ndarray,
-                             ends: np.ndarray, extra_offsets: np.ndarray | None = None
-                             ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def resample_positions_batch(
+    t: np.ndarray,
+    xy: np.ndarray,
+    starts: np.ndarray,
+    ends: np.ndarray,
+    extra_offsets: np.ndarray | None = None,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Batched :func:`resample_positions`: positions (B, 8 [+extra], 2), coef (B, 4, 2), scale (B,).
 
     ``extra_offsets`` [s, relative to each window's newest fix] are evaluated after the grid
@@ -270,8 +277,9 @@ def resample_positions_batch(t: np.ndarray, xy: np.ndarray, starts: np.ndarray,
     return pos, coef, scale
 
 
-def resample_imu_batch(t_imu: np.ndarray, vals: np.ndarray, t0: np.ndarray, t_end: np.ndarray
-                       ) -> tuple[np.ndarray, np.ndarray]:
+def resample_imu_batch(
+    t_imu: np.ndarray, vals: np.ndarray, t0: np.ndarray, t_end: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
     """Batched :func:`resample_imu`: (B, 8, k) values and a (B,) validity flag."""
     good = (np.abs(vals[:, 0]) <= ACCEL_GLITCH) & (np.abs(vals[:, 1]) <= ACCEL_GLITCH)
     tg, vg = t_imu[good], vals[good]
@@ -289,8 +297,9 @@ def resample_imu_batch(t_imu: np.ndarray, vals: np.ndarray, t0: np.ndarray, t_en
     return out, ok
 
 
-def centred_cubic_batch(t: np.ndarray, xy: np.ndarray, tq: np.ndarray, half: float = 1.0
-                        ) -> tuple[np.ndarray, np.ndarray]:
+def centred_cubic_batch(
+    t: np.ndarray, xy: np.ndarray, tq: np.ndarray, half: float = 1.0
+) -> tuple[np.ndarray, np.ndarray]:
     """The paper's reference ("truth by cubic"): a cubic through the real fixes within
     +-``half`` s of each query time (past AND future), evaluated there.
 

@@ -62,8 +62,13 @@ class OnnxModel:
             not have changes nothing.
     """
 
-    def __init__(self, path: str | Path, output: str | None = None,
-                 fixed_batch: int | None = None, batch_dim: str | None = None) -> None:
+    def __init__(
+        self,
+        path: str | Path,
+        output: str | None = None,
+        fixed_batch: int | None = None,
+        batch_dim: str | None = None,
+    ) -> None:
         p = Path(path)
         if not p.is_file():
             raise DataError(p, "ONNX model file not found")
@@ -73,8 +78,11 @@ class OnnxModel:
         try:
             self.session = _session(self.source, batch_dim)
         except Exception as exc:  # onnxruntime raises its own exception types
-            raise DataError(p, f"not a loadable ONNX model ({type(exc).__name__}: "
-                               f"{str(exc).splitlines()[0][:200]})") from None
+            raise DataError(
+                p,
+                f"not a loadable ONNX model ({type(exc).__name__}: "
+                f"{str(exc).splitlines()[0][:200]})",
+            ) from None
         ins = self.session.get_inputs()
         inp = ins[0]
         self.input_name = inp.name
@@ -90,13 +98,17 @@ class OnnxModel:
         dims = [d if isinstance(d, int) else None for d in self.input_shape]
         b = dims[0] if fixed_batch is None else fixed_batch
         self.batch = b if isinstance(b, int) else 1
-        self.buf = np.zeros([self.batch] + [d if d is not None else 1 for d in dims[1:]],
-                            dtype=np.float32)
+        self.buf = np.zeros(
+            [self.batch] + [d if d is not None else 1 for d in dims[1:]], dtype=np.float32
+        )
         #: one preallocated float32 buffer per input (``bufs[0]`` is :attr:`buf`): a graph
         #: with several inputs is fed all of them by :meth:`run_buffer`
         self.bufs = [self.buf] + [
-            np.zeros([self.batch] + [d if isinstance(d, int) else 1 for d in shape[1:]],
-                     dtype=np.float32) for shape in self.input_shapes[1:]]
+            np.zeros(
+                [self.batch] + [d if isinstance(d, int) else 1 for d in shape[1:]], dtype=np.float32
+            )
+            for shape in self.input_shapes[1:]
+        ]
         self._feed = dict(zip(self.input_names, self.bufs, strict=True))
         #: the batch dimension was pinned to 1: many windows need another session
         self.pinned = bool(batch_dim) and self.input_shape[0] == 1
@@ -130,8 +142,10 @@ class OnnxModel:
         if inner is None:  # pragma: no cover - another onnxruntime layout
             return
         if self._agrees(lambda: inner.run(self._outs, self._feed, None)[0]):
+
             def run(outputs: list[str], feed: dict, _inner=inner.run) -> list:
                 return _inner(outputs, feed, None)
+
             self._run = run
         self._run_bound = self._bound_run(inner)
 
@@ -148,8 +162,7 @@ class OnnxModel:
             io = self.session.io_binding()
             for name, b in zip(self.input_names, self.bufs, strict=True):
                 io.bind_cpu_input(name, b)
-            io.bind_output(self.output_name, "cpu", 0, np.float32, list(shape),
-                           out.ctypes.data)
+            io.bind_output(self.output_name, "cpu", 0, np.float32, list(shape), out.ctypes.data)
             run_io = inner.run_with_iobinding
         except Exception:  # pragma: no cover - another onnxruntime layout
             return None
@@ -170,9 +183,11 @@ class OnnxModel:
     def __getstate__(self) -> dict:
         """Everything but the onnxruntime sessions (not picklable): they are rebuilt from the
         model bytes on unpickling, so predictors can cross process boundaries."""
-        return {k: v for k, v in self.__dict__.items()
-                if k not in ("session", "_batch_session", "_feed", "_run", "_run_bound",
-                             "_binding")}
+        return {
+            k: v
+            for k, v in self.__dict__.items()
+            if k not in ("session", "_batch_session", "_feed", "_run", "_run_bound", "_binding")
+        }
 
     def __setstate__(self, state: dict) -> None:
         self.__dict__.update(state)
@@ -213,8 +228,8 @@ class OnnxModel:
             return self._batch().run(self._outs, {self.input_name: X})[0]
         outs = []
         for i in range(0, X.shape[0], self.batch):
-            chunk = X[i:i + self.batch]
+            chunk = X[i : i + self.batch]
             buf = np.zeros_like(self.buf)
-            buf[:chunk.shape[0]] = chunk
-            outs.append(self.session.run(self._outs, {self.input_name: buf})[0][:chunk.shape[0]])
+            buf[: chunk.shape[0]] = chunk
+            outs.append(self.session.run(self._outs, {self.input_name: buf})[0][: chunk.shape[0]])
         return np.concatenate(outs) if outs else np.zeros((0,))

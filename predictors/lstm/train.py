@@ -60,9 +60,19 @@ def manifest(paths: Sequence[str | Path]) -> list[dict]:
     out = []
     for p in map(Path, paths):
         files = [p] if p.is_file() else sorted(f for f in p.rglob("*") if f.is_file())
-        out.append({"path": str(p), "files": [
-            {"file": str(f.relative_to(p)) if f != p else f.name, "bytes": f.stat().st_size,
-             "sha256": sha256_file(f)} for f in files]})
+        out.append(
+            {
+                "path": str(p),
+                "files": [
+                    {
+                        "file": str(f.relative_to(p)) if f != p else f.name,
+                        "bytes": f.stat().st_size,
+                        "sha256": sha256_file(f),
+                    }
+                    for f in files
+                ],
+            }
+        )
     return out
 
 
@@ -83,8 +93,10 @@ def synthetic_drives(n: int, seed: int) -> list[Drive]:
         return []
     from posbench.scenarios.synthetic import ROUTES, generate_drive
 
-    return [generate_drive(seed=s, route=ROUTES[i % len(ROUTES)])
-            for i, s in enumerate(synthetic_seeds(n, seed))]
+    return [
+        generate_drive(seed=s, route=ROUTES[i % len(ROUTES)])
+        for i, s in enumerate(synthetic_seeds(n, seed))
+    ]
 
 
 def group_of(drive: Drive) -> str:
@@ -112,22 +124,35 @@ def split_by_route(drives: Sequence[Drive]) -> tuple[list[Drive], list[Drive]]:
     return train, val
 
 
-def gps_variants(drive: Drive, n_seeds: int, seed: int,
-                 profiles: Sequence[str] = ("rtk",)) -> list:
+def gps_variants(drive: Drive, n_seeds: int, seed: int, profiles: Sequence[str] = ("rtk",)) -> list:
     """GPS streams to train on: the drive's own (no truth) or, per profile, ``n_seeds``
     degradations of its truth (each with freshly drawn fix times)."""
     if drive.truth is None or len(drive.truth) < 2:
         return [drive.gps]
     from posbench.scenarios.degrade import degrade_gps
 
-    return [degrade_gps(drive.truth, prof, seed=seed * 1000 + 100 * j + k)
-            for j, prof in enumerate(profiles) for k in range(n_seeds)]
+    return [
+        degrade_gps(drive.truth, prof, seed=seed * 1000 + 100 * j + k)
+        for j, prof in enumerate(profiles)
+        for k in range(n_seeds)
+    ]
 
 
-def build_windows(drives: Sequence[Drive], n_seeds: int, seed: int, frame: str,
-                  profiles: Sequence[str] = ("rtk",), fix_offset: bool = False) -> WindowSet:
-    return WindowSet.concat([drive_windows(d, g, frame, fix_offset=fix_offset) for d in drives
-                             for g in gps_variants(d, n_seeds, seed, profiles)])
+def build_windows(
+    drives: Sequence[Drive],
+    n_seeds: int,
+    seed: int,
+    frame: str,
+    profiles: Sequence[str] = ("rtk",),
+    fix_offset: bool = False,
+) -> WindowSet:
+    return WindowSet.concat(
+        [
+            drive_windows(d, g, frame, fix_offset=fix_offset)
+            for d in drives
+            for g in gps_variants(d, n_seeds, seed, profiles)
+        ]
+    )
 
 
 def corpus(hours: float, seed: int) -> list[Drive]:
@@ -139,9 +164,13 @@ def corpus(hours: float, seed: int) -> list[Drive]:
     return list(corpus_drives(hours, seed=seed))
 
 
-def gather_drives(data_paths: Sequence[str | Path], synthetic: int, corpus_hours: float,
-                  seed: int, drives: Sequence[Drive] | None = None
-                  ) -> tuple[list[Drive], list[Drive], list[Drive]]:
+def gather_drives(
+    data_paths: Sequence[str | Path],
+    synthetic: int,
+    corpus_hours: float,
+    seed: int,
+    drives: Sequence[Drive] | None = None,
+) -> tuple[list[Drive], list[Drive], list[Drive]]:
     """Every training source loaded and split by route: (train, validation, the corpus
     drives among them); a one-line DataError when there is none."""
     from posbench.scenarios.loaders import load
@@ -151,16 +180,20 @@ def gather_drives(data_paths: Sequence[str | Path], synthetic: int, corpus_hours
         loaded = load(p)
         kitti = [d.name for d in loaded if (d.meta.format or "").lower() in EVALUATION_ONLY]
         if kitti:
-            raise DataError(p, f"KITTI is evaluation-only data (non-commercial licence; never "
-                               f"trained on): {len(kitti)} drive(s), e.g. {kitti[0]}")
+            raise DataError(
+                p,
+                f"KITTI is evaluation-only data (non-commercial licence; never "
+                f"trained on): {len(kitti)} drive(s), e.g. {kitti[0]}",
+            )
         all_drives.extend(loaded)
     all_drives.extend(synthetic_drives(synthetic, seed))
     corpus_d = corpus(corpus_hours, seed)
     all_drives.extend(corpus_d)
     all_drives.extend(drives or [])
     if not all_drives:
-        raise DataError(None, "no training drives: give --data PATH, --synthetic N or "
-                              "--corpus-hours H")
+        raise DataError(
+            None, "no training drives: give --data PATH, --synthetic N or --corpus-hours H"
+        )
     train_d, val_d = split_by_route(all_drives)
     return train_d, val_d, corpus_d
 
@@ -202,30 +235,41 @@ def error_stats(pred: np.ndarray, truth: np.ndarray) -> dict[str, float]:
     e = np.linalg.norm(pred - truth, axis=1)
     if e.size == 0:
         return {"n": 0}
-    return {"n": int(e.size), "mean_m": float(e.mean()), "p50_m": float(np.median(e)),
-            "p95_m": float(np.percentile(e, 95))}
+    return {
+        "n": int(e.size),
+        "mean_m": float(e.mean()),
+        "p50_m": float(np.median(e)),
+        "p95_m": float(np.percentile(e, 95)),
+    }
 
 
 def evaluate(ws: WindowSet, lstm_future: np.ndarray, groups: dict[str, str]) -> dict:
     """Future-point error [m] of the network, plain cubic and constant velocity, overall,
     per label, per source group (``groups``: drive name -> group) and per drive."""
-    out = {"all": {k: error_stats(p, ws.truth_future) for k, p in
-                   (("lstm", lstm_future), ("cubic", ws.cubic_pred), ("cv", ws.cv_pred))}}
+    out = {
+        "all": {
+            k: error_stats(p, ws.truth_future)
+            for k, p in (("lstm", lstm_future), ("cubic", ws.cubic_pred), ("cv", ws.cv_pred))
+        }
+    }
     for lab in sorted(set(ws.label.tolist())):
         m = ws.label == lab
-        out[f"label:{lab}"] = {k: error_stats(p[m], ws.truth_future[m]) for k, p in
-                               (("lstm", lstm_future), ("cubic", ws.cubic_pred),
-                                ("cv", ws.cv_pred))}
+        out[f"label:{lab}"] = {
+            k: error_stats(p[m], ws.truth_future[m])
+            for k, p in (("lstm", lstm_future), ("cubic", ws.cubic_pred), ("cv", ws.cv_pred))
+        }
     for g in sorted(set(groups.values())):
         m = np.array([groups.get(d) == g for d in ws.drive], dtype=bool)
-        out[f"group:{g}"] = {k: error_stats(p[m], ws.truth_future[m]) for k, p in
-                             (("lstm", lstm_future), ("cubic", ws.cubic_pred),
-                              ("cv", ws.cv_pred))}
+        out[f"group:{g}"] = {
+            k: error_stats(p[m], ws.truth_future[m])
+            for k, p in (("lstm", lstm_future), ("cubic", ws.cubic_pred), ("cv", ws.cv_pred))
+        }
     for name in sorted(set(ws.drive.tolist())):
         m = ws.drive == name
-        out[f"drive:{name}"] = {k: error_stats(p[m], ws.truth_future[m]) for k, p in
-                                (("lstm", lstm_future), ("cubic", ws.cubic_pred),
-                                 ("cv", ws.cv_pred))}
+        out[f"drive:{name}"] = {
+            k: error_stats(p[m], ws.truth_future[m])
+            for k, p in (("lstm", lstm_future), ("cubic", ws.cubic_pred), ("cv", ws.cv_pred))
+        }
     return out
 
 
@@ -240,17 +284,34 @@ def package_versions() -> dict[str, str]:
 
 
 # --------------------------------------------------------------------------- training
-def run_training(data_paths: Sequence[str | Path], out_dir: Path, epochs: int = 40,
-                 seed: int = 0, synthetic: int = 0, progress: Progress | None = None,
-                 command: str | None = None, drives: Sequence[Drive] | None = None,
-                 hidden: int = 64, lstm_layers: int = 1, enc_layers: int = 1,
-                 batch_size: int = 512, lr: float = 2e-3, patience: int = 6,
-                 gps_seeds: int = 1, frame: str = "heading", threads: int = 2,
-                 timing_calls: int = 2000, on_early_stop: EarlyStop | None = None,
-                 form: str = "speed", corpus_hours: float = 0.0,
-                 profiles: Sequence[str] = ("none", "rtk"), mirror: bool = True,
-                 max_minutes: float = 30.0, max_val_windows: int = 60_000,
-                 fix_offset: bool = True) -> dict:
+def run_training(
+    data_paths: Sequence[str | Path],
+    out_dir: Path,
+    epochs: int = 40,
+    seed: int = 0,
+    synthetic: int = 0,
+    progress: Progress | None = None,
+    command: str | None = None,
+    drives: Sequence[Drive] | None = None,
+    hidden: int = 64,
+    lstm_layers: int = 1,
+    enc_layers: int = 1,
+    batch_size: int = 512,
+    lr: float = 2e-3,
+    patience: int = 6,
+    gps_seeds: int = 1,
+    frame: str = "heading",
+    threads: int = 2,
+    timing_calls: int = 2000,
+    on_early_stop: EarlyStop | None = None,
+    form: str = "speed",
+    corpus_hours: float = 0.0,
+    profiles: Sequence[str] = ("none", "rtk"),
+    mirror: bool = True,
+    max_minutes: float = 30.0,
+    max_val_windows: int = 60_000,
+    fix_offset: bool = True,
+) -> dict:
     """Train, export and describe a model. Returns the dict written to ``model.json``.
 
     Args:
@@ -296,11 +357,15 @@ def run_training(data_paths: Sequence[str | Path], out_dir: Path, epochs: int = 
 
     train_d, val_d, corpus_d = gather_drives(data_paths, synthetic, corpus_hours, seed, drives)
     tr = build_windows(train_d, gps_seeds, seed, frame, profiles, fix_offset)
-    va = subsample(build_windows(val_d, 1, seed + 7919, frame, profiles, fix_offset),
-                   max_val_windows, seed)
+    va = subsample(
+        build_windows(val_d, 1, seed + 7919, frame, profiles, fix_offset), max_val_windows, seed
+    )
     if len(tr) == 0 or len(va) == 0:
-        raise DataError(None, f"too few windows (train {len(tr)}, validation {len(va)}): "
-                              "drives need >= 2 s of moving GPS")
+        raise DataError(
+            None,
+            f"too few windows (train {len(tr)}, validation {len(va)}): "
+            "drives need >= 2 s of moving GPS",
+        )
     t_data = time.perf_counter() - t_start
     flat = tr.X.reshape(-1, tr.X.shape[-1])
     mean = flat.mean(axis=0)
@@ -314,11 +379,15 @@ def run_training(data_paths: Sequence[str | Path], out_dir: Path, epochs: int = 
         with torch.no_grad():
             log_s = torch.log(LstmNet.speed_scale(Xtr)).flatten()
             res = (Ytr[:, :, :2] - LstmNet.base_step(Xtr)).reshape(-1, 2)
-            net.set_speed_stats(float(log_s.mean()), float(log_s.std().clamp_min(1e-3)),
-                                res.std(0).clamp_min(1e-3))
+            net.set_speed_stats(
+                float(log_s.mean()), float(log_s.std().clamp_min(1e-3)), res.std(0).clamp_min(1e-3)
+            )
+
     def loss_fn(x: torch.Tensor, y: torch.Tensor) -> torch.Tensor:
         pred, tgt = net.core(x), net.target_std(x, y)
-        return torch.mean((pred - tgt) ** 2) + 10.0 * torch.mean((pred[:, -1, :2] - tgt[:, -1, :2]) ** 2)
+        return torch.mean((pred - tgt) ** 2) + 10.0 * torch.mean(
+            (pred[:, -1, :2] - tgt[:, -1, :2]) ** 2
+        )
 
     def validate() -> tuple[float, float]:
         """Validation loss and future-point mean error [m] (no mirroring)."""
@@ -326,7 +395,7 @@ def run_training(data_paths: Sequence[str | Path], out_dir: Path, epochs: int = 
         tot, outs = 0.0, []
         with torch.no_grad():
             for i in range(0, len(va), 8192):
-                xb, yb = Xva[i:i + 8192], Yva[i:i + 8192]
+                xb, yb = Xva[i : i + 8192], Yva[i : i + 8192]
                 tot += float(loss_fn(xb, yb)) * xb.shape[0]
                 outs.append(net(xb)[:, -1, :2].numpy())
         fut = future_from_output(va, np.concatenate(outs).astype(float), frame)
@@ -341,10 +410,22 @@ def run_training(data_paths: Sequence[str | Path], out_dir: Path, epochs: int = 
             xb, yb = xb * sg, yb * sg
         return loss_fn(xb, yb)
 
-    fit = fit_epochs(net, batch_loss, validate, torch.tensor(sample_weights(tr.label)),
-                     epochs=epochs, batch_size=batch_size, lr=lr, patience=patience, gen=gen,
-                     t_start=t_start, max_minutes=max_minutes, select="val_loss",
-                     progress=progress, on_early_stop=on_early_stop)
+    fit = fit_epochs(
+        net,
+        batch_loss,
+        validate,
+        torch.tensor(sample_weights(tr.label)),
+        epochs=epochs,
+        batch_size=batch_size,
+        lr=lr,
+        patience=patience,
+        gen=gen,
+        t_start=t_start,
+        max_minutes=max_minutes,
+        select="val_loss",
+        progress=progress,
+        on_early_stop=on_early_stop,
+    )
     history, stopped_by = fit.history, fit.stopped_by
     train_s = time.perf_counter() - t_start
 
@@ -355,49 +436,91 @@ def run_training(data_paths: Sequence[str | Path], out_dir: Path, epochs: int = 
     lstm_future = future_from_output(va, out[:, :2].astype(float), frame)
     metrics = evaluate(va, lstm_future, {d.name: group_of(d) for d in val_d})
 
-    forms = {"paper": "every feature standardised (training mean/std), displacement output "
-                      "standardised likewise",
-             "speed": "speed-invariant in-graph: (dx, dy) / s with s = mean grid step + 0.02 m, "
-                      "log s as a 7th encoder channel; displacement output = previous grid step "
-                      "+ res_std x net (a residual); aux features standardised"}
+    forms = {
+        "paper": "every feature standardised (training mean/std), displacement output "
+        "standardised likewise",
+        "speed": "speed-invariant in-graph: (dx, dy) / s with s = mean grid step + 0.02 m, "
+        "log s as a 7th encoder channel; displacement output = previous grid step "
+        "+ res_std x net (a residual); aux features standardised",
+    }
     info = {
-        "format": FORMAT, "version": 2 if form == "speed" else 1,
-        "frame": frame, "form": form, "fix_offset": fix_offset, "features": list(FEATURES), "n_steps": N_STEPS, "dt_s": DT,
-        "min_span_s": MIN_SPAN_S, "input": "features", "output": "future",
-        "input_shape": ["batch", N_STEPS, len(FEATURES)], "output_shape": ["batch", len(FEATURES)],
+        "format": FORMAT,
+        "version": 2 if form == "speed" else 1,
+        "frame": frame,
+        "form": form,
+        "fix_offset": fix_offset,
+        "features": list(FEATURES),
+        "n_steps": N_STEPS,
+        "dt_s": DT,
+        "min_span_s": MIN_SPAN_S,
+        "input": "features",
+        "output": "future",
+        "input_shape": ["batch", N_STEPS, len(FEATURES)],
+        "output_shape": ["batch", len(FEATURES)],
         "normalisation": f"in-graph (raw features in, raw next-sample features out); {forms[form]}",
-        "feature_mean": mean.tolist(), "feature_std": std.tolist(),
-        "speed_stats": ({"log_s_mean": float(net.log_s_mean), "log_s_std": float(net.log_s_std),
-                         "res_std_m": net.res_std.tolist()} if form == "speed" else None),
-        "architecture": {"encoder": f"{enc_layers} x (Linear -> LeakyReLU(0.1)), width {hidden}",
-                         "lstm": {"hidden": hidden, "layers": lstm_layers},
-                         "decoder": f"Linear({hidden},{hidden}) -> LeakyReLU(0.1) -> Linear({hidden},6)",
-                         "parameters": int(sum(p.numel() for p in net.parameters()))},
-        "training": {"epochs_max": epochs, "epochs_run": len(history), "best_epoch": fit.best_epoch,
-                     "stopped_by": stopped_by, "max_minutes": max_minutes,
-                     "seed": seed, "batch_size": batch_size, "lr": lr, "optimizer": "Adam",
-                     "scheduler": "ReduceLROnPlateau(factor 0.5, patience 2)",
-                     "early_stopping_patience": patience,
-                     "loss": "MSE(all 8x6 outputs in network units) + 10 x MSE(last output x, y)",
-                     "oversampling": "turn/roundabout weight n_other/n_turn clipped to [1, 5], "
-                                     "windows drawn with replacement",
-                     "augmentation": {"mirror": mirror, "gps_profiles": list(profiles),
-                                      "gps_draws_per_profile": gps_seeds,
-                                      "time_jitter": "fix times drawn afresh per GPS draw "
-                                                     "(the paper's interval distribution)"},
-                     "threads": threads, "data_seconds": round(t_data, 1),
-                     "seconds": round(train_s, 1), "history": history},
-        "data": {"paths": manifest(data_paths),
-                 "synthetic": {"drives": synthetic, "generator": "posbench.scenarios.synthetic.generate_drive",
-                               "generator_seeds": synthetic_seeds(synthetic, seed)},
-                 "corpus": corpus_card(corpus_d, corpus_hours, seed),
-                 "in_memory_drives": [d.name for d in (drives or [])],
-                 "train_drives": [d.name for d in train_d], "val_drives": [d.name for d in val_d],
-                 "split": f"by route: per source group in name order, every {VAL_EVERY}th drive "
-                          f"from index {VAL_OFFSET} held out",
-                 "train_windows": len(tr), "val_windows": len(va),
-                 "train_labels": {k: int(v) for k, v in zip(*np.unique(tr.label, return_counts=True),
-                                                             strict=True)}},
+        "feature_mean": mean.tolist(),
+        "feature_std": std.tolist(),
+        "speed_stats": (
+            {
+                "log_s_mean": float(net.log_s_mean),
+                "log_s_std": float(net.log_s_std),
+                "res_std_m": net.res_std.tolist(),
+            }
+            if form == "speed"
+            else None
+        ),
+        "architecture": {
+            "encoder": f"{enc_layers} x (Linear -> LeakyReLU(0.1)), width {hidden}",
+            "lstm": {"hidden": hidden, "layers": lstm_layers},
+            "decoder": f"Linear({hidden},{hidden}) -> LeakyReLU(0.1) -> Linear({hidden},6)",
+            "parameters": int(sum(p.numel() for p in net.parameters())),
+        },
+        "training": {
+            "epochs_max": epochs,
+            "epochs_run": len(history),
+            "best_epoch": fit.best_epoch,
+            "stopped_by": stopped_by,
+            "max_minutes": max_minutes,
+            "seed": seed,
+            "batch_size": batch_size,
+            "lr": lr,
+            "optimizer": "Adam",
+            "scheduler": "ReduceLROnPlateau(factor 0.5, patience 2)",
+            "early_stopping_patience": patience,
+            "loss": "MSE(all 8x6 outputs in network units) + 10 x MSE(last output x, y)",
+            "oversampling": "turn/roundabout weight n_other/n_turn clipped to [1, 5], "
+            "windows drawn with replacement",
+            "augmentation": {
+                "mirror": mirror,
+                "gps_profiles": list(profiles),
+                "gps_draws_per_profile": gps_seeds,
+                "time_jitter": "fix times drawn afresh per GPS draw "
+                "(the paper's interval distribution)",
+            },
+            "threads": threads,
+            "data_seconds": round(t_data, 1),
+            "seconds": round(train_s, 1),
+            "history": history,
+        },
+        "data": {
+            "paths": manifest(data_paths),
+            "synthetic": {
+                "drives": synthetic,
+                "generator": "posbench.scenarios.synthetic.generate_drive",
+                "generator_seeds": synthetic_seeds(synthetic, seed),
+            },
+            "corpus": corpus_card(corpus_d, corpus_hours, seed),
+            "in_memory_drives": [d.name for d in (drives or [])],
+            "train_drives": [d.name for d in train_d],
+            "val_drives": [d.name for d in val_d],
+            "split": f"by route: per source group in name order, every {VAL_EVERY}th drive "
+            f"from index {VAL_OFFSET} held out",
+            "train_windows": len(tr),
+            "val_windows": len(va),
+            "train_labels": {
+                k: int(v) for k, v in zip(*np.unique(tr.label, return_counts=True), strict=True)
+            },
+        },
         "validation": metrics,
         "export": export_report,
         "core": core,
@@ -429,5 +552,10 @@ def corpus_card(drives: Sequence[Drive], hours: float, seed: int) -> dict:
         return {"hours": 0}
     from posbench.scenarios.corpus import envelope
 
-    return {"hours": hours, "seed": seed, "generator": "posbench.scenarios.corpus.corpus_drives",
-            "drives": len(drives), "envelope": envelope(drives)}
+    return {
+        "hours": hours,
+        "seed": seed,
+        "generator": "posbench.scenarios.corpus.corpus_drives",
+        "drives": len(drives),
+        "envelope": envelope(drives),
+    }

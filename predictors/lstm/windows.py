@@ -45,16 +45,16 @@ TURN_HEADING_RAD = 0.2
 class WindowSet:
     """Windows of one or more drives. Shapes: B windows, 8 steps, 6 features; metres, ENU."""
 
-    X: np.ndarray            # (B, 8, 6) input features
-    Y: np.ndarray            # (B, 8, 6) targets (next sample of each step)
-    psi: np.ndarray          # (B,) frame heading [rad]
-    p_last: np.ndarray       # (B, 2) newest grid position [m]
+    X: np.ndarray  # (B, 8, 6) input features
+    Y: np.ndarray  # (B, 8, 6) targets (next sample of each step)
+    psi: np.ndarray  # (B,) frame heading [rad]
+    p_last: np.ndarray  # (B, 2) newest grid position [m]
     truth_future: np.ndarray  # (B, 2) reference position 200 ms after the newest fix [m]
-    cubic_pred: np.ndarray   # (B, 2) plain cubic extrapolation of the same fixes [m]
-    cv_pred: np.ndarray      # (B, 2) constant velocity from the last two fixes [m]
-    t_end: np.ndarray        # (B,) newest fix time [s]
-    label: np.ndarray        # (B,) scenario label (str)
-    drive: np.ndarray        # (B,) drive name (str)
+    cubic_pred: np.ndarray  # (B, 2) plain cubic extrapolation of the same fixes [m]
+    cv_pred: np.ndarray  # (B, 2) constant velocity from the last two fixes [m]
+    t_end: np.ndarray  # (B,) newest fix time [s]
+    label: np.ndarray  # (B,) scenario label (str)
+    drive: np.ndarray  # (B,) drive name (str)
 
     def __len__(self) -> int:
         return int(self.X.shape[0])
@@ -67,15 +67,28 @@ class WindowSet:
         sets = [s for s in sets if len(s)]
         if not sets:
             return empty_windows()
-        return WindowSet(**{f.name: np.concatenate([getattr(s, f.name) for s in sets])
-                            for f in fields(WindowSet)})
+        return WindowSet(
+            **{
+                f.name: np.concatenate([getattr(s, f.name) for s in sets])
+                for f in fields(WindowSet)
+            }
+        )
 
 
 def empty_windows() -> WindowSet:
     z = np.zeros
-    return WindowSet(z((0, N_STEPS, 6)), z((0, N_STEPS, 6)), z(0), z((0, 2)), z((0, 2)),
-                     z((0, 2)), z((0, 2)), z(0), np.array([], dtype=object),
-                     np.array([], dtype=object))
+    return WindowSet(
+        z((0, N_STEPS, 6)),
+        z((0, N_STEPS, 6)),
+        z(0),
+        z((0, 2)),
+        z((0, 2)),
+        z((0, 2)),
+        z((0, 2)),
+        z(0),
+        np.array([], dtype=object),
+        np.array([], dtype=object),
+    )
 
 
 def unwrap_finite(a: np.ndarray) -> np.ndarray:
@@ -87,8 +100,7 @@ def unwrap_finite(a: np.ndarray) -> np.ndarray:
     return out
 
 
-def _labels(drive: Drive, t_end: np.ndarray, psi_first: np.ndarray, psi: np.ndarray
-            ) -> np.ndarray:
+def _labels(drive: Drive, t_end: np.ndarray, psi_first: np.ndarray, psi: np.ndarray) -> np.ndarray:
     """Scenario labels at the window ends: scenarios.labels.label_times when it exists,
     else "turn" when the fitted heading turns by > 0.2 rad over the window."""
     try:
@@ -98,15 +110,28 @@ def _labels(drive: Drive, t_end: np.ndarray, psi_first: np.ndarray, psi: np.ndar
     if label_times is not None:
         src = drive.truth if drive.truth is not None else drive.gps
         sp = drive.speed
-        return np.asarray(label_times(t_end, src.t, src.x, src.y,
-                                      None if sp is None else sp.t,
-                                      None if sp is None else sp.v), dtype=object)
+        return np.asarray(
+            label_times(
+                t_end,
+                src.t,
+                src.x,
+                src.y,
+                None if sp is None else sp.t,
+                None if sp is None else sp.v,
+            ),
+            dtype=object,
+        )
     turn = np.abs(wrap(psi - psi_first)) > TURN_HEADING_RAD
     return np.where(turn, "turn", "straight").astype(object)
 
 
-def drive_windows(drive: Drive, gps: GpsStream | None = None, frame: str = "heading",
-                  min_span: float = MIN_SPAN_S, fix_offset: bool = False) -> WindowSet:
+def drive_windows(
+    drive: Drive,
+    gps: GpsStream | None = None,
+    frame: str = "heading",
+    min_span: float = MIN_SPAN_S,
+    fix_offset: bool = False,
+) -> WindowSet:
     """All training windows of one drive, its GPS optionally replaced (e.g. degraded);
     ``fix_offset``: row 0 holds the newest fix minus the newest grid point
     (:mod:`posbench.predictors.lstm.features`)."""
@@ -174,16 +199,25 @@ def drive_windows(drive: Drive, gps: GpsStream | None = None, frame: str = "head
     d0 = deriv_poly(coef.transpose(1, 0, 2), s_grid[:, 0])
     psi_first = np.arctan2(d0[:, 1], d0[:, 0])
     names = np.full(ends.size, drive.name, dtype=object)
-    return WindowSet(X=X, Y=Y, psi=psi, p_last=pos[:, -1], truth_future=ref[:, -1],
-                     cubic_pred=pos9[:, N_STEPS], cv_pred=cv_pred, t_end=t_end,
-                     label=_labels(drive, t_end, psi_first, psi), drive=names)
+    return WindowSet(
+        X=X,
+        Y=Y,
+        psi=psi,
+        p_last=pos[:, -1],
+        truth_future=ref[:, -1],
+        cubic_pred=pos9[:, N_STEPS],
+        cv_pred=cv_pred,
+        t_end=t_end,
+        label=_labels(drive, t_end, psi_first, psi),
+        drive=names,
+    )
 
 
-def future_from_output(ws: WindowSet, out_dxdy: np.ndarray, frame: str = "heading"
-                       ) -> np.ndarray:
+def future_from_output(ws: WindowSet, out_dxdy: np.ndarray, frame: str = "heading") -> np.ndarray:
     """Predicted future positions (B, 2) [m] from the network's last-step dx, dy (B, 2)."""
     if frame == "world":
         return ws.p_last + out_dxdy
     c, s = np.cos(ws.psi), np.sin(ws.psi)
-    return ws.p_last + np.stack([c * out_dxdy[:, 0] - s * out_dxdy[:, 1],
-                                 s * out_dxdy[:, 0] + c * out_dxdy[:, 1]], axis=1)
+    return ws.p_last + np.stack(
+        [c * out_dxdy[:, 0] - s * out_dxdy[:, 1], s * out_dxdy[:, 0] + c * out_dxdy[:, 1]], axis=1
+    )

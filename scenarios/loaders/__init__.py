@@ -21,12 +21,16 @@ TABLE_SUFFIXES = (".csv", ".parquet", ".pq")
 
 def _is_kitti_drive(p: Path) -> bool:
     return (p / "oxts" / "timestamps.txt").is_file() or (
-        p.name == "oxts" and (p / "timestamps.txt").is_file())
+        p.name == "oxts" and (p / "timestamps.txt").is_file()
+    )
 
 
 def _is_comma_segment(p: Path) -> bool:
-    return (p / "processed_log" / "GNSS").is_dir() or (p / "global_pose").is_dir() and (
-        p / "processed_log").is_dir()
+    return (
+        (p / "processed_log" / "GNSS").is_dir()
+        or (p / "global_pose").is_dir()
+        and (p / "processed_log").is_dir()
+    )
 
 
 def _is_ros2_folder(p: Path) -> bool:
@@ -72,8 +76,9 @@ def find_recordings(path: Path) -> list[tuple[Path, str]]:
     return found
 
 
-def load_one(path: Path, fmt: str, projection: str = "enu",
-             topics: dict[str, str] | None = None) -> Drive:
+def load_one(
+    path: Path, fmt: str, projection: str = "enu", topics: dict[str, str] | None = None
+) -> Drive:
     """Load one recording of a known format."""
     if fmt == "kitti":
         from posbench.scenarios.loaders.kitti import load_kitti_drive
@@ -98,8 +103,9 @@ def load_one(path: Path, fmt: str, projection: str = "enu",
     raise DataError(path, f"unknown format {fmt!r}")
 
 
-def iter_load(path: str | Path, projection: str = "enu",
-              topics: dict[str, str] | None = None) -> Iterator[Drive]:
+def iter_load(
+    path: str | Path, projection: str = "enu", topics: dict[str, str] | None = None
+) -> Iterator[Drive]:
     """Yield the drives at or under ``path``; raise :class:`DataError` if there are none."""
     for rec_path, fmt in _recordings(path):
         yield load_one(rec_path, fmt, projection=projection, topics=topics)
@@ -112,14 +118,21 @@ def _recordings(path: str | Path) -> list[tuple[Path, str]]:
         raise DataError(p, "no such file or folder")
     recs = find_recordings(p)
     if not recs:
-        raise DataError(p, "unknown format: not a ROS bag (.bag/.db3/.mcap or folder with "
-                           "metadata.yaml), KITTI oxts drive, comma2k19 segment, route pickle "
-                           "(.pickle) or CSV/Parquet table, and no such recordings below it")
+        raise DataError(
+            p,
+            "unknown format: not a ROS bag (.bag/.db3/.mcap or folder with "
+            "metadata.yaml), KITTI oxts drive, comma2k19 segment, route pickle "
+            "(.pickle) or CSV/Parquet table, and no such recordings below it",
+        )
     return recs
 
 
-def iter_load_many(paths: Iterable[str | Path], projection: str = "enu",
-                   topics: dict[str, str] | None = None, workers: int = 1) -> Iterator[Drive]:
+def iter_load_many(
+    paths: Iterable[str | Path],
+    projection: str = "enu",
+    topics: dict[str, str] | None = None,
+    workers: int = 1,
+) -> Iterator[Drive]:
     """The drives at or under each of ``paths``, in the order given (as :func:`iter_load` of
     each), loaded by ``workers`` processes at a time (forked; one recording each). Every path
     is checked for recordings before any is loaded. A loader's :class:`DataError` is raised
@@ -132,10 +145,12 @@ def iter_load_many(paths: Iterable[str | Path], projection: str = "enu",
     import multiprocessing as mp
     from concurrent.futures import ProcessPoolExecutor
 
-    with ProcessPoolExecutor(max_workers=min(workers, len(recs)),
-                             mp_context=mp.get_context("fork")) as pool:
-        futures = [pool.submit(load_one, rec_path, fmt, projection, topics)
-                   for rec_path, fmt in recs]
+    with ProcessPoolExecutor(
+        max_workers=min(workers, len(recs)), mp_context=mp.get_context("fork")
+    ) as pool:
+        futures = [
+            pool.submit(load_one, rec_path, fmt, projection, topics) for rec_path, fmt in recs
+        ]
         try:
             for fut in futures:
                 yield fut.result()
@@ -150,14 +165,16 @@ def _can_fork() -> bool:
     return "fork" in mp.get_all_start_methods()
 
 
-def load(path: str | Path, projection: str = "enu",
-         topics: dict[str, str] | None = None) -> list[Drive]:
+def load(
+    path: str | Path, projection: str = "enu", topics: dict[str, str] | None = None
+) -> list[Drive]:
     """All drives at or under ``path`` (format detected). See :func:`iter_load`."""
     return list(iter_load(path, projection=projection, topics=topics))
 
 
-def load_many(paths: Iterable[str | Path], projection: str = "enu",
-              topics: dict[str, str] | None = None) -> list[Drive]:
+def load_many(
+    paths: Iterable[str | Path], projection: str = "enu", topics: dict[str, str] | None = None
+) -> list[Drive]:
     """Drives from several paths, in the order given."""
     out: list[Drive] = []
     for p in paths:

@@ -70,11 +70,31 @@ BURST_S = 1e-3
 #: print(q('../shared/data/aslan'))"``. p5 122 ms, p25 197, p50 200, p75 202,
 #: p95 264, max 1002 ms (min 17 ms). Draw intervals by inverse-CDF interpolation
 #: (``np.interp(u, np.linspace(0, 1, 21), ASLAN_FIX_INTERVAL_QUANTILES_S)``).
-ASLAN_FIX_INTERVAL_QUANTILES_S = np.array([
-    0.016759, 0.121838, 0.176081, 0.180101, 0.196006, 0.197184, 0.198696,
-    0.199131, 0.199443, 0.199715, 0.199934, 0.200098, 0.200369, 0.200667,
-    0.201004, 0.201672, 0.203134, 0.217133, 0.220959, 0.263626, 1.002175,
-])
+ASLAN_FIX_INTERVAL_QUANTILES_S = np.array(
+    [
+        0.016759,
+        0.121838,
+        0.176081,
+        0.180101,
+        0.196006,
+        0.197184,
+        0.198696,
+        0.199131,
+        0.199443,
+        0.199715,
+        0.199934,
+        0.200098,
+        0.200369,
+        0.200667,
+        0.201004,
+        0.201672,
+        0.203134,
+        0.217133,
+        0.220959,
+        0.263626,
+        1.002175,
+    ]
+)
 
 _REQUIRED = ("tstamps", "ground_truth", "ACCEL", "theta")
 
@@ -82,8 +102,11 @@ _REQUIRED = ("tstamps", "ground_truth", "ACCEL", "theta")
 def _windows(raw: Any, path: Path) -> list[tuple[Any, dict]]:
     """The windows in index order, each checked for the keys the loader needs."""
     if not isinstance(raw, dict) or not raw:
-        raise DataError(path, "not a route pickle: expected a non-empty dict "
-                              f"{{window_index: window}}, got {type(raw).__name__}")
+        raise DataError(
+            path,
+            "not a route pickle: expected a non-empty dict "
+            f"{{window_index: window}}, got {type(raw).__name__}",
+        )
     try:
         keys = sorted(raw)
     except TypeError:
@@ -108,11 +131,17 @@ def _fix_rows(windows: list[tuple[Any, dict]], path: Path) -> tuple[np.ndarray, 
             t = np.asarray(w["tstamps"], dtype=np.int64).reshape(-1)
             p = np.asarray(w["ground_truth"], dtype=float)
         except (TypeError, ValueError, OverflowError) as exc:
-            raise DataError(path, f"window {k!r}: tstamps / ground_truth are not numbers "
-                                  f"({type(exc).__name__}: {exc})") from None
+            raise DataError(
+                path,
+                f"window {k!r}: tstamps / ground_truth are not numbers "
+                f"({type(exc).__name__}: {exc})",
+            ) from None
         if p.ndim != 2 or p.shape != (t.size, 2):
-            raise DataError(path, f"window {k!r}: ground_truth has shape {p.shape}, "
-                                  f"expected ({t.size}, 2) to match tstamps")
+            raise DataError(
+                path,
+                f"window {k!r}: ground_truth has shape {p.shape}, "
+                f"expected ({t.size}, 2) to match tstamps",
+            )
         ts.append(t)
         ps.append(p)
     return np.concatenate(ts), np.concatenate(ps)
@@ -129,13 +158,15 @@ def _accel_rows(windows: list[tuple[Any, dict]], path: Path) -> tuple[np.ndarray
                 ts.append(int(t_s))
                 vals.append((float(ax), float(ay)))
             except (TypeError, ValueError):
-                raise DataError(path, f"window {k!r}: ACCEL row {i} is not "
-                                      f"(t_ns, ax, ay): {row!r}") from None
+                raise DataError(
+                    path, f"window {k!r}: ACCEL row {i} is not (t_ns, ax, ay): {row!r}"
+                ) from None
     return np.asarray(ts, dtype=np.int64), np.asarray(vals, dtype=float).reshape(-1, 2)
 
 
-def union_by_stamp(t_ns: np.ndarray, vals: np.ndarray, what: str,
-                   warnings: list[str]) -> tuple[np.ndarray, np.ndarray]:
+def union_by_stamp(
+    t_ns: np.ndarray, vals: np.ndarray, what: str, warnings: list[str]
+) -> tuple[np.ndarray, np.ndarray]:
     """Sort by stamp and keep one row per distinct stamp (the first window's).
 
     Rows sharing a stamp but not values are counted in ``warnings``.
@@ -151,13 +182,16 @@ def union_by_stamp(t_ns: np.ndarray, vals: np.ndarray, what: str,
     differs = ~np.all(np.isclose(v, ref, rtol=0.0, atol=1e-9, equal_nan=True), axis=1)
     if np.any(differs):
         n = np.unique(group[differs]).size
-        warnings.append(f"{what}: {n} time stamps map to different values in different "
-                        "windows; kept the earliest window's")
+        warnings.append(
+            f"{what}: {n} time stamps map to different values in different "
+            "windows; kept the earliest window's"
+        )
     return t[first], v[first]
 
 
-def drop_bursts(t_ns: np.ndarray, vals: np.ndarray, what: str,
-                warnings: list[str]) -> tuple[np.ndarray, np.ndarray]:
+def drop_bursts(
+    t_ns: np.ndarray, vals: np.ndarray, what: str, warnings: list[str]
+) -> tuple[np.ndarray, np.ndarray]:
     """Drop samples < :data:`BURST_S` after the previous one (duplicated messages)."""
     if t_ns.size < 2:
         return t_ns, vals
@@ -166,9 +200,11 @@ def drop_bursts(t_ns: np.ndarray, vals: np.ndarray, what: str,
     if np.any(burst):
         same = np.zeros_like(burst)
         same[1:] = np.all(vals[1:] == vals[:-1], axis=1)
-        warnings.append(f"{what}: dropped {int(burst.sum())} samples < {BURST_S * 1e3:g} ms "
-                        f"after the previous one (duplicate messages; "
-                        f"{int((burst & ~same).sum())} with different values)")
+        warnings.append(
+            f"{what}: dropped {int(burst.sum())} samples < {BURST_S * 1e3:g} ms "
+            f"after the previous one (duplicate messages; "
+            f"{int((burst & ~same).sum())} with different values)"
+        )
     return t_ns[~burst], vals[~burst]
 
 
@@ -206,8 +242,9 @@ def load_aslan_pickle(path: Path) -> Drive:
         raise DataError(path, "no GPS fixes in any window")
     stale = int(np.all(fp[1:] == fp[:-1], axis=1).sum()) if ft.size > 1 else 0
     if stale:
-        warnings.append(f"gps: {stale} fixes repeat the previous position exactly "
-                        "(stale GPS, kept)")
+        warnings.append(
+            f"gps: {stale} fixes repeat the previous position exactly (stale GPS, kept)"
+        )
 
     # IMU
     at, av = _accel_rows(windows, path)
@@ -219,13 +256,16 @@ def load_aslan_pickle(path: Path) -> Drive:
     at, av = drop_bursts(at, av, "imu", warnings)
     glitch = np.hypot(av[:, 0], av[:, 1]) > ACCEL_GLITCH_MPS2
     if np.any(glitch):
-        warnings.append(f"imu: dropped {int(glitch.sum())} acceleration glitches with "
-                        f"|a| > {ACCEL_GLITCH_MPS2:g} m/s^2")
+        warnings.append(
+            f"imu: dropped {int(glitch.sum())} acceleration glitches with "
+            f"|a| > {ACCEL_GLITCH_MPS2:g} m/s^2"
+        )
         at, av = at[~glitch], av[~glitch]
 
     # yaw: theta at each window's last fix, held until the next window's
-    th_t = np.asarray([int(w["tstamps"][-1]) for _, w in windows if len(w["tstamps"])],
-                      dtype=np.int64)
+    th_t = np.asarray(
+        [int(w["tstamps"][-1]) for _, w in windows if len(w["tstamps"])], dtype=np.int64
+    )
     th = np.asarray([float(w["theta"]) for _, w in windows if len(w["tstamps"])], dtype=float)
     th_t, th2 = union_by_stamp(th_t, th[:, None], "yaw", warnings)
     th = th2[:, 0]
@@ -235,12 +275,19 @@ def load_aslan_pickle(path: Path) -> Drive:
     t0 = int(min(ft[0], at[0])) if at.size else int(ft[0])
     n_xy = sum(len(w.get("X", ())) for _, w in windows)
     meta = DriveMeta(
-        name=path.stem, source=str(path), format="aslan", epoch_s=t0 / 1e9,
-        projection="source", time_source="recorded stamps (ns since the Unix epoch)",
+        name=path.stem,
+        source=str(path),
+        format="aslan",
+        epoch_s=t0 / 1e9,
+        projection="source",
+        time_source="recorded stamps (ns since the Unix epoch)",
         warnings=warnings,
-        extra={"windows": len(windows), "raw_xy_unused": int(n_xy),
-               "yaw_source": "theta per window = GPS course (atan2 of the last two fixes), "
-                             "held from each window's last fix"},
+        extra={
+            "windows": len(windows),
+            "raw_xy_unused": int(n_xy),
+            "yaw_source": "theta per window = GPS course (atan2 of the last two fixes), "
+            "held from each window's last fix",
+        },
     )
     gps = GpsStream((ft - t0) * 1e-9, fp[:, 0], fp[:, 1])
     imu = None

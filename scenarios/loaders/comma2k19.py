@@ -88,11 +88,14 @@ def quat_to_rotmat(q: np.ndarray) -> np.ndarray:
     """(N, 4) unit quaternions (w, x, y, z) -> (N, 3, 3) rotation matrices."""
     q = q / np.linalg.norm(q, axis=1, keepdims=True)
     w, x, y, z = q.T
-    return np.stack([
-        np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)], axis=-1),
-        np.stack([2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)], axis=-1),
-        np.stack([2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)], axis=-1),
-    ], axis=1)
+    return np.stack(
+        [
+            np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)], axis=-1),
+            np.stack([2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)], axis=-1),
+            np.stack([2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)], axis=-1),
+        ],
+        axis=1,
+    )
 
 
 def ecef_yaw(quat: np.ndarray, lat0: float, lon0: float) -> np.ndarray:
@@ -104,8 +107,15 @@ def ecef_yaw(quat: np.ndarray, lat0: float, lon0: float) -> np.ndarray:
     return np.arctan2(fwd @ north, fwd @ east)
 
 
-def measure_gnss_lag(t_fix: np.ndarray, x: np.ndarray, y: np.ndarray, t_truth: np.ndarray,
-                     xt: np.ndarray, yt: np.ndarray, span: float = 0.5) -> float:
+def measure_gnss_lag(
+    t_fix: np.ndarray,
+    x: np.ndarray,
+    y: np.ndarray,
+    t_truth: np.ndarray,
+    xt: np.ndarray,
+    yt: np.ndarray,
+    span: float = 0.5,
+) -> float:
     """Time shift [s] L minimising sum |fix(t) - truth(t - L)|^2 (positive = fixes late)."""
     from scipy.optimize import minimize_scalar
 
@@ -115,16 +125,22 @@ def measure_gnss_lag(t_fix: np.ndarray, x: np.ndarray, y: np.ndarray, t_truth: n
     tf, xf, yf = t_fix[inside], x[inside], y[inside]
 
     def cost(lag: float) -> float:
-        return float(np.mean((xf - np.interp(tf - lag, t_truth, xt)) ** 2
-                             + (yf - np.interp(tf - lag, t_truth, yt)) ** 2))
+        return float(
+            np.mean(
+                (xf - np.interp(tf - lag, t_truth, xt)) ** 2
+                + (yf - np.interp(tf - lag, t_truth, yt)) ** 2
+            )
+        )
 
-    res = minimize_scalar(cost, bounds=(-span, span), method="bounded",
-                          options={"xatol": 1e-4})
+    res = minimize_scalar(cost, bounds=(-span, span), method="bounded", options={"xatol": 1e-4})
     return float(res.x)
 
 
-def load_comma_segment(path: Path, projection: str = "enu", gnss_lag_s: float = GNSS_LAG_S,
-                       ) -> Drive:
+def load_comma_segment(
+    path: Path,
+    projection: str = "enu",
+    gnss_lag_s: float = GNSS_LAG_S,
+) -> Drive:
     """Load one comma2k19 segment folder as a :class:`Drive` (see the module docstring).
 
     Args:
@@ -137,7 +153,9 @@ def load_comma_segment(path: Path, projection: str = "enu", gnss_lag_s: float = 
     log = path / "processed_log"
     gnss_dir = log / "GNSS" / "live_gnss_ublox"
     t_g, g = _series(gnss_dir, 6)
-    t_g, gc = clean_times(t_g, {"lat": g[:, 0], "lon": g[:, 1], "utc_ms": g[:, 3]}, "gnss", warnings)
+    t_g, gc = clean_times(
+        t_g, {"lat": g[:, 0], "lon": g[:, 1], "utc_ms": g[:, 3]}, "gnss", warnings
+    )
     t_g, gc = drop_nonfinite(t_g, gc, ("lat", "lon"), "gnss", warnings)
     if t_g.size == 0:
         raise DataError(gnss_dir, "no GNSS fixes")
@@ -153,8 +171,11 @@ def load_comma_segment(path: Path, projection: str = "enu", gnss_lag_s: float = 
     t_w, wc = clean_times(t_w, {"d": gyr[:, 2]}, "imu gyro", warnings)
     if t_w.size and not (t_w.size == t_a.size and np.array_equal(t_w, t_a)):
         warnings.append("imu: gyro interpolated linearly to the accelerometer times")
-    yaw_rate = (-np.interp(t_a, t_w, wc["d"], left=np.nan, right=np.nan) if t_w.size
-                else np.full(t_a.size, np.nan))
+    yaw_rate = (
+        -np.interp(t_a, t_w, wc["d"], left=np.nan, right=np.nan)
+        if t_w.size
+        else np.full(t_a.size, np.nan)
+    )
     ax, ay = ac["f"], -ac["r"]
 
     t_s, sp = _series(log / "CAN" / "speed", 1)
@@ -166,8 +187,11 @@ def load_comma_segment(path: Path, projection: str = "enu", gnss_lag_s: float = 
     pos = _load(pose / "frame_positions", (2,), 3)
     quat = _load(pose / "frame_orientations", (2,), 4)
     vel = _load(pose / "frame_velocities", (2,), 3)
-    for arr, nm in ((pos, "frame_positions"), (quat, "frame_orientations"),
-                    (vel, "frame_velocities")):
+    for arr, nm in (
+        (pos, "frame_positions"),
+        (quat, "frame_orientations"),
+        (vel, "frame_velocities"),
+    ):
         if arr.shape[0] != t_p.size:
             raise DataError(pose / nm, f"{arr.shape[0]} rows but frame_times has {t_p.size}")
     t_p, pc = clean_times(t_p, {"i": np.arange(t_p.size, dtype=float)}, "global_pose", warnings)
@@ -200,11 +224,19 @@ def load_comma_segment(path: Path, projection: str = "enu", gnss_lag_s: float = 
             extra["boot_to_unix_spread_s"] = float(np.ptp(off))
 
     name = f"{path.parent.name}/{path.name}"
-    meta = DriveMeta(name=name, source=str(path), format="comma2k19", epoch_s=epoch,
-                     origin_lat=lat0, origin_lon=lon0, projection=projection,
-                     time_source="device boot clock (processed_log t); epoch from "
-                                 "global_pose/frame_gps_times, GPS-UTC = 18 s",
-                     warnings=warnings, extra=extra)
+    meta = DriveMeta(
+        name=name,
+        source=str(path),
+        format="comma2k19",
+        epoch_s=epoch,
+        origin_lat=lat0,
+        origin_lon=lon0,
+        projection=projection,
+        time_source="device boot clock (processed_log t); epoch from "
+        "global_pose/frame_gps_times, GPS-UTC = 18 s",
+        warnings=warnings,
+        extra=extra,
+    )
     return Drive(
         meta=meta,
         gps=GpsStream(t_g - t0, x, y, lat=lat, lon=lon),

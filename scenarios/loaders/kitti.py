@@ -61,9 +61,36 @@ from posbench.scenarios.projection import to_local, validate_latlon
 
 #: KITTI's documented column order (used when dataformat.txt is missing).
 OXTS_COLUMNS = (
-    "lat", "lon", "alt", "roll", "pitch", "yaw", "vn", "ve", "vf", "vl", "vu",
-    "ax", "ay", "az", "af", "al", "au", "wx", "wy", "wz", "wf", "wl", "wu",
-    "pos_accuracy", "vel_accuracy", "navstat", "numsats", "posmode", "velmode", "orimode",
+    "lat",
+    "lon",
+    "alt",
+    "roll",
+    "pitch",
+    "yaw",
+    "vn",
+    "ve",
+    "vf",
+    "vl",
+    "vu",
+    "ax",
+    "ay",
+    "az",
+    "af",
+    "al",
+    "au",
+    "wx",
+    "wy",
+    "wz",
+    "wf",
+    "wl",
+    "wu",
+    "pos_accuracy",
+    "vel_accuracy",
+    "navstat",
+    "numsats",
+    "posmode",
+    "velmode",
+    "orimode",
 )
 POOR_TRUTH_M = 1.0
 _NEEDED = ("lat", "lon", "yaw", "vf", "vl", "af", "al", "wu", "pos_accuracy")
@@ -134,16 +161,20 @@ def parse_timestamps(path: Path) -> np.ndarray:
                     _warnings.simplefilter("ignore")
                     np.datetime64(s, "ns")
             except ValueError:
-                raise DataError(path, f"line {k + 1}: cannot parse time stamp {s!r} "
-                                      "(expected YYYY-MM-DD HH:MM:SS.fffffffff)") from None
+                raise DataError(
+                    path,
+                    f"line {k + 1}: cannot parse time stamp {s!r} "
+                    "(expected YYYY-MM-DD HH:MM:SS.fffffffff)",
+                ) from None
         raise  # pragma: no cover - the loop finds the bad line
     t = ns.astype(np.int64).astype(np.float64) / 1e9
     t[blank | np.isnat(ns)] = np.nan
     return t
 
 
-def _parse_data_files(data_dir: Path, n: int, ncol: int,
-                      warnings: list[str]) -> tuple[np.ndarray, np.ndarray]:
+def _parse_data_files(
+    data_dir: Path, n: int, ncol: int, warnings: list[str]
+) -> tuple[np.ndarray, np.ndarray]:
     """Read data/NNNNNNNNNN.txt for samples 0..n-1: (values (n, ncol) with NaN rows, present mask)."""
     if not data_dir.is_dir():
         raise DataError(data_dir, "folder missing (expected oxts/data/NNNNNNNNNN.txt)")
@@ -165,7 +196,9 @@ def _parse_data_files(data_dir: Path, n: int, ncol: int,
     extra = len(names) - int(present.sum()) - empty
     missing = n - int(present.sum()) - empty
     if missing:
-        warnings.append(f"kitti: {missing} data files missing for listed time stamps; samples dropped")
+        warnings.append(
+            f"kitti: {missing} data files missing for listed time stamps; samples dropped"
+        )
     if empty:
         warnings.append(f"kitti: {empty} empty data files; samples dropped")
     if extra > 0:
@@ -198,8 +231,11 @@ def _fast_parse(texts: list[str], ncol: int) -> np.ndarray | None:
 def _parse_one(path: Path, txt: str, ncol: int) -> np.ndarray:
     rows = [(k + 1, ln) for k, ln in enumerate(txt.splitlines()) if ln.strip()]
     if len(rows) != 1:
-        raise DataError(path, f"line {rows[1][0]}: expected one line of {ncol} numbers, "
-                              f"found {len(rows)} non-blank lines")
+        raise DataError(
+            path,
+            f"line {rows[1][0]}: expected one line of {ncol} numbers, "
+            f"found {len(rows)} non-blank lines",
+        )
     lineno, ln = rows[0]
     fields = ln.split()
     if len(fields) != ncol:
@@ -208,8 +244,9 @@ def _parse_one(path: Path, txt: str, ncol: int) -> np.ndarray:
         try:
             float(f)
         except ValueError:
-            raise DataError(path, f"line {lineno}, column {j + 1} ({OXTS_COLUMNS[j]}): "
-                                  f"not a number: {f!r}") from None
+            raise DataError(
+                path, f"line {lineno}, column {j + 1} ({OXTS_COLUMNS[j]}): not a number: {f!r}"
+            ) from None
     return np.array(fields, dtype=float)
 
 
@@ -249,12 +286,15 @@ def load_kitti_drive(path: Path, projection: str = "enu") -> Drive:
     # index in the message is the data file's number
     lat_all = np.where(present, data[:, ci["lat"]], 0.0)
     lon_all = np.where(present, data[:, ci["lon"]], 0.0)
-    bad = (~np.isfinite(lat_all) | ~np.isfinite(lon_all) | (np.abs(lat_all) > 90)
-           | (np.abs(lon_all) > 180))
+    bad = (
+        ~np.isfinite(lat_all)
+        | ~np.isfinite(lon_all)
+        | (np.abs(lat_all) > 90)
+        | (np.abs(lon_all) > 180)
+    )
     if np.any(bad):
         i = int(np.flatnonzero(bad)[0])
-        validate_latlon(lat_all, lon_all, str(oxts / "data" / f"{i:010d}.txt"),
-                        what="oxts sample")
+        validate_latlon(lat_all, lon_all, str(oxts / "data" / f"{i:010d}.txt"), what="oxts sample")
     t_abs = t_abs[present]
     data = data[present]
 
@@ -266,8 +306,9 @@ def load_kitti_drive(path: Path, projection: str = "enu") -> Drive:
     t = t_abs - epoch
     gaps, jitter, med_dt = _count_time_irregularity(t)
     if gaps:
-        warnings.append(f"kitti oxts: {gaps} time gaps longer than 1.5 x the median interval "
-                        f"({med_dt:.3f} s)")
+        warnings.append(
+            f"kitti oxts: {gaps} time gaps longer than 1.5 x the median interval ({med_dt:.3f} s)"
+        )
 
     lat, lon = columns["lat"], columns["lon"]
     x, y = to_local(lat, lon, float(lat[0]), float(lon[0]), projection)
@@ -275,20 +316,35 @@ def load_kitti_drive(path: Path, projection: str = "enu") -> Drive:
     vf, vl = columns["vf"], columns["vl"]
     yaw = columns["yaw"]
 
-    extra: dict = {"time_gaps": gaps, "time_jitter": jitter, "median_dt_s": med_dt,
-                   "truth_poor": False, "truth_source": "OXTS RT3003 GPS/IMU solution"}
+    extra: dict = {
+        "time_gaps": gaps,
+        "time_jitter": jitter,
+        "median_dt_s": med_dt,
+        "truth_poor": False,
+        "truth_source": "OXTS RT3003 GPS/IMU solution",
+    }
     finite_acc = acc[np.isfinite(acc)]
     med_acc = float(np.median(finite_acc)) if finite_acc.size else float("nan")
     extra["truth_median_accuracy_m"] = med_acc
     if med_acc > POOR_TRUTH_M:
-        warnings.append(f"poor truth accuracy: median pos_accuracy {med_acc:.2f} m > "
-                        f"{POOR_TRUTH_M:.0f} m")
+        warnings.append(
+            f"poor truth accuracy: median pos_accuracy {med_acc:.2f} m > {POOR_TRUTH_M:.0f} m"
+        )
         extra["truth_poor"] = True
 
-    meta = DriveMeta(fix_source=FIXES_FROM_TRUTH, name=name, source=str(path), format="kitti", epoch_s=epoch,
-                     origin_lat=float(lat[0]), origin_lon=float(lon[0]), projection=projection,
-                     time_source="oxts/timestamps.txt (naive wall clock, read as UTC)",
-                     warnings=warnings, extra=extra)
+    meta = DriveMeta(
+        fix_source=FIXES_FROM_TRUTH,
+        name=name,
+        source=str(path),
+        format="kitti",
+        epoch_s=epoch,
+        origin_lat=float(lat[0]),
+        origin_lon=float(lon[0]),
+        projection=projection,
+        time_source="oxts/timestamps.txt (naive wall clock, read as UTC)",
+        warnings=warnings,
+        extra=extra,
+    )
     gps = GpsStream(t, x, y, lat=lat, lon=lon, accuracy=acc)
     imu = ImuStream(t, columns["af"], columns["al"], yaw=yaw, yaw_rate=columns["wu"])
     speed = SpeedStream(t, vf)

@@ -35,8 +35,13 @@ def _rpy_deg(r: np.ndarray) -> list[float]:
     return [round(float(np.degrees(a)), 1) + 0.0 for a in fr.matrix_to_rpy(r)]
 
 
-def _check_yaw(t: np.ndarray, yaw_b: np.ndarray, gps: tuple[np.ndarray, np.ndarray, np.ndarray],
-               info: dict[str, Any], warnings: list[str]) -> np.ndarray | None:
+def _check_yaw(
+    t: np.ndarray,
+    yaw_b: np.ndarray,
+    gps: tuple[np.ndarray, np.ndarray, np.ndarray],
+    info: dict[str, Any],
+    warnings: list[str],
+) -> np.ndarray | None:
     ct, course = fr.gps_course(*gps)
     off, spread, n = fr.yaw_offset(t, yaw_b, ct, course)
     info["yaw_samples"] = n
@@ -44,28 +49,34 @@ def _check_yaw(t: np.ndarray, yaw_b: np.ndarray, gps: tuple[np.ndarray, np.ndarr
     info["yaw_spread_deg"] = round(float(np.degrees(spread)), 1) if n else None
     if n < fr.YAW_MIN_SAMPLES:
         info["yaw"] = "dropped"
-        warnings.append(f"imu: yaw not used: too little motion to check it against the GPS course "
-                        f"({n} samples moving >= {fr.COURSE_MIN_DISPLACEMENT_M:g} m in "
-                        f"{fr.COURSE_CHORD_S:g} s, need {fr.YAW_MIN_SAMPLES})")
+        warnings.append(
+            f"imu: yaw not used: too little motion to check it against the GPS course "
+            f"({n} samples moving >= {fr.COURSE_MIN_DISPLACEMENT_M:g} m in "
+            f"{fr.COURSE_CHORD_S:g} s, need {fr.YAW_MIN_SAMPLES})"
+        )
         return None
     if np.degrees(spread) > fr.YAW_MAX_SPREAD_DEG:
         info["yaw"] = "dropped"
-        warnings.append(f"imu: yaw not used: yaw - GPS course spreads {np.degrees(spread):.1f} deg "
-                        f"(limit {fr.YAW_MAX_SPREAD_DEG:g} deg, {n} samples while moving)")
+        warnings.append(
+            f"imu: yaw not used: yaw - GPS course spreads {np.degrees(spread):.1f} deg "
+            f"(limit {fr.YAW_MAX_SPREAD_DEG:g} deg, {n} samples while moving)"
+        )
         return None
     if abs(np.degrees(off)) <= fr.YAW_ENU_TOL_DEG:
         info["yaw"] = "enu"
         return yaw_b
     info["yaw"] = "offset-corrected"
-    warnings.append(f"imu: yaw is not ENU (magnetic or power-on reference?): offset "
-                    f"{np.degrees(off):+.1f} deg estimated against the GPS course "
-                    f"(spread {np.degrees(spread):.1f} deg, {n} samples) and added")
+    warnings.append(
+        f"imu: yaw is not ENU (magnetic or power-on reference?): offset "
+        f"{np.degrees(off):+.1f} deg estimated against the GPS course "
+        f"(spread {np.degrees(spread):.1f} deg, {n} samples) and added"
+    )
     return fr.wrap(yaw_b + off)
 
 
-def _speed_ref(speed: tuple[np.ndarray, np.ndarray] | None,
-               gps: tuple[np.ndarray, np.ndarray, np.ndarray]
-               ) -> tuple[np.ndarray | None, np.ndarray | None, str]:
+def _speed_ref(
+    speed: tuple[np.ndarray, np.ndarray] | None, gps: tuple[np.ndarray, np.ndarray, np.ndarray]
+) -> tuple[np.ndarray | None, np.ndarray | None, str]:
     if speed is not None and speed[0].size > 3:
         return speed[0], speed[1], "speed stream"
     tm, v, _ = fr.gps_chords(*gps)
@@ -74,11 +85,18 @@ def _speed_ref(speed: tuple[np.ndarray, np.ndarray] | None,
     return None, None, "none"
 
 
-def imu_to_vehicle(t: np.ndarray, f_s: np.ndarray, w_s: np.ndarray | None, q: np.ndarray | None,
-                   frame: str, edges: dict[tuple[str, str], np.ndarray],
-                   gps: tuple[np.ndarray, np.ndarray, np.ndarray],
-                   speed: tuple[np.ndarray, np.ndarray] | None, topic: str,
-                   warnings: list[str]) -> tuple[dict[str, np.ndarray | None], dict[str, Any]]:
+def imu_to_vehicle(
+    t: np.ndarray,
+    f_s: np.ndarray,
+    w_s: np.ndarray | None,
+    q: np.ndarray | None,
+    frame: str,
+    edges: dict[tuple[str, str], np.ndarray],
+    gps: tuple[np.ndarray, np.ndarray, np.ndarray],
+    speed: tuple[np.ndarray, np.ndarray] | None,
+    topic: str,
+    warnings: list[str],
+) -> tuple[dict[str, np.ndarray | None], dict[str, Any]]:
     """Convert one drive's IMU samples (see module doc).
 
     Args:
@@ -101,15 +119,21 @@ def imu_to_vehicle(t: np.ndarray, f_s: np.ndarray, w_s: np.ndarray | None, q: np
         r_ws = fr.quat_to_matrix(*q.T)
         ax, ay, yaw_b = fr.level_vehicle_accel(f_s, r_ws, r_bs)
         yaw_rate = None if w_s is None else fr.world_yaw_rate(w_s, r_ws)
-        info.update(method="orientation+tf_static" if r_bs is not None else "orientation",
-                    gravity_removed=True)
+        info.update(
+            method="orientation+tf_static" if r_bs is not None else "orientation",
+            gravity_removed=True,
+        )
         if r_bs is None:
-            warnings.append(f"imu: {topic} levelled by its orientation, gravity removed; no "
-                            f"/tf_static mount for frame '{frame}': its x axis taken as forward")
+            warnings.append(
+                f"imu: {topic} levelled by its orientation, gravity removed; no "
+                f"/tf_static mount for frame '{frame}': its x axis taken as forward"
+            )
         else:
-            warnings.append(f"imu: {topic} levelled by its orientation, gravity removed; mount "
-                            f"{base} -> {frame} from tf (roll, pitch, yaw "
-                            f"{', '.join(f'{a:g}' for a in info['mount_rpy_deg'])} deg)")
+            warnings.append(
+                f"imu: {topic} levelled by its orientation, gravity removed; mount "
+                f"{base} -> {frame} from tf (roll, pitch, yaw "
+                f"{', '.join(f'{a:g}' for a in info['mount_rpy_deg'])} deg)"
+            )
         yaw = _check_yaw(t, yaw_b, gps, info, warnings)
         return {"ax": ax, "ay": ay, "yaw": yaw, "yaw_rate": yaw_rate}, info
 
@@ -117,34 +141,49 @@ def imu_to_vehicle(t: np.ndarray, f_s: np.ndarray, w_s: np.ndarray | None, q: np
     if r_bs is not None:
         ax, ay, yaw_rate = fr.vehicle_from_mount(f_s, w_s, r_bs)
         info.update(method="tf_static", gravity_removed=True)
-        warnings.append(f"imu: {topic} has no orientation: rotated by the tf mount {base} -> "
-                        f"{frame}, vehicle assumed level (gravity on its z only)")
+        warnings.append(
+            f"imu: {topic} has no orientation: rotated by the tf mount {base} -> "
+            f"{frame}, vehicle assumed level (gravity on its z only)"
+        )
         return {"ax": ax, "ay": ay, "yaw": None, "yaw_rate": yaw_rate}, info
 
     ok = np.all(np.isfinite(f_s), axis=1)
     mean = f_s[ok].mean(axis=0) if ok.any() else np.full(3, np.nan)
     norm = float(np.linalg.norm(mean))
-    level = ok.any() and norm > fr.NO_GRAVITY_FRACTION * fr.G0 and \
-        fr.tilt_deg(mean) <= fr.LEVEL_TILT_DEG
+    level = (
+        ok.any()
+        and norm > fr.NO_GRAVITY_FRACTION * fr.G0
+        and fr.tilt_deg(mean) <= fr.LEVEL_TILT_DEG
+    )
     if not ok.any() or norm <= fr.NO_GRAVITY_FRACTION * fr.G0 or level:
-        info.update(method="as-is", gravity_removed=False,
-                    mean_specific_force=[round(float(v), 3) for v in mean])
+        info.update(
+            method="as-is",
+            gravity_removed=False,
+            mean_specific_force=[round(float(v), 3) for v in mean],
+        )
         if ok.any() and not level:
-            warnings.append(f"imu: {topic} shows no gravity (mean specific force {norm:.2f} m/s^2):"
-                            " x, y used as vehicle-frame acceleration as they are")
+            warnings.append(
+                f"imu: {topic} shows no gravity (mean specific force {norm:.2f} m/s^2):"
+                " x, y used as vehicle-frame acceleration as they are"
+            )
         yr = None if w_s is None else w_s[:, 2]
         return {"ax": f_s[:, 0], "ay": f_s[:, 1], "yaw": None, "yaw_rate": yr}, info
     st, sv, ref = _speed_ref(speed, gps)
     r_bs, est = fr.estimate_mount(t, f_s, st, sv)
     ax, ay, yaw_rate = fr.vehicle_from_mount(f_s, w_s, r_bs)
     corr = est["forward_corr"]
-    info.update(method="estimated", gravity_removed=True, mount_rpy_deg=_rpy_deg(r_bs),
-                mount_from=f"data: up from {est['up_from']}, forward from {est['forward_from']}"
-                           + (f" ({ref})" if est["forward_from"] == "d(speed)/dt" else ""),
-                forward_corr=None if not np.isfinite(corr) else round(float(corr), 3))
-    warnings.append(f"imu: {topic} has no orientation and no tf mount, gravity "
-                    f"{fr.tilt_deg(mean):.0f} deg off its z: mount estimated from the data "
-                    f"(roll, pitch, yaw {', '.join(f'{a:g}' for a in info['mount_rpy_deg'])} deg; "
-                    f"{info['mount_from']}"
-                    + (f", correlation {corr:.2f}" if np.isfinite(corr) else "") + ")")
+    info.update(
+        method="estimated",
+        gravity_removed=True,
+        mount_rpy_deg=_rpy_deg(r_bs),
+        mount_from=f"data: up from {est['up_from']}, forward from {est['forward_from']}"
+        + (f" ({ref})" if est["forward_from"] == "d(speed)/dt" else ""),
+        forward_corr=None if not np.isfinite(corr) else round(float(corr), 3),
+    )
+    warnings.append(
+        f"imu: {topic} has no orientation and no tf mount, gravity "
+        f"{fr.tilt_deg(mean):.0f} deg off its z: mount estimated from the data "
+        f"(roll, pitch, yaw {', '.join(f'{a:g}' for a in info['mount_rpy_deg'])} deg; "
+        f"{info['mount_from']}" + (f", correlation {corr:.2f}" if np.isfinite(corr) else "") + ")"
+    )
     return {"ax": ax, "ay": ay, "yaw": None, "yaw_rate": yaw_rate}, info

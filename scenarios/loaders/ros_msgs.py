@@ -74,8 +74,9 @@ def item_times(items: list) -> tuple[np.ndarray, str]:
     return times([stamp_ns(m) for _, m in items], [t for t, _ in items])
 
 
-def navsat_fields(items: list, topic: str, path: Path, warnings: list[str],
-                  role: str = "gps") -> dict[str, Any]:
+def navsat_fields(
+    items: list, topic: str, path: Path, warnings: list[str], role: str = "gps"
+) -> dict[str, Any]:
     """``sensor_msgs/NavSatFix``: t, lat, lon [deg] and acc [m].
 
     Fixes with ``status.status < 0`` (no fix) are skipped and counted in ``warnings``. acc is
@@ -88,16 +89,22 @@ def navsat_fields(items: list, topic: str, path: Path, warnings: list[str],
     keep = [i for i, (_, m) in enumerate(items) if int(m.status.status) >= 0]
     skipped = len(items) - len(keep)
     if skipped:
-        warnings.append(f"{role}: skipped {skipped} of {len(items)} NavSatFix messages on {topic} "
-                        "with status < 0 (no fix)")
+        warnings.append(
+            f"{role}: skipped {skipped} of {len(items)} NavSatFix messages on {topic} "
+            "with status < 0 (no fix)"
+        )
     if not keep:
-        raise DataError(path, f"topic {topic}: no valid {'GPS' if role == 'gps' else role} fixes "
-                              f"({len(items)} messages, {skipped} without fix)")
+        raise DataError(
+            path,
+            f"topic {topic}: no valid {'GPS' if role == 'gps' else role} fixes "
+            f"({len(items)} messages, {skipped} without fix)",
+        )
     ms = [items[i][1] for i in keep]
     lat_a = np.asarray([float(m.latitude) for m in ms])
     lon_a = np.asarray([float(m.longitude) for m in ms])
-    cov = np.asarray([np.asarray(m.position_covariance, dtype=float)[:5] for m in ms],
-                     dtype=float).reshape(len(ms), -1)
+    cov = np.asarray(
+        [np.asarray(m.position_covariance, dtype=float)[:5] for m in ms], dtype=float
+    ).reshape(len(ms), -1)
     known = np.asarray([int(m.position_covariance_type) > 0 for m in ms]) & (cov.shape[1] >= 5)
     acc = np.full(len(ms), math.nan)
     if cov.shape[1] >= 5:
@@ -105,8 +112,11 @@ def navsat_fields(items: list, topic: str, path: Path, warnings: list[str],
     bad = ~np.isfinite(lat_a) | ~np.isfinite(lon_a) | (np.abs(lat_a) > 90) | (np.abs(lon_a) > 180)
     if np.any(bad):
         j = int(np.flatnonzero(bad)[0])
-        raise DataError(path, f"topic {topic} message {keep[j]}: invalid lat/lon "
-                              f"({float(lat_a[j])!r}, {float(lon_a[j])!r}); {int(bad.sum())} invalid in all")
+        raise DataError(
+            path,
+            f"topic {topic} message {keep[j]}: invalid lat/lon "
+            f"({float(lat_a[j])!r}, {float(lon_a[j])!r}); {int(bad.sum())} invalid in all",
+        )
     t, src = times([stamp_ns(m) for m in ms], [items[i][0] for i in keep])
     return {"t": t, "lat": lat_a, "lon": lon_a, "acc": acc, "src": src}
 
@@ -132,17 +142,26 @@ def pose_fields(items: list, msgtype: str) -> dict[str, Any]:
     t, src = item_times(items)
     poses = [m.pose if msgtype == POSE_STAMPED else m.pose.pose for _, m in items]
     pos = np.asarray([(p.position.x, p.position.y) for p in poses], dtype=float).reshape(-1, 2)
-    q = np.asarray([(p.orientation.w, p.orientation.x, p.orientation.y, p.orientation.z)
-                    for p in poses], dtype=float).reshape(-1, 4)
+    q = np.asarray(
+        [(p.orientation.w, p.orientation.x, p.orientation.y, p.orientation.z) for p in poses],
+        dtype=float,
+    ).reshape(-1, 4)
     acc = None
     if msgtype != POSE_STAMPED:
-        cov = np.asarray([(m.pose.covariance[0], m.pose.covariance[7]) for _, m in items],
-                         dtype=float).reshape(-1, 2)
+        cov = np.asarray(
+            [(m.pose.covariance[0], m.pose.covariance[7]) for _, m in items], dtype=float
+        ).reshape(-1, 2)
         if np.any(cov > 0):
             acc = np.sqrt(np.clip(cov.mean(axis=1), 0.0, None))
-    v = (np.asarray([twist_v(m) for _, m in items], dtype=float) if msgtype in TWIST_TYPES
-         else None)
+    v = np.asarray([twist_v(m) for _, m in items], dtype=float) if msgtype in TWIST_TYPES else None
     yaw = quat_yaw(*q.T)
-    return {"t": t, "x": pos[:, 0], "y": pos[:, 1],
-            "yaw": yaw if np.any(np.isfinite(yaw)) else None, "v": v, "acc": acc,
-            "frames": sorted({str(m.header.frame_id) for _, m in items}), "src": src}
+    return {
+        "t": t,
+        "x": pos[:, 0],
+        "y": pos[:, 1],
+        "yaw": yaw if np.any(np.isfinite(yaw)) else None,
+        "v": v,
+        "acc": acc,
+        "frames": sorted({str(m.header.frame_id) for _, m in items}),
+        "src": src,
+    }

@@ -54,8 +54,9 @@ def edges_from_messages(msgs: Iterable[Any]) -> dict[tuple[str, str], np.ndarray
     return out
 
 
-def chain_rotation(edges: dict[tuple[str, str], np.ndarray], parent: str, child: str
-                   ) -> np.ndarray | None:
+def chain_rotation(
+    edges: dict[tuple[str, str], np.ndarray], parent: str, child: str
+) -> np.ndarray | None:
     """R_parent_child (3, 3) through the tf tree (breadth-first, edges used both ways);
     identity when the frames are the same; None when they are not connected."""
     parent, child = frame_name(parent), frame_name(child)
@@ -81,8 +82,9 @@ def chain_rotation(edges: dict[tuple[str, str], np.ndarray], parent: str, child:
     return None
 
 
-def find_mount(edges: dict[tuple[str, str], np.ndarray], imu_frame: str
-               ) -> tuple[np.ndarray | None, str | None]:
+def find_mount(
+    edges: dict[tuple[str, str], np.ndarray], imu_frame: str
+) -> tuple[np.ndarray | None, str | None]:
     """(R_base_imu, base frame name) for the first of :data:`BASE_FRAMES` connected to
     ``imu_frame``; (None, None) when none is (or the IMU frame is itself a base frame)."""
     imu_frame = frame_name(imu_frame)

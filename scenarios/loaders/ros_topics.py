@@ -53,16 +53,21 @@ def describe(topic_types: dict[str, str]) -> str:
 def _named(role: str, name: str, topic_types: dict[str, str], path: Path) -> str:
     accepted = ROLE_TYPES[role][1]
     if name not in topic_types:
-        raise DataError(path, f"--topic {role}={name}: no such topic; the bag has "
-                              f"{describe(topic_types)}")
+        raise DataError(
+            path, f"--topic {role}={name}: no such topic; the bag has {describe(topic_types)}"
+        )
     if topic_types[name] not in accepted:
-        raise DataError(path, f"--topic {role}={name}: topic has type {topic_types[name]}, "
-                              f"expected {' or '.join(accepted)}")
+        raise DataError(
+            path,
+            f"--topic {role}={name}: topic has type {topic_types[name]}, "
+            f"expected {' or '.join(accepted)}",
+        )
     return name
 
 
-def select_topics(topic_types: dict[str, str], topics: dict[str, str] | None, path: Path
-                  ) -> tuple[dict[str, str | None], dict[str, str]]:
+def select_topics(
+    topic_types: dict[str, str], topics: dict[str, str] | None, path: Path
+) -> tuple[dict[str, str | None], dict[str, str]]:
     """Choose one topic (or ``None``) per role, and say why.
 
     Args:
@@ -78,8 +83,9 @@ def select_topics(topic_types: dict[str, str], topics: dict[str, str] | None, pa
     topics = dict(topics or {})
     unknown = sorted(set(topics) - set(ROLE_TYPES))
     if unknown:
-        raise DataError(path, f"unknown topic role(s) {', '.join(unknown)}; "
-                              f"roles are {', '.join(ROLE_TYPES)}")
+        raise DataError(
+            path, f"unknown topic role(s) {', '.join(unknown)}; roles are {', '.join(ROLE_TYPES)}"
+        )
     chosen: dict[str, str | None] = {}
     why: dict[str, str] = {}
     for role in ROLE_TYPES:
@@ -93,18 +99,21 @@ def select_topics(topic_types: dict[str, str], topics: dict[str, str] | None, pa
             why[role] = "named"
     truth = chosen.get("truth")
     if truth is not None:
-        why["truth"] = ("named; a second receiver: projected like the fixes (same origin and "
-                        "projection), no fit"
-                        if topic_types[truth] == NAVSATFIX else
-                        "named; aligned to the fixes' ENU frame by a 2-D rigid fit")
+        why["truth"] = (
+            "named; a second receiver: projected like the fixes (same origin and "
+            "projection), no fit"
+            if topic_types[truth] == NAVSATFIX
+            else "named; aligned to the fixes' ENU frame by a 2-D rigid fit"
+        )
     for role, (auto, _) in ROLE_TYPES.items():
         if role in chosen or not auto:
             chosen.setdefault(role, None)
             continue
         kinds = " or ".join(short_type(k) for k in auto)
         cands = sorted(t for t, m in topic_types.items() if m in auto and t != truth)
-        reason = f"only {kinds}" + ("" if truth is None or topic_types[truth] not in auto
-                                    else " besides the truth")
+        reason = f"only {kinds}" + (
+            "" if truth is None or topic_types[truth] not in auto else " besides the truth"
+        )
         if not cands and role in FALLBACK_TYPES:
             fb = FALLBACK_TYPES[role]
             cands = sorted(t for t, m in topic_types.items() if m in fb and t != truth)
@@ -112,22 +121,30 @@ def select_topics(topic_types: dict[str, str], topics: dict[str, str] | None, pa
             kinds = " or ".join(short_type(k) for k in fb)
         if len(cands) > 1:
             off = "" if role == "gps" else f" (or --topic {role}=none to skip it)"
-            raise DataError(path, f"several {role} topics ({kinds}): {', '.join(cands)}; "
-                                  f"choose one with --topic {role}=/name{off}")
+            raise DataError(
+                path,
+                f"several {role} topics ({kinds}): {', '.join(cands)}; "
+                f"choose one with --topic {role}=/name{off}",
+            )
         if not cands and role == "gps" and truth is not None and topic_types[truth] == NAVSATFIX:
-            cands, reason = [truth], ("the truth's own topic (the only NavSatFix): a run "
-                                      "simulates its fixes from the truth")
+            cands, reason = (
+                [truth],
+                (
+                    "the truth's own topic (the only NavSatFix): a run "
+                    "simulates its fixes from the truth"
+                ),
+            )
         chosen[role] = cands[0] if cands else None
         if cands:
             why[role] = reason
     if chosen["gps"] is None:
-        raise DataError(path, f"no GPS topic ({NAVSATFIX}); the bag has "
-                              f"{describe(topic_types)}")
+        raise DataError(path, f"no GPS topic ({NAVSATFIX}); the bag has {describe(topic_types)}")
     return chosen, why
 
 
-def unused_topics(topic_types: dict[str, str], chosen: dict[str, str | None],
-                  topics: dict[str, str] | None) -> dict[str, dict[str, str]]:
+def unused_topics(
+    topic_types: dict[str, str], chosen: dict[str, str | None], topics: dict[str, str] | None
+) -> dict[str, dict[str, str]]:
     """The bag's other topics: topic -> {"type", "why"} (why each plays no role)."""
     topics = topics or {}
     used = {t for t in chosen.values() if t is not None}
@@ -135,16 +152,19 @@ def unused_topics(topic_types: dict[str, str], chosen: dict[str, str | None],
     for topic, mt in sorted(topic_types.items()):
         if topic in used:
             continue
-        off = [r for r, (auto, acc) in ROLE_TYPES.items()
-               if mt in acc and r in topics and topics[r].strip().lower() in OFF]
+        off = [
+            r
+            for r, (auto, acc) in ROLE_TYPES.items()
+            if mt in acc and r in topics and topics[r].strip().lower() in OFF
+        ]
         if topic in TF_TOPICS:
-            why = ("tf: read for the IMU's mount" if chosen.get("imu") else
-                   "tf: no IMU to mount")
+            why = "tf: read for the IMU's mount" if chosen.get("imu") else "tf: no IMU to mount"
         elif off:
             why = f"--topic {off[0]}=none"
         elif mt in (ODOMETRY, POSE_STAMPED, POSE_COV_STAMPED, NAVSATFIX):
-            why = (f"a truth only when named: --topic truth={topic}"
-                   + ("; odometry drifts (REP 105)" if mt == ODOMETRY else ""))
+            why = f"a truth only when named: --topic truth={topic}" + (
+                "; odometry drifts (REP 105)" if mt == ODOMETRY else ""
+            )
         elif any(mt in acc for acc in (a for _, a in ROLE_TYPES.values())):
             why = "another topic was named for its role"
         else:

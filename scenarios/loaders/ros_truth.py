@@ -33,8 +33,9 @@ from posbench.scenarios.loaders.ros_msgs import NAVSATFIX, navsat_fields, pose_f
 from posbench.scenarios.projection import to_local
 
 
-def truth_fields(items: list, msgtype: str, topic: str, path: Path,
-                 warnings: list[str]) -> dict[str, Any]:
+def truth_fields(
+    items: list, msgtype: str, topic: str, path: Path, warnings: list[str]
+) -> dict[str, Any]:
     """The raw fields of a truth topic (t [ns]; lat/lon [deg] or x/y [m] in its frame)."""
     if msgtype == NAVSATFIX:
         out = navsat_fields(items, topic, path, warnings, role="truth")
@@ -46,9 +47,18 @@ def truth_fields(items: list, msgtype: str, topic: str, path: Path,
     return out
 
 
-def truth_stream(s: dict[str, Any], t: np.ndarray, gps: GpsStream, lat0: float, lon0: float,
-                 projection: str, topic: str, path: Path, extra: dict[str, Any],
-                 warnings: list[str]) -> TruthStream:
+def truth_stream(
+    s: dict[str, Any],
+    t: np.ndarray,
+    gps: GpsStream,
+    lat0: float,
+    lon0: float,
+    projection: str,
+    topic: str,
+    path: Path,
+    extra: dict[str, Any],
+    warnings: list[str],
+) -> TruthStream:
     """The truth in the fixes' local frame (see the module notes).
 
     Args:
@@ -61,25 +71,37 @@ def truth_stream(s: dict[str, Any], t: np.ndarray, gps: GpsStream, lat0: float, 
         t, c = clean_times(t, {k: s[k] for k in ("lat", "lon", "acc")}, "truth", warnings)
         x, y = to_local(c["lat"], c["lon"], lat0, lon0, projection)
         acc = c["acc"] if np.any(np.isfinite(c["acc"])) else None
-        extra["truth_alignment"] = {"fit": "none",
-                                    "why": f"NavSatFix projected like the fixes ({projection} "
-                                           f"about the first fix)"}
+        extra["truth_alignment"] = {
+            "fit": "none",
+            "why": f"NavSatFix projected like the fixes ({projection} about the first fix)",
+        }
         return TruthStream(t, x, y, None, None, acc)
     t, c = clean_times(t, {k: s[k] for k in ("x", "y", "yaw", "v", "acc")}, "truth", warnings)
     c = align_truth(t, c, gps, topic, path, extra, warnings)
     return TruthStream(t, c["x"], c["y"], c["yaw"], c["v"], c["acc"])
 
 
-def align_truth(tt: np.ndarray, c: dict[str, Any], gps: GpsStream, topic: str, path: Path,
-                extra: dict[str, Any], warnings: list[str]) -> dict[str, Any]:
+def align_truth(
+    tt: np.ndarray,
+    c: dict[str, Any],
+    gps: GpsStream,
+    topic: str,
+    path: Path,
+    extra: dict[str, Any],
+    warnings: list[str],
+) -> dict[str, Any]:
     """Rotate and shift a truth in a local frame (x, y [m], yaw [rad] at times ``tt`` [s])
     onto the GPS fixes by a 2-D rigid fit over the fixes inside its time span."""
     inside = (gps.t >= tt[0]) & (gps.t <= tt[-1]) if tt.size else np.zeros(len(gps), bool)
     if inside.sum() < 3 or tt.size < 2:
-        raise DataError(path, f"--topic truth={topic}: cannot align it to the GPS: only "
-                              f"{int(inside.sum())} fixes fall inside its time span")
-    src = np.column_stack([np.interp(gps.t[inside], tt, c["x"]),
-                           np.interp(gps.t[inside], tt, c["y"])])
+        raise DataError(
+            path,
+            f"--topic truth={topic}: cannot align it to the GPS: only "
+            f"{int(inside.sum())} fixes fall inside its time span",
+        )
+    src = np.column_stack(
+        [np.interp(gps.t[inside], tt, c["x"]), np.interp(gps.t[inside], tt, c["y"])]
+    )
     dst = np.column_stack([gps.x[inside], gps.y[inside]])
     rot, tr, rms = umeyama_2d(src, dst)
     acc = gps.accuracy[inside] if gps.accuracy is not None else np.empty(0)
@@ -89,17 +111,26 @@ def align_truth(tt: np.ndarray, c: dict[str, Any], gps: GpsStream, topic: str, p
     ang = float(np.degrees(np.arctan2(rot[1, 0], rot[0, 0])))
     fit = f"rotation {ang:+.1f} deg, translation ({tr[0]:+.1f}, {tr[1]:+.1f}) m"
     what = f"{fit}, residual RMS {rms:.2f} m over {int(inside.sum())} fixes"
-    extra["truth_alignment"] = {"fit": "rigid-2d", "rotation_deg": round(ang, 3),
-                                "translation_m": [round(float(tr[0]), 3), round(float(tr[1]), 3)],
-                                "residual_rms_m": round(rms, 3), "limit_m": round(limit, 3),
-                                "fixes": int(inside.sum())}
+    extra["truth_alignment"] = {
+        "fit": "rigid-2d",
+        "rotation_deg": round(ang, 3),
+        "translation_m": [round(float(tr[0]), 3), round(float(tr[1]), 3)],
+        "residual_rms_m": round(rms, 3),
+        "limit_m": round(limit, 3),
+        "fixes": int(inside.sum()),
+    }
     if rms > limit:
         stated = f"3 x median stated GPS accuracy {med:.2f} m, " if med is not None else ""
-        raise DataError(path, f"--topic truth={topic}: residual RMS {rms:.2f} m after aligning it "
-                              f"to the GPS fixes exceeds the limit {limit:.2f} m (max({stated}"
-                              f"5 m); {fit}): it drifts or is mis-scaled, so it is no truth")
-    warnings.append(f"truth: {topic} (frame {extra.get('truth_frame') or '?'}) aligned to the GPS "
-                    f"ENU frame by a 2-D rigid fit: {what} (limit {limit:.2f} m)")
+        raise DataError(
+            path,
+            f"--topic truth={topic}: residual RMS {rms:.2f} m after aligning it "
+            f"to the GPS fixes exceeds the limit {limit:.2f} m (max({stated}"
+            f"5 m); {fit}): it drifts or is mis-scaled, so it is no truth",
+        )
+    warnings.append(
+        f"truth: {topic} (frame {extra.get('truth_frame') or '?'}) aligned to the GPS "
+        f"ENU frame by a 2-D rigid fit: {what} (limit {limit:.2f} m)"
+    )
     xy = np.column_stack([c["x"], c["y"]]) @ rot.T + tr
     out = dict(c)
     out["x"], out["y"] = xy[:, 0], xy[:, 1]

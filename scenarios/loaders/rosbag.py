@@ -87,14 +87,35 @@ from posbench.scenarios.loaders.ros_topics import (
 from posbench.scenarios.loaders.ros_truth import truth_fields, truth_stream
 from posbench.scenarios.projection import PROJECTIONS, to_local
 
-__all__ = ["FALLBACK_TYPES", "IMU", "NAVSATFIX", "ODOMETRY", "POSE_COV_STAMPED", "POSE_STAMPED",
-           "ROLE_TYPES", "TWIST_COV_STAMPED", "TWIST_STAMPED", "load_rosbag", "normalize_msgtype",
-           "quat_yaw", "select_topics"]
+__all__ = [
+    "FALLBACK_TYPES",
+    "IMU",
+    "NAVSATFIX",
+    "ODOMETRY",
+    "POSE_COV_STAMPED",
+    "POSE_STAMPED",
+    "ROLE_TYPES",
+    "TWIST_COV_STAMPED",
+    "TWIST_STAMPED",
+    "load_rosbag",
+    "normalize_msgtype",
+    "quat_yaw",
+    "select_topics",
+]
 
 
 _READ_ERRORS: tuple[type[BaseException], ...] = (
-    sqlite3.DatabaseError, struct.error, EOFError, ValueError, KeyError, IndexError,
-    AssertionError, UnicodeDecodeError, OSError, TypeError, AttributeError,
+    sqlite3.DatabaseError,
+    struct.error,
+    EOFError,
+    ValueError,
+    KeyError,
+    IndexError,
+    AssertionError,
+    UnicodeDecodeError,
+    OSError,
+    TypeError,
+    AttributeError,
 )
 
 
@@ -130,8 +151,9 @@ def _read(path: Path, wanted: dict[str, str | None], reader: Any) -> dict[str, l
     return out
 
 
-def _read_tf(reader: Any, topic_types: dict[str, str], imu_frame: str | None
-             ) -> dict[tuple[str, str], np.ndarray]:
+def _read_tf(
+    reader: Any, topic_types: dict[str, str], imu_frame: str | None
+) -> dict[tuple[str, str], np.ndarray]:
     """tf edges from ``/tf_static`` (all of it), then from ``/tf`` only while the IMU's mount
     is still unknown (stops reading as soon as it is found)."""
     from posbench.scenarios.loaders.ros_tf import frame_name
@@ -151,8 +173,11 @@ def _read_tf(reader: Any, topic_types: dict[str, str], imu_frame: str | None
             if not added:
                 continue
             edges.update(added)
-            if topic != "/tf_static" and any(frame_name(imu_frame) in k for k in added) \
-                    and find_mount(edges, imu_frame)[0] is not None:
+            if (
+                topic != "/tf_static"
+                and any(frame_name(imu_frame) in k for k in added)
+                and find_mount(edges, imu_frame)[0] is not None
+            ):
                 break
     return edges
 
@@ -178,8 +203,14 @@ def _imu(items: list) -> dict[str, Any]:
     q[np.sum(q * q, axis=1) < 1e-12] = np.nan
     t, src = times(stamps, recv)
     frames = sorted({str(m.header.frame_id) for _, m in items})
-    return {"t": t, "f": f, "q": q if np.any(np.isfinite(q)) else None,
-            "w": w if np.any(np.isfinite(w)) else None, "src": src, "frames": frames}
+    return {
+        "t": t,
+        "f": f,
+        "q": q if np.any(np.isfinite(q)) else None,
+        "w": w if np.any(np.isfinite(w)) else None,
+        "src": src,
+        "frames": frames,
+    }
 
 
 def _open_reader(path: Path) -> Any:
@@ -189,8 +220,7 @@ def _open_reader(path: Path) -> Any:
     return AnyReader([path], default_typestore=get_typestore(Stores.ROS2_HUMBLE))
 
 
-def load_rosbag(path: Path, projection: str = "enu",
-                topics: dict[str, str] | None = None) -> Drive:
+def load_rosbag(path: Path, projection: str = "enu", topics: dict[str, str] | None = None) -> Drive:
     """Read a ROS 1 or ROS 2 bag into a :class:`Drive` (see the module notes).
 
     Args:
@@ -202,8 +232,9 @@ def load_rosbag(path: Path, projection: str = "enu",
     """
     path = Path(path)
     if projection not in PROJECTIONS:
-        raise DataError(path, f"unknown projection {projection!r}; choose one of "
-                              f"{', '.join(PROJECTIONS)}")
+        raise DataError(
+            path, f"unknown projection {projection!r}; choose one of {', '.join(PROJECTIONS)}"
+        )
     if not path.exists():
         raise DataError(path, "no such file or folder")
     fmt = "ros1" if path.suffix.lower() == ".bag" else "ros2"
@@ -212,56 +243,91 @@ def load_rosbag(path: Path, projection: str = "enu",
         reader = _open_reader(path)
         with reader:
             if reader.message_count == 0:
-                raise DataError(path, "empty bag: it holds no messages "
-                                      f"(topics: {describe(_topic_types(reader.connections))})")
+                raise DataError(
+                    path,
+                    "empty bag: it holds no messages "
+                    f"(topics: {describe(_topic_types(reader.connections))})",
+                )
             topic_types = _topic_types(reader.connections)
             chosen, why = select_topics(topic_types, topics, path)
             items = _read(path, chosen, reader)
             imu_items = items.get("imu") or []
-            edges = _read_tf(reader, topic_types,
-                             str(imu_items[0][1].header.frame_id) if imu_items else None)
+            edges = _read_tf(
+                reader, topic_types, str(imu_items[0][1].header.frame_id) if imu_items else None
+            )
     except DataError:
         raise
     except FileNotFoundError as exc:
         raise DataError(path, f"cannot open bag: {exc}") from None
     except errors as exc:
-        raise DataError(path, f"cannot read bag (truncated or corrupt?): "
-                              f"{type(exc).__name__}: {exc}") from None
-    roles = {r: {"topic": t, "type": topic_types[t], "why": why.get(r, "")}
-             for r in ROLE_TYPES if (t := chosen.get(r)) is not None}
-    return _assemble(path, fmt, projection, chosen, items, topic_types, edges, roles,
-                     unused_topics(topic_types, chosen, topics))
+        raise DataError(
+            path, f"cannot read bag (truncated or corrupt?): {type(exc).__name__}: {exc}"
+        ) from None
+    roles = {
+        r: {"topic": t, "type": topic_types[t], "why": why.get(r, "")}
+        for r in ROLE_TYPES
+        if (t := chosen.get(r)) is not None
+    }
+    return _assemble(
+        path,
+        fmt,
+        projection,
+        chosen,
+        items,
+        topic_types,
+        edges,
+        roles,
+        unused_topics(topic_types, chosen, topics),
+    )
 
 
 def _topic_types(connections: Iterable[Any]) -> dict[str, str]:
     return {c.topic: normalize_msgtype(c.msgtype) for c in connections}
 
 
-def _no_truth_notes(topic_types: dict[str, str], chosen: dict[str, str | None],
-                    warnings: list[str]) -> None:
+def _no_truth_notes(
+    topic_types: dict[str, str], chosen: dict[str, str | None], warnings: list[str]
+) -> None:
     """Why a drive without a named truth is scored against its own fixes (REP 105)."""
     odoms = sorted(t for t, m in topic_types.items() if m == ODOMETRY)
     if odoms:
         used = [t for t in odoms if t == chosen["speed"]]
-        how = (f"its twist feeds the speed stream ({used[0]})" if used
-               else "not used (speed from " + (chosen["speed"] or "nowhere") + ")")
-        warnings.append(f"truth: odometry {', '.join(odoms)} is not used as truth (a pose in a "
-                        f"drifting frame such as odom is no independent reference, REP 105): "
-                        f"{how}; scored against the GPS fixes themselves, as the paper's "
-                        f"routes (name it with --topic truth=/name to align it to the GPS "
-                        f"and score against it)")
-    others = sorted(f"{t} ({short_type(m)})" for t, m in topic_types.items()
-                    if m in (NAVSATFIX, POSE_STAMPED, POSE_COV_STAMPED) and t != chosen["gps"])
+        how = (
+            f"its twist feeds the speed stream ({used[0]})"
+            if used
+            else "not used (speed from " + (chosen["speed"] or "nowhere") + ")"
+        )
+        warnings.append(
+            f"truth: odometry {', '.join(odoms)} is not used as truth (a pose in a "
+            f"drifting frame such as odom is no independent reference, REP 105): "
+            f"{how}; scored against the GPS fixes themselves, as the paper's "
+            f"routes (name it with --topic truth=/name to align it to the GPS "
+            f"and score against it)"
+        )
+    others = sorted(
+        f"{t} ({short_type(m)})"
+        for t, m in topic_types.items()
+        if m in (NAVSATFIX, POSE_STAMPED, POSE_COV_STAMPED) and t != chosen["gps"]
+    )
     if others:
-        warnings.append(f"truth: {', '.join(others)} could be the truth but nothing is the truth "
-                        f"unless named: scored against the GPS fixes themselves (name one with "
-                        f"--topic truth=/name)")
+        warnings.append(
+            f"truth: {', '.join(others)} could be the truth but nothing is the truth "
+            f"unless named: scored against the GPS fixes themselves (name one with "
+            f"--topic truth=/name)"
+        )
 
 
-def _assemble(path: Path, fmt: str, projection: str, chosen: dict[str, str | None],
-              items: dict[str, list], topic_types: dict[str, str],
-              edges: dict[tuple[str, str], np.ndarray], roles: dict[str, dict[str, str]],
-              unused: dict[str, dict[str, str]]) -> Drive:
+def _assemble(
+    path: Path,
+    fmt: str,
+    projection: str,
+    chosen: dict[str, str | None],
+    items: dict[str, list],
+    topic_types: dict[str, str],
+    edges: dict[tuple[str, str], np.ndarray],
+    roles: dict[str, dict[str, str]],
+    unused: dict[str, dict[str, str]],
+) -> Drive:
     warnings: list[str] = []
     extra: dict[str, Any] = {"topics": roles, "unused_topics": unused}
     sources: dict[str, str] = {}
@@ -278,8 +344,9 @@ def _assemble(path: Path, fmt: str, projection: str, chosen: dict[str, str | Non
     truth_topic = chosen["truth"]
     if truth_topic is not None and items["truth"]:
         ttype = topic_types[truth_topic]
-        streams["truth"] = tr = truth_fields(items["truth"], ttype, truth_topic, path,
-                                             warnings if truth_topic != gps_topic else [])
+        streams["truth"] = tr = truth_fields(
+            items["truth"], ttype, truth_topic, path, warnings if truth_topic != gps_topic else []
+        )
         extra["truth_frame"] = ",".join(tr["frames"])
     for role in ("imu", "speed", "truth"):
         if chosen[role] is not None and not items[role]:
@@ -297,8 +364,7 @@ def _assemble(path: Path, fmt: str, projection: str, chosen: dict[str, str | Non
     def rel(s: dict[str, Any]) -> np.ndarray:
         return (s["t"] - t0) * 1e-9
 
-    t, c = clean_times(rel(g), {"lat": g["lat"], "lon": g["lon"], "acc": g["acc"]}, "gps",
-                       warnings)
+    t, c = clean_times(rel(g), {"lat": g["lat"], "lon": g["lon"], "acc": g["acc"]}, "gps", warnings)
     lat0, lon0 = float(c["lat"][0]), float(c["lon"][0])
     x, y = to_local(c["lat"], c["lon"], lat0, lon0, projection)
     acc = c["acc"] if np.any(np.isfinite(c["acc"])) else None
@@ -313,26 +379,56 @@ def _assemble(path: Path, fmt: str, projection: str, chosen: dict[str, str | Non
         s = streams["imu"]
         t, c = clean_times(rel(s), {k: s[k] for k in ("f", "w", "q")}, "imu", warnings)
         if len(s["frames"]) > 1:
-            warnings.append(f"imu: several frame ids {', '.join(s['frames'])}: the mount of "
-                            f"'{s['frames'][0]}' used for all")
-        cols, info = imu_to_vehicle(t, c["f"], c["w"], c["q"], s["frames"][0], edges,
-                                    (gps.t, gps.x, gps.y),
-                                    None if speed is None else (speed.t, speed.v),
-                                    str(chosen["imu"]), warnings)
+            warnings.append(
+                f"imu: several frame ids {', '.join(s['frames'])}: the mount of "
+                f"'{s['frames'][0]}' used for all"
+            )
+        cols, info = imu_to_vehicle(
+            t,
+            c["f"],
+            c["w"],
+            c["q"],
+            s["frames"][0],
+            edges,
+            (gps.t, gps.x, gps.y),
+            None if speed is None else (speed.t, speed.v),
+            str(chosen["imu"]),
+            warnings,
+        )
         extra["imu_frame"] = info
         imu = ImuStream(t, cols["ax"], cols["ay"], cols["yaw"], cols["yaw_rate"])
     if "truth" in streams:
-        truth = truth_stream(streams["truth"], rel(streams["truth"]), gps, lat0, lon0, projection,
-                             str(truth_topic), path, extra, warnings)
+        truth = truth_stream(
+            streams["truth"],
+            rel(streams["truth"]),
+            gps,
+            lat0,
+            lon0,
+            projection,
+            str(truth_topic),
+            path,
+            extra,
+            warnings,
+        )
         al = extra.get("truth_alignment", {})
         if "residual_rms_m" in al:
-            roles["truth"]["why"] += (f": rotation {al['rotation_deg']:+.1f} deg, residual RMS "
-                                      f"{al['residual_rms_m']:.2f} m, limit {al['limit_m']:.2f} m")
+            roles["truth"]["why"] += (
+                f": rotation {al['rotation_deg']:+.1f} deg, residual RMS "
+                f"{al['residual_rms_m']:.2f} m, limit {al['limit_m']:.2f} m"
+            )
 
     name = path.name if path.is_dir() else path.stem
-    meta = DriveMeta(name=name, source=str(path), format=fmt, epoch_s=t0 / 1e9,
-                     origin_lat=lat0, origin_lon=lon0, projection=projection,
-                     time_source="; ".join(f"{r}={s}" for r, s in sources.items()),
-                     warnings=warnings, extra=extra,
-                     fix_source=FIXES_FROM_TRUTH if gps_topic == truth_topic else FIXES_RECEIVER)
+    meta = DriveMeta(
+        name=name,
+        source=str(path),
+        format=fmt,
+        epoch_s=t0 / 1e9,
+        origin_lat=lat0,
+        origin_lon=lon0,
+        projection=projection,
+        time_source="; ".join(f"{r}={s}" for r, s in sources.items()),
+        warnings=warnings,
+        extra=extra,
+        fix_source=FIXES_FROM_TRUTH if gps_topic == truth_topic else FIXES_RECEIVER,
+    )
     return Drive(meta=meta, gps=gps, imu=imu, speed=speed, truth=truth)

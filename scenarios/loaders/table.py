@@ -128,8 +128,10 @@ def _parser_error(msg: str) -> str:
     if m:
         exp = re.search(r"Expected (\d+) fields", msg)
         n_exp = exp.group(1) if exp else "?"
-        return (f"line {m.group(1)}: malformed CSV, expected {n_exp} fields, saw {m.group(2)} "
-                "(truncated or damaged file?)")
+        return (
+            f"line {m.group(1)}: malformed CSV, expected {n_exp} fields, saw {m.group(2)} "
+            "(truncated or damaged file?)"
+        )
     m = re.search(r"starting at row (\d+)", msg)
     if m:  # pandas counts rows from 0 including the header
         return f"line {int(m.group(1)) + 1}: malformed CSV, quoted field never closed ({msg})"
@@ -151,8 +153,7 @@ def numeric_column(tab: TableFile, col: str) -> np.ndarray:
     bad = num.isna() & txt.notna() & (txt != "")
     if bad.any():
         i = int(np.flatnonzero(bad.to_numpy())[0])
-        raise DataError(tab.path, f"{tab.where(i)}, column {col!r}: not a number: "
-                                  f"{s.iloc[i]!r}")
+        raise DataError(tab.path, f"{tab.where(i)}, column {col!r}: not a number: {s.iloc[i]!r}")
     return num.to_numpy(dtype=np.float64, na_value=np.nan)
 
 
@@ -180,13 +181,17 @@ def _times(tab: TableFile, rows: np.ndarray) -> tuple[np.ndarray, float]:
     return t - t0, t0
 
 
-def _need_cells(tab: TableFile, rows: np.ndarray, missing: np.ndarray, col: str,
-                what: str = "") -> None:
+def _need_cells(
+    tab: TableFile, rows: np.ndarray, missing: np.ndarray, col: str, what: str = ""
+) -> None:
     if np.any(missing):
         i = int(rows[np.flatnonzero(missing)[0]])
         extra = f" (required for {what} rows)" if what else ""
-        raise DataError(tab.path, f"{tab.where(i)}, column {col!r}: missing or non-finite "
-                                  f"value{extra}; {int(missing.sum())} such rows in all")
+        raise DataError(
+            tab.path,
+            f"{tab.where(i)}, column {col!r}: missing or non-finite "
+            f"value{extra}; {int(missing.sum())} such rows in all",
+        )
 
 
 def _stream_labels(tab: TableFile, warnings: list[str]) -> tuple[np.ndarray, np.ndarray]:
@@ -204,9 +209,12 @@ def _stream_labels(tab: TableFile, warnings: list[str]) -> tuple[np.ndarray, np.
     unknown = ~np.isin(labels, STREAMS) & ~blank
     if unknown.any():
         i = int(np.flatnonzero(unknown)[0])
-        raise DataError(tab.path, f"{tab.where(i)}, column 'stream': unknown stream "
-                                  f"{df['stream'].iloc[i]!r} (expected one of "
-                                  f"{', '.join(STREAMS)}); {int(unknown.sum())} such rows")
+        raise DataError(
+            tab.path,
+            f"{tab.where(i)}, column 'stream': unknown stream "
+            f"{df['stream'].iloc[i]!r} (expected one of "
+            f"{', '.join(STREAMS)}); {int(unknown.sum())} such rows",
+        )
     return labels, ~blank
 
 
@@ -227,6 +235,7 @@ def _check_columns(tab: TableFile, present_streams: set[str]) -> None:
 
 def _position_frame(tab: TableFile, rows: np.ndarray, num: dict[str, np.ndarray]) -> str:
     """'latlon' or 'xy': which columns every gps/truth row fills."""
+
     def complete(a: str, b: str) -> np.ndarray:
         if a not in num or b not in num:
             return np.zeros(rows.size, dtype=bool)
@@ -242,8 +251,11 @@ def _position_frame(tab: TableFile, rows: np.ndarray, num: dict[str, np.ndarray]
         i = int(rows[np.flatnonzero(neither)[0]])
         raise DataError(tab.path, f"{tab.where(i)}: position row has neither lat/lon nor x/y")
     i = int(rows[np.flatnonzero(~ll)[0]])
-    raise DataError(tab.path, f"{tab.where(i)}: some position rows give only x/y and others "
-                              "only lat/lon; use one frame for all gps and truth rows")
+    raise DataError(
+        tab.path,
+        f"{tab.where(i)}: some position rows give only x/y and others "
+        "only lat/lon; use one frame for all gps and truth rows",
+    )
 
 
 def _opt(a: np.ndarray | None) -> np.ndarray | None:
@@ -313,18 +325,36 @@ def load_table(path: Path, projection: str = "enu") -> Drive:
 
     r = rows_of("gps")
     lat_g, lon_g = col("lat", r), col("lon", r)
-    if lat_g is None or lon_g is None or not (np.all(np.isfinite(lat_g))
-                                              and np.all(np.isfinite(lon_g))):
+    if (
+        lat_g is None
+        or lon_g is None
+        or not (np.all(np.isfinite(lat_g)) and np.all(np.isfinite(lon_g)))
+    ):
         lat_g = lon_g = None  # kept only when every fix has them
-    t, c = clean("gps", {"x": xs["gps"][0], "y": xs["gps"][1], "lat": lat_g, "lon": lon_g,
-                         "accuracy": col("accuracy", r)})
+    t, c = clean(
+        "gps",
+        {
+            "x": xs["gps"][0],
+            "y": xs["gps"][1],
+            "lat": lat_g,
+            "lon": lon_g,
+            "accuracy": col("accuracy", r),
+        },
+    )
     gps = GpsStream(t, c["x"], c["y"], lat=c["lat"], lon=c["lon"], accuracy=_opt(c["accuracy"]))
 
     imu = speed = truth = None
     r = rows_of("imu")
     if r.size:
-        t, c = clean("imu", {"ax": num["ax"][r], "ay": num["ay"][r], "yaw": col("yaw", r),
-                             "yaw_rate": col("yaw_rate", r)})
+        t, c = clean(
+            "imu",
+            {
+                "ax": num["ax"][r],
+                "ay": num["ay"][r],
+                "yaw": col("yaw", r),
+                "yaw_rate": col("yaw_rate", r),
+            },
+        )
         imu = ImuStream(t, c["ax"], c["ay"], yaw=_opt(c["yaw"]), yaw_rate=_opt(c["yaw_rate"]))
     r = rows_of("speed")
     if r.size:
@@ -332,16 +362,33 @@ def load_table(path: Path, projection: str = "enu") -> Drive:
         speed = SpeedStream(t, c["v"])
     r = rows_of("truth")
     if r.size:
-        t, c = clean("truth", {"x": xs["truth"][0], "y": xs["truth"][1], "yaw": col("yaw", r),
-                               "v": col("v", r), "accuracy": col("accuracy", r)})
-        truth = TruthStream(t, c["x"], c["y"], yaw=_opt(c["yaw"]), v=_opt(c["v"]),
-                            accuracy=_opt(c["accuracy"]))
+        t, c = clean(
+            "truth",
+            {
+                "x": xs["truth"][0],
+                "y": xs["truth"][1],
+                "yaw": col("yaw", r),
+                "v": col("v", r),
+                "accuracy": col("accuracy", r),
+            },
+        )
+        truth = TruthStream(
+            t, c["x"], c["y"], yaw=_opt(c["yaw"]), v=_opt(c["v"]), accuracy=_opt(c["accuracy"])
+        )
 
     epoch = t_origin if t_origin > UNIX_MIN_S else float("nan")
-    meta = DriveMeta(name=path.stem, source=str(path), format="table", epoch_s=epoch,
-                     origin_lat=origin_lat, origin_lon=origin_lon, projection=proj,
-                     time_source="t_ns column" if "t_ns" in df.columns else "t column",
-                     warnings=warnings, extra={"rows": int(keep.sum())})
+    meta = DriveMeta(
+        name=path.stem,
+        source=str(path),
+        format="table",
+        epoch_s=epoch,
+        origin_lat=origin_lat,
+        origin_lon=origin_lon,
+        projection=proj,
+        time_source="t_ns column" if "t_ns" in df.columns else "t column",
+        warnings=warnings,
+        extra={"rows": int(keep.sum())},
+    )
     return Drive(meta=meta, gps=gps, imu=imu, speed=speed, truth=truth)
 
 

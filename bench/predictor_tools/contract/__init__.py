@@ -38,5 +38,12 @@ from posbench.predictor_tools.contract.report import (
     resolve_predictor,
 )
 
-__all__ = ["CLAUSES", "CLAUSE_IDS", "ClauseResult", "ContractReport", "check_contract",
-           "check_predictor", "resolve_predictor"]
+__all__ = [
+    "CLAUSES",
+    "CLAUSE_IDS",
+    "ClauseResult",
+    "ContractReport",
+    "check_contract",
+    "check_predictor",
+    "resolve_predictor",
+]

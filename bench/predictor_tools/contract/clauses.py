@@ -55,8 +55,12 @@ class ClauseResult:
     evidence: str
 
     def to_dict(self) -> dict[str, Any]:
-        return {"clause": self.clause, "description": self.description, "passed": self.passed,
-                "evidence": self.evidence}
+        return {
+            "clause": self.clause,
+            "description": self.description,
+            "passed": self.passed,
+            "evidence": self.evidence,
+        }
 
 
 # ------------------------------------------------------------------------- helpers
@@ -77,9 +81,11 @@ def run_replay(factory: Factory, prep: PreparedDrive, pred: Predictor | None = N
     future answers first, then the now answers."""
     p = factory() if pred is None else pred
     res = replay(p, prep, HORIZON_S)
-    return Answers(np.concatenate([prep.future.t_query, prep.now.t_query]),
-                   np.concatenate([prep.future.t_issue, prep.now.t_issue]),
-                   np.concatenate([res.future_xy, res.now_xy]).astype(float))
+    return Answers(
+        np.concatenate([prep.future.t_query, prep.now.t_query]),
+        np.concatenate([prep.future.t_issue, prep.now.t_issue]),
+        np.concatenate([res.future_xy, res.now_xy]).astype(float),
+    )
 
 
 def differences(a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -133,14 +139,18 @@ def clause_reset(factory: Factory, inp: Inputs) -> tuple[bool, str]:
     second = run_replay(factory, inp.drive, p)
     d0 = differences(before, after)[0]
     if d0 > SAME_M:
-        return False, (f"answer for t={t0:.2f} s right after reset() was {_xy(after[0])}, a "
-                       f"fresh instance answered {_xy(before[0])}")
+        return False, (
+            f"answer for t={t0:.2f} s right after reset() was {_xy(after[0])}, a "
+            f"fresh instance answered {_xy(before[0])}"
+        )
     d = differences(first.xy, second.xy)
     i = int(np.argmax(d))
     if d[i] > SAME_M:
-        return False, (f"second replay after reset(): answer for t={first.t_query[i]:.2f} s "
-                       f"changed by {metres(d[i])} ({np.sum(d > SAME_M)} of {len(d)} answers "
-                       f"differ)")
+        return False, (
+            f"second replay after reset(): answer for t={first.t_query[i]:.2f} s "
+            f"changed by {metres(d[i])} ({np.sum(d > SAME_M)} of {len(d)} answers "
+            f"differ)"
+        )
     return True, f"max |diff| {metres(float(d.max()))} over {len(d)} answers of two replays"
 
 
@@ -159,10 +169,14 @@ def clause_nan_before_first_fix(factory: Factory, inp: Inputs) -> tuple[bool, st
     n_spd = len(evs) - n_imu
     if bad:
         t, xy = bad[0]
-        return False, (f"answer for t={t:.2f} s before the first fix ({inp.line_first_fix_s:.2f}"
-                       f" s) was {_xy(xy)}, not (nan, nan) ({len(bad)} of {len(asked)} answers)")
-    return True, (f"(nan, nan) at all {len(asked)} queries before the first fix "
-                  f"(after {n_imu} IMU and {n_spd} speed samples)")
+        return False, (
+            f"answer for t={t:.2f} s before the first fix ({inp.line_first_fix_s:.2f}"
+            f" s) was {_xy(xy)}, not (nan, nan) ({len(bad)} of {len(asked)} answers)"
+        )
+    return True, (
+        f"(nan, nan) at all {len(asked)} queries before the first fix "
+        f"(after {n_imu} IMU and {n_spd} speed samples)"
+    )
 
 
 def no_look_ahead_cuts(prep: PreparedDrive, n: int = 4) -> list[float]:
@@ -201,25 +215,33 @@ def clause_no_look_ahead(factory: Factory, inp: Inputs) -> tuple[bool, str]:
         try:
             p.position_at(t_last)
         except Exception as e:  # noqa: BLE001 - any exception fails the clause
-            return False, f"position_at({t_last:.2f} s), the newest observation's time, {raised_line(e)}"
+            return (
+                False,
+                f"position_at({t_last:.2f} s), the newest observation's time, {raised_line(e)}",
+            )
         nf = prep.future.t_query.size
         nw = prep.now.t_query.size
-        ref = np.concatenate([whole.xy[:nf], whole.xy[len(inp.drive.future.t_query):][:nw]])
-        ref_tq = np.concatenate([whole.t_query[:nf],
-                                 whole.t_query[len(inp.drive.future.t_query):][:nw]])
-        ref_ti = np.concatenate([whole.t_issue[:nf],
-                                 whole.t_issue[len(inp.drive.future.t_query):][:nw]])
+        ref = np.concatenate([whole.xy[:nf], whole.xy[len(inp.drive.future.t_query) :][:nw]])
+        ref_tq = np.concatenate(
+            [whole.t_query[:nf], whole.t_query[len(inp.drive.future.t_query) :][:nw]]
+        )
+        ref_ti = np.concatenate(
+            [whole.t_issue[:nf], whole.t_issue[len(inp.drive.future.t_query) :][:nw]]
+        )
         d = differences(part.xy, ref)
         n_cmp += d.size
         i = int(np.argmax(d))
         if d[i] > SAME_M:
-            return False, (f"answer for t={ref_tq[i]:.2f} s (asked at {ref_ti[i]:.2f} s) changed "
-                           f"by {metres(d[i])} when the observations stamped after {t_cut:.2f} s "
-                           f"were withheld")
+            return False, (
+                f"answer for t={ref_tq[i]:.2f} s (asked at {ref_ti[i]:.2f} s) changed "
+                f"by {metres(d[i])} when the observations stamped after {t_cut:.2f} s "
+                f"were withheld"
+            )
         worst = max(worst, float(d.max()))
     cuts = ", ".join(f"{t:.1f}" for t in no_look_ahead_cuts(inp.drive))
-    return True, (f"max |diff| {metres(worst)} over {n_cmp} answers, drive cut at {cuts} s "
-                  f"vs whole")
+    return True, (
+        f"max |diff| {metres(worst)} over {n_cmp} answers, drive cut at {cuts} s vs whole"
+    )
 
 
 def clause_finite_after_first_fix(factory: Factory, inp: Inputs) -> tuple[bool, str]:
@@ -229,8 +251,10 @@ def clause_finite_after_first_fix(factory: Factory, inp: Inputs) -> tuple[bool, 
     bad = ~np.all(np.isfinite(a.xy), axis=1)
     if bad.any():
         i = int(np.flatnonzero(bad)[np.argmin(a.t_issue[bad])])
-        return False, (f"{int(bad.sum())} of {len(a)} answers not finite, first for "
-                       f"t={a.t_query[i]:.2f} s (asked at {a.t_issue[i]:.2f} s)")
+        return False, (
+            f"{int(bad.sum())} of {len(a)} answers not finite, first for "
+            f"t={a.t_query[i]:.2f} s (asked at {a.t_issue[i]:.2f} s)"
+        )
     return True, f"all {len(a)} answers finite ({inp.drive.drive.name}, 0-{DRIVE_S:g} s)"
 
 
@@ -246,19 +270,25 @@ def clause_straight_line(factory: Factory, inp: Inputs) -> tuple[bool, str]:
     drift = np.hypot(stand.xy[skeep, 0] - START_XY[0], stand.xy[skeep, 1] - START_XY[1])
     msgs = []
     ok = True
-    for what, e, tq, bound in (("line", err, line.t_query[keep], LINE_BOUND_M),
-                               ("standstill", drift, stand.t_query[skeep], STAND_BOUND_M)):
+    for what, e, tq, bound in (
+        ("line", err, line.t_query[keep], LINE_BOUND_M),
+        ("standstill", drift, stand.t_query[skeep], STAND_BOUND_M),
+    ):
         bad = ~np.isfinite(e)
         if bad.any():
             ok = False
-            msgs.append(f"{what}: {int(bad.sum())} of {e.size} answers not finite, first for "
-                        f"t={tq[bad][0]:.2f} s")
+            msgs.append(
+                f"{what}: {int(bad.sum())} of {e.size} answers not finite, first for "
+                f"t={tq[bad][0]:.2f} s"
+            )
             continue
         i = int(np.argmax(e))
         if e[i] > bound:
             ok = False
-            msgs.append(f"{what}: error {metres(e[i])} > {bound:g} m for t={tq[i]:.2f} s "
-                        f"({int(np.sum(e > bound))} of {e.size} answers)")
+            msgs.append(
+                f"{what}: error {metres(e[i])} > {bound:g} m for t={tq[i]:.2f} s "
+                f"({int(np.sum(e > bound))} of {e.size} answers)"
+            )
         else:
             msgs.append(f"{what}: max error {metres(e[i])} over {e.size} answers")
     return ok, "; ".join(msgs)
@@ -292,14 +322,18 @@ def clause_query_order(factory: Factory, inp: Inputs) -> tuple[bool, str]:
             n_asked[0] += 1
             order.append(f"{off:g}")
             if not (math.isfinite(x) and math.isfinite(y)):
-                failures.append(f"answer for t={t:.2f} s ({off:g} s after the newest "
-                                f"observation) is {_xy((x, y))}")
+                failures.append(
+                    f"answer for t={t:.2f} s ({off:g} s after the newest "
+                    f"observation) is {_xy((x, y))}"
+                )
                 return
             if off in seen:
                 d = float(np.hypot(x - seen[off][0], y - seen[off][1]))
                 if d > SAME_M:
-                    failures.append(f"t={t:.2f} s asked again (offsets asked: "
-                                    f"{', '.join(order)} s) moved {metres(d)}")
+                    failures.append(
+                        f"t={t:.2f} s asked again (offsets asked: "
+                        f"{', '.join(order)} s) moved {metres(d)}"
+                    )
                     return
             else:
                 seen[off] = (x, y)
@@ -307,9 +341,11 @@ def clause_query_order(factory: Factory, inp: Inputs) -> tuple[bool, str]:
     feed(p, evs, HORIZON_S, after=probe)
     if failures:
         return False, failures[0]
-    return True, (f"{n_asked[0]} answers at {len(probe_at)} points of the drive, "
-                  f"{', '.join(f'{o:g}' for o in PROBE_OFFSETS)} s after the newest observation "
-                  "in this order: finite, repeats identical")
+    return True, (
+        f"{n_asked[0]} answers at {len(probe_at)} points of the drive, "
+        f"{', '.join(f'{o:g}' for o in PROBE_OFFSETS)} s after the newest observation "
+        "in this order: finite, repeats identical"
+    )
 
 
 def clause_picklable(factory: Factory, inp: Inputs) -> tuple[bool, str]:
@@ -333,15 +369,19 @@ def clause_picklable(factory: Factory, inp: Inputs) -> tuple[bool, str]:
     a2 = np.array(feed(p, evs, HORIZON_S, start=mid)).reshape(-1, 3)
     b2 = np.array(feed(c2, evs, HORIZON_S, start=mid)).reshape(-1, 3)
     worst = 0.0
-    for what, x, y in (("the copy of a fresh instance", a, b),
-                       (f"the copy made after {n_obs} observations", a2, b2)):
+    for what, x, y in (
+        ("the copy of a fresh instance", a, b),
+        (f"the copy made after {n_obs} observations", a2, b2),
+    ):
         d = differences(x[:, 1:], y[:, 1:])
         i = int(np.argmax(d)) if d.size else 0
         if d.size and d[i] > SAME_M:
             return False, f"{what} answered t={x[i, 0]:.2f} s {metres(d[i])} away from the original"
         worst = max(worst, float(d.max()) if d.size else 0.0)
-    return True, (f"max |diff| {metres(worst)} over {len(a) + len(a2)} answers of the copies "
-                  f"(fresh, and after {n_obs} observations)")
+    return True, (
+        f"max |diff| {metres(worst)} over {len(a) + len(a2)} answers of the copies "
+        f"(fresh, and after {n_obs} observations)"
+    )
 
 
 def clause_deterministic(factory: Factory, inp: Inputs) -> tuple[bool, str]:
@@ -351,8 +391,10 @@ def clause_deterministic(factory: Factory, inp: Inputs) -> tuple[bool, str]:
     d = differences(a.xy, b.xy)
     i = int(np.argmax(d))
     if d[i] > SAME_M:
-        return False, (f"answer for t={a.t_query[i]:.2f} s differs by {metres(d[i])} between two "
-                       f"fresh instances ({int(np.sum(d > SAME_M))} of {len(d)} answers)")
+        return False, (
+            f"answer for t={a.t_query[i]:.2f} s differs by {metres(d[i])} between two "
+            f"fresh instances ({int(np.sum(d > SAME_M))} of {len(d)} answers)"
+        )
     return True, f"max |diff| {metres(float(d.max()))} over {len(d)} answers of two instances"
 
 
@@ -379,8 +421,10 @@ def clause_covariance_psd(factory: Factory, inp: Inputs) -> tuple[bool, str]:
             c = np.asarray(answer, dtype=float)
             n += 1
             if c.shape != (2, 2) or not np.all(np.isfinite(c)):
-                bad.append(f"covariance_at({t:.2f} s) is not a finite 2x2 matrix: "
-                           f"{np.array2string(c, precision=3, separator=', ')}")
+                bad.append(
+                    f"covariance_at({t:.2f} s) is not a finite 2x2 matrix: "
+                    f"{np.array2string(c, precision=3, separator=', ')}"
+                )
                 return
             asym = abs(c[0, 1] - c[1, 0])
             if asym > PSD_TOL * max(1.0, float(np.abs(c).max())):
@@ -401,31 +445,60 @@ def clause_covariance_psd(factory: Factory, inp: Inputs) -> tuple[bool, str]:
 
 #: every clause: id, one-line description, function (its docstring says what it proves)
 CLAUSES: tuple[tuple[str, str, Callable[[Factory, Inputs], tuple[bool, str]]], ...] = (
-    ("reset", "reset() forgets the drive: a second replay gives the first one's answers",
-     clause_reset),
-    ("nan_before_first_fix", "(nan, nan) before the first fix, also after IMU and speed samples",
-     clause_nan_before_first_fix),
-    ("no_look_ahead", "an answer depends only on observations stamped up to its issue time",
-     clause_no_look_ahead),
-    ("finite_after_first_fix", "every answer from the first fix on is finite",
-     clause_finite_after_first_fix),
-    ("straight_line", f"within {LINE_BOUND_M:g} m on a {LINE_SPEED:g} m/s line "
-     f"({HORIZON_S:g} s ahead), within {STAND_BOUND_M:g} m at standstill", clause_straight_line),
-    ("query_order", "out-of-order and repeated queries: finite, same time gives same answer",
-     clause_query_order),
-    ("picklable", "pickled fresh and mid-drive, the copy answers like the original",
-     clause_picklable),
-    ("deterministic", "two fresh instances give the same answers on the same drive",
-     clause_deterministic),
-    ("covariance_psd", "covariance_at(t), if reported, is symmetric positive semi-definite",
-     clause_covariance_psd),
+    (
+        "reset",
+        "reset() forgets the drive: a second replay gives the first one's answers",
+        clause_reset,
+    ),
+    (
+        "nan_before_first_fix",
+        "(nan, nan) before the first fix, also after IMU and speed samples",
+        clause_nan_before_first_fix,
+    ),
+    (
+        "no_look_ahead",
+        "an answer depends only on observations stamped up to its issue time",
+        clause_no_look_ahead,
+    ),
+    (
+        "finite_after_first_fix",
+        "every answer from the first fix on is finite",
+        clause_finite_after_first_fix,
+    ),
+    (
+        "straight_line",
+        f"within {LINE_BOUND_M:g} m on a {LINE_SPEED:g} m/s line "
+        f"({HORIZON_S:g} s ahead), within {STAND_BOUND_M:g} m at standstill",
+        clause_straight_line,
+    ),
+    (
+        "query_order",
+        "out-of-order and repeated queries: finite, same time gives same answer",
+        clause_query_order,
+    ),
+    (
+        "picklable",
+        "pickled fresh and mid-drive, the copy answers like the original",
+        clause_picklable,
+    ),
+    (
+        "deterministic",
+        "two fresh instances give the same answers on the same drive",
+        clause_deterministic,
+    ),
+    (
+        "covariance_psd",
+        "covariance_at(t), if reported, is symmetric positive semi-definite",
+        clause_covariance_psd,
+    ),
 )
 #: the clause ids, in the order they run
 CLAUSE_IDS: tuple[str, ...] = tuple(c for c, _, _ in CLAUSES)
 
 
-def check_predictor(factory: Factory, name: str,
-                    clauses: tuple[str, ...] | None = None) -> list[ClauseResult]:
+def check_predictor(
+    factory: Factory, name: str, clauses: tuple[str, ...] | None = None
+) -> list[ClauseResult]:
     """Run the contract's clauses (all, or those named in ``clauses``) on the predictors that
     ``factory`` builds; ``name`` only words errors. Never raises for the predictor's faults:
     an exception inside a clause fails that clause with what was raised and where."""

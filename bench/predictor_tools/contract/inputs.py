@@ -50,8 +50,9 @@ class Inputs:
     line_first_fix_s: float
 
 
-def _steady_drive(name: str, speed: float, duration_s: float = 10.0,
-                  first_fix_s: float = 1.0) -> Drive:
+def _steady_drive(
+    name: str, speed: float, duration_s: float = 10.0, first_fix_s: float = 1.0
+) -> Drive:
     """A car at constant ``speed`` [m/s] on heading :data:`LINE_HEADING` from
     :data:`START_XY`: IMU (50 Hz) and speed (50 Hz, 10 ms later) from t = 0, exact fixes
     at 5 Hz from ``first_fix_s``."""
@@ -60,10 +61,12 @@ def _steady_drive(name: str, speed: float, duration_s: float = 10.0,
     t_spd = t_imu + 0.01
     t_fix = first_fix_s + 0.2 * np.arange(int(round((duration_s - first_fix_s) / 0.2)))
     zero = np.zeros_like(t_imu)
-    return Drive(DriveMeta(name, "contract", "contract", projection="source"),
-                 GpsStream(t_fix, START_XY[0] + speed * c * t_fix, START_XY[1] + speed * s * t_fix),
-                 ImuStream(t_imu, zero, zero, np.full_like(t_imu, LINE_HEADING), zero),
-                 SpeedStream(t_spd, np.full_like(t_spd, speed)))
+    return Drive(
+        DriveMeta(name, "contract", "contract", projection="source"),
+        GpsStream(t_fix, START_XY[0] + speed * c * t_fix, START_XY[1] + speed * s * t_fix),
+        ImuStream(t_imu, zero, zero, np.full_like(t_imu, LINE_HEADING), zero),
+        SpeedStream(t_spd, np.full_like(t_spd, speed)),
+    )
 
 
 def line_position(t: np.ndarray) -> np.ndarray:
@@ -83,15 +86,25 @@ def inputs() -> Inputs:
     drive = default_drives()[0].window(0.0, DRIVE_S)
     line = _steady_drive("contract-line", LINE_SPEED)
     stand = _steady_drive("contract-standstill", 0.0)
-    return Inputs(prepare_drive(drive, cfg), prepare_drive(line, cfg), prepare_drive(stand, cfg),
-                  float(line.gps.t[0]))
+    return Inputs(
+        prepare_drive(drive, cfg),
+        prepare_drive(line, cfg),
+        prepare_drive(stand, cfg),
+        float(line.gps.t[0]),
+    )
 
 
 def _cut_queries(q: Queries, keep: np.ndarray) -> Queries:
-    return Queries(q.t_issue[keep], q.t_query[keep], q.ref_xy[keep], q.speed_mps[keep],
-                   q.label[keep], q.since_fix_s[keep],
-                   None if q.heading_rad is None else q.heading_rad[keep],
-                   None if q.yaw_rate is None else q.yaw_rate[keep])
+    return Queries(
+        q.t_issue[keep],
+        q.t_query[keep],
+        q.ref_xy[keep],
+        q.speed_mps[keep],
+        q.label[keep],
+        q.since_fix_s[keep],
+        None if q.heading_rad is None else q.heading_rad[keep],
+        None if q.yaw_rate is None else q.yaw_rate[keep],
+    )
 
 
 def cut_prepared(prep: PreparedDrive, t_cut: float) -> PreparedDrive:
@@ -99,9 +112,13 @@ def cut_prepared(prep: PreparedDrive, t_cut: float) -> PreparedDrive:
     issued after it: its replay is the first part of ``prep``'s, event for event."""
     gps = prep.gps.take(prep.gps.t <= t_cut)
     drive = prep.drive.window(-math.inf, t_cut)
-    return replace(prep, drive=drive, gps=gps,
-                   future=_cut_queries(prep.future, prep.future.t_issue <= t_cut),
-                   now=_cut_queries(prep.now, prep.now.t_issue <= t_cut))
+    return replace(
+        prep,
+        drive=drive,
+        gps=gps,
+        future=_cut_queries(prep.future, prep.future.t_issue <= t_cut),
+        now=_cut_queries(prep.now, prep.now.t_issue <= t_cut),
+    )
 
 
 def last_observation_s(prep: PreparedDrive) -> float:

@@ -44,12 +44,19 @@ class ContractReport:
 
     def to_dict(self) -> dict[str, Any]:
         """The report as ``bench check --json`` prints it for one predictor."""
-        return {"predictor": self.predictor, "gated": self.gated, "passed": self.passed,
-                "seconds": round(self.seconds, 3), "clauses": [c.to_dict() for c in self.clauses]}
+        return {
+            "predictor": self.predictor,
+            "gated": self.gated,
+            "passed": self.passed,
+            "seconds": round(self.seconds, 3),
+            "clauses": [c.to_dict() for c in self.clauses],
+        }
 
     def __repr__(self) -> str:
-        head = (f"ContractReport({self.predictor}{' behind the gate' if self.gated else ''}: "
-                f"{len(self.clauses) - len(self.failed)} of {len(self.clauses)} clauses pass)")
+        head = (
+            f"ContractReport({self.predictor}{' behind the gate' if self.gated else ''}: "
+            f"{len(self.clauses) - len(self.failed)} of {len(self.clauses)} clauses pass)"
+        )
         return "\n".join([head, *(f"  FAIL {c.clause}: {c.evidence}" for c in self.failed)])
 
 
@@ -71,6 +78,7 @@ def resolve_predictor(spec: str, options: Mapping[str, Any] | None = None) -> Fa
 
     def factory() -> Predictor:
         return create(spec, None, **opts)
+
     try:
         factory()
     except Exception as e:  # noqa: BLE001 - DataError, TypeError (abstract, arguments), ...
@@ -78,8 +86,12 @@ def resolve_predictor(spec: str, options: Mapping[str, Any] | None = None) -> Fa
     return factory
 
 
-def check_contract(spec: str, options: Mapping[str, Any] | None = None, gate: bool = True,
-                   clauses: Sequence[str] | None = None) -> ContractReport:
+def check_contract(
+    spec: str,
+    options: Mapping[str, Any] | None = None,
+    gate: bool = True,
+    clauses: Sequence[str] | None = None,
+) -> ContractReport:
     """Check predictor ``spec`` (a registered name, ``NAME@ALIAS`` or ``module:Class``, built
     with ``options``) against the contract: every clause, or those named in ``clauses``;
     with ``gate`` behind the GPS outlier gate, as ``bench run`` runs it.
