@@ -7,8 +7,8 @@ A reusable writer: :func:`write_bag` takes a :class:`SynthBag` of options and wr
 - ``/imu``  ``sensor_msgs/Imu`` at ``imu_hz`` in frame ``imu_link``, mounted by ``mount_rpy_deg``
   (roll 90 deg: gravity on the sensor's +y): specific force f_s = R_bs^T (a_long, a_lat, g)
   (gravity included, REP 145), angular velocity in the sensor frame (``yaw_rate_sign`` -1
-  flips it), orientation R_ws = Rz(yaw + ``yaw_ref_offset_deg`` + ``yaw_ref_drift_dps`` t) R_bs or absent
-  (``orientation_covariance[0] = -1``);
+  flips it), orientation R_ws = Rz(yaw + ``yaw_ref_offset_deg`` + ``yaw_ref_drift_dps`` t) R_bs
+  or absent (``orientation_covariance[0] = -1``);
 - ``/tf_static`` ``tf2_msgs/TFMessage`` base_link -> imu_link (when ``tf_static``);
 - ``/odom``  ``nav_msgs/Odometry`` wheel odometry in ``odom`` (child ``base_link``): speed and
   positions scaled by ``odom_scale`` (drift), heading rotated by ``odom_heading_deg`` and
@@ -24,7 +24,8 @@ A reusable writer: :func:`write_bag` takes a :class:`SynthBag` of options and wr
 - ``/vel`` (when ``twist`` names ``TwistStamped`` or ``TwistWithCovarianceStamped``) the speed
   at ``odom_hz`` (linear.x = v [m/s] in base_link).
 
-``gps_topic`` renames ``/fix``, ``gps_bias_m`` shifts its fixes (east, north) [m]; ``gps_interval_s = (0.1, 0.1)`` gives regular 10 Hz fixes.
+``gps_topic`` renames ``/fix``, ``gps_bias_m`` shifts its fixes (east, north) [m];
+``gps_interval_s = (0.1, 0.1)`` gives regular 10 Hz fixes.
 
 The path is :func:`posbench.scenarios.synthetic.generate_drive`'s truth (turns, stops), cut to
 ``duration_s``; :func:`synth_truth` returns it (ENU about the first fix's origin) for asserts.

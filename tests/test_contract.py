@@ -128,7 +128,8 @@ def test_the_plain_core_of_the_broken_predictors_passes():
         (
             NoReset,
             "reset",
-            r"^answer for t=\d+\.\d\d s right after reset\(\) was \(-?\d+\.\d{3}, -?\d+\.\d{3}\), a "
+            r"^answer for t=\d+\.\d\d s right after reset\(\) was "
+            r"\(-?\d+\.\d{3}, -?\d+\.\d{3}\), a "
             r"fresh instance answered \(nan, nan\)$",
         ),
         (
@@ -203,7 +204,8 @@ def test_differences_treat_nan_as_equal_only_to_nan():
 
 
 def test_feed_matches_the_runners_replay():
-    """The hand feeder (query order, pickling) drives a predictor exactly as posbench.replay.loop.replay."""
+    """The hand feeder (query order, pickling) drives a predictor exactly as
+    posbench.replay.loop.replay."""
     prep = cut_prepared(inputs().drive, 15.0)
     p = create("kf")
     p.reset()

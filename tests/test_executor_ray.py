@@ -1,6 +1,7 @@
 """The Ray executor: same figures as the local executor, failures retried then reported.
 
-Needs Ray (``posbench-harness[ray]``, part of ``dev``): skipped without it, but failing when CI is set.
+Needs Ray (``posbench-harness[ray]``, part of ``dev``): skipped without it, but failing when CI is
+set.
 """
 
 from __future__ import annotations

@@ -15,11 +15,12 @@ before issue 16, and one generic ``update`` per scalar measurement (x, y, yaw ra
 acceleration, yaw with a wrapped residual, wheel speed).
 
 ``poly`` fits its cubics through the normal equations in plain floats
-(:func:`posbench.predictors._cubic_xy.fit_cubic_xy`); the reference is ``fit_cubic`` (numpy's lstsq),
-compared curve by curve on random windows and answer by answer on the drives; ``kf-paper``
-resamples its window with the same fit, checked answer by answer likewise. Drives: the synthetic set (with and without
-wheel speed, with and without IMU yaw) and one shared drive per data set (aslan: IMU, no
-speed; KITTI: IMU with yaw, speed; comma2k19: IMU without yaw, CAN speed).
+(:func:`posbench.predictors._cubic_xy.fit_cubic_xy`); the reference is ``fit_cubic`` (numpy's
+lstsq), compared curve by curve on random windows and answer by answer on the drives;
+``kf-paper`` resamples its window with the same fit, checked answer by answer likewise. Drives:
+the synthetic set (with and without wheel speed, with and without IMU yaw) and one shared drive
+per data set (aslan: IMU, no speed; KITTI: IMU with yaw, speed; comma2k19: IMU without yaw, CAN
+speed).
 """
 
 from __future__ import annotations

@@ -73,9 +73,11 @@ def test_the_api_works_beside_a_users_own_metrics_package(installed: Path, tmp_p
         loaded = posbench.load("out")
         table = loaded.summary()
         assert list(table.index.names) == ["predictor", "kind"] and len(table) == 4
-        assert table.loc[("kf", "future"), "mean_m"] == run.summary().loc[("kf", "future"), "mean_m"]
+        kf_future = ("kf", "future")
+        assert table.loc[kf_future, "mean_m"] == run.summary().loc[kf_future, "mean_m"]
         cmp = posbench.compare(loaded, run)
-        assert cmp.frame.loc[cmp.frame["scope"] == "all", "delta {{}}".format(cmp.labels[1])].abs().max() == 0
+        delta = cmp.frame.loc[cmp.frame["scope"] == "all", "delta {{}}".format(cmp.labels[1])]
+        assert delta.abs().max() == 0
         assert metrics.MINE == "metrics" and predictors.MINE == "predictors"
         assert posbench.__file__.startswith({str(installed)!r})
         print(repr(loaded))

@@ -1,7 +1,7 @@
 """Issue 18 part A: IMU frames and gravity, yaw reference, and what counts as truth in bags.
 
-Bags are written by :mod:`ros_synth` (tests/ros_synth.py) (rotated IMU, tf_static, drifting wheel odometry,
-1 m-noise NavSatFix at 2-5 Hz) and read back through the loader and the harness.
+Bags are written by :mod:`ros_synth` (tests/ros_synth.py) (rotated IMU, tf_static, drifting
+wheel odometry, 1 m-noise NavSatFix at 2-5 Hz) and read back through the loader and the harness.
 """
 
 from __future__ import annotations

@@ -274,8 +274,8 @@ def test_plot_formats(tmp_path):
 
 
 def test_report_formats_choose_the_table_files(tmp_path):
-    """--table-format md,csv: report.md and tables/*.csv (no .tex); --table-format md: no tables/ at all;
-    the CSV holds the interval bounds as numbers in their own columns."""
+    """--table-format md,csv: report.md and tables/*.csv (no .tex); --table-format md: no
+    tables/ at all; the CSV holds the interval bounds as numbers in their own columns."""
     out = tmp_path / "o"
     r = bench(
         "run",

@@ -26,5 +26,6 @@ for name, fmt, a in rows:
         f"{name[:28]:28s} {fmt:18s}",
         "none stated"
         if a is None
-        else f"per-axis 1-sigma median {np.nanmedian(a):.3f} m ({np.isfinite(a).sum()} of {a.size} fixes)",
+        else f"per-axis 1-sigma median {np.nanmedian(a):.3f} m "
+        f"({np.isfinite(a).sum()} of {a.size} fixes)",
     )
