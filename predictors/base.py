@@ -16,6 +16,7 @@ from __future__ import annotations
 import inspect
 from abc import ABC, abstractmethod
 from collections.abc import Callable
+from pathlib import Path
 from typing import ClassVar
 
 import numpy as np
@@ -87,6 +88,14 @@ class ModelFileSeams:
 
     #: the text recorded in results for the bundled model
     bundled_text: ClassVar[str] = ""
+
+    # set by the predictor this is mixed into (declared here so the seams type-check)
+    #: the model's .onnx file
+    model_path: Path
+    #: its model.json, as loaded
+    info: dict
+    #: whether the package's bundled model is used
+    bundled: bool
 
     def model_description(self) -> dict:
         """``{"model": the model file's path (or :attr:`bundled_text`), "bundled": bool}``."""

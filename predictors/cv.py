@@ -90,7 +90,7 @@ class ConstantVelocity(Predictor):
         self._span = math.nan  # T of the error model [s] (NaN: velocity unknown)
         self._var_v_rel = math.nan  # velocity variance / fix_sigma^2 [1/s^2]
 
-    def observe_gps(self, t: float, x: float, y: float) -> None:
+    def observe_gps(self, t: float, x: float, y: float) -> None:  # type: ignore[override]  # three-argument form on purpose: no sigma passed (accepts_sigma)
         if not (math.isfinite(x) and math.isfinite(y)):
             return
         buf = self._buf

@@ -187,7 +187,8 @@ class CtraEkf(Predictor):
         self._S2 = np.empty((2, 2))
         self._e2 = np.empty(2)
         r_imu = (self._r_w, self._r_a, self._r_yaw)
-        self._H_imu = {}  # measurement rows and variances per set of finite IMU channels
+        # measurement rows and variances per set of finite IMU channels (their indices in z)
+        self._H_imu: dict[tuple[int, ...], tuple[np.ndarray, tuple[float, ...]]] = {}
         for sel in ((0, 1), (0, 2), (1, 2), (0, 1, 2)):
             H = np.zeros((len(sel), N_STATE))
             for i, k in enumerate(sel):

@@ -17,6 +17,7 @@ Units: seconds, metres, radians, local ENU.
 from __future__ import annotations
 
 from collections.abc import Sequence
+from typing import Any
 
 from posbench.predictors._geometry import check_config
 from posbench.predictors.bank import ModelBank
@@ -79,7 +80,9 @@ class EkfBank(ModelBank):
                         "use_speed": False,
                     }
                 )
-                members.append(CtraEkf(jerk_psd=j, yaw_acc_psd=w, **{**options, **extra}))
+                # any CtraEkf option (from --set): CtraEkf checks the names and values
+                member_options: dict[str, Any] = {**options, **extra}
+                members.append(CtraEkf(jerk_psd=j, yaw_acc_psd=w, **member_options))
                 labels.append(f"{'aided' if aided else 'fixes'} j{j:g} w{w:g}")
         super().__init__(members, labels, memory_fixes=memory_fixes, cov_scale=cov_scale)
 

@@ -20,6 +20,7 @@ Units: seconds, metres, local ENU.
 from __future__ import annotations
 
 from collections.abc import Sequence
+from typing import TypedDict
 
 from posbench.predictors._accel_bias import AccelBiasEstimator
 from posbench.predictors._geometry import check_config
@@ -30,14 +31,31 @@ from posbench.predictors.kf import KMH, LinearKalman
 #: white-jerk densities of the members [m^2/s^5]: from ~0.7 m/s^3 over a second (steady
 #: motorway) to ~16 m/s^3 (hard city manoeuvres); a factor 8 apart
 JERK_PSDS = (0.5, 4.0, 32.0, 256.0)
-#: the options a fixes-only member takes (it has no IMU or speed to weigh)
-FIXES_ONLY_OPTIONS = (
-    "gps_sigma",
-    "gps_sigma_scale",
-    "init_vel_sigma",
-    "init_acc_sigma",
-    "fix_noise_memory",
-)
+
+
+class _FixesOnlyOptions(TypedDict):
+    """The options a fixes-only member takes (it has no IMU or speed to weigh), passed to
+    :class:`~posbench.predictors.kf.LinearKalman`."""
+
+    gps_sigma: float
+    gps_sigma_scale: float
+    init_vel_sigma: float
+    init_acc_sigma: float
+    fix_noise_memory: float
+
+
+class _MemberOptions(_FixesOnlyOptions):
+    """The options every aided member takes: a fixes-only member's and those of the IMU,
+    the wheel speed and the heading."""
+
+    accel_sigma: float
+    speed_sigma: float
+    speed_rel_sigma: float
+    stop_speed: float
+    heading_sigma_max: float
+    accel_bias_tau_s: float
+    imu_gate: float
+    imu_noise_tau_s: float
 
 
 class KalmanBank(ModelBank):
@@ -86,7 +104,7 @@ class KalmanBank(ModelBank):
             jerk_psds = (jerk_psd,)
         check_config("kf", **{f"jerk_psds[{i}]": (j, 1e-9, 1e6) for i, j in enumerate(jerk_psds)})
         jerks = tuple(float(j) for j in jerk_psds)
-        self._options = {
+        self._options: _MemberOptions = {
             "gps_sigma": gps_sigma,
             "gps_sigma_scale": gps_sigma_scale,
             "accel_sigma": accel_sigma,
@@ -107,7 +125,13 @@ class KalmanBank(ModelBank):
         o = self._options
         course = CourseHeading()  # one heading tracker and bias estimator for the aided
         bias = AccelBiasEstimator(accel_bias_tau_s) if accel_bias_tau_s > 0.0 else None
-        fixes_only = {k: v for k, v in o.items() if k in FIXES_ONLY_OPTIONS}
+        fixes_only: _FixesOnlyOptions = {
+            "gps_sigma": o["gps_sigma"],
+            "gps_sigma_scale": o["gps_sigma_scale"],
+            "init_vel_sigma": o["init_vel_sigma"],
+            "init_acc_sigma": o["init_acc_sigma"],
+            "fix_noise_memory": o["fix_noise_memory"],
+        }
         for j in jerks:
             members.append(
                 LinearKalman(

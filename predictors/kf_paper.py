@@ -198,7 +198,7 @@ class PaperKalman(Predictor):
         out[ok, 1] = imu.y[idx[ok]]
         return out
 
-    def observe_gps(self, t: float, x: float, y: float) -> None:
+    def observe_gps(self, t: float, x: float, y: float) -> None:  # type: ignore[override]  # three-argument form on purpose: no sigma passed (accepts_sigma)
         if not (math.isfinite(x) and math.isfinite(y)):
             return
         buf = self._fixes

@@ -92,7 +92,7 @@ class PolyExtrapolator(Predictor):
     def observe_speed(self, t: float, v: float) -> None:
         self._speed = v
 
-    def observe_gps(self, t: float, x: float, y: float) -> None:
+    def observe_gps(self, t: float, x: float, y: float) -> None:  # type: ignore[override]  # three-argument form on purpose: no sigma passed (accepts_sigma)
         if not (math.isfinite(x) and math.isfinite(y)):
             return
         buf = self._buf
@@ -120,7 +120,7 @@ class PolyExtrapolator(Predictor):
         c = f.coef
         return (
             tuple(c[:, 0].tolist()),
-            tuple(c[:, 1].tolist()),  # type: ignore[return-value]
+            tuple(c[:, 1].tolist()),
             f.t_ref,
             1.0 / f.scale,
         )

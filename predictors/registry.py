@@ -264,7 +264,9 @@ OLD_TOP_LEVEL = {
 def _renamed_hint(missing: str | None) -> str:
     """For a plugin that still imports a package posbench 0.1 installed at the top (``from
     predictors.base import Predictor``): the name to import instead."""
-    top = (missing or "").partition(".")[0]
+    if missing is None:
+        return ""
+    top = missing.partition(".")[0]
     if top not in OLD_TOP_LEVEL:
         return ""
     new = OLD_TOP_LEVEL[top] + missing[len(top) :]

@@ -11,6 +11,10 @@ from __future__ import annotations
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    import torch
 
 
 @dataclass
@@ -24,21 +28,21 @@ class FitResult:
 
 
 def fit_epochs(
-    net,
-    batch_loss: Callable,
+    net: torch.nn.Module,
+    batch_loss: Callable[[torch.Tensor], torch.Tensor],
     validate: Callable[[], tuple[float, float]],
-    weights,
+    weights: torch.Tensor,
     *,
     epochs: int,
     batch_size: int,
     lr: float,
     patience: int,
-    gen,
+    gen: torch.Generator,
     t_start: float,
     max_minutes: float,
     select: str = "val_loss",
     include_initial: bool = False,
-    progress: Callable | None = None,
+    progress: Callable[[int, int, float, float, float], None] | None = None,
     on_early_stop: Callable[[int, int, int], None] | None = None,
 ) -> FitResult:
     """Train ``net`` in place and leave it holding its best weights (eval mode).

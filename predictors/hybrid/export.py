@@ -193,6 +193,7 @@ def write_untrained(
     names = []
     for s in seeds:
         d = generate_drive(seed=s)
+        assert d.truth is not None  # a synthetic drive always has its truth
         gps = degrade_gps(d.truth, stats_condition, seed=s)
         rows.append(hybrid_windows(d, gps, prior[stats_condition]))
         names.append(d.name)

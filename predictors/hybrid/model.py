@@ -42,6 +42,16 @@ def _stat(v: ArrayLike, shape: tuple[int, ...]) -> torch.Tensor:
 class HybridNet(nn.Module):
     """Encoder MLP -> LSTM(hidden, lstm_layers) -> [h_last, prior] -> decoder MLP -> [B, 4, 4]."""
 
+    # buffers (``register_buffer`` in ``__init__``), declared here with their type
+    #: feature standardisation: mean and std (raw units), (6,) each
+    feature_mean: torch.Tensor
+    feature_std: torch.Tensor
+    #: the prior's scale [m], (4, 2)
+    prior_std: torch.Tensor
+    #: the residual's scale [m] and 2 log of it, (4, 2) each
+    res_std: torch.Tensor
+    log_res_var: torch.Tensor
+
     def __init__(
         self,
         hidden: int = 48,
@@ -58,10 +68,9 @@ class HybridNet(nn.Module):
             width = hidden
         self.encoder = nn.Sequential(*enc)
         self.lstm = nn.LSTM(hidden, hidden, num_layers=lstm_layers, batch_first=True)
-        self.decoder = nn.Sequential(
-            nn.Linear(hidden + 2 * N_H, hidden), nn.LeakyReLU(slope), nn.Linear(hidden, 4 * N_H)
-        )
-        last = self.decoder[-1]
+        first = nn.Linear(hidden + 2 * N_H, hidden)  # built in this order: same random init
+        last = nn.Linear(hidden, 4 * N_H)
+        self.decoder = nn.Sequential(first, nn.LeakyReLU(slope), last)
         nn.init.zeros_(last.weight)
         nn.init.zeros_(last.bias)
         self.register_buffer("feature_mean", torch.zeros(n_features))

@@ -116,7 +116,7 @@ def core_model(full: onnx.ModelProto) -> onnx.ModelProto:
     w[N_FEATURES] = w_enc[N_FEATURES] / ls_s
 
     f32 = np.float32
-    tensors = {
+    tensors: dict[str, np.ndarray] = {
         "enc_w": w.T.astype(f32),
         "enc_b": b.astype(f32),
         "lstm_w": init[lstm.input[1]].astype(f32),

@@ -185,7 +185,7 @@ class FusedStep:
         t3[0, 0] = t_end
         np.subtract(fix.T, t3, out=self._rows(0, nf)[3:6, :nf])
         b = self._rows(1, ni)
-        if ni:
+        if imu is not None and ni:
             t4 = self._t4
             t4[0, 0] = t_end
             np.subtract(imu.T, t4, out=b[3:7, :ni])

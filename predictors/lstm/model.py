@@ -44,6 +44,16 @@ class LstmNet(nn.Module):
     """Encoder MLP (``enc_layers`` x Linear+LeakyReLU) -> LSTM(hidden, lstm_layers) ->
     decoder MLP (Linear+LeakyReLU, Linear -> 6); ``form`` see the module doc."""
 
+    # buffers (``register_buffer`` in ``__init__``), declared here with their type
+    #: feature standardisation: mean and std (raw units), [n_features] each
+    mean: torch.Tensor
+    std: torch.Tensor
+    #: ``"speed"`` form: mean and std of log(speed scale), scalars
+    log_s_mean: torch.Tensor
+    log_s_std: torch.Tensor
+    #: ``"speed"`` form: the displacement residual's scale [m], (x, y)
+    res_std: torch.Tensor
+
     def __init__(
         self,
         hidden: int = 64,

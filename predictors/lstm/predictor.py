@@ -245,7 +245,7 @@ class LstmPredictor(ModelFileSeams, Predictor):
         self._t_end = math.nan
         self._grid = np.zeros((N_STEPS, 2))
         self._pred = np.zeros(2)
-        self._c = (0.0,) * 8  # final cubic (x0..x3, y0..y3) in s = t - t_end
+        self._c: tuple[float, ...] = (0.0,) * 8  # final cubic (x0..x3, y0..y3) in s = t - t_end
         self._line = (0.0, 0.0, 0.0, 0.0, 0.0)  # t0, x0, vx, y0, vy
         self.steps = 0
         self.bridge_steps = 0
@@ -258,7 +258,7 @@ class LstmPredictor(ModelFileSeams, Predictor):
         if math.isfinite(v):
             self._can_v = v
 
-    def observe_gps(self, t: float, x: float, y: float) -> None:
+    def observe_gps(self, t: float, x: float, y: float) -> None:  # type: ignore[override]  # three-argument form on purpose: no sigma passed (accepts_sigma)
         timer = self.stage_timer
         c0 = perf_counter_ns() if timer is not None else 0
         if not (math.isfinite(x) and math.isfinite(y)):
@@ -283,20 +283,20 @@ class LstmPredictor(ModelFileSeams, Predictor):
         while tl and tl[-1] >= t:
             fb.pop()
         fb.append((t, x, y))
-        if self._fused is not None and self._fused_step(timer, c0):
+        fused = self._fused
+        if fused is not None and self._fused_step(fused, timer, c0):
             return
         self._step_on_fixes(timer, c0)
 
     # ------------------------------------------------------------------ steps
-    def _fused_step(self, timer: StageTimer | None, c0: int) -> bool:
-        """The fix step through :class:`FusedStep`; False (nothing changed) where the staged
-        step must run instead: fixes spanning < 2 s (start-up line), fewer than 4 fixes in
-        the window (a lower-degree fit), a non-finite prediction."""
+    def _fused_step(self, f: FusedStep, timer: StageTimer | None, c0: int) -> bool:
+        """The fix step through ``f`` (:attr:`_fused`); False (nothing changed) where the
+        staged step must run instead: fixes spanning < 2 s (start-up line), fewer than 4
+        fixes in the window (a lower-degree fit), a non-finite prediction."""
         fb = self._fix
         t_end = fb.t[fb.n - 1]
-        if not fit_fused_window(self._fused, fb, self._imu, t_end):
+        if not fit_fused_window(f, fb, self._imu, t_end):
             return False
-        f = self._fused
         if timer is not None:
             c0 = lap(timer, "resample", c0)
         f.features()

@@ -23,6 +23,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import onnxruntime as ort
@@ -143,13 +144,15 @@ class OnnxModel:
             return
         if self._agrees(lambda: inner.run(self._outs, self._feed, None)[0]):
 
-            def run(outputs: list[str], feed: dict, _inner=inner.run) -> list:
+            def run(
+                outputs: list[str], feed: dict, _inner: Callable[..., list] = inner.run
+            ) -> list:
                 return _inner(outputs, feed, None)
 
             self._run = run
         self._run_bound = self._bound_run(inner)
 
-    def _bound_run(self, inner: object) -> Callable[[], np.ndarray] | None:
+    def _bound_run(self, inner: Any) -> Callable[[], np.ndarray] | None:
         """A call that runs the session on the bound buffers and returns the first row of
         a preallocated output (overwritten by the next call); None where the output shape
         is not static, binding is not available, or the probe answers differ."""
@@ -167,7 +170,11 @@ class OnnxModel:
         except Exception:  # pragma: no cover - another onnxruntime layout
             return None
 
-        def run(_run=run_io, _io=io._iobinding, _out=out) -> np.ndarray:
+        def run(
+            _run: Callable[[Any, None], object] = run_io,
+            _io: Any = io._iobinding,
+            _out: np.ndarray = out,
+        ) -> np.ndarray:
             _run(_io, None)
             return _out[0]
 

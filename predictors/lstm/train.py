@@ -28,6 +28,7 @@ import time
 from collections.abc import Callable, Sequence
 from importlib import metadata
 from pathlib import Path
+from typing import TYPE_CHECKING, Protocol, Self, TypeVar
 
 import numpy as np
 
@@ -36,6 +37,9 @@ from posbench.predictors.lstm.resample import DT, MIN_SPAN_S, N_STEPS
 from posbench.predictors.lstm.windows import WindowSet, drive_windows, future_from_output
 from posbench.scenarios.drive import Drive
 from posbench.scenarios.errors import DataError
+
+if TYPE_CHECKING:
+    import torch
 
 #: ``callback(epoch, n_epochs, train_loss, val_loss, val_future_mean_m)`` after each epoch
 Progress = Callable[[int, int, float, float, float], None]
@@ -112,7 +116,8 @@ def split_by_route(drives: Sequence[Drive]) -> tuple[list[Drive], list[Drive]]:
     groups: dict[str, list[Drive]] = {}
     for d in drives:
         groups.setdefault(group_of(d), []).append(d)
-    train, val = [], []
+    train: list[Drive] = []
+    val: list[Drive] = []
     for g in sorted(groups):
         ds = sorted(groups[g], key=lambda d: d.name)
         for i, d in enumerate(ds):
@@ -198,7 +203,7 @@ def gather_drives(
     return train_d, val_d, corpus_d
 
 
-def mirror_signs(n: int, gen, like) -> object:
+def mirror_signs(n: int, gen: torch.Generator, like: torch.Tensor) -> torch.Tensor:
     """Per-window sign vectors (n, 1, 6) for left-right mirroring: +1 everywhere, or -1 on
     dy, ay and yaw (features 1, 3, 4) for about half the windows (torch tensors)."""
     import torch
@@ -211,7 +216,18 @@ def mirror_signs(n: int, gen, like) -> object:
     return sg
 
 
-def subsample(ws: WindowSet, n_max: int, seed: int) -> WindowSet:
+class Rows(Protocol):
+    """A set of training rows: its length and the rows at given indices."""
+
+    def __len__(self) -> int: ...
+
+    def take(self, idx: np.ndarray) -> Self: ...
+
+
+RowsT = TypeVar("RowsT", bound=Rows)
+
+
+def subsample(ws: RowsT, n_max: int, seed: int) -> RowsT:
     """At most ``n_max`` windows, drawn without replacement (seeded), order kept (any set
     of rows with ``len`` and ``take``: also the hybrid's HybridWindows)."""
     if len(ws) <= n_max:

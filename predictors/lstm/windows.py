@@ -106,23 +106,21 @@ def _labels(drive: Drive, t_end: np.ndarray, psi_first: np.ndarray, psi: np.ndar
     try:
         from posbench.scenarios.labels import label_times
     except ImportError:
-        label_times = None
-    if label_times is not None:
-        src = drive.truth if drive.truth is not None else drive.gps
-        sp = drive.speed
-        return np.asarray(
-            label_times(
-                t_end,
-                src.t,
-                src.x,
-                src.y,
-                None if sp is None else sp.t,
-                None if sp is None else sp.v,
-            ),
-            dtype=object,
-        )
-    turn = np.abs(wrap(psi - psi_first)) > TURN_HEADING_RAD
-    return np.where(turn, "turn", "straight").astype(object)
+        turn = np.abs(wrap(psi - psi_first)) > TURN_HEADING_RAD
+        return np.where(turn, "turn", "straight").astype(object)
+    src = drive.truth if drive.truth is not None else drive.gps
+    sp = drive.speed
+    return np.asarray(
+        label_times(
+            t_end,
+            src.t,
+            src.x,
+            src.y,
+            None if sp is None else sp.t,
+            None if sp is None else sp.v,
+        ),
+        dtype=object,
+    )
 
 
 def drive_windows(
