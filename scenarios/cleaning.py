@@ -6,21 +6,22 @@ Nothing is dropped silently: every removal or re-ordering is appended to the
 
 from __future__ import annotations
 
+from collections.abc import Mapping
+from typing import overload
+
 import numpy as np
 
 
-def clean_times(
-    t: np.ndarray, cols: dict[str, np.ndarray | None], what: str, warnings: list[str]
-) -> tuple[np.ndarray, dict[str, np.ndarray | None]]:
+def clean_index(t: np.ndarray, what: str, warnings: list[str]) -> tuple[np.ndarray, np.ndarray]:
     """Sort by time, drop non-finite times and exact duplicate stamps (keeping the first).
 
     Args:
         t: times [s].
-        cols: columns aligned with ``t`` (``None`` entries are passed through).
         what: the stream's name for warnings, e.g. ``"gps"``.
         warnings: list to append human-readable notes to.
     Returns:
-        (t, cols) cleaned, strictly increasing in t.
+        (t cleaned, strictly increasing [s]; the kept samples' indices into ``t``, in that
+        order: :func:`take` applies them to a column aligned with ``t``).
     """
     t = np.asarray(t, dtype=float)
     keep = np.isfinite(t)
@@ -40,23 +41,47 @@ def clean_times(
     if np.any(dup):
         warnings.append(f"{what}: dropped {int(dup.sum())} samples with duplicate time stamps")
         idx = idx[~dup]
-    out = {k: (None if v is None else np.asarray(v, dtype=float)[idx]) for k, v in cols.items()}
-    return t[idx], out
+    return t[idx], idx
+
+
+@overload
+def take(col: np.ndarray, idx: np.ndarray) -> np.ndarray: ...
+@overload
+def take(col: None, idx: np.ndarray) -> None: ...
+def take(col: np.ndarray | None, idx: np.ndarray) -> np.ndarray | None:
+    """The samples ``idx`` (from :func:`clean_index`) of a column, as floats; None stays None."""
+    return None if col is None else np.asarray(col, dtype=float)[idx]
+
+
+def clean_times(
+    t: np.ndarray, cols: Mapping[str, np.ndarray], what: str, warnings: list[str]
+) -> tuple[np.ndarray, dict[str, np.ndarray]]:
+    """:func:`clean_index` applied to ``t`` and to columns aligned with it.
+
+    Args:
+        t: times [s].
+        cols: columns aligned with ``t`` (a stream with optional columns uses
+            :func:`clean_index` and :func:`take`, which pass ``None`` through).
+        what: the stream's name for warnings, e.g. ``"gps"``.
+        warnings: list to append human-readable notes to.
+    Returns:
+        (t, cols) cleaned, strictly increasing in t.
+    """
+    t, idx = clean_index(t, what, warnings)
+    return t, {k: take(v, idx) for k, v in cols.items()}
 
 
 def drop_nonfinite(
     t: np.ndarray,
-    cols: dict[str, np.ndarray | None],
+    cols: Mapping[str, np.ndarray],
     required: tuple[str, ...],
     what: str,
     warnings: list[str],
-) -> tuple[np.ndarray, dict[str, np.ndarray | None]]:
+) -> tuple[np.ndarray, dict[str, np.ndarray]]:
     """Drop samples whose required columns are NaN/inf, counting them in ``warnings``."""
     keep = np.ones(np.asarray(t).size, dtype=bool)
     for k in required:
-        c = cols[k]
-        if c is not None:
-            keep &= np.isfinite(c)
+        keep &= np.isfinite(cols[k])
     if not np.all(keep):
         warnings.append(f"{what}: dropped {int((~keep).sum())} samples with non-finite values")
-    return np.asarray(t)[keep], {k: (None if v is None else v[keep]) for k, v in cols.items()}
+    return np.asarray(t)[keep], {k: v[keep] for k, v in cols.items()}

@@ -111,9 +111,11 @@ def _sign_only(
 ) -> Check | None:
     """The gyro's sign against a course rate too noisy for its scale (noise up to
     :attr:`Tolerances.sign_noise_ratio` x its signal): fail on a clear negative
-    correlation, pass on a clear positive one (scale not judged); None when unclear or
-    too few samples."""
+    correlation, pass on a clear positive one (scale not judged); None when unclear, too
+    few samples or no such course rate (``kin.course_rate_sign`` None)."""
     ref_all = kin.course_rate_sign
+    if ref_all is None:
+        return None
     ref, val = pairs(ref_all, gyro)
     secs = ref.size / tol.grid_hz
     # both must turn: the gyro's sd is blind to its sign, so it biases no verdict

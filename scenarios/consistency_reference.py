@@ -25,7 +25,7 @@ rolling, provided the heading follows the truth's own course.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -284,8 +284,8 @@ def truth_kinematics(drive: Drive, tol: Tolerances = TOLERANCES) -> Reference | 
     heading = np.angle(np.exp(1j * h))
     why = _heading_refused(heading, ref.course, scatter_1d(tr.t[ok], unwrapped), tr.t[ok], tol)
     if why:
-        return _with(ref, note=why)
-    return _with(ref, heading=heading, heading_rate=h_rate)
+        return replace(ref, note=why)
+    return replace(ref, heading=heading, heading_rate=h_rate)
 
 
 def _interp_finite(t: np.ndarray, v: np.ndarray, grid: np.ndarray, tol: Tolerances) -> np.ndarray:
@@ -320,11 +320,10 @@ def _heading_refused(
 
 def _take(tr: TruthStream, keep: np.ndarray) -> TruthStream:
     """The truth samples where ``keep``."""
-    cols = {f: getattr(tr, f) for f in ("t", "x", "y", "yaw", "v", "accuracy")}
-    return TruthStream(**{f: None if c is None else c[keep] for f, c in cols.items()})
 
+    def opt(c: np.ndarray | None) -> np.ndarray | None:
+        return None if c is None else c[keep]
 
-def _with(ref: Reference, **kw: object) -> Reference:
-    from dataclasses import replace
-
-    return replace(ref, **kw)
+    return TruthStream(
+        tr.t[keep], tr.x[keep], tr.y[keep], yaw=opt(tr.yaw), v=opt(tr.v), accuracy=opt(tr.accuracy)
+    )

@@ -547,7 +547,9 @@ def envelope(drives: Iterable[Drive], subsample: int = 10) -> dict:
     for d in drives:
         n += 1
         dyn = drive_dynamics(d)
-        span = float(d.truth.t[-1] - d.truth.t[0])
+        tr = d.truth
+        assert tr is not None  # drive_dynamics raises on a drive without a truth
+        span = float(tr.t[-1] - tr.t[0])
         prof = str(d.meta.extra.get("profile", "other"))
         spans = d.meta.extra.get("segments", [])
         mans = d.meta.extra.get("manoeuvres", spans)

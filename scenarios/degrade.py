@@ -324,7 +324,7 @@ def _sample_in(free: np.ndarray, rng: np.random.Generator) -> float:
 def outage_windows(
     t_start: float,
     t_end: float,
-    lengths: Sequence[float],
+    lengths: Sequence[float] | np.ndarray,
     rng: np.random.Generator,
     t_turns: np.ndarray | None = None,
     min_sep_s: float = OUTAGE_SEPARATION_S,
@@ -339,12 +339,12 @@ def outage_windows(
     (times of turning, [s]) the first half (rounded up) of the shuffled outages are
     centred on a random turn time where that fits. Lengths that do not fit are skipped.
     """
-    lengths = np.asarray(lengths, dtype=float)
+    length_set = np.asarray(lengths, dtype=float)
     span = float(t_end) - float(t_start)
     reps = 1
-    if repeat and lengths.size:
-        reps = max(1, int(span // (2.0 * (lengths.sum() + min_sep_s * lengths.size))))
-    todo = rng.permutation(np.tile(lengths, reps))
+    if repeat and length_set.size:
+        reps = max(1, int(span // (2.0 * (length_set.sum() + min_sep_s * length_set.size))))
+    todo = rng.permutation(np.tile(length_set, reps))
     n_turn = int(np.ceil(todo.size / 2)) if t_turns is not None and np.size(t_turns) else 0
     turns = np.sort(np.asarray(t_turns, dtype=float)) if n_turn else np.empty(0)
     placed: list[tuple[float, float]] = []

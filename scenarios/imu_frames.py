@@ -16,6 +16,8 @@ Rotation matrices are (N, 3, 3) or (3, 3) arrays; quaternions are given as w, x,
 
 from __future__ import annotations
 
+from typing import TypedDict
+
 import numpy as np
 
 #: standard gravity [m/s^2]
@@ -150,12 +152,20 @@ def _smooth(x: np.ndarray, width: int) -> np.ndarray:
     return np.stack([np.convolve(x[:, j], k, mode="same") for j in range(x.shape[1])], axis=1)
 
 
+class MountEstimate(TypedDict):
+    """How :func:`estimate_mount` found the mount (see there)."""
+
+    up_from: str
+    forward_from: str
+    forward_corr: float
+
+
 def estimate_mount(
     t: np.ndarray,
     f_s: np.ndarray,
     speed_t: np.ndarray | None = None,
     speed_v: np.ndarray | None = None,
-) -> tuple[np.ndarray, dict[str, object]]:
+) -> tuple[np.ndarray, MountEstimate]:
     """Estimate the mount R_bs of an IMU without orientation from its data.
 
     Up: the mean specific force at standstill (speed < :data:`STANDSTILL_MPS`), or over the
@@ -175,15 +185,20 @@ def estimate_mount(
     f_s = np.asarray(f_s, dtype=float)
     ok = np.all(np.isfinite(f_s), axis=1)
     t, f_s = t[ok], f_s[ok]
-    info: dict[str, object] = {
+    info: MountEstimate = {
         "up_from": "whole drive",
         "forward_from": "sensor x (no speed)",
         "forward_corr": float("nan"),
     }
-    have_speed = speed_t is not None and speed_v is not None and np.size(speed_t) > 3
+    # (times [s], speeds [m/s]) when known and long enough to use
+    speed = (
+        (speed_t, speed_v)
+        if speed_t is not None and speed_v is not None and np.size(speed_t) > 3
+        else None
+    )
     still = np.zeros(t.size, dtype=bool)
-    if have_speed:
-        v_at = np.interp(t, speed_t, speed_v, left=np.nan, right=np.nan)
+    if speed is not None:
+        v_at = np.interp(t, speed[0], speed[1], left=np.nan, right=np.nan)
         still = v_at < STANDSTILL_MPS
     if still.sum() >= 20:
         up = f_s[still].mean(axis=0)
@@ -196,7 +211,8 @@ def estimate_mount(
     cand = axes[int(np.argmin(np.abs(axes @ up)))]
     fwd = cand - (cand @ up) * up
     fwd /= np.linalg.norm(fwd)
-    if have_speed:
+    if speed is not None:
+        speed_t, speed_v = speed
         grid = np.arange(max(t[0], speed_t[0]), min(t[-1], speed_t[-1]), 0.1)
         if grid.size > 50:
             width = 10  # 1 s

@@ -207,9 +207,8 @@ def _parse_data_files(
         raise DataError(data_dir, "no readable OXTS data files")
     vals = _fast_parse(texts, ncol)
     if vals is None:  # find and name the bad file / line
-        idx = np.flatnonzero(present)
-        for i, txt in zip(idx, texts, strict=True):
-            _parse_one(data_dir / f"{i:010d}.txt", txt, ncol)
+        for file_no, txt in zip(np.flatnonzero(present), texts, strict=True):
+            _parse_one(data_dir / f"{file_no:010d}.txt", txt, ncol)
         raise DataError(data_dir, "cannot parse OXTS data")  # pragma: no cover
     out = np.full((n, ncol), np.nan)
     out[present] = vals

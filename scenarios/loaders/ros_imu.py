@@ -23,12 +23,22 @@ used ("dropped"). ``meta.extra["imu_frame"]`` records the path and the figures.
 
 from __future__ import annotations
 
-from typing import Any
+from typing import Any, TypedDict
 
 import numpy as np
 
 import posbench.scenarios.imu_frames as fr
 from posbench.scenarios.loaders.ros_tf import find_mount
+
+
+class VehicleImu(TypedDict):
+    """An IMU in the vehicle frame: ax, ay [m/s^2] (x forward, y left, gravity-free), yaw
+    [rad, ENU] and yaw rate [rad/s] (None where the data give none)."""
+
+    ax: np.ndarray
+    ay: np.ndarray
+    yaw: np.ndarray | None
+    yaw_rate: np.ndarray | None
 
 
 def _rpy_deg(r: np.ndarray) -> list[float]:
@@ -96,7 +106,7 @@ def imu_to_vehicle(
     speed: tuple[np.ndarray, np.ndarray] | None,
     topic: str,
     warnings: list[str],
-) -> tuple[dict[str, np.ndarray | None], dict[str, Any]]:
+) -> tuple[VehicleImu, dict[str, Any]]:
     """Convert one drive's IMU samples (see module doc).
 
     Args:
@@ -113,9 +123,7 @@ def imu_to_vehicle(
     if r_bs is not None:
         info["mount_from"] = f"tf {base} -> {frame}"
         info["mount_rpy_deg"] = _rpy_deg(r_bs)
-    have_q = q is not None and bool(np.any(np.all(np.isfinite(q), axis=1)))
-    if have_q:
-        assert q is not None
+    if q is not None and np.any(np.all(np.isfinite(q), axis=1)):
         r_ws = fr.quat_to_matrix(*q.T)
         ax, ay, yaw_b = fr.level_vehicle_accel(f_s, r_ws, r_bs)
         yaw_rate = None if w_s is None else fr.world_yaw_rate(w_s, r_ws)

@@ -25,7 +25,7 @@ from typing import Any
 import numpy as np
 
 from posbench.scenarios.align import alignment_limit_m, umeyama_2d
-from posbench.scenarios.cleaning import clean_times
+from posbench.scenarios.cleaning import clean_index, clean_times, take
 from posbench.scenarios.drive import GpsStream, TruthStream
 from posbench.scenarios.errors import DataError
 from posbench.scenarios.imu_frames import wrap
@@ -76,9 +76,10 @@ def truth_stream(
             "why": f"NavSatFix projected like the fixes ({projection} about the first fix)",
         }
         return TruthStream(t, x, y, None, None, acc)
-    t, c = clean_times(t, {k: s[k] for k in ("x", "y", "yaw", "v", "acc")}, "truth", warnings)
-    c = align_truth(t, c, gps, topic, path, extra, warnings)
-    return TruthStream(t, c["x"], c["y"], c["yaw"], c["v"], c["acc"])
+    t, idx = clean_index(t, "truth", warnings)  # yaw, v and acc may be None
+    local = {k: take(s[k], idx) for k in ("x", "y", "yaw", "v", "acc")}
+    aligned = align_truth(t, local, gps, topic, path, extra, warnings)
+    return TruthStream(t, aligned["x"], aligned["y"], aligned["yaw"], aligned["v"], aligned["acc"])
 
 
 def align_truth(

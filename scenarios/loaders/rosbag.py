@@ -48,7 +48,7 @@ from typing import Any
 
 import numpy as np
 
-from posbench.scenarios.cleaning import clean_times
+from posbench.scenarios.cleaning import clean_index, clean_times, take
 from posbench.scenarios.drive import (
     FIXES_FROM_TRUTH,
     FIXES_RECEIVER,
@@ -377,7 +377,7 @@ def _assemble(
         speed = SpeedStream(t, c["v"])
     if "imu" in streams:
         s = streams["imu"]
-        t, c = clean_times(rel(s), {k: s[k] for k in ("f", "w", "q")}, "imu", warnings)
+        t, idx = clean_index(rel(s), "imu", warnings)
         if len(s["frames"]) > 1:
             warnings.append(
                 f"imu: several frame ids {', '.join(s['frames'])}: the mount of "
@@ -385,9 +385,9 @@ def _assemble(
             )
         cols, info = imu_to_vehicle(
             t,
-            c["f"],
-            c["w"],
-            c["q"],
+            take(s["f"], idx),
+            take(s["w"], idx),
+            take(s["q"], idx),
             s["frames"][0],
             edges,
             (gps.t, gps.x, gps.y),

@@ -37,7 +37,7 @@ Positions: if every gps and truth row has ``lat`` and ``lon``, they are projecte
 where complete, are kept as attributes). Times: t = 0 is the earliest row of any
 stream; ``meta.epoch_s`` is that time if it looks like Unix time (> 1e8 s, i.e.
 after 1973), else NaN. Rows of a stream are sorted by time and exact duplicate
-stamps dropped, with a warning (:func:`posbench.scenarios.cleaning.clean_times`). Blank CSV
+stamps dropped, with a warning (:func:`posbench.scenarios.cleaning.clean_index`). Blank CSV
 lines are dropped with a warning. Unknown columns are ignored with a warning.
 
 Errors (:class:`DataError`, naming the file): empty file, missing required columns,
@@ -50,10 +50,11 @@ from __future__ import annotations
 
 import re
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
-from posbench.scenarios.cleaning import clean_times
+from posbench.scenarios.cleaning import clean_index, take
 from posbench.scenarios.drive import (
     Drive,
     DriveMeta,
@@ -65,6 +66,9 @@ from posbench.scenarios.drive import (
 from posbench.scenarios.errors import DataError
 from posbench.scenarios.projection import to_local, validate_latlon
 
+if TYPE_CHECKING:  # pandas is imported when a table is read or written
+    import pandas as pd
+
 STREAMS = ("gps", "imu", "speed", "truth")
 NUMERIC = ("t", "t_ns", "lat", "lon", "x", "y", "accuracy", "ax", "ay", "yaw", "yaw_rate", "v")
 KNOWN = ("stream", *NUMERIC)
@@ -75,7 +79,7 @@ UNIX_MIN_S = 1e8
 class TableFile:
     """A read table (``df``, a pandas DataFrame) with its file and a way to name rows."""
 
-    def __init__(self, path: Path, df, is_csv: bool) -> None:
+    def __init__(self, path: Path, df: pd.DataFrame, is_csv: bool) -> None:
         self.path = path
         self.df = df
         self.is_csv = is_csv
@@ -319,9 +323,9 @@ def load_table(path: Path, projection: str = "enu") -> Drive:
             r = rows_of(s)
             xs[s] = (num["x"][r], num["y"][r]) if r.size else (np.empty(0), np.empty(0))
 
-    def clean(s: str, cols: dict[str, np.ndarray | None]):
-        r = rows_of(s)
-        return clean_times(t_full[r], cols, f"table {s}", warnings)
+    def clean(s: str) -> tuple[np.ndarray, np.ndarray]:
+        """Stream ``s``'s times [s] cleaned, and the kept ones' indices into its rows."""
+        return clean_index(t_full[rows_of(s)], f"table {s}", warnings)
 
     r = rows_of("gps")
     lat_g, lon_g = col("lat", r), col("lon", r)
@@ -331,49 +335,41 @@ def load_table(path: Path, projection: str = "enu") -> Drive:
         or not (np.all(np.isfinite(lat_g)) and np.all(np.isfinite(lon_g)))
     ):
         lat_g = lon_g = None  # kept only when every fix has them
-    t, c = clean(
-        "gps",
-        {
-            "x": xs["gps"][0],
-            "y": xs["gps"][1],
-            "lat": lat_g,
-            "lon": lon_g,
-            "accuracy": col("accuracy", r),
-        },
+    t, kept = clean("gps")
+    gps = GpsStream(
+        t,
+        take(xs["gps"][0], kept),
+        take(xs["gps"][1], kept),
+        lat=take(lat_g, kept),
+        lon=take(lon_g, kept),
+        accuracy=_opt(take(col("accuracy", r), kept)),
     )
-    gps = GpsStream(t, c["x"], c["y"], lat=c["lat"], lon=c["lon"], accuracy=_opt(c["accuracy"]))
 
     imu = speed = truth = None
     r = rows_of("imu")
     if r.size:
-        t, c = clean(
-            "imu",
-            {
-                "ax": num["ax"][r],
-                "ay": num["ay"][r],
-                "yaw": col("yaw", r),
-                "yaw_rate": col("yaw_rate", r),
-            },
+        t, kept = clean("imu")
+        imu = ImuStream(
+            t,
+            take(num["ax"][r], kept),
+            take(num["ay"][r], kept),
+            yaw=_opt(take(col("yaw", r), kept)),
+            yaw_rate=_opt(take(col("yaw_rate", r), kept)),
         )
-        imu = ImuStream(t, c["ax"], c["ay"], yaw=_opt(c["yaw"]), yaw_rate=_opt(c["yaw_rate"]))
     r = rows_of("speed")
     if r.size:
-        t, c = clean("speed", {"v": num["v"][r]})
-        speed = SpeedStream(t, c["v"])
+        t, kept = clean("speed")
+        speed = SpeedStream(t, take(num["v"][r], kept))
     r = rows_of("truth")
     if r.size:
-        t, c = clean(
-            "truth",
-            {
-                "x": xs["truth"][0],
-                "y": xs["truth"][1],
-                "yaw": col("yaw", r),
-                "v": col("v", r),
-                "accuracy": col("accuracy", r),
-            },
-        )
+        t, kept = clean("truth")
         truth = TruthStream(
-            t, c["x"], c["y"], yaw=_opt(c["yaw"]), v=_opt(c["v"]), accuracy=_opt(c["accuracy"])
+            t,
+            take(xs["truth"][0], kept),
+            take(xs["truth"][1], kept),
+            yaw=_opt(take(col("yaw", r), kept)),
+            v=_opt(take(col("v", r), kept)),
+            accuracy=_opt(take(col("accuracy", r), kept)),
         )
 
     epoch = t_origin if t_origin > UNIX_MIN_S else float("nan")
@@ -392,7 +388,7 @@ def load_table(path: Path, projection: str = "enu") -> Drive:
     return Drive(meta=meta, gps=gps, imu=imu, speed=speed, truth=truth)
 
 
-def drive_to_frame(drive: Drive):
+def drive_to_frame(drive: Drive) -> pd.DataFrame:
     """A :class:`Drive` as a long-format ``pandas.DataFrame`` (the schema above).
 
     Times are written as ``t`` [s] from the drive start; positions as ``x``/``y`` in
