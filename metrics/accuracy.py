@@ -35,7 +35,8 @@ DEFINITIONS = {
 def euclidean_error(pred_xy: np.ndarray, ref_xy: np.ndarray) -> np.ndarray:
     """Per-row Euclidean distance [m] between (N, 2) predicted and reference positions."""
     d = np.asarray(pred_xy, dtype=float) - np.asarray(ref_xy, dtype=float)
-    return np.hypot(d[:, 0], d[:, 1])
+    distance: np.ndarray = np.hypot(d[:, 0], d[:, 1])
+    return distance
 
 
 def summarize(errors: np.ndarray) -> dict[str, float | int]:

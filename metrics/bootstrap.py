@@ -27,10 +27,13 @@ import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 from functools import lru_cache
+from typing import Any
 
 import numpy as np
 
-from posbench.metrics.resampled_quantiles import resampled_quantiles, resampled_quantiles_many
+# resampled_quantiles was defined here before it got its own module: still importable from here
+from posbench.metrics.resampled_quantiles import resampled_quantiles as resampled_quantiles
+from posbench.metrics.resampled_quantiles import resampled_quantiles_many
 
 #: resamples per interval (B)
 DEFAULT_RESAMPLES = 2000
@@ -374,7 +377,7 @@ def summary_ci(
     n_resamples: int = DEFAULT_RESAMPLES,
     seed: int = 0,
     level: float = LEVEL,
-) -> dict[str, object]:
+) -> dict[str, Any]:
     """Intervals of the mean, median and p95 of the finite ``errors`` (what
     :func:`posbench.metrics.accuracy.summarize` reports), resampling ``clusters`` (e.g. the drive of
     each query); with a single cluster, a block bootstrap over the queries in time order
@@ -395,7 +398,7 @@ def summary_cis(
     n_resamples: int = DEFAULT_RESAMPLES,
     seed: int = 0,
     level: float = LEVEL,
-) -> list[dict[str, object]]:
+) -> list[dict[str, Any]]:
     """:func:`summary_ci` of several error arrays over the same queries (``clusters`` and
     ``times`` shared; e.g. each predictor's errors on one drive), in one pass per set of
     resamples. With a single cluster, the series with the same number of finite errors are
@@ -412,7 +415,7 @@ def group_cis(
     n_resamples: int = DEFAULT_RESAMPLES,
     seed: int = 0,
     level: float = LEVEL,
-) -> dict[object, dict[str, object]]:
+) -> dict[object, dict[str, Any]]:
     """:func:`summary_ci` of the errors of each distinct key (e.g. scenario label, speed
     bin, query kind): key -> intervals, exactly what :func:`summary_ci` gives each group."""
     k = np.asarray(keys)
@@ -420,7 +423,7 @@ def group_cis(
         return {}
     if k.dtype.kind in "iu" and k.min() >= 0:
         counts = np.bincount(k)
-        names: list[object] = np.flatnonzero(counts).tolist()
+        names: Sequence[object] = np.flatnonzero(counts).tolist()
         code = k
     else:
         uniq, code = np.unique(k, return_inverse=True)
@@ -445,13 +448,13 @@ def interval_batch(
     n_resamples: int = DEFAULT_RESAMPLES,
     seed: int = 0,
     level: float = LEVEL,
-) -> list[dict[str, object]]:
+) -> list[dict[str, Any]]:
     """:func:`summary_ci` of each (errors, clusters, times) of ``items``; those that end up
     with the same resamples (as many clusters, or one cluster and the same block) share one
     quantile pass. ``share_blocks``: the items are series over the same queries, and the
     single-cluster ones of equal length use the longest of their block lengths."""
     nan2 = [float("nan"), float("nan")]
-    out: list[dict[str, object]] = []
+    out: list[dict[str, Any]] = []
     prepared: list[tuple[int, np.ndarray, np.ndarray | None, int]] = []
     for i, (err, clusters, times) in enumerate(items):
         e = np.asarray(err, dtype=np.float64)
@@ -476,18 +479,18 @@ def interval_batch(
             prepared.append((i, e, c, d))
     blocks: dict[int, int] = {}
     if share_blocks:  # one block length per series length among the single-cluster series
-        for _, e, c, b in prepared:
-            if c is None:
-                blocks[e.size] = max(blocks.get(e.size, 1), b)
+        for _, values, codes, block_len in prepared:
+            if codes is None:
+                blocks[values.size] = max(blocks.get(values.size, 1), block_len)
     shared: dict[tuple[int, int], tuple[np.ndarray, list[tuple[int, np.ndarray, np.ndarray]]]] = {}
-    for i, e, c, d in prepared:
-        if c is None:
+    for i, e, codes, d in prepared:
+        if codes is None:
             br = block_resample(
                 e.size, blocks.get(e.size, d) if share_blocks else d, n_resamples, seed
             )
             units, w, block, n_clusters = br.units, br.counts, br.block_len, 1
         else:
-            units, w, block, n_clusters = c, cluster_weights(d, n_resamples, seed), None, d
+            units, w, block, n_clusters = codes, cluster_weights(d, n_resamples, seed), None, d
         n_units = w.shape[1]
         sums = np.bincount(units, weights=e, minlength=n_units)
         counts = np.bincount(units, minlength=n_units)
@@ -503,8 +506,8 @@ def interval_batch(
             [(v, u) for _, v, u in members], w, tuple(QUANTILES.values())
         )
         for (i, _, _), st in zip(members, stats, strict=True):
-            for j, key in enumerate(QUANTILES):
-                out[i][key] = list(percentile_interval(st[:, j], level))
+            for j, figure in enumerate(QUANTILES):
+                out[i][figure] = list(percentile_interval(st[:, j], level))
     return out
 
 

@@ -109,10 +109,11 @@ def coverage(d2: np.ndarray, levels: Sequence[float] = COVERAGE_LEVELS) -> np.nd
     """Observed share of the finite ``d2`` inside each level's ellipse (NaN with none)."""
     d = np.asarray(d2, dtype=float)
     d = d[np.isfinite(d)]
-    r2 = ellipse_r2(np.asarray(levels, dtype=float))
+    r2 = np.asarray(ellipse_r2(np.asarray(levels, dtype=float)))  # typed float | array: an array
     if d.size == 0:
         return np.full(r2.shape, np.nan)
-    return (d[:, None] <= r2[None, :]).mean(axis=0)
+    share: np.ndarray = (d[:, None] <= r2[None, :]).mean(axis=0)
+    return share
 
 
 def calibration_curve(

@@ -102,7 +102,7 @@ def error_vs_since_fix(
     since_fix_s: np.ndarray,
     checkpoints_s: Sequence[float] = SINCE_FIX_CHECKPOINTS_S,
     tolerance_s: float = SINCE_FIX_TOLERANCE_S,
-) -> dict[str, dict]:
+) -> dict[str, dict[str, float | int]]:
     """Summary of errors at each checkpoint of time since the last fix, keyed like ``"1s"``."""
     e = np.asarray(errors, dtype=float)
     s = np.asarray(since_fix_s, dtype=float)
@@ -110,7 +110,7 @@ def error_vs_since_fix(
 
 
 def since_fix_bins(
-    since_fix_s: np.ndarray, edges: Sequence[float], open_last: bool = False
+    since_fix_s: np.ndarray, edges: Sequence[float] | np.ndarray, open_last: bool = False
 ) -> np.ndarray:
     """The bin of each time since the last fix [s] among ``edges`` (bin i holds
     ``edges[i] <= s < edges[i + 1]``); -1 for NaN, before the first edge and past the last

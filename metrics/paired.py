@@ -14,12 +14,8 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from posbench.metrics.bootstrap import (
-    LEVEL,
-    percentile_interval,
-    resampled_means,
-    resampled_quantiles,
-)
+from posbench.metrics.bootstrap import LEVEL, percentile_interval, resampled_means
+from posbench.metrics.resampled_quantiles import resampled_quantiles
 
 #: statistics pooled from per-drive summaries alone (count, mean / RMSE); the others need
 #: every error (quantiles) or the per-drive maxima

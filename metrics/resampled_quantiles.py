@@ -32,7 +32,10 @@ def _last_at_most(table: np.ndarray, rank: np.ndarray) -> np.ndarray:
     column j with table[row, j] <= rank[row]."""
     n_rows, n_cols = table.shape
     if n_cols <= 64:  # a comparison with every column is cheaper than a search
-        return (table[:, 1:] <= rank[:, None]).view(np.int8).sum(axis=1, dtype=np.int64)
+        counted: np.ndarray = (
+            (table[:, 1:] <= rank[:, None]).view(np.int8).sum(axis=1, dtype=np.int64)
+        )
+        return counted
     flat = table.ravel()  # contiguous: a view
     base = np.arange(n_rows, dtype=np.int64) * n_cols
     lo = np.zeros(n_rows, dtype=np.int64)
@@ -128,7 +131,8 @@ def resampled_quantiles_many(
     upper = np.triu(np.ones((length, length), dtype=ftype)) if length <= 64 else None
 
     def count_le(cum: np.ndarray, limit: np.ndarray) -> np.ndarray:
-        return (cum <= limit[:, None]).view(np.int8).sum(axis=1, dtype=np.int64)
+        counted: np.ndarray = (cum <= limit[:, None]).view(np.int8).sum(axis=1, dtype=np.int64)
+        return counted
 
     def locate(rank: np.ndarray, which: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
         """Row of the block table and cumulative weights of the block holding ``rank``

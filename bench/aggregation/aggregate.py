@@ -235,7 +235,7 @@ def aggregate(
 
     base_df = scored_rows(stats.baseline) if stats.baseline else None
     for name in preds:
-        df = base_df if name == stats.baseline else scored_rows(name)
+        df = base_df if base_df is not None and name == stats.baseline else scored_rows(name)
         entry = _kind_summaries(df, stats) if not df.empty else _empty_kinds(stats)
         steps = np.concatenate(
             [r.step_ns[name] for r in runs if name in r.step_ns] or [np.empty(0)]
@@ -263,7 +263,7 @@ def aggregate(
             ids = outage_keys(codes, outage)
             since_fix = error_vs_since_fix(e, since)
             add_group_cis(since_fix, e, since_fix_checkpoint(since), codes, t, stats)
-            scores = outage_scores(e, t, ids)
+            scores: dict[str, Any] = outage_scores(e, t, ids)
             scores["ci95"] = outage_cis(e, t, ids, stats)
             res["outages"][name] = {"since_fix": since_fix, "scores": scores}
         if base_df is not None and name != stats.baseline and not df.empty:

@@ -75,7 +75,8 @@ def drive_codes(df: pd.DataFrame) -> np.ndarray:
         return np.zeros(0, dtype=np.int64)
     ds = pd.factorize(df["dataset"])[0].astype(np.int64)
     dr = pd.factorize(df["drive"])[0].astype(np.int64)
-    return pd.factorize(ds * (int(dr.max()) + 1) + dr)[0].astype(np.int64)
+    codes: np.ndarray = pd.factorize(ds * (int(dr.max()) + 1) + dr)[0].astype(np.int64)
+    return codes
 
 
 def ci_entry(
@@ -174,10 +175,20 @@ def outage_cis(
         return None
     oid, ade, fde, t_end = per_outage(errors, t_query, ids)
     drive = outage_drive(oid)
-    kw = {"n_resamples": stats.resamples, "seed": stats.seed, "level": stats.level}
-    a = summary_ci(ade, drive, t_end, **kw)
-    f = summary_ci(fde, drive, t_end, **kw)
-    miss = summary_ci((fde > MISS_THRESHOLD_M).astype(float), drive, t_end, **kw)
+    a = summary_ci(
+        ade, drive, t_end, n_resamples=stats.resamples, seed=stats.seed, level=stats.level
+    )
+    f = summary_ci(
+        fde, drive, t_end, n_resamples=stats.resamples, seed=stats.seed, level=stats.level
+    )
+    miss = summary_ci(
+        (fde > MISS_THRESHOLD_M).astype(float),
+        drive,
+        t_end,
+        n_resamples=stats.resamples,
+        seed=stats.seed,
+        level=stats.level,
+    )
     return {
         "ade_mean_m": a["mean_m"],
         "fde_mean_m": f["mean_m"],

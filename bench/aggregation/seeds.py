@@ -48,7 +48,7 @@ def seed_figures(
             out["by_dataset"].setdefault(str(ds), {})[name] = {
                 k: summarize(g.loc[g["kind"] == k, "error_m"].to_numpy()) for k in KINDS
             }
-    if baseline in predictors:
+    if baseline is not None and baseline in predictors:
         for name in predictors:
             if name == baseline:
                 continue

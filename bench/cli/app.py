@@ -19,6 +19,7 @@ from pathlib import Path
 from typing import Annotated, Any
 
 import typer
+from typer.core import TyperArgument
 
 import posbench.blas_threads  # noqa: F401  (before numpy: one OpenBLAS thread)
 import posbench.cli.check as check
@@ -37,13 +38,16 @@ from posbench.cli.options import WORKER_DIED
 from posbench.cli.terminal import fail, warn
 
 
-def _argument_type(self: typer.core.TyperArgument, ctx: object) -> str | None:
+def _argument_type(self: TyperArgument, ctx: Any) -> str | None:
     """Help shows an argument's placeholder (``PATH``, ``FILE``) without Typer's type tag
-    (``<list[Path]>``) beside it; arguments without a placeholder keep the tag."""
-    return None if self.metavar else typer.core.TyperArgument.display_type(self, ctx)
+    (``<list[Path]>``) beside it; arguments without a placeholder keep the tag. (``ctx``:
+    the click context, ``click.Context`` or the one of typer's vendored click, by version.)"""
+    return None if self.metavar else TyperArgument.display_type(self, ctx)
 
 
-typer.core.TyperArgument.display_type_rich = _argument_type  # typer has no hook for this
+# typer has no hook for this: the method is replaced (for mypy, assigning to a method, and
+# a function taking a TyperArgument where the method takes any typer parameter)
+TyperArgument.display_type_rich = _argument_type  # type: ignore[method-assign, assignment]  # patch
 app = typer.Typer(
     help="posbench: benchmark real-time vehicle position predictors on your drives.\n\n"
     "Start with `bench run` (built-in synthetic drives, no data needed), then point it at "
@@ -227,7 +231,7 @@ def _click_errors(name: str) -> tuple[type[BaseException], ...]:
 NO_ARGS = _click_errors("NoArgsIsHelpError")
 USAGE_ERRORS = _click_errors("UsageError")
 CLICK_ERRORS = _click_errors("ClickException")
-ABORTS = (typer.Abort, *_click_errors("Abort"))
+ABORTS: tuple[type[BaseException], ...] = (typer.Abort, *_click_errors("Abort"))
 
 
 def command_path(args: list[str]) -> str:
@@ -260,7 +264,8 @@ def main(argv: list[str] | None = None) -> None:
     try:
         rv = app(args=args, prog_name="bench", standalone_mode=False)
     except NO_ARGS as e:  # `bench` or `bench data` alone: their help
-        print(e.ctx.get_help())
+        ctx = getattr(e, "ctx", None)  # click's NoArgsIsHelpError always has its context
+        print(ctx.get_help() if ctx is not None else str(e))
         rv = 0
     except CLICK_ERRORS as e:  # unknown option, missing value, not a number, no such command
         fail(usage_line(e, args))

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import json
 from contextlib import nullcontext
-from typing import Annotated
+from typing import TYPE_CHECKING, Annotated
 
 import typer
 
@@ -19,6 +19,9 @@ from posbench.cli.options import (
 )
 from posbench.errors import UsageError
 
+if TYPE_CHECKING:
+    from posbench.predictor_tools.contract.report import ContractReport
+
 #: registered predictors left out of the default set unless ``--model NAME=PATH`` names them
 NEEDS_MODEL = ("lstm-authors",)
 
@@ -30,7 +33,7 @@ def default_names(options: dict[str, dict[str, str]]) -> list[str]:
     return [n for n in available() if n not in NEEDS_MODEL or n in options]
 
 
-def _print_text(report) -> None:
+def _print_text(report: ContractReport) -> None:
     from rich.markup import escape
 
     from posbench.cli.terminal import console

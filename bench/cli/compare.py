@@ -11,7 +11,10 @@ import typer
 from posbench.cli.options import ConfigOpt, OldFormatOpt, QuietOpt, VerboseOpt, renamed
 
 if TYPE_CHECKING:
+    import pandas as pd
+
     from posbench.comparison.comparison import Comparison
+    from posbench.tables.table import Table
 
 #: how the tables are printed and written
 FORMATS = ("md", "csv", "latex")
@@ -170,7 +173,7 @@ def compare(
         raise typer.Exit(1)
 
 
-def _print(table, frame, fmt: str) -> None:
+def _print(table: Table, frame: pd.DataFrame, fmt: str) -> None:
     from posbench.cli.terminal import console, print_table
 
     if table.frame.empty:
@@ -191,7 +194,7 @@ def _print(table, frame, fmt: str) -> None:
         )
 
 
-def _write_table(out: Path, stem: str, table, frame, fmt: str) -> Path:
+def _write_table(out: Path, stem: str, table: Table, frame: pd.DataFrame, fmt: str) -> Path:
     if fmt == "md":
         path = out / f"{stem}.md"
         path.write_text(f"# {table.title}\n\n{table.markdown()}\n")

@@ -169,13 +169,13 @@ def print_inspect(rows: list[dict[str, Any]], checks: dict[str, Any]) -> None:
         for w in r["warnings"]:
             console.print(f"[yellow]warning[/] {escape(r['name'])}: {escape(w)}", highlight=False)
     section = {d: c.to_dict() for d, c in checks.items()}
-    header, cells = table_rows(section)
+    check_header, check_cells = table_rows(section)
     print_table(
         console,
-        header,
-        cells,
+        check_header,
+        check_cells,
         key_columns=1,
-        left_columns=len(header),
+        left_columns=len(check_header),
         title="data consistency: each stream against the truth's motion, else what "
         "the GPS fixes imply (pass / warn / fail / n/a)",
     )

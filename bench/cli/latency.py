@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import json
-from typing import Annotated
+from typing import Annotated, Any
 
 import typer
 
@@ -66,7 +66,7 @@ def latency(
         raise UsageError(f"unknown predictor(s) {', '.join(unknown)}")
     drives = load_drives(data, "enu", None, reporter=reporter())
     drive = max(drives, key=lambda d: len(d.gps))
-    res: dict = {}
+    res: dict[str, Any] = {}
     with reporter().phase("timing...") as status:
         for n in names:
             status(f"timing {n} on {drive.name}...")

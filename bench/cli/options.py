@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import shlex
 import sys
+from collections.abc import Callable
 from pathlib import Path
 from typing import Annotated
 
@@ -46,7 +47,7 @@ def parse_topics(values: list[str] | None) -> dict[str, str]:
     return topics
 
 
-def _loudness(level: int):
+def _loudness(level: int) -> Callable[[typer.Context, bool], bool]:
     """The eager callback of ``-q`` (``level`` QUIET) or ``-v`` (VERBOSE): sets the level,
     refusing the other one given too."""
 

@@ -106,7 +106,7 @@ def queries(
         exclude_poor_truth=not include_poor_truth,
         gate=False,
     )
-    reporter = reporter()
+    progress = reporter()
     with local_paths(data) as local:
         drives = load_drives(
             local,
@@ -114,9 +114,9 @@ def queries(
             topics or None,
             seed=seed,
             synthetic_duration_s=synthetic_duration,
-            reporter=reporter,
+            reporter=progress,
         )
-        with reporter.steps(
+        with progress.steps(
             f"{plural(len(drives), 'drive')}: queries and inputs", len(drives)
         ) as done:
             written = write_queries(

@@ -21,11 +21,15 @@ from __future__ import annotations
 
 import os
 from collections.abc import Callable, Iterable, Sequence
+from typing import TYPE_CHECKING
 
 import typer
 from rich.console import Console, ConsoleOptions, RenderableType, RenderResult
 
 from posbench.pipeline.reporter import INFO, Reporter, RichReporter
+
+if TYPE_CHECKING:
+    from rich.table import Table
 
 console = Console()
 err_console = Console(stderr=True)
@@ -176,7 +180,7 @@ def _rich_table(
     widths: Sequence[int],
     title: str | None,
     left: int,
-):
+) -> Table:
     from rich.cells import cell_len
     from rich.table import Table
     from rich.text import Text

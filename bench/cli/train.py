@@ -2,8 +2,9 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from pathlib import Path
-from typing import Annotated
+from typing import Annotated, Any
 
 import typer
 from rich.console import Console
@@ -125,6 +126,8 @@ def train(
         ) from None
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
+    # the two networks' trainers take the same keywords used below, and differ in others
+    run_training: Callable[..., dict[str, Any]]
     if network == "hybrid":
         from posbench.predictors.hybrid.train import run_training
     else:
@@ -187,7 +190,7 @@ def early_stop_message(epoch: int, best_epoch: int) -> str:
     )
 
 
-def _sources(names: list[str], info: dict) -> str:
+def _sources(names: list[str], info: dict[str, Any]) -> str:
     """Where a split's drives come from: --data, the synthetic generator, in-memory drives."""
     data = info["data"]
     seeds = {f"-s{s}" for s in data["synthetic"]["generator_seeds"]}
@@ -215,7 +218,7 @@ def _plural(n: int, word: str) -> str:
 
 
 def print_summary(
-    console: Console, info: dict, out: Path, early_stop: tuple[int, int, int] | None
+    console: Console, info: dict[str, Any], out: Path, early_stop: tuple[int, int, int] | None
 ) -> None:
     """The end of ``bench train``: data, epochs and early stopping, validation error [m] of the
     model beside the cubic-extrapolation and constant-velocity baselines, export timing [us]

@@ -4,7 +4,7 @@ covariance (:mod:`posbench.predictor_tools.tuning`)."""
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Annotated
+from typing import Annotated, Any
 
 import typer
 
@@ -123,6 +123,7 @@ def tune(
         + sum(len(v) for v in list(grid.values())[2:])
         + 1
     )  # + the calibration replay
+    trials: list[tuple[dict[str, Any], float]]  # (parameters, objective [m]) per trial
     with reporter().steps(f"tuning {predictor} ({gps_profile})", n) as done:
         if calibrate_only:
             best, trials = kept, []

@@ -153,7 +153,8 @@ def _zoom_panel(
     for p in names:
         w = near[near.predictor == p]
         seg = np.stack([w[["x", "y"]].to_numpy(float), w[["x_ref", "y_ref"]].to_numpy(float)], 1)
-        ax.add_collection(LineCollection(seg, colors=[colors.get(p)], lw=0.8, alpha=0.8))
+        # a list of (2, 2) segments, as documented (matplotlib iterates the array the same way)
+        ax.add_collection(LineCollection(list(seg), colors=[colors.get(p)], lw=0.8, alpha=0.8))
         ax.plot(w.x, w.y, "o", ms=4, color=colors.get(p))
     ax.plot(near.x_ref, near.y_ref, "k.", ms=3)
     ax.set_xlim(cx - hw, cx + hw)

@@ -93,7 +93,7 @@ def save_figure(
     paths = []
     for fmt in formats:
         p = folder / f"{stem}.{fmt}"
-        extra = (
+        extra: dict[str, Any] = (
             {"pil_kwargs": {"compress_level": 1}} if fmt == "png" else {}
         )  # quicker; ~10 % larger
         fig.savefig(p, format=fmt, dpi=dpi, metadata=_METADATA[fmt], **extra)
@@ -122,7 +122,8 @@ def warmup_mask(traces: pd.DataFrame) -> np.ndarray:
     """Boolean mask of the warm-up rows (all False without a ``warmup`` column)."""
     if "warmup" not in traces.columns:
         return np.zeros(len(traces), dtype=bool)
-    return traces["warmup"].fillna(False).astype(bool).to_numpy()
+    mask: np.ndarray = traces["warmup"].fillna(False).astype(bool).to_numpy()
+    return mask
 
 
 def headline(traces: pd.DataFrame, columns: Sequence[str] | None = None) -> pd.DataFrame:

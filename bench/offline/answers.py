@@ -34,7 +34,7 @@ from __future__ import annotations
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import pandas as pd
@@ -45,6 +45,9 @@ from posbench.scenarios.errors import DataError
 from posbench.scoring.records import DriveRun
 from posbench.scoring.schema import COV_COLUMNS, KINDS
 from posbench.scoring.score import MATCH_TOLERANCE_S, answer_positions, score
+
+if TYPE_CHECKING:
+    from posbench.scenarios.loaders.table import TableFile
 
 REQUIRED = ("drive", "kind", "t_query", "x", "y")
 COVARIANCE = COV_COLUMNS  # the answer's reported covariance, as in the traces
@@ -85,7 +88,7 @@ class Answers:
         return DataError(self.path, f"{self.where(row)}: {detail}")
 
 
-def _text(tab, col: str) -> np.ndarray:
+def _text(tab: TableFile, col: str) -> np.ndarray:
     """A text column stripped, every cell a non-empty string (else a DataError on its row)."""
     s = tab.df[col]
     txt = s.astype("string").str.strip()
@@ -95,7 +98,8 @@ def _text(tab, col: str) -> np.ndarray:
         raise DataError(
             tab.path, f"{tab.where(i)}, column {col!r}: empty; {int(empty.sum())} such rows in all"
         )
-    return txt.to_numpy(dtype=object).astype(str)
+    text: np.ndarray = txt.to_numpy(dtype=object).astype(str)
+    return text
 
 
 def read_answers(path: str | Path) -> Answers:

@@ -158,7 +158,10 @@ def write_queries(
     (out / INPUTS).mkdir(exist_ok=True)
     (out / "key").mkdir(exist_ok=True)
     ids = drive_ids([d.name for d in drives])
-    public, key, records, listed = [], [], [], []
+    public: list[pd.DataFrame] = []  # per drive: its rows of the queries list
+    key: list[pd.DataFrame] = []  # per drive: its query table, the answer key
+    records: list[dict[str, Any]] = []  # per drive: its record in the answer key
+    listed: list[dict[str, Any]] = []  # per drive: its entry of the manifest
     for drive, did in zip(drives, ids, strict=True):
         reason = skip_reason(drive, cfg)
         if reason:

@@ -96,7 +96,8 @@ class Job(Generic[T]):
         ok, value = answer
         if not ok:
             raise value
-        return value
+        returned: T = value  # what fn returned in the child, unpickled
+        return returned
 
 
 class FigureJobs:

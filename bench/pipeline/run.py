@@ -13,7 +13,7 @@ from __future__ import annotations
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field, fields, replace
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from posbench.aggregation.intervals import Statistics
 from posbench.config import DEFAULT_PREDICTORS, RunConfig
@@ -23,6 +23,9 @@ from posbench.pipeline.publish import Published
 from posbench.pipeline.reporter import SILENT, Reporter
 from posbench.report.markdown import TABLE_FORMATS
 from posbench.scenarios.drive import Drive
+
+if TYPE_CHECKING:
+    from posbench.scoring.records import DriveRun
 
 
 @dataclass(frozen=True)
@@ -266,7 +269,7 @@ def replay_drives(
     reporter: Reporter = SILENT,
     label: str = "",
     preload: Any = None,
-) -> list:
+) -> list[DriveRun]:
     """Every drive through every predictor of ``cfg`` on the options' executor, as
     :class:`~posbench.scoring.records.DriveRun` records in drive order; one reporter step
     per drive. ``preload`` (:class:`~posbench.pipeline.preload.Preload`) starts when the
@@ -280,7 +283,7 @@ def replay_drives(
         len(drives),
     ) as done:
 
-        def on_done(r: Any) -> None:
+        def on_done(r: DriveRun) -> None:
             done(r.name)
             if preload is not None and elsewhere:
                 preload.start()

@@ -14,9 +14,9 @@ the drive with the most turn / roundabout queries, so the figures show a turn.
 
 from __future__ import annotations
 
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable, Sequence
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import pandas as pd
@@ -27,6 +27,10 @@ from posbench.predictors.registry import create
 from posbench.replay.loop import replay
 from posbench.replay.prepare import PreparedDrive, prepare_drive
 from posbench.scenarios.drive import Drive
+from posbench.scoring.records import DriveRun
+
+if TYPE_CHECKING:
+    from posbench.predictors.lstm.stages import LstmStep
 
 
 def pick_moment(traces: pd.DataFrame, predictor: str) -> tuple[str, float] | None:
@@ -81,7 +85,7 @@ def paper_figures(
     cfg: RunConfig,
     traces: pd.DataFrame,
     out: Path,
-    runs: list | None = None,
+    runs: Sequence[DriveRun] | None = None,
     formats: Iterable[str] = ("png",),
 ) -> list[tuple[str, str]]:
     """Write the figures, each in every one of ``formats`` (png, svg, pdf); return
@@ -115,9 +119,11 @@ def paper_figures(
     cond = gps_condition(cfg, drive) if cfg.use_tuned else None
     lstm = create("lstm", cond, **cfg.predictor_options.get("lstm", {}))
     replay(lstm, prep, cfg.horizon_s)
-    step = lstm.last_step()
+    # LstmPredictor's seam; a predictor registered as "lstm" in its place may lack it
+    last_step: Callable[[], LstmStep | None] | None = getattr(lstm, "last_step", None)
+    step = last_step() if last_step is not None else None
     if step is None:
-        return []  # too few fixes before the moment for a model prediction
+        return []  # too few fixes before the moment for a model prediction (or no seam)
     grid, pred = step.grid, step.pred
     ts = np.linspace(t_fix, t_fix + cfg.horizon_s, 5)
     now = np.array([lstm.position_at(t) for t in ts])

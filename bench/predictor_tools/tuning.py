@@ -33,6 +33,7 @@ from posbench.config import RunConfig
 from posbench.predictors.registry import TUNED_FILE
 from posbench.replay.runner import run
 from posbench.scenarios.drive import Drive
+from posbench.scoring.records import DriveRun
 
 TUNED_PATH = TUNED_FILE
 #: Search grids per predictor (values tried for each parameter).
@@ -62,7 +63,7 @@ def grid_for(predictor: str, gps_profile: str) -> dict[str, list[float]]:
     }
 
 
-def objective(runs) -> float:
+def objective(runs: Sequence[DriveRun]) -> float:
     """Mean future error + mean now error [m] over all queries of the runs."""
     import pandas as pd
 

@@ -162,8 +162,11 @@ def error_colours(errors: np.ndarray, top_m: float) -> np.ndarray:
     w = (u - lo)[:, None]
     rgb = SCALE_RGB[lo] * (1 - w) + SCALE_RGB[lo + 1] * w
     rgb[~np.isfinite(e)] = NO_ERROR_RGB
-    return np.round(rgb).astype(np.uint8)
+    colours: np.ndarray = np.round(rgb).astype(np.uint8)
+    return colours
 
 
 def predictor_color(i: int) -> tuple[int, int, int]:
-    return tuple(int(c) for c in PALETTE[i % len(PALETTE)])
+    """The RGB colour (0-255) of the ``i``-th predictor, the palette repeating."""
+    r, g, b = PALETTE[i % len(PALETTE)]
+    return int(r), int(g), int(b)

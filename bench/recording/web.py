@@ -153,7 +153,7 @@ def _listening(port: int, host: str = HOST) -> bool:
         return s.connect_ex((host, port)) == 0
 
 
-def _stop(proc: subprocess.Popen) -> None:
+def _stop(proc: subprocess.Popen[bytes]) -> None:
     """End the server's process group (the ``rerun`` launcher script and the viewer binary
     it starts): SIGTERM, then SIGKILL after 5 s."""
     if os.name != "posix":  # no process groups: the launcher only
@@ -229,7 +229,7 @@ def serve(
 
 
 def _wait_ready(
-    proc: subprocess.Popen, log: IO[bytes], ports: tuple[int, ...], timeout_s: float
+    proc: subprocess.Popen[bytes], log: IO[bytes], ports: tuple[int, ...], timeout_s: float
 ) -> None:
     deadline = time.monotonic() + timeout_s
     while not all(_listening(p) for p in ports):

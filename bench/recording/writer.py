@@ -93,6 +93,11 @@ if TYPE_CHECKING:
     from posbench.scoring.records import DriveRun
 
 
+#: an RGB colour, 0-255 per channel
+_Rgb = tuple[int, int, int]
+#: a drive's traces per (predictor, kind), sorted by query time
+_Groups = dict[tuple[str, str], "pd.DataFrame"]
+
 VIZ_HINT = "rerun recordings need the viz extra: pip install 'posbench-harness[viz]'"
 
 
@@ -110,7 +115,7 @@ class _Writer:
     def _time(self, t: np.ndarray) -> Any:
         return self.rr.TimeColumn(TIMELINE, duration=np.asarray(t, dtype=np.float64))
 
-    def points(self, path: str, t: np.ndarray, xy: np.ndarray, color, radius: float) -> None:
+    def points(self, path: str, t: np.ndarray, xy: np.ndarray, color: _Rgb, radius: float) -> None:
         """One point per row at its time, in screen coordinates (:func:`screen`); rows with
         NaN time or position are left out."""
         rr = self.rr
@@ -124,7 +129,9 @@ class _Writer:
                 recording=self.rec,
             )
 
-    def ellipses(self, path: str, t: np.ndarray, xy: np.ndarray, cov: np.ndarray, color) -> None:
+    def ellipses(
+        self, path: str, t: np.ndarray, xy: np.ndarray, cov: np.ndarray, color: _Rgb
+    ) -> None:
         """The 95 % ellipse of each answer (centre ``xy`` [m, ENU], covariance ``cov`` (N, 3)
         (xx, xy, yy) [m^2]) as a closed line strip at its time, in screen coordinates; a
         row without a valid covariance or position holds no strip (the previous ellipse is
@@ -160,7 +167,9 @@ class _Writer:
                 recording=self.rec,
             )
 
-    def series(self, path: str, t: np.ndarray, v: np.ndarray, name: str, color, kind: str) -> None:
+    def series(
+        self, path: str, t: np.ndarray, v: np.ndarray, name: str, color: _Rgb, kind: str
+    ) -> None:
         """A time series: a line for ``now`` queries, points for ``future`` ones."""
         rr = self.rr
         style = (
@@ -195,23 +204,23 @@ class _Writer:
                     rr.LineStrips2D([screen(s) for s in strips], colors=[TRUTH_RGB], radii=[0.15]),
                     static=True,
                 )
-        fix_t = fix_xy = None
+        received: tuple[np.ndarray, np.ndarray] | None = None  # the received fixes' t, xy
         if run.fixes is not None and len(run.fixes):
             f = run.fixes
             t, xy = f["t"].to_numpy(np.float64), f[["x", "y"]].to_numpy(np.float64)
             rcv = f["received"].to_numpy(bool)
             self.points(f"{root}/map/fixes/received", t[rcv], xy[rcv], RECEIVED_RGB, 0.35)
             self.points(f"{root}/map/fixes/dropped", t[~rcv], xy[~rcv], DROPPED_RGB, 0.5)
-            fix_t, fix_xy = t[rcv], xy[rcv]
+            received = t[rcv], xy[rcv]
 
         tr = run.traces
         if tr is None or tr.empty:
             return
-        groups = {
+        groups: _Groups = {
             key: g.sort_values("t_query", kind="stable")
             for key, g in tr.groupby(["predictor", "kind"], sort=False, observed=True)
         }
-        self._around_common(root, run, groups, fix_t, fix_xy)
+        self._around_common(root, run, groups, received)
         self._track_colours(root, run, groups)
         rec.log(
             f"{root}/vehicle_frame/axes",
@@ -273,7 +282,7 @@ class _Writer:
         self._labels(root, tr)
         self._outages(root, run, tr)
 
-    def _arrows(self, path: str, t: np.ndarray, rel: np.ndarray, color) -> None:
+    def _arrows(self, path: str, t: np.ndarray, rel: np.ndarray, color: _Rgb) -> None:
         """Arrows from (0, 0) (the reference) to each relative answer, at their times."""
         rr = self.rr
         ok = np.isfinite(t) & np.all(np.isfinite(rel), axis=1)
@@ -290,7 +299,7 @@ class _Writer:
                 recording=self.rec,
             )
 
-    def _now_reference(self, groups: dict) -> tuple[np.ndarray, np.ndarray] | None:
+    def _now_reference(self, groups: _Groups) -> tuple[np.ndarray, np.ndarray] | None:
         """Times [s] and reference positions [m] of the 'now' queries (any predictor's rows:
         the queries are the same for all)."""
         for pred in self.predictors:
@@ -306,12 +315,12 @@ class _Writer:
         self,
         root: str,
         run: DriveRun,
-        groups: dict,
-        fix_t: np.ndarray | None,
-        fix_xy: np.ndarray | None,
+        groups: _Groups,
+        received: tuple[np.ndarray, np.ndarray] | None,
     ) -> None:
         """The reference at (0, 0), and at each 'now' query time the last fixes and the road
-        ahead and behind, relative to the reference then."""
+        ahead and behind, relative to the reference then (``received``: the received fixes'
+        times [s] and positions [m], None without fixes)."""
         rr, rec = self.rr, self.rec
         rec.log(
             f"{root}/around/reference",
@@ -326,7 +335,8 @@ class _Writer:
         t, ref = t[ok], ref[ok]
         if t.size == 0:
             return
-        if fix_t is not None and fix_t.size:
+        if received is not None and received[0].size:
+            fix_t, fix_xy = received
             idx, lengths = last_fixes(t, fix_t)
             rel = fix_xy[idx] - np.repeat(ref, lengths, axis=0)
             rec.log(
@@ -360,7 +370,7 @@ class _Writer:
                     recording=rec,
                 )
 
-    def _track_colours(self, root: str, run: DriveRun, groups: dict) -> None:
+    def _track_colours(self, root: str, run: DriveRun, groups: _Groups) -> None:
         """The reference track in segments coloured by ``color_by``'s 'now' error, and the
         colour scale as text."""
         rr, rec = self.rr, self.rec

@@ -233,14 +233,14 @@ def _fan_out(
             left[i] -= 1
             if left[i] == 0:
                 failed = [p for p in parts[i] if isinstance(p, _Failed)]
-                out[i] = (
+                out[i] = drive_run = (
                     failed_run(drives[i], failed[0].predictor, failed[0].error, max_retries + 1)
                     if failed
-                    else merge_predictor_runs([p for p in parts[i] if p is not None])
+                    else merge_predictor_runs([p for p in parts[i] if isinstance(p, DriveRun)])
                 )
                 parts[i] = []  # free the traces once merged
                 if on_done:
-                    on_done(out[i])
+                    on_done(drive_run)
     return [r for r in out if r is not None]
 
 

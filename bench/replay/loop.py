@@ -134,8 +134,10 @@ def replay(predictor: Predictor, prep: PreparedDrive, horizon_s: float) -> Repla
     query_ns = np.zeros(n_now, dtype=np.int64)
     clock = perf_counter_ns
     with_cov = reports_covariance(predictor)
-    cov = np.full((n_fix + n_now, 3), np.nan) if with_cov else None
-    cov_ns = np.zeros(n_fix + n_now, dtype=np.int64) if with_cov else None
+    # covariance rows and call durations; written only with_cov (else empty, returned as None)
+    n_cov = n_fix + n_now if with_cov else 0
+    cov = np.full((n_cov, 3), np.nan)
+    cov_ns = np.zeros(n_cov, dtype=np.int64)
     covariance_at = predictor.covariance_at
     observe_gps, observe_imu = predictor.observe_gps, predictor.observe_imu
     observe_speed, position_at = predictor.observe_speed, predictor.position_at
@@ -144,8 +146,7 @@ def replay(predictor: Predictor, prep: PreparedDrive, horizon_s: float) -> Repla
     for c in range(0, kinds.size, CHUNK_EVENTS):
         kc, ic = kinds[c : c + CHUNK_EVENTS], idxs[c : c + CHUNK_EVENTS]
         go, (gt, gx, gy, gs) = _window(cols[GPS], ic[kc == GPS])
-        if with_sigma:
-            gs = [fix_sigma(a) for a in gs]
+        sigmas = [fix_sigma(a) for a in gs] if with_sigma else []
         qo, (qt,) = _window(cols[QUERY], ic[kc == QUERY])
         if IMU in cols:
             io, (it, iax, iay, iyaw, irate) = _window(cols[IMU], ic[kc == IMU])
@@ -160,7 +161,7 @@ def replay(predictor: Predictor, prep: PreparedDrive, horizon_s: float) -> Repla
                 t = gt[j]
                 c0 = clock()
                 if with_sigma:
-                    observe_gps(t, gx[j], gy[j], sigma=gs[j])
+                    observe_gps(t, gx[j], gy[j], sigma=sigmas[j])
                 else:
                     observe_gps(t, gx[j], gy[j])
                 p = position_at(t + horizon_s)
@@ -168,9 +169,9 @@ def replay(predictor: Predictor, prep: PreparedDrive, horizon_s: float) -> Repla
                 future[i] = p
                 if with_cov:
                     c0 = clock()
-                    c = covariance_at(t + horizon_s)
+                    answer_cov = covariance_at(t + horizon_s)
                     cov_ns[i] = clock() - c0
-                    _store_cov(cov, i, c)
+                    _store_cov(cov, i, answer_cov)
             elif k == SPEED:
                 j = i - so
                 observe_speed(st[j], sv[j])
@@ -182,9 +183,11 @@ def replay(predictor: Predictor, prep: PreparedDrive, horizon_s: float) -> Repla
                 now[i] = p
                 if with_cov:
                     c0 = clock()
-                    c = covariance_at(qt[j])
+                    answer_cov = covariance_at(qt[j])
                     cov_ns[n_fix + i] = clock() - c0
-                    _store_cov(cov, n_fix + i, c)
+                    _store_cov(cov, n_fix + i, answer_cov)
+    if not with_cov:
+        return ReplayResult(future, now, step_ns, query_ns)
     return ReplayResult(future, now, step_ns, query_ns, cov, cov_ns)
 
 

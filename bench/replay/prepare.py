@@ -73,17 +73,23 @@ def _input_gps(
     return drive.gps, [f"GPS: {fixes_description(condition)}"]
 
 
+def _interp(tq: np.ndarray, t: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """``v`` sampled at times ``t`` [s], interpolated linearly at ``tq`` [s] (NaN outside)."""
+    at_tq: np.ndarray = np.interp(tq, t, v, left=np.nan, right=np.nan)
+    return at_tq
+
+
 def _speed_at(drive: Drive, tq: np.ndarray, ref_t: np.ndarray, ref_xy: np.ndarray) -> np.ndarray:
     if drive.truth is not None and drive.truth.v is not None:
-        return np.interp(tq, drive.truth.t, drive.truth.v, left=np.nan, right=np.nan)
+        return _interp(tq, drive.truth.t, drive.truth.v)
     if drive.speed is not None and len(drive.speed) > 1:
-        return np.interp(tq, drive.speed.t, drive.speed.v, left=np.nan, right=np.nan)
+        return _interp(tq, drive.speed.t, drive.speed.v)
     ok = np.all(np.isfinite(ref_xy), axis=1)
     if ok.sum() < 2:
         return np.full(tq.size, np.nan)
     t, xy = ref_t[ok], ref_xy[ok]
     v = np.hypot(np.gradient(xy[:, 0], t), np.gradient(xy[:, 1], t))
-    return np.interp(tq, t, v, left=np.nan, right=np.nan)
+    return _interp(tq, t, v)
 
 
 def _labels(drive: Drive, tq: np.ndarray, grid_t: np.ndarray, grid_xy: np.ndarray) -> np.ndarray:

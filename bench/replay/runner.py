@@ -91,11 +91,10 @@ def run_drive(drive: Drive, cfg: RunConfig) -> DriveRun:
         pred = create(
             name, condition, tuning_file=cfg.tuning, **cfg.predictor_options.get(name, {})
         )
-        if cfg.gate:
-            pred = GatedPredictor(pred)
-        res = replay(pred, prep, cfg.horizon_s)
-        if cfg.gate:
-            rejected[name] = pred.rejected
+        gated = GatedPredictor(pred) if cfg.gate else None
+        res = replay(pred if gated is None else gated, prep, cfg.horizon_s)
+        if gated is not None:
+            rejected[name] = gated.rejected
         answers.append((name, np.concatenate([res.future_xy, res.now_xy]), res.cov))
         step_ns[name] = res.step_ns
         query_ns[name] = res.query_ns
@@ -170,9 +169,9 @@ def run(
     out: list[DriveRun | None] = [None] * len(drives)
     if workers <= 1 or not drives or (len(drives) == 1 and len(cfg.predictors) <= 1):
         for i, d in enumerate(drives):
-            out[i] = run_drive(d, cfg)
+            out[i] = drive_run = run_drive(d, cfg)
             if on_done:
-                on_done(out[i])
+                on_done(drive_run)
         return [r for r in out if r is not None]
     tasks = plan_tasks(drives, cfg, workers)
     parts: dict[int, dict[str, DriveRun]] = {}
@@ -191,13 +190,14 @@ def run(
         for fut in as_completed(futures):
             i, name = futures[fut]
             if name is None:
-                out[i] = fut.result()
+                drive_run = fut.result()
             else:
                 parts.setdefault(i, {})[name] = fut.result()
                 if len(parts[i]) < n_parts[i]:
                     continue
                 mine = parts.pop(i)
-                out[i] = merge_predictor_runs([mine[n] for n in cfg.predictors])
+                drive_run = merge_predictor_runs([mine[n] for n in cfg.predictors])
+            out[i] = drive_run
             if on_done:
-                on_done(out[i])
+                on_done(drive_run)
     return [r for r in out if r is not None]

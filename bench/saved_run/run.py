@@ -39,9 +39,10 @@ PROVENANCE_KEYS = ("command", "versions", "git_commit", "data")
 
 def results_schema() -> dict[str, Any]:
     """The JSON Schema of ``results.json`` (shipped with the package)."""
-    return json.loads(
+    schema: dict[str, Any] = json.loads(
         (resources.files("posbench.saved_run") / "schemas" / "results.schema.json").read_text()
     )
+    return schema
 
 
 def to_json_value(o: Any) -> Any:
@@ -93,7 +94,8 @@ class Run:
     @property
     def config(self) -> dict[str, Any]:
         """The run's configuration (``RunConfig`` as a dict: horizon_s, gps_profile, ...)."""
-        return self.results["config"]
+        config: dict[str, Any] = self.results["config"]
+        return config
 
     @property
     def provenance(self) -> dict[str, Any]:

@@ -33,7 +33,7 @@ def scored_mask(traces: pd.DataFrame) -> np.ndarray:
     :func:`posbench.replay.queries.warmup_end_s`) and with a known reference position."""
     if traces.empty:
         return np.zeros(0, dtype=bool)
-    m = traces["x_ref"].notna().to_numpy() & traces["y_ref"].notna().to_numpy()
+    m: np.ndarray = traces["x_ref"].notna().to_numpy() & traces["y_ref"].notna().to_numpy()
     if "warmup" in traces:
         m &= ~traces["warmup"].to_numpy(dtype=bool)
     return m

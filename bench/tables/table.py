@@ -136,7 +136,8 @@ class Table:
         for c, (lo, hi) in self.ci.items():
             name = self.labels.get(c, c) if c not in self.counts else c
             labels[lo], labels[hi] = f"{name} ci95 lo", f"{name} ci95 hi"
-        return self.frame.rename(columns=labels).to_csv(index=False)
+        text: str = self.frame.rename(columns=labels).to_csv(index=False)
+        return text
 
     def latex(self) -> str:
         """A booktabs ``tabular``, figures as in the Markdown form, value columns ``r`` and
@@ -364,7 +365,8 @@ def _tex_char(ch: str) -> str | None:
     """One non-ASCII character as LaTeX, or None where there is none."""
     if ch in TEX_CHARACTERS:
         return TEX_CHARACTERS[ch]
-    base, *marks = unicodedata.normalize("NFD", ch)
+    decomposed = unicodedata.normalize("NFD", ch)  # the base letter, then combining marks
+    base, marks = decomposed[0], decomposed[1:]
     if marks and base.isascii() and base.isalpha() and all(m in _TEX_ACCENTS for m in marks):
         out = {"i": r"\i{}", "j": r"\j{}"}.get(base, base)
         for m in marks:  # innermost accent first

@@ -93,7 +93,7 @@ def differences(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     inf where they differ and one holds a NaN or an inf."""
     a, b = np.asarray(a, dtype=float), np.asarray(b, dtype=float)
     with np.errstate(invalid="ignore", over="ignore"):
-        d = np.hypot(a[:, 0] - b[:, 0], a[:, 1] - b[:, 1])
+        d: np.ndarray = np.hypot(a[:, 0] - b[:, 0], a[:, 1] - b[:, 1])
         same = np.all((a == b) | (np.isnan(a) & np.isnan(b)), axis=1)
     d[same] = 0.0
     d[~np.isfinite(d)] = np.inf
@@ -408,7 +408,8 @@ def clause_covariance_psd(factory: Factory, inp: Inputs) -> tuple[bool, str]:
         return True, "not reported"
     p.reset()
     evs = events(cut_prepared(inp.drive, 20.0))
-    n, min_eig, bad = 0, math.inf, []
+    n, min_eig = 0, math.inf
+    bad: list[str] = []  # the first problem found (probing stops there)
 
     def probe(i: int) -> None:
         nonlocal n, min_eig
