@@ -47,11 +47,13 @@ class RunConfig:
             package's for the predictors and GPS conditions it holds; None: the package's.
         use_tuned: start from the tuned parameters of ``predictors/tuned.json`` for the drive's
             GPS condition (``bench tune`` writes them); False = the predictors' physical defaults.
-        predictor_options: per-predictor constructor overrides, e.g. ``{"lstm-authors": {"model": p}}``.
-        gate: put every predictor behind the GPS outlier gate (:class:`posbench.predictors.gate.FixGate`,
-            default limits): a fix implying impossible motion is dropped before the predictor
-            sees it (bridged like a missing fix) and counted. False = the paper's ungated
-            behaviour. Scoring is unaffected: the reference is never gated.
+        predictor_options: per-predictor constructor overrides, e.g.
+            ``{"lstm-authors": {"model": p}}``.
+        gate: put every predictor behind the GPS outlier gate
+            (:class:`posbench.predictors.gate.FixGate`, default limits): a fix implying
+            impossible motion is dropped before the predictor sees it (bridged like a missing
+            fix) and counted. False = the paper's ungated behaviour. Scoring is unaffected: the
+            reference is never gated.
     """
 
     predictors: tuple[str, ...] = ("cv", "kf")

@@ -74,7 +74,8 @@ def summarize_groups(
 def speed_bin_labels(
     speed_mps: np.ndarray, edges_mps: Sequence[float] = (0.5, 5, 10, 15, 20, 30)
 ) -> np.ndarray:
-    """Bin names like ``"5-10 m/s"`` for each speed [m/s]; ``"<0.5 m/s"`` and ``">=30 m/s"`` at the ends."""
+    """Bin names like ``"5-10 m/s"`` for each speed [m/s]; ``"<0.5 m/s"`` and ``">=30 m/s"``
+    at the ends."""
     s = np.asarray(speed_mps, dtype=float)
     edges = list(edges_mps)
     names = [f"<{edges[0]:g} m/s"] + [

@@ -135,7 +135,8 @@ def sharpness_m2(cov: np.ndarray, p: float = 0.95) -> float:
 
 
 def log_likelihood(d2: np.ndarray, cov: np.ndarray) -> np.ndarray:
-    """Per-row log density [nats] of the truth under N(answer, P): -ln 2pi - ln det P / 2 - d^2 / 2."""
+    """Per-row log density [nats] of the truth under
+    N(answer, P): -ln 2pi - ln det P / 2 - d^2 / 2."""
     return -math.log(2.0 * math.pi) - 0.5 * log_det(cov) - 0.5 * np.asarray(d2, dtype=float)
 
 

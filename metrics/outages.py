@@ -67,7 +67,8 @@ DEFINITIONS = {
 
 
 def outage_ids(t_query: np.ndarray, outages: Sequence[tuple[float, float]]) -> np.ndarray:
-    """Index of the outage (t_last_fix, t_next_fix) each query time falls strictly inside; -1 if none."""
+    """Index of the outage (t_last_fix, t_next_fix) each query time falls strictly
+    inside; -1 if none."""
     t = np.asarray(t_query, dtype=float)
     ids = np.full(t.size, -1, dtype=np.int64)
     if not len(outages):

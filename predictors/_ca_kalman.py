@@ -4,7 +4,8 @@ Same maths as ``filterpy.kalman.KalmanFilter`` with ``F``, ``Q`` of the CA model
 kf's measurements, written for the fixed size: at IMU rate numpy's per-call overhead
 (~1 us per 6x6 product, ``inv`` of a 2x2, filterpy's copies of priors and posteriors)
 is most of the cost, while the arithmetic is ~200 flops. Exact, not approximate: the
-tests reproduce filterpy's mean and covariance to rounding (tests/test_filter_fastpath.py).
+tests reproduce filterpy's mean and covariance to rounding
+(tests/predictors/test_filter_fastpath.py).
 
 Layout. The state ``[x, y, vx, vy, ax, ay]`` is kept per axis: ``mx = [x, vx, ax]``,
 ``my = [y, vy, ay]`` (m, m/s, m/s^2, ENU). ``F = f (x) I2`` with the per-axis

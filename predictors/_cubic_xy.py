@@ -7,7 +7,7 @@ while the arithmetic is ~100 flops. Conditioning: time is centred and scaled to
 s in [-1, 1] (s = (t - t_mid) / half_span) and values are taken relative to the newest fix,
 so the normal equations lose ~3 digits, not the 8 they would on raw ENU metres and seconds:
 the fitted curve equals lstsq's to ~1e-11 m over a 2 s window, up to ~1e-10 m extrapolated
-2 s past it (tests/test_filter_fastpath.py). Rank-deficient windows (fewer than four
+2 s past it (tests/predictors/test_filter_fastpath.py). Rank-deficient windows (fewer than four
 distinct times) return None: the caller falls back to lstsq's minimum-norm solution.
 """
 

@@ -28,10 +28,10 @@ Implementation: a compact numpy/float implementation rather than a filterpy
 ``ExtendedKalmanFilter`` subclass. filterpy's ``update`` takes Jacobian callables,
 inverts S as a matrix and copies priors/posteriors on every call; with IMU samples at
 up to 100 Hz carrying three scalar measurements each, the scalar sequential updates
-here cost a fraction of that (figures in tests/test_predictors_baselines.py timing).
+here cost a fraction of that (figures in tests/predictors/test_predictors_baselines.py timing).
 The fix is one 2-D update with S^-1 in closed form, products go into preallocated
 buffers and F, Q are written with one ``put`` each (a fix step ~20 -> ~12 us p50);
-tests/test_filter_fastpath.py checks every state against filterpy's
+tests/predictors/test_filter_fastpath.py checks every state against filterpy's
 ``ExtendedKalmanFilter`` fed the same model.
 """
 
@@ -445,8 +445,8 @@ class CtraEkf(Predictor):
         """2x2 ENU position covariance [m^2] of ``position_at(t)``: the position rows of the
         predict step over T = t - (time of the state), ``F P F' + Q(T)`` with the CTRA
         Jacobian F at the current mean (the linearisation the filter itself uses), without
-        changing the filter, times ``cov_scale``. None before initialisation (``position_at`` then holds the
-        newest fix with no motion model behind it)."""
+        changing the filter, times ``cov_scale``. None before initialisation (``position_at`` then
+        holds the newest fix with no motion model behind it)."""
         if not self._ready:
             return None
         T = t - self._ts

@@ -17,8 +17,8 @@ heading at all the sample is skipped.
 
 Cycle: predict at every observation's time (variable dt), then update: fixes
 (x, y; per-axis sigma ``gps_sigma_scale`` x the fix's stated accuracy when
-``observe_gps`` is given one, else ``gps_sigma``), IMU world acceleration, wheel speed along the heading
-(sigma ``speed_sigma``); a speed below ``stop_speed`` is a zero-velocity update of both
+``observe_gps`` is given one, else ``gps_sigma``), IMU world acceleration, wheel speed along the
+heading (sigma ``speed_sigma``); a speed below ``stop_speed`` is a zero-velocity update of both
 components. ``position_at`` extrapolates the current mean in closed form
 (``p + v dt + a dt^2/2``) without touching the filter; ``covariance_at`` gives the position
 block of the same prediction's covariance (``F P F' + Q(dt)``, ENU, m^2).

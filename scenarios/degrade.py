@@ -1,4 +1,5 @@
-"""Turn a reference track into a realistic GPS stream: irregular fix times, noise, latency, dropouts.
+"""Turn a reference track into a realistic GPS stream:
+irregular fix times, noise, latency, dropouts.
 
 Everything here is seeded and deterministic. Times are seconds from the drive's
 start, positions metres in the drive's local frame (ENU: x east, y north).
@@ -64,8 +65,8 @@ OUTAGE_LENGTHS_S = (0.5, 1.0, 2.0, 5.0)
 OUTAGE_SEPARATION_S = 10.0
 
 #: Fix-interval distribution [s] of the paper's routes: the 21 quantiles (0, 5, ..., 100 %)
-#: measured over all 15 routes by ``posbench.scenarios.loaders.aslan.fix_interval_quantiles``, with the
-#: tails clipped to 100-400 ms. The unclipped extremes (17 ms stale repeats, 1.0 s gaps) are
+#: measured over all 15 routes by ``posbench.scenarios.loaders.aslan.fix_interval_quantiles``, with
+#: the tails clipped to 100-400 ms. The unclipped extremes (17 ms stale repeats, 1.0 s gaps) are
 #: receiver glitches and outages, which the dropout profiles model separately.
 ASLAN_FIX_INTERVAL_QUANTILES_S: np.ndarray = np.clip(_ASLAN_MEASURED_QUANTILES_S, 0.100, 0.400)
 

@@ -1,11 +1,12 @@
 """Scenario labels: "straight", "turn", "roundabout", "start_stop" per query time.
 
 The reference track (truth or fitted fixes; t [s], x/y [m, local ENU]) is resampled
-to a regular grid (cubic Hermite, so fix gaps in curves stay curved) and smoothed with a Savitzky-Golay filter, which also gives
-velocity and acceleration; from them speed v [m/s], tangential acceleration [m/s^2], yaw
-rate [rad/s] (= (x' y'' - y' x'') / v^2) and curvature [1/m] (= yaw rate / v). A CAN /
-wheel speed stream, when given, replaces the track's speed for the standstill and
-acceleration tests. Then, on the grid (thresholds in :class:`LabelThresholds`):
+to a regular grid (cubic Hermite, so fix gaps in curves stay curved) and smoothed with a
+Savitzky-Golay filter, which also gives velocity and acceleration; from them speed v [m/s],
+tangential acceleration [m/s^2], yaw rate [rad/s] (= (x' y'' - y' x'') / v^2) and
+curvature [1/m] (= yaw rate / v). A CAN / wheel speed stream, when given, replaces the
+track's speed for the standstill and acceleration tests. Then, on the grid (thresholds in
+:class:`LabelThresholds`):
 
 - ``start_stop``: standstill (v < 0.15 km/h, the paper's threshold), or within
   ``near_stop_s`` of a standstill while |acceleration| > ``accel_mps2``;

@@ -16,7 +16,8 @@ def _path_length(x: np.ndarray, y: np.ndarray) -> float:
 
 
 def _speed_series(drive: Drive) -> np.ndarray:
-    """Best available speed samples [m/s]: CAN/wheel, truth v, else positions differenced over >= 0.5 s."""
+    """Best available speed samples [m/s]: CAN/wheel, truth v, else positions differenced
+    over >= 0.5 s."""
     if drive.speed is not None and len(drive.speed):
         return drive.speed.v
     if drive.truth is not None and drive.truth.v is not None:

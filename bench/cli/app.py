@@ -35,7 +35,7 @@ import posbench.cli.train as train
 import posbench.cli.tune as tune
 import posbench.cli.view as view
 from posbench.cli.options import WORKER_DIED
-from posbench.cli.terminal import fail, warn
+from posbench.cli.terminal import NORMAL, fail, set_verbosity, warn
 
 
 def _argument_type(self: TyperArgument, ctx: Any) -> str | None:
@@ -259,7 +259,9 @@ def usage_line(e: BaseException, args: list[str]) -> str:
 
 def main(argv: list[str] | None = None) -> None:
     """Console-script entry point: run ``bench`` on ``argv`` (default: ``sys.argv[1:]``) and
-    exit with its status (0 ok, 1 a check or gate failed, 2 user error, 130 interrupted)."""
+    exit with its status (0 ok, 1 a check or gate failed, 2 user error, 130 interrupted).
+    Each call starts at normal loudness: an earlier call's ``-q`` or ``-v`` does not carry over."""
+    set_verbosity(NORMAL)
     args = upgrade_argv(sys.argv[1:] if argv is None else argv)
     try:
         rv = app(args=args, prog_name="bench", standalone_mode=False)

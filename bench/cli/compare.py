@@ -50,10 +50,10 @@ def compare(
         list[str] | None,
         typer.Option(
             metavar="SCOPES",
-            help="Rows to show, comma-separated or repeated: all (whole run), dataset, route (route "
-            "type per data set; over all data sets in the uncertainty table), drive (error "
-            "table only), since-fix (time since the last fix bins; uncertainty table only). "
-            "Default: all,dataset.",
+            help="Rows to show, comma-separated or repeated: all (whole run), dataset, route "
+            "(route type per data set; over all data sets in the uncertainty table), drive "
+            "(error table only), since-fix (time since the last fix bins; uncertainty table "
+            "only). Default: all,dataset.",
         ),
     ] = None,
     out: Annotated[

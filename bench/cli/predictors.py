@@ -30,8 +30,9 @@ def predictor_info(name: str, options: bool = False, tuning: Path | None = None)
     loaded, else None). With ``options``: its constructor options (``name``, ``default``,
     ``required``), ``any_option`` (it takes ``**kwargs``) and ``by_condition``: per GPS
     condition the values a run uses where they differ from the defaults (the ``tuning``
-    file's, else the package's tuning), with ``tuning`` (the file they come from). A built-in's class is imported
-    only for its options; an entry point's or import path's to read its docstring."""
+    file's, else the package's tuning), with ``tuning`` (the file they come from). A
+    built-in's class is imported only for its options; an entry point's or import path's to
+    read its docstring."""
     from posbench.config import GPS_CONDITIONS
     from posbench.predictors.registry import (
         PredictorError,

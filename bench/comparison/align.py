@@ -88,6 +88,12 @@ def _data_hashes(run: Run) -> dict[str, str]:
     return {str(d.get("path", "")): str(d.get("sha256", "")) for d in run.results.get("data") or []}
 
 
+def _data_text(hashes: Mapping[str, str]) -> str:
+    """A run's data as ``file:hash`` pairs (hash cut to 8 characters), by path; ``synthetic``
+    when it has none."""
+    return ", ".join(f"{Path(p).name}:{s[:8]}" for p, s in sorted(hashes.items())) or "synthetic"
+
+
 def config_differences(runs: Sequence[Run], labels: Sequence[str]) -> list[str]:
     """One line per configuration item on which the runs disagree (empty: comparable).
 
@@ -114,10 +120,7 @@ def config_differences(runs: Sequence[Run], labels: Sequence[str]) -> list[str]:
     if any(h != hashes[0] for h in hashes[1:]):
         lines.append(
             "data: "
-            + ", ".join(
-                f"{', '.join(f'{Path(p).name}:{s[:8]}' for p, s in sorted(h.items())) or 'synthetic'} ({lab})"
-                for h, lab in zip(hashes, labels, strict=True)
-            )
+            + ", ".join(f"{_data_text(h)} ({lab})" for h, lab in zip(hashes, labels, strict=True))
         )
     return lines
 

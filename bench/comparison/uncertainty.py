@@ -1,10 +1,10 @@
 """The uncertainty figures of saved runs side by side (``bench compare --uncertainty``).
 
 Reads each run's ``uncertainty`` block of results.json (schema 1.4, built by
-:mod:`posbench.aggregation.uncertainty`): per predictor that reports covariance and kind (future, now),
-the mean NEES with its cluster-bootstrap 95 % CI as stored (whole run only; the other
-rows have none), the coverage of the 95 % ellipse, the sharpness (median 95 % ellipse area
-[m^2]), the log-likelihood of the reference [nats], the verdict and the query count.
+:mod:`posbench.aggregation.uncertainty`): per predictor that reports covariance and kind
+(future, now), the mean NEES with its cluster-bootstrap 95 % CI as stored (whole run only;
+the other rows have none), the coverage of the 95 % ellipse, the sharpness (median 95 % ellipse
+area [m^2]), the log-likelihood of the reference [nats], the verdict and the query count.
 
 Rows: the whole run (``all``), each data set (``dataset``), each route type over all data
 sets (``route type``: results.json keeps the uncertainty by label, not by data set and

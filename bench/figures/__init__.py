@@ -7,8 +7,8 @@
 Every figure is drawn from the per-query traces (one row per query: ``t_query`` [s] in
 drive time, positions ``x, y, x_ref, y_ref`` [m] in a local ENU frame, ``error_m`` [m];
 see :data:`posbench.scoring.schema.TRACE_COLUMNS`). :func:`~posbench.figures.writer.write_plots`
-writes them and never raises on thin data:
-a figure with nothing to show is not written, and :class:`~posbench.figures.style.PlotsWritten` says why.
+writes them and never raises on thin data: a figure with nothing to show is not written, and
+:class:`~posbench.figures.style.PlotsWritten` says why.
 
 Figures (each written once per requested format, see :data:`~posbench.figures.style.FORMATS`):
 

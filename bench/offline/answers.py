@@ -25,8 +25,8 @@ comment line ``# drive: NAME`` names (the drive's id in the queries folder or it
 name and a timestamp matching no now query are errors naming the file and line.
 
 The answers are turned into the same :class:`~posbench.scoring.records.DriveRun` records as a replay
-(:func:`score_answers`), through :func:`posbench.scoring.score.score`, so aggregation, the report and
-``results.json`` are those of ``bench run``.
+(:func:`score_answers`), through :func:`posbench.scoring.score.score`, so aggregation, the report
+and ``results.json`` are those of ``bench run``.
 """
 
 from __future__ import annotations
@@ -366,8 +366,8 @@ def score_answers(
 ) -> Scored:
     """Score ``answers`` as predictor ``predictor`` against ``folder``: per drive (folder
     order) the :class:`~posbench.scoring.records.DriveRun` a replay would give, traces from
-    :func:`posbench.scoring.score.score` (unanswered queries NaN, i.e. ``missing``), step latency from
-    the ``latency_us`` of future answers and query latency from that of now answers [ns].
+    :func:`posbench.scoring.score.score` (unanswered queries NaN, i.e. ``missing``), step latency
+    from the ``latency_us`` of future answers and query latency from that of now answers [ns].
     ``on_done(drive name)`` is called as each drive is scored."""
     pos = match(folder, answers)
     key = folder.key

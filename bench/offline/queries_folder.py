@@ -8,8 +8,8 @@ file                        who    content
 ==========================  =====  ===============================================================
 ``queries.csv``             give   ``drive, kind, t_issue, t_query``: every query to answer
 ``inputs/DRIVE.csv``        give   what a predictor may see of that drive, in the long table
-                                   format of :mod:`posbench.scenarios.loaders.table` (streams gps = the
-                                   fixes fed after degradation and dropouts, imu, speed)
+                                   format of :mod:`posbench.scenarios.loaders.table` (streams
+                                   gps = the fixes fed after degradation and dropouts, imu, speed)
 ``manifest.json``           -      format version, posbench version, command, config, seed,
                                    data hashes, drives, sha256 of every file
 ``key/reference.parquet``   keep   the answer key: per query its reference position, label,
@@ -146,8 +146,8 @@ def write_queries(
 ) -> QueriesWritten:
     """Prepare ``drives`` as ``bench run`` does under ``cfg`` and write the queries folder
     ``out`` (layout in the module docstring); ``data`` is the data block of the manifest
-    (:func:`posbench.saved_run.provenance.data_provenance`), ``fmt`` csv or parquet for the queries list and
-    inputs. ``on_done(drive name)`` is called as each drive is written (progress bar).
+    (:func:`posbench.saved_run.provenance.data_provenance`), ``fmt`` csv or parquet for the queries
+    list and inputs. ``on_done(drive name)`` is called as each drive is written (progress bar).
     Files of an earlier queries folder there are replaced; others are left alone."""
     from posbench.saved_run.provenance import git_commit, package_versions
     from posbench.scenarios.loaders.table import drive_to_frame
@@ -271,8 +271,8 @@ class QueryFolder:
     Attributes:
         folder: where it is.
         manifest: the content of ``manifest.json``.
-        key: the answer key, one row per query, :data:`~posbench.scoring.schema.QUERY_COLUMNS`, drive
-            times [s] as in ``traces.parquet``; per drive its future then its now queries.
+        key: the answer key, one row per query, :data:`~posbench.scoring.schema.QUERY_COLUMNS`,
+            drive times [s] as in ``traces.parquet``; per drive its future then its now queries.
         drives: per drive (manifest order) the :class:`~posbench.scoring.records.DriveRun` fields of
             :data:`DRIVE_FIELDS`, plus ``id`` (the drive in the public files) and ``t0_s``.
     """

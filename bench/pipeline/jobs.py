@@ -108,7 +108,8 @@ class FigureJobs:
         traces: the run's traces; preds: the run's predictors in report order.
         out, formats, drive_plots: as :func:`posbench.figures.writer.write_plots`.
         paper: draws the paper's figures into ``out`` and returns (file, caption) pairs
-            (:func:`posbench.predictor_tools.paper_figures.paper_figures` with the run bound); None: none.
+            (:func:`posbench.predictor_tools.paper_figures.paper_figures` with the run bound);
+            None: none.
         background: False draws everything in this process, when asked (for tests and
             platforms without fork this is what happens anyway).
     """

@@ -100,8 +100,8 @@ def lstm_stages(drive: Drive, steps: int) -> dict[str, Any]:
 
 def lstm_fused_stages(drive: Drive, steps: int) -> dict[str, Any]:
     """Per-stage latency [us] of the default, *fused* ``lstm`` fix step
-    (:data:`posbench.predictors.lstm.predictor.FUSED_STAGES`: ``resample`` = fix bookkeeping and both
-    cubics in one solve, ``features``, ``inference``, ``current_position_fit``), timed
+    (:data:`posbench.predictors.lstm.predictor.FUSED_STAGES`: ``resample`` = fix bookkeeping and
+    both cubics in one solve, ``features``, ``inference``, ``current_position_fit``), timed
     through the same ``stage_timer`` hook during a normal replay."""
     cfg = RunConfig(predictors=("lstm",))
     return _stage_times(prepare_drive(drive, cfg), cfg.horizon_s, steps, "fused")

@@ -190,8 +190,8 @@ def worker_runtime_env(names: Sequence[str]) -> dict[str, Any] | None:
     the driver imported them from in front of the worker's own PYTHONPATH (Ray expands
     ``${PYTHONPATH}`` to the worker's value). Checked: a module importable only through the
     driver's ``sys.path`` fails in the workers without this and runs with it
-    (tests/test_plugins.py). On a cluster, those folders must exist on every node (a shared
-    file system), or the plugin be installed there as a package (an entry point)."""
+    (tests/predictors/test_plugins.py). On a cluster, those folders must exist on every node (a
+    shared file system), or the plugin be installed there as a package (an entry point)."""
     roots = import_roots(names)
     if not roots:
         return None

@@ -206,8 +206,8 @@ def validate_predictors(
     """Check the requested predictors and their constructor options before any work.
 
     Each name must be a built-in, an entry point or an importable ``module:Class`` of a
-    Predictor subclass (:func:`posbench.predictors.registry.resolve`), each option set must belong to
-    a requested name and name a keyword of its constructor, a ``model`` path must exist (a
+    Predictor subclass (:func:`posbench.predictors.registry.resolve`), each option set must belong
+    to a requested name and name a keyword of its constructor, a ``model`` path must exist (a
     folder stands for its ``model.onnx``), and each predictor is built once here with its
     options (registry defaults, no tuned parameters) so that a bad model file or value fails
     now, in one line naming the predictor and the option.

@@ -125,7 +125,8 @@ KIND_DTYPE = pd.CategoricalDtype(list(KINDS))
 
 
 def trace_columns_markdown() -> str:
-    """The Markdown table of :data:`TRACE_COLUMNS` (the README shows it; a test keeps the two equal)."""
+    """The Markdown table of :data:`TRACE_COLUMNS` (the README shows it; a test keeps the
+    two equal)."""
     lines = ["| column | type | unit | meaning |", "|---|---|---|---|"]
     lines += [f"| `{c}` | {t} | {u or '-'} | {m} |" for c, (t, u, m) in TRACE_COLUMNS.items()]
     return "\n".join(lines)

@@ -6,8 +6,9 @@ a 95 % interval (``value [lo, hi]``) and which a marker (``*`` conclusive, ``?``
 renderer writes each form: terminal cells (:meth:`Table.cells`, printed by
 :func:`posbench.cli.terminal.print_table`), Markdown, CSV (full precision; counts, interval bounds
 and markers as their own columns) and LaTeX (pure ASCII: every text through
-:func:`tex_escape`). Value columns are right-aligned in each form. The builders (:mod:`posbench.tables.run_tables`, ...) read a run's
-``results`` (see :mod:`posbench.saved_run.run`); nothing else formats a figure.
+:func:`tex_escape`). Value columns are right-aligned in each form. The builders
+(:mod:`posbench.tables.run_tables`, ...) read a run's ``results`` (see
+:mod:`posbench.saved_run.run`); nothing else formats a figure.
 """
 
 from __future__ import annotations

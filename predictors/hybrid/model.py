@@ -4,8 +4,8 @@
 per horizon H = (0.2, 0.4, 0.6, 0.8) s, (dx, dy) [m, heading frame] to add to the kf's
 answer and (log var along the heading, log var across) [log m^2] of that residual.
 
-All normalisation lives in the graph as buffers (like :class:`posbench.predictors.lstm.model.LstmNet`),
-so the exported ONNX takes raw inputs:
+All normalisation lives in the graph as buffers (like
+:class:`posbench.predictors.lstm.model.LstmNet`), so the exported ONNX takes raw inputs:
 
 - features standardised with ``feature_mean`` / ``feature_std`` (6,);
 - the prior (kf answer minus the newest grid point, heading frame [m]) divided by

@@ -3,7 +3,8 @@
 :func:`run_training` is what ``bench train --model hybrid`` calls; its arguments mirror
 :func:`posbench.predictors.lstm.train.run_training`. Pipeline: drives (``--data``, the benchmark's
 synthetic generator, hours of :mod:`posbench.scenarios.corpus`) -> split by route
-(:func:`posbench.predictors.lstm.train.split_by_route`) -> rows (:func:`posbench.predictors.hybrid.data.hybrid_windows`):
+(:func:`posbench.predictors.lstm.train.split_by_route`) -> rows
+(:func:`posbench.predictors.hybrid.data.hybrid_windows`):
 drives with truth get their fixes drawn from it under each of ``profiles`` and the kf prior
 with that profile's tuned parameters (``predictors/tuned.json``); drives without truth
 keep their own fixes and the ``native`` parameters -> statistics -> Adam, early stopping

@@ -12,7 +12,8 @@ and return ``output`` ``[batch, 6, 1]``: the same features 200 ms after the last
 x, y in the input's frame. The network normalises each window internally.
 
 Everything else (cubic resampling, dropout feedback loop, standstill hold, start-up
-line, final cubic for the current position) is :class:`~posbench.predictors.lstm.predictor.LstmPredictor`'s.
+line, final cubic for the current position) is
+:class:`~posbench.predictors.lstm.predictor.LstmPredictor`'s.
 
 ``origin``: ``"window"`` (default) subtracts the window's first grid sample from x, y
 and adds it back to the output (the paper: "each training sequence commences at the

@@ -2,8 +2,8 @@
 normalisation, for the fused fix step (export side: needs the ``onnx`` package).
 
 The exported ``model.onnx`` keeps the public interface (raw features ``[B, 8, 6]`` in, raw
-next-sample features ``[B, 6]`` out, :mod:`posbench.predictors.lstm.model`). Its normalisation (speed
-scale, log, divisions, residual) is ~30 small onnxruntime nodes of ~0.7 us each around a
+next-sample features ``[B, 6]`` out, :mod:`posbench.predictors.lstm.model`). Its normalisation
+(speed scale, log, divisions, residual) is ~30 small onnxruntime nodes of ~0.7 us each around a
 network of 6; for one window per call that overhead is half the inference time. The core
 graph is the same weights with the input affine parts folded in:
 

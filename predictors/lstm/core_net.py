@@ -1,6 +1,6 @@
 """The core network of a ``"speed"``-form model at run time: the fused step's inference
-without the ~30 normalisation nodes of the full graph (see :mod:`posbench.predictors.lstm.core_graph`,
-which builds it; onnxruntime only here).
+without the ~30 normalisation nodes of the full graph (see
+:mod:`posbench.predictors.lstm.core_graph`, which builds it; onnxruntime only here).
 
 The fused step writes its (8, 6) float64 window once; :meth:`CoreNet.load` applies the
 model's input scaling in three numpy calls (the displacements divided by the window's speed

@@ -23,8 +23,8 @@ Two input/output forms (``form``, recorded in model.json):
   standardised as in the paper.
 
 ``fix_offset`` (model.json): row 0's dx, dy hold the newest fix minus the newest grid point
-(:mod:`posbench.predictors.lstm.features`); in the ``"speed"`` form they enter divided by ``res_std``
-(centimetres matter there at any speed), not by the speed scale.
+(:mod:`posbench.predictors.lstm.features`); in the ``"speed"`` form they enter divided by
+``res_std`` (centimetres matter there at any speed), not by the speed scale.
 
 LeakyReLU slope 0.1 (the paper's). This module imports torch: never import it from
 the runtime path.

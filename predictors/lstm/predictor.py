@@ -26,8 +26,8 @@ extrapolates a least-squares *line* through the fixes it has (one fix: that fix)
 short cubic would extrapolate wildly.
 
 The steps above are the *staged* reference (``step="staged"``). By default a fix step runs
-*fused* (:mod:`posbench.predictors.lstm.fused`: the same maths in few numpy calls, both cubics in one
-batched solve, one onnxruntime call; within 1e-6 m of the staged step on every shared drive,
+*fused* (:mod:`posbench.predictors.lstm.fused`: the same maths in few numpy calls, both cubics in
+one batched solve, one onnxruntime call; within 1e-6 m of the staged step on every shared drive,
 tested); bridging steps, windows of < 4 fixes and the L-BFGS fit run staged.
 
 Public seams (for benchmarks and figures, nothing private to reach into):
@@ -93,7 +93,8 @@ FITS = ("closed", "lbfgs")
 #: ``staged``: the readable reference, stage by stage (same answers to float rounding)
 STEPS = ("fused", "staged")
 N_FEATURES = 6
-#: text recorded in results for the bundled model (:meth:`~posbench.predictors.base.ModelFileSeams.model_description`)
+#: text recorded in results for the bundled model
+#: (:meth:`~posbench.predictors.base.ModelFileSeams.model_description`)
 BUNDLED_TEXT = "bundled (predictors/lstm/bundled/model.onnx)"
 
 
@@ -185,8 +186,8 @@ class LstmPredictor(ModelFileSeams, Predictor):
         self._x = np.empty((N_STEPS, 6), dtype=np.float64)
         self._pts = np.empty((N_STEPS + 1, 2))
         fused = getattr(self, "step", "staged") == "fused" and self.fit == "closed"
-        #: the model's core graph (model.json "core"; :mod:`posbench.predictors.lstm.core_net`), run by
-        #: the fused step; a model copied without its core file runs the full graph
+        #: the model's core graph (model.json "core"; :mod:`posbench.predictors.lstm.core_net`), run
+        #: by the fused step; a model copied without its core file runs the full graph
         self.core = (
             CoreNet(self.model_path, self.info["core"], self.net)
             if fused and has_core(self.model_path, self.info)

@@ -108,7 +108,8 @@ def fit_poly(
 
 
 def eval_poly(coef: np.ndarray, s: np.ndarray | float) -> np.ndarray:
-    """Values of the polynomial(s) ``coef`` (DEGREE+1, k) at scaled times s: shape s.shape + (k,)."""
+    """Values of the polynomial(s) ``coef`` (DEGREE+1, k) at scaled times s: shape
+    s.shape + (k,)."""
     return powers(s) @ coef
 
 

@@ -9,10 +9,10 @@ hot path takes two shortcuts, both checked to give the public API's outputs:
 - ``batch_dim``: the graph's symbolic batch dimension pinned to 1 (onnxruntime then folds
   the LSTM's shape arithmetic: 14 nodes run instead of 18, ~3 us); :meth:`OnnxModel.run_batch`
   builds an unpinned session on first use;
-- the feed is fixed (preallocated buffers, the inputs' names checked once), so :meth:`OnnxModel.run_buffer`
-  calls the session's compiled ``run`` without the Python wrapper's per-call checks
-  (~4 us under cache pressure); where onnxruntime's layout differs, or that call does not
-  answer exactly as the public ``InferenceSession.run`` on a probe, the public one is used;
+- the feed is fixed (preallocated buffers, the inputs' names checked once), so
+  :meth:`OnnxModel.run_buffer` calls the session's compiled ``run`` without the Python wrapper's
+  per-call checks (~4 us under cache pressure); where onnxruntime's layout differs, or that call
+  does not answer exactly as the public ``InferenceSession.run`` on a probe, the public one is used;
 - where the output's shape is static, the buffers are bound once (IO binding: the inputs
   read in place, the output written into a preallocated array) and :meth:`run_buffer`
   calls the compiled ``run_with_iobinding`` (~3 us less: no feed dict, no output

@@ -1,9 +1,9 @@
 """Train the paper's MLP-LSTM-MLP on drives and write ``model.onnx`` + ``model.json``.
 
 :func:`run_training` is what ``bench train --data PATH... --out DIR [--epochs N] [--seed N]``
-calls. Pipeline: load drives (``posbench.scenarios.load``), optional synthetic drives and hours of the
-vehicle-dynamics corpus (:mod:`posbench.scenarios.corpus`) -> split by route (never by window) ->
-windows (:mod:`posbench.predictors.lstm.windows`; drives with a truth stream are fed GPS degraded
+calls. Pipeline: load drives (``posbench.scenarios.load``), optional synthetic drives and hours of
+the vehicle-dynamics corpus (:mod:`posbench.scenarios.corpus`) -> split by route (never by window)
+-> windows (:mod:`posbench.predictors.lstm.windows`; drives with a truth stream are fed GPS degraded
 from it under each of ``profiles``, ``gps_seeds`` draws each: fresh fix times from the
 paper's interval distribution every draw, i.e. time jitter) -> feature statistics on the
 training windows -> Adam + ReduceLROnPlateau + early stopping on the validation loss,
@@ -161,7 +161,8 @@ def build_windows(
 
 
 def corpus(hours: float, seed: int) -> list[Drive]:
-    """``hours`` of the vehicle-dynamics corpus (:func:`posbench.scenarios.corpus.corpus_drives`)."""
+    """``hours`` of the vehicle-dynamics corpus
+    (:func:`posbench.scenarios.corpus.corpus_drives`)."""
     if hours <= 0:
         return []
     from posbench.scenarios.corpus import corpus_drives
@@ -347,7 +348,8 @@ def run_training(
             ``epoch - best_epoch`` (= ``patience``) epochs; the best epoch's weights are kept.
         form: ``"speed"`` (speed-invariant input, residual output) or ``"paper"``
             (:mod:`posbench.predictors.lstm.model`).
-        corpus_hours: hours of the vehicle-dynamics corpus to add (:mod:`posbench.scenarios.corpus`).
+        corpus_hours: hours of the vehicle-dynamics corpus to add
+            (:mod:`posbench.scenarios.corpus`).
         profiles: GPS profiles drawn from the truth of drives that have one.
         mirror: mirror every batch left-right at random (augmentation).
         max_minutes: wall-clock budget of the epochs [min]; the best epoch so far is kept.

@@ -9,7 +9,7 @@ window's fixes (``old_tstamps``, ``ground_truth_old``). It is read with
 :mod:`posbench.scenarios.safe_pickle` (NumPy arrays and containers only).
 
 What was measured on the 15 routes in ``shared/data/aslan`` (ad-hoc scripts; the
-route-level checks are repeated in tests/test_loader_aslan.py) and what the
+route-level checks are repeated in tests/scenarios/test_loader_aslan.py) and what the
 loader does about it:
 
 - Fixes: union over windows of ``(tstamps, ground_truth)``. No stamp ever maps
@@ -297,7 +297,8 @@ def load_aslan_pickle(path: Path) -> Drive:
 
 
 def fix_interval_quantiles(folder: str | Path, n: int = 21) -> np.ndarray:
-    """Quantiles (0..100 %, ``n`` of them) of all fix intervals [s] of the pickles under ``folder``."""
+    """Quantiles (0..100 %, ``n`` of them) of all fix intervals [s] of the pickles
+    under ``folder``."""
     from posbench.scenarios.loaders import load
 
     dts = [np.diff(d.gps.t) for d in load(folder) if d.meta.format == "aslan"]

@@ -29,7 +29,7 @@ i.e. already the ENU yaw of :mod:`posbench.scenarios.drive`. Checked on the 46 d
 of travel atan2(dy, dx) from the ENU positions agrees with OXTS yaw to a median of
 0.1 - 1.2 degrees on every drive with good truth; only 2011_09_26_drive_0093 (median
 pos_accuracy 21 m, flagged ``truth_poor``) disagrees (35 degrees), because its
-positions, not its yaw, are poor (tests/test_loader_kitti.py asserts < 10 degrees).
+positions, not its yaw, are poor (tests/scenarios/test_loader_kitti.py asserts < 10 degrees).
 
 Times: ``timestamps.txt`` holds naive wall-clock stamps (KITTI does not state the
 time zone); they are read as UTC, so ``meta.epoch_s`` may be off by whole hours.
@@ -175,7 +175,8 @@ def parse_timestamps(path: Path) -> np.ndarray:
 def _parse_data_files(
     data_dir: Path, n: int, ncol: int, warnings: list[str]
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Read data/NNNNNNNNNN.txt for samples 0..n-1: (values (n, ncol) with NaN rows, present mask)."""
+    """Read data/NNNNNNNNNN.txt for samples 0..n-1: (values (n, ncol) with NaN rows,
+    present mask)."""
     if not data_dir.is_dir():
         raise DataError(data_dir, "folder missing (expected oxts/data/NNNNNNNNNN.txt)")
     names = {e.name for e in os.scandir(data_dir) if e.name.endswith(".txt")}

@@ -14,11 +14,12 @@ stream (vehicle frame x forward / y left, gravity-free, yaw ENU), choosing one p
     (:func:`posbench.scenarios.imu_frames.estimate_mount`) and a warning says so.
 ``as-is``
     no orientation, no mount, and the data are level (mean specific force within
-    :data:`~posbench.scenarios.imu_frames.LEVEL_TILT_DEG` of +z) or hold no gravity: x, y used as they are.
+    :data:`~posbench.scenarios.imu_frames.LEVEL_TILT_DEG` of +z) or hold no gravity: x, y
+    used as they are.
 
 Yaw (orientation paths only): checked against the GPS course while moving
-(:func:`posbench.scenarios.imu_frames.yaw_offset`): kept ("enu"), shifted ("offset-corrected") or not
-used ("dropped"). ``meta.extra["imu_frame"]`` records the path and the figures.
+(:func:`posbench.scenarios.imu_frames.yaw_offset`): kept ("enu"), shifted ("offset-corrected") or
+not used ("dropped"). ``meta.extra["imu_frame"]`` records the path and the figures.
 """
 
 from __future__ import annotations
@@ -112,7 +113,8 @@ def imu_to_vehicle(
     Args:
         t: (N,) times [s]; f_s: (N, 3) linear_acceleration [m/s^2], sensor frame (NaN: absent);
         w_s: (N, 3) angular velocity [rad/s] or None; q: (N, 4) orientation (w, x, y, z) or None.
-        frame: the IMU's ``header.frame_id``; edges: tf edges (:mod:`posbench.scenarios.loaders.ros_tf`).
+        frame: the IMU's ``header.frame_id``; edges: tf edges
+            (:mod:`posbench.scenarios.loaders.ros_tf`).
         gps: (t [s], x [m], y [m]) ENU fixes; speed: (t [s], v [m/s]) or None.
         topic: for messages; warnings: appended one line per non-trivial decision.
     Returns:

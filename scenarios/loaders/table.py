@@ -91,8 +91,8 @@ class TableFile:
 
 def read_table_file(path: Path, text_columns: tuple[str, ...] = ("stream",)) -> TableFile:
     """Read a CSV (``text_columns``, named in lower case, kept as text) or Parquet file; column
-    names stripped and lower-cased. Raises :class:`DataError` (naming the file and the line) when it is missing,
-    empty, damaged or has duplicate columns."""
+    names stripped and lower-cased. Raises :class:`DataError` (naming the file and the line) when it
+    is missing, empty, damaged or has duplicate columns."""
     import pandas as pd
 
     if not path.is_file():

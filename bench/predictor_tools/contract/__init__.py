@@ -8,11 +8,12 @@ raises: an exception from the predictor fails that clause and names where it was
 
 The inputs (built once per process, deterministic):
 
-- the **drive**: the first built-in synthetic drive (``posbench.scenarios.synthetic.default_drives()[0]``),
-  its first :data:`DRIVE_S` seconds (straight, turn, roundabout, straight, a stop) with its own
-  recorded fixes (irregular 0.1-0.6 s, noisy, one dropout) and 50 Hz IMU / speed, replayed
-  as the runner does (:func:`posbench.replay.loop.replay`: a "future" query :data:`HORIZON_S` after
-  every fix, a "now" query every 0.05 s);
+- the **drive**: the first built-in synthetic drive
+  (``posbench.scenarios.synthetic.default_drives()[0]``), its first :data:`DRIVE_S` seconds
+  (straight, turn, roundabout, straight, a stop) with its own recorded fixes
+  (irregular 0.1-0.6 s, noisy, one dropout) and 50 Hz IMU / speed, replayed as the runner
+  does (:func:`posbench.replay.loop.replay`: a "future" query :data:`HORIZON_S` after every
+  fix, a "now" query every 0.05 s);
 - a **straight line**: 15 m/s on a heading of 0.5 rad, IMU and speed at 50 Hz from t = 0,
   exact fixes at 5 Hz from t = 1 s;
 - a **standstill**: the same streams for a car that does not move.

@@ -77,8 +77,8 @@ class Answers:
 
 
 def run_replay(factory: Factory, prep: PreparedDrive, pred: Predictor | None = None) -> Answers:
-    """Replay ``prep`` through a fresh predictor (or ``pred``) with :func:`posbench.replay.loop.replay`;
-    future answers first, then the now answers."""
+    """Replay ``prep`` through a fresh predictor (or ``pred``) with
+    :func:`posbench.replay.loop.replay`; future answers first, then the now answers."""
     p = factory() if pred is None else pred
     res = replay(p, prep, HORIZON_S)
     return Answers(

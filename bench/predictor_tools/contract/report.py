@@ -64,8 +64,8 @@ def resolve_predictor(spec: str, options: Mapping[str, Any] | None = None) -> Fa
     """A factory of fresh predictors for ``spec``: a registered or entry-point name (or
     ``NAME@ALIAS``), built with the registry's defaults and ``options``; or ``module:Class``,
     a :class:`Predictor` subclass imported from an importable module and built with
-    ``options`` (:func:`posbench.predictors.registry.resolve`). One instance is built here, so that a
-    predictor that cannot be built fails now. Raises :class:`UsageError` (one line) for an
+    ``options`` (:func:`posbench.predictors.registry.resolve`). One instance is built here, so that
+    a predictor that cannot be built fails now. Raises :class:`UsageError` (one line) for an
     unknown name, a missing module or class, a class that is not a Predictor, or a predictor
     that cannot be built."""
     from posbench.predictors.registry import PredictorError, create, predictor_class
