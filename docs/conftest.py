@@ -32,6 +32,7 @@ import sys
 import tempfile
 from pathlib import Path
 
+import pytest
 from sybil import Example, Sybil
 from sybil.parsers.markdown import CodeBlockParser, PythonCodeBlockParser, SkipParser
 
@@ -145,3 +146,14 @@ pytest_collect_file = Sybil(
     teardown=_teardown,
     name="docs",
 ).pytest()
+
+
+def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
+    """Every example of the docs is ``slow``: a page's examples run in order in one namespace
+    and one working directory (none can be left out alone), and most pages run whole commands,
+    seconds each. They run in the full suite; ``pytest -m "not slow"``, the inner loop, runs
+    none of them."""
+    here = Path(__file__).resolve().parent
+    for item in items:
+        if item.path.resolve().is_relative_to(here):
+            item.add_marker(pytest.mark.slow)

@@ -1,14 +1,15 @@
-"""Shared fixtures. Tests that need ``../shared`` use :func:`shared_dir`: they skip on a
-machine without it, but fail when the ``CI`` environment variable is set."""
+"""Fixtures every test folder shares (what tests share besides fixtures is in
+:mod:`helpers`). Tests that need ``../shared`` use :func:`shared_dir`: they skip on a machine
+without it, but fail when the ``CI`` environment variable is set."""
 
 from __future__ import annotations
 
 from pathlib import Path
 
 import pytest
-from needs import chromium_executable, missing
+from helpers import ROOT, bench, chromium_executable, missing
 
-SHARED = Path(__file__).resolve().parents[1].parent / "shared"
+SHARED = ROOT.parent / "shared"
 
 
 def _need(path: Path) -> Path:
@@ -21,8 +22,6 @@ def _need(path: Path) -> Path:
 def cv_kf_run(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """``bench run -p cv,kf --drive-plots 0`` on the built-in drives, once per session: a
     saved run folder that tests read (copy it before changing anything in it)."""
-    from test_cli_errors import bench
-
     out = tmp_path_factory.mktemp("cv-kf-run") / "old"
     r = bench("run", "-p", "cv,kf", "--out", str(out), "--drive-plots", "0", timeout=300)
     assert r.returncode == 0, r.stderr
@@ -31,7 +30,8 @@ def cv_kf_run(tmp_path_factory: pytest.TempPathFactory) -> Path:
 
 @pytest.fixture(scope="session")
 def chromium() -> str:
-    """The system Chromium's executable, for the browser tests (:mod:`needs`)."""
+    """The system Chromium's executable, for the browser tests
+    (:func:`helpers.chromium_executable`)."""
     return chromium_executable()
 
 

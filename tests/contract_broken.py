@@ -1,4 +1,4 @@
-"""Predictors that break one clause of the contract each (for tests/test_contract.py and
+"""Predictors that break one clause of the contract each (for tests/bench/test_contract.py and
 ``bench check tests.contract_broken:LookAhead``), on a plain constant-velocity core.
 
 Each bug is one a plugin author could write: peeking at the runner's drive in memory, a

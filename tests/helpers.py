@@ -1,0 +1,237 @@
+"""What tests share: where the source lives (:data:`ROOT`, :func:`module_name`), what a test
+needs from the machine (:func:`missing`), and ``bench`` as a user runs it (:func:`bench`,
+:func:`assert_one_error_line`, :func:`snapshot`).
+
+``bench`` runs in this process by default: the command line's own entry point,
+``posbench.cli.app.main``, on fresh standard streams, environment, working directory,
+``sys.argv``, ``sys.path``, warning filters and console widths, as a new process would have
+them, all put back afterwards. Pass ``process=True`` where the test is about the process
+itself: worker processes writing to the terminal, signals, what gets imported, the console
+script, a plugin's import path or entry points (modules imported once stay imported).
+"""
+
+from __future__ import annotations
+
+import io
+import os
+import shutil
+import subprocess
+import sys
+import tempfile
+import traceback
+import warnings
+from collections.abc import Iterator, Mapping
+from contextlib import contextmanager
+from pathlib import Path
+from typing import IO, NoReturn
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+TESTS = ROOT / "tests"
+
+# ------------------------------------------------------------------ the source tree
+#: source folder -> the installed package it becomes (pyproject.toml's package-dir map)
+FOLDERS = {
+    "bench": "posbench",
+    "predictors": "posbench.predictors",
+    "scenarios": "posbench.scenarios",
+    "metrics": "posbench.metrics",
+}
+
+
+def module_name(path: Path) -> str:
+    """The installed module of a source file: ``bench/config.py`` -> ``posbench.config``,
+    ``predictors/lstm/__init__.py`` -> ``posbench.predictors.lstm``."""
+    parts = path.resolve().relative_to(ROOT).with_suffix("").parts
+    if parts[-1] == "__init__":
+        parts = parts[:-1]
+    return ".".join((FOLDERS[parts[0]], *parts[1:]))
+
+
+def source_files() -> list[Path]:
+    """Every Python file of the installed packages, in a stable order."""
+    return [f for folder in FOLDERS for f in sorted((ROOT / folder).rglob("*.py"))]
+
+
+# ------------------------------------------------------------- what a test needs
+#: Chromium flags for the browser tests: no sandbox (CI runs as root), WebGL through ANGLE on
+#: SwiftShader (no GPU)
+CHROMIUM_ARGS = [
+    "--no-sandbox",
+    "--use-gl=angle",
+    "--use-angle=swiftshader",
+    "--enable-unsafe-swiftshader",
+    "--disable-dev-shm-usage",
+]
+
+
+def missing(what: str) -> NoReturn:
+    """Skip the test for want of ``what`` (data, a tool, a browser), or fail it when ``CI`` is
+    set: ``.ci/run`` installs everything, so there every test must run."""
+    if os.environ.get("CI"):
+        pytest.fail(f"{what} (CI is set: this test must run)")
+    pytest.skip(what)
+
+
+def chromium_executable() -> str:
+    """The system Chromium (Debian's package, which ``.ci/run`` installs) with playwright
+    importable to drive it, or :func:`missing`."""
+    exe = shutil.which("chromium") or shutil.which("chromium-browser")
+    if exe is None:
+        missing("no chromium on PATH (.ci/run installs it)")
+    try:
+        import playwright.sync_api  # noqa: F401
+    except ImportError:
+        missing("the playwright package is not installed (the dev extra has it)")
+    return exe
+
+
+# ------------------------------------------------------------------------- bench
+#: the warning filters a new Python process starts with (no -W, no PYTHONWARNINGS)
+_PROCESS_WARNING_FILTERS = (
+    ("default", DeprecationWarning, "__main__"),
+    ("ignore", DeprecationWarning, ""),
+    ("ignore", PendingDeprecationWarning, ""),
+    ("ignore", ImportWarning, ""),
+    ("ignore", ResourceWarning, ""),
+)
+#: how Python prints a warning, saved before any test replaces it (pytest records them)
+_SHOW_WARNING = warnings._showwarnmsg_impl  # type: ignore[attr-defined]
+
+
+def bench(
+    *args: object,
+    cwd: Path | str | None = None,
+    env: Mapping[str, str | None] | None = None,
+    columns: int | None = 80,
+    process: bool = False,
+    timeout: float = 600,
+) -> subprocess.CompletedProcess[str]:
+    """``bench ARGS`` as a user runs it: its exit status, stdout and stderr.
+
+    ``columns``: the terminal width (``COLUMNS``); None for output piped without one.
+    ``env``: variables to set (None: unset) on top of this process's environment.
+    ``process``: run ``python -m posbench`` in a new process (``timeout`` [s] applies there
+    only) instead of in this one; see the module's docstring for when.
+    """
+    argv = [str(a) for a in args]
+    environ: dict[str, str | None] = {"COLUMNS": None if columns is None else str(columns)}
+    environ.update(env or {})
+    if process:
+        full = {**os.environ, **environ}
+        return subprocess.run(
+            [sys.executable, "-m", "posbench", *argv],
+            capture_output=True,
+            text=True,
+            cwd=cwd,
+            timeout=timeout,
+            env={k: v for k, v in full.items() if v is not None},
+        )
+    from posbench.cli.app import main
+
+    with _as_a_new_process(argv, cwd, environ) as (out, err):
+        try:
+            main(argv)
+            code = 0
+        except SystemExit as e:
+            code = e.code if isinstance(e.code, int) else (0 if e.code is None else 1)
+        except BaseException:  # what Python prints when a process dies of an exception
+            sys.stderr.write(traceback.format_exc())
+            code = 1
+    return subprocess.CompletedProcess(["bench", *argv], code, _read(out), _read(err))
+
+
+def _read(f: IO[bytes]) -> str:
+    f.seek(0)
+    return f.read().decode("utf-8", errors="backslashreplace")
+
+
+@contextmanager
+def _as_a_new_process(
+    argv: list[str], cwd: Path | str | None, environ: Mapping[str, str | None]
+) -> Iterator[tuple[IO[bytes], IO[bytes]]]:
+    """Standard streams (empty stdin; stdout and stderr into two files, at the descriptors 1
+    and 2, so that worker processes, C libraries and warnings write there as they would to a
+    terminal), environment, working directory, ``sys.argv``, ``sys.path``, warning filters
+    and the consoles' widths as a new ``bench`` process would have them; all restored on exit."""
+    from posbench.cli import terminal
+
+    out, err = tempfile.TemporaryFile(), tempfile.TemporaryFile()
+    saved_streams = sys.stdin, sys.stdout, sys.stderr
+    saved_argv, saved_path, saved_cwd = sys.argv, list(sys.path), os.getcwd()
+    saved_env = dict(os.environ)
+    consoles = (terminal.console, terminal.err_console)
+    saved_widths = [c._width for c in consoles]  # rich reads COLUMNS once, at construction
+    saved_verbosity = terminal.verbosity()
+    for stream in saved_streams[1:]:
+        stream.flush()
+    saved_fds = os.dup(1), os.dup(2)
+    try:
+        os.dup2(out.fileno(), 1)
+        os.dup2(err.fileno(), 2)
+        for k, v in environ.items():
+            if v is None:
+                os.environ.pop(k, None)
+            else:
+                os.environ[k] = v
+        columns = os.environ.get("COLUMNS", "")
+        for c in consoles:
+            c._width = int(columns) if columns.isdigit() else None
+        sys.stdin = io.TextIOWrapper(io.BytesIO(b""), encoding="utf-8")
+        sys.stdout = _unbuffered_text(1, "strict")
+        sys.stderr = _unbuffered_text(2, "backslashreplace")
+        sys.argv = ["bench", *argv]
+        if cwd is not None:
+            os.chdir(cwd)
+        terminal.set_verbosity(terminal.NORMAL)
+        with warnings.catch_warnings():
+            warnings.resetwarnings()
+            for action, category, module in reversed(_PROCESS_WARNING_FILTERS):
+                warnings.filterwarnings(action, category=category, module=module)
+            warnings._showwarnmsg_impl = _SHOW_WARNING  # type: ignore[attr-defined]
+            warnings.showwarning = warnings._showwarning_orig  # type: ignore[attr-defined]
+            yield out, err
+    finally:
+        sys.stdout.flush()
+        sys.stderr.flush()
+        sys.stdin, sys.stdout, sys.stderr = saved_streams
+        os.dup2(saved_fds[0], 1)
+        os.dup2(saved_fds[1], 2)
+        for fd in saved_fds:
+            os.close(fd)
+        sys.argv, sys.path[:] = saved_argv, saved_path
+        os.chdir(saved_cwd)
+        os.environ.clear()
+        os.environ.update(saved_env)
+        for c, w in zip(consoles, saved_widths, strict=True):
+            c._width = w
+        terminal.set_verbosity(saved_verbosity)
+
+
+def _unbuffered_text(fd: int, errors: str) -> io.TextIOWrapper:
+    """Text on descriptor ``fd``, every write passed straight through (a forked worker
+    inherits no unwritten buffer to write a second time)."""
+    raw = io.FileIO(fd, "w", closefd=False)
+    return io.TextIOWrapper(raw, encoding="utf-8", errors=errors, write_through=True)
+
+
+def assert_one_error_line(r: subprocess.CompletedProcess[str], *needles: str) -> str:
+    """``r`` failed as a user mistake should: exit 2, no traceback, stderr exactly one line
+    ``error: ...`` holding every one of ``needles``; the line."""
+    assert r.returncode == 2, (r.returncode, r.stdout, r.stderr)
+    assert "Traceback" not in r.stdout + r.stderr, r.stderr
+    lines = r.stderr.splitlines()
+    assert len(lines) == 1 and lines[0].strip(), r.stderr
+    assert lines[0].startswith("error: "), lines[0]
+    for n in needles:
+        assert n in lines[0], (n, lines[0])
+    return lines[0]
+
+
+def snapshot(folder: Path) -> dict[str, tuple[int, int]]:
+    """Every path under ``folder`` with its size and modification time [ns]."""
+    return {
+        str(p.relative_to(folder)): (p.stat().st_size, p.stat().st_mtime_ns)
+        for p in sorted(folder.rglob("*"))
+    }
