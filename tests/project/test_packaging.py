@@ -50,6 +50,7 @@ def test_a_plain_install_puts_nothing_generic_at_the_top(installed: Path):
     assert dist.startswith("posbench_harness-")
     pkg = installed / "posbench"
     for data in (
+        "py.typed",  # PEP 561: type checkers read posbench's own annotations
         "saved_run/schemas/results.schema.json",
         "predictors/tuned.json",
         "predictors/lstm/bundled/model.onnx",
