@@ -34,6 +34,7 @@ from posbench.scenarios.consistency_stats import fix_scatter, scatter_1d
 from posbench.scenarios.drive import Drive, GpsStream, TruthStream
 from posbench.scenarios.grid import gaussian_kernel, interp_gapped, smooth
 from posbench.scenarios.imu_frames import circular_offset
+from posbench.scenarios.time_axis import grid_size
 
 
 @dataclass(frozen=True)
@@ -170,10 +171,15 @@ def position_noise_m(
     )
 
 
-def _grid(t: np.ndarray, tol: Tolerances) -> np.ndarray | None:
+def _grid(t: np.ndarray, tol: Tolerances, source: str | None = None) -> np.ndarray | None:
+    """The reference grid [s] every 1 / :attr:`Tolerances.grid_hz` over the samples at
+    ``t`` [s] (None for fewer than 4 samples or 8 grid points); its size is checked before it
+    is allocated (:func:`~posbench.scenarios.time_axis.grid_size`: a DataError naming
+    ``source`` beyond :data:`~posbench.scenarios.time_axis.MAX_GRID_POINTS`)."""
     dt = 1.0 / tol.grid_hz
     if t.size < 4:
         return None
+    grid_size(float(t[0]), float(t[-1]), dt, source)
     grid = np.arange(t[0], t[-1] + dt / 2, dt)
     return grid if grid.size >= 8 else None
 
@@ -248,7 +254,7 @@ def gps_kinematics(drive: Drive, tol: Tolerances = TOLERANCES) -> Reference | No
     g: GpsStream = drive.gps
     if g.accuracy is not None:
         g = g.take(~(g.accuracy > tol.max_fix_accuracy_m))
-    grid = _grid(g.t, tol)
+    grid = _grid(g.t, tol, drive.meta.source)
     if grid is None:
         return None
     noise = position_noise_m(g.t, g.x, g.y, g.accuracy, tol)
@@ -266,7 +272,7 @@ def truth_kinematics(drive: Drive, tol: Tolerances = TOLERANCES) -> Reference | 
         return None
     if tr.accuracy is not None:
         tr = _take(tr, ~(tr.accuracy > tol.max_fix_accuracy_m))
-    grid = _grid(tr.t, tol)
+    grid = _grid(tr.t, tol, drive.meta.source)
     if grid is None:
         return None
     k = gaussian_kernel(tol.smooth_s, 1.0 / tol.grid_hz)

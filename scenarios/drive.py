@@ -18,6 +18,7 @@ from typing import Any
 import numpy as np
 
 from posbench.scenarios.errors import DataError
+from posbench.scenarios.time_axis import check_span
 
 
 def _f64(a: Any) -> np.ndarray:
@@ -190,7 +191,12 @@ class DriveMeta:
 
 @dataclass(frozen=True)
 class Drive:
-    """One recording: GPS (required), IMU, speed and truth streams, plus metadata."""
+    """One recording: GPS (required), IMU, speed and truth streams, plus metadata.
+
+    Its streams together span at most :data:`~posbench.scenarios.time_axis.MAX_SPAN_S`
+    (:func:`~posbench.scenarios.time_axis.check_span`, a :class:`DataError` otherwise), which
+    bounds every array sized by a drive's span.
+    """
 
     meta: DriveMeta
     gps: GpsStream
@@ -201,6 +207,8 @@ class Drive:
     def __post_init__(self) -> None:
         if len(self.gps) == 0 and self.truth is None:
             raise DataError(self.meta.source, "drive has no GPS fixes")
+        streams = {"gps": self.gps, "imu": self.imu, "speed": self.speed, "truth": self.truth}
+        check_span({k: s.t for k, s in streams.items() if s is not None}, self.meta.source)
 
     @property
     def name(self) -> str:

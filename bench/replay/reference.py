@@ -6,7 +6,8 @@
 - Drives without truth (the paper's routes): the paper's convention, a cubic
   fitted through the surrounding real fixes (``n_side`` before and after the query,
   past and future); NaN where there are fewer than 2 fixes within ``max_gap_s``
-  on either side.
+  on either side. Solved in blocks of :data:`CUBIC_BLOCK` queries: memory is bounded
+  whatever the number of queries (which grows with the drive's span).
 """
 
 from __future__ import annotations
@@ -50,6 +51,11 @@ def truth_at(
     return out
 
 
+#: queries [-] :func:`cubic_through_fixes` solves at once: its batched arrays take about 1 kB
+#: a query (``n_side`` = 4), so a block of 2^16 takes ~70 MB however many queries there are
+CUBIC_BLOCK = 1 << 16
+
+
 def cubic_through_fixes(
     t_fix: np.ndarray,
     x: np.ndarray,
@@ -60,12 +66,29 @@ def cubic_through_fixes(
 ) -> np.ndarray:
     """(N, 2) positions [m] at tq from a least-squares cubic through the ``n_side`` fixes
     before and ``n_side`` after each query time (vectorised: batched normal equations
-    on times centred at the query and scaled to seconds)."""
+    on times centred at the query and scaled to seconds), in blocks of
+    :data:`CUBIC_BLOCK` queries so that memory does not grow with N."""
     tq = np.asarray(tq, dtype=float)
+    out = np.full((tq.size, 2), np.nan)
+    if t_fix.size < 2 * n_side:
+        return out
+    for start in range(0, tq.size, CUBIC_BLOCK):
+        block = slice(start, start + CUBIC_BLOCK)
+        out[block] = _cubic_block(t_fix, x, y, tq[block], n_side, max_gap_s)
+    return out
+
+
+def _cubic_block(
+    t_fix: np.ndarray,
+    x: np.ndarray,
+    y: np.ndarray,
+    tq: np.ndarray,
+    n_side: int,
+    max_gap_s: float,
+) -> np.ndarray:
+    """:func:`cubic_through_fixes` of one block of queries (at least 2 ``n_side`` fixes)."""
     n = t_fix.size
     out = np.full((tq.size, 2), np.nan)
-    if n < 2 * n_side:
-        return out
     right = np.searchsorted(t_fix, tq, side="right")  # first fix strictly after tq
     start = np.clip(right - n_side, 0, n - 2 * n_side)
     idx = start[:, None] + np.arange(2 * n_side)[None, :]

@@ -57,6 +57,7 @@ import numpy as np
 from posbench.scenarios.drive import Drive, DriveMeta, GpsStream, ImuStream
 from posbench.scenarios.errors import DataError
 from posbench.scenarios.safe_pickle import safe_load
+from posbench.scenarios.time_axis import check_stream_times
 
 #: |a| [m/s^2] above which an ACCEL sample is a glitch (3 g; real samples < 15 m/s^2).
 ACCEL_GLITCH_MPS2 = 30.0
@@ -142,6 +143,7 @@ def _fix_rows(windows: list[tuple[Any, dict]], path: Path) -> tuple[np.ndarray, 
                 f"window {k!r}: ground_truth has shape {p.shape}, "
                 f"expected ({t.size}, 2) to match tstamps",
             )
+        _refuse_nonfinite(p, path, k, "ground_truth")
         ts.append(t)
         ps.append(p)
     return np.concatenate(ts), np.concatenate(ps)
@@ -152,16 +154,50 @@ def _accel_rows(windows: list[tuple[Any, dict]], path: Path) -> tuple[np.ndarray
     ts: list[int] = []
     vals: list[tuple[float, float]] = []
     for k, w in windows:
+        rows: list[tuple[float, float]] = []
         for i, row in enumerate(w["ACCEL"]):
             try:
                 t_s, ax, ay = row
                 ts.append(int(t_s))
-                vals.append((float(ax), float(ay)))
+                rows.append((float(ax), float(ay)))
             except (TypeError, ValueError):
                 raise DataError(
                     path, f"window {k!r}: ACCEL row {i} is not (t_ns, ax, ay): {row!r}"
                 ) from None
+        _refuse_nonfinite(np.asarray(rows, dtype=float).reshape(-1, 2), path, k, "ACCEL (ax, ay)")
+        vals.extend(rows)
     return np.asarray(ts, dtype=np.int64), np.asarray(vals, dtype=float).reshape(-1, 2)
+
+
+def _refuse_nonfinite(values: np.ndarray, path: Path, window: Any, what: str) -> None:
+    """Refuse the first row of ``values`` (one window's ``what``) holding a NaN or infinity,
+    naming the window and the row."""
+    bad = ~np.all(np.isfinite(values.reshape(len(values), -1)), axis=1)
+    if np.any(bad):
+        i = int(np.flatnonzero(bad)[0])
+        shown = ", ".join(repr(float(a)) for a in values[i].reshape(-1))
+        raise DataError(path, f"window {window!r}: {what} row {i} is not finite ({shown})")
+
+
+def _checked(
+    t_ns: np.ndarray, t0: int, windows: list[tuple[Any, dict]], kind: str, path: Path
+) -> np.ndarray:
+    """Times [s from ``t0``, ns] of a stream, checked
+    (:func:`~posbench.scenarios.time_axis.check_stream_times`, naming the first window that
+    holds a sample's stamp)."""
+    key = "tstamps" if kind == "gps" else "ACCEL"
+
+    def where(i: int) -> str:
+        stamp = int(t_ns[i])
+        for k, w in windows:
+            stamps = w[key] if kind == "gps" else [r[0] for r in w[key]]
+            if any(int(v) == stamp for v in stamps):
+                return f"window {k!r} ({key} stamp {stamp} ns)"
+        return f"stamp {stamp} ns"  # pragma: no cover - every stamp comes from a window
+
+    t = (t_ns - t0) * 1e-9
+    check_stream_times(t, kind, path, where)
+    return t
 
 
 def union_by_stamp(
@@ -225,6 +261,11 @@ def load_aslan_pickle(path: Path) -> Drive:
     ``projection = "source"``. IMU: ax, ay [m/s^2, vehicle frame x fwd, y left],
     ``yaw`` [rad, route frame, 0 = +x, CCW] = the latest window's ``theta``
     (a GPS course, see the module notes). No speed, no truth.
+
+    Raises:
+        DataError: not a route pickle; a NaN or infinite fix position, ACCEL value or
+            ``theta`` (naming the window and row); times that fail
+            :func:`~posbench.scenarios.time_axis.check_stream_times` (unit, gaps).
     """
     path = Path(path)
     warnings: list[str] = []
@@ -233,10 +274,6 @@ def load_aslan_pickle(path: Path) -> Drive:
     # fixes
     ft, fp = _fix_rows(windows, path)
     ft, fp = union_by_stamp(ft, fp, "gps", warnings)
-    bad = ~np.all(np.isfinite(fp), axis=1)
-    if np.any(bad):
-        warnings.append(f"gps: dropped {int(bad.sum())} fixes with non-finite positions")
-        ft, fp = ft[~bad], fp[~bad]
     ft, fp = drop_bursts(ft, fp, "gps", warnings)
     if ft.size == 0:
         raise DataError(path, "no GPS fixes in any window")
@@ -249,10 +286,6 @@ def load_aslan_pickle(path: Path) -> Drive:
     # IMU
     at, av = _accel_rows(windows, path)
     at, av = union_by_stamp(at, av, "imu", warnings)
-    av_ok = np.all(np.isfinite(av), axis=1)
-    if not np.all(av_ok):
-        warnings.append(f"imu: dropped {int((~av_ok).sum())} samples with non-finite acceleration")
-        at, av = at[av_ok], av[av_ok]
     at, av = drop_bursts(at, av, "imu", warnings)
     glitch = np.hypot(av[:, 0], av[:, 1]) > ACCEL_GLITCH_MPS2
     if np.any(glitch):
@@ -267,10 +300,12 @@ def load_aslan_pickle(path: Path) -> Drive:
         [int(w["tstamps"][-1]) for _, w in windows if len(w["tstamps"])], dtype=np.int64
     )
     th = np.asarray([float(w["theta"]) for _, w in windows if len(w["tstamps"])], dtype=float)
+    keys = [k for k, w in windows if len(w["tstamps"])]
+    if not np.all(np.isfinite(th)):
+        i = int(np.flatnonzero(~np.isfinite(th))[0])
+        raise DataError(path, f"window {keys[i]!r}: theta is not finite ({float(th[i])!r})")
     th_t, th2 = union_by_stamp(th_t, th[:, None], "yaw", warnings)
     th = th2[:, 0]
-    ok = np.isfinite(th)
-    th_t, th = th_t[ok], th[ok]
 
     t0 = int(min(ft[0], at[0])) if at.size else int(ft[0])
     n_xy = sum(len(w.get("X", ())) for _, w in windows)
@@ -289,10 +324,11 @@ def load_aslan_pickle(path: Path) -> Drive:
             "held from each window's last fix",
         },
     )
-    gps = GpsStream((ft - t0) * 1e-9, fp[:, 0], fp[:, 1])
+    gps = GpsStream(_checked(ft, t0, windows, "gps", path), fp[:, 0], fp[:, 1])
     imu = None
     if at.size:
-        imu = ImuStream((at - t0) * 1e-9, av[:, 0], av[:, 1], yaw=held_yaw(th_t, th, at))
+        t_imu = _checked(at, t0, windows, "imu", path)
+        imu = ImuStream(t_imu, av[:, 0], av[:, 1], yaw=held_yaw(th_t, th, at))
     return Drive(meta=meta, gps=gps, imu=imu)
 
 

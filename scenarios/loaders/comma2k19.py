@@ -36,6 +36,11 @@ Streams built (t = 0 is the earliest sample of any stream used):
   to a median of 0.9 deg; the body y axis points right, z down. v = |frame_velocities|.
   With ``projection="mercator"`` the truth goes ECEF -> lat/lon (pymap3d) -> mercator
   so both streams share one frame.
+
+Refused (:class:`DataError` naming the array file and its row, 0-based): a NaN or infinite
+value in a column a stream uses (lat, lon; accelerometer forward and right; gyro down; CAN
+speed; global_pose positions, orientations, velocities), and times that fail
+:func:`~posbench.scenarios.time_axis.check_stream_times` (unit, gaps).
 """
 
 from __future__ import annotations
@@ -44,7 +49,7 @@ from pathlib import Path
 
 import numpy as np
 
-from posbench.scenarios.cleaning import clean_times, drop_nonfinite
+from posbench.scenarios.cleaning import clean_index, take
 from posbench.scenarios.drive import (
     Drive,
     DriveMeta,
@@ -55,6 +60,7 @@ from posbench.scenarios.drive import (
 )
 from posbench.scenarios.errors import DataError
 from posbench.scenarios.projection import ecef_to_local, to_local, validate_latlon
+from posbench.scenarios.time_axis import check_stream_times
 
 GNSS_LAG_S = 0.1
 GPS_UNIX_OFFSET_S = 315964800.0  # 1980-01-06 in Unix time
@@ -82,6 +88,32 @@ def _series(folder: Path, ncols: int) -> tuple[np.ndarray, np.ndarray]:
     if v.shape[0] != t.size:
         raise DataError(folder / "value", f"{v.shape[0]} rows but t has {t.size}")
     return t, v
+
+
+def _refuse_nonfinite(values: np.ndarray, path: Path, names: tuple[str, ...]) -> None:
+    """Refuse the first row of ``values`` (columns ``names``) holding a NaN or infinity,
+    naming the array file, the row (0-based) and the column."""
+    bad = ~np.all(np.isfinite(values), axis=1)
+    if not np.any(bad):
+        return
+    i = int(np.flatnonzero(bad)[0])
+    j = int(np.flatnonzero(~np.isfinite(values[i]))[0])
+    raise DataError(
+        path,
+        f"row {i}, {names[j]}: non-finite value {float(values[i, j])!r}; "
+        f"{int(bad.sum())} such row{'s' * (int(bad.sum()) != 1)} in all",
+    )
+
+
+def _checked(
+    t: np.ndarray, folder: Path, kind: str, what: str, warnings: list[str], name: str = "t"
+) -> tuple[np.ndarray, np.ndarray]:
+    """The times [s] in ``folder / name`` cleaned (:func:`clean_index`) and checked
+    (:func:`~posbench.scenarios.time_axis.check_stream_times`, naming rows of that file), and
+    the kept rows' indices."""
+    t, kept = clean_index(t, what, warnings)
+    check_stream_times(t, kind, folder / name, lambda i: f"row {int(kept[i])}")
+    return t, kept
 
 
 def quat_to_rotmat(q: np.ndarray) -> np.ndarray:
@@ -153,13 +185,11 @@ def load_comma_segment(
     log = path / "processed_log"
     gnss_dir = log / "GNSS" / "live_gnss_ublox"
     t_g, g = _series(gnss_dir, 6)
-    t_g, gc = clean_times(
-        t_g, {"lat": g[:, 0], "lon": g[:, 1], "utc_ms": g[:, 3]}, "gnss", warnings
-    )
-    t_g, gc = drop_nonfinite(t_g, gc, ("lat", "lon"), "gnss", warnings)
+    _refuse_nonfinite(g[:, :2], gnss_dir / "value", ("lat", "lon"))
+    t_g, kept = _checked(t_g, gnss_dir, "gps", "gnss", warnings)
     if t_g.size == 0:
         raise DataError(gnss_dir, "no GNSS fixes")
-    lat, lon = gc["lat"], gc["lon"]
+    lat, lon = take(g[:, 0], kept), take(g[:, 1], kept)
     validate_latlon(lat, lon, str(gnss_dir / "value"))
     lat0, lon0 = float(lat[0]), float(lon[0])
     t_g = t_g - gnss_lag_s
@@ -167,8 +197,12 @@ def load_comma_segment(
     imu_dir = log / "IMU"
     t_a, acc = _series(imu_dir / "accelerometer", 3)
     t_w, gyr = _series(imu_dir / "gyro", 3)
-    t_a, ac = clean_times(t_a, {"f": acc[:, 0], "r": acc[:, 1]}, "imu accelerometer", warnings)
-    t_w, wc = clean_times(t_w, {"d": gyr[:, 2]}, "imu gyro", warnings)
+    _refuse_nonfinite(acc[:, :2], imu_dir / "accelerometer" / "value", ("forward", "right"))
+    _refuse_nonfinite(gyr[:, 2:3], imu_dir / "gyro" / "value", ("down",))
+    t_a, kept = _checked(t_a, imu_dir / "accelerometer", "imu", "imu accelerometer", warnings)
+    ac = {"f": take(acc[:, 0], kept), "r": take(acc[:, 1], kept)}
+    t_w, kept = _checked(t_w, imu_dir / "gyro", "imu", "imu gyro", warnings)
+    wc = {"d": take(gyr[:, 2], kept)}
     if t_w.size and not (t_w.size == t_a.size and np.array_equal(t_w, t_a)):
         warnings.append("imu: gyro interpolated linearly to the accelerometer times")
     yaw_rate = (
@@ -179,23 +213,24 @@ def load_comma_segment(
     ax, ay = ac["f"], -ac["r"]
 
     t_s, sp = _series(log / "CAN" / "speed", 1)
-    t_s, sc = clean_times(t_s, {"v": sp[:, 0]}, "can speed", warnings)
-    t_s, sc = drop_nonfinite(t_s, sc, ("v",), "can speed", warnings)
+    _refuse_nonfinite(sp[:, :1], log / "CAN" / "speed" / "value", ("speed",))
+    t_s, kept = _checked(t_s, log / "CAN" / "speed", "speed", "can speed", warnings)
+    sc = {"v": take(sp[:, 0], kept)}
 
     pose = path / "global_pose"
     t_p = _load(pose / "frame_times", (1,))
     pos = _load(pose / "frame_positions", (2,), 3)
     quat = _load(pose / "frame_orientations", (2,), 4)
     vel = _load(pose / "frame_velocities", (2,), 3)
-    for arr, nm in (
-        (pos, "frame_positions"),
-        (quat, "frame_orientations"),
-        (vel, "frame_velocities"),
+    for arr, nm, used in (
+        (pos, "frame_positions", ("x", "y", "z")),
+        (quat, "frame_orientations", ("w", "x", "y", "z")),
+        (vel, "frame_velocities", ("x", "y", "z")),
     ):
         if arr.shape[0] != t_p.size:
             raise DataError(pose / nm, f"{arr.shape[0]} rows but frame_times has {t_p.size}")
-    t_p, pc = clean_times(t_p, {"i": np.arange(t_p.size, dtype=float)}, "global_pose", warnings)
-    idx = pc["i"].astype(int)
+        _refuse_nonfinite(arr[:, : len(used)], pose / nm, used)
+    t_p, idx = _checked(t_p, pose, "truth", "global_pose", warnings, "frame_times")
     pos, quat, vel = pos[idx], quat[idx], vel[idx]
     if projection == "enu":
         xt, yt = ecef_to_local(pos, lat0, lon0)

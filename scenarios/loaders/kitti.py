@@ -46,7 +46,7 @@ from pathlib import Path
 
 import numpy as np
 
-from posbench.scenarios.cleaning import clean_times
+from posbench.scenarios.cleaning import clean_index, take
 from posbench.scenarios.drive import (
     FIXES_FROM_TRUTH,
     Drive,
@@ -58,6 +58,7 @@ from posbench.scenarios.drive import (
 )
 from posbench.scenarios.errors import DataError
 from posbench.scenarios.projection import to_local, validate_latlon
+from posbench.scenarios.time_axis import check_stream_times
 
 #: KITTI's documented column order (used when dataformat.txt is missing).
 OXTS_COLUMNS = (
@@ -250,6 +251,24 @@ def _parse_one(path: Path, txt: str, ncol: int) -> np.ndarray:
     return np.array(fields, dtype=float)
 
 
+def _refuse_nonfinite(
+    data: np.ndarray, present: np.ndarray, ci: dict[str, int], data_dir: Path
+) -> None:
+    """Refuse the first present sample with a NaN or infinite value in a column the streams
+    use (:data:`_NEEDED`), naming its data file and column."""
+    cols = [ci[c] for c in _NEEDED]
+    bad = present & ~np.all(np.isfinite(data[:, cols]), axis=1)
+    if not np.any(bad):
+        return
+    i = int(np.flatnonzero(bad)[0])
+    j = next(c for c in cols if not np.isfinite(data[i, c]))
+    raise DataError(
+        data_dir / f"{i:010d}.txt",
+        f"column {j + 1} ({OXTS_COLUMNS[j]}): non-finite value {float(data[i, j])!r}; "
+        f"{int(bad.sum())} such sample{'s' * (int(bad.sum()) != 1)} in all",
+    )
+
+
 def _count_time_irregularity(t: np.ndarray) -> tuple[int, int, float]:
     """(gaps, jittered intervals, median interval [s]) of sorted times."""
     if t.size < 3:
@@ -270,7 +289,10 @@ def load_kitti_drive(path: Path, projection: str = "enu") -> Drive:
     Returns:
         Drive with gps, imu, speed and truth streams (t [s] from the first sample).
     Raises:
-        DataError: missing timestamps / data, unparsable lines, invalid lat/lon.
+        DataError: missing timestamps / data, unparsable lines, invalid lat/lon, a NaN or
+            infinite value in a column the streams use (naming the data file), times that
+            fail :func:`~posbench.scenarios.time_axis.check_stream_times` (naming the line
+            of timestamps.txt).
     """
     path = Path(path)
     oxts = _oxts_dir(path)
@@ -295,15 +317,18 @@ def load_kitti_drive(path: Path, projection: str = "enu") -> Drive:
     if np.any(bad):
         i = int(np.flatnonzero(bad)[0])
         validate_latlon(lat_all, lon_all, str(oxts / "data" / f"{i:010d}.txt"), what="oxts sample")
+    _refuse_nonfinite(data, present, ci, oxts / "data")
+    lines = np.flatnonzero(present)  # each kept sample's line in timestamps.txt, 0-based
     t_abs = t_abs[present]
     data = data[present]
 
-    columns = {c: data[:, ci[c]] for c in _NEEDED}
-    t_abs, columns = clean_times(t_abs, columns, "kitti oxts", warnings)
+    t_abs, idx = clean_index(t_abs, "kitti oxts", warnings)
+    columns = {c: take(data[:, ci[c]], idx) for c in _NEEDED}
     if t_abs.size == 0:
         raise DataError(ts_path, "no samples with a valid time stamp")
     epoch = float(t_abs[0])
     t = t_abs - epoch
+    check_stream_times(t, "gps", ts_path, lambda k: f"line {int(lines[idx[k]]) + 1}")
     gaps, jitter, med_dt = _count_time_irregularity(t)
     if gaps:
         warnings.append(

@@ -7,6 +7,13 @@ the header stamp where non-zero, the receive (log) time otherwise.
 Units: positions [m] in the message's own frame (``header.frame_id``), lat/lon [deg],
 yaw [rad] about z (ENU convention: 0 = x axis / east, counter-clockwise), speeds [m/s],
 accuracies as per-axis 1-sigma [m].
+
+Non-finite values (:func:`refuse_nonfinite`): a NaN or infinite position, orientation,
+acceleration, rate or twist in a message is refused (:class:`DataError` naming the bag, the
+topic and the message's index on it, 0-based), as the table loader refuses such a cell with
+its line; only a field the message marks absent (REP 145: covariance[0] = -1; a zero
+quaternion) is not read. A covariance may be NaN ("not stated", as an empty accuracy cell),
+never infinite.
 """
 
 from __future__ import annotations
@@ -51,6 +58,43 @@ def quat_yaw(w: np.ndarray, x: np.ndarray, y: np.ndarray, z: np.ndarray) -> np.n
     return np.where(norm > 1e-12, yaw, np.nan)
 
 
+def refuse_nonfinite(
+    values: np.ndarray,
+    topic: str,
+    path: Path,
+    field: str,
+    present: np.ndarray | None = None,
+    index: np.ndarray | None = None,
+    allow_nan: bool = False,
+) -> None:
+    """Refuse the first message whose ``field`` is not finite, naming the topic and message.
+
+    Args:
+        values: (N,) or (N, k): the field of each message.
+        present: (N,) where the message carries the field (None: all).
+        index: (N,) each row's index among the topic's messages (None: the row number).
+        allow_nan: NaN means "not stated" (a covariance); only infinities are refused.
+    Raises:
+        DataError: ``topic /imu message 7: non-finite linear_acceleration (nan, 0.1, 9.8);
+            1 such message in all``.
+    """
+    v = np.asarray(values, dtype=float).reshape(len(values), -1)
+    bad = np.isinf(v) if allow_nan else ~np.isfinite(v)
+    rows = np.any(bad, axis=1)
+    if present is not None:
+        rows &= present
+    if not np.any(rows):
+        return
+    j = int(np.flatnonzero(rows)[0])
+    k = j if index is None else int(index[j])
+    shown = ", ".join(repr(float(a)) for a in v[j])
+    raise DataError(
+        path,
+        f"topic {topic} message {k}: non-finite {field} ({shown}); "
+        f"{int(rows.sum())} such message{'s' * (int(rows.sum()) != 1)} in all",
+    )
+
+
 def stamp_ns(msg: Any) -> int:
     """A message's header stamp [ns]."""
     st = msg.header.stamp
@@ -84,7 +128,8 @@ def navsat_fields(
     (ENU, m^2) of ``position_covariance``, NaN where its type is UNKNOWN (0).
 
     Raises:
-        DataError: no valid fix, or an invalid lat/lon (naming the bag, topic and message).
+        DataError: no valid fix, an invalid lat/lon or an infinite covariance (naming the
+            bag, topic and message).
     """
     keep = [i for i, (_, m) in enumerate(items) if int(m.status.status) >= 0]
     skipped = len(items) - len(keep)
@@ -106,9 +151,6 @@ def navsat_fields(
         [np.asarray(m.position_covariance, dtype=float)[:5] for m in ms], dtype=float
     ).reshape(len(ms), -1)
     known = np.asarray([int(m.position_covariance_type) > 0 for m in ms]) & (cov.shape[1] >= 5)
-    acc = np.full(len(ms), math.nan)
-    if cov.shape[1] >= 5:
-        acc[known] = np.sqrt(np.clip(0.5 * (cov[known, 0] + cov[known, 4]), 0.0, None))
     bad = ~np.isfinite(lat_a) | ~np.isfinite(lon_a) | (np.abs(lat_a) > 90) | (np.abs(lon_a) > 180)
     if np.any(bad):
         j = int(np.flatnonzero(bad)[0])
@@ -117,28 +159,48 @@ def navsat_fields(
             f"topic {topic} message {keep[j]}: invalid lat/lon "
             f"({float(lat_a[j])!r}, {float(lon_a[j])!r}); {int(bad.sum())} invalid in all",
         )
+    acc = np.full(len(ms), math.nan)
+    if cov.shape[1] >= 5:
+        refuse_nonfinite(
+            cov[:, [0, 4]], topic, path, "position_covariance", known, np.asarray(keep), True
+        )
+        acc[known] = np.sqrt(np.clip(0.5 * (cov[known, 0] + cov[known, 4]), 0.0, None))
     t, src = times([stamp_ns(m) for m in ms], [items[i][0] for i in keep])
-    return {"t": t, "lat": lat_a, "lon": lon_a, "acc": acc, "src": src}
+    return {"t": t, "lat": lat_a, "lon": lon_a, "acc": acc, "src": src, "index": np.asarray(keep)}
+
+
+def twist_xy(m: Any) -> tuple[float, float]:
+    """(linear.x, linear.y) [m/s] of a message's twist (TwistStamped,
+    TwistWithCovarianceStamped or Odometry, whose twist is in ``child_frame_id``)."""
+    lin = m.twist.twist.linear if hasattr(m.twist, "twist") else m.twist.linear
+    return float(lin.x), float(lin.y)
 
 
 def twist_v(m: Any) -> float:
-    """Horizontal speed [m/s] |(linear.x, linear.y)| of a message's twist (TwistStamped,
-    TwistWithCovarianceStamped or Odometry, whose twist is in ``child_frame_id``)."""
-    lin = m.twist.twist.linear if hasattr(m.twist, "twist") else m.twist.linear
-    return math.hypot(float(lin.x), float(lin.y))
+    """Horizontal speed [m/s] |(linear.x, linear.y)| of a message's twist (:func:`twist_xy`)."""
+    return math.hypot(*twist_xy(m))
 
 
-def speed_fields(items: list) -> dict[str, Any]:
-    """A twist topic as speed: t [ns] and v [m/s] (:func:`twist_v`)."""
+def _speeds(items: list, topic: str, path: Path) -> np.ndarray:
+    """|(linear.x, linear.y)| [m/s] of each message's twist; non-finite ones refused."""
+    lin = np.asarray([twist_xy(m) for _, m in items], dtype=float).reshape(-1, 2)
+    refuse_nonfinite(lin, topic, path, "twist linear (x, y)")
+    return np.hypot(lin[:, 0], lin[:, 1])
+
+
+def speed_fields(items: list, topic: str, path: Path) -> dict[str, Any]:
+    """A twist topic as speed: t [ns] and v [m/s] (:func:`twist_v`); a non-finite twist is
+    refused (:func:`refuse_nonfinite`)."""
     t, src = item_times(items)
-    return {"t": t, "v": np.asarray([twist_v(m) for _, m in items], dtype=float), "src": src}
+    return {"t": t, "v": _speeds(items, topic, path), "src": src}
 
 
-def pose_fields(items: list, msgtype: str) -> dict[str, Any]:
+def pose_fields(items: list, msgtype: str, topic: str, path: Path) -> dict[str, Any]:
     """A pose topic (PoseStamped, PoseWithCovarianceStamped or Odometry) in its own frame:
     t [ns], x, y [m], yaw [rad, about the frame's z], v [m/s] (Odometry's twist, else None),
     acc [m] (per-axis 1-sigma ``sqrt(mean(cov[0], cov[7]))`` of the pose covariance where
-    stated, i.e. any positive, else None) and the frame ids."""
+    stated, i.e. any positive, else None) and the frame ids. A non-finite position,
+    orientation or twist, or an infinite covariance, is refused (:func:`refuse_nonfinite`)."""
     t, src = item_times(items)
     poses = [m.pose if msgtype == POSE_STAMPED else m.pose.pose for _, m in items]
     pos = np.asarray([(p.position.x, p.position.y) for p in poses], dtype=float).reshape(-1, 2)
@@ -146,14 +208,17 @@ def pose_fields(items: list, msgtype: str) -> dict[str, Any]:
         [(p.orientation.w, p.orientation.x, p.orientation.y, p.orientation.z) for p in poses],
         dtype=float,
     ).reshape(-1, 4)
+    refuse_nonfinite(pos, topic, path, "position (x, y)")
+    refuse_nonfinite(q, topic, path, "orientation (w, x, y, z)")
     acc = None
     if msgtype != POSE_STAMPED:
         cov = np.asarray(
             [(m.pose.covariance[0], m.pose.covariance[7]) for _, m in items], dtype=float
         ).reshape(-1, 2)
+        refuse_nonfinite(cov, topic, path, "pose covariance", allow_nan=True)
         if np.any(cov > 0):
             acc = np.sqrt(np.clip(cov.mean(axis=1), 0.0, None))
-    v = np.asarray([twist_v(m) for _, m in items], dtype=float) if msgtype in TWIST_TYPES else None
+    v = _speeds(items, topic, path) if msgtype in TWIST_TYPES else None
     yaw = quat_yaw(*q.T)
     return {
         "t": t,

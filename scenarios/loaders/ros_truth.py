@@ -42,7 +42,7 @@ def truth_fields(
         out["frames"] = sorted({str(m.header.frame_id) for _, m in items})
         out["kind"] = "navsat"
         return out
-    out = pose_fields(items, msgtype)
+    out = pose_fields(items, msgtype, topic, path)
     out["kind"] = "pose"
     return out
 

@@ -48,7 +48,7 @@ from typing import Any
 
 import numpy as np
 
-from posbench.scenarios.cleaning import clean_index, clean_times, take
+from posbench.scenarios.cleaning import clean_index, take
 from posbench.scenarios.drive import (
     FIXES_FROM_TRUTH,
     FIXES_RECEIVER,
@@ -71,6 +71,7 @@ from posbench.scenarios.loaders.ros_msgs import (
     navsat_fields,
     normalize_msgtype,
     quat_yaw,
+    refuse_nonfinite,
     short_type,
     speed_fields,
     stamp_ns,
@@ -86,6 +87,7 @@ from posbench.scenarios.loaders.ros_topics import (
 )
 from posbench.scenarios.loaders.ros_truth import truth_fields, truth_stream
 from posbench.scenarios.projection import PROJECTIONS, to_local
+from posbench.scenarios.time_axis import check_span, check_stream_times
 
 __all__ = [
     "FALLBACK_TYPES",
@@ -182,25 +184,32 @@ def _read_tf(
     return edges
 
 
-def _imu(items: list) -> dict[str, Any]:
+def _imu(items: list, topic: str, path: Path) -> dict[str, Any]:
     """Raw IMU fields in the sensor frame: f (N, 3) [m/s^2], w (N, 3) [rad/s], q (N, 4) w x y z
-    (NaN rows where REP 145's covariance[0] == -1 marks the field absent, or a zero quaternion)."""
+    (NaN rows where REP 145's covariance[0] == -1 marks the field absent, or a zero quaternion).
+    A field a message carries that is not finite is refused, naming the message
+    (:func:`~posbench.scenarios.loaders.ros_msgs.refuse_nonfinite`)."""
     stamps, recv = [], []
     n = len(items)
     f, w, q = np.full((n, 3), np.nan), np.full((n, 3), np.nan), np.full((n, 4), np.nan)
+    has_f, has_w, has_q = (np.zeros(n, dtype=bool) for _ in range(3))
     for i, (t_ns, m) in enumerate(items):
         stamps.append(stamp_ns(m))
         recv.append(t_ns)
         if float(m.linear_acceleration_covariance[0]) != -1.0:
             a = m.linear_acceleration
-            f[i] = (a.x, a.y, a.z)
+            f[i], has_f[i] = (a.x, a.y, a.z), True
         if float(m.orientation_covariance[0]) != -1.0:
             o = m.orientation
-            q[i] = (o.w, o.x, o.y, o.z)
+            q[i], has_q[i] = (o.w, o.x, o.y, o.z), True
         if float(m.angular_velocity_covariance[0]) != -1.0:
             g = m.angular_velocity
-            w[i] = (g.x, g.y, g.z)
-    q[np.sum(q * q, axis=1) < 1e-12] = np.nan
+            w[i], has_w[i] = (g.x, g.y, g.z), True
+    zero_q = np.sum(q * q, axis=1) < 1e-12  # a zero quaternion: no orientation
+    q[zero_q] = np.nan
+    refuse_nonfinite(f, topic, path, "linear_acceleration", has_f)
+    refuse_nonfinite(w, topic, path, "angular_velocity", has_w)
+    refuse_nonfinite(q, topic, path, "orientation (w, x, y, z)", has_q & ~zero_q)
     t, src = times(stamps, recv)
     frames = sorted({str(m.header.frame_id) for _, m in items})
     return {
@@ -317,6 +326,26 @@ def _no_truth_notes(
         )
 
 
+def _checked_times(
+    t: np.ndarray,
+    index: np.ndarray | None,
+    role: str,
+    topic: str,
+    path: Path,
+    warnings: list[str],
+) -> tuple[np.ndarray, np.ndarray]:
+    """A stream's times [s] cleaned (:func:`clean_index`) and checked
+    (:func:`~posbench.scenarios.time_axis.check_stream_times`, naming the topic and message:
+    ``index`` maps its samples to their messages on the topic, None where they are the same),
+    and the kept samples' indices."""
+    t, idx = clean_index(t, role, warnings)
+    msg = idx if index is None else index[idx]
+    check_stream_times(
+        t, role, path, lambda i: f"topic {topic} message {int(msg[i])}", f"topic {topic} stamps"
+    )
+    return t, idx
+
+
 def _assemble(
     path: Path,
     fmt: str,
@@ -338,9 +367,9 @@ def _assemble(
     sources["gps"] = g["src"]
     streams: dict[str, dict[str, Any]] = {"gps": g}
     if chosen["imu"] is not None and items["imu"]:
-        streams["imu"] = _imu(items["imu"])
+        streams["imu"] = _imu(items["imu"], str(chosen["imu"]), path)
     if chosen["speed"] is not None and items["speed"]:
-        streams["speed"] = speed_fields(items["speed"])
+        streams["speed"] = speed_fields(items["speed"], str(chosen["speed"]), path)
     truth_topic = chosen["truth"]
     if truth_topic is not None and items["truth"]:
         ttype = topic_types[truth_topic]
@@ -364,7 +393,23 @@ def _assemble(
     def rel(s: dict[str, Any]) -> np.ndarray:
         return (s["t"] - t0) * 1e-9
 
-    t, c = clean_times(rel(g), {"lat": g["lat"], "lon": g["lon"], "acc": g["acc"]}, "gps", warnings)
+    # every stream's times cleaned and checked before anything is built on them
+    cleaned: dict[str, tuple[np.ndarray, np.ndarray]] = {
+        role: _checked_times(
+            rel(s := streams[role]), s.get("index"), role, str(chosen[role]), path, warnings
+        )
+        for role in ("gps", "speed", "imu")
+        if role in streams
+    }
+    if "truth" in streams:  # cleaned with its fields in truth_stream: only checked here
+        tr = streams["truth"]
+        cleaned["truth"] = _checked_times(
+            rel(tr), tr.get("index"), "truth", str(truth_topic), path, []
+        )
+    check_span({role: t for role, (t, _) in cleaned.items()}, path)
+
+    t, idx = cleaned["gps"]
+    c = {k: take(g[k], idx) for k in ("lat", "lon", "acc")}
     lat0, lon0 = float(c["lat"][0]), float(c["lon"][0])
     x, y = to_local(c["lat"], c["lon"], lat0, lon0, projection)
     acc = c["acc"] if np.any(np.isfinite(c["acc"])) else None
@@ -372,12 +417,11 @@ def _assemble(
 
     imu = speed = truth = None
     if "speed" in streams:
-        s = streams["speed"]
-        t, c = clean_times(rel(s), {"v": s["v"]}, "speed", warnings)
-        speed = SpeedStream(t, c["v"])
+        t, idx = cleaned["speed"]
+        speed = SpeedStream(t, take(streams["speed"]["v"], idx))
     if "imu" in streams:
         s = streams["imu"]
-        t, idx = clean_index(rel(s), "imu", warnings)
+        t, idx = cleaned["imu"]
         if len(s["frames"]) > 1:
             warnings.append(
                 f"imu: several frame ids {', '.join(s['frames'])}: the mount of "

@@ -41,9 +41,17 @@ stamps dropped, with a warning (:func:`posbench.scenarios.cleaning.clean_index`)
 lines are dropped with a warning. Unknown columns are ignored with a warning.
 
 Errors (:class:`DataError`, naming the file): empty file, missing required columns,
-unknown ``stream`` values, non-numeric or missing required cells, truncated /
-malformed CSV. Rows are named by CSV line number (header = line 1) or, for
-Parquet, by 1-based data row.
+unknown ``stream`` values, non-numeric or missing required cells, an infinite cell in any
+column, truncated / malformed CSV. Rows are named by CSV line number (header = line 1) or,
+for Parquet, by 1-based data row.
+
+Time axis (:mod:`posbench.scenarios.time_axis`, after sorting): a stream whose median step
+is implausible for its kind is refused with the unit ``t`` evidently has (e.g. ``t looks
+like milliseconds, not seconds (the gps stream's median step is 200, a 5 Hz stream in
+milliseconds ...)``): it is not converted, a wrong guess would be silently wrong; a gap over
+:data:`~posbench.scenarios.time_axis.MAX_GAP_S` inside a stream is refused naming the line
+where it starts; all streams together may span at most
+:data:`~posbench.scenarios.time_axis.MAX_SPAN_S`.
 """
 
 from __future__ import annotations
@@ -65,6 +73,7 @@ from posbench.scenarios.drive import (
 )
 from posbench.scenarios.errors import DataError
 from posbench.scenarios.projection import to_local, validate_latlon
+from posbench.scenarios.time_axis import check_stream_times
 
 if TYPE_CHECKING:  # pandas is imported when a table is read or written
     import pandas as pd
@@ -237,6 +246,20 @@ def _check_columns(tab: TableFile, present_streams: set[str]) -> None:
         raise DataError(tab.path, f"missing required column(s): {'; '.join(missing)}")
 
 
+def _refuse_infinite(tab: TableFile, keep: np.ndarray, num: dict[str, np.ndarray]) -> None:
+    """Refuse an infinite cell in any numeric column (an empty cell means "not given"; no
+    value is infinite), naming its line and column."""
+    for c, v in num.items():
+        inf = np.isinf(v) & keep
+        if np.any(inf):
+            i = int(np.flatnonzero(inf)[0])
+            raise DataError(
+                tab.path,
+                f"{tab.where(i)}, column {c!r}: infinite value {float(v[i])!r}; "
+                f"{int(inf.sum())} such row{'s' * (int(inf.sum()) != 1)} in all",
+            )
+
+
 def _position_frame(tab: TableFile, rows: np.ndarray, num: dict[str, np.ndarray]) -> str:
     """'latlon' or 'xy': which columns every gps/truth row fills."""
 
@@ -284,6 +307,7 @@ def load_table(path: Path, projection: str = "enu") -> Drive:
         warnings.append(f"table: ignored unknown columns {', '.join(ignored)}")
 
     num = {c: numeric_column(tab, c) for c in NUMERIC if c in df.columns and c != "t_ns"}
+    _refuse_infinite(tab, keep, num)
     all_rows = np.flatnonzero(keep)
     t_all, t_origin = _times(tab, all_rows)
     t_full = np.full(len(df), np.nan)
@@ -323,9 +347,17 @@ def load_table(path: Path, projection: str = "enu") -> Drive:
             r = rows_of(s)
             xs[s] = (num["x"][r], num["y"][r]) if r.size else (np.empty(0), np.empty(0))
 
+    t_col, t_unit = ("t_ns", "nanoseconds") if "t_ns" in df.columns else ("t", "seconds")
+
     def clean(s: str) -> tuple[np.ndarray, np.ndarray]:
-        """Stream ``s``'s times [s] cleaned, and the kept ones' indices into its rows."""
-        return clean_index(t_full[rows_of(s)], f"table {s}", warnings)
+        """Stream ``s``'s times [s] cleaned and checked (:mod:`~posbench.scenarios.time_axis`),
+        and the kept ones' indices into its rows."""
+        r = rows_of(s)
+        t, kept = clean_index(t_full[r], f"table {s}", warnings)
+        check_stream_times(
+            t, s, path, lambda i: tab.where(int(r[kept[i]])), what=t_col, unit=t_unit
+        )
+        return t, kept
 
     r = rows_of("gps")
     lat_g, lon_g = col("lat", r), col("lon", r)
