@@ -34,6 +34,7 @@ import posbench.cli.score as score
 import posbench.cli.train as train
 import posbench.cli.tune as tune
 import posbench.cli.view as view
+from posbench.cli import INTERRUPTED
 from posbench.cli.options import WORKER_DIED
 from posbench.cli.terminal import NORMAL, fail, set_verbosity, warn
 
@@ -111,7 +112,8 @@ def user_errors() -> tuple[type[BaseException], ...]:
 
 def command(fn: Callable[..., Any]) -> Callable[..., Any]:
     """``fn`` with the one error wrapper every command has: a user error (:func:`user_errors`)
-    is one line on stderr and exit 2; a dead worker process too (:data:`WORKER_DIED`)."""
+    is one line on stderr and exit 2; a dead worker process too (:data:`WORKER_DIED`);
+    Ctrl-C is exit 130, its line printed by :func:`main`."""
 
     @functools.wraps(fn)
     def wrapper(*args: Any, **kwargs: Any) -> Any:
@@ -119,6 +121,8 @@ def command(fn: Callable[..., Any]) -> Callable[..., Any]:
 
         try:
             return fn(*args, **kwargs)
+        except KeyboardInterrupt:  # first: typer would take it, silently, as exit 130
+            raise typer.Exit(INTERRUPTED) from None
         except user_errors() as e:
             raise fail(str(e)) from None
         except BrokenProcessPool:
@@ -258,8 +262,9 @@ def usage_line(e: BaseException, args: list[str]) -> str:
 
 
 def main(argv: list[str] | None = None) -> None:
-    """Console-script entry point: run ``bench`` on ``argv`` (default: ``sys.argv[1:]``) and
-    exit with its status (0 ok, 1 a check or gate failed, 2 user error, 130 interrupted).
+    """Run ``bench`` on ``argv`` (default: ``sys.argv[1:]``) and exit with its status (0 ok,
+    1 a check or gate failed, 2 user error, 130 interrupted: one line ``error: interrupted``).
+    The process around it is :func:`posbench.cli.main`.
     Each call starts at normal loudness: an earlier call's ``-q`` or ``-v`` does not carry over."""
     set_verbosity(NORMAL)
     args = upgrade_argv(sys.argv[1:] if argv is None else argv)
@@ -274,10 +279,11 @@ def main(argv: list[str] | None = None) -> None:
         rv = 2
     except ABORTS:
         fail("aborted")
-        rv = 130
-    except KeyboardInterrupt:
+        sys.exit(INTERRUPTED)
+    except KeyboardInterrupt:  # outside a command (older typer lets it through)
+        rv = INTERRUPTED
+    if rv == INTERRUPTED:  # Ctrl-C: typer turns it into this status, without a word
         fail("interrupted")
-        rv = 130
     sys.exit(rv if isinstance(rv, int) else 0)  # typer.Exit(n) comes back as n; None: 0
 
 

@@ -12,6 +12,10 @@ byte those drawn in-process.
 Where ``fork`` is not available (macOS and Windows start processes by ``spawn``, which
 would pickle the traces), or when a child dies, the work is done in this process when
 its result is asked for: slower, never different.
+
+A child ends with this process however it ends, ignores Ctrl-C (this process answers it) and
+is forked with Ctrl-C held (:mod:`posbench.scenarios.child_processes`); this process
+interrupted while it waits for a child's answer ends that child.
 """
 
 from __future__ import annotations
@@ -27,6 +31,7 @@ import pandas as pd
 
 from posbench.figures.style import PlotsWritten
 from posbench.figures.writer import joined, write_drive_plots, write_summary_plots
+from posbench.scenarios.child_processes import become_child, interrupts_held
 from posbench.scoring.records import lean_traces
 
 T = TypeVar("T")
@@ -36,8 +41,10 @@ T = TypeVar("T")
 CHILD_NICENESS = 5
 
 
-def _child(conn: Any, fn: Callable[..., Any], args: tuple[Any, ...]) -> None:
-    """In the child: run ``fn(*args)``, send ``(True, value)`` or ``(False, exception)``."""
+def _child(conn: Any, fn: Callable[..., Any], args: tuple[Any, ...], parent_pid: int) -> None:
+    """In the child of ``parent_pid``: run ``fn(*args)``, send ``(True, value)`` or
+    ``(False, exception)``."""
+    become_child(parent_pid)
     try:
         os.nice(CHILD_NICENESS)
     except OSError:  # not allowed here: run at the parent's priority
@@ -65,7 +72,7 @@ class Job(Generic[T]):
     Without fork (or with ``background=False``) nothing starts until :meth:`result`, which
     then calls ``fn`` here. If the child dies without an answer (killed, out of memory),
     :meth:`result` calls ``fn`` here too. An exception ``fn`` raised in the child is raised
-    again by :meth:`result`."""
+    again by :meth:`result`; :meth:`result` interrupted (Ctrl-C) kills the child."""
 
     def __init__(self, fn: Callable[..., T], *args: Any, background: bool = True) -> None:
         self._fn, self._args = fn, args
@@ -74,8 +81,9 @@ class Job(Generic[T]):
         if background and can_fork():
             ctx = mp.get_context("fork")
             recv, send = ctx.Pipe(duplex=False)
-            self._proc = ctx.Process(target=_child, args=(send, fn, args), daemon=True)
-            self._proc.start()
+            self._proc = ctx.Process(target=_child, args=(send, fn, args, os.getpid()), daemon=True)
+            with interrupts_held():
+                self._proc.start()
             send.close()
             self._conn = recv
 
@@ -88,6 +96,9 @@ class Job(Generic[T]):
             answer = self._conn.recv()
         except EOFError:  # the child died before answering
             answer = None
+        except BaseException:  # interrupted while waiting: its answer is not wanted any more
+            proc.kill()
+            raise
         finally:
             self._conn.close()
             proc.join()

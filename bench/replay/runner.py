@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import os
 from collections.abc import Callable, Sequence
-from concurrent.futures import ProcessPoolExecutor
+from concurrent.futures import as_completed
 from dataclasses import replace
 from typing import Any
 
@@ -19,6 +19,7 @@ from posbench.predictors.registry import create
 from posbench.replay.loop import replay
 from posbench.replay.prepare import PreparedDrive, prepare_drive
 from posbench.replay.queries import query_frame
+from posbench.scenarios.child_processes import WorkerPool
 from posbench.scenarios.drive import Drive
 from posbench.scoring.records import DriveRun, merge_predictor_runs
 from posbench.scoring.score import score_many
@@ -123,7 +124,7 @@ def run_drive(drive: Drive, cfg: RunConfig) -> DriveRun:
 
 
 def _init_worker() -> None:
-    # one thread per worker process: onnxruntime / BLAS must not oversubscribe the cores
+    """One thread per worker process: onnxruntime / BLAS must not oversubscribe the cores."""
     for var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
         os.environ[var] = "1"
 
@@ -165,7 +166,9 @@ def run(
     The returned list is in the order of ``drives`` whatever ``workers`` is. With several
     workers the costliest drives start first, and a drive long enough to hold a worker
     alone is replayed one predictor per task (:func:`plan_tasks`); its parts are merged as
-    :func:`run_drive` would have made it (:func:`merge_predictor_runs`)."""
+    :func:`run_drive` would have made it (:func:`merge_predictor_runs`). The workers end
+    with this process and leave Ctrl-C to it; an error or Ctrl-C here ends them at once
+    (:class:`~posbench.scenarios.child_processes.WorkerPool`)."""
     out: list[DriveRun | None] = [None] * len(drives)
     if workers <= 1 or not drives or (len(drives) == 1 and len(cfg.predictors) <= 1):
         for i, d in enumerate(drives):
@@ -176,17 +179,13 @@ def run(
     tasks = plan_tasks(drives, cfg, workers)
     parts: dict[int, dict[str, DriveRun]] = {}
     n_parts = {i: sum(1 for j, _ in tasks if j == i) for i in range(len(drives))}
-    with ProcessPoolExecutor(
-        max_workers=min(workers, len(tasks)), initializer=_init_worker
-    ) as pool:
+    with WorkerPool(min(workers, len(tasks)), initializer=_init_worker) as pool:
         futures = {
             pool.submit(
                 run_drive, drives[i], cfg if name is None else replace(cfg, predictors=(name,))
             ): (i, name)
             for i, name in tasks
         }
-        from concurrent.futures import as_completed
-
         for fut in as_completed(futures):
             i, name = futures[fut]
             if name is None:
