@@ -4,13 +4,16 @@ and by the Python API alike).
 Each check raises :class:`~posbench.errors.UsageError` with one line naming the option (as
 ``bench`` spells it) and what is wrong, so a typo costs a second instead of a whole run (and
 never surfaces as a traceback from a worker process). The checks of values are pure; those
-of paths look at the file system but never create or change anything there.
+of paths look at the file system, and an output folder is tried for real (made, written and
+removed again), so that one the run could not write fails here, never after the replay.
 """
 
 from __future__ import annotations
 
+import errno
 import math
 import os
+import tempfile
 from collections.abc import Iterable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
@@ -34,6 +37,11 @@ def parse_pairs(values: list[str] | None, what: str) -> dict[str, str]:
 MAX_HORIZON_S = 10.0
 #: shortest --synthetic-duration [s]
 MIN_SYNTHETIC_S = 1.0
+#: longest --synthetic-duration [s]: the longest drive posbench takes (8 h,
+#: :data:`posbench.scenarios.time_axis.MAX_SPAN_S`, not imported here: that module needs numpy,
+#: the command line's start does not). The generator holds about 0.13 GB per simulated hour
+#: (100 Hz truth, 50 Hz IMU and speed) and a run about 0.2 GB
+MAX_SYNTHETIC_S = 8 * 3600.0
 
 
 def _num(value: float) -> str:
@@ -77,7 +85,8 @@ def check_dropouts(profile: str) -> str:
 
 
 def check_synthetic_duration(seconds: float | None, data: Sequence[Any] | None) -> float | None:
-    """``--synthetic-duration`` [s]: only without ``--data``, finite and > 1 s."""
+    """``--synthetic-duration`` [s]: only without ``--data``, more than :data:`MIN_SYNTHETIC_S`
+    and at most :data:`MAX_SYNTHETIC_S` (the memory the drive takes grows with its length)."""
     if seconds is None:
         return None
     if data:
@@ -85,9 +94,11 @@ def check_synthetic_duration(seconds: float | None, data: Sequence[Any] | None) 
             "--synthetic-duration is for runs without --data (it sets the length "
             "of the synthetic drive)"
         )
-    if not (math.isfinite(seconds) and seconds > MIN_SYNTHETIC_S):
+    if not (MIN_SYNTHETIC_S < seconds <= MAX_SYNTHETIC_S):  # False for NaN too
         raise UsageError(
-            f"--synthetic-duration must be more than {MIN_SYNTHETIC_S:g} s; got {_num(seconds)}"
+            f"--synthetic-duration must be more than {MIN_SYNTHETIC_S:g} s and at most "
+            f"{MAX_SYNTHETIC_S:.0f} s ({MAX_SYNTHETIC_S / 3600:g} h, the longest drive posbench "
+            f"takes; a run holds about 0.2 GB of memory per simulated hour); got {_num(seconds)}"
         )
     return seconds
 
@@ -172,19 +183,87 @@ def check_topics(
 
 
 # ------------------------------------------------------------------- paths
-def _first_existing(path: Path) -> Path:
+def _nearest_existing(path: Path) -> Path:
+    """``path`` (absolute) or the nearest folder above it that exists; a name too long to
+    exist counts as missing."""
     p = path.absolute()
-    while not p.exists() and p != p.parent:
+    while p != p.parent:
+        try:
+            if p.exists():
+                return p
+        except OSError:  # e.g. ENAMETOOLONG: it cannot exist
+            pass
         p = p.parent
     return p
 
 
-def _check_creatable(path: Path, option: str) -> None:
-    anc = _first_existing(path)
+def _limit(folder: Path, name: str, default: int) -> int:
+    """The file system's ``os.pathconf`` limit ``name`` at ``folder`` (``default`` where it
+    does not say)."""
+    try:
+        return int(os.pathconf(folder, name))
+    except (OSError, ValueError):
+        return default
+
+
+def _why(e: OSError, path: Path) -> str:
+    """Why ``path`` cannot be written, from the error the try raised, in words."""
+    if e.errno == errno.ENAMETOOLONG:
+        anc = _nearest_existing(path)
+        longest = max(path.absolute().parts, key=lambda part: len(os.fsencode(part)))
+        name_max = _limit(anc, "PC_NAME_MAX", 255)
+        if len(os.fsencode(longest)) > name_max:
+            return (
+                f"a name in it has {len(longest)} characters, more than the file system "
+                f"allows ({name_max} bytes)"
+            )
+        path_max = _limit(anc, "PC_PATH_MAX", 4096)
+        return f"the path is longer than the file system allows ({path_max} bytes)"
+    if e.errno in (errno.EACCES, errno.EPERM):
+        return "no permission to write there"
+    if e.errno == errno.EROFS:
+        return "the file system is read-only"
+    if e.errno == errno.ENOENT:  # mkdir in /proc, /sys: the parent exists, takes nothing new
+        return f"{_nearest_existing(path)} takes no new files or folders"
+    return (e.strerror or str(e)).lower()
+
+
+def _try_writing(folder: Path, option: str, shown: Path, name: str | None = None) -> None:
+    """Whether a command can write in ``folder``, tried for real: the folders missing on the
+    way made, a file written there (``name``, else a temporary one) and removed, then the
+    folders made removed again, so the check leaves no trace.
+
+    Raises:
+        UsageError: naming ``option`` and ``shown`` (the path as given), and why not.
+    """
+    anc = _nearest_existing(folder)
     if not anc.is_dir():
-        raise UsageError(f"{option} {path}: cannot be created, {anc} is a file")
-    if not os.access(anc, os.W_OK | os.X_OK):
-        raise UsageError(f"{option} {path}: cannot be created, no permission to write in {anc}")
+        raise UsageError(f"{option} {shown}: cannot be created, {anc} is a file")
+    missing = list(folder.absolute().relative_to(anc).parts)
+    made: list[Path] = []
+    try:
+        here = anc
+        for part in missing:
+            here = here / part
+            try:
+                here.mkdir()
+            except FileExistsError:  # made meanwhile by another process, or a "..": not ours
+                continue
+            made.append(here)
+        if name is None:
+            with tempfile.TemporaryFile(dir=folder):
+                pass
+        else:
+            (folder / name).open("x").close()
+            (folder / name).unlink()
+    except OSError as e:
+        raise UsageError(f"{option} {shown}: cannot be written: {_why(e, shown)}") from None
+    finally:
+        for p in reversed(made):
+            try:
+                p.rmdir()
+            except OSError:
+                pass
 
 
 def parse_drive_plots(value: str | int | None, option: str = "--drive-plots") -> int | None:
@@ -215,15 +294,14 @@ def parse_plot_formats(
 
 
 def check_out_dir(path: Path, option: str = "--out") -> Path:
-    """An output folder: an existing folder, or one that can be created (nothing is created
-    here: a failed check leaves no trace)."""
-    if path.exists():
-        if not path.is_dir():
-            raise UsageError(f"{option} {path}: exists and is not a folder; give a folder path")
-        if not os.access(path, os.W_OK | os.X_OK):
-            raise UsageError(f"{option} {path}: no permission to write in this folder")
-        return path
-    _check_creatable(path, option)
+    """An output folder the command can write: an existing folder, or one that can be made.
+    Tried for real (made, a file written in it, all removed again: the check leaves no
+    trace), so that every command that takes ``--out`` refuses, before any drive is loaded,
+    a folder it could not write (no permission, a read-only or system file system, a name
+    longer than the file system allows)."""
+    if _nearest_existing(path) == path.absolute() and not path.is_dir():
+        raise UsageError(f"{option} {path}: exists and is not a folder; give a folder path")
+    _try_writing(path, option, path)
     return path
 
 
@@ -247,24 +325,27 @@ def resolve_color_by(value: str | None, names: Sequence[str], rerun: Path | None
 
 
 def check_out_file(path: Path, option: str) -> Path:
-    """An output file: not an existing folder, and its folder exists or can be created."""
-    if path.is_dir():
-        raise UsageError(f"{option} {path}: is a folder; give a file path")
-    if path.exists():
+    """An output file: an existing file that may be overwritten, or one that can be written
+    (tried for real as :func:`check_out_dir` does, and removed again)."""
+    if _nearest_existing(path) == path.absolute():
+        if path.is_dir():
+            raise UsageError(f"{option} {path}: is a folder; give a file path")
         if not os.access(path, os.W_OK):
             raise UsageError(f"{option} {path}: no permission to overwrite this file")
         return path
-    _check_creatable(path, option)
+    _try_writing(path.parent, option, path, name=path.name)
     return path
 
 
 def check_data_paths(paths: Sequence[str | Path] | None, option: str = "--data") -> None:
-    """Local ``--data`` paths exist (fsspec URLs such as ``s3://...`` are fetched later)."""
-    from posbench.scenarios.remote import as_url
+    """Local ``--data`` paths and ``file://`` URLs exist (other fsspec URLs such as
+    ``s3://...`` are fetched later)."""
+    from posbench.scenarios.remote import as_url, local_path
 
     for p in paths or []:
-        if as_url(p) is None and not Path(p).exists():
-            raise UsageError(f"{option} {p}: no such file or folder")
+        local = local_path(p)
+        if local is not None and not local.exists():
+            raise UsageError(f"{option} {as_url(p) or p}: no such file or folder")
 
 
 def check_drive_options(

@@ -13,6 +13,7 @@ import math
 import numpy as np
 
 from posbench.scenarios.errors import DataError
+from posbench.scenarios.text import quoted
 
 TWO_PI = 2.0 * math.pi
 
@@ -38,7 +39,7 @@ def check_config(owner: str, **checks: tuple[float, float, float]) -> None:
     """Raise :class:`DataError` unless each ``name=(value, low, high)`` has low <= value <= high."""
     for name, (value, low, high) in checks.items():
         if not (isinstance(value, int | float) and low <= value <= high):
-            raise DataError(None, f"{owner}: {name}={value!r} must be in [{low}, {high}]")
+            raise DataError(None, f"{owner}: {name}={quoted(value)} must be in [{low}, {high}]")
 
 
 class FixBuffer:

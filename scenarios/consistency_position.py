@@ -23,6 +23,7 @@ from posbench.scenarios.consistency_motion import no_reference
 from posbench.scenarios.consistency_stats import fix_scatter
 from posbench.scenarios.drive import Drive
 from posbench.scenarios.grid import interp_gapped
+from posbench.scenarios.text import fixed
 
 #: fixes within this of the truth at every fix [m] are the truth's own samples (one source)
 ONE_SOURCE_M = 1e-3
@@ -150,7 +151,7 @@ def check_truth(
         return Check(
             s,
             WARN,
-            f"the truth states a median accuracy of {own:.1f} m > "
+            f"the truth states a median accuracy of {fixed(own, 1)} m > "
             f"{tol.max_fix_accuracy_m:g} m: no reference for the other "
             "streams",
             fig,
@@ -161,7 +162,10 @@ def check_truth(
     if verdict != PASS:
         return Check(s, verdict, f"GPS vs truth {why}{_stated(fig)}", fig)
     return Check(
-        s, PASS, f"offset {fig['offset_m']:.2f} m, RMS {fig['rms_m']:.2f} m{_stated(fig)}", fig
+        s,
+        PASS,
+        f"offset {fixed(fig['offset_m'], 2)} m, RMS {fixed(fig['rms_m'], 2)} m{_stated(fig)}",
+        fig,
     )
 
 
@@ -178,7 +182,7 @@ def _poor_receiver(cmp: GpsVsTruth | str, tol: Tolerances) -> str:
         return ""
     f = cmp.figures
     if f["offset_m"] > tol.gps_truth_offset_warn_m or f["rms_m"] > tol.gps_truth_rms_warn_m:
-        return f"fixes {f['offset_m']:.1f} m from the truth (RMS {f['rms_m']:.1f} m)"
+        return f"fixes {fixed(f['offset_m'], 1)} m from the truth (RMS {fixed(f['rms_m'], 1)} m)"
     return ""
 
 
@@ -204,11 +208,11 @@ def check_gps(
     if acc is None or acc.size == 0:
         if poor:
             return Check(s, WARN, f"{poor}, no accuracy stated: a poor receiver", fig)
-        return na(s, f"no stated accuracy (scatter {scatter:.2f} m)", **fig)
+        return na(s, f"no stated accuracy (scatter {fixed(scatter, 2)} m)", **fig)
     stated = float(np.median(acc))
     ratio = scatter / stated
     fig.update(stated_m=stated, ratio=ratio)
-    why = f"scatter {scatter:.2f} m vs stated accuracy {stated:.2f} m"
+    why = f"scatter {fixed(scatter, 2)} m vs stated accuracy {fixed(stated, 2)} m"
     if ratio > tol.scatter_ratio_fail:
         return Check(s, FAIL, why, fig)
     if ratio > tol.scatter_ratio_warn:
@@ -224,12 +228,12 @@ def check_gps(
         return Check(
             s,
             WARN,
-            f"median stated accuracy {stated:.1f} m > "
+            f"median stated accuracy {fixed(stated, 1)} m > "
             f"{tol.max_fix_accuracy_m:g} m"
             + (f", {poor}" if poor else "")
             + f": a poor receiver ({use})",
             fig,
         )
     if poor:
-        return Check(s, WARN, f"{poor}, stated accuracy {stated:.2f} m: a poor receiver", fig)
+        return Check(s, WARN, f"{poor}, stated accuracy {fixed(stated, 2)} m: a poor receiver", fig)
     return Check(s, PASS, why, fig)

@@ -15,6 +15,7 @@ from __future__ import annotations
 import numpy as np
 
 from posbench.scenarios.errors import DataError
+from posbench.scenarios.text import quoted
 
 EARTH_RADIUS_M = 6378137.0
 PROJECTIONS = ("enu", "mercator")
@@ -29,7 +30,7 @@ def validate_latlon(lat: np.ndarray, lon: np.ndarray, source: str, what: str = "
         i = int(np.flatnonzero(bad)[0])
         raise DataError(
             source,
-            f"{what} {i}: invalid lat/lon ({lat[i]!r}, {lon[i]!r}); "
+            f"{what} {i}: invalid lat/lon ({quoted(lat[i])}, {quoted(lon[i])}); "
             f"{int(bad.sum())} invalid in all",
         )
 

@@ -2,8 +2,8 @@
 
 The loaders read local files, so a URL is first copied, file by file, into a
 temporary folder that keeps the URL's last path component as its name (loaders
-name drives after their folders). Only the process that runs ``bench run`` reads
-the URL; workers (processes or Ray) receive the loaded drives.
+name drives after their folders); an error in a copy names the URL. Only the process that
+runs ``bench run`` reads the URL; workers (processes or Ray) receive the loaded drives.
 """
 
 from __future__ import annotations
@@ -34,6 +34,16 @@ def as_url(path: str | Path) -> str | None:
         return None
     scheme, rest = m.groups()
     return f"{scheme}://{'/' if scheme.lower() in _ROOTED else ''}{rest}"
+
+
+def local_path(path: str | Path) -> Path | None:
+    """The local file or folder ``path`` names: itself, or the path of a ``file://`` URL;
+    None for a URL of another file system (copied first, :func:`fetch`)."""
+    url = as_url(path)
+    if url is None:
+        return Path(path)
+    scheme, _, rest = url.partition("://")
+    return Path(rest) if scheme.lower() in _ROOTED else None
 
 
 def fetch(url: str, dest: Path) -> Path:
@@ -78,7 +88,8 @@ def fetch(url: str, dest: Path) -> Path:
 @contextmanager
 def local_paths(paths: Sequence[str | Path] | None) -> Iterator[list[Path] | None]:
     """``paths`` with every URL replaced by a local copy, in the same order; the copies
-    are removed on exit. ``None`` (no data given) passes through."""
+    are removed on exit, and a :class:`DataError` raised meanwhile about a copied file names
+    it by its URL. ``None`` (no data given) passes through."""
     if not paths:
         yield None if paths is None else []
         return
@@ -88,9 +99,24 @@ def local_paths(paths: Sequence[str | Path] | None) -> Iterator[list[Path] | Non
         return
     tmp = Path(tempfile.mkdtemp(prefix="posbench-fetch-"))
     try:
-        out = []
+        out, copies = [], {}
         for i, (p, u) in enumerate(zip(paths, urls, strict=True)):
             out.append(Path(p) if u is None else fetch(u, tmp / str(i)))
-        yield out
+            if u is not None:
+                copies[str(out[-1])] = u
+        try:
+            yield out
+        except DataError as e:
+            raise _named_by_url(e, copies) from None
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
+
+
+def _named_by_url(error: DataError, copies: dict[str, str]) -> DataError:
+    """``error`` naming the URL a file was copied from instead of the copy (``copies``: local
+    copy -> URL); as it is where it names no copy."""
+    where = error.path or ""
+    for copy, url in copies.items():
+        if where == copy or where.startswith(copy + "/"):
+            return DataError(url + where[len(copy) :], error.detail)
+    return error

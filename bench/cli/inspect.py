@@ -18,6 +18,7 @@ from posbench.cli.options import (
     parse_topics,
 )
 from posbench.cli.terminal import console, print_table
+from posbench.scenarios.text import fixed
 
 HEADER = (
     "drive",
@@ -76,17 +77,18 @@ def inspect_rows(summaries: list[dict[str, Any]]) -> tuple[tuple[str, ...], list
     for r in summaries:
         q = r["gps_interval_ms"]
         acc = r["truth_median_accuracy_m"]
-        truth = ("yes" + (f" ({acc:.2f} m)" if acc is not None else "")) if r["has_truth"] else "no"
+        stated = f" ({fixed(acc, 2)} m)" if acc is not None else ""
+        truth = ("yes" + stated) if r["has_truth"] else "no"
         out.append(
             [
                 r["name"],
                 r["format"],
-                f"{r['duration_s']:.1f}",
-                f"{r['distance_m']:.0f}",
+                fixed(r["duration_s"], 1),
+                fixed(r["distance_m"], 0),
                 str(r["gps_count"]),
-                f"{q['p5']:.0f}/{q['p50']:.0f}/{q['p95']:.0f}/{q['max']:.0f}",
+                "/".join(fixed(q[k], 0) for k in ("p5", "p50", "p95", "max")),
                 f"{r['imu_rate_hz']:.0f}",
-                f"{r['speed_mps']['min']:.1f}-{r['speed_mps']['max']:.1f}",
+                f"{fixed(r['speed_mps']['min'], 1)}-{fixed(r['speed_mps']['max'], 1)}",
                 f"{100 * r['fraction_stopped']:.0f}%",
                 "/".join(f"{100 * v:.0f}" for v in r["label_shares"].values()),
                 truth,
@@ -119,9 +121,12 @@ def inspect(
     from posbench.cli.terminal import reporter
     from posbench.pipeline.data_check import check_drives, strict_error
     from posbench.pipeline.drives import load_drives
+    from posbench.scenarios.remote import local_paths
     from posbench.scenarios.summary import summarize_drive
 
-    drives = load_drives(paths, projection, parse_topics(topic) or None, reporter=reporter())
+    topics = parse_topics(topic) or None
+    with local_paths(paths) as local:  # fsspec URLs (file://, s3://, ...) read as bench run does
+        drives = load_drives(local, projection, topics, reporter=reporter())
     checks = check_drives(drives)
     rows = [summarize_drive(d) for d in drives]
     for r, d in zip(rows, drives, strict=True):

@@ -177,7 +177,8 @@ SyntheticDurationOpt = Annotated[
     typer.Option(
         metavar="SECONDS",
         help="Without --data: one synthetic mixed drive of this length [s] instead of the "
-        "built-in set (e.g. 36000 for a 10-hour soak test).",
+        "built-in set (e.g. 14400 for a 4-hour soak test; at most 28800, 8 h, about 0.2 GB of "
+        "memory per hour).",
     ),
 ]
 

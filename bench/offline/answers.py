@@ -11,8 +11,9 @@ must be positive semi-definite). Other columns are ignored.
 A row answers the query of its drive and kind whose ``t_query`` is within
 :data:`~posbench.scoring.score.MATCH_TOLERANCE_S` (1e-6 s) of its own. A query without an answer is
 scored as ``missing`` (never dropped); an answer to no query, two answers to one query, a
-drive the queries folder does not hold, a missing or non-finite cell: a :class:`DataError`
-naming the file and the first such row (CSV line number, header = line 1; Parquet row).
+drive the queries folder does not hold, a missing or non-finite cell, an x or y more than
+:data:`MAX_POSITION_M` (1e9 m) from the drive's origin: a :class:`DataError` naming the
+file and the first such row (CSV line number, header = line 1; Parquet row).
 
 A TUM trajectory file (suffix ``.tum``: lines ``timestamp x y z qx qy qz qw`` separated
 by whitespace, ``#`` comments; :mod:`posbench.offline.tum`) answers the ``now`` queries of
@@ -42,6 +43,7 @@ import pandas as pd
 from posbench.offline.queries_folder import QueryFolder
 from posbench.offline.tum import is_tum, read_tum
 from posbench.scenarios.errors import DataError
+from posbench.scenarios.text import quoted
 from posbench.scoring.records import DriveRun
 from posbench.scoring.schema import COV_COLUMNS, KINDS
 from posbench.scoring.score import MATCH_TOLERANCE_S, answer_positions, score
@@ -50,6 +52,9 @@ if TYPE_CHECKING:
     from posbench.scenarios.loaders.table import TableFile
 
 REQUIRED = ("drive", "kind", "t_query", "x", "y")
+#: the farthest an answer's x or y may lie from its drive's origin [m]: no point on Earth is
+#: that far in local metres (ENU or Mercator), and the squares the figures take stay finite
+MAX_POSITION_M = 1e9
 COVARIANCE = COV_COLUMNS  # the answer's reported covariance, as in the traces
 OPTIONAL = ("latency_us", *COVARIANCE)
 
@@ -146,7 +151,7 @@ def read_answers(path: str | Path) -> Answers:
             raise DataError(
                 path,
                 f"{where(i)}, column {c!r}: missing or non-finite value "
-                f"({df[c].iloc[i]!r}){hint}; {int(nonfinite.sum())} such rows "
+                f"({quoted(df[c].iloc[i])}){hint}; {int(nonfinite.sum())} such rows "
                 f"in all",
             )
         num[c] = v
@@ -158,13 +163,13 @@ def read_answers(path: str | Path) -> Answers:
             i = int(np.flatnonzero(bad)[0])
             raise DataError(
                 path,
-                f"{where(i)}, column 'latency_us': {df['latency_us'].iloc[i]!r} "
+                f"{where(i)}, column 'latency_us': {quoted(df['latency_us'].iloc[i])} "
                 f"is not a duration >= 0 [us] (leave it empty if not timed)",
             )
     frame = pd.DataFrame(
         {"drive": drive, "kind": kind, **num, "latency_us": lat, **_covariance(tab, path)}
     )
-    return Answers(path, frame, tab.is_csv, ignored)
+    return _positions_checked(Answers(path, frame, tab.is_csv, ignored))
 
 
 def read_tum_answers(path: str | Path) -> Answers:
@@ -189,7 +194,7 @@ def read_tum_answers(path: str | Path) -> Answers:
             **{c: np.full(n, np.nan) for c in COVARIANCE},
         }
     )
-    return Answers(
+    answers = Answers(
         Path(path),
         frame,
         False,
@@ -198,6 +203,27 @@ def read_tum_answers(path: str | Path) -> Answers:
         tum_drive=tum.drive,
         tum_run_clock=tum.run_clock,
     )
+    return _positions_checked(answers)
+
+
+def _positions_checked(answers: Answers) -> Answers:
+    """``answers`` if every x and y is within :data:`MAX_POSITION_M` of the drive's origin.
+
+    Raises:
+        DataError: naming the first row and column beyond it.
+    """
+    for c in ("x", "y"):
+        v = answers.frame[c].to_numpy(float)
+        far = np.abs(v) > MAX_POSITION_M
+        if far.any():
+            i = int(np.flatnonzero(far)[0])
+            raise DataError(
+                answers.path,
+                f"{answers.where(i)}, column {c!r}: {quoted(v[i])} is no position: more than "
+                f"{MAX_POSITION_M:g} m from the drive's origin, farther than any point on "
+                f"Earth; {int(far.sum())} such rows in all",
+            )
+    return answers
 
 
 def tum_drive(folder: QueryFolder, answers: Answers) -> str:
@@ -267,7 +293,7 @@ def _covariance(tab: Any, path: Path) -> dict[str, np.ndarray]:
         raise DataError(
             path,
             f"{tab.where(i)}, columns cov_xx, cov_xy, cov_yy: "
-            f"({xx[i]!r}, {xy[i]!r}, {yy[i]!r}) is not a covariance (all three "
+            f"({quoted(xx[i])}, {quoted(xy[i])}, {quoted(yy[i])}) is not a covariance (all three "
             f"finite, variances >= 0, cov_xy^2 <= cov_xx cov_yy; leave all "
             f"three empty for no uncertainty)",
         )

@@ -14,7 +14,8 @@ timed on its own (``cov_ns``), never charged to the step's or query's latency.
 Fix accuracy: a predictor whose ``observe_gps`` takes ``sigma``
 (:func:`posbench.predictors.base.accepts_sigma`, checked once per replay) gets each fix's stated
 per-axis 1-sigma [m] (``GpsStream.accuracy``) as ``sigma=``, or ``sigma=None`` where the
-stream states none or the value is not finite and positive; others get (t, x, y) only.
+stream states none or the value is not finite and positive, and at most :data:`MAX_SIGMA_M`;
+others get (t, x, y) only.
 
 :func:`replay` is the runner's loop (timed, in chunks of Python floats); :func:`events` and
 :func:`feed` are the same events and calls one at a time, for checks that stop, copy or
@@ -113,10 +114,16 @@ def _window(cols: list[np.ndarray | None], sel: np.ndarray) -> tuple[int, list[l
     return lo, [c[lo:hi].tolist() if c is not None else [float("nan")] * (hi - lo) for c in cols]
 
 
+#: the largest ``sigma`` [m] a predictor is given: 1000 km. A fix stating more tells nothing
+#: of where the vehicle is, as this does; the cap keeps sigma^2 and a filter's gain finite (an
+#: accuracy of 1e300 m squares to inf, and the filter's covariance to NaN)
+MAX_SIGMA_M = 1e6
+
+
 def fix_sigma(accuracy_m: float) -> float | None:
     """A fix's stated accuracy [m] as ``observe_gps(..., sigma=)`` takes it: None where it is
-    not finite and positive (the stream states none)."""
-    return accuracy_m if 0.0 < accuracy_m < math.inf else None
+    not finite and positive (the stream states none), at most :data:`MAX_SIGMA_M`."""
+    return min(accuracy_m, MAX_SIGMA_M) if 0.0 < accuracy_m < math.inf else None
 
 
 def replay(predictor: Predictor, prep: PreparedDrive, horizon_s: float) -> ReplayResult:

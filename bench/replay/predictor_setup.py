@@ -26,6 +26,7 @@ from typing import Any
 from posbench.config import RunConfig
 from posbench.errors import UsageError
 from posbench.scenarios.errors import DataError
+from posbench.scenarios.text import quoted
 
 #: how a user gave each option: ``(predictor, option) -> "--set kf.jerk_psd=4"``, for messages
 Given = dict[tuple[str, str], str]
@@ -308,7 +309,7 @@ def _build_once(
         if failed is not None:
             raise UsageError(
                 f"{flag_text(given, name, k, as_given.get(k))}: predictor {name} "
-                f"rejects {k}={opts[k]!r}: {_failure_detail(failed)}"
+                f"rejects {k}={quoted(opts[k])}: {_failure_detail(failed)}"
             )
     raise UsageError(
         f"predictor {name} cannot be created with "

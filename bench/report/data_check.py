@@ -17,34 +17,45 @@ from posbench.scenarios.consistency import (
     Check,
     worst,
 )
+from posbench.scenarios.text import fixed
 
-#: the figures shown in a table cell, per stream (name, format)
-_CELL = {
-    "imu.yaw_rate": (("scale", "x{:.2f}"), ("corr", "r {:.2f}"), ("lag_s", "{:+.2f} s")),
-    "imu.ax": (("scale", "x{:.2f}"), ("corr", "r {:.2f}"), ("bias_mps2", "{:+.2f} m/s²")),
-    "imu.yaw": (("offset_deg", "{:+.1f}°"), ("spread_deg", "sd {:.1f}°")),
-    "speed": (("scale", "x{:.3f}"),),
+#: the figures shown in a table cell, per stream: (name, text around the figure, decimals,
+#: sign: "+" always signed)
+_CELL: dict[str, tuple[tuple[str, str, int, str], ...]] = {
+    "imu.yaw_rate": (
+        ("scale", "x{}", 2, ""),
+        ("corr", "r {}", 2, ""),
+        ("lag_s", "{} s", 2, "+"),
+    ),
+    "imu.ax": (
+        ("scale", "x{}", 2, ""),
+        ("corr", "r {}", 2, ""),
+        ("bias_mps2", "{} m/s²", 2, "+"),
+    ),
+    "imu.yaw": (("offset_deg", "{}°", 1, "+"), ("spread_deg", "sd {}°", 1, "")),
+    "speed": (("scale", "x{}", 3, ""),),
     "gps": (
-        ("scatter_m", "{:.2f} m"),
-        ("stated_m", "/ {:.2f} m"),
-        ("truth_offset_m", "off {:.1f} m"),
+        ("scatter_m", "{} m", 2, ""),
+        ("stated_m", "/ {} m", 2, ""),
+        ("truth_offset_m", "off {} m", 1, ""),
     ),
     "truth": (
-        ("offset_m", "{:.2f} m"),
-        ("rms_m", "rms {:.2f} m"),
-        ("rotation_deg", "{:+.2f}°"),
-        ("scale", "x{:.3f}"),
+        ("offset_m", "{} m", 2, ""),
+        ("rms_m", "rms {} m", 2, ""),
+        ("rotation_deg", "{}°", 2, "+"),
+        ("scale", "x{}", 3, ""),
     ),
 }
 
 
 def cell(c: Check) -> str:
-    """One table cell: the verdict and the stream's main figures."""
+    """One table cell: the verdict and the stream's main figures (a huge one in scientific
+    notation, :func:`~posbench.scenarios.text.fixed`)."""
     if c.verdict == NA:
         return NA
     figs = [
-        fmt.format(c.figures[k])
-        for k, fmt in _CELL[c.stream]
+        text.format(fixed(c.figures[k], decimals, sign))
+        for k, text, decimals, sign in _CELL[c.stream]
         if c.figures.get(k) is not None and c.figures[k] == c.figures[k]
     ]
     return " ".join([c.verdict, *figs])

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 from typing import Any
 
+from posbench.scenarios.text import fixed
 from posbench.scoring.schema import KINDS
 from posbench.tables.run_tables import trained_in_run
 from posbench.tables.stat_tables import block_lengths
@@ -166,7 +167,7 @@ def block_note(summaries: list[dict[str, Any]], what: str) -> str:
 
 def _interval(ci: list[float] | None) -> str:
     """`` [lo, hi]`` of a 95 % interval, or nothing for a run saved without one."""
-    return f" [{ci[0]:.3f}, {ci[1]:.3f}]" if ci else ""
+    return f" [{fixed(ci[0], 3)}, {fixed(ci[1], 3)}]" if ci else ""
 
 
 def sanity_lines(res: dict[str, Any]) -> list[str]:
@@ -181,7 +182,8 @@ def sanity_lines(res: dict[str, Any]) -> list[str]:
     lines = []
     for (name, ds), losses in grouped.items():
         parts = "; ".join(
-            f"{x['kind']} +{x['diff_m']:.3f} m{_interval(x.get('ci95'))} ({x['queries']} queries)"
+            f"{x['kind']} {fixed(x['diff_m'], 3, '+')} m{_interval(x.get('ci95'))} "
+            f"({x['queries']} queries)"
             for x in losses
         )
         hint = (

@@ -23,6 +23,8 @@ from typing import Any
 
 import pandas as pd
 
+from posbench.scenarios.text import fixed
+
 
 def as_float(v: Any) -> float:
     """A figure of results.json as a float: None (no figure) is NaN."""
@@ -163,7 +165,9 @@ def is_finite(v: Any) -> bool:
 
 
 def fmt(v: Any, digits: int = 3) -> str:
-    """One figure as text: ``-`` for None/NaN, integers as is, floats to ``digits``."""
+    """One figure as text: ``-`` for None/NaN, integers as is, floats to ``digits`` decimals
+    (in scientific notation from 1e9 on, :func:`~posbench.scenarios.text.fixed`, so that a
+    huge figure stays short)."""
     if v is None or (isinstance(v, float) and math.isnan(v)):
         return "-"
     if isinstance(v, bool) or isinstance(v, str):
@@ -171,7 +175,7 @@ def fmt(v: Any, digits: int = 3) -> str:
     if isinstance(v, int) or (hasattr(v, "is_integer") and not isinstance(v, float)):
         return str(int(v))
     try:
-        return f"{float(v):.{digits}f}"
+        return fixed(float(v), digits)
     except (TypeError, ValueError):
         return str(v)
 
