@@ -100,6 +100,7 @@ def run(
 
     from posbench.config import DEFAULT_PREDICTORS
     from posbench.pipeline.run import RunOptions, execute_run, plan_run
+    from posbench.scenarios.text import quoted
 
     known = {f.name for f in fields(RunOptions)}
     unknown = sorted(set(options) - known)
@@ -126,7 +127,7 @@ def run(
         **options,
     )
     given = {
-        (n, k): f"options={{{n!r}: {{{k!r}: {v!r}}}}}"
+        (n, k): f"options={{{n!r}: {{{k!r}: {quoted(v)}}}}}"
         for n, o in opts.options.items()
         for k, v in o.items()
     }
@@ -176,17 +177,19 @@ def score(
     ).run
 
 
-def load(path: str | Path) -> Run:
+def load(path: str | Path, *, allow_failed: bool = False) -> Run:
     """A run saved by ``bench run``, ``bench score`` or :meth:`Run.save`, from its folder or
-    its results.json; the traces load on first use.
+    its results.json; the traces load on first use. ``allow_failed``: also a run whose
+    command failed or was interrupted (results.json ``status`` failed or interrupted, with
+    its ``reason``: ``run.status``, ``run.reason``); its figures are not a whole run's.
 
     Raises:
-        DataError: no results.json there, not one of posbench's, or from an incompatible
-            posbench.
+        DataError: no results.json there, not one of posbench's, from an incompatible
+            posbench, or (without ``allow_failed``) a run that failed or was interrupted.
     """
     from posbench.saved_run.run import load_run
 
-    return load_run(path)
+    return load_run(path, allow_failed=allow_failed)
 
 
 def compare(
@@ -197,12 +200,15 @@ def compare(
     gates: Sequence[str] = (),
     uncertainty: bool = False,
     allow_config_change: bool = False,
+    allow_failed: bool = False,
 ) -> Comparison:
     """Compare saved runs (:class:`Run` objects or their folders) as ``bench compare``
     does: ``metric`` (``KIND.STAT``, e.g. ``now.p95_m``) aligned per predictor, data set,
     route type and drive (``scopes``), each later run's paired difference from the first
     with its 95 % cluster-bootstrap CI, the uncertainty figures if asked, and the
-    ``gates`` (``"lstm:future.mean_m:5%"``: two runs, OLD then NEW) checked.
+    ``gates`` (``"lstm:future.mean_m:5%"``: two runs, OLD then NEW) checked. A run that
+    failed or was interrupted (results.json ``status``) is refused unless ``allow_failed``
+    (then named in ``notes``).
 
     Returns:
         a :class:`~posbench.comparison.comparison.Comparison` (``frame``, ``table``,
@@ -211,7 +217,7 @@ def compare(
     from posbench.comparison.comparison import compare_runs
 
     return compare_runs(
-        runs, metric, scopes, bootstrap_seed, gates, uncertainty, allow_config_change
+        runs, metric, scopes, bootstrap_seed, gates, uncertainty, allow_config_change, allow_failed
     )
 
 

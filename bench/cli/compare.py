@@ -84,6 +84,15 @@ def compare(
             "by default that is an error.",
         ),
     ] = False,
+    allow_failed: Annotated[
+        bool,
+        typer.Option(
+            "--allow-failed",
+            help="Also compare runs that failed or were interrupted (results.json status "
+            "failed or interrupted: the run's command exited non-zero, its figures are not a "
+            "whole run's); each is named in a note. By default such a run is an error.",
+        ),
+    ] = False,
     bootstrap_seed: Annotated[
         int,
         typer.Option(
@@ -115,8 +124,9 @@ def compare(
 
     The first run is the reference: every later run gets a paired difference (later - first,
     over the drives both scored) with its 95 % cluster-bootstrap CI; `*` marks a CI that
-    excludes 0. Runs with different configurations are flagged (notes on stderr). Exit
-    status 1 when a gate fails.
+    excludes 0. Runs with different configurations are flagged (notes on stderr). A run that
+    failed or was interrupted is refused unless --allow-failed. Exit status 1 when a gate
+    fails.
 
     Examples:
 
@@ -145,7 +155,14 @@ def compare(
         s.strip() for text in (scope or ["all,dataset"]) for s in text.split(",") if s.strip()
     ]
     result = compare_runs(
-        runs, metric, scopes, bootstrap_seed, fail_if_worse or [], uncertainty, allow_config_change
+        runs,
+        metric,
+        scopes,
+        bootstrap_seed,
+        fail_if_worse or [],
+        uncertainty,
+        allow_config_change,
+        allow_failed,
     )
     for line in result.differences:
         err_console.print(

@@ -44,7 +44,8 @@ class Comparison:
         differences: one line per configuration item on which the runs disagree.
         gates: the accuracy gates checked (NEW = the second run against OLD = the first).
         uncertainty: the uncertainty figures side by side (table, frame), if asked for.
-        notes: what the uncertainty table cannot show (runs without those figures).
+        notes: what the uncertainty table cannot show (runs without those figures), and the
+            runs that did not complete (compared with ``allow_failed``).
     """
 
     runs: list[Run]
@@ -102,28 +103,34 @@ def compare_runs(
     gates: Sequence[str] = (),
     uncertainty: bool = False,
     allow_config_change: bool = False,
+    allow_failed: bool = False,
 ) -> Comparison:
     """Compare saved runs (objects or folders): ``metric`` of each aligned per predictor,
     data set, route type and drive (``scopes``), each later run's paired difference from the
     first (cluster bootstrap seeded ``seed``), with ``uncertainty`` the uncertainty figures
     too, and the ``gates`` (``PREDICTOR:KIND.STAT:TOL``, exactly two runs) checked.
+    ``allow_failed``: also runs that did not complete (results.json ``status`` failed or
+    interrupted), each named in a note.
 
     Raises:
         UsageError: a bad metric, scope or gate; gates over runs whose configurations differ
             (unless ``allow_config_change``).
-        DataError: a folder that holds no saved run.
+        DataError: a folder that holds no saved run; a run that failed or was interrupted
+            (unless ``allow_failed``).
     """
     from posbench.comparison.align import config_differences, run_labels
     from posbench.comparison.gates import Gate, check_gates
     from posbench.comparison.views import comparison_table
-    from posbench.saved_run.run import load_run
+    from posbench.saved_run.run import COMPLETE, check_complete, load_run
 
     m = metric if isinstance(metric, Metric) else Metric.parse(metric)
     rows = row_scopes(scopes, uncertainty)
     parsed = [Gate.parse(g) for g in gates]
     if parsed and len(runs) != 2:
         raise UsageError(f"--fail-if-worse compares exactly two runs (OLD NEW); got {len(runs)}")
-    loaded = [r if isinstance(r, Run) else load_run(r) for r in runs]
+    loaded = [r if isinstance(r, Run) else load_run(r, allow_failed) for r in runs]
+    for r in loaded if not allow_failed else ():
+        check_complete(r)
     labels = run_labels(loaded)
     diffs = config_differences(loaded, labels)
     if parsed and diffs and not allow_config_change:
@@ -145,4 +152,9 @@ def compare_runs(
             out.notes.append("no run has uncertainty figures to compare")
     if parsed:
         out.gates = check_gates(loaded[0], loaded[1], parsed, seed)
+    out.notes += [
+        f"{label} is {'an' if r.status[0] in 'aeiou' else 'a'} {r.status} run: {r.reason}"
+        for r, label in zip(loaded, labels, strict=True)
+        if r.status != COMPLETE
+    ]
     return out

@@ -23,8 +23,10 @@ def load_drives(
     ``projection``: the local frame of lat/lon sources, ``topics``: bag topics by role), or
     without paths the built-in synthetic drives of generator ``seed`` (one mixed drive of
     ``synthetic_duration_s`` [s] if given). Local paths only: URLs are fetched first
-    (:func:`posbench.scenarios.remote.local_paths`)."""
-    from posbench.scenarios.loaders import iter_load_many
+    (:func:`posbench.scenarios.remote.local_paths`). A recording given twice (or a
+    byte-identical copy) is loaded once, said in one line
+    (:func:`posbench.scenarios.loaders.distinct_recordings`)."""
+    from posbench.scenarios.loaders import distinct_recordings, iter_load_many
 
     if not paths:
         from posbench.checks import check_synthetic_duration
@@ -34,11 +36,20 @@ def load_drives(
             return [generate_drive(seed=seed, route="mixed", duration_s=synthetic_duration_s)]
         return default_drives(seed=seed)
     from posbench.pipeline.preload import REPLAY_MODULES, Preload
+    from posbench.pipeline.reporter import WARNING
 
+    recordings = distinct_recordings(paths)
+    for dup in recordings.duplicates:
+        reporter.line(f"note: {dup.line()}", WARNING)
     drives = []
     preload = Preload(REPLAY_MODULES)  # for the replay workers, forked after loading
     with reporter.phase("loading drives...") as update:
-        for d in iter_load_many(paths, projection=projection, topics=topics, workers=workers):
+        for d in iter_load_many(
+            [rec for rec, _ in recordings.found],
+            projection=projection,
+            topics=topics,
+            workers=workers,
+        ):
             drives.append(d)
             if workers > 1:  # the loader processes exist by now: safe to import in a thread
                 preload.start()

@@ -59,6 +59,11 @@ def publish(
     figures, tables, results.json, traces.parquet; an earlier run's files there are
     replaced) or, with ``out`` None, kept in memory.
 
+    A run that fails (the errors below) is written all the same, its results.json marked
+    ``status`` failed with the error line as ``reason``; one interrupted (or failing) while
+    its files are written gets a results.json marked interrupted (or failed) all the same.
+    results.json is written last and atomically: no folder cut short reads as complete.
+
     Args:
         res: :func:`posbench.pipeline.results.build_results` output; ``traces`` the traces
             it was made from.
@@ -77,29 +82,30 @@ def publish(
 
     Raises:
         UsageError: every drive was skipped (the report is written first).
+        DataError: no query of any drive could be scored (the report is written first).
     """
+    from posbench.saved_run.run import FAILED, mark_unfinished
+
     run = Run.from_results(res, traces)
+    failure = run_failure(run, runs, out)
+    if failure is not None:
+        mark_unfinished(run, FAILED, str(failure))
     written: list[Path] = []
     if out is not None:
-        from posbench.report.markdown import write_report
-        from posbench.saved_run.outputs import remove_previous_outputs
-        from posbench.saved_run.run import save_run
+        from posbench.saved_run.run import marked_if_unfinished
 
-        out.mkdir(parents=True, exist_ok=True)
-        if removed is None:
-            removed = remove_previous_outputs(out)
-        drawn = figures(run) if figures is not None else []
-        run.results["paper_figures"] = [{"file": f, "caption": c} for f, c in drawn]
-        written = [(out / f).with_suffix("." + fmt) for f, _ in drawn for fmt in plot_formats]
-        written += write_report(
-            run,
-            out,
-            formats=plot_formats,
-            drive_plots=drive_plots,
-            table_formats=table_formats,
-            plots=plots.plots() if plots is not None else None,
-        )
-        written += save_run(out, run, also_written=written, traces_written=traces_written)
+        with marked_if_unfinished(run, out=out):
+            written, removed = _write(
+                run,
+                out,
+                plot_formats,
+                drive_plots,
+                figures,
+                table_formats,
+                plots,
+                removed,
+                traces_written,
+            )
     else:
         run.results["paper_figures"] = []
     skipped = [r for r in runs if r.skipped]
@@ -108,6 +114,53 @@ def publish(
             f"skipped {plural(len(skipped), 'drive')}: "
             + "; ".join(f"{r.name} ({r.skipped})" for r in skipped)
         )
+    if failure is not None:
+        raise failure
+    return Published(run, written, list(removed or []))
+
+
+def _write(
+    run: Run,
+    out: Path,
+    plot_formats: tuple[str, ...],
+    drive_plots: int | None,
+    figures: Callable[[Run], list[tuple[str, str]]] | None,
+    table_formats: tuple[str, ...],
+    plots: FigureJobs | None,
+    removed: list[Path] | None,
+    traces_written: Callable[[], Path | None] | None,
+) -> tuple[list[Path], list[Path]]:
+    """``run``'s files in ``out`` (see :func:`publish`), results.json last: the files
+    written, and those of an earlier run removed first."""
+    from posbench.report.markdown import write_report
+    from posbench.saved_run.outputs import remove_previous_outputs
+    from posbench.saved_run.run import save_run
+
+    out.mkdir(parents=True, exist_ok=True)
+    if removed is None:
+        removed = remove_previous_outputs(out)
+    drawn = figures(run) if figures is not None else []
+    run.results["paper_figures"] = [{"file": f, "caption": c} for f, c in drawn]
+    written = [(out / f).with_suffix("." + fmt) for f, _ in drawn for fmt in plot_formats]
+    written += write_report(
+        run,
+        out,
+        formats=plot_formats,
+        drive_plots=drive_plots,
+        table_formats=table_formats,
+        plots=plots.plots() if plots is not None else None,
+    )
+    written += save_run(out, run, also_written=written, traces_written=traces_written)
+    return written, removed
+
+
+def run_failure(
+    run: Run, runs: Sequence[DriveRun], out: Path | None
+) -> UsageError | DataError | None:
+    """Why ``run`` fails, as the error its command exits with, or None: every drive was
+    skipped (UsageError), or no query of any drive could be scored (DataError). ``out``: where
+    report.md is written, named in the message."""
+    skipped = [r for r in runs if r.skipped]
     if len(skipped) == len(runs):
         where = (
             f"the reasons are in {out / 'report.md'}"
@@ -115,14 +168,14 @@ def publish(
             else "; ".join(f"{r.name}: {r.skipped}" for r in skipped[:3])
             + ("; ..." if len(skipped) > 3 else "")
         )
-        raise UsageError(
+        return UsageError(
             f"every drive was skipped ({plural(len(runs), 'drive')}), nothing was scored; {where}"
         )
     if not any(
         p[k]["count"] + p[k]["missing"] for p in run.results["predictors"].values() for k in KINDS
     ):
-        raise DataError(None, nothing_scored(run.results, runs, out))
-    return Published(run, written, list(removed or []))
+        return DataError(None, nothing_scored(run.results, runs, out))
+    return None
 
 
 def nothing_scored(res: dict[str, Any], runs: Sequence[DriveRun], out: Path | None) -> str:

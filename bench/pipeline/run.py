@@ -312,12 +312,15 @@ def _replay_and_publish(
     from posbench.pipeline.publish import publish
     from posbench.pipeline.results import build_results
     from posbench.saved_run.provenance import data_provenance
+    from posbench.scenarios.loaders import distinct_recordings
     from posbench.scoring.records import all_traces, lean_traces
 
     cfg, o, seeds = plan.config, plan.options, plan.seeds
     out = o.out
     first = f"seed {cfg.seed} (1/{len(seeds)}): " if seeds else ""
-    provenance = Job(data_provenance, data, cfg.seed)  # hashing the data (~1 s) meanwhile
+    recordings = distinct_recordings(data) if data else None  # as loaded: each counted once
+    sources = recordings.sources if recordings is not None else None
+    provenance = Job(data_provenance, sources, cfg.seed)  # hashing the data (~1 s) meanwhile
     preload = Preload()  # the imports of the figures and the report, during the replay
     runs = replay_drives(drives, cfg, o, reporter, first, preload)
     preload.join()  # before forking the figure children
@@ -348,6 +351,11 @@ def _replay_and_publish(
         runs, cfg, provenance.result(), command, traces=lean, statistics=plan.statistics
     )
     res["consistency"] = consistency
+    if recordings is not None and recordings.duplicates:
+        res["data_duplicates"] = [
+            {"path": str(d.path), "same_as": str(d.kept), "same_file": d.same_file}
+            for d in recordings.duplicates
+        ]
     if seeds:
         base = res["paired"]["baseline"]
         figures = [seed_figures(traces, cfg.predictors, base, cfg.seed)]
@@ -373,13 +381,31 @@ def _replay_and_publish(
         reporter=reporter,
     )
     if o.rerun is not None:
-        from posbench.recording.writer import write_recording
-        from posbench.scenarios.errors import DataError
+        from posbench.saved_run.run import marked_if_unfinished
 
-        with reporter.phase(f"writing rerun recording {o.rerun}..."):
-            try:
-                write_recording(o.rerun, runs, list(cfg.predictors), plan.color_by)
-            except RuntimeError as e:  # joining the drives' recordings failed
-                raise DataError(o.rerun, str(e)) from None
+        with marked_if_unfinished(published.run, "writing the rerun recording"):
+            _write_rerun(o.rerun, runs, cfg, plan.color_by, reporter)
         published.recording = o.rerun
     return published
+
+
+def _write_rerun(
+    path: Path,
+    runs: list[DriveRun],
+    cfg: RunConfig,
+    color_by: str | None,
+    reporter: Reporter,
+) -> None:
+    """The rerun recording of ``runs`` at ``path``.
+
+    Raises:
+        DataError: joining the drives' recordings failed.
+    """
+    from posbench.recording.writer import write_recording
+    from posbench.scenarios.errors import DataError
+
+    with reporter.phase(f"writing rerun recording {path}..."):
+        try:
+            write_recording(path, runs, list(cfg.predictors), color_by)
+        except RuntimeError as e:  # joining the drives' recordings failed
+            raise DataError(path, str(e)) from None

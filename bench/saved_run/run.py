@@ -6,6 +6,14 @@ as ``posbench/saved_run/schemas/results.schema.json``, version :data:`SCHEMA_VER
 reads them back as a :class:`Run`, its traces loaded only when first used. The report,
 the figures, the terminal tables and every later command read a :class:`Run`.
 
+A run that did not end well says so (schema 1.7): ``status`` is ``complete``, ``failed``
+(the command exited non-zero: nothing could be scored, every drive was skipped, the rerun
+recording could not be written) or ``interrupted`` (Ctrl-C while its files were written),
+and ``reason`` is the one error line. :func:`load_run` refuses a run that is not complete
+unless asked (``allow_failed=True``); a results.json written before 1.7 has no status and
+reads as complete. results.json is written last and atomically (a temporary file renamed
+over it), so a folder whose writing was cut short never reads as a complete run.
+
 Example (a notebook)::
 
     import posbench
@@ -18,7 +26,9 @@ from __future__ import annotations
 
 import json
 import math
-from collections.abc import Callable, Sequence
+import os
+from collections.abc import Callable, Iterator, Sequence
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 from importlib import resources
 from pathlib import Path
@@ -31,10 +41,12 @@ from posbench.scenarios.errors import DataError
 
 #: MAJOR.MINOR of results.json: a reader accepts every MINOR of its MAJOR; MINOR grows when
 #: keys are added, MAJOR when a key changes meaning or goes
-SCHEMA_VERSION = "1.6"
+SCHEMA_VERSION = "1.7"
 RESULTS = "results.json"
 TRACES = "traces.parquet"
 PROVENANCE_KEYS = ("command", "versions", "git_commit", "data")
+#: ``status`` of results.json (schema 1.7; older files, which have none, read as complete)
+COMPLETE, FAILED, INTERRUPTED = "complete", "failed", "interrupted"
 
 
 def results_schema() -> dict[str, Any]:
@@ -82,14 +94,30 @@ class Run:
         cls, results: dict[str, Any], traces: pd.DataFrame | None = None, folder: Path | None = None
     ) -> Run:
         """A run from freshly aggregated ``results``: stamped with :data:`SCHEMA_VERSION`
-        and converted to strict JSON values (NaN -> None), exactly as a load would give it."""
+        and ``status`` (complete unless ``results`` says otherwise) and converted to strict
+        JSON values (NaN -> None), exactly as a load would give it."""
+        stamp = ("schema_version", "status", "reason")
         res = to_json_value(
             {
                 "schema_version": SCHEMA_VERSION,
-                **{k: v for k, v in results.items() if k != "schema_version"},
+                "status": results.get("status", COMPLETE),
+                "reason": results.get("reason"),
+                **{k: v for k, v in results.items() if k not in stamp},
             }
         )
         return cls(res, folder, traces)
+
+    @property
+    def status(self) -> str:
+        """:data:`COMPLETE`, :data:`FAILED` or :data:`INTERRUPTED` (schema 1.7; a run saved
+        before has none and is complete)."""
+        return str(self.results.get("status", COMPLETE))
+
+    @property
+    def reason(self) -> str | None:
+        """Why a run that is not complete ended: the one error line it exited with."""
+        reason = self.results.get("reason")
+        return None if reason is None else str(reason)
 
     @property
     def config(self) -> dict[str, Any]:
@@ -208,7 +236,8 @@ class Run:
             else f"{p} -"
             for p, v in res.get("predictors", {}).items()
         )
-        return f"{head}\n  future mean error [m]: {means}"
+        status = "" if self.status == COMPLETE else f"\n  {self.status}: {self.reason}"
+        return f"{head}\n  future mean error [m]: {means}{status}"
 
 
 def write_traces(out: Path, traces: pd.DataFrame | None) -> Path | None:
@@ -239,19 +268,90 @@ def save_run(
     written = [traces] if traces is not None else []
     written.append(out / RESULTS)
     run.results["outputs"] = relative_outputs(out, [*also_written, *written])
-    (out / RESULTS).write_text(
-        json.dumps(to_json_value(run.results), indent=2, allow_nan=False) + "\n"
-    )
+    write_results(out, run.results)
     run.folder = out
     return written
 
 
-def load_run(path: str | Path) -> Run:
-    """A saved run from its folder (or its ``results.json``); traces load lazily.
+def write_results(out: Path, results: dict[str, Any]) -> Path:
+    """``out/results.json`` from ``results`` (strict JSON), atomically: written to a
+    temporary file beside it, then renamed over it, so an interrupted write leaves the
+    previous file or none, never half of one. The path."""
+    path = out / RESULTS
+    text = json.dumps(to_json_value(results), indent=2, allow_nan=False) + "\n"
+    tmp = out / f".{RESULTS}.{os.getpid()}.tmp"
+    try:
+        tmp.write_text(text)
+        os.replace(tmp, path)
+    finally:
+        tmp.unlink(missing_ok=True)
+    return path
+
+
+def mark_unfinished(run: Run, status: str, reason: str, out: Path | None = None) -> None:
+    """Record that ``run`` did not complete (:data:`FAILED` or :data:`INTERRUPTED`, with
+    ``reason``, the one error line) in it and in its results.json: in the folder it is
+    saved in, or, not saved yet, in ``out`` (None: in memory only)."""
+    run.results["status"], run.results["reason"] = status, reason
+    folder = run.folder if run.folder is not None else out
+    if folder is not None and folder.is_dir():
+        run.results.setdefault("outputs", [RESULTS])
+        write_results(folder, run.results)
+        run.folder = folder
+
+
+@contextmanager
+def marked_if_unfinished(
+    run: Run, doing: str = "writing the run's files", out: Path | None = None
+) -> Iterator[None]:
+    """Inside, an exception marks ``run`` as not complete, and its results.json (in its
+    folder, or in ``out`` if it is not saved yet: :func:`mark_unfinished`), before it goes
+    on: a KeyboardInterrupt as :data:`INTERRUPTED` (``doing``: what was interrupted), any
+    other as :data:`FAILED`, its one line the reason. Marking is best effort: if it fails
+    too, the first error is the one raised."""
+    try:
+        yield
+    except BaseException as e:
+        if isinstance(e, KeyboardInterrupt):
+            status, reason = INTERRUPTED, f"interrupted (Ctrl-C) while {doing}"
+        else:
+            status, reason = FAILED, " ".join(str(e).split()) or type(e).__name__
+        try:
+            mark_unfinished(run, status, reason, out)
+        except Exception:  # noqa: BLE001 - the error being raised says more
+            pass
+        raise
+
+
+def check_complete(run: Run, path: str | Path | None = None) -> None:
+    """Raise unless ``run`` is complete (schema 1.7 ``status``; older runs are).
 
     Raises:
-        DataError: no results.json there, not JSON, or written by an incompatible
-            posbench (another schema MAJOR version).
+        DataError: a failed or interrupted run, in one line with its reason and how to read
+            it anyway; ``path`` (default: the run's results.json) is named.
+    """
+    if run.status == COMPLETE:
+        return
+    what = {FAILED: "a failed run", INTERRUPTED: "an interrupted run"}.get(
+        run.status, f"a run of status {run.status!r}"
+    )
+    where = path if path is not None else run.folder / RESULTS if run.folder else None
+    raise DataError(
+        where,
+        f"{what} ({run.reason or 'no reason recorded'}); --allow-failed (bench compare) or "
+        "allow_failed=True (posbench.load, posbench.compare) reads it anyway",
+    )
+
+
+def load_run(path: str | Path, allow_failed: bool = False) -> Run:
+    """A saved run from its folder (or its ``results.json``); traces load lazily.
+    ``allow_failed``: also a run that did not complete (``status`` failed or interrupted:
+    its command exited non-zero; see :attr:`Run.status` and :attr:`Run.reason`).
+
+    Raises:
+        DataError: no results.json there, not JSON, written by an incompatible posbench
+            (another schema MAJOR version), or, without ``allow_failed``, a run that failed
+            or was interrupted (:func:`check_complete`).
     """
     p = Path(path)
     res_path = p / RESULTS if p.is_dir() else p
@@ -273,4 +373,7 @@ def load_run(path: str | Path) -> Run:
             f"{SCHEMA_VERSION.split('.')[0]}.x): re-run it or use a matching "
             f"posbench",
         )
-    return Run(results, res_path.parent)
+    run = Run(results, res_path.parent)
+    if not allow_failed:
+        check_complete(run, res_path)
+    return run

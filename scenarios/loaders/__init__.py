@@ -3,11 +3,18 @@
 A path may be one recording (a bag, a pickle, a CSV/Parquet file, a KITTI drive
 folder, a comma2k19 segment folder) or a folder tree holding many; every
 recording found becomes one :class:`~posbench.scenarios.drive.Drive`.
+:func:`distinct_recordings` finds the recordings of several paths with each counted once
+(the same file given twice, or a byte-identical copy under another name).
 """
 
 from __future__ import annotations
 
+import functools
+import hashlib
+import os
+from collections import Counter, defaultdict
 from collections.abc import Iterable, Iterator
+from dataclasses import dataclass
 from pathlib import Path
 
 from posbench.scenarios.drive import Drive
@@ -143,11 +150,10 @@ def iter_load_many(
             yield load_one(rec_path, fmt, projection=projection, topics=topics)
         return
     import multiprocessing as mp
-    from concurrent.futures import ProcessPoolExecutor
 
-    with ProcessPoolExecutor(
-        max_workers=min(workers, len(recs)), mp_context=mp.get_context("fork")
-    ) as pool:
+    from posbench.scenarios.child_processes import WorkerPool  # end with us, no Ctrl-C
+
+    with WorkerPool(max_workers=min(workers, len(recs)), mp_context=mp.get_context("fork")) as pool:
         futures = [
             pool.submit(load_one, rec_path, fmt, projection, topics) for rec_path, fmt in recs
         ]
@@ -180,3 +186,136 @@ def load_many(
     for p in paths:
         out.extend(load(p, projection=projection, topics=topics))
     return out
+
+
+# ------------------------------------------------------------------ each recording once
+
+
+@dataclass(frozen=True)
+class Duplicate:
+    """A recording given more than once: ``path`` is left out, ``kept`` (met first) counts.
+
+    Attributes:
+        path: the recording left out, as it was reached (a path given, or one found in a
+            folder given).
+        kept: the recording counted in its place.
+        same_file: ``path`` is the very file or folder ``kept`` is (given twice, through a
+            symbolic link, or both alone and inside a folder given); False: another file or
+            folder with the same content (a byte-identical copy under another name).
+    """
+
+    path: Path
+    kept: Path
+    same_file: bool
+
+    def line(self) -> str:
+        """What was done, in one line: which paths are the same recording, which one counts."""
+        if self.same_file and self.path == self.kept:
+            return f"{self.path} given twice: counted once"
+        why = "the same file" if self.same_file else "identical bytes"
+        same = f"{self.path} is the same recording as {self.kept} ({why})"
+        return f"{same}: counted once, as {self.kept}"
+
+
+@dataclass(frozen=True)
+class Recordings:
+    """The recordings at or under some paths, each counted once (:func:`distinct_recordings`).
+
+    Attributes:
+        found: ``(path, format)`` of every recording counted, in the order given.
+        duplicates: the recordings left out, in the order met, each the same as one of found.
+        sources: the paths given that hold a recording counted, in the order given, each once.
+    """
+
+    found: list[tuple[Path, str]]
+    duplicates: list[Duplicate]
+    sources: list[Path]
+
+
+def distinct_recordings(paths: Iterable[str | Path]) -> Recordings:
+    """The recordings at or under each of ``paths`` (as :func:`iter_load_many` reads them),
+    each counted once: a recording reached again (the same file or folder: a path given
+    twice, a symbolic link to it, a file given alone and inside a folder given) or with the
+    content of an earlier one (the same format and bytes: a file's, or a folder recording's
+    files' relative paths and bytes) is left out, as a :class:`Duplicate` of the first.
+
+    Only recordings whose every file has the size of another's are hashed (sha256), each
+    file once per process: where no two are alike no file is read here.
+
+    Raises:
+        DataError: a path that does not exist or holds no recording (every path is checked
+            before any file is read).
+    """
+    given = [Path(p) for p in paths]
+    reached = [(i, rec, fmt) for i, p in enumerate(given) for rec, fmt in _recordings(p)]
+    first: dict[Path, int] = {}  # resolved path -> its first position in ``reached``
+    dropped: dict[int, Duplicate] = {}
+    for n, (_, rec, _) in enumerate(reached):
+        real = rec.resolve()
+        if real in first:
+            dropped[n] = Duplicate(rec, reached[first[real]][1], same_file=True)
+        else:
+            first[real] = n
+    for n, m in _same_content([(n, r[1], r[2]) for n, r in enumerate(reached) if n not in dropped]):
+        dropped[n] = Duplicate(reached[n][1], reached[m][1], same_file=False)
+    kept = [r for n, r in enumerate(reached) if n not in dropped]
+    held = {i for i, _, _ in kept}
+    return Recordings(
+        found=[(rec, fmt) for _, rec, fmt in kept],
+        duplicates=[dropped[n] for n in sorted(dropped)],
+        sources=[p for i, p in enumerate(given) if i in held],
+    )
+
+
+def _same_content(recs: list[tuple[int, Path, str]]) -> Iterator[tuple[int, int]]:
+    """``(n, m)`` for every recording ``n`` of ``recs`` (position, path, format) whose
+    format and content are those of an earlier one, ``m``: only recordings whose files have
+    the same relative paths and sizes are hashed (and only those of a format met twice are
+    listed)."""
+    formats = Counter(fmt for _, _, fmt in recs)
+    alike: dict[tuple[object, ...], list[tuple[int, list[tuple[str, Path, os.stat_result]]]]]
+    alike = defaultdict(list)
+    for n, rec, fmt in recs:
+        if formats[fmt] < 2:
+            continue
+        files = _recording_files(rec)
+        alike[(fmt, *((name, st.st_size) for name, _, st in files))].append((n, files))
+    for group in alike.values():
+        seen: dict[str, int] = {}
+        for n, files in group if len(group) > 1 else ():
+            digest = _content_sha256(files)
+            if digest in seen:
+                yield n, seen[digest]
+            else:
+                seen[digest] = n
+
+
+def _recording_files(rec: Path) -> list[tuple[str, Path, os.stat_result]]:
+    """The files of a recording with their ``stat``: a file alone (its name is no part of
+    its content), or every file under a folder recording by relative POSIX path, sorted
+    (symbolic links to folders not followed)."""
+    if rec.is_file():
+        return [("", rec, rec.stat())]
+    out = []
+    for folder, dirs, names in os.walk(rec):
+        dirs.sort()
+        for name in sorted(names):
+            f = Path(folder, name)
+            if f.is_file():
+                out.append((f.relative_to(rec).as_posix(), f, f.stat()))
+    return sorted(out, key=lambda e: e[0])
+
+
+def _content_sha256(files: list[tuple[str, Path, os.stat_result]]) -> str:
+    """sha256 over the relative paths and the sha256 of each of ``files``."""
+    h = hashlib.sha256()
+    for name, f, st in files:
+        h.update(f"{name}\0{_file_sha256(f.resolve(), st.st_size, st.st_mtime_ns)}\n".encode())
+    return h.hexdigest()
+
+
+@functools.lru_cache(maxsize=4096)
+def _file_sha256(path: Path, size: int, mtime_ns: int) -> str:
+    """sha256 of one file's bytes; remembered while its size and modification time stay."""
+    with open(path, "rb") as f:
+        return hashlib.file_digest(f, "sha256").hexdigest()
