@@ -15,7 +15,7 @@ import time
 from pathlib import Path
 
 import pytest
-from processes import HAS_PROC, Started
+from helpers import HAS_PROC, Started
 
 pytestmark = pytest.mark.skipif(not HAS_PROC, reason="reads processes from /proc (Linux)")
 

@@ -22,7 +22,7 @@ import time
 from pathlib import Path
 
 import pytest
-from processes import HAS_PROC, Started, alive
+from helpers import HAS_PROC, Started, alive
 
 from posbench.cli import INTERRUPTED, INTERRUPTED_LINE
 
