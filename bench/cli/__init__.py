@@ -21,6 +21,13 @@ INTERRUPTED = 130
 INTERRUPTED_LINE = "error: interrupted"
 
 
+class Interrupted(KeyboardInterrupt):
+    """Ctrl-C as this process raises it: a KeyboardInterrupt (caught as one everywhere) of
+    its own type, because CPython remembers a plain KeyboardInterrupt that escaped code run
+    by ``exec`` of a string (a dataclass being made, for one) and, under ``python -m``, ends
+    the process by SIGINT at exit, whatever status it was given (checked: -2, not 130)."""
+
+
 class _Interrupts:
     """What this process knows of Ctrl-C (SIGINT): whether one came while the command ran
     (``seen``), whether one was dropped by something that could not raise it (``lost``: a
@@ -34,12 +41,12 @@ class _Interrupts:
 
 
 def _on_interrupt(signum: int, frame: FrameType | None) -> None:
-    """The SIGINT handler of the process: KeyboardInterrupt while the command runs; once it
+    """The SIGINT handler of the process: :class:`Interrupted` while the command runs; once it
     has ended (the interpreter exits: threads joined, atexit), the one line unless it is out
     already, and the process ends at once with status 130."""
     _Interrupts.seen = True
     if _Interrupts.running:
-        raise KeyboardInterrupt
+        raise Interrupted
     if not _Interrupts.said:
         _say_interrupted()
     for stream in (sys.stdout, sys.stderr):  # what was printed before still goes out

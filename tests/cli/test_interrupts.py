@@ -192,6 +192,22 @@ def test_an_interrupt_turned_into_another_error_ends_with_one_line(tmp_path):
     assert_interrupted(r.returncode, r.stderr)
 
 
+def test_an_interrupt_out_of_code_run_by_exec_still_exits_130(tmp_path):
+    """CPython remembers a plain KeyboardInterrupt that escaped code run by ``exec`` of a
+    string (dataclasses make their methods so) and, under ``python -m``, ended the process
+    by SIGINT at exit whatever its status: an interrupted run printed its line, then died of
+    the signal (-2), about once in 20."""
+    code = """
+        def command(argv):
+            exec("os.kill(os.getpid(), signal.SIGINT)\\nfor i in range(3): pass")
+    """
+    (tmp_path / "entry.py").write_text(IMPORTS + textwrap.dedent(code) + AROUND)
+    r = subprocess.run(
+        [sys.executable, "-m", "entry"], cwd=tmp_path, capture_output=True, text=True, timeout=60
+    )
+    assert_interrupted(r.returncode, r.stderr)
+
+
 def test_ctrl_c_while_the_process_exits(tmp_path):
     """After the command has ended (threads joined, atexit hooks run), Ctrl-C ends the
     process at once: the one line, status 130, what the command printed kept."""
