@@ -18,6 +18,8 @@ AUTO_PROFILE = "auto"
 GPS_PROFILES = (AUTO_PROFILE, *GPS_CONDITIONS)
 #: the simulated profile ``auto`` gives a drive whose fixes are the truth's own positions
 AUTO_SIMULATED = "rtk"
+#: how results.json names the package's own tuning file (the same on every installation)
+BUILT_IN_TUNING = "posbench/predictors/tuned.json"
 #: the predictors of a run that names none (``bench run``, :func:`posbench.run`)
 DEFAULT_PREDICTORS = ("cv", "poly", "kf", "kf-paper", "ekf", "lstm")
 

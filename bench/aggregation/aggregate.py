@@ -33,6 +33,7 @@ from posbench.metrics.outages import (
 )
 from posbench.scenarios.labels import LABELS
 from posbench.scoring.records import DriveRun, all_traces
+from posbench.scoring.reference import dataset_references
 from posbench.scoring.schema import KINDS, scored_mask
 
 #: the trace columns aggregation reads (positions are not needed once errors exist)
@@ -183,6 +184,7 @@ def aggregate(
     stats = statistics or Statistics(baseline=default_baseline(preds))
     res: dict[str, Any] = {
         "predictors": {},
+        "references": {},  # filled from the drives below
         "by_dataset": {},
         "by_label": {},
         "by_speed": {},
@@ -343,6 +345,7 @@ def aggregate(
             "name": r.name,
             "dataset": r.dataset,
             "reference": r.reference,
+            "truth_source": r.truth_source,
             "gps_condition": r.gps_condition,
             "duration_s": r.duration_s,
             "gps_fed": r.gps_count,
@@ -359,6 +362,7 @@ def aggregate(
             mine = per_drive.get((r.dataset, r.name), {})
             d["predictors"] = {name: mine.get(name, _empty_kinds(stats)) for name in preds}
         res["drives"].append(d)
+    res["references"] = dataset_references(res["drives"])
     res["gate"] = gate_summary(runs, cfg)
     from posbench.aggregation.track import track_section
 

@@ -16,12 +16,13 @@ def print_run_summary(published: Published) -> None:
     quiet)."""
     from posbench.report.notes import (
         excluded_note,
-        fixes_lines,
+        fixes_scored,
         has_held_out_paired,
         has_paired,
         sanity_lines,
         trained_note,
     )
+    from posbench.scoring.reference import reference_lines
     from posbench.tables.run_tables import summary_table
     from posbench.tables.stat_tables import paired_table, seeds_table
 
@@ -31,8 +32,8 @@ def print_run_summary(published: Published) -> None:
     if verbosity() <= QUIET:
         return
     scored = sum(1 for d in res["drives"] if not d["skipped"])
-    for line in fixes_lines(res):
-        say(line.replace("`", ""))
+    for line in reference_lines(res, fixes_scored(res)):
+        say(line.replace("`", ""))  # one line per data set, wrapped to the terminal's width
     headline = summary_table(res, compact=True)
     print_table(
         console,
@@ -68,8 +69,8 @@ def print_run_summary(published: Published) -> None:
             console,
             held.header(),
             held.cells(),
-            title=f"held-out {plural(len(ho['drives']), 'drive')} (no learned predictor "
-            f"trained on them) - errors in metres",
+            title=f"held-out {plural(len(ho['drives']), 'drive')} (no predictor "
+            f"trained or tuned on them) - errors in metres",
         )
         if has_held_out_paired(res):
             hp = paired_table(res, held_out=True)

@@ -15,7 +15,8 @@ file                        who    content
 ``key/reference.parquet``   keep   the answer key: per query its reference position, label,
                                    speed, time since fix, outage, warm-up flag
 ``key/drives.json``         keep   per drive what the report needs (data set, reference kind,
-                                   notes, outages, fixes fed, skipped drives and why)
+                                   what its truth is, notes, outages, fixes fed, skipped drives
+                                   and why)
 ==========================  =====  ===============================================================
 
 Clock and frame: every time in ``queries.csv`` and ``inputs/`` is in seconds from the drive's
@@ -45,6 +46,7 @@ from posbench.config import RunConfig
 from posbench.naming import unique_file_safe
 from posbench.replay.prepare import prepare_drive
 from posbench.replay.queries import query_frame
+from posbench.replay.reference import truth_source
 from posbench.replay.runner import skip_reason, skipped_run
 from posbench.scenarios.drive import Drive, GpsStream, ImuStream, SpeedStream
 from posbench.scenarios.errors import DataError
@@ -54,7 +56,7 @@ from posbench.scoring.schema import KINDS, QUERY_COLUMNS, TRACK_QUERY_COLUMNS
 #: what ``manifest.json`` says it is, and the version of this layout: a reader accepts every
 #: MINOR of its MAJOR (MINOR grows when files or keys are added, MAJOR when one changes)
 FORMAT = "posbench-queries"
-FORMAT_VERSION = "1.1"
+FORMAT_VERSION = "1.2"
 MANIFEST = "manifest.json"
 INPUTS = "inputs"
 KEY_QUERIES = "key/reference.parquet"
@@ -75,6 +77,7 @@ DRIVE_FIELDS = (
     "gps_count",
     "duration_s",
     "gps_condition",
+    "truth_source",
 )
 
 
@@ -204,6 +207,7 @@ def write_queries(
                 gps_count=len(prep.gps),
                 duration_s=drive.duration_s,
                 gps_condition=prep.gps_condition,
+                truth_source=truth_source(drive),
             )
             records.append(_drive_record(run))
             listed.append(
@@ -304,7 +308,8 @@ class QueryFolder:
 
     def drive_run(self, d: dict[str, Any], traces: pd.DataFrame) -> DriveRun:
         """The :class:`~posbench.scoring.records.DriveRun` of drive record ``d`` with ``traces``."""
-        kw = {f: d[f] for f in DRIVE_FIELDS if f in d}  # folders before 1.1: no gps_condition
+        # folders before 1.1 have no gps_condition, before 1.2 no truth_source
+        kw = {f: d[f] for f in DRIVE_FIELDS if f in d}
         kw["outages"] = [(float(a), float(b)) for a, b in d["outages"]]
         return DriveRun(traces=traces, **kw)
 

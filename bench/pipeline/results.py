@@ -11,7 +11,7 @@ import pandas as pd
 
 from posbench.aggregation.aggregate import aggregate
 from posbench.aggregation.intervals import Statistics
-from posbench.config import RunConfig
+from posbench.config import BUILT_IN_TUNING, RunConfig
 from posbench.saved_run.provenance import git_commit, package_versions
 from posbench.scoring.records import DriveRun
 
@@ -60,17 +60,14 @@ def build_results(
     return {**head, **aggregate(runs, cfg, traces=traces, models=models, statistics=statistics)}
 
 
-#: how results.json names the package's own tuning file (the same on every installation)
-BUILT_IN_TUNING = "posbench/predictors/tuned.json"
-
-
 def tuning_provenance(cfg: RunConfig, runs: Sequence[DriveRun]) -> dict[str, dict[str, Any]]:
     """Per predictor of the run that ran with tuned parameters: ``file`` (the user's path as
     given, or :data:`BUILT_IN_TUNING`), ``sha256`` of it, ``built_in`` (the package's file),
     ``conditions`` (per GPS condition used: its ``params``, ``how`` they were obtained and the
-    ``file`` they come from: a user's file may hold some conditions, the package's the others;
-    the predictor's ``file`` is the first condition's) and ``drives`` (the development drives
-    the tuning used, marked in the run like a learned model's training drives)."""
+    ``file`` they come from, with its ``sha256`` and the condition's development ``drives``: a
+    user's file may hold some conditions, the package's the others; the predictor's ``file``
+    is the first condition's) and ``drives`` (the development drives the tuning used over all
+    conditions, marked in the run like a learned model's training drives)."""
     import hashlib
 
     from posbench.predictors.registry import TUNED_FILE, base_name, tuning_entry
@@ -104,6 +101,8 @@ def tuning_provenance(cfg: RunConfig, runs: Sequence[DriveRun]) -> dict[str, dic
                 "params": entry.get("params", {}),
                 "how": entry.get("how", ""),
                 "file": file,
+                "sha256": sha256[path],
+                "drives": sorted(entry.get("drives", [])),
             }
             t["drives"] = sorted(set(t["drives"]) | set(entry.get("drives", [])))
     return out

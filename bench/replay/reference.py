@@ -15,10 +15,18 @@ from __future__ import annotations
 import numpy as np
 
 from posbench.scenarios.drive import Drive
+from posbench.scoring.reference import FIX_CUBIC, TRUTH, truth_name
 
-#: what a drive is scored against (``DriveRun.reference``): its truth, or the paper's cubic
-TRUTH = "truth"
-FIX_CUBIC = "cubic through surrounding fixes"
+__all__ = ["FIX_CUBIC", "TRUTH", "cubic_through_fixes", "reference_at", "truth_at", "truth_source"]
+
+
+def truth_source(drive: Drive) -> str:
+    """What ``drive``'s truth is, in words (``DriveRun.truth_source``), e.g. ``the OXTS
+    RT3003 INS/GNSS solution``; "" for a drive without one (scored against its fixes)."""
+    if drive.truth is None:
+        return ""
+    topic = ((drive.meta.extra.get("topics") or {}).get("truth") or {}).get("topic")
+    return truth_name(drive.meta.format, str(topic) if topic else None)
 
 
 def reference_at(drive: Drive, tq: np.ndarray) -> np.ndarray:

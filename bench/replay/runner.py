@@ -19,6 +19,7 @@ from posbench.predictors.registry import create
 from posbench.replay.loop import replay
 from posbench.replay.prepare import PreparedDrive, prepare_drive
 from posbench.replay.queries import query_frame
+from posbench.replay.reference import truth_source
 from posbench.scenarios.child_processes import WorkerPool
 from posbench.scenarios.drive import Drive
 from posbench.scoring.records import DriveRun, merge_predictor_runs
@@ -120,6 +121,7 @@ def run_drive(drive: Drive, cfg: RunConfig) -> DriveRun:
         rejected=rejected,
         cov_ns=cov_ns,
         gps_condition=prep.gps_condition,
+        truth_source=truth_source(drive),
     )
 
 

@@ -13,22 +13,24 @@ from posbench.errors import UsageError
 from posbench.figures.per_drive import DEFAULT_DRIVE_PLOTS
 from posbench.figures.style import PlotsWritten, shown_format
 from posbench.figures.writer import write_plots
+from posbench.naming import plural
 from posbench.report.data_check import report_lines as consistency_lines
 from posbench.report.glossary import glossary_lines
 from posbench.report.notes import (
     MISSING_NOTE,
     block_note,
+    dataset_reference,
     excluded_note,
-    fixes_lines,
     fixes_scored,
     has_held_out_paired,
     has_paired,
-    model_text,
+    held_out_note,
     paired_note,
     statistics_note,
     trained_note,
     tuning_lines,
 )
+from posbench.scoring.reference import reference_lines, references
 from posbench.scoring.schema import KINDS
 from posbench.tables.run_tables import (
     NOT_CONCLUSIVE,
@@ -178,9 +180,10 @@ def render_markdown(
         f"GPS profile `{cfg['gps_profile']}`; dropouts `{cfg['dropouts']}`; "
         f"seed {cfg['seed']}.",
         "",
-        *[f"- {line[0].upper()}{line[1:]}." for line in fixes_lines(res)],
+        *[f"- {line[0].upper()}{line[1:]}." for line in reference_lines(res, fixes_scored(res))],
         "",
-        "Errors are Euclidean distances in metres in a local ENU frame (true metres). "
+        "Errors are Euclidean distances in metres, in a local ENU frame, to each data set's "
+        "reference named above. "
         "`future` = position at fix time + horizon, asked at the fix; `now` = current position, "
         "asked every now-step between fixes. Latency: `step` = one `observe_gps` plus the "
         "future query, `query` = one between-fix `position_at`, single process.",
@@ -233,8 +236,8 @@ def render_markdown(
     if res.get("held_out_all"):
         ho = res["held_out_all"]
         lines += [
-            f"## Held-out drives ({len(ho['drives'])}: no learned predictor of this run "
-            f"was trained on them)",
+            f"## Held-out drives ({len(ho['drives'])}: no predictor of this run was trained "
+            f"or tuned on them)",
             "",
             summary_table(res, held_out=True).markdown(),
             "",
@@ -257,15 +260,14 @@ def render_markdown(
             "",
         ]
     fixes_by_dataset = fixes_scored(res)
+    refs = references(res)
     for ds in res["by_dataset"]:
         drives = [d for d in res["drives"] if d["dataset"] == ds]
-        refs = sorted({d["reference"] for d in drives if d["reference"]})
-        fixes = fixes_by_dataset.get(ds)
-        fed = f"; fixes: {fixes}" if fixes else ""
         lines += [
             f"## Data set `{ds}`",
             "",
-            f"{len(drives)} drives; reference: {', '.join(refs) or '-'}{fed}.",
+            f"{plural(len(drives), 'drive')}; "
+            f"{dataset_reference(refs.get(ds), fixes_by_dataset.get(ds))}.",
             "",
         ]
         lines += [dataset_table(res, ds).markdown(), ""]
@@ -302,17 +304,11 @@ def render_markdown(
             ]
         ho = res.get("held_out", {}).get(ds)
         if ho:
-            who = "; ".join(
-                f"`{p}` ({model_text(res['models'][p])}) was trained on "
-                + ", ".join(sorted(set(names) & set(ho["excluded_training_drives"])))
-                for p, names in res.get("training_drives", {}).items()
-                if set(names) & set(ho["excluded_training_drives"])
-            )
             lines += [
                 f"### Held-out drives only ({len(ho['drives'])} of {len(drives)})",
                 "",
-                f"{who}: figures on those drives flatter it. On the held-out drives "
-                f"({', '.join(ho['drives']) or 'none'}):",
+                f"{held_out_note(res, ho['excluded_training_drives'])}. On the held-out "
+                f"drives ({', '.join(ho['drives']) or 'none'}):",
                 "",
             ]
             if ho["drives"] and has_held_out_paired(res, ds):

@@ -4,9 +4,13 @@ intervals and the paired comparison were made."""
 
 from __future__ import annotations
 
+import re
+from collections.abc import Mapping, Sequence
 from typing import Any
 
+from posbench.config import BUILT_IN_TUNING
 from posbench.scenarios.text import fixed
+from posbench.scoring.reference import KIND_FIXES
 from posbench.scoring.schema import KINDS
 from posbench.tables.run_tables import trained_in_run
 from posbench.tables.stat_tables import block_lengths
@@ -31,17 +35,93 @@ def model_text(model: dict[str, Any]) -> str:
     return f"model {model['model']}"
 
 
+def tuned_baseline(res: Mapping[str, Any], name: str) -> bool:
+    """Whether the drives marked for ``name`` are the development drives of its tuning (a
+    baseline run with tuned parameters, no learned model: results.json's ``models`` names
+    its model ``tuning FILE``), not a learned model's training drives."""
+    model = (res.get("models") or {}).get(name) or {}
+    return name in (res.get("tuning") or {}) and str(model.get("model", "")).startswith("tuning ")
+
+
+def tuning_file_text(entry: Mapping[str, Any], file: str | None = None) -> str:
+    """How a report names a tuning file: the package's own, or the user's path (``file``:
+    one of ``entry``'s conditions' file, else the predictor's)."""
+    file = file or str(entry["file"])
+    built_in = entry.get("built_in") if file == entry["file"] else file == BUILT_IN_TUNING
+    return "the built-in predictors/tuned.json" if built_in else f"`{file}`"
+
+
+def _names(names: Sequence[str]) -> str:
+    """``a``, ``a and b``, ``a, b and c``."""
+    return names[0] if len(names) == 1 else f"{', '.join(names[:-1])} and {names[-1]}"
+
+
+def _marked_groups(
+    res: Mapping[str, Any], marked: Mapping[str, Sequence[str]]
+) -> list[tuple[list[str], str, Sequence[str], bool]]:
+    """The predictors of ``marked`` (name -> drives of the run marked for it) as groups
+    ``(names, what, drives, tuned)``: a learned predictor alone, with its model's text; tuned
+    baselines that share a tuning file and development drives together, with the file's."""
+    groups: dict[tuple[str, ...], tuple[list[str], str, Sequence[str], bool]] = {}
+    for p, drives in marked.items():
+        if tuned_baseline(res, p):
+            what = tuning_file_text(res["tuning"][p])
+            key: tuple[str, ...] = ("tuned", what, *drives)
+        else:
+            what, key = model_text(res["models"][p]), ("trained", p)
+        groups.setdefault(key, ([], what, drives, key[0] == "tuned"))[0].append(p)
+    return list(groups.values())
+
+
 def trained_note(res: dict[str, Any]) -> str:
-    """The footnote of ``*`` rows: which model, trained on which of the run's drives."""
+    """The footnote of ``*`` rows: which model, trained on which of the run's drives, or which
+    tuning, tuned on which (its development drives)."""
     trained = trained_in_run(res)
     if not trained:
         return ""
     n_drives = sum(1 for d in res["drives"] if not d["skipped"])
-    parts = [
-        f"{p} ({model_text(res['models'][p])}) was trained on {len(d)} of these {n_drives} drives"
-        for p, d in trained.items()
-    ]
-    return "* " + "; ".join(parts) + ": its figures on them flatter it; see the held-out table."
+    parts = []
+    for names, what, drives, tuned in _marked_groups(res, trained):
+        these = f"{len(drives)} of these {n_drives} drives"
+        if tuned:
+            verb = "was" if len(names) == 1 else "were"
+            parts.append(f"{_names(names)} {verb} tuned on {these} (development drives of {what})")
+        else:
+            parts.append(f"{names[0]} ({what}) was trained on {these}")
+    end = (
+        "its figures on them flatter it"
+        if len(trained) == 1
+        else "their figures on those drives flatter them"
+    )
+    return "* " + "; ".join(parts) + f": {end}; see the held-out table."
+
+
+def held_out_note(res: Mapping[str, Any], excluded: Sequence[str]) -> str:
+    """Who was trained or tuned on which of the ``excluded`` drives of a data set, and that
+    those drives flatter them (the held-out section of report.md); drives that all of them
+    share are listed once."""
+    leave = set(excluded)
+    marked = {
+        p: sorted(set(names) & leave)
+        for p, names in res.get("training_drives", {}).items()
+        if set(names) & leave
+    }
+    groups = _marked_groups(res, marked)
+    shared = len({tuple(drives) for _, _, drives, _ in groups}) == 1
+    parts = []
+    for names, what, drives, tuned in groups:
+        who = _names([f"`{n}`" for n in names])
+        verb = "was" if len(names) == 1 else "were"
+        on = "" if shared else f" on {', '.join(drives)}"
+        if tuned:
+            parts.append(f"{who} {verb} tuned{on} (development drives of {what})")
+        else:
+            parts.append(f"{who} ({what}) was trained{on}")
+    them = "it" if len(marked) == 1 else "them"
+    text = _names(parts) if shared else "; ".join(parts)
+    if shared:
+        text += f" on {', '.join(groups[0][2])}"
+    return f"{text}: figures on those drives flatter {them}"
 
 
 def drive_condition(res: dict[str, Any], drive: dict[str, Any]) -> str:
@@ -79,14 +159,18 @@ def fixes_scored(res: dict[str, Any]) -> dict[str, str]:
     return out
 
 
-def fixes_lines(res: dict[str, Any], dataset: str | None = None) -> list[str]:
-    """``fixes scored in `DATA SET`: ...`` per data set (or for ``dataset`` only):
-    :func:`fixes_scored` as lines for the terminal and report.md."""
-    return [
-        f"fixes scored in `{ds}`: {text}"
-        for ds, text in fixes_scored(res).items()
-        if dataset is None or ds == dataset
-    ]
+def dataset_reference(ref: Mapping[str, Any] | None, fixes: str | None) -> str:
+    """``reference: TEXT; fixes: FIXES`` of a data set's section (:mod:`posbench.scoring.reference`;
+    the fixes scored where they are not the reference themselves)."""
+    if ref is None:
+        return "reference: -" + (f"; fixes: {fixes}" if fixes else "")
+    cubic = (
+        "; the reference position of a query is a cubic through the fixes around it"
+        if ref["kind"] == KIND_FIXES
+        else ""
+    )
+    fed = f"; fixes: {fixes}" if fixes and ref["kind"] != KIND_FIXES else ""
+    return f"reference: {ref['text']}{cubic}{fed}"
 
 
 def excluded_counts(res: dict[str, Any]) -> tuple[int, int]:
@@ -195,40 +279,78 @@ def sanity_lines(res: dict[str, Any]) -> list[str]:
     return lines
 
 
-def _condition_text(condition: str, entry: dict[str, Any], file: str) -> str:
-    """``rtk: cov_scale=0.708 (how)``: one GPS condition's tuned values, how they were
-    obtained, and their file where it is not the predictor's."""
-    values = (
-        ", ".join(
-            f"{k}={v:g}" if isinstance(v, float) else f"{k}={v}" for k, v in entry["params"].items()
-        )
-        or "defaults"
-    )
-    other = entry.get("file", file)
-    source = f" from `{other}`" if other != file else ""
-    how = f" ({entry['how']})" if entry.get("how") else ""
-    return f"{condition}: {values}{source}{how}"
+#: what in a tuning's ``how`` the report leaves to results.json: the ``bench tune`` commands
+#: ("by `CMD`", "`CMD`: ") and the paths of the development drives ("development drives P, Q")
+_COMMAND_BY = re.compile(r"\s*\bby `[^`]*`")
+_COMMAND_LEAD = re.compile(r"`[^`]*`:\s*")
+_DRIVE_PATHS = re.compile(r"\bdevelopment drives [^;]*")
+
+
+def short_how(how: str) -> str:
+    """How a tuned value was obtained, without the ``bench tune`` command and the paths of its
+    development drives (results.json keeps both): ``cov_scale for 95 % coverage on the
+    development drives``."""
+    how = _COMMAND_LEAD.sub("", _COMMAND_BY.sub("", how))
+    return _DRIVE_PATHS.sub("the development drives", how).strip(" ;")
 
 
 def tuning_lines(res: dict[str, Any]) -> list[str]:
-    """One line per predictor that ran with tuned parameters (results.json ``tuning``): the
-    file (built-in or the user's, with its sha256) and, per GPS condition, how the values
-    were obtained."""
+    """The "Tuning of the baselines" lines (results.json ``tuning``): the tuning file(s) with
+    their sha256, once; per predictor that ran with tuned parameters, per GPS condition its
+    values, how they were obtained (without the command) and a label of its development
+    drives; then each set of development drives once, by drive name. The full ``bench tune``
+    commands stay in results.json."""
     tuning = res.get("tuning") or {}
+    if not tuning:
+        return []
+    files: dict[str, tuple[str, str, list[str]]] = {}  # file -> (text, sha256, predictors)
+    sets: dict[tuple[str, ...], str] = {}  # development drives -> label (D1, D2, ...)
     lines = []
     for name, t in tuning.items():
-        where = (
-            "built-in (predictors/tuned.json)" if t.get("built_in") else f"`{t['file']}`"
-        ) + f", sha256 {t['sha256'][:12]}"
-        conds = "; ".join(_condition_text(c, e, t["file"]) for c, e in t["conditions"].items())
-        lines.append(f"- `{name}`: tuning {where}; {conds}")
-    return (
-        [
-            "Tuning of the baselines (their development drives are marked like training drives):",
-            "",
-            *lines,
-            "",
+        conds = []
+        for cond, e in t["conditions"].items():
+            file = str(e.get("file", t["file"]))
+            sha = e.get("sha256") or (t["sha256"] if file == t["file"] else "")
+            text, _, users = files.setdefault(file, (tuning_file_text(t, file), sha, []))
+            if name not in users:
+                users.append(name)
+            drives = tuple(sorted(e["drives"] if "drives" in e else t.get("drives", [])))
+            label = sets.setdefault(drives, f"D{len(sets) + 1}") if drives else ""
+            values = (
+                ", ".join(
+                    f"{k}={v:g}" if isinstance(v, float) else f"{k}={v}"
+                    for k, v in e["params"].items()
+                )
+                or "defaults"
+            )
+            how = short_how(str(e.get("how", "")))
+            conds.append(
+                f"{cond}{f' [{label}]' if label else ''}: {values}"
+                + (f" from {text}" if file != t["file"] else "")
+                + (f" ({how})" if how else "")
+            )
+        lines.append(f"- `{name}`: {'; '.join(conds)}")
+    if len(files) == 1:
+        text, sha, _ = next(iter(files.values()))
+        head = [f"- tuning file: {text}, sha256 {sha[:12]}"]
+    else:
+        head = [
+            "- tuning files: "
+            + "; ".join(
+                f"{text}, sha256 {sha[:12]} ({', '.join(f'`{u}`' for u in users)})"
+                for text, sha, users in files.values()
+            )
         ]
-        if lines
-        else []
-    )
+    tail = [
+        f"- development drives {label} ({len(drives)}): {', '.join(drives)}"
+        for drives, label in sets.items()
+    ]
+    return [
+        "Tuning of the baselines (their development drives are marked like training drives; "
+        "results.json's `tuning` keeps the `bench tune` command behind each value):",
+        "",
+        *head,
+        *lines,
+        *tail,
+        "",
+    ]

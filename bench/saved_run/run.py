@@ -14,6 +14,10 @@ unless asked (``allow_failed=True``); a results.json written before 1.7 has no s
 reads as complete. results.json is written last and atomically (a temporary file renamed
 over it), so a folder whose writing was cut short never reads as a complete run.
 
+Each data set names its reference (schema 1.8, ``references``): its truth, or the
+receiver's own fixes (no independent truth); a run saved before says it through its drives'
+``reference`` (:func:`posbench.scoring.reference.references` reads both).
+
 Example (a notebook)::
 
     import posbench
@@ -41,7 +45,7 @@ from posbench.scenarios.errors import DataError
 
 #: MAJOR.MINOR of results.json: a reader accepts every MINOR of its MAJOR; MINOR grows when
 #: keys are added, MAJOR when a key changes meaning or goes
-SCHEMA_VERSION = "1.7"
+SCHEMA_VERSION = "1.8"
 RESULTS = "results.json"
 TRACES = "traces.parquet"
 PROVENANCE_KEYS = ("command", "versions", "git_commit", "data")

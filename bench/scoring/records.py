@@ -37,6 +37,9 @@ class DriveRun:
     #: the GPS condition its fixes were fed under (``native``: the recording's own receiver;
     #: a profile: drawn from the truth); "" for a skipped drive
     gps_condition: str = ""
+    #: what its truth is, in words, where the drive is scored against one
+    #: (:func:`posbench.replay.reference.truth_source`); "" for none or not known
+    truth_source: str = ""
 
 
 def merge_predictor_runs(parts: Sequence[DriveRun]) -> DriveRun:

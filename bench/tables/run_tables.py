@@ -25,7 +25,8 @@ TRAINED_MARK = " *"
 
 # ------------------------------------------------------------------ builders
 def trained_in_run(res: Mapping[str, Any]) -> dict[str, list[str]]:
-    """Per learned predictor, the drives of this run its model was trained on (non-empty only)."""
+    """Per predictor with marked drives, those of this run: the drives its learned model was
+    trained on, or the development drives of its tuning (a tuned baseline); non-empty only."""
     names = {d["name"] for d in res["drives"] if not d["skipped"]}
     out = {}
     for p, drives in res.get("training_drives", {}).items():
@@ -83,7 +84,7 @@ SUMMARY_CI = ("future_mean", "future_median", "future_p95", "now_mean", "now_p95
 def summary_table(res: Mapping[str, Any], held_out: bool = False, compact: bool = False) -> Table:
     """The headline: per predictor, future and now errors [m] with their 95 % intervals,
     unanswered queries, latency [us]. A predictor trained on some of the run's drives is
-    marked ``*``. ``held_out``: over the drives no learned predictor trained on (no latency:
+    marked ``*``. ``held_out``: over the drives no predictor trained or tuned on (no latency:
     it is run-wide). ``compact`` (the terminal): intervals on the means only."""
     trained = trained_in_run(res)
     src = res["held_out_all"]["predictors"] if held_out else res["predictors"]
@@ -207,7 +208,7 @@ def label_table(res: Mapping[str, Any], dataset: str, kind: str, held_out: bool 
     """The paper's Table I layout: route type x mean error [cm] with its 95 % interval
     (query count), one column per predictor, ``?`` where the interval is wider than the
     value (not conclusive); for the future point (what the paper measured) its LSTM figure
-    beside. ``held_out``: only drives no learned predictor was trained on."""
+    beside. ``held_out``: only drives no predictor was trained or tuned on."""
     preds = list(res["predictors"])
     paper = kind == "future"
     if held_out:

@@ -42,7 +42,7 @@ def paired_table(
     set: difference of mean error [m] (predictor - baseline, queries both answered) with its
     95 % interval, ``*`` where the interval excludes 0, and the drives it wins. A learned
     predictor trained on some of the drives compared is marked ``*`` after its name;
-    ``held_out``: over the drives no learned predictor trained on
+    ``held_out``: over the drives no predictor trained or tuned on
     (``results["paired"]["held_out"]``)."""
     paired = res.get("paired") or {}
     if held_out:

@@ -3,10 +3,11 @@ report's figures read from its ``reports/NAME/results.json`` (what
 ``reports/regenerate.sh`` wrote), never copied by hand.
 
 Per report: the command that made it, its configuration (GPS profile, dropouts, data
-sets, drives), each predictor's ``future`` and ``now`` mean error with its 95 % interval
-and query count, the mean ``future`` error per data set when there are several, and a
-link to the full ``report.md`` in the repository (it lives outside the docs folder, so it
-is linked at the repository's URL). :data:`ROOT` and :data:`REPO_URL` are set by the
+sets, drives), what each data set is scored against (its truth, or the receiver's own
+fixes), each predictor's ``future`` and ``now`` mean error with its 95 % interval and
+query count, the mean ``future`` error per data set when there are several, and a link to
+the full ``report.md`` in the repository (it lives outside the docs folder, so it is linked
+at the repository's URL). :data:`ROOT` and :data:`REPO_URL` are set by the
 mkdocs hook (``docs/gen/hooks.py``) from mkdocs.yml.
 """
 
@@ -107,6 +108,15 @@ def dataset_table(res: Mapping[str, Any]) -> list[str]:
     return lines
 
 
+def reference_lines(res: Mapping[str, Any]) -> list[str]:
+    """What each data set's figures are measured against, one item each (its truth, or the
+    receiver's own fixes: :mod:`posbench.scoring.reference`), then a blank line."""
+    from posbench.scoring.reference import reference_lines as lines_of
+
+    lines = lines_of(res)
+    return [f"- {line[0].upper()}{line[1:]}." for line in lines] + [""] * bool(lines)
+
+
 def report_section(folder: Path, repo_url: str | None = None) -> str:
     """One report's section of the page."""
     res = json.loads((folder / "results.json").read_text())
@@ -128,6 +138,7 @@ def report_section(folder: Path, repo_url: str | None = None) -> str:
         + (f" ({len(drives) - len(scored)} skipped)" if len(scored) < len(drives) else "")
         + f"; results.json schema {res.get('schema_version', '?')}.",
         "",
+        *reference_lines(res),
         *predictor_table(res),
         "",
     ]

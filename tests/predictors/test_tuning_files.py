@@ -105,7 +105,9 @@ def test_tune_out_round_trip_leaves_the_package_tuning_alone(tmp_path, comma_dir
     assert res["training_drives"]["kf"] == entry["drives"]
     assert res["drives"][0]["trained_on"] == ["kf"]
     report = (out / "report.md").read_text()
-    assert f"`kf`: tuning `{mine}`, sha256 {sha256(mine)[:12]}" in report
+    # each tuning file named once, with its hash and the baselines that use it
+    assert f"`{mine}`, sha256 {sha256(mine)[:12]} (`kf`)" in report
+    assert "kf was tuned on" in report and "bundled" not in report
     # bench predictors shows the values a run would use
     r = bench("predictors", "kf", "--tuning", str(mine))
     assert r.returncode == 0 and "under GPS condition native" in r.stdout

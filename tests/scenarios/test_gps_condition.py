@@ -120,7 +120,10 @@ def test_bench_run_scores_the_users_receiver_by_default(tmp_path):
         text=True,
     )
     assert r.returncode == 0, r.stderr
-    assert "fixes scored in table: the recording's own receiver" in r.stdout
+    assert (
+        "reference in table: the truth, the file's truth rows (errors in true metres); fixes "
+        "scored: the recording's own receiver" in " ".join(r.stdout.split())
+    )
     res = json.loads((out / "results.json").read_text())
     drive = res["drives"][0]
     assert drive["gps_condition"] == "native" and drive["gps_fed"] == 300
@@ -128,7 +131,10 @@ def test_bench_run_scores_the_users_receiver_by_default(tmp_path):
     # the receiver sits 3 m off the truth: its errors say so (simulated rtk would give cm)
     assert res["predictors"]["cv"]["future"]["mean_m"] > 2.5
     md = (out / "report.md").read_text()
-    assert "Fixes scored in `table`: the recording's own receiver." in md
+    assert (
+        "- Reference in `table`: the truth, the file's truth rows (errors in true metres); "
+        "fixes scored: the recording's own receiver." in md
+    )
     assert "fixes: the recording's own receiver." in md
 
     out2 = tmp_path / "o2"
@@ -163,7 +169,7 @@ def test_bench_run_scores_the_users_receiver_by_default(tmp_path):
 def test_reports_of_older_runs_name_their_fixes():
     """A results.json before schema 1.6 holds no gps_condition: it is inferred from the
     run's profile and the drive's reference."""
-    from posbench.report.notes import fixes_lines
+    from posbench.report.notes import fixes_scored
 
     res = {
         "config": {"gps_profile": "consumer"},
@@ -172,17 +178,17 @@ def test_reports_of_older_runs_name_their_fixes():
             {"name": "b", "dataset": "aslan", "reference": "cubic", "skipped": None},
         ],
     }
-    assert fixes_lines(res) == [
-        "fixes scored in `kitti`: simulated `consumer` fixes drawn from the truth",
-        "fixes scored in `aslan`: the recording's own receiver",
-    ]
+    assert fixes_scored(res) == {
+        "kitti": "simulated `consumer` fixes drawn from the truth",
+        "aslan": "the recording's own receiver",
+    }
     mixed = replace_drives(
         res, [{"name": "c", "dataset": "kitti", "reference": "cubic", "skipped": None}]
     )
-    assert fixes_lines(mixed, "kitti") == [
-        "fixes scored in `kitti`: the recording's own receiver (1 drive); simulated `consumer` "
-        "fixes drawn from the truth (1 drive)"
-    ]
+    assert fixes_scored(mixed)["kitti"] == (
+        "the recording's own receiver (1 drive); simulated `consumer` fixes drawn from the "
+        "truth (1 drive)"
+    )
 
 
 def replace_drives(res: dict, more: list[dict]) -> dict:
