@@ -19,6 +19,7 @@ Inputs are idempotent per time stamp, so filters of one bank can share an estima
 
 from __future__ import annotations
 
+import copy
 import math
 
 from posbench.predictors._ca_kalman import CaFilter2D
@@ -48,6 +49,13 @@ class AccelBiasEstimator:
         self.max_window_s = float(max_window_s)
         self._ref = CaFilter2D()
         self.reset()
+
+    def __deepcopy__(self, memo: dict) -> AccelBiasEstimator:
+        new = copy.copy(self)
+        memo[id(self)] = new
+        new._ref = copy.deepcopy(self._ref, memo)
+        new._dv = list(self._dv)
+        return new
 
     def reset(self) -> None:
         self._ready = False

@@ -24,6 +24,8 @@ IMU acceleration, zero-velocity update) have ``H`` selecting one component per a
 
 from __future__ import annotations
 
+import copy
+
 import numpy as np
 
 #: entries of a symmetric 3x3 block in storage order, by (row, column)
@@ -95,6 +97,13 @@ class CaFilter2D:
 
     def __init__(self) -> None:
         self.init(0.0, 0.0, 1.0, 1.0, 1.0)
+
+    def __deepcopy__(self, memo: dict) -> CaFilter2D:
+        """A copy with its own means (the covariance blocks are immutable tuples)."""
+        new = copy.copy(self)
+        memo[id(self)] = new
+        new.mx, new.my = list(self.mx), list(self.my)
+        return new
 
     def init(self, x: float, y: float, var_p: float, var_v: float, var_a: float) -> None:
         """At rest at (x, y) [m] with diagonal covariance (per axis: var_p [m^2],

@@ -17,6 +17,8 @@ a manoeuvre's jerk over a long gap), floored at ``floor_var`` [m^2]. Before
 
 from __future__ import annotations
 
+import copy
+
 
 class FixNoise:
     """Per-axis fix variance [m^2] from the fix stream (module docstring).
@@ -44,11 +46,22 @@ class FixNoise:
         self.warmup = int(warmup)
         self.reset()
 
+    def __deepcopy__(self, memo: dict) -> FixNoise:
+        new = copy.copy(self)
+        memo[id(self)] = new
+        new._fixes = list(self._fixes)
+        return new
+
     def reset(self) -> None:
         self._fixes: list[tuple[float, float, float]] = []  # the last three (t, x, y)
         self._mean = 0.0  # running mean of the samples [m^2]
         self._n = 0
         self.var = self.initial_var
+
+    @property
+    def samples(self) -> int:
+        """How many fixes have given a sample so far (the first three give none)."""
+        return self._n
 
     def observe(self, t: float, x: float, y: float) -> None:
         """A fix at t [s], (x, y) [m]; a repeated time stamp is ignored."""

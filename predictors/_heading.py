@@ -20,6 +20,7 @@ each feeding it.
 
 from __future__ import annotations
 
+import copy
 import math
 
 from posbench.predictors._geometry import wrap_angle
@@ -48,6 +49,12 @@ class CourseHeading:
         self.rate_psd = float(rate_psd)
         self.hold_psd = float(hold_psd)
         self.reset()
+
+    def __deepcopy__(self, memo: dict) -> CourseHeading:
+        """A copy (every attribute is an immutable value)."""
+        new = copy.copy(self)
+        memo[id(self)] = new
+        return new
 
     def reset(self) -> None:
         self.h = math.nan  # heading [rad]

@@ -37,13 +37,14 @@ tests/predictors/test_filter_fastpath.py checks every state against filterpy's
 
 from __future__ import annotations
 
+import copy
 import math
 
 import numpy as np
 
-from posbench.predictors._fix_noise import FixNoise
 from posbench.predictors._geometry import check_config, wrap_angle
-from posbench.predictors.base import Predictor, stated_fix_variance
+from posbench.predictors._gnss_noise import GnssNoise
+from posbench.predictors.base import Predictor
 from posbench.predictors.ctra import (
     IA,
     IBA,
@@ -93,14 +94,19 @@ class CtraEkf(Predictor):
         yaw_sigma: IMU yaw noise [rad]. speed_sigma: wheel-speed noise [m/s].
         speed_rel_sigma: wheel-speed scale error, fraction of v (tyre radius, calibration).
         use_imu_yaw, use_speed: whether to use those inputs when present.
+        use_imu: False: ignore the IMU altogether (a fixes-only filter).
         init_vel_sigma: prior speed uncertainty [m/s] when initialised from IMU yaw only.
         cov_scale: calibration: ``covariance_at`` reports ``cov_scale`` x the filter's own
             covariance (1: as the model says); fitted on development drives by
             ``bench tune`` so that 95 % of the 95 % ellipses cover the truth. It never
             changes a position.
-        fix_noise_memory: > 0: for fixes that state no accuracy, estimate their noise from
-            the fixes themselves (:class:`~posbench.predictors._fix_noise.FixNoise`, this many
-            fixes of memory) instead of assuming ``gps_sigma``.
+        fix_noise_memory: > 0: estimate the fixes' white noise from the fixes themselves
+            (:class:`~posbench.predictors._fix_noise.FixNoise`, this many fixes of memory):
+            for fixes that state no accuracy it replaces ``gps_sigma``; for fixes that
+            state one, it splits the statement (see ``gps_split``).
+        gps_split: with ``fix_noise_memory`` > 0, take a fix's stated sigma as its total
+            error, weigh it by the white part the fixes show, and add the slow rest to
+            ``covariance_at`` (:class:`~posbench.predictors._gnss_noise.GnssNoise`).
     """
 
     name = "ekf"
@@ -117,6 +123,7 @@ class CtraEkf(Predictor):
         speed_sigma: float = 0.2,
         speed_rel_sigma: float = 0.03,
         use_imu_yaw: bool = True,
+        use_imu: bool = True,
         use_speed: bool = True,
         init_vel_sigma: float = 15.0,
         accel_bias_psd: float = 1e-3,
@@ -129,6 +136,7 @@ class CtraEkf(Predictor):
         gps_sigma_scale: float = 1.0,
         cov_scale: float = 1.0,
         fix_noise_memory: float = 0.0,
+        gps_split: bool = True,
     ) -> None:
         check_config(
             "ekf",
@@ -147,11 +155,8 @@ class CtraEkf(Predictor):
             fix_noise_memory=(fix_noise_memory, 0.0, 1e6),
         )
         self.fix_noise_memory = float(fix_noise_memory)
-        self._fix_noise = (
-            FixNoise(float(gps_sigma) ** 2, self.fix_noise_memory)
-            if self.fix_noise_memory > 0.0
-            else None
-        )
+        self.gps_split = bool(gps_split)
+        self._gnss = GnssNoise(gps_sigma, gps_sigma_scale, self.fix_noise_memory, self.gps_split)
         self.jerk_psd = float(jerk_psd)
         self.yaw_acc_psd = float(yaw_acc_psd)
         self.pos_psd = float(pos_psd)
@@ -164,6 +169,7 @@ class CtraEkf(Predictor):
         self.speed_sigma = float(speed_sigma)
         self.speed_rel_sigma = float(speed_rel_sigma)
         self.use_imu_yaw = bool(use_imu_yaw)
+        self.use_imu = bool(use_imu)
         self.use_speed = bool(use_speed)
         self.init_vel_sigma = float(init_vel_sigma)
         self.accel_bias_psd = float(accel_bias_psd)
@@ -196,6 +202,17 @@ class CtraEkf(Predictor):
             self._H_imu[sel] = (H, tuple(r_imu[k] for k in sel))
         self.reset()
 
+    def __deepcopy__(self, memo: dict) -> CtraEkf:
+        """An independent copy (a bank's shadows): its own mean, covariance and work
+        buffers; the measurement rows (constant) shared."""
+        new = copy.copy(self)
+        memo[id(self)] = new
+        for name in ("x", "P", "_F", "_Q", "_FP", "_S2", "_e2"):
+            setattr(new, name, getattr(self, name).copy())
+        new._s = list(self._s)
+        new._gnss = copy.deepcopy(self._gnss, memo)
+        return new
+
     def config(self) -> dict:
         return {
             "jerk_psd": self.jerk_psd,
@@ -210,6 +227,7 @@ class CtraEkf(Predictor):
             "speed_sigma": self.speed_sigma,
             "speed_rel_sigma": self.speed_rel_sigma,
             "use_imu_yaw": self.use_imu_yaw,
+            "use_imu": self.use_imu,
             "use_speed": self.use_speed,
             "init_vel_sigma": self.init_vel_sigma,
             "accel_bias_psd": self.accel_bias_psd,
@@ -220,6 +238,7 @@ class CtraEkf(Predictor):
             "speed_scale_sigma0": self.speed_scale_sigma0,
             "calib_psd": self.calib_psd,
             "fix_noise_memory": self.fix_noise_memory,
+            "gps_split": self.gps_split,
         }
 
     def reset(self) -> None:
@@ -231,8 +250,7 @@ class CtraEkf(Predictor):
         self._speed_meas = math.nan
         self.x.fill(0.0)
         self.P[:] = np.eye(N_STATE)
-        if self._fix_noise is not None:
-            self._fix_noise.reset()
+        self._gnss.reset()
 
     # -- filter core ---------------------------------------------------------------
     def _init(
@@ -359,13 +377,11 @@ class CtraEkf(Predictor):
 
     # -- observations ----------------------------------------------------------------
     def fix_variance(self, sigma: float | None) -> float:
-        """R per axis [m^2] of a fix stating per-axis 1-sigma ``sigma`` [m]:
-        ``(gps_sigma_scale * sigma)^2``, or when it states none (None, not finite, or <= 0)
-        ``gps_sigma^2`` or, with ``fix_noise_memory``, the variance estimated so far."""
-        fn = self._fix_noise
-        return stated_fix_variance(
-            sigma, self.gps_sigma_scale, self._r_gps if fn is None else fn.var
-        )
+        """R per axis [m^2] a fix stating per-axis 1-sigma ``sigma`` [m] is weighed with:
+        its white part (:class:`~posbench.predictors._gnss_noise.GnssNoise`); without
+        ``fix_noise_memory`` ``(gps_sigma_scale * sigma)^2``, or ``gps_sigma^2`` when it
+        states none (None, not finite, or <= 0)."""
+        return self._gnss.parts(sigma)[0]
 
     #: the newest fix's innovation and its covariance before the update, ``(nu_x, nu_y,
     #: S_xx, S_xy, S_yy)`` [m, m^2]; None before the filter is initialised (read by
@@ -376,9 +392,8 @@ class CtraEkf(Predictor):
         self.fix_innovation = None
         if not (math.isfinite(x) and math.isfinite(y)):
             return
-        if self._fix_noise is not None:
-            self._fix_noise.observe(t, x, y)
-        self._r_fix = self.fix_variance(sigma)  # this fix's R, read by _init / _update_position
+        self._gnss.observe(t, x, y)
+        self._r_fix = self._gnss.weigh(sigma)  # this fix's R, read by _init / _update_position
         if not self._ready:
             self._try_init(t, x, y)
             return
@@ -406,6 +421,8 @@ class CtraEkf(Predictor):
         self._init(t, x, y, math.atan2(y - y0, x - x0), v0, var_yaw, var_v)
 
     def observe_imu(self, t: float, ax: float, ay: float, yaw: float, yaw_rate: float) -> None:
+        if not self.use_imu:
+            return
         if not self._ready:
             if self.use_imu_yaw and math.isfinite(yaw):
                 self._yaw_meas = yaw
@@ -429,6 +446,13 @@ class CtraEkf(Predictor):
         covariance) of the filter, NaN time before it is initialised. A copy."""
         return self._ts, self.x.tolist(), self.P.copy()
 
+    @property
+    def slow_variance(self) -> float:
+        """The slow part [m^2] per axis of the newest fix's stated error, which
+        ``covariance_at`` adds to the filter's own covariance (0 for a white receiver or
+        one that states nothing; :class:`~posbench.predictors._gnss_noise.GnssNoise`)."""
+        return self._gnss.slow_var
+
     # -- query -------------------------------------------------------------------------
     def position_at(self, t: float) -> tuple[float, float]:
         if not self._ready:
@@ -445,14 +469,17 @@ class CtraEkf(Predictor):
         """2x2 ENU position covariance [m^2] of ``position_at(t)``: the position rows of the
         predict step over T = t - (time of the state), ``F P F' + Q(T)`` with the CTRA
         Jacobian F at the current mean (the linearisation the filter itself uses), without
-        changing the filter, times ``cov_scale``. None before initialisation (``position_at`` then
+        changing the filter, times ``cov_scale``, plus the slow part of the newest fix's
+        stated error (a consider term: :class:`~posbench.predictors._gnss_noise.GnssNoise`).
+        None before initialisation (``position_at`` then
         holds the newest fix with no motion model behind it)."""
         if not self._ready:
             return None
         T = t - self._ts
         P = self.P
+        slow = self._gnss.slow_var * np.eye(2)
         if not T > 0.0:
-            return self.cov_scale * P[:2, :2]
+            return self.cov_scale * P[:2, :2] + slow
         F = np.eye(N_STATE)
         ctra_step(np.array(self._s), T, F)  # the mean position_at extrapolates
         Q = ctra_process_noise(
@@ -465,4 +492,4 @@ class CtraEkf(Predictor):
         )
         Fp = F[:2, : IA + 1]
         out = Fp @ P[: IA + 1, : IA + 1] @ Fp.T + Q[:2, :2]
-        return (0.5 * self.cov_scale) * (out + out.T)
+        return (0.5 * self.cov_scale) * (out + out.T) + slow

@@ -22,6 +22,7 @@ from typing import Any
 from posbench.predictors._geometry import check_config
 from posbench.predictors.bank import ModelBank
 from posbench.predictors.ekf import CtraEkf
+from posbench.predictors.kf_bank import HORIZONS_S
 
 #: (jerk_psd [m^2/s^5], yaw_acc_psd [rad^2/s^3]) of the members, gentle to agile
 NOISE_LEVELS = ((0.5, 0.03), (4.0, 0.3), (32.0, 3.0), (256.0, 10.0))
@@ -37,6 +38,9 @@ class EkfBank(ModelBank):
             and one fixes-only member; the one not given takes
             :class:`~posbench.predictors.ekf.CtraEkf`'s default), e.g. ``--set ekf.jerk_psd=4``.
         memory_fixes: exponential memory of the member scores, in fixes.
+        horizons_s, horizon_memory: the horizons [s] members are also scored at and the
+            memory of those scores (:class:`~posbench.predictors.bank.ModelBank`); ``[]``:
+            one fix ahead only.
         cov_scale: ``covariance_at`` reports ``cov_scale`` x the selected member's covariance.
         **options: any other :class:`~posbench.predictors.ekf.CtraEkf` option, passed to
             every member (``gps_sigma``, ``gps_sigma_scale``, ``yaw_rate_sigma``, ...).
@@ -51,6 +55,8 @@ class EkfBank(ModelBank):
         yaw_acc_psd: float | None = None,
         memory_fixes: float = 20.0,
         cov_scale: float = 1.0,
+        horizons_s: Sequence[float] = HORIZONS_S,
+        horizon_memory: float = 10.0,
         **options: float | bool,
     ) -> None:
         if jerk_psd is not None or yaw_acc_psd is not None:
@@ -70,21 +76,20 @@ class EkfBank(ModelBank):
         members, labels = [], []
         for j, w in levels:
             for aided in (True, False):
-                extra = (
-                    {}
-                    if aided
-                    else {
-                        "yaw_rate_sigma": 1e3,
-                        "accel_sigma": 1e3,
-                        "use_imu_yaw": False,
-                        "use_speed": False,
-                    }
-                )
+                # a fixes-only member takes no sensor input at all
+                extra = {} if aided else {"use_imu": False, "use_speed": False}
                 # any CtraEkf option (from --set): CtraEkf checks the names and values
                 member_options: dict[str, Any] = {**options, **extra}
                 members.append(CtraEkf(jerk_psd=j, yaw_acc_psd=w, **member_options))
                 labels.append(f"{'aided' if aided else 'fixes'} j{j:g} w{w:g}")
-        super().__init__(members, labels, memory_fixes=memory_fixes, cov_scale=cov_scale)
+        super().__init__(
+            members,
+            labels,
+            memory_fixes=memory_fixes,
+            cov_scale=cov_scale,
+            horizons_s=horizons_s,
+            horizon_memory=horizon_memory,
+        )
 
     def config(self) -> dict:
         member = {
@@ -98,4 +103,6 @@ class EkfBank(ModelBank):
             "noise_levels": [list(p) for p in self.noise_levels],
             "memory_fixes": self.memory_fixes,
             "cov_scale": self.cov_scale,
+            "horizons_s": list(self.horizons_s),
+            "horizon_memory": self.horizon_memory,
         }

@@ -38,16 +38,17 @@ tests run filterpy beside it (``filter_core``) and check mean, covariance and ev
 
 from __future__ import annotations
 
+import copy
 import math
 
 import numpy as np
 
 from posbench.predictors._accel_bias import AccelBiasEstimator
 from posbench.predictors._ca_kalman import CaFilter2D, ca_noise_block, predict_cross, predict_sym
-from posbench.predictors._fix_noise import FixNoise
 from posbench.predictors._geometry import check_config
+from posbench.predictors._gnss_noise import GnssNoise
 from posbench.predictors._heading import CourseHeading
-from posbench.predictors.base import Predictor, stated_fix_variance
+from posbench.predictors.base import Predictor
 
 NAN2 = (math.nan, math.nan)
 KMH = 1.0 / 3.6
@@ -117,9 +118,13 @@ class LinearKalman(Predictor):
             from every sample.
         imu_gate: > 0: skip an IMU update whose 2-D innovation NIS exceeds this (13.8: the
             chi-square 99.9 % point).
-        fix_noise_memory: > 0: for fixes that state no accuracy, estimate their noise from
-            the fixes themselves (:class:`~posbench.predictors._fix_noise.FixNoise`, this many
-            fixes of memory) instead of assuming ``gps_sigma``.
+        fix_noise_memory: > 0: estimate the fixes' white noise from the fixes themselves
+            (:class:`~posbench.predictors._fix_noise.FixNoise`, this many fixes of memory):
+            for fixes that state no accuracy it replaces ``gps_sigma``; for fixes that
+            state one, it splits the statement (see ``gps_split``).
+        gps_split: with ``fix_noise_memory`` > 0, take a fix's stated sigma as its total
+            error, weigh it by the white part the fixes show, and add the slow rest to
+            ``covariance_at`` (:class:`~posbench.predictors._gnss_noise.GnssNoise`).
         imu_noise_tau_s: > 0: adapt the IMU noise to its innovations (covariance
             matching, exponential memory of this many seconds): R = max(accel_sigma^2,
             mean squared innovation - predicted variance), so vibration and a misfit
@@ -151,6 +156,7 @@ class LinearKalman(Predictor):
         imu_gate: float = 0.0,
         imu_noise_tau_s: float = 0.0,
         fix_noise_memory: float = 0.0,
+        gps_split: bool = True,
         course: CourseHeading | None = None,
         bias_estimator: AccelBiasEstimator | None = None,
     ) -> None:
@@ -182,11 +188,8 @@ class LinearKalman(Predictor):
         self.imu_noise_tau_s = float(imu_noise_tau_s)
         # heading tracker and bias estimator: shared ones where a bank passes them
         self._course = (course or CourseHeading()) if self.heading_from_fixes else None
-        self._fix_noise = (
-            FixNoise(float(gps_sigma) ** 2, self.fix_noise_memory)
-            if self.fix_noise_memory > 0.0
-            else None
-        )
+        self.gps_split = bool(gps_split)
+        self._gnss = GnssNoise(gps_sigma, gps_sigma_scale, self.fix_noise_memory, self.gps_split)
         self._bias_est = (
             (bias_estimator or AccelBiasEstimator(self.accel_bias_tau_s))
             if self.accel_bias_tau_s > 0.0
@@ -204,11 +207,23 @@ class LinearKalman(Predictor):
         self.init_vel_sigma = float(init_vel_sigma)
         self.init_acc_sigma = float(init_acc_sigma)
         self.heading_min_speed = float(heading_min_speed)
-        self._r_pos = self.gps_sigma**2
         self._r_acc = self.accel_sigma**2
         self._r_spd = self.speed_sigma**2
         self.kf = self.filter_core()
         self.reset()
+
+    def __deepcopy__(self, memo: dict) -> LinearKalman:
+        """An independent copy (a bank's shadows, :class:`~posbench.predictors.bank.ModelBank`):
+        its own filter state; the heading tracker and bias estimator copied once per
+        ``memo``, so copies of a bank's members share them as the members do."""
+        new = copy.copy(self)
+        memo[id(self)] = new
+        new.kf = copy.deepcopy(self.kf, memo)
+        new._s = list(self._s)
+        new._gnss = copy.deepcopy(self._gnss, memo)
+        new._course = copy.deepcopy(self._course, memo)
+        new._bias_est = copy.deepcopy(self._bias_est, memo)
+        return new
 
     #: the filter's mean / covariance algebra (the tests put a filterpy twin here)
     filter_core: type = CaFilter2D
@@ -234,6 +249,7 @@ class LinearKalman(Predictor):
             "imu_gate": self.imu_gate,
             "imu_noise_tau_s": self.imu_noise_tau_s,
             "fix_noise_memory": self.fix_noise_memory,
+            "gps_split": self.gps_split,
         }
 
     # -- state -------------------------------------------------------------------------
@@ -245,8 +261,7 @@ class LinearKalman(Predictor):
         self._yaw_t = math.nan
         if self._bias_est is not None:
             self._bias_est.reset()
-        if self._fix_noise is not None:
-            self._fix_noise.reset()
+        self._gnss.reset()
         self._imu_t = math.nan  # time of the previous IMU sample [s]
         self._imu_yaw = False  # whether the newest IMU sample stated a yaw
         self._imu_m2 = self._r_acc  # mean squared IMU innovation per axis [m^2/s^4]
@@ -264,13 +279,11 @@ class LinearKalman(Predictor):
 
     # -- observations -----------------------------------------------------------------
     def fix_variance(self, sigma: float | None) -> float:
-        """R per axis [m^2] of a fix stating per-axis 1-sigma ``sigma`` [m]:
-        ``(gps_sigma_scale * sigma)^2``, or when it states none (None, not finite, or <= 0)
-        ``gps_sigma^2`` or, with ``fix_noise_memory``, the variance estimated so far."""
-        fn = self._fix_noise
-        return stated_fix_variance(
-            sigma, self.gps_sigma_scale, self._r_pos if fn is None else fn.var
-        )
+        """R per axis [m^2] a fix stating per-axis 1-sigma ``sigma`` [m] is weighed with:
+        its white part (:class:`~posbench.predictors._gnss_noise.GnssNoise`); without
+        ``fix_noise_memory`` ``(gps_sigma_scale * sigma)^2``, or ``gps_sigma^2`` when it
+        states none (None, not finite, or <= 0)."""
+        return self._gnss.parts(sigma)[0]
 
     #: the newest fix's innovation and its covariance before the update, ``(nu_x, nu_y,
     #: S_xx, S_xy, S_yy)`` [m, m^2]; None before the filter's second fix (read by
@@ -281,9 +294,8 @@ class LinearKalman(Predictor):
         self.fix_innovation = None
         if not (math.isfinite(x) and math.isfinite(y)):
             return
-        if self._fix_noise is not None:
-            self._fix_noise.observe(t, x, y)
-        r = self.fix_variance(sigma)
+        self._gnss.observe(t, x, y)
+        r = self._gnss.weigh(sigma)
         if self._course is not None:
             self._course.observe_fix(t, x, y, r)
         if self._bias_est is not None:
@@ -410,6 +422,13 @@ class LinearKalman(Predictor):
         time before the first fix. A copy: changing it does not change the filter."""
         return self._ts, self.kf.state(), self.kf.covariance()
 
+    @property
+    def slow_variance(self) -> float:
+        """The slow part [m^2] per axis of the newest fix's stated error, which
+        ``covariance_at`` adds to the filter's own covariance (0 for a white receiver or
+        one that states nothing; :class:`~posbench.predictors._gnss_noise.GnssNoise`)."""
+        return self._gnss.slow_var
+
     # -- query ------------------------------------------------------------------------
     def position_at(self, t: float) -> tuple[float, float]:
         if not self._ready:
@@ -423,7 +442,9 @@ class LinearKalman(Predictor):
         """2x2 ENU position covariance [m^2] of ``position_at(t)``: the filter's covariance
         propagated over dt = t - (time of the state) exactly as a predict step would
         (``F P F' + Q(dt)`` with the white-jerk Q), without changing the filter, times
-        ``cov_scale``. None before the first fix."""
+        ``cov_scale``, plus the slow part of the newest fix's stated error (a consider
+        term: :class:`~posbench.predictors._gnss_noise.GnssNoise`). None before the first
+        fix."""
         if not self._ready:
             return None
         kf = self.kf
@@ -437,4 +458,5 @@ class LinearKalman(Predictor):
         else:
             pxx, pyy, pxy = kf.A[0], kf.B[0], kf.C[0]
         k = self.cov_scale
-        return np.array(((k * pxx, k * pxy), (k * pxy, k * pyy)))
+        s = self._gnss.slow_var
+        return np.array(((k * pxx + s, k * pxy), (k * pxy, k * pyy + s)))

@@ -32,6 +32,10 @@ from posbench.predictors.kf import KMH, LinearKalman
 #: motorway) to ~16 m/s^3 (hard city manoeuvres); a factor 8 apart
 JERK_PSDS = (0.5, 4.0, 32.0, 256.0)
 
+#: horizons [s] the members are also scored at, for queries that far after the newest fix
+#: (outages; :class:`~posbench.predictors.bank.ModelBank`)
+HORIZONS_S = (1.0, 3.0)
+
 
 class _FixesOnlyOptions(TypedDict):
     """The options a fixes-only member takes (it has no IMU or speed to weigh), passed to
@@ -42,6 +46,7 @@ class _FixesOnlyOptions(TypedDict):
     init_vel_sigma: float
     init_acc_sigma: float
     fix_noise_memory: float
+    gps_split: bool
 
 
 class _MemberOptions(_FixesOnlyOptions):
@@ -65,13 +70,17 @@ class KalmanBank(ModelBank):
     Args:
         gps_sigma, gps_sigma_scale, accel_sigma, speed_sigma, speed_rel_sigma, use_speed,
             stop_speed, init_vel_sigma, init_acc_sigma, heading_sigma_max,
-            accel_bias_tau_s, imu_gate, imu_noise_tau_s, fix_noise_memory: passed to every member
+            accel_bias_tau_s, imu_gate, imu_noise_tau_s, fix_noise_memory, gps_split: passed to
+            every member
             (:class:`~posbench.predictors.kf.LinearKalman`); ``accel_sigma`` is the floor
             of the adapted IMU noise.
         jerk_psds: the members' white-jerk densities [m^2/s^5].
         jerk_psd: one density instead of ``jerk_psds`` (a bank of one aided and one
             fixes-only member), e.g. ``--set kf.jerk_psd=4``.
         memory_fixes: exponential memory of the member scores, in fixes.
+        horizons_s, horizon_memory: the horizons [s] members are also scored at and the
+            memory of those scores (:class:`~posbench.predictors.bank.ModelBank`); ``[]``:
+            one fix ahead only.
         cov_scale: ``covariance_at`` reports ``cov_scale`` x the selected member's
             covariance (1: as its model says).
     """
@@ -94,10 +103,13 @@ class KalmanBank(ModelBank):
         imu_gate: float = 13.8,
         imu_noise_tau_s: float = 5.0,
         fix_noise_memory: float = 30.0,
+        gps_split: bool = True,
         jerk_psds: Sequence[float] = JERK_PSDS,
         jerk_psd: float | None = None,
         memory_fixes: float = 20.0,
         cov_scale: float = 1.0,
+        horizons_s: Sequence[float] = HORIZONS_S,
+        horizon_memory: float = 10.0,
     ) -> None:
         if jerk_psd is not None:
             check_config("kf", jerk_psd=(jerk_psd, 1e-9, 1e6))
@@ -118,6 +130,7 @@ class KalmanBank(ModelBank):
             "imu_gate": imu_gate,
             "imu_noise_tau_s": imu_noise_tau_s,
             "fix_noise_memory": fix_noise_memory,
+            "gps_split": gps_split,
         }
         self.use_speed = bool(use_speed)
         self.jerk_psds = jerks
@@ -131,6 +144,7 @@ class KalmanBank(ModelBank):
             "init_vel_sigma": o["init_vel_sigma"],
             "init_acc_sigma": o["init_acc_sigma"],
             "fix_noise_memory": o["fix_noise_memory"],
+            "gps_split": o["gps_split"],
         }
         for j in jerks:
             members.append(
@@ -146,7 +160,14 @@ class KalmanBank(ModelBank):
             labels.append(f"aided j{j:g}")
             members.append(LinearKalman(jerk_psd=j, use_imu=False, use_speed=False, **fixes_only))
             labels.append(f"fixes j{j:g}")
-        super().__init__(members, labels, memory_fixes=memory_fixes, cov_scale=cov_scale)
+        super().__init__(
+            members,
+            labels,
+            memory_fixes=memory_fixes,
+            cov_scale=cov_scale,
+            horizons_s=horizons_s,
+            horizon_memory=horizon_memory,
+        )
 
     def config(self) -> dict:
         return {
@@ -155,4 +176,6 @@ class KalmanBank(ModelBank):
             "jerk_psds": list(self.jerk_psds),
             "memory_fixes": self.memory_fixes,
             "cov_scale": self.cov_scale,
+            "horizons_s": list(self.horizons_s),
+            "horizon_memory": self.horizon_memory,
         }
