@@ -39,11 +39,11 @@ from __future__ import annotations
 
 import copy
 import math
+from typing import Any
 
 import numpy as np
 
 from posbench.predictors._geometry import check_config, wrap_angle
-from posbench.predictors._gnss_noise import GnssNoise
 from posbench.predictors.base import Predictor
 from posbench.predictors.ctra import (
     IA,
@@ -61,6 +61,7 @@ from posbench.predictors.ctra import (
     ctra_process_noise,
     ctra_step,
 )
+from posbench.predictors.filter_inputs import CtraImuInput, CtraSpeedInput, FlatNames, GnssInput
 
 NAN2 = (math.nan, math.nan)
 #: the IMU's measurements as sums of two states: yaw rate, longitudinal accel, yaw
@@ -80,33 +81,62 @@ def _sym_inverse(S: list[list[float]]) -> list[list[float]]:
     return [[A00 * w, A01 * w, A02 * w], [A01 * w, A11 * w, A12 * w], [A02 * w, A12 * w, A22 * w]]
 
 
+#: the ekf's inputs as :class:`CtraEkf` takes them by default
+EKF_INPUTS: dict[str, Any] = {
+    "gnss": GnssInput(),
+    "imu": CtraImuInput(),
+    "speed": CtraSpeedInput(),
+}
+#: flat option names (``--set ekf.X``, tuning files, ``config()``) -> the inputs' fields
+EKF_FLAT = FlatNames(
+    {
+        "gps_sigma": ("gnss", "sigma"),
+        "gps_sigma_scale": ("gnss", "sigma_scale"),
+        "fix_noise_memory": ("gnss", "noise_memory"),
+        "gps_split": ("gnss", "split"),
+        "use_imu": ("imu", None),
+        "yaw_rate_sigma": ("imu", "yaw_rate_sigma"),
+        "accel_sigma": ("imu", "accel_sigma"),
+        "yaw_sigma": ("imu", "yaw_sigma"),
+        "use_imu_yaw": ("imu", "use_yaw"),
+        "accel_bias_psd": ("imu", "accel_bias_psd"),
+        "gyro_bias_psd": ("imu", "gyro_bias_psd"),
+        "accel_bias_sigma0": ("imu", "accel_bias_sigma0"),
+        "gyro_bias_sigma0": ("imu", "gyro_bias_sigma0"),
+        "yaw_offset_sigma0": ("imu", "yaw_offset_sigma0"),
+        "use_speed": ("speed", None),
+        "speed_sigma": ("speed", "sigma"),
+        "speed_rel_sigma": ("speed", "rel_sigma"),
+        "speed_scale_sigma0": ("speed", "scale_sigma0"),
+    }
+)
+
+
 class CtraEkf(Predictor):
     """CTRA extended Kalman filter over GNSS, IMU yaw rate / accel / yaw and wheel speed.
+
+    Composed of the CTRA motion model and its sensor inputs
+    (:mod:`~posbench.predictors.filter_inputs`); a fixes-only filter is ``imu=None,
+    speed=None``.
 
     Args:
         jerk_psd: white-jerk spectral density [m^2/s^5].
         yaw_acc_psd: white yaw-acceleration spectral density [rad^2/s^3].
         pos_psd: position random-walk density [m^2/s].
-        gps_sigma: fix noise [m] per axis, for fixes that state no accuracy.
-        gps_sigma_scale: a fix stating its accuracy ``sigma`` [m] (``observe_gps(...,
-            sigma=)``, per-axis 1-sigma) is weighed with R = (gps_sigma_scale * sigma)^2 I2.
-        yaw_rate_sigma: gyro noise [rad/s]. accel_sigma: longitudinal accel noise [m/s^2].
-        yaw_sigma: IMU yaw noise [rad]. speed_sigma: wheel-speed noise [m/s].
-        speed_rel_sigma: wheel-speed scale error, fraction of v (tyre radius, calibration).
-        use_imu_yaw, use_speed: whether to use those inputs when present.
-        use_imu: False: ignore the IMU altogether (a fixes-only filter).
+        gnss: the fixes (:class:`~posbench.predictors.filter_inputs.GnssInput`).
+        imu: yaw rate, longitudinal acceleration and yaw with their biases
+            (:class:`~posbench.predictors.filter_inputs.CtraImuInput`); None: no IMU.
+        speed: wheel speed with its scale error
+            (:class:`~posbench.predictors.filter_inputs.CtraSpeedInput`); None: no speed.
         init_vel_sigma: prior speed uncertainty [m/s] when initialised from IMU yaw only.
+        calib_psd: random-walk density of the IMU yaw offset and the speed scale.
         cov_scale: calibration: ``covariance_at`` reports ``cov_scale`` x the filter's own
             covariance (1: as the model says); fitted on development drives by
             ``bench tune`` so that 95 % of the 95 % ellipses cover the truth. It never
             changes a position.
-        fix_noise_memory: > 0: estimate the fixes' white noise from the fixes themselves
-            (:class:`~posbench.predictors._fix_noise.FixNoise`, this many fixes of memory):
-            for fixes that state no accuracy it replaces ``gps_sigma``; for fixes that
-            state one, it splits the statement (see ``gps_split``).
-        gps_split: with ``fix_noise_memory`` > 0, take a fix's stated sigma as its total
-            error, weigh it by the white part the fixes show, and add the slow rest to
-            ``covariance_at`` (:class:`~posbench.predictors._gnss_noise.GnssNoise`).
+        **flat: the inputs' fields by their flat names (:data:`EKF_FLAT`: ``gps_sigma``,
+            ``yaw_rate_sigma``, ``use_imu_yaw``, ``use_speed``, ...), as ``--set ekf.X``
+            and tuning files give them.
     """
 
     name = "ekf"
@@ -116,75 +146,48 @@ class CtraEkf(Predictor):
         jerk_psd: float = 2.0,
         yaw_acc_psd: float = 0.1,
         pos_psd: float = 0.01,
-        gps_sigma: float = 0.3,
-        yaw_rate_sigma: float = 0.02,
-        accel_sigma: float = 0.3,
-        yaw_sigma: float = 0.05,
-        speed_sigma: float = 0.2,
-        speed_rel_sigma: float = 0.03,
-        use_imu_yaw: bool = True,
-        use_imu: bool = True,
-        use_speed: bool = True,
+        *,
+        gnss: GnssInput = EKF_INPUTS["gnss"],
+        imu: CtraImuInput | None = EKF_INPUTS["imu"],
+        speed: CtraSpeedInput | None = EKF_INPUTS["speed"],
         init_vel_sigma: float = 15.0,
-        accel_bias_psd: float = 1e-3,
-        gyro_bias_psd: float = 1e-6,
-        accel_bias_sigma0: float = 0.5,
-        gyro_bias_sigma0: float = 0.01,
-        yaw_offset_sigma0: float = 0.1,
-        speed_scale_sigma0: float = 0.05,
         calib_psd: float = 1e-6,
-        gps_sigma_scale: float = 1.0,
         cov_scale: float = 1.0,
-        fix_noise_memory: float = 0.0,
-        gps_split: bool = True,
+        **flat: Any,
     ) -> None:
         check_config(
             "ekf",
             jerk_psd=(jerk_psd, 1e-9, 1e6),
             yaw_acc_psd=(yaw_acc_psd, 1e-12, 1e6),
             pos_psd=(pos_psd, 0.0, 1e6),
-            gps_sigma=(gps_sigma, 1e-4, 1e3),
-            yaw_rate_sigma=(yaw_rate_sigma, 1e-6, 1e3),
-            accel_sigma=(accel_sigma, 1e-4, 1e3),
-            yaw_sigma=(yaw_sigma, 1e-6, 10.0),
-            speed_sigma=(speed_sigma, 1e-4, 1e3),
-            speed_rel_sigma=(speed_rel_sigma, 0.0, 1.0),
             init_vel_sigma=(init_vel_sigma, 1e-3, 1e3),
-            gps_sigma_scale=(gps_sigma_scale, 1e-3, 1e3),
+            calib_psd=(calib_psd, 0.0, 1e6),
             cov_scale=(cov_scale, 1e-6, 1e6),
-            fix_noise_memory=(fix_noise_memory, 0.0, 1e6),
         )
-        self.fix_noise_memory = float(fix_noise_memory)
-        self.gps_split = bool(gps_split)
-        self._gnss = GnssNoise(gps_sigma, gps_sigma_scale, self.fix_noise_memory, self.gps_split)
+        inputs = EKF_FLAT.compose(
+            "ekf", {"gnss": gnss, "imu": imu, "speed": speed}, EKF_INPUTS, flat
+        )
+        #: the sensor inputs (:mod:`~posbench.predictors.filter_inputs`); None: not used
+        self.gnss: GnssInput = inputs["gnss"]
+        self.imu: CtraImuInput | None = inputs["imu"]
+        self.speed: CtraSpeedInput | None = inputs["speed"]
+        self._gnss = self.gnss.noise()
         self.jerk_psd = float(jerk_psd)
         self.yaw_acc_psd = float(yaw_acc_psd)
         self.pos_psd = float(pos_psd)
-        self.gps_sigma = float(gps_sigma)
-        self.gps_sigma_scale = float(gps_sigma_scale)
-        self.cov_scale = float(cov_scale)
-        self.yaw_rate_sigma = float(yaw_rate_sigma)
-        self.accel_sigma = float(accel_sigma)
-        self.yaw_sigma = float(yaw_sigma)
-        self.speed_sigma = float(speed_sigma)
-        self.speed_rel_sigma = float(speed_rel_sigma)
-        self.use_imu_yaw = bool(use_imu_yaw)
-        self.use_imu = bool(use_imu)
-        self.use_speed = bool(use_speed)
         self.init_vel_sigma = float(init_vel_sigma)
-        self.accel_bias_psd = float(accel_bias_psd)
-        self.gyro_bias_psd = float(gyro_bias_psd)
-        self.accel_bias_sigma0 = float(accel_bias_sigma0)
-        self.gyro_bias_sigma0 = float(gyro_bias_sigma0)
-        self.yaw_offset_sigma0 = float(yaw_offset_sigma0)
-        self.speed_scale_sigma0 = float(speed_scale_sigma0)
         self.calib_psd = float(calib_psd)
-        self._r_gps = self.gps_sigma**2
-        self._r_fix = self._r_gps  # R per axis [m^2] of the fix being observed
-        self._r_w = self.yaw_rate_sigma**2
-        self._r_a = self.accel_sigma**2
-        self._r_yaw = self.yaw_sigma**2
-        self._r_v = self.speed_sigma**2
+        self.cov_scale = float(cov_scale)
+        # the calibration states exist without their sensor (unobserved): default priors
+        imu_c = self.imu if self.imu is not None else EKF_INPUTS["imu"]
+        spd_c = self.speed if self.speed is not None else EKF_INPUTS["speed"]
+        self._imu_c: CtraImuInput = imu_c
+        self._spd_c: CtraSpeedInput = spd_c
+        self._r_fix = self.gnss.sigma**2  # R per axis [m^2] of the fix being observed
+        self._r_w = imu_c.yaw_rate_sigma**2
+        self._r_a = imu_c.accel_sigma**2
+        self._r_yaw = imu_c.yaw_sigma**2
+        self._r_v = spd_c.sigma**2
         self.x = np.zeros(N_STATE)
         self.P = np.eye(N_STATE)
         self._F = np.eye(N_STATE)
@@ -213,32 +216,25 @@ class CtraEkf(Predictor):
         new._gnss = copy.deepcopy(self._gnss, memo)
         return new
 
+    @classmethod
+    def flat_options(cls) -> dict[str, Any]:
+        """The flat option names and their defaults (for ``bench predictors`` and
+        ``--set`` checks)."""
+        return EKF_FLAT.flatten(EKF_INPUTS, EKF_INPUTS)
+
     def config(self) -> dict:
+        """The options in flat names (:data:`EKF_FLAT`), as ``CtraEkf(**config())`` takes
+        them."""
         return {
             "jerk_psd": self.jerk_psd,
             "yaw_acc_psd": self.yaw_acc_psd,
             "pos_psd": self.pos_psd,
-            "gps_sigma": self.gps_sigma,
-            "gps_sigma_scale": self.gps_sigma_scale,
-            "cov_scale": self.cov_scale,
-            "yaw_rate_sigma": self.yaw_rate_sigma,
-            "accel_sigma": self.accel_sigma,
-            "yaw_sigma": self.yaw_sigma,
-            "speed_sigma": self.speed_sigma,
-            "speed_rel_sigma": self.speed_rel_sigma,
-            "use_imu_yaw": self.use_imu_yaw,
-            "use_imu": self.use_imu,
-            "use_speed": self.use_speed,
             "init_vel_sigma": self.init_vel_sigma,
-            "accel_bias_psd": self.accel_bias_psd,
-            "gyro_bias_psd": self.gyro_bias_psd,
-            "accel_bias_sigma0": self.accel_bias_sigma0,
-            "gyro_bias_sigma0": self.gyro_bias_sigma0,
-            "yaw_offset_sigma0": self.yaw_offset_sigma0,
-            "speed_scale_sigma0": self.speed_scale_sigma0,
             "calib_psd": self.calib_psd,
-            "fix_noise_memory": self.fix_noise_memory,
-            "gps_split": self.gps_split,
+            "cov_scale": self.cov_scale,
+            **EKF_FLAT.flatten(
+                {"gnss": self.gnss, "imu": self.imu, "speed": self.speed}, EKF_INPUTS
+            ),
         }
 
     def reset(self) -> None:
@@ -266,10 +262,10 @@ class CtraEkf(Predictor):
                 var_v,
                 0.3**2,
                 2.0**2,
-                self.accel_bias_sigma0**2,
-                self.gyro_bias_sigma0**2,
-                self.yaw_offset_sigma0**2,
-                self.speed_scale_sigma0**2,
+                self._imu_c.accel_bias_sigma0**2,
+                self._imu_c.gyro_bias_sigma0**2,
+                self._imu_c.yaw_offset_sigma0**2,
+                self._spd_c.scale_sigma0**2,
             ]
         )
         self._ts = t
@@ -285,8 +281,8 @@ class CtraEkf(Predictor):
         Q = ctra_process_noise(
             self._s[IYAW], T, self.jerk_psd, self.yaw_acc_psd, self.pos_psd, self._Q
         )
-        Q[IBA, IBA] = self.accel_bias_psd * T
-        Q[IBW, IBW] = self.gyro_bias_psd * T
+        Q[IBA, IBA] = self._imu_c.accel_bias_psd * T
+        Q[IBW, IBW] = self._imu_c.gyro_bias_psd * T
         Q[IBY, IBY] = Q[IKV, IKV] = self.calib_psd * T
         FP, P = self._FP, self.P
         np.dot(F, P, out=FP)
@@ -421,24 +417,26 @@ class CtraEkf(Predictor):
         self._init(t, x, y, math.atan2(y - y0, x - x0), v0, var_yaw, var_v)
 
     def observe_imu(self, t: float, ax: float, ay: float, yaw: float, yaw_rate: float) -> None:
-        if not self.use_imu:
+        imu = self.imu
+        if imu is None:
             return
         if not self._ready:
-            if self.use_imu_yaw and math.isfinite(yaw):
+            if imu.use_yaw and math.isfinite(yaw):
                 self._yaw_meas = yaw
             return
         self._predict_to(t)
-        self._update_imu(yaw_rate, ax, yaw if self.use_imu_yaw else math.nan)
+        self._update_imu(yaw_rate, ax, yaw if imu.use_yaw else math.nan)
         self._s = self.x.tolist()
 
     def observe_speed(self, t: float, v: float) -> None:
-        if not (self.use_speed and math.isfinite(v)):
+        speed = self.speed
+        if not (speed is not None and math.isfinite(v)):
             return
         if not self._ready:
             self._speed_meas = v
             return
         self._predict_to(t)
-        self._update_speed(v, self._r_v + (self.speed_rel_sigma * v) ** 2)
+        self._update_speed(v, self._r_v + (speed.rel_sigma * v) ** 2)
         self._s = self.x.tolist()
 
     def state(self) -> tuple[float, list[float], np.ndarray]:

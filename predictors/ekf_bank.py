@@ -21,11 +21,17 @@ from typing import Any
 
 from posbench.predictors._geometry import check_config
 from posbench.predictors.bank import ModelBank
-from posbench.predictors.ekf import CtraEkf
+from posbench.predictors.ekf import EKF_FLAT, EKF_INPUTS, CtraEkf
+from posbench.predictors.filter_inputs import CtraImuInput, CtraSpeedInput, GnssInput
 from posbench.predictors.kf_bank import HORIZONS_S
 
 #: (jerk_psd [m^2/s^5], yaw_acc_psd [rad^2/s^3]) of the members, gentle to agile
 NOISE_LEVELS = ((0.5, 0.03), (4.0, 0.3), (32.0, 3.0), (256.0, 10.0))
+
+
+#: the aided members' inputs: as :class:`~posbench.predictors.ekf.CtraEkf`'s, with the
+#: fixes' noise estimated over 30 fixes
+BANK_INPUTS: dict[str, Any] = {**EKF_INPUTS, "gnss": GnssInput(noise_memory=30.0)}
 
 
 class EkfBank(ModelBank):
@@ -37,13 +43,19 @@ class EkfBank(ModelBank):
         jerk_psd, yaw_acc_psd: one level instead of ``noise_levels`` (a bank of one aided
             and one fixes-only member; the one not given takes
             :class:`~posbench.predictors.ekf.CtraEkf`'s default), e.g. ``--set ekf.jerk_psd=4``.
+        gnss, imu, speed: the aided members' inputs (:mod:`~posbench.predictors.filter_inputs`;
+            defaults :data:`BANK_INPUTS`); a fixes-only member takes ``gnss`` alone.
+        pos_psd, init_vel_sigma, calib_psd: every member's
+            (:class:`~posbench.predictors.ekf.CtraEkf`).
         memory_fixes: exponential memory of the member scores, in fixes.
+        cov_scale: ``covariance_at`` reports ``cov_scale`` x the selected member's own
+            covariance.
         horizons_s, horizon_memory: the horizons [s] members are also scored at and the
             memory of those scores (:class:`~posbench.predictors.bank.ModelBank`); ``[]``:
             one fix ahead only.
-        cov_scale: ``covariance_at`` reports ``cov_scale`` x the selected member's covariance.
-        **options: any other :class:`~posbench.predictors.ekf.CtraEkf` option, passed to
-            every member (``gps_sigma``, ``gps_sigma_scale``, ``yaw_rate_sigma``, ...).
+        **flat: the inputs' fields by their flat names (``gps_sigma``, ``yaw_rate_sigma``,
+            ``use_speed``, ...: :data:`~posbench.predictors.ekf.EKF_FLAT`), as ``--set ekf.X``
+            and tuning files give them.
     """
 
     name = "ekf"
@@ -53,11 +65,18 @@ class EkfBank(ModelBank):
         noise_levels: Sequence[Sequence[float]] = NOISE_LEVELS,
         jerk_psd: float | None = None,
         yaw_acc_psd: float | None = None,
+        *,
+        gnss: GnssInput = BANK_INPUTS["gnss"],
+        imu: CtraImuInput | None = BANK_INPUTS["imu"],
+        speed: CtraSpeedInput | None = BANK_INPUTS["speed"],
+        pos_psd: float = 0.01,
+        init_vel_sigma: float = 15.0,
+        calib_psd: float = 1e-6,
         memory_fixes: float = 20.0,
         cov_scale: float = 1.0,
         horizons_s: Sequence[float] = HORIZONS_S,
         horizon_memory: float = 10.0,
-        **options: float | bool,
+        **flat: Any,
     ) -> None:
         if jerk_psd is not None or yaw_acc_psd is not None:
             noise_levels = (
@@ -70,18 +89,23 @@ class EkfBank(ModelBank):
         check_config(
             "ekf", **{f"noise_levels[{i}]": (j, 1e-9, 1e6) for i, (j, _) in enumerate(levels)}
         )
-        options.setdefault("fix_noise_memory", 30.0)  # members check the options
-        self._options = dict(options)
+        inputs = EKF_FLAT.compose(
+            "ekf", {"gnss": gnss, "imu": imu, "speed": speed}, BANK_INPUTS, flat
+        )
+        self.inputs = inputs
         self.noise_levels = levels
+        self._member: dict[str, Any] = {
+            "pos_psd": pos_psd,
+            "init_vel_sigma": init_vel_sigma,
+            "calib_psd": calib_psd,
+        }
         members, labels = [], []
         for j, w in levels:
-            for aided in (True, False):
-                # a fixes-only member takes no sensor input at all
-                extra = {} if aided else {"use_imu": False, "use_speed": False}
-                # any CtraEkf option (from --set): CtraEkf checks the names and values
-                member_options: dict[str, Any] = {**options, **extra}
-                members.append(CtraEkf(jerk_psd=j, yaw_acc_psd=w, **member_options))
-                labels.append(f"{'aided' if aided else 'fixes'} j{j:g} w{w:g}")
+            members.append(CtraEkf(j, w, **inputs, **self._member))
+            labels.append(f"aided j{j:g} w{w:g}")
+            # a fixes-only member takes no sensor input at all
+            members.append(CtraEkf(j, w, gnss=inputs["gnss"], imu=None, speed=None, **self._member))
+            labels.append(f"fixes j{j:g} w{w:g}")
         super().__init__(
             members,
             labels,
@@ -91,15 +115,16 @@ class EkfBank(ModelBank):
             horizon_memory=horizon_memory,
         )
 
+    @classmethod
+    def flat_options(cls) -> dict[str, Any]:
+        """The flat option names and their defaults (for ``bench predictors`` and
+        ``--set`` checks)."""
+        return EKF_FLAT.flatten(BANK_INPUTS, BANK_INPUTS)
+
     def config(self) -> dict:
-        member = {
-            k: v
-            for k, v in self.members[0].config().items()
-            if k not in ("jerk_psd", "yaw_acc_psd", "cov_scale")
-        }
         return {
-            **member,
-            **self._options,
+            **EKF_FLAT.flatten(self.inputs, BANK_INPUTS),
+            **self._member,
             "noise_levels": [list(p) for p in self.noise_levels],
             "memory_fixes": self.memory_fixes,
             "cov_scale": self.cov_scale,

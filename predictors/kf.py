@@ -40,18 +40,54 @@ from __future__ import annotations
 
 import copy
 import math
+from typing import Any
 
 import numpy as np
 
 from posbench.predictors._accel_bias import AccelBiasEstimator
 from posbench.predictors._ca_kalman import CaFilter2D, ca_noise_block, predict_cross, predict_sym
 from posbench.predictors._geometry import check_config
-from posbench.predictors._gnss_noise import GnssNoise
 from posbench.predictors._heading import CourseHeading
 from posbench.predictors.base import Predictor
+from posbench.predictors.filter_inputs import (
+    AccelInput,
+    FlatNames,
+    GnssInput,
+    HeadingInput,
+    SpeedInput,
+)
 
 NAN2 = (math.nan, math.nan)
 KMH = 1.0 / 3.6
+
+#: the kf's inputs as :class:`LinearKalman` takes them by default
+KF_INPUTS: dict[str, Any] = {
+    "gnss": GnssInput(),
+    "imu": AccelInput(),
+    "heading": HeadingInput(),
+    "speed": SpeedInput(),
+}
+#: flat option names (``--set kf.X``, tuning files, ``config()``) -> the inputs' fields
+KF_FLAT = FlatNames(
+    {
+        "gps_sigma": ("gnss", "sigma"),
+        "gps_sigma_scale": ("gnss", "sigma_scale"),
+        "fix_noise_memory": ("gnss", "noise_memory"),
+        "gps_split": ("gnss", "split"),
+        "use_imu": ("imu", None),
+        "accel_sigma": ("imu", "sigma"),
+        "accel_bias_tau_s": ("imu", "bias_tau_s"),
+        "imu_gate": ("imu", "gate"),
+        "imu_noise_tau_s": ("imu", "noise_tau_s"),
+        "heading_from_fixes": ("heading", "from_fixes"),
+        "heading_sigma_max": ("heading", "sigma_max"),
+        "heading_min_speed": ("heading", "min_speed"),
+        "use_speed": ("speed", None),
+        "speed_sigma": ("speed", "sigma"),
+        "speed_rel_sigma": ("speed", "rel_sigma"),
+        "stop_speed": ("speed", "stop_speed"),
+    }
+)
 
 #: per-axis component of a measurement (CaFilter2D.update_pair): position, velocity, accel
 POS, VEL, ACC = 0, 1, 2
@@ -87,50 +123,32 @@ def ca_process_noise(dt: float, jerk_psd: float, out: np.ndarray) -> np.ndarray:
 class LinearKalman(Predictor):
     """Constant-acceleration linear KF fed by GNSS fixes, IMU acceleration and wheel speed.
 
+    Composed of the CA motion model and its sensor inputs
+    (:mod:`~posbench.predictors.filter_inputs`); a fixes-only filter is ``imu=None,
+    speed=None``.
+
     Args:
         jerk_psd: process noise, white-jerk spectral density [m^2/s^5].
-        gps_sigma: fix noise [m] per axis, for fixes that state no accuracy.
-        gps_sigma_scale: a fix stating its accuracy ``sigma`` [m] (``observe_gps(...,
-            sigma=)``, per-axis 1-sigma) is weighed with R = (gps_sigma_scale * sigma)^2 I2.
-        accel_sigma: IMU acceleration noise [m/s^2] per axis.
-        speed_sigma: wheel-speed noise [m/s].
-        speed_rel_sigma: wheel-speed scale error (tyre radius, calibration), fraction of v.
-        use_speed: use wheel/CAN speed updates when given.
-        stop_speed: speed [m/s] under which a zero-velocity update is applied.
+        gnss: the fixes (:class:`~posbench.predictors.filter_inputs.GnssInput`: noise for
+            fixes that state none, scale of a statement, white/slow split).
+        imu: IMU acceleration as an observation
+            (:class:`~posbench.predictors.filter_inputs.AccelInput`: noise, bias estimate,
+            adapted noise, gate); None: no IMU updates.
+        heading: where the IMU states no yaw, the heading it and the speed are taken along
+            (:class:`~posbench.predictors.filter_inputs.HeadingInput`).
+        speed: wheel speed (:class:`~posbench.predictors.filter_inputs.SpeedInput`); None:
+            no speed updates.
         init_vel_sigma: prior velocity uncertainty [m/s] at the first fix.
         init_acc_sigma: prior acceleration uncertainty [m/s^2] at the first fix.
-        heading_min_speed: speed [m/s] above which the velocity direction is the heading
-            used to rotate the IMU when its yaw is missing.
         cov_scale: calibration: ``covariance_at`` reports ``cov_scale`` x the filter's own
             covariance (1: as the model says); fitted on development drives by
             ``bench tune`` so that 95 % of the 95 % ellipses cover the truth. It never
             changes a position.
-        use_imu: use IMU acceleration updates when given.
-        heading_from_fixes: where the IMU states no yaw, take the heading from fix chords
-            longer than their noise, carried by the gyro in between
-            (:class:`~posbench.predictors._heading.CourseHeading`), instead of from the
-            velocity state above ``heading_min_speed``; IMU samples are used only while
-            that heading's standard deviation is below ``heading_sigma_max`` [rad].
-        accel_bias_tau_s: > 0: estimate the accelerometer's vehicle-frame bias [m/s^2]
-            (mount tilt, gravity leakage, offset) from the IMU's velocity changes against
-            those of a fixes-only filter, forgetting with this time constant [s]
-            (:class:`~posbench.predictors._accel_bias.AccelBiasEstimator`), and remove it
-            from every sample.
-        imu_gate: > 0: skip an IMU update whose 2-D innovation NIS exceeds this (13.8: the
-            chi-square 99.9 % point).
-        fix_noise_memory: > 0: estimate the fixes' white noise from the fixes themselves
-            (:class:`~posbench.predictors._fix_noise.FixNoise`, this many fixes of memory):
-            for fixes that state no accuracy it replaces ``gps_sigma``; for fixes that
-            state one, it splits the statement (see ``gps_split``).
-        gps_split: with ``fix_noise_memory`` > 0, take a fix's stated sigma as its total
-            error, weigh it by the white part the fixes show, and add the slow rest to
-            ``covariance_at`` (:class:`~posbench.predictors._gnss_noise.GnssNoise`).
-        imu_noise_tau_s: > 0: adapt the IMU noise to its innovations (covariance
-            matching, exponential memory of this many seconds): R = max(accel_sigma^2,
-            mean squared innovation - predicted variance), so vibration and a misfit
-            mount weigh the IMU down.
         course, bias_estimator: a heading tracker / bias estimator to use instead of the
             filter's own (filters of a bank share theirs; their inputs are idempotent).
+        **flat: the inputs' fields by their flat names (:data:`KF_FLAT`: ``gps_sigma``,
+            ``accel_sigma``, ``use_imu``, ``heading_from_fixes``, ``stop_speed``, ...), as
+            ``--set kf.X``, tuning files and the hybrid's saved prior give them.
     """
 
     name = "kf"
@@ -138,77 +156,44 @@ class LinearKalman(Predictor):
     def __init__(
         self,
         jerk_psd: float = 2.0,
-        gps_sigma: float = 0.3,
-        accel_sigma: float = 0.3,
-        speed_sigma: float = 0.2,
-        speed_rel_sigma: float = 0.03,
-        use_speed: bool = True,
-        stop_speed: float = 0.15 * KMH,
+        *,
+        gnss: GnssInput = KF_INPUTS["gnss"],
+        imu: AccelInput | None = KF_INPUTS["imu"],
+        heading: HeadingInput = KF_INPUTS["heading"],
+        speed: SpeedInput | None = KF_INPUTS["speed"],
         init_vel_sigma: float = 15.0,
         init_acc_sigma: float = 3.0,
-        heading_min_speed: float = 1.0,
-        gps_sigma_scale: float = 1.0,
         cov_scale: float = 1.0,
-        use_imu: bool = True,
-        heading_from_fixes: bool = False,
-        heading_sigma_max: float = 0.15,
-        accel_bias_tau_s: float = 0.0,
-        imu_gate: float = 0.0,
-        imu_noise_tau_s: float = 0.0,
-        fix_noise_memory: float = 0.0,
-        gps_split: bool = True,
         course: CourseHeading | None = None,
         bias_estimator: AccelBiasEstimator | None = None,
+        **flat: Any,
     ) -> None:
         check_config(
             "kf",
             jerk_psd=(jerk_psd, 1e-9, 1e6),
-            gps_sigma=(gps_sigma, 1e-4, 1e3),
-            gps_sigma_scale=(gps_sigma_scale, 1e-3, 1e3),
-            accel_sigma=(accel_sigma, 1e-4, 1e3),
-            speed_sigma=(speed_sigma, 1e-4, 1e3),
-            speed_rel_sigma=(speed_rel_sigma, 0.0, 1.0),
-            stop_speed=(stop_speed, 0.0, 10.0),
             init_vel_sigma=(init_vel_sigma, 1e-3, 1e3),
             init_acc_sigma=(init_acc_sigma, 1e-3, 1e3),
-            heading_min_speed=(heading_min_speed, 0.0, 100.0),
             cov_scale=(cov_scale, 1e-6, 1e6),
-            heading_sigma_max=(heading_sigma_max, 1e-4, 3.2),
-            accel_bias_tau_s=(accel_bias_tau_s, 0.0, 1e6),
-            imu_gate=(imu_gate, 0.0, 1e9),
-            imu_noise_tau_s=(imu_noise_tau_s, 0.0, 1e6),
-            fix_noise_memory=(fix_noise_memory, 0.0, 1e6),
         )
-        self.fix_noise_memory = float(fix_noise_memory)
-        self.use_imu = bool(use_imu)
-        self.heading_from_fixes = bool(heading_from_fixes)
-        self.heading_sigma_max = float(heading_sigma_max)
-        self.accel_bias_tau_s = float(accel_bias_tau_s)
-        self.imu_gate = float(imu_gate)
-        self.imu_noise_tau_s = float(imu_noise_tau_s)
-        # heading tracker and bias estimator: shared ones where a bank passes them
-        self._course = (course or CourseHeading()) if self.heading_from_fixes else None
-        self.gps_split = bool(gps_split)
-        self._gnss = GnssNoise(gps_sigma, gps_sigma_scale, self.fix_noise_memory, self.gps_split)
-        self._bias_est = (
-            (bias_estimator or AccelBiasEstimator(self.accel_bias_tau_s))
-            if self.accel_bias_tau_s > 0.0
-            else None
+        inputs = KF_FLAT.compose(
+            "kf", {"gnss": gnss, "imu": imu, "heading": heading, "speed": speed}, KF_INPUTS, flat
         )
+        #: the sensor inputs (:mod:`~posbench.predictors.filter_inputs`); None: not used
+        self.gnss: GnssInput = inputs["gnss"]
+        self.imu: AccelInput | None = inputs["imu"]
+        self.heading: HeadingInput = inputs["heading"]
+        self.speed: SpeedInput | None = inputs["speed"]
         self.jerk_psd = float(jerk_psd)
-        self.gps_sigma = float(gps_sigma)
-        self.gps_sigma_scale = float(gps_sigma_scale)
-        self.cov_scale = float(cov_scale)
-        self.accel_sigma = float(accel_sigma)
-        self.speed_sigma = float(speed_sigma)
-        self.speed_rel_sigma = float(speed_rel_sigma)
-        self.use_speed = bool(use_speed)
-        self.stop_speed = float(stop_speed)
         self.init_vel_sigma = float(init_vel_sigma)
         self.init_acc_sigma = float(init_acc_sigma)
-        self.heading_min_speed = float(heading_min_speed)
-        self._r_acc = self.accel_sigma**2
-        self._r_spd = self.speed_sigma**2
+        self.cov_scale = float(cov_scale)
+        # heading tracker and bias estimator: shared ones where a bank passes them
+        self._course = (course or CourseHeading()) if self.heading.from_fixes else None
+        self._gnss = self.gnss.noise()
+        tau = self.imu.bias_tau_s if self.imu is not None else 0.0
+        self._bias_est = (bias_estimator or AccelBiasEstimator(tau)) if tau > 0.0 else None
+        self._r_acc = self.imu.sigma**2 if self.imu is not None else math.nan
+        self._r_spd = self.speed.sigma**2 if self.speed is not None else math.nan
         self.kf = self.filter_core()
         self.reset()
 
@@ -228,28 +213,24 @@ class LinearKalman(Predictor):
     #: the filter's mean / covariance algebra (the tests put a filterpy twin here)
     filter_core: type = CaFilter2D
 
+    @classmethod
+    def flat_options(cls) -> dict[str, Any]:
+        """The flat option names and their defaults (for ``bench predictors`` and
+        ``--set`` checks)."""
+        return KF_FLAT.flatten(KF_INPUTS, KF_INPUTS)
+
     def config(self) -> dict:
+        """The options in flat names (:data:`KF_FLAT`), as ``LinearKalman(**config())``
+        takes them."""
         return {
             "jerk_psd": self.jerk_psd,
-            "gps_sigma": self.gps_sigma,
-            "accel_sigma": self.accel_sigma,
-            "speed_sigma": self.speed_sigma,
-            "speed_rel_sigma": self.speed_rel_sigma,
-            "use_speed": self.use_speed,
-            "stop_speed": self.stop_speed,
             "init_vel_sigma": self.init_vel_sigma,
             "init_acc_sigma": self.init_acc_sigma,
-            "heading_min_speed": self.heading_min_speed,
-            "gps_sigma_scale": self.gps_sigma_scale,
             "cov_scale": self.cov_scale,
-            "use_imu": self.use_imu,
-            "heading_from_fixes": self.heading_from_fixes,
-            "heading_sigma_max": self.heading_sigma_max,
-            "accel_bias_tau_s": self.accel_bias_tau_s,
-            "imu_gate": self.imu_gate,
-            "imu_noise_tau_s": self.imu_noise_tau_s,
-            "fix_noise_memory": self.fix_noise_memory,
-            "gps_split": self.gps_split,
+            **KF_FLAT.flatten(
+                {"gnss": self.gnss, "imu": self.imu, "heading": self.heading, "speed": self.speed},
+                KF_INPUTS,
+            ),
         }
 
     # -- state -------------------------------------------------------------------------
@@ -319,7 +300,7 @@ class LinearKalman(Predictor):
             h = yaw
         else:
             vx, vy = self.kf.velocity()  # predicted to t (self._s may be older)
-            if math.hypot(vx, vy) > self.heading_min_speed:
+            if math.hypot(vx, vy) > self.heading.min_speed:
                 h = math.atan2(vy, vx)
             elif math.isfinite(self._yaw) and math.isfinite(yaw_rate):
                 h = self._yaw + yaw_rate * (t - self._yaw_t)
@@ -337,7 +318,8 @@ class LinearKalman(Predictor):
             if math.isfinite(yaw):
                 self._yaw, self._yaw_t = yaw, t
             return
-        if not self.use_imu:
+        imu = self.imu
+        if imu is None:
             return
         self._predict_to(t)
         if course is not None and not math.isfinite(yaw):
@@ -349,8 +331,8 @@ class LinearKalman(Predictor):
             self._bias_est.observe_imu(t, ax, ay, h)
         if math.isfinite(ax) and math.isfinite(ay) and math.isfinite(h):
             c, s = math.cos(h), math.sin(h)
-            if self.accel_bias_tau_s > 0.0 or self.imu_gate > 0.0 or self.imu_noise_tau_s > 0.0:
-                self._robust_accel_update(t, ax, ay, c, s)
+            if imu.robust:
+                self._robust_accel_update(t, ax, ay, c, s, imu)
             else:
                 self.kf.update_pair(ACC, c * ax - s * ay, s * ax + c * ay, self._r_acc)
         self._imu_t = t
@@ -360,12 +342,14 @@ class LinearKalman(Predictor):
         """The course tracker's heading [rad] at t, NaN while its standard deviation is not
         below ``heading_sigma_max``."""
         h, h_sd = self._course.heading(t)  # type: ignore[union-attr]
-        return h if h_sd < self.heading_sigma_max else math.nan
+        return h if h_sd < self.heading.sigma_max else math.nan
 
-    def _robust_accel_update(self, t: float, ax: float, ay: float, c: float, s: float) -> None:
+    def _robust_accel_update(
+        self, t: float, ax: float, ay: float, c: float, s: float, imu: AccelInput
+    ) -> None:
         """The IMU acceleration update with the bias estimate removed, its noise adapted to
-        the innovations and the update gated (``accel_bias_tau_s``, ``imu_noise_tau_s``,
-        ``imu_gate``). Innovations in the vehicle frame [m/s^2]."""
+        the innovations and the update gated (``imu``'s ``bias_tau_s``, ``noise_tau_s``,
+        ``gate``). Innovations in the vehicle frame [m/s^2]."""
         kf = self.kf
         bx, by = self.accel_bias
         mx, my = ax - bx, ay - by
@@ -378,24 +362,25 @@ class LinearKalman(Predictor):
         dt = min(dt, 0.5) if dt > 0.0 else 0.0
         m2 = 0.5 * (nx * nx + ny * ny)
         r = self._r_acc
-        if self.imu_noise_tau_s > 0.0:
-            self._imu_m2 += min(dt / self.imu_noise_tau_s, 1.0) * (m2 - self._imu_m2)
+        if imu.noise_tau_s > 0.0:
+            self._imu_m2 += min(dt / imu.noise_tau_s, 1.0) * (m2 - self._imu_m2)
             r = max(r, self._imu_m2 - pa)
-        if self.imu_gate > 0.0 and 2.0 * m2 > self.imu_gate * (pa + r):
+        if imu.gate > 0.0 and 2.0 * m2 > imu.gate * (pa + r):
             return
         kf.update_pair(ACC, c * mx - s * my, s * mx + c * my, r)
 
     def observe_speed(self, t: float, v: float) -> None:
-        if not (self._ready and self.use_speed and math.isfinite(v)):
+        speed = self.speed
+        if not (self._ready and speed is not None and math.isfinite(v)):
             return
         self._predict_to(t)
-        if abs(v) < self.stop_speed:
+        if abs(v) < speed.stop_speed:
             self.kf.update_pair(VEL, 0.0, 0.0, self._r_spd)
         else:
             h = self._speed_heading(t)
             if math.isfinite(h):  # no heading: no update, but the prediction stands
                 self.kf.update_speed(
-                    math.cos(h), math.sin(h), v, self._r_spd + (self.speed_rel_sigma * v) ** 2
+                    math.cos(h), math.sin(h), v, self._r_spd + (speed.rel_sigma * v) ** 2
                 )
         self._sync()  # the mean was predicted to t: answers must start from it
 
@@ -407,7 +392,7 @@ class LinearKalman(Predictor):
             return self._course_heading(t)
         h = self._yaw
         vx, vy = self.kf.velocity()
-        if not math.isfinite(h) and math.hypot(vx, vy) > self.heading_min_speed:
+        if not math.isfinite(h) and math.hypot(vx, vy) > self.heading.min_speed:
             h = math.atan2(vy, vx)
         return h
 

@@ -20,13 +20,14 @@ Units: seconds, metres, local ENU.
 from __future__ import annotations
 
 from collections.abc import Sequence
-from typing import TypedDict
+from typing import Any
 
 from posbench.predictors._accel_bias import AccelBiasEstimator
 from posbench.predictors._geometry import check_config
 from posbench.predictors._heading import CourseHeading
 from posbench.predictors.bank import ModelBank
-from posbench.predictors.kf import KMH, LinearKalman
+from posbench.predictors.filter_inputs import AccelInput, GnssInput, HeadingInput, SpeedInput
+from posbench.predictors.kf import KF_FLAT, LinearKalman
 
 #: white-jerk densities of the members [m^2/s^5]: from ~0.7 m/s^3 over a second (steady
 #: motorway) to ~16 m/s^3 (hard city manoeuvres); a factor 8 apart
@@ -37,30 +38,15 @@ JERK_PSDS = (0.5, 4.0, 32.0, 256.0)
 HORIZONS_S = (1.0, 3.0)
 
 
-class _FixesOnlyOptions(TypedDict):
-    """The options a fixes-only member takes (it has no IMU or speed to weigh), passed to
-    :class:`~posbench.predictors.kf.LinearKalman`."""
-
-    gps_sigma: float
-    gps_sigma_scale: float
-    init_vel_sigma: float
-    init_acc_sigma: float
-    fix_noise_memory: float
-    gps_split: bool
-
-
-class _MemberOptions(_FixesOnlyOptions):
-    """The options every aided member takes: a fixes-only member's and those of the IMU,
-    the wheel speed and the heading."""
-
-    accel_sigma: float
-    speed_sigma: float
-    speed_rel_sigma: float
-    stop_speed: float
-    heading_sigma_max: float
-    accel_bias_tau_s: float
-    imu_gate: float
-    imu_noise_tau_s: float
+#: the aided members' inputs: the IMU as the raw sensor it may be (vehicle-frame bias
+#: estimated over 30 s, noise adapted over 5 s, 99.9 % innovation gate), the heading from
+#: fix chords where the IMU states no yaw, the fixes' noise estimated over 30 fixes
+BANK_INPUTS: dict[str, Any] = {
+    "gnss": GnssInput(noise_memory=30.0),
+    "imu": AccelInput(bias_tau_s=30.0, gate=13.8, noise_tau_s=5.0),
+    "heading": HeadingInput(from_fixes=True),
+    "speed": SpeedInput(),
+}
 
 
 class KalmanBank(ModelBank):
@@ -68,97 +54,71 @@ class KalmanBank(ModelBank):
     by the likelihood of their fix predictions (module docstring).
 
     Args:
-        gps_sigma, gps_sigma_scale, accel_sigma, speed_sigma, speed_rel_sigma, use_speed,
-            stop_speed, init_vel_sigma, init_acc_sigma, heading_sigma_max,
-            accel_bias_tau_s, imu_gate, imu_noise_tau_s, fix_noise_memory, gps_split: passed to
-            every member
-            (:class:`~posbench.predictors.kf.LinearKalman`); ``accel_sigma`` is the floor
-            of the adapted IMU noise.
+        gnss, imu, heading, speed: the aided members' inputs
+            (:mod:`~posbench.predictors.filter_inputs`; defaults :data:`BANK_INPUTS`); a
+            fixes-only member takes ``gnss`` alone. ``imu`` or ``speed`` None: the aided
+            members go without it.
+        init_vel_sigma, init_acc_sigma: every member's prior at its first fix.
         jerk_psds: the members' white-jerk densities [m^2/s^5].
         jerk_psd: one density instead of ``jerk_psds`` (a bank of one aided and one
             fixes-only member), e.g. ``--set kf.jerk_psd=4``.
         memory_fixes: exponential memory of the member scores, in fixes.
+        cov_scale: ``covariance_at`` reports ``cov_scale`` x the selected member's own
+            covariance (1: as its model says).
         horizons_s, horizon_memory: the horizons [s] members are also scored at and the
             memory of those scores (:class:`~posbench.predictors.bank.ModelBank`); ``[]``:
             one fix ahead only.
-        cov_scale: ``covariance_at`` reports ``cov_scale`` x the selected member's
-            covariance (1: as its model says).
+        **flat: the inputs' fields by their flat names (``gps_sigma``, ``accel_sigma``,
+            ``use_speed``, ...: :data:`~posbench.predictors.kf.KF_FLAT`), as ``--set kf.X``
+            and tuning files give them.
     """
 
     name = "kf"
 
     def __init__(
         self,
-        gps_sigma: float = 0.3,
-        gps_sigma_scale: float = 1.0,
-        accel_sigma: float = 0.3,
-        speed_sigma: float = 0.2,
-        speed_rel_sigma: float = 0.03,
-        use_speed: bool = True,
-        stop_speed: float = 0.15 * KMH,
+        *,
+        gnss: GnssInput = BANK_INPUTS["gnss"],
+        imu: AccelInput | None = BANK_INPUTS["imu"],
+        heading: HeadingInput = BANK_INPUTS["heading"],
+        speed: SpeedInput | None = BANK_INPUTS["speed"],
         init_vel_sigma: float = 15.0,
         init_acc_sigma: float = 3.0,
-        heading_sigma_max: float = 0.15,
-        accel_bias_tau_s: float = 30.0,
-        imu_gate: float = 13.8,
-        imu_noise_tau_s: float = 5.0,
-        fix_noise_memory: float = 30.0,
-        gps_split: bool = True,
         jerk_psds: Sequence[float] = JERK_PSDS,
         jerk_psd: float | None = None,
         memory_fixes: float = 20.0,
         cov_scale: float = 1.0,
         horizons_s: Sequence[float] = HORIZONS_S,
         horizon_memory: float = 10.0,
+        **flat: Any,
     ) -> None:
         if jerk_psd is not None:
             check_config("kf", jerk_psd=(jerk_psd, 1e-9, 1e6))
             jerk_psds = (jerk_psd,)
         check_config("kf", **{f"jerk_psds[{i}]": (j, 1e-9, 1e6) for i, j in enumerate(jerk_psds)})
-        jerks = tuple(float(j) for j in jerk_psds)
-        self._options: _MemberOptions = {
-            "gps_sigma": gps_sigma,
-            "gps_sigma_scale": gps_sigma_scale,
-            "accel_sigma": accel_sigma,
-            "speed_sigma": speed_sigma,
-            "speed_rel_sigma": speed_rel_sigma,
-            "stop_speed": stop_speed,
-            "init_vel_sigma": init_vel_sigma,
-            "init_acc_sigma": init_acc_sigma,
-            "heading_sigma_max": heading_sigma_max,
-            "accel_bias_tau_s": accel_bias_tau_s,
-            "imu_gate": imu_gate,
-            "imu_noise_tau_s": imu_noise_tau_s,
-            "fix_noise_memory": fix_noise_memory,
-            "gps_split": gps_split,
+        inputs = KF_FLAT.compose(
+            "kf",
+            {"gnss": gnss, "imu": imu, "heading": heading, "speed": speed},
+            BANK_INPUTS,
+            flat,
+        )
+        self.inputs = inputs
+        self.init_vel_sigma = float(init_vel_sigma)
+        self.init_acc_sigma = float(init_acc_sigma)
+        self.jerk_psds = tuple(float(j) for j in jerk_psds)
+        prior: dict[str, Any] = {
+            "init_vel_sigma": self.init_vel_sigma,
+            "init_acc_sigma": self.init_acc_sigma,
         }
-        self.use_speed = bool(use_speed)
-        self.jerk_psds = jerks
-        members, labels = [], []
-        o = self._options
+        imu_in = inputs["imu"]
         course = CourseHeading()  # one heading tracker and bias estimator for the aided
-        bias = AccelBiasEstimator(accel_bias_tau_s) if accel_bias_tau_s > 0.0 else None
-        fixes_only: _FixesOnlyOptions = {
-            "gps_sigma": o["gps_sigma"],
-            "gps_sigma_scale": o["gps_sigma_scale"],
-            "init_vel_sigma": o["init_vel_sigma"],
-            "init_acc_sigma": o["init_acc_sigma"],
-            "fix_noise_memory": o["fix_noise_memory"],
-            "gps_split": o["gps_split"],
-        }
-        for j in jerks:
-            members.append(
-                LinearKalman(
-                    jerk_psd=j,
-                    use_speed=self.use_speed,
-                    heading_from_fixes=True,
-                    course=course,
-                    bias_estimator=bias,
-                    **o,
-                )
-            )
+        tau = imu_in.bias_tau_s if imu_in is not None else 0.0
+        bias = AccelBiasEstimator(tau) if tau > 0.0 else None
+        members, labels = [], []
+        for j in self.jerk_psds:
+            members.append(LinearKalman(j, **inputs, **prior, course=course, bias_estimator=bias))
             labels.append(f"aided j{j:g}")
-            members.append(LinearKalman(jerk_psd=j, use_imu=False, use_speed=False, **fixes_only))
+            members.append(LinearKalman(j, gnss=inputs["gnss"], imu=None, speed=None, **prior))
             labels.append(f"fixes j{j:g}")
         super().__init__(
             members,
@@ -169,10 +129,17 @@ class KalmanBank(ModelBank):
             horizon_memory=horizon_memory,
         )
 
+    @classmethod
+    def flat_options(cls) -> dict[str, Any]:
+        """The flat option names and their defaults (for ``bench predictors`` and
+        ``--set`` checks)."""
+        return KF_FLAT.flatten(BANK_INPUTS, BANK_INPUTS)
+
     def config(self) -> dict:
         return {
-            **self._options,
-            "use_speed": self.use_speed,
+            **KF_FLAT.flatten(self.inputs, BANK_INPUTS),
+            "init_vel_sigma": self.init_vel_sigma,
+            "init_acc_sigma": self.init_acc_sigma,
             "jerk_psds": list(self.jerk_psds),
             "memory_fixes": self.memory_fixes,
             "cov_scale": self.cov_scale,

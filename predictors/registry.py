@@ -346,7 +346,11 @@ def description(name: str) -> str:
 
 def constructor_options(cls: type[Predictor]) -> tuple[dict[str, Any], bool]:
     """The keyword options ``cls(...)`` takes, with their defaults (``inspect.Parameter.empty``
-    when required), and whether it takes any keyword at all (``**kwargs``)."""
+    when required), and whether it takes any keyword at all (``**kwargs``).
+
+    A class whose ``**kwargs`` are named options of its own (the Kalman filters' flat names,
+    :class:`~posbench.predictors.filter_inputs.FlatNames`) says which by a classmethod
+    ``flat_options()`` (name -> default): those are listed too, and it takes no others."""
     try:
         params = inspect.signature(cls).parameters.values()
     except (TypeError, ValueError):  # no signature to read: accept anything
@@ -354,6 +358,9 @@ def constructor_options(cls: type[Predictor]) -> tuple[dict[str, Any], bool]:
     options = {
         p.name: p.default for p in params if p.kind in (p.POSITIONAL_OR_KEYWORD, p.KEYWORD_ONLY)
     }
+    flat = getattr(cls, "flat_options", None)
+    if callable(flat):
+        return {**flat(), **options}, False  # the flat names first: what users set
     return options, any(p.kind is p.VAR_KEYWORD for p in params)
 
 

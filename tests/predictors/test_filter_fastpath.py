@@ -319,8 +319,8 @@ def ref_process_noise(p: CtraEkf, yaw: float, T: float) -> np.ndarray:
     out[2, 2] = qw * T3 / 3.0
     out[2, 4] = out[4, 2] = qw * T2 / 2.0
     out[4, 4] = qw * T
-    out[IBA, IBA] = p.accel_bias_psd * T
-    out[IBW, IBW] = p.gyro_bias_psd * T
+    out[IBA, IBA] = p._imu_c.accel_bias_psd * T  # the IMU's (or, without one, the default)
+    out[IBW, IBW] = p._imu_c.gyro_bias_psd * T
     out[IBY, IBY] = out[IKV, IKV] = p.calib_psd * T
     return out
 
@@ -377,8 +377,8 @@ class FilterpyEkf(CtraEkf):
         self._ts = t
 
     def _update_position(self, zx: float, zy: float) -> None:
-        self._scalar(zx, _row(i0=1.0), float(self.x[IX]), self._r_gps)
-        self._scalar(zy, _row(i1=1.0), float(self.x[IY]), self._r_gps)
+        self._scalar(zx, _row(i0=1.0), float(self.x[IX]), self._r_fix)
+        self._scalar(zy, _row(i1=1.0), float(self.x[IY]), self._r_fix)
 
     def _update_imu(self, yaw_rate: float, ax: float, yaw: float) -> None:
         """One scalar update per finite channel, in the order of the code before issue 16."""
