@@ -23,6 +23,7 @@ import copy
 import math
 
 from posbench.predictors._ca_kalman import CaFilter2D
+from posbench.predictors._copying import copy_attrs
 
 #: white jerk of the fixes-only reference [m^2/s^5] (smooth: its velocity is what counts)
 REF_JERK_PSD = 4.0
@@ -50,8 +51,28 @@ class AccelBiasEstimator:
         self._ref = CaFilter2D()
         self.reset()
 
+    #: every instance attribute, for :func:`~posbench.predictors._copying.copy_attrs`
+    _ATTRS = (
+        "tau_s",
+        "min_window_s",
+        "max_window_s",
+        "_ref",
+        "_ready",
+        "_t_ref",
+        "_w0",
+        "_v0",
+        "_dv",
+        "_c",
+        "_s",
+        "_valid",
+        "_t_imu",
+        "_a",
+        "_g",
+        "bias",
+    )
+
     def __deepcopy__(self, memo: dict) -> AccelBiasEstimator:
-        new = copy.copy(self)
+        new = copy_attrs(self, self._ATTRS)
         memo[id(self)] = new
         new._ref = copy.deepcopy(self._ref, memo)
         new._dv = list(self._dv)

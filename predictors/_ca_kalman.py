@@ -24,9 +24,9 @@ IMU acceleration, zero-velocity update) have ``H`` selecting one component per a
 
 from __future__ import annotations
 
-import copy
-
 import numpy as np
+
+from posbench.predictors._copying import copy_attrs
 
 #: entries of a symmetric 3x3 block in storage order, by (row, column)
 _SYM = ((0, 1, 2), (1, 3, 4), (2, 4, 5))
@@ -98,9 +98,12 @@ class CaFilter2D:
     def __init__(self) -> None:
         self.init(0.0, 0.0, 1.0, 1.0, 1.0)
 
+    #: every instance attribute, for :func:`~posbench.predictors._copying.copy_attrs`
+    _ATTRS = ("mx", "my", "A", "B", "C")
+
     def __deepcopy__(self, memo: dict) -> CaFilter2D:
         """A copy with its own means (the covariance blocks are immutable tuples)."""
-        new = copy.copy(self)
+        new = copy_attrs(self, self._ATTRS)
         memo[id(self)] = new
         new.mx, new.my = list(self.mx), list(self.my)
         return new

@@ -17,7 +17,7 @@ a manoeuvre's jerk over a long gap), floored at ``floor_var`` [m^2]. Before
 
 from __future__ import annotations
 
-import copy
+from posbench.predictors._copying import copy_attrs
 
 
 class FixNoise:
@@ -46,8 +46,21 @@ class FixNoise:
         self.warmup = int(warmup)
         self.reset()
 
+    #: every instance attribute, for :func:`~posbench.predictors._copying.copy_attrs`
+    _ATTRS = (
+        "initial_var",
+        "memory",
+        "floor_var",
+        "clip",
+        "warmup",
+        "_fixes",
+        "_mean",
+        "_n",
+        "var",
+    )
+
     def __deepcopy__(self, memo: dict) -> FixNoise:
-        new = copy.copy(self)
+        new = copy_attrs(self, self._ATTRS)
         memo[id(self)] = new
         new._fixes = list(self._fixes)
         return new

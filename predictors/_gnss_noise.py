@@ -38,6 +38,7 @@ from __future__ import annotations
 
 import copy
 
+from posbench.predictors._copying import copy_attrs
 from posbench.predictors._fix_noise import FixNoise
 
 #: estimate / stated total at and above which a receiver counts as white (W = T)
@@ -83,8 +84,11 @@ class GnssNoise:
         self.split_stated = bool(split) and self.estimator is not None
         self.reset()
 
+    #: every instance attribute, for :func:`~posbench.predictors._copying.copy_attrs`
+    _ATTRS = ("default_var", "scale", "estimator", "split_stated", "slow_var")
+
     def __deepcopy__(self, memo: dict) -> GnssNoise:
-        new = copy.copy(self)
+        new = copy_attrs(self, self._ATTRS)
         memo[id(self)] = new
         new.estimator = copy.deepcopy(self.estimator, memo)
         return new

@@ -20,9 +20,9 @@ each feeding it.
 
 from __future__ import annotations
 
-import copy
 import math
 
+from posbench.predictors._copying import copy_attrs
 from posbench.predictors._geometry import wrap_angle
 
 
@@ -50,9 +50,24 @@ class CourseHeading:
         self.hold_psd = float(hold_psd)
         self.reset()
 
+    #: every instance attribute, for :func:`~posbench.predictors._copying.copy_attrs`
+    _ATTRS = (
+        "gate",
+        "max_chord_s",
+        "rate_psd",
+        "hold_psd",
+        "h",
+        "var",
+        "t",
+        "_turned",
+        "_rate",
+        "_fix_t",
+        "_anchor",
+    )
+
     def __deepcopy__(self, memo: dict) -> CourseHeading:
         """A copy (every attribute is an immutable value)."""
-        new = copy.copy(self)
+        new = copy_attrs(self, self._ATTRS)
         memo[id(self)] = new
         return new
 

@@ -18,10 +18,12 @@ bridges seconds without fixes (an IMU-aided one). So each horizon ``h`` of
 the IMU and wheel speed but no fix, exactly as the member would be in an outage; at the
 first fix at least ``h`` later, each copy's answer is scored by its distance to that fix
 [m] (summed with an exponential memory of ``horizon_memory`` windows). After the longest
-horizon the copies are dropped and new ones start at that fix. A query more than ``h``
-after the newest fix (the largest such ``h``) is answered by the member whose shadows
-did best at ``h``; a query nearer the fix by the likelihood's choice above. The shadows
-cost about one more run of the aided members (the copies themselves ~80 us per window).
+horizon the copies are dropped and new ones start at that fix (copied at the next
+observation, before the members take it: the same state, off the fix's step). A query
+more than ``h`` after the newest fix (the largest such ``h``) is answered by the member
+whose shadows did best at ``h``; a query nearer the fix by the likelihood's choice above.
+The shadows cost about one more run of the aided members on the IMU and speed (the
+copies themselves 55-75 us per window, :mod:`~posbench.predictors._copying`).
 The distance, not a likelihood, scores a horizon because there the question is only
 which member's answer lands nearer: the fix's noise is the same for every member.
 
@@ -118,6 +120,9 @@ class ModelBank(Predictor):
         #: members) or None; ``_next_h``: index of the next horizon they are scored at
         self._shadow: tuple[float, list[Predictor]] | None = None
         self._next_h = 0
+        #: time [s] of the fix new shadows start at, copied at the next observation
+        #: (NaN: none pending)
+        self._shadow_due = math.nan
         self._t_fix = math.nan  # time [s] of the newest fix
 
     @property
@@ -164,7 +169,19 @@ class ModelBank(Predictor):
         if self._next_h == len(hs):
             self._shadow = None
 
+    def _start_shadows(self) -> None:
+        """Copy the members into new shadows, due since the fix at ``_shadow_due``. Done
+        at the first observation after that fix, before the members take it: their state
+        is still the one they had right after the fix (a copy taken then and fed this
+        observation is the same), and the copy is not charged to the fix's step."""
+        # the copies share among themselves what the members share
+        self._shadow = (self._shadow_due, copy.deepcopy(self.members))
+        self._next_h = 0
+        self._shadow_due = math.nan
+
     def observe_gps(self, t: float, x: float, y: float, sigma: float | None = None) -> None:
+        if self._shadow_due == self._shadow_due:
+            self._start_shadows()
         if self.horizons_s and math.isfinite(x) and math.isfinite(y):
             self._score_shadows(t, x, y)
         for m in self.members:
@@ -172,9 +189,7 @@ class ModelBank(Predictor):
         if math.isfinite(x) and math.isfinite(y):
             self._t_fix = t
             if self.horizons_s and self._shadow is None:
-                # copies share among themselves what the members share
-                self._shadow = (t, copy.deepcopy(self.members))
-                self._next_h = 0
+                self._shadow_due = t
         ll = [self._log_likelihood(m.fix_innovation) for m in self.members]  # type: ignore[attr-defined]
         if all(v == v for v in ll):  # every member scored this fix (a non-finite one: none)
             k = self._keep
@@ -182,6 +197,8 @@ class ModelBank(Predictor):
             self.best = int(np.argmax(self.scores))
 
     def observe_imu(self, t: float, ax: float, ay: float, yaw: float, yaw_rate: float) -> None:
+        if self._shadow_due == self._shadow_due:
+            self._start_shadows()
         for m in self.members:
             m.observe_imu(t, ax, ay, yaw, yaw_rate)
         if self._shadow is not None:
@@ -189,6 +206,8 @@ class ModelBank(Predictor):
                 m.observe_imu(t, ax, ay, yaw, yaw_rate)
 
     def observe_speed(self, t: float, v: float) -> None:
+        if self._shadow_due == self._shadow_due:
+            self._start_shadows()
         for m in self.members:
             m.observe_speed(t, v)
         if self._shadow is not None:

@@ -43,6 +43,7 @@ from typing import Any
 
 import numpy as np
 
+from posbench.predictors._copying import copy_attrs
 from posbench.predictors._geometry import check_config, wrap_angle
 from posbench.predictors.base import Predictor
 from posbench.predictors.ctra import (
@@ -205,10 +206,46 @@ class CtraEkf(Predictor):
             self._H_imu[sel] = (H, tuple(r_imu[k] for k in sel))
         self.reset()
 
+    #: every instance attribute, for :func:`~posbench.predictors._copying.copy_attrs`
+    _ATTRS = (
+        "gnss",
+        "imu",
+        "speed",
+        "_gnss",
+        "jerk_psd",
+        "yaw_acc_psd",
+        "pos_psd",
+        "init_vel_sigma",
+        "calib_psd",
+        "cov_scale",
+        "_imu_c",
+        "_spd_c",
+        "_r_fix",
+        "_r_w",
+        "_r_a",
+        "_r_yaw",
+        "_r_v",
+        "x",
+        "P",
+        "_F",
+        "_Q",
+        "_FP",
+        "_S2",
+        "_e2",
+        "_H_imu",
+        "_ready",
+        "_ts",
+        "_s",
+        "_fix",
+        "_yaw_meas",
+        "_speed_meas",
+        "fix_innovation",
+    )
+
     def __deepcopy__(self, memo: dict) -> CtraEkf:
         """An independent copy (a bank's shadows): its own mean, covariance and work
         buffers; the measurement rows (constant) shared."""
-        new = copy.copy(self)
+        new = copy_attrs(self, self._ATTRS)
         memo[id(self)] = new
         for name in ("x", "P", "_F", "_Q", "_FP", "_S2", "_e2"):
             setattr(new, name, getattr(self, name).copy())

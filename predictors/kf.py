@@ -46,6 +46,7 @@ import numpy as np
 
 from posbench.predictors._accel_bias import AccelBiasEstimator
 from posbench.predictors._ca_kalman import CaFilter2D, ca_noise_block, predict_cross, predict_sym
+from posbench.predictors._copying import copy_attrs
 from posbench.predictors._geometry import check_config
 from posbench.predictors._heading import CourseHeading
 from posbench.predictors.base import Predictor
@@ -197,11 +198,38 @@ class LinearKalman(Predictor):
         self.kf = self.filter_core()
         self.reset()
 
+    #: every instance attribute, for :func:`~posbench.predictors._copying.copy_attrs`
+    _ATTRS = (
+        "gnss",
+        "imu",
+        "heading",
+        "speed",
+        "jerk_psd",
+        "init_vel_sigma",
+        "init_acc_sigma",
+        "cov_scale",
+        "_course",
+        "_gnss",
+        "_bias_est",
+        "_r_acc",
+        "_r_spd",
+        "kf",
+        "_ready",
+        "_ts",
+        "_s",
+        "_yaw",
+        "_yaw_t",
+        "_imu_t",
+        "_imu_yaw",
+        "_imu_m2",
+        "fix_innovation",
+    )
+
     def __deepcopy__(self, memo: dict) -> LinearKalman:
         """An independent copy (a bank's shadows, :class:`~posbench.predictors.bank.ModelBank`):
         its own filter state; the heading tracker and bias estimator copied once per
         ``memo``, so copies of a bank's members share them as the members do."""
-        new = copy.copy(self)
+        new = copy_attrs(self, self._ATTRS)
         memo[id(self)] = new
         new.kf = copy.deepcopy(self.kf, memo)
         new._s = list(self._s)

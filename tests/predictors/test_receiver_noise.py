@@ -270,3 +270,22 @@ def test_over_an_outage_the_bank_answers_no_worse_than_its_best_member(bank_cls)
     assert mean["bank"] <= 1.10 * best, mean
     one_fix = far_errors(lambda: cls(horizons_s=()), drives)["bank"]
     assert one_fix > 2.0 * best, (one_fix, mean)
+
+
+def test_every_attribute_of_a_filter_is_listed_for_its_copy():
+    """The copies list attributes by name (``_ATTRS``, :mod:`posbench.predictors._copying`):
+    one missing would leave a shadow sharing, or lacking, a piece of its member's state."""
+    from posbench.predictors.ekf_bank import EkfBank
+    from posbench.replay.loop import replay
+
+    prep = prepared(generate_drive(seed=3501, route="mixed", duration_s=60.0), "outages")
+    kb, eb = KalmanBank(), EkfBank()
+    replay(kb, prep, 0.2)
+    replay(eb, prep, 0.2)
+    aided = kb.members[0]
+    objects = [aided, aided.kf, aided._gnss, aided._gnss.estimator, aided._course]
+    objects += [aided._bias_est, eb.members[0], eb.members[0]._gnss]
+    for obj in objects:
+        assert obj is not None
+        missing = set(vars(obj)) - set(type(obj)._ATTRS)  # type: ignore[attr-defined]
+        assert not missing, (type(obj).__name__, missing)
