@@ -182,11 +182,12 @@ class ModelBank(Predictor):
     def observe_gps(self, t: float, x: float, y: float, sigma: float | None = None) -> None:
         if self._shadow_due == self._shadow_due:
             self._start_shadows()
-        if self.horizons_s and math.isfinite(x) and math.isfinite(y):
+        finite = math.isfinite(x) and math.isfinite(y)
+        if self.horizons_s and finite:
             self._score_shadows(t, x, y)
         for m in self.members:
             m.observe_gps(t, x, y, sigma)
-        if math.isfinite(x) and math.isfinite(y):
+        if finite:
             self._t_fix = t
             if self.horizons_s and self._shadow is None:
                 self._shadow_due = t

@@ -110,15 +110,6 @@ class ModelFileSeams:
         return tuple(str(d) for d in data.get("train_drives") or ())
 
 
-def stated_fix_variance(sigma: float | None, scale: float, default_var: float) -> float:
-    """R per axis [m^2] of a fix stating per-axis 1-sigma ``sigma`` [m]: ``(scale * sigma)^2``,
-    or ``default_var`` when it states none (None, not finite, or <= 0)."""
-    if sigma is not None and 0.0 < sigma < float("inf"):
-        s = scale * sigma
-        return s * s
-    return default_var
-
-
 def accepts_sigma(observe_gps: Callable[..., object]) -> bool:
     """Whether an ``observe_gps`` (bound or not) takes the fix accuracy: it declares a
     parameter named ``sigma`` (or ``**kwargs``). Checked once per predictor by the runner

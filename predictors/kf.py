@@ -59,7 +59,6 @@ from posbench.predictors.filter_inputs import (
 )
 
 NAN2 = (math.nan, math.nan)
-KMH = 1.0 / 3.6
 
 #: the kf's inputs as :class:`LinearKalman` takes them by default
 KF_INPUTS: dict[str, Any] = {
