@@ -14,20 +14,36 @@ a process noise that does not fit it is weighed down by the drive's own innovati
 By construction the fixes-only members keep the bank near the best fixes-only filter
 wherever the aiding misleads.
 
+Implementation: the members (and their shadows) are rows of one array stepped by
+compiled kernels, :mod:`~posbench.predictors._ca_batch`: one call per observation for
+the whole bank, about the cost of one filter object. :meth:`KalmanBank.member_bank`
+builds the same bank from :class:`~posbench.predictors.kf.LinearKalman` objects under a
+:class:`~posbench.predictors.bank.ModelBank`, the readable reference the tests hold the
+rows to (tests/predictors/test_kf_batched.py).
+
 Units: seconds, metres, local ENU.
 """
 
 from __future__ import annotations
 
+import copy
+import math
 from collections.abc import Sequence
 from typing import Any
 
+import numpy as np
+
+from posbench.predictors import _ca_batch as kb
 from posbench.predictors._accel_bias import AccelBiasEstimator
+from posbench.predictors._ca_kalman import ca_noise_block, predict_cross, predict_sym
 from posbench.predictors._geometry import check_config
 from posbench.predictors._heading import CourseHeading
 from posbench.predictors.bank import ModelBank
+from posbench.predictors.base import Predictor
 from posbench.predictors.filter_inputs import AccelInput, GnssInput, HeadingInput, SpeedInput
 from posbench.predictors.kf import KF_FLAT, LinearKalman
+
+NAN2 = (math.nan, math.nan)
 
 #: white-jerk densities of the members [m^2/s^5]: from ~0.7 m/s^3 over a second (steady
 #: motorway) to ~16 m/s^3 (hard city manoeuvres); a factor 8 apart
@@ -49,9 +65,11 @@ BANK_INPUTS: dict[str, Any] = {
 }
 
 
-class KalmanBank(ModelBank):
+class KalmanBank(Predictor):
     """Linear CA Kalman filters, aided and fixes-only at several process noises, selected
-    by the likelihood of their fix predictions (module docstring).
+    by the likelihood of their fix predictions (module docstring); the behaviour of
+    :class:`~posbench.predictors.bank.ModelBank` over
+    :class:`~posbench.predictors.kf.LinearKalman` members (:meth:`member_bank`), batched.
 
     Args:
         gnss, imu, heading, speed: the aided members' inputs
@@ -74,6 +92,8 @@ class KalmanBank(ModelBank):
     """
 
     name = "kf"
+    #: Huber k of the fix likelihood (:class:`~posbench.predictors.bank.ModelBank`'s default)
+    huber_k = 3.0
 
     def __init__(
         self,
@@ -95,17 +115,322 @@ class KalmanBank(ModelBank):
         if jerk_psd is not None:
             check_config("kf", jerk_psd=(jerk_psd, 1e-9, 1e6))
             jerk_psds = (jerk_psd,)
-        check_config("kf", **{f"jerk_psds[{i}]": (j, 1e-9, 1e6) for i, j in enumerate(jerk_psds)})
-        inputs = KF_FLAT.compose(
+        check_config(
+            "kf",
+            init_vel_sigma=(init_vel_sigma, 1e-3, 1e3),
+            init_acc_sigma=(init_acc_sigma, 1e-3, 1e3),
+            memory_fixes=(memory_fixes, 1.0, 1e6),
+            cov_scale=(cov_scale, 1e-6, 1e6),
+            horizon_memory=(horizon_memory, 1.0, 1e6),
+            **{f"jerk_psds[{i}]": (j, 1e-9, 1e6) for i, j in enumerate(jerk_psds)},
+            **{f"horizons_s[{i}]": (h, 1e-3, 3600.0) for i, h in enumerate(horizons_s)},
+        )
+        if not jerk_psds:
+            raise ValueError("kf: jerk_psds must name at least one density")
+        self.inputs = KF_FLAT.compose(
             "kf",
             {"gnss": gnss, "imu": imu, "heading": heading, "speed": speed},
             BANK_INPUTS,
             flat,
         )
-        self.inputs = inputs
         self.init_vel_sigma = float(init_vel_sigma)
         self.init_acc_sigma = float(init_acc_sigma)
         self.jerk_psds = tuple(float(j) for j in jerk_psds)
+        self.memory_fixes = float(memory_fixes)
+        self.cov_scale = float(cov_scale)
+        self.horizons_s = tuple(sorted(float(h) for h in horizons_s))
+        self.horizon_memory = float(horizon_memory)
+        self.labels = tuple(
+            label for j in self.jerk_psds for label in (f"aided j{j:g}", f"fixes j{j:g}")
+        )
+        self._setup()
+        self.reset()
+
+    def _setup(self) -> None:
+        """The rows' parameters, the options array and the inputs shared by the members."""
+        imu, speed = self.inputs["imu"], self.inputs["speed"]
+        heading: HeadingInput = self.inputs["heading"]
+        n = self._n = 2 * len(self.jerk_psds)
+        rp = np.zeros((2 * n, kb.NP))  # members, then their shadows
+        for k, j in enumerate(self.jerk_psds):
+            rp[2 * k, :] = (j, imu is not None, speed is not None)  # aided
+            rp[2 * k + 1, :] = (j, 0.0, 0.0)  # fixes only
+        rp[n:] = rp[:n]
+        self._rp = rp
+        self._r_acc = imu.sigma**2 if imu is not None else math.nan
+        cf = {
+            "r_acc": self._r_acc,
+            "r_spd": speed.sigma**2 if speed is not None else math.nan,
+            "rel_sigma": speed.rel_sigma if speed is not None else 0.0,
+            "stop_speed": speed.stop_speed if speed is not None else 0.0,
+            "min_speed": heading.min_speed,
+            "gate": imu.gate if imu is not None else 0.0,
+            "noise_tau_s": imu.noise_tau_s if imu is not None else 0.0,
+            "robust": float(imu is not None and imu.robust),
+            "course": float(heading.from_fixes),
+            "huber_k": self.huber_k,
+        }
+        self._cf = np.array([cf[name] for name in kb.CF_NAMES])
+        self._has_imu = imu is not None
+        self._has_speed = speed is not None
+        self._stop_speed = cf["stop_speed"]
+        self._sigma_max = heading.sigma_max
+        self._keep = 1.0 - 1.0 / self.memory_fixes
+        self._keep_h = 1.0 - 1.0 / self.horizon_memory
+        # one fix-noise model, heading tracker and bias estimator for all members: each
+        # member's would see the same inputs and hold the same values
+        self._gnss = self.inputs["gnss"].noise()
+        self._course = CourseHeading() if heading.from_fixes else None
+        tau = imu.bias_tau_s if imu is not None else 0.0
+        self._bias = AccelBiasEstimator(tau) if tau > 0.0 else None
+
+    def reset(self) -> None:
+        n, nh = self._n, len(self.horizons_s)
+        self._S = kb.new_rows(2 * n)
+        self._S[:, kb.IMU_M2] = self._r_acc
+        self.scores = np.zeros(n)
+        self.best = 0
+        #: per horizon: summed distances [m] of each member's shadows (lower is better)
+        self.horizon_scores = np.zeros((nh, n))
+        #: per horizon: the member answering queries at least that far after a fix
+        self.horizon_best = [0] * nh
+        self._horizon_seen = [False] * nh
+        self._dist = np.empty(n)
+        self._gnss.reset()
+        if self._course is not None:
+            self._course.reset()
+        if self._bias is not None:
+            self._bias.reset()
+        self._ready = False
+        self._imu_yaw = False  # whether the newest IMU sample stated a yaw
+        self._t_fix = math.nan  # time [s] of the newest fix
+        #: the shadows (rows n..2n-1): running since the fix at ``_shadow_t0`` [s] (NaN:
+        #: none), with their own heading tracker and bias estimator; the next horizon
+        #: they are scored at; the fix new shadows start at (NaN: none pending)
+        self._shadow_t0 = math.nan
+        self._shadow_course: CourseHeading | None = None
+        self._shadow_bias: AccelBiasEstimator | None = None
+        self._next_h = 0
+        self._shadow_due = math.nan
+
+    @property
+    def selected(self) -> str:
+        """Label of the member answering now."""
+        return self.labels[self.best]
+
+    # -- shadows (ModelBank's, on rows) ---------------------------------------------------
+    def _start_shadows(self) -> None:
+        """Copy the members' rows into the shadows' (:meth:`ModelBank._start_shadows`)."""
+        n = self._n
+        self._S[n:] = self._S[:n]
+        self._shadow_course = copy.deepcopy(self._course)
+        self._shadow_bias = copy.deepcopy(self._bias)
+        self._shadow_t0 = self._shadow_due
+        self._next_h = 0
+        self._shadow_due = math.nan
+
+    def _score_shadows(self, t: float, x: float, y: float) -> None:
+        """Score the shadows by the fix (t, x, y) at every horizon they have now run
+        (:meth:`ModelBank._score_shadows`)."""
+        t0, hs = self._shadow_t0, self.horizons_s
+        if not t - t0 >= hs[self._next_h]:  # also none running (NaN)
+            return
+        scored = kb.shadow_distances(self._S, self._n, t, x, y, self._dist)
+        k = self._keep_h
+        while self._next_h < len(hs) and t - t0 >= hs[self._next_h]:
+            i = self._next_h
+            if scored:
+                sc = k * self.horizon_scores[i] + self._dist
+                self.horizon_scores[i] = sc
+                self.horizon_best[i] = int(np.argmin(sc))
+                self._horizon_seen[i] = True
+            self._next_h += 1
+        if self._next_h == len(hs):
+            self._shadow_t0 = math.nan
+
+    @property
+    def _shadows_on(self) -> bool:
+        return self._shadow_t0 == self._shadow_t0
+
+    # -- observations ---------------------------------------------------------------------
+    def observe_gps(self, t: float, x: float, y: float, sigma: float | None = None) -> None:
+        if self._shadow_due == self._shadow_due:
+            self._start_shadows()
+        if not (math.isfinite(x) and math.isfinite(y)):
+            return  # no member takes it, none is scored
+        if self.horizons_s:
+            self._score_shadows(t, x, y)
+        self._gnss.observe(t, x, y)
+        r = self._gnss.weigh(sigma)
+        if self._course is not None:
+            self._course.observe_fix(t, x, y, r)
+        if self._bias is not None:
+            self._bias.observe_fix(t, x, y, r)
+        n = self._n
+        if not self._ready:
+            v, a = self.init_vel_sigma**2, self.init_acc_sigma**2
+            kb.init_rows(self._S, n, t, x, y, r, v, a)
+            self._ready = True
+        else:
+            best = kb.fix_rows(
+                self._S, self._rp, n, t, x, y, r, self.huber_k, self.scores, self._keep
+            )
+            if best >= 0:
+                self.best = best
+        self._t_fix = t
+        if self.horizons_s and not self._shadows_on:
+            self._shadow_due = t
+
+    def _course_heading(self, course: CourseHeading | None, t: float) -> float:
+        """A course tracker's heading [rad] at t, NaN while its standard deviation is not
+        below ``heading_sigma_max`` (``LinearKalman._course_heading``)."""
+        if course is None:
+            return math.nan
+        h, h_sd = course.heading(t)
+        return h if h_sd < self._sigma_max else math.nan
+
+    def observe_imu(self, t: float, ax: float, ay: float, yaw: float, yaw_rate: float) -> None:
+        if self._shadow_due == self._shadow_due:
+            self._start_shadows()
+        shadows = self._shadows_on
+        course = self._course
+        if course is not None:
+            course.observe_rate(t, yaw_rate)
+            if shadows:
+                self._shadow_course.observe_rate(t, yaw_rate)  # type: ignore[union-attr]
+        yaw_known = math.isfinite(yaw)
+        self._imu_yaw = yaw_known
+        if not self._ready:
+            if yaw_known:
+                self._S[:, kb.YAW] = yaw
+                self._S[:, kb.YAW_T] = t
+            return
+        if not self._has_imu:
+            return
+        hm = hs = math.nan
+        if course is not None and not yaw_known:
+            hm = self._course_heading(course, t)
+            if shadows:
+                hs = self._course_heading(self._shadow_course, t)
+        bias, sbias = self._bias, self._shadow_bias
+        bxm, bym = bias.bias if bias is not None else (0.0, 0.0)
+        bxs, bys = sbias.bias if sbias is not None and shadows else (0.0, 0.0)
+        n = self._n
+        h_m, h_s = kb.imu_rows(
+            self._S,
+            self._rp,
+            self._cf,
+            2 * n if shadows else n,
+            n,
+            t,
+            ax,
+            ay,
+            yaw,
+            yaw_rate,
+            hm,
+            hs,
+            bxm,
+            bym,
+            bxs,
+            bys,
+        )
+        if bias is not None:
+            bias.observe_imu(t, ax, ay, h_m)
+            if shadows:
+                sbias.observe_imu(t, ax, ay, h_s)  # type: ignore[union-attr]
+
+    def observe_speed(self, t: float, v: float) -> None:
+        if self._shadow_due == self._shadow_due:
+            self._start_shadows()
+        if not (self._ready and self._has_speed and math.isfinite(v)):
+            return
+        shadows = self._shadows_on
+        hm = hs = math.nan
+        if self._course is not None and not self._imu_yaw and abs(v) >= self._stop_speed:
+            hm = self._course_heading(self._course, t)
+            if shadows:
+                hs = self._course_heading(self._shadow_course, t)
+        n = self._n
+        kb.speed_rows(
+            self._S,
+            self._rp,
+            self._cf,
+            2 * n if shadows else n,
+            n,
+            t,
+            v,
+            self._imu_yaw,
+            hm,
+            hs,
+        )
+
+    # -- answers --------------------------------------------------------------------------
+    def answering(self, t: float) -> int:
+        """Index of the member that answers a query at t [s]
+        (:meth:`~posbench.predictors.bank.ModelBank.answering`)."""
+        gap = t - self._t_fix
+        for i in range(len(self.horizons_s) - 1, -1, -1):
+            if gap >= self.horizons_s[i] and self._horizon_seen[i]:
+                return self.horizon_best[i]
+        return self.best
+
+    def position_at(self, t: float) -> tuple[float, float]:
+        if not self._ready:
+            return NAN2
+        i = self.answering(t)
+        x, vx, ax, y, vy, ay = self._S[i, :6].tolist()
+        ts = self._S.item(i, kb.TS)
+        dt = t - ts
+        h = 0.5 * dt * dt
+        return x + vx * dt + ax * h, y + vy * dt + ay * h
+
+    def covariance_at(self, t: float) -> np.ndarray | None:
+        """The answering member's 2x2 ENU position covariance [m^2] at t
+        (``LinearKalman.covariance_at``): its own part times ``cov_scale``, plus the slow
+        part of the newest fix's stated error (:attr:`slow_variance`, not scaled). None
+        before the first fix."""
+        if not self._ready:
+            return None
+        i = self.answering(t)
+        row = self._S[i].tolist()
+        d = t - row[kb.TS]
+        A = tuple(row[kb.A : kb.A + 6])
+        B = tuple(row[kb.B : kb.B + 6])
+        C = tuple(row[kb.C : kb.C + 9])
+        if d > 0.0:
+            h = 0.5 * d * d
+            q = ca_noise_block(d, self._rp.item(i, kb.PSD))
+            pxx = predict_sym(A, d, h, q)[0]
+            pyy = predict_sym(B, d, h, q)[0]
+            pxy = predict_cross(C, d, h)[0]
+        else:
+            pxx, pyy, pxy = A[0], B[0], C[0]
+        s = self._gnss.slow_var
+        # the member's covariance (its own scale 1), then the bank's scale of its own part
+        P = np.array(((1.0 * pxx + s, 1.0 * pxy), (1.0 * pxy, 1.0 * pyy + s)))
+        k = self.cov_scale
+        slow = (1.0 - k) * s
+        out = k * P
+        out[0, 0] += slow
+        out[1, 1] += slow
+        return out
+
+    def fix_variance(self, sigma: float | None) -> float:
+        """R per axis [m^2] of a fix stating ``sigma``, as the members weigh it."""
+        return self._gnss.parts(sigma)[0]
+
+    @property
+    def slow_variance(self) -> float:
+        """The slow part [m^2] per axis of the newest fix's stated error, which
+        ``covariance_at`` adds unscaled (:class:`~posbench.predictors._gnss_noise.GnssNoise`)."""
+        return self._gnss.slow_var
+
+    # -- options and the reference --------------------------------------------------------
+    def member_bank(self) -> ModelBank:
+        """The same bank as :class:`~posbench.predictors.kf.LinearKalman` objects under a
+        :class:`~posbench.predictors.bank.ModelBank`: the readable reference these rows
+        answer as (tests/predictors/test_kf_batched.py)."""
+        inputs = self.inputs
         prior: dict[str, Any] = {
             "init_vel_sigma": self.init_vel_sigma,
             "init_acc_sigma": self.init_acc_sigma,
@@ -114,19 +439,18 @@ class KalmanBank(ModelBank):
         course = CourseHeading()  # one heading tracker and bias estimator for the aided
         tau = imu_in.bias_tau_s if imu_in is not None else 0.0
         bias = AccelBiasEstimator(tau) if tau > 0.0 else None
-        members, labels = [], []
+        members = []
         for j in self.jerk_psds:
             members.append(LinearKalman(j, **inputs, **prior, course=course, bias_estimator=bias))
-            labels.append(f"aided j{j:g}")
             members.append(LinearKalman(j, gnss=inputs["gnss"], imu=None, speed=None, **prior))
-            labels.append(f"fixes j{j:g}")
-        super().__init__(
+        return ModelBank(
             members,
-            labels,
-            memory_fixes=memory_fixes,
-            cov_scale=cov_scale,
-            horizons_s=horizons_s,
-            horizon_memory=horizon_memory,
+            self.labels,
+            memory_fixes=self.memory_fixes,
+            huber_k=self.huber_k,
+            cov_scale=self.cov_scale,
+            horizons_s=self.horizons_s,
+            horizon_memory=self.horizon_memory,
         )
 
     @classmethod

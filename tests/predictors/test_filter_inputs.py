@@ -62,7 +62,7 @@ def test_config_round_trips(make):
 
 def test_bank_options_reach_the_aided_members_and_fixes_only_members_take_no_sensor():
     kb = KalmanBank(accel_sigma=0.6, use_speed=False, gps_sigma=0.5)
-    for m, label in zip(kb.members, kb.labels, strict=True):
+    for m, label in zip(kb.member_bank().members, kb.labels, strict=True):
         assert m.gnss.sigma == 0.5  # type: ignore[attr-defined]
         if label.startswith("aided"):
             assert m.imu.sigma == 0.6 and m.speed is None  # type: ignore[attr-defined]
