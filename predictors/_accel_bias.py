@@ -19,10 +19,9 @@ Inputs are idempotent per time stamp, so filters of one bank can share an estima
 
 from __future__ import annotations
 
-import copy
 import math
 
-from posbench.predictors._ca_kalman import CaFilter2D
+from posbench.predictors import _ca_batch as kb
 from posbench.predictors._copying import copy_attrs
 
 #: white jerk of the fixes-only reference [m^2/s^5] (smooth: its velocity is what counts)
@@ -48,7 +47,7 @@ class AccelBiasEstimator:
         self.tau_s = float(tau_s)
         self.min_window_s = float(min_window_s)
         self.max_window_s = float(max_window_s)
-        self._ref = CaFilter2D()
+        self._ref = kb.new_rows(1)  # the fixes-only reference filter
         self.reset()
 
     #: every instance attribute, for :func:`~posbench.predictors._copying.copy_attrs`
@@ -74,7 +73,7 @@ class AccelBiasEstimator:
     def __deepcopy__(self, memo: dict) -> AccelBiasEstimator:
         new = copy_attrs(self, self._ATTRS)
         memo[id(self)] = new
-        new._ref = copy.deepcopy(self._ref, memo)
+        new._ref = self._ref.copy()
         new._dv = list(self._dv)
         return new
 
@@ -117,14 +116,11 @@ class AccelBiasEstimator:
             return
         ref = self._ref
         if not self._ready:
-            ref.init(x, y, var, REF_INIT_VEL_SIGMA**2, REF_INIT_ACC_SIGMA**2)
+            kb.init_rows(ref, 1, t, x, y, var, REF_INIT_VEL_SIGMA**2, REF_INIT_ACC_SIGMA**2)
             self._ready, self._t_ref = True, t
             return
-        if t > self._t_ref:
-            ref.predict(t - self._t_ref, REF_JERK_PSD)
-            self._t_ref = t
-        ref.update_pair(0, x, y, var)
-        v = ref.velocity()
+        v = kb.fix_one(ref, 0, t, x, y, var, REF_JERK_PSD)  # predicts only forward
+        self._t_ref = max(t, self._t_ref)
         span = t - self._w0
         if span == span and span < self.min_window_s and self._valid:
             return  # keep collecting

@@ -224,6 +224,18 @@ def init_rows(
 
 
 @njit(cache=True)
+def fix_one(
+    S: np.ndarray, i: int, t: float, x: float, y: float, r: float, psd: float
+) -> tuple[float, float]:
+    """Row i, a fixes-only filter of white-jerk density psd [m^2/s^5], takes a fix (x, y)
+    [m] at t [s] of variance r [m^2] per axis (predict, then ``update_pair`` of the
+    position); returns its velocity (vx, vy) [m/s]."""
+    _predict(S, i, t, psd)
+    _update_pair(S, i, 0, x, y, r)
+    return S[i, 1], S[i, 4]
+
+
+@njit(cache=True)
 def fix_rows(
     S: np.ndarray,
     RP: np.ndarray,

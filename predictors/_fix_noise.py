@@ -13,11 +13,65 @@ sample ``|r|^2 / (2 (1 + sum L_i^2))``. Samples are averaged with an exponential
 ``memory`` fixes, each clipped at ``clip`` x the current estimate (a jump of the source,
 a manoeuvre's jerk over a long gap), floored at ``floor_var`` [m^2]. Before
 ``warmup`` samples the estimate is the filter's assumed variance.
+
+Each fix is one compiled call (:func:`observe_fix`, numba: ~0.6 us against ~3 us in plain
+Python, paid once per fix by every filter that estimates its fix noise).
 """
 
 from __future__ import annotations
 
+import numpy as np
+from numba import njit
+
 from posbench.predictors._copying import copy_attrs
+
+#: the state array: the last three fixes ``(t, x, y)`` (oldest first), how many are held,
+#: the running mean of the samples [m^2] and their count
+_FIXES, _HELD, _MEAN, _COUNT = 0, 9, 10, 11
+
+
+@njit(cache=True)
+def observe_fix(
+    st: np.ndarray,
+    t: float,
+    x: float,
+    y: float,
+    memory: float,
+    clip: float,
+    warmup: int,
+) -> bool:
+    """:meth:`FixNoise.observe` on its state array ``st``; whether a sample was taken."""
+    held = int(st[_HELD])
+    if held > 0 and not t > st[3 * (held - 1)]:
+        return False
+    if held < 3:
+        st[3 * held] = t
+        st[3 * held + 1] = x
+        st[3 * held + 2] = y
+        st[_HELD] = held + 1
+        return False
+    t0, x0, y0 = st[0], st[1], st[2]
+    t1, x1, y1 = st[3], st[4], st[5]
+    t2, x2, y2 = st[6], st[7], st[8]
+    l0 = (t - t1) * (t - t2) / ((t0 - t1) * (t0 - t2))
+    l1 = (t - t0) * (t - t2) / ((t1 - t0) * (t1 - t2))
+    l2 = (t - t0) * (t - t1) / ((t2 - t0) * (t2 - t1))
+    rx = x - (l0 * x0 + l1 * x1 + l2 * x2)
+    ry = y - (l0 * y0 + l1 * y1 + l2 * y2)
+    sample = (rx * rx + ry * ry) / (2.0 * (1.0 + l0 * l0 + l1 * l1 + l2 * l2))
+    n = int(st[_COUNT])
+    if n >= warmup:
+        sample = min(sample, clip * st[_MEAN])
+        st[_MEAN] += (sample - st[_MEAN]) / memory
+    else:  # the plain mean of the first samples
+        st[_MEAN] += (sample - st[_MEAN]) / (n + 1)
+    st[_COUNT] = n + 1
+    for k in range(6):
+        st[k] = st[k + 3]
+    st[6] = t
+    st[7] = x
+    st[8] = y
+    return True
 
 
 class FixNoise:
@@ -53,8 +107,7 @@ class FixNoise:
         "floor_var",
         "clip",
         "warmup",
-        "_fixes",
-        "_mean",
+        "_st",
         "_n",
         "var",
     )
@@ -62,13 +115,12 @@ class FixNoise:
     def __deepcopy__(self, memo: dict) -> FixNoise:
         new = copy_attrs(self, self._ATTRS)
         memo[id(self)] = new
-        new._fixes = list(self._fixes)
+        new._st = self._st.copy()
         return new
 
     def reset(self) -> None:
-        self._fixes: list[tuple[float, float, float]] = []  # the last three (t, x, y)
-        self._mean = 0.0  # running mean of the samples [m^2]
-        self._n = 0
+        self._st = np.zeros(12)  # the last three fixes, the running mean (observe_fix)
+        self._n = 0  # samples so far
         self.var = self.initial_var
 
     @property
@@ -78,24 +130,7 @@ class FixNoise:
 
     def observe(self, t: float, x: float, y: float) -> None:
         """A fix at t [s], (x, y) [m]; a repeated time stamp is ignored."""
-        fx = self._fixes
-        if fx and not t > fx[-1][0]:
-            return
-        if len(fx) == 3:
-            (t0, x0, y0), (t1, x1, y1), (t2, x2, y2) = fx
-            l0 = (t - t1) * (t - t2) / ((t0 - t1) * (t0 - t2))
-            l1 = (t - t0) * (t - t2) / ((t1 - t0) * (t1 - t2))
-            l2 = (t - t0) * (t - t1) / ((t2 - t0) * (t2 - t1))
-            rx = x - (l0 * x0 + l1 * x1 + l2 * x2)
-            ry = y - (l0 * y0 + l1 * y1 + l2 * y2)
-            sample = (rx * rx + ry * ry) / (2.0 * (1.0 + l0 * l0 + l1 * l1 + l2 * l2))
-            if self._n >= self.warmup:
-                sample = min(sample, self.clip * self._mean)
-                self._mean += (sample - self._mean) / self.memory
-            else:  # the plain mean of the first samples
-                self._mean += (sample - self._mean) / (self._n + 1)
+        if observe_fix(self._st, t, x, y, self.memory, self.clip, self.warmup):
             self._n += 1
             if self._n >= self.warmup:
-                self.var = max(self._mean, self.floor_var)
-            fx.pop(0)
-        fx.append((t, x, y))
+                self.var = max(self._st[_MEAN].item(), self.floor_var)
