@@ -13,17 +13,105 @@ In between, a 1-D Kalman filter carries the heading [rad, ENU, 0 = east, counter
 clockwise] with the yaw rate [rad/s] when the IMU gives one (variance growing by
 ``rate_psd`` per second), else holds it (``hold_psd``). A chord's course is the heading at
 its midpoint: it is moved to the newest fix by the yaw integrated since then, then fused.
-Pure floats: this runs at IMU rate. Every input is idempotent per time stamp (a fix or
-rate at the time already seen is ignored), so filters of one bank can share a tracker,
-each feeding it.
+Each input is one compiled call (numba) on the tracker's state array: this runs at IMU
+rate. Every input is idempotent per time stamp (a fix or rate at the time already seen is
+ignored), so filters of one bank can share a tracker, each feeding it.
 """
 
 from __future__ import annotations
 
 import math
 
+import numpy as np
+from numba import njit
+
 from posbench.predictors._copying import copy_attrs
-from posbench.predictors._geometry import wrap_angle
+
+#: the state array: heading [rad], its variance [rad^2], its time [s], the yaw integrated
+#: since the start [rad], the newest yaw rate [rad/s], the newest fix's time [s], and the
+#: anchor of the next chord (t [s], x, y [m], var [m^2], yaw integrated then [rad])
+H, VAR, T, TURNED, RATE, FIX_T, A_T, A_X, A_Y, A_VAR, A_TURNED = range(11)
+TWO_PI = 2.0 * math.pi
+
+
+@njit(cache=True)
+def _wrap(a: float) -> float:
+    """``_geometry.wrap_angle``: a [rad] wrapped to [-pi, pi)."""
+    return (a + math.pi) % TWO_PI - math.pi
+
+
+@njit(cache=True)
+def _advance(st: np.ndarray, t: float, rate_psd: float, hold_psd: float) -> None:
+    if not t > st[T]:
+        if st[T] != st[T]:
+            st[T] = t
+        return
+    dt = t - st[T]
+    if math.isfinite(st[RATE]):
+        turn = st[RATE] * dt
+        st[TURNED] += turn
+        if st[H] == st[H]:
+            st[H] = _wrap(st[H] + turn)
+        st[VAR] += rate_psd * dt
+    else:
+        st[VAR] += hold_psd * dt
+    st[T] = t
+
+
+@njit(cache=True)
+def observe_rate(
+    st: np.ndarray, t: float, yaw_rate: float, rate_psd: float, hold_psd: float
+) -> None:
+    """:meth:`CourseHeading.observe_rate` on the state array."""
+    _advance(st, t, rate_psd, hold_psd)
+    st[RATE] = yaw_rate if math.isfinite(yaw_rate) else math.nan
+
+
+@njit(cache=True)
+def observe_fix(
+    st: np.ndarray,
+    t: float,
+    x: float,
+    y: float,
+    var: float,
+    gate: float,
+    max_chord_s: float,
+    rate_psd: float,
+    hold_psd: float,
+) -> None:
+    """:meth:`CourseHeading.observe_fix` on the state array."""
+    if t == st[FIX_T]:
+        return
+    st[FIX_T] = t
+    _advance(st, t, rate_psd, hold_psd)
+    if not (t - st[A_T] <= max_chord_s):  # no anchor yet, or too old
+        st[A_T], st[A_X], st[A_Y], st[A_VAR], st[A_TURNED] = t, x, y, var, st[TURNED]
+        return
+    dx, dy = x - st[A_X], y - st[A_Y]
+    d2 = dx * dx + dy * dy
+    v = st[A_VAR] + var
+    if d2 < gate * gate * v:
+        return
+    course = math.atan2(dy, dx) + 0.5 * (st[TURNED] - st[A_TURNED])  # midpoint -> now
+    var_c = v / d2
+    if st[H] != st[H] or not math.isfinite(st[VAR]):
+        st[H], st[VAR] = _wrap(course), var_c
+    else:
+        k = st[VAR] / (st[VAR] + var_c)
+        st[H] = _wrap(st[H] + k * _wrap(course - st[H]))
+        st[VAR] = (1.0 - k) * st[VAR]
+    st[A_T], st[A_X], st[A_Y], st[A_VAR], st[A_TURNED] = t, x, y, var, st[TURNED]
+
+
+@njit(cache=True)
+def heading_at(st: np.ndarray, t: float, rate_psd: float, hold_psd: float) -> tuple[float, float]:
+    """:meth:`CourseHeading.heading` on the state array."""
+    if st[H] != st[H]:
+        return math.nan, math.inf
+    dt = max(t - st[T], 0.0)
+    if math.isfinite(st[RATE]):
+        return _wrap(st[H] + st[RATE] * dt), math.sqrt(st[VAR] + rate_psd * dt)
+    return st[H], math.sqrt(st[VAR] + hold_psd * dt)
 
 
 class CourseHeading:
@@ -51,87 +139,42 @@ class CourseHeading:
         self.reset()
 
     #: every instance attribute, for :func:`~posbench.predictors._copying.copy_attrs`
-    _ATTRS = (
-        "gate",
-        "max_chord_s",
-        "rate_psd",
-        "hold_psd",
-        "h",
-        "var",
-        "t",
-        "_turned",
-        "_rate",
-        "_fix_t",
-        "_anchor",
-    )
+    _ATTRS = ("gate", "max_chord_s", "rate_psd", "hold_psd", "_st")
 
     def __deepcopy__(self, memo: dict) -> CourseHeading:
-        """A copy (every attribute is an immutable value)."""
+        """A copy with its own state array."""
         new = copy_attrs(self, self._ATTRS)
         memo[id(self)] = new
+        new._st = self._st.copy()
         return new
 
     def reset(self) -> None:
-        self.h = math.nan  # heading [rad]
-        self.var = math.inf  # its variance [rad^2]
-        self.t = math.nan  # time of h [s]
-        self._turned = 0.0  # yaw integrated since the start [rad]
-        self._rate = math.nan  # newest yaw rate [rad/s]
-        self._fix_t = math.nan  # time of the newest fix [s]
-        self._anchor = (math.nan, math.nan, math.nan, math.nan, 0.0)  # t, x, y, var, turned
+        st = np.full(11, math.nan)
+        st[VAR] = math.inf  # no heading yet
+        st[TURNED] = st[A_TURNED] = 0.0
+        self._st = st
 
-    def _advance(self, t: float) -> None:
-        if not t > self.t:
-            if self.t != self.t:
-                self.t = t
-            return
-        dt = t - self.t
-        if math.isfinite(self._rate):
-            turn = self._rate * dt
-            self._turned += turn
-            if self.h == self.h:
-                self.h = wrap_angle(self.h + turn)
-            self.var += self.rate_psd * dt
-        else:
-            self.var += self.hold_psd * dt
-        self.t = t
+    @property
+    def h(self) -> float:
+        """The heading [rad] at the newest input (NaN before the first usable chord)."""
+        return float(self._st[H])
+
+    @property
+    def var(self) -> float:
+        """Its variance [rad^2]."""
+        return float(self._st[VAR])
 
     def observe_rate(self, t: float, yaw_rate: float) -> None:
         """Gyro yaw rate [rad/s] at t [s] (NaN: none)."""
-        self._advance(t)
-        self._rate = yaw_rate if math.isfinite(yaw_rate) else math.nan
+        observe_rate(self._st, t, yaw_rate, self.rate_psd, self.hold_psd)
 
     def observe_fix(self, t: float, x: float, y: float, var: float) -> None:
         """A fix at (x, y) [m, ENU] with per-axis variance var [m^2]."""
-        if t == self._fix_t:
-            return
-        self._fix_t = t
-        self._advance(t)
-        ta, xa, ya, va, turned_a = self._anchor
-        if not (t - ta <= self.max_chord_s):  # no anchor yet, or too old
-            self._anchor = (t, x, y, var, self._turned)
-            return
-        dx, dy = x - xa, y - ya
-        d2 = dx * dx + dy * dy
-        v = va + var
-        if d2 < self.gate * self.gate * v:
-            return
-        course = math.atan2(dy, dx) + 0.5 * (self._turned - turned_a)  # midpoint -> now
-        var_c = v / d2
-        if self.h != self.h or not math.isfinite(self.var):
-            self.h, self.var = wrap_angle(course), var_c
-        else:
-            k = self.var / (self.var + var_c)
-            self.h = wrap_angle(self.h + k * wrap_angle(course - self.h))
-            self.var = (1.0 - k) * self.var
-        self._anchor = (t, x, y, var, self._turned)
+        observe_fix(
+            self._st, t, x, y, var, self.gate, self.max_chord_s, self.rate_psd, self.hold_psd
+        )
 
     def heading(self, t: float) -> tuple[float, float]:
         """(heading [rad], its standard deviation [rad]) at t [s] >= the newest input's
         time, by the newest yaw rate; (NaN, inf) before the first usable chord."""
-        if self.h != self.h:
-            return math.nan, math.inf
-        dt = max(t - self.t, 0.0)
-        if math.isfinite(self._rate):
-            return wrap_angle(self.h + self._rate * dt), math.sqrt(self.var + self.rate_psd * dt)
-        return self.h, math.sqrt(self.var + self.hold_psd * dt)
+        return heading_at(self._st, t, self.rate_psd, self.hold_psd)
