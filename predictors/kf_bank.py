@@ -16,8 +16,12 @@ wherever the aiding misleads.
 
 Implementation: the members (and their shadows) are rows of one array stepped by
 compiled kernels, :mod:`~posbench.predictors._ca_batch`: one call per observation for
-the whole bank, about the cost of one filter object. :meth:`KalmanBank.member_bank`
-builds the same bank from :class:`~posbench.predictors.kf.LinearKalman` objects under a
+the whole bank, about the cost of one filter object. A fix's answer comes first: what
+only the next IMU and speed updates read (the heading tracker and the bias estimator
+taking the fix) and the start of new shadows wait for the next observation, which does
+them before anything else (the answers are the same; the work moves off the fix step).
+:meth:`KalmanBank.member_bank` builds the same bank from
+:class:`~posbench.predictors.kf.LinearKalman` objects under a
 :class:`~posbench.predictors.bank.ModelBank`, the readable reference the tests hold the
 rows to (tests/predictors/test_kf_batched.py).
 
@@ -212,6 +216,10 @@ class KalmanBank(Predictor):
         self._shadow_bias: AccelBiasEstimator | None = None
         self._next_h = 0
         self._shadow_due = math.nan
+        #: a fix (t, x, y, its variance) the heading tracker and bias estimator take after
+        #: its answer (:meth:`_catch_up`), and whether any such work is due
+        self._after_fix: tuple[float, float, float, float] | None = None
+        self._due = False
 
     @property
     def selected(self) -> str:
@@ -253,19 +261,34 @@ class KalmanBank(Predictor):
         return self._shadow_t0 == self._shadow_t0
 
     # -- observations ---------------------------------------------------------------------
-    def observe_gps(self, t: float, x: float, y: float, sigma: float | None = None) -> None:
+    def _catch_up(self) -> None:
+        """The work a fix left for after its answer, done before the next observation: the
+        heading tracker and the bias estimator take the fix (only IMU and speed updates
+        read them), then new shadows start (their copy of both included)."""
+        pending = self._after_fix
+        if pending is not None:
+            self._after_fix = None
+            t, x, y, r = pending
+            if self._course is not None:
+                self._course.observe_fix(t, x, y, r)
+            if self._bias is not None:
+                self._bias.observe_fix(t, x, y, r)
         if self._shadow_due == self._shadow_due:
             self._start_shadows()
+        self._due = False
+
+    def observe_gps(self, t: float, x: float, y: float, sigma: float | None = None) -> None:
+        if self._due:
+            self._catch_up()
         if not (math.isfinite(x) and math.isfinite(y)):
             return  # no member takes it, none is scored
         if self.horizons_s:
             self._score_shadows(t, x, y)
         self._gnss.observe(t, x, y)
         r = self._gnss.weigh(sigma)
-        if self._course is not None:
-            self._course.observe_fix(t, x, y, r)
-        if self._bias is not None:
-            self._bias.observe_fix(t, x, y, r)
+        if self._course is not None or self._bias is not None:
+            self._after_fix = (t, x, y, r)
+            self._due = True
         n = self._n
         if not self._ready:
             v, a = self.init_vel_sigma**2, self.init_acc_sigma**2
@@ -280,6 +303,7 @@ class KalmanBank(Predictor):
         self._t_fix = t
         if self.horizons_s and not self._shadows_on:
             self._shadow_due = t
+            self._due = True
 
     def _course_heading(self, course: CourseHeading | None, t: float) -> float:
         """A course tracker's heading [rad] at t, NaN while its standard deviation is not
@@ -290,8 +314,8 @@ class KalmanBank(Predictor):
         return h if h_sd < self._sigma_max else math.nan
 
     def observe_imu(self, t: float, ax: float, ay: float, yaw: float, yaw_rate: float) -> None:
-        if self._shadow_due == self._shadow_due:
-            self._start_shadows()
+        if self._due:
+            self._catch_up()
         shadows = self._shadows_on
         course = self._course
         if course is not None:
@@ -340,8 +364,8 @@ class KalmanBank(Predictor):
                 sbias.observe_imu(t, ax, ay, h_s)  # type: ignore[union-attr]
 
     def observe_speed(self, t: float, v: float) -> None:
-        if self._shadow_due == self._shadow_due:
-            self._start_shadows()
+        if self._due:
+            self._catch_up()
         if not (self._ready and self._has_speed and math.isfinite(v)):
             return
         shadows = self._shadows_on
