@@ -37,7 +37,6 @@ from posbench.cli.options import (
     renamed,
 )
 from posbench.config import DEFAULT_PREDICTORS
-from posbench.errors import UsageError
 
 
 def run(
@@ -158,18 +157,12 @@ def run(
     Examples: bench run; bench run -p lstm -p kf --data ../shared/data/kitti_raw;
     bench run --config run.toml --seeds 5
     """
-    from posbench.checks import (
-        parse_drive_plots,
-        parse_pairs,
-        parse_plot_formats,
-        parse_seeds,
-    )
+    from posbench.checks import parse_pairs
     from posbench.cli.config_file import to_toml
     from posbench.cli.summary import print_run_summary
     from posbench.cli.terminal import reporter
     from posbench.pipeline.run import RunOptions, execute_run, plan_run
     from posbench.replay.predictor_setup import parse_set
-    from posbench.report.markdown import parse_report_formats
 
     if old_format is not None:
         renamed("--format", "--table-format", "bench run")
@@ -177,11 +170,7 @@ def run(
     if print_config:
         print(to_toml(ctx), end="")
         return
-    if seed is not None and seeds is not None:
-        raise UsageError(
-            "--seed and --seeds together: give one seed (--seed 3) or the "
-            "seeds to repeat the run over (--seeds 0,1,2)"
-        )
+    # the options are passed on as given: plan_run checks (and parses) each one, once
     options, given = parse_set(set_)
     opts = RunOptions(
         data=tuple(data or ()),
@@ -191,8 +180,8 @@ def run(
         gps_profile=gps_profile,
         gps_latency_s=gps_latency,
         dropouts=dropouts,
-        seed=0 if seed is None else seed,
-        seeds=tuple(parse_seeds(seeds)) if seeds is not None else None,
+        seed=seed,
+        seeds=seeds,
         baseline=baseline,
         workers=workers,
         models=parse_pairs(model, "--model"),
@@ -205,9 +194,9 @@ def run(
         rerun_color_by=rerun_color_by,
         executor=executor,
         address=address,
-        table_formats=parse_report_formats(table_format, "--table-format"),
-        plot_formats=parse_plot_formats(plot_format),
-        drive_plots=parse_drive_plots(drive_plots),
+        table_formats=table_format,
+        plot_formats=plot_format,
+        drive_plots=drive_plots,
         gate=gate,
         strict=strict,
         tuning=tuning,

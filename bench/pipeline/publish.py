@@ -20,7 +20,7 @@ from posbench.scoring.records import DriveRun
 from posbench.scoring.schema import KINDS
 
 if TYPE_CHECKING:
-    from posbench.pipeline.jobs import FigureJobs
+    from posbench.pipeline.jobs import FigureJobs, Job
 
 
 @dataclass
@@ -40,24 +40,102 @@ class Published:
     recording: Path | None = None
 
 
+class OutputWriter:
+    """The one writer of a run's output folder: traces.parquet, figures (the run's and the
+    paper's), report.md with its table files, and results.json, last and atomically.
+
+    :meth:`start` begins the work that needs only the traces, right after the replay: it
+    removes an earlier run's files, then draws the figures and writes traces.parquet in
+    forked child processes (:class:`~posbench.pipeline.jobs.FigureJobs`,
+    :class:`~posbench.pipeline.jobs.Job`) while this process aggregates. :meth:`write`
+    collects them and writes the rest; without :meth:`start` it does everything itself
+    (``bench score``). The files are the same either way.
+
+    Args:
+        out: the output folder.
+        plot_formats: figure formats (png, svg, pdf).
+        drive_plots: per-drive error plots (as ``--drive-plots``; None: every drive).
+        table_formats: table files beside report.md (csv, latex; empty: none).
+    """
+
+    def __init__(
+        self,
+        out: Path,
+        plot_formats: tuple[str, ...] = ("png",),
+        drive_plots: int | None = 20,
+        table_formats: tuple[str, ...] = TABLE_FORMATS,
+    ) -> None:
+        self.out = out
+        self.plot_formats = tuple(plot_formats)
+        self.drive_plots = drive_plots
+        self.table_formats = tuple(table_formats)
+        self._removed: list[Path] | None = None
+        self._jobs: FigureJobs | None = None
+        self._traces: Job[Path | None] | None = None
+
+    def start(
+        self,
+        traces: pd.DataFrame,
+        predictors: Sequence[str],
+        paper: Callable[[], list[tuple[str, str]]] | None = None,
+        lean: pd.DataFrame | None = None,
+    ) -> None:
+        """Remove an earlier run's files (first, so none of the new ones is), then start
+        drawing the figures of ``traces`` (and ``paper()``, the paper's figures) and writing
+        traces.parquet in other processes. ``lean``: ``traces`` as
+        :func:`~posbench.scoring.records.lean_traces` gives them, if already made."""
+        from posbench.pipeline.jobs import FigureJobs, Job
+        from posbench.saved_run.outputs import remove_previous_outputs
+        from posbench.saved_run.run import write_traces
+
+        self.out.mkdir(parents=True, exist_ok=True)
+        self._removed = remove_previous_outputs(self.out)
+        self._jobs = FigureJobs(
+            traces if lean is None else lean,
+            predictors,
+            self.out,
+            self.plot_formats,
+            self.drive_plots,
+            paper=paper,
+        )
+        self._traces = Job(write_traces, self.out, traces)
+
+    def write(self, run: Run) -> tuple[list[Path], list[Path]]:
+        """``run``'s files, results.json last: the files written, and those of an earlier
+        run removed first."""
+        from posbench.report.markdown import write_report
+        from posbench.saved_run.outputs import remove_previous_outputs
+        from posbench.saved_run.run import save_run
+
+        out, jobs = self.out, self._jobs
+        out.mkdir(parents=True, exist_ok=True)
+        removed = self._removed if self._removed is not None else remove_previous_outputs(out)
+        drawn = jobs.paper() if jobs is not None else []
+        run.results["paper_figures"] = [{"file": f, "caption": c} for f, c in drawn]
+        written = [(out / f).with_suffix("." + fmt) for f, _ in drawn for fmt in self.plot_formats]
+        written += write_report(
+            run,
+            out,
+            formats=self.plot_formats,
+            drive_plots=self.drive_plots,
+            table_formats=self.table_formats,
+            plots=jobs.plots() if jobs is not None else None,
+        )
+        traces_written = self._traces.result if self._traces is not None else None
+        written += save_run(out, run, also_written=written, traces_written=traces_written)
+        return written, removed
+
+
 def publish(
     res: dict[str, Any],
     traces: pd.DataFrame,
     runs: Sequence[DriveRun],
-    out: Path | None,
-    *,
-    plot_formats: tuple[str, ...] = ("png",),
-    drive_plots: int | None = 20,
-    figures: Callable[[Run], list[tuple[str, str]]] | None = None,
-    table_formats: tuple[str, ...] = TABLE_FORMATS,
-    plots: FigureJobs | None = None,
-    removed: list[Path] | None = None,
-    traces_written: Callable[[], Path | None] | None = None,
+    writer: OutputWriter | None = None,
     reporter: Reporter = SILENT,
 ) -> Published:
-    """The :class:`Run` of aggregated results ``res``, written into ``out`` (report.md,
-    figures, tables, results.json, traces.parquet; an earlier run's files there are
-    replaced) or, with ``out`` None, kept in memory.
+    """The :class:`Run` of aggregated results ``res``, written by ``writer`` into its folder
+    (report.md, figures, tables, results.json, traces.parquet; an earlier run's files there
+    are replaced) or, with ``writer`` None, kept in memory.
 
     A run that fails (the errors below) is written all the same, its results.json marked
     ``status`` failed with the error line as ``reason``; one interrupted (or failing) while
@@ -69,16 +147,7 @@ def publish(
             it was made from.
         runs: the per-drive :class:`~posbench.scoring.records.DriveRun` records (skipped
             drives named).
-        figures: ``figures(run) -> [(file stem, caption)]`` draws extra figures into ``out``
-            (the paper's figures of ``bench run``); None: none.
-        table_formats: table files beside report.md (csv, latex; empty: none).
-        plots: the run's plots, being drawn by :class:`~posbench.pipeline.jobs.FigureJobs`;
-            None: drawn here.
-        removed: the files of an earlier run already removed from ``out`` (by the caller,
-            before it started drawing into it); None: removed here.
-        traces_written: returns ``out/traces.parquet`` once written by the caller
-            (:func:`posbench.saved_run.run.write_traces`, in another process); None: written
-            here.
+        writer: the output folder's writer (started or not); None: no folder.
 
     Raises:
         UsageError: every drive was skipped (the report is written first).
@@ -87,25 +156,17 @@ def publish(
     from posbench.saved_run.run import FAILED, mark_unfinished
 
     run = Run.from_results(res, traces)
+    out = writer.out if writer is not None else None
     failure = run_failure(run, runs, out)
     if failure is not None:
         mark_unfinished(run, FAILED, str(failure))
     written: list[Path] = []
-    if out is not None:
+    removed: list[Path] = []
+    if writer is not None:
         from posbench.saved_run.run import marked_if_unfinished
 
-        with marked_if_unfinished(run, out=out):
-            written, removed = _write(
-                run,
-                out,
-                plot_formats,
-                drive_plots,
-                figures,
-                table_formats,
-                plots,
-                removed,
-                traces_written,
-            )
+        with marked_if_unfinished(run, out=writer.out):
+            written, removed = writer.write(run)
     else:
         run.results["paper_figures"] = []
     skipped = [r for r in runs if r.skipped]
@@ -116,42 +177,7 @@ def publish(
         )
     if failure is not None:
         raise failure
-    return Published(run, written, list(removed or []))
-
-
-def _write(
-    run: Run,
-    out: Path,
-    plot_formats: tuple[str, ...],
-    drive_plots: int | None,
-    figures: Callable[[Run], list[tuple[str, str]]] | None,
-    table_formats: tuple[str, ...],
-    plots: FigureJobs | None,
-    removed: list[Path] | None,
-    traces_written: Callable[[], Path | None] | None,
-) -> tuple[list[Path], list[Path]]:
-    """``run``'s files in ``out`` (see :func:`publish`), results.json last: the files
-    written, and those of an earlier run removed first."""
-    from posbench.report.markdown import write_report
-    from posbench.saved_run.outputs import remove_previous_outputs
-    from posbench.saved_run.run import save_run
-
-    out.mkdir(parents=True, exist_ok=True)
-    if removed is None:
-        removed = remove_previous_outputs(out)
-    drawn = figures(run) if figures is not None else []
-    run.results["paper_figures"] = [{"file": f, "caption": c} for f, c in drawn]
-    written = [(out / f).with_suffix("." + fmt) for f, _ in drawn for fmt in plot_formats]
-    written += write_report(
-        run,
-        out,
-        formats=plot_formats,
-        drive_plots=drive_plots,
-        table_formats=table_formats,
-        plots=plots.plots() if plots is not None else None,
-    )
-    written += save_run(out, run, also_written=written, traces_written=traces_written)
-    return written, removed
+    return Published(run, written, removed)
 
 
 def run_failure(

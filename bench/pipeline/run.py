@@ -21,7 +21,7 @@ from posbench.errors import UsageError
 from posbench.naming import plural
 from posbench.pipeline.publish import Published
 from posbench.pipeline.reporter import SILENT, Reporter
-from posbench.report.markdown import TABLE_FORMATS
+from posbench.report.markdown import TABLE_FORMATS, parse_report_formats
 from posbench.scenarios.drive import Drive
 
 if TYPE_CHECKING:
@@ -45,8 +45,9 @@ class RunOptions:
             (:func:`posbench.config.gps_condition`).
         gps_latency_s: receiver latency of drawn fixes [s].
         dropouts: GPS dropout profile (none, random:P, outages, outage:L).
-        seed: master seed (GPS draws, dropouts, synthetic data).
-        seeds: repeat the run over these seeds (the first one is the run); None: once.
+        seed: master seed (GPS draws, dropouts, synthetic data); None: 0.
+        seeds: repeat the run over these seeds (the first one is the run), or a count or
+            text as ``--seeds`` takes it (``5``, ``"0,1,2"``); None: once. Not with ``seed``.
         baseline: the predictor the others are compared with; None: ``kf`` when it runs;
             ``"none"``: no comparison.
         workers: parallel processes (one drive each).
@@ -60,10 +61,13 @@ class RunOptions:
         rerun_color_by: the predictor whose error colours the recording's track.
         executor: local (processes) or ray.
         address: the Ray cluster (with ``executor="ray"``).
-        table_formats: table files beside report.md (csv, latex).
-        plot_formats: figure formats (png, svg, pdf).
+        table_formats: table files beside report.md (csv, latex), or ``--table-format``'s
+            text (``"md,csv"``).
+        plot_formats: figure formats (png, svg, pdf), or ``--plot-format``'s text.
         drive_plots: per-drive error plots: every drive of a run with at most this many,
-            else this many worst ones; None: every drive.
+            else this many worst ones; None or ``"all"``: every drive.
+
+    The options are checked, and those given as text parsed, once: by :func:`plan_run`.
         gate: the GPS outlier gate in front of every predictor.
         strict: stop (DataError) when the data consistency check fails.
         tuning: a tuning file (``bench tune --out``) used over the package's tuning for the
@@ -77,8 +81,8 @@ class RunOptions:
     gps_profile: str = "auto"
     gps_latency_s: float = 0.0
     dropouts: str = "none"
-    seed: int = 0
-    seeds: tuple[int, ...] | None = None
+    seed: int | None = None
+    seeds: tuple[int, ...] | int | str | None = None
     baseline: str | None = None
     workers: int = 2
     models: Mapping[str, str | Path] = field(default_factory=dict)
@@ -91,9 +95,9 @@ class RunOptions:
     rerun_color_by: str | None = None
     executor: str = "local"
     address: str | None = None
-    table_formats: tuple[str, ...] = TABLE_FORMATS
-    plot_formats: tuple[str, ...] = ("png",)
-    drive_plots: int | None = 20
+    table_formats: tuple[str, ...] | str = TABLE_FORMATS
+    plot_formats: tuple[str, ...] | str = ("png",)
+    drive_plots: int | str | None = 20
     gate: bool = True
     strict: bool = False
     tuning: Path | None = None
@@ -115,6 +119,11 @@ class RunPlan:
         statistics: how intervals and the paired comparison are computed.
         seeds: the seeds to repeat the run over (the first one is ``config.seed``), or None.
         color_by: the predictor colouring the rerun recording's track.
+        models: the learned models behind the predictors, asked of the instances built to
+            check them (results.json's ``models``;
+            :func:`posbench.replay.predictor_setup.plan_predictors`).
+        plot_formats, drive_plots, table_formats: the options' figure formats, per-drive
+            plots and table files, checked.
     """
 
     options: RunOptions
@@ -122,10 +131,16 @@ class RunPlan:
     statistics: Statistics
     seeds: tuple[int, ...] | None = None
     color_by: str | None = None
+    models: Mapping[str, Mapping[str, Any]] = field(default_factory=dict)
+    plot_formats: tuple[str, ...] = ("png",)
+    drive_plots: int | None = 20
+    table_formats: tuple[str, ...] = TABLE_FORMATS
 
 
 def plan_run(options: RunOptions, given: Mapping[tuple[str, str], str] | None = None) -> RunPlan:
-    """Check every option of a run before any work, and resolve them.
+    """Check every option of a run before any work, and resolve them: the one place the
+    options are checked (the command line passes its text on as given). Every predictor is
+    built here once, and asked which learned model it uses.
 
     ``given``: how each ``(predictor, option)`` was written (``--set kf.jerk_psd=4``), for
     the messages; default ``--set NAME.OPTION=VALUE`` / ``--model NAME=PATH``.
@@ -153,7 +168,7 @@ def plan_run(options: RunOptions, given: Mapping[tuple[str, str], str] | None = 
         check_tuning_file,
         merge_options,
         model_options,
-        validate_predictors,
+        plan_predictors,
         with_model_aliases,
     )
 
@@ -165,20 +180,24 @@ def plan_run(options: RunOptions, given: Mapping[tuple[str, str], str] | None = 
         raise UsageError(RAY_MISSING)
     names = parse_predictor_names(o.predictors)
     plot_formats = parse_plot_formats(o.plot_formats)
-    bad = [f for f in o.table_formats if f not in TABLE_FORMATS]
+    if isinstance(o.table_formats, str):
+        table_formats = parse_report_formats(o.table_formats, "--table-format")
+    else:
+        table_formats = tuple(o.table_formats)
+    bad = [f for f in table_formats if f not in TABLE_FORMATS]
     if bad:
         raise UsageError(
             f"--table-format: unknown table format {bad[0]!r}; use "
             f"{', '.join(TABLE_FORMATS)} (report.md is always written)"
         )
     drive_plots = parse_drive_plots(o.drive_plots)
-    if o.seeds is not None and o.seed != 0:
+    if o.seeds is not None and o.seed is not None:
         raise UsageError(
             "--seed and --seeds together: give one seed (--seed 3) or the "
             "seeds to repeat the run over (--seeds 0,1,2)"
         )
     seeds = tuple(parse_seeds(o.seeds)) if o.seeds is not None else None
-    seed = seeds[0] if seeds else o.seed
+    seed = seeds[0] if seeds else (o.seed or 0)
     check_drive_options(
         o.gps_profile,
         o.projection,
@@ -206,7 +225,7 @@ def plan_run(options: RunOptions, given: Mapping[tuple[str, str], str] | None = 
     )
     names = with_model_aliases(names, opts)
     color_by = resolve_color_by(o.rerun_color_by, names, o.rerun)
-    resolved = validate_predictors(names, opts, given)
+    resolved, models = plan_predictors(names, opts, given)
     check_tuning_file(o.tuning, names, resolved)
     stats = Statistics(baseline=resolve_baseline(o.baseline, names))
     cfg = RunConfig(
@@ -226,10 +245,11 @@ def plan_run(options: RunOptions, given: Mapping[tuple[str, str], str] | None = 
         predictors=names,
         plot_formats=plot_formats,
         drive_plots=drive_plots,
+        seed=seed,
         seeds=seeds,
-        table_formats=tuple(o.table_formats),
+        table_formats=table_formats,
     )
-    return RunPlan(o, cfg, stats, seeds, color_by)
+    return RunPlan(o, cfg, stats, seeds, color_by, models, plot_formats, drive_plots, table_formats)
 
 
 def execute_run(plan: RunPlan, command: str, reporter: Reporter = SILENT) -> Published:
@@ -307,7 +327,7 @@ def _replay_and_publish(
     reporter: Reporter,
 ) -> Published:
     from posbench.aggregation.seeds import seed_figures, seeds_section
-    from posbench.pipeline.jobs import FigureJobs, Job
+    from posbench.pipeline.jobs import Job
     from posbench.pipeline.preload import Preload
     from posbench.pipeline.publish import publish
     from posbench.pipeline.results import build_results
@@ -326,29 +346,29 @@ def _replay_and_publish(
     preload.join()  # before forking the figure children
     traces = all_traces(runs)
     lean = lean_traces(traces)  # text columns as categoricals: cheaper filters, same results
-    jobs = traces_file = removed = None
+    writer = None
     if out is not None:
-        # the figures need only the traces: other processes draw them while this one
-        # aggregates (an earlier run's files are removed first, so none of the new ones is)
+        # the figures need only the traces: other processes draw them (and write the
+        # traces) while this one aggregates
+        from posbench.pipeline.publish import OutputWriter
         from posbench.predictor_tools.paper_figures import paper_figures
-        from posbench.saved_run.outputs import remove_previous_outputs
-        from posbench.saved_run.run import write_traces
 
-        out.mkdir(parents=True, exist_ok=True)
-        removed = remove_previous_outputs(out)
-        jobs = FigureJobs(
-            lean,
+        fmts = plan.plot_formats
+        writer = OutputWriter(out, fmts, plan.drive_plots, plan.table_formats)
+        writer.start(
+            traces,
             cfg.predictors,
-            out,
-            o.plot_formats,
-            o.drive_plots,
-            paper=lambda: paper_figures(
-                list(drives), cfg, traces, out, runs, formats=o.plot_formats
-            ),
+            paper=lambda: paper_figures(drives, cfg, traces, out, runs, formats=fmts),
+            lean=lean,
         )
-        traces_file = Job(write_traces, out, traces)  # the parquet (~0.5 s) meanwhile too
     res = build_results(
-        runs, cfg, provenance.result(), command, traces=lean, statistics=plan.statistics
+        runs,
+        cfg,
+        provenance.result(),
+        command,
+        traces=lean,
+        models=plan.models,
+        statistics=plan.statistics,
     )
     res["consistency"] = consistency
     if recordings is not None and recordings.duplicates:
@@ -366,20 +386,7 @@ def _replay_and_publish(
             figures.append(seed_figures(all_traces(runs_s), cfg.predictors, base, s))
             del runs_s
         res["seeds"] = seeds_section(seeds, figures)
-    published = publish(
-        res,
-        traces,
-        runs,
-        out,
-        plot_formats=o.plot_formats,
-        drive_plots=o.drive_plots,
-        figures=(lambda _: jobs.paper()) if jobs is not None else None,
-        table_formats=o.table_formats,
-        plots=jobs,
-        removed=removed,
-        traces_written=traces_file.result if traces_file is not None else None,
-        reporter=reporter,
-    )
+    published = publish(res, traces, runs, writer, reporter)
     if o.rerun is not None:
         from posbench.saved_run.run import marked_if_unfinished
 

@@ -63,7 +63,7 @@ def score_answers_file(
     """
     from posbench.offline.answers import read_answers, score_answers
     from posbench.offline.queries_folder import read_queries
-    from posbench.pipeline.publish import publish
+    from posbench.pipeline.publish import OutputWriter, publish
     from posbench.pipeline.results import build_results
     from posbench.saved_run.provenance import tree_hash
     from posbench.scoring.records import all_traces
@@ -88,16 +88,12 @@ def score_answers_file(
         "unanswered": scored.unanswered,
         "look_ahead_checked": False,
     }
-    return publish(
-        res,
-        traces,
-        scored.runs,
-        out,
-        plot_formats=plot_formats,
-        drive_plots=drive_plots,
-        table_formats=table_formats,
-        reporter=reporter,
+    writer = (
+        OutputWriter(out, tuple(plot_formats), drive_plots, tuple(table_formats))
+        if out is not None
+        else None
     )
+    return publish(res, traces, scored.runs, writer, reporter)
 
 
 def answers_line(

@@ -11,8 +11,9 @@ is taken as a string (``--set lstm.fit=lbfgs``).
 ``--model NAME=PATH`` (:func:`model_options`) is the same as ``--set NAME.model=PATH``; both
 may be given only if they name the same file (:func:`merge_options`). Every name and option
 is checked, and every predictor built once, before any drive is loaded
-(:func:`validate_predictors`). :func:`learned_models` asks the learned predictors of a run
-which model they use and which drives it was trained on.
+(:func:`validate_predictors`); :func:`plan_predictors` also asks those instances which
+learned model they use and which drives it was trained on, so ``bench run`` builds each
+predictor once at plan time (:func:`learned_models` builds them for that alone).
 """
 
 from __future__ import annotations
@@ -25,6 +26,7 @@ from typing import Any
 
 from posbench.config import RunConfig
 from posbench.errors import UsageError
+from posbench.predictors.base import Predictor
 from posbench.scenarios.errors import DataError
 from posbench.scenarios.text import quoted
 
@@ -222,6 +224,16 @@ def validate_predictors(
     Returns:
         the options with ``model`` folders resolved to their ``model.onnx``.
     """
+    return plan_predictors(names, options, given)[0]
+
+
+def _check_predictors(
+    names: Sequence[str],
+    options: Mapping[str, Mapping[str, Any]],
+    given: Mapping[tuple[str, str], str],
+) -> dict[str, dict[str, Any]]:
+    """Every check of :func:`validate_predictors` but building: the options with ``model``
+    folders resolved."""
     from posbench.predictors.registry import (
         PredictorError,
         base_name,
@@ -231,7 +243,6 @@ def validate_predictors(
         predictor_class,
     )
 
-    given = given or {}
     unknown = [n for n in names if not is_import_path(n) and not is_known(n)]
     if unknown:
         raise UsageError(
@@ -271,9 +282,27 @@ def validate_predictors(
         resolved[name] = dict(opts)
         if "model" in opts:
             resolved[name]["model"] = _model_path(name, opts["model"])
-    for name in names:
-        _build_once(name, resolved.get(name, {}), options.get(name, {}), given)
     return resolved
+
+
+def plan_predictors(
+    names: Sequence[str],
+    options: Mapping[str, Mapping[str, Any]],
+    given: Mapping[tuple[str, str], str] | None = None,
+) -> tuple[dict[str, dict[str, Any]], dict[str, dict[str, Any]]]:
+    """:func:`validate_predictors`, and the learned models behind the predictors
+    (:func:`learned_models`), asked of the instances built for the check: every predictor
+    is built once. Returns (resolved options, learned models)."""
+    from posbench.predictors.registry import predictor_class
+
+    resolved = _check_predictors(names, options, given or {})
+    models: dict[str, dict[str, Any]] = {}
+    for name in names:
+        pred = _build_once(name, resolved.get(name, {}), options.get(name, {}), given or {})
+        model = _learned_model(pred) if _declares_model(predictor_class(name)) else None
+        if model is not None:
+            models[name] = model
+    return resolved, models
 
 
 def _build_once(
@@ -281,22 +310,24 @@ def _build_once(
     opts: Mapping[str, Any],
     as_given: Mapping[str, Any],
     given: Mapping[tuple[str, str], str],
-) -> None:
-    """Build predictor ``name`` with ``opts``; a failure names the option to blame. The model
+) -> Predictor:
+    """Predictor ``name`` built with ``opts``; a failure names the option to blame. The model
     file (if any) is tried first, then the other options are added one at a time in the order
     given: the first that makes the constructor fail is named."""
     from posbench.predictors.registry import create
 
+    built: list[Predictor] = []
+
     def build(kw: Mapping[str, Any]) -> BaseException | None:
         try:
-            create(name, None, **kw)
+            built.append(create(name, None, **kw))
         except Exception as e:  # noqa: BLE001 - ValueError, DataError, onnxruntime's own types
             return e
         return None
 
     exc = build(opts)
     if exc is None:
-        return
+        return built[0]
     base = {k: v for k, v in opts.items() if k == "model"}
     others = [k for k in opts if k != "model"]
     if not others or build(base) is not None:  # the predictor itself, or its model file
@@ -323,30 +354,41 @@ def learned_models(cfg: RunConfig) -> dict[str, dict[str, Any]]:
     ``lstm-authors``, ...; :meth:`~posbench.predictors.base.Predictor.model_description`): the model
     file it uses, whether that is the bundled one, and the drive names the model was
     trained on (:meth:`~posbench.predictors.base.Predictor.training_drives`), so results on those
-    drives can be told apart. Each predictor is created with the run's options for it."""
-    from posbench.predictors.base import Predictor
+    drives can be told apart. Each predictor is created with the run's options for it
+    (:func:`plan_predictors` asks the instances it built for its checks instead)."""
     from posbench.predictors.registry import create, predictor_class
 
     out: dict[str, dict[str, Any]] = {}
     for name in cfg.predictors:
-        cls = predictor_class(name)
-        if (
-            cls.model_description is Predictor.model_description
-            and cls.training_drives is Predictor.training_drives
-        ):
+        if not _declares_model(predictor_class(name)):
             continue  # no learned model: not worth building (an ONNX session, ...)
-        pred = create(name, None, **cfg.predictor_options.get(name, {}))
-        desc = pred.model_description()
-        drives = list(pred.training_drives())
-        if desc is None and not drives:
-            continue
-        desc = desc or {}
-        out[name] = {
-            "model": str(desc.get("model", "")),
-            "bundled": bool(desc.get("bundled")),
-            "train_drives": drives,
-        }
+        model = _learned_model(create(name, None, **cfg.predictor_options.get(name, {})))
+        if model is not None:
+            out[name] = model
     return out
+
+
+def _declares_model(cls: type[Predictor]) -> bool:
+    """Whether predictor class ``cls`` overrides a learned-model seam."""
+    return (
+        cls.model_description is not Predictor.model_description
+        or cls.training_drives is not Predictor.training_drives
+    )
+
+
+def _learned_model(pred: Predictor) -> dict[str, Any] | None:
+    """The learned model behind ``pred`` as results.json's ``models`` holds it (model file,
+    bundled, training drives), or None: it declares none."""
+    desc = pred.model_description()
+    drives = list(pred.training_drives())
+    if desc is None and not drives:
+        return None
+    desc = desc or {}
+    return {
+        "model": str(desc.get("model", "")),
+        "bundled": bool(desc.get("bundled")),
+        "train_drives": drives,
+    }
 
 
 def check_tuning_file(

@@ -36,8 +36,21 @@ def glossary(res: Mapping[str, Any]) -> list[tuple[str, str]]:
         terms += seeds.DEFINITIONS.items()
     if res.get("outages"):
         terms += outages.DEFINITIONS.items()
-    terms += latency.DEFINITIONS.items()
+    terms += [(t, _where_measured(t, d, res)) for t, d in latency.DEFINITIONS.items()]
     return list(terms)
+
+
+#: where ``bench run`` measures its latency columns (the summary table's ``worker ...``)
+REPLAY_LATENCY = (
+    " In `bench run` (columns `worker ...`): measured in the replay's worker processes, "
+    "several at once on the machine's cores; `bench latency` gives single-process figures."
+)
+
+
+def _where_measured(term: str, definition: str, res: Mapping[str, Any]) -> str:
+    """A latency term's definition, with where a replay measured it (scored answers carry
+    their own latency: unchanged)."""
+    return definition if res.get("answers") else definition + REPLAY_LATENCY
 
 
 def glossary_lines(res: Mapping[str, Any]) -> list[str]:

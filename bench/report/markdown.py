@@ -58,6 +58,14 @@ REPORT_FORMATS = ("md", "csv", "latex")
 TABLE_FORMATS = ("csv", "latex")
 
 
+#: where a run's latency figures come from: a replay's (False) or an answers file's (True)
+LATENCY_WHERE = {
+    False: "measured in the replay's worker processes, which share the machine's cores "
+    "(`bench latency` gives single-process figures).",
+    True: "as the answers file gives them.",
+}
+
+
 def parse_report_formats(text: str, option: str = "--format") -> tuple[str, ...]:
     """``--format md,csv,latex`` -> the table file formats to write beside report.md
     (``("csv", "latex")``; ``md`` alone: none)."""
@@ -186,7 +194,8 @@ def render_markdown(
         "reference named above. "
         "`future` = position at fix time + horizon, asked at the fix; `now` = current position, "
         "asked every now-step between fixes. Latency: `step` = one `observe_gps` plus the "
-        "future query, `query` = one between-fix `position_at`, single process.",
+        "future query, `query` = one between-fix `position_at`, "
+        + LATENCY_WHERE[bool(res.get("answers"))],
         "",
     ]
     lines += consistency_lines(res)

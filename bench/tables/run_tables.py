@@ -72,9 +72,11 @@ SUMMARY_LABELS = {
     "now_p95": "now p95",
     "now_n": "n",
     "missing": "missing",
-    "step_p50": "step p50 [us]",
-    "step_p99": "step p99 [us]",
-    "query_p50": "query p50 [us]",
+    # measured in the replay's worker processes, beside each other on the machine's cores
+    # (the report's glossary says so; `bench latency` gives single-process figures)
+    "step_p50": "worker step p50 [us]",
+    "step_p99": "worker step p99 [us]",
+    "query_p50": "worker query p50 [us]",
 }
 LATENCY_DIGITS = {"step_p50": 1, "step_p99": 1, "query_p50": 1}
 #: the columns of the summary table that carry a 95 % interval (all means, medians, p95s)
@@ -83,9 +85,10 @@ SUMMARY_CI = ("future_mean", "future_median", "future_p95", "now_mean", "now_p95
 
 def summary_table(res: Mapping[str, Any], held_out: bool = False, compact: bool = False) -> Table:
     """The headline: per predictor, future and now errors [m] with their 95 % intervals,
-    unanswered queries, latency [us]. A predictor trained on some of the run's drives is
-    marked ``*``. ``held_out``: over the drives no predictor trained or tuned on (no latency:
-    it is run-wide). ``compact`` (the terminal): intervals on the means only."""
+    unanswered queries, latency [us] as measured in the replay's workers. A predictor
+    trained on some of the run's drives is marked ``*``. ``held_out``: over the drives no
+    predictor trained or tuned on (no latency: it is run-wide). ``compact`` (the terminal):
+    intervals on the means only."""
     trained = trained_in_run(res)
     src = res["held_out_all"]["predictors"] if held_out else res["predictors"]
     rows = []
