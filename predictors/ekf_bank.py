@@ -11,19 +11,35 @@ innovations (see :mod:`posbench.predictors.kf_bank`, the same idea for ``kf``). 
 that state no accuracy have their noise estimated from the fixes themselves
 (``fix_noise_memory``, 30 fixes).
 
+Implementation: the members (and their shadows) are rows of one array stepped by
+compiled kernels, :mod:`~posbench.predictors._ctra_batch`: one call per observation for
+the whole bank, about the cost of one filter object; the fix-noise model is one for all
+members (each member's would see the same fixes and hold the same values).
+:meth:`EkfBank.member_bank` builds the same bank from
+:class:`~posbench.predictors.ekf.CtraEkf` objects under a
+:class:`~posbench.predictors.bank.ModelBank`, the readable reference the tests hold the
+rows to (tests/predictors/test_ekf_batched.py).
+
 Units: seconds, metres, radians, local ENU.
 """
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from typing import Any
 
+import numpy as np
+
+from posbench.predictors import _ctra_batch as cb
 from posbench.predictors._geometry import check_config
 from posbench.predictors.bank import ModelBank
+from posbench.predictors.base import Predictor
 from posbench.predictors.ekf import EKF_FLAT, EKF_INPUTS, CtraEkf
 from posbench.predictors.filter_inputs import CtraImuInput, CtraSpeedInput, GnssInput
 from posbench.predictors.kf_bank import HORIZONS_S
+
+NAN2 = (math.nan, math.nan)
 
 #: (jerk_psd [m^2/s^5], yaw_acc_psd [rad^2/s^3]) of the members, gentle to agile
 NOISE_LEVELS = ((0.5, 0.03), (4.0, 0.3), (32.0, 3.0), (256.0, 10.0))
@@ -34,9 +50,11 @@ NOISE_LEVELS = ((0.5, 0.03), (4.0, 0.3), (32.0, 3.0), (256.0, 10.0))
 BANK_INPUTS: dict[str, Any] = {**EKF_INPUTS, "gnss": GnssInput(noise_memory=30.0)}
 
 
-class EkfBank(ModelBank):
+class EkfBank(Predictor):
     """CTRA EKFs, aided and fixes-only at several process noises, selected by the
-    likelihood of their fix predictions (module docstring).
+    likelihood of their fix predictions (module docstring); the behaviour of
+    :class:`~posbench.predictors.bank.ModelBank` over
+    :class:`~posbench.predictors.ekf.CtraEkf` members (:meth:`member_bank`), batched.
 
     Args:
         noise_levels: ``(jerk_psd, yaw_acc_psd)`` pairs, one pair of members each.
@@ -59,6 +77,8 @@ class EkfBank(ModelBank):
     """
 
     name = "ekf"
+    #: Huber k of the fix likelihood (:class:`~posbench.predictors.bank.ModelBank`'s default)
+    huber_k = 3.0
 
     def __init__(
         self,
@@ -89,30 +109,250 @@ class EkfBank(ModelBank):
         check_config(
             "ekf", **{f"noise_levels[{i}]": (j, 1e-9, 1e6) for i, (j, _) in enumerate(levels)}
         )
-        inputs = EKF_FLAT.compose(
+        # what each member (CtraEkf) and the bank (ModelBank) would check
+        check_config(
+            "ekf",
+            **{f"yaw_acc_psd[{i}]": (w, 1e-12, 1e6) for i, (_, w) in enumerate(levels)},
+            pos_psd=(pos_psd, 0.0, 1e6),
+            init_vel_sigma=(init_vel_sigma, 1e-3, 1e3),
+            calib_psd=(calib_psd, 0.0, 1e6),
+            memory_fixes=(memory_fixes, 1.0, 1e6),
+            cov_scale=(cov_scale, 1e-6, 1e6),
+            horizon_memory=(horizon_memory, 1.0, 1e6),
+            **{f"horizons_s[{i}]": (h, 1e-3, 3600.0) for i, h in enumerate(horizons_s)},
+        )
+        if not levels:
+            raise ValueError("ekf: noise_levels must name at least one pair")
+        self.inputs = EKF_FLAT.compose(
             "ekf", {"gnss": gnss, "imu": imu, "speed": speed}, BANK_INPUTS, flat
         )
-        self.inputs = inputs
         self.noise_levels = levels
         self._member: dict[str, Any] = {
             "pos_psd": pos_psd,
             "init_vel_sigma": init_vel_sigma,
             "calib_psd": calib_psd,
         }
-        members, labels = [], []
-        for j, w in levels:
+        self.memory_fixes = float(memory_fixes)
+        self.cov_scale = float(cov_scale)
+        self.horizons_s = tuple(sorted(float(h) for h in horizons_s))
+        self.horizon_memory = float(horizon_memory)
+        self.labels = tuple(
+            label for j, w in levels for label in (f"aided j{j:g} w{w:g}", f"fixes j{j:g} w{w:g}")
+        )
+        self._setup()
+        self.reset()
+
+    def _setup(self) -> None:
+        """The rows' parameters and the options array (as each member's ``CtraEkf``
+        holds them) and the fix-noise model shared by the members."""
+        imu, speed = self.inputs["imu"], self.inputs["speed"]
+        n = self._n = 2 * len(self.noise_levels)
+        rp = np.zeros((2 * n, cb.NP))  # members, then their shadows
+        for k, (j, w) in enumerate(self.noise_levels):
+            rp[2 * k] = self._row_params(j, w, imu, speed)  # aided
+            rp[2 * k + 1] = self._row_params(j, w, None, None)  # fixes only
+        rp[n:] = rp[:n]
+        self._rp = rp
+        cf = {
+            "pos_psd": float(self._member["pos_psd"]),
+            "calib_psd": float(self._member["calib_psd"]),
+            "var_v0": float(self._member["init_vel_sigma"]) ** 2,
+            "huber_k": self.huber_k,
+            "two": 2.0,
+        }
+        self._cf = np.array([cf[name] for name in cb.CF_NAMES])
+        self._has_imu = imu is not None
+        self._has_speed = speed is not None
+        self._keep = 1.0 - 1.0 / self.memory_fixes
+        self._keep_h = 1.0 - 1.0 / self.horizon_memory
+        self._w = np.empty(cb.NW)
+        # one fix-noise model for all members: each member's would hold the same values
+        self._gnss = self.inputs["gnss"].noise()
+
+    @staticmethod
+    def _row_params(
+        j: float, w: float, imu: CtraImuInput | None, speed: CtraSpeedInput | None
+    ) -> list[float]:
+        """One row's parameters (:data:`~posbench.predictors._ctra_batch.RP_NAMES`): a
+        sensor not taken keeps its calibration states at the default priors, as
+        ``CtraEkf`` does."""
+        imu_c = imu if imu is not None else EKF_INPUTS["imu"]
+        spd_c = speed if speed is not None else EKF_INPUTS["speed"]
+        row = {
+            "jerk_psd": float(j),
+            "yaw_acc_psd": float(w),
+            "accel_bias_psd": imu_c.accel_bias_psd,
+            "gyro_bias_psd": imu_c.gyro_bias_psd,
+            "var_ba0": imu_c.accel_bias_sigma0**2,
+            "var_bw0": imu_c.gyro_bias_sigma0**2,
+            "var_by0": imu_c.yaw_offset_sigma0**2,
+            "var_kv0": spd_c.scale_sigma0**2,
+            "r_w": imu_c.yaw_rate_sigma**2,
+            "r_a": imu_c.accel_sigma**2,
+            "r_yaw": imu_c.yaw_sigma**2,
+            "r_v": spd_c.sigma**2,
+            "rel_sigma": spd_c.rel_sigma,
+            "has_imu": float(imu is not None),
+            "use_yaw": float(imu is not None and imu.use_yaw),
+            "has_speed": float(speed is not None),
+        }
+        return [row[name] for name in cb.RP_NAMES]
+
+    def reset(self) -> None:
+        n, nh = self._n, len(self.horizons_s)
+        self._S = cb.new_rows(2 * n)
+        self.scores = np.zeros(n)
+        self.best = 0
+        #: per horizon: summed distances [m] of each member's shadows (lower is better)
+        self.horizon_scores = np.zeros((nh, n))
+        #: per horizon: the member answering queries at least that far after a fix
+        self.horizon_best = [0] * nh
+        self._horizon_seen = [False] * nh
+        self._dist = np.empty(n)
+        self._gnss.reset()
+        self._t_fix = math.nan  # time [s] of the newest fix
+        #: the shadows (rows n..2n-1): running since the fix at ``_shadow_t0`` [s] (NaN:
+        #: none); the next horizon they are scored at; the fix new shadows start at (NaN:
+        #: none pending)
+        self._shadow_t0 = math.nan
+        self._next_h = 0
+        self._shadow_due = math.nan
+
+    @property
+    def selected(self) -> str:
+        """Label of the member answering now."""
+        return self.labels[self.best]
+
+    # -- shadows (ModelBank's, on rows) ---------------------------------------------------
+    def _start_shadows(self) -> None:
+        """Copy the members' rows into the shadows' (:meth:`ModelBank._start_shadows`)."""
+        n = self._n
+        self._S[n:] = self._S[:n]
+        self._shadow_t0 = self._shadow_due
+        self._next_h = 0
+        self._shadow_due = math.nan
+
+    def _score_shadows(self, t: float, x: float, y: float) -> None:
+        """Score the shadows by the fix (t, x, y) at every horizon they have now run
+        (:meth:`ModelBank._score_shadows`)."""
+        t0, hs = self._shadow_t0, self.horizons_s
+        if not t - t0 >= hs[self._next_h]:  # also none running (NaN)
+            return
+        scored = cb.shadow_distances(self._S, self._n, t, x, y, self._dist)
+        k = self._keep_h
+        while self._next_h < len(hs) and t - t0 >= hs[self._next_h]:
+            i = self._next_h
+            if scored:
+                sc = k * self.horizon_scores[i] + self._dist
+                self.horizon_scores[i] = sc
+                self.horizon_best[i] = int(np.argmin(sc))
+                self._horizon_seen[i] = True
+            self._next_h += 1
+        if self._next_h == len(hs):
+            self._shadow_t0 = math.nan
+
+    @property
+    def _shadows_on(self) -> bool:
+        return self._shadow_t0 == self._shadow_t0
+
+    # -- observations ---------------------------------------------------------------------
+    def observe_gps(self, t: float, x: float, y: float, sigma: float | None = None) -> None:
+        if self._shadow_due == self._shadow_due:
+            self._start_shadows()
+        if not (math.isfinite(x) and math.isfinite(y)):
+            return  # no member takes it, none is scored
+        if self.horizons_s:
+            self._score_shadows(t, x, y)
+        self._gnss.observe(t, x, y)
+        r = self._gnss.weigh(sigma)
+        best = cb.fix_rows(
+            self._S, self._rp, self._cf, self._w, self._n, t, x, y, r, self.scores, self._keep
+        )
+        if best >= 0:
+            self.best = best
+        self._t_fix = t
+        if self.horizons_s and not self._shadows_on:
+            self._shadow_due = t
+
+    def observe_imu(self, t: float, ax: float, ay: float, yaw: float, yaw_rate: float) -> None:
+        if self._shadow_due == self._shadow_due:
+            self._start_shadows()
+        if not self._has_imu:
+            return
+        n = self._n
+        hi = 2 * n if self._shadows_on else n
+        cb.imu_rows(self._S, self._rp, self._cf, self._w, hi, t, ax, yaw, yaw_rate)
+
+    def observe_speed(self, t: float, v: float) -> None:
+        if self._shadow_due == self._shadow_due:
+            self._start_shadows()
+        if not (self._has_speed and math.isfinite(v)):
+            return
+        n = self._n
+        hi = 2 * n if self._shadows_on else n
+        cb.speed_rows(self._S, self._rp, self._cf, self._w, hi, t, v)
+
+    # -- answers --------------------------------------------------------------------------
+    def answering(self, t: float) -> int:
+        """Index of the member that answers a query at t [s]
+        (:meth:`~posbench.predictors.bank.ModelBank.answering`)."""
+        gap = t - self._t_fix
+        for i in range(len(self.horizons_s) - 1, -1, -1):
+            if gap >= self.horizons_s[i] and self._horizon_seen[i]:
+                return self.horizon_best[i]
+        return self.best
+
+    def position_at(self, t: float) -> tuple[float, float]:
+        return cb.position(self._S, self.answering(t), t)
+
+    def covariance_at(self, t: float) -> np.ndarray | None:
+        """The answering member's 2x2 ENU position covariance [m^2] at t
+        (``CtraEkf.covariance_at``): its own part times ``cov_scale``, plus the slow part
+        of the newest fix's stated error (:attr:`slow_variance`, not scaled). None before
+        that member is initialised."""
+        i = self.answering(t)
+        if self._S.item(i, cb.READY) == 0.0:
+            return None
+        pxx, pxy, pyy = cb.covariance(self._S, self._rp, self._cf, i, t)
+        s = self._gnss.slow_var
+        # the member's covariance (its own scale 1), then the bank's scale of its own part
+        P = np.array(((1.0 * pxx + s, 1.0 * pxy + 0.0), (1.0 * pxy + 0.0, 1.0 * pyy + s)))
+        k = self.cov_scale
+        slow = (1.0 - k) * s
+        out = k * P
+        out[0, 0] += slow
+        out[1, 1] += slow
+        return out
+
+    def fix_variance(self, sigma: float | None) -> float:
+        """R per axis [m^2] of a fix stating ``sigma``, as the members weigh it."""
+        return self._gnss.parts(sigma)[0]
+
+    @property
+    def slow_variance(self) -> float:
+        """The slow part [m^2] per axis of the newest fix's stated error, which
+        ``covariance_at`` adds unscaled (:class:`~posbench.predictors._gnss_noise.GnssNoise`)."""
+        return self._gnss.slow_var
+
+    # -- options and the reference --------------------------------------------------------
+    def member_bank(self) -> ModelBank:
+        """The same bank as :class:`~posbench.predictors.ekf.CtraEkf` objects under a
+        :class:`~posbench.predictors.bank.ModelBank`: the readable reference these rows
+        answer as (tests/predictors/test_ekf_batched.py)."""
+        inputs = self.inputs
+        members = []
+        for j, w in self.noise_levels:
             members.append(CtraEkf(j, w, **inputs, **self._member))
-            labels.append(f"aided j{j:g} w{w:g}")
             # a fixes-only member takes no sensor input at all
             members.append(CtraEkf(j, w, gnss=inputs["gnss"], imu=None, speed=None, **self._member))
-            labels.append(f"fixes j{j:g} w{w:g}")
-        super().__init__(
+        return ModelBank(
             members,
-            labels,
-            memory_fixes=memory_fixes,
-            cov_scale=cov_scale,
-            horizons_s=horizons_s,
-            horizon_memory=horizon_memory,
+            self.labels,
+            memory_fixes=self.memory_fixes,
+            huber_k=self.huber_k,
+            cov_scale=self.cov_scale,
+            horizons_s=self.horizons_s,
+            horizon_memory=self.horizon_memory,
         )
 
     @classmethod

@@ -69,7 +69,7 @@ def test_bank_options_reach_the_aided_members_and_fixes_only_members_take_no_sen
         else:
             assert m.imu is None and m.speed is None  # type: ignore[attr-defined]
     eb = EkfBank(yaw_rate_sigma=0.03)
-    for m, label in zip(eb.members, eb.labels, strict=True):
+    for m, label in zip(eb.member_bank().members, eb.labels, strict=True):
         if label.startswith("aided"):
             assert m.imu.yaw_rate_sigma == 0.03  # type: ignore[attr-defined]
         else:

@@ -208,8 +208,9 @@ def test_a_copy_of_the_members_answers_exactly_as_they_do(bank_cls):
     from posbench.predictors.ekf_bank import EkfBank
     from posbench.replay.loop import events, feed
 
-    # the kf's members as objects: its reference (the bank itself runs them as rows)
-    bank = KalmanBank(horizons_s=()).member_bank() if bank_cls == "kf" else EkfBank(horizons_s=())
+    # the members as objects: the banks' reference (the banks themselves run them as rows)
+    cls = KalmanBank if bank_cls == "kf" else EkfBank
+    bank = cls(horizons_s=()).member_bank()
     evs = events(prepared(generate_drive(seed=3301, route="turns", duration_s=60.0)))
     half = len(evs) // 2
     feed(bank, evs, 0.2, stop=half)
@@ -243,7 +244,7 @@ def far_errors(bank_factory, drives) -> dict[str, float]:
     err: dict[str, list[np.ndarray]] = {}
     for d, prep in drives:
         bank = bank_factory()
-        source = bank.member_bank() if isinstance(bank, KalmanBank) else bank
+        source = bank.member_bank()
         members = [copy.deepcopy(m) for m in source.members]  # type: ignore[attr-defined]
         tq = prep.now.t_query
         ref = np.column_stack(interpolate_truth(d.truth, tq))
@@ -281,7 +282,7 @@ def test_every_attribute_of_a_filter_is_listed_for_its_copy():
     from posbench.replay.loop import replay
 
     prep = prepared(generate_drive(seed=3501, route="mixed", duration_s=60.0), "outages")
-    kb, eb = KalmanBank().member_bank(), EkfBank()
+    kb, eb = KalmanBank().member_bank(), EkfBank().member_bank()
     replay(kb, prep, 0.2)
     replay(eb, prep, 0.2)
     aided = kb.members[0]
