@@ -34,10 +34,10 @@ import numpy as np
 from posbench.predictors import _ctra_batch as cb
 from posbench.predictors._geometry import check_config
 from posbench.predictors.bank import ModelBank
-from posbench.predictors.base import Predictor
 from posbench.predictors.ekf import EKF_FLAT, EKF_INPUTS, CtraEkf
 from posbench.predictors.filter_inputs import CtraImuInput, CtraSpeedInput, GnssInput
 from posbench.predictors.kf_bank import HORIZONS_S
+from posbench.predictors.row_bank import RowBank
 
 NAN2 = (math.nan, math.nan)
 
@@ -50,7 +50,7 @@ NOISE_LEVELS = ((0.5, 0.03), (4.0, 0.3), (32.0, 3.0), (256.0, 10.0))
 BANK_INPUTS: dict[str, Any] = {**EKF_INPUTS, "gnss": GnssInput(noise_memory=30.0)}
 
 
-class EkfBank(Predictor):
+class EkfBank(RowBank):
     """CTRA EKFs, aided and fixes-only at several process noises, selected by the
     likelihood of their fix predictions (module docstring); the behaviour of
     :class:`~posbench.predictors.bank.ModelBank` over
@@ -77,8 +77,7 @@ class EkfBank(Predictor):
     """
 
     name = "ekf"
-    #: Huber k of the fix likelihood (:class:`~posbench.predictors.bank.ModelBank`'s default)
-    huber_k = 3.0
+    _distances = staticmethod(cb.shadow_distances)
 
     def __init__(
         self,
@@ -163,8 +162,6 @@ class EkfBank(Predictor):
         self._cf = np.array([cf[name] for name in cb.CF_NAMES])
         self._has_imu = imu is not None
         self._has_speed = speed is not None
-        self._keep = 1.0 - 1.0 / self.memory_fixes
-        self._keep_h = 1.0 - 1.0 / self.horizon_memory
         self._w = np.empty(cb.NW)
         # one fix-noise model for all members: each member's would hold the same values
         self._gnss = self.inputs["gnss"].noise()
@@ -199,70 +196,15 @@ class EkfBank(Predictor):
         return [row[name] for name in cb.RP_NAMES]
 
     def reset(self) -> None:
-        n, nh = self._n, len(self.horizons_s)
-        self._S = cb.new_rows(2 * n)
-        self.scores = np.zeros(n)
-        self.best = 0
-        #: per horizon: summed distances [m] of each member's shadows (lower is better)
-        self.horizon_scores = np.zeros((nh, n))
-        #: per horizon: the member answering queries at least that far after a fix
-        self.horizon_best = [0] * nh
-        self._horizon_seen = [False] * nh
-        self._dist = np.empty(n)
-        self._gnss.reset()
-        self._t_fix = math.nan  # time [s] of the newest fix
-        #: the shadows (rows n..2n-1): running since the fix at ``_shadow_t0`` [s] (NaN:
-        #: none); the next horizon they are scored at; the fix new shadows start at (NaN:
-        #: none pending)
-        self._shadow_t0 = math.nan
-        self._next_h = 0
-        self._shadow_due = math.nan
-
-    @property
-    def selected(self) -> str:
-        """Label of the member answering now."""
-        return self.labels[self.best]
-
-    # -- shadows (ModelBank's, on rows) ---------------------------------------------------
-    def _start_shadows(self) -> None:
-        """Copy the members' rows into the shadows' (:meth:`ModelBank._start_shadows`)."""
-        n = self._n
-        self._S[n:] = self._S[:n]
-        self._shadow_t0 = self._shadow_due
-        self._next_h = 0
-        self._shadow_due = math.nan
-
-    def _score_shadows(self, t: float, x: float, y: float) -> None:
-        """Score the shadows by the fix (t, x, y) at every horizon they have now run
-        (:meth:`ModelBank._score_shadows`)."""
-        t0, hs = self._shadow_t0, self.horizons_s
-        if not t - t0 >= hs[self._next_h]:  # also none running (NaN)
-            return
-        scored = cb.shadow_distances(self._S, self._n, t, x, y, self._dist)
-        k = self._keep_h
-        while self._next_h < len(hs) and t - t0 >= hs[self._next_h]:
-            i = self._next_h
-            if scored:
-                sc = k * self.horizon_scores[i] + self._dist
-                self.horizon_scores[i] = sc
-                self.horizon_best[i] = int(np.argmin(sc))
-                self._horizon_seen[i] = True
-            self._next_h += 1
-        if self._next_h == len(hs):
-            self._shadow_t0 = math.nan
-
-    @property
-    def _shadows_on(self) -> bool:
-        return self._shadow_t0 == self._shadow_t0
+        self._reset_bank(cb.new_rows(2 * self._n))
 
     # -- observations ---------------------------------------------------------------------
     def observe_gps(self, t: float, x: float, y: float, sigma: float | None = None) -> None:
-        if self._shadow_due == self._shadow_due:
-            self._start_shadows()
+        if self._due:
+            self._catch_up()
         if not (math.isfinite(x) and math.isfinite(y)):
             return  # no member takes it, none is scored
-        if self.horizons_s:
-            self._score_shadows(t, x, y)
+        self._fix_begins(t, x, y)
         self._gnss.observe(t, x, y)
         r = self._gnss.weigh(sigma)
         best = cb.fix_rows(
@@ -270,13 +212,11 @@ class EkfBank(Predictor):
         )
         if best >= 0:
             self.best = best
-        self._t_fix = t
-        if self.horizons_s and not self._shadows_on:
-            self._shadow_due = t
+        self._fix_ends(t)
 
     def observe_imu(self, t: float, ax: float, ay: float, yaw: float, yaw_rate: float) -> None:
-        if self._shadow_due == self._shadow_due:
-            self._start_shadows()
+        if self._due:
+            self._catch_up()
         if not self._has_imu:
             return
         n = self._n
@@ -284,8 +224,8 @@ class EkfBank(Predictor):
         cb.imu_rows(self._S, self._rp, self._cf, self._w, hi, t, ax, yaw, yaw_rate)
 
     def observe_speed(self, t: float, v: float) -> None:
-        if self._shadow_due == self._shadow_due:
-            self._start_shadows()
+        if self._due:
+            self._catch_up()
         if not (self._has_speed and math.isfinite(v)):
             return
         n = self._n
@@ -293,15 +233,6 @@ class EkfBank(Predictor):
         cb.speed_rows(self._S, self._rp, self._cf, self._w, hi, t, v)
 
     # -- answers --------------------------------------------------------------------------
-    def answering(self, t: float) -> int:
-        """Index of the member that answers a query at t [s]
-        (:meth:`~posbench.predictors.bank.ModelBank.answering`)."""
-        gap = t - self._t_fix
-        for i in range(len(self.horizons_s) - 1, -1, -1):
-            if gap >= self.horizons_s[i] and self._horizon_seen[i]:
-                return self.horizon_best[i]
-        return self.best
-
     def position_at(self, t: float) -> tuple[float, float]:
         return cb.position(self._S, self.answering(t), t)
 
@@ -314,25 +245,7 @@ class EkfBank(Predictor):
         if self._S.item(i, cb.READY) == 0.0:
             return None
         pxx, pxy, pyy = cb.covariance(self._S, self._rp, self._cf, i, t)
-        s = self._gnss.slow_var
-        # the member's covariance (its own scale 1), then the bank's scale of its own part
-        P = np.array(((1.0 * pxx + s, 1.0 * pxy + 0.0), (1.0 * pxy + 0.0, 1.0 * pyy + s)))
-        k = self.cov_scale
-        slow = (1.0 - k) * s
-        out = k * P
-        out[0, 0] += slow
-        out[1, 1] += slow
-        return out
-
-    def fix_variance(self, sigma: float | None) -> float:
-        """R per axis [m^2] of a fix stating ``sigma``, as the members weigh it."""
-        return self._gnss.parts(sigma)[0]
-
-    @property
-    def slow_variance(self) -> float:
-        """The slow part [m^2] per axis of the newest fix's stated error, which
-        ``covariance_at`` adds unscaled (:class:`~posbench.predictors._gnss_noise.GnssNoise`)."""
-        return self._gnss.slow_var
+        return self._bank_covariance(pxx, pxy, pyy)
 
     # -- options and the reference --------------------------------------------------------
     def member_bank(self) -> ModelBank:

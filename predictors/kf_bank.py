@@ -43,9 +43,9 @@ from posbench.predictors._ca_kalman import ca_noise_block, predict_cross, predic
 from posbench.predictors._geometry import check_config
 from posbench.predictors._heading import CourseHeading
 from posbench.predictors.bank import ModelBank
-from posbench.predictors.base import Predictor
 from posbench.predictors.filter_inputs import AccelInput, GnssInput, HeadingInput, SpeedInput
 from posbench.predictors.kf import KF_FLAT, LinearKalman
+from posbench.predictors.row_bank import RowBank
 
 NAN2 = (math.nan, math.nan)
 
@@ -69,7 +69,7 @@ BANK_INPUTS: dict[str, Any] = {
 }
 
 
-class KalmanBank(Predictor):
+class KalmanBank(RowBank):
     """Linear CA Kalman filters, aided and fixes-only at several process noises, selected
     by the likelihood of their fix predictions (module docstring); the behaviour of
     :class:`~posbench.predictors.bank.ModelBank` over
@@ -96,8 +96,7 @@ class KalmanBank(Predictor):
     """
 
     name = "kf"
-    #: Huber k of the fix likelihood (:class:`~posbench.predictors.bank.ModelBank`'s default)
-    huber_k = 3.0
+    _distances = staticmethod(kb.shadow_distances)
 
     def __init__(
         self,
@@ -179,8 +178,6 @@ class KalmanBank(Predictor):
         self._has_speed = speed is not None
         self._stop_speed = cf["stop_speed"]
         self._sigma_max = heading.sigma_max
-        self._keep = 1.0 - 1.0 / self.memory_fixes
-        self._keep_h = 1.0 - 1.0 / self.horizon_memory
         # one fix-noise model, heading tracker and bias estimator for all members: each
         # member's would see the same inputs and hold the same values
         self._gnss = self.inputs["gnss"].noise()
@@ -189,82 +186,25 @@ class KalmanBank(Predictor):
         self._bias = AccelBiasEstimator(tau) if tau > 0.0 else None
 
     def reset(self) -> None:
-        n, nh = self._n, len(self.horizons_s)
-        self._S = kb.new_rows(2 * n)
-        self._S[:, kb.IMU_M2] = self._r_acc
-        self.scores = np.zeros(n)
-        self.best = 0
-        #: per horizon: summed distances [m] of each member's shadows (lower is better)
-        self.horizon_scores = np.zeros((nh, n))
-        #: per horizon: the member answering queries at least that far after a fix
-        self.horizon_best = [0] * nh
-        self._horizon_seen = [False] * nh
-        self._dist = np.empty(n)
-        self._gnss.reset()
+        rows = kb.new_rows(2 * self._n)
+        rows[:, kb.IMU_M2] = self._r_acc
+        self._reset_bank(rows)
         if self._course is not None:
             self._course.reset()
         if self._bias is not None:
             self._bias.reset()
         self._ready = False
         self._imu_yaw = False  # whether the newest IMU sample stated a yaw
-        self._t_fix = math.nan  # time [s] of the newest fix
-        #: the shadows (rows n..2n-1): running since the fix at ``_shadow_t0`` [s] (NaN:
-        #: none), with their own heading tracker and bias estimator; the next horizon
-        #: they are scored at; the fix new shadows start at (NaN: none pending)
-        self._shadow_t0 = math.nan
+        #: the shadows' heading tracker and bias estimator (copies of the members')
         self._shadow_course: CourseHeading | None = None
         self._shadow_bias: AccelBiasEstimator | None = None
-        self._next_h = 0
-        self._shadow_due = math.nan
         #: a fix (t, x, y, its variance) the heading tracker and bias estimator take after
-        #: its answer (:meth:`_catch_up`), and whether any such work is due
+        #: its answer (:meth:`_after_fix_work`)
         self._after_fix: tuple[float, float, float, float] | None = None
-        self._due = False
 
-    @property
-    def selected(self) -> str:
-        """Label of the member answering now."""
-        return self.labels[self.best]
-
-    # -- shadows (ModelBank's, on rows) ---------------------------------------------------
-    def _start_shadows(self) -> None:
-        """Copy the members' rows into the shadows' (:meth:`ModelBank._start_shadows`)."""
-        n = self._n
-        self._S[n:] = self._S[:n]
-        self._shadow_course = copy.deepcopy(self._course)
-        self._shadow_bias = copy.deepcopy(self._bias)
-        self._shadow_t0 = self._shadow_due
-        self._next_h = 0
-        self._shadow_due = math.nan
-
-    def _score_shadows(self, t: float, x: float, y: float) -> None:
-        """Score the shadows by the fix (t, x, y) at every horizon they have now run
-        (:meth:`ModelBank._score_shadows`)."""
-        t0, hs = self._shadow_t0, self.horizons_s
-        if not t - t0 >= hs[self._next_h]:  # also none running (NaN)
-            return
-        scored = kb.shadow_distances(self._S, self._n, t, x, y, self._dist)
-        k = self._keep_h
-        while self._next_h < len(hs) and t - t0 >= hs[self._next_h]:
-            i = self._next_h
-            if scored:
-                sc = k * self.horizon_scores[i] + self._dist
-                self.horizon_scores[i] = sc
-                self.horizon_best[i] = int(np.argmin(sc))
-                self._horizon_seen[i] = True
-            self._next_h += 1
-        if self._next_h == len(hs):
-            self._shadow_t0 = math.nan
-
-    @property
-    def _shadows_on(self) -> bool:
-        return self._shadow_t0 == self._shadow_t0
-
-    # -- observations ---------------------------------------------------------------------
-    def _catch_up(self) -> None:
-        """The work a fix left for after its answer, done before the next observation: the
-        heading tracker and the bias estimator take the fix (only IMU and speed updates
-        read them), then new shadows start (their copy of both included)."""
+    def _after_fix_work(self) -> None:
+        """The heading tracker and the bias estimator take the newest fix (only IMU and
+        speed updates read them)."""
         pending = self._after_fix
         if pending is not None:
             self._after_fix = None
@@ -273,17 +213,18 @@ class KalmanBank(Predictor):
                 self._course.observe_fix(t, x, y, r)
             if self._bias is not None:
                 self._bias.observe_fix(t, x, y, r)
-        if self._shadow_due == self._shadow_due:
-            self._start_shadows()
-        self._due = False
 
+    def _start_shadow_helpers(self) -> None:
+        self._shadow_course = copy.deepcopy(self._course)
+        self._shadow_bias = copy.deepcopy(self._bias)
+
+    # -- observations ---------------------------------------------------------------------
     def observe_gps(self, t: float, x: float, y: float, sigma: float | None = None) -> None:
         if self._due:
             self._catch_up()
         if not (math.isfinite(x) and math.isfinite(y)):
             return  # no member takes it, none is scored
-        if self.horizons_s:
-            self._score_shadows(t, x, y)
+        self._fix_begins(t, x, y)
         self._gnss.observe(t, x, y)
         r = self._gnss.weigh(sigma)
         if self._course is not None or self._bias is not None:
@@ -300,10 +241,7 @@ class KalmanBank(Predictor):
             )
             if best >= 0:
                 self.best = best
-        self._t_fix = t
-        if self.horizons_s and not self._shadows_on:
-            self._shadow_due = t
-            self._due = True
+        self._fix_ends(t)
 
     def _course_heading(self, course: CourseHeading | None, t: float) -> float:
         """A course tracker's heading [rad] at t, NaN while its standard deviation is not
@@ -389,15 +327,6 @@ class KalmanBank(Predictor):
         )
 
     # -- answers --------------------------------------------------------------------------
-    def answering(self, t: float) -> int:
-        """Index of the member that answers a query at t [s]
-        (:meth:`~posbench.predictors.bank.ModelBank.answering`)."""
-        gap = t - self._t_fix
-        for i in range(len(self.horizons_s) - 1, -1, -1):
-            if gap >= self.horizons_s[i] and self._horizon_seen[i]:
-                return self.horizon_best[i]
-        return self.best
-
     def position_at(self, t: float) -> tuple[float, float]:
         if not self._ready:
             return NAN2
@@ -429,25 +358,7 @@ class KalmanBank(Predictor):
             pxy = predict_cross(C, d, h)[0]
         else:
             pxx, pyy, pxy = A[0], B[0], C[0]
-        s = self._gnss.slow_var
-        # the member's covariance (its own scale 1), then the bank's scale of its own part
-        P = np.array(((1.0 * pxx + s, 1.0 * pxy), (1.0 * pxy, 1.0 * pyy + s)))
-        k = self.cov_scale
-        slow = (1.0 - k) * s
-        out = k * P
-        out[0, 0] += slow
-        out[1, 1] += slow
-        return out
-
-    def fix_variance(self, sigma: float | None) -> float:
-        """R per axis [m^2] of a fix stating ``sigma``, as the members weigh it."""
-        return self._gnss.parts(sigma)[0]
-
-    @property
-    def slow_variance(self) -> float:
-        """The slow part [m^2] per axis of the newest fix's stated error, which
-        ``covariance_at`` adds unscaled (:class:`~posbench.predictors._gnss_noise.GnssNoise`)."""
-        return self._gnss.slow_var
+        return self._bank_covariance(pxx, pxy, pyy)
 
     # -- options and the reference --------------------------------------------------------
     def member_bank(self) -> ModelBank:
