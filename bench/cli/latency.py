@@ -41,12 +41,16 @@ def latency(
     quiet: QuietOpt = False,
     verbose: VerboseOpt = False,
 ) -> None:
-    """Per-call latency percentiles (us) in one process and thread, with the lstm's stages and
-    batch throughput, beside the paper's figures (2 ms fit + 2 ms LSTM, 4-6 ms per step)."""
+    """Per-call latency percentiles (us) in one process and thread, each predictor's step as a
+    ratio to constant velocity's (timed in the same run: ratios carry across machines), the
+    lstm's stages and batch throughput, beside the paper's figures (2 ms fit + 2 ms LSTM,
+    4-6 ms per step)."""
     # every option is checked before a drive is loaded or a predictor timed
     check_at_least(steps, 1, "--steps")
     check_data_paths(data)
     names = list(parse_predictor_names(predictors or DEFAULT_TIMED))
+    if "cv" not in names:  # the yardstick of the ratios
+        names.insert(0, "cv")
     options = model_options(parse_pairs(model, "--model"))
     validate_predictors(names, options)
     from posbench.pipeline.drives import load_drives
@@ -55,6 +59,7 @@ def latency(
         batch_throughput,
         lstm_fused_stages,
         lstm_stages,
+        ratios_to_cv,
         single_thread,
         time_predictor,
     )
@@ -77,6 +82,7 @@ def latency(
             res["lstm_fused_stages"] = lstm_fused_stages(drive, steps)
             status("timing batch throughput...")
             res["batch"] = batch_throughput()
+    res["ratio_to_cv"] = ratios_to_cv(res)
     res["drive"] = drive.name
     res["paper_ms"] = PAPER_MS
     if as_json:
@@ -86,6 +92,7 @@ def latency(
     rows = []
     for n in names:
         s, q = res[n]["step_us"], res[n]["query_us"]
+        ratio = res["ratio_to_cv"].get(n, {})
         rows.append(
             [
                 n,
@@ -93,6 +100,8 @@ def latency(
                 f"{s['p90']:.1f}",
                 f"{s['p99']:.1f}",
                 f"{s['max']:.0f}",
+                f"{ratio.get('step_p50', float('nan')):.1f}",
+                f"{ratio.get('step_p99', float('nan')):.1f}",
                 f"{q['p50']:.1f}",
                 f"{q['p99']:.1f}",
                 paper.get(n, ""),
@@ -100,7 +109,18 @@ def latency(
         )
     print_table(
         console,
-        ("predictor", "step p50", "p90", "p99", "max", "query p50", "query p99", "paper"),
+        (
+            "predictor",
+            "step p50",
+            "p90",
+            "p99",
+            "max",
+            "p50 x cv",
+            "p99 x cv",
+            "query p50",
+            "query p99",
+            "paper",
+        ),
         rows,
         title=f"per-call latency (us) on {drive.name} (one process, one thread)",
     )

@@ -3,7 +3,10 @@
 Each predictor replays the drive once to warm up (imports, allocations, ONNX
 session), then replays it again, repeating until at least ``steps`` fix steps
 were timed; every call is timed with ``perf_counter_ns``. Figures are
-percentiles in microseconds, never a single timing.
+percentiles in microseconds, never a single timing, and each predictor's step as a ratio
+to constant velocity's step timed in the same run (:func:`ratios_to_cv`): absolute times
+differ by machine, ratios far less, so the CI latency budgets are ratios
+(tests/project/latency_budgets.json).
 """
 
 from __future__ import annotations
@@ -55,6 +58,49 @@ def time_predictor(
         "step_us": latency_summary(np.concatenate(step)[:steps]),
         "query_us": latency_summary(np.concatenate(query)),
     }
+
+
+def time_predictors(
+    names: list[str],
+    drive: Drive,
+    steps: int,
+    options: dict[str, dict[str, Any]] | None = None,
+    rounds: int = 1,
+) -> dict[str, dict[str, Any]]:
+    """:func:`time_predictor` for each name; with ``rounds`` > 1 the predictors are timed in
+    turn that many times and each percentile is the lowest of its rounds, so that a burst
+    of load from another process, which hits one round, does not decide a ratio."""
+    out: dict[str, dict[str, Any]] = {}
+    for _ in range(rounds):
+        for n in names:
+            r = time_predictor(n, drive, steps, (options or {}).get(n))
+            if n not in out:
+                out[n] = r
+                continue
+            for kind in ("step_us", "query_us"):
+                best = out[n][kind]
+                for k in ("p50", "p90", "p99", "max", "mean"):
+                    best[k] = min(best[k], r[kind][k])
+    return out
+
+
+def ratios_to_cv(results: dict[str, Any]) -> dict[str, dict[str, float]]:
+    """Per timed predictor: its step p50 and p99 over cv's step p50 of the same run, and its
+    own p99 over p50 (a spread); {} when cv was not timed."""
+    cv = results.get("cv", {}).get("step_us", {}).get("p50")
+    if not cv:
+        return {}
+    out = {}
+    for name, r in results.items():
+        step = r.get("step_us") if isinstance(r, dict) else None
+        if not step or "p50" not in step or name.startswith("lstm_"):
+            continue
+        out[name] = {
+            "step_p50": step["p50"] / cv,
+            "step_p99": step["p99"] / cv,
+            "p99_over_p50": step["p99"] / step["p50"],
+        }
+    return out
 
 
 def lstm_stages(drive: Drive, steps: int) -> dict[str, Any]:
