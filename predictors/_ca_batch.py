@@ -39,13 +39,12 @@ PSD, HAS_IMU, HAS_SPEED = 0, 1, 2
 #: columns of a row's parameters
 NP = 3
 #: the options array ``CF``, in order: IMU acceleration variance [m^2/s^4], wheel speed
-#: variance [m^2/s^2], relative speed sigma, stop speed [m/s], heading min speed [m/s],
+#: variance [m^2/s^2], stop speed [m/s], heading min speed [m/s],
 #: IMU gate, IMU noise time constant [s], robust IMU update (0/1), course heading (0/1),
 #: Huber k of the fix likelihood
 CF_NAMES = (
     "r_acc",
     "r_spd",
-    "rel_sigma",
     "stop_speed",
     "min_speed",
     "gate",
@@ -54,7 +53,7 @@ CF_NAMES = (
     "course",
     "huber_k",
 )
-R_ACC, R_SPD, REL_SIGMA, STOP_SPEED, MIN_SPEED, GATE, NOISE_TAU, ROBUST, COURSE, HUBER_K = range(10)
+R_ACC, R_SPD, STOP_SPEED, MIN_SPEED, GATE, NOISE_TAU, ROBUST, COURSE, HUBER_K = range(9)
 
 
 def new_rows(n: int) -> np.ndarray:
@@ -393,12 +392,16 @@ def speed_rows(
     n: int,
     t: float,
     v: float,
+    r_v: float,
     imu_yaw: bool,
     course_m: float,
     course_s: float,
 ) -> None:
     """A wheel speed v [m/s] at t [s] for the rows 0..hi-1 that take it
-    (``LinearKalman.observe_speed`` after its first fix; shadows as in :func:`imu_rows`)."""
+    (``LinearKalman.observe_speed`` after its first fix; shadows as in :func:`imu_rows`);
+    ``r_v`` [m^2/s^2]: its variance along the heading, ``r_spd + (rel_sigma v) ** 2``
+    computed by the caller as the members do (libm's pow, which is not always ``x * x``
+    in the last bit)."""
     r_spd = CF[R_SPD]
     for i in range(hi):
         if RP[i, HAS_SPEED] == 0.0:
@@ -415,8 +418,7 @@ def speed_rows(
             if not math.isfinite(h) and math.hypot(vx, vy) > CF[MIN_SPEED]:
                 h = math.atan2(vy, vx)
         if math.isfinite(h):
-            rel = CF[REL_SIGMA] * v
-            _update_speed(S, i, math.cos(h), math.sin(h), v, r_spd + rel * rel)
+            _update_speed(S, i, math.cos(h), math.sin(h), v, r_v)
 
 
 @njit(cache=True)
