@@ -28,7 +28,8 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit
+
+from posbench.predictors._kernels import kernel
 
 MX, MY, A, B, C = 0, 3, 6, 12, 18
 TS, YAW, YAW_T, IMU_T, IMU_M2 = 27, 28, 29, 30, 31
@@ -63,7 +64,7 @@ def new_rows(n: int) -> np.ndarray:
     return S
 
 
-@njit(cache=True)
+@kernel
 def _sym_entry(k: int, j: int) -> int:
     # entries of a symmetric 3x3 block in storage order (CaFilter2D._SYM)
     if k == 0:
@@ -73,7 +74,7 @@ def _sym_entry(k: int, j: int) -> int:
     return (2, 4, 5)[j]
 
 
-@njit(cache=True)
+@kernel
 def _predict(S: np.ndarray, i: int, t: float, psd: float) -> None:
     """Row i to time t [s] (``LinearKalman._predict_to``: only forward)."""
     d = t - S[i, TS]
@@ -129,7 +130,7 @@ def _predict(S: np.ndarray, i: int, t: float, psd: float) -> None:
     S[i, TS] = t
 
 
-@njit(cache=True)
+@kernel
 def _update(
     S: np.ndarray,
     i: int,
@@ -177,7 +178,7 @@ def _update(
     S[i, C + 8] -= u2 * y2
 
 
-@njit(cache=True)
+@kernel
 def _update_pair(S: np.ndarray, i: int, k: int, zx: float, zy: float, r: float) -> None:
     """Component k (0 position, 1 velocity, 2 acceleration) of both axes, noise r I2
     (``CaFilter2D.update_pair``: x, then y)."""
@@ -192,7 +193,7 @@ def _update_pair(S: np.ndarray, i: int, k: int, zx: float, zy: float, r: float) 
     _update(S, i, x0, x1, x2, y0, y1, y2, py[k] + r, zy - S[i, MY + k])
 
 
-@njit(cache=True)
+@kernel
 def _update_speed(S: np.ndarray, i: int, c: float, s: float, z: float, r: float) -> None:
     """Speed z [m/s] along (c, s), noise r (``CaFilter2D.update_speed``)."""
     x0 = c * S[i, A + 1] + s * S[i, C + 1]
@@ -204,7 +205,7 @@ def _update_speed(S: np.ndarray, i: int, c: float, s: float, z: float, r: float)
     _update(S, i, x0, x1, x2, y0, y1, y2, c * x1 + s * y1 + r, z - c * S[i, 1] - s * S[i, 4])
 
 
-@njit(cache=True)
+@kernel
 def init_rows(
     S: np.ndarray, n: int, t: float, x: float, y: float, r: float, vv: float, va: float
 ) -> None:
@@ -222,7 +223,7 @@ def init_rows(
         S[i, TS] = t
 
 
-@njit(cache=True)
+@kernel
 def fix_one(
     S: np.ndarray, i: int, t: float, x: float, y: float, r: float, psd: float
 ) -> tuple[float, float]:
@@ -234,7 +235,7 @@ def fix_one(
     return S[i, 1], S[i, 4]
 
 
-@njit(cache=True)
+@kernel
 def fix_rows(
     S: np.ndarray,
     RP: np.ndarray,
@@ -289,7 +290,7 @@ def fix_rows(
     return best
 
 
-@njit(cache=True)
+@kernel
 def _row_heading(
     S: np.ndarray, i: int, t: float, yaw: float, yaw_rate: float, min_speed: float
 ) -> float:
@@ -305,7 +306,7 @@ def _row_heading(
     return S[i, YAW]
 
 
-@njit(cache=True)
+@kernel
 def imu_rows(
     S: np.ndarray,
     RP: np.ndarray,
@@ -383,7 +384,7 @@ def imu_rows(
     return h_m, h_s
 
 
-@njit(cache=True)
+@kernel
 def speed_rows(
     S: np.ndarray,
     RP: np.ndarray,
@@ -421,7 +422,7 @@ def speed_rows(
             _update_speed(S, i, math.cos(h), math.sin(h), v, r_v)
 
 
-@njit(cache=True)
+@kernel
 def shadow_distances(S: np.ndarray, n: int, t: float, x: float, y: float, out: np.ndarray) -> bool:
     """Distances [m] of the shadows' (rows n..2n-1) answers for t [s] to (x, y) [m] into
     ``out``; whether every one is finite."""

@@ -33,10 +33,8 @@ import math
 from typing import Any
 
 import numpy as np
-from llvmlite import ir  # type: ignore[import-untyped]
-from numba import njit, types
-from numba.core import cgutils
-from numba.extending import intrinsic
+
+from posbench.predictors._kernels import fused_multiply_add, kernel
 
 X, P = 0, 10
 TS, READY, FIX, YAW_MEAS, SPEED_MEAS, INNOV, LL = 110, 111, 112, 115, 116, 117, 122
@@ -83,27 +81,23 @@ def new_rows(n: int) -> np.ndarray:
     return S
 
 
-def _fma_typer(typingctx, a, b, c):
-    def codegen(context, builder, signature, args):
-        d = ir.DoubleType()
-        fnty = ir.FunctionType(d, [d, d, d])
-        fn = cgutils.get_or_insert_function(builder.module, fnty, "llvm.fma.f64")
-        return builder.call(fn, args)
-
-    return types.float64(types.float64, types.float64, types.float64), codegen
-
-
 #: a * b + c rounded once (LLVM's fma: the instruction, where the CPU has one), as BLAS
-#: computes the products numpy hands it
-_fma: Any = intrinsic(_fma_typer)
+#: computes the products numpy hands it; made by :func:`_numba_setup`
+_fma: Any = None
 
 
-@njit(cache=True)
+def _numba_setup() -> None:
+    """:data:`_fma`, made when this module's kernels are compiled."""
+    global _fma
+    _fma = fused_multiply_add()
+
+
+@kernel
 def _wrap(a: float) -> float:
     return (a + math.pi) % TWO_PI - math.pi
 
 
-@njit(cache=True)
+@kernel
 def _hypot(a: float, b: float) -> float:
     """CPython's ``math.hypot`` of two floats (its ``vector_norm``: exact squares and sums,
     one correction step), to the bit; libm's hypot differs in the last bit now and then."""
@@ -136,7 +130,7 @@ def _hypot(a: float, b: float) -> float:
     return h / scale
 
 
-@njit(cache=True)
+@kernel
 def _integrals(w: float, T: float) -> tuple[float, float, float, float, float, float]:
     """``ctra.ctra_integrals``: (C0, S0, C1, S1, C2, S2)."""
     p = w * T
@@ -164,7 +158,7 @@ def _integrals(w: float, T: float) -> tuple[float, float, float, float, float, f
     return C0, S0, C1, S1, C2, S2
 
 
-@njit(cache=True)
+@kernel
 def _jacobian(S: np.ndarray, i: int, T: float) -> tuple[float, ...]:
     """``ctra.ctra_step``'s displacement (dx, dy) and its Jacobian's entries of rows 0-1
     (F[0, 2..5], F[1, 2..5]) at row i's mean over T [s]."""
@@ -185,7 +179,7 @@ def _jacobian(S: np.ndarray, i: int, T: float) -> tuple[float, ...]:
     return dx, dy, -dy, f03, f04, f05, dx, f13, f14, f15, c, s
 
 
-@njit(cache=True)
+@kernel
 def _predict(S: np.ndarray, RP: np.ndarray, CF: np.ndarray, i: int, t: float) -> None:
     """Row i to time t [s] (``CtraEkf._predict_to``: only forward): the CTRA step, then
     P = F P F' + Q, symmetrised."""
@@ -262,7 +256,7 @@ def _predict(S: np.ndarray, RP: np.ndarray, CF: np.ndarray, i: int, t: float) ->
     S[i, TS] = t
 
 
-@njit(cache=True)
+@kernel
 def _gain(S: np.ndarray, W: np.ndarray, i: int, s: float, innov: float) -> None:
     """Scalar update of row i given ph = P h' in W[0:10], s = h P h' + r and the innovation
     (``CtraEkf._gain``)."""
@@ -277,7 +271,7 @@ def _gain(S: np.ndarray, W: np.ndarray, i: int, s: float, innov: float) -> None:
             S[i, P + 10 * a + b] -= ka * W[b]
 
 
-@njit(cache=True)
+@kernel
 def _update_fix(S: np.ndarray, W: np.ndarray, i: int, zx: float, zy: float, r: float) -> None:
     """The 2-D fix update of row i with S^-1 in closed form (``CtraEkf._update_position``);
     stores the innovation and its covariance at :data:`INNOV`."""
@@ -303,7 +297,7 @@ def _update_fix(S: np.ndarray, W: np.ndarray, i: int, zx: float, zy: float, r: f
             S[i, P + 10 * a + b] -= _fma(k1, W[10 + b], k0 * W[b])
 
 
-@njit(cache=True)
+@kernel
 def _update_imu(
     S: np.ndarray, RP: np.ndarray, W: np.ndarray, i: int, yaw_rate: float, ax: float, yaw: float
 ) -> None:
@@ -381,7 +375,7 @@ def _update_imu(
         S[i, 2] = _wrap(S[i, 2])
 
 
-@njit(cache=True)
+@kernel
 def _init_row(
     S: np.ndarray,
     RP: np.ndarray,
@@ -407,7 +401,7 @@ def _init_row(
     S[i, READY] = 1.0
 
 
-@njit(cache=True)
+@kernel
 def _try_init(
     S: np.ndarray, RP: np.ndarray, CF: np.ndarray, i: int, t: float, x: float, y: float, r: float
 ) -> None:
@@ -431,7 +425,7 @@ def _try_init(
     _init_row(S, RP, i, t, x, y, math.atan2(y - y0, x - x0), v0, var_yaw, var_v, r)
 
 
-@njit(cache=True)
+@kernel
 def fix_rows(
     S: np.ndarray,
     RP: np.ndarray,
@@ -481,7 +475,7 @@ def fix_rows(
     return best
 
 
-@njit(cache=True)
+@kernel
 def imu_rows(
     S: np.ndarray,
     RP: np.ndarray,
@@ -507,7 +501,7 @@ def imu_rows(
         _update_imu(S, RP, W, i, yaw_rate, ax, yaw if use_yaw else math.nan)
 
 
-@njit(cache=True)
+@kernel
 def speed_rows(
     S: np.ndarray, RP: np.ndarray, CF: np.ndarray, W: np.ndarray, hi: int, t: float, v: float
 ) -> None:
@@ -527,7 +521,7 @@ def speed_rows(
         _gain(S, W, i, g * W[3] + vs * W[9] + r, v - g * vs)
 
 
-@njit(cache=True)
+@kernel
 def position(S: np.ndarray, i: int, t: float) -> tuple[float, float]:
     """Row i's answer for t [s] (``CtraEkf.position_at``): the CTRA extrapolation of its
     mean, or before initialisation the newest fix held (NaN: none)."""
@@ -549,7 +543,7 @@ def position(S: np.ndarray, i: int, t: float) -> tuple[float, float]:
     return x + (c * dxb - s * dyb), y + (s * dxb + c * dyb)
 
 
-@njit(cache=True)
+@kernel
 def covariance(S: np.ndarray, RP: np.ndarray, CF: np.ndarray, i: int, t: float) -> tuple:
     """(P_xx, P_xy, P_yy) [m^2] of row i (initialised) at t [s], the filter's own part
     (``CtraEkf.covariance_at`` with ``cov_scale`` 1, before the slow part): the position
@@ -587,7 +581,7 @@ def covariance(S: np.ndarray, RP: np.ndarray, CF: np.ndarray, i: int, t: float) 
     return 0.5 * (o00 + o00), 0.5 * (o01 + o10), 0.5 * (o11 + o11)
 
 
-@njit(cache=True)
+@kernel
 def shadow_distances(S: np.ndarray, n: int, t: float, x: float, y: float, out: np.ndarray) -> bool:
     """Distances [m] of the shadows' (rows n..2n-1) answers for t [s] to (x, y) [m] into
     ``out``; whether every one is finite."""

@@ -21,16 +21,16 @@ Python, paid once per fix by every filter that estimates its fix noise).
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
 
 from posbench.predictors._copying import copy_attrs
+from posbench.predictors._kernels import kernel
 
 #: the state array: the last three fixes ``(t, x, y)`` (oldest first), how many are held,
 #: the running mean of the samples [m^2] and their count
 _FIXES, _HELD, _MEAN, _COUNT = 0, 9, 10, 11
 
 
-@njit(cache=True)
+@kernel
 def observe_fix(
     st: np.ndarray,
     t: float,

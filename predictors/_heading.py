@@ -23,9 +23,9 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit
 
 from posbench.predictors._copying import copy_attrs
+from posbench.predictors._kernels import kernel
 
 #: the state array: heading [rad], its variance [rad^2], its time [s], the yaw integrated
 #: since the start [rad], the newest yaw rate [rad/s], the newest fix's time [s], and the
@@ -34,13 +34,13 @@ H, VAR, T, TURNED, RATE, FIX_T, A_T, A_X, A_Y, A_VAR, A_TURNED = range(11)
 TWO_PI = 2.0 * math.pi
 
 
-@njit(cache=True)
+@kernel
 def _wrap(a: float) -> float:
     """``_geometry.wrap_angle``: a [rad] wrapped to [-pi, pi)."""
     return (a + math.pi) % TWO_PI - math.pi
 
 
-@njit(cache=True)
+@kernel
 def _advance(st: np.ndarray, t: float, rate_psd: float, hold_psd: float) -> None:
     if not t > st[T]:
         if st[T] != st[T]:
@@ -58,7 +58,7 @@ def _advance(st: np.ndarray, t: float, rate_psd: float, hold_psd: float) -> None
     st[T] = t
 
 
-@njit(cache=True)
+@kernel
 def observe_rate(
     st: np.ndarray, t: float, yaw_rate: float, rate_psd: float, hold_psd: float
 ) -> None:
@@ -67,7 +67,7 @@ def observe_rate(
     st[RATE] = yaw_rate if math.isfinite(yaw_rate) else math.nan
 
 
-@njit(cache=True)
+@kernel
 def observe_fix(
     st: np.ndarray,
     t: float,
@@ -103,7 +103,7 @@ def observe_fix(
     st[A_T], st[A_X], st[A_Y], st[A_VAR], st[A_TURNED] = t, x, y, var, st[TURNED]
 
 
-@njit(cache=True)
+@kernel
 def heading_at(st: np.ndarray, t: float, rate_psd: float, hold_psd: float) -> tuple[float, float]:
     """:meth:`CourseHeading.heading` on the state array."""
     if st[H] != st[H]:

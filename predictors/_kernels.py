@@ -1,0 +1,78 @@
+"""Compiled kernels (numba), compiled when one first runs: numba is imported then.
+
+Why not ``numba.njit`` at import: numba and LLVM take ~70 MB of memory and ~0.5 s to
+import, and the compiled kernels ~40 MB more once loaded. A process that builds
+predictors without stepping a filter bank (``bench run``'s planning, which checks every
+option by building each predictor once, ``bench predictors``, a report) should not pay
+that: with the kernels compiled at import, the main process of a run over the shared data
+grew from 731 MB to 792 MB at its peak.
+
+Use: decorate a module's kernels with :func:`kernel`. The first call of any of them
+replaces every kernel of that module by ``numba.njit(cache=True)`` of it (in the
+module's namespace, where the kernels find one another and the callers find them, as
+``module.name``), after running the module's ``_numba_setup()`` if it has one (numba
+pieces that are not kernels, e.g. an intrinsic), then makes the call. Compiled code is
+cached beside the module (numba's ``cache=True``; numba falls back to a user cache folder
+where that is not writable), so a new process loads it instead of compiling again.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import Any, TypeVar, cast
+
+F = TypeVar("F", bound=Callable[..., Any])
+
+#: the attribute that marks a kernel's wrapper and holds the Python function
+SOURCE = "_kernel_source"
+
+
+def kernel(fn: F) -> F:
+    """Mark ``fn`` as a kernel of its module (module docstring)."""
+    namespace = fn.__globals__
+    name = fn.__name__
+
+    def first_call(*args: Any) -> Any:
+        compile_module(namespace)
+        return namespace[name](*args)
+
+    setattr(first_call, SOURCE, fn)
+    first_call.__name__ = name
+    first_call.__doc__ = fn.__doc__
+    first_call.__wrapped__ = fn  # type: ignore[attr-defined]
+    return cast(F, first_call)
+
+
+def compile_module(namespace: dict[str, Any]) -> None:
+    """Replace every kernel in a module's namespace by its numba dispatcher (lazy: each
+    compiles, or loads from the cache, at its first call)."""
+    from numba import njit
+
+    setup = namespace.get("_numba_setup")
+    if setup is not None:
+        setup()
+    for key, value in list(namespace.items()):
+        source = getattr(value, SOURCE, None)
+        if source is not None:
+            namespace[key] = njit(cache=True)(source)
+
+
+def fused_multiply_add() -> Any:
+    """A numba intrinsic ``fma(a, b, c)``: ``a * b + c`` of float64s rounded once (LLVM's
+    ``llvm.fma.f64``: the instruction where the CPU has one), for kernels that must round
+    as BLAS does (:mod:`~posbench.predictors._ctra_batch`). Imports numba."""
+    from llvmlite import ir  # type: ignore[import-untyped]
+    from numba import types
+    from numba.core import cgutils
+    from numba.extending import intrinsic
+
+    def typer(typingctx: Any, a: Any, b: Any, c: Any) -> Any:
+        def codegen(context: Any, builder: Any, signature: Any, args: Any) -> Any:
+            d = ir.DoubleType()
+            fnty = ir.FunctionType(d, [d, d, d])
+            fn = cgutils.get_or_insert_function(builder.module, fnty, "llvm.fma.f64")
+            return builder.call(fn, args)
+
+        return types.float64(types.float64, types.float64, types.float64), codegen
+
+    return intrinsic(typer)
