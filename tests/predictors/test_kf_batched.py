@@ -86,3 +86,22 @@ def test_rows_answer_as_the_members_on_shared_drives(
 ) -> None:
     for profile in ("native", "rtk"):
         assert_same_answers(shared_drives[which], dropouts, profile)
+
+
+def test_building_predictors_leaves_numba_unimported() -> None:
+    """The kernels compile when a bank first steps (predictors/_kernels.py): a process that
+    only builds predictors (bench run's planning) never pays numba's and LLVM's ~100 MB."""
+    import subprocess
+    import sys
+
+    code = (
+        "import sys\n"
+        "from posbench.predictors.registry import create\n"
+        "for name in ('cv', 'kf', 'ekf', 'lstm', 'hybrid'):\n"
+        "    create(name).reset()\n"
+        "print('numba' in sys.modules, 'llvmlite' in sys.modules)\n"
+    )
+    out = subprocess.run(
+        [sys.executable, "-c", code], capture_output=True, text=True, check=True, timeout=120
+    )
+    assert out.stdout.split() == ["False", "False"], out.stdout + out.stderr
