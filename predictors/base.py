@@ -64,6 +64,11 @@ class Predictor(ABC):
         """The predictor's configuration, recorded in results for reproducibility."""
         return {}
 
+    def warm_up(self) -> None:
+        """One-time start-up work done before a run's clock starts (loading compiled code,
+        say), so that no timed step pays it; the runner calls it once for each predictor it
+        builds. The default does nothing."""
+
     # optional seams of learned predictors: the defaults describe a predictor without a model
 
     def model_description(self) -> dict | None:

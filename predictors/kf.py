@@ -49,6 +49,7 @@ from posbench.predictors._ca_kalman import CaFilter2D, ca_noise_block, predict_c
 from posbench.predictors._copying import copy_attrs
 from posbench.predictors._geometry import check_config
 from posbench.predictors._heading import CourseHeading
+from posbench.predictors._kernels import warm_up_once
 from posbench.predictors.base import Predictor
 from posbench.predictors.filter_inputs import (
     AccelInput,
@@ -236,6 +237,11 @@ class LinearKalman(Predictor):
         new._course = copy.deepcopy(self._course, memo)
         new._bias_est = copy.deepcopy(self._bias_est, memo)
         return new
+
+    def warm_up(self) -> None:
+        """Load the kernels of its inputs (the fix-noise estimate, the heading tracker)
+        before a run's clock starts (:func:`~posbench.predictors._kernels.warm_up_once`)."""
+        warm_up_once(lambda: LinearKalman(**self.config()))
 
     #: the filter's mean / covariance algebra (the tests put a filterpy twin here)
     filter_core: type = CaFilter2D

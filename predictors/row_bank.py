@@ -26,6 +26,7 @@ from collections.abc import Callable
 import numpy as np
 
 from posbench.predictors._gnss_noise import GnssNoise
+from posbench.predictors._kernels import warm_up_once
 from posbench.predictors.base import Predictor
 
 #: a kernel filling ``out`` with the shadows' distances [m] to a fix (t, x, y) and saying
@@ -78,6 +79,11 @@ class RowBank(Predictor):
         self._score_due: tuple[float, float, float, int, int] | None = None
         #: whether any work is left for before the next observation (:meth:`_catch_up`)
         self._due = False
+
+    def warm_up(self) -> None:
+        """Load the kernels before a run's clock starts, on a bank of the same options
+        (:func:`~posbench.predictors._kernels.warm_up_once`)."""
+        warm_up_once(lambda: type(self)(**self.config()))
 
     @property
     def selected(self) -> str:

@@ -93,6 +93,7 @@ def run_drive(drive: Drive, cfg: RunConfig) -> DriveRun:
         pred = create(
             name, condition, tuning_file=cfg.tuning, **cfg.predictor_options.get(name, {})
         )
+        pred.warm_up()  # one-time start-up work (compiled kernels) off the clock
         gated = GatedPredictor(pred) if cfg.gate else None
         res = replay(pred if gated is None else gated, prep, cfg.horizon_s)
         if gated is not None:

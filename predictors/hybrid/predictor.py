@@ -225,6 +225,10 @@ class HybridPredictor(ModelFileSeams, Predictor):
         return self._t_fix, math.atan2(self._cs[1], self._cs[0])
 
     # ------------------------------------------------------------------ state
+    def warm_up(self) -> None:
+        """The prior's start-up work (its kernels) before a run's clock starts."""
+        self.kf.warm_up()
+
     def reset(self) -> None:
         self.kf.reset()
         self._fix = RowBuffer(FIX_CAP, 3)  # t, x, y of real fixes
