@@ -29,7 +29,7 @@ import math
 
 import numpy as np
 
-from posbench.predictors._kernels import kernel
+from posbench.predictors._kernels import hypot, kernel
 
 MX, MY, A, B, C = 0, 3, 6, 12, 18
 TS, YAW, YAW_T, IMU_T, IMU_M2 = 27, 28, 29, 30, 31
@@ -299,7 +299,7 @@ def _row_heading(
     if math.isfinite(yaw):
         return yaw
     vx, vy = S[i, 1], S[i, 4]
-    if math.hypot(vx, vy) > min_speed:
+    if hypot(vx, vy) > min_speed:
         return math.atan2(vy, vx)
     if math.isfinite(S[i, YAW]) and math.isfinite(yaw_rate):
         return S[i, YAW] + yaw_rate * (t - S[i, YAW_T])
@@ -416,7 +416,7 @@ def speed_rows(
         else:
             h = S[i, YAW]
             vx, vy = S[i, 1], S[i, 4]
-            if not math.isfinite(h) and math.hypot(vx, vy) > CF[MIN_SPEED]:
+            if not math.isfinite(h) and hypot(vx, vy) > CF[MIN_SPEED]:
                 h = math.atan2(vy, vx)
         if math.isfinite(h):
             _update_speed(S, i, math.cos(h), math.sin(h), v, r_v)
@@ -433,7 +433,7 @@ def shadow_distances(S: np.ndarray, n: int, t: float, x: float, y: float, out: n
         h = 0.5 * d * d
         px = S[i, 0] + S[i, 1] * d + S[i, 2] * h
         py = S[i, 3] + S[i, 4] * d + S[i, 5] * h
-        out[j] = math.hypot(x - px, y - py)
+        out[j] = hypot(x - px, y - py)
         if not out[j] < math.inf:
             ok = False
     return ok

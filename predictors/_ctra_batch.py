@@ -11,11 +11,11 @@ rounding included: where the members multiply matrices with numpy (BLAS: each en
 chain of fused multiply-adds in index order; here those of OpenBLAS's kernels for this
 CPU) the rows take the same fused chains (:func:`_fma`), skipping only the Jacobian's
 zeros, which add nothing; squares the members take as ``x ** 2`` go through libm's pow
-and distances through CPython's hypot. So the rows answer as the member objects do, to
-the bit where BLAS rounds as here (tests/predictors/test_ekf_batched.py, on every shared
-drive). That matters: a member that loses its heading (a fixes-only filter at a
-standstill) amplifies a difference in the last bit ~10x a second. The member objects
-stay the readable reference.
+and distances through CPython's hypot (:func:`~posbench.predictors._kernels.hypot`). So
+the rows answer as the member objects do, to the bit where BLAS rounds as here
+(tests/predictors/test_ekf_batched.py, on every shared drive). That matters: a member
+that loses its heading (a fixes-only filter at a standstill) amplifies a difference in
+the last bit ~10x a second. The member objects stay the readable reference.
 
 Layout. Row state ``S[i]`` (float64): the mean ``[x, y, yaw, v, yaw_rate, a, b_a, b_w,
 b_y, k_v]`` at :data:`X` (``CtraEkf.x``), the 10x10 covariance row-major at :data:`P`,
@@ -34,7 +34,7 @@ from typing import Any
 
 import numpy as np
 
-from posbench.predictors._kernels import fused_multiply_add, kernel
+from posbench.predictors._kernels import fused_multiply_add, hypot, kernel
 
 X, P = 0, 10
 TS, READY, FIX, YAW_MEAS, SPEED_MEAS, INNOV, LL = 110, 111, 112, 115, 116, 117, 122
@@ -95,39 +95,6 @@ def _numba_setup() -> None:
 @kernel
 def _wrap(a: float) -> float:
     return (a + math.pi) % TWO_PI - math.pi
-
-
-@kernel
-def _hypot(a: float, b: float) -> float:
-    """CPython's ``math.hypot`` of two floats (its ``vector_norm``: exact squares and sums,
-    one correction step), to the bit; libm's hypot differs in the last bit now and then."""
-    x, y = abs(a), abs(b)
-    if math.isinf(x) or math.isinf(y):
-        return math.inf
-    if x != x or y != y:
-        return math.nan
-    mx = max(x, y)
-    if mx == 0.0:
-        return mx
-    e = math.frexp(mx)[1]
-    if e < -1021:  # subnormal: not worth the rescaling
-        return math.hypot(a, b)
-    scale = math.ldexp(1.0, -e)
-    csum, frac1, frac2 = 1.0, 0.0, 0.0
-    for v in (x * scale, y * scale):
-        hi = v * v
-        s = csum + hi
-        frac1 += _fma(v, v, -hi)
-        frac2 += (csum - s) + hi
-        csum = s
-    h = math.sqrt(csum - 1.0 + (frac1 + frac2))
-    hi = -h * h
-    s = csum + hi
-    frac1 += _fma(-h, h, -hi)
-    frac2 += (csum - s) + hi
-    csum = s
-    h += (csum - 1.0 + (frac1 + frac2)) / (2.0 * h)
-    return h / scale
 
 
 @kernel
@@ -417,7 +384,7 @@ def _try_init(
     S[i, FIX], S[i, FIX + 1], S[i, FIX + 2] = t, x, y
     if not t > t0:
         return
-    d = _hypot(x - x0, y - y0)
+    d = hypot(x - x0, y - y0)
     var_yaw = min(4.0 * r / (d * d), PI2) if d > 0 else PI2
     if not v_known:
         v0 = d / (t - t0)
@@ -588,7 +555,7 @@ def shadow_distances(S: np.ndarray, n: int, t: float, x: float, y: float, out: n
     ok = True
     for j in range(n):
         px, py = position(S, n + j, t)
-        out[j] = _hypot(x - px, y - py)
+        out[j] = hypot(x - px, y - py)
         if not out[j] < math.inf:
             ok = False
     return ok

@@ -54,8 +54,15 @@ def compile_module(namespace: dict[str, Any]) -> None:
         setup()
     for key, value in list(namespace.items()):
         source = getattr(value, SOURCE, None)
-        if source is not None:
+        if source is None:
+            continue
+        home = source.__globals__
+        if home is namespace:
             namespace[key] = njit(cache=True)(source)
+        else:  # a kernel of another module, imported by name: its module's dispatcher
+            if getattr(home[source.__name__], SOURCE, None) is not None:
+                compile_module(home)
+            namespace[key] = home[source.__name__]
 
 
 def fused_multiply_add() -> Any:
@@ -106,3 +113,46 @@ def warm_up_once(make_probe: Callable[[], Any]) -> None:
             probe.position_at(tf + dt)
             probe.covariance_at(tf + dt)
     _WARM.add(cls)
+
+
+#: a * b + c rounded once, for :func:`hypot`; made by :func:`_numba_setup`
+_fma: Any = None
+
+
+def _numba_setup() -> None:
+    """:data:`_fma`, made when this module's kernels are compiled."""
+    global _fma
+    _fma = fused_multiply_add()
+
+
+@kernel
+def hypot(a: float, b: float) -> float:
+    """CPython's ``math.hypot`` of two floats (its ``vector_norm``: exact squares and sums,
+    one correction step), to the bit; libm's hypot differs in the last bit now and then."""
+    x, y = abs(a), abs(b)
+    if math.isinf(x) or math.isinf(y):
+        return math.inf
+    if x != x or y != y:
+        return math.nan
+    mx = max(x, y)
+    if mx == 0.0:
+        return mx
+    e = math.frexp(mx)[1]
+    if e < -1021:  # subnormal: not worth the rescaling
+        return math.hypot(a, b)
+    scale = math.ldexp(1.0, -e)
+    csum, frac1, frac2 = 1.0, 0.0, 0.0
+    for v in (x * scale, y * scale):
+        hi = v * v
+        s = csum + hi
+        frac1 += _fma(v, v, -hi)
+        frac2 += (csum - s) + hi
+        csum = s
+    h = math.sqrt(csum - 1.0 + (frac1 + frac2))
+    hi = -h * h
+    s = csum + hi
+    frac1 += _fma(-h, h, -hi)
+    frac2 += (csum - s) + hi
+    csum = s
+    h += (csum - 1.0 + (frac1 + frac2)) / (2.0 * h)
+    return h / scale

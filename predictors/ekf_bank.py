@@ -258,15 +258,7 @@ class EkfBank(RowBank):
             members.append(CtraEkf(j, w, **inputs, **self._member))
             # a fixes-only member takes no sensor input at all
             members.append(CtraEkf(j, w, gnss=inputs["gnss"], imu=None, speed=None, **self._member))
-        return ModelBank(
-            members,
-            self.labels,
-            memory_fixes=self.memory_fixes,
-            huber_k=self.huber_k,
-            cov_scale=self.cov_scale,
-            horizons_s=self.horizons_s,
-            horizon_memory=self.horizon_memory,
-        )
+        return self._model_bank(members)
 
     @classmethod
     def flat_options(cls) -> dict[str, Any]:

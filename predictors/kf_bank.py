@@ -380,15 +380,7 @@ class KalmanBank(RowBank):
         for j in self.jerk_psds:
             members.append(LinearKalman(j, **inputs, **prior, course=course, bias_estimator=bias))
             members.append(LinearKalman(j, gnss=inputs["gnss"], imu=None, speed=None, **prior))
-        return ModelBank(
-            members,
-            self.labels,
-            memory_fixes=self.memory_fixes,
-            huber_k=self.huber_k,
-            cov_scale=self.cov_scale,
-            horizons_s=self.horizons_s,
-            horizon_memory=self.horizon_memory,
-        )
+        return self._model_bank(members)
 
     @classmethod
     def flat_options(cls) -> dict[str, Any]:

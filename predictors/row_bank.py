@@ -21,12 +21,13 @@ Units: seconds, metres, ENU.
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 
 import numpy as np
 
 from posbench.predictors._gnss_noise import GnssNoise
 from posbench.predictors._kernels import warm_up_once
+from posbench.predictors.bank import ModelBank
 from posbench.predictors.base import Predictor
 
 #: a kernel filling ``out`` with the shadows' distances [m] to a fix (t, x, y) and saying
@@ -170,6 +171,20 @@ class RowBank(Predictor):
             if gap >= hs[i] and self._horizon_seen[i]:
                 return self.horizon_best[i]
         return self.best
+
+    def _model_bank(self, members: Sequence[Predictor]) -> ModelBank:
+        """``members`` (objects, in the rows' order) under a
+        :class:`~posbench.predictors.bank.ModelBank` with this bank's selection options:
+        the readable reference the rows answer as."""
+        return ModelBank(
+            members,
+            self.labels,
+            memory_fixes=self.memory_fixes,
+            huber_k=self.huber_k,
+            cov_scale=self.cov_scale,
+            horizons_s=self.horizons_s,
+            horizon_memory=self.horizon_memory,
+        )
 
     def fix_variance(self, sigma: float | None) -> float:
         """R per axis [m^2] of a fix stating ``sigma``, as the members weigh it."""

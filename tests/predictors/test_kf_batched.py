@@ -43,6 +43,8 @@ def assert_same_answers(drive: Drive, dropouts: str, profile: str, **options: An
         ok = np.isfinite(x)
         assert np.max(np.abs(x[ok] - y[ok]), initial=0.0) <= TOL_M, (drive.name, options)
     assert fast.scores.tolist() == pytest.approx(ref.scores, abs=1e-9)
+    hs = np.asarray(ref.horizon_scores).reshape(fast.horizon_scores.shape)
+    np.testing.assert_allclose(fast.horizon_scores, hs, rtol=0.0, atol=1e-9)
     assert fast.best == ref.best and fast.horizon_best == ref.horizon_best
 
 
