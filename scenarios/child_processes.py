@@ -189,8 +189,8 @@ class WorkerPool(ProcessPoolExecutor):
         for that thread): with the workers gone, this process holds the pipe's last write
         end, and closing it ends the wait (the pool is broken, as after a crash). The workers
         and that pipe are ``ProcessPoolExecutor`` internals (``_processes``,
-        ``_result_queue``: CPython 3.8 to 3.14), each read with a default: a version without
-        one skips that step."""
+        ``_result_queue``, ``_executor_manager_thread``: CPython 3.8 to 3.14), each read with a
+        default: a version without one skips that step."""
         workers = list((getattr(self, "_processes", None) or {}).values())
         results = getattr(self, "_result_queue", None)  # shutdown() forgets it
         self.shutdown(wait=False, cancel_futures=True)
@@ -200,6 +200,14 @@ class WorkerPool(ProcessPoolExecutor):
         writer = getattr(results, "_writer", None)
         if writer is not None:
             writer.close()
+        # the pool's manager thread, seeing the workers gone, closes its wake-up pipe; the
+        # interpreter's exit writes to that pipe unless it is closed (CPython 3.11's
+        # concurrent.futures._python_exit checks without the pool's lock): racing with the
+        # close, it printed "Exception ignored ... Bad file descriptor" after Ctrl-C. Waiting
+        # for the thread here (it ends at once: nothing is left to wait for) leaves no race.
+        manager = getattr(self, "_executor_manager_thread", None)
+        if manager is not None and manager.is_alive():
+            manager.join(timeout=5.0)
 
     def __exit__(
         self,
