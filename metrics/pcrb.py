@@ -1,0 +1,449 @@
+"""How well could any predictor do? The posterior Cramér-Rao bound (PCRB) of position.
+
+The bound (Tichavsky, Muravchik, Nehorai 1998) is for a predictor that knows the motion model
+and the noise of its inputs. The model, per axis (east and north independent and identical,
+local ENU metres, seconds):
+
+- state ``[p, v, a]`` [m, m/s, m/s^2], constant acceleration driven by white jerk of
+  spectral density ``q`` [m^2/s^5]: ``x(t + dt) = F(dt) x(t) + w``, ``w ~ N(0, Q(dt))``,
+  ``F(dt) = [[1, dt, dt^2/2], [0, 1, dt], [0, 0, 1]]``,
+  ``Q(dt) = q [[dt^5/20, dt^4/8, dt^3/6], [dt^4/8, dt^3/3, dt^2/2], [dt^3/6, dt^2/2, dt]]``
+  (the kf's ``ca_process_noise``);
+- a fix at ``t_k`` observes the position with white noise of variance ``R_k`` [m^2] per axis
+  (``H = [1, 0, 0]``); optionally an IMU sample at ``s_j`` observes the acceleration with
+  variance ``r_acc`` [m^2/s^4] per axis (``H = [0, 0, 1]``);
+- a prior ``N(., diag(prior_var))`` on the state at the first fix (default: nothing known
+  of the position, the kf's initial velocity and acceleration sigmas).
+
+**The recursion.** The information matrices (inverse bounds) at the observation times are
+``J_0 = P0^-1 + H' R_0^-1 H`` (``P0^-1``'s position entry 0 by default) and
+``J_k = (F J_{k-1}^-1 F' + Q)^-1 + H' R_k^-1 H`` with ``F``, ``Q`` over the interval since
+the previous observation. For this linear-Gaussian model
+the recursion is exactly the Kalman filter's covariance recursion, ``J_k^-1 = P_k`` (the
+information filter and the covariance filter are the same filter), so it is computed in the
+covariance form (predict, then the scalar update ``P - P H' H P / (H P H' + R)``), which needs
+no matrix inverse and keeps ``P`` symmetric; :func:`information_recursion` returns the ``J_k``
+themselves.
+
+**At a query.** Asked at ``t_issue`` (every observation at or before it known) for the
+position at ``t_query >= t_issue``, the bound on the position's error variance per axis is
+``[F(d) P_k F(d)' + Q(d)]_00`` with ``P_k`` after the newest observation at or before
+``t_issue`` and ``d = t_query - t_k``: the error variance of the best predictor given those
+observations (``t_issue = t_query``: a `now` query; ``t_issue`` = fix time, ``t_query`` =
+fix time + horizon: a `future` query). NaN before the first fix.
+
+**Mean error.** A Gaussian model makes the optimal estimator's error zero-mean Gaussian with
+covariance ``P`` and independent of the data; any other estimator's error is that plus a
+term that is a function of the data, so (Anderson's inequality) its mean Euclidean error is
+no smaller: :func:`mean_error_bound` (per-axis variance ``s^2``: ``s sqrt(pi/2)``) and
+:func:`mean_error_2d` (any 2x2 covariance: the mean of a Hoyt distribution) bound a
+predictor's mean error, not only its mean squared error. The bound holds for drives drawn
+from the model; on real drives it says what a predictor that knows the model's ``q`` and the
+fixes' noise would achieve, which :func:`jerk_psd_from_track` estimates from a reference
+track.
+
+**A receiver's slow error** (``predictors/_gnss_noise.py``: a fix's stated variance is a
+white part plus a slow part that wanders over seconds to minutes): the recursion takes the
+white part as ``R``; against an independent truth the slow part adds its variance to the
+bound (no fix can reveal it), against the receiver's own fixes it adds nothing
+(:func:`with_slow_error`).
+
+Pure numpy (scipy.special for the elliptic integral). Times [s] must be non-decreasing.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+#: default prior standard deviations of velocity [m/s] and acceleration [m/s^2] at the first
+#: fix (the kf's ``init_vel_sigma``, ``init_acc_sigma``); position: none (``inf``)
+PRIOR_VEL_SIGMA = 15.0
+PRIOR_ACC_SIGMA = 3.0
+#: the variance of the third difference at spacing h of a white-jerk position, / (q h^5)
+#: (the cardinal B-spline identity: the integral of N_3^2 is N_6(3) = 11/20)
+THIRD_DIFFERENCE_GAIN = 11.0 / 20.0
+
+#: what each figure means (the report's glossary collects these)
+DEFINITIONS = {
+    "PCRB": "posterior Cramér-Rao bound: the smallest error variance [m^2] per axis any "
+    "predictor can reach when it knows the motion model (constant acceleration, white jerk "
+    "of PSD q) and the noise of the fixes; for this linear-Gaussian model, the covariance of "
+    "the Kalman filter with the true q and fix noise, predicted to the query time.",
+    "bound mean error": "the mean Euclidean error [m] of a zero-mean 2-D Gaussian error "
+    "with the PCRB's covariance (per-axis sigma s: s sqrt(pi/2)); no predictor's mean "
+    "error is lower on drives drawn from the model.",
+    "jerk PSD q": "spectral density [m^2/s^5] of the white jerk of the constant-acceleration "
+    "model, estimated from the reference track's third differences on a uniform grid "
+    "(mean square / (11/20 dt^5)).",
+    "slow error floor": "the variance [m^2] per axis of a receiver's slow error (the part of "
+    "its stated accuracy that is not white), added to the bound where an independent "
+    "truth is the reference; none where the receiver's own fixes are.",
+}
+
+#: the six upper entries of a symmetric 3x3 per axis, in the order the loops use
+_UPPER = ((0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2))
+_POSITION, _ACCELERATION = 0, 1
+
+
+def transition_matrix(dt: np.ndarray | float) -> np.ndarray:
+    """``F(dt)`` (..., 3, 3) of the constant-acceleration model over ``dt`` [s]."""
+    d = np.asarray(dt, dtype=float)
+    f = np.zeros((*d.shape, 3, 3))
+    f[..., 0, 0] = f[..., 1, 1] = f[..., 2, 2] = 1.0
+    f[..., 0, 1] = f[..., 1, 2] = d
+    f[..., 0, 2] = 0.5 * d * d
+    return f
+
+
+def process_noise(dt: np.ndarray | float, q: float) -> np.ndarray:
+    """``Q(dt)`` (..., 3, 3) [m^2, m^2/s, ...] of white jerk of PSD ``q`` [m^2/s^5] over
+    ``dt`` [s] (the kf's ``ca_process_noise``, per axis)."""
+    d = np.asarray(dt, dtype=float)
+    d2 = d * d
+    d3 = d2 * d
+    blk = (
+        (d3 * d2 / 20.0, d2 * d2 / 8.0, d3 / 6.0),
+        (d2 * d2 / 8.0, d3 / 3.0, d2 / 2.0),
+        (d3 / 6.0, d2 / 2.0, d),
+    )
+    out = np.empty((*d.shape, 3, 3))
+    for i in range(3):
+        for j in range(3):
+            out[..., i, j] = q * blk[i][j]
+    return out
+
+
+def default_prior() -> tuple[float, float, float]:
+    """The default prior variances at the first fix: position ``inf`` (nothing known before
+    the first fix), velocity :data:`PRIOR_VEL_SIGMA` ^2 [m^2/s^2], acceleration
+    :data:`PRIOR_ACC_SIGMA` ^2 [m^2/s^4]. With the first fix, ``J_0 = diag(1/R_0, 1/15^2,
+    1/3^2)``: the kf's own start (``kf.init``), so a kf with the true ``q`` and ``R``
+    reports the bound itself."""
+    return (math.inf, PRIOR_VEL_SIGMA**2, PRIOR_ACC_SIGMA**2)
+
+
+# ---------------------------------------------------------------------- the recursion
+def _check_times(t: np.ndarray, what: str) -> None:
+    if t.ndim != 1 or not np.all(np.isfinite(t)):
+        raise ValueError(f"{what}: a 1-D array of finite times [s]")
+    if t.size > 1 and np.any(np.diff(t) < 0):
+        raise ValueError(f"{what}: times must be non-decreasing")
+
+
+def _variances(r: np.ndarray | float, n: int, what: str) -> np.ndarray:
+    v = np.broadcast_to(np.asarray(r, dtype=float), (n,))
+    if not np.all(np.isfinite(v) & (v > 0)):
+        raise ValueError(f"{what}: variances must be finite and positive")
+    return v
+
+
+def _events(
+    t_fix: np.ndarray,
+    r_var: np.ndarray | float,
+    t_acc: np.ndarray | None,
+    r_acc: np.ndarray | float | None,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Observation times, kinds (position / acceleration) and variances, in time order (a fix
+    before an IMU sample at the same time); IMU samples before the first fix left out."""
+    t = np.asarray(t_fix, dtype=float)
+    _check_times(t, "t_fix")
+    if t.size == 0:
+        raise ValueError("t_fix: no fix")
+    r = _variances(r_var, t.size, "r_var")
+    if t_acc is None:
+        return t, np.full(t.size, _POSITION), r
+    if r_acc is None:
+        raise ValueError("r_acc: the IMU's acceleration variance is needed with t_acc")
+    ta = np.asarray(t_acc, dtype=float)
+    _check_times(ta, "t_acc")
+    ra = _variances(r_acc, ta.size, "r_acc")
+    keep = ta >= t[0]
+    times = np.concatenate([t, ta[keep]])
+    kinds = np.concatenate([np.full(t.size, _POSITION), np.full(int(keep.sum()), _ACCELERATION)])
+    order = np.lexsort((kinds, times))
+    return times[order], kinds[order], np.concatenate([r, ra[keep]])[order]
+
+
+def _recursion(
+    times: np.ndarray,
+    kinds: np.ndarray,
+    r: np.ndarray,
+    q: float,
+    prior_var: tuple[float, float, float],
+) -> np.ndarray:
+    """``P_k = J_k^-1`` (n, 6) after each observation, as the six upper entries (00, 01, 02,
+    11, 12, 22). One step per observation in Python floats: ~1 us each, far cheaper than
+    3x3 numpy calls (~10 us each); the recursion is sequential, so it does not vectorise."""
+    if not q >= 0 or not math.isfinite(q):
+        raise ValueError(f"q: a finite jerk PSD >= 0 [m^2/s^5], not {q}")
+    if len(prior_var) != 3 or not all(v > 0 and not math.isnan(v) for v in prior_var):
+        raise ValueError("prior_var: three positive variances (p, v, a; inf: nothing known)")
+    if not (math.isfinite(prior_var[1]) and math.isfinite(prior_var[2])):
+        raise ValueError("prior_var: the velocity and acceleration variances must be finite")
+    # the first observation is the first fix: with a diagonal prior only the position moves,
+    # a -> (1/a + 1/r)^-1 (a = inf: r)
+    r0, a0 = float(r[0]), float(prior_var[0])
+    a = r0 if math.isinf(a0) else a0 * r0 / (a0 + r0)
+    b, c, d, e, f = 0.0, 0.0, float(prior_var[1]), 0.0, float(prior_var[2])
+    t_prev = float(times[0])
+    out = [(a, b, c, d, e, f)]
+    steps = zip(times[1:].tolist(), kinds[1:].tolist(), r[1:].tolist(), strict=True)
+    for t, kind, rv in steps:
+        h = t - t_prev
+        if h > 0.0:
+            g = 0.5 * h * h
+            # M = F P, rows m0, m1 (m2 = P's last row); then F P F' + Q
+            m00, m01, m02 = a + h * b + g * c, b + h * d + g * e, c + h * e + g * f
+            m11, m12 = d + h * e, e + h * f
+            h2 = h * h
+            h3 = h2 * h
+            a = m00 + h * m01 + g * m02 + q * h3 * h2 / 20.0
+            b = m01 + h * m02 + q * h2 * h2 / 8.0
+            c = m02 + q * h3 / 6.0
+            d = m11 + h * m12 + q * h3 / 3.0
+            e = m12 + q * h2 / 2.0
+            f = f + q * h
+            t_prev = t
+        if kind == _POSITION:  # H = [1, 0, 0]
+            s = a + rv
+            a, b, c, d, e, f = (
+                a - a * a / s,
+                b - a * b / s,
+                c - a * c / s,
+                d - b * b / s,
+                e - b * c / s,
+                f - c * c / s,
+            )
+        else:  # H = [0, 0, 1]
+            s = f + rv
+            a, b, c, d, e, f = (
+                a - c * c / s,
+                b - c * e / s,
+                c - c * f / s,
+                d - e * e / s,
+                e - e * f / s,
+                f - f * f / s,
+            )
+        out.append((a, b, c, d, e, f))
+    return np.array(out, dtype=float).reshape(-1, 6)
+
+
+def _full(upper: np.ndarray) -> np.ndarray:
+    """(n, 6) upper entries -> (n, 3, 3) symmetric matrices."""
+    m = np.empty((upper.shape[0], 3, 3))
+    for k, (i, j) in enumerate(_UPPER):
+        m[:, i, j] = m[:, j, i] = upper[:, k]
+    return m
+
+
+def _prior(prior_var: tuple[float, float, float] | None) -> tuple[float, float, float]:
+    return default_prior() if prior_var is None else prior_var
+
+
+def filtered_bound(
+    t_fix: np.ndarray,
+    r_var: np.ndarray | float,
+    q: float,
+    prior_var: tuple[float, float, float] | None = None,
+) -> np.ndarray:
+    """The PCRB ``J_k^-1`` (n, 3, 3) per axis [m^2, m^2/s, ...] of the state ``[p, v, a]``
+    just after each fix (the filtered bound; see the module docstring).
+
+    ``t_fix`` (n,) [s], non-decreasing; ``r_var`` [m^2] per axis, one or one per fix;
+    ``q`` [m^2/s^5]; ``prior_var``: the prior's diagonal at the first fix (position [m^2],
+    velocity [m^2/s^2], acceleration [m^2/s^4]), default :func:`default_prior`.
+    """
+    times, kinds, r = _events(np.asarray(t_fix, dtype=float), r_var, None, None)
+    return _full(_recursion(times, kinds, r, q, _prior(prior_var)))
+
+
+def information_recursion(
+    t_fix: np.ndarray,
+    r_var: np.ndarray | float,
+    q: float,
+    prior_var: tuple[float, float, float] | None = None,
+) -> np.ndarray:
+    """The information matrices ``J_k`` (n, 3, 3) per axis at each fix:
+    ``J_0 = P0^-1 + H' R_0^-1 H``, ``J_k = (F J_{k-1}^-1 F' + Q)^-1 + H' R_k^-1 H``,
+    ``H = [1, 0, 0]``; the inverse of :func:`filtered_bound` (same arguments), which computes
+    the same recursion in the covariance form."""
+    j: np.ndarray = np.linalg.inv(filtered_bound(t_fix, r_var, q, prior_var))
+    return j
+
+
+def _at_queries(
+    times: np.ndarray,
+    upper: np.ndarray,
+    q: float,
+    t_query: np.ndarray,
+    t_issue: np.ndarray | None,
+) -> np.ndarray:
+    """``[F(d) P_k F(d)' + Q(d)]_00`` per query, vectorised (see the module docstring)."""
+    tq = np.asarray(t_query, dtype=float)
+    ti = tq if t_issue is None else np.broadcast_to(np.asarray(t_issue, dtype=float), tq.shape)
+    if np.any(tq < ti):
+        raise ValueError("t_query before t_issue: the bound is for predictions, not smoothing")
+    k = np.searchsorted(times, ti, side="right") - 1
+    known = k >= 0
+    p = upper[np.where(known, k, 0)]
+    d = np.where(known, tq - times[np.where(known, k, 0)], 0.0)
+    d2 = d * d
+    var = (
+        p[..., 0]
+        + 2.0 * d * p[..., 1]
+        + d2 * (p[..., 2] + p[..., 3])
+        + d2 * d * p[..., 4]
+        + 0.25 * d2 * d2 * p[..., 5]
+        + q * d2 * d2 * d / 20.0
+    )
+    return np.where(known, var, np.nan)
+
+
+def position_variance_bound(
+    t_fix: np.ndarray,
+    r_var: np.ndarray | float,
+    q: float,
+    t_query: np.ndarray,
+    *,
+    t_issue: np.ndarray | None = None,
+    prior_var: tuple[float, float, float] | None = None,
+) -> np.ndarray:
+    """The PCRB [m^2] per axis on the position at each ``t_query`` [s], asked at
+    ``t_issue`` [s] (default: ``t_query``, a `now` query) knowing the fixes at or before it.
+
+    ``[F(d) P_k F(d)' + Q(d)]_00``, ``P_k`` the filtered bound after the newest fix at or
+    before ``t_issue``, ``d = t_query - t_k``; NaN before the first fix. ``t_query`` and
+    ``t_issue`` (same shape, ``t_query >= t_issue``) in any order; other arguments as
+    :func:`filtered_bound`. One recursion step per fix, then vectorised over the queries.
+    """
+    times, kinds, r = _events(np.asarray(t_fix, dtype=float), r_var, None, None)
+    upper = _recursion(times, kinds, r, q, _prior(prior_var))
+    return _at_queries(times, upper, q, t_query, t_issue)
+
+
+def position_variance_bound_with_acceleration(
+    t_fix: np.ndarray,
+    r_var: np.ndarray | float,
+    q: float,
+    t_query: np.ndarray,
+    t_acc: np.ndarray,
+    r_acc: np.ndarray | float,
+    *,
+    t_issue: np.ndarray | None = None,
+    prior_var: tuple[float, float, float] | None = None,
+) -> np.ndarray:
+    """:func:`position_variance_bound` for a predictor that also has an IMU: at each of
+    ``t_acc`` [s] (non-decreasing) the acceleration per axis is observed with variance
+    ``r_acc`` [m^2/s^4] (one or one per sample; ``H = [0, 0, 1]``; a known input is an
+    observation of the state's acceleration). The recursion runs over fixes and IMU samples
+    together, from the first fix (IMU samples before it are left out); a query uses the
+    newest observation of either kind at or before its ``t_issue``. Never above the
+    fixes-only bound; equal to it as ``r_acc`` grows without bound.
+    """
+    times, kinds, r = _events(np.asarray(t_fix, dtype=float), r_var, t_acc, r_acc)
+    upper = _recursion(times, kinds, r, q, _prior(prior_var))
+    return _at_queries(times, upper, q, t_query, t_issue)
+
+
+def with_slow_error(var: np.ndarray, slow_var: float, *, independent_truth: bool) -> np.ndarray:
+    """The bound ``var`` [m^2] per axis with a receiver's slow error (variance ``slow_var``
+    [m^2] per axis; ``predictors/_gnss_noise.py``: the stated total minus the white part).
+
+    The recursion takes the fixes' white part as their noise ``R``. A slow error shifts every
+    fix of a stretch alike, so the fixes cannot tell it from the motion: against an
+    **independent truth** (``independent_truth=True``, e.g. a survey-grade INS) it adds its
+    whole variance, ``var + slow_var`` (exact for an error that stays constant over the
+    stretch and a wide prior on position; a slow error of correlation time far beyond the
+    horizon keeps its stationary variance, as in the kf). Against the **receiver's own
+    fixes** as the reference (``independent_truth=False``), the reference carries the same
+    slow error: nothing is added.
+    """
+    v = np.asarray(var, dtype=float)
+    if not (math.isfinite(slow_var) and slow_var >= 0):
+        raise ValueError(f"slow_var: a finite variance >= 0 [m^2], not {slow_var}")
+    out: np.ndarray = v + slow_var if independent_truth else v.copy()
+    return out
+
+
+# ------------------------------------------------------------------------ mean error
+def mean_error_bound(var: np.ndarray | float) -> np.ndarray:
+    """Mean Euclidean error [m] of a zero-mean 2-D Gaussian with per-axis variance ``var``
+    [m^2], axes independent: ``sqrt(var) sqrt(pi / 2)`` (the Rayleigh mean). NaN stays NaN."""
+    v = np.asarray(var, dtype=float)
+    out: np.ndarray = np.sqrt(v) * math.sqrt(math.pi / 2.0)
+    return out
+
+
+def mean_error_2d(cov: np.ndarray) -> np.ndarray:
+    """Mean Euclidean error [m] of a zero-mean 2-D Gaussian of covariance ``cov`` (N, 3) =
+    (xx, xy, yy) [m^2] per row (calibration's layout): the mean of a Hoyt distribution,
+    ``sqrt(2 l1 / pi) E(1 - l2 / l1)`` with ``l1 >= l2`` the covariance's eigenvalues and
+    ``E(m)`` the complete elliptic integral of the second kind (parameter ``m``); equals
+    :func:`mean_error_bound` when ``xx = yy``, ``xy = 0``. NaN where not finite or not
+    positive semi-definite."""
+    from scipy.special import ellipe
+
+    c = np.asarray(cov, dtype=float).reshape(-1, 3)
+    xx, xy, yy = c[:, 0], c[:, 1], c[:, 2]
+    half_tr = 0.5 * (xx + yy)
+    rad = np.sqrt(0.25 * (xx - yy) ** 2 + xy * xy)
+    l1, l2 = half_tr + rad, half_tr - rad
+    ok = np.isfinite(l1) & np.isfinite(l2) & (l2 >= -1e-12 * np.abs(l1))
+    with np.errstate(invalid="ignore", divide="ignore"):
+        m = np.where(l1 > 0, 1.0 - np.clip(l2, 0.0, None) / np.where(l1 > 0, l1, 1.0), 0.0)
+        mean = np.sqrt(2.0 * np.clip(l1, 0.0, None) / math.pi) * ellipe(np.clip(m, 0.0, 1.0))
+    out: np.ndarray = np.where(ok, mean, np.nan)
+    return out
+
+
+# ------------------------------------------------------------------- q from a track
+def jerk_psd_from_track(
+    t: np.ndarray,
+    x: np.ndarray,
+    y: np.ndarray,
+    *,
+    dt: float | None = None,
+    noise_var: float = 0.0,
+) -> float:
+    """The white-jerk PSD ``q`` [m^2/s^5] that explains a reference track's own motion.
+
+    The track (``t`` [s] non-decreasing, ``x``, ``y`` [m] ENU) is resampled by linear
+    interpolation on a uniform grid of spacing ``dt`` [s] (default: its median sampling
+    interval, so a uniform track is used as it is). Under the model, the third difference
+    of positions ``p_{i+3} - 3 p_{i+2} + 3 p_{i+1} - p_i`` has variance
+    ``11/20 q dt^5`` (:data:`THIRD_DIFFERENCE_GAIN`) per axis, whatever the velocity and
+    acceleration; so ``q = mean(third difference^2 over both axes) / (11/20 dt^5)``.
+    Differences that span a gap of the track longer than ``2 dt`` are left out (the
+    interpolation would draw a straight line through it). White position noise of variance
+    ``noise_var`` [m^2] per axis adds ``20 noise_var`` to each squared difference; it is
+    subtracted (0 for a truth track). Real jerk is not white, so ``q`` depends on ``dt``:
+    take ``dt`` near the fix interval the bound is used at. NaN with fewer than 4 grid
+    points; never below 0.
+    """
+    tt = np.asarray(t, dtype=float)
+    _check_times(tt, "t")
+    xy = np.column_stack([np.asarray(x, dtype=float), np.asarray(y, dtype=float)])
+    good = np.isfinite(xy).all(axis=1)
+    tt, xy = tt[good], xy[good]
+    if tt.size < 4 or tt[-1] <= tt[0]:
+        return math.nan
+    step = float(np.median(np.diff(tt))) if dt is None else float(dt)
+    if not step > 0:
+        raise ValueError(f"dt: a positive grid spacing [s], not {step}")
+    n = int(math.floor((tt[-1] - tt[0]) / step + 1e-9)) + 1
+    if n < 4:
+        return math.nan
+    grid = tt[0] + step * np.arange(n)
+    px, py = np.interp(grid, tt, xy[:, 0]), np.interp(grid, tt, xy[:, 1])
+    # the track's own interval around each grid point; a gap > 2 dt invalidates the point
+    idx = np.clip(np.searchsorted(tt, grid, side="left"), 1, tt.size - 1)
+    ok = (tt[idx] - tt[idx - 1]) <= 2.0 * step
+    ok |= np.isin(grid, tt)  # a grid point on a sample needs no interpolation
+    d3x, d3y = np.diff(px, 3), np.diff(py, 3)
+    valid = ok[:-3] & ok[1:-2] & ok[2:-1] & ok[3:]
+    if not valid.any():
+        return math.nan
+    ms = 0.5 * float(np.mean(d3x[valid] ** 2) + np.mean(d3y[valid] ** 2))
+    return max(0.0, (ms - 20.0 * noise_var) / (THIRD_DIFFERENCE_GAIN * step**5))
