@@ -29,7 +29,7 @@ import math
 
 import numpy as np
 
-from posbench.predictors._kernels import hypot, kernel
+from posbench.predictors._kernels import huber_log_likelihood, hypot, kernel, update_scores
 
 MX, MY, A, B, C = 0, 3, 6, 12, 18
 TS, YAW, YAW_T, IMU_T, IMU_M2 = 27, 28, 29, 30, 31
@@ -253,7 +253,6 @@ def fix_rows(
     (:meth:`~posbench.predictors.bank.ModelBank._log_likelihood`), update. Then the scores:
     ``keep`` x scores + likelihoods where every row scored; returns the best row, or -1
     when not every row scored (the scores stand)."""
-    every = True
     for i in range(n):
         _predict(S, i, t, RP[i, PSD])
         ex = x - S[i, 0]
@@ -266,28 +265,9 @@ def fix_rows(
         S[i, INNOV + 2] = a
         S[i, INNOV + 3] = b
         S[i, INNOV + 4] = d
-        det = a * d - b * b
-        if det > 0.0:
-            nis = (d * ex * ex - 2.0 * b * ex * ey + a * ey * ey) / det
-            if nis <= huber_k * huber_k:
-                rho = nis
-            else:
-                rho = 2.0 * huber_k * math.sqrt(nis) - huber_k * huber_k
-            ll = -0.5 * (rho + math.log(det))
-        else:
-            ll = math.nan
-        S[i, LL] = ll
-        if not ll == ll:
-            every = False
+        S[i, LL] = huber_log_likelihood(ex, ey, a, b, d, huber_k)
         _update_pair(S, i, 0, x, y, r)
-    if not every:
-        return -1
-    best = 0
-    for i in range(n):
-        scores[i] = keep * scores[i] + S[i, LL]
-        if scores[i] > scores[best]:
-            best = i
-    return best
+    return update_scores(S, n, LL, scores, keep)
 
 
 @kernel

@@ -34,7 +34,13 @@ from typing import Any
 
 import numpy as np
 
-from posbench.predictors._kernels import fused_multiply_add, hypot, kernel
+from posbench.predictors._kernels import (
+    fused_multiply_add,
+    huber_log_likelihood,
+    hypot,
+    kernel,
+    update_scores,
+)
 
 X, P = 0, 10
 TS, READY, FIX, YAW_MEAS, SPEED_MEAS, INNOV, LL = 110, 111, 112, 115, 116, 117, 122
@@ -411,35 +417,17 @@ def fix_rows(
     update, scores; returns the best row or -1); a row not yet initialised tries to
     (``CtraEkf._try_init``) and leaves the scores as they stand."""
     k = CF[HUBER_K]
-    every = True
     for i in range(n):
         if S[i, READY] == 0.0:
             _try_init(S, RP, CF, i, t, x, y, r)
             S[i, LL] = math.nan
-            every = False
             continue
         _predict(S, RP, CF, i, t)
         _update_fix(S, W, i, x, y, r)
         ex, ey = S[i, INNOV], S[i, INNOV + 1]
         a, b, d = S[i, INNOV + 2], S[i, INNOV + 3], S[i, INNOV + 4]
-        det = a * d - b * b
-        if det > 0.0:
-            nis = (d * ex * ex - 2.0 * b * ex * ey + a * ey * ey) / det
-            rho = nis if nis <= k * k else 2.0 * k * math.sqrt(nis) - k * k
-            ll = -0.5 * (rho + math.log(det))
-        else:
-            ll = math.nan
-        S[i, LL] = ll
-        if not ll == ll:
-            every = False
-    if not every:
-        return -1
-    best = 0
-    for i in range(n):
-        scores[i] = keep * scores[i] + S[i, LL]
-        if scores[i] > scores[best]:
-            best = i
-    return best
+        S[i, LL] = huber_log_likelihood(ex, ey, a, b, d, k)
+    return update_scores(S, n, LL, scores, keep)
 
 
 @kernel

@@ -156,3 +156,33 @@ def hypot(a: float, b: float) -> float:
     csum = s
     h += (csum - 1.0 + (frac1 + frac2)) / (2.0 * h)
     return h / scale
+
+
+@kernel
+def huber_log_likelihood(ex: float, ey: float, a: float, b: float, d: float, k: float) -> float:
+    """:meth:`~posbench.predictors.bank.ModelBank._log_likelihood` of a fix's innovation
+    ``(ex, ey)`` [m] with covariance ``[[a, b], [b, d]]`` [m^2], Huber k ``k``; NaN where the
+    covariance is not positive definite."""
+    det = a * d - b * b
+    if not det > 0.0:
+        return math.nan
+    nis = (d * ex * ex - 2.0 * b * ex * ey + a * ey * ey) / det
+    rho = nis if nis <= k * k else 2.0 * k * math.sqrt(nis) - k * k
+    return -0.5 * (rho + math.log(det))
+
+
+@kernel
+def update_scores(S: Any, n: int, ll: int, scores: Any, keep: float) -> int:
+    """The bank's scores after a fix (:class:`~posbench.predictors.bank.ModelBank`): where
+    every member row 0..n-1 has a likelihood in column ``ll`` of ``S``, ``keep`` x score +
+    likelihood, and the best row (the first of the highest); else -1, the scores as they
+    stand."""
+    for i in range(n):
+        if not S[i, ll] == S[i, ll]:
+            return -1
+    best = 0
+    for i in range(n):
+        scores[i] = keep * scores[i] + S[i, ll]
+        if scores[i] > scores[best]:
+            best = i
+    return best
