@@ -40,7 +40,8 @@ no smaller: :func:`mean_error_bound` (per-axis variance ``s^2``: ``s sqrt(pi/2)`
 predictor's mean error, not only its mean squared error. The bound holds for drives drawn
 from the model; on real drives it says what a predictor that knows the model's ``q`` and the
 fixes' noise would achieve, which :func:`jerk_psd_from_track` estimates from a reference
-track.
+track (:func:`jerk_psd_profile`: as it varies along the track; ``q`` may be such a profile,
+:data:`JerkPsd`, each interval of the recursion and each query then taking its own).
 
 **A receiver's slow error** (``predictors/_gnss_noise.py``: a fix's stated variance is a
 white part plus a slow part that wanders over seconds to minutes): the recursion takes the
@@ -76,11 +77,17 @@ DEFINITIONS = {
     "error is lower on drives drawn from the model.",
     "jerk PSD q": "spectral density [m^2/s^5] of the white jerk of the constant-acceleration "
     "model, estimated from the reference track's third differences on a uniform grid "
-    "(mean square / (11/20 dt^5)).",
+    "(mean square / (11/20 dt^5)); as a profile along the track, the same in a moving "
+    "window.",
     "slow error floor": "the variance [m^2] per axis of a receiver's slow error (the part of "
     "its stated accuracy that is not white), added to the bound where an independent "
     "truth is the reference; none where the receiver's own fixes are.",
 }
+
+#: the jerk PSD q [m^2/s^5] the bound takes: one value for the whole drive, or a profile
+#: ``(times [s], values [m^2/s^5])`` (:func:`jerk_psd_profile`): an interval between two
+#: instants takes the profile at its middle (linear interpolation, held beyond its ends)
+JerkPsd = float | tuple[np.ndarray, np.ndarray]
 
 #: the six upper entries of a symmetric 3x3 per axis, in the order the loops use
 _UPPER = ((0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2))
@@ -166,18 +173,34 @@ def _events(
     return times[order], kinds[order], np.concatenate([r, ra[keep]])[order]
 
 
+def _q_between(q: JerkPsd, t0: np.ndarray, t1: np.ndarray) -> np.ndarray:
+    """q [m^2/s^5] over each interval ``(t0, t1)`` [s]: the one value, or the profile at the
+    interval's middle (:data:`JerkPsd`)."""
+    shape = np.broadcast(np.asarray(t0), np.asarray(t1)).shape
+    if isinstance(q, tuple):
+        tq, vq = (np.asarray(a, dtype=float) for a in q)
+        if tq.ndim != 1 or tq.shape != vq.shape or tq.size == 0:
+            raise ValueError("q: a profile is (times, values), two 1-D arrays of one length")
+        if not (np.all(np.isfinite(vq)) and np.all(vq >= 0) and np.all(np.isfinite(tq))):
+            raise ValueError("q: a profile's values must be finite jerk PSDs >= 0 [m^2/s^5]")
+        mid: np.ndarray = np.interp(0.5 * (np.asarray(t0) + np.asarray(t1)), tq, vq)
+        return mid
+    if not q >= 0 or not math.isfinite(q):
+        raise ValueError(f"q: a finite jerk PSD >= 0 [m^2/s^5], not {q}")
+    return np.full(shape, float(q))
+
+
 def _recursion(
     times: np.ndarray,
     kinds: np.ndarray,
     r: np.ndarray,
-    q: float,
+    q: JerkPsd,
     prior_var: tuple[float, float, float],
 ) -> np.ndarray:
     """``P_k = J_k^-1`` (n, 6) after each observation, as the six upper entries (00, 01, 02,
     11, 12, 22). One step per observation in Python floats: ~1 us each, far cheaper than
     3x3 numpy calls (~10 us each); the recursion is sequential, so it does not vectorise."""
-    if not q >= 0 or not math.isfinite(q):
-        raise ValueError(f"q: a finite jerk PSD >= 0 [m^2/s^5], not {q}")
+    q_steps = _q_between(q, times[:-1], times[1:])
     if len(prior_var) != 3 or not all(v > 0 and not math.isnan(v) for v in prior_var):
         raise ValueError("prior_var: three positive variances (p, v, a; inf: nothing known)")
     if not (math.isfinite(prior_var[1]) and math.isfinite(prior_var[2])):
@@ -189,8 +212,10 @@ def _recursion(
     b, c, d, e, f = 0.0, 0.0, float(prior_var[1]), 0.0, float(prior_var[2])
     t_prev = float(times[0])
     out = [(a, b, c, d, e, f)]
-    steps = zip(times[1:].tolist(), kinds[1:].tolist(), r[1:].tolist(), strict=True)
-    for t, kind, rv in steps:
+    steps = zip(
+        times[1:].tolist(), kinds[1:].tolist(), r[1:].tolist(), q_steps.tolist(), strict=True
+    )
+    for t, kind, rv, qk in steps:
         h = t - t_prev
         if h > 0.0:
             g = 0.5 * h * h
@@ -199,12 +224,12 @@ def _recursion(
             m11, m12 = d + h * e, e + h * f
             h2 = h * h
             h3 = h2 * h
-            a = m00 + h * m01 + g * m02 + q * h3 * h2 / 20.0
-            b = m01 + h * m02 + q * h2 * h2 / 8.0
-            c = m02 + q * h3 / 6.0
-            d = m11 + h * m12 + q * h3 / 3.0
-            e = m12 + q * h2 / 2.0
-            f = f + q * h
+            a = m00 + h * m01 + g * m02 + qk * h3 * h2 / 20.0
+            b = m01 + h * m02 + qk * h2 * h2 / 8.0
+            c = m02 + qk * h3 / 6.0
+            d = m11 + h * m12 + qk * h3 / 3.0
+            e = m12 + qk * h2 / 2.0
+            f = f + qk * h
             t_prev = t
         if kind == _POSITION:  # H = [1, 0, 0]
             s = a + rv
@@ -245,15 +270,16 @@ def _prior(prior_var: tuple[float, float, float] | None) -> tuple[float, float, 
 def filtered_bound(
     t_fix: np.ndarray,
     r_var: np.ndarray | float,
-    q: float,
+    q: JerkPsd,
     prior_var: tuple[float, float, float] | None = None,
 ) -> np.ndarray:
     """The PCRB ``J_k^-1`` (n, 3, 3) per axis [m^2, m^2/s, ...] of the state ``[p, v, a]``
     just after each fix (the filtered bound; see the module docstring).
 
     ``t_fix`` (n,) [s], non-decreasing; ``r_var`` [m^2] per axis, one or one per fix;
-    ``q`` [m^2/s^5]; ``prior_var``: the prior's diagonal at the first fix (position [m^2],
-    velocity [m^2/s^2], acceleration [m^2/s^4]), default :func:`default_prior`.
+    ``q`` [m^2/s^5], one value or a profile (:data:`JerkPsd`); ``prior_var``: the prior's
+    diagonal at the first fix (position [m^2], velocity [m^2/s^2], acceleration [m^2/s^4]),
+    default :func:`default_prior`.
     """
     times, kinds, r = _events(np.asarray(t_fix, dtype=float), r_var, None, None)
     return _full(_recursion(times, kinds, r, q, _prior(prior_var)))
@@ -262,7 +288,7 @@ def filtered_bound(
 def information_recursion(
     t_fix: np.ndarray,
     r_var: np.ndarray | float,
-    q: float,
+    q: JerkPsd,
     prior_var: tuple[float, float, float] | None = None,
 ) -> np.ndarray:
     """The information matrices ``J_k`` (n, 3, 3) per axis at each fix:
@@ -276,7 +302,7 @@ def information_recursion(
 def _at_queries(
     times: np.ndarray,
     upper: np.ndarray,
-    q: float,
+    q: JerkPsd,
     t_query: np.ndarray,
     t_issue: np.ndarray | None,
 ) -> np.ndarray:
@@ -289,6 +315,7 @@ def _at_queries(
     known = k >= 0
     p = upper[np.where(known, k, 0)]
     d = np.where(known, tq - times[np.where(known, k, 0)], 0.0)
+    q_d = _q_between(q, tq - d, tq)
     d2 = d * d
     var = (
         p[..., 0]
@@ -296,7 +323,7 @@ def _at_queries(
         + d2 * (p[..., 2] + p[..., 3])
         + d2 * d * p[..., 4]
         + 0.25 * d2 * d2 * p[..., 5]
-        + q * d2 * d2 * d / 20.0
+        + q_d * d2 * d2 * d / 20.0
     )
     return np.where(known, var, np.nan)
 
@@ -304,7 +331,7 @@ def _at_queries(
 def position_variance_bound(
     t_fix: np.ndarray,
     r_var: np.ndarray | float,
-    q: float,
+    q: JerkPsd,
     t_query: np.ndarray,
     *,
     t_issue: np.ndarray | None = None,
@@ -326,7 +353,7 @@ def position_variance_bound(
 def position_variance_bound_with_acceleration(
     t_fix: np.ndarray,
     r_var: np.ndarray | float,
-    q: float,
+    q: JerkPsd,
     t_query: np.ndarray,
     t_acc: np.ndarray,
     r_acc: np.ndarray | float,
@@ -399,6 +426,36 @@ def mean_error_2d(cov: np.ndarray) -> np.ndarray:
 
 
 # ------------------------------------------------------------------- q from a track
+def _third_differences(
+    t: np.ndarray, x: np.ndarray, y: np.ndarray, dt: float | None
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, float] | None:
+    """The track on a uniform grid (see :func:`jerk_psd_from_track`): per third difference
+    its mean square over both axes [m^2], whether it is valid, its middle [s], and the grid
+    spacing [s]; None with fewer than 4 grid points."""
+    tt = np.asarray(t, dtype=float)
+    _check_times(tt, "t")
+    xy = np.column_stack([np.asarray(x, dtype=float), np.asarray(y, dtype=float)])
+    good = np.isfinite(xy).all(axis=1)
+    tt, xy = tt[good], xy[good]
+    if tt.size < 4 or tt[-1] <= tt[0]:
+        return None
+    step = float(np.median(np.diff(tt))) if dt is None else float(dt)
+    if not step > 0:
+        raise ValueError(f"dt: a positive grid spacing [s], not {step}")
+    n = int(math.floor((tt[-1] - tt[0]) / step + 1e-9)) + 1
+    if n < 4:
+        return None
+    grid = tt[0] + step * np.arange(n)
+    px, py = np.interp(grid, tt, xy[:, 0]), np.interp(grid, tt, xy[:, 1])
+    # the track's own interval around each grid point; a gap > 2 dt invalidates the point
+    idx = np.clip(np.searchsorted(tt, grid, side="left"), 1, tt.size - 1)
+    ok = (tt[idx] - tt[idx - 1]) <= 2.0 * step
+    ok |= np.isin(grid, tt)  # a grid point on a sample needs no interpolation
+    d3x, d3y = np.diff(px, 3), np.diff(py, 3)
+    valid = ok[:-3] & ok[1:-2] & ok[2:-1] & ok[3:]
+    return 0.5 * (d3x**2 + d3y**2), valid, grid[:-3] + 1.5 * step, step
+
+
 def jerk_psd_from_track(
     t: np.ndarray,
     x: np.ndarray,
@@ -422,28 +479,76 @@ def jerk_psd_from_track(
     take ``dt`` near the fix interval the bound is used at. NaN with fewer than 4 grid
     points; never below 0.
     """
-    tt = np.asarray(t, dtype=float)
-    _check_times(tt, "t")
-    xy = np.column_stack([np.asarray(x, dtype=float), np.asarray(y, dtype=float)])
-    good = np.isfinite(xy).all(axis=1)
-    tt, xy = tt[good], xy[good]
-    if tt.size < 4 or tt[-1] <= tt[0]:
+    diffs = _third_differences(t, x, y, dt)
+    if diffs is None:
         return math.nan
-    step = float(np.median(np.diff(tt))) if dt is None else float(dt)
-    if not step > 0:
-        raise ValueError(f"dt: a positive grid spacing [s], not {step}")
-    n = int(math.floor((tt[-1] - tt[0]) / step + 1e-9)) + 1
-    if n < 4:
-        return math.nan
-    grid = tt[0] + step * np.arange(n)
-    px, py = np.interp(grid, tt, xy[:, 0]), np.interp(grid, tt, xy[:, 1])
-    # the track's own interval around each grid point; a gap > 2 dt invalidates the point
-    idx = np.clip(np.searchsorted(tt, grid, side="left"), 1, tt.size - 1)
-    ok = (tt[idx] - tt[idx - 1]) <= 2.0 * step
-    ok |= np.isin(grid, tt)  # a grid point on a sample needs no interpolation
-    d3x, d3y = np.diff(px, 3), np.diff(py, 3)
-    valid = ok[:-3] & ok[1:-2] & ok[2:-1] & ok[3:]
+    sq, valid, _, step = diffs
     if not valid.any():
         return math.nan
-    ms = 0.5 * float(np.mean(d3x[valid] ** 2) + np.mean(d3y[valid] ** 2))
+    ms = float(np.mean(sq[valid]))
     return max(0.0, (ms - 20.0 * noise_var) / (THIRD_DIFFERENCE_GAIN * step**5))
+
+
+def track_noise_variance(
+    t: np.ndarray, x: np.ndarray, y: np.ndarray, *, dt: float | None = None
+) -> float:
+    """The white noise [m^2 per axis] on a reference track's positions, from its third
+    differences at two scales (the grid ``dt`` [s], default the track's median interval,
+    and ``2 dt``).
+
+    Under white jerk a third difference's mean square is ``m(dt) = 11/20 q dt^5 + 20 s2``
+    per axis, ``s2`` the positions' white noise: the motion's part grows 32-fold from ``dt``
+    to ``2 dt``, the noise's not at all, so ``20 s2 = (32 m(dt) - m(2 dt)) / 31``, held in
+    ``[0, m(dt)]``. A measured truth (an INS solution at 10 Hz) carries millimetres of such
+    noise, and at a 0.1 s grid they outweigh the motion: a third difference amplifies
+    white noise 20-fold and the motion's by ``11/20 dt^5`` = 5.5e-6. Jerk that is not white
+    but smooth grows faster than 32-fold and gives 0, as a noise-free track does. NaN
+    where either scale gives no difference.
+    """
+    d1 = _third_differences(t, x, y, dt)
+    if d1 is None or not d1[1].any():
+        return math.nan
+    d2 = _third_differences(t, x, y, 2.0 * d1[3])
+    if d2 is None or not d2[1].any():
+        return math.nan
+    m1 = float(np.mean(d1[0][d1[1]]))
+    m2 = float(np.mean(d2[0][d2[1]]))
+    return min(max((32.0 * m1 - m2) / 31.0, 0.0), m1) / 20.0
+
+
+def jerk_psd_profile(
+    t: np.ndarray,
+    x: np.ndarray,
+    y: np.ndarray,
+    *,
+    dt: float | None = None,
+    window_s: float = 2.0,
+    noise_var: float = 0.0,
+) -> tuple[np.ndarray, np.ndarray]:
+    """The jerk PSD of a track as it varies along it: ``(times [s], q [m^2/s^5])``, a
+    profile the bound takes for ``q`` (:data:`JerkPsd`).
+
+    :func:`jerk_psd_from_track`'s estimate in a moving window of ``window_s`` [s] (the
+    mean of the squared third differences whose middle lies within ``window_s / 2`` of each
+    difference's middle; at least one difference), so that a drive's stops, cruising and
+    manoeuvres each get their own q: real jerk comes in bursts, and one q for a whole drive
+    overstates it where the drive is calm (a predictor that adapts beats such a bound) and
+    understates it in its manoeuvres. Where a window holds no valid difference, the whole
+    track's q. Empty arrays where the track gives no q at all.
+    """
+    diffs = _third_differences(t, x, y, dt)
+    if diffs is None or not diffs[1].any():
+        return np.empty(0), np.empty(0)
+    sq, valid, mid, step = diffs
+    v = np.where(valid, sq - 20.0 * noise_var, 0.0)
+    half = max(0, int(round(0.5 * window_s / step)))
+    csum = np.concatenate([[0.0], np.cumsum(v)])
+    ccount = np.concatenate([[0], np.cumsum(valid)])
+    lo = np.clip(np.arange(v.size) - half, 0, v.size)
+    hi = np.clip(np.arange(v.size) + half + 1, 0, v.size)
+    count = ccount[hi] - ccount[lo]
+    overall = max(0.0, float(np.mean(v[valid])) / (THIRD_DIFFERENCE_GAIN * step**5))
+    with np.errstate(invalid="ignore", divide="ignore"):
+        local = (csum[hi] - csum[lo]) / count / (THIRD_DIFFERENCE_GAIN * step**5)
+    q = np.where(count > 0, np.clip(local, 0.0, None), overall)
+    return mid, q

@@ -363,6 +363,11 @@ def aggregate(
             d["predictors"] = {name: mine.get(name, _empty_kinds(stats)) for name in preds}
         res["drives"].append(d)
     res["references"] = dataset_references(res["drives"])
+    from posbench.aggregation.limit import limit_section
+
+    limit = limit_section(runs, res, stats)  # the bound beside the predictors, never one
+    if limit is not None:
+        res["limit"] = limit
     res["gate"] = gate_summary(runs, cfg)
     from posbench.aggregation.track import track_section
 

@@ -14,6 +14,7 @@ from posbench.pipeline.publish import Published
 def print_run_summary(published: Published) -> None:
     """The tables and notes of a finished run, then the ``wrote ...`` line (nothing when
     quiet)."""
+    from posbench.report.limit import limit_terminal_lines
     from posbench.report.notes import (
         excluded_note,
         fixes_scored,
@@ -41,7 +42,7 @@ def print_run_summary(published: Published) -> None:
         headline.cells(),
         title=f"{plural(scored, 'drive')} - errors in metres [95 % CI], latency in microseconds",
     )
-    for note in (trained_note(res), excluded_note(res)):
+    for note in (trained_note(res), excluded_note(res), *limit_terminal_lines(res)):
         if note:
             say(note)
     if has_paired(res):

@@ -289,9 +289,11 @@ def replay_drives(
     reporter: Reporter = SILENT,
     label: str = "",
     preload: Any = None,
+    limit: bool = False,
 ) -> list[DriveRun]:
     """Every drive through every predictor of ``cfg`` on the options' executor, as
-    :class:`~posbench.scoring.records.DriveRun` records in drive order; one reporter step
+    :class:`~posbench.scoring.records.DriveRun` records in drive order, with each drive's
+    bound given ``limit`` (:func:`posbench.replay.limit.drive_limit`); one reporter step
     per drive. ``preload`` (:class:`~posbench.pipeline.preload.Preload`) starts when the
     first drive is done, if the drives are replayed in other processes (the worker processes
     exist by then; in this one, its imports would disturb the timings)."""
@@ -315,6 +317,7 @@ def replay_drives(
             workers=options.workers,
             address=options.address,
             on_done=on_done,
+            limit=limit,
         )
 
 
@@ -342,7 +345,7 @@ def _replay_and_publish(
     sources = recordings.sources if recordings is not None else None
     provenance = Job(data_provenance, sources, cfg.seed)  # hashing the data (~1 s) meanwhile
     preload = Preload()  # the imports of the figures and the report, during the replay
-    runs = replay_drives(drives, cfg, o, reporter, first, preload)
+    runs = replay_drives(drives, cfg, o, reporter, first, preload, limit=True)
     preload.join()  # before forking the figure children
     traces = all_traces(runs)
     lean = lean_traces(traces)  # text columns as categoricals: cheaper filters, same results

@@ -60,20 +60,27 @@ def run_local(
     cfg: RunConfig,
     workers: int = 2,
     on_done: Callable[[DriveRun], None] | None = None,
+    limit: bool = False,
 ) -> list[DriveRun]:
-    """The local executor: :func:`posbench.replay.runner.run` in ``workers`` processes."""
-    return run(drives, cfg, workers=workers, on_done=on_done)
+    """The local executor: :func:`posbench.replay.runner.run` in ``workers`` processes
+    (``limit``: each drive's bound too)."""
+    return run(drives, cfg, workers=workers, on_done=on_done, limit=limit)
 
 
 def run_predictor(
-    drive: Drive, cfg: RunConfig, name: str | None, entries: dict[str, Entry]
+    drive: Drive, cfg: RunConfig, name: str | None, entries: dict[str, Entry], limit: bool = False
 ) -> DriveRun:
     """One task: ``drive`` replayed through predictor ``name`` only (all of ``cfg``'s when
     None). ``entries`` re-registers the driver's predictors, so predictors registered at
-    run time are known in a fresh worker (their module must be importable there)."""
+    run time are known in a fresh worker (their module must be importable there).
+    ``limit``: the drive's bound too, by the task of the first predictor only."""
     for n, e in entries.items():
         register(n, e.target, e.description, **e.defaults)
-    return run_drive(drive, cfg if name is None else replace(cfg, predictors=(name,)))
+    return run_drive(
+        drive,
+        cfg if name is None else replace(cfg, predictors=(name,)),
+        limit=limit and (name is None or name == cfg.predictors[0]),  # once per drive
+    )
 
 
 @dataclass(frozen=True)
@@ -118,8 +125,10 @@ def run_ray(
     num_cpus: int = 2,
     max_retries: int = DEFAULT_RETRIES,
     on_done: Callable[[DriveRun], None] | None = None,
+    limit: bool = False,
 ) -> list[DriveRun]:
-    """Run every (drive, predictor) pair as a Ray task; the result is in drive order.
+    """Run every (drive, predictor) pair as a Ray task; the result is in drive order
+    (``limit``: each drive's bound too, :func:`run_predictor`).
 
     Without ``address`` a local Ray instance with ``num_cpus`` CPUs is started and shut
     down afterwards; with one (``ray://host:10001`` or ``host:6379`` or ``auto``) the
@@ -147,7 +156,7 @@ def run_ray(
                 f"cannot start Ray{' at ' + address if address else ''}: {_error_line(e)}"
             ) from None
     try:
-        return _fan_out(ray, drives, cfg, max_retries, on_done)
+        return _fan_out(ray, drives, cfg, max_retries, on_done, limit)
     finally:
         if started:
             ray.shutdown()
@@ -204,6 +213,7 @@ def _fan_out(
     cfg: RunConfig,
     max_retries: int,
     on_done: Callable[[DriveRun], None] | None,
+    limit: bool = False,
 ) -> list[DriveRun]:
     task = ray.remote(num_cpus=1, max_retries=max_retries, retry_exceptions=True)(run_predictor)
     env = worker_runtime_env(cfg.predictors)
@@ -217,7 +227,7 @@ def _fan_out(
     for i, d in enumerate(drives):
         drive_ref = ray.put(d)  # once per drive, shared by its predictor tasks
         for j, name in enumerate(names):
-            pending[task.remote(drive_ref, cfg_ref, name, entries)] = (i, j)
+            pending[task.remote(drive_ref, cfg_ref, name, entries, limit)] = (i, j)
     parts: list[list[DriveRun | _Failed | None]] = [[None] * len(names) for _ in drives]
     left = [len(names)] * len(drives)
     out: list[DriveRun | None] = [None] * len(drives)
@@ -251,12 +261,16 @@ def run_drives(
     workers: int = 2,
     address: str | None = None,
     on_done: Callable[[DriveRun], None] | None = None,
+    limit: bool = False,
 ) -> list[DriveRun]:
-    """Run ``drives`` on ``executor`` (``local`` or ``ray``); results in drive order."""
+    """Run ``drives`` on ``executor`` (``local`` or ``ray``); results in drive order
+    (``limit``: each drive's bound too, :func:`posbench.replay.runner.run_drive`)."""
     if executor == "local":
         if address:
             raise ExecutorError("--address is for --executor ray")
-        return run_local(drives, cfg, workers=workers, on_done=on_done)
+        return run_local(drives, cfg, workers=workers, on_done=on_done, limit=limit)
     if executor == "ray":
-        return run_ray(drives, cfg, address=address, num_cpus=max(1, workers), on_done=on_done)
+        return run_ray(
+            drives, cfg, address=address, num_cpus=max(1, workers), on_done=on_done, limit=limit
+        )
     raise ExecutorError(f"--executor must be one of {', '.join(EXECUTORS)}, got {executor!r}")

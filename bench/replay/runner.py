@@ -78,8 +78,10 @@ def skipped_run(drive: Drive, reason: str) -> DriveRun:
     )
 
 
-def run_drive(drive: Drive, cfg: RunConfig) -> DriveRun:
-    """Prepare one drive and replay it through every configured predictor."""
+def run_drive(drive: Drive, cfg: RunConfig, limit: bool = False) -> DriveRun:
+    """Prepare one drive and replay it through every configured predictor; with ``limit``,
+    also compute the bound on its scored queries (:func:`posbench.replay.limit.drive_limit`;
+    ``bench run`` asks for it, once per drive)."""
     reason = skip_reason(drive, cfg)
     if reason:
         return skipped_run(drive, reason)
@@ -104,6 +106,12 @@ def run_drive(drive: Drive, cfg: RunConfig) -> DriveRun:
         if res.cov_ns is not None:
             cov_ns[name] = res.cov_ns
     traces = score_many(queries, answers)
+    bound: pd.DataFrame | None = None
+    bound_info: dict[str, Any] = {}
+    if limit:
+        from posbench.replay.limit import drive_limit
+
+        bound, bound_info = drive_limit(prep, queries, cfg)
     return DriveRun(
         drive.name,
         prep.dataset,
@@ -123,6 +131,8 @@ def run_drive(drive: Drive, cfg: RunConfig) -> DriveRun:
         cov_ns=cov_ns,
         gps_condition=prep.gps_condition,
         truth_source=truth_source(drive),
+        limit=bound,
+        limit_info=bound_info,
     )
 
 
@@ -164,8 +174,11 @@ def run(
     cfg: RunConfig,
     workers: int = 1,
     on_done: Callable[[DriveRun], None] | None = None,
+    limit: bool = False,
 ) -> list[DriveRun]:
-    """Run all drives; ``on_done`` is called as each finishes (for a progress bar).
+    """Run all drives; ``on_done`` is called as each finishes (for a progress bar); with
+    ``limit``, each drive's bound is computed too (:func:`run_drive`; by one task of a drive
+    split by predictor, the first predictor's).
     The returned list is in the order of ``drives`` whatever ``workers`` is. With several
     workers the costliest drives start first, and a drive long enough to hold a worker
     alone is replayed one predictor per task (:func:`plan_tasks`); its parts are merged as
@@ -175,7 +188,7 @@ def run(
     out: list[DriveRun | None] = [None] * len(drives)
     if workers <= 1 or not drives or (len(drives) == 1 and len(cfg.predictors) <= 1):
         for i, d in enumerate(drives):
-            out[i] = drive_run = run_drive(d, cfg)
+            out[i] = drive_run = run_drive(d, cfg, limit)
             if on_done:
                 on_done(drive_run)
         return [r for r in out if r is not None]
@@ -185,7 +198,10 @@ def run(
     with WorkerPool(min(workers, len(tasks)), initializer=_init_worker) as pool:
         futures = {
             pool.submit(
-                run_drive, drives[i], cfg if name is None else replace(cfg, predictors=(name,))
+                run_drive,
+                drives[i],
+                cfg if name is None else replace(cfg, predictors=(name,)),
+                limit and (name is None or name == cfg.predictors[0]),  # once per drive
             ): (i, name)
             for i, name in tasks
         }

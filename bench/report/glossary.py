@@ -1,6 +1,7 @@
 """The report's glossary: the definitions written once beside each metric
 (``DEFINITIONS`` of :mod:`posbench.metrics.accuracy`, :mod:`posbench.metrics.bootstrap`,
-:mod:`posbench.metrics.outages`, :mod:`posbench.metrics.seeds`, :mod:`posbench.metrics.latency` and
+:mod:`posbench.metrics.outages`, :mod:`posbench.metrics.seeds`, :mod:`posbench.metrics.latency`,
+:mod:`posbench.metrics.limit`, :mod:`posbench.metrics.pcrb` and
 :mod:`posbench.aggregation.aggregate`), picked for the figures a run's report prints."""
 
 from __future__ import annotations
@@ -8,14 +9,14 @@ from __future__ import annotations
 from collections.abc import Mapping
 from typing import Any
 
-from posbench.metrics import accuracy, bootstrap, latency, outages, seeds
+from posbench.metrics import accuracy, bootstrap, latency, limit, outages, pcrb, seeds
 from posbench.scoring.schema import DEFINITIONS, TRACE_COLUMNS
 
 
 def glossary(res: Mapping[str, Any]) -> list[tuple[str, str]]:
     """(term, definition) for every kind of figure in the report of ``res``, in reading
     order: queries and errors, the summary figures, intervals, the paired comparison, seeds,
-    outages, latency."""
+    outages, the limit, latency."""
     terms: list[tuple[str, str]] = [
         ("future / now", TRACE_COLUMNS["kind"][2]),
         *DEFINITIONS.items(),
@@ -36,6 +37,9 @@ def glossary(res: Mapping[str, Any]) -> list[tuple[str, str]]:
         terms += seeds.DEFINITIONS.items()
     if res.get("outages"):
         terms += outages.DEFINITIONS.items()
+    if res.get("limit"):
+        terms += limit.DEFINITIONS.items()
+        terms += [(k, pcrb.DEFINITIONS[k]) for k in ("PCRB", "jerk PSD q", "slow error floor")]
     terms += [(t, _where_measured(t, d, res)) for t, d in latency.DEFINITIONS.items()]
     return list(terms)
 

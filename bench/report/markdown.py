@@ -16,6 +16,7 @@ from posbench.figures.writer import write_plots
 from posbench.naming import plural
 from posbench.report.data_check import report_lines as consistency_lines
 from posbench.report.glossary import glossary_lines
+from posbench.report.limit import limit_report_lines
 from posbench.report.notes import (
     MISSING_NOTE,
     block_note,
@@ -206,6 +207,7 @@ def render_markdown(
     for note in (trained_note(res), excluded_note(res), MISSING_NOTE):
         if note:
             lines += [note, ""]
+    lines += limit_report_lines(res)
     lines += sanity_report_lines(res)
     lines += tuning_lines(res)
     if has_paired(res):

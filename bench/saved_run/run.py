@@ -18,6 +18,10 @@ Each data set names its reference (schema 1.8, ``references``): its truth, or th
 receiver's own fixes (no independent truth); a run saved before says it through its drives'
 ``reference`` (:func:`posbench.scoring.reference.references` reads both).
 
+Each run carries the bound beside its predictors (schema 1.9, ``limit``): the posterior
+Cramér-Rao bound on the mean error over the same queries, each predictor's ``x limit`` and
+the predictors below it; a run saved before has none, and shows no limit row.
+
 Example (a notebook)::
 
     import posbench
@@ -45,7 +49,7 @@ from posbench.scenarios.errors import DataError
 
 #: MAJOR.MINOR of results.json: a reader accepts every MINOR of its MAJOR; MINOR grows when
 #: keys are added, MAJOR when a key changes meaning or goes
-SCHEMA_VERSION = "1.8"
+SCHEMA_VERSION = "1.9"
 RESULTS = "results.json"
 TRACES = "traces.parquet"
 PROVENANCE_KEYS = ("command", "versions", "git_commit", "data")

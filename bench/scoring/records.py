@@ -40,6 +40,12 @@ class DriveRun:
     #: what its truth is, in words, where the drive is scored against one
     #: (:func:`posbench.replay.reference.truth_source`); "" for none or not known
     truth_source: str = ""
+    #: the bound on its scored queries, one row each (kind, t_query, label, limit_m,
+    #: limit_imu_m: :data:`posbench.replay.limit.LIMIT_COLUMNS`); None: not computed
+    limit: pd.DataFrame | None = None
+    #: what the bound took (q, the fixes' white noise, the slow floor, the IMU's noise, ...:
+    #: :func:`posbench.replay.limit.drive_limit`); empty without a bound
+    limit_info: dict[str, Any] = field(default_factory=dict)
 
 
 def merge_predictor_runs(parts: Sequence[DriveRun]) -> DriveRun:
@@ -47,11 +53,13 @@ def merge_predictor_runs(parts: Sequence[DriveRun]) -> DriveRun:
     :func:`run_drive` would have made it with all predictors: traces are concatenated (per
     predictor: future, then now) with a fresh index, and every per-predictor dict (step_ns,
     query_ns, ...) is joined in predictor order. The rest (prepared-drive figures: notes,
-    outages, fixes, ...) is the same in every part."""
+    outages, fixes, ...) is the same in every part; the bound (``limit``) is computed by
+    one part only and taken from it."""
     first = parts[0]
     frames = [p.traces for p in parts if not p.traces.empty]
     merged: dict[str, Any] = {
-        "traces": pd.concat(frames, ignore_index=True) if frames else pd.DataFrame()
+        "traces": pd.concat(frames, ignore_index=True) if frames else pd.DataFrame(),
+        "limit": next((p.limit for p in parts if p.limit is not None), None),
     }
     for f in fields(DriveRun):
         if isinstance(getattr(first, f.name), dict):

@@ -10,6 +10,16 @@ from typing import Any
 
 from posbench.metrics.accuracy import speed_bin_order
 from posbench.scenarios.labels import LABELS
+from posbench.tables.limit import (
+    drive_limit_mean,
+    label_limit_mean,
+    limit_rows,
+    limit_scope,
+    ratio_cells,
+    ratio_digits,
+    ratio_labels,
+    with_ratio_columns,
+)
 from posbench.tables.table import Table, as_float, is_finite, rows_frame
 
 PAPER_TABLE_CM = {"straight": 16.6, "turn": 12.1, "roundabout": 9.7, "start_stop": 4.2}
@@ -88,9 +98,12 @@ def summary_table(res: Mapping[str, Any], held_out: bool = False, compact: bool 
     unanswered queries, latency [us] as measured in the replay's workers. A predictor
     trained on some of the run's drives is marked ``*``. ``held_out``: over the drives no
     predictor trained or tuned on (no latency: it is run-wide). ``compact`` (the terminal):
-    intervals on the means only."""
+    intervals on the means only. With a bound (schema 1.9), each predictor's ``x limit``
+    beside its means and the bound's rows below (:mod:`posbench.tables.limit`; not over the
+    held-out drives)."""
     trained = trained_in_run(res)
     src = res["held_out_all"]["predictors"] if held_out else res["predictors"]
+    bound = None if held_out else limit_scope(res)
     rows = []
     for name, p in src.items():
         f, n = p["future"], p["now"]
@@ -117,14 +130,24 @@ def summary_table(res: Mapping[str, Any], held_out: bool = False, compact: bool 
                 step_p99=as_float(lat["latency_us"].get("p99")),
                 query_p50=as_float(lat["query_us"].get("p50")),
             )
+        if bound is not None:
+            row.update(ratio_cells(res, name))
         rows.append(row)
     shown_ci = ("future_mean", "now_mean") if compact else SUMMARY_CI
-    cols = list(SUMMARY_LABELS) if not held_out else list(SUMMARY_LABELS)[:11]
+    cols = with_ci_columns(
+        list(SUMMARY_LABELS) if not held_out else list(SUMMARY_LABELS)[:11], shown_ci
+    )
+    labels, digits = dict(SUMMARY_LABELS), dict(LATENCY_DIGITS)
+    if bound is not None:
+        rows += limit_rows(res, bound, {"future": "future_n", "now": "now_n"})
+        cols = with_ratio_columns(cols, bool(bound.get("imu")))
+        labels.update(ratio_labels())
+        digits.update(ratio_digits())
     return Table(
-        rows_frame(rows, with_ci_columns(cols, shown_ci)),
+        rows_frame(rows, cols),
         "held_out" if held_out else "summary",
-        SUMMARY_LABELS,
-        LATENCY_DIGITS,
+        labels,
+        digits,
         ci=ci_map(shown_ci),
     )
 
@@ -166,7 +189,9 @@ DATASET_CI = ("future_mean", "future_median", "future_p95", "now_mean", "now_p95
 
 
 def dataset_table(res: Mapping[str, Any], dataset: str) -> Table:
-    """One data set: per predictor, future and now errors [m] with their 95 % intervals."""
+    """One data set: per predictor, future and now errors [m] with their 95 % intervals;
+    with a bound (schema 1.9), each predictor's ``x limit`` and the bound's rows."""
+    bound = limit_scope(res, dataset)
     rows = []
     for name, s in res["by_dataset"][dataset].items():
         f, n = s["future"], s["now"]
@@ -180,8 +205,10 @@ def dataset_table(res: Mapping[str, Any], dataset: str) -> Table:
         ):
             put_figure(row, col, summ, fig)
         row.update(future_n=f["count"], now_n=n["count"])
+        if bound is not None:
+            row.update(ratio_cells(res, name, dataset))
         rows.append(row)
-    labels = {
+    labels: dict[str, str] = {
         "future_mean": "future mean [m]",
         "future_median": "median",
         "future_p95": "p95",
@@ -190,13 +217,24 @@ def dataset_table(res: Mapping[str, Any], dataset: str) -> Table:
         "now_p95": "now p95",
         "now_n": "n",
     }
+    cols = with_ci_columns(["predictor", *labels], DATASET_CI)
+    digits: dict[str, int] = {}
+    if bound is not None:
+        rows += limit_rows(res, bound, {"future": "future_n", "now": "now_n"})
+        cols = with_ratio_columns(cols, bool(bound.get("imu")))
+        labels.update(ratio_labels())
+        digits.update(ratio_digits())
     return Table(
-        rows_frame(rows, with_ci_columns(["predictor", *labels], DATASET_CI)),
+        rows_frame(rows, cols),
         f"dataset-{dataset}",
         labels,
+        digits,
         ci=ci_map(DATASET_CI),
     )
 
+
+#: the drives table's column of the bound's future mean [m]
+LIMIT_DRIVE_COLUMN = "limit future mean [m]"
 
 #: the marker of a route-type cell whose 95 % interval is wider than its value
 NOT_CONCLUSIVE = "?"
@@ -211,9 +249,11 @@ def label_table(res: Mapping[str, Any], dataset: str, kind: str, held_out: bool 
     """The paper's Table I layout: route type x mean error [cm] with its 95 % interval
     (query count), one column per predictor, ``?`` where the interval is wider than the
     value (not conclusive); for the future point (what the paper measured) its LSTM figure
-    beside. ``held_out``: only drives no predictor was trained or tuned on."""
+    beside. ``held_out``: only drives no predictor was trained or tuned on. With a bound
+    (schema 1.9; not over the held-out drives), its mean [cm] as the column ``limit [cm]``."""
     preds = list(res["predictors"])
     paper = kind == "future"
+    bound = not held_out and limit_scope(res, dataset) is not None
     if held_out:
         by_label = res["held_out"][dataset]["by_label"]
         overall_src = res["held_out"][dataset]["predictors"]
@@ -241,6 +281,8 @@ def label_table(res: Mapping[str, Any], dataset: str, kind: str, held_out: bool 
             "route type": LABEL_TITLES[lab],
             **cells({p: by_label.get(p, {}).get(kind, {}).get(lab, {}) for p in preds}),
         }
+        if bound:
+            row["limit [cm]"] = 100.0 * label_limit_mean(res, dataset, kind, lab)
         if paper:
             row["paper LSTM [cm]"] = PAPER_TABLE_CM[lab]
         rows.append(row)
@@ -248,6 +290,8 @@ def label_table(res: Mapping[str, Any], dataset: str, kind: str, held_out: bool 
         "route type": "all",
         **cells({p: overall_src.get(p, {}).get(kind, {}) for p in preds}),
     }
+    if bound:
+        overall["limit [cm]"] = 100.0 * label_limit_mean(res, dataset, kind, None)
     if paper:
         overall["paper LSTM [cm]"] = PAPER_OVERALL
     rows.append(overall)
@@ -256,6 +300,7 @@ def label_table(res: Mapping[str, Any], dataset: str, kind: str, held_out: bool 
         for p in preds
         for c in (f"{p} [cm]", f"{p} [cm]_lo", f"{p} [cm]_hi", f"{p} mark", f"{p} n")
     ]
+    cols += ["limit [cm]"] if bound else []
     cols += ["paper LSTM [cm]"] if paper else []
     return Table(
         rows_frame(rows, cols),
@@ -362,8 +407,10 @@ def gate_drive_table(res: Mapping[str, Any]) -> Table:
 
 
 def drives_table(res: Mapping[str, Any]) -> Table:
-    """Per drive: data set, reference (or why it was skipped), each predictor's future mean [m]."""
+    """Per drive: data set, reference (or why it was skipped), each predictor's future mean
+    [m] and, with a bound (schema 1.9), the bound's (``limit future mean [m]``)."""
     preds = list(res["predictors"])
+    bound = bool(res.get("limit"))
     rows = []
     for d in res["drives"]:
         if d["skipped"]:
@@ -381,10 +428,13 @@ def drives_table(res: Mapping[str, Any]) -> Table:
             put_figure(
                 row, f"{p} future mean [m]", d["predictors"].get(p, {}).get("future"), "mean_m"
             )
+        if bound:
+            row[LIMIT_DRIVE_COLUMN] = drive_limit_mean(d)
         rows.append(row)
     cols = [f"{p} future mean [m]" for p in preds]
+    shown = with_ci_columns(["drive", "data set", "reference", *cols], cols)
     return Table(
-        rows_frame(rows, with_ci_columns(["drive", "data set", "reference", *cols], cols)),
+        rows_frame(rows, shown + [LIMIT_DRIVE_COLUMN] * bound),
         "drives",
         ci=ci_map(cols),
     )

@@ -185,13 +185,14 @@ _EVERY_PART = {
     "paired": {"baseline": "x"},
     "seeds": {"seeds": [0]},
     "outages": {"x": 1},
+    "limit": {"x": 1},
 }
 
 
 def glossary_markdown() -> str:
     """Every term :func:`posbench.report.glossary.glossary` can print (a run with every
-    part: speed bins, intervals, a paired baseline, seeds, outages), in its reading order,
-    as a definition list."""
+    part: speed bins, intervals, a paired baseline, seeds, outages, the limit), in its
+    reading order, as a definition list."""
     from posbench.report.glossary import glossary
 
     seen: set[str] = set()

@@ -5,7 +5,8 @@ report's figures read from its ``reports/NAME/results.json`` (what
 Per report: the command that made it, its configuration (GPS profile, dropouts, data
 sets, drives), what each data set is scored against (its truth, or the receiver's own
 fixes), each predictor's ``future`` and ``now`` mean error with its 95 % interval and
-query count, the mean ``future`` error per data set when there are several, and a link to
+query count (and, from schema 1.9 on, its ``x limit`` and the bound's rows, never ranked),
+the mean ``future`` error per data set when there are several, and a link to
 the full ``report.md`` in the repository (it lives outside the docs folder, so it is linked
 at the repository's URL). :data:`ROOT` and :data:`REPO_URL` are set by the
 mkdocs hook (``docs/gen/hooks.py``) from mkdocs.yml.
@@ -69,24 +70,50 @@ def report_url(name: str, repo_url: str | None = None) -> str:
     return f"{base}/blob/{BRANCH}/reports/{name}/report.md" if base else ""
 
 
+def ratio(v: Any) -> str:
+    """``0.38``: a predictor's x limit; ``-`` without one."""
+    x = _num(v)
+    return "-" if math.isnan(x) else f"{x:.2f}"
+
+
 def predictor_table(res: Mapping[str, Any]) -> list[str]:
     """Per predictor: future and now mean error [m] with 95 % CI, and the query counts;
-    the lowest future mean in bold."""
+    the lowest future mean in bold. With the bound (schema 1.9), each predictor's x limit
+    and the bound's rows below, in italics (a bound, never ranked)."""
     preds = res.get("predictors") or {}
     means = {p: _num((v.get("future") or {}).get("mean_m")) for p, v in preds.items()}
     finite = [m for m in means.values() if not math.isnan(m)]
     best = min(finite) if finite else None
-    lines = [
-        "| predictor | future mean [m] (95 % CI) | n | now mean [m] (95 % CI) | n |",
-        "|---|---|---|---|---|",
-    ]
+    lim = res.get("limit") or {}
+    ratios = (lim.get("ratios") or {}).get("overall") or {}
+    imu = bool((lim.get("overall") or {}).get("imu"))
+    head = "| predictor | future mean [m] (95 % CI) | n | now mean [m] (95 % CI) | n |"
+    rule = "|---|---|---|---|---|"
+    keys = ["future", "now"] + (["future_imu", "now_imu"] if imu else [])
+    if lim:
+        head += " future x limit | now x limit |" + (
+            " future x IMU limit | now x IMU limit |" if imu else ""
+        )
+        rule += "---|" * len(keys)
+    lines = [head, rule]
     for p, v in preds.items():
         fut, now = v.get("future") or {}, v.get("now") or {}
         f = figure(fut)
         if best is not None and means[p] == best:
             f = f"**{f}**"
+        row = f"| `{p}` | {f} | {fut.get('count', 0)} | {figure(now)} | {now.get('count', 0)} |"
+        if lim:
+            r = ratios.get(p) or {}
+            row += "".join(f" {ratio(r.get(k))} |" for k in keys)
+        lines.append(row)
+    overall = lim.get("overall") or {}
+    for name, kinds in ((lim.get("name"), overall), (lim.get("name_imu"), overall.get("imu"))):
+        if not name or not kinds:
+            continue
+        fut, now = kinds.get("future") or {}, kinds.get("now") or {}
         lines.append(
-            f"| `{p}` | {f} | {fut.get('count', 0)} | {figure(now)} | {now.get('count', 0)} |"
+            f"| *{name}* | *{figure(fut)}* | {fut.get('count', 0)} | *{figure(now)}* | "
+            f"{now.get('count', 0)} |" + " - |" * len(keys)
         )
     return lines
 
@@ -105,6 +132,11 @@ def dataset_table(res: Mapping[str, Any]) -> list[str]:
     for p in res.get("predictors") or {}:
         cells = [figure((by[d].get(p) or {}).get("future")) for d in sets]
         lines.append(f"| `{p}` | " + " | ".join(cells) + " |")
+    lim = res.get("limit") or {}
+    if lim:
+        bounds = lim.get("by_dataset") or {}
+        cells = [figure((bounds.get(d) or {}).get("future")) for d in sets]
+        lines.append(f"| *{lim['name']}* | " + " | ".join(f"*{c}*" for c in cells) + " |")
     return lines
 
 
@@ -163,8 +195,9 @@ def results_markdown(root: Path | None = None, repo_url: str | None = None) -> s
     if not dirs:
         return "No reference reports found (`reports/*/results.json`)."
     lines = [
-        "| report | data sets | GPS profile | dropouts | predictors | best future mean [m] |",
-        "|---|---|---|---|---|---|",
+        "| report | data sets | GPS profile | dropouts | predictors | best future mean [m] "
+        "| limit future mean [m] |",
+        "|---|---|---|---|---|---|---|",
     ]
     sections = []
     for d in dirs:
@@ -176,9 +209,10 @@ def results_markdown(root: Path | None = None, repo_url: str | None = None) -> s
         best_txt = f"`{best}` {figure(preds[best]['future'])}" if best else "-"
         cfg = res.get("config") or {}
         sets = ", ".join(res.get("by_dataset") or {}) or "-"
+        bound = ((res.get("limit") or {}).get("overall") or {}).get("future")
         lines.append(
             f"| [{d.name}](#{d.name}) | {sets} | `{cfg.get('gps_profile', '?')}` | "
-            f"`{cfg.get('dropouts', '?')}` | {len(preds)} | {best_txt} |"
+            f"`{cfg.get('dropouts', '?')}` | {len(preds)} | {best_txt} | {figure(bound)} |"
         )
         sections.append(report_section(d, repo_url))
     return "\n".join([*lines, "", *sections])

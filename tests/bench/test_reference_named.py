@@ -19,7 +19,7 @@ from posbench.pipeline.results import build_results
 from posbench.replay.runner import run
 from posbench.report.markdown import render_markdown
 from posbench.report.notes import held_out_note, trained_note, tuning_lines
-from posbench.saved_run.run import Run, results_schema
+from posbench.saved_run.run import SCHEMA_VERSION, Run, results_schema
 from posbench.scenarios.drive import Drive
 from posbench.scenarios.synthetic import generate_drive
 from posbench.scoring.reference import FIXES_TEXT, dataset_references, references
@@ -55,7 +55,7 @@ def test_results_json_names_each_data_sets_reference(mixed_run):
     assert by_name["receiver-only"]["truth_source"] == ""
     assert by_name["synthetic-mixed-s0"]["truth_source"] == "the simulated vehicle path"
     saved = Run.from_results(mixed_run).results  # as results.json holds it
-    assert saved["schema_version"] == "1.8"
+    assert saved["schema_version"] == SCHEMA_VERSION
     jsonschema.validate(saved, results_schema())
 
 

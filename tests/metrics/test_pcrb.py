@@ -354,3 +354,22 @@ def test_slow_error_is_added_against_an_independent_truth_only():
 def test_definitions_are_glossary_entries():
     assert set(pcrb.DEFINITIONS) >= {"PCRB", "bound mean error", "jerk PSD q"}
     assert all(isinstance(v, str) and v.strip() for v in pcrb.DEFINITIONS.values())
+
+
+@pytest.mark.parametrize("noise_sd", [0.0, 0.002])
+def test_a_tracks_white_noise_is_told_from_its_jerk(noise_sd):
+    """A white-jerk track (q = 2 m^2/s^5, 0.1 s samples) with millimetres of white noise on
+    its positions, as a measured truth has: the noise is recovered from two scales, and q
+    with it taken out; without that, 2 mm of noise would pass for ~7 times the jerk."""
+    rng = np.random.default_rng(0)
+    q, fine, n = 2.0, 0.001, 20000
+    jerk = rng.normal(0.0, math.sqrt(q / fine), (n * 100, 2))
+    pos = np.cumsum(np.cumsum(np.cumsum(jerk, axis=0) * fine, axis=0) * fine, axis=0) * fine
+    t = np.arange(n) * 0.1
+    xy = pos[::100] + rng.normal(0.0, noise_sd, (n, 2)) if noise_sd else pos[::100]
+    s2 = pcrb.track_noise_variance(t, xy[:, 0], xy[:, 1], dt=0.1)
+    assert math.sqrt(s2) == pytest.approx(noise_sd, abs=2e-4)
+    got = jerk_psd_from_track(t, xy[:, 0], xy[:, 1], dt=0.1, noise_var=s2)
+    assert got == pytest.approx(q, rel=0.05)
+    if noise_sd:
+        assert jerk_psd_from_track(t, xy[:, 0], xy[:, 1], dt=0.1) > 5 * q

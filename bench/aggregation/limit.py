@@ -1,0 +1,269 @@
+"""How far from the limit: results.json's ``limit`` (schema 1.9) from each drive's bound.
+
+Each replayed drive carries the bound on the mean error of its scored queries
+(``DriveRun.limit``, :func:`posbench.replay.limit.drive_limit`): one value per query, for the
+very queries the predictors are scored on (past the warm-up, with a reference). Here they
+are summarised as a predictor's errors are (mean over the same queries, with its cluster
+bootstrap interval over drives), overall and per data set, fixes only and with the IMU;
+each predictor's ``x limit`` ratio (its mean / the bound's); and the predictors whose mean
+lies below the bound by more than their interval, each with the likely reason. The bound
+is never a predictor: it is kept out of ``predictors``, the paired comparison, the sanity
+check and every gate.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+from posbench.aggregation.intervals import Statistics, drive_codes
+from posbench.metrics.accuracy import summarize, summarize_groups
+from posbench.metrics.limit import LIMIT_IMU_NAME, LIMIT_NAME, mean_ci
+from posbench.scenarios.labels import LABELS
+from posbench.scoring.records import DriveRun
+from posbench.scoring.reference import KIND_FIXES
+from posbench.scoring.schema import KINDS
+
+#: what the bound assumes, in one paragraph (results.json ``limit.assumptions``, report.md)
+ASSUMPTIONS = (
+    "a bound under stated assumptions, not a predictor: the posterior Cramér-Rao bound of "
+    "a predictor that knows the motion model (constant acceleration driven by white jerk, per "
+    "axis, of the PSD q the reference shows, as it varies along each drive in 2 s windows) "
+    "and the noise of the fixes it is fed (white, of the simulated profile's variance, else "
+    "as estimated from the fixes), at the drive's actual fix times; against an independent "
+    "truth plus the receiver's slow error (no fix can reveal it), against the receiver's own "
+    "fixes without. The mean error of the 2-D Gaussian it implies, averaged over the queries "
+    "the predictors are scored on. The IMU variant also observes the acceleration at every "
+    "IMU sample, with the white noise the samples show (bias, tilt and mounting taken as "
+    "known)."
+)
+
+
+def _frames(runs: Sequence[DriveRun]) -> pd.DataFrame:
+    """Every drive's limit rows, with its data set and drive."""
+    parts = [
+        r.limit.assign(dataset=r.dataset, drive=r.name)
+        for r in runs
+        if r.limit is not None and not r.skipped and not r.limit.empty
+    ]
+    return pd.concat(parts, ignore_index=True) if parts else pd.DataFrame()
+
+
+def _kind_summaries(
+    df: pd.DataFrame, column: str, stats: Statistics | None
+) -> dict[str, Any] | None:
+    """Per kind, :func:`summarize` of the bound in ``column`` with the ``ci95`` of its mean
+    (drives resampled, as a predictor's; its median and p95 are no bound: no interval);
+    None when no query has one (e.g. no IMU)."""
+    e = df[column].to_numpy(dtype=float)
+    if not np.isfinite(e).any():
+        return None
+    kind = df["kind"].to_numpy()
+    codes = drive_codes(df)
+    t = df["t_query"].to_numpy(dtype=float)
+    out: dict[str, dict[str, Any]] = {}
+    for k in KINDS:
+        m = kind == k
+        out[k] = dict(summarize(e[m]))
+        if stats is not None:
+            r = mean_ci(e[m], codes[m], t[m], stats.resamples, stats.seed, stats.level)
+            out[k]["ci95"] = {
+                "mean_m": r["mean_m"],
+                "median_m": r["median_m"],
+                "p95_m": r["p95_m"],
+                "drives": r["clusters"],
+                "block_len": r["block_len"],
+            }
+    return out
+
+
+def _scope(df: pd.DataFrame, stats: Statistics | None) -> dict[str, Any]:
+    """The bound's figures over ``df``'s queries: per kind fixes only, and ``imu``."""
+    out = _kind_summaries(df, "limit_m", stats) or {k: summarize(np.empty(0)) for k in KINDS}
+    return {**out, "imu": _kind_summaries(df, "limit_imu_m", stats)}
+
+
+def _ratio(pred: Mapping[str, Any] | None, bound: Mapping[str, Any] | None) -> float | None:
+    """A predictor's mean error / the bound's [-] (None where either has none)."""
+    m = (pred or {}).get("mean_m")
+    b = (bound or {}).get("mean_m")
+    if m is None or b is None or not (math.isfinite(m) and math.isfinite(b)) or b <= 0:
+        return None
+    return float(m) / float(b)
+
+
+def ratios(
+    summaries: Mapping[str, Mapping[str, Any]], bound: Mapping[str, Any]
+) -> dict[str, dict[str, float | None]]:
+    """Per predictor of ``summaries`` (name -> kind -> summary), its ``x limit`` per kind
+    against ``bound`` (:func:`_scope`), and against the IMU variant (``KIND_imu``)."""
+    imu = bound.get("imu") or {}
+    return {
+        name: {
+            **{k: _ratio(s.get(k), bound.get(k)) for k in KINDS},
+            **{f"{k}_imu": _ratio(s.get(k), imu.get(k)) for k in KINDS},
+        }
+        for name, s in summaries.items()
+    }
+
+
+def below_reason(has_imu: bool, below_imu: bool, reference_kind: str | None) -> str:
+    """Why a predictor's mean can lie below the bound by more than its interval (which
+    inputs a predictor uses, posbench does not know: both readings are given)."""
+    why = []
+    if reference_kind == KIND_FIXES:
+        why.append(
+            "the reference is a cubic through the receiver's own fixes, which the bound takes "
+            "for the true motion"
+        )
+    if has_imu and not below_imu:
+        why.append(
+            "if it uses the IMU, that is what this bound does not have (it is not below the "
+            "limit with IMU); if it does not, the bound's assumptions (white jerk of the PSD "
+            "the reference shows, white fix noise of the variance taken) do not hold on this data"
+        )
+    else:
+        why.append(
+            "it uses information the bound"
+            + (" with IMU" if has_imu else "")
+            + " does not have (wheel speed, a learned prior of how these vehicles move"
+            + ("" if has_imu else ", an IMU")
+            + "), or the bound's assumptions (white jerk of the PSD the reference shows, "
+            "white fix noise of the variance taken) do not hold on this data"
+        )
+    return "; ".join(why)
+
+
+def below_limit(
+    by_dataset: Mapping[str, Mapping[str, Any]],
+    limit_by_dataset: Mapping[str, Mapping[str, Any]],
+    references: Mapping[str, Mapping[str, Any]],
+) -> list[dict[str, Any]]:
+    """Predictors whose mean error lies below the bound by more than their interval (the
+    upper end of their 95 % interval of the mean below the bound's mean), per data set and
+    query kind: dataset, predictor, kind, ``mean_m``, ``ci95_hi_m``, ``limit_m``,
+    ``limit_imu_m``, ``ratio`` (x limit) and ``reason``."""
+    out = []
+    for ds, preds in by_dataset.items():
+        bound = limit_by_dataset.get(ds)
+        if not bound:
+            continue
+        imu = bound.get("imu") or {}
+        for name, s in preds.items():
+            for k in KINDS:
+                mean = (s.get(k) or {}).get("mean_m")
+                hi = ((s.get(k) or {}).get("ci95") or {}).get("mean_m", [None, None])[1]
+                lim = (bound.get(k) or {}).get("mean_m")
+                if mean is None or hi is None or lim is None:
+                    continue
+                if not (math.isfinite(hi) and math.isfinite(lim)) or hi >= lim:
+                    continue
+                lim_imu = (imu.get(k) or {}).get("mean_m")
+                has_imu = lim_imu is not None and math.isfinite(lim_imu)
+                below_imu = lim_imu is not None and has_imu and hi < float(lim_imu)
+                out.append(
+                    {
+                        "dataset": ds,
+                        "predictor": name,
+                        "kind": k,
+                        "mean_m": mean,
+                        "ci95_hi_m": hi,
+                        "limit_m": lim,
+                        "limit_imu_m": lim_imu if has_imu else None,
+                        "ratio": _ratio(s.get(k), bound.get(k)),
+                        "reason": below_reason(
+                            has_imu,
+                            below_imu,
+                            (references.get(ds) or {}).get("kind"),
+                        ),
+                    }
+                )
+    return out
+
+
+def _drive_entry(r: DriveRun, rows: pd.DataFrame) -> dict[str, Any]:
+    """``drives[].limit``: what the drive's bound took, and its mean per kind."""
+    info = {k: v for k, v in r.limit_info.items() if k != "cost_s"}  # timing: run-wide only
+    kind = rows["kind"].astype(str).to_numpy()
+    imu = rows["limit_imu_m"].to_numpy(dtype=float)
+    return {
+        **info,
+        **{k: summarize(rows["limit_m"].to_numpy(dtype=float)[kind == k]) for k in KINDS},
+        "imu": {k: summarize(imu[kind == k]) for k in KINDS} if np.isfinite(imu).any() else None,
+    }
+
+
+def limit_section(
+    runs: Sequence[DriveRun], res: dict[str, Any], stats: Statistics | None
+) -> dict[str, Any] | None:
+    """results.json's ``limit`` from the drives' bounds (None when no drive has one: scored
+    answers, whose drives posbench did not replay), and each scored drive's
+    ``drives[].limit`` in ``res``. ``res`` needs ``predictors``, ``by_dataset``,
+    ``references`` and ``drives`` already.
+
+    Returns:
+        ``name``, ``name_imu``, ``assumptions``; ``overall`` and ``by_dataset[ds]``: per kind
+        the bound's summary [m] with ``ci95``, ``imu`` the same with the IMU (None without
+        one), and per data set ``gps_conditions`` (condition -> drives) and ``slow_floor``
+        (drives whose slow error was added, and not); ``by_label[ds][kind][route type]``
+        (no interval); ``ratios`` (``overall`` and ``by_dataset[ds]``: per predictor and
+        kind its x limit, and ``KIND_imu`` against the IMU variant); ``below``
+        (:func:`below_limit`). No timing: results.json's figures are the same on every
+        run of the same inputs (``DriveRun.limit_info["cost_s"]`` keeps each drive's).
+    """
+    df = _frames(runs)
+    if df.empty:
+        return None
+    df["kind"] = df["kind"].astype(str)
+    by_drive = {name: g for name, g in df.groupby(["dataset", "drive"], sort=False)}
+    for d, r in zip(res["drives"], runs, strict=True):
+        rows = by_drive.get((r.dataset, r.name))
+        if rows is not None:
+            d["limit"] = _drive_entry(r, rows)
+    section: dict[str, Any] = {
+        "name": LIMIT_NAME,
+        "name_imu": LIMIT_IMU_NAME,
+        "assumptions": ASSUMPTIONS,
+        "overall": _scope(df, stats),
+        "by_dataset": {},
+        "by_label": {},
+    }
+    ds_col = df["dataset"].to_numpy()
+    single = len(set(ds_col.tolist())) == 1
+    for ds in res["by_dataset"]:
+        part = df[ds_col == ds]
+        if part.empty:
+            continue
+        # one data set: its queries are all of them, the same figures
+        entry = dict(section["overall"]) if single else _scope(part, stats)
+        mine = [r for r in runs if r.dataset == ds and r.limit is not None and not r.skipped]
+        conditions: dict[str, int] = {}
+        for r in mine:
+            conditions[r.gps_condition] = conditions.get(r.gps_condition, 0) + 1
+        added = sum(bool(r.limit_info.get("slow_added")) for r in mine)
+        entry["gps_conditions"] = dict(sorted(conditions.items()))
+        entry["slow_floor"] = {"added": added, "not_added": len(mine) - added}
+        section["by_dataset"][ds] = entry
+        kind = part["kind"].to_numpy()
+        section["by_label"][ds] = {
+            k: summarize_groups(
+                part["limit_m"].to_numpy(dtype=float)[kind == k],
+                part["label"].astype(str).to_numpy()[kind == k],
+                order=list(LABELS),
+            )
+            for k in KINDS
+        }
+    section["ratios"] = {
+        "overall": ratios(res["predictors"], section["overall"]),
+        "by_dataset": {
+            ds: ratios(res["by_dataset"][ds], b) for ds, b in section["by_dataset"].items()
+        },
+    }
+    section["below"] = below_limit(
+        res["by_dataset"], section["by_dataset"], res.get("references") or {}
+    )
+    return section

@@ -1,0 +1,196 @@
+"""How far from the limit: the bound beside every table (issue 38). A kf that knows only what
+the bound knows reaches it; the bound is computed once per drive, split or not; results.json
+(schema 1.9) carries it and each predictor's x limit, never as a predictor; the terminal,
+report.md and the tables show its rows; a predictor below it is named with a reason; a 1.8
+file still loads and renders without the row."""
+
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import replace
+
+import jsonschema
+import numpy as np
+import pandas as pd
+import pytest
+from helpers import bench
+
+from posbench.aggregation.limit import below_limit
+from posbench.config import RunConfig
+from posbench.metrics.limit import LIMIT_IMU_NAME, LIMIT_NAME
+from posbench.pipeline.results import build_results
+from posbench.replay.runner import run, run_drive
+from posbench.report.markdown import render_markdown, report_tables
+from posbench.saved_run.run import SCHEMA_VERSION, Run, load_run, results_schema, save_run
+from posbench.scenarios.synthetic import generate_drive
+from posbench.scoring.schema import scored_mask
+from posbench.tables.run_tables import dataset_table, drives_table, label_table, summary_table
+
+FIXES_ONLY = {"use_imu": False, "use_speed": False}
+
+
+@pytest.fixture(scope="module")
+def drives():
+    return [
+        generate_drive(seed=0, duration_s=40.0),
+        generate_drive(seed=1, route="turns", duration_s=40.0),
+    ]
+
+
+@pytest.fixture(scope="module")
+def result(drives):
+    cfg = RunConfig(predictors=("cv", "kf"))
+    runs = run(drives, cfg, limit=True)
+    return runs, build_results(runs, cfg, [], "bench run -p cv,kf", models={})
+
+
+def test_a_kf_that_knows_what_the_bound_knows_comes_near_it(drives):
+    """The fixes-only kf (no IMU, no wheel speed) is above the bound's mean on the same
+    queries and within 35 % of it (the bound knows how the jerk varies along the drive,
+    the kf's bank only adapts to it); the bound has one row per scored query."""
+    cfg = RunConfig(predictors=("kf@fixes",), predictor_options={"kf@fixes": FIXES_ONLY})
+    r = run_drive(drives[0], cfg, limit=True)
+    scored = r.traces[scored_mask(r.traces)]
+    assert len(r.limit) == len(scored)
+    for kind in ("future", "now"):
+        kf = scored.loc[scored["kind"] == kind, "error_m"].mean()
+        bound = r.limit.loc[r.limit["kind"] == kind, "limit_m"].mean()
+        assert 1.0 <= kf / bound < 1.35, (kind, kf, bound)
+    assert (r.limit["limit_imu_m"] <= r.limit["limit_m"] + 1e-12).all()
+    info = r.limit_info
+    assert info["slow_added"] and info["q_m2_s5"] > 0 and info["fix_white_var_m2"] == 0.02**2
+    assert run_drive(drives[0], cfg).limit is None  # only when asked (bench run asks)
+
+
+def test_a_drive_split_by_predictor_gets_the_same_bound_once(drives):
+    cfg = RunConfig(predictors=("cv", "kf"))
+    whole = run_drive(drives[0], cfg, limit=True)
+    split = run(drives[:1], cfg, workers=2, limit=True)[0]  # one long drive: per predictor
+    pd.testing.assert_frame_equal(split.limit, whole.limit, check_exact=True)
+    assert {k: v for k, v in split.limit_info.items() if k != "cost_s"} == {
+        k: v for k, v in whole.limit_info.items() if k != "cost_s"
+    }
+
+
+def test_results_carry_the_bound_beside_the_predictors_never_as_one(result):
+    _, res = result
+    saved = Run.from_results(res).results
+    assert saved["schema_version"] == SCHEMA_VERSION == "1.9"
+    jsonschema.validate(saved, results_schema())
+    lim = res["limit"]
+    assert lim["name"] == LIMIT_NAME and lim["name_imu"] == LIMIT_IMU_NAME
+    assert LIMIT_NAME not in res["predictors"] and "limit" not in res["paired"]["overall"]
+    for kind in ("future", "now"):
+        bound = lim["by_dataset"]["synthetic"][kind]
+        assert bound["count"] == res["by_dataset"]["synthetic"]["kf"][kind]["count"]
+        lo, hi = bound["ci95"]["mean_m"]
+        assert lo <= bound["mean_m"] <= hi
+        for p in ("cv", "kf"):
+            ratio = lim["ratios"]["by_dataset"]["synthetic"][p][kind]
+            assert ratio == pytest.approx(
+                res["by_dataset"]["synthetic"][p][kind]["mean_m"] / bound["mean_m"]
+            )
+    assert lim["by_dataset"]["synthetic"]["gps_conditions"] == {"rtk": 2}
+    for d in res["drives"]:
+        assert d["limit"]["future"]["count"] > 0 and d["limit"]["imu"] is not None
+        assert "cost_s" not in d["limit"]  # no timing: the same inputs, the same results
+
+
+def test_tables_and_report_show_the_rows_and_the_ratio(result):
+    _, res = result
+    res = Run.from_results(res).results
+    for t in (
+        summary_table(res),
+        summary_table(res, compact=True),
+        dataset_table(res, "synthetic"),
+    ):
+        names = list(t.frame["predictor"])
+        assert names[-2:] == [LIMIT_NAME, LIMIT_IMU_NAME]
+        assert "x limit" in t.header() and "x IMU limit" in t.header()
+        row = t.cells()[names.index(LIMIT_NAME)]
+        header = t.header()
+        assert row[header.index("x limit")] == "-"  # the bound has no ratio, no rank
+        assert "[" in row[header.index("future mean [m]")]  # its interval
+        if "median" in header:
+            assert row[header.index("median")] == "-"
+    assert "limit [cm]" in label_table(res, "synthetic", "future").header()
+    assert "limit future mean [m]" in drives_table(res).header()
+    md = render_markdown(res, [])
+    assert f"| {LIMIT_NAME} |" in md and f"The rows `{LIMIT_NAME}`" in md
+    assert "- Limit in `synthetic` (2 drives; GPS `rtk` (2))" in md
+    assert "**x limit**" in md and "**PCRB**" in md  # the glossary
+    for t in report_tables(res):  # every form renders (never a cut number)
+        t.csv(), t.latex(), t.markdown()
+
+
+def test_a_predictor_below_the_bound_is_named_with_a_reason():
+    def summ(mean, hi):
+        return {"mean_m": mean, "ci95": {"mean_m": [mean - 0.01, hi]}}
+
+    by_dataset = {"d": {"a": {"future": summ(0.05, 0.06), "now": summ(0.2, 0.25)}}}
+    bound = {
+        "future": {"mean_m": 0.1},
+        "now": {"mean_m": 0.1},
+        "imu": {"future": {"mean_m": 0.04}, "now": {"mean_m": 0.03}},
+    }
+    below = below_limit(by_dataset, {"d": bound}, {"d": {"kind": "truth"}})
+    assert [(b["predictor"], b["kind"]) for b in below] == [("a", "future")]
+    assert below[0]["ratio"] == pytest.approx(0.5)
+    assert "if it uses the IMU" in below[0]["reason"]
+    bound["imu"]["future"]["mean_m"] = 0.09  # below the IMU variant too
+    below = below_limit(by_dataset, {"d": bound}, {"d": {"kind": "fixes"}})
+    assert "wheel speed" in below[0]["reason"] and "cubic through" in below[0]["reason"]
+
+
+def test_schema_1_9_round_trips_and_a_1_8_file_still_loads(result, tmp_path):
+    runs, res = result
+    from posbench.scoring.records import all_traces
+
+    r = Run.from_results(res, all_traces(runs))
+    save_run(tmp_path / "new", r)
+    back = load_run(tmp_path / "new")
+    assert back.results == json.loads((tmp_path / "new" / "results.json").read_text())
+    assert back.results["limit"]["name"] == LIMIT_NAME
+    old = json.loads(json.dumps(back.results))
+    old["schema_version"] = "1.8"
+    del old["limit"]
+    for d in old["drives"]:
+        del d["limit"]
+    (tmp_path / "old").mkdir()
+    (tmp_path / "old" / "results.json").write_text(json.dumps(old))
+    loaded = load_run(tmp_path / "old")
+    jsonschema.validate(loaded.results, results_schema())
+    md = render_markdown(loaded.results, [])
+    assert LIMIT_NAME not in md and "x limit" not in md
+    assert "x limit" not in summary_table(loaded.results).header()
+    assert "limit [cm]" not in label_table(loaded.results, "synthetic", "now").header()
+
+
+def test_a_drive_against_its_own_fixes_has_no_slow_floor():
+    d = generate_drive(seed=1, route="turns", duration_s=30.0)
+    d = replace(d, truth=None, meta=replace(d.meta, name="receiver-only", format="table"))
+    r = run_drive(d, RunConfig(predictors=("cv",)), limit=True)
+    assert r.limit_info["slow_added"] is False
+    assert "white part" in r.limit_info["noise"]  # the synthetic receiver states its sigma
+    assert math.isfinite(r.limit_info["q_m2_s5"]) and np.isfinite(r.limit["limit_m"]).all()
+
+
+@pytest.mark.slow
+def test_bench_run_prints_the_rows(tmp_path):
+    r = bench(
+        "run",
+        "--synthetic-duration",
+        "30",
+        "-p",
+        "cv,kf",
+        "--drive-plots",
+        "0",
+        "--out",
+        tmp_path / "o",
+        columns=300,
+    )
+    assert r.returncode == 0, r.stderr
+    assert LIMIT_NAME in r.stdout and "x limit" in r.stdout
+    assert f"{LIMIT_NAME}: a bound under stated assumptions, not a predictor" in r.stdout
+    assert load_run(tmp_path / "o").results["limit"]["overall"]["future"]["count"] > 0
