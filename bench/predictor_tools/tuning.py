@@ -17,13 +17,17 @@ search, only this scale. Winners are written to the user's tuning file (``bench 
 which ``bench run --tuning`` merges over the package's tuning and the predictors'
 physical defaults. The package's own ``predictors/tuned.json`` is never written by a
 command: maintainers copy a file made this way into the source tree.
+
+``kf`` can also be tuned by gradient descent instead of the grid (:func:`gradient_search`,
+``bench tune kf --method gradient``): its noise fitted as OKF does
+(:mod:`posbench.predictors.kf_gradient`, needs torch), then calibrated the same way.
 """
 
 from __future__ import annotations
 
 import itertools
 import json
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -178,9 +182,12 @@ def save_tuned(
     note: str,
     path: Path,
     drives: Sequence[str] = (),
+    extra: Mapping[str, Any] | None = None,
 ) -> None:
     """Merge one result into the tuning file ``path`` (created if missing): its
-    ``params``, ``how`` they were obtained and the ``drives`` they were tuned on."""
+    ``params``, ``how`` they were obtained and the ``drives`` they were tuned on, plus the
+    keys of ``extra`` (e.g. ``fit``: what a gradient tuning fitted; readers use ``params``
+    only)."""
     if path.resolve() == TUNED_PATH.resolve():
         raise ValueError("the package's tuning is not written by a command")
     data = json.loads(path.read_text()) if path.exists() else {}
@@ -188,5 +195,55 @@ def save_tuned(
         "params": params,
         "how": note,
         "drives": sorted(drives),
+        **(extra or {}),
     }
     path.write_text(json.dumps(data, indent=2, sort_keys=True) + "\n")
+
+
+def gradient_search(
+    drives: Sequence[Drive],
+    gps_profile: str,
+    seed: int = 0,
+    on_step: Callable[[int, dict[str, float]], None] | None = None,
+    **fit: Any,
+) -> dict[str, Any]:
+    """The ``kf``'s noise fitted by gradient descent on ``drives``
+    (:func:`posbench.predictors.kf_gradient.gradient_tune`, whose result this returns) on the
+    fixes a run with ``seed`` feeds under ``gps_profile``
+    (:func:`~posbench.replay.prepare.prepare_drive`: the calibration's replay sees the same
+    fixes). ``fit``: the keywords of ``gradient_tune``
+    (``iterations``, ``lr``, ``holdout``, ...). Raises ImportError without torch."""
+    from posbench.predictors.kf_gradient import gradient_tune, require_torch
+    from posbench.replay.prepare import prepare_drive
+
+    require_torch()
+    cfg = RunConfig(predictors=("kf",), gps_profile=gps_profile, seed=seed, use_tuned=False)
+    gps = [prepare_drive(d, cfg).gps for d in drives]
+    return gradient_tune(drives, gps_profile, gps=gps, seed=seed, on_step=on_step, **fit)
+
+
+def gradient_note(fit: Mapping[str, Any]) -> str:
+    """One line on what :func:`gradient_search` fitted (for the tuning file's ``how``)."""
+    loss = fit["loss"]["train"]
+    q = np.asarray(fit["Q_c"])
+    r = np.asarray(fit["R"])
+    parts = [
+        f"gradient descent (OKF: {fit['best_iteration']} Adam steps, beta-NLL of the 0.2 s "
+        f"reference) on {fit['fixes']['train']} fixes",
+        f"Q_c eigenvalues {_eig(q)} m^2/s^5, R eigenvalues {_eig(r)} m^2",
+    ]
+    if fit.get("sigma_a") is not None:
+        parts.append(f"sigma_a {fit['sigma_a']:.3g} m/s^2")
+    if fit.get("slow") is not None:
+        parts.append(f"slow error eigenvalues {_eig(np.asarray(fit['slow']))} m^2")
+    parts.append(f"mean 0.2 s error {loss['error_m']:.4f} m, NLL {loss['nll']:.3f}")
+    held = fit["loss"].get("holdout")
+    if held:
+        parts.append(f"held out {held['error_m']:.4f} m, NLL {held['nll']:.3f}")
+    return "; ".join(parts)
+
+
+def _eig(m: np.ndarray) -> str:
+    """The eigenvalues of a symmetric 2x2 matrix, as ``a / b`` (3 significant digits)."""
+    lo, hi = np.linalg.eigvalsh(m)
+    return f"{hi:.3g} / {lo:.3g}"
