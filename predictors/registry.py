@@ -102,7 +102,7 @@ _REGISTRY: dict[str, Entry] = {
     ),
     "hybrid": Entry(
         "posbench.predictors.hybrid.predictor:HybridPredictor",
-        "one CA Kalman filter (the pre-bank kf) as prior + learned residual (ONNX), 200 ms ahead",
+        "the kf as prior + a learned residual (ONNX), applied as far as it has earned it",
     ),
 }
 

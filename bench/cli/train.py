@@ -15,6 +15,7 @@ from posbench.cli.options import (
     DataOpt,
     QuietOpt,
     VerboseOpt,
+    WorkersOpt,
     command_line,
     renamed,
 )
@@ -23,6 +24,11 @@ from posbench.errors import UsageError
 
 #: the networks `bench train` trains (``--network``)
 NETWORKS = ("lstm", "hybrid")
+#: seed of the synthetic development drives the hybrid's held-out comparison adds (those
+#: ``bench tune`` develops on: never the benchmark's seed 0, never a training seed)
+DEV_SEED = 1000
+#: minutes of training drives the gradient-tuned kf of the held-out comparison is fitted on
+GRADIENT_MINUTES = 10.0
 #: GPS profiles drawn from the truth of drives that have one, per network (``--profiles``)
 DEFAULT_PROFILES = {"lstm": "none,rtk", "hybrid": "none,rtk,consumer"}
 
@@ -80,6 +86,16 @@ def train(
             help="Wall-clock budget for the epochs; the best epoch so far is kept.",
         ),
     ] = 30.0,
+    held_out: Annotated[
+        bool,
+        typer.Option(
+            "--held-out/--no-held-out",
+            help="hybrid: once written, replay the model against its prior kf (and the kf "
+            "tuned by gradient on the training drives) on the held-out drives, with paired "
+            "95 % intervals, for its model card.",
+        ),
+    ] = True,
+    workers: WorkersOpt = 2,
     config: ConfigOpt = None,
     quiet: QuietOpt = False,
     verbose: VerboseOpt = False,
@@ -104,6 +120,7 @@ def train(
     check_at_least(seed, 0, "--seed")
     check_at_least(synthetic, 0, "--synthetic")
     check_at_least(hidden, 4, "--hidden")
+    check_at_least(workers, 1, "--workers")
     if not corpus_hours >= 0:
         raise UsageError(f"--corpus-hours must be >= 0, got {corpus_hours}")
     if not max_minutes > 0:
@@ -177,9 +194,74 @@ def train(
             profiles=tuple(prof),
             hidden=hidden,
             max_minutes=max_minutes,
+            **(
+                {"held_out": held_out_comparison(workers, seed, console)}
+                if network == "hybrid" and held_out
+                else {}
+            ),
         )
     if verbosity() > QUIET:
         print_summary(console, info, out, stopped[0] if stopped else None)
+
+
+def held_out_comparison(workers: int, seed: int, console: Console) -> Any:
+    """The hybrid's held-out comparison (:mod:`posbench.predictor_tools.held_out`) as
+    :data:`posbench.predictors.hybrid.train.HeldOut`."""
+
+    def compare(model_dir: Path, train_d: Any, val_d: Any, profiles: Any) -> dict[str, Any]:
+        from posbench.predictor_tools.held_out import compare_on_held_out
+        from posbench.scenarios.synthetic import default_drives
+
+        if verbosity() > QUIET:
+            console.print("held-out comparison with the prior: replaying validation drives")
+        dev = default_drives(seed=DEV_SEED)  # never trained on (training uses other seeds)
+        gradient = gradient_priors(train_d, profiles, seed)
+        res = compare_on_held_out(
+            model_dir,
+            [*val_d, *dev],
+            profiles,
+            gradient_params={c: g["params"] for c, g in gradient.items()},
+            workers=workers,
+            seed=seed,
+        )
+        res["gradient_prior"] = {
+            c: {k: g[k] for k in ("params", "Q_c", "R", "sigma_a", "loss", "best_iteration")}
+            | {
+                "how": "predictors.kf_gradient.gradient_tune on the training drives "
+                "(bench tune kf --method gradient), defaults"
+            }
+            for c, g in gradient.items()
+        }
+        return res
+
+    return compare
+
+
+def gradient_priors(train_d: Any, profiles: Any, seed: int) -> dict[str, dict[str, Any]]:
+    """The kf with its noise fitted by gradient (``bench tune kf --method gradient``,
+    :func:`posbench.predictors.kf_gradient.gradient_tune`) on the hybrid's own training
+    drives, per GPS condition they give: their own fixes (``native``) for drives without a
+    truth, each of ``profiles`` for those with one. A condition none gives is not fitted.
+    At most about :data:`GRADIENT_MINUTES` of drives per condition (every k-th drive by
+    name): the fit's cost grows with the drive time (about 1 s per Adam step for 10 min)."""
+    import math
+
+    from posbench.predictors.kf_gradient import gradient_tune
+
+    def spread(ds: list[Any]) -> list[Any]:
+        ds = sorted(ds, key=lambda d: d.name)
+        total = sum(d.duration_s for d in ds) / 60.0
+        return ds[:: max(1, math.ceil(total / GRADIENT_MINUTES))]
+
+    own = [d for d in train_d if d.truth is None or len(d.truth) <= 1]
+    with_truth = [d for d in train_d if d.truth is not None and len(d.truth) > 1]
+    out = {}
+    for cond, ds in [("native", spread(own))] + [(p, spread(with_truth)) for p in profiles]:
+        if ds:
+            if verbosity() > QUIET:
+                console.print(f"fitting the kf's noise by gradient ({cond}, {len(ds)} drives)")
+            out[cond] = gradient_tune(ds, cond, seed=seed)
+    return out
 
 
 def early_stop_message(epoch: int, best_epoch: int) -> str:
@@ -296,6 +378,35 @@ def print_summary(
         key_columns=1 + by_source,
         left_columns=1 + by_source,
     )
+    conds = (info.get("held_out") or {}).get("conditions") or {}
+    if conds:
+        rows = []
+        for cond, c in conds.items():
+            for kind in ("future", "now"):
+                r = c.get(kind) or {}
+                for key, d in r.items():
+                    if not key.startswith("hybrid_minus_"):
+                        continue
+                    other = key.removeprefix("hybrid_minus_")
+                    rows.append(
+                        [
+                            cond,
+                            kind,
+                            other,
+                            str(c["drives"]),
+                            f"{r[f'{other}_mean_m']:.4f}",
+                            f"{r['hybrid_mean_m']:.4f}",
+                            f"{d['diff']:+.4f} ({d['lo']:+.4f}, {d['hi']:+.4f})",
+                        ]
+                    )
+        print_table(
+            console,
+            ("GPS", "query", "vs", "drives", "its mean [m]", "hybrid [m]", "diff [m] (95 % CI)"),
+            rows,
+            title="held out, as run: hybrid minus its prior",
+            key_columns=3,
+            left_columns=3,
+        )
     core = (info.get("core") or {}).get("file")
     for what, name in (
         ("model", "model.onnx"),

@@ -6,7 +6,7 @@ For one drive and its (possibly degraded) fixes, one row per ``lstm`` training w
 - ``X`` (B, 8, 6): the lstm's features (heading frame);
 - ``prior`` (B, 4, 2) [m]: ``kf.position_at(t_fix + h) - p_last`` for h in
   :data:`~posbench.predictors.hybrid.predictor.HORIZONS`, rotated by -psi (heading frame), where the
-  kf is a fresh ``LinearKalman(**kf_params)`` replayed over the drive's streams in the
+  kf is a fresh ``KalmanBank(**kf_params)`` (the ``kf``) replayed over the drive's streams in the
   runner's order (:func:`kf_prior_at_fixes`) and asked right after each fix;
 - ``target`` (B, 4, 2) [m]: ``reference(t_fix + h) - kf.position_at(t_fix + h)``, rotated
   by -psi: the residual the network learns to add. The reference is the drive's truth
@@ -26,7 +26,7 @@ from dataclasses import dataclass, fields
 import numpy as np
 
 from posbench.predictors.hybrid.predictor import HORIZONS, N_H
-from posbench.predictors.kf import LinearKalman
+from posbench.predictors.kf_bank import KalmanBank
 from posbench.predictors.lstm.resample import N_STEPS, centred_cubic_batch
 from posbench.predictors.lstm.windows import drive_windows
 from posbench.scenarios.drive import Drive, GpsStream
@@ -48,6 +48,7 @@ class HybridWindows:
     t_end: np.ndarray  # (B,) fix time [s]
     label: np.ndarray  # (B,) scenario label (str)
     drive: np.ndarray  # (B,) drive name (str)
+    condition: np.ndarray  # (B,) GPS condition of the fixes (str: a profile, or "native")
 
     def __len__(self) -> int:
         return int(self.X.shape[0])
@@ -81,6 +82,7 @@ def empty_hybrid_windows() -> HybridWindows:
         z(0),
         np.array([], dtype=object),
         np.array([], dtype=object),
+        np.array([], dtype=object),
     )
 
 
@@ -94,11 +96,12 @@ def kf_prior_at_fixes(
     drive: Drive, gps: GpsStream, kf_params: dict, horizons: tuple[float, ...] = HORIZONS
 ) -> np.ndarray:
     """(n_fixes, len(horizons), 2) [m, ENU]: ``kf.position_at(t_fix + h)`` asked right after
-    each fix of ``gps``, from a fresh ``LinearKalman(**kf_params)`` fed the drive's IMU and
-    speed and ``gps`` (sigma = the stated accuracy where finite and positive, else None) in
-    the runner's order (:mod:`posbench.replay.loop`: by time; at equal times fixes, then IMU, then
-    speed). NaN rows for fixes before the kf has a state (a non-finite first fix)."""
-    kf = LinearKalman(**kf_params)
+    each fix of ``gps``, from a fresh ``KalmanBank(**kf_params)`` (the ``kf``) fed the
+    drive's IMU and speed and ``gps`` (sigma = the stated accuracy where finite and
+    positive, else None) in the runner's order (:mod:`posbench.replay.loop`: by time; at
+    equal times fixes, then IMU, then speed). NaN rows for fixes before the kf has a
+    state (a non-finite first fix)."""
+    kf = KalmanBank(**kf_params)
     parts_t = [gps.t]
     parts_k = [np.full(len(gps), _GPS)]
     imu, spd = drive.imu, drive.speed
@@ -146,10 +149,12 @@ def hybrid_windows(
     gps: GpsStream | None = None,
     kf_params: dict | None = None,
     frame: str = "heading",
+    condition: str = "native",
 ) -> HybridWindows:
     """The hybrid's training rows of one drive (see the module doc); ``gps`` replaces the
     drive's fixes (e.g. degraded), ``kf_params`` configure the prior's kf (its defaults if
-    None). Only the heading frame is supported."""
+    None), ``condition`` names the fixes' GPS condition in the rows. Only the heading frame
+    is supported."""
     if frame != "heading":
         raise ValueError(f"the hybrid works in the heading frame, not {frame!r}")
     gps = drive.gps if gps is None else gps
@@ -187,4 +192,5 @@ def hybrid_windows(
         t_end=ws.t_end,
         label=ws.label,
         drive=ws.drive,
+        condition=np.full(len(ws), condition, dtype=object),
     )

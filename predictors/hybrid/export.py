@@ -165,15 +165,14 @@ def save_model(
 
 
 def prior_kf_params() -> dict[str, dict]:
-    """The prior's parameters per GPS condition: those the bundled hybrid was trained with
-    (its model.json ``prior.params``; {} where it has none). The prior is one linear CA
-    Kalman filter (:class:`~posbench.predictors.kf.LinearKalman`) with fixed noise, the
-    ``kf`` baseline as it was tuned before that became a bank of filters
-    (:mod:`posbench.predictors.kf_bank`); a new hybrid keeps it unless given others."""
-    from posbench.predictors.hybrid.predictor import bundled_model, load_model_info
+    """The prior's parameters per GPS condition: the ``kf``'s package tuning for each
+    (``predictors/tuned.json``, through :func:`posbench.predictors.registry.tuned_params`;
+    {} where it has none). The prior is the ``kf`` itself
+    (:class:`~posbench.predictors.kf_bank.KalmanBank`) as ``bench run -p kf`` builds it,
+    so that the hybrid is held against the filter under it."""
+    from posbench.predictors.registry import tuned_params
 
-    params = load_model_info(bundled_model())["prior"].get("params", {})
-    return {c: dict(params.get(c, {})) for c in CONDITIONS}
+    return {c: tuned_params("kf", c) for c in CONDITIONS}
 
 
 def write_untrained(

@@ -1,10 +1,10 @@
-"""``hybrid``: a Kalman-filter prior plus a learned residual (numpy + onnxruntime, no torch).
+"""``hybrid``: the ``kf`` bank as prior plus a learned residual, applied only as far as it
+has earned it (numpy + onnxruntime, no torch).
 
-The prior is one linear CA Kalman filter, :class:`posbench.predictors.kf.LinearKalman` (the
-``kf`` baseline before it became a bank of filters, :mod:`posbench.predictors.kf_bank`), run
-inside the hybrid on every observation (fixes with their stated sigma, IMU, wheel speed),
-with the parameters the network was trained with (model.json ``prior.params[condition]``,
-see :func:`prior_params`).
+The prior is the ``kf`` itself, :class:`posbench.predictors.kf_bank.KalmanBank`, run inside
+the hybrid on every observation (fixes with their stated sigma, IMU, wheel speed) with
+the parameters the network was trained with (model.json ``prior.params[condition]``, the
+kf's tuning for that GPS condition at training time; see :func:`prior_params`).
 
 On each real GPS fix whose window holds >= 4 fixes spanning >= 2 s, one *network step*:
 
@@ -18,11 +18,17 @@ On each real GPS fix whose window holds >= 4 fixes spanning >= 2 s, one *network
    h)`` and (log var along the heading, log var across) [log m^2] of that residual.
 
 Answers, with h = t - t_fix of the newest network step:
-``position_at(t) = kf.position_at(t) + R(psi) corr(h)``, corr linearly interpolated over
-the knots h = 0 (correction 0), 0.2, 0.4, 0.6, 0.8 s and held at its 0.8 s value beyond;
-``covariance_at(t) = kf.covariance_at(t) + R(psi) diag(var(h)) R(psi)^T`` with the log
-variances interpolated the same way between the knots 0.2-0.8 s (held beyond), and the
-variance rising linearly from 0 at h = 0 to its 0.2 s value.
+``position_at(t) = kf.position_at(t) + g a(h) R(psi) corr(h)``, corr linearly
+interpolated over the knots h = 0 (correction 0), 0.2, 0.4, 0.6, 0.8 s and held at its
+0.8 s value beyond; ``covariance_at(t) = kf.covariance_at(t) + g R(psi) diag(var(h))
+R(psi)^T`` with the log variances interpolated the same way between the knots 0.2-0.8 s
+(held beyond), and the variance rising linearly from 0 at h = 0 to its 0.2 s value.
+
+The gate (:mod:`posbench.predictors.hybrid.gate`, model.json ``gate``): ``a(h)`` is a
+shrinkage per horizon fitted on held-out development drives; a window outside the box
+of the training inputs takes no correction; ``g`` in [0, 1] is the drive's own evidence
+that the correction predicts the fixes better than the prior does (0 until it has
+earned it). ``gate=False`` applies the network's correction as it is (for inspection).
 
 GPS outages: no network step runs between real fixes, so an outage is bridged by the
 kf's own dead reckoning (its constant-acceleration state, kept current by IMU and wheel
@@ -34,9 +40,11 @@ Fallback to the prior alone (correction 0, the kf's covariance):
 
 - start-up: before the first window of >= 4 fixes spanning >= 2 s (and after a restart);
   a real fix that yields no window clears the previous step's correction;
+- a window outside the training inputs' box, or a network output (or its variance)
+  that is not finite;
+- no evidence yet, or evidence that the correction does not help (g = 0);
 - standstill: the wheel/CAN speed (else the speed of the window's cubic at the fix) below
-  0.15 km/h (:data:`posbench.predictors.lstm.predictor.STILL_SPEED_MPS`), decided at query time;
-- a network output (or its variance) that is not finite.
+  0.15 km/h (:data:`posbench.predictors.lstm.predictor.STILL_SPEED_MPS`), decided at query time.
 
 Frames and units: positions [m] local ENU, times [s], covariances [m^2] ENU.
 """
@@ -52,7 +60,8 @@ from typing import Any
 import numpy as np
 
 from posbench.predictors.base import ModelFileSeams, Predictor
-from posbench.predictors.kf import LinearKalman
+from posbench.predictors.hybrid.gate import EvidenceGate, envelope_arrays, inside_envelope
+from posbench.predictors.kf_bank import KalmanBank
 from posbench.predictors.lstm.features import N_FEATURES
 from posbench.predictors.lstm.fused import FusedStep
 from posbench.predictors.lstm.history import FIX_CAP, ImuHistory, RowBuffer, fit_fused_window
@@ -122,7 +131,41 @@ def load_model_info(onnx_path: Path) -> dict:
             js,
             'key \'prior\' must be {"predictor": "kf", "params": {CONDITION: {kf option: value}}}',
         )
+    check_gate(js, info.get("gate"))
     return info
+
+
+def check_gate(js: Path, gate: Any) -> None:
+    """model.json's optional ``gate``: ``shrink`` (4 factors in [0, 1]) and the envelope
+    (``feature_min``/``feature_max`` of 6, ``prior_min``/``prior_max`` of 4 x 2), each
+    optional. Raises a one-line :class:`DataError` naming the key."""
+    if gate is None:
+        return
+    if not isinstance(gate, dict):
+        raise DataError(js, "key 'gate' must be an object")
+    shapes = {
+        "shrink": (N_H,),
+        "feature_min": (N_FEATURES,),
+        "feature_max": (N_FEATURES,),
+        "prior_min": (N_H, 2),
+        "prior_max": (N_H, 2),
+    }
+    for key, shape in shapes.items():
+        if key not in gate:
+            continue
+        try:
+            a = np.asarray(gate[key], dtype=float)
+        except (TypeError, ValueError):
+            a = np.zeros(0)
+        if a.shape != shape or (key == "shrink" and not ((a >= 0) & (a <= 1)).all()):
+            extra = ", each in [0, 1]" if key == "shrink" else ""
+            raise DataError(js, f"gate.{key} must be numbers of shape {list(shape)}{extra}")
+    if ("feature_min" in gate) != ("prior_max" in gate) or any(
+        (k in gate) != ("feature_min" in gate) for k in ("feature_max", "prior_min")
+    ):
+        raise DataError(
+            js, "gate: give all of feature_min, feature_max, prior_min, prior_max or none"
+        )
 
 
 def prior_params(info: dict, condition: str | None) -> tuple[str, dict[str, Any]]:
@@ -168,12 +211,16 @@ class HybridPredictor(ModelFileSeams, Predictor):
         gps_condition: the run's GPS condition (``none``, ``rtk``, ``consumer``, ``native``;
             passed by :func:`posbench.predictors.registry.create`): picks the prior's kf parameters
             from model.json (fallback ``native``, then the kf's defaults).
+        gate: apply the gate (module doc; default). False: the network's correction as it
+            is, for inspection (``--set hybrid.gate=false``).
     """
 
     name = "hybrid"
     bundled_text = BUNDLED_TEXT
 
-    def __init__(self, model: str | None = None, gps_condition: str | None = None) -> None:
+    def __init__(
+        self, model: str | None = None, gps_condition: str | None = None, gate: bool = True
+    ) -> None:
         self.bundled = not model
         self.model_path = Path(model) if model else bundled_model()
         if self.model_path.is_dir():  # a folder written by training
@@ -184,7 +231,7 @@ class HybridPredictor(ModelFileSeams, Predictor):
         self.gps_condition = gps_condition
         self.prior_condition, self.prior_params = prior_params(self.info, gps_condition)
         try:
-            self.kf = LinearKalman(**self.prior_params)
+            self.kf = KalmanBank(**self.prior_params)
         except (TypeError, DataError) as exc:
             raise DataError(
                 self.model_path.with_suffix(".json"),
@@ -200,12 +247,20 @@ class HybridPredictor(ModelFileSeams, Predictor):
         pinv = np.linalg.pinv(np.vander(np.append(GRID_OFFSETS, DT), 4, increasing=True))
         self._fused = FusedStep(self.net, "heading", pinv)
         self._prior = np.zeros((N_H, 2))
+        self.gate = bool(gate)
+        g = self.info.get("gate") or {}
+        shrink = g.get("shrink", [1.0] * N_H) if self.gate else [1.0] * N_H
+        #: shrinkage per knot (index 0 = h 0, unused)
+        self._shrink = (0.0, *(float(a) for a in shrink))
+        self._box = envelope_arrays(g) if self.gate and "feature_min" in g else None
+        self.evidence = EvidenceGate()
         self.reset()
 
     def config(self) -> dict:
         return {
             "model": str(self.model_path),
             "gps_condition": self.gps_condition,
+            "gate": self.gate,
             "prior": {
                 "predictor": "kf",
                 "condition": self.prior_condition,
@@ -226,8 +281,11 @@ class HybridPredictor(ModelFileSeams, Predictor):
 
     # ------------------------------------------------------------------ state
     def warm_up(self) -> None:
-        """The prior's start-up work (its kernels) before a run's clock starts."""
+        """The prior's start-up work (its kernels) and the input box's kernel, before a
+        run's clock starts."""
         self.kf.warm_up()
+        if self._box is not None:
+            inside_envelope(self.net.bufs[0][0], self.net.bufs[1][0], self._box)
 
     def reset(self) -> None:
         self.kf.reset()
@@ -236,8 +294,10 @@ class HybridPredictor(ModelFileSeams, Predictor):
         self._t_real = math.nan
         self._can_v: float | None = None
         self._gps_v = math.nan
+        self.evidence.reset()
         self._clear()
         self.steps = 0
+        self.outside = 0  # network steps whose window was outside the training box
 
     def _clear(self) -> None:
         """No correction: answers are the prior's."""
@@ -259,6 +319,8 @@ class HybridPredictor(ModelFileSeams, Predictor):
     def observe_gps(self, t: float, x: float, y: float, sigma: float | None = None) -> None:
         if not (math.isfinite(x) and math.isfinite(y)):
             return
+        if self.gate and self._has:
+            self._weigh_evidence(t, x, y)
         self.kf.observe_gps(t, x, y, sigma)
         fb = self._fix
         if t - self._t_real > RESTART_GAP_S:
@@ -270,6 +332,14 @@ class HybridPredictor(ModelFileSeams, Predictor):
         fb.append((t, x, y))
         if not self._step(t):
             self._clear()
+
+    def _weigh_evidence(self, t: float, x: float, y: float) -> None:
+        """The fix at t as evidence for or against the correction (module doc, the gate)."""
+        px, py = self.kf.position_at(t)
+        if px != px:
+            return
+        cx, cy = self.correction_at(t, gated=False)
+        self.evidence.observe(x - px, y - py, cx, cy)
 
     # ------------------------------------------------------------------ step
     def _step(self, t_end: float) -> bool:
@@ -290,13 +360,19 @@ class HybridPredictor(ModelFileSeams, Predictor):
             pr[k, 0] = c * dx + s * dy
             pr[k, 1] = c * dy - s * dx
         self.net.bufs[1][0] = pr
+        if self._box is not None and not inside_envelope(
+            self.net.bufs[0][0], self.net.bufs[1][0], self._box
+        ):
+            self.outside += 1
+            return False
         out = self.net.run_buffer()  # (4, 4): dx, dy [m, heading frame], log var along/across
         self._gps_v = f.speed
         if not np.isfinite(out).all() or out[:, 2:].max() > MAX_LOGVAR:
             return False
         o = out.tolist()
-        self._kx = (0.0,) + tuple(c * r[0] - s * r[1] for r in o)
-        self._ky = (0.0,) + tuple(s * r[0] + c * r[1] for r in o)
+        a = self._shrink
+        self._kx = (0.0,) + tuple(a[k + 1] * (c * r[0] - s * r[1]) for k, r in enumerate(o))
+        self._ky = (0.0,) + tuple(a[k + 1] * (s * r[0] + c * r[1]) for k, r in enumerate(o))
         self._lva = (0.0,) + tuple(r[2] for r in o)
         self._lvc = (0.0,) + tuple(r[3] for r in o)
         self._cs = (c, s)
@@ -310,20 +386,28 @@ class HybridPredictor(ModelFileSeams, Predictor):
         v = self._can_v if self._can_v is not None else self._gps_v
         return v == v and abs(v) < STILL_SPEED_MPS
 
-    def correction_at(self, t: float) -> tuple[float, float]:
+    def gate_weight(self) -> float:
+        """The drive's evidence weight g in [0, 1] (1 with ``gate=False``)."""
+        return self.evidence.weight if self.gate else 1.0
+
+    def correction_at(self, t: float, gated: bool = True) -> tuple[float, float]:
         """The world correction (dx, dy) [m, ENU] added to the prior's answer for t [s]:
-        (0, 0) where the hybrid falls back to the prior (see the module doc)."""
+        (0, 0) where the hybrid falls back to the prior (see the module doc). ``gated``
+        False: before the evidence weight g (the correction the evidence is about)."""
         if not self._has or self._stationary():
+            return 0.0, 0.0
+        g = self.gate_weight() if gated else 1.0
+        if g == 0.0:
             return 0.0, 0.0
         u = (t - self._t_fix) / DT
         kx, ky = self._kx, self._ky
         if u >= N_H:
-            return kx[N_H], ky[N_H]
+            return g * kx[N_H], g * ky[N_H]
         if u <= 0.0:
             return 0.0, 0.0
         k = int(u)
         f = u - k
-        return kx[k] + f * (kx[k + 1] - kx[k]), ky[k] + f * (ky[k + 1] - ky[k])
+        return g * (kx[k] + f * (kx[k + 1] - kx[k])), g * (ky[k] + f * (ky[k + 1] - ky[k]))
 
     def position_at(self, t: float) -> tuple[float, float]:
         px, py = self.kf.position_at(t)
@@ -333,10 +417,18 @@ class HybridPredictor(ModelFileSeams, Predictor):
         return px + dx, py + dy
 
     def residual_variance_at(self, t: float) -> tuple[float, float]:
-        """(along, across) the heading: the variance [m^2] of the learned residual at t [s]
-        (0, 0 on fallback; see the module doc for the interpolation)."""
+        """(along, across) the heading: the variance [m^2] of the learned residual at t [s],
+        times the evidence weight g (0, 0 on fallback; see the module doc for the
+        interpolation)."""
         if not self._has or self._stationary():
             return 0.0, 0.0
+        g = self.gate_weight()
+        if g == 0.0:
+            return 0.0, 0.0
+        va, vc = self._residual_variance(t)
+        return g * va, g * vc
+
+    def _residual_variance(self, t: float) -> tuple[float, float]:
         u = (t - self._t_fix) / DT
         la, lc = self._lva, self._lvc
         if u >= N_H:

@@ -10,7 +10,10 @@ with that profile's tuned parameters (``predictors/tuned.json``); drives without
 keep their own fixes and the ``native`` parameters -> statistics -> Adam, early stopping
 on the validation future-point error [m], turn rows oversampled, batches mirrored at
 random (left <-> right: dy, ay, yaw of the features, y of prior and target negated) ->
-ONNX export with a parity check -> model card.
+ONNX export with a parity check -> the gate (:mod:`posbench.predictors.hybrid.gate`: the
+shrinkage per horizon fitted on the validation rows, the box of the training inputs) ->
+optionally the held-out comparison with the prior (``held_out``, run by ``bench train``) ->
+model card.
 
 Loss: beta-NLL (Seitzer et al., ICLR 2022, beta = 0.5) of the residual under the predicted
 Gaussian, per horizon and axis, in residual units: the variance head learns how far the
@@ -23,12 +26,14 @@ from __future__ import annotations
 
 import json
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
 from posbench.predictors.hybrid.data import HybridWindows, hybrid_windows
+from posbench.predictors.hybrid.gate import fit_shrink, input_envelope
 from posbench.predictors.lstm.train import (
     EarlyStop,
     Progress,
@@ -49,13 +54,19 @@ BETA = 0.5
 #: the loss weighs the 0.2 s horizon (the benchmark's future point) this much more
 FUTURE_WEIGHT = 4.0
 
+#: ``held_out(model_dir, train_drives, validation_drives, profiles)``: a comparison of the
+#: written model with its prior on the validation drives, recorded as model.json
+#: ``held_out`` (``bench train`` passes
+#: :func:`posbench.predictor_tools.held_out.compare_on_held_out` through it)
+HeldOut = Callable[[Path, Sequence[Drive], Sequence[Drive], Sequence[str]], dict[str, Any]]
+
 
 def drive_rows(
     drive: Drive, profiles: Sequence[str], kf_params: dict[str, dict], seed: int
 ) -> HybridWindows:
     """Training rows of one drive: per profile for a drive with truth, else its own fixes."""
     if drive.truth is None or len(drive.truth) < 2:
-        return hybrid_windows(drive, drive.gps, kf_params.get("native") or {})
+        return hybrid_windows(drive, drive.gps, kf_params.get("native") or {}, condition="native")
     from posbench.scenarios.degrade import degrade_gps
 
     return HybridWindows.concat(
@@ -64,6 +75,7 @@ def drive_rows(
                 drive,
                 degrade_gps(drive.truth, p, seed=seed * 1000 + 100 * j),
                 kf_params.get(p) or {},
+                condition=p,
             )
             for j, p in enumerate(profiles)
         ]
@@ -83,6 +95,19 @@ def future_answers(hw: HybridWindows, corr: np.ndarray) -> np.ndarray:
     return hw.kf_future + np.stack(
         [c * corr[:, 0] - s * corr[:, 1], s * corr[:, 0] + c * corr[:, 1]], axis=1
     )
+
+
+def balanced_future_error(hw: HybridWindows, future: np.ndarray, groups: dict[str, str]) -> float:
+    """The validation error the training selects by [m]: per cell (source group of the
+    drive, GPS condition) the ratio of the hybrid's mean future-point error to its prior's,
+    averaged over the cells with equal weight, times the prior's mean over all rows. Equal
+    to the prior's mean for a correction of 0; a consumer receiver's metre-level rows, where
+    nothing is to be learned, do not outweigh the centimetre cells (or the real drives)."""
+    e_h = np.linalg.norm(future - hw.truth_future, axis=1)
+    e_k = np.linalg.norm(hw.kf_future - hw.truth_future, axis=1)
+    cells = np.array([f"{groups.get(d)}|{c}" for d, c in zip(hw.drive, hw.condition, strict=True)])
+    ratios = [e_h[cells == c].mean() / e_k[cells == c].mean() for c in np.unique(cells)]
+    return float(np.mean(ratios) * e_k.mean())
 
 
 def evaluate(hw: HybridWindows, future: np.ndarray, groups: dict[str, str]) -> dict:
@@ -125,12 +150,14 @@ def run_training(
     max_minutes: float = 30.0,
     max_val_windows: int = 60_000,
     kf_params: dict[str, dict] | None = None,
+    held_out: HeldOut | None = None,
 ) -> dict:
     """Train, export and describe a hybrid model; returns the dict written to model.json.
 
     Args as :func:`posbench.predictors.lstm.train.run_training`; ``hidden`` is the network width
-    (default 48), ``kf_params`` the prior's parameters per GPS condition (default: the tuned
-    ones, :func:`posbench.predictors.hybrid.export.prior_kf_params`)."""
+    (default 48), ``kf_params`` the prior's parameters per GPS condition (default: the kf's
+    tuned ones, :func:`posbench.predictors.hybrid.export.prior_kf_params`); ``held_out``
+    compares the written model with its prior on the validation drives (:data:`HeldOut`)."""
     import torch
 
     from posbench.predictors.hybrid.export import fit_stats, prior_kf_params, save_model
@@ -154,6 +181,7 @@ def run_training(
             "drives need >= 2 s of moving GPS",
         )
     t_data = time.perf_counter() - t_start
+    val_groups = {d.name: group_of(d) for d in val_d}
 
     net = HybridNet(hidden=hidden, lstm_layers=lstm_layers)
     st = fit_stats(tr)
@@ -186,7 +214,7 @@ def run_training(
                 tot += float(loss_fn(Xva[sl], Pva[sl], Tva[sl])) * Xva[sl].shape[0]
                 outs.append(net(Xva[sl], Pva[sl])[:, 0, :2].numpy())
         fut = future_answers(va, np.concatenate(outs).astype(float))
-        return tot / len(va), float(np.linalg.norm(fut - va.truth_future, axis=1).mean())
+        return tot / len(va), balanced_future_error(va, fut, val_groups)
 
     gen = torch.Generator().manual_seed(seed)
 
@@ -236,8 +264,10 @@ def run_training(
             "optimizer": "Adam",
             "scheduler": "ReduceLROnPlateau(factor 0.5, patience 2) on the validation future error",
             "early_stopping_patience": patience,
-            "selection": "validation future-point mean error [m] (development "
-            "drives; epoch 0 = the untrained net = the kf alone)",
+            "selection": "validation future-point error [m] balanced over cells (source "
+            "group x GPS condition): the mean of the cells' hybrid/kf ratios times the kf's "
+            "mean (development drives; epoch 0 = the untrained net = the kf alone); "
+            "history key val_future_mean_m",
             "loss": f"beta-NLL (beta {BETA}) of the residual per horizon and axis, "
             f"in residual units; the 0.2 s horizon weighted {FUTURE_WEIGHT}x",
             "oversampling": "turn/roundabout weight n_other/n_turn clipped to [1, 5]",
@@ -277,9 +307,25 @@ def run_training(
     outs = onnx.session.run(
         None, {"features": va.X.astype(np.float32), "prior": va.prior.astype(np.float32)}
     )[0]
-    future = future_answers(va, outs[:, 0, :2].astype(float))
-    info["validation"] = evaluate(va, future, {d.name: group_of(d) for d in val_d})
+    corr = outs[:, :, :2].astype(float)
+    shrink = fit_shrink(corr, va.target)
+    info["gate"] = {
+        "shrink": [round(float(a), 4) for a in shrink],
+        **input_envelope(tr.X, tr.prior),
+        "how": "shrink: least-squares factor per horizon on the validation rows (held-out "
+        "drives), clipped to [0, 1]; feature_/prior_ min and max: the box of the training "
+        "inputs (widened 10 % at run time); at run time also the drive's own evidence "
+        "(predictors/hybrid/gate.py)",
+    }
+    groups = {d.name: group_of(d) for d in val_d}
+    info["validation"] = evaluate(va, future_answers(va, corr[:, 0]), groups)
+    info["validation_shrunk"] = evaluate(va, future_answers(va, corr[:, 0] * shrink[0]), groups)
     (out_dir / "model.json").write_text(json.dumps(info, indent=1) + "\n")
+    if held_out is not None:
+        t0 = time.perf_counter()
+        info["held_out"] = held_out(out_dir, train_d, val_d, profiles)
+        info["held_out"]["seconds"] = round(time.perf_counter() - t0, 1)
+        (out_dir / "model.json").write_text(json.dumps(info, indent=1) + "\n")
     from posbench.predictors.model_card import write_model_card
 
     write_model_card(info, out_dir, "hybrid")

@@ -1,6 +1,6 @@
-"""The ``hybrid`` predictor (kf prior + learned residual): its fallback to the prior, the
-correction it adds, ONNX parity with torch, its training data, pickling, the GPS-condition
-seam of the registry and one-line errors for a bad model."""
+"""The ``hybrid`` predictor (the kf bank as prior + a gated learned residual): its fallback
+to the prior, the correction it adds, its gate, ONNX parity with torch, its training data,
+pickling, the GPS-condition seam of the registry and one-line errors for a bad model."""
 
 from __future__ import annotations
 
@@ -31,7 +31,6 @@ from posbench.predictors.hybrid.export import (  # noqa: E402
 )
 from posbench.predictors.hybrid.model import HybridNet  # noqa: E402
 from posbench.predictors.hybrid.predictor import HORIZONS, HybridPredictor  # noqa: E402
-from posbench.predictors.kf import LinearKalman  # noqa: E402
 from posbench.predictors.lstm.windows import drive_windows  # noqa: E402
 from posbench.predictors.registry import create  # noqa: E402
 from posbench.replay.loop import GPS, events, feed, replay  # noqa: E402
@@ -99,10 +98,11 @@ def _corr_at(h: float) -> np.ndarray:
 @pytest.mark.parametrize("profile", ["rtk", "consumer", "none"])
 def test_untrained_hybrid_answers_exactly_as_kf_in_the_runner(untrained, profile):
     """Zero correction: every future and now answer of the hybrid is the kf's (same tuned
-    parameters: the model records them per condition), bit for bit, though the network ran."""
+    parameters: the model records them per condition), bit for bit, though the network ran;
+    with the gate off too (no shrinkage, no evidence)."""
     prep = prepare_drive(generate_drive(seed=2, route="mixed"), RunConfig(gps_profile=profile))
-    kf = LinearKalman(**prior_kf_params()[profile])
-    hy = create("hybrid", profile, model=str(untrained))
+    kf = create("kf", profile)
+    hy = create("hybrid", profile, model=str(untrained), gate=False)
     assert hy.prior_condition == profile and hy.kf.config() == kf.config()
     a, b = replay(kf, prep, 0.2), replay(hy, prep, 0.2)
     assert hy.steps > 100  # the network did run on most fixes
@@ -114,11 +114,9 @@ def test_untrained_hybrid_answers_exactly_as_kf_in_the_runner(untrained, profile
 @pytest.mark.slow
 def test_untrained_hybrid_equals_kf_through_the_runner_command(untrained, tmp_path):
     """The real runner (`bench run`, one worker): same figures for the hybrid and its prior,
-    the one CA Kalman filter (``posbench.predictors.kf:LinearKalman``) with the model's rtk
-    parameters."""
+    the ``kf`` as the run builds it (its tuning for the run's GPS condition)."""
     out = tmp_path / "out"
-    cls = "posbench.predictors.kf:LinearKalman"
-    sets = [a for k, v in prior_kf_params()["rtk"].items() for a in ("--set", f"{cls}.{k}={v}")]
+    cls = "kf"
     r = subprocess.run(
         [
             sys.executable,
@@ -133,7 +131,6 @@ def test_untrained_hybrid_equals_kf_through_the_runner_command(untrained, tmp_pa
             str(out),
             "--workers",
             "1",
-            *sets,
         ],
         capture_output=True,
         text=True,
@@ -151,7 +148,7 @@ def test_untrained_hybrid_equals_kf_through_the_runner_command(untrained, tmp_pa
 
 # --------------------------------------------------------------- the correction
 def test_a_hand_set_correction_shifts_answers_by_exactly_R_psi_corr(constant, prep):
-    hy = HybridPredictor(str(constant), "rtk")
+    hy = HybridPredictor(str(constant), "rtk", gate=False)
     evs = events(prep)
     checked = 0
     for i, (k, t, _) in enumerate(evs):
@@ -176,7 +173,7 @@ def test_a_hand_set_correction_shifts_answers_by_exactly_R_psi_corr(constant, pr
 
 
 def test_start_up_and_standstill_fall_back_to_the_prior(constant):
-    hy = HybridPredictor(str(constant), "rtk")
+    hy = HybridPredictor(str(constant), "rtk", gate=False)
     # start-up: fixes 0.2 s apart along a line; no window until they span 2 s
     for i in range(11):
         t = 0.2 * i
@@ -195,7 +192,7 @@ def test_start_up_and_standstill_fall_back_to_the_prior(constant):
     hy.observe_speed(t + 0.02, 10.0)
     assert hy.position_at(t + 0.5) != hy.kf.position_at(t + 0.5)
     # standstill by the window cubic's speed (no wheel speed): fixes that do not move
-    hy2 = HybridPredictor(str(constant), "rtk")
+    hy2 = HybridPredictor(str(constant), "rtk", gate=False)
     for i in range(15):
         hy2.observe_gps(0.2 * i, 5.0, 7.0, sigma=0.02)
     assert hy2.last_step() is not None
@@ -259,7 +256,8 @@ def test_untrained_net_outputs_zero_correction():
 # --------------------------------------------------------------- training data
 def test_hybrid_windows_prior_is_what_kf_answers_in_a_real_replay(prep):
     params = prior_kf_params()["rtk"]
-    kf = LinearKalman(**params)
+    kf = create("kf", "rtk")
+    assert kf.config() == create("kf", None, **params).config()
     future = replay(kf, prep, 0.2).future_xy
     hw = hybrid_windows(prep.drive, prep.gps, params)
     ws = drive_windows(prep.drive, prep.gps)
@@ -329,8 +327,8 @@ def test_gps_condition_picks_the_prior_params(untrained, tmp_path):
     info["prior"]["params"] = {"rtk": {"jerk_psd": 7.0}}
     (tmp_path / "model.json").write_text(json.dumps(info))
     hy = create("hybrid", "consumer", model=str(tmp_path))
-    assert hy.prior_condition == "defaults" and hy.kf.jerk_psd == 2.0
-    assert create("hybrid", "rtk", model=str(tmp_path)).kf.jerk_psd == 7.0
+    assert hy.prior_condition == "defaults" and hy.kf.config() == create("kf", None).config()
+    assert create("hybrid", "rtk", model=str(tmp_path)).kf.config()["jerk_psds"] == [7.0]
     # predictors without the parameter never receive it
     assert "gps_condition" not in create("kf", "rtk").config()
 
