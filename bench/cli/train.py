@@ -24,11 +24,6 @@ from posbench.errors import UsageError
 
 #: the networks `bench train` trains (``--network``)
 NETWORKS = ("lstm", "hybrid")
-#: seed of the synthetic development drives the hybrid's held-out comparison adds (those
-#: ``bench tune`` develops on: never the benchmark's seed 0, never a training seed)
-DEV_SEED = 1000
-#: minutes of training drives the gradient-tuned kf of the held-out comparison is fitted on
-GRADIENT_MINUTES = 10.0
 #: GPS profiles drawn from the truth of drives that have one, per network (``--profiles``)
 DEFAULT_PROFILES = {"lstm": "none,rtk", "hybrid": "none,rtk,consumer"}
 
@@ -205,63 +200,22 @@ def train(
 
 
 def held_out_comparison(workers: int, seed: int, console: Console) -> Any:
-    """The hybrid's held-out comparison (:mod:`posbench.predictor_tools.held_out`) as
-    :data:`posbench.predictors.hybrid.train.HeldOut`."""
+    """The hybrid's held-out comparison
+    (:func:`posbench.predictor_tools.held_out.hybrid_held_out`) as
+    :data:`posbench.predictors.hybrid.train.HeldOut`, its steps said on ``console``."""
+
+    def tell(text: str) -> None:
+        if verbosity() > QUIET:
+            console.print(text)
 
     def compare(model_dir: Path, train_d: Any, val_d: Any, profiles: Any) -> dict[str, Any]:
-        from posbench.predictor_tools.held_out import compare_on_held_out
-        from posbench.scenarios.synthetic import default_drives
+        from posbench.predictor_tools.held_out import hybrid_held_out
 
-        if verbosity() > QUIET:
-            console.print("held-out comparison with the prior: replaying validation drives")
-        dev = default_drives(seed=DEV_SEED)  # never trained on (training uses other seeds)
-        gradient = gradient_priors(train_d, profiles, seed)
-        res = compare_on_held_out(
-            model_dir,
-            [*val_d, *dev],
-            profiles,
-            gradient_params={c: g["params"] for c, g in gradient.items()},
-            workers=workers,
-            seed=seed,
+        return hybrid_held_out(
+            model_dir, train_d, val_d, profiles, workers=workers, seed=seed, tell=tell
         )
-        res["gradient_prior"] = {
-            c: {k: g[k] for k in ("params", "Q_c", "R", "sigma_a", "loss", "best_iteration")}
-            | {
-                "how": "predictors.kf_gradient.gradient_tune on the training drives "
-                "(bench tune kf --method gradient), defaults"
-            }
-            for c, g in gradient.items()
-        }
-        return res
 
     return compare
-
-
-def gradient_priors(train_d: Any, profiles: Any, seed: int) -> dict[str, dict[str, Any]]:
-    """The kf with its noise fitted by gradient (``bench tune kf --method gradient``,
-    :func:`posbench.predictors.kf_gradient.gradient_tune`) on the hybrid's own training
-    drives, per GPS condition they give: their own fixes (``native``) for drives without a
-    truth, each of ``profiles`` for those with one. A condition none gives is not fitted.
-    At most about :data:`GRADIENT_MINUTES` of drives per condition (every k-th drive by
-    name): the fit's cost grows with the drive time (about 1 s per Adam step for 10 min)."""
-    import math
-
-    from posbench.predictors.kf_gradient import gradient_tune
-
-    def spread(ds: list[Any]) -> list[Any]:
-        ds = sorted(ds, key=lambda d: d.name)
-        total = sum(d.duration_s for d in ds) / 60.0
-        return ds[:: max(1, math.ceil(total / GRADIENT_MINUTES))]
-
-    own = [d for d in train_d if d.truth is None or len(d.truth) <= 1]
-    with_truth = [d for d in train_d if d.truth is not None and len(d.truth) > 1]
-    out = {}
-    for cond, ds in [("native", spread(own))] + [(p, spread(with_truth)) for p in profiles]:
-        if ds:
-            if verbosity() > QUIET:
-                console.print(f"fitting the kf's noise by gradient ({cond}, {len(ds)} drives)")
-            out[cond] = gradient_tune(ds, cond, seed=seed)
-    return out
 
 
 def early_stop_message(epoch: int, best_epoch: int) -> str:

@@ -17,7 +17,8 @@ drives; each difference (hybrid minus the other, negative = the hybrid is better
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+import math
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -31,6 +32,11 @@ from posbench.scoring.schema import scored_mask
 
 #: the kf tuned by gradient, in the comparison's runs
 GRADIENT = "kf@gradient"
+#: seed of the synthetic development drives the comparison adds (those ``bench tune``
+#: develops on: never the benchmark's seed 0, never a training seed)
+DEV_SEED = 1000
+#: minutes of training drives the gradient-tuned kf is fitted on, at most (about)
+GRADIENT_MINUTES = 10.0
 KINDS = ("future", "now")
 
 
@@ -121,3 +127,74 @@ def compare_on_held_out(
         "drives (negative: the hybrid is better)"
     )
     return out
+
+
+def gradient_priors(
+    train_d: Sequence[Drive],
+    profiles: Sequence[str],
+    seed: int = 0,
+    tell: Callable[[str], None] | None = None,
+) -> dict[str, dict[str, Any]]:
+    """The kf with its noise fitted by gradient (``bench tune kf --method gradient``,
+    :func:`posbench.predictors.kf_gradient.gradient_tune`) on the hybrid's own training
+    drives, per GPS condition they give: their own fixes (``native``) for drives without a
+    truth, each of ``profiles`` for those with one. A condition none gives is not fitted.
+    At most about :data:`GRADIENT_MINUTES` of drives per condition (every k-th drive by
+    name): the fit's cost grows with the drive time (about 1 s per Adam step for 10 min).
+    ``tell`` hears one line per fit."""
+    from posbench.predictors.kf_gradient import gradient_tune
+
+    def spread(ds: list[Drive]) -> list[Drive]:
+        ds = sorted(ds, key=lambda d: d.name)
+        total = sum(d.duration_s for d in ds) / 60.0
+        return ds[:: max(1, math.ceil(total / GRADIENT_MINUTES))]
+
+    own = [d for d in train_d if d.truth is None or len(d.truth) <= 1]
+    with_truth = [d for d in train_d if d.truth is not None and len(d.truth) > 1]
+    out = {}
+    for cond, ds in [("native", spread(own))] + [(p, spread(with_truth)) for p in profiles]:
+        if ds:
+            if tell is not None:
+                tell(f"fitting the kf's noise by gradient ({cond}, {len(ds)} drives)")
+            out[cond] = gradient_tune(ds, cond, seed=seed)
+    return out
+
+
+def hybrid_held_out(
+    model_dir: Path,
+    train_d: Sequence[Drive],
+    val_d: Sequence[Drive],
+    profiles: Sequence[str],
+    *,
+    workers: int = 2,
+    seed: int = 0,
+    tell: Callable[[str], None] | None = None,
+) -> dict[str, Any]:
+    """What ``bench train --network hybrid`` records as model.json ``held_out``: the model
+    against ``kf`` and the kf tuned by gradient on ``train_d`` (:func:`gradient_priors`),
+    on the validation drives ``val_d`` plus the synthetic development drives of seed
+    :data:`DEV_SEED` (:func:`compare_on_held_out`); the gradient fits under
+    ``gradient_prior``."""
+    from posbench.scenarios.synthetic import default_drives
+
+    if tell is not None:
+        tell("held-out comparison with the prior: replaying validation drives")
+    dev = default_drives(seed=DEV_SEED)  # never trained on (training uses other seeds)
+    gradient = gradient_priors(train_d, profiles, seed, tell)
+    res = compare_on_held_out(
+        model_dir,
+        [*val_d, *dev],
+        profiles,
+        gradient_params={c: g["params"] for c, g in gradient.items()},
+        workers=workers,
+        seed=seed,
+    )
+    res["gradient_prior"] = {
+        c: {k: g[k] for k in ("params", "Q_c", "R", "sigma_a", "loss", "best_iteration")}
+        | {
+            "how": "predictors.kf_gradient.gradient_tune on the training drives "
+            "(bench tune kf --method gradient), defaults"
+        }
+        for c, g in gradient.items()
+    }
+    return res

@@ -7,11 +7,11 @@ drive's actual fix times, and a second one that also knows the IMU. What the bou
 per drive:
 
 - **q**, the jerk PSD [m^2/s^5]: from the reference's own motion on the drive, as it varies
-  along it (:func:`~posbench.metrics.pcrb.jerk_psd_profile`: the squared third differences
+  along it (:func:`~posbench.metrics.jerk_psd.jerk_psd_profile`: the squared third differences
   on a grid of the drive's median fix interval, averaged over 2 s windows): its truth, or
   without one the cubic through its fixes that the queries are scored against. One q for a
   whole drive would overstate it where the drive is calm and understate it in manoeuvres;
-  the drive's one value (:func:`~posbench.metrics.pcrb.jerk_psd_from_track`) is reported;
+  the drive's one value (:func:`~posbench.metrics.jerk_psd.jerk_psd_from_track`) is reported;
 - **R**, the fixes' white noise [m^2] per axis: a simulated profile's own (``rtk`` 2 cm,
   ``consumer`` 0.5 m, ``none`` exact: :data:`~posbench.metrics.limit.MIN_FIX_VAR_M2`); a
   receiver's own fixes: estimated from the fixes
@@ -36,18 +36,18 @@ import numpy as np
 import pandas as pd
 
 from posbench.config import RunConfig
+from posbench.metrics.jerk_psd import (
+    jerk_psd_from_track,
+    jerk_psd_profile,
+    track_noise_variance,
+)
 from posbench.metrics.limit import (
     fix_error_variance,
     fix_white_variance,
     imu_white_variance,
     mean_error_bounds,
 )
-from posbench.metrics.pcrb import (
-    JerkPsd,
-    jerk_psd_from_track,
-    jerk_psd_profile,
-    track_noise_variance,
-)
+from posbench.metrics.pcrb import JerkPsd
 from posbench.replay.prepare import PreparedDrive
 from posbench.replay.reference import TRUTH, cubic_through_fixes, truth_at
 
@@ -104,9 +104,9 @@ Q_WINDOW_S = 2.0
 def jerk_psd(prep: PreparedDrive) -> tuple[float, JerkPsd]:
     """The jerk PSD [m^2/s^5] of ``prep``'s reference on a grid of its median fix interval
     [s], less what the reference's own white noise adds
-    (:func:`~posbench.metrics.pcrb.track_noise_variance`): the drive's one value, and its
+    (:func:`~posbench.metrics.jerk_psd.track_noise_variance`): the drive's one value, and its
     profile along the drive in windows of
-    :data:`Q_WINDOW_S` (:func:`~posbench.metrics.pcrb.jerk_psd_profile`, what the bound
+    :data:`Q_WINDOW_S` (:func:`~posbench.metrics.jerk_psd.jerk_psd_profile`, what the bound
     takes). The reference: its truth, or without one the cubic through its fixes the
     queries are scored against (:func:`posbench.replay.reference.cubic_through_fixes`; a
     stale or jumping fix moves it far less than it moves the fixes themselves)."""

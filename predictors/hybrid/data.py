@@ -25,7 +25,7 @@ from dataclasses import dataclass, fields
 
 import numpy as np
 
-from posbench.predictors.hybrid.predictor import HORIZONS, N_H
+from posbench.predictors.hybrid.model_info import HORIZONS, N_H
 from posbench.predictors.kf_bank import KalmanBank
 from posbench.predictors.lstm.resample import N_STEPS, centred_cubic_batch
 from posbench.predictors.lstm.windows import drive_windows

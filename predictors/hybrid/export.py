@@ -29,7 +29,14 @@ import torch
 
 from posbench.predictors.hybrid.data import HybridWindows, hybrid_windows
 from posbench.predictors.hybrid.model import HybridNet
-from posbench.predictors.hybrid.predictor import CONDITIONS, FORMAT, HORIZONS, INPUTS, N_H, OUTPUT
+from posbench.predictors.hybrid.model_info import (
+    CONDITIONS,
+    FORMAT,
+    HORIZONS,
+    INPUTS,
+    N_H,
+    OUTPUT,
+)
 from posbench.predictors.lstm.features import FEATURES, N_FEATURES
 from posbench.predictors.lstm.resample import DT, MIN_SPAN_S, N_STEPS
 from posbench.predictors.lstm.runtime import session_options

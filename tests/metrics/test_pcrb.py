@@ -12,11 +12,11 @@ import numpy as np
 import pytest
 from helpers import missing
 
-from posbench.metrics import pcrb
+from posbench.metrics import jerk_psd, pcrb
+from posbench.metrics.jerk_psd import jerk_psd_from_track
 from posbench.metrics.pcrb import (
     filtered_bound,
     information_recursion,
-    jerk_psd_from_track,
     mean_error_2d,
     mean_error_bound,
     position_variance_bound,
@@ -367,7 +367,7 @@ def test_a_tracks_white_noise_is_told_from_its_jerk(noise_sd):
     pos = np.cumsum(np.cumsum(np.cumsum(jerk, axis=0) * fine, axis=0) * fine, axis=0) * fine
     t = np.arange(n) * 0.1
     xy = pos[::100] + rng.normal(0.0, noise_sd, (n, 2)) if noise_sd else pos[::100]
-    s2 = pcrb.track_noise_variance(t, xy[:, 0], xy[:, 1], dt=0.1)
+    s2 = jerk_psd.track_noise_variance(t, xy[:, 0], xy[:, 1], dt=0.1)
     assert math.sqrt(s2) == pytest.approx(noise_sd, abs=2e-4)
     got = jerk_psd_from_track(t, xy[:, 0], xy[:, 1], dt=0.1, noise_var=s2)
     assert got == pytest.approx(q, rel=0.05)
