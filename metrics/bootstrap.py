@@ -377,6 +377,7 @@ def summary_ci(
     n_resamples: int = DEFAULT_RESAMPLES,
     seed: int = 0,
     level: float = LEVEL,
+    quantiles: bool = True,
 ) -> dict[str, Any]:
     """Intervals of the mean, median and p95 of the finite ``errors`` (what
     :func:`posbench.metrics.accuracy.summarize` reports), resampling ``clusters`` (e.g. the drive of
@@ -387,8 +388,12 @@ def summary_ci(
         ``{"mean_m": [lo, hi], "median_m": [lo, hi], "p95_m": [lo, hi], "clusters": D,
         "block_len": L}``: ``block_len`` is the block length [queries] when one cluster was
         block-resampled, else None; with no finite error every interval is NaN and D = 0.
+        ``quantiles`` False: the mean's interval only (median and p95 NaN, no quantile
+        pass paid).
     """
-    return interval_batch([(errors, clusters, times)], False, n_resamples, seed, level)[0]
+    return interval_batch([(errors, clusters, times)], False, n_resamples, seed, level, quantiles)[
+        0
+    ]
 
 
 def summary_cis(
@@ -448,11 +453,13 @@ def interval_batch(
     n_resamples: int = DEFAULT_RESAMPLES,
     seed: int = 0,
     level: float = LEVEL,
+    quantiles: bool = True,
 ) -> list[dict[str, Any]]:
     """:func:`summary_ci` of each (errors, clusters, times) of ``items``; those that end up
     with the same resamples (as many clusters, or one cluster and the same block) share one
     quantile pass. ``share_blocks``: the items are series over the same queries, and the
-    single-cluster ones of equal length use the longest of their block lengths."""
+    single-cluster ones of equal length use the longest of their block lengths.
+    ``quantiles`` False: the means' intervals only (no quantile pass)."""
     nan2 = [float("nan"), float("nan")]
     out: list[dict[str, Any]] = []
     prepared: list[tuple[int, np.ndarray, np.ndarray | None, int]] = []
@@ -497,6 +504,8 @@ def interval_batch(
         out[i].update(
             mean_m=list(ratio_ci(sums, counts, w, level)), clusters=n_clusters, block_len=block
         )
+        if not quantiles:
+            continue
         order = np.argsort(e)  # ties hold equal values: any order of them gives the same
         # series over the same queries share a pass when they share their resamples
         key = (id(w), e.size) if share_blocks else (id(w), i)

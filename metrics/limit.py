@@ -23,14 +23,7 @@ from typing import Any
 
 import numpy as np
 
-from posbench.metrics.bootstrap import (
-    DEFAULT_RESAMPLES,
-    LEVEL,
-    block_length,
-    block_resample,
-    cluster_weights,
-    ratio_ci,
-)
+from posbench.metrics.bootstrap import DEFAULT_RESAMPLES, LEVEL, summary_ci
 from posbench.metrics.pcrb import (
     JerkPsd,
     mean_error_bound,
@@ -205,34 +198,7 @@ def mean_ci(
 ) -> dict[str, Any]:
     """The interval of the mean [m] of the finite ``values`` (a bound's per-query mean
     errors), resampling ``clusters`` (drives), or with one cluster in blocks of its queries
-    in time order (``times`` [s]): the same resamples, so the same interval, as
-    :func:`posbench.metrics.bootstrap.summary_ci` gives the mean; ``median_m`` and ``p95_m``
-    are NaN (a bound's median and p95 are no bound) and no quantile pass is paid. Keys as
-    :func:`~posbench.metrics.bootstrap.summary_ci`'s."""
-    nan2 = [math.nan, math.nan]
-    out: dict[str, Any] = {
-        "mean_m": list(nan2),
-        "median_m": list(nan2),
-        "p95_m": list(nan2),
-        "clusters": 0,
-        "block_len": None,
-    }
-    e = np.asarray(values, dtype=np.float64)
-    ok = np.isfinite(e)
-    e = e[ok]
-    if e.size == 0:
-        return out
-    _, codes = np.unique(np.asarray(clusters)[ok], return_inverse=True)
-    codes = codes.ravel()
-    d = int(codes.max()) + 1
-    if d == 1:
-        if times is not None:
-            e = e[np.argsort(np.asarray(times, dtype=np.float64)[ok], kind="stable")]
-        br = block_resample(e.size, block_length(e), n_resamples, seed)
-        units, w, block = br.units, br.counts, br.block_len
-    else:
-        units, w, block = codes, cluster_weights(d, n_resamples, seed), None
-    sums = np.bincount(units, weights=e, minlength=w.shape[1])
-    counts = np.bincount(units, minlength=w.shape[1])
-    out.update(mean_m=list(ratio_ci(sums, counts, w, level)), clusters=d, block_len=block)
-    return out
+    in time order (``times`` [s]): :func:`posbench.metrics.bootstrap.summary_ci` without
+    its quantile pass, so ``median_m`` and ``p95_m`` are NaN (a bound's median and p95 are
+    no bound). Keys as ``summary_ci``'s."""
+    return summary_ci(values, clusters, times, n_resamples, seed, level, quantiles=False)
