@@ -17,9 +17,14 @@ import inspect
 from abc import ABC, abstractmethod
 from collections.abc import Callable
 from pathlib import Path
-from typing import ClassVar
+from typing import ClassVar, Literal, get_args
 
 import numpy as np
+
+#: the GPS conditions a run replays a drive under: its own receiver's fixes (``native``), or
+#: fixes drawn from its truth with no noise, an RTK receiver's or a consumer receiver's
+GpsCondition = Literal["native", "none", "rtk", "consumer"]
+GPS_CONDITIONS: tuple[str, ...] = get_args(GpsCondition)
 
 
 class Predictor(ABC):

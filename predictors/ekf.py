@@ -259,6 +259,11 @@ class CtraEkf(Predictor):
         ``--set`` checks)."""
         return EKF_FLAT.flatten(EKF_INPUTS, EKF_INPUTS)
 
+    @classmethod
+    def flat_option_types(cls) -> dict[str, Any]:
+        """The flat option names and their declared types (``--set`` parses by them)."""
+        return EKF_FLAT.types(EKF_INPUTS)
+
     def config(self) -> dict:
         """The options in flat names (:data:`EKF_FLAT`), as ``CtraEkf(**config())`` takes
         them."""

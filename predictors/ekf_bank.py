@@ -266,6 +266,11 @@ class EkfBank(RowBank):
         ``--set`` checks)."""
         return EKF_FLAT.flatten(BANK_INPUTS, BANK_INPUTS)
 
+    @classmethod
+    def flat_option_types(cls) -> dict[str, Any]:
+        """The flat option names and their declared types (``--set`` parses by them)."""
+        return EKF_FLAT.types(BANK_INPUTS)
+
     def config(self) -> dict:
         return {
             **EKF_FLAT.flatten(self.inputs, BANK_INPUTS),

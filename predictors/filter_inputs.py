@@ -202,6 +202,16 @@ class FlatNames:
             raise DataError(None, msg)
         return dataclasses.replace(base, **value)
 
+    def types(self, defaults: Mapping[str, Any]) -> dict[str, Any]:
+        """Each flat name's declared type: its input field's (``bool`` for a ``use_``
+        switch), as :func:`posbench.predictors.option_types.parse_options` reads them."""
+        from posbench.predictors.option_types import field_types
+
+        return {
+            name: bool if field is None else field_types(type(defaults[key]))[field]
+            for name, (key, field) in self.fields.items()
+        }
+
     def flatten(self, inputs: Mapping[str, Any], defaults: Mapping[str, Any]) -> dict[str, Any]:
         """The flat options of ``inputs`` (a dropped input: its ``use_`` switch False and
         its fields at ``defaults``), in the order of :attr:`fields`."""

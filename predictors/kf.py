@@ -252,6 +252,11 @@ class LinearKalman(Predictor):
         ``--set`` checks)."""
         return KF_FLAT.flatten(KF_INPUTS, KF_INPUTS)
 
+    @classmethod
+    def flat_option_types(cls) -> dict[str, Any]:
+        """The flat option names and their declared types (``--set`` parses by them)."""
+        return KF_FLAT.types(KF_INPUTS)
+
     def config(self) -> dict:
         """The options in flat names (:data:`KF_FLAT`), as ``LinearKalman(**config())``
         takes them."""

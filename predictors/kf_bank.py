@@ -388,6 +388,11 @@ class KalmanBank(RowBank):
         ``--set`` checks)."""
         return KF_FLAT.flatten(BANK_INPUTS, BANK_INPUTS)
 
+    @classmethod
+    def flat_option_types(cls) -> dict[str, Any]:
+        """The flat option names and their declared types (``--set`` parses by them)."""
+        return KF_FLAT.types(BANK_INPUTS)
+
     def config(self) -> dict:
         return {
             **KF_FLAT.flatten(self.inputs, BANK_INPUTS),

@@ -437,10 +437,17 @@ def create(
     A class whose constructor declares a parameter :data:`CONDITION_PARAM`
     (``gps_condition``) also receives ``gps_condition=condition`` (None included) unless
     ``config`` sets it: a predictor that keeps per-condition parameters of its own (the
-    ``hybrid``'s prior, recorded in its model) picks them itself."""
+    ``hybrid``'s prior, recorded in its model) picks them itself.
+
+    Every option is parsed by its declared type
+    (:func:`posbench.predictors.option_types.parse_options`): ``use_imu="no"`` is False, and
+    a value an option does not take (``use_imu="maybe"``) raises
+    :class:`~posbench.predictors.option_types.OptionValueError`, one line naming it."""
+    from posbench.predictors.option_types import parse_options
+
     entry = resolve(name)
     cls = load_class(entry, base_name(name))
     kwargs = {**entry.defaults, **tuned_params(base_name(name), condition, tuning_file), **config}
     if CONDITION_PARAM not in kwargs and CONDITION_PARAM in constructor_options(cls)[0]:
         kwargs[CONDITION_PARAM] = condition
-    return cls(**kwargs)
+    return cls(**parse_options(cls, kwargs))

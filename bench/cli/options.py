@@ -213,7 +213,9 @@ SetOpt = Annotated[
         help="A constructor option of one predictor of the run, over its tuned value, e.g. "
         "--set kf.jerk_psd=4.0 or kf@slow.jerk_psd=1 or mymod:MyPredictor.tau_s=0.5 (split at "
         "the last '.' before '='). VALUE is a JSON literal (4, 0.5, true, \"text\", [1, 2]), "
-        "else taken as text. Repeatable; see `bench predictors NAME` for the options.",
+        "else taken as text, and read by the option's type: a yes/no option takes true/false "
+        "(also yes/no, on/off, 1/0), nothing else. Repeatable; `bench predictors NAME` lists "
+        "each option and what it takes.",
     ),
 ]
 GateOpt = Annotated[

@@ -28,12 +28,14 @@ def predictor_info(name: str, options: bool = False, tuning: Path | None = None)
     (built-in, registered, entry point, import path), ``distribution`` (for an entry
     point), ``target`` (``module:Class``), ``description`` and ``error`` (why it cannot be
     loaded, else None). With ``options``: its constructor options (``name``, ``default``,
-    ``required``), ``any_option`` (it takes ``**kwargs``) and ``by_condition``: per GPS
+    ``required``, ``takes``: the values it takes, in words), ``any_option`` (it takes
+    ``**kwargs``) and ``by_condition``: per GPS
     condition the values a run uses where they differ from the defaults (the ``tuning``
     file's, else the package's tuning), with ``tuning`` (the file they come from). A
     built-in's class is imported only for its options; an entry point's or import path's to
     read its docstring."""
     from posbench.config import GPS_CONDITIONS
+    from posbench.predictors.option_types import declared_types, takes_text
     from posbench.predictors.registry import (
         PredictorError,
         base_name,
@@ -56,12 +58,15 @@ def predictor_info(name: str, options: bool = False, tuning: Path | None = None)
     try:
         info["description"] = description(name)
         if options:
-            accepted, any_option = constructor_options(predictor_class(name))
+            cls = predictor_class(name)
+            accepted, any_option = constructor_options(cls)
+            types = declared_types(cls)
             info["options"] = [
                 {
                     "name": k,
                     "default": None if v is inspect.Parameter.empty else _jsonable(v),
                     "required": v is inspect.Parameter.empty,
+                    "takes": takes_text(types.get(k, Any)),
                 }
                 for k, v in accepted.items()
             ]
@@ -100,16 +105,6 @@ def listing(names: list[str] | None = None, tuning: Path | None = None) -> dict[
     return {"predictors": infos, "notes": notes}
 
 
-def _option_text(opts: list[dict[str, Any]], any_option: bool) -> str:
-    parts = [
-        f"{o['name']} (required)" if o["required"] else f"{o['name']}={o['default']!r}"
-        for o in opts
-    ]
-    if any_option:
-        parts.append("and any other (**kwargs)")
-    return ", ".join(parts) if parts else "none"
-
-
 def list_predictors(
     names: Annotated[
         list[str] | None,
@@ -141,6 +136,7 @@ def list_predictors(
     from rich.markup import escape
 
     from posbench.cli.terminal import print_table, say
+    from posbench.predictors.option_types import shown
 
     if tuning is not None and not tuning.is_file():
         raise UsageError(f"--tuning {tuning}: no such file")
@@ -159,12 +155,20 @@ def list_predictors(
     print_table(console, ["name", "from", "description"], rows, left_columns=3)
     for i in res["predictors"]:
         if "options" in i:
+            more = " and any other (**kwargs)" if i["any_option"] else ""
+            how = f"--set {escape(i['name'])}.OPTION=VALUE"
             console.print(
-                f"{escape(i['name'])} ({escape(i['target'])}) options: "
-                f"{escape(_option_text(i['options'], i['any_option']))}",
+                f"{escape(i['name'])} ({escape(i['target'])}) options"
+                f"{':' if i['options'] else ': none'}{more} ({how})",
                 highlight=False,
                 soft_wrap=True,
             )
+            option_rows = [
+                [o["name"], "(required)" if o["required"] else shown(o["default"]), o["takes"]]
+                for o in i["options"]
+            ]
+            if option_rows:
+                print_table(console, ["option", "default", "takes"], option_rows, left_columns=3)
             for cond, tuned in i.get("by_condition", {}).items():
                 values = ", ".join(f"{k}={v!r}" for k, v in tuned["params"].items())
                 console.print(

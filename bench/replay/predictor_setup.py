@@ -35,11 +35,30 @@ Given = dict[tuple[str, str], str]
 EXAMPLE = "e.g. --set kf.jerk_psd=4.0"
 
 
+#: the first characters of a value meant as JSON (an object, a list, a quoted text): such a
+#: value that does not parse is a mistake to name, never a bare word
+JSON_STARTS = ("{", "[", '"')
+
+
 def parse_value(text: str) -> Any:
-    """A ``--set`` value: the JSON literal it spells, else the text itself (a bare word)."""
+    """A ``--set`` value: the JSON literal it spells, else the text itself (a bare word such
+    as ``lbfgs`` or ``no``; the option's declared type decides what it means).
+
+    Raises:
+        ValueError: text that starts as JSON does (``{``, ``[``, ``"``) but does not parse,
+            with the parser's reason and column.
+    """
     try:
         return json.loads(text)
-    except ValueError:
+    except ValueError as e:
+        if text.lstrip().startswith(JSON_STARTS):
+            reason = getattr(e, "msg", str(e))
+            col = getattr(e, "colno", None)
+            raise ValueError(
+                f"{quoted(text)} is not valid JSON ({reason}"
+                f"{f' at column {col}' if col else ''}); quote it for the shell, "
+                """e.g. --set 'kf.imu={"gate": 0}'"""
+            ) from None
         return text
 
 
@@ -68,7 +87,10 @@ def parse_set(values: Sequence[str] | None) -> tuple[dict[str, dict[str, Any]], 
             raise UsageError(f"{flag}: no value; write '\"\"' for an empty text, {EXAMPLE}")
         if (name, option) in given:
             raise UsageError(f"{flag}: {name}.{option} is set twice (also {given[name, option]})")
-        options.setdefault(name, {})[option] = parse_value(value.strip())
+        try:
+            options.setdefault(name, {})[option] = parse_value(value.strip())
+        except ValueError as e:
+            raise UsageError(f"{flag}: {e}") from None
         given[name, option] = flag
     return options, given
 
@@ -279,10 +301,30 @@ def _check_predictors(
         check_option_names(name, opts, given)
     resolved: dict[str, dict[str, Any]] = {}
     for name, opts in options.items():
-        resolved[name] = dict(opts)
+        resolved[name] = typed_options(name, opts, given)
         if "model" in opts:
             resolved[name]["model"] = _model_path(name, opts["model"])
     return resolved
+
+
+def typed_options(
+    name: str, options: Mapping[str, Any], given: Mapping[tuple[str, str], str]
+) -> dict[str, Any]:
+    """``options`` of predictor ``name`` parsed by their declared types
+    (:func:`posbench.predictors.option_types.parse_options`: ``--set kf.use_imu=no`` is
+    False); a value an option does not take is one line naming how it was given, what it
+    takes and the value."""
+    from posbench.predictors.option_types import OptionValueError, parse_options
+    from posbench.predictors.registry import predictor_class
+
+    try:
+        return parse_options(predictor_class(name), options)
+    except OptionValueError as e:
+        top = e.option.split(".")[0].split("[")[0]
+        raise UsageError(
+            f"{flag_text(given, name, top, options.get(top))}: {name}.{e}; see "
+            f"`bench predictors {name}`"
+        ) from None
 
 
 def plan_predictors(

@@ -273,3 +273,35 @@ def tolerances_markdown() -> str:
             out.append(f"| `{n}` | `{getattr(defaults, n)!r}` | {cell(meaning)} |")
         out.append("")
     return "\n".join(out)
+
+
+# ------------------------------------------------------------------ predictor options
+def predictor_options_markdown() -> str:
+    """One table per built-in predictor: every option ``--set NAME.OPTION=VALUE`` takes, its
+    default and what values it takes, read from the constructor's declared types
+    (:mod:`posbench.predictors.option_types`), as ``bench predictors NAME`` prints them."""
+    from posbench.predictors.option_types import declared_types, shown, takes_text
+    from posbench.predictors.registry import (
+        BUILT_IN,
+        available,
+        constructor_options,
+        predictor_class,
+    )
+
+    out = []
+    for name, entry in available().items():
+        if entry.source != BUILT_IN:
+            continue
+        cls = predictor_class(name)
+        defaults, _ = constructor_options(cls)
+        types = declared_types(cls)
+        out += [f"## `{name}`", "", cell(entry.description), ""]
+        out += ["| option | default | takes |", "|---|---|---|"]
+        for option, default in defaults.items():
+            value = "(required)" if default is inspect.Parameter.empty else shown(default)
+            if len(value) > 60:  # an input object's repr: its fields are listed as options
+                value = type(default).__name__ + "(...)"
+            takes = takes_text(types.get(option, Any))
+            out.append(f"| `{option}` | `{cell(value)}` | {cell(takes)} |")
+        out.append("")
+    return "\n".join(out)

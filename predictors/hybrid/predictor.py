@@ -57,7 +57,7 @@ from pathlib import Path
 
 import numpy as np
 
-from posbench.predictors.base import ModelFileSeams, Predictor
+from posbench.predictors.base import GpsCondition, ModelFileSeams, Predictor
 from posbench.predictors.hybrid.gate import EvidenceGate, envelope_arrays, inside_envelope
 from posbench.predictors.hybrid.model_info import (
     BUNDLED_TEXT,
@@ -100,7 +100,10 @@ class HybridPredictor(ModelFileSeams, Predictor):
     bundled_text = BUNDLED_TEXT
 
     def __init__(
-        self, model: str | None = None, gps_condition: str | None = None, gate: bool = True
+        self,
+        model: str | None = None,
+        gps_condition: GpsCondition | None = None,
+        gate: bool = True,
     ) -> None:
         self.bundled = not model
         self.model_path = Path(model) if model else bundled_model()

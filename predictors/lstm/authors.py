@@ -27,17 +27,19 @@ from __future__ import annotations
 
 import math
 from pathlib import Path
+from typing import Literal, get_args
 
 import numpy as np
 
-from posbench.predictors.lstm.predictor import LstmPredictor
+from posbench.predictors.lstm.predictor import Fit, LstmPredictor
 from posbench.predictors.lstm.resample import GRID_OFFSETS, N_STEPS, deriv_poly
 from posbench.predictors.lstm.runtime import OnnxModel
 from posbench.scenarios.errors import DataError
 
 OUTPUT = "output"
 FIXED_BATCH = 1024
-ORIGINS = ("window", "absolute")
+Origin = Literal["window", "absolute"]
+ORIGINS: tuple[str, ...] = get_args(Origin)
 _T = np.arange(N_STEPS) * 0.2
 
 
@@ -57,7 +59,7 @@ class AuthorsLstmPredictor(LstmPredictor):
     name = "lstm-authors"
 
     def __init__(
-        self, model: str | None = None, fit: str = "closed", origin: str = "window"
+        self, model: str | None = None, fit: Fit = "closed", origin: Origin = "window"
     ) -> None:
         if model is None:
             raise DataError(

@@ -48,6 +48,7 @@ import math
 from importlib import resources
 from pathlib import Path
 from time import perf_counter_ns
+from typing import Literal, get_args
 
 import numpy as np
 
@@ -88,10 +89,12 @@ MAX_BRIDGE_STEPS = 1500
 #: a real fix this long [s] after the previous real one restarts the fix history: the
 #: bridging pseudo-fixes of a long outage (metres off by then) must not shape the new fit
 RESTART_GAP_S = 5.0
-FITS = ("closed", "lbfgs")
+Fit = Literal["closed", "lbfgs"]
+FITS: tuple[str, ...] = get_args(Fit)
 #: ``fused`` (default): the fix step in few numpy calls (:mod:`posbench.predictors.lstm.fused`);
 #: ``staged``: the readable reference, stage by stage (same answers to float rounding)
-STEPS = ("fused", "staged")
+Step = Literal["fused", "staged"]
+STEPS: tuple[str, ...] = get_args(Step)
 N_FEATURES = 6
 #: text recorded in results for the bundled model
 #: (:meth:`~posbench.predictors.base.ModelFileSeams.model_description`)
@@ -159,7 +162,7 @@ class LstmPredictor(ModelFileSeams, Predictor):
     #: network step a fix triggers (see the module doc); set it on an instance
     stage_timer: StageTimer | None = None
 
-    def __init__(self, model: str | None = None, fit: str = "closed", step: str = "fused") -> None:
+    def __init__(self, model: str | None = None, fit: Fit = "closed", step: Step = "fused") -> None:
         if fit not in FITS:
             raise ValueError(f"fit must be one of {FITS}, not {fit!r}")
         if step not in STEPS:

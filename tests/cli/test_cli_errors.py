@@ -104,7 +104,7 @@ CASES = [
     (
         "set-bad-json-rejected",
         "run -p kf --set kf.jerk_psd=[1,",
-        "--set kf.jerk_psd=[1,: predictor kf rejects jerk_psd='[1,'",
+        "--set kf.jerk_psd=[1,: '[1,' is not valid JSON (Expecting value at column 4)",
         True,
     ),
     (

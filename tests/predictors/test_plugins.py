@@ -459,12 +459,18 @@ def test_constructor_options():
         ('"4"', "4"),
         ("[1, 2]", [1, 2]),
         ("lbfgs", "lbfgs"),
-        ("[1,", "[1,"),
+        ("no", "no"),
         ("path/to/m.onnx", "path/to/m.onnx"),
     ],
 )
 def test_set_values_are_json_else_text(text, value):
     assert parse_value(text) == value
+
+
+@pytest.mark.parametrize("text", ["[1,", '{"gate": 0', '"open'])
+def test_set_values_that_start_as_json_must_parse(text):
+    with pytest.raises(ValueError, match="is not valid JSON"):
+        parse_value(text)
 
 
 def test_set_splits_at_the_last_dot():
@@ -527,11 +533,17 @@ def test_set_alias_joins_the_run_and_tuned_values_come_first():
 
 
 def test_set_errors_name_the_predictor_and_option():
-    opts, given = parse_set(["kf.gps_sigma=0.1", "kf.jerk_psd=[1,"])
+    opts, given = parse_set(["kf.gps_sigma=0.1", "kf.jerk_psd=x"])
     with pytest.raises(UsageError) as e:
         validate_predictors(["kf"], opts, given)
     assert str(e.value).startswith(
-        "--set kf.jerk_psd=[1,: predictor kf rejects jerk_psd='[1,': kf: jerk_psd='[1,' must be in"
+        "--set kf.jerk_psd=x: kf.jerk_psd takes a number or null, not 'x'; see `bench predictors"
+    )
+    opts, given = parse_set(["kf.gps_sigma=0.1", "kf.jerk_psd=1e9"])
+    with pytest.raises(UsageError) as e:
+        validate_predictors(["kf"], opts, given)
+    assert str(e.value).startswith(
+        "--set kf.jerk_psd=1e9: predictor kf rejects jerk_psd=1000000000.0: kf: jerk_psd="
     )
     opts, given = parse_set(["cv.nosuch=1"])
     with pytest.raises(
