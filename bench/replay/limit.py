@@ -42,6 +42,7 @@ from posbench.metrics.jerk_psd import (
     track_noise_variance,
 )
 from posbench.metrics.limit import (
+    MIN_FIX_VAR_M2,
     fix_error_variance,
     fix_white_variance,
     imu_white_variance,
@@ -53,6 +54,10 @@ from posbench.replay.reference import TRUTH, cubic_through_fixes, truth_at
 
 #: the columns of a drive's limit frame (``DriveRun.limit``): one row per scored query
 LIMIT_COLUMNS = ("kind", "t_query", "label", "limit_m", "limit_imu_m")
+
+
+#: the largest stated accuracy [m] the bound takes as it is (its square stays finite)
+MAX_STATED_SIGMA_M = 1e150
 
 
 def fix_noise(prep: PreparedDrive, cfg: RunConfig) -> dict[str, Any]:
@@ -77,6 +82,9 @@ def fix_noise(prep: PreparedDrive, cfg: RunConfig) -> dict[str, Any]:
     est = fix_white_variance(gps.t, gps.x, gps.y)
     stated = np.asarray(gps.accuracy, dtype=float) if gps.accuracy is not None else np.empty(0)
     stated = stated[np.isfinite(stated) & (stated > 0)]
+    # held within [1 mm, 1e150 m]: the bound's floor on a fix's noise, and a square that
+    # neither underflows to 0 (a division by it) nor overflows (ordinary statements unmoved)
+    stated = np.clip(stated, math.sqrt(MIN_FIX_VAR_M2), MAX_STATED_SIGMA_M)
     how = "white: estimated from the fixes"
     white = est
     total = math.nan
