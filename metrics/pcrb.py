@@ -32,6 +32,26 @@ position at ``t_query >= t_issue``, the bound on the position's error variance p
 observations (``t_issue = t_query``: a `now` query; ``t_issue`` = fix time, ``t_query`` =
 fix time + horizon: a `future` query). NaN before the first fix.
 
+**After a gap.** White jerk makes the velocity's variance grow as ``q h^3 / 3`` over an
+interval ``h`` without observations, without limit: after 1,000 s at q = 80 m^2/s^5 the
+model knows the velocity to 160 km/s, and a bound built on that is no bound at all (a
+predictor that keeps the velocity it had is "below" it by orders of magnitude). A vehicle's
+velocity and acceleration are never less known than the prior says at a drive's start
+(the kf's own start, :func:`default_prior`), so over an interval longer than
+:func:`gap_scale_s` (where ``q h^3 / 3`` alone exceeds the prior's velocity variance: 2 s at
+q = 80, 8.8 s at q = 1, never at q = 0) the recursion, after the observation that ends it,
+holds the velocity and acceleration variances at the prior's (``S P S``, every correlation
+kept: :func:`_cap_at_prior`); a query across such a gap is at most
+``(sqrt(P_k,00) + prior_vel_sigma d)^2`` (a velocity error of the prior's sigma held over the
+whole interval). Shorter intervals are untouched, so the bound of a drive without such gaps
+is the model's exactly. A lower bound lowered this way stays a bound under the model with
+that ceiling; it can only make a predictor less often "below the limit".
+
+**Numbers far from 1.** Where the predicted position variance dwarfs a fix's (a gap, a
+reference glitch's jerk), the update is taken in a form without cancellation (``a r / s``,
+:func:`_update`); a jerk PSD above :data:`MAX_JERK_PSD` is held there. The bound is then
+finite and positive for any finite fix times, variances and q.
+
 **Mean error.** A Gaussian model makes the optimal estimator's error zero-mean Gaussian with
 covariance ``P`` and independent of the data; any other estimator's error is that plus a
 term that is a function of the data, so (Anderson's inequality) its mean Euclidean error is

@@ -17,7 +17,9 @@ per drive:
   receiver's own fixes: estimated from the fixes
   (:func:`~posbench.metrics.limit.fix_white_variance`) and, where they state an accuracy,
   the white part of the statement as the filters split it
-  (:func:`posbench.predictors._gnss_noise.white_share`);
+  (:func:`posbench.predictors._gnss_noise.white_share`; a statement held within 1 mm, the
+  bound's floor, and :data:`MAX_STATED_SIGMA_M`, so its square neither underflows to 0 nor
+  overflows);
 - **the slow floor** [m^2] per axis, added where a truth is the reference (none where the
   receiver's own fixes are): a simulated profile's Gauss-Markov variance (``consumer``
   1 m); a receiver's own fixes: their mean square error against the truth at the fix times
