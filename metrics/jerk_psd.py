@@ -14,6 +14,11 @@ import numpy as np
 THIRD_DIFFERENCE_GAIN = 11.0 / 20.0
 
 
+#: the largest third difference [m] of a track that is taken as it is (beyond any vehicle's
+#: by a hundred orders of magnitude; its square and sums of squares stay finite)
+MAX_THIRD_DIFFERENCE_M = 1e100
+
+
 def check_times(t: np.ndarray, what: str) -> None:
     """``t`` must be a 1-D array of finite, non-decreasing times [s] (ValueError naming
     ``what`` otherwise)."""
@@ -48,7 +53,10 @@ def _third_differences(
     idx = np.clip(np.searchsorted(tt, grid, side="left"), 1, tt.size - 1)
     ok = (tt[idx] - tt[idx - 1]) <= 2.0 * step
     ok |= np.isin(grid, tt)  # a grid point on a sample needs no interpolation
-    d3x, d3y = np.diff(px, 3), np.diff(py, 3)
+    # held at MAX_THIRD_DIFFERENCE_M: a glitch far out (1e200 m) leaves a finite square,
+    # and sums of them stay finite (no overflow, no inf - inf in a window's sum)
+    cap = MAX_THIRD_DIFFERENCE_M
+    d3x, d3y = (np.clip(np.diff(v, 3), -cap, cap) for v in (px, py))
     valid = ok[:-3] & ok[1:-2] & ok[2:-1] & ok[3:]
     return 0.5 * (d3x**2 + d3y**2), valid, grid[:-3] + 1.5 * step, step
 

@@ -81,7 +81,9 @@ def fix_white_variance(t: np.ndarray, x: np.ndarray, y: np.ndarray) -> float:
     if tt.size < 4:
         return math.nan
     t0, t1, t2, tk = tt[:-3], tt[1:-2], tt[2:-1], tt[3:]
-    with np.errstate(divide="ignore", invalid="ignore"):
+    # a glitch far out (1e200 m) squares to inf: its sample is left out below, as a
+    # repeated time's is
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
         l0 = (tk - t1) * (tk - t2) / ((t0 - t1) * (t0 - t2))
         l1 = (tk - t0) * (tk - t2) / ((t1 - t0) * (t1 - t2))
         l2 = (tk - t0) * (tk - t1) / ((t2 - t0) * (t2 - t1))

@@ -32,6 +32,26 @@ position at ``t_query >= t_issue``, the bound on the position's error variance p
 observations (``t_issue = t_query``: a `now` query; ``t_issue`` = fix time, ``t_query`` =
 fix time + horizon: a `future` query). NaN before the first fix.
 
+**After a gap.** White jerk makes the velocity's variance grow as ``q h^3 / 3`` over an
+interval ``h`` without observations, without limit: after 1,000 s at q = 80 m^2/s^5 the
+model knows the velocity to 160 km/s, and a bound built on that is no bound at all (a
+predictor that keeps the velocity it had is "below" it by orders of magnitude). A vehicle's
+velocity and acceleration are never less known than the prior says at a drive's start
+(the kf's own start, :func:`default_prior`), so over an interval longer than
+:func:`gap_scale_s` (where ``q h^3 / 3`` alone exceeds the prior's velocity variance: 2 s at
+q = 80, 8.8 s at q = 1, never at q = 0) the recursion, after the observation that ends it,
+holds the velocity and acceleration variances at the prior's (``S P S``, every correlation
+kept: :func:`_cap_at_prior`); a query across such a gap is at most
+``(sqrt(P_k,00) + prior_vel_sigma d)^2`` (a velocity error of the prior's sigma held over the
+whole interval). Shorter intervals are untouched, so the bound of a drive without such gaps
+is the model's exactly. A lower bound lowered this way stays a bound under the model with
+that ceiling; it can only make a predictor less often "below the limit".
+
+**Numbers far from 1.** Where the predicted position variance dwarfs a fix's (a gap, a
+reference glitch's jerk), the update is taken in a form without cancellation (``a r / s``,
+:func:`_update`); a jerk PSD above :data:`MAX_JERK_PSD` is held there. The bound is then
+finite and positive for any finite fix times, variances and q.
+
 **Mean error.** A Gaussian model makes the optimal estimator's error zero-mean Gaussian with
 covariance ``P`` and independent of the data; any other estimator's error is that plus a
 term that is a function of the data, so (Anderson's inequality) its mean Euclidean error is
@@ -64,6 +84,12 @@ from posbench.metrics.jerk_psd import check_times as _check_times
 #: fix (the kf's ``init_vel_sigma``, ``init_acc_sigma``); position: none (``inf``)
 PRIOR_VEL_SIGMA = 15.0
 PRIOR_ACC_SIGMA = 3.0
+
+#: the largest jerk PSD [m^2/s^5] the bound takes as it is, a larger one (a reference with a
+#: glitch far out) held there: 1e98 times a road vehicle's in a manoeuvre, and already so
+#: large that every interval is a gap (velocity and acceleration held at the prior's), so
+#: the bound barely depends on it, while its products with any interval stay finite
+MAX_JERK_PSD = 1e100
 
 #: what each figure means (the report's glossary collects these)
 DEFINITIONS = {
@@ -176,11 +202,66 @@ def _q_between(q: JerkPsd, t0: np.ndarray, t1: np.ndarray) -> np.ndarray:
             raise ValueError("q: a profile is (times, values), two 1-D arrays of one length")
         if not (np.all(np.isfinite(vq)) and np.all(vq >= 0) and np.all(np.isfinite(tq))):
             raise ValueError("q: a profile's values must be finite jerk PSDs >= 0 [m^2/s^5]")
-        mid: np.ndarray = np.interp(0.5 * (np.asarray(t0) + np.asarray(t1)), tq, vq)
+        mid: np.ndarray = np.interp(
+            0.5 * (np.asarray(t0) + np.asarray(t1)), tq, np.minimum(vq, MAX_JERK_PSD)
+        )
         return mid
     if not q >= 0 or not math.isfinite(q):
         raise ValueError(f"q: a finite jerk PSD >= 0 [m^2/s^5], not {q}")
-    return np.full(shape, float(q))
+    return np.full(shape, min(float(q), MAX_JERK_PSD))
+
+
+#: above this ratio of the predicted position variance to the fix's, the update is taken in
+#: the form that loses no precision (``a r / s``; ``a - a a / s`` would keep less than half
+#: the digits of ``r``, and 0 or less once ``a + r`` rounds to ``a``); below it the textbook
+#: form, so a drive's figures stay as they were to the last bit
+_STABLE_RATIO = 1e8
+
+
+def _update(
+    a: float, b: float, c: float, d: float, e: float, f: float, rv: float
+) -> tuple[float, float, float, float, float, float]:
+    """The scalar update of the six upper entries by an observation of the first state
+    (``H = [1, 0, 0]``) of variance ``rv``: ``P - P H' H P / (H P H' + rv)``. Where the
+    predicted variance ``a`` dwarfs ``rv`` (:data:`_STABLE_RATIO`: a gap, a glitch's jerk),
+    ``a rv / s``, ``b rv / s``, ``c rv / s`` and ``d - b (b / s)``: the same values without
+    the cancellation (and without squaring entries near the float range's end)."""
+    s = a + rv
+    if a <= _STABLE_RATIO * rv:
+        return (
+            a - a * a / s,
+            b - a * b / s,
+            c - a * c / s,
+            d - b * b / s,
+            e - b * c / s,
+            f - c * c / s,
+        )
+    k = rv / s
+    bs, cs = b / s, c / s
+    return (a * k, b * k, c * k, d - b * bs, e - b * cs, f - c * cs)
+
+
+def _cap_at_prior(
+    a: float, b: float, c: float, d: float, e: float, f: float, pv: float, pa: float
+) -> tuple[float, float, float, float, float, float]:
+    """The six upper entries with the velocity and acceleration variances held at the
+    prior's ``pv`` [m^2/s^2], ``pa`` [m^2/s^4] where they exceed them: ``S P S`` with
+    ``S = diag(1, min(1, sqrt(pv / d)), min(1, sqrt(pa / f)))`` (positive semi-definite,
+    every correlation kept, no entry larger in magnitude)."""
+    sv = math.sqrt(pv / d) if d > pv else 1.0
+    sa = math.sqrt(pa / f) if f > pa else 1.0
+    return (a, b * sv, c * sa, d * sv * sv, e * sv * sa, f * sa * sa)
+
+
+def gap_scale_s(q: float, prior_vel_var: float = PRIOR_VEL_SIGMA**2) -> float:
+    """The interval [s] past which the motion model alone forgets a vehicle's velocity
+    beyond the prior's: ``(3 prior_vel_var / q)^(1/3)``, where white jerk of PSD ``q``
+    [m^2/s^5] has added the prior's velocity variance [m^2/s^2] (``q h^3 / 3``; 2.0 s at
+    q = 80, 8.8 s at q = 1; inf at q = 0). An interval between observations longer than
+    this is a gap (:func:`position_variance_bound`)."""
+    if not q > 0:
+        return math.inf
+    return float((3.0 * prior_vel_var / q) ** (1.0 / 3.0))
 
 
 def _recursion(
@@ -208,8 +289,10 @@ def _recursion(
     steps = zip(
         times[1:].tolist(), kinds[1:].tolist(), r[1:].tolist(), q_steps.tolist(), strict=True
     )
+    pv, pa = float(prior_var[1]), float(prior_var[2])
     for t, kind, rv, qk in steps:
         h = t - t_prev
+        gap = False
         if h > 0.0:
             g = 0.5 * h * h
             # M = F P, rows m0, m1 (m2 = P's last row); then F P F' + Q
@@ -224,26 +307,13 @@ def _recursion(
             e = m12 + qk * h2 / 2.0
             f = f + qk * h
             t_prev = t
+            gap = qk * h3 / 3.0 > pv
         if kind == _POSITION:  # H = [1, 0, 0]
-            s = a + rv
-            a, b, c, d, e, f = (
-                a - a * a / s,
-                b - a * b / s,
-                c - a * c / s,
-                d - b * b / s,
-                e - b * c / s,
-                f - c * c / s,
-            )
-        else:  # H = [0, 0, 1]
-            s = f + rv
-            a, b, c, d, e, f = (
-                a - c * c / s,
-                b - c * e / s,
-                c - c * f / s,
-                d - e * e / s,
-                e - e * f / s,
-                f - f * f / s,
-            )
+            a, b, c, d, e, f = _update(a, b, c, d, e, f, rv)
+        else:  # H = [0, 0, 1]: the same update with p and a swapped
+            f, e, c, d, b, a = _update(f, e, c, d, b, a, rv)
+        if gap:
+            a, b, c, d, e, f = _cap_at_prior(a, b, c, d, e, f, pv, pa)
         out.append((a, b, c, d, e, f))
     return np.array(out, dtype=float).reshape(-1, 6)
 
@@ -298,8 +368,11 @@ def _at_queries(
     q: JerkPsd,
     t_query: np.ndarray,
     t_issue: np.ndarray | None,
+    prior_vel_var: float,
 ) -> np.ndarray:
-    """``[F(d) P_k F(d)' + Q(d)]_00`` per query, vectorised (see the module docstring)."""
+    """``[F(d) P_k F(d)' + Q(d)]_00`` per query, vectorised (see the module docstring); a
+    query across a gap (``q d^3 / 3`` above ``prior_vel_var`` [m^2/s^2]) at most
+    ``(sqrt(P_k,00) + sqrt(prior_vel_var) d)^2``."""
     tq = np.asarray(t_query, dtype=float)
     ti = tq if t_issue is None else np.broadcast_to(np.asarray(t_issue, dtype=float), tq.shape)
     if np.any(tq < ti):
@@ -318,6 +391,12 @@ def _at_queries(
         + 0.25 * d2 * d2 * p[..., 5]
         + q_d * d2 * d2 * d / 20.0
     )
+    # across a gap the velocity is no less known than the prior's: the position drifts at
+    # most by an error of that sigma held for the whole interval (Var(int v) <= (int s_v)^2)
+    gap = q_d * d2 * d / 3.0 > prior_vel_var
+    if np.any(gap):
+        held = (np.sqrt(p[..., 0]) + math.sqrt(prior_vel_var) * d) ** 2
+        var = np.where(gap, np.minimum(var, held), var)
     return np.where(known, var, np.nan)
 
 
@@ -339,8 +418,9 @@ def position_variance_bound(
     :func:`filtered_bound`. One recursion step per fix, then vectorised over the queries.
     """
     times, kinds, r = _events(np.asarray(t_fix, dtype=float), r_var, None, None)
-    upper = _recursion(times, kinds, r, q, _prior(prior_var))
-    return _at_queries(times, upper, q, t_query, t_issue)
+    prior = _prior(prior_var)
+    upper = _recursion(times, kinds, r, q, prior)
+    return _at_queries(times, upper, q, t_query, t_issue, prior[1])
 
 
 def position_variance_bound_with_acceleration(
@@ -363,8 +443,9 @@ def position_variance_bound_with_acceleration(
     fixes-only bound; equal to it as ``r_acc`` grows without bound.
     """
     times, kinds, r = _events(np.asarray(t_fix, dtype=float), r_var, t_acc, r_acc)
-    upper = _recursion(times, kinds, r, q, _prior(prior_var))
-    return _at_queries(times, upper, q, t_query, t_issue)
+    prior = _prior(prior_var)
+    upper = _recursion(times, kinds, r, q, prior)
+    return _at_queries(times, upper, q, t_query, t_issue, prior[1])
 
 
 def with_slow_error(var: np.ndarray, slow_var: float, *, independent_truth: bool) -> np.ndarray:

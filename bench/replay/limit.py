@@ -17,7 +17,9 @@ per drive:
   receiver's own fixes: estimated from the fixes
   (:func:`~posbench.metrics.limit.fix_white_variance`) and, where they state an accuracy,
   the white part of the statement as the filters split it
-  (:func:`posbench.predictors._gnss_noise.white_share`);
+  (:func:`posbench.predictors._gnss_noise.white_share`; a statement held within 1 mm, the
+  bound's floor, and :data:`MAX_STATED_SIGMA_M`, so its square neither underflows to 0 nor
+  overflows);
 - **the slow floor** [m^2] per axis, added where a truth is the reference (none where the
   receiver's own fixes are): a simulated profile's Gauss-Markov variance (``consumer``
   1 m); a receiver's own fixes: their mean square error against the truth at the fix times
@@ -42,6 +44,7 @@ from posbench.metrics.jerk_psd import (
     track_noise_variance,
 )
 from posbench.metrics.limit import (
+    MIN_FIX_VAR_M2,
     fix_error_variance,
     fix_white_variance,
     imu_white_variance,
@@ -53,6 +56,10 @@ from posbench.replay.reference import TRUTH, cubic_through_fixes, truth_at
 
 #: the columns of a drive's limit frame (``DriveRun.limit``): one row per scored query
 LIMIT_COLUMNS = ("kind", "t_query", "label", "limit_m", "limit_imu_m")
+
+
+#: the largest stated accuracy [m] the bound takes as it is (its square stays finite)
+MAX_STATED_SIGMA_M = 1e150
 
 
 def fix_noise(prep: PreparedDrive, cfg: RunConfig) -> dict[str, Any]:
@@ -77,6 +84,9 @@ def fix_noise(prep: PreparedDrive, cfg: RunConfig) -> dict[str, Any]:
     est = fix_white_variance(gps.t, gps.x, gps.y)
     stated = np.asarray(gps.accuracy, dtype=float) if gps.accuracy is not None else np.empty(0)
     stated = stated[np.isfinite(stated) & (stated > 0)]
+    # held within [1 mm, 1e150 m]: the bound's floor on a fix's noise, and a square that
+    # neither underflows to 0 (a division by it) nor overflows (ordinary statements unmoved)
+    stated = np.clip(stated, math.sqrt(MIN_FIX_VAR_M2), MAX_STATED_SIGMA_M)
     how = "white: estimated from the fixes"
     white = est
     total = math.nan

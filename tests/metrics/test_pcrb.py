@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import math
 import time
+import warnings
 
 import numpy as np
 import pytest
@@ -179,8 +180,10 @@ def test_a_kf_with_the_true_noise_reaches_the_bound():
 
 # ------------------------------------------------------------------- the query bound
 def _per_query(t_fix, r_var, q, t_query, t_issue, prior_var=None):
-    """The bound one query at a time, with 3x3 matrices: the slow reference."""
+    """The bound one query at a time, with 3x3 matrices: the slow reference (a query across
+    a gap at most a velocity of the prior's sigma held throughout)."""
     p = filtered_bound(t_fix, r_var, q, prior_var)
+    pv = (prior_var or pcrb.default_prior())[1]
     out = np.full(len(t_query), np.nan)
     for i, (tq, ti) in enumerate(zip(t_query, t_issue, strict=True)):
         k = max((j for j, t in enumerate(t_fix) if t <= ti), default=None)
@@ -189,6 +192,8 @@ def _per_query(t_fix, r_var, q, t_query, t_issue, prior_var=None):
         d = tq - t_fix[k]
         F, Q = transition_matrix(d), process_noise(d, q)
         out[i] = (F @ p[k] @ F.T + Q)[0, 0]
+        if q * d**3 / 3.0 > pv:
+            out[i] = min(out[i], (math.sqrt(p[k][0, 0]) + math.sqrt(pv) * d) ** 2)
     return out
 
 
@@ -373,3 +378,59 @@ def test_a_tracks_white_noise_is_told_from_its_jerk(noise_sd):
     assert got == pytest.approx(q, rel=0.05)
     if noise_sd:
         assert jerk_psd_from_track(t, xy[:, 0], xy[:, 1], dt=0.1) > 5 * q
+
+
+# ------------------------------------------------------------- any valid drive (issue 50)
+def test_after_a_gap_velocity_and_acceleration_are_held_at_the_prior():
+    """Fixes 0.2 s apart with a 1,000 s gap: the CA model alone would leave the velocity
+    variance at ~q gap^3 / 48 after the fix that ends it (1.7e9 m^2/s^2 at q = 80); the
+    bound holds it and the acceleration's at the prior's (15^2, 3^2), and the interval
+    that decides it is :func:`pcrb.gap_scale_s`."""
+    q = 80.0
+    t = np.concatenate([np.arange(0.0, 4.0, 0.2), 1000.0 + np.arange(0.0, 4.0, 0.2)])
+    p = filtered_bound(t, 0.25, q)
+    after = p[20]
+    assert after[1, 1] <= pcrb.PRIOR_VEL_SIGMA**2 * (1 + 1e-12)
+    assert after[2, 2] <= pcrb.PRIOR_ACC_SIGMA**2 * (1 + 1e-12)
+    assert np.all(np.linalg.eigvalsh(p) > -1e-9)
+    assert pcrb.gap_scale_s(q) == pytest.approx((3 * 225 / q) ** (1 / 3))
+    # a query across the gap: no more than a velocity of the prior's sigma held throughout
+    d = 500.0
+    var = position_variance_bound(t, 0.25, q, np.array([t[19] + d]), t_issue=t[19:20])
+    assert var[0] <= (math.sqrt(p[19, 0, 0]) + 15.0 * d) ** 2 * (1 + 1e-12)
+
+
+def test_regular_fixes_never_reach_the_gap_cap():
+    """Below the gap scale nothing is held: the bound equals the plain covariance recursion
+    (Joseph-free textbook Kalman steps in numpy) on a drive with irregular 0.1-1 s intervals."""
+    rng = np.random.default_rng(3)
+    t = np.cumsum(rng.uniform(0.1, 1.0, 200))
+    q, r = JERK_PSD, GPS_SIGMA**2
+    assert np.diff(t).max() < pcrb.gap_scale_s(q)
+    P = np.diag([r, 225.0, 9.0])
+    H = np.array([[1.0, 0.0, 0.0]])
+    for h in np.diff(t):
+        P = transition_matrix(h) @ P @ transition_matrix(h).T + process_noise(h, q)
+        K = P @ H.T / (P[0, 0] + r)
+        P = P - K @ H @ P
+    np.testing.assert_allclose(filtered_bound(t, r, q)[-1], P, rtol=1e-9, atol=1e-12)
+
+
+def test_a_jerk_psd_that_dwarfs_the_fix_noise_leaves_a_finite_positive_bound():
+    """q = 1e43 m^2/s^5 (a reference's glitch at 1e20 m): ``a - a^2 / s`` rounded to 0 and
+    below (NaN in the mean error, a RuntimeWarning); the form without cancellation keeps
+    the position variance at the fix's, every query finite and positive, no warning. The
+    two forms agree where both are exact enough."""
+    t = np.arange(0.0, 20.0, 0.2)
+    tq = t + 0.2
+    with warnings.catch_warnings(), np.errstate(all="raise", under="ignore"):
+        warnings.simplefilter("error", RuntimeWarning)
+        for q in (1e43, 1e120, math.inf):
+            var = position_variance_bound(t, 0.25, q if math.isfinite(q) else 1e300, tq, t_issue=t)
+            assert np.all(np.isfinite(var)) and np.all(var > 0)
+            assert np.all(filtered_bound(t, 0.25, 1e43)[:, 0, 0] <= 0.25 * (1 + 1e-12))
+    # near the switch (a / r ~ 1e8) both forms give the same bound
+    a, b, c, d, e, f = 1e8 * 0.25 * (1 + 1e-9), 3.0, 1.0, 5e6, 2.0, 7.0
+    textbook = pcrb._update(a, b, c, d, e, f, 0.25)
+    stable = pcrb._update(a * (1 - 2e-9), b, c, d, e, f, 0.25)
+    np.testing.assert_allclose(textbook, stable, rtol=1e-6)
