@@ -47,6 +47,9 @@ WHITE_RATIO = 0.3
 SMOOTH_RATIO = 0.1
 #: fix samples of the white estimate before a statement is split
 SPLIT_WARMUP = 20
+#: the range a stated per-axis accuracy [m] is taken within (:meth:`GnssNoise.parts`)
+MIN_STATED_SIGMA_M = 1e-4
+MAX_STATED_SIGMA_M = 1e6
 
 
 def white_share(ratio: float) -> float:
@@ -113,10 +116,13 @@ class GnssNoise:
 
     def parts(self, sigma: float | None) -> tuple[float, float]:
         """(white, slow) variance [m^2] per axis of a fix stating per-axis 1-sigma
-        ``sigma`` [m] (None, not finite or <= 0: states none)."""
+        ``sigma`` [m] (None, not finite or <= 0: states none). A statement is taken within
+        [:data:`MIN_STATED_SIGMA_M`, :data:`MAX_STATED_SIGMA_M`]: a receiver cannot know its
+        position better than a tenth of a millimetre, and a fix stating more than a thousand
+        kilometres weighs nothing either way (no square underflows or overflows)."""
         if sigma is None or not 0.0 < sigma < float("inf"):
             return self.estimate, 0.0
-        s = self.scale * sigma
+        s = self.scale * min(max(sigma, MIN_STATED_SIGMA_M), MAX_STATED_SIGMA_M)
         total = s * s
         est = self.estimator
         if not self.split_stated or est is None or est.samples < SPLIT_WARMUP:

@@ -48,8 +48,13 @@ class OptionValueError(ValueError):
     what it takes, and the value given."""
 
     def __init__(self, option: str, value: Any, takes: str, message: str | None = None) -> None:
-        self.option, self.value, self.takes = option, value, takes
+        self.option, self.value, self.takes, self.message = option, value, takes, message
         super().__init__(message or f"{option} takes {takes}, not {shown(value)}")
+
+    def __reduce__(self) -> tuple[Any, ...]:
+        # pickle (worker processes, Ray) rebuilds from ``args`` = (text,) by default, which
+        # does not fit ``__init__``: rebuild it from its own arguments
+        return type(self), (self.option, self.value, self.takes, self.message)
 
 
 def shown(value: Any) -> str:

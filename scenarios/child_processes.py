@@ -61,6 +61,18 @@ def _parent_death_signal(sig: int) -> bool:
     return bool(done == 0)
 
 
+def exec_with_parent_death(parent_pid: int, sig: int = signal.SIGTERM) -> Callable[[], None]:
+    """A ``preexec_fn`` for :class:`subprocess.Popen`: the program it starts gets ``sig``
+    when ``parent_pid`` (this process) ends, however it ends (Linux; elsewhere nothing), and
+    does not start at all if this process is already gone. The setting survives ``exec``."""
+
+    def before_exec() -> None:
+        if _parent_death_signal(sig) and os.getppid() != parent_pid:
+            os._exit(ORPHAN_STATUS)
+
+    return before_exec
+
+
 def _watch_parent(parent_pid: int, poll_s: float) -> None:
     """A daemon thread that ends this process once its parent is no longer ``parent_pid``
     (POSIX re-parents an orphan), checking every ``poll_s`` seconds."""

@@ -156,6 +156,41 @@ class TruthStream:
         return int(self.t.size)
 
 
+#: a position farther than this from a drive's origin [m] is no position: farther than any
+#: point on Earth (its diameter is 1.3e7 m); a loader refuses it, as ``bench score`` refuses
+#: such answers
+MAX_POSITION_M = 1e9
+
+
+def far_position(t: np.ndarray, x: np.ndarray, y: np.ndarray) -> tuple[int, str, int] | None:
+    """The first sample of a track with a coordinate beyond :data:`MAX_POSITION_M` (index,
+    ``"x"`` or ``"y"``, how many such samples in all), or None."""
+    far_x, far_y = np.abs(x) > MAX_POSITION_M, np.abs(y) > MAX_POSITION_M
+    far = far_x | far_y
+    if not far.any():
+        return None
+    i = int(np.flatnonzero(far)[0])
+    return i, "x" if far_x[i] else "y", int(far.sum())
+
+
+def refuse_far_positions(drive: Drive, path: Any) -> None:
+    """Raise a :class:`DataError` for ``path`` naming the first fix or truth sample of
+    ``drive`` beyond :data:`MAX_POSITION_M` of its origin (a loader's last check)."""
+    for what, s in (("fix", drive.gps), ("truth sample", drive.truth)):
+        if s is None or not len(s):
+            continue
+        found = far_position(s.t, s.x, s.y)
+        if found is not None:
+            i, axis, n = found
+            value = float(getattr(s, axis)[i])
+            raise DataError(
+                path,
+                f"{what} at t={float(s.t[i]):.3f} s: {axis} = {value:g} m is no position: "
+                f"more than {MAX_POSITION_M:g} m from the drive's origin, farther than any "
+                f"point on Earth; {n} such {what}{'s' * (n != 1)} in all",
+            )
+
+
 #: ``DriveMeta.fix_source``: the fixes come from a receiver independent of the truth
 FIXES_RECEIVER = "receiver"
 #: ``DriveMeta.fix_source``: the fixes are the truth's positions or were simulated from it

@@ -42,6 +42,7 @@ import pandas as pd
 
 from posbench.offline.queries_folder import QueryFolder
 from posbench.offline.tum import is_tum, read_tum
+from posbench.scenarios.drive import MAX_POSITION_M as DRIVE_MAX_POSITION_M
 from posbench.scenarios.errors import DataError
 from posbench.scenarios.text import quoted
 from posbench.scoring.records import DriveRun
@@ -54,7 +55,7 @@ if TYPE_CHECKING:
 REQUIRED = ("drive", "kind", "t_query", "x", "y")
 #: the farthest an answer's x or y may lie from its drive's origin [m]: no point on Earth is
 #: that far in local metres (ENU or Mercator), and the squares the figures take stay finite
-MAX_POSITION_M = 1e9
+MAX_POSITION_M = DRIVE_MAX_POSITION_M  # the bound a loader holds a drive's positions to
 COVARIANCE = COV_COLUMNS  # the answer's reported covariance, as in the traces
 OPTIONAL = ("latency_us", *COVARIANCE)
 

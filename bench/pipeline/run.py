@@ -260,11 +260,14 @@ def execute_run(plan: RunPlan, command: str, reporter: Reporter = SILENT) -> Pub
 
     Raises:
         DataError: a recording that cannot be read; with ``strict``, a failing data check.
-        UsageError: every drive was skipped.
+        UsageError: every drive was skipped, or an option applies to none of the drives
+            (:func:`posbench.pipeline.honoured.unhonoured`: --gps-profile rtk without truths).
         ExecutorError: Ray could not start.
     """
     from posbench.pipeline.data_check import run_data_check
     from posbench.pipeline.drives import load_drives
+    from posbench.pipeline.honoured import unhonoured
+    from posbench.pipeline.reporter import WARNING
     from posbench.scenarios.remote import local_paths
 
     o = plan.options
@@ -278,8 +281,11 @@ def execute_run(plan: RunPlan, command: str, reporter: Reporter = SILENT) -> Pub
             workers=o.workers if o.executor == "local" else 1,
             reporter=reporter,
         )
+        notes = unhonoured(drives, plan.config)  # an option no drive can take: stop here
+        for note in notes:
+            reporter.line(f"note: {note}", WARNING)
         consistency = run_data_check(drives, plan.config.predictors, o.strict, reporter)
-        return _replay_and_publish(drives, plan, data, command, consistency, reporter)
+        return _replay_and_publish(drives, plan, data, command, consistency, reporter, notes)
 
 
 def replay_drives(
@@ -328,8 +334,10 @@ def _replay_and_publish(
     command: str,
     consistency: dict[str, Any],
     reporter: Reporter,
+    unhonoured: Sequence[str] = (),
 ) -> Published:
     from posbench.aggregation.seeds import seed_figures, seeds_section
+    from posbench.pipeline.honoured import scored_conditions
     from posbench.pipeline.jobs import Job
     from posbench.pipeline.preload import Preload
     from posbench.pipeline.publish import publish
@@ -374,6 +382,9 @@ def _replay_and_publish(
         statistics=plan.statistics,
     )
     res["consistency"] = consistency
+    res["gps_conditions"] = scored_conditions(res["drives"])
+    if unhonoured:
+        res["unhonoured"] = list(unhonoured)
     if recordings is not None and recordings.duplicates:
         res["data_duplicates"] = [
             {"path": str(d.path), "same_as": str(d.kept), "same_file": d.same_file}

@@ -30,6 +30,7 @@ from typing import IO
 from urllib.parse import quote
 
 from posbench.errors import UsageError
+from posbench.scenarios.child_processes import exec_with_parent_death
 
 #: the host both servers listen on; other machines reach it through ``ssh -L``
 HOST = "127.0.0.1"
@@ -102,6 +103,27 @@ def viewer_url(
 def ssh_forward_command(web_port: int, data_port: int, host: str) -> str:
     """The ``ssh`` line to run on your own machine to reach both ports of ``host``."""
     return f"ssh -L {web_port}:localhost:{web_port} -L {data_port}:localhost:{data_port} {host}"
+
+
+def viewer_binary(exe: str) -> str:
+    """The program to start for ``exe``: the rerun-sdk's ``rerun`` launcher is a Python
+    script that only runs the viewer binary beside its package (``rerun_cli/rerun``) as a
+    child; that binary itself is started instead, so that it is the server's one process and
+    ends with ``bench`` (:func:`serve`). Any other ``exe`` as it is."""
+    try:
+        with open(exe, "rb") as f:
+            head = f.read(4096)
+    except OSError:
+        return exe
+    if b"rerun_cli" not in head or "RERUN_CLI_PATH" in os.environ:
+        return exe
+    import importlib.util
+
+    spec = importlib.util.find_spec("rerun_cli")
+    if spec is None or spec.origin is None:
+        return exe
+    binary = Path(spec.origin).parent / ("rerun.exe" if os.name == "nt" else "rerun")
+    return str(binary) if binary.is_file() and os.access(binary, os.X_OK) else exe
 
 
 def server_command(exe: str, recording: Path, web_port: int, data_port: int) -> list[str]:
@@ -203,12 +225,14 @@ def serve(
     try:
         with tempfile.TemporaryFile() as log:
             proc = subprocess.Popen(
-                server_command(exe, recording, web_port, data_port),
+                server_command(viewer_binary(exe), recording, web_port, data_port),
                 stdin=subprocess.DEVNULL,
                 stdout=log,
                 stderr=log,
                 env=server_env(os.environ),
                 start_new_session=True,
+                # the server ends with this process however it ends (a kill -9 included)
+                preexec_fn=exec_with_parent_death(os.getpid()) if os.name == "posix" else None,
             )
             try:
                 _wait_ready(proc, log, (web_port, data_port), ready_timeout_s)

@@ -78,6 +78,35 @@ def skipped_run(drive: Drive, reason: str) -> DriveRun:
     )
 
 
+def refuse_far_answers(
+    name: str, drive: str, prep: PreparedDrive, future_xy: np.ndarray, now_xy: np.ndarray
+) -> None:
+    """A predictor's answers must be positions: one farther than
+    :data:`~posbench.scenarios.drive.MAX_POSITION_M` from the drive's origin (farther than any
+    point on Earth) is a broken predictor, refused in one line naming it, the drive and the
+    query time, as ``bench score`` refuses such an answer (the figures would overflow).
+
+    Raises:
+        DataError: the first such answer (future queries first, then now queries).
+    """
+    from posbench.scenarios.drive import MAX_POSITION_M
+    from posbench.scenarios.errors import DataError
+
+    for kind, xy, q in (("future", future_xy, prep.future), ("now", now_xy, prep.now)):
+        with np.errstate(invalid="ignore"):
+            far = np.abs(xy) > MAX_POSITION_M
+        rows = np.flatnonzero(far.any(axis=1)) if xy.size else np.empty(0, dtype=int)
+        if rows.size:
+            i = int(rows[0])
+            raise DataError(
+                None,
+                f"predictor {name} answered ({xy[i, 0]:g}, {xy[i, 1]:g}) m for the {kind} "
+                f"query at t={float(q.t_query[i]):.3f} s of drive {drive}: no position (more than "
+                f"{MAX_POSITION_M:g} m from the drive's origin, farther than any point on "
+                f"Earth); {rows.size} such {kind} answers on this drive",
+            )
+
+
 def run_drive(drive: Drive, cfg: RunConfig, limit: bool = False) -> DriveRun:
     """Prepare one drive and replay it through every configured predictor; with ``limit``,
     also compute the bound on its scored queries (:func:`posbench.replay.limit.drive_limit`;
@@ -98,6 +127,7 @@ def run_drive(drive: Drive, cfg: RunConfig, limit: bool = False) -> DriveRun:
         pred.warm_up()  # one-time start-up work (compiled kernels) off the clock
         gated = GatedPredictor(pred) if cfg.gate else None
         res = replay(pred if gated is None else gated, prep, cfg.horizon_s)
+        refuse_far_answers(name, drive.name, prep, res.future_xy, res.now_xy)
         if gated is not None:
             rejected[name] = gated.rejected
         answers.append((name, np.concatenate([res.future_xy, res.now_xy]), res.cov))

@@ -86,7 +86,19 @@ def find_recordings(path: Path) -> list[tuple[Path, str]]:
 def load_one(
     path: Path, fmt: str, projection: str = "enu", topics: dict[str, str] | None = None
 ) -> Drive:
-    """Load one recording of a known format."""
+    """Load one recording of a known format. A fix or truth sample farther from the drive's
+    origin than any point on Earth is refused
+    (:func:`~posbench.scenarios.drive.refuse_far_positions`)."""
+    from posbench.scenarios.drive import refuse_far_positions
+
+    drive = _load_format(path, fmt, projection, topics)
+    refuse_far_positions(drive, path)
+    return drive
+
+
+def _load_format(
+    path: Path, fmt: str, projection: str = "enu", topics: dict[str, str] | None = None
+) -> Drive:
     if fmt == "kitti":
         from posbench.scenarios.loaders.kitti import load_kitti_drive
 

@@ -64,6 +64,7 @@ import numpy as np
 
 from posbench.scenarios.cleaning import clean_index, take
 from posbench.scenarios.drive import (
+    MAX_POSITION_M,
     Drive,
     DriveMeta,
     GpsStream,
@@ -260,6 +261,24 @@ def _refuse_infinite(tab: TableFile, keep: np.ndarray, num: dict[str, np.ndarray
             )
 
 
+def _refuse_far(tab: TableFile, keep: np.ndarray, num: dict[str, np.ndarray]) -> None:
+    """Refuse an x or y cell farther than :data:`~posbench.scenarios.drive.MAX_POSITION_M`
+    from the origin (no vehicle can be there), naming its line and column."""
+    for c in ("x", "y"):
+        if c not in num:
+            continue
+        far = (np.abs(num[c]) > MAX_POSITION_M) & keep
+        if np.any(far):
+            i = int(np.flatnonzero(far)[0])
+            n = int(far.sum())
+            raise DataError(
+                tab.path,
+                f"{tab.where(i)}, column {c!r}: {float(num[c][i]):g} m is no position: more "
+                f"than {MAX_POSITION_M:g} m from the origin, farther than any point on Earth; "
+                f"{n} such row{'s' * (n != 1)} in all",
+            )
+
+
 def _position_frame(tab: TableFile, rows: np.ndarray, num: dict[str, np.ndarray]) -> str:
     """'latlon' or 'xy': which columns every gps/truth row fills."""
 
@@ -308,6 +327,7 @@ def load_table(path: Path, projection: str = "enu") -> Drive:
 
     num = {c: numeric_column(tab, c) for c in NUMERIC if c in df.columns and c != "t_ns"}
     _refuse_infinite(tab, keep, num)
+    _refuse_far(tab, keep, num)
     all_rows = np.flatnonzero(keep)
     t_all, t_origin = _times(tab, all_rows)
     t_full = np.full(len(df), np.nan)

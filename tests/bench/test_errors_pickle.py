@@ -20,6 +20,7 @@ def samples() -> dict[str, list[BaseException]]:
     from posbench.errors import UsageError
     from posbench.figures.style import NothingToPlot
     from posbench.predictors.lstm.core_graph import NoCoreGraph
+    from posbench.predictors.option_types import OptionValueError
     from posbench.predictors.registry import PredictorError
     from posbench.recording.web import ServeError
     from posbench.replay.executors import ExecutorError
@@ -41,6 +42,10 @@ def samples() -> dict[str, list[BaseException]]:
         ],
         "posbench.predictors.registry.PredictorError": [
             PredictorError("nosuchmodule:X: no module named 'nosuchmodule'")
+        ],
+        "posbench.predictors.option_types.OptionValueError": [
+            OptionValueError("use_imu", "maybe", "true or false"),
+            OptionValueError("imu.gat", 1, "an object", "imu has no field 'gat'"),
         ],
         "posbench.predictors.lstm.core_graph.NoCoreGraph": [
             NoCoreGraph("not a speed-form posbench model (no net.res_std)")

@@ -300,3 +300,50 @@ def test_web_on_a_missing_file_is_one_error_line(tmp_path):
     r = bench("view", str(tmp_path / "nope.rrd"), "--web", env=env)
     assert_one_error_line(r, f"{tmp_path / 'nope.rrd'}: no such file")
     assert not note.exists()
+
+
+def test_web_server_ends_with_bench_view_killed_by_force(tmp_path):
+    """`kill -9` of `bench view --web` (no handler runs) still ends the server: the kernel
+    sends it SIGTERM when its parent dies (issue 49)."""
+    import json
+
+    rrd = tmp_path / "run.rrd"
+    rrd.write_bytes(b"RRF2")
+    env, note = fake_rerun(tmp_path)
+    n = free_port_pair()
+    proc = start_view(rrd, n, env)
+    try:
+        read_until(proc, "open: ")
+        pid = json.loads(note.read_text())["pid"]
+        os.kill(proc.pid, signal.SIGKILL)
+        proc.communicate(timeout=30)
+        deadline = time.monotonic() + 10
+        while time.monotonic() < deadline:
+            try:
+                os.kill(pid, 0)
+            except ProcessLookupError:
+                break
+            try:  # reap it if it is ours (it is not: it was bench view's child)
+                os.waitpid(pid, os.WNOHANG)
+            except ChildProcessError:
+                pass
+            time.sleep(0.1)
+        else:
+            raise AssertionError("the web server outlived bench view")
+    finally:
+        cleanup(proc, note)
+
+
+def test_the_sdk_launcher_is_replaced_by_its_viewer_binary(tmp_path):
+    plain = tmp_path / "rerun"
+    plain.write_text("#!/bin/sh\nexec sleep 1\n")
+    assert rerun_web.viewer_binary(str(plain)) == str(plain)
+    assert rerun_web.viewer_binary(str(tmp_path / "missing")) == str(tmp_path / "missing")
+    import importlib.util
+
+    if importlib.util.find_spec("rerun_cli") is None:
+        return  # the viz extra is not installed: nothing to replace
+    launcher = tmp_path / "rerun-sdk"
+    launcher.write_text("#!/usr/bin/python\nfrom rerun_cli.__main__ import main\nmain()\n")
+    got = Path(rerun_web.viewer_binary(str(launcher)))
+    assert got.name in ("rerun", "rerun.exe") and got.parent.name == "rerun_cli"
