@@ -7,13 +7,14 @@ from collections.abc import Iterable
 from dataclasses import asdict, dataclass, field
 from typing import TYPE_CHECKING, Any
 
-# the GPS conditions a drive can be replayed under (and a predictor tuned for): ``native``
-# (the recording's own fixes) or a profile of fixes simulated from the truth
-from posbench.predictors.base import GPS_CONDITIONS as GPS_CONDITIONS
-
 if TYPE_CHECKING:
     from posbench.scenarios.drive import Drive
 
+#: the GPS conditions a drive can be replayed under (and a predictor tuned for): ``native``
+#: (the recording's own fixes) or a profile of fixes simulated from the truth; the same as
+#: :data:`posbench.predictors.base.GPS_CONDITIONS`, which a predictor's option declares (this
+#: module may not import the predictors; tests/predictors/test_option_types.py holds them equal)
+GPS_CONDITIONS = ("native", "none", "rtk", "consumer")
 #: ``--gps-profile`` choices: a condition for every drive, or ``auto`` (one per drive)
 AUTO_PROFILE = "auto"
 GPS_PROFILES = (AUTO_PROFILE, *GPS_CONDITIONS)

@@ -208,7 +208,7 @@ class FlatNames:
         from posbench.predictors.option_types import field_types
 
         return {
-            name: bool if field is None else field_types(type(defaults[key]))[field]
+            name: bool if field is None else field_types(defaults[key].__class__)[field]
             for name, (key, field) in self.fields.items()
         }
 

@@ -206,9 +206,8 @@ def parse_value(option: str, value: Any, tp: Any) -> Any:
             raise nested[0]
         raise OptionValueError(option, value, takes_text(tp))
     if get_origin(tp) is Literal:
-        choices = get_args(tp)
         if isinstance(value, str | int | float) and not isinstance(value, bool):
-            for c in choices:
+            for c in get_args(tp):
                 if value == c and type(value) is type(c):
                     return c
         raise OptionValueError(option, value, takes_text(tp))
@@ -218,7 +217,7 @@ def parse_value(option: str, value: Any, tp: Any) -> Any:
         if isinstance(value, numbers.Integral) and not _is_bool(value):
             return int(value)
         if isinstance(value, numbers.Real) and math.isfinite(value) and float(value).is_integer():
-            return int(value)
+            return int(float(value))
         raise OptionValueError(option, value, "a whole number")
     if tp is float:
         if isinstance(value, numbers.Real) and not _is_bool(value):

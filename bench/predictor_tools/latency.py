@@ -165,7 +165,7 @@ def _stage_times(
     ``after_step(predictor)`` runs after each step's last stage (outside every stage)."""
     from posbench.predictors.lstm.predictor import LstmPredictor, StageRecorder
 
-    p = LstmPredictor(step=step)
+    p = LstmPredictor(step=step)  # type: ignore[arg-type]  # checked by the caller's --step
     stages = p.stages
     rec = StageRecorder()
     count = rec.ns.setdefault("inference", [])

@@ -101,6 +101,13 @@ def test_use_imu_no_runs_as_use_imu_false_and_not_as_the_default():
     assert no != default
 
 
+def test_the_gps_conditions_a_predictor_takes_are_the_runs():
+    from posbench.config import GPS_CONDITIONS
+    from posbench.predictors.base import GPS_CONDITIONS as DECLARED
+
+    assert DECLARED == GPS_CONDITIONS
+
+
 def test_hybrid_gate_no_is_off_and_bogus_condition_refused():
     off = create("hybrid", None, gate="no")
     assert off.gate is False
