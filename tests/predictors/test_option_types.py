@@ -211,3 +211,25 @@ def test_bench_predictors_says_what_each_option_takes():
     assert opts["gps_condition"]["takes"].startswith("one of 'native'")
     r = bench("predictors", "lstm", columns=120)
     assert "one of 'closed', 'lbfgs'" in r.stdout
+
+
+def test_an_empty_horizon_list_means_what_it_says():
+    """`kf.horizons_s=[]` is no horizon scoring (one fix ahead only), as the option's doc
+    says: the bank keeps no horizon, and under outages it answers otherwise than with the
+    default (1, 3) s (without outages no query lies a second past its fix: the same)."""
+    import posbench
+
+    assert create("kf", None, horizons_s=[]).horizons_s == ()
+    assert create("ekf", None, horizons_s=[]).horizons_s == ()
+
+    def now_mean(**kf: Any) -> float:
+        run = posbench.run(
+            predictors="kf",
+            options={"kf": kf} if kf else {},
+            synthetic_duration_s=120,
+            dropouts="outages",
+            out=None,
+        )
+        return run.results["predictors"]["kf"]["now"]["mean_m"]
+
+    assert now_mean(horizons_s=[]) != now_mean()
