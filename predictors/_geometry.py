@@ -16,6 +16,9 @@ from posbench.scenarios.errors import DataError
 from posbench.scenarios.text import quoted
 
 TWO_PI = 2.0 * math.pi
+#: the range of every baseline's ``cov_scale`` (kf, ekf, cv and their banks): what their
+#: constructors accept, and what ``bench tune`` holds a calibrated scale in
+COV_SCALE_RANGE = (1e-6, 1e6)
 
 
 def wrap_angle(a: float) -> float:

@@ -46,7 +46,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from posbench.predictors._geometry import check_config
+from posbench.predictors._geometry import COV_SCALE_RANGE, check_config
 from posbench.predictors.base import Predictor
 
 NAN2 = (math.nan, math.nan)
@@ -88,7 +88,7 @@ class ModelBank(Predictor):
             "bank",
             memory_fixes=(memory_fixes, 1.0, 1e6),
             huber_k=(huber_k, 0.1, 1e3),
-            cov_scale=(cov_scale, 1e-6, 1e6),
+            cov_scale=(cov_scale, *COV_SCALE_RANGE),
             horizon_memory=(horizon_memory, 1.0, 1e6),
             **{f"horizons_s[{i}]": (h, 1e-3, 3600.0) for i, h in enumerate(horizons_s)},
         )

@@ -28,7 +28,7 @@ import math
 
 import numpy as np
 
-from posbench.predictors._geometry import FixBuffer, check_config
+from posbench.predictors._geometry import COV_SCALE_RANGE, FixBuffer, check_config
 from posbench.predictors.base import Predictor
 
 NAN2 = (math.nan, math.nan)
@@ -63,7 +63,7 @@ class ConstantVelocity(Predictor):
             window_s=(window_s, 0.0, 60.0),
             fix_sigma=(fix_sigma, 1e-4, 1e3),
             accel_sigma=(accel_sigma, 0.0, 1e3),
-            cov_scale=(cov_scale, 1e-6, 1e6),
+            cov_scale=(cov_scale, *COV_SCALE_RANGE),
         )
         self.window_s = float(window_s)
         self.fix_sigma = float(fix_sigma)

@@ -44,7 +44,7 @@ from typing import Any
 import numpy as np
 
 from posbench.predictors._copying import copy_attrs
-from posbench.predictors._geometry import check_config, wrap_angle
+from posbench.predictors._geometry import COV_SCALE_RANGE, check_config, wrap_angle
 from posbench.predictors.base import Predictor
 from posbench.predictors.ctra import (
     IA,
@@ -163,7 +163,7 @@ class CtraEkf(Predictor):
             pos_psd=(pos_psd, 0.0, 1e6),
             init_vel_sigma=(init_vel_sigma, 1e-3, 1e3),
             calib_psd=(calib_psd, 0.0, 1e6),
-            cov_scale=(cov_scale, 1e-6, 1e6),
+            cov_scale=(cov_scale, *COV_SCALE_RANGE),
         )
         inputs = EKF_FLAT.compose(
             "ekf", {"gnss": gnss, "imu": imu, "speed": speed}, EKF_INPUTS, flat

@@ -32,7 +32,7 @@ from typing import Any
 import numpy as np
 
 from posbench.predictors import _ctra_batch as cb
-from posbench.predictors._geometry import check_config
+from posbench.predictors._geometry import COV_SCALE_RANGE, check_config
 from posbench.predictors.bank import ModelBank
 from posbench.predictors.ekf import EKF_FLAT, EKF_INPUTS, CtraEkf
 from posbench.predictors.filter_inputs import CtraImuInput, CtraSpeedInput, GnssInput
@@ -116,7 +116,7 @@ class EkfBank(RowBank):
             init_vel_sigma=(init_vel_sigma, 1e-3, 1e3),
             calib_psd=(calib_psd, 0.0, 1e6),
             memory_fixes=(memory_fixes, 1.0, 1e6),
-            cov_scale=(cov_scale, 1e-6, 1e6),
+            cov_scale=(cov_scale, *COV_SCALE_RANGE),
             horizon_memory=(horizon_memory, 1.0, 1e6),
             **{f"horizons_s[{i}]": (h, 1e-3, 3600.0) for i, h in enumerate(horizons_s)},
         )

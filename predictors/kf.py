@@ -47,7 +47,7 @@ import numpy as np
 from posbench.predictors._accel_bias import AccelBiasEstimator
 from posbench.predictors._ca_kalman import CaFilter2D, ca_noise_block, predict_cross, predict_sym
 from posbench.predictors._copying import copy_attrs
-from posbench.predictors._geometry import check_config
+from posbench.predictors._geometry import COV_SCALE_RANGE, check_config
 from posbench.predictors._heading import CourseHeading
 from posbench.predictors._kernels import warm_up_once
 from posbench.predictors.base import Predictor
@@ -174,7 +174,7 @@ class LinearKalman(Predictor):
             jerk_psd=(jerk_psd, 1e-9, 1e6),
             init_vel_sigma=(init_vel_sigma, 1e-3, 1e3),
             init_acc_sigma=(init_acc_sigma, 1e-3, 1e3),
-            cov_scale=(cov_scale, 1e-6, 1e6),
+            cov_scale=(cov_scale, *COV_SCALE_RANGE),
         )
         inputs = KF_FLAT.compose(
             "kf", {"gnss": gnss, "imu": imu, "heading": heading, "speed": speed}, KF_INPUTS, flat

@@ -40,7 +40,7 @@ import numpy as np
 from posbench.predictors import _ca_batch as kb
 from posbench.predictors._accel_bias import AccelBiasEstimator
 from posbench.predictors._ca_kalman import ca_noise_block, predict_cross, predict_sym
-from posbench.predictors._geometry import check_config
+from posbench.predictors._geometry import COV_SCALE_RANGE, check_config
 from posbench.predictors._heading import CourseHeading
 from posbench.predictors.bank import ModelBank
 from posbench.predictors.filter_inputs import AccelInput, GnssInput, HeadingInput, SpeedInput
@@ -123,7 +123,7 @@ class KalmanBank(RowBank):
             init_vel_sigma=(init_vel_sigma, 1e-3, 1e3),
             init_acc_sigma=(init_acc_sigma, 1e-3, 1e3),
             memory_fixes=(memory_fixes, 1.0, 1e6),
-            cov_scale=(cov_scale, 1e-6, 1e6),
+            cov_scale=(cov_scale, *COV_SCALE_RANGE),
             horizon_memory=(horizon_memory, 1.0, 1e6),
             **{f"jerk_psds[{i}]": (j, 1e-9, 1e6) for i, j in enumerate(jerk_psds)},
             **{f"horizons_s[{i}]": (h, 1e-3, 3600.0) for i, h in enumerate(horizons_s)},

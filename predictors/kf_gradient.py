@@ -140,17 +140,22 @@ def kf_options(
     sigma_a: float | None,
     sigma_ref: float | None,
     unstated: bool = True,
+    clamped: dict[str, float] | None = None,
 ) -> dict[str, float]:
     """The kf's flat options of fitted noise (module docstring): ``jerk_psd`` [m^2/s^5] =
     trace(Q_c) / 2; the fix sigma ``sqrt(trace(R) / 2)`` [m] as ``gps_sigma_scale`` (that
     sigma / ``sigma_ref``) where fixes state an accuracy (``sigma_ref`` given) and as
     ``gps_sigma`` where some state none (``unstated``, or no ``sigma_ref``);
     ``accel_sigma`` = ``sigma_a`` [m/s^2] (None: not fitted). Rounded to 4 significant
-    digits, held in the kf's ranges (:data:`RANGES`)."""
+    digits, held in the kf's ranges (:data:`RANGES`); ``clamped`` (given) receives the
+    fitted value of each option that lay outside its range. A NaN stays NaN (the run
+    refuses it)."""
 
     def put(name: str, v: float) -> float:
         lo, hi = RANGES[name]
-        return float(f"{min(max(v, lo), hi):.4g}")
+        if clamped is not None and not lo <= v <= hi and v == v:
+            clamped[name] = v
+        return float(f"{min(max(v, lo), hi):.4g}") if v == v else v
 
     sig = math.sqrt(0.5 * float(np.trace(R)))
     out = {"jerk_psd": put("jerk_psd", 0.5 * float(np.trace(Qc)))}
@@ -207,7 +212,8 @@ def gradient_tune(
             ``sigma_a`` with the IMU, ``sigma_slow_m`` with ``slow``).
 
     Returns:
-        ``params`` (the kf's flat options, :func:`kf_options`); the fitted ``Q_c``
+        ``params`` (the kf's flat options, :func:`kf_options`); ``clamped`` (the fitted
+        value of each option that lay outside the kf's range, held in it); the fitted ``Q_c``
         [m^2/s^5], ``R`` [m^2] (of a fix stating ``sigma_ref_m``, or none), ``sigma_a``
         [m/s^2] (None without IMU) and ``slow`` (2, 2) [m^2] (None unless fitted);
         ``loss`` (``train`` and, with ``holdout``, ``holdout``: mean beta-NLL, NLL [nats]
@@ -286,8 +292,10 @@ def gradient_tune(
         torch.set_num_threads(threads)
     Qc, R = nz.Qc.numpy().copy(), nz.R.numpy().copy()
     sigma_a = math.sqrt(float(nz.sa2)) if use_imu else None
+    clamped: dict[str, float] = {}
     return {
-        "params": kf_options(Qc, R, sigma_a, sigma_ref, unstated),
+        "params": kf_options(Qc, R, sigma_a, sigma_ref, unstated, clamped),
+        "clamped": clamped,
         "Q_c": Qc.tolist(),
         "R": R.tolist(),
         "sigma_a": sigma_a,

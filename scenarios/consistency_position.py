@@ -12,6 +12,7 @@ import numpy as np
 from posbench.scenarios.align import similarity_2d
 from posbench.scenarios.consistency_model import (
     FAIL,
+    NA,
     PASS,
     TOLERANCES,
     WARN,
@@ -24,6 +25,7 @@ from posbench.scenarios.consistency_stats import fix_scatter
 from posbench.scenarios.drive import Drive
 from posbench.scenarios.grid import interp_gapped
 from posbench.scenarios.text import fixed
+from posbench.scenarios.truth_gaps import truth_gap_note
 
 #: fixes within this of the truth at every fix [m] are the truth's own samples (one source)
 ONE_SOURCE_M = 1e-3
@@ -139,7 +141,20 @@ def check_truth(
     what the accuracy the fixes (and truth) state explains (:class:`GpsVsTruth`; absolute
     limits when none is stated). Fixes that are the truth's own samples pass; a truth
     stating a median accuracy worse than :attr:`Tolerances.max_fix_accuracy_m` warns (it is
-    then no reference for the other streams)."""
+    then no reference for the other streams); so does a truth sampled too sparsely for a
+    reference position over a material part of its span
+    (:func:`~posbench.scenarios.truth_gaps.truth_gap_note`), with its figures: its line
+    first, then what the comparison found."""
+    check = _check_truth(drive, tol, cmp)
+    gaps = truth_gap_note(drive.truth.t) if drive.truth is not None else ""
+    if not gaps or check.verdict == FAIL:
+        return check
+    found = f"; {check.reason}" if check.verdict != NA and check.reason else ""
+    return Check(check.stream, WARN, gaps + found, check.figures)
+
+
+def _check_truth(drive: Drive, tol: Tolerances, cmp: GpsVsTruth | str | None) -> Check:
+    """:func:`check_truth` but its sampling."""
     s = "truth"
     cmp = gps_vs_truth(drive, tol) if cmp is None else cmp
     if isinstance(cmp, str):

@@ -11,7 +11,7 @@ import typer
 
 from posbench.checks import check_at_least, check_choice, check_data_paths
 from posbench.cli.options import ConfigOpt, DataOpt, QuietOpt, VerboseOpt, WorkersOpt, command_line
-from posbench.cli.terminal import reporter, say
+from posbench.cli.terminal import reporter, say, warn
 from posbench.errors import UsageError
 
 if TYPE_CHECKING:
@@ -214,14 +214,7 @@ def tune(
             f"kept {best or 'the defaults'} from the tuning in force "
             f"({out if mine else 'built-in'})"
         )
-    if cov_scale == cov_scale:
-        best = {**best, "cov_scale": cov_scale}
-        say(
-            f"calibrated: cov_scale {cov_scale:g} (95 % of the 95 % ellipses cover "
-            f"on {len(dev)} drives)"
-        )
-    else:
-        say("no covariance reported on these drives: nothing to calibrate")
+    best = with_cov_scale(predictor, best, cov_scale, len(dev))
     if save:
         command = command_line()
         how = (
@@ -236,6 +229,28 @@ def tune(
             how = tuning_note(predictor, gps_profile, how, out)
         save_tuned(predictor, gps_profile, best, how, out, drives=[d.name for d in dev])
         say(f"saved to {out} (use it: bench run --tuning {out})")
+
+
+def with_cov_scale(
+    predictor: str, params: dict[str, Any], cov_scale: float, n_drives: int
+) -> dict[str, Any]:
+    """``params`` with the calibrated ``cov_scale`` (held in the range ``predictor``
+    accepts, with a one-line warning where it was clamped; none where NaN: no covariance),
+    said on stdout."""
+    from posbench.predictor_tools.tuning import held_cov_scale
+
+    if cov_scale != cov_scale:
+        say("no covariance reported on these drives: nothing to calibrate")
+        return params
+    held, clamp = held_cov_scale(predictor, cov_scale)
+    if clamp is not None:
+        warn(clamp)
+    else:
+        say(
+            f"calibrated: cov_scale {cov_scale:g} (95 % of the 95 % ellipses cover "
+            f"on {n_drives} drives)"
+        )
+    return {**params, "cov_scale": held}
 
 
 def check_tuning_out(out: Path) -> None:
@@ -310,14 +325,9 @@ def tune_gradient(
         done("calibration")
     note = gradient_note(fit)
     say(f"fitted {best} ({note}) over {len(dev)} drives in {fit['seconds']:.0f} s")
-    if cov_scale == cov_scale:
-        best["cov_scale"] = cov_scale
-        say(
-            f"calibrated: cov_scale {cov_scale:g} (95 % of the 95 % ellipses cover "
-            f"on {len(dev)} drives)"
-        )
-    else:
-        say("no covariance reported on these drives: nothing to calibrate")
+    for name, value in fit.get("clamped", {}).items():
+        warn(f"fitted {name} {value:g} is outside the kf's range: clamped to {best[name]:g}")
+    best = with_cov_scale("kf", best, cov_scale, len(dev))
     if save:
         how = f"`{command_line()}`: {source}; {note}; then cov_scale for 95 % coverage"
         kept = ("Q_c", "R", "sigma_a", "slow", "sigma_ref_m", "loss", "iterations")

@@ -12,7 +12,8 @@ A row answers the query of its drive and kind whose ``t_query`` is within
 :data:`~posbench.scoring.score.MATCH_TOLERANCE_S` (1e-6 s) of its own. A query without an answer is
 scored as ``missing`` (never dropped); an answer to no query, two answers to one query, a
 drive the queries folder does not hold, a missing or non-finite cell, an x or y more than
-:data:`MAX_POSITION_M` (1e9 m) from the drive's origin: a :class:`DataError` naming the
+:data:`MAX_POSITION_M` (1e9 m) from the drive's origin, a latency below 0 or over
+:data:`MAX_LATENCY_US` (1e9 us, 1000 s): a :class:`DataError` naming the
 file and the first such row (CSV line number, header = line 1; Parquet row).
 
 A TUM trajectory file (suffix ``.tum``: lines ``timestamp x y z qx qy qz qw`` separated
@@ -58,6 +59,10 @@ REQUIRED = ("drive", "kind", "t_query", "x", "y")
 MAX_POSITION_M = DRIVE_MAX_POSITION_M  # the bound a loader holds a drive's positions to
 COVARIANCE = COV_COLUMNS  # the answer's reported covariance, as in the traces
 OPTIONAL = ("latency_us", *COVARIANCE)
+#: the longest latency [us] an answer may state: 1000 s, beyond any machine answering a
+#: position query (a larger figure is another unit or a placeholder, and its nanoseconds
+#: would overflow the int64 the latency figures are taken in)
+MAX_LATENCY_US = 1e9
 
 
 @dataclass
@@ -114,7 +119,8 @@ def read_answers(path: str | Path) -> Answers:
 
     Raises:
         DataError: missing file or columns, a non-numeric, missing or non-finite t_query, x or
-            y, an unknown kind, a negative latency; each naming the first row at fault.
+            y, an unknown kind, a negative latency or one over :data:`MAX_LATENCY_US`; each
+            naming the first row at fault.
     """
     from posbench.scenarios.loaders.table import numeric_column, read_table_file
 
@@ -166,6 +172,16 @@ def read_answers(path: str | Path) -> Answers:
                 path,
                 f"{where(i)}, column 'latency_us': {quoted(df['latency_us'].iloc[i])} "
                 f"is not a duration >= 0 [us] (leave it empty if not timed)",
+            )
+        slow = lat > MAX_LATENCY_US
+        if slow.any():
+            i = int(np.flatnonzero(slow)[0])
+            raise DataError(
+                path,
+                f"{where(i)}, column 'latency_us': {lat[i]:g} us is over {MAX_LATENCY_US:g} us "
+                f"({MAX_LATENCY_US / 1e6:g} s), longer than any machine takes to answer "
+                f"(microseconds expected; leave it empty if not timed); "
+                f"{int(slow.sum())} such rows",
             )
     frame = pd.DataFrame(
         {"drive": drive, "kind": kind, **num, "latency_us": lat, **_covariance(tab, path)}

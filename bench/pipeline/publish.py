@@ -207,7 +207,9 @@ def run_failure(
 def nothing_scored(res: dict[str, Any], runs: Sequence[DriveRun], out: Path | None) -> str:
     """Why a run scored no query of any drive, in one line: the drives fed fewer than two
     fixes (queries start at a drive's second fix), and the queries left out as warm-up or
-    for want of a reference position; where report.md was written."""
+    for want of a reference position (with the truth's sampling where that is the cause:
+    :attr:`~posbench.scoring.records.DriveRun.reference_gaps`); where report.md was
+    written."""
     from posbench.report.notes import excluded_counts
 
     few = [r for r in runs if not r.skipped and r.gps_count < 2]
@@ -228,9 +230,15 @@ def nothing_scored(res: dict[str, Any], runs: Sequence[DriveRun], out: Path | No
             f"drive's second received fix)"
         )
     if n_noref:
+        gaps = [r for r in runs if not r.skipped and r.reference_gaps]
+        why = (
+            "; ".join(f"drive {r.name}: {r.reference_gaps}" for r in gaps[:3])
+            + ("; ..." if len(gaps) > 3 else "")
+            if gaps
+            else "past the end of the truth or of the fixes"
+        )
         parts.append(
-            f"{n_noref} quer{'y' if n_noref == 1 else 'ies'} without a reference "
-            f"position (past the end of the truth or of the fixes)"
+            f"{n_noref} quer{'y' if n_noref == 1 else 'ies'} without a reference position ({why})"
         )
     where = f"; wrote {out / 'report.md'} all the same" if out is not None else ""
     return "no query of any drive could be scored: " + ("; ".join(parts) or "no queries") + where

@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import itertools
 import json
+import os
 from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
@@ -34,6 +35,7 @@ from typing import Any
 import numpy as np
 
 from posbench.config import RunConfig
+from posbench.errors import UsageError
 from posbench.predictors.registry import TUNED_FILE
 from posbench.replay.runner import run
 from posbench.scenarios.drive import Drive
@@ -175,6 +177,26 @@ def tuning_note(predictor: str, condition: str, calibration: str, path: Path | N
     return f"{noise}; {calibration}" if noise else calibration
 
 
+def held_cov_scale(predictor: str, cov_scale: float) -> tuple[float, str | None]:
+    """A calibrated ``cov_scale`` held in the range the baselines accept
+    (:data:`~posbench.predictors._geometry.COV_SCALE_RANGE`), and one line on the clamp
+    (None where there was none). A scale of 0 (every error on the drives 0: a parked car
+    with exact fixes) becomes the least one, whose ellipses still cover; a larger one than
+    the most is held at the most, whose ellipses then cover less than 95 %."""
+    from posbench.predictors._geometry import COV_SCALE_RANGE
+
+    lo, hi = COV_SCALE_RANGE
+    if not cov_scale == cov_scale or lo <= cov_scale <= hi:
+        return cov_scale, None
+    held = min(max(cov_scale, lo), hi)
+    covers = "still cover" if cov_scale < lo else "cover less than"
+    why = f"its 95 % ellipses {covers} 95 % of the errors on these drives"
+    return held, (
+        f"calibrated cov_scale {cov_scale:g} is outside the range {predictor} accepts "
+        f"[{lo:g}, {hi:g}]: clamped to {held:g} ({why})"
+    )
+
+
 def save_tuned(
     predictor: str,
     condition: str,
@@ -187,7 +209,16 @@ def save_tuned(
     """Merge one result into the tuning file ``path`` (created if missing): its
     ``params``, ``how`` they were obtained and the ``drives`` they were tuned on, plus the
     keys of ``extra`` (e.g. ``fit``: what a gradient tuning fitted; readers use ``params``
-    only)."""
+    only).
+
+    The merged file is written to a temporary file beside ``path`` and checked there as
+    ``bench run --tuning`` checks it (:func:`~posbench.replay.predictor_setup.tuning_entry_refusal`,
+    the run's own function): an entry the run would refuse raises :class:`UsageError`
+    (one line) and ``path`` is left as it was. Otherwise the temporary file is synced to
+    disk and renamed over ``path``: a kill at any moment leaves the old file or the new
+    one, never part of one."""
+    from posbench.replay.predictor_setup import tuning_entry_refusal
+
     if path.resolve() == TUNED_PATH.resolve():
         raise ValueError("the package's tuning is not written by a command")
     data = json.loads(path.read_text()) if path.exists() else {}
@@ -197,7 +228,37 @@ def save_tuned(
         "drives": sorted(drives),
         **(extra or {}),
     }
-    path.write_text(json.dumps(data, indent=2, sort_keys=True) + "\n")
+    text = json.dumps(data, indent=2, sort_keys=True) + "\n"
+    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
+    try:
+        with open(tmp, "w", encoding="utf-8") as f:
+            f.write(text)
+            f.flush()
+            os.fsync(f.fileno())
+        why = tuning_entry_refusal(tmp, predictor, condition, {})
+        if why is not None:
+            raise UsageError(
+                f"nothing saved to {path}: `bench run --tuning` would refuse it: {why}"
+            )
+        os.replace(tmp, path)
+    finally:
+        tmp.unlink(missing_ok=True)
+    _sync_folder(path.parent)
+
+
+def _sync_folder(folder: Path) -> None:
+    """fsync a folder (so a rename in it is on disk too); a no-op where the system
+    cannot open one (Windows)."""
+    try:
+        fd = os.open(folder, os.O_RDONLY)
+    except OSError:
+        return
+    try:
+        os.fsync(fd)
+    except OSError:
+        pass
+    finally:
+        os.close(fd)
 
 
 def gradient_search(

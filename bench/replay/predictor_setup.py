@@ -438,10 +438,11 @@ def check_tuning_file(
 ) -> None:
     """Check a ``--tuning`` file before any work: readable, shaped as ``bench tune --out``
     writes it, and each of its entries accepted by the run's predictor of that name
-    (each such predictor is built once per GPS condition the file holds for it)."""
+    (:func:`tuning_entry_refusal`: each such predictor is built once per GPS condition the
+    file holds for it)."""
     if path is None:
         return
-    from posbench.predictors.registry import PredictorError, base_name, create, read_tuning
+    from posbench.predictors.registry import PredictorError, base_name, read_tuning
 
     try:
         data = read_tuning(path)
@@ -449,10 +450,26 @@ def check_tuning_file(
         raise UsageError(f"--tuning: {e}") from None
     for name in names:
         for condition in data.get(base_name(name), {}):
-            try:
-                create(name, condition, tuning_file=path, **options.get(name, {}))
-            except Exception as e:  # noqa: BLE001 - any constructor failure is the file's
-                raise UsageError(
-                    f"--tuning {path}: {base_name(name)} ({condition}) cannot be "
-                    f"created with its parameters: {_failure_detail(e)}"
-                ) from None
+            why = tuning_entry_refusal(path, name, condition, options.get(name, {}))
+            if why is not None:
+                raise UsageError(f"--tuning {path}: {why}")
+
+
+def tuning_entry_refusal(
+    path: Path | str, name: str, condition: str, options: Mapping[str, Any]
+) -> str | None:
+    """Why ``bench run --tuning path`` refuses the entry of predictor ``name`` under GPS
+    ``condition`` (one line, without the file's name), or None where it takes it: the
+    predictor built with the file's parameters and the run's ``options`` for it. ``bench
+    tune`` asks the same before it saves (:func:`posbench.predictor_tools.tuning.save_tuned`),
+    so it never writes an entry the run refuses."""
+    from posbench.predictors.registry import base_name, create
+
+    try:
+        create(name, condition, tuning_file=path, **options)
+    except Exception as e:  # noqa: BLE001 - any constructor failure is the file's
+        return (
+            f"{base_name(name)} ({condition}) cannot be created with its parameters: "
+            f"{_failure_detail(e)}"
+        )
+    return None

@@ -2,7 +2,8 @@
 
 - Drives with a truth stream: the truth interpolated at the query time with a
   cubic spline (truth is 10-100 Hz); NaN outside the truth's span or inside gaps
-  longer than ``max_gap_s``.
+  longer than ``max_gap_s`` (:data:`~posbench.scenarios.truth_gaps.TRUTH_MAX_GAP_S`, 0.5 s:
+  why in :mod:`posbench.scenarios.truth_gaps`).
 - Drives without truth (the paper's routes): the paper's convention, a cubic
   fitted through the surrounding real fixes (``n_side`` before and after the query,
   past and future); NaN where there are fewer than 2 fixes within ``max_gap_s``
@@ -15,6 +16,7 @@ from __future__ import annotations
 import numpy as np
 
 from posbench.scenarios.drive import Drive
+from posbench.scenarios.truth_gaps import TRUTH_MAX_GAP_S
 from posbench.scoring.reference import FIX_CUBIC, TRUTH, truth_name
 
 __all__ = ["FIX_CUBIC", "TRUTH", "cubic_through_fixes", "reference_at", "truth_at", "truth_source"]
@@ -41,7 +43,11 @@ def reference_at(drive: Drive, tq: np.ndarray) -> np.ndarray:
 
 
 def truth_at(
-    t_truth: np.ndarray, x: np.ndarray, y: np.ndarray, tq: np.ndarray, max_gap_s: float = 0.5
+    t_truth: np.ndarray,
+    x: np.ndarray,
+    y: np.ndarray,
+    tq: np.ndarray,
+    max_gap_s: float = TRUTH_MAX_GAP_S,
 ) -> np.ndarray:
     """(N, 2) truth positions [m] at times tq [s] by cubic spline; NaN where not covered."""
     from scipy.interpolate import CubicSpline

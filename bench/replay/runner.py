@@ -22,6 +22,7 @@ from posbench.replay.queries import query_frame
 from posbench.replay.reference import truth_source
 from posbench.scenarios.child_processes import WorkerPool
 from posbench.scenarios.drive import Drive
+from posbench.scenarios.truth_gaps import truth_gap_note
 from posbench.scoring.records import DriveRun, merge_predictor_runs
 from posbench.scoring.score import score_many
 
@@ -142,12 +143,13 @@ def run_drive(drive: Drive, cfg: RunConfig, limit: bool = False) -> DriveRun:
         from posbench.replay.limit import drive_limit
 
         bound, bound_info = drive_limit(prep, queries, cfg)
+    gaps = truth_gap_note(drive.truth.t) if drive.truth is not None else ""
     return DriveRun(
         drive.name,
         prep.dataset,
         prep.reference,
         prep.notes,
-        list(drive.meta.warnings),
+        list(drive.meta.warnings) + ([gaps] if gaps else []),
         traces,
         step_ns,
         query_ns,
@@ -163,6 +165,7 @@ def run_drive(drive: Drive, cfg: RunConfig, limit: bool = False) -> DriveRun:
         truth_source=truth_source(drive),
         limit=bound,
         limit_info=bound_info,
+        reference_gaps=gaps,
     )
 
 

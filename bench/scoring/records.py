@@ -46,6 +46,11 @@ class DriveRun:
     #: what the bound took (q, the fixes' white noise, the slow floor, the IMU's noise, ...:
     #: :func:`posbench.replay.limit.drive_limit`); empty without a bound
     limit_info: dict[str, Any] = field(default_factory=dict)
+    #: why part of its truth's span has no reference position (its samples farther apart
+    #: than the reference interpolates across:
+    #: :func:`posbench.scenarios.truth_gaps.truth_gap_note`, also among its ``warnings``);
+    #: "" where none
+    reference_gaps: str = ""
 
 
 def merge_predictor_runs(parts: Sequence[DriveRun]) -> DriveRun:

@@ -408,6 +408,14 @@ CASES = {
         lambda a: a.assign(latency_us=[1.0, 2.0, -3.0, 4.0, 5.0, 6.0]),
         ["line 4, column 'latency_us'", "not a duration >= 0"],
     ),
+    "impossible latency": (  # exit 0 with a RuntimeWarning and a p50 of -9.2e15 us before
+        lambda a: a.assign(latency_us=[1.0, 2.0, 3.0, 1e300, 5.0, 6.0]),
+        ["line 5, column 'latency_us': 1e+300 us", "over 1e+09 us (1000 s)"],
+    ),
+    "latency past 1000 s": (
+        lambda a: a.assign(latency_us=[1.0, 2.0, 3.0, 4.0, 5.0, 1.5e9]),
+        ["line 7, column 'latency_us': 1.5e+09 us", "over 1e+09 us (1000 s)"],
+    ),
     "unknown drive": (
         lambda a: a.assign(drive=["synthetic-mixed-s0"] * 5 + ["kitti-42"]),
         [

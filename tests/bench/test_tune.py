@@ -61,3 +61,53 @@ def test_calibration_of_a_predictor_without_covariance_is_nan():
 
     drives = [generate_drive(seed=1003, route="straight", duration_s=20)]
     assert math.isnan(calibrate("poly", drives, "rtk", {}, workers=1))
+
+
+def test_a_tuning_the_run_refuses_is_not_saved(tmp_path):
+    # the entry is checked with the run's own check before it replaces the file: a NaN
+    # jerk density is refused in one line naming why, and the user's file stays as it was
+    import json
+    import math
+
+    import pytest
+
+    from posbench.errors import UsageError
+    from posbench.predictor_tools.tuning import save_tuned
+    from posbench.replay.predictor_setup import check_tuning_file
+
+    out = tmp_path / "t.json"
+    save_tuned("kf", "rtk", {"jerk_psd": 4.0}, "by hand", out)
+    before = out.read_bytes()
+    with pytest.raises(UsageError) as e:
+        save_tuned("kf", "none", {"jerk_psd": math.nan}, "diverged", out)
+    assert str(e.value).startswith(f"nothing saved to {out}: `bench run --tuning` would refuse")
+    assert "jerk_psd=nan must be in [1e-09, 1000000.0]" in str(e.value)
+    assert out.read_bytes() == before and sorted(p.name for p in tmp_path.iterdir()) == ["t.json"]
+    assert json.loads(before)["kf"]["rtk"]["params"] == {"jerk_psd": 4.0}
+    check_tuning_file(out, ["kf"], {})  # what was kept is still a file the run takes
+
+
+def test_a_stop_while_saving_leaves_the_tuning_file_whole(tmp_path, monkeypatch):
+    # the merged file is written beside the user's, synced and renamed over it: a kill
+    # before the rename (here: in the fsync) leaves the old file intact and no stray file
+    import os
+
+    import pytest
+
+    from posbench.predictor_tools.tuning import save_tuned
+
+    out = tmp_path / "t.json"
+    save_tuned("kf", "rtk", {"jerk_psd": 4.0}, "by hand", out)
+    before = out.read_bytes()
+    synced: list[str] = []
+
+    def killed(fd: int) -> None:
+        synced.append(os.readlink(f"/proc/self/fd/{fd}"))
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(os, "fsync", killed)
+    with pytest.raises(KeyboardInterrupt):
+        save_tuned("kf", "none", {"jerk_psd": 8.0}, "by hand", out)
+    assert out.read_bytes() == before
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["t.json"]
+    assert synced and os.path.dirname(synced[0]) == str(tmp_path) and synced[0] != str(out)

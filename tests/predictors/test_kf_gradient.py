@@ -275,3 +275,51 @@ def test_the_module_does_not_import_torch_until_a_fit() -> None:
         [sys.executable, "-c", code], capture_output=True, text=True, timeout=60, check=True
     )
     assert out.stdout.strip() == "False"
+
+
+def parked_csv(path: Path, duration_s: float = 12.0) -> Path:
+    """A parked car as a CSV drive: the truth still at (5, -3) m at 100 Hz, fixes there
+    at 10 Hz with 2 cm of noise (``native``; ``none`` draws exact ones), the IMU all
+    zero at 100 Hz."""
+    from posbench.scenarios.loaders.table import write_table
+
+    rng = np.random.default_rng(0)
+    t, tg = np.arange(0.0, duration_s, 0.01), np.arange(0.0, duration_s, 0.1)
+    zero = np.zeros(t.size)
+    drive = Drive(
+        meta=DriveMeta(name="parked", source="test", format="test"),
+        gps=GpsStream(tg, 5.0 + rng.normal(0, 0.02, tg.size), -3 + rng.normal(0, 0.02, tg.size)),
+        imu=ImuStream(t, zero, zero, zero, zero),
+        truth=TruthStream(t, zero + 5.0, zero - 3.0),
+    )
+    write_table(drive, path)
+    return path
+
+
+@pytest.mark.slow
+def test_a_parked_car_saves_a_cov_scale_the_run_accepts(tmp_path: Path) -> None:
+    # exact fixes of a parked car: every error 0, so the calibration's scale is 0, which
+    # the kf refuses; it is clamped to the least it takes, said in one line, and the run
+    # takes the file (it used to say "saved" and the run refused the file)
+    from posbench.replay.predictor_setup import check_tuning_file
+
+    data, out = parked_csv(tmp_path / "parked.csv"), tmp_path / "t.json"
+    r = bench(
+        "tune", "kf", "--method", "gradient", "--data", data, "--gps-profile", "none",
+        "--iterations", "2", "--lr", "1.0", "--out", out,
+    )  # fmt: skip
+    assert r.returncode == 0, r.stderr
+    assert r.stderr.splitlines() == [
+        "warning: calibrated cov_scale 0 is outside the range kf accepts [1e-06, 1e+06]: "
+        "clamped to 1e-06 (its 95 % ellipses still cover 95 % of the errors on these drives)"
+    ]
+    assert json.loads(out.read_text())["kf"]["none"]["params"]["cov_scale"] == 1e-6
+    check_tuning_file(out, ["kf"], {})  # raises UsageError if the run refuses it
+
+
+def test_fitted_options_outside_the_kfs_range_are_clamped_and_named() -> None:
+    clamped: dict[str, float] = {}
+    eye = np.eye(2)
+    opts = kg.kf_options(eye * 4e6, eye * 0.25, 2e3, None, clamped=clamped)
+    assert opts == {"jerk_psd": 1e6, "gps_sigma": 0.5, "accel_sigma": 1e3}
+    assert clamped == {"jerk_psd": 4e6, "accel_sigma": 2e3}
