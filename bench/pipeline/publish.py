@@ -16,6 +16,7 @@ from posbench.pipeline.reporter import SILENT, Reporter
 from posbench.report.markdown import TABLE_FORMATS
 from posbench.saved_run.run import Run
 from posbench.scenarios.errors import DataError
+from posbench.scenarios.truth_gaps import TRUTH_MAX_GAP_S
 from posbench.scoring.records import DriveRun
 from posbench.scoring.schema import KINDS
 
@@ -235,7 +236,8 @@ def nothing_scored(res: dict[str, Any], runs: Sequence[DriveRun], out: Path | No
             "; ".join(f"drive {r.name}: {r.reference_gaps}" for r in gaps[:3])
             + ("; ..." if len(gaps) > 3 else "")
             if gaps
-            else "past the end of the truth or of the fixes"
+            else "past the end of the truth or of the fixes, or in a gap of the truth longer "
+            f"than {TRUTH_MAX_GAP_S:g} s"
         )
         parts.append(
             f"{n_noref} quer{'y' if n_noref == 1 else 'ies'} without a reference position ({why})"

@@ -10,6 +10,7 @@ from typing import Any
 
 from posbench.config import BUILT_IN_TUNING
 from posbench.scenarios.text import fixed
+from posbench.scenarios.truth_gaps import TRUTH_MAX_GAP_S
 from posbench.scoring.reference import KIND_FIXES
 from posbench.scoring.schema import KINDS
 from posbench.tables.run_tables import trained_in_run
@@ -194,7 +195,7 @@ def excluded_note(res: dict[str, Any]) -> str:
         f"Excluded from these figures, per predictor: {n_warm} warm-up queries (issued before "
         f"a drive's second received fix, when no predictor can know a velocity) and "
         f"{n_noref} queries without a reference position (past the end of the truth or of "
-        f"the fixes)."
+        f"the fixes, or in a gap of the truth longer than {TRUTH_MAX_GAP_S:g} s)."
     )
 
 
