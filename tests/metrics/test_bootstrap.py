@@ -299,3 +299,25 @@ def test_definitions_name_the_figures_of_the_report():
     assert {"95 % CI", "block bootstrap", "paired difference", "wins", "conclusive"} <= set(
         DEFINITIONS
     )
+
+
+def test_autocovariance_in_blocks_equals_the_whole_and_stays_small():
+    """A long series' autocovariance block by block: the same sums as one FFT of the whole
+    (to rounding), and no allocation of the order of the whole FFT (issue 46: an 8 h drive
+    died in a MemoryError here)."""
+    import tracemalloc
+
+    from posbench.metrics.bootstrap import _autocovariance
+
+    rng = np.random.default_rng(5)
+    n, lag = 1 << 20, 900
+    x = np.cumsum(rng.normal(size=n)) * 0.01 + rng.normal(size=n)
+    whole = _autocovariance(x, lag, block=n)
+    tracemalloc.start()
+    blocked = _autocovariance(x, lag, block=1 << 14)
+    peak = tracemalloc.get_traced_memory()[1]
+    tracemalloc.stop()
+    np.testing.assert_allclose(blocked, whole, rtol=0, atol=1e-12 * whole[0])
+    # the centred copy of the series (8 n bytes) and a few block-sized FFTs; the whole FFT
+    # alone would take 4 x 16 n bytes
+    assert peak < 8 * n + 64 * (1 << 16) * 16, peak
