@@ -61,15 +61,18 @@ DEFINITIONS = {
     "of the PSD its reference shows, as it varies along the drive) and the fixes had the "
     "noise the bound "
     "takes (a simulated profile's own, else the fixes' estimated white noise); against an "
-    "independent truth, plus the receiver's slow error, which no fix reveals. A bound under "
+    "independent truth, plus the receiver's slow error, which no fix reveals (on simulated "
+    "fixes the error drawn for the drive). A predictor that reads the IMU is held against "
+    "the limit with IMU. A bound under "
     "stated assumptions, never a predictor: it is not ranked, compared or gated.",
     "limit with IMU": f"`{LIMIT_IMU_NAME}`: the same bound for a predictor that also "
     "observes the acceleration at every IMU sample, with the IMU's white noise as its "
     "samples show it (bias, tilt and mounting taken as known: optimistic).",
     "x limit": "a predictor's mean error / the limit's mean error over the same scored "
     "queries (1 = at the bound; 2 = twice the smallest error possible under the bound's "
-    "assumptions). Below 1 by more than the predictor's interval: it uses information the "
-    "bound does not have, or the bound's assumptions do not hold on that data.",
+    "assumptions). Below 1 by more than the predictor's interval (against the limit with "
+    "IMU for a predictor that reads the IMU): it uses information the bound does not have, "
+    "or the bound's assumptions do not hold on that data.",
 }
 
 

@@ -169,7 +169,8 @@ def drawn_slow_offsets(prep: PreparedDrive, t_query: np.ndarray, latency_s: floa
     tq = np.asarray(t_query, dtype=float) + latency_s
     if t.size == 0:
         return np.full(tq.shape, np.nan)
-    return np.hypot(np.interp(tq, t, slow[:, 0]), np.interp(tq, t, slow[:, 1]))
+    length: np.ndarray = np.hypot(np.interp(tq, t, slow[:, 0]), np.interp(tq, t, slow[:, 1]))
+    return length
 
 
 #: the window [s] of the jerk PSD's profile along a drive (:func:`jerk_psd`)

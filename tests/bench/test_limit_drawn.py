@@ -99,9 +99,10 @@ def test_on_a_simulated_receiver_the_floor_is_the_error_drawn(consumer_drive):
     assert info["slow_var_m2"] == pytest.approx(realised, rel=0.15)
     assert info["slow_var_m2"] < 0.8  # this drive's draw, not the profile's 1 m^2
     for kind in ("future", "now"):
-        ratio = _scored_mean(r, "kf@fixes", kind) / r.limit.loc[
-            r.limit["kind"] == kind, "limit_m"
-        ].mean()
+        ratio = (
+            _scored_mean(r, "kf@fixes", kind)
+            / r.limit.loc[r.limit["kind"] == kind, "limit_m"].mean()
+        )
         assert 0.97 <= ratio < 1.1, (kind, ratio)
     # the drawn floor is never below the white-only bound, and the IMU variant never above it
     assert (r.limit["limit_imu_m"] <= r.limit["limit_m"] + 1e-12).all()
