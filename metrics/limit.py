@@ -10,7 +10,11 @@ metres, local ENU):
 - the fixes' total error against an independent truth (:func:`fix_error_variance`), of
   which the part that is not white is the receiver's slow error;
 - the per-query bound on the mean Euclidean error, fixes only and with the IMU as a known
-  acceleration input (:func:`mean_error_bounds`).
+  acceleration input (:func:`mean_error_bounds`); with a slow error drawn by the harness,
+  the realised error at each query as an offset no predictor can remove
+  (:func:`mean_error_offset`, the Rice mean);
+- how few independent samples of a slow error one drive holds
+  (:func:`correlation_time_s`, :func:`slow_floor_sd`).
 
 Which of these a drive uses (a simulated GPS profile's known noise, a receiver's stated
 accuracy, the reference's kind) is the harness's choice (``posbench.replay.limit``).
@@ -44,6 +48,11 @@ MIN_IMU_VAR = 1e-6
 #: a fix farther from the truth than this many times the median distance is a glitch, left
 #: out of :func:`fix_error_variance` (a Gaussian error reaches it with odds below 1e-15)
 OUTLIER_FACTOR = 5.0
+#: beyond this ``|offset|^2 / (2 var)`` the Rice mean is taken in its asymptotic form
+#: ``nu + var / (2 nu)`` (:func:`mean_error_offset`; relative error below 1e-12 there)
+RICE_ASYMPTOTIC = 1e12
+#: the grid [s] on which :func:`correlation_time_s` reads a slow error's autocorrelation
+CORRELATION_STEP_S = 1.0
 
 #: what each figure means (the report's glossary collects these)
 DEFINITIONS = {
@@ -52,15 +61,18 @@ DEFINITIONS = {
     "of the PSD its reference shows, as it varies along the drive) and the fixes had the "
     "noise the bound "
     "takes (a simulated profile's own, else the fixes' estimated white noise); against an "
-    "independent truth, plus the receiver's slow error, which no fix reveals. A bound under "
+    "independent truth, plus the receiver's slow error, which no fix reveals (on simulated "
+    "fixes the error drawn for the drive). A predictor that reads the IMU is held against "
+    "the limit with IMU. A bound under "
     "stated assumptions, never a predictor: it is not ranked, compared or gated.",
     "limit with IMU": f"`{LIMIT_IMU_NAME}`: the same bound for a predictor that also "
     "observes the acceleration at every IMU sample, with the IMU's white noise as its "
     "samples show it (bias, tilt and mounting taken as known: optimistic).",
     "x limit": "a predictor's mean error / the limit's mean error over the same scored "
     "queries (1 = at the bound; 2 = twice the smallest error possible under the bound's "
-    "assumptions). Below 1 by more than the predictor's interval: it uses information the "
-    "bound does not have, or the bound's assumptions do not hold on that data.",
+    "assumptions). Below 1 by more than the predictor's interval (against the limit with "
+    "IMU for a predictor that reads the IMU): it uses information the bound does not have, "
+    "or the bound's assumptions do not hold on that data.",
 }
 
 
@@ -134,6 +146,79 @@ def fix_error_variance(ex: np.ndarray, ey: np.ndarray) -> float:
     return float(np.mean(r[keep] ** 2) / 2.0)
 
 
+def mean_error_offset(var: np.ndarray | float, offset_m: np.ndarray | float) -> np.ndarray:
+    """Mean Euclidean error [m] of a 2-D Gaussian with per-axis variance ``var`` [m^2] (axes
+    independent) offset by a fixed vector of length ``offset_m`` [m]: the mean of a Rice
+    distribution, ``s sqrt(pi/2) L_1/2(-a)`` with ``s = sqrt(var)``, ``a = nu^2 / (2 s^2)``,
+    taken as ``(1 + a) i0e(a/2) + a i1e(a/2)`` (scipy's exponentially scaled Bessel
+    functions: no overflow) and as ``nu + s^2 / (2 nu)`` beyond :data:`RICE_ASYMPTOTIC`.
+    ``offset_m = 0`` gives :func:`~posbench.metrics.pcrb.mean_error_bound` (the Rayleigh
+    mean), ``var = 0`` gives ``offset_m``; averaged over offsets drawn from a 2-D Gaussian
+    of per-axis variance ``v``, it is the Rayleigh mean of ``var + v``. NaN where either is
+    NaN."""
+    from scipy.special import i0e, i1e
+
+    v = np.asarray(var, dtype=float)
+    nu = np.abs(np.asarray(offset_m, dtype=float))
+    v, nu = np.broadcast_arrays(v, nu)
+    out = np.full(v.shape, np.nan)
+    ok = np.isfinite(v) & np.isfinite(nu) & (v >= 0)
+    zero = ok & (v == 0)
+    out[zero] = nu[zero]
+    pos = ok & (v > 0)
+    with np.errstate(over="ignore"):
+        a = np.where(pos, nu * nu / np.where(pos, 2.0 * v, 1.0), 0.0)
+    far = pos & ~(a <= RICE_ASYMPTOTIC)  # an inf a too
+    out[far] = nu[far] + v[far] / (2.0 * nu[far])
+    near = pos & ~far
+    an, sn = a[near], np.sqrt(v[near])
+    lag = (1.0 + an) * i0e(an / 2.0) + an * i1e(an / 2.0)
+    out[near] = sn * math.sqrt(math.pi / 2.0) * lag
+    return out
+
+
+def correlation_time_s(t: np.ndarray, ex: np.ndarray, ey: np.ndarray) -> float:
+    """The correlation time [s] of an error ``ex``, ``ey`` [m] at times ``t`` [s] (fix minus
+    truth, say): on a grid of :data:`CORRELATION_STEP_S`, the first lag at which its
+    autocorrelation ``sum e(t) e(t + L) / sum e(t)^2`` (both axes, the mean **not**
+    removed: a bias is one sample however long the drive) falls below 1/e; at least the
+    grid step, at most the span of ``t``. NaN with fewer than 2 finite samples or no
+    error."""
+    tt, a, b = (np.asarray(v, dtype=float) for v in (t, ex, ey))
+    ok = np.isfinite(tt) & np.isfinite(a) & np.isfinite(b)
+    tt, a, b = tt[ok], a[ok], b[ok]
+    if tt.size < 2 or not np.all(np.diff(tt) >= 0):
+        return math.nan
+    span = float(tt[-1] - tt[0])
+    if not (span > 0):
+        return math.nan
+    step = min(CORRELATION_STEP_S, span)
+    grid = tt[0] + step * np.arange(int(span / step) + 1)
+    e = np.column_stack([np.interp(grid, tt, a), np.interp(grid, tt, b)])
+    scale = float(np.max(np.abs(e)))
+    if not (scale > 0 and math.isfinite(scale)):
+        return math.nan
+    e = e / scale  # no overflow in the products below
+    n = grid.size
+    f = np.fft.rfft(e, n=2 * n, axis=0)  # zero-padded: every lag's sum at once
+    acf = np.fft.irfft(f * np.conj(f), n=2 * n, axis=0)[:n].sum(axis=1)
+    rho = acf / acf[0] * n / (n - np.arange(n))  # each lag's mean product over its mean square
+    below = np.flatnonzero(rho[1:] < math.exp(-1.0))
+    return float((below[0] + 1) * step) if below.size else span
+
+
+def slow_floor_sd(total_var_m2: float, duration_s: float, tau_s: float) -> float:
+    """The standard deviation [m^2] of a slow error's variance per axis as measured over one
+    drive: ``total_var_m2 / sqrt(n)`` with ``n = max(1, duration_s / tau_s)`` independent
+    samples (the mean square of an exponentially correlated error over ``T`` has the
+    variance ``2 s^4 tau / T`` per axis; two axes halve it). NaN where an input is not
+    finite or ``tau_s`` not positive."""
+    vals = (total_var_m2, duration_s, tau_s)
+    if not all(math.isfinite(v) for v in vals) or tau_s <= 0 or total_var_m2 < 0:
+        return math.nan
+    return float(total_var_m2) / math.sqrt(max(1.0, duration_s / tau_s))
+
+
 def mean_error_bounds(
     t_fix: np.ndarray,
     r_var: float,
@@ -142,6 +227,7 @@ def mean_error_bounds(
     t_query: np.ndarray,
     *,
     slow_var: float = 0.0,
+    slow_offset_m: np.ndarray | None = None,
     independent_truth: bool = True,
     latency_s: float = 0.0,
     t_acc: np.ndarray | None = None,
@@ -157,8 +243,10 @@ def mean_error_bounds(
     that holds the position at ``t - latency_s`` [s] (a receiver's latency) is an
     observation at ``t - latency_s``, known from ``t`` on. ``slow_var`` [m^2] per axis, the
     receiver's slow error, is added where ``independent_truth`` is the reference
-    (:func:`~posbench.metrics.pcrb.with_slow_error`). ``t_acc`` [s], ``r_acc`` [m^2/s^4]:
-    IMU samples observing the acceleration per axis
+    (:func:`~posbench.metrics.pcrb.with_slow_error`); ``slow_offset_m`` [m] (same shape as
+    the queries), a slow error's realised length at each query, instead takes it as an
+    offset (:func:`mean_error_offset`; ``slow_var`` is then not added). ``t_acc`` [s],
+    ``r_acc`` [m^2/s^4]: IMU samples observing the acceleration per axis
     (:func:`~posbench.metrics.pcrb.position_variance_bound_with_acceleration`; with a
     latency, the IMU samples of the last ``latency_s`` before a query are not used).
     Both axes alike, so the mean error is the Rayleigh mean of the per-axis variance
@@ -174,9 +262,16 @@ def mean_error_bounds(
         return nan, (None if t_acc is None else nan.copy())
     r = max(float(r_var), MIN_FIX_VAR_M2)
     obs, issue = tf - latency_s, ti - latency_s
-    var = position_variance_bound(obs, r, q, tq, t_issue=issue)
-    var = with_slow_error(var, slow_var, independent_truth=independent_truth)
-    bound = mean_error_bound(var)
+    offset = None
+    if slow_offset_m is not None and independent_truth:
+        offset = np.broadcast_to(np.asarray(slow_offset_m, dtype=float), tq.shape)
+        slow_var = 0.0
+
+    def mean_error(v: np.ndarray) -> np.ndarray:
+        v = with_slow_error(v, slow_var, independent_truth=independent_truth)
+        return mean_error_bound(v) if offset is None else mean_error_offset(v, offset)
+
+    bound = mean_error(position_variance_bound(obs, r, q, tq, t_issue=issue))
     if t_acc is None:
         return bound, None
     ta = np.asarray(t_acc, dtype=float)
@@ -186,8 +281,7 @@ def mean_error_bounds(
     var_i = position_variance_bound_with_acceleration(
         obs, r, q, tq, ta, max(ra, MIN_IMU_VAR), t_issue=issue
     )
-    var_i = with_slow_error(var_i, slow_var, independent_truth=independent_truth)
-    return bound, mean_error_bound(var_i)
+    return bound, mean_error(var_i)
 
 
 def mean_ci(

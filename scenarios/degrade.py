@@ -50,6 +50,7 @@ Dropouts (:func:`apply_dropouts`, profiles listed in :data:`DROPOUT_PROFILES`)
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -179,6 +180,22 @@ def gauss_markov(
     return np.stack([np.interp(t, grid, out[:, k]) for k in range(dims)], axis=1)
 
 
+def gps_noise_parts(
+    t: np.ndarray,
+    rng: np.random.Generator,
+    white_sd: float,
+    gm_sd: float = 0.0,
+    gm_tau_s: float = 45.0,
+) -> tuple[np.ndarray, np.ndarray]:
+    """The two parts of :func:`gps_noise` [m], each (len(t), 2): the white error (sigma
+    ``white_sd``) and the slow, Gauss-Markov error (``gm_sd``, ``gm_tau_s`` [s]; zeros
+    without one), drawn from ``rng`` in that order (their sum is :func:`gps_noise`'s)."""
+    t = np.asarray(t, dtype=float)
+    white = rng.standard_normal((t.size, 2)) * white_sd
+    slow = gauss_markov(t, gm_sd, gm_tau_s, rng) if gm_sd > 0 else np.zeros((t.size, 2))
+    return white, slow
+
+
 def gps_noise(
     t: np.ndarray,
     rng: np.random.Generator,
@@ -187,11 +204,8 @@ def gps_noise(
     gm_tau_s: float = 45.0,
 ) -> np.ndarray:
     """Position error [m] (len(t), 2): white (sigma ``white_sd``) plus Gauss-Markov (``gm_sd``)."""
-    t = np.asarray(t, dtype=float)
-    e = rng.standard_normal((t.size, 2)) * white_sd
-    if gm_sd > 0:
-        e = e + gauss_markov(t, gm_sd, gm_tau_s, rng)
-    return e
+    white, slow = gps_noise_parts(t, rng, white_sd, gm_sd, gm_tau_s)
+    return white + slow if gm_sd > 0 else white
 
 
 def interpolate_truth(truth: TruthStream, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -230,6 +244,18 @@ def stated_sigma_m(profile: str) -> float | None:
     return STATED_SIGMA_M[profile]
 
 
+@dataclass(frozen=True)
+class DrawnGps:
+    """A simulated receiver's fixes and the slow error the harness drew for them."""
+
+    #: the fixes (:func:`degrade_gps`'s stream)
+    gps: GpsStream
+    #: the slow (Gauss-Markov) part of each fix's error [m], (len(gps), 2) east, north: the
+    #: fix minus the truth at its time (less the latency) minus the white part; zeros for a
+    #: profile without a slow error
+    slow_xy: np.ndarray
+
+
 def degrade_gps(
     truth: TruthStream,
     profile: str = "rtk",
@@ -251,7 +277,22 @@ def degrade_gps(
     Returns:
         GpsStream with t [s], x/y [m], lat/lon (if ``origin``), accuracy = the profile's
         stated per-axis 1-sigma [m] (:func:`stated_sigma_m`; ``None`` for ``"none"``).
+        :func:`draw_gps` gives the same stream with the slow error it drew.
     """
+    return draw_gps(truth, profile, seed, latency_s, intervals, origin).gps
+
+
+def draw_gps(
+    truth: TruthStream,
+    profile: str = "rtk",
+    seed: int = 0,
+    latency_s: float = 0.0,
+    intervals: str = "aslan",
+    origin: tuple[float, float] | None = None,
+) -> DrawnGps:
+    """:func:`degrade_gps`'s stream (the same for the same arguments), with the slow
+    error drawn for each fix (:class:`DrawnGps`): what no predictor can remove against the
+    truth, on this drive."""
     _check_profile(profile)
     if not (np.isfinite(latency_s) and latency_s >= 0):
         raise DataError(None, f"latency {latency_s!r} s: must be >= 0")
@@ -260,16 +301,18 @@ def degrade_gps(
         truth.t[0] + latency_s, truth.t[-1], np.random.default_rng(ss_times), intervals
     )
     x, y = interpolate_truth(truth, t_fix - latency_s)
+    slow = np.zeros((t_fix.size, 2))
     if profile != "none":
         w, g, tau = NOISE_PARAMS[profile]
-        e = gps_noise(t_fix, np.random.default_rng(ss_noise), w, g, tau)
+        white, slow = gps_noise_parts(t_fix, np.random.default_rng(ss_noise), w, g, tau)
+        e = white + slow if g > 0 else white
         x, y = x + e[:, 0], y + e[:, 1]
     lat = lon = None
     if origin is not None:
         lat, lon = enu_to_latlon(x, y, origin[0], origin[1])
     stated = stated_sigma_m(profile)
     acc = None if stated is None else np.full(t_fix.size, stated)
-    return GpsStream(t_fix, x, y, lat, lon, acc)
+    return DrawnGps(GpsStream(t_fix, x, y, lat, lon, acc), slow)
 
 
 def enu_to_latlon(

@@ -363,9 +363,11 @@ def aggregate(
             d["predictors"] = {name: mine.get(name, _empty_kinds(stats)) for name in preds}
         res["drives"].append(d)
     res["references"] = dataset_references(res["drives"])
-    from posbench.aggregation.limit import limit_section
+    from posbench.aggregation.limit import imu_readers, limit_section
 
-    limit = limit_section(runs, res, stats)  # the bound beside the predictors, never one
+    # the bound beside the predictors, never one; each judged against the bound that applies
+    readers = imu_readers(preds, cfg.predictor_options)
+    limit = limit_section(runs, res, stats, readers)
     if limit is not None:
         res["limit"] = limit
     res["gate"] = gate_summary(runs, cfg)

@@ -6,7 +6,13 @@ very queries the predictors are scored on (past the warm-up, with a reference). 
 are summarised as a predictor's errors are (mean over the same queries, with its cluster
 bootstrap interval over drives), overall and per data set, fixes only and with the IMU;
 each predictor's ``x limit`` ratio (its mean / the bound's); and the predictors whose mean
-lies below the bound by more than their interval, each with the likely reason. The bound
+lies below **the bound that applies to them** by more than their interval, each with the
+likely reason: a predictor that reads the IMU (its class overrides ``observe_imu`` and no
+``use_imu`` option turns it off: :func:`imu_readers`) is held against the bound with IMU,
+one that does not against the fixes-only bound. Where a drive's slow floor was measured on
+few independent samples (a receiver's own fixes against a truth,
+``drives[].limit.slow_var_sd_m2``), the bound's interval is widened by what that leaves
+uncertain (:func:`floor_sd`), and a predictor is below only by more than that too. The bound
 is never a predictor: it is kept out of ``predictors``, the paired comparison, the sanity
 check and every gate.
 """
@@ -15,6 +21,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping, Sequence
+from statistics import NormalDist
 from typing import Any
 
 import numpy as np
@@ -35,50 +42,124 @@ ASSUMPTIONS = (
     "axis, of the PSD q the reference shows, as it varies along each drive in 2 s windows) "
     "and the noise of the fixes it is fed (white, of the simulated profile's variance, else "
     "as estimated from the fixes), at the drive's actual fix times; against an independent "
-    "truth plus the receiver's slow error (no fix can reveal it), against the receiver's own "
-    "fixes without. The mean error of the 2-D Gaussian it implies, averaged over the queries "
+    "truth plus the receiver's slow error (no fix can reveal it: on simulated fixes the error "
+    "posbench drew for the drive, at each query; on a receiver's own, its variance measured "
+    "against the truth, the interval widened by how few independent samples of it a drive "
+    "holds), against the receiver's own fixes without. The mean error of the 2-D Gaussian it "
+    "implies, averaged over the queries "
     "the predictors are scored on. The IMU variant also observes the acceleration at every "
     "IMU sample, with the white noise the samples show (bias, tilt and mounting taken as "
     "known)."
 )
 
 
+#: ``use_imu`` option values that switch a predictor's IMU off
+_OFF = {"false", "no", "off", "0"}
+
+
+def imu_readers(
+    names: Sequence[str], options: Mapping[str, Mapping[str, Any]] | None = None
+) -> dict[str, bool | None]:
+    """Per predictor name, whether it reads the IMU: its class overrides
+    :meth:`~posbench.predictors.base.Predictor.observe_imu` (as the data check's
+    ``uses_stream`` tells) and its ``use_imu`` option (``options[name]``) does not turn that
+    off; None where the class cannot be found (e.g. answers scored from a file)."""
+    from posbench.predictors.base import Predictor
+    from posbench.predictors.registry import predictor_class
+
+    out: dict[str, bool | None] = {}
+    for name in names:
+        try:
+            cls = predictor_class(name)
+        except Exception:  # noqa: BLE001 - any failure to resolve: not known
+            out[name] = None
+            continue
+        reads = getattr(cls, "observe_imu", None) is not Predictor.observe_imu
+        use = (options or {}).get(name, {}).get("use_imu", True)
+        if use is False or str(use).strip().lower() in _OFF:
+            reads = False
+        out[name] = reads
+    return out
+
+
 def _frames(runs: Sequence[DriveRun]) -> pd.DataFrame:
-    """Every drive's limit rows, with its data set and drive."""
+    """Every drive's limit rows, with its data set, drive and ``slow_sd_m2`` (the standard
+    deviation of its measured slow floor, ``limit_info["slow_var_sd_m2"]``: 0 if none)."""
     parts = [
-        r.limit.assign(dataset=r.dataset, drive=r.name)
+        r.limit.assign(
+            dataset=r.dataset,
+            drive=r.name,
+            slow_sd_m2=float(r.limit_info.get("slow_var_sd_m2") or 0.0),
+        )
         for r in runs
         if r.limit is not None and not r.skipped and not r.limit.empty
     ]
     return pd.concat(parts, ignore_index=True) if parts else pd.DataFrame()
 
 
+def floor_sd(bound_m: np.ndarray, slow_sd_m2: np.ndarray, codes: np.ndarray) -> float:
+    """The standard deviation [m] of the mean of ``bound_m`` (per-query bounds [m]) that its
+    drives' measured slow floors leave (``slow_sd_m2`` [m^2] per query, its drive's;
+    ``codes`` the drives): a query's bound ``c sqrt(V)``, ``c^2 = pi/2``, moves by
+    ``pi / (4 b)`` per m^2 of slow variance; fully correlated within a drive (one floor),
+    independent across drives. 0 where no drive's floor was measured."""
+    b = np.asarray(bound_m, dtype=float)
+    sd = np.asarray(slow_sd_m2, dtype=float)
+    ok = np.isfinite(b) & (b > 0) & np.isfinite(sd)
+    if not ok.any() or not (sd[ok] > 0).any():
+        return 0.0
+    per_query = math.pi * sd[ok] / (4.0 * b[ok])
+    per_drive = np.bincount(np.asarray(codes)[ok], weights=per_query) / ok.sum()
+    return float(np.sqrt(np.sum(per_drive * per_drive)))
+
+
 def _kind_summaries(
     df: pd.DataFrame, column: str, stats: Statistics | None
 ) -> dict[str, Any] | None:
     """Per kind, :func:`summarize` of the bound in ``column`` with the ``ci95`` of its mean
-    (drives resampled, as a predictor's; its median and p95 are no bound: no interval);
-    None when no query has one (e.g. no IMU)."""
+    (drives resampled, as a predictor's; its median and p95 are no bound: no interval),
+    widened by ``floor_sd_m`` (:func:`floor_sd`, in quadrature with the resampling's
+    half-widths); None when no query has one (e.g. no IMU)."""
     e = df[column].to_numpy(dtype=float)
     if not np.isfinite(e).any():
         return None
     kind = df["kind"].to_numpy()
     codes = drive_codes(df)
     t = df["t_query"].to_numpy(dtype=float)
+    slow_sd = df["slow_sd_m2"].to_numpy(dtype=float)
     out: dict[str, dict[str, Any]] = {}
     for k in KINDS:
         m = kind == k
         out[k] = dict(summarize(e[m]))
+        sd = floor_sd(e[m], slow_sd[m], codes[m])
+        out[k]["floor_sd_m"] = sd
         if stats is not None:
             r = mean_ci(e[m], codes[m], t[m], stats.resamples, stats.seed, stats.level)
             out[k]["ci95"] = {
-                "mean_m": r["mean_m"],
+                "mean_m": _widened(r["mean_m"], out[k]["mean_m"], sd, stats.level),
                 "median_m": r["median_m"],
                 "p95_m": r["p95_m"],
                 "drives": r["clusters"],
                 "block_len": r["block_len"],
             }
     return out
+
+
+def _z(level: float) -> float:
+    """The standard normal quantile of a two-sided ``level`` interval (1.96 at 0.95)."""
+    return NormalDist().inv_cdf(0.5 + level / 2.0)
+
+
+def _widened(ci: Any, mean: float, sd: float, level: float) -> Any:
+    """``ci`` ([lo, hi] of a mean ``mean``) with ``z sd`` added to each half-width in
+    quadrature (``sd`` [m]: :func:`floor_sd`); as it is where ``sd`` is 0 or not finite."""
+    if not (sd > 0 and math.isfinite(sd)) or ci is None:
+        return ci
+    lo, hi = ci
+    if lo is None or hi is None or not (math.isfinite(lo) and math.isfinite(hi)):
+        return ci
+    extra = (_z(level) * sd) ** 2
+    return [mean - math.sqrt((mean - lo) ** 2 + extra), mean + math.sqrt((hi - mean) ** 2 + extra)]
 
 
 def _scope(df: pd.DataFrame, stats: Statistics | None) -> dict[str, Any]:
@@ -111,20 +192,37 @@ def ratios(
     }
 
 
-def below_reason(has_imu: bool, below_imu: bool, reference_kind: str | None) -> str:
-    """Why a predictor's mean can lie below the bound by more than its interval (which
-    inputs a predictor uses, posbench does not know: both readings are given)."""
+def below_reason(
+    has_imu: bool, below_imu: bool, reference_kind: str | None, reads_imu: bool | None = None
+) -> str:
+    """Why a predictor's mean can lie below the bound that applies to it by more than its
+    interval. ``reads_imu``: whether it reads the IMU (:func:`imu_readers`; None: posbench
+    does not know, and both readings are given)."""
     why = []
     if reference_kind == KIND_FIXES:
         why.append(
             "the reference is a cubic through the receiver's own fixes, which the bound takes "
             "for the true motion"
         )
-    if has_imu and not below_imu:
+    assumptions = (
+        "the bound's assumptions (white jerk of the PSD the reference shows, white fix noise "
+        "of the variance taken) do not hold on this data"
+    )
+    if reads_imu is True and has_imu:
+        why.append(
+            "it reads the IMU and lies below the limit with IMU: it uses information that "
+            "bound does not have too (wheel speed, a learned prior of how these vehicles "
+            f"move, IMU errors smaller than the samples show), or {assumptions}"
+        )
+    elif reads_imu is False:
+        why.append(
+            "it does not read the IMU: it uses information the bound does not have (wheel "
+            f"speed, a learned prior of how these vehicles move), or {assumptions}"
+        )
+    elif has_imu and not below_imu:
         why.append(
             "if it uses the IMU, that is what this bound does not have (it is not below the "
-            "limit with IMU); if it does not, the bound's assumptions (white jerk of the PSD "
-            "the reference shows, white fix noise of the variance taken) do not hold on this data"
+            f"limit with IMU); if it does not, {assumptions}"
         )
     else:
         why.append(
@@ -132,39 +230,55 @@ def below_reason(has_imu: bool, below_imu: bool, reference_kind: str | None) -> 
             + (" with IMU" if has_imu else "")
             + " does not have (wheel speed, a learned prior of how these vehicles move"
             + ("" if has_imu else ", an IMU")
-            + "), or the bound's assumptions (white jerk of the PSD the reference shows, "
-            "white fix noise of the variance taken) do not hold on this data"
+            + f"), or {assumptions}"
         )
     return "; ".join(why)
+
+
+def _mean(summary: Mapping[str, Any] | None) -> float | None:
+    """A summary's finite ``mean_m`` (None without one)."""
+    m = (summary or {}).get("mean_m")
+    return float(m) if m is not None and math.isfinite(m) else None
 
 
 def below_limit(
     by_dataset: Mapping[str, Mapping[str, Any]],
     limit_by_dataset: Mapping[str, Mapping[str, Any]],
     references: Mapping[str, Mapping[str, Any]],
+    reads_imu: Mapping[str, bool | None] | None = None,
+    level: float = 0.95,
 ) -> list[dict[str, Any]]:
-    """Predictors whose mean error lies below the bound by more than their interval (the
-    upper end of their 95 % interval of the mean below the bound's mean), per data set and
-    query kind: dataset, predictor, kind, ``mean_m``, ``ci95_hi_m``, ``limit_m``,
-    ``limit_imu_m``, ``ratio`` (x limit) and ``reason``."""
+    """Predictors whose mean error lies below the bound that applies to them by more than
+    their interval (the upper end of their 95 % interval of the mean below the bound's mean,
+    less ``z`` times the bound's ``floor_sd_m``: what a slow floor measured on few samples
+    leaves uncertain), per data set and query kind. The bound that applies: with the IMU
+    for a predictor that reads it (``reads_imu[name]`` True, where the data set has one),
+    fixes only for one that does not or whose reading is not known (None; then both readings
+    are given). Entries: dataset, predictor, kind, ``mean_m``, ``ci95_hi_m``, ``limit_m``,
+    ``limit_imu_m``, ``against`` (``"limit"`` or ``"limit with IMU"``), ``against_m`` (that
+    bound's mean), ``floor_sd_m``, ``ratio`` (x that bound) and ``reason``."""
     out = []
+    z = _z(level)
     for ds, preds in by_dataset.items():
         bound = limit_by_dataset.get(ds)
         if not bound:
             continue
         imu = bound.get("imu") or {}
         for name, s in preds.items():
+            reads = (reads_imu or {}).get(name)
             for k in KINDS:
                 mean = (s.get(k) or {}).get("mean_m")
                 hi = ((s.get(k) or {}).get("ci95") or {}).get("mean_m", [None, None])[1]
-                lim = (bound.get(k) or {}).get("mean_m")
-                if mean is None or hi is None or lim is None:
+                lim, lim_imu = _mean(bound.get(k)), _mean(imu.get(k))
+                if mean is None or hi is None or lim is None or not math.isfinite(hi):
                     continue
-                if not (math.isfinite(hi) and math.isfinite(lim)) or hi >= lim:
+                has_imu = lim_imu is not None
+                use_imu = bool(reads) and has_imu
+                applies = (imu if use_imu else bound).get(k) or {}
+                against = lim_imu if use_imu and lim_imu is not None else lim
+                sd = float(applies.get("floor_sd_m") or 0.0)
+                if hi >= against - z * sd:
                     continue
-                lim_imu = (imu.get(k) or {}).get("mean_m")
-                has_imu = lim_imu is not None and math.isfinite(lim_imu)
-                below_imu = lim_imu is not None and has_imu and hi < float(lim_imu)
                 out.append(
                     {
                         "dataset": ds,
@@ -173,12 +287,16 @@ def below_limit(
                         "mean_m": mean,
                         "ci95_hi_m": hi,
                         "limit_m": lim,
-                        "limit_imu_m": lim_imu if has_imu else None,
-                        "ratio": _ratio(s.get(k), bound.get(k)),
+                        "limit_imu_m": lim_imu,
+                        "against": "limit with IMU" if use_imu else "limit",
+                        "against_m": against,
+                        "floor_sd_m": sd,
+                        "ratio": _ratio(s.get(k), applies),
                         "reason": below_reason(
                             has_imu,
-                            below_imu,
+                            lim_imu is not None and hi < lim_imu,
                             (references.get(ds) or {}).get("kind"),
+                            reads,
                         ),
                     }
                 )
@@ -198,7 +316,10 @@ def _drive_entry(r: DriveRun, rows: pd.DataFrame) -> dict[str, Any]:
 
 
 def limit_section(
-    runs: Sequence[DriveRun], res: dict[str, Any], stats: Statistics | None
+    runs: Sequence[DriveRun],
+    res: dict[str, Any],
+    stats: Statistics | None,
+    reads_imu: Mapping[str, bool | None] | None = None,
 ) -> dict[str, Any] | None:
     """results.json's ``limit`` from the drives' bounds (None when no drive has one: scored
     answers, whose drives posbench did not replay), and each scored drive's
@@ -211,7 +332,8 @@ def limit_section(
         one), and per data set ``gps_conditions`` (condition -> drives) and ``slow_floor``
         (drives whose slow error was added, and not); ``by_label[ds][kind][route type]``
         (no interval); ``ratios`` (``overall`` and ``by_dataset[ds]``: per predictor and
-        kind its x limit, and ``KIND_imu`` against the IMU variant); ``below``
+        kind its x limit, and ``KIND_imu`` against the IMU variant); ``reads_imu`` (per
+        predictor: judged against the bound with IMU; None: not known); ``below``
         (:func:`below_limit`). No timing: results.json's figures are the same on every
         run of the same inputs (``DriveRun.limit_info["cost_s"]`` keeps each drive's).
     """
@@ -263,7 +385,12 @@ def limit_section(
             ds: ratios(res["by_dataset"][ds], b) for ds, b in section["by_dataset"].items()
         },
     }
+    section["reads_imu"] = dict(reads_imu or {})
     section["below"] = below_limit(
-        res["by_dataset"], section["by_dataset"], res.get("references") or {}
+        res["by_dataset"],
+        section["by_dataset"],
+        res.get("references") or {},
+        reads_imu,
+        stats.level if stats is not None else 0.95,
     )
     return section

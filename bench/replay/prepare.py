@@ -49,28 +49,37 @@ class PreparedDrive:
     notes: list[str] = field(default_factory=list)
     #: the GPS condition of the fixes fed (:func:`posbench.config.gps_condition`)
     gps_condition: str = "native"
+    #: fixes drawn by posbench (a GPS profile): the slow error [m] it drew for each fix of
+    #: ``gps_all``, (len(gps_all), 2) east, north (:class:`posbench.scenarios.degrade.DrawnGps`);
+    #: None for a receiver's own fixes (its slow error is not known)
+    gps_slow_xy: np.ndarray | None = None
 
 
 def _input_gps(
     drive: Drive, cfg: RunConfig, seed: int, condition: str
-) -> tuple[GpsStream, list[str]]:
-    """The fixes fed under GPS ``condition``: the drive's own, or drawn from its truth."""
+) -> tuple[GpsStream, np.ndarray | None, list[str]]:
+    """The fixes fed under GPS ``condition``: the drive's own, or drawn from its truth
+    (then with the slow error drawn for each fix [m], (n, 2); else None)."""
     if condition != "native":
-        from posbench.scenarios.degrade import degrade_gps
+        from posbench.scenarios.degrade import draw_gps
 
         assert drive.truth is not None  # gps_condition gives a profile only with a truth
-        gps = degrade_gps(
+        drawn = draw_gps(
             drive.truth,
             profile=condition,
             seed=seed,
             latency_s=cfg.gps_latency_s,
             intervals=cfg.intervals,
         )
-        return gps, [
-            f"GPS: {fixes_description(condition)}: intervals {cfg.intervals}, "
-            f"latency {cfg.gps_latency_s:g} s, seed {seed}"
-        ]
-    return drive.gps, [f"GPS: {fixes_description(condition)}"]
+        return (
+            drawn.gps,
+            drawn.slow_xy,
+            [
+                f"GPS: {fixes_description(condition)}: intervals {cfg.intervals}, "
+                f"latency {cfg.gps_latency_s:g} s, seed {seed}"
+            ],
+        )
+    return drive.gps, None, [f"GPS: {fixes_description(condition)}"]
 
 
 def _interp(tq: np.ndarray, t: np.ndarray, v: np.ndarray) -> np.ndarray:
@@ -112,7 +121,7 @@ def prepare_drive(drive: Drive, cfg: RunConfig) -> PreparedDrive:
     """Draw the input GPS, apply dropouts, place the queries and their references."""
     seed = drive_seed(cfg.seed, drive.name)
     condition = gps_condition(cfg, drive)
-    gps, notes = _input_gps(drive, cfg, seed, condition)
+    gps, slow_xy, notes = _input_gps(drive, cfg, seed, condition)
     gps_all = gps
     outages: list[tuple[float, float]] = []
     if cfg.dropouts != "none":
@@ -169,5 +178,15 @@ def prepare_drive(drive: Drive, cfg: RunConfig) -> PreparedDrive:
     future = queries("future", f_issue, f_query)
     now = queries("now", n_query, n_query)
     return PreparedDrive(
-        drive, drive.meta.format, gps, gps_all, reference, future, now, outages, notes, condition
+        drive,
+        drive.meta.format,
+        gps,
+        gps_all,
+        reference,
+        future,
+        now,
+        outages,
+        notes,
+        condition,
+        slow_xy,
     )

@@ -74,9 +74,9 @@ def dataset_limit_line(res: Mapping[str, Any], dataset: str) -> str:
 
 
 def below_lines(res: Mapping[str, Any]) -> list[str]:
-    """One line per predictor and data set whose mean error lies below the bound by more
-    than its interval in a query kind (results.json ``limit.below``), with the likely
-    reason."""
+    """One line per predictor and data set whose mean error lies below the bound that
+    applies to it (with IMU for a predictor that reads the IMU) by more than its interval in
+    a query kind (results.json ``limit.below``), with the likely reason."""
     groups: dict[tuple[str, str], list[Mapping[str, Any]]] = {}
     for b in (res.get("limit") or {}).get("below", []):
         groups.setdefault((b["dataset"], b["predictor"]), []).append(b)
@@ -84,15 +84,27 @@ def below_lines(res: Mapping[str, Any]) -> list[str]:
     for (ds, name), entries in groups.items():
         parts = []
         for b in entries:
-            ratio = f", x limit {fixed(float(b['ratio']), 2)}" if b.get("ratio") is not None else ""
-            imu = (
-                f"; limit with IMU {_m(b['limit_imu_m'])} m"
-                if b.get("limit_imu_m") is not None
+            with_imu = b.get("against") == "limit with IMU"
+            ratio = (
+                f", x {'IMU ' if with_imu else ''}limit {fixed(float(b['ratio']), 2)}"
+                if b.get("ratio") is not None
                 else ""
             )
+            if with_imu:
+                bound = f"the limit with IMU's {_m(b['limit_imu_m'])} m"
+                other = f"; limit {_m(b['limit_m'])} m"
+            else:
+                bound = f"the limit's {_m(b['limit_m'])} m"
+                other = (
+                    f"; limit with IMU {_m(b['limit_imu_m'])} m"
+                    if b.get("limit_imu_m") is not None
+                    else ""
+                )
+            sd = float(b.get("floor_sd_m") or 0.0)
+            floor = f" (its slow floor +/- {_m(sd)} m)" if sd > 0 else ""
             parts.append(
                 f"{b['kind']} {_m(b['mean_m'])} m (95 % CI up to {_m(b['ci95_hi_m'])} m) "
-                f"against the limit's {_m(b['limit_m'])} m{ratio}{imu}"
+                f"against {bound}{floor}{ratio}{other}"
             )
         reasons = list(dict.fromkeys(str(b["reason"]) for b in entries))
         out.append(f"{name} on `{ds}`: {'; '.join(parts)}. Likely: {'; '.join(reasons)}.")
@@ -113,13 +125,15 @@ def limit_report_lines(res: Mapping[str, Any]) -> list[str]:
     below = below_lines(res)
     if not below:
         return lines + [
-            "No predictor's mean error lies below the limit by more than its 95 % interval.",
+            "No predictor's mean error lies below the limit that applies to it (the limit "
+            "with IMU for a predictor that reads the IMU) by more than its 95 % interval.",
             "",
         ]
     return lines + [
         "### Below the limit",
         "",
-        "A predictor whose mean error lies below the limit by more than its 95 % interval "
+        "A predictor whose mean error lies below the limit that applies to it (the limit "
+        "with IMU for a predictor that reads the IMU) by more than its 95 % interval "
         "uses information the bound does not have, or the bound's assumptions do not hold "
         "on that data:",
         "",
