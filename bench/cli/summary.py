@@ -65,8 +65,8 @@ def print_first_screen(published: Published) -> None:
         console,
         headline.header(),
         headline.cells(),
-        title=f"{plural(scored, 'drive')} - errors in metres [95 % CI], latency in "
-        "microseconds; every column: --wide",
+        title=f"{plural(scored, 'drive')} - errors in metres [95 % CI], latency [us]; "
+        "every column: --wide",
     )
     for note in (trained_note(res), limit_legend(res), mark_legend(res)):
         if note:

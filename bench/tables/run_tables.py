@@ -159,19 +159,28 @@ FLAG_MARK = " !"
 FIRST_SCREEN_COLUMNS = ("predictor", "future_mean", "future_xlim", "now_mean", "step_p50")
 
 
+def short_limit_name(name: str | None) -> str:
+    """A bound's row name without its model in brackets: ``limit (PCRB, CA model)`` ->
+    ``limit`` ("" for None)."""
+    return (name or "").split(" (")[0]
+
+
 def first_screen_table(
     res: Mapping[str, Any], flagged: Collection[str] = (), held_out: bool = False
 ) -> Table:
     """The terminal's headline, narrow enough to read at a glance (100 columns for the
     default run): per predictor its future and now mean error [m] with their 95 % intervals,
     its future ``x limit`` and its median fix step [us], the bound's rows below; a predictor
-    in ``flagged`` (report.md flags it) is marked ``!`` after its name. The same figures as
+    in ``flagged`` (report.md flags it) is marked ``!`` after its name; the bound's rows are
+    named without their model (:func:`short_limit_name`). The same figures as
     :func:`summary_table`, a choice of its columns."""
     full = summary_table(res, held_out=held_out, compact=True)
     frame = full.frame.copy()
     keep = [x for c in FIRST_SCREEN_COLUMNS for x in (c, *full.ci.get(c, ())) if x in frame.columns]
+    lim = res.get("limit") or {}
+    short = {lim.get(k): short_limit_name(lim.get(k)) for k in ("name", "name_imu")}
     frame["predictor"] = [
-        name + (FLAG_MARK if name.removesuffix(TRAINED_MARK) in flagged else "")
+        short.get(name) or name + (FLAG_MARK if name.removesuffix(TRAINED_MARK) in flagged else "")
         for name in frame["predictor"]
     ]
     labels = {**full.labels, "step_p50": "step p50 [us]"}
