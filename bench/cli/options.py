@@ -257,6 +257,16 @@ DrivePlotsOpt = Annotated[
         "for none.",
     ),
 ]
+WideOpt = Annotated[
+    bool,
+    typer.Option(
+        "--wide",
+        help="Print the full summary: every column of the headline table (median, RMSE, p95, "
+        "max, counts, x IMU limit, latency p99, ...), the paired tables and each note in full "
+        "(-v implies it). By default: one table that fits 100 columns and one line per "
+        "finding; report.md and results.json hold every figure either way.",
+    ),
+]
 #: the hidden ``--format`` of one release, where it meant another option
 OldFormatOpt = Annotated[str | None, typer.Option("--format", hidden=True)]
 

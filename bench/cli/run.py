@@ -29,6 +29,7 @@ from posbench.cli.options import (
     TableFormatOpt,
     TopicOpt,
     VerboseOpt,
+    WideOpt,
     WorkersOpt,
     command_line,
     import_from_cwd,
@@ -147,6 +148,7 @@ def run(
             "TOML table for --config, and exit without running.",
         ),
     ] = False,
+    wide: WideOpt = False,
     config: ConfigOpt = None,
     quiet: QuietOpt = False,
     verbose: VerboseOpt = False,
@@ -203,4 +205,4 @@ def run(
     )
     import_from_cwd()
     plan = plan_run(opts, given)  # every option is checked before a drive is loaded
-    print_run_summary(execute_run(plan, command_line(), reporter()))
+    print_run_summary(execute_run(plan, command_line(), reporter()), wide=wide)

@@ -16,6 +16,7 @@ from posbench.cli.options import (
     QuietOpt,
     TableFormatOpt,
     VerboseOpt,
+    WideOpt,
     command_line,
     renamed,
 )
@@ -50,6 +51,7 @@ def score(
     table_format: TableFormatOpt = "md,csv,latex",
     plot_format: PlotFormatOpt = "png",
     drive_plots: DrivePlotsOpt = "20",
+    wide: WideOpt = False,
     config: ConfigOpt = None,
     quiet: QuietOpt = False,
     verbose: VerboseOpt = False,
@@ -96,4 +98,4 @@ def score(
         table_formats=parse_report_formats(table_format, "--table-format"),
         reporter=reporter(),
     )
-    print_run_summary(published)
+    print_run_summary(published, wide=wide)

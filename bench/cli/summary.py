@@ -6,14 +6,109 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from posbench.cli.terminal import QUIET, console, print_table, say, verbosity, warn
+from posbench.cli.terminal import QUIET, VERBOSE, console, print_table, say, verbosity, warn
 from posbench.naming import plural
 from posbench.pipeline.publish import Published
 
 
-def print_run_summary(published: Published) -> None:
-    """The tables and notes of a finished run, then the ``wrote ...`` line (nothing when
-    quiet)."""
+def print_run_summary(published: Published, wide: bool = False) -> None:
+    """What a finished run prints (nothing but its warnings when quiet): by default the first
+    screen (:func:`print_first_screen`); ``wide`` (``--wide``, implied by ``-v``) the full
+    summary (:func:`print_wide_summary`). Then the ``wrote ...`` line."""
+    from posbench.report.first_screen import sanity_short_lines
+    from posbench.report.notes import sanity_lines
+
+    res = published.run.results
+    wide = wide or verbosity() >= VERBOSE
+    if verbosity() <= QUIET:
+        for line in sanity_lines(res) if wide else sanity_short_lines(res):
+            warn(line)
+        return
+    if wide:
+        print_wide_summary(published)
+    else:
+        print_first_screen(published)
+    if published.run.folder is not None:
+        say(written_summary(published.run.folder, published.written, published.removed, wide))
+    if published.recording is not None:
+        say(f"wrote {published.recording} (open it with: bench view {published.recording})")
+
+
+def print_first_screen(published: Published) -> None:
+    """The summary read at a glance: each data set's reference, one table (future and now
+    mean with their intervals, x limit, median step; ``!`` beside a predictor report.md
+    flags), then at most one line per warning or finding, each naming where report.md has it
+    in full. The held-out drives and the seeds, where the run has them, get a narrow table
+    each."""
+    from posbench.report.first_screen import (
+        below_line,
+        excluded_line,
+        flagged,
+        limit_legend,
+        mark_legend,
+        paired_line,
+        sanity_short_lines,
+    )
+    from posbench.report.notes import excluded_counts, fixes_scored, trained_note
+    from posbench.scoring.reference import reference_lines
+    from posbench.tables.run_tables import first_screen_table
+    from posbench.tables.stat_tables import seeds_table
+    from posbench.tables.table import Table
+
+    res = published.run.results
+    scored = sum(1 for d in res["drives"] if not d["skipped"])
+    for line in reference_lines(res, fixes_scored(res)):
+        say(line.replace("`", ""))  # one line per data set, wrapped to the terminal's width
+    flags = set(flagged(res))
+    headline = first_screen_table(res, flags)
+    print_table(
+        console,
+        headline.header(),
+        headline.cells(),
+        title=f"{plural(scored, 'drive')} - errors in metres [95 % CI], latency [us]; "
+        "every column: --wide",
+    )
+    for note in (trained_note(res), limit_legend(res), mark_legend(res)):
+        if note:
+            say(note)
+    for line in sanity_short_lines(res):
+        warn(line)
+    notes = [below_line(res), paired_line(res)]
+    if res["predictors"]:
+        notes.append(excluded_line(*excluded_counts(res)))
+    for note in notes:
+        if note:
+            say(note)
+    if res.get("held_out_all"):
+        ho = res["held_out_all"]
+        held = first_screen_table(res, flags, held_out=True)
+        print_table(
+            console,
+            held.header(),
+            held.cells(),
+            title=f"held-out {plural(len(ho['drives']), 'drive')} (no predictor "
+            f"trained or tuned on them) - errors in metres",
+        )
+        note = paired_line(res, held_out=True)
+        if note:
+            say(note)
+    if res.get("seeds"):
+        st = seeds_table(res)
+        spread = [c for c in st.frame.columns if c.endswith(("_seeds_mean", "_sd"))]
+        narrow = Table(
+            st.frame[["predictor", *(c for c in spread if "_diff_" not in c)]], st.name, st.labels
+        )
+        print_table(
+            console,
+            narrow.header(),
+            narrow.cells(),
+            title=f"over seeds {', '.join(map(str, res['seeds']['seeds']))}: mean error [m]",
+        )
+
+
+def print_wide_summary(published: Published) -> None:
+    """The full summary: every column of the headline table (paged to the terminal's width),
+    each note in full and the paired tables."""
     from posbench.report.limit import limit_terminal_lines
     from posbench.report.notes import (
         excluded_note,
@@ -30,8 +125,6 @@ def print_run_summary(published: Published) -> None:
     res = published.run.results
     for line in sanity_lines(res):
         warn(line)
-    if verbosity() <= QUIET:
-        return
     scored = sum(1 for d in res["drives"] if not d["skipped"])
     for line in reference_lines(res, fixes_scored(res)):
         say(line.replace("`", ""))  # one line per data set, wrapped to the terminal's width
@@ -82,15 +175,21 @@ def print_run_summary(published: Published) -> None:
                 title=f"held-out drives vs {res['paired']['baseline']}: Δ mean error [m] "
                 f"[95 % CI]; * CI excludes 0",
             )
-    if published.run.folder is not None:
-        say(written_summary(published.run.folder, published.written, published.removed))
-    if published.recording is not None:
-        say(f"wrote {published.recording} (open it with: bench view {published.recording})")
 
 
-def written_summary(out: Path, written: list[Path], removed: list[Path]) -> str:
-    """One line naming what the run wrote into ``out`` (and removed of an earlier run)."""
+#: the suffixes of the figures a run writes (``--plot-format``)
+FIGURE_SUFFIXES = (".png", ".svg", ".pdf")
+
+
+def written_summary(out: Path, written: list[Path], removed: list[Path], wide: bool = True) -> str:
+    """One line naming what the run wrote into ``out`` (and removed of an earlier run);
+    unless ``wide``, its figures counted rather than named."""
     top = [p.name for p in written if p.parent == out]
+    if not wide:
+        figures = [n for n in top if n.endswith(FIGURE_SUFFIXES)]
+        top = [n for n in top if n not in figures]
+        if figures:
+            top.append(plural(len(figures), "figure"))
     text = f"wrote {out}/: " + ", ".join(top)
     nested: dict[str, int] = {}
     for p in written:

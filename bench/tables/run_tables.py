@@ -5,7 +5,7 @@ the run's ``results`` and returns a numeric :class:`~posbench.tables.table.Table
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+from collections.abc import Collection, Mapping, Sequence
 from typing import Any
 
 from posbench.metrics.accuracy import speed_bin_order
@@ -149,6 +149,47 @@ def summary_table(res: Mapping[str, Any], held_out: bool = False, compact: bool 
         labels,
         digits,
         ci=ci_map(shown_ci),
+    )
+
+
+#: the mark after a predictor's name on the first screen: report.md flags it (it lies below the
+#: limit, loses to constant velocity, ...); the lines under the table say what
+FLAG_MARK = " !"
+#: the columns of the first screen's table (those of :func:`summary_table` it keeps)
+FIRST_SCREEN_COLUMNS = ("predictor", "future_mean", "future_xlim", "now_mean", "step_p50")
+
+
+def short_limit_name(name: str | None) -> str:
+    """A bound's row name without its model in brackets: ``limit (PCRB, CA model)`` ->
+    ``limit`` ("" for None)."""
+    return (name or "").split(" (")[0]
+
+
+def first_screen_table(
+    res: Mapping[str, Any], flagged: Collection[str] = (), held_out: bool = False
+) -> Table:
+    """The terminal's headline, narrow enough to read at a glance (100 columns for the
+    default run): per predictor its future and now mean error [m] with their 95 % intervals,
+    its future ``x limit`` and its median fix step [us], the bound's rows below; a predictor
+    in ``flagged`` (report.md flags it) is marked ``!`` after its name; the bound's rows are
+    named without their model (:func:`short_limit_name`). The same figures as
+    :func:`summary_table`, a choice of its columns."""
+    full = summary_table(res, held_out=held_out, compact=True)
+    frame = full.frame.copy()
+    keep = [x for c in FIRST_SCREEN_COLUMNS for x in (c, *full.ci.get(c, ())) if x in frame.columns]
+    lim = res.get("limit") or {}
+    short = {lim.get(k): short_limit_name(lim.get(k)) for k in ("name", "name_imu")}
+    frame["predictor"] = [
+        short.get(name) or name + (FLAG_MARK if name.removesuffix(TRAINED_MARK) in flagged else "")
+        for name in frame["predictor"]
+    ]
+    labels = {**full.labels, "step_p50": "step p50 [us]"}
+    return Table(
+        frame[keep],
+        "first_screen" + ("_held_out" if held_out else ""),
+        labels,
+        full.digits,
+        ci={c: b for c, b in full.ci.items() if c in keep},
     )
 
 

@@ -246,7 +246,7 @@ def test_cli_no_gate_flag(tmp_path, monkeypatch):
         seen["gate"] = plan.config.gate
 
     monkeypatch.setattr(pipeline, "execute_run", fake_execute)
-    monkeypatch.setattr(summary, "print_run_summary", lambda published: None)
+    monkeypatch.setattr(summary, "print_run_summary", lambda published, wide=False: None)
     from typer.testing import CliRunner
 
     for flag, want in (([], True), (["--no-gate"], False), (["--gate"], True)):
