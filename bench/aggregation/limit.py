@@ -151,15 +151,23 @@ def _z(level: float) -> float:
 
 
 def _widened(ci: Any, mean: float, sd: float, level: float) -> Any:
-    """``ci`` ([lo, hi] of a mean ``mean``) with ``z sd`` added to each half-width in
-    quadrature (``sd`` [m]: :func:`floor_sd`); as it is where ``sd`` is 0 or not finite."""
+    """``ci`` ([lo, hi] of a mean ``mean`` > 0) widened by the floor's uncertainty ``sd`` [m]
+    (:func:`floor_sd`), in quadrature on the log scale: each end's log-ratio to the mean and
+    ``z sd / mean`` combine as root sum of squares. A mean error stays positive however
+    uncertain its floor (added in metres, a floor measured on few samples gave intervals
+    below 0); to first order in the widths the same as adding ``z sd`` to each half-width.
+    As it is where ``sd`` is 0 or not finite."""
     if not (sd > 0 and math.isfinite(sd)) or ci is None:
         return ci
     lo, hi = ci
     if lo is None or hi is None or not (math.isfinite(lo) and math.isfinite(hi)):
         return ci
-    extra = (_z(level) * sd) ** 2
-    return [mean - math.sqrt((mean - lo) ** 2 + extra), mean + math.sqrt((hi - mean) ** 2 + extra)]
+    if not (mean > 0 and lo > 0 and hi > 0):
+        return ci
+    extra = (_z(level) * sd / mean) ** 2
+    down = math.sqrt(math.log(mean / lo) ** 2 + extra) if lo < mean else math.sqrt(extra)
+    up = math.sqrt(math.log(hi / mean) ** 2 + extra) if hi > mean else math.sqrt(extra)
+    return [mean * math.exp(-down), mean * math.exp(up)]
 
 
 def _scope(df: pd.DataFrame, stats: Statistics | None) -> dict[str, Any]:

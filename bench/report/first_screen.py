@@ -48,9 +48,15 @@ def limit_legend(res: Mapping[str, Any]) -> str:
     lim = res.get("limit")
     if not lim:
         return ""
+    imu = [n for n, reads in (lim.get("reads_imu") or {}).items() if reads]
+    which = (
+        f" (the limit with IMU for {', '.join(imu)}, which read{'s' * (len(imu) == 1)} the IMU)"
+        if imu and lim.get("name_imu")
+        else ""
+    )
     return (
         f"{lim['name']}: a bound under stated assumptions, not a predictor; "
-        "x limit = mean / limit's"
+        f"x limit = future mean / limit{which}"
     )
 
 

@@ -18,6 +18,7 @@ from posbench.tables.limit import (
     ratio_cells,
     ratio_digits,
     ratio_labels,
+    ratio_of,
     with_ratio_columns,
 )
 from posbench.tables.table import Table, as_float, is_finite, rows_frame
@@ -170,7 +171,9 @@ def first_screen_table(
 ) -> Table:
     """The terminal's headline, narrow enough to read at a glance (100 columns for the
     default run): per predictor its future and now mean error [m] with their 95 % intervals,
-    its future ``x limit`` and its median fix step [us], the bound's rows below; a predictor
+    its future ``x limit`` against the limit that applies to it (with IMU for a predictor that
+    reads the IMU, results.json's ``limit.reads_imu``) and its median fix step [us], the
+    bound's rows below; a predictor
     in ``flagged`` (report.md flags it) is marked ``!`` after its name; the bound's rows are
     named without their model (:func:`short_limit_name`). The same figures as
     :func:`summary_table`, a choice of its columns."""
@@ -179,6 +182,14 @@ def first_screen_table(
     keep = [x for c in FIRST_SCREEN_COLUMNS for x in (c, *full.ci.get(c, ())) if x in frame.columns]
     lim = res.get("limit") or {}
     short = {lim.get(k): short_limit_name(lim.get(k)) for k in ("name", "name_imu")}
+    reads_imu = lim.get("reads_imu") or {}
+    if "future_xlim" in frame.columns and not held_out:
+        frame["future_xlim"] = [
+            ratio_of(res, name, "future", imu=True)
+            if reads_imu.get(name.removesuffix(TRAINED_MARK))
+            else x
+            for name, x in zip(frame["predictor"], frame["future_xlim"], strict=True)
+        ]
     frame["predictor"] = [
         short.get(name) or name + (FLAG_MARK if name.removesuffix(TRAINED_MARK) in flagged else "")
         for name in frame["predictor"]

@@ -227,3 +227,21 @@ def test_a_measured_slow_floor_widens_the_bound_by_its_few_samples():
     assert below_limit({"d": near}, {"d": lim}, {}, {"p": False}) == []
     far = {"p": {"future": _summ(mean - 3 * fut["floor_sd_m"], mean - 2.5 * fut["floor_sd_m"])}}
     assert len(below_limit({"d": far}, {"d": lim}, {}, {"p": False})) == 1
+
+
+def test_a_widened_limit_interval_stays_positive():
+    """A slow floor measured on few samples widens the limit's interval a lot; the mean
+    error's interval still never reaches 0 (added in metres it went to -0.036 m on the
+    docs' two-drive example), and a small widening is the additive one to first order."""
+    from posbench.aggregation.limit import _widened
+
+    lo, hi = _widened([0.17, 0.18], 0.176, 0.064, 0.95)
+    assert 0 < lo < 0.17 and hi > 0.18
+    small = _widened([0.17, 0.18], 0.176, 0.0001, 0.95)
+    z = 1.959963984540054
+    add = [
+        0.176 - ((0.006) ** 2 + (z * 1e-4) ** 2) ** 0.5,
+        0.176 + (0.004**2 + (z * 1e-4) ** 2) ** 0.5,
+    ]
+    assert abs(small[0] - add[0]) < 2e-4 and abs(small[1] - add[1]) < 2e-4
+    assert _widened([0.17, 0.18], 0.176, 0.0, 0.95) == [0.17, 0.18]
