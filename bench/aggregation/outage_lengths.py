@@ -138,9 +138,18 @@ def length_entry(rows: pd.DataFrame, stats: Statistics | None) -> dict[str, Any]
     entry["drives"] = int(np.unique(drive).size)
     if stats is None:
         return entry
-    kw = {"n_resamples": stats.resamples, "seed": stats.seed, "level": stats.level}
-    f = summary_ci(fde, drive, t_end, quantiles=False, **kw)
-    a = summary_ci(ate, drive, t_end, quantiles=False, **kw)
+    f, a = (
+        summary_ci(
+            x,
+            drive,
+            t_end,
+            n_resamples=stats.resamples,
+            seed=stats.seed,
+            level=stats.level,
+            quantiles=False,
+        )
+        for x in (fde, ate)
+    )
     entry["ci95"] = {
         "fde_mean_m": f["mean_m"],
         "ate_mean_m": a["mean_m"],

@@ -41,7 +41,8 @@ def curve(entries: Mapping[str, Any], keys: list[str], figure: str) -> np.ndarra
 
 def plot_outage_lengths(res: Mapping[str, Any]) -> Figure:
     """FDE [m] and FDE [% of distance] against outage length [s] (log axes), one line per
-    predictor, its 95 % interval shaded; lengths without an outage are left out."""
+    predictor, its 95 % interval shaded; lengths without an outage are left out; a
+    predictor whose curve equals an earlier one's is dashed and named ``p (= q)``."""
     from matplotlib.figure import Figure
 
     sec = res.get("outage_lengths")
@@ -57,12 +58,23 @@ def plot_outage_lengths(res: Mapping[str, Any]) -> Figure:
     fig = Figure(figsize=(11, 4.5), layout="constrained")
     axes = fig.subplots(1, 2, sharex=True)
     for ax, (figure, label) in zip(axes, PANELS, strict=True):
+        drawn: dict[str, np.ndarray] = {}
         for p in preds:
             c = curve(sec["predictors"][p], keys, figure)
             ok = np.isfinite(c[:, 0]) & (c[:, 0] > 0)
             if not ok.any():
                 continue
-            ax.plot(lengths[ok], c[ok, 0], marker="o", label=p, color=colors[p])
+            # a curve equal to one drawn before would hide it: dashed, and named so
+            same = next((q for q, d in drawn.items() if np.allclose(d, c, equal_nan=True)), None)
+            drawn[p] = c
+            ax.plot(
+                lengths[ok],
+                c[ok, 0],
+                marker="o",
+                label=p if same is None else f"{p} (= {same})",
+                color=colors[p],
+                ls="-" if same is None else "--",
+            )
             band = ok & np.isfinite(c[:, 1]) & np.isfinite(c[:, 2]) & (c[:, 1] > 0)
             if band.any():
                 ax.fill_between(
