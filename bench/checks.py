@@ -73,7 +73,8 @@ def check_horizon(seconds: float, option: str = "--horizon") -> float:
 
 
 def check_dropouts(profile: str) -> str:
-    """A GPS dropout profile (``none``, ``random:P``, ``outages``, ``outage:L``), checked by
+    """A GPS dropout profile (``none``, ``random:P``, ``outages``, ``outage:L``,
+    ``outage-lengths``), checked by
     the parser that applies it (:func:`posbench.scenarios.degrade.parse_dropouts`)."""
     from posbench.scenarios.degrade import parse_dropouts
 

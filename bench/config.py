@@ -43,7 +43,8 @@ class RunConfig:
             fixes (:func:`gps_condition`).
         gps_latency_s: receiver latency of the drawn fixes [s].
         intervals: fix-interval distribution of the drawn fixes (``aslan`` = the paper's routes).
-        dropouts: GPS dropout profile (``none``, ``random:p``, ``outages``, ``outage:L``).
+        dropouts: GPS dropout profile (``none``, ``random:p``, ``outages``, ``outage:L``,
+            ``outage-lengths``).
         seed: master seed; each drive's seed derives from it and the drive's name only,
             so results do not depend on the number of workers.
         exclude_poor_truth: skip drives whose truth is flagged poor (median accuracy > 1 m).

@@ -43,7 +43,14 @@ Dropouts (:func:`apply_dropouts`, profiles listed in :data:`DROPOUT_PROFILES`)
                       are given, half of the outages (rounded up) are centred on a turn
                       time where one fits. Lengths that no longer fit are left out: the
                       returned outage list says which were placed;
-    ``"outage:L"``    like ``"outages"`` with the single length L seconds.
+    ``"outage:L"``    like ``"outages"`` with the single length L seconds;
+    ``"outage-lengths"`` outages of the lengths the GNSS/INS field reports, 1, 2, 5, 10, 30
+                      and 60 s (:data:`FIELD_OUTAGE_LENGTHS_S`), placed by
+                      :func:`packed_outage_windows`: longest first, each length the
+                      stream still has room for (the same >= 10 s of reception before each
+                      outage, the last ending >= 1 s before the stream does), so a short
+                      drive gets its short lengths and only a long drive a 60 s one; the
+                      set is repeated on long streams as for ``"outages"``.
     Every fix stamped inside an outage window [a, a + L] is removed.
 """
 
@@ -61,8 +68,12 @@ from posbench.scenarios.loaders.aslan import (
 )
 
 GPS_PROFILES = ("none", "rtk", "consumer")
-DROPOUT_PROFILES = ("none", "random:p", "outages", "outage:L")
+DROPOUT_PROFILES = ("none", "random:p", "outages", "outage:L", "outage-lengths")
 OUTAGE_LENGTHS_S = (0.5, 1.0, 2.0, 5.0)
+#: the profile whose outages are the lengths the GNSS/INS field reports errors after
+FIELD_OUTAGES = "outage-lengths"
+#: its lengths [s] (error after 10, 30 and 60 s of GNSS outage is what IMU bridging reports)
+FIELD_OUTAGE_LENGTHS_S = (1.0, 2.0, 5.0, 10.0, 30.0, 60.0)
 OUTAGE_SEPARATION_S = 10.0
 
 #: Fix-interval distribution [s] of the paper's routes: the 21 quantiles (0, 5, ..., 100 %)
@@ -411,13 +422,59 @@ def outage_windows(
     return np.asarray(sorted(placed), dtype=float).reshape(-1, 2)
 
 
+def packed_outage_windows(
+    t_start: float,
+    t_end: float,
+    lengths: Sequence[float] | np.ndarray,
+    rng: np.random.Generator,
+    min_sep_s: float = OUTAGE_SEPARATION_S,
+    repeat: bool = True,
+) -> np.ndarray:
+    """Seeded non-overlapping outage windows of as many of ``lengths`` [s] as fit, shape
+    (k, 2) of [start, end] [s], sorted.
+
+    Each window is preceded by >= ``min_sep_s`` of reception (from ``t_start`` or the
+    previous window) and the last ends >= 1 s before ``t_end``, as in
+    :func:`outage_windows`. The lengths are taken longest first (a long outage fits fewer
+    drives than a short one), each kept while the kept ones and their separations still
+    fit into the span; with ``repeat`` the set is taken ``max(1, floor(T / (2 (sum(lengths)
+    + min_sep_s n))))`` times (as :func:`outage_windows` repeats it). The kept windows are
+    then shuffled and the spare time is spread over the gaps at random (uniform spacings),
+    so that where a length falls along the drive does not depend on its length.
+    """
+    length_set = np.sort(np.asarray(lengths, dtype=float))[::-1]
+    span = float(t_end) - float(t_start) - 1.0
+    reps = 1
+    if repeat and length_set.size:
+        reps = max(1, int((span + 1.0) // (2.0 * (length_set.sum() + min_sep_s * length_set.size))))
+    kept: list[float] = []
+    used = 0.0
+    for length in np.tile(length_set, reps):
+        if used + min_sep_s + length <= span:
+            kept.append(float(length))
+            used += min_sep_s + length
+    if not kept:
+        return np.empty((0, 2))
+    order = rng.permutation(len(kept))
+    spare = span - used
+    cuts = np.sort(rng.random(len(kept))) * spare  # spare time before each window, cumulative
+    placed, t = [], float(t_start)
+    prev_cut = 0.0
+    for i, k in enumerate(order):
+        t += min_sep_s + (cuts[i] - prev_cut)
+        prev_cut = cuts[i]
+        placed.append((t, t + kept[k]))
+        t += kept[k]
+    return np.asarray(placed, dtype=float).reshape(-1, 2)
+
+
 def parse_dropouts(profile: str) -> tuple[str, float]:
     bad = DataError(
         None,
         f"unknown dropout profile {profile!r}; use 'none', 'random:p' "
-        "(0 <= p < 1), 'outages' or 'outage:L' (L > 0 seconds)",
+        f"(0 <= p < 1), 'outages', 'outage:L' (L > 0 seconds) or '{FIELD_OUTAGES}'",
     )
-    if profile in ("none", "outages"):
+    if profile in ("none", "outages", FIELD_OUTAGES):
         return profile, float("nan")
     for kind in ("random", "outage"):
         if profile.startswith(kind + ":"):
@@ -476,6 +533,9 @@ def apply_dropouts(
             for i, j in zip(s, e, strict=True)
         ]
         return gps.take(keep), out
+    if kind == FIELD_OUTAGES:
+        win = packed_outage_windows(float(t[0]), float(t[-1]), FIELD_OUTAGE_LENGTHS_S, rng)
+        return drop_windows(gps, win)
     lengths = OUTAGE_LENGTHS_S if kind == "outages" else (val,)
     win = outage_windows(float(t[0]), float(t[-1]), lengths, rng, t_turns)
     return drop_windows(gps, win)

@@ -371,6 +371,11 @@ def aggregate(
     if limit is not None:
         res["limit"] = limit
     res["gate"] = gate_summary(runs, cfg)
+    from posbench.aggregation.outage_lengths import outage_length_section
+
+    lengths = outage_length_section(runs, cfg, stats)  # the outage-lengths profile only
+    if lengths is not None:
+        res["outage_lengths"] = lengths
     from posbench.aggregation.track import track_section
 
     res["track_errors"] = track_section(traces, keep, preds)

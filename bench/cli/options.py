@@ -163,7 +163,10 @@ GpsLatencyOpt = Annotated[
 DropoutsOpt = Annotated[
     str,
     typer.Option(
-        metavar="PROFILE", help="GPS dropouts: none, random:P, outages (0.5/1/2/5 s), outage:L."
+        metavar="PROFILE",
+        help="GPS dropouts: none, random:P, outages (0.5/1/2/5 s), outage:L, "
+        "outage-lengths (1/2/5/10/30/60 s as each drive allows; error by outage length, m and "
+        "% of distance).",
     ),
 ]
 SeedOpt = Annotated[

@@ -19,6 +19,10 @@ Figures (each written once per requested format, see :data:`~posbench.figures.st
 - ``path``: 40 s of the most-turning drive, with zoomed panels around its worst moments;
 - ``trajectory_error``: that drive's reference path coloured by each predictor's
   future-point error, one panel per predictor, one shared colour scale;
+- ``outage_lengths`` (runs with the ``outage-lengths`` dropout profile): FDE [m] and FDE
+  [% of the distance since the last fix] against outage length, with 95 % intervals, drawn
+  from results.json (:func:`~posbench.figures.writer.write_result_plots`: the intervals are
+  the aggregation's);
 - ``drives/<drive>-error_over_time``: per drive, future-point error over drive time,
   with GPS outages, scenario labels and the warm-up shaded.
 

@@ -17,6 +17,8 @@ from posbench.figures.distributions import (
     plot_error_vs_speed,
 )
 from posbench.figures.maps import plot_path, plot_trajectory_error
+from posbench.figures.outage_lengths import NAME as OUTAGE_LENGTHS
+from posbench.figures.outage_lengths import plot_outage_lengths
 from posbench.figures.per_drive import DEFAULT_DRIVE_PLOTS, write_error_over_time
 from posbench.figures.style import NothingToPlot, PlotsWritten, check_formats, save_figure
 
@@ -28,6 +30,9 @@ FIGURES = {
     "trajectory_error": plot_trajectory_error,
     "calibration": plot_calibration,
 }
+#: figures drawn from results.json rather than the traces (they show its intervals), each
+#: only for a run whose results have the key it draws
+RESULT_FIGURES = {OUTAGE_LENGTHS: ("outage_lengths", plot_outage_lengths)}
 REQUIRED = (
     "drive",
     "predictor",
@@ -104,6 +109,25 @@ def write_drive_plots(
             written.notes["error_over_time"] = note
     except Exception as e:  # noqa: BLE001
         written.notes["error_over_time"] = f"failed ({type(e).__name__}: {e})"
+    return written
+
+
+def write_result_plots(
+    res: dict[str, Any], out: Path, formats: Iterable[str] = ("png",)
+) -> PlotsWritten:
+    """The figures of :data:`RESULT_FIGURES` whose results key ``res`` has, into ``out``;
+    never raises on thin data (see :func:`write_plots`)."""
+    fmts = check_formats(formats)
+    written = PlotsWritten()
+    for name, (key, draw) in RESULT_FIGURES.items():
+        if not res.get(key):
+            continue
+        try:
+            written.files += save_figure(draw(res), out, name, fmts)
+        except NothingToPlot as e:
+            written.notes[name] = str(e)
+        except Exception as e:  # noqa: BLE001 - one bad figure must not lose the report
+            written.notes[name] = f"failed ({type(e).__name__}: {e})"
     return written
 
 

@@ -44,7 +44,7 @@ class RunOptions:
             it is not the truth, else rtk drawn from the truth), native, none, rtk, consumer
             (:func:`posbench.config.gps_condition`).
         gps_latency_s: receiver latency of drawn fixes [s].
-        dropouts: GPS dropout profile (none, random:P, outages, outage:L).
+        dropouts: GPS dropout profile (none, random:P, outages, outage:L, outage-lengths).
         seed: master seed (GPS draws, dropouts, synthetic data); None: 0.
         seeds: repeat the run over these seeds (the first one is the run), or a count or
             text as ``--seeds`` takes it (``5``, ``"0,1,2"``); None: once. Not with ``seed``.

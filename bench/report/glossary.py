@@ -9,7 +9,16 @@ from __future__ import annotations
 from collections.abc import Mapping
 from typing import Any
 
-from posbench.metrics import accuracy, bootstrap, latency, limit, outages, pcrb, seeds
+from posbench.metrics import (
+    accuracy,
+    bootstrap,
+    latency,
+    limit,
+    outage_lengths,
+    outages,
+    pcrb,
+    seeds,
+)
 from posbench.scoring.schema import DEFINITIONS, TRACE_COLUMNS
 
 
@@ -37,6 +46,8 @@ def glossary(res: Mapping[str, Any]) -> list[tuple[str, str]]:
         terms += seeds.DEFINITIONS.items()
     if res.get("outages"):
         terms += outages.DEFINITIONS.items()
+    if res.get("outage_lengths"):
+        terms += outage_lengths.DEFINITIONS.items()
     if res.get("limit"):
         terms += limit.DEFINITIONS.items()
         terms += [(k, pcrb.DEFINITIONS[k]) for k in ("PCRB", "jerk PSD q", "slow error floor")]

@@ -12,7 +12,7 @@ from typing import TYPE_CHECKING, Any
 from posbench.errors import UsageError
 from posbench.figures.per_drive import DEFAULT_DRIVE_PLOTS
 from posbench.figures.style import PlotsWritten, shown_format
-from posbench.figures.writer import write_plots
+from posbench.figures.writer import joined, write_plots, write_result_plots
 from posbench.naming import plural
 from posbench.report.data_check import report_lines as consistency_lines
 from posbench.report.glossary import glossary_lines
@@ -31,8 +31,10 @@ from posbench.report.notes import (
     trained_note,
     tuning_lines,
 )
+from posbench.report.outage_lengths import figure_file, outage_length_lines
 from posbench.scoring.reference import reference_lines, references
 from posbench.scoring.schema import KINDS
+from posbench.tables.outage_lengths import outage_length_tables
 from posbench.tables.run_tables import (
     NOT_CONCLUSIVE,
     dataset_table,
@@ -100,6 +102,7 @@ def write_report(
     out.mkdir(parents=True, exist_ok=True)
     if plots is None:
         plots = write_plots(run.traces, run.results, out, formats, drive_plots)
+    plots = joined(plots, write_result_plots(run.results, out, formats))
     (out / "report.md").write_text(
         render_markdown(
             run.results,
@@ -149,6 +152,7 @@ def report_tables(res: dict[str, Any]) -> list[Table]:
         tables.append(speed_table(res))
     if res.get("outages"):
         tables.append(outage_table(res))
+    tables += outage_length_tables(res)
     if res.get("gate", {}).get("enabled"):
         tables.append(gate_table(res))
     tables.append(drives_table(res))
@@ -358,6 +362,7 @@ def render_markdown(
             "",
         ]
         lines += [outage_table(res).markdown(), ""]
+    lines += outage_length_lines(res, plots)
     lines += gate_lines(res)
     lines += ["## Drives", ""]
     lines += [drives_table(res).markdown(), ""]
@@ -376,7 +381,8 @@ def render_markdown(
     if warn:
         lines += ["## Loader warnings", ""] + [f"- `{n}`: {w}" for n, w in warn] + [""]
     if plots or plot_notes:
-        shown = [p for p in plots if not p.startswith("drives/")]
+        curve = figure_file(plots) if res.get("outage_lengths") else None  # in its section
+        shown = [p for p in plots if not p.startswith("drives/") and p != curve]
         per_drive = [p for p in plots if p.startswith("drives/")]
         lines += ["## Plots", ""]
         lines += [

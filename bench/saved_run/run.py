@@ -22,6 +22,10 @@ Each run carries the bound beside its predictors (schema 1.9, ``limit``): the po
 Cramér-Rao bound on the mean error over the same queries, each predictor's ``x limit`` and
 the predictors below it; a run saved before has none, and shows no limit row.
 
+A run with the ``outage-lengths`` dropout profile carries its outage curve (schema 1.10,
+``outage_lengths``): FDE and ATE at the end of 1-60 s outages, in metres and as % of the
+distance travelled since the last fix; a run saved before has none, and shows no such section.
+
 Example (a notebook)::
 
     import posbench
@@ -49,7 +53,7 @@ from posbench.scenarios.errors import DataError
 
 #: MAJOR.MINOR of results.json: a reader accepts every MINOR of its MAJOR; MINOR grows when
 #: keys are added, MAJOR when a key changes meaning or goes
-SCHEMA_VERSION = "1.9"
+SCHEMA_VERSION = "1.10"
 RESULTS = "results.json"
 TRACES = "traces.parquet"
 PROVENANCE_KEYS = ("command", "versions", "git_commit", "data")

@@ -185,6 +185,7 @@ _EVERY_PART = {
     "paired": {"baseline": "x"},
     "seeds": {"seeds": [0]},
     "outages": {"x": 1},
+    "outage_lengths": {"x": 1},
     "limit": {"x": 1},
 }
 
