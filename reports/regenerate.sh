@@ -17,6 +17,10 @@ bench run --predictors cv,poly,kf,kf-paper,ekf,lstm,hybrid,lstm-authors \
   --data $S/data/aslan --data $S/data/kitti_raw --data $S/data/comma2k19 --out reports/all-data
 bench run --predictors cv,poly,kf,kf-paper,ekf,lstm,hybrid --dropouts outages \
   --data $S/data/aslan --data $S/data/kitti_raw --data $S/data/comma2k19 --out reports/outages
+# outages as the field reports them: the error 1-60 s into an outage, in metres and as % of the
+# distance travelled since the last fix (KITTI at rtk, evaluation only)
+bench run --predictors cv,kf,ekf,lstm,hybrid --data $S/data/kitti_raw --gps-profile rtk \
+  --dropouts outage-lengths --drive-plots 0 --out reports/kitti-outage-lengths
 bench latency --json > reports/latency.json
 # the outlier gate's effect on the paper's routes: the same run with the gate off
 bench run --predictors cv,poly,kf,kf-paper,ekf,lstm,lstm-authors \

@@ -34,6 +34,7 @@ ORDER = (
     "kitti-consumer",
     "all-data",
     "outages",
+    "kitti-outage-lengths",
     "aslan-no-gate",
     "aslan-gate",
 )
