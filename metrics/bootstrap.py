@@ -31,6 +31,8 @@ from typing import Any
 
 import numpy as np
 
+from posbench.metrics.autocovariance import autocovariance as _autocovariance
+
 # resampled_quantiles was defined here before it got its own module: still importable from here
 from posbench.metrics.resampled_quantiles import resampled_quantiles as resampled_quantiles
 from posbench.metrics.resampled_quantiles import resampled_quantiles_many
@@ -220,32 +222,6 @@ def quantile_ci(
 
 
 # ----------------------------------------------------------- block bootstrap
-#: the longest series [samples] whose autocovariance is one FFT of the whole; a longer one is
-#: taken block by block (:func:`_autocovariance`), so that memory does not grow with a drive
-AUTOCOVARIANCE_BLOCK = 1 << 18
-
-
-def _autocovariance(x: np.ndarray, max_lag: int, block: int = AUTOCOVARIANCE_BLOCK) -> np.ndarray:
-    """Sample autocovariances (divisor n) of ``x`` at lags 0 .. max_lag, through the FFT: of
-    the whole series up to ``block`` samples, else block by block (each block of ``block``
-    samples correlated with itself and the ``max_lag`` samples after it, the products summed:
-    the same sums, in memory of the order of ``block + max_lag`` whatever the length)."""
-    n = x.size
-    d = x - x.mean()
-    if n <= block:
-        size = 1 << (2 * n - 1).bit_length()
-        f = np.fft.rfft(d, size)
-        return np.fft.irfft(f * np.conj(f), size)[: max_lag + 1] / n
-    out = np.zeros(max_lag + 1)
-    size = 1 << (2 * (block + max_lag) - 1).bit_length()
-    for start in range(0, n, block):
-        head = d[start : start + block]  # the lags' first factors
-        tail = d[start : start + block + max_lag]  # their partners, up to max_lag later
-        c = np.fft.irfft(np.conj(np.fft.rfft(head, size)) * np.fft.rfft(tail, size), size)
-        out += c[: max_lag + 1]
-    return out / n
-
-
 def block_length(x: np.ndarray) -> int:
     """Block length [samples] for the circular block bootstrap of a series in time order.
 

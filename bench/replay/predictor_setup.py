@@ -171,11 +171,13 @@ def _first_line(exc: BaseException) -> str:
 
 
 def _failure_detail(exc: BaseException) -> str:
-    """``Type: first line`` of an exception (a DataError's own line, without its type)."""
+    """``Type: first line`` of an exception (a DataError's or an option value's own line,
+    without its type: both are written for the user)."""
+    from posbench.predictors.option_types import OptionValueError
 
     return (
         _first_line(exc)
-        if isinstance(exc, DataError)
+        if isinstance(exc, DataError | OptionValueError)
         else f"{type(exc).__name__}: {_first_line(exc)}"
     )
 

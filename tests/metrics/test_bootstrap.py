@@ -307,7 +307,7 @@ def test_autocovariance_in_blocks_equals_the_whole_and_stays_small():
     died in a MemoryError here)."""
     import tracemalloc
 
-    from posbench.metrics.bootstrap import _autocovariance
+    from posbench.metrics.autocovariance import autocovariance as _autocovariance
 
     rng = np.random.default_rng(5)
     n, lag = 1 << 20, 900
