@@ -4,7 +4,9 @@ one line naming what was written. All from the saved :class:`~posbench.saved_run
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from pathlib import Path
+from typing import Any
 
 from posbench.cli.terminal import QUIET, VERBOSE, console, print_table, say, verbosity, warn
 from posbench.naming import plural
@@ -86,8 +88,7 @@ def print_first_screen(published: Published) -> None:
             console,
             held.header(),
             held.cells(),
-            title=f"held-out {plural(len(ho['drives']), 'drive')} (no predictor "
-            f"trained or tuned on them) - errors in metres",
+            title=held_out_title(ho),
         )
         note = paired_line(res, held_out=True)
         if note:
@@ -163,8 +164,7 @@ def print_wide_summary(published: Published) -> None:
             console,
             held.header(),
             held.cells(),
-            title=f"held-out {plural(len(ho['drives']), 'drive')} (no predictor "
-            f"trained or tuned on them) - errors in metres",
+            title=held_out_title(ho),
         )
         if has_held_out_paired(res):
             hp = paired_table(res, held_out=True)
@@ -179,6 +179,15 @@ def print_wide_summary(published: Published) -> None:
 
 #: the suffixes of the figures a run writes (``--plot-format``)
 FIGURE_SUFFIXES = (".png", ".svg", ".pdf")
+
+
+def held_out_title(held_out: Mapping[str, Any]) -> str:
+    """The title of the held-out drives' table (``held_out``: results.json's
+    ``held_out_all``)."""
+    return (
+        f"held-out {plural(len(held_out['drives']), 'drive')} (no predictor trained or tuned "
+        "on them) - errors in metres"
+    )
 
 
 def written_summary(out: Path, written: list[Path], removed: list[Path], wide: bool = True) -> str:

@@ -48,8 +48,10 @@ def unhonoured(drives: Sequence[Drive], cfg: RunConfig) -> list[str]:
     notes: list[str] = []
     profile = cfg.gps_profile
     flag = f"--gps-profile {profile}"
-    if profile not in (AUTO_PROFILE, "native"):
-        no_truth = [d for d in drives if d.truth is None]
+    conditions = [gps_condition(cfg, d) for d in drives]  # what each drive is fed
+    missed = [d for d, c in zip(drives, conditions, strict=True) if c != profile]
+    if profile != AUTO_PROFILE and missed:
+        no_truth = [d for d in missed if d.truth is None]
         if no_truth and len(no_truth) == len(drives):
             d = no_truth[0]
             which = f"{d.name} holds {_what(d)}" if len(drives) == 1 else _names(no_truth)
@@ -63,24 +65,22 @@ def unhonoured(drives: Sequence[Drive], cfg: RunConfig) -> list[str]:
                 f"{flag}: {plural(len(no_truth), 'drive')} without a truth "
                 f"({_names(no_truth)}) fed and scored on their own receiver's fixes (native)"
             )
-    if profile == "native":
-        without = [d for d in drives if d.truth is not None and len(d.gps) == 0]
+        without = [d for d in missed if d.truth is not None]  # native, no fixes of its own
         if without:
             notes.append(
                 f"{flag}: {plural(len(without), 'drive')} without fixes of their own "
                 f"({_names(without)}) fed rtk fixes drawn from their truth"
             )
     if cfg.gps_latency_s > 0.0:
-        drawn = [d for d in drives if gps_condition(cfg, d) != "native"]
+        own = [d for d, c in zip(drives, conditions, strict=True) if c == "native"]
         latency = f"--gps-latency {cfg.gps_latency_s:g}"
-        if not drawn:
+        if len(own) == len(drives):
             raise UsageError(
                 f"{latency} delays fixes drawn from a truth, and no drive of this run is fed "
                 f"drawn fixes (--gps-profile {profile}: their own receiver's): leave it out, or "
                 "draw fixes with --gps-profile rtk|consumer|none"
             )
-        if len(drawn) < len(drives):
-            own = [d for d in drives if d not in drawn]
+        if own:
             notes.append(
                 f"{latency}: {plural(len(own), 'drive')} fed their own receiver's fixes "
                 f"({_names(own)}) without the latency"

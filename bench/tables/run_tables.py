@@ -18,7 +18,6 @@ from posbench.tables.limit import (
     ratio_cells,
     ratio_digits,
     ratio_labels,
-    ratio_of,
     with_ratio_columns,
 )
 from posbench.tables.table import Table, as_float, is_finite, rows_frame
@@ -183,13 +182,9 @@ def first_screen_table(
     lim = res.get("limit") or {}
     short = {lim.get(k): short_limit_name(lim.get(k)) for k in ("name", "name_imu")}
     reads_imu = lim.get("reads_imu") or {}
-    if "future_xlim" in frame.columns and not held_out:
-        frame["future_xlim"] = [
-            ratio_of(res, name, "future", imu=True)
-            if reads_imu.get(name.removesuffix(TRAINED_MARK))
-            else x
-            for name, x in zip(frame["predictor"], frame["future_xlim"], strict=True)
-        ]
+    if "future_xlim_imu" in frame.columns and not held_out:  # the ratio that applies
+        imu = frame["predictor"].map(lambda n: bool(reads_imu.get(n.removesuffix(TRAINED_MARK))))
+        frame["future_xlim"] = frame["future_xlim_imu"].where(imu, frame["future_xlim"])
     frame["predictor"] = [
         short.get(name) or name + (FLAG_MARK if name.removesuffix(TRAINED_MARK) in flagged else "")
         for name in frame["predictor"]

@@ -92,3 +92,33 @@ def test_the_default_run_records_its_conditions_and_no_notes():
     run = posbench.run(predictors="cv", synthetic_duration_s=30, out=None)
     assert run.results["gps_conditions"] == {"rtk": 1}
     assert "unhonoured" not in run.results
+
+
+def test_latency_that_misses_some_drives_is_one_note(tmp_path):
+    folder = tmp_path / "data"
+    folder.mkdir()
+    _csv(folder / "with_truth.csv", truth=True)
+    _csv(folder / "own_only.csv", truth=False)
+    r = bench(
+        "run",
+        "--data",
+        folder,
+        "-p",
+        "cv",
+        "--gps-profile",
+        "rtk",
+        "--gps-latency",
+        "0.1",
+        "--out",
+        tmp_path / "o",
+        "--drive-plots",
+        "0",
+        cwd=tmp_path,
+        columns=200,
+    )
+    assert r.returncode == 0, r.stderr
+    notes = [ln for ln in (r.stdout + r.stderr).splitlines() if ln.startswith("note: --gps-lat")]
+    assert notes == [
+        "note: --gps-latency 0.1: 1 drive fed their own receiver's fixes (own_only) "
+        "without the latency"
+    ]

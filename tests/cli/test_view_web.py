@@ -227,17 +227,31 @@ def test_web_serves_prints_the_url_and_stops_cleanly_on_ctrl_c(tmp_path):
     assert not rerun_web.port_in_use(n) and not rerun_web.port_in_use(n + 1)
 
 
-def test_web_stops_the_server_on_sigterm_too(tmp_path):
+def serving(tmp_path: Path) -> tuple[subprocess.Popen, Path]:
+    """`bench view --web` on a stand-in recording and server, started and serving (its
+    URL printed); the stand-in's note file (its pid under ``pid``)."""
     rrd = tmp_path / "run.rrd"
     rrd.write_bytes(b"RRF2")
     env, note = fake_rerun(tmp_path)
-    n = free_port_pair()
-    proc = start_view(rrd, n, env)
+    proc = start_view(rrd, free_port_pair(), env)
     try:
         read_until(proc, "open: ")
-        import json
+    except BaseException:
+        cleanup(proc, note)
+        raise
+    return proc, note
 
-        pid = json.loads(note.read_text())["pid"]
+
+def server_pid(note: Path) -> int:
+    import json
+
+    return int(json.loads(note.read_text())["pid"])
+
+
+def test_web_stops_the_server_on_sigterm_too(tmp_path):
+    proc, note = serving(tmp_path)
+    try:
+        pid = server_pid(note)
         proc.terminate()
         out, err = proc.communicate(timeout=30)
     finally:
@@ -305,16 +319,9 @@ def test_web_on_a_missing_file_is_one_error_line(tmp_path):
 def test_web_server_ends_with_bench_view_killed_by_force(tmp_path):
     """`kill -9` of `bench view --web` (no handler runs) still ends the server: the kernel
     sends it SIGTERM when its parent dies (issue 49)."""
-    import json
-
-    rrd = tmp_path / "run.rrd"
-    rrd.write_bytes(b"RRF2")
-    env, note = fake_rerun(tmp_path)
-    n = free_port_pair()
-    proc = start_view(rrd, n, env)
+    proc, note = serving(tmp_path)
     try:
-        read_until(proc, "open: ")
-        pid = json.loads(note.read_text())["pid"]
+        pid = server_pid(note)
         os.kill(proc.pid, signal.SIGKILL)
         proc.communicate(timeout=30)
         deadline = time.monotonic() + 10
