@@ -50,6 +50,8 @@ import numpy as np
 import pandas as pd
 
 from posbench.scenarios.errors import DataError
+from posbench.scoring.schema import COV_COLUMNS
+from posbench.scoring.trace_set import TraceSet
 
 #: MAJOR.MINOR of results.json: a reader accepts every MINOR of its MAJOR; MINOR grows when
 #: keys are added, MAJOR when a key changes meaning or goes
@@ -100,10 +102,15 @@ class Run:
     results: dict[str, Any]
     folder: Path | None = None
     _traces: pd.DataFrame | None = field(default=None, repr=False)
+    #: the traces' Parquet parts, while they are on disk and not in :attr:`folder`
+    _trace_parts: tuple[Path, ...] = field(default=(), repr=False)
 
     @classmethod
     def from_results(
-        cls, results: dict[str, Any], traces: pd.DataFrame | None = None, folder: Path | None = None
+        cls,
+        results: dict[str, Any],
+        traces: pd.DataFrame | TraceSet | None = None,
+        folder: Path | None = None,
     ) -> Run:
         """A run from freshly aggregated ``results``: stamped with :data:`SCHEMA_VERSION`
         and ``status`` (complete unless ``results`` says otherwise) and converted to strict
@@ -117,6 +124,10 @@ class Run:
                 **{k: v for k, v in results.items() if k not in stamp},
             }
         )
+        if isinstance(traces, TraceSet):
+            if traces.in_memory is None:
+                return cls(res, folder, None, traces.parts)
+            traces = traces.in_memory
         return cls(res, folder, traces)
 
     @property
@@ -148,9 +159,28 @@ class Run:
         return list(self.results["predictors"])
 
     @property
+    def trace_set(self) -> TraceSet:
+        """The traces where they are, read one predictor or one drive at a time
+        (:class:`~posbench.scoring.trace_set.TraceSet`): what the figures, the report and the
+        recording read, so that a large run is never held whole."""
+        if self._traces is not None:
+            return TraceSet(self._traces)
+        if self._trace_parts:
+            return TraceSet(parts=self._trace_parts)
+        path = None if self.folder is None else self.folder / TRACES
+        if path is not None and path.is_file():
+            import pyarrow.parquet as pq
+
+            if all(c in pq.read_schema(path).names for c in COV_COLUMNS):
+                return TraceSet(parts=[path])
+        return TraceSet(self.traces)
+
+    @property
     def traces(self) -> pd.DataFrame:
         """Per-query traces (loaded from the folder on first use; columns:
         :data:`posbench.scoring.schema.TRACE_COLUMNS`). Empty when nothing was scored."""
+        if self._traces is None and self._trace_parts:
+            self._traces = TraceSet(parts=self._trace_parts).materialize()
         if self._traces is None:
             path = None if self.folder is None else self.folder / TRACES
             if path is None or not path.is_file():
@@ -159,8 +189,6 @@ class Run:
                 self._traces = pd.DataFrame()
             else:
                 self._traces = pd.read_parquet(path)
-                from posbench.scoring.schema import COV_COLUMNS
-
                 for c in COV_COLUMNS:  # traces written before schema 1.4
                     if c not in self._traces:
                         self._traces[c] = np.nan
