@@ -32,9 +32,10 @@ from posbench.metrics.outages import (
     since_fix_checkpoint,
 )
 from posbench.scenarios.labels import LABELS
-from posbench.scoring.records import DriveRun, all_traces
+from posbench.scoring.records import DriveRun, trace_set
 from posbench.scoring.reference import dataset_references
-from posbench.scoring.schema import KINDS, scored_mask
+from posbench.scoring.schema import KINDS
+from posbench.scoring.trace_set import TraceSet
 
 #: the trace columns aggregation reads (positions are not needed once errors exist)
 AGGREGATED = (
@@ -52,23 +53,29 @@ AGGREGATED = (
 
 
 def excluded_summary(
-    traces: pd.DataFrame, preds: Sequence[str], stats: Statistics | None = None
+    traces: TraceSet | pd.DataFrame, preds: Sequence[str], stats: Statistics | None = None
 ) -> dict[str, Any]:
     """What the headline figures leave out, per predictor and kind: warm-up queries (with
     their error summaries, and intervals given ``stats``) and queries without a reference
-    (beyond the truth's or the fixes' span: nothing to score against)."""
+    (beyond the truth's or the fixes' span: nothing to score against). One predictor's
+    rows at a time."""
     out: dict[str, Any] = {"warmup": {}, "no_reference": {}}
-    if traces.empty:
+    ts = as_trace_set(traces)
+    if ts.empty:
         return out
-    no_ref = traces["x_ref"].isna() | traces["y_ref"].isna()
-    warm = traces["warmup"] if "warmup" in traces else pd.Series(False, index=traces.index)
-    for name in preds:
-        mine = traces["predictor"] == name
-        out["warmup"][name] = _kind_summaries(_with_codes(traces[mine & warm & ~no_ref]), stats)
-        out["no_reference"][name] = {
-            k: int((mine & no_ref & (traces["kind"] == k)).sum()) for k in KINDS
-        }
+    cols = ["dataset", "drive", "kind", "t_query", "error_m", "x_ref", "y_ref", "warmup"]
+    for name, df in ts.per_predictor(preds, cols, scored=False):
+        no_ref = (df["x_ref"].isna() | df["y_ref"].isna()).to_numpy()
+        warm = df["warmup"].to_numpy(dtype=bool) if "warmup" in df else np.zeros(len(df), bool)
+        out["warmup"][name] = _kind_summaries(_with_codes(df[warm & ~no_ref]), stats)
+        kind = df["kind"].to_numpy()
+        out["no_reference"][name] = {k: int((no_ref & (kind == k)).sum()) for k in KINDS}
     return out
+
+
+def as_trace_set(traces: TraceSet | pd.DataFrame) -> TraceSet:
+    """``traces`` as a :class:`~posbench.scoring.trace_set.TraceSet` (a frame is wrapped)."""
+    return traces if isinstance(traces, TraceSet) else TraceSet(traces)
 
 
 def _with_codes(df: pd.DataFrame) -> pd.DataFrame:
@@ -164,22 +171,24 @@ def aggregate(
     cfg: RunConfig,
     *,
     models: Mapping[str, Mapping[str, Any]],
-    traces: pd.DataFrame | None = None,
+    traces: TraceSet | pd.DataFrame | None = None,
     statistics: Statistics | None = None,
 ) -> dict[str, Any]:
-    """The figures of ``results.json``, from its key ``predictors`` on (``traces``:
-    :func:`all_traces` if already made; ``models``: the learned models behind the
+    """The figures of ``results.json``, from its key ``predictors`` on (``traces``: the
+    runs' traces, in memory or on disk, :func:`~posbench.scoring.records.trace_set` if not
+    given; ``models``: the learned models behind the
     predictors, per name ``{"model", "bundled", "train_drives"}``, ``{}`` for none, e.g.
     answers scored from a file, whose models posbench cannot know).
 
-    Headline figures use the scored rows only (:func:`scored_mask`); the work goes one
-    predictor at a time over just the :data:`AGGREGATED` columns of its rows, so a long run
-    never holds a second full copy of its traces (the baseline's rows are kept for the
-    paired comparison). Every summary gets its ``ci95`` and each predictor its paired
-    comparison with the baseline as ``statistics`` says (default: :class:`Statistics` with
-    baseline ``kf`` when it is in the run; see :mod:`posbench.aggregation.intervals`)."""
-    if traces is None:
-        traces = all_traces(runs)
+    Headline figures use the scored rows only
+    (:func:`~posbench.scoring.schema.scored_mask`); the work goes one predictor at a time
+    over just the :data:`AGGREGATED` columns of its rows (the baseline's rows are kept for
+    the paired comparison); traces on disk are read that way, so the process holds one
+    predictor's columns (two with the baseline), never every answer of the run. Every
+    summary gets its ``ci95`` and each predictor its paired comparison with the baseline
+    as ``statistics`` says (default: :class:`Statistics` with baseline ``kf`` when it is
+    in the run; see :mod:`posbench.aggregation.intervals`)."""
+    ts = trace_set(runs) if traces is None else as_trace_set(traces)
     preds = list(cfg.predictors)
     stats = statistics or Statistics(baseline=default_baseline(preds))
     res: dict[str, Any] = {
@@ -190,27 +199,24 @@ def aggregate(
         "by_speed": {},
         "outages": {},
         "models": {n: dict(m) for n, m in models.items()},
-        "excluded": excluded_summary(traces, preds, stats),
+        "excluded": excluded_summary(ts, preds, stats),
         "held_out": {},
         "held_out_all": {},
         "drives": [],
     }
     res["training_drives"] = {n: m["train_drives"] for n, m in res["models"].items()}
     trained_on = {n for names in res["training_drives"].values() for n in names}
-    keep = scored_mask(traces)
-    cols = [c for c in AGGREGATED if c in traces.columns] if not traces.empty else list(AGGREGATED)
-    scored_pairs = (
-        traces.loc[keep, ["dataset", "drive"]].drop_duplicates()
-        if not traces.empty
-        else pd.DataFrame(columns=["dataset", "drive"])
-    )
-    datasets = sorted(set(scored_pairs["dataset"].astype(str)))
-    drives_of = {
-        ds: set(scored_pairs.loc[scored_pairs["dataset"].astype(str) == ds, "drive"].astype(str))
-        for ds in datasets
-    }
+    cols = [c for c in AGGREGATED if c in ts] if not ts.empty else list(AGGREGATED)
+    # which drives were scored, and whether any query fell in an outage: one predictor at a time
+    drives_of: dict[str, set[str]] = {}
+    with_outages = False
+    for _, df in ts.per_predictor(preds, ["dataset", "drive", "outage"]):
+        pairs = df[["dataset", "drive"]].drop_duplicates()
+        for ds, drive in zip(pairs["dataset"].astype(str), pairs["drive"].astype(str), strict=True):
+            drives_of.setdefault(ds, set()).add(drive)
+        with_outages = with_outages or bool((df["outage"].to_numpy() >= 0).any())
+    datasets = sorted(drives_of)
     all_drives = set().union(*drives_of.values()) if drives_of else set()
-    with_outages = not traces.empty and bool((traces.loc[keep, "outage"] >= 0).any())
     held_ds = [ds for ds in datasets if drives_of[ds] & trained_on]
     for ds in held_ds:
         res["held_out"][ds] = {
@@ -231,23 +237,20 @@ def aggregate(
     res["paired"] = {"baseline": stats.baseline, "overall": {}, "by_dataset": {}, "by_label": {}}
 
     def scored_rows(name: str) -> pd.DataFrame:
-        if traces.empty:
+        if ts.empty:
             return pd.DataFrame(columns=[*cols, "code"])
-        return _with_codes(traces.loc[keep & (traces["predictor"] == name).to_numpy(), cols])
+        return _with_codes(ts.scored(name, cols))
 
     base_df = scored_rows(stats.baseline) if stats.baseline else None
     for name in preds:
         df = base_df if base_df is not None and name == stats.baseline else scored_rows(name)
         entry = _kind_summaries(df, stats) if not df.empty else _empty_kinds(stats)
-        steps = np.concatenate(
-            [r.step_ns[name] for r in runs if name in r.step_ns] or [np.empty(0)]
+        steps, queries, covs = (
+            [r.call_ns(c, name) for r in runs] for c in ("step", "query", "cov")
         )
-        queries = np.concatenate(
-            [r.query_ns[name] for r in runs if name in r.query_ns] or [np.empty(0)]
-        )
-        entry["latency_us"] = latency_summary(steps)
-        entry["query_us"] = latency_summary(queries)
-        covs = [r.cov_ns[name] for r in runs if name in getattr(r, "cov_ns", {})]
+        steps, queries, covs = ([a for a in c if a is not None] for c in (steps, queries, covs))
+        entry["latency_us"] = latency_summary(np.concatenate(steps or [np.empty(0)]))
+        entry["query_us"] = latency_summary(np.concatenate(queries or [np.empty(0)]))
         if covs:  # the covariance_at call, timed apart from the query
             entry["covariance_us"] = latency_summary(np.concatenate(covs))
         res["predictors"][name] = entry
@@ -358,7 +361,7 @@ def aggregate(
         }
         if r.sensor_frames:
             d["sensor_frames"] = r.sensor_frames
-        if not r.traces.empty:
+        if r.has_traces:
             mine = per_drive.get((r.dataset, r.name), {})
             d["predictors"] = {name: mine.get(name, _empty_kinds(stats)) for name in preds}
         res["drives"].append(d)
@@ -378,13 +381,13 @@ def aggregate(
         res["outage_lengths"] = lengths
     from posbench.aggregation.track import track_section
 
-    res["track_errors"] = track_section(traces, keep, preds)
+    res["track_errors"] = track_section(ts, preds)
     from posbench.aggregation.uncertainty import uncertainty_section
 
-    res["uncertainty"] = uncertainty_section(traces, keep, preds)
+    res["uncertainty"] = uncertainty_section(ts, preds)
     from posbench.aggregation.sanity import sanity_section
 
-    res["sanity"] = sanity_section(traces, keep, preds, datasets, stats)
+    res["sanity"] = sanity_section(ts, preds, datasets, stats)
     return res
 
 

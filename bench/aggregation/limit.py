@@ -85,14 +85,15 @@ def imu_readers(
 def _frames(runs: Sequence[DriveRun]) -> pd.DataFrame:
     """Every drive's limit rows, with its data set, drive and ``slow_sd_m2`` (the standard
     deviation of its measured slow floor, ``limit_info["slow_var_sd_m2"]``: 0 if none)."""
+    frames = ((r, r.load_limit()) for r in runs if r.has_limit and not r.skipped)
     parts = [
-        r.limit.assign(
+        rows.assign(
             dataset=r.dataset,
             drive=r.name,
             slow_sd_m2=float(r.limit_info.get("slow_var_sd_m2") or 0.0),
         )
-        for r in runs
-        if r.limit is not None and not r.skipped and not r.limit.empty
+        for r, rows in frames
+        if rows is not None and not rows.empty
     ]
     return pd.concat(parts, ignore_index=True) if parts else pd.DataFrame()
 
@@ -370,7 +371,7 @@ def limit_section(
             continue
         # one data set: its queries are all of them, the same figures
         entry = dict(section["overall"]) if single else _scope(part, stats)
-        mine = [r for r in runs if r.dataset == ds and r.limit is not None and not r.skipped]
+        mine = [r for r in runs if r.dataset == ds and r.has_limit and not r.skipped]
         conditions: dict[str, int] = {}
         for r in mine:
             conditions[r.gps_condition] = conditions.get(r.gps_condition, 0) + 1

@@ -71,8 +71,10 @@ def drive_outages(
 ) -> dict[str, pd.DataFrame]:
     """Per predictor, one row per outage of ``run`` with a scored query: the columns of
     :data:`_FIELDS` (``drive`` = ``index``, the bootstrap's cluster)."""
-    tr = run.traces
-    if tr.empty or not run.outages:
+    if not run.has_traces or not run.outages:
+        return {}
+    tr = run.load_traces()
+    if tr.empty:
         return {}
     bounds = np.asarray(run.outages, dtype=float).reshape(-1, 2)
     classes = length_classes(bounds[:, 1] - bounds[:, 0], lengths_s)
@@ -172,7 +174,7 @@ def outage_length_section(
     if cfg.dropouts != FIELD_OUTAGES:
         return None
     lengths = [float(x) for x in FIELD_OUTAGE_LENGTHS_S]
-    scored = [r for r in runs if not r.skipped and not r.traces.empty]
+    scored = [r for r in runs if not r.skipped and r.has_traces]
     per_pred: dict[str, list[pd.DataFrame]] = {name: [] for name in cfg.predictors}
     counts = {length_key(x): {"length_s": x, "outages": 0, "drives": 0} for x in lengths}
     for i, r in enumerate(scored):

@@ -18,6 +18,7 @@ import pandas as pd
 
 from posbench.aggregation.intervals import Statistics, drive_codes, paired_by_dataset
 from posbench.scoring.schema import KINDS
+from posbench.scoring.trace_set import TraceSet
 
 #: the predictor every other is checked against
 REFERENCE = "cv"
@@ -26,8 +27,7 @@ COLUMNS = ["dataset", "drive", "kind", "t_query", "error_m", "label"]
 
 
 def sanity_section(
-    traces: pd.DataFrame,
-    keep: np.ndarray,
+    traces: TraceSet,
     predictors: Sequence[str],
     datasets: Sequence[str],
     stats: Statistics,
@@ -39,10 +39,9 @@ def sanity_section(
     if REFERENCE not in predictors or traces.empty:
         return out
     out["checked"] = True
-    pred = traces["predictor"].to_numpy()
 
     def rows(name: str) -> pd.DataFrame:
-        df = traces.loc[keep & (pred == name), COLUMNS]
+        df = traces.scored(name, COLUMNS)
         return df.assign(code=drive_codes(df))
 
     base = rows(REFERENCE)

@@ -17,28 +17,26 @@ import pandas as pd
 
 from posbench.metrics.accuracy import summarize
 from posbench.metrics.seeds import paired_mean_difference, spread
-from posbench.scoring.schema import KINDS, scored_mask
+from posbench.scoring.schema import KINDS
+from posbench.scoring.trace_set import TraceSet
 
 #: the figures whose spread across seeds is reported
 SPREAD_FIGURES = ("mean_m", "median_m", "rmse_m", "p95_m")
 
 
 def seed_figures(
-    traces: pd.DataFrame, predictors: Sequence[str], baseline: str | None, seed: int
+    traces: TraceSet | pd.DataFrame, predictors: Sequence[str], baseline: str | None, seed: int
 ) -> dict[str, Any]:
-    """One seed's headline figures from its traces: per predictor and kind the summary of
-    the scored queries (as ``results["predictors"]``, without latency and intervals), the
-    same per data set, and each predictor's paired difference of mean error against the
-    baseline on the queries both answered [m]."""
+    """One seed's headline figures from its traces (read one predictor at a time): per
+    predictor and kind the summary of the scored queries (as ``results["predictors"]``,
+    without latency and intervals), the same per data set, and each predictor's paired
+    difference of mean error against the baseline on the queries both answered [m]."""
     out: dict[str, Any] = {"seed": int(seed), "predictors": {}, "by_dataset": {}, "paired": {}}
-    if traces.empty:
+    ts = traces if isinstance(traces, TraceSet) else TraceSet(traces)
+    if ts.empty:
         return out
-    keep = scored_mask(traces)
-    cols = ["dataset", "predictor", "kind", "error_m"]
-    df = traces.loc[keep, cols]
     errors: dict[tuple[str, str], np.ndarray] = {}
-    for name in predictors:
-        mine = df[df["predictor"] == name]
+    for name, mine in ts.per_predictor(predictors, ["dataset", "kind", "error_m"]):
         out["predictors"][name] = {}
         for k in KINDS:
             e = mine.loc[mine["kind"] == k, "error_m"].to_numpy(dtype=float)

@@ -26,6 +26,7 @@ from posbench.metrics.calibration import (
     since_fix_bin,
 )
 from posbench.scoring.schema import COV_COLUMNS, KINDS
+from posbench.scoring.trace_set import TraceSet
 
 COV = list(COV_COLUMNS)
 NEEDED = (
@@ -49,14 +50,12 @@ def _arrays(rows: pd.DataFrame) -> tuple[np.ndarray, np.ndarray]:
     return err, rows[COV].to_numpy(float)
 
 
-def uncertainty_section(
-    traces: pd.DataFrame, keep: np.ndarray, predictors: Sequence[str]
-) -> dict[str, Any]:
+def uncertainty_section(traces: TraceSet, predictors: Sequence[str]) -> dict[str, Any]:
     """``{"predictors": {name: {kind: summary}}, "by_dataset": {name: {kind: {ds: summary}}},
     "by_label": {...}, "by_since_fix": {name: {kind: {bin: summary}}}, "curve": {name:
     {kind: [[expected, observed], ...]}}, "none": [names without covariance]}`` over the
-    rows ``keep`` of ``traces``. Traces without covariance columns (older runs, answers
-    without them): every predictor under ``none``."""
+    scored rows of ``traces`` (one predictor at a time). Traces without covariance columns
+    (older runs, answers without them): every predictor under ``none``."""
     out: dict[str, Any] = {
         "predictors": {},
         "by_dataset": {},
@@ -68,13 +67,10 @@ def uncertainty_section(
     if traces.empty or any(c not in traces for c in NEEDED):
         out["none"] = list(predictors)
         return out
-    has_cov = np.isfinite(traces["cov_xx"].to_numpy(float))
-    for name in predictors:
-        mine = keep & (traces["predictor"] == name).to_numpy()
-        if not (mine & has_cov).any():
+    for name, sub in traces.per_predictor(predictors, NEEDED):
+        if not np.isfinite(sub["cov_xx"].to_numpy(float)).any():
             out["none"].append(name)
             continue
-        sub = traces.loc[mine, list(NEEDED)]
         for block in ("predictors", "by_dataset", "by_label", "by_since_fix", "curve"):
             out[block][name] = {}
         for k in KINDS:

@@ -296,13 +296,16 @@ def replay_drives(
     label: str = "",
     preload: Any = None,
     limit: bool = False,
+    parts: Path | None = None,
 ) -> list[DriveRun]:
     """Every drive through every predictor of ``cfg`` on the options' executor, as
     :class:`~posbench.scoring.records.DriveRun` records in drive order, with each drive's
     bound given ``limit`` (:func:`posbench.replay.limit.drive_limit`); one reporter step
-    per drive. ``preload`` (:class:`~posbench.pipeline.preload.Preload`) starts when the
-    first drive is done, if the drives are replayed in other processes (the worker processes
-    exist by then; in this one, its imports would disturb the timings)."""
+    per drive. ``parts``: the folder the workers write the drives' traces to (the records
+    then name their parts instead of holding them). ``preload``
+    (:class:`~posbench.pipeline.preload.Preload`) starts when the first drive is done, if
+    the drives are replayed in other processes (the worker processes exist by then; in this
+    one, its imports would disturb the timings)."""
     from posbench.replay.executors import run_drives
 
     elsewhere = options.executor != "local" or (options.workers > 1 and len(drives) > 1)
@@ -324,6 +327,7 @@ def replay_drives(
             address=options.address,
             on_done=on_done,
             limit=limit,
+            parts=parts,
         )
 
 
@@ -336,6 +340,22 @@ def _replay_and_publish(
     reporter: Reporter,
     unhonoured: Sequence[str] = (),
 ) -> Published:
+    from posbench.pipeline.parts import PartsFolder
+
+    with PartsFolder(plan.options.out) as parts:
+        return _replay_into(drives, plan, data, command, consistency, reporter, unhonoured, parts)
+
+
+def _replay_into(
+    drives: list[Drive],
+    plan: RunPlan,
+    data: list[Path] | None,
+    command: str,
+    consistency: dict[str, Any],
+    reporter: Reporter,
+    unhonoured: Sequence[str],
+    parts: Any,
+) -> Published:
     from posbench.aggregation.seeds import seed_figures, seeds_section
     from posbench.pipeline.honoured import scored_conditions
     from posbench.pipeline.jobs import Job
@@ -344,7 +364,7 @@ def _replay_and_publish(
     from posbench.pipeline.results import build_results
     from posbench.saved_run.provenance import data_provenance
     from posbench.scenarios.loaders import distinct_recordings
-    from posbench.scoring.records import all_traces, lean_traces
+    from posbench.scoring.records import trace_set
 
     cfg, o, seeds = plan.config, plan.options, plan.seeds
     out = o.out
@@ -353,14 +373,13 @@ def _replay_and_publish(
     sources = recordings.sources if recordings is not None else None
     provenance = Job(data_provenance, sources, cfg.seed)  # hashing the data (~1 s) meanwhile
     preload = Preload()  # the imports of the figures and the report, during the replay
-    runs = replay_drives(drives, cfg, o, reporter, first, preload, limit=True)
+    runs = replay_drives(drives, cfg, o, reporter, first, preload, limit=True, parts=parts.seed(0))
     preload.join()  # before forking the figure children
-    traces = all_traces(runs)
-    lean = lean_traces(traces)  # text columns as categoricals: cheaper filters, same results
+    traces = trace_set(runs)  # on disk: read one predictor or drive at a time from here on
     writer = None
     if out is not None:
-        # the figures need only the traces: other processes draw them (and write the
-        # traces) while this one aggregates
+        # the figures need only the traces: other processes draw them (and write
+        # traces.parquet) while this one aggregates
         from posbench.pipeline.publish import OutputWriter
         from posbench.predictor_tools.paper_figures import paper_figures
 
@@ -370,14 +389,13 @@ def _replay_and_publish(
             traces,
             cfg.predictors,
             paper=lambda: paper_figures(drives, cfg, traces, out, runs, formats=fmts),
-            lean=lean,
         )
     res = build_results(
         runs,
         cfg,
         provenance.result(),
         command,
-        traces=lean,
+        traces=traces,
         models=plan.models,
         statistics=plan.statistics,
     )
@@ -395,9 +413,15 @@ def _replay_and_publish(
         figures = [seed_figures(traces, cfg.predictors, base, cfg.seed)]
         for i, s in enumerate(seeds[1:], start=2):
             runs_s = replay_drives(
-                drives, replace(cfg, seed=s), o, reporter, f"seed {s} ({i}/{len(seeds)}): "
+                drives,
+                replace(cfg, seed=s),
+                o,
+                reporter,
+                f"seed {s} ({i}/{len(seeds)}): ",
+                parts=parts.seed(i - 1),
             )
-            figures.append(seed_figures(all_traces(runs_s), cfg.predictors, base, s))
+            figures.append(seed_figures(trace_set(runs_s), cfg.predictors, base, s))
+            parts.drop(i - 1)
             del runs_s
         res["seeds"] = seeds_section(seeds, figures)
     published = publish(res, traces, runs, writer, reporter)
@@ -407,6 +431,7 @@ def _replay_and_publish(
         with marked_if_unfinished(published.run, "writing the rerun recording"):
             _write_rerun(o.rerun, runs, cfg, plan.color_by, reporter)
         published.recording = o.rerun
+    parts.keep_for(published.run)  # without an output folder, the run reads them later
     return published
 
 

@@ -20,6 +20,7 @@ import os
 import sys
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
+from pathlib import Path
 from typing import Any
 
 import pandas as pd
@@ -34,7 +35,7 @@ from posbench.predictors.registry import (
     register,
     resolve,
 )
-from posbench.replay.runner import run, run_drive
+from posbench.replay.runner import part_name, run, run_drive
 from posbench.scenarios.drive import Drive
 from posbench.scoring.records import DriveRun, merge_predictor_runs
 
@@ -61,25 +62,36 @@ def run_local(
     workers: int = 2,
     on_done: Callable[[DriveRun], None] | None = None,
     limit: bool = False,
+    parts: Path | None = None,
 ) -> list[DriveRun]:
     """The local executor: :func:`posbench.replay.runner.run` in ``workers`` processes
-    (``limit``: each drive's bound too)."""
-    return run(drives, cfg, workers=workers, on_done=on_done, limit=limit)
+    (``limit``: each drive's bound too; ``parts``: where the tasks write their traces)."""
+    return run(drives, cfg, workers=workers, on_done=on_done, limit=limit, parts=parts)
 
 
 def run_predictor(
-    drive: Drive, cfg: RunConfig, name: str | None, entries: dict[str, Entry], limit: bool = False
+    drive: Drive,
+    cfg: RunConfig,
+    name: str | None,
+    entries: dict[str, Entry],
+    limit: bool = False,
+    parts: Path | None = None,
+    part: str = "drive",
 ) -> DriveRun:
     """One task: ``drive`` replayed through predictor ``name`` only (all of ``cfg``'s when
     None). ``entries`` re-registers the driver's predictors, so predictors registered at
     run time are known in a fresh worker (their module must be importable there).
-    ``limit``: the drive's bound too, by the task of the first predictor only."""
+    ``limit``: the drive's bound too, by the task of the first predictor only. ``parts``:
+    the folder the task writes its traces to, as part ``part`` (on a cluster, one every
+    node reaches); the record returned names the file instead of holding them."""
     for n, e in entries.items():
         register(n, e.target, e.description, **e.defaults)
     return run_drive(
         drive,
         cfg if name is None else replace(cfg, predictors=(name,)),
         limit=limit and (name is None or name == cfg.predictors[0]),  # once per drive
+        parts=parts,
+        part=part,
     )
 
 
@@ -126,9 +138,11 @@ def run_ray(
     max_retries: int = DEFAULT_RETRIES,
     on_done: Callable[[DriveRun], None] | None = None,
     limit: bool = False,
+    parts: Path | None = None,
 ) -> list[DriveRun]:
     """Run every (drive, predictor) pair as a Ray task; the result is in drive order
-    (``limit``: each drive's bound too, :func:`run_predictor`).
+    (``limit``: each drive's bound too, :func:`run_predictor`; ``parts``: the folder the
+    tasks write their traces to, so only small records return to the driver).
 
     Without ``address`` a local Ray instance with ``num_cpus`` CPUs is started and shut
     down afterwards; with one (``ray://host:10001`` or ``host:6379`` or ``auto``) the
@@ -156,7 +170,7 @@ def run_ray(
                 f"cannot start Ray{' at ' + address if address else ''}: {_error_line(e)}"
             ) from None
     try:
-        return _fan_out(ray, drives, cfg, max_retries, on_done, limit)
+        return _fan_out(ray, drives, cfg, max_retries, on_done, limit, parts)
     finally:
         if started:
             ray.shutdown()
@@ -214,6 +228,7 @@ def _fan_out(
     max_retries: int,
     on_done: Callable[[DriveRun], None] | None,
     limit: bool = False,
+    parts: Path | None = None,
 ) -> list[DriveRun]:
     task = ray.remote(num_cpus=1, max_retries=max_retries, retry_exceptions=True)(run_predictor)
     env = worker_runtime_env(cfg.predictors)
@@ -227,7 +242,8 @@ def _fan_out(
     for i, d in enumerate(drives):
         drive_ref = ray.put(d)  # once per drive, shared by its predictor tasks
         for j, name in enumerate(names):
-            pending[task.remote(drive_ref, cfg_ref, name, entries, limit)] = (i, j)
+            part = part_name(i, None if name is None else j)
+            pending[task.remote(drive_ref, cfg_ref, name, entries, limit, parts, part)] = (i, j)
     parts: list[list[DriveRun | _Failed | None]] = [[None] * len(names) for _ in drives]
     left = [len(names)] * len(drives)
     out: list[DriveRun | None] = [None] * len(drives)
@@ -262,15 +278,24 @@ def run_drives(
     address: str | None = None,
     on_done: Callable[[DriveRun], None] | None = None,
     limit: bool = False,
+    parts: Path | None = None,
 ) -> list[DriveRun]:
     """Run ``drives`` on ``executor`` (``local`` or ``ray``); results in drive order
-    (``limit``: each drive's bound too, :func:`posbench.replay.runner.run_drive`)."""
+    (``limit``: each drive's bound too, :func:`posbench.replay.runner.run_drive`;
+    ``parts``: the folder every task writes its traces to, so that only small records
+    come back; None: the records hold them)."""
     if executor == "local":
         if address:
             raise ExecutorError("--address is for --executor ray")
-        return run_local(drives, cfg, workers=workers, on_done=on_done, limit=limit)
+        return run_local(drives, cfg, workers=workers, on_done=on_done, limit=limit, parts=parts)
     if executor == "ray":
         return run_ray(
-            drives, cfg, address=address, num_cpus=max(1, workers), on_done=on_done, limit=limit
+            drives,
+            cfg,
+            address=address,
+            num_cpus=max(1, workers),
+            on_done=on_done,
+            limit=limit,
+            parts=parts,
         )
     raise ExecutorError(f"--executor must be one of {', '.join(EXECUTORS)}, got {executor!r}")

@@ -8,6 +8,7 @@ import os
 from collections.abc import Callable, Sequence
 from concurrent.futures import as_completed
 from dataclasses import replace
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -108,10 +109,30 @@ def refuse_far_answers(
             )
 
 
-def run_drive(drive: Drive, cfg: RunConfig, limit: bool = False) -> DriveRun:
+def part_name(index: int, predictor: int | None = None) -> str:
+    """The name of the traces part of drive ``index`` (of its ``predictor``-th predictor's
+    task, when the drive is replayed one predictor per task): names sort in drive, then
+    predictor order."""
+    return f"drive-{index:06d}" + ("" if predictor is None else f"-{predictor:03d}")
+
+
+def run_drive(
+    drive: Drive,
+    cfg: RunConfig,
+    limit: bool = False,
+    parts: Path | None = None,
+    part: str = "drive",
+) -> DriveRun:
     """Prepare one drive and replay it through every configured predictor; with ``limit``,
     also compute the bound on its scored queries (:func:`posbench.replay.limit.drive_limit`;
-    ``bench run`` asks for it, once per drive)."""
+    ``bench run`` asks for it, once per drive). Given a folder ``parts``, its traces are
+    written there as part ``part`` and the record names the file instead of holding them
+    (:meth:`~posbench.scoring.records.DriveRun.spill`): what returns to the caller is small."""
+    record = _run_drive(drive, cfg, limit)
+    return record.spill(parts, part) if parts is not None else record
+
+
+def _run_drive(drive: Drive, cfg: RunConfig, limit: bool) -> DriveRun:
     reason = skip_reason(drive, cfg)
     if reason:
         return skipped_run(drive, reason)
@@ -208,10 +229,12 @@ def run(
     workers: int = 1,
     on_done: Callable[[DriveRun], None] | None = None,
     limit: bool = False,
+    parts: Path | None = None,
 ) -> list[DriveRun]:
     """Run all drives; ``on_done`` is called as each finishes (for a progress bar); with
     ``limit``, each drive's bound is computed too (:func:`run_drive`; by one task of a drive
-    split by predictor, the first predictor's).
+    split by predictor, the first predictor's). Given a folder ``parts``, each task writes
+    its traces there (:func:`run_drive`, :func:`part_name`) and returns a small record.
     The returned list is in the order of ``drives`` whatever ``workers`` is. With several
     workers the costliest drives start first, and a drive long enough to hold a worker
     alone is replayed one predictor per task (:func:`plan_tasks`); its parts are merged as
@@ -221,12 +244,12 @@ def run(
     out: list[DriveRun | None] = [None] * len(drives)
     if workers <= 1 or not drives or (len(drives) == 1 and len(cfg.predictors) <= 1):
         for i, d in enumerate(drives):
-            out[i] = drive_run = run_drive(d, cfg, limit)
+            out[i] = drive_run = run_drive(d, cfg, limit, parts, part_name(i))
             if on_done:
                 on_done(drive_run)
         return [r for r in out if r is not None]
     tasks = plan_tasks(drives, cfg, workers)
-    parts: dict[int, dict[str, DriveRun]] = {}
+    pieces: dict[int, dict[str, DriveRun]] = {}
     n_parts = {i: sum(1 for j, _ in tasks if j == i) for i in range(len(drives))}
     with WorkerPool(min(workers, len(tasks)), initializer=_init_worker) as pool:
         futures = {
@@ -235,6 +258,8 @@ def run(
                 drives[i],
                 cfg if name is None else replace(cfg, predictors=(name,)),
                 limit and (name is None or name == cfg.predictors[0]),  # once per drive
+                parts,
+                part_name(i, None if name is None else cfg.predictors.index(name)),
             ): (i, name)
             for i, name in tasks
         }
@@ -243,10 +268,10 @@ def run(
             if name is None:
                 drive_run = fut.result()
             else:
-                parts.setdefault(i, {})[name] = fut.result()
-                if len(parts[i]) < n_parts[i]:
+                pieces.setdefault(i, {})[name] = fut.result()
+                if len(pieces[i]) < n_parts[i]:
                     continue
-                mine = parts.pop(i)
+                mine = pieces.pop(i)
                 drive_run = merge_predictor_runs([mine[n] for n in cfg.predictors])
             out[i] = drive_run
             if on_done:

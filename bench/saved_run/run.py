@@ -280,11 +280,15 @@ class Run:
         return f"{head}\n  future mean error [m]: {means}{status}"
 
 
-def write_traces(out: Path, traces: pd.DataFrame | None) -> Path | None:
-    """``out/traces.parquet`` from ``traces`` (nothing without rows); the path, or None."""
+def write_traces(out: Path, traces: pd.DataFrame | TraceSet | None) -> Path | None:
+    """``out/traces.parquet`` from ``traces`` (nothing without rows; parts on disk are
+    copied one at a time, :meth:`~posbench.scoring.trace_set.TraceSet.write`); the path, or
+    None."""
     if traces is None or traces.empty:
         return None
     out.mkdir(parents=True, exist_ok=True)
+    if isinstance(traces, TraceSet):
+        return traces.write(out / TRACES)
     traces.to_parquet(out / TRACES, index=False)
     return out / TRACES
 
@@ -304,8 +308,10 @@ def save_run(
     from posbench.saved_run.outputs import relative_outputs
 
     out.mkdir(parents=True, exist_ok=True)
-    traces = traces_written() if traces_written is not None else write_traces(out, run._traces)
+    source = TraceSet(parts=run._trace_parts) if run._trace_parts else run._traces
+    traces = traces_written() if traces_written is not None else write_traces(out, source)
     written = [traces] if traces is not None else []
+    run._trace_parts = ()  # from now on, read from the folder
     written.append(out / RESULTS)
     run.results["outputs"] = relative_outputs(out, [*also_written, *written])
     write_results(out, run.results)

@@ -6,10 +6,14 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass, field, fields, replace
-from typing import Any
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import pandas as pd
+
+if TYPE_CHECKING:
+    from posbench.scoring.trace_set import TraceSet
 
 
 @dataclass
@@ -51,6 +55,87 @@ class DriveRun:
     #: :func:`posbench.scenarios.truth_gaps.truth_gap_note`, also among its ``warnings``);
     #: "" where none
     reference_gaps: str = ""
+    #: where its traces are when the worker wrote them to disk
+    #: (:func:`posbench.scoring.trace_set.write_part`, one part per task, in predictor
+    #: order): ``traces`` is then empty and these hold its ``trace_rows`` rows
+    trace_parts: list[str] = field(default_factory=list)
+    trace_rows: int = 0
+    #: where its call durations are when spilled (``.npz`` per task: ``step/NAME``,
+    #: ``query/NAME``, ``cov/NAME`` [ns]); the dicts above then hold none
+    timing_parts: list[str] = field(default_factory=list)
+    #: where its bound's rows are when spilled (Parquet); ``limit`` is then None
+    limit_part: str = ""
+
+    @property
+    def has_traces(self) -> bool:
+        """Whether any query of the drive was traced (in memory or in its parts)."""
+        return not self.traces.empty or self.trace_rows > 0
+
+    def load_traces(self, columns: Sequence[str] | None = None) -> pd.DataFrame:
+        """Its traces (only ``columns``, given them), from memory or from its parts."""
+        if self.trace_parts and self.traces.empty:
+            from posbench.scoring.trace_set import TraceSet
+
+            return TraceSet(parts=self.trace_parts).frame(columns)
+        if columns is None or self.traces.empty:
+            return self.traces
+        return self.traces[[c for c in columns if c in self.traces.columns]]
+
+    def call_ns(self, call: str, name: str) -> np.ndarray | None:
+        """Predictor ``name``'s ``call`` durations [ns] (``step``, ``query`` or ``cov``), from
+        memory or from its spilled timings; None where it has none."""
+        held: dict[str, np.ndarray] = getattr(self, f"{call}_ns")
+        if name in held:
+            return held[name]
+        key = f"{call}/{name}"
+        for path in self.timing_parts:
+            with np.load(path) as z:
+                if key in z.files:
+                    return np.asarray(z[key])
+        return None
+
+    @property
+    def has_limit(self) -> bool:
+        """Whether its bound was computed (held or spilled)."""
+        return self.limit is not None or bool(self.limit_part)
+
+    def load_limit(self) -> pd.DataFrame | None:
+        """Its bound's rows (:data:`posbench.replay.limit.LIMIT_COLUMNS`), from memory or
+        disk; None when not computed."""
+        if self.limit is None and self.limit_part:
+            return pd.read_parquet(self.limit_part)
+        return self.limit
+
+    def spill(self, folder: Path, name: str) -> DriveRun:
+        """This record with what grows with the drive's span - its traces
+        (:func:`~posbench.scoring.trace_set.write_part`), call durations and bound's rows -
+        written to ``folder`` under ``name`` and dropped from memory: what remains is small
+        and the same for a drive of any length, but for notes and fixes."""
+        from posbench.scoring.trace_set import write_part
+
+        folder.mkdir(parents=True, exist_ok=True)
+        changes: dict[str, Any] = {}
+        if not self.traces.empty:
+            path = write_part(folder, self.traces, name)
+            changes |= {
+                "traces": self.traces.iloc[:0],
+                "trace_parts": [str(path)],
+                "trace_rows": len(self.traces),
+            }
+        timings = {
+            f"{call}/{n}": a
+            for call in ("step", "query", "cov")
+            for n, a in getattr(self, f"{call}_ns").items()
+        }
+        if timings:
+            path = folder / f"{name}.ns.npz"
+            np.savez(path, **timings)
+            changes |= {"step_ns": {}, "query_ns": {}, "cov_ns": {}, "timing_parts": [str(path)]}
+        if self.limit is not None:
+            path = folder / f"{name}.limit.parquet"
+            self.limit.to_parquet(path, index=False)
+            changes |= {"limit": None, "limit_part": str(path)}
+        return replace(self, **changes)
 
 
 def merge_predictor_runs(parts: Sequence[DriveRun]) -> DriveRun:
@@ -65,6 +150,10 @@ def merge_predictor_runs(parts: Sequence[DriveRun]) -> DriveRun:
     merged: dict[str, Any] = {
         "traces": pd.concat(frames, ignore_index=True) if frames else pd.DataFrame(),
         "limit": next((p.limit for p in parts if p.limit is not None), None),
+        "trace_parts": [f for p in parts for f in p.trace_parts],
+        "trace_rows": sum(p.trace_rows for p in parts),
+        "timing_parts": [f for p in parts for f in p.timing_parts],
+        "limit_part": next((p.limit_part for p in parts if p.limit_part), ""),
     }
     for f in fields(DriveRun):
         if isinstance(getattr(first, f.name), dict):
@@ -73,11 +162,24 @@ def merge_predictor_runs(parts: Sequence[DriveRun]) -> DriveRun:
 
 
 def all_traces(runs: Sequence[DriveRun]) -> pd.DataFrame:
-    """Every run's per-query traces in one frame (a single run's frame is returned as is)."""
-    frames = [r.traces for r in runs if not r.traces.empty]
+    """Every run's per-query traces in one frame (a single run's frame is returned as is;
+    traces written to parts are read back: for small runs, see :func:`trace_set`)."""
+    frames = [r.load_traces() for r in runs if r.has_traces]
     if len(frames) == 1:
         return frames[0]
     return pd.concat(frames, ignore_index=True) if frames else pd.DataFrame()
+
+
+def trace_set(runs: Sequence[DriveRun]) -> TraceSet:
+    """The runs' traces as a :class:`~posbench.scoring.trace_set.TraceSet`: their parts on
+    disk when the workers wrote them there, else the frame of :func:`all_traces`."""
+    from posbench.scoring.trace_set import TraceSet
+
+    if any(r.trace_parts for r in runs):
+        if any(not r.traces.empty for r in runs):
+            raise ValueError("runs with traces both in memory and on disk")
+        return TraceSet(parts=[f for r in runs for f in r.trace_parts])
+    return TraceSet(all_traces(runs))
 
 
 #: text columns of the traces that aggregation and figures filter and group by, again and again

@@ -9,6 +9,7 @@ import pandas as pd
 import pytest
 
 from posbench.aggregation.track import track_section
+from posbench.scoring.trace_set import TraceSet
 from posbench.config import RunConfig
 from posbench.metrics.track_errors import inward_cross, track_summary
 from posbench.pipeline.results import build_results
@@ -79,4 +80,4 @@ def test_results_block_matches_the_traces(drive):
 
 def test_section_without_track_columns_is_empty():
     tr = pd.DataFrame({"predictor": ["a"], "kind": ["now"], "error_m": [1.0]})
-    assert track_section(tr, np.array([True]), ["a"]) == {"predictors": {}, "by_label": {}}
+    assert track_section(TraceSet(tr), ["a"]) == {"predictors": {}, "by_label": {}}

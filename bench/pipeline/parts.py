@@ -1,0 +1,55 @@
+"""Where a run's workers write the drives' traces while it runs: a folder of Parquet parts
+(:func:`posbench.scoring.trace_set.write_part`), one subfolder per seed.
+
+With an output folder it lies inside it (``OUT/.parts-XXXX``), so that on a cluster the
+workers write where the driver reads (``--out`` on a shared file system); without one, in
+the system's temporary folder. It is removed when the run is published (the traces are then
+in ``traces.parquet``), when the run fails, or - for a run kept only in memory, whose
+:class:`~posbench.saved_run.run.Run` reads its traces from the parts - when that object is
+gone.
+"""
+
+from __future__ import annotations
+
+import shutil
+import tempfile
+import weakref
+from pathlib import Path
+from types import TracebackType
+
+
+class PartsFolder:
+    """The parts folder of one run (a context manager: removed on exit unless kept)."""
+
+    def __init__(self, out: Path | None) -> None:
+        if out is not None:
+            out.mkdir(parents=True, exist_ok=True)
+        self.path = Path(tempfile.mkdtemp(prefix=".parts-" if out else "posbench-parts-", dir=out))
+        self._kept = False
+
+    def seed(self, index: int) -> Path:
+        """The folder of the ``index``-th seed's parts (0: the run's own)."""
+        return self.path / f"seed-{index}"
+
+    def drop(self, index: int) -> None:
+        """Remove the ``index``-th seed's parts (once its figures are taken)."""
+        shutil.rmtree(self.seed(index), ignore_errors=True)
+
+    def keep_for(self, run: object) -> None:
+        """Keep the parts while ``run`` reads from them (a run without an output folder),
+        removing them when it is garbage-collected or the interpreter exits."""
+        if getattr(run, "_trace_parts", ()):
+            self._kept = True
+            weakref.finalize(run, shutil.rmtree, str(self.path), True)
+
+    def __enter__(self) -> PartsFolder:
+        return self
+
+    def __exit__(
+        self,
+        exc_type: type[BaseException] | None,
+        exc: BaseException | None,
+        tb: TracebackType | None,
+    ) -> None:
+        if not self._kept or exc_type is not None:
+            shutil.rmtree(self.path, ignore_errors=True)
