@@ -9,7 +9,6 @@ import pandas as pd
 import pytest
 
 from posbench.aggregation.track import track_section
-from posbench.scoring.trace_set import TraceSet
 from posbench.config import RunConfig
 from posbench.metrics.track_errors import inward_cross, track_summary
 from posbench.pipeline.results import build_results
@@ -17,6 +16,7 @@ from posbench.replay.prepare import prepare_drive
 from posbench.replay.runner import run
 from posbench.scenarios.synthetic import generate_drive
 from posbench.scoring.records import all_traces
+from posbench.scoring.trace_set import TraceSet
 from posbench.tables.track import track_table
 
 
