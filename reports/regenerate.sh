@@ -22,6 +22,11 @@ bench run --predictors cv,poly,kf,kf-paper,ekf,lstm,hybrid --dropouts outages \
 bench run --predictors cv,kf,ekf,lstm,hybrid --data $S/data/kitti_raw --gps-profile rtk \
   --dropouts outage-lengths --drive-plots 0 --out reports/kitti-outage-lengths
 bench latency --json > reports/latency.json
+# bench run's wall time and peak memory (RSS) against drive hours (docs: Speed): the corpus at
+# 4, 16 and 64 h, one 8 h drive at 1 Hz fixes, one 2 h drive at 10 Hz fixes and 100 Hz IMU,
+# and the 16 h corpus on a local Ray of 2 workers (skipped, said, without Ray)
+python reports/scaling.py --cases corpus,long-1hz,long-10hz,ray --hours 4 16 64 \
+  --long-1hz-hours 8 --long-10hz-hours 2 --ray-hours 16
 # the outlier gate's effect on the paper's routes: the same run with the gate off
 bench run --predictors cv,poly,kf,kf-paper,ekf,lstm,lstm-authors \
   --model lstm-authors=$S/models/authors/gps_interpolation_model3.onnx \

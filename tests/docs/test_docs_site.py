@@ -47,6 +47,8 @@ COMMANDS = (
 )
 #: the pages opened in the browser: path below the site, a text the page must show
 BROWSER_PAGES = (("", "posbench"), ("reference/cli/", "bench data inspect"))
+#: the peak memories of reports/scaling.json, in the Speed page's column order
+RSS_KEYS = ("main", "worker", "largest")
 #: where mkdocs-material's repository facts (stars, forks) come from
 GITHUB_API = "https://api.github.com/"
 
@@ -136,6 +138,26 @@ def test_results_come_from_the_reports(site: Path) -> None:
         for p, figures in res["predictors"].items():
             mean, (lo, hi) = figures["future"]["mean_m"], figures["future"]["ci95"]["mean_m"]
             assert f"{mean:.3f} [{lo:.3f}, {hi:.3f}]" in shown, (name, p)
+
+
+def test_speed_comes_from_the_scaling_report(site: Path) -> None:
+    """Every run of reports/scaling.json is a row of the Speed page: its case, drive hours,
+    predictors, wall time and each peak memory it measured (``-`` where it measured none)."""
+    speed = page(site, "results/speed")
+    rows = [
+        [text(c).strip() for c in re.findall(r"<t[dh][^>]*>(.*?)</t[dh]>", tr, re.S)]
+        for tr in re.findall(r"<tr>(.*?)</tr>", speed, re.S)
+    ]
+    sc = json.loads((ROOT / "reports" / "scaling.json").read_text())
+    runs = [r for r in sc["runs"] + sc.get("cases", []) if not r.get("skipped")]
+    assert runs
+    for r in runs:
+        for name, wall in r["wall_s"].items():
+            rss = r.get("peak_rss_mb", {}).get(name, {})
+            mb = [f"{v:.0f}" if (v := rss.get(k)) is not None else "-" for k in RSS_KEYS]
+            want = [f"{r['drive_hours']:.2f}", "default" if name == sc["predictors"] else name]
+            want += [f"{wall:.0f}"]
+            assert any([c[1], c[3], c[4], *c[7:10]] == [*want, *mb] for c in rows), (r, name)
 
 
 # ---------------------------------------------------------------------------- browser
