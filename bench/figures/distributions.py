@@ -1,5 +1,7 @@
 """The figures of error distributions over all drives: error CDFs, mean error by speed and by
-time since the last fix, and the calibration curve of reported uncertainty."""
+time since the last fix, and the calibration curve of reported uncertainty. Each reads the
+traces one predictor at a time (:mod:`posbench.figures.reading`), a few columns of its rows
+past the warm-up, and keeps only what it draws (a thinned CDF, a mean per bin, a curve)."""
 
 from __future__ import annotations
 
@@ -9,18 +11,18 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 import pandas as pd
 
+from posbench.figures.reading import first_seen, past_warmup, trace_set
 from posbench.figures.style import (
     NothingToPlot,
     colors_for,
     finite_errors,
     floor_note,
-    headline,
     log_values,
-    warmup_mask,
 )
 from posbench.metrics.accuracy import error_cdf, speed_bin_labels, speed_bin_order, summarize_groups
 from posbench.metrics.outages import SINCE_FIX_CURVE_EDGES_S, since_fix_bins
 from posbench.scoring.schema import COV_COLUMNS, KINDS
+from posbench.scoring.trace_set import TraceSet
 
 if TYPE_CHECKING:  # matplotlib is imported when a figure is drawn: importing this module is cheap
     from matplotlib.figure import Figure
@@ -29,29 +31,48 @@ if TYPE_CHECKING:  # matplotlib is imported when a figure is drawn: importing th
 CDF_POINTS = 4000
 
 
-def plot_error_cdf(traces: pd.DataFrame, preds: Sequence[str]) -> Figure:
-    """Future and now error CDFs [m], one line per predictor, warm-up excluded."""
+def _cdf_curve(errors: np.ndarray) -> tuple[np.ndarray, np.ndarray, int]:
+    """The error CDF of ``errors`` [m] as drawn: (errors, fractions) thinned to at most
+    :data:`CDF_POINTS` points evenly spaced in rank (exact at each), and the count."""
+    e, c = error_cdf(errors)
+    n = e.size
+    if n > CDF_POINTS:  # a drawn CDF needs no more points than pixels: thin evenly
+        pick = np.unique(np.linspace(0, n - 1, CDF_POINTS).astype(int))
+        e, c = e[pick], c[pick]
+    return e, c, n
+
+
+def plot_error_cdf(traces: TraceSet | pd.DataFrame, preds: Sequence[str]) -> Figure:
+    """Future and now error CDFs [m], one line per predictor, warm-up excluded. Reads per
+    predictor: drive, kind, error_m, warmup."""
     from matplotlib.figure import Figure
 
-    t = finite_errors(headline(traces, ["predictor", "kind", "error_m"]))
-    if t.empty:
+    ts = trace_set(traces)
+    curves: dict[str, dict[str, tuple[np.ndarray, np.ndarray, int]]] = {k: {} for k in KINDS}
+    firsts: dict[str, dict[str, str]] = {k: {} for k in KINDS}
+    warm = False
+    for p in ts.predictors():
+        rows, had = past_warmup(ts, p, ["drive", "kind", "error_m"])
+        warm |= had
+        rows = finite_errors(rows)
+        for kind in KINDS:
+            g = rows[rows.kind == kind]
+            if len(g):
+                curves[kind][p] = _cdf_curve(g["error_m"].to_numpy(dtype=float))
+                firsts[kind][p] = str(g["drive"].iloc[0])
+    if not any(curves.values()):
         raise NothingToPlot("no query with a known error (no reference position)")
     colors = colors_for(preds)
     fig = Figure(figsize=(11, 4), layout="constrained")
     axes = fig.subplots(1, 2, sharey=True)
     clipped = False
     for ax, kind in zip(axes, KINDS, strict=True):
-        tk = t[t.kind == kind]
-        for p, g in tk.groupby("predictor", observed=True, sort=False):
-            e, c = error_cdf(g["error_m"].to_numpy(dtype=float))
-            n = e.size
-            if n > CDF_POINTS:  # a drawn CDF needs no more points than pixels: thin evenly
-                pick = np.unique(np.linspace(0, n - 1, CDF_POINTS).astype(int))
-                e, c = e[pick], c[pick]
+        for p in first_seen(ts, firsts[kind]):
+            e, c, n = curves[kind][p]
             v, low = log_values(e)
             clipped |= low
             ax.step(v, c, where="post", label=f"{p} (n={n})", color=colors.get(p))
-        if tk.empty:
+        if not curves[kind]:
             ax.text(
                 0.5,
                 0.5,
@@ -69,10 +90,7 @@ def plot_error_cdf(traces: pd.DataFrame, preds: Sequence[str]) -> Figure:
     for ax in axes:
         ax.set_xlabel("error [m] (log" + floor_note(clipped) + ")")
     axes[0].set_ylabel("fraction of queries")
-    fig.suptitle(
-        "Error distribution per predictor"
-        + (" (warm-up excluded)" if warmup_mask(traces).any() else "")
-    )
+    fig.suptitle("Error distribution per predictor" + (" (warm-up excluded)" if warm else ""))
     return fig
 
 
@@ -87,24 +105,30 @@ def _mean_error_axes(ax: Any, xlabel: str, ylabel: str, clipped: bool, title: st
     ax.legend(fontsize=8)
 
 
-def plot_error_vs_speed(traces: pd.DataFrame, preds: Sequence[str]) -> Figure:
+def plot_error_vs_speed(traces: TraceSet | pd.DataFrame, preds: Sequence[str]) -> Figure:
     """Mean future-point error [m] per speed bin [m/s]; bins where no predictor has a query
-    are dropped. Warm-up excluded."""
+    are dropped. Warm-up excluded. Reads per predictor: drive, kind, error_m, speed_mps,
+    warmup."""
     from matplotlib.figure import Figure
 
-    t = headline(traces, ["predictor", "kind", "error_m", "speed_mps"])
-    fut = finite_errors(t[(t.kind == "future") & np.isfinite(t["speed_mps"].to_numpy(dtype=float))])
-    if fut.empty:
-        raise NothingToPlot("no query with a known speed")
+    ts = trace_set(traces)
     order = speed_bin_order()
-    stats = {
-        p: summarize_groups(
-            g["error_m"].to_numpy(dtype=float),
-            speed_bin_labels(g["speed_mps"].to_numpy(dtype=float)),
-            order,
-        )
-        for p, g in fut.groupby("predictor", observed=True, sort=False)
-    }
+    found: dict[str, dict[str, dict[str, float]]] = {}
+    firsts: dict[str, str] = {}
+    for p in ts.predictors():
+        t, _ = past_warmup(ts, p, ["drive", "kind", "error_m", "speed_mps"])
+        speed = t["speed_mps"].to_numpy(dtype=float)
+        fut = finite_errors(t[(t.kind == "future").to_numpy() & np.isfinite(speed)])
+        if len(fut):
+            found[p] = summarize_groups(
+                fut["error_m"].to_numpy(dtype=float),
+                speed_bin_labels(fut["speed_mps"].to_numpy(dtype=float)),
+                order,
+            )
+            firsts[p] = str(fut["drive"].iloc[0])
+    if not found:
+        raise NothingToPlot("no query with a known speed")
+    stats = {p: found[p] for p in first_seen(ts, firsts)}
     bins = [b for b in order if any(s[b]["count"] for s in stats.values())]
     colors = colors_for(preds)
     fig = Figure(figsize=(8, 4.5), layout="constrained")
@@ -130,35 +154,40 @@ def plot_error_vs_speed(traces: pd.DataFrame, preds: Sequence[str]) -> Figure:
     return fig
 
 
-def plot_error_vs_since_fix(traces: pd.DataFrame, preds: Sequence[str]) -> Figure:
+def plot_error_vs_since_fix(traces: TraceSet | pd.DataFrame, preds: Sequence[str]) -> Figure:
     """Mean current-position error [m] by time since the last fix [s]; only for runs with
-    GPS outages; bins where no predictor has a query are dropped. Warm-up excluded."""
+    GPS outages; bins where no predictor has a query are dropped. Warm-up excluded. Reads
+    per predictor: drive, kind, error_m, since_fix_s, outage, warmup."""
     from matplotlib.figure import Figure
 
-    t = headline(traces, ["predictor", "kind", "error_m", "since_fix_s", "outage"])
-    now = t[t.kind == "now"]
-    if not (now["outage"] >= 0).any():
-        raise NothingToPlot("no GPS outage in this run")
-    now = finite_errors(now[np.isfinite(now["since_fix_s"].to_numpy(dtype=float))])
-    if now.empty:
-        raise NothingToPlot("no current-position query with a known error")
+    ts = trace_set(traces)
     edges = np.asarray(SINCE_FIX_CURVE_EDGES_S, dtype=float)
-    b_all = since_fix_bins(now["since_fix_s"].to_numpy(dtype=float), edges, open_last=True)
-    frame = pd.DataFrame(
-        {"p": now["predictor"].to_numpy(), "b": b_all, "e": now["error_m"].to_numpy(dtype=float)}
-    )
-    mean = frame.groupby(["p", "b"], sort=True)["e"].mean()
-    used = np.unique(b_all)  # bins where some predictor has a query
+    means: dict[str, pd.Series] = {}  # predictor -> mean error [m] per occupied bin
+    firsts: dict[str, str] = {}
+    outages = False
+    for p in ts.predictors():
+        t, _ = past_warmup(ts, p, ["drive", "kind", "error_m", "since_fix_s", "outage"])
+        now = t[t.kind == "now"]
+        outages |= bool((now["outage"] >= 0).any())
+        now = finite_errors(now[np.isfinite(now["since_fix_s"].to_numpy(dtype=float))])
+        if len(now):
+            b = since_fix_bins(now["since_fix_s"].to_numpy(dtype=float), edges, open_last=True)
+            e = now["error_m"].to_numpy(dtype=float)
+            means[p] = pd.DataFrame({"b": b, "e": e}).groupby("b", sort=True)["e"].mean()
+            firsts[p] = str(now["drive"].iloc[0])
+    if not outages:
+        raise NothingToPlot("no GPS outage in this run")
+    if not means:
+        raise NothingToPlot("no current-position query with a known error")
+    used = np.unique(np.concatenate([m.index.to_numpy() for m in means.values()]))
     mid = 0.5 * (edges[:-1] + edges[1:])
     colors = colors_for(preds)
     fig = Figure(figsize=(8, 4.5), layout="constrained")
     ax = fig.add_subplot()
     clipped = False
-    present = {str(x) for x in pd.unique(frame.p)}
-    names = list(dict.fromkeys([p for p in preds if p in present] + list(frame.p.unique())))
+    names = list(dict.fromkeys([p for p in preds if p in means] + first_seen(ts, firsts)))
     for p in names:
-        m = mean.loc[p]
-        ys, low = log_values(m.reindex(used).to_numpy(dtype=float))
+        ys, low = log_values(means[p].reindex(used).to_numpy(dtype=float))
         clipped |= low
         ax.plot(mid[used], ys, marker="o", label=p, color=colors.get(p))
     if mid[used].max() > 10:
@@ -173,46 +202,45 @@ def plot_error_vs_since_fix(traces: pd.DataFrame, preds: Sequence[str]) -> Figur
     return fig
 
 
-def plot_calibration(traces: pd.DataFrame, preds: Sequence[str]) -> Figure:
+def plot_calibration(traces: TraceSet | pd.DataFrame, preds: Sequence[str]) -> Figure:
     """Calibration curve of the reported covariances: observed vs expected coverage of the
     p-ellipses (:func:`posbench.metrics.calibration.calibration_curve`), future and now panels, one
     line per predictor that reports covariance; the diagonal is honest, below it
-    overconfident. Warm-up excluded."""
+    overconfident. Warm-up excluded. Reads per predictor: kind, x, y, x_ref, y_ref, error_m
+    [m], cov_xx, cov_xy, cov_yy [m^2], warmup."""
     from matplotlib.figure import Figure
 
     from posbench.metrics.calibration import calibration_curve, mahalanobis_sq
 
-    cols = [
-        "predictor",
-        "kind",
-        "x",
-        "y",
-        "x_ref",
-        "y_ref",
-        "error_m",
-        "cov_xx",
-        "cov_xy",
-        "cov_yy",
-    ]
-    if any(c not in traces for c in cols):
+    ts = trace_set(traces)
+    cols = ["predictor", "kind", "x", "y", "x_ref", "y_ref", "error_m", *COV_COLUMNS]
+    if any(c not in ts.columns for c in cols):
         raise NothingToPlot("traces without covariance columns")
-    t = finite_errors(headline(traces, cols))
-    t = t[np.isfinite(t["cov_xx"].to_numpy(dtype=float))]
-    if t.empty:
+    curves: dict[str, dict[str, np.ndarray]] = {}  # predictor -> kind -> (p, observed) rows
+    reports = False
+    for p in ts.predictors():
+        t, _ = past_warmup(ts, p, cols[1:])
+        t = finite_errors(t)
+        t = t[np.isfinite(t["cov_xx"].to_numpy(dtype=float))]
+        reports |= len(t) > 0
+        if len(t) == 0 or p not in preds:
+            continue
+        curves[p] = {}
+        for kind in KINDS:
+            r = t[t.kind == kind]
+            err = r[["x", "y"]].to_numpy(float) - r[["x_ref", "y_ref"]].to_numpy(float)
+            curves[p][kind] = np.array(
+                calibration_curve(mahalanobis_sq(err, r[list(COV_COLUMNS)].to_numpy(float)))
+            )
+    if not reports:
         raise NothingToPlot("no predictor reports uncertainty for an answer with a known error")
     colors = colors_for(preds)
     fig = Figure(figsize=(9, 4.5), layout="constrained")
     axes = fig.subplots(1, 2, sharey=True)
-    present = {str(x) for x in pd.unique(t.predictor)}
     for ax, kind in zip(axes, KINDS, strict=True):
         ax.plot([0, 1], [0, 1], color="0.6", lw=1, ls="--", label="calibrated")
-        rows = t[t.kind == kind]
-        for p in [q for q in preds if q in present]:
-            r = rows[rows.predictor == p]
-            err = r[["x", "y"]].to_numpy(float) - r[["x_ref", "y_ref"]].to_numpy(float)
-            curve = np.array(
-                calibration_curve(mahalanobis_sq(err, r[list(COV_COLUMNS)].to_numpy(float)))
-            )
+        for p in [q for q in preds if q in curves]:
+            curve = curves[p][kind]
             ax.plot(curve[:, 0], curve[:, 1], marker="o", ms=3, label=p, color=colors.get(p))
         ax.set_title(f"{kind}: reported ellipse vs truth")
         ax.set_xlabel("expected coverage p of the reported p-ellipse")

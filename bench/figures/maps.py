@@ -1,6 +1,7 @@
 """The map figures of the most-turning drive: 40 s of its path with the predictors' future
 points and zooms at the worst moments, and its reference path coloured by each predictor's
-error."""
+error. Each finds that drive reading a few columns one predictor at a time
+(:func:`turning_drive`), then reads that drive's rows alone."""
 
 from __future__ import annotations
 
@@ -10,6 +11,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 import pandas as pd
 
+from posbench.figures.reading import past_warmup, trace_set
 from posbench.figures.style import (
     FLOOR_M,
     TURN_LABELS,
@@ -19,8 +21,10 @@ from posbench.figures.style import (
     gap_steps,
     headline,
     in_order,
-    most_turning_drive,
+    most_turning,
+    turn_counts,
 )
+from posbench.scoring.trace_set import TraceSet
 
 if TYPE_CHECKING:  # matplotlib is imported when a figure is drawn: importing this module is cheap
     from matplotlib.figure import Figure
@@ -44,40 +48,58 @@ def _worst_moments(win: pd.DataFrame, k: int, gap_s: float) -> list[tuple[float,
     return picked
 
 
-def plot_path(traces: pd.DataFrame, preds: Sequence[str]) -> Figure:
+def turning_drive(ts: TraceSet, known_error: bool) -> tuple[str, bool] | None:
+    """The drive the map figures show: the one with the most turn / roundabout future queries
+    with a reference position (``known_error``: and a finite error) past the warm-up, over
+    all predictors (:func:`~posbench.figures.style.most_turning_drive` over the whole
+    traces); and whether any such query is turning (else the first drive with one). None:
+    no such query. Reads per predictor: drive, kind, x_ref, label, error_m, warmup."""
+    turns: dict[str, int] = {}
+    firsts: list[str] = []
+    for p in ts.predictors():
+        t, _ = past_warmup(ts, p, ["drive", "kind", "x_ref", "label", "error_m"])
+        fut = t[(t.kind == "future").to_numpy() & np.isfinite(t["x_ref"].to_numpy(dtype=float))]
+        fut = finite_errors(fut) if known_error else fut
+        if len(fut):
+            firsts.append(str(fut["drive"].iloc[0]))
+            for d, n in turn_counts(fut).items():
+                turns[d] = turns.get(d, 0) + n
+    if not firsts:
+        return None
+    if turns:
+        return most_turning(turns), True
+    order = ts.drives() if len(set(firsts)) > 1 else firsts
+    return min(firsts, key=order.index), False
+
+
+def drive_rows(ts: TraceSet, drive: str, columns: list[str]) -> pd.DataFrame:
+    """The rows of ``drive`` past the warm-up, ``columns`` of them, every predictor's, in
+    the traces' order."""
+    return headline(ts.frame([*columns, "warmup"], drive=drive), columns)
+
+
+def plot_path(traces: TraceSet | pd.DataFrame, preds: Sequence[str]) -> Figure:
     """40 s of the drive with the most turn queries: reference path [m, ENU] and every
     predictor's future points; beside it, zoomed panels at the worst moments (largest future
-    error of any predictor), each scaled to that error so the misses are visible."""
+    error of any predictor), each scaled to that error so the misses are visible. Reads the
+    drive (:func:`turning_drive`), then that drive's rows: predictor, kind, t_issue, t_query
+    [s], x, y, x_ref, y_ref, error_m [m], label."""
     from matplotlib.figure import Figure
 
-    t = headline(
-        traces,
-        [
-            "drive",
-            "predictor",
-            "kind",
-            "t_issue",
-            "t_query",
-            "x",
-            "y",
-            "x_ref",
-            "y_ref",
-            "error_m",
-            "label",
-        ],
-    )
-    fut = t[(t.kind == "future") & np.isfinite(t["x_ref"].to_numpy(dtype=float))]
-    if fut.empty:
+    ts = trace_set(traces)
+    picked = turning_drive(ts, known_error=False)
+    if picked is None:
         raise NothingToPlot("no future query with a reference position")
-    drive, has_turns = most_turning_drive(fut)
-    dfd = fut[fut.drive == drive]
+    drive, has_turns = picked
+    cols = ["drive", "predictor", "kind", "t_issue", "t_query", "x", "y", "x_ref", "y_ref"]
+    t = drive_rows(ts, drive, [*cols, "error_m", "label"])
+    dfd = t[(t.kind == "future") & np.isfinite(t["x_ref"].to_numpy(dtype=float))]
     med = (dfd.loc[dfd.label.isin(TURN_LABELS), "t_issue"] if has_turns else dfd.t_issue).median()
     tc = float(dfd.t_issue.iloc[int(np.argmin(np.abs(dfd.t_issue.to_numpy(float) - med)))])
     half = PATH_WINDOW_S / 2
     win = dfd[(dfd.t_issue > tc - half) & (dfd.t_issue < tc + half)]
     ref_rows = t[
-        (t.drive == drive)
-        & (t.predictor == win.predictor.iloc[0])
+        (t.predictor == win.predictor.iloc[0])
         & (t.t_query > tc - half)
         & (t.t_query < tc + half + 1)
     ]
@@ -166,25 +188,27 @@ def _zoom_panel(
     ax.grid(True, alpha=0.3)
 
 
-def plot_trajectory_error(traces: pd.DataFrame, preds: Sequence[str]) -> Figure:
+def plot_trajectory_error(traces: TraceSet | pd.DataFrame, preds: Sequence[str]) -> Figure:
     """The most-turning drive's reference path [m, ENU] coloured by each predictor's future
     error [m]: one panel per predictor, one shared colour scale (log when the errors span
-    more than a decade). Warm-up excluded."""
+    more than a decade). Warm-up excluded. Reads the drive (:func:`turning_drive`), then
+    that drive's rows: predictor, kind, t_query [s], x_ref, y_ref, error_m [m]."""
     from matplotlib.cm import ScalarMappable
     from matplotlib.collections import LineCollection
     from matplotlib.colors import LogNorm, Normalize
     from matplotlib.figure import Figure
 
-    t = headline(
-        traces, ["drive", "predictor", "kind", "t_query", "x_ref", "y_ref", "error_m", "label"]
-    )
-    fut = finite_errors(t[(t.kind == "future") & np.isfinite(t["x_ref"].to_numpy(dtype=float))])
-    if fut.empty:
+    ts = trace_set(traces)
+    picked = turning_drive(ts, known_error=True)
+    if picked is None:
         raise NothingToPlot("no future query with a known error")
-    drive, _ = most_turning_drive(fut)
-    dfd = fut[fut.drive == drive]
+    drive, _ = picked
+    t = drive_rows(
+        ts, drive, ["drive", "predictor", "kind", "t_query", "x_ref", "y_ref", "error_m"]
+    )
+    dfd = finite_errors(t[(t.kind == "future") & np.isfinite(t["x_ref"].to_numpy(dtype=float))])
     names = in_order(preds, dfd.predictor)
-    track = t[(t.drive == drive) & (t.predictor == names[0])].dropna(subset=["x_ref"])
+    track = t[t.predictor == names[0]].dropna(subset=["x_ref"])
     track = track.sort_values("t_query")
     e_all = dfd.error_m.to_numpy(dtype=float)
     lo, hi = np.percentile(e_all, [1, 99])

@@ -1,6 +1,7 @@
 """The per-drive figures: future-point error over drive time, with GPS outages, scenario
 labels and the warm-up shaded, for every drive of a small run or the worst ones of a large
-one (``drives/<drive>-error_over_time.<fmt>``)."""
+one (``drives/<drive>-error_over_time.<fmt>``). The worst drives are found reading a few
+columns one predictor at a time; each figure reads its drive's rows alone."""
 
 from __future__ import annotations
 
@@ -11,6 +12,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
+from posbench.figures.reading import past_warmup, trace_set
 from posbench.figures.style import (
     DRIVE_DPI,
     FLOOR_M,
@@ -18,13 +20,13 @@ from posbench.figures.style import (
     colors_for,
     finite_errors,
     gap_steps,
-    headline,
     in_order,
     log_values,
     save_figure,
     warmup_mask,
 )
 from posbench.naming import unique_file_safe
+from posbench.scoring.trace_set import TraceSet
 
 #: at most this many per-drive error-over-time figures per run (the first drives in run
 #: order); the note of ``error_over_time`` says when drives were left out
@@ -143,24 +145,32 @@ def draw_error_over_time(
     return True
 
 
-def drives_to_plot(traces: pd.DataFrame, limit: int | None) -> tuple[list[str], str | None]:
+def drives_to_plot(
+    traces: TraceSet | pd.DataFrame, limit: int | None
+) -> tuple[list[str], str | None]:
     """Which drives get an error-over-time plot: all of them when there are at most
     ``limit`` (None: no limit; never more than :data:`MAX_DRIVE_FIGURES`), else the
-    ``limit`` drives with the largest mean future-point error over all predictors (past the
-    warm-up), in drive order; and a note saying which were chosen, or None."""
-    drives = [str(d) for d in pd.unique(traces.drive)]
+    ``limit`` drives with the largest mean future-point error [m] over all predictors (past
+    the warm-up), in drive order; and a note saying which were chosen, or None. The means
+    are summed one predictor at a time (drive, kind, error_m, warmup)."""
+    ts = trace_set(traces)
+    drives = ts.drives()
     cap = MAX_DRIVE_FIGURES if limit is None else min(limit, MAX_DRIVE_FIGURES)
     if len(drives) <= cap:
         return drives, None
     if cap == 0:
         return [], f"not drawn for the {len(drives)} drives (--drive-plots 0)"
-    fut = headline(traces[traces.kind == "future"])
-    worst = (
-        fut.groupby(fut.drive, sort=False, observed=True)["error_m"]
-        .mean()
-        .sort_values(ascending=False, kind="stable")
-        .index[:cap]
-    )
+    sums = pd.DataFrame(0.0, index=pd.Index(drives), columns=["sum", "count", "rows"])
+    for p in ts.predictors():
+        t, _ = past_warmup(ts, p, ["drive", "kind", "error_m"])
+        fut = t[t.kind == "future"]
+        g = fut.groupby("drive", sort=False, observed=True)["error_m"]
+        part = pd.DataFrame({"sum": g.sum(), "count": g.count(), "rows": g.size()})
+        part.index = pd.Index([str(d) for d in part.index])
+        sums = sums.add(part.reindex(sums.index, fill_value=0.0))
+    sums = sums[sums["rows"] > 0]  # drives with a future query past the warm-up
+    mean = (sums["sum"] / sums["count"]).where(sums["count"] > 0)
+    worst = mean.sort_values(ascending=False, kind="stable").index[:cap]
     worst = {str(d) for d in worst}
     chosen = [d for d in drives if d in worst]
     why = (
@@ -175,7 +185,7 @@ def drives_to_plot(traces: pd.DataFrame, limit: int | None) -> tuple[list[str], 
 
 
 def write_error_over_time(
-    traces: pd.DataFrame,
+    traces: TraceSet | pd.DataFrame,
     preds: Sequence[str],
     out: Path,
     formats: Sequence[str],
@@ -192,23 +202,23 @@ def write_error_over_time(
     fig.subplots_adjust(left=0.065, right=0.80, bottom=0.13, top=0.91)
     files: list[Path] = []
     empty: list[str] = []
-    chosen, chosen_note = drives_to_plot(traces, limit)
+    ts = trace_set(traces)
+    chosen, chosen_note = drives_to_plot(ts, limit)
     used = [
         c
         for c in ("drive", "predictor", "kind", "t_query", "error_m", "label", "outage", "warmup")
-        if c in traces.columns
+        if c in ts.columns
     ]
-    picked = traces.loc[traces.drive.isin(chosen).to_numpy(), used]
     stems = dict(zip(chosen, unique_file_safe(chosen), strict=True))  # two names, one file name
-    # iterate the groups (first appearance order): get_group fails on 1-row groups (pandas 3.1)
-    for drive, rows in picked.groupby(picked.drive, sort=False, observed=True):
+    for drive in chosen:  # one drive's rows at a time
+        rows = ts.frame(used, drive=drive)
         ax.clear()
         if not draw_error_over_time(ax, rows, preds, colors):
-            empty.append(str(drive))
+            empty.append(drive)
             continue
         ax.set_title(f"{drive}: future-point error over time", fontsize=10, loc="left")
         files += save_figure(
-            fig, out / "drives", f"{stems[str(drive)]}-error_over_time", formats, dpi=DRIVE_DPI
+            fig, out / "drives", f"{stems[drive]}-error_over_time", formats, dpi=DRIVE_DPI
         )
     notes = []
     if empty:

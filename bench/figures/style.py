@@ -104,10 +104,26 @@ def save_figure(
 def most_turning_drive(fut: pd.DataFrame) -> tuple[str, bool]:
     """The drive with the most turn / roundabout queries in ``fut`` (a traces slice), and
     whether any query is turning at all (else the first drive)."""
+    counts = turn_counts(fut)
+    return (most_turning(counts), True) if counts else (str(fut.drive.iloc[0]), False)
+
+
+def turn_counts(fut: pd.DataFrame) -> dict[str, int]:
+    """drive -> its turn / roundabout queries in ``fut`` (drives with one or more)."""
     turns = fut[fut.label.isin(TURN_LABELS)]
     if turns.empty:
-        return str(fut.drive.iloc[0]), False
-    return str(turns.groupby("drive", observed=True).size().idxmax()), True
+        return {}
+    counts = turns.groupby("drive", observed=True).size()
+    return {str(d): int(n) for d, n in counts.items() if n}
+
+
+def most_turning(turns: dict[str, int]) -> str:
+    """The drive with the most turn / roundabout queries (``turns``: drive -> count, not
+    empty), the first by name among equals: what ``groupby("drive").size().idxmax()`` picks
+    over a text column or :func:`~posbench.scoring.records.lean_traces`' categorical one
+    (sorted categories), whichever way the rows were read."""
+    top = max(turns.values())
+    return min(d for d, n in turns.items() if n == top)
 
 
 def colors_for(preds: Sequence[str]) -> dict[str, Any]:

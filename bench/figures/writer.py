@@ -1,6 +1,8 @@
 """Write a run's figures into its folder (:func:`write_plots`: the summary figures of
 :data:`FIGURES`, then the per-drive ones), never raising on thin data: a figure with nothing
-to show is not written and gets a note instead."""
+to show is not written and gets a note instead. The figures read the traces from a
+:class:`~posbench.scoring.trace_set.TraceSet` (a frame is wrapped in one), one predictor or
+one drive at a time."""
 
 from __future__ import annotations
 
@@ -20,7 +22,9 @@ from posbench.figures.maps import plot_path, plot_trajectory_error
 from posbench.figures.outage_lengths import NAME as OUTAGE_LENGTHS
 from posbench.figures.outage_lengths import plot_outage_lengths
 from posbench.figures.per_drive import DEFAULT_DRIVE_PLOTS, write_error_over_time
+from posbench.figures.reading import trace_set
 from posbench.figures.style import NothingToPlot, PlotsWritten, check_formats, save_figure
+from posbench.scoring.trace_set import TraceSet
 
 FIGURES = {
     "error_cdf": plot_error_cdf,
@@ -50,7 +54,7 @@ REQUIRED = (
 )
 
 
-def _plottable(traces: pd.DataFrame) -> str | None:
+def _plottable(traces: TraceSet) -> str | None:
     """Why ``traces`` cannot be drawn at all (empty, or lacking a column), or None."""
     missing = [c for c in REQUIRED if c not in traces.columns]
     if traces.empty or missing:
@@ -58,19 +62,23 @@ def _plottable(traces: pd.DataFrame) -> str | None:
     return None
 
 
-def plot_predictors(traces: pd.DataFrame, res: dict[str, Any]) -> list[str]:
+def plot_predictors(traces: TraceSet | pd.DataFrame, res: dict[str, Any]) -> list[str]:
     """The predictors the figures show, in order: the run's (``res["predictors"]``), else
     those in the traces (which must have the ``predictor`` column)."""
-    return list(res.get("predictors") or [str(p) for p in pd.unique(traces.predictor)])
+    return list(res.get("predictors") or trace_set(traces).predictors())
 
 
 def write_summary_plots(
-    traces: pd.DataFrame, preds: Sequence[str], out: Path, formats: Iterable[str] = ("png",)
+    traces: TraceSet | pd.DataFrame,
+    preds: Sequence[str],
+    out: Path,
+    formats: Iterable[str] = ("png",),
 ) -> PlotsWritten:
     """The run's figures of :data:`FIGURES` (not the per-drive ones) into ``out``; see
     :func:`write_plots`."""
     fmts = check_formats(formats)
     written = PlotsWritten()
+    traces = trace_set(traces)
     why = _plottable(traces)
     if why:
         written.notes = dict.fromkeys(FIGURES, why)
@@ -88,7 +96,7 @@ def write_summary_plots(
 
 
 def write_drive_plots(
-    traces: pd.DataFrame,
+    traces: TraceSet | pd.DataFrame,
     preds: Sequence[str],
     out: Path,
     formats: Iterable[str] = ("png",),
@@ -98,6 +106,7 @@ def write_drive_plots(
     never raises on thin data (see :func:`write_plots`)."""
     fmts = check_formats(formats)
     written = PlotsWritten()
+    traces = trace_set(traces)
     why = _plottable(traces)
     if why:
         written.notes = {"error_over_time": why}
@@ -141,7 +150,7 @@ def joined(*parts: PlotsWritten) -> PlotsWritten:
 
 
 def write_plots(
-    traces: pd.DataFrame,
+    traces: TraceSet | pd.DataFrame,
     res: dict[str, Any],
     out: Path,
     formats: Iterable[str] = ("png",),
@@ -158,6 +167,7 @@ def write_plots(
         ValueError: an unknown format (checked before anything is written).
     """
     fmts = check_formats(formats)
+    traces = trace_set(traces)
     preds = plot_predictors(traces, res) if _plottable(traces) is None else []
     return joined(
         write_summary_plots(traces, preds, out, fmts),

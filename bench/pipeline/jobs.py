@@ -3,9 +3,11 @@
 The figures of a ``bench run`` need only the traces (and, for the paper's figures, the
 drives and the run's fixes), not the aggregated results; drawing them takes about as long
 as the aggregation (matplotlib, one core). So ``bench run`` starts them right after the
-replay as forked child processes (:class:`Job`: the child inherits the traces without a
-copy, draws, and sends back only the list of files written and their notes) and collects
-them when the report is written. The children run a little nicer than the parent
+replay as forked child processes (:class:`Job`: the child inherits the traces'
+:class:`~posbench.scoring.trace_set.TraceSet` without a copy - a frame in memory, or just
+the paths of its parts on disk - reads from it one predictor or one drive at a time, draws,
+and sends back only the list of files written and their notes) and collects them when the
+report is written. The children run a little nicer than the parent
 (:data:`CHILD_NICENESS`), so the aggregation keeps a core to itself. The files are byte for
 byte those drawn in-process.
 
@@ -33,6 +35,7 @@ from posbench.figures.style import PlotsWritten
 from posbench.figures.writer import joined, write_drive_plots, write_summary_plots
 from posbench.scenarios.child_processes import become_child, interrupts_held
 from posbench.scoring.records import lean_traces
+from posbench.scoring.trace_set import TraceSet
 
 T = TypeVar("T")
 #: how much nicer than the parent a child runs: on a machine with fewer free cores than
@@ -116,7 +119,9 @@ class FigureJobs:
     figures and (given ``paper``) the paper's figures, each in its own child process.
 
     Args:
-        traces: the run's traces; preds: the run's predictors in report order.
+        traces: the run's traces (a frame is wrapped in a :class:`TraceSet`; one in memory
+            gets its text columns as categoricals once, :func:`lean_traces`); preds: the
+            run's predictors in report order.
         out, formats, drive_plots: as :func:`posbench.figures.writer.write_plots`.
         paper: draws the paper's figures into ``out`` and returns (file, caption) pairs
             (:func:`posbench.predictor_tools.paper_figures.paper_figures` with the run bound);
@@ -127,7 +132,7 @@ class FigureJobs:
 
     def __init__(
         self,
-        traces: pd.DataFrame,
+        traces: TraceSet | pd.DataFrame,
         preds: Sequence[str],
         out: Path,
         formats: Sequence[str] = ("png",),
@@ -138,7 +143,9 @@ class FigureJobs:
         if background and can_fork():
             import matplotlib.figure  # noqa: F401  (once here, not once per child)
         preds = list(preds)
-        traces = lean_traces(traces)
+        frame = traces if isinstance(traces, pd.DataFrame) else traces.in_memory
+        if frame is not None:  # categorical text columns: cheaper filters in the children
+            traces = TraceSet(lean_traces(frame))
         self._paper = Job(paper, background=background) if paper is not None else None
         self._drives = Job(
             write_drive_plots,

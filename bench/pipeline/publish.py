@@ -19,6 +19,7 @@ from posbench.scenarios.errors import DataError
 from posbench.scenarios.truth_gaps import TRUTH_MAX_GAP_S
 from posbench.scoring.records import DriveRun
 from posbench.scoring.schema import KINDS
+from posbench.scoring.trace_set import TraceSet
 
 if TYPE_CHECKING:
     from posbench.pipeline.jobs import FigureJobs, Job
@@ -76,30 +77,32 @@ class OutputWriter:
 
     def start(
         self,
-        traces: pd.DataFrame,
+        traces: TraceSet | pd.DataFrame,
         predictors: Sequence[str],
         paper: Callable[[], list[tuple[str, str]]] | None = None,
         lean: pd.DataFrame | None = None,
     ) -> None:
         """Remove an earlier run's files (first, so none of the new ones is), then start
         drawing the figures of ``traces`` (and ``paper()``, the paper's figures) and writing
-        traces.parquet in other processes. ``lean``: ``traces`` as
+        traces.parquet in other processes. ``traces``: where they are (a frame is wrapped in
+        a :class:`~posbench.scoring.trace_set.TraceSet`); ``lean``: a frame ``traces`` as
         :func:`~posbench.scoring.records.lean_traces` gives them, if already made."""
         from posbench.pipeline.jobs import FigureJobs, Job
         from posbench.saved_run.outputs import remove_previous_outputs
-        from posbench.saved_run.run import write_traces
+        from posbench.saved_run.run import TRACES
 
+        ts = traces if isinstance(traces, TraceSet) else TraceSet(traces)
         self.out.mkdir(parents=True, exist_ok=True)
         self._removed = remove_previous_outputs(self.out)
         self._jobs = FigureJobs(
-            traces if lean is None else lean,
+            ts if lean is None else TraceSet(lean),
             predictors,
             self.out,
             self.plot_formats,
             self.drive_plots,
             paper=paper,
         )
-        self._traces = Job(write_traces, self.out, traces)
+        self._traces = Job(ts.write, self.out / TRACES)
 
     def write(self, run: Run) -> tuple[list[Path], list[Path]]:
         """``run``'s files, results.json last: the files written, and those of an earlier

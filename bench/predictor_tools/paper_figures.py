@@ -9,7 +9,8 @@ the report; written in each requested format of :data:`posbench.figures.style.FO
 4. The Kalman filter's prediction (``kf-paper``, the paper's baseline) at the same fix.
 
 The moment shown is the fix with the largest heading change over the next second on
-the drive with the most turn / roundabout queries, so the figures show a turn.
+the drive with the most turn / roundabout queries, so the figures show a turn. Of the traces
+the figures read lstm's rows alone (:data:`COLUMNS`).
 """
 
 from __future__ import annotations
@@ -28,9 +29,27 @@ from posbench.replay.loop import replay
 from posbench.replay.prepare import PreparedDrive, prepare_drive
 from posbench.scenarios.drive import Drive
 from posbench.scoring.records import DriveRun
+from posbench.scoring.trace_set import TraceSet
 
 if TYPE_CHECKING:
     from posbench.predictors.lstm.stages import LstmStep
+
+
+#: the trace columns the figures read, of lstm's rows
+COLUMNS = (
+    "drive",
+    "predictor",
+    "kind",
+    "t_issue",
+    "t_query",
+    "x",
+    "y",
+    "x_ref",
+    "y_ref",
+    "error_m",
+    "label",
+    "speed_mps",
+)
 
 
 def pick_moment(traces: pd.DataFrame, predictor: str) -> tuple[str, float] | None:
@@ -83,7 +102,7 @@ def _prepared_window(drive: Drive, fixes: pd.DataFrame, t0: float, t1: float) ->
 def paper_figures(
     drives: list[Drive],
     cfg: RunConfig,
-    traces: pd.DataFrame,
+    traces: TraceSet | pd.DataFrame,
     out: Path,
     runs: Sequence[DriveRun] | None = None,
     formats: Iterable[str] = ("png",),
@@ -92,15 +111,18 @@ def paper_figures(
     (file name, caption) pairs, the file in the format a report shows
     (:func:`posbench.figures.style.shown_format`: png, else svg, else pdf). Needs ``lstm`` in
     the run. With ``runs`` (the run's DriveRuns) the replay uses the run's own fixes over a
-    40 s window, so long drives cost no more than short ones.
+    40 s window, so long drives cost no more than short ones. ``traces``: where they are (a
+    frame is wrapped in a :class:`TraceSet`); lstm's rows are read, :data:`COLUMNS` of them.
 
     Raises:
         ValueError: an unknown format.
     """
     fmts = check_formats(formats)
-    if "lstm" not in cfg.predictors or traces.empty:
+    held = traces if isinstance(traces, TraceSet) else TraceSet(traces)
+    if "lstm" not in cfg.predictors or held.empty:
         return []
-    moment = pick_moment(traces, "lstm")
+    lstm_rows = held.frame(COLUMNS, "lstm")  # all the figures draw of the traces
+    moment = pick_moment(lstm_rows, "lstm")
     if moment is None:
         return []
     from matplotlib.figure import Figure
@@ -184,11 +206,11 @@ def paper_figures(
         f"errors {', '.join(f'{100 * e:.1f}' for e in e_now)} cm.",
     )
 
-    f = traces[
-        (traces.drive == name)
-        & (traces.kind == "future")
-        & (traces.t_issue > t_fix - 20)
-        & (traces.t_issue < t_fix + 20)
+    f = lstm_rows[
+        (lstm_rows.drive == name)
+        & (lstm_rows.kind == "future")
+        & (lstm_rows.t_issue > t_fix - 20)
+        & (lstm_rows.t_issue < t_fix + 20)
     ]
     fig = Figure(figsize=(7, 7), layout="constrained")
     ax = fig.add_subplot()

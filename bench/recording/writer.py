@@ -48,7 +48,8 @@ Layout, per drive under ``drives/<drive>/`` (names sanitised to ``[A-Za-z0-9_.-]
   an outage).
 
 Rows whose position is NaN are not logged in the 2-D views; error series are logged for
-every query, NaN (not scorable) included.
+every query, NaN (not scorable) included. The traces are read one drive at a time
+(:func:`posbench.recording.traces.drive_traces`).
 """
 
 from __future__ import annotations
@@ -85,12 +86,14 @@ from posbench.recording.layout import (
     sanitise,
     screen,
 )
+from posbench.recording.traces import drive_traces
 from posbench.scoring.schema import COV_COLUMNS
 
 if TYPE_CHECKING:
     import pandas as pd
 
     from posbench.scoring.records import DriveRun
+    from posbench.scoring.trace_set import TraceSet
 
 
 #: an RGB colour, 0-255 per channel
@@ -180,7 +183,8 @@ class _Writer:
         self.rec.log(path, style, static=True)
         self.scalars(path, t, v)
 
-    def drive(self, root: str, run: DriveRun) -> None:
+    def drive(self, root: str, run: DriveRun, tr: pd.DataFrame | None) -> None:
+        """Send drive ``run`` under ``root``; ``tr``: its traces (None or empty: none)."""
         rr, rec = self.rr, self.rec
         info = [
             f"drive: {run.name}",
@@ -213,7 +217,6 @@ class _Writer:
             self.points(f"{root}/map/fixes/dropped", t[~rcv], xy[~rcv], DROPPED_RGB, 0.5)
             received = t[rcv], xy[rcv]
 
-        tr = run.traces
         if tr is None or tr.empty:
             return
         groups: _Groups = {
@@ -483,7 +486,11 @@ def merge_rrd(parts: Sequence[Path], path: Path) -> None:
 
 
 def write_recording(
-    path: Path, runs: Sequence[DriveRun], predictors: Sequence[str], color_by: str | None = None
+    path: Path,
+    runs: Sequence[DriveRun],
+    predictors: Sequence[str],
+    color_by: str | None = None,
+    traces: TraceSet | None = None,
 ) -> None:
     """Write ``runs`` to the Rerun file ``path``, one recording per drive (no viewer starts).
 
@@ -494,6 +501,8 @@ def write_recording(
             drive's traces are left out of that drive.
         color_by: the predictor whose current-position error colours the overview map's
             track (default: the first of ``predictors``).
+        traces: the run's traces, read one drive at a time (:func:`drive_traces`); None:
+            each run's own (``DriveRun.traces``).
 
     Raises:
         ImportError: rerun-sdk (the ``viz`` extra) is not installed.
@@ -512,7 +521,7 @@ def write_recording(
             rec = rr.RecordingStream(application_id(rid), recording_id=rid)
             rec.save(part, default_blueprint=blueprint(rrb, root))
             rec.send_recording_name(rid)
-            _Writer(rr, rec, predictors, color_by).drive(root, run)
+            _Writer(rr, rec, predictors, color_by).drive(root, run, drive_traces(run, traces))
             rec.flush()
             rec.disconnect()
             parts.append(part)

@@ -101,7 +101,7 @@ def write_report(
     shown = "." + shown_format(formats)  # checks the formats before anything is written
     out.mkdir(parents=True, exist_ok=True)
     if plots is None:
-        plots = write_plots(run.traces, run.results, out, formats, drive_plots)
+        plots = write_plots(run.trace_set, run.results, out, formats, drive_plots)
     plots = joined(plots, write_result_plots(run.results, out, formats))
     (out / "report.md").write_text(
         render_markdown(

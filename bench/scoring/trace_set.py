@@ -59,13 +59,18 @@ def write_part(folder: Path, traces: pd.DataFrame, name: str) -> Path:
 
 
 def read_part(
-    path: str | Path, columns: Sequence[str] | None = None, predictor: str | None = None
+    path: str | Path,
+    columns: Sequence[str] | None = None,
+    predictor: str | None = None,
+    drive: str | None = None,
 ) -> pd.DataFrame:
-    """One part's rows (of ``predictor`` only, given one), its text columns as categoricals."""
+    """One part's rows (of ``predictor`` only, and of ``drive`` only, given them), its text
+    columns as categoricals."""
     import pyarrow.parquet as pq
 
     cols = None if columns is None else list(dict.fromkeys(columns))
-    filters = [("predictor", "==", predictor)] if predictor is not None else None
+    wanted = (("predictor", predictor), ("drive", drive))
+    filters = [(c, "==", v) for c, v in wanted if v is not None] or None
     table = pq.read_table(
         path,
         columns=cols,
@@ -90,6 +95,10 @@ class TraceSet:
         self._keep: np.ndarray | None = None
         self._columns: list[str] | None = None
         self._rows: int | None = None
+        #: per part, its drives in order (read once, for :meth:`drives` and drive reads)
+        self._part_drives: list[list[str]] | None = None
+        #: in memory: the drive column's codes and names (:func:`pandas.factorize`, once)
+        self._drive_codes: tuple[np.ndarray, list[str]] | None = None
 
     # -- what it holds ------------------------------------------------------------------
     @property
@@ -131,23 +140,66 @@ class TraceSet:
 
     # -- reads ---------------------------------------------------------------------------
     def frame(
-        self, columns: Sequence[str] | None = None, predictor: str | None = None
+        self,
+        columns: Sequence[str] | None = None,
+        predictor: str | None = None,
+        drive: str | None = None,
     ) -> pd.DataFrame:
-        """Rows (of ``predictor`` only, given one) with ``columns`` (None: all), text columns
-        as categoricals. On disk, this reads them: ask for what you need."""
+        """Rows (of ``predictor`` only, and of ``drive`` only, given them) with ``columns``
+        (None: all), text columns as categoricals. On disk, this reads them: ask for what
+        you need (a drive's rows are read from the parts that hold it only)."""
         if self._frame is not None:
             from posbench.scoring.records import lean_traces
 
             df = self._frame
+            keep = None
             if predictor is not None and not df.empty:
-                df = df.loc[(df["predictor"] == predictor).to_numpy()]
+                keep = (df["predictor"] == predictor).to_numpy()
+            if drive is not None and not df.empty:
+                codes, names = self._codes()
+                mine = codes == (names.index(drive) if drive in names else -2)
+                keep = mine if keep is None else keep & mine
+            if keep is not None:
+                df = df.loc[keep]
             if columns is not None:
                 df = df[[c for c in columns if c in df.columns]] if not df.empty else df
             return lean_traces(df)
         cols = None if columns is None else [c for c in columns if c in self.columns]
-        frames = [read_part(p, cols, predictor) for p in self.parts]
+        parts = self.parts
+        if drive is not None:
+            held = self._drives_per_part()
+            parts = tuple(p for p, ds in zip(self.parts, held, strict=True) if drive in ds)
+            parts = parts or self.parts[:1]
+        frames = [read_part(p, cols, predictor, drive) for p in parts]
         frames = [f for f in frames if len(f)] or frames[:1]
         return _concat(frames)
+
+    def predictors(self) -> list[str]:
+        """The predictors, in the order they first appear (the run's order)."""
+        if self._frame is not None:
+            df = self._frame
+            return [] if df.empty else [str(p) for p in pd.unique(df["predictor"])]
+        return list(dict.fromkeys(v for p in self.parts for v in _values(p, "predictor")))
+
+    def drives(self) -> list[str]:
+        """The drives, in the order they first appear (drive order)."""
+        if self._frame is not None:
+            return [] if self._frame.empty else list(self._codes()[1])
+        return list(dict.fromkeys(d for ds in self._drives_per_part() for d in ds))
+
+    def _codes(self) -> tuple[np.ndarray, list[str]]:
+        """In memory: each row's drive as a code into the drive names (in order)."""
+        if self._drive_codes is None:
+            assert self._frame is not None
+            codes, names = pd.factorize(self._frame["drive"])
+            self._drive_codes = (np.asarray(codes), [str(n) for n in names])
+        return self._drive_codes
+
+    def _drives_per_part(self) -> list[list[str]]:
+        """Per part, the drives it holds, in order."""
+        if self._part_drives is None:
+            self._part_drives = [_values(p, "drive") for p in self.parts]
+        return self._part_drives
 
     def scored(self, predictor: str, columns: Sequence[str]) -> pd.DataFrame:
         """The scored rows (:func:`~posbench.scoring.schema.scored_mask`) of ``predictor``
@@ -208,6 +260,28 @@ class TraceSet:
         finally:
             tmp.unlink(missing_ok=True)
         return path
+
+
+def _values(path: Path, column: str) -> list[str]:
+    """The values of text ``column`` in part ``path``, in the order they first appear: from
+    each row group's statistics where they hold one value (a part has one row group per
+    predictor, and one drive), else read from that row group's column alone."""
+    import pyarrow.parquet as pq
+
+    out: dict[str, None] = {}
+    with pq.ParquetFile(path, read_dictionary=[column]) as pf:
+        if column not in pf.schema_arrow.names:
+            return []
+        j = pf.metadata.schema.names.index(column)
+        for i in range(pf.metadata.num_row_groups):
+            stats = pf.metadata.row_group(i).column(j).statistics
+            if stats is not None and stats.has_min_max and stats.min == stats.max:
+                v = stats.min
+                out[v.decode() if isinstance(v, bytes) else str(v)] = None
+            else:  # dictionary codes: cheap to read, one row group at a time
+                col = pf.read_row_group(i, columns=[column]).column(0).to_pandas()
+                out.update(dict.fromkeys(str(v) for v in pd.unique(col.dropna())))
+    return list(out)
 
 
 def _concat(frames: list[pd.DataFrame]) -> pd.DataFrame:
