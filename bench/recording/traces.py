@@ -36,11 +36,12 @@ COLUMNS = (
 def drive_traces(run: DriveRun, traces: TraceSet | None) -> pd.DataFrame | None:
     """The rows of drive ``run`` its recording reads, in the traces' order: from ``traces``
     the rows of its drive and data set, :data:`COLUMNS` of them (one drive read at a time);
-    without ``traces``, the run's own (``run.traces``). None for a skipped drive."""
+    without ``traces``, the run's own (held, or read from its parts:
+    :meth:`~posbench.scoring.records.DriveRun.load_traces`). None for a skipped drive."""
     if run.skipped:
         return None
     if traces is None:
-        return run.traces
+        return run.load_traces()
     if traces.empty:
         return None
     rows = traces.frame(COLUMNS, drive=run.name)

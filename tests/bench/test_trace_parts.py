@@ -1,0 +1,119 @@
+"""The fleet-scale data path: workers write each drive's traces (and call durations and bound
+rows) to parts on disk and return small records; every figure combined from them is the one
+the in-memory path gives, to the bit; the saved traces are the same rows."""
+
+from __future__ import annotations
+
+import gc
+import json
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from posbench.aggregation.aggregate import aggregate
+from posbench.config import RunConfig
+from posbench.replay.runner import run
+from posbench.scenarios.synthetic import generate_drive
+from posbench.scoring.records import all_traces, trace_set
+from posbench.scoring.trace_set import TraceSet
+
+CFG = RunConfig(predictors=("cv", "kf", "poly"), dropouts="outages")
+
+
+@pytest.fixture(scope="module")
+def drives():
+    return [
+        generate_drive(seed=1, route="mixed", duration_s=90.0),
+        generate_drive(seed=2, route="roundabout", duration_s=70.0),
+    ]
+
+
+@pytest.fixture(scope="module")
+def both(drives, tmp_path_factory):
+    """The same drives replayed with traces in memory, and written to parts (split by
+    predictor: ``workers`` > 1 and a drive holding more than its share)."""
+    folder = tmp_path_factory.mktemp("parts")
+    return run(drives, CFG, workers=1, limit=True), run(
+        drives, CFG, workers=2, limit=True, parts=folder
+    )
+
+
+def _without_timings(x):
+    if isinstance(x, dict):
+        return {k: _without_timings(v) for k, v in x.items() if not k.endswith("_us")}
+    if isinstance(x, list):
+        return [_without_timings(v) for v in x]
+    return x
+
+
+def test_records_from_parts_hold_nothing_that_grows_with_the_drive(both):
+    _, spilled = both
+    for r in spilled:
+        assert r.traces.empty and r.trace_rows > 0 and r.trace_parts
+        assert r.step_ns == {} and r.query_ns == {} and r.cov_ns == {} and r.timing_parts
+        assert r.limit is None and Path(r.limit_part).is_file()
+        assert all(Path(p).is_file() for p in r.trace_parts)
+
+
+def test_every_figure_from_parts_equals_the_in_memory_one(both):
+    memory, spilled = both
+    a = aggregate(memory, CFG, models={})
+    b = aggregate(spilled, CFG, models={})
+    assert a["outages"] and a["limit"]  # the families that read more than the traces
+    assert json.dumps(_without_timings(a), sort_keys=True, default=str) == json.dumps(
+        _without_timings(b), sort_keys=True, default=str
+    )
+    # the same calls were timed, read back from the spilled timings
+    for name in CFG.predictors:
+        assert a["predictors"][name]["latency_us"]["count"] == b["predictors"][name][
+            "latency_us"
+        ]["count"]
+
+
+def test_the_trace_set_reads_the_rows_of_the_frame(both, tmp_path):
+    memory, spilled = both
+    frame = all_traces(memory)
+    parts = trace_set(spilled)
+    assert parts.in_memory is None and parts.rows == len(frame)
+    for name in CFG.predictors:
+        want = frame[frame["predictor"] == name].reset_index(drop=True)
+        got = parts.frame(None, name)
+        pd.testing.assert_frame_equal(
+            got.astype({c: str for c in ("dataset", "drive", "predictor")}),
+            want.astype({c: str for c in ("dataset", "drive", "predictor")}),
+            check_categorical=False,
+        )
+        scored = parts.scored(name, ["t_query", "error_m"])
+        assert np.array_equal(
+            scored["error_m"].to_numpy(),
+            TraceSet(frame).scored(name, ["error_m"])["error_m"].to_numpy(),
+        )
+    written = parts.write(tmp_path / "traces.parquet")
+    back = pd.read_parquet(written)
+    assert np.array_equal(back["error_m"].to_numpy(), frame["error_m"].to_numpy(), equal_nan=True)
+    assert list(back["drive"].astype(str)) == list(frame["drive"].astype(str))
+
+
+def test_a_run_without_a_folder_reads_its_parts_until_it_is_gone(drives):
+    import posbench
+
+    result = posbench.run(predictors=["cv"], synthetic_duration_s=60.0)
+    parts = result._trace_parts
+    assert parts and all(Path(p).is_file() for p in parts)
+    n = len(result.traces)
+    assert n > 0 and result.trace_set.rows == n
+    folder = Path(parts[0]).parent.parent
+    del result
+    gc.collect()
+    assert not folder.exists()
+
+
+def test_a_run_into_a_folder_leaves_no_parts_behind(tmp_path):
+    import posbench
+
+    out = tmp_path / "out"
+    result = posbench.run(predictors=["cv"], synthetic_duration_s=60.0, out=out)
+    assert not [p for p in out.iterdir() if p.name.startswith(".parts-")]
+    assert len(pd.read_parquet(out / "traces.parquet")) == len(result.traces) > 0
