@@ -67,9 +67,10 @@ def test_every_figure_from_parts_equals_the_in_memory_one(both):
     )
     # the same calls were timed, read back from the spilled timings
     for name in CFG.predictors:
-        assert a["predictors"][name]["latency_us"]["count"] == b["predictors"][name][
-            "latency_us"
-        ]["count"]
+        assert (
+            a["predictors"][name]["latency_us"]["count"]
+            == b["predictors"][name]["latency_us"]["count"]
+        )
 
 
 def test_the_trace_set_reads_the_rows_of_the_frame(both, tmp_path):
