@@ -161,6 +161,12 @@ def _per_drive(
             queries.setdefault((ds, drive, k), {})[name] = (e[idx], t[idx])
 
 
+def _durations(runs: Sequence[DriveRun], call: str, name: str) -> list[np.ndarray]:
+    """Predictor ``name``'s ``call`` durations [ns] per drive that has them, in drive order."""
+    found = (r.call_ns(call, name) for r in runs)
+    return [a for a in found if a is not None]
+
+
 def _empty_kinds(stats: Statistics | None = None) -> dict[str, Any]:
     empty = np.empty(0)
     return {k: with_ci(summarize(empty), empty, empty, None, stats) for k in KINDS}
@@ -245,10 +251,7 @@ def aggregate(
     for name in preds:
         df = base_df if base_df is not None and name == stats.baseline else scored_rows(name)
         entry = _kind_summaries(df, stats) if not df.empty else _empty_kinds(stats)
-        steps, queries, covs = (
-            [r.call_ns(c, name) for r in runs] for c in ("step", "query", "cov")
-        )
-        steps, queries, covs = ([a for a in c if a is not None] for c in (steps, queries, covs))
+        steps, queries, covs = (_durations(runs, c, name) for c in ("step", "query", "cov"))
         entry["latency_us"] = latency_summary(np.concatenate(steps or [np.empty(0)]))
         entry["query_us"] = latency_summary(np.concatenate(queries or [np.empty(0)]))
         if covs:  # the covariance_at call, timed apart from the query

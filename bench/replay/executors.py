@@ -244,7 +244,7 @@ def _fan_out(
         for j, name in enumerate(names):
             part = part_name(i, None if name is None else j)
             pending[task.remote(drive_ref, cfg_ref, name, entries, limit, parts, part)] = (i, j)
-    parts: list[list[DriveRun | _Failed | None]] = [[None] * len(names) for _ in drives]
+    pieces: list[list[DriveRun | _Failed | None]] = [[None] * len(names) for _ in drives]
     left = [len(names)] * len(drives)
     out: list[DriveRun | None] = [None] * len(drives)
     refs = list(pending)
@@ -253,18 +253,18 @@ def _fan_out(
         for ref in done:
             i, j = pending.pop(ref)
             try:
-                parts[i][j] = ray.get(ref)
+                pieces[i][j] = ray.get(ref)
             except ray.exceptions.RayError as e:
-                parts[i][j] = _Failed(names[j], _error_line(e))
+                pieces[i][j] = _Failed(names[j], _error_line(e))
             left[i] -= 1
             if left[i] == 0:
-                failed = [p for p in parts[i] if isinstance(p, _Failed)]
+                failed = [p for p in pieces[i] if isinstance(p, _Failed)]
                 out[i] = drive_run = (
                     failed_run(drives[i], failed[0].predictor, failed[0].error, max_retries + 1)
                     if failed
-                    else merge_predictor_runs([p for p in parts[i] if isinstance(p, DriveRun)])
+                    else merge_predictor_runs([p for p in pieces[i] if isinstance(p, DriveRun)])
                 )
-                parts[i] = []  # free the traces once merged
+                pieces[i] = []  # free the records once merged
                 if on_done:
                     on_done(drive_run)
     return [r for r in out if r is not None]

@@ -149,8 +149,6 @@ class TraceSet:
         (None: all), text columns as categoricals. On disk, this reads them: ask for what
         you need (a drive's rows are read from the parts that hold it only)."""
         if self._frame is not None:
-            from posbench.scoring.records import lean_traces
-
             df = self._frame
             keep = None
             if predictor is not None and not df.empty:
@@ -163,7 +161,7 @@ class TraceSet:
                 df = df.loc[keep]
             if columns is not None:
                 df = df[[c for c in columns if c in df.columns]] if not df.empty else df
-            return lean_traces(df)
+            return _lean(df)
         cols = None if columns is None else [c for c in columns if c in self.columns]
         parts = self.parts
         if drive is not None:
@@ -213,9 +211,7 @@ class TraceSet:
             if self._keep is None:
                 self._keep = scored_mask(df)
             mine = self._keep & (df["predictor"] == predictor).to_numpy()
-            from posbench.scoring.records import lean_traces
-
-            return lean_traces(df.loc[mine, cols])
+            return _lean(df.loc[mine, cols])
         df = self.frame([*cols, *MASK_COLUMNS], predictor)
         if df.empty:
             return df[cols]
@@ -282,6 +278,16 @@ def _values(path: Path, column: str) -> list[str]:
                 col = pf.read_row_group(i, columns=[column]).column(0).to_pandas()
                 out.update(dict.fromkeys(str(v) for v in pd.unique(col.dropna())))
     return list(out)
+
+
+def _lean(df: pd.DataFrame) -> pd.DataFrame:
+    """``df`` with its :data:`TEXT` columns as categoricals (the same values)."""
+    cols = {
+        c: "category"
+        for c in TEXT
+        if c in df.columns and not isinstance(df[c].dtype, pd.CategoricalDtype)
+    }
+    return df.astype(cols) if cols else df
 
 
 def _concat(frames: list[pd.DataFrame]) -> pd.DataFrame:
