@@ -150,6 +150,8 @@ class TraceSet:
         you need (a drive's rows are read from the parts that hold it only)."""
         if self._frame is not None:
             df = self._frame
+            if df.empty and df.columns.empty:  # no traces at all: the columns asked for
+                return pd.DataFrame(columns=list(columns or []))
             keep = None
             if predictor is not None and not df.empty:
                 keep = (df["predictor"] == predictor).to_numpy()
@@ -201,13 +203,13 @@ class TraceSet:
 
     def scored(self, predictor: str, columns: Sequence[str]) -> pd.DataFrame:
         """The scored rows (:func:`~posbench.scoring.schema.scored_mask`) of ``predictor``
-        with ``columns`` that exist, its text columns as categoricals, a fresh 0-based
-        index."""
+        with ``columns`` that exist (all of them when there are no traces at all), its text
+        columns as categoricals."""
         cols = [c for c in columns if c in self.columns]
         if self._frame is not None:
             df = self._frame
             if df.empty:
-                return pd.DataFrame(columns=cols)
+                return pd.DataFrame(columns=list(columns) if df.columns.empty else cols)
             if self._keep is None:
                 self._keep = scored_mask(df)
             mine = self._keep & (df["predictor"] == predictor).to_numpy()
