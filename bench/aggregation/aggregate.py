@@ -313,13 +313,14 @@ def aggregate(
             )
         if not df.empty:
             _per_drive(df, name, per_drive, drive_queries)
+            # each drive's interval (block bootstrap) depends on its own predictor's queries
+            # only: taken now, so no other predictor's errors are held meanwhile
+            for (ds, drive, k), by_pred in drive_queries.items():
+                for n, ci in one_drive_cis(by_pred, stats).items():
+                    per_drive[(ds, drive)][n][k]["ci95"] = ci
+            drive_queries.clear()
         del df, groups
     del base_df
-    # one drive's intervals (block bootstrap), drive by drive: its predictors share resamples
-    for (ds, drive, k), by_pred in drive_queries.items():
-        for name, ci in one_drive_cis(by_pred, stats).items():
-            per_drive[(ds, drive)][name][k]["ci95"] = ci
-    del drive_queries
     empty_ci = _empty_kinds(stats)["future"].get("ci95")
     for kinds in (s for by_name in per_drive.values() for s in by_name.values()):
         for k in KINDS:

@@ -22,8 +22,14 @@ class PartsFolder:
     """The parts folder of one run (a context manager: removed on exit unless kept)."""
 
     def __init__(self, out: Path | None) -> None:
+        #: the output folders this made (to leave none behind when the run stops before
+        #: writing anything there)
+        self._made: list[Path] = []
         if out is not None:
-            out.mkdir(parents=True, exist_ok=True)
+            for folder in (*reversed(out.parents), out):
+                if not folder.exists():
+                    folder.mkdir()
+                    self._made.append(folder)
         self.path = Path(tempfile.mkdtemp(prefix=".parts-" if out else "posbench-parts-", dir=out))
         self._kept = False
 
@@ -53,3 +59,8 @@ class PartsFolder:
     ) -> None:
         if not self._kept or exc_type is not None:
             shutil.rmtree(self.path, ignore_errors=True)
+        for folder in reversed(self._made):  # those still empty: nothing was written there
+            try:
+                folder.rmdir()
+            except OSError:
+                break
