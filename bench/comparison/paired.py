@@ -68,15 +68,10 @@ def drive_summaries(
 def drive_errors(
     run: Run, predictor: str, kind: str, drives: Sequence[tuple[str, str]]
 ) -> list[np.ndarray]:
-    """The scored errors [m] of ``predictor`` per drive, in ``drives`` order (from traces)."""
-    from posbench.scoring.schema import scored_mask
-
-    tr = run.traces
-    tr = tr[
-        scored_mask(tr)
-        & (tr["predictor"] == predictor).to_numpy()
-        & (tr["kind"] == kind).to_numpy()
-    ]
+    """The scored errors [m] of ``predictor`` per drive, in ``drives`` order (from traces:
+    that predictor's columns only, :attr:`~posbench.saved_run.run.Run.trace_set`)."""
+    tr = run.trace_set.scored(predictor, ["dataset", "drive", "kind", "error_m"])
+    tr = tr[(tr["kind"] == kind).to_numpy()]
     groups = {
         (str(ds), str(dr)): g["error_m"].to_numpy(dtype=float)
         for (ds, dr), g in tr.groupby(["dataset", "drive"], observed=True, sort=False)
