@@ -25,6 +25,7 @@ from posbench.report.markdown import TABLE_FORMATS, parse_report_formats
 from posbench.scenarios.drive import Drive
 
 if TYPE_CHECKING:
+    from posbench.pipeline.parts import PartsFolder
     from posbench.scoring.records import DriveRun
 
 
@@ -267,6 +268,7 @@ def execute_run(plan: RunPlan, command: str, reporter: Reporter = SILENT) -> Pub
     from posbench.pipeline.data_check import run_data_check
     from posbench.pipeline.drives import load_drives
     from posbench.pipeline.honoured import unhonoured
+    from posbench.pipeline.parts import PartsFolder
     from posbench.pipeline.reporter import WARNING
     from posbench.scenarios.remote import local_paths
 
@@ -285,7 +287,10 @@ def execute_run(plan: RunPlan, command: str, reporter: Reporter = SILENT) -> Pub
         for note in notes:
             reporter.line(f"note: {note}", WARNING)
         consistency = run_data_check(drives, plan.config.predictors, o.strict, reporter)
-        return _replay_and_publish(drives, plan, data, command, consistency, reporter, notes)
+        with PartsFolder(o.out) as parts:  # where the workers write the drives' traces
+            return _replay_and_publish(
+                drives, plan, data, command, consistency, reporter, parts, notes
+            )
 
 
 def replay_drives(
@@ -338,23 +343,8 @@ def _replay_and_publish(
     command: str,
     consistency: dict[str, Any],
     reporter: Reporter,
+    parts: PartsFolder,
     unhonoured: Sequence[str] = (),
-) -> Published:
-    from posbench.pipeline.parts import PartsFolder
-
-    with PartsFolder(plan.options.out) as parts:
-        return _replay_into(drives, plan, data, command, consistency, reporter, unhonoured, parts)
-
-
-def _replay_into(
-    drives: list[Drive],
-    plan: RunPlan,
-    data: list[Path] | None,
-    command: str,
-    consistency: dict[str, Any],
-    reporter: Reporter,
-    unhonoured: Sequence[str],
-    parts: Any,
 ) -> Published:
     from posbench.aggregation.seeds import seed_figures, seeds_section
     from posbench.pipeline.honoured import scored_conditions
