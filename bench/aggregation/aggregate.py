@@ -35,7 +35,7 @@ from posbench.scenarios.labels import LABELS
 from posbench.scoring.records import DriveRun, trace_set
 from posbench.scoring.reference import dataset_references
 from posbench.scoring.schema import KINDS
-from posbench.scoring.trace_set import TraceSet
+from posbench.scoring.trace_set import TraceSet, as_trace_set
 
 #: the trace columns aggregation reads (positions are not needed once errors exist)
 AGGREGATED = (
@@ -71,11 +71,6 @@ def excluded_summary(
         kind = df["kind"].to_numpy()
         out["no_reference"][name] = {k: int((no_ref & (kind == k)).sum()) for k in KINDS}
     return out
-
-
-def as_trace_set(traces: TraceSet | pd.DataFrame) -> TraceSet:
-    """``traces`` as a :class:`~posbench.scoring.trace_set.TraceSet` (a frame is wrapped)."""
-    return traces if isinstance(traces, TraceSet) else TraceSet(traces)
 
 
 def _with_codes(df: pd.DataFrame) -> pd.DataFrame:

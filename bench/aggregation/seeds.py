@@ -18,7 +18,7 @@ import pandas as pd
 from posbench.metrics.accuracy import summarize
 from posbench.metrics.seeds import paired_mean_difference, spread
 from posbench.scoring.schema import KINDS
-from posbench.scoring.trace_set import TraceSet
+from posbench.scoring.trace_set import TraceSet, as_trace_set
 
 #: the figures whose spread across seeds is reported
 SPREAD_FIGURES = ("mean_m", "median_m", "rmse_m", "p95_m")
@@ -32,7 +32,7 @@ def seed_figures(
     without latency and intervals), the same per data set, and each predictor's paired
     difference of mean error against the baseline on the queries both answered [m]."""
     out: dict[str, Any] = {"seed": int(seed), "predictors": {}, "by_dataset": {}, "paired": {}}
-    ts = traces if isinstance(traces, TraceSet) else TraceSet(traces)
+    ts = as_trace_set(traces)
     if ts.empty:
         return out
     errors: dict[tuple[str, str], np.ndarray] = {}

@@ -11,7 +11,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 import pandas as pd
 
-from posbench.figures.reading import first_seen, past_warmup, trace_set
+from posbench.figures.reading import first_seen, past_warmup
 from posbench.figures.style import (
     NothingToPlot,
     colors_for,
@@ -22,7 +22,7 @@ from posbench.figures.style import (
 from posbench.metrics.accuracy import error_cdf, speed_bin_labels, speed_bin_order, summarize_groups
 from posbench.metrics.outages import SINCE_FIX_CURVE_EDGES_S, since_fix_bins
 from posbench.scoring.schema import COV_COLUMNS, KINDS
-from posbench.scoring.trace_set import TraceSet
+from posbench.scoring.trace_set import TraceSet, as_trace_set
 
 if TYPE_CHECKING:  # matplotlib is imported when a figure is drawn: importing this module is cheap
     from matplotlib.figure import Figure
@@ -47,7 +47,7 @@ def plot_error_cdf(traces: TraceSet | pd.DataFrame, preds: Sequence[str]) -> Fig
     predictor: drive, kind, error_m, warmup."""
     from matplotlib.figure import Figure
 
-    ts = trace_set(traces)
+    ts = as_trace_set(traces)
     curves: dict[str, dict[str, tuple[np.ndarray, np.ndarray, int]]] = {k: {} for k in KINDS}
     firsts: dict[str, dict[str, str]] = {k: {} for k in KINDS}
     warm = False
@@ -111,7 +111,7 @@ def plot_error_vs_speed(traces: TraceSet | pd.DataFrame, preds: Sequence[str]) -
     warmup."""
     from matplotlib.figure import Figure
 
-    ts = trace_set(traces)
+    ts = as_trace_set(traces)
     order = speed_bin_order()
     found: dict[str, dict[str, dict[str, float]]] = {}
     firsts: dict[str, str] = {}
@@ -160,7 +160,7 @@ def plot_error_vs_since_fix(traces: TraceSet | pd.DataFrame, preds: Sequence[str
     per predictor: drive, kind, error_m, since_fix_s, outage, warmup."""
     from matplotlib.figure import Figure
 
-    ts = trace_set(traces)
+    ts = as_trace_set(traces)
     edges = np.asarray(SINCE_FIX_CURVE_EDGES_S, dtype=float)
     means: dict[str, pd.Series] = {}  # predictor -> mean error [m] per occupied bin
     firsts: dict[str, str] = {}
@@ -212,7 +212,7 @@ def plot_calibration(traces: TraceSet | pd.DataFrame, preds: Sequence[str]) -> F
 
     from posbench.metrics.calibration import calibration_curve, mahalanobis_sq
 
-    ts = trace_set(traces)
+    ts = as_trace_set(traces)
     cols = ["predictor", "kind", "x", "y", "x_ref", "y_ref", "error_m", *COV_COLUMNS]
     if any(c not in ts.columns for c in cols):
         raise NothingToPlot("traces without covariance columns")

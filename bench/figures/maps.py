@@ -11,7 +11,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 import pandas as pd
 
-from posbench.figures.reading import past_warmup, trace_set
+from posbench.figures.reading import past_warmup
 from posbench.figures.style import (
     FLOOR_M,
     TURN_LABELS,
@@ -24,7 +24,7 @@ from posbench.figures.style import (
     most_turning,
     turn_counts,
 )
-from posbench.scoring.trace_set import TraceSet
+from posbench.scoring.trace_set import TraceSet, as_trace_set
 
 if TYPE_CHECKING:  # matplotlib is imported when a figure is drawn: importing this module is cheap
     from matplotlib.figure import Figure
@@ -86,7 +86,7 @@ def plot_path(traces: TraceSet | pd.DataFrame, preds: Sequence[str]) -> Figure:
     [s], x, y, x_ref, y_ref, error_m [m], label."""
     from matplotlib.figure import Figure
 
-    ts = trace_set(traces)
+    ts = as_trace_set(traces)
     picked = turning_drive(ts, known_error=False)
     if picked is None:
         raise NothingToPlot("no future query with a reference position")
@@ -198,7 +198,7 @@ def plot_trajectory_error(traces: TraceSet | pd.DataFrame, preds: Sequence[str])
     from matplotlib.colors import LogNorm, Normalize
     from matplotlib.figure import Figure
 
-    ts = trace_set(traces)
+    ts = as_trace_set(traces)
     picked = turning_drive(ts, known_error=True)
     if picked is None:
         raise NothingToPlot("no future query with a known error")

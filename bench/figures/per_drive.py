@@ -12,7 +12,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from posbench.figures.reading import past_warmup, trace_set
+from posbench.figures.reading import past_warmup
 from posbench.figures.style import (
     DRIVE_DPI,
     FLOOR_M,
@@ -26,7 +26,7 @@ from posbench.figures.style import (
     warmup_mask,
 )
 from posbench.naming import unique_file_safe
-from posbench.scoring.trace_set import TraceSet
+from posbench.scoring.trace_set import TraceSet, as_trace_set
 
 #: at most this many per-drive error-over-time figures per run (the first drives in run
 #: order); the note of ``error_over_time`` says when drives were left out
@@ -153,7 +153,7 @@ def drives_to_plot(
     ``limit`` drives with the largest mean future-point error [m] over all predictors (past
     the warm-up), in drive order; and a note saying which were chosen, or None. The means
     are summed one predictor at a time (drive, kind, error_m, warmup)."""
-    ts = trace_set(traces)
+    ts = as_trace_set(traces)
     drives = ts.drives()
     cap = MAX_DRIVE_FIGURES if limit is None else min(limit, MAX_DRIVE_FIGURES)
     if len(drives) <= cap:
@@ -202,7 +202,7 @@ def write_error_over_time(
     fig.subplots_adjust(left=0.065, right=0.80, bottom=0.13, top=0.91)
     files: list[Path] = []
     empty: list[str] = []
-    ts = trace_set(traces)
+    ts = as_trace_set(traces)
     chosen, chosen_note = drives_to_plot(ts, limit)
     used = [
         c

@@ -16,11 +16,6 @@ from posbench.figures.style import warmup_mask
 from posbench.scoring.trace_set import TraceSet
 
 
-def trace_set(traces: TraceSet | pd.DataFrame) -> TraceSet:
-    """``traces`` as a :class:`TraceSet` (a frame is wrapped, not copied)."""
-    return traces if isinstance(traces, TraceSet) else TraceSet(traces)
-
-
 def past_warmup(ts: TraceSet, predictor: str, columns: Sequence[str]) -> tuple[pd.DataFrame, bool]:
     """The rows of ``predictor`` past the warm-up (every row without a ``warmup`` column),
     ``columns`` of them (those the traces have); and whether it had any warm-up row."""

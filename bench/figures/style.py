@@ -120,7 +120,7 @@ def turn_counts(fut: pd.DataFrame) -> dict[str, int]:
 def most_turning(turns: dict[str, int]) -> str:
     """The drive with the most turn / roundabout queries (``turns``: drive -> count, not
     empty), the first by name among equals: what ``groupby("drive").size().idxmax()`` picks
-    over a text column or :func:`~posbench.scoring.records.lean_traces`' categorical one
+    over a text column or :func:`~posbench.scoring.trace_set.lean_traces`' categorical one
     (sorted categories), whichever way the rows were read."""
     top = max(turns.values())
     return min(d for d, n in turns.items() if n == top)

@@ -22,9 +22,8 @@ from posbench.figures.maps import plot_path, plot_trajectory_error
 from posbench.figures.outage_lengths import NAME as OUTAGE_LENGTHS
 from posbench.figures.outage_lengths import plot_outage_lengths
 from posbench.figures.per_drive import DEFAULT_DRIVE_PLOTS, write_error_over_time
-from posbench.figures.reading import trace_set
 from posbench.figures.style import NothingToPlot, PlotsWritten, check_formats, save_figure
-from posbench.scoring.trace_set import TraceSet
+from posbench.scoring.trace_set import TraceSet, as_trace_set
 
 FIGURES = {
     "error_cdf": plot_error_cdf,
@@ -65,7 +64,7 @@ def _plottable(traces: TraceSet) -> str | None:
 def plot_predictors(traces: TraceSet | pd.DataFrame, res: dict[str, Any]) -> list[str]:
     """The predictors the figures show, in order: the run's (``res["predictors"]``), else
     those in the traces (which must have the ``predictor`` column)."""
-    return list(res.get("predictors") or trace_set(traces).predictors())
+    return list(res.get("predictors") or as_trace_set(traces).predictors())
 
 
 def write_summary_plots(
@@ -78,7 +77,7 @@ def write_summary_plots(
     :func:`write_plots`."""
     fmts = check_formats(formats)
     written = PlotsWritten()
-    traces = trace_set(traces)
+    traces = as_trace_set(traces)
     why = _plottable(traces)
     if why:
         written.notes = dict.fromkeys(FIGURES, why)
@@ -106,7 +105,7 @@ def write_drive_plots(
     never raises on thin data (see :func:`write_plots`)."""
     fmts = check_formats(formats)
     written = PlotsWritten()
-    traces = trace_set(traces)
+    traces = as_trace_set(traces)
     why = _plottable(traces)
     if why:
         written.notes = {"error_over_time": why}
@@ -167,7 +166,7 @@ def write_plots(
         ValueError: an unknown format (checked before anything is written).
     """
     fmts = check_formats(formats)
-    traces = trace_set(traces)
+    traces = as_trace_set(traces)
     preds = plot_predictors(traces, res) if _plottable(traces) is None else []
     return joined(
         write_summary_plots(traces, preds, out, fmts),

@@ -34,8 +34,7 @@ import pandas as pd
 from posbench.figures.style import PlotsWritten
 from posbench.figures.writer import joined, write_drive_plots, write_summary_plots
 from posbench.scenarios.child_processes import become_child, interrupts_held
-from posbench.scoring.records import lean_traces
-from posbench.scoring.trace_set import TraceSet
+from posbench.scoring.trace_set import TraceSet, lean_traces
 
 T = TypeVar("T")
 #: how much nicer than the parent a child runs: on a machine with fewer free cores than

@@ -19,7 +19,7 @@ from posbench.scenarios.errors import DataError
 from posbench.scenarios.truth_gaps import TRUTH_MAX_GAP_S
 from posbench.scoring.records import DriveRun
 from posbench.scoring.schema import KINDS
-from posbench.scoring.trace_set import TraceSet
+from posbench.scoring.trace_set import TraceSet, as_trace_set
 
 if TYPE_CHECKING:
     from posbench.pipeline.jobs import FigureJobs, Job
@@ -86,12 +86,12 @@ class OutputWriter:
         drawing the figures of ``traces`` (and ``paper()``, the paper's figures) and writing
         traces.parquet in other processes. ``traces``: where they are (a frame is wrapped in
         a :class:`~posbench.scoring.trace_set.TraceSet`); ``lean``: a frame ``traces`` as
-        :func:`~posbench.scoring.records.lean_traces` gives them, if already made."""
+        :func:`~posbench.scoring.trace_set.lean_traces` gives them, if already made."""
         from posbench.pipeline.jobs import FigureJobs, Job
         from posbench.saved_run.outputs import remove_previous_outputs
         from posbench.saved_run.run import TRACES
 
-        ts = traces if isinstance(traces, TraceSet) else TraceSet(traces)
+        ts = as_trace_set(traces)
         self.out.mkdir(parents=True, exist_ok=True)
         self._removed = remove_previous_outputs(self.out)
         self._jobs = FigureJobs(

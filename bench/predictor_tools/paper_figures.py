@@ -29,7 +29,7 @@ from posbench.replay.loop import replay
 from posbench.replay.prepare import PreparedDrive, prepare_drive
 from posbench.scenarios.drive import Drive
 from posbench.scoring.records import DriveRun
-from posbench.scoring.trace_set import TraceSet
+from posbench.scoring.trace_set import TraceSet, as_trace_set
 
 if TYPE_CHECKING:
     from posbench.predictors.lstm.stages import LstmStep
@@ -118,7 +118,7 @@ def paper_figures(
         ValueError: an unknown format.
     """
     fmts = check_formats(formats)
-    held = traces if isinstance(traces, TraceSet) else TraceSet(traces)
+    held = as_trace_set(traces)
     if "lstm" not in cfg.predictors or held.empty:
         return []
     lstm_rows = held.frame(COLUMNS, "lstm")  # all the figures draw of the traces

@@ -7,13 +7,12 @@ from __future__ import annotations
 from collections.abc import Sequence
 from dataclasses import dataclass, field, fields, replace
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 import pandas as pd
 
-if TYPE_CHECKING:
-    from posbench.scoring.trace_set import TraceSet
+from posbench.scoring.trace_set import TraceSet, write_part
 
 
 @dataclass
@@ -74,8 +73,6 @@ class DriveRun:
     def load_traces(self, columns: Sequence[str] | None = None) -> pd.DataFrame:
         """Its traces (only ``columns``, given them), from memory or from its parts."""
         if self.trace_parts and self.traces.empty:
-            from posbench.scoring.trace_set import TraceSet
-
             return TraceSet(parts=self.trace_parts).frame(columns)
         if columns is None or self.traces.empty:
             return self.traces
@@ -111,8 +108,6 @@ class DriveRun:
         (:func:`~posbench.scoring.trace_set.write_part`), call durations and bound's rows -
         written to ``folder`` under ``name`` and dropped from memory: what remains is small
         and the same for a drive of any length, but for notes and fixes."""
-        from posbench.scoring.trace_set import write_part
-
         folder.mkdir(parents=True, exist_ok=True)
         changes: dict[str, Any] = {}
         if not self.traces.empty:
@@ -173,28 +168,8 @@ def all_traces(runs: Sequence[DriveRun]) -> pd.DataFrame:
 def trace_set(runs: Sequence[DriveRun]) -> TraceSet:
     """The runs' traces as a :class:`~posbench.scoring.trace_set.TraceSet`: their parts on
     disk when the workers wrote them there, else the frame of :func:`all_traces`."""
-    from posbench.scoring.trace_set import TraceSet
-
     if any(r.trace_parts for r in runs):
         if any(not r.traces.empty for r in runs):
             raise ValueError("runs with traces both in memory and on disk")
         return TraceSet(parts=[f for r in runs for f in r.trace_parts])
     return TraceSet(all_traces(runs))
-
-
-#: text columns of the traces that aggregation and figures filter and group by, again and again
-TEXT_COLUMNS = ("dataset", "drive", "predictor")
-
-
-def lean_traces(traces: pd.DataFrame) -> pd.DataFrame:
-    """``traces`` with its :data:`TEXT_COLUMNS` as categoricals (the same values), for
-    :func:`aggregate` and the figures: every row filter then copies small integer codes
-    instead of strings (on the shared data ~0.5-0.9 CPU-s less aggregation and ~0.2-0.3 less
-    per figure process; results and files the same to the bit). Saved traces keep their
-    text columns."""
-    cols = {
-        c: "category"
-        for c in TEXT_COLUMNS
-        if c in traces.columns and not isinstance(traces[c].dtype, pd.CategoricalDtype)
-    }
-    return traces.astype(cols) if cols else traces
