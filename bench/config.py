@@ -9,6 +9,7 @@ from typing import TYPE_CHECKING, Any
 
 if TYPE_CHECKING:
     from posbench.scenarios.drive import Drive
+    from posbench.scenarios.stored_drive import DriveInfo
 
 #: the GPS conditions a drive can be replayed under (and a predictor tuned for): ``native``
 #: (the recording's own fixes) or a profile of fixes simulated from the truth; the same as
@@ -97,17 +98,18 @@ def drive_seed(seed: int, drive_name: str) -> int:
     return int.from_bytes(h[:4], "little")
 
 
-def gps_condition(cfg: RunConfig, drive: Drive) -> str:
-    """The GPS condition (one of :data:`GPS_CONDITIONS`) ``drive`` is replayed under:
+def gps_condition(cfg: RunConfig, drive: Drive | DriveInfo) -> str:
+    """The GPS condition (one of :data:`GPS_CONDITIONS`) ``drive`` (or its description) is
+    replayed under:
     ``native`` (its own recorded fixes) for a drive without truth; for one with truth the
     run's profile, where ``auto`` is ``native`` when the fixes come from a receiver of their
     own and :data:`AUTO_SIMULATED` when they are the truth's positions or were simulated
     from it (``Drive.fixes_from_truth``)."""
-    if drive.truth is None:
+    if not drive.has_truth:
         return "native"
     if cfg.gps_profile == AUTO_PROFILE:
         return AUTO_SIMULATED if drive.fixes_from_truth else "native"
-    if cfg.gps_profile == "native" and len(drive.gps) == 0:
+    if cfg.gps_profile == "native" and drive.fix_count == 0:
         return AUTO_SIMULATED  # no fixes of its own to feed
     return cfg.gps_profile
 

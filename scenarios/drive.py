@@ -263,6 +263,16 @@ class Drive:
         return float(max(ends) - min(starts)) if ends else 0.0
 
     @property
+    def fix_count(self) -> int:
+        """The drive's GPS fixes."""
+        return len(self.gps)
+
+    @property
+    def has_truth(self) -> bool:
+        """Whether the drive holds a truth stream."""
+        return self.truth is not None
+
+    @property
     def fixes_from_truth(self) -> bool:
         """Whether the drive's GPS fixes are no receiver of their own: the loader says they
         are the truth's positions or simulated from it (``meta.fix_source``), the drive has

@@ -16,7 +16,9 @@ from posbench.scenarios.consistency import (
     Consistency,
     check_drive,
 )
+from posbench.scenarios.drive import Drive
 from posbench.scenarios.errors import DataError
+from posbench.scenarios.stored_drive import StoredDrive, as_drive
 
 #: streams whose failure marks only the predictors that observe them (by overriding the
 #: named method of :class:`posbench.predictors.base.Predictor`); every other stream marks all
@@ -28,9 +30,14 @@ STREAM_METHODS = {
 }
 
 
-def check_drives(drives: Iterable[Any]) -> dict[str, Consistency]:
-    """:func:`posbench.scenarios.consistency.check_drive` of every drive, by drive name."""
-    return {d.name: check_drive(d) for d in drives}
+def check_drives(drives: Iterable[Drive | StoredDrive]) -> dict[str, Consistency]:
+    """:func:`posbench.scenarios.consistency.check_drive` of every drive, by drive name (a
+    stored drive's verdicts as its loading process found them)."""
+    out = {}
+    for d in drives:
+        found = d.check if isinstance(d, StoredDrive) else None
+        out[d.name] = found if found is not None else check_drive(as_drive(d))
+    return out
 
 
 def uses_stream(cls: type, stream: str) -> bool:
@@ -79,7 +86,10 @@ def to_results(checks: dict[str, Consistency], names: Sequence[str] = ()) -> dic
 
 
 def run_data_check(
-    drives: Iterable[Any], names: Sequence[str], strict: bool = False, reporter: Reporter = SILENT
+    drives: Iterable[Drive | StoredDrive],
+    names: Sequence[str],
+    strict: bool = False,
+    reporter: Reporter = SILENT,
 ) -> dict[str, Any]:
     """The data consistency check of every loaded drive, before any predictor runs: the
     ``consistency`` key of results.json; its failures and warnings told to ``reporter``.

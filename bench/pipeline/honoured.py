@@ -20,38 +20,40 @@ from posbench.config import AUTO_PROFILE, RunConfig, gps_condition
 from posbench.errors import UsageError
 from posbench.naming import plural
 from posbench.scenarios.drive import Drive
+from posbench.scenarios.stored_drive import DriveInfo, StoredDrive
 
 #: at most this many drive names in a note
 NAMED = 3
 
 
-def _names(drives: Sequence[Drive]) -> str:
+def _names(drives: Sequence[DriveInfo]) -> str:
     shown = ", ".join(d.name for d in drives[:NAMED])
     return shown + (f" and {len(drives) - NAMED} more" if len(drives) > NAMED else "")
 
 
-def _what(drive: Drive) -> str:
+def _what(drive: DriveInfo) -> str:
     """What a drive holds, for a message: ``fixes and IMU``, ``fixes, IMU and speed``."""
-    parts = ["fixes" if len(drive.gps) else "no fixes"]
-    parts += [s for s, v in (("IMU", drive.imu), ("speed", drive.speed)) if v is not None]
+    parts = ["fixes" if drive.fix_count else "no fixes"]
+    parts += [s for s, v in (("IMU", drive.has_imu), ("speed", drive.has_speed)) if v]
     return parts[0] if len(parts) == 1 else ", ".join(parts[:-1]) + " and " + parts[-1]
 
 
-def unhonoured(drives: Sequence[Drive], cfg: RunConfig) -> list[str]:
-    """One note per option of ``cfg`` that some of ``drives`` cannot honour (module
-    docstring); [] when every drive takes every option as asked.
+def unhonoured(loaded: Sequence[Drive | StoredDrive], cfg: RunConfig) -> list[str]:
+    """One note per option of ``cfg`` that some of the ``loaded`` drives cannot honour
+    (module docstring); [] when every drive takes every option as asked.
 
     Raises:
         UsageError: an option that applies to none of the drives, naming it and what would
             have been scored instead.
     """
+    drives = [DriveInfo.of(d) for d in loaded]
     notes: list[str] = []
     profile = cfg.gps_profile
     flag = f"--gps-profile {profile}"
     conditions = [gps_condition(cfg, d) for d in drives]  # what each drive is fed
     missed = [d for d, c in zip(drives, conditions, strict=True) if c != profile]
     if profile != AUTO_PROFILE and missed:
-        no_truth = [d for d in missed if d.truth is None]
+        no_truth = [d for d in missed if not d.has_truth]
         if no_truth and len(no_truth) == len(drives):
             d = no_truth[0]
             which = f"{d.name} holds {_what(d)}" if len(drives) == 1 else _names(no_truth)
@@ -65,7 +67,7 @@ def unhonoured(drives: Sequence[Drive], cfg: RunConfig) -> list[str]:
                 f"{flag}: {plural(len(no_truth), 'drive')} without a truth "
                 f"({_names(no_truth)}) fed and scored on their own receiver's fixes (native)"
             )
-        without = [d for d in missed if d.truth is not None]  # native, no fixes of its own
+        without = [d for d in missed if d.has_truth]  # native, no fixes of its own
         if without:
             notes.append(
                 f"{flag}: {plural(len(without), 'drive')} without fixes of their own "

@@ -1,5 +1,7 @@
-"""Where a run's workers write the drives' traces while it runs: a folder of Parquet parts
-(:func:`posbench.scoring.trace_set.write_part`), one subfolder per seed.
+"""Where a run keeps what its processes hand each other on disk while it runs: the drives as
+their loading processes wrote them (``drives/``, :mod:`posbench.scenarios.stored_drive`) and
+the drives' traces as the workers wrote them, a folder of Parquet parts
+(:func:`posbench.scoring.trace_set.write_part`) per seed (``seed-N/``).
 
 With an output folder it lies inside it (``OUT/.parts-XXXX``), so that on a cluster the
 workers write where the driver reads (``--out`` on a shared file system); without one, in
@@ -30,12 +32,25 @@ class PartsFolder:
                 if not folder.exists():
                     folder.mkdir()
                     self._made.append(folder)
-        self.path = Path(tempfile.mkdtemp(prefix=".parts-" if out else "posbench-parts-", dir=out))
+        # absolute: Ray workers need not share this process's working folder
+        self.path = Path(
+            tempfile.mkdtemp(prefix=".parts-" if out else "posbench-parts-", dir=out)
+        ).resolve()
         self._kept = False
 
     def seed(self, index: int) -> Path:
         """The folder of the ``index``-th seed's parts (0: the run's own)."""
         return self.path / f"seed-{index}"
+
+    @property
+    def drives(self) -> Path:
+        """The folder of the run's drives, as their loading processes wrote them
+        (:func:`posbench.scenarios.stored_drive.store_drive`)."""
+        return self.path / "drives"
+
+    def drop_drives(self) -> None:
+        """Remove the drives (once every replay and figure that reads them is done)."""
+        shutil.rmtree(self.drives, ignore_errors=True)
 
     def drop(self, index: int) -> None:
         """Remove the ``index``-th seed's parts (once its figures are taken)."""

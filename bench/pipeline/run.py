@@ -26,6 +26,7 @@ from posbench.scenarios.drive import Drive
 
 if TYPE_CHECKING:
     from posbench.pipeline.parts import PartsFolder
+    from posbench.scenarios.stored_drive import StoredDrive
     from posbench.scoring.records import DriveRun
 
 
@@ -266,16 +267,19 @@ def execute_run(plan: RunPlan, command: str, reporter: Reporter = SILENT) -> Pub
         ExecutorError: Ray could not start.
     """
     from posbench.pipeline.data_check import run_data_check
-    from posbench.pipeline.drives import load_drives
+    from posbench.pipeline.drives import stored_drives
     from posbench.pipeline.honoured import unhonoured
     from posbench.pipeline.parts import PartsFolder
     from posbench.pipeline.reporter import WARNING
     from posbench.scenarios.remote import local_paths
 
     o = plan.options
-    with local_paths(list(o.data) or None) as data:  # fsspec URLs -> local copies for loaders
-        drives = load_drives(
+    # fsspec URLs -> local copies for loaders; the parts folder: where the loading processes
+    # write the drives and the workers their traces (this process holds neither)
+    with local_paths(list(o.data) or None) as data, PartsFolder(o.out) as parts:
+        drives = stored_drives(
             data,
+            parts.drives,
             o.projection,
             dict(o.topics) or None,
             seed=plan.config.seed,
@@ -287,14 +291,11 @@ def execute_run(plan: RunPlan, command: str, reporter: Reporter = SILENT) -> Pub
         for note in notes:
             reporter.line(f"note: {note}", WARNING)
         consistency = run_data_check(drives, plan.config.predictors, o.strict, reporter)
-        with PartsFolder(o.out) as parts:  # where the workers write the drives' traces
-            return _replay_and_publish(
-                drives, plan, data, command, consistency, reporter, parts, notes
-            )
+        return _replay_and_publish(drives, plan, data, command, consistency, reporter, parts, notes)
 
 
 def replay_drives(
-    drives: Sequence[Drive],
+    drives: Sequence[Drive | StoredDrive],
     cfg: RunConfig,
     options: RunOptions,
     reporter: Reporter = SILENT,
@@ -337,7 +338,7 @@ def replay_drives(
 
 
 def _replay_and_publish(
-    drives: list[Drive],
+    drives: Sequence[StoredDrive],
     plan: RunPlan,
     data: list[Path] | None,
     command: str,
@@ -415,6 +416,7 @@ def _replay_and_publish(
             del runs_s
         res["seeds"] = seeds_section(seeds, figures)
     published = publish(res, traces, runs, writer, reporter)
+    parts.drop_drives()  # replayed and drawn
     if o.rerun is not None:
         from posbench.saved_run.run import marked_if_unfinished
 

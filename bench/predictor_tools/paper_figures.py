@@ -28,6 +28,7 @@ from posbench.predictors.registry import create
 from posbench.replay.loop import replay
 from posbench.replay.prepare import PreparedDrive, prepare_drive
 from posbench.scenarios.drive import Drive
+from posbench.scenarios.stored_drive import StoredDrive, as_drive
 from posbench.scoring.records import DriveRun
 from posbench.scoring.trace_set import TraceSet, as_trace_set
 
@@ -100,7 +101,7 @@ def _prepared_window(drive: Drive, fixes: pd.DataFrame, t0: float, t1: float) ->
 
 
 def paper_figures(
-    drives: list[Drive],
+    drives: Sequence[Drive | StoredDrive],
     cfg: RunConfig,
     traces: TraceSet | pd.DataFrame,
     out: Path,
@@ -128,7 +129,7 @@ def paper_figures(
     from matplotlib.figure import Figure
 
     name, t_fix = moment
-    drive = next(d for d in drives if d.name == name)
+    drive = as_drive(next(d for d in drives if d.name == name))  # the one drawn, read here
     run = next((r for r in runs or [] if r.name == name and r.fixes is not None), None)
     if run is not None:
         fixes_fed = run.fixes

@@ -37,6 +37,7 @@ from posbench.predictors.registry import (
 )
 from posbench.replay.runner import part_name, run, run_drive
 from posbench.scenarios.drive import Drive
+from posbench.scenarios.stored_drive import DriveInfo, StoredDrive
 from posbench.scoring.records import DriveRun, merge_predictor_runs
 
 EXECUTORS = ("local", "ray")
@@ -57,7 +58,7 @@ def ray_available() -> bool:
 
 
 def run_local(
-    drives: Sequence[Drive],
+    drives: Sequence[Drive | StoredDrive],
     cfg: RunConfig,
     workers: int = 2,
     on_done: Callable[[DriveRun], None] | None = None,
@@ -70,7 +71,7 @@ def run_local(
 
 
 def run_predictor(
-    drive: Drive,
+    drive: Drive | StoredDrive,
     cfg: RunConfig,
     name: str | None,
     entries: dict[str, Entry],
@@ -101,18 +102,21 @@ class _Failed:
     error: str
 
 
-def failed_run(drive: Drive, predictor: str | None, error: str, attempts: int) -> DriveRun:
+def failed_run(
+    drive: Drive | StoredDrive, predictor: str | None, error: str, attempts: int
+) -> DriveRun:
     """The record of a drive whose task failed after all retries: skipped, with the reason."""
+    drive_info = DriveInfo.of(drive)
     what = f"predictor {predictor}: " if predictor else ""
     return DriveRun(
-        drive.name,
-        drive.meta.format,
+        drive_info.name,
+        drive_info.meta.format,
         "",
         [],
-        list(drive.meta.warnings),
+        list(drive_info.meta.warnings),
         pd.DataFrame(),
         skipped=f"worker failed: {what}{error} (after {attempts} attempts)",
-        duration_s=drive.duration_s,
+        duration_s=drive_info.duration_s,
     )
 
 
@@ -131,7 +135,7 @@ def _import_ray() -> Any:
 
 
 def run_ray(
-    drives: Sequence[Drive],
+    drives: Sequence[Drive | StoredDrive],
     cfg: RunConfig,
     address: str | None = None,
     num_cpus: int = 2,
@@ -223,7 +227,7 @@ def worker_runtime_env(names: Sequence[str]) -> dict[str, Any] | None:
 
 def _fan_out(
     ray: Any,
-    drives: Sequence[Drive],
+    drives: Sequence[Drive | StoredDrive],
     cfg: RunConfig,
     max_retries: int,
     on_done: Callable[[DriveRun], None] | None,
@@ -240,7 +244,7 @@ def _fan_out(
     cfg_ref = ray.put(cfg)
     pending: dict[Any, tuple[int, int]] = {}
     for i, d in enumerate(drives):
-        drive_ref = ray.put(d)  # once per drive, shared by its predictor tasks
+        drive_ref = ray.put(d)  # once per drive (a stored one: its file), shared by its tasks
         for j, name in enumerate(names):
             part = part_name(i, None if name is None else j)
             pending[task.remote(drive_ref, cfg_ref, name, entries, limit, parts, part)] = (i, j)
@@ -271,7 +275,7 @@ def _fan_out(
 
 
 def run_drives(
-    drives: Sequence[Drive],
+    drives: Sequence[Drive | StoredDrive],
     cfg: RunConfig,
     executor: str = "local",
     workers: int = 2,

@@ -23,6 +23,7 @@ from posbench.replay.queries import query_frame
 from posbench.replay.reference import truth_source
 from posbench.scenarios.child_processes import WorkerPool
 from posbench.scenarios.drive import Drive
+from posbench.scenarios.stored_drive import DriveInfo, StoredDrive, as_drive
 from posbench.scenarios.truth_gaps import truth_gap_note
 from posbench.scoring.records import DriveRun, merge_predictor_runs
 from posbench.scoring.score import score_many
@@ -52,21 +53,21 @@ def _track_frame(prep: PreparedDrive) -> pd.DataFrame:
 SENSOR_FRAME_KEYS = ("imu_frame", "truth_kind", "truth_alignment")
 
 
-def sensor_frames(drive: Drive) -> dict[str, Any]:
+def sensor_frames(drive: Drive | DriveInfo) -> dict[str, Any]:
     """What the loader did about sensor frames and truth: the IMU path (levelled by its
     orientation, mount from tf, estimated, as-is), what the drive is scored against, and
     the alignment of a named truth (rotation, translation, residual RMS [m])."""
     return {k: drive.meta.extra[k] for k in SENSOR_FRAME_KEYS if k in drive.meta.extra}
 
 
-def skip_reason(drive: Drive, cfg: RunConfig) -> str | None:
+def skip_reason(drive: Drive | DriveInfo, cfg: RunConfig) -> str | None:
     """Why ``drive`` is not scored under ``cfg`` (None: it is)."""
     if cfg.exclude_poor_truth and drive.meta.extra.get("truth_poor"):
         return "poor truth accuracy (median > 1 m)"
     return None
 
 
-def skipped_run(drive: Drive, reason: str) -> DriveRun:
+def skipped_run(drive: Drive | DriveInfo, reason: str) -> DriveRun:
     """The record of a drive that is not scored, with the reason."""
     return DriveRun(
         drive.name,
@@ -117,7 +118,7 @@ def part_name(index: int, predictor: int | None = None) -> str:
 
 
 def run_drive(
-    drive: Drive,
+    drive: Drive | StoredDrive,
     cfg: RunConfig,
     limit: bool = False,
     parts: Path | None = None,
@@ -127,15 +128,16 @@ def run_drive(
     also compute the bound on its scored queries (:func:`posbench.replay.limit.drive_limit`;
     ``bench run`` asks for it, once per drive). Given a folder ``parts``, its traces are
     written there as part ``part`` and the record names the file instead of holding them
-    (:meth:`~posbench.scoring.records.DriveRun.spill`): what returns to the caller is small."""
-    record = _run_drive(drive, cfg, limit)
+    (:meth:`~posbench.scoring.records.DriveRun.spill`): what returns to the caller is small.
+    A stored drive is read here (:func:`~posbench.scenarios.stored_drive.as_drive`), unless
+    it is not scored."""
+    described = drive.info if isinstance(drive, StoredDrive) else drive  # its meta: enough
+    reason = skip_reason(described, cfg)
+    record = skipped_run(described, reason) if reason else _run_drive(as_drive(drive), cfg, limit)
     return record.spill(parts, part) if parts is not None else record
 
 
 def _run_drive(drive: Drive, cfg: RunConfig, limit: bool) -> DriveRun:
-    reason = skip_reason(drive, cfg)
-    if reason:
-        return skipped_run(drive, reason)
     prep = prepare_drive(drive, cfg)
     answers, step_ns, query_ns, cov_ns, rejected = [], {}, {}, {}, {}
     # one query table, future then now: each predictor's traces are its future rows, then
@@ -196,16 +198,15 @@ def _init_worker() -> None:
         os.environ[var] = "1"
 
 
-def replay_cost(drive: Drive, cfg: RunConfig) -> float:
+def replay_cost(drive: Drive | StoredDrive, cfg: RunConfig) -> float:
     """A drive's replay work, in events: its samples (fixes, IMU, speed) and its "now"
     queries. Only the order matters (the runner starts the costliest drives first)."""
-    n = len(drive.gps) + drive.duration_s / cfg.now_step_s
-    n += len(drive.imu) if drive.imu is not None else 0
-    return n + (len(drive.speed) if drive.speed is not None else 0)
+    info = DriveInfo.of(drive)
+    return info.samples + info.duration_s / cfg.now_step_s
 
 
 def plan_tasks(
-    drives: Sequence[Drive], cfg: RunConfig, workers: int
+    drives: Sequence[Drive | StoredDrive], cfg: RunConfig, workers: int
 ) -> list[tuple[int, str | None]]:
     """The local runner's tasks, costliest first: (drive index, None) replays a drive through
     every predictor; (drive index, name) through predictor ``name`` only. A drive holding
@@ -224,7 +225,7 @@ def plan_tasks(
 
 
 def run(
-    drives: Sequence[Drive],
+    drives: Sequence[Drive | StoredDrive],
     cfg: RunConfig,
     workers: int = 1,
     on_done: Callable[[DriveRun], None] | None = None,

@@ -13,9 +13,10 @@ import functools
 import hashlib
 import os
 from collections import Counter, defaultdict
-from collections.abc import Iterable, Iterator
+from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TypeVar
 
 from posbench.scenarios.drive import Drive
 from posbench.scenarios.errors import DataError
@@ -24,6 +25,8 @@ ROS1_SUFFIXES = (".bag",)
 ROS2_SUFFIXES = (".db3", ".mcap")
 PICKLE_SUFFIXES = (".pickle", ".pkl")
 TABLE_SUFFIXES = (".csv", ".parquet", ".pq")
+
+T = TypeVar("T")
 
 
 def _is_kitti_drive(p: Path) -> bool:
@@ -151,30 +154,47 @@ def iter_load_many(
     projection: str = "enu",
     topics: dict[str, str] | None = None,
     workers: int = 1,
-) -> Iterator[Drive]:
+    keep: Callable[[int, Drive], T] | None = None,
+) -> Iterator[Drive] | Iterator[T]:
     """The drives at or under each of ``paths``, in the order given (as :func:`iter_load` of
     each), loaded by ``workers`` processes at a time (forked; one recording each). Every path
     is checked for recordings before any is loaded. A loader's :class:`DataError` is raised
-    here, from whichever process met it, once the drives before it are yielded."""
+    here, from whichever process met it, once the drives before it are yielded.
+
+    ``keep``: what to make of each drive in the process that loaded it, given its index in
+    the order of the recordings (e.g. write it to disk and describe it:
+    :func:`posbench.scenarios.stored_drive.store_drive`); its results are yielded instead of
+    the drives, so no drive crosses back to this process."""
     recs = [r for p in paths for r in _recordings(p)]
+    job = functools.partial(_load_and_keep, projection=projection, topics=topics, keep=keep)
     if workers <= 1 or len(recs) <= 1 or not _can_fork():
-        for rec_path, fmt in recs:
-            yield load_one(rec_path, fmt, projection=projection, topics=topics)
+        for i, (rec_path, fmt) in enumerate(recs):
+            yield job(i, rec_path, fmt)
         return
     import multiprocessing as mp
 
     from posbench.scenarios.child_processes import WorkerPool  # end with us, no Ctrl-C
 
     with WorkerPool(max_workers=min(workers, len(recs)), mp_context=mp.get_context("fork")) as pool:
-        futures = [
-            pool.submit(load_one, rec_path, fmt, projection, topics) for rec_path, fmt in recs
-        ]
+        futures = [pool.submit(job, i, rec_path, fmt) for i, (rec_path, fmt) in enumerate(recs)]
         try:
             for fut in futures:
                 yield fut.result()
         finally:
             for fut in futures:
                 fut.cancel()
+
+
+def _load_and_keep(
+    index: int,
+    path: Path,
+    fmt: str,
+    projection: str,
+    topics: dict[str, str] | None,
+    keep: Callable[[int, Drive], T] | None,
+) -> Drive | T:
+    drive = load_one(path, fmt, projection=projection, topics=topics)
+    return drive if keep is None else keep(index, drive)
 
 
 def _can_fork() -> bool:
