@@ -3,168 +3,49 @@
 Pure given its inputs: traces and per-drive records in, a nested dict of figures out. What
 the run was (command, config, versions, data hashes) is added by
 :func:`posbench.pipeline.results.build_results`; which learned models stand behind the
-predictors is an input (:func:`posbench.replay.predictor_setup.learned_models`)."""
+predictors is an input (:func:`posbench.replay.predictor_setup.learned_models`).
+
+Two steps: each predictor's figures
+(:func:`posbench.aggregation.predictor_figures.predictor_figures`, in a child process each
+given ``workers``), then put in place and combined over predictors and drives here."""
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Mapping, Sequence
 from typing import Any
 
-import numpy as np
 import pandas as pd
 
-from posbench.aggregation.intervals import (
-    Statistics,
-    add_group_cis,
-    drive_codes,
-    one_drive_cis,
-    outage_cis,
-    paired_results,
-    with_ci,
+from posbench.aggregation.intervals import Statistics
+from posbench.aggregation.predictor_figures import (
+    AGGREGATED,
+    Combining,
+    empty_kinds,
+    limit_figures,
+    predictor_figures,
+    scored_drives,
 )
 from posbench.config import RunConfig, default_baseline
-from posbench.metrics.accuracy import speed_bin_labels, speed_bin_order, summarize, summarize_groups
-from posbench.metrics.latency import latency_summary
-from posbench.metrics.outages import (
-    error_vs_since_fix,
-    outage_keys,
-    outage_scores,
-    since_fix_checkpoint,
-)
-from posbench.scenarios.labels import LABELS
 from posbench.scoring.records import DriveRun, trace_set
 from posbench.scoring.reference import dataset_references
 from posbench.scoring.schema import KINDS
 from posbench.scoring.trace_set import TraceSet, as_trace_set
 
-#: the trace columns aggregation reads (positions are not needed once errors exist)
-AGGREGATED = (
-    "dataset",
-    "drive",
-    "predictor",
-    "kind",
-    "t_query",
-    "error_m",
-    "label",
-    "speed_mps",
-    "since_fix_s",
-    "outage",
-)
 
-
-def excluded_summary(
-    traces: TraceSet | pd.DataFrame, preds: Sequence[str], stats: Statistics | None = None
-) -> dict[str, Any]:
-    """What the headline figures leave out, per predictor and kind: warm-up queries (with
-    their error summaries, and intervals given ``stats``) and queries without a reference
-    (beyond the truth's or the fixes' span: nothing to score against). One predictor's
-    rows at a time."""
-    out: dict[str, Any] = {"warmup": {}, "no_reference": {}}
-    ts = as_trace_set(traces)
-    if ts.empty:
-        return out
-    cols = ["dataset", "drive", "kind", "t_query", "error_m", "x_ref", "y_ref", "warmup"]
-    for name, df in ts.per_predictor(preds, cols, scored=False):
-        no_ref = (df["x_ref"].isna() | df["y_ref"].isna()).to_numpy()
-        warm = df["warmup"].to_numpy(dtype=bool) if "warmup" in df else np.zeros(len(df), bool)
-        out["warmup"][name] = _kind_summaries(_with_codes(df[warm & ~no_ref]), stats)
-        kind = df["kind"].to_numpy()
-        out["no_reference"][name] = {k: int((no_ref & (kind == k)).sum()) for k in KINDS}
-    return out
-
-
-def _with_codes(df: pd.DataFrame) -> pd.DataFrame:
-    """``df`` with column ``code``: its drive as an integer (the bootstrap's cluster)."""
-    return df.assign(code=drive_codes(df))
-
-
-def _columns(df: pd.DataFrame, kind: str) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """Errors [m], drive codes, query times [s] and the row mask of one kind's rows."""
-    m = (df["kind"] == kind).to_numpy()
-    return (
-        df["error_m"].to_numpy(dtype=float)[m],
-        df["code"].to_numpy()[m],
-        df["t_query"].to_numpy(dtype=float)[m],
-        m,
-    )
-
-
-def _kind_summaries(df: pd.DataFrame, stats: Statistics | None = None) -> dict[str, Any]:
-    """Per kind, :func:`summarize` of the errors, with ``ci95`` given ``stats`` (``df`` then
-    needs the ``code`` column of :func:`_with_codes`)."""
-    if stats is None:
-        return {k: summarize(df.loc[df["kind"] == k, "error_m"].to_numpy()) for k in KINDS}
-    kind = df["kind"].to_numpy()
-    out = {k: summarize(df["error_m"].to_numpy(dtype=float)[kind == k]) for k in KINDS}
-    add_group_cis(
-        out,
-        df["error_m"].to_numpy(dtype=float),
-        kind,
-        df["code"].to_numpy(),
-        df["t_query"].to_numpy(dtype=float),
-        stats,
-    )
-    return out
-
-
-def _label_summaries(df: pd.DataFrame, stats: Statistics | None = None) -> dict[str, Any]:
-    out = {}
-    for kind in KINDS:
-        m = (df["kind"] == kind).to_numpy()
-        e = df["error_m"].to_numpy(dtype=float)[m]
-        labels = df["label"].to_numpy()[m]
-        out[kind] = summarize_groups(e, labels, order=list(LABELS))
-        if stats is not None:
-            add_group_cis(
-                out[kind],
-                e,
-                labels,
-                df["code"].to_numpy()[m],
-                df["t_query"].to_numpy(dtype=float)[m],
-                stats,
-            )
-    return out
-
-
-def _per_drive(
-    df: pd.DataFrame,
-    name: str,
-    per_drive: dict[tuple[str, str], dict[str, Any]],
-    queries: dict[tuple[str, str, str], dict[str, tuple[np.ndarray, np.ndarray]]],
-) -> None:
-    """Each drive's summaries of predictor ``name`` (``df``: its scored rows with ``code``)
-    into ``per_drive[(dataset, drive)][name]``, and each drive's errors and query times per
-    kind into ``queries[(dataset, drive, kind)][name]`` (for the intervals, drive by drive)."""
-    first = df.drop_duplicates("code")
-    keys = dict(
-        zip(
-            first["code"].to_numpy(),
-            zip(first["dataset"].astype(str), first["drive"].astype(str), strict=True),
-            strict=True,
-        )
-    )
-    for key in keys.values():
-        per_drive.setdefault(key, {})[name] = {k: summarize(np.empty(0)) for k in KINDS}
-    for k in KINDS:
-        e, codes, t, _ = _columns(df, k)
-        order = np.argsort(codes, kind="stable")  # stable: each drive keeps its time order
-        present, starts, counts = np.unique(codes[order], return_index=True, return_counts=True)
-        for code, a, n in zip(present.tolist(), starts.tolist(), counts.tolist(), strict=True):
-            ds, drive = keys[code]
-            idx = order[a : a + n]
-            per_drive[(ds, drive)][name][k] = summarize(e[idx])
-            queries.setdefault((ds, drive, k), {})[name] = (e[idx], t[idx])
-
-
-def _durations(runs: Sequence[DriveRun], call: str, name: str) -> list[np.ndarray]:
-    """Predictor ``name``'s ``call`` durations [ns] per drive that has them, in drive order."""
-    found = (r.call_ns(call, name) for r in runs)
-    return [a for a in found if a is not None]
-
-
-def _empty_kinds(stats: Statistics | None = None) -> dict[str, Any]:
-    empty = np.empty(0)
-    return {k: with_ci(summarize(empty), empty, empty, None, stats) for k in KINDS}
+def _merge_sections(res: dict[str, Any], name: str, f: dict[str, Any]) -> None:
+    """Predictor ``name``'s excluded queries, track errors, uncertainty and sanity losses
+    (``f``: :func:`predictor_figures`) into ``res``, after the predictors before it."""
+    for key in ("warmup", "no_reference"):
+        res["excluded"][key].update(f["excluded"][key])
+    for block, value in f["track_errors"].items():
+        res["track_errors"].setdefault(block, {}).update(value)
+    for block, value in f["uncertainty"].items():
+        if block == "none":
+            res["uncertainty"]["none"].extend(value)
+        else:
+            res["uncertainty"].setdefault(block, {}).update(value)
+    res["sanity"]["losses"].extend(f["losses"])
 
 
 def aggregate(
@@ -174,6 +55,7 @@ def aggregate(
     models: Mapping[str, Mapping[str, Any]],
     traces: TraceSet | pd.DataFrame | None = None,
     statistics: Statistics | None = None,
+    workers: int = 1,
 ) -> dict[str, Any]:
     """The figures of ``results.json``, from its key ``predictors`` on (``traces``: the
     runs' traces, in memory or on disk, :func:`~posbench.scoring.records.trace_set` if not
@@ -184,11 +66,18 @@ def aggregate(
     Headline figures use the scored rows only
     (:func:`~posbench.scoring.schema.scored_mask`); the work goes one predictor at a time
     over just the :data:`AGGREGATED` columns of its rows (the baseline's rows are kept for
-    the paired comparison); traces on disk are read that way, so the process holds one
-    predictor's columns (two with the baseline), never every answer of the run. Every
-    summary gets its ``ci95`` and each predictor its paired comparison with the baseline
-    as ``statistics`` says (default: :class:`Statistics` with baseline ``kf`` when it is
-    in the run; see :mod:`posbench.aggregation.intervals`)."""
+    the paired comparison); traces on disk are read that way, so a process holds one
+    predictor's columns (two with the baseline), never every answer of the run. With
+    ``workers`` > 1 each predictor's figures are computed in a forked child process
+    (:func:`~posbench.scenarios.forked.forked_map`, that many at a time): this process never
+    reads a predictor's rows, and what a predictor's figures allocated is returned to the
+    system when its child ends; the figures are the same, to the bit. Every summary gets
+    its ``ci95`` and each predictor its paired comparison with the baseline as
+    ``statistics`` says (default: :class:`Statistics` with baseline ``kf`` when it is in
+    the run; see :mod:`posbench.aggregation.intervals`)."""
+    from posbench.aggregation.sanity import REFERENCE
+    from posbench.scenarios.forked import Job, forked_map
+
     ts = trace_set(runs) if traces is None else as_trace_set(traces)
     preds = list(cfg.predictors)
     stats = statistics or Statistics(baseline=default_baseline(preds))
@@ -200,7 +89,7 @@ def aggregate(
         "by_speed": {},
         "outages": {},
         "models": {n: dict(m) for n, m in models.items()},
-        "excluded": excluded_summary(ts, preds, stats),
+        "excluded": {"warmup": {}, "no_reference": {}},  # filled per predictor below
         "held_out": {},
         "held_out_all": {},
         "drives": [],
@@ -208,14 +97,14 @@ def aggregate(
     res["training_drives"] = {n: m["train_drives"] for n, m in res["models"].items()}
     trained_on = {n for names in res["training_drives"].values() for n in names}
     cols = [c for c in AGGREGATED if c in ts] if not ts.empty else list(AGGREGATED)
-    # which drives were scored, and whether any query fell in an outage: one predictor at a time
+    # which drives were scored, and whether any query fell in an outage: one predictor at a
+    # time (each in a child process given workers)
     drives_of: dict[str, set[str]] = {}
     with_outages = False
-    for _, df in ts.per_predictor(preds, ["dataset", "drive", "outage"]):
-        pairs = df[["dataset", "drive"]].drop_duplicates()
-        for ds, drive in zip(pairs["dataset"].astype(str), pairs["drive"].astype(str), strict=True):
+    for found, outages in forked_map(functools.partial(scored_drives, ts), preds, workers):
+        for ds, drive in found:
             drives_of.setdefault(ds, set()).add(drive)
-        with_outages = with_outages or bool((df["outage"].to_numpy() >= 0).any())
+        with_outages = with_outages or outages
     datasets = sorted(drives_of)
     all_drives = set().union(*drives_of.values()) if drives_of else set()
     held_ds = [ds for ds in datasets if drives_of[ds] & trained_on]
@@ -230,93 +119,58 @@ def aggregate(
     if held_all:
         res["held_out_all"] = {"drives": sorted(all_drives - trained_on), "predictors": {}}
     per_drive: dict[tuple[str, str], dict[str, Any]] = {}
-    drive_queries: dict[tuple[str, str, str], dict[str, tuple[np.ndarray, np.ndarray]]] = {}
     for ds in datasets:
         res["by_dataset"][ds] = {}
         res["by_label"][ds] = {}
     res["statistics"] = stats.to_dict()
     res["paired"] = {"baseline": stats.baseline, "overall": {}, "by_dataset": {}, "by_label": {}}
-
-    def scored_rows(name: str) -> pd.DataFrame:
-        if ts.empty:
-            return pd.DataFrame(columns=[*cols, "code"])
-        return _with_codes(ts.scored(name, cols))
-
-    base_df = scored_rows(stats.baseline) if stats.baseline else None
-    for name in preds:
-        df = base_df if base_df is not None and name == stats.baseline else scored_rows(name)
-        entry = _kind_summaries(df, stats) if not df.empty else _empty_kinds(stats)
-        steps, queries, covs = (_durations(runs, c, name) for c in ("step", "query", "cov"))
-        entry["latency_us"] = latency_summary(np.concatenate(steps or [np.empty(0)]))
-        entry["query_us"] = latency_summary(np.concatenate(queries or [np.empty(0)]))
-        if covs:  # the covariance_at call, timed apart from the query
-            entry["covariance_us"] = latency_summary(np.concatenate(covs))
-        res["predictors"][name] = entry
-        if not df.empty:
-            for kind in KINDS:
-                e, codes, t, m = _columns(df, kind)
-                bins = speed_bin_labels(df["speed_mps"].to_numpy()[m])
-                by_speed = summarize_groups(e, bins, order=speed_bin_order() + ["unknown"])
-                add_group_cis(by_speed, e, bins, codes, t, stats)
-                res["by_speed"].setdefault(name, {})[kind] = by_speed
-        if with_outages:
-            e, codes, t, m = _columns(df, "now")
-            outage = df["outage"].to_numpy()[m]
-            since = df["since_fix_s"].to_numpy()[m]
-            ids = outage_keys(codes, outage)
-            since_fix = error_vs_since_fix(e, since)
-            add_group_cis(since_fix, e, since_fix_checkpoint(since), codes, t, stats)
-            scores: dict[str, Any] = outage_scores(e, t, ids)
-            scores["ci95"] = outage_cis(e, t, ids, stats)
-            res["outages"][name] = {"since_fix": since_fix, "scores": scores}
-        if base_df is not None and name != stats.baseline and not df.empty:
-            pr = paired_results(df, base_df, datasets, stats)
+    res["track_errors"] = {"predictors": {}, "by_label": {}}
+    res["uncertainty"] = {"none": []}
+    checked = REFERENCE in preds and not ts.empty
+    res["sanity"] = {"reference": REFERENCE, "checked": checked, "losses": []}
+    combining = Combining(
+        ts, runs, cols, stats, datasets, with_outages, trained_on, held_ds, held_all, checked
+    )
+    figures = forked_map(functools.partial(predictor_figures, combining), preds, workers)
+    for name, f in zip(preds, figures, strict=True):
+        res["predictors"][name] = f["entry"]
+        if "by_speed" in f:
+            res["by_speed"][name] = f["by_speed"]
+        if "outages" in f:
+            res["outages"][name] = f["outages"]
+        if "paired" in f:
+            pr = f["paired"]
             res["paired"]["overall"][name] = pr["overall"]
             for ds in datasets:
                 res["paired"]["by_dataset"].setdefault(ds, {})[name] = pr["by_dataset"][ds]
                 res["paired"]["by_label"].setdefault(ds, {})[name] = pr["by_label"][ds]
-            if held_all or held_ds:  # the same comparison without the training drives
-                ph = paired_results(
-                    df[~df["drive"].isin(trained_on)],
-                    base_df[~base_df["drive"].isin(trained_on)],
-                    held_ds,
-                    stats,
-                )
-                held = res["paired"].setdefault(
-                    "held_out",
-                    {
-                        "drives": sorted(all_drives - trained_on),
-                        "overall": {},
-                        "by_dataset": {ds: {} for ds in held_ds},
-                    },
-                )
-                held["overall"][name] = ph["overall"]
-                for ds in held_ds:
-                    held["by_dataset"][ds][name] = ph["by_dataset"][ds]
-        groups = {str(ds): g for ds, g in df.groupby("dataset", sort=True, observed=True)}
-        for ds in datasets:
-            dfp = groups.get(ds, df.iloc[:0])
-            res["by_dataset"][ds][name] = _kind_summaries(dfp, stats)
-            res["by_label"][ds][name] = _label_summaries(dfp, stats)
-            if ds in res["held_out"]:
-                held = dfp[~dfp["drive"].isin(trained_on)]
-                res["held_out"][ds]["predictors"][name] = _kind_summaries(held, stats)
-                res["held_out"][ds]["by_label"][name] = _label_summaries(held, stats)
-        if held_all:
-            res["held_out_all"]["predictors"][name] = _kind_summaries(
-                df[~df["drive"].isin(trained_on)], stats
+        if "paired_held" in f:
+            ph = f["paired_held"]
+            held = res["paired"].setdefault(
+                "held_out",
+                {
+                    "drives": sorted(all_drives - trained_on),
+                    "overall": {},
+                    "by_dataset": {ds: {} for ds in held_ds},
+                },
             )
-        if not df.empty:
-            _per_drive(df, name, per_drive, drive_queries)
-            # each drive's interval (block bootstrap) depends on its own predictor's queries
-            # only: taken now, so no other predictor's errors are held meanwhile
-            for (ds, drive, k), by_pred in drive_queries.items():
-                for n, ci in one_drive_cis(by_pred, stats).items():
-                    per_drive[(ds, drive)][n][k]["ci95"] = ci
-            drive_queries.clear()
-        del df, groups
-    del base_df
-    empty_ci = _empty_kinds(stats)["future"].get("ci95")
+            held["overall"][name] = ph["overall"]
+            for ds in held_ds:
+                held["by_dataset"][ds][name] = ph["by_dataset"][ds]
+        for ds in datasets:
+            res["by_dataset"][ds][name] = f["by_dataset"][ds]
+            res["by_label"][ds][name] = f["by_label"][ds]
+            if ds in res["held_out"]:
+                kinds, labels = f["held_out"][ds]
+                res["held_out"][ds]["predictors"][name] = kinds
+                res["held_out"][ds]["by_label"][name] = labels
+        if held_all:
+            res["held_out_all"]["predictors"][name] = f["held_out_all"]
+        for key, kinds in f["per_drive"].items():
+            per_drive.setdefault(key, {})[name] = kinds
+        _merge_sections(res, name, f)
+    _uncertainty_in_order(res)
+    empty_ci = empty_kinds(stats)["future"].get("ci95")
     for kinds in (s for by_name in per_drive.values() for s in by_name.values()):
         for k in KINDS:
             if empty_ci is not None and "ci95" not in kinds[k]:  # a kind without queries
@@ -362,14 +216,19 @@ def aggregate(
             d["sensor_frames"] = r.sensor_frames
         if r.has_traces:
             mine = per_drive.get((r.dataset, r.name), {})
-            d["predictors"] = {name: mine.get(name, _empty_kinds(stats)) for name in preds}
+            d["predictors"] = {name: mine.get(name, empty_kinds(stats)) for name in preds}
         res["drives"].append(d)
     res["references"] = dataset_references(res["drives"])
-    from posbench.aggregation.limit import imu_readers, limit_section
+    from posbench.aggregation.limit import imu_readers
 
     # the bound beside the predictors, never one; each judged against the bound that applies
     readers = imu_readers(preds, cfg.predictor_options)
-    limit = limit_section(runs, res, stats, readers)
+    limit, per_drive_limits = Job(
+        limit_figures, runs, res, stats, readers, background=workers > 1, nice=0
+    ).result()
+    for d, entry in zip(res["drives"], per_drive_limits, strict=True):
+        if entry is not None:
+            d["limit"] = entry
     if limit is not None:
         res["limit"] = limit
     res["gate"] = gate_summary(runs, cfg)
@@ -378,16 +237,16 @@ def aggregate(
     lengths = outage_length_section(runs, cfg, stats)  # the outage-lengths profile only
     if lengths is not None:
         res["outage_lengths"] = lengths
-    from posbench.aggregation.track import track_section
-
-    res["track_errors"] = track_section(ts, preds)
-    from posbench.aggregation.uncertainty import uncertainty_section
-
-    res["uncertainty"] = uncertainty_section(ts, preds)
-    from posbench.aggregation.sanity import sanity_section
-
-    res["sanity"] = sanity_section(ts, preds, datasets, stats)
+    for key in ("track_errors", "uncertainty", "sanity"):  # after the others, as before
+        res[key] = res.pop(key)
     return res
+
+
+def _uncertainty_in_order(res: dict[str, Any]) -> None:
+    """The uncertainty block's keys in :func:`uncertainty_section`'s order."""
+    u = res["uncertainty"]
+    order = ("predictors", "by_dataset", "by_label", "by_since_fix", "curve", "none")
+    res["uncertainty"] = {k: u.get(k, {}) for k in order}
 
 
 def gate_summary(runs: Sequence[DriveRun], cfg: RunConfig) -> dict[str, Any]:

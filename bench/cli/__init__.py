@@ -88,7 +88,13 @@ def main(argv: list[str] | None = None) -> None:
     own handling prints it; an interrupt dropped on the way (by a finalizer) or turned into
     another error (an import of a C extension, interrupted, raises ImportError) is reported
     here when the command ends; one after it has ended (the interpreter exiting) ends the
-    process at once. With SIGINT ignored (a background job), it stays ignored."""
+    process at once. With SIGINT ignored (a background job), it stays ignored.
+
+    Arrow allocates through the C library's malloc in ``bench``'s processes (unless
+    ``ARROW_DEFAULT_MEMORY_POOL`` says otherwise): its default pool (mimalloc) keeps what a
+    run's aggregation frees, reading one predictor's traces after another; measured on 8 drive
+    hours of the corpus, the main process's peak fell 968 -> 805 MB at the same wall time."""
+    os.environ.setdefault("ARROW_DEFAULT_MEMORY_POOL", "system")
     if signal.getsignal(signal.SIGINT) is signal.default_int_handler:
         signal.signal(signal.SIGINT, _on_interrupt)
         sys.unraisablehook = _quiet_interrupts(sys.unraisablehook)

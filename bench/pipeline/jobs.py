@@ -22,95 +22,17 @@ interrupted while it waits for a child's answer ends that child.
 
 from __future__ import annotations
 
-import multiprocessing as mp
-import os
-import pickle
 from collections.abc import Callable, Sequence
 from pathlib import Path
-from typing import Any, Generic, TypeVar
 
 import pandas as pd
 
 from posbench.figures.style import PlotsWritten
 from posbench.figures.writer import joined, write_drive_plots, write_summary_plots
-from posbench.scenarios.child_processes import become_child, interrupts_held
+from posbench.scenarios.forked import CHILD_NICENESS as CHILD_NICENESS
+from posbench.scenarios.forked import Job as Job
+from posbench.scenarios.forked import can_fork as can_fork
 from posbench.scoring.trace_set import TraceSet, lean_traces
-
-T = TypeVar("T")
-#: how much nicer than the parent a child runs: on a machine with fewer free cores than
-#: processes, the parent (which aggregates, the longest chain of work) keeps a core and the
-#: children share what is left, instead of every process getting an equal slice
-CHILD_NICENESS = 5
-
-
-def _child(conn: Any, fn: Callable[..., Any], args: tuple[Any, ...], parent_pid: int) -> None:
-    """In the child of ``parent_pid``: run ``fn(*args)``, send ``(True, value)`` or
-    ``(False, exception)``."""
-    become_child(parent_pid)
-    try:
-        os.nice(CHILD_NICENESS)
-    except OSError:  # not allowed here: run at the parent's priority
-        pass
-    try:
-        value: tuple[bool, Any] = (True, fn(*args))
-    except BaseException as e:  # noqa: BLE001 - everything goes back to the parent
-        value = (False, e)
-    try:
-        conn.send(value)
-    except (pickle.PicklingError, TypeError, AttributeError):  # an exception that won't pickle
-        conn.send((False, RuntimeError(f"{type(value[1]).__name__}: {value[1]}")))
-    finally:
-        conn.close()
-
-
-def can_fork() -> bool:
-    """Whether this platform starts processes by ``fork`` (Linux)."""
-    return "fork" in mp.get_all_start_methods()
-
-
-class Job(Generic[T]):
-    """``fn(*args)`` started now in a forked child process; :meth:`result` waits for it.
-
-    Without fork (or with ``background=False``) nothing starts until :meth:`result`, which
-    then calls ``fn`` here. If the child dies without an answer (killed, out of memory),
-    :meth:`result` calls ``fn`` here too. An exception ``fn`` raised in the child is raised
-    again by :meth:`result`; :meth:`result` interrupted (Ctrl-C) kills the child."""
-
-    def __init__(self, fn: Callable[..., T], *args: Any, background: bool = True) -> None:
-        self._fn, self._args = fn, args
-        self._proc: Any = None
-        self._conn: Any = None
-        if background and can_fork():
-            ctx = mp.get_context("fork")
-            recv, send = ctx.Pipe(duplex=False)
-            self._proc = ctx.Process(target=_child, args=(send, fn, args, os.getpid()), daemon=True)
-            with interrupts_held():
-                self._proc.start()
-            send.close()
-            self._conn = recv
-
-    def result(self) -> T:
-        """The value of ``fn(*args)`` (waits for the child). Ask once."""
-        if self._proc is None:
-            return self._fn(*self._args)
-        proc, self._proc = self._proc, None
-        try:
-            answer = self._conn.recv()
-        except EOFError:  # the child died before answering
-            answer = None
-        except BaseException:  # interrupted while waiting: its answer is not wanted any more
-            proc.kill()
-            raise
-        finally:
-            self._conn.close()
-            proc.join()
-        if answer is None:
-            return self._fn(*self._args)
-        ok, value = answer
-        if not ok:
-            raise value
-        returned: T = value  # what fn returned in the child, unpickled
-        return returned
 
 
 class FigureJobs:

@@ -25,13 +25,15 @@ def build_results(
     traces: pd.DataFrame | None = None,
     models: Mapping[str, Mapping[str, Any]] | None = None,
     statistics: Statistics | None = None,
+    workers: int = 1,
 ) -> dict[str, Any]:
     """``results.json`` of ``runs`` replayed under ``cfg``: its provenance (``command``, the
     config, package versions, the git commit, ``data``: the data block,
     :func:`posbench.saved_run.provenance.data_provenance`) then the figures of
     :func:`posbench.aggregation.aggregate.aggregate`. ``models``: the learned models behind
     the predictors; None builds each learned predictor of ``cfg`` once to ask
-    (:func:`posbench.replay.predictor_setup.learned_models`), ``{}`` for none."""
+    (:func:`posbench.replay.predictor_setup.learned_models`), ``{}`` for none.
+    ``workers``: child processes computing the predictors' figures at a time (``aggregate``)."""
     if models is None:
         from posbench.replay.predictor_setup import learned_models
 
@@ -57,7 +59,12 @@ def build_results(
         "data": data,
         "tuning": tuning,
     }
-    return {**head, **aggregate(runs, cfg, traces=traces, models=models, statistics=statistics)}
+    return {
+        **head,
+        **aggregate(
+            runs, cfg, traces=traces, models=models, statistics=statistics, workers=workers
+        ),
+    }
 
 
 def tuning_provenance(cfg: RunConfig, runs: Sequence[DriveRun]) -> dict[str, dict[str, Any]]:

@@ -389,6 +389,7 @@ def _replay_and_publish(
         traces=traces,
         models=plan.models,
         statistics=plan.statistics,
+        workers=o.workers,
     )
     res["consistency"] = consistency
     res["gps_conditions"] = scored_conditions(res["drives"])

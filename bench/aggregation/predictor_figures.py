@@ -1,0 +1,296 @@
+"""Each predictor's figures, step one of combining a run (:mod:`posbench.aggregation.aggregate`
+puts them in place): from its scored rows, read on their own (with the baseline's for the
+paired comparison), every summary and interval of results.json that concerns it, as plain
+values, so that they can be computed in a child process and sent back.
+
+Pure given its inputs: the traces (in memory or on disk) and the per-drive records in,
+nested dicts of figures out."""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+from posbench.aggregation.intervals import (
+    Statistics,
+    add_group_cis,
+    drive_codes,
+    one_drive_cis,
+    outage_cis,
+    paired_results,
+    with_ci,
+)
+from posbench.metrics.accuracy import speed_bin_labels, speed_bin_order, summarize, summarize_groups
+from posbench.metrics.latency import latency_summary
+from posbench.metrics.outages import (
+    error_vs_since_fix,
+    outage_keys,
+    outage_scores,
+    since_fix_checkpoint,
+)
+from posbench.scenarios.labels import LABELS
+from posbench.scoring.records import DriveRun
+from posbench.scoring.schema import KINDS
+from posbench.scoring.trace_set import TraceSet, as_trace_set
+
+#: the trace columns aggregation reads (positions are not needed once errors exist)
+AGGREGATED = (
+    "dataset",
+    "drive",
+    "predictor",
+    "kind",
+    "t_query",
+    "error_m",
+    "label",
+    "speed_mps",
+    "since_fix_s",
+    "outage",
+)
+
+
+def excluded_summary(
+    traces: TraceSet | pd.DataFrame, preds: Sequence[str], stats: Statistics | None = None
+) -> dict[str, Any]:
+    """What the headline figures leave out, per predictor and kind: warm-up queries (with
+    their error summaries, and intervals given ``stats``) and queries without a reference
+    (beyond the truth's or the fixes' span: nothing to score against). One predictor's
+    rows at a time."""
+    out: dict[str, Any] = {"warmup": {}, "no_reference": {}}
+    ts = as_trace_set(traces)
+    if ts.empty:
+        return out
+    cols = ["dataset", "drive", "kind", "t_query", "error_m", "x_ref", "y_ref", "warmup"]
+    for name, df in ts.per_predictor(preds, cols, scored=False):
+        no_ref = (df["x_ref"].isna() | df["y_ref"].isna()).to_numpy()
+        warm = df["warmup"].to_numpy(dtype=bool) if "warmup" in df else np.zeros(len(df), bool)
+        out["warmup"][name] = kind_summaries(with_codes(df[warm & ~no_ref]), stats)
+        kind = df["kind"].to_numpy()
+        out["no_reference"][name] = {k: int((no_ref & (kind == k)).sum()) for k in KINDS}
+    return out
+
+
+def with_codes(df: pd.DataFrame) -> pd.DataFrame:
+    """``df`` with column ``code``: its drive as an integer (the bootstrap's cluster)."""
+    return df.assign(code=drive_codes(df))
+
+
+def kind_columns(
+    df: pd.DataFrame, kind: str
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Errors [m], drive codes, query times [s] and the row mask of one kind's rows."""
+    m = (df["kind"] == kind).to_numpy()
+    return (
+        df["error_m"].to_numpy(dtype=float)[m],
+        df["code"].to_numpy()[m],
+        df["t_query"].to_numpy(dtype=float)[m],
+        m,
+    )
+
+
+def kind_summaries(df: pd.DataFrame, stats: Statistics | None = None) -> dict[str, Any]:
+    """Per kind, :func:`summarize` of the errors, with ``ci95`` given ``stats`` (``df`` then
+    needs the ``code`` column of :func:`with_codes`)."""
+    if stats is None:
+        return {k: summarize(df.loc[df["kind"] == k, "error_m"].to_numpy()) for k in KINDS}
+    kind = df["kind"].to_numpy()
+    out = {k: summarize(df["error_m"].to_numpy(dtype=float)[kind == k]) for k in KINDS}
+    add_group_cis(
+        out,
+        df["error_m"].to_numpy(dtype=float),
+        kind,
+        df["code"].to_numpy(),
+        df["t_query"].to_numpy(dtype=float),
+        stats,
+    )
+    return out
+
+
+def label_summaries(df: pd.DataFrame, stats: Statistics | None = None) -> dict[str, Any]:
+    out = {}
+    for kind in KINDS:
+        m = (df["kind"] == kind).to_numpy()
+        e = df["error_m"].to_numpy(dtype=float)[m]
+        labels = df["label"].to_numpy()[m]
+        out[kind] = summarize_groups(e, labels, order=list(LABELS))
+        if stats is not None:
+            add_group_cis(
+                out[kind],
+                e,
+                labels,
+                df["code"].to_numpy()[m],
+                df["t_query"].to_numpy(dtype=float)[m],
+                stats,
+            )
+    return out
+
+
+def per_drive_summaries(
+    df: pd.DataFrame,
+    name: str,
+    per_drive: dict[tuple[str, str], dict[str, Any]],
+    queries: dict[tuple[str, str, str], dict[str, tuple[np.ndarray, np.ndarray]]],
+) -> None:
+    """Each drive's summaries of predictor ``name`` (``df``: its scored rows with ``code``)
+    into ``per_drive[(dataset, drive)][name]``, and each drive's errors and query times per
+    kind into ``queries[(dataset, drive, kind)][name]`` (for the intervals, drive by drive)."""
+    first = df.drop_duplicates("code")
+    keys = dict(
+        zip(
+            first["code"].to_numpy(),
+            zip(first["dataset"].astype(str), first["drive"].astype(str), strict=True),
+            strict=True,
+        )
+    )
+    for key in keys.values():
+        per_drive.setdefault(key, {})[name] = {k: summarize(np.empty(0)) for k in KINDS}
+    for k in KINDS:
+        e, codes, t, _ = kind_columns(df, k)
+        order = np.argsort(codes, kind="stable")  # stable: each drive keeps its time order
+        present, starts, counts = np.unique(codes[order], return_index=True, return_counts=True)
+        for code, a, n in zip(present.tolist(), starts.tolist(), counts.tolist(), strict=True):
+            ds, drive = keys[code]
+            idx = order[a : a + n]
+            per_drive[(ds, drive)][name][k] = summarize(e[idx])
+            queries.setdefault((ds, drive, k), {})[name] = (e[idx], t[idx])
+
+
+def durations(runs: Sequence[DriveRun], call: str, name: str) -> list[np.ndarray]:
+    """Predictor ``name``'s ``call`` durations [ns] per drive that has them, in drive order."""
+    found = (r.call_ns(call, name) for r in runs)
+    return [a for a in found if a is not None]
+
+
+def empty_kinds(stats: Statistics | None = None) -> dict[str, Any]:
+    empty = np.empty(0)
+    return {k: with_ci(summarize(empty), empty, empty, None, stats) for k in KINDS}
+
+
+@dataclass(frozen=True)
+class Combining:
+    """What every predictor's figures need, settled before any is computed."""
+
+    ts: TraceSet
+    runs: Sequence[DriveRun]
+    cols: list[str]
+    stats: Statistics
+    datasets: list[str]
+    with_outages: bool
+    trained_on: set[str]
+    held_ds: list[str]
+    held_all: bool
+    #: whether the predictors are checked against cv (:mod:`posbench.aggregation.sanity`)
+    sanity: bool
+
+    def scored_rows(self, name: str) -> pd.DataFrame:
+        """``name``'s scored rows of :data:`AGGREGATED`, with the drive code."""
+        if self.ts.empty:
+            return pd.DataFrame(columns=[*self.cols, "code"])
+        return with_codes(self.ts.scored(name, self.cols))
+
+
+def predictor_figures(c: Combining, name: str) -> dict[str, Any]:
+    """Every figure of predictor ``name``, from its scored rows (and the baseline's, for the
+    paired comparison): the pieces :func:`aggregate` puts in place. Reads and holds this
+    predictor's rows only (and the baseline's)."""
+    stats, datasets, trained_on = c.stats, c.datasets, c.trained_on
+    base_df = c.scored_rows(stats.baseline) if stats.baseline else None
+    df = base_df if base_df is not None and name == stats.baseline else c.scored_rows(name)
+    out: dict[str, Any] = {}
+    entry = kind_summaries(df, stats) if not df.empty else empty_kinds(stats)
+    steps, queries, covs = (durations(c.runs, call, name) for call in ("step", "query", "cov"))
+    entry["latency_us"] = latency_summary(np.concatenate(steps or [np.empty(0)]))
+    entry["query_us"] = latency_summary(np.concatenate(queries or [np.empty(0)]))
+    if covs:  # the covariance_at call, timed apart from the query
+        entry["covariance_us"] = latency_summary(np.concatenate(covs))
+    out["entry"] = entry
+    if not df.empty:
+        out["by_speed"] = {}
+        for kind in KINDS:
+            e, codes, t, m = kind_columns(df, kind)
+            bins = speed_bin_labels(df["speed_mps"].to_numpy()[m])
+            by_speed = summarize_groups(e, bins, order=speed_bin_order() + ["unknown"])
+            add_group_cis(by_speed, e, bins, codes, t, stats)
+            out["by_speed"][kind] = by_speed
+    if c.with_outages:
+        e, codes, t, m = kind_columns(df, "now")
+        outage = df["outage"].to_numpy()[m]
+        since = df["since_fix_s"].to_numpy()[m]
+        ids = outage_keys(codes, outage)
+        since_fix = error_vs_since_fix(e, since)
+        add_group_cis(since_fix, e, since_fix_checkpoint(since), codes, t, stats)
+        scores: dict[str, Any] = outage_scores(e, t, ids)
+        scores["ci95"] = outage_cis(e, t, ids, stats)
+        out["outages"] = {"since_fix": since_fix, "scores": scores}
+    if base_df is not None and name != stats.baseline and not df.empty:
+        out["paired"] = paired_results(df, base_df, datasets, stats)
+        if c.held_all or c.held_ds:  # the same comparison without the training drives
+            out["paired_held"] = paired_results(
+                df[~df["drive"].isin(trained_on)],
+                base_df[~base_df["drive"].isin(trained_on)],
+                c.held_ds,
+                stats,
+            )
+    del base_df
+    groups = {str(ds): g for ds, g in df.groupby("dataset", sort=True, observed=True)}
+    out["by_dataset"], out["by_label"], out["held_out"] = {}, {}, {}
+    for ds in datasets:
+        dfp = groups.get(ds, df.iloc[:0])
+        out["by_dataset"][ds] = kind_summaries(dfp, stats)
+        out["by_label"][ds] = label_summaries(dfp, stats)
+        if ds in c.held_ds:
+            held = dfp[~dfp["drive"].isin(trained_on)]
+            out["held_out"][ds] = (kind_summaries(held, stats), label_summaries(held, stats))
+    del groups
+    if c.held_all:
+        out["held_out_all"] = kind_summaries(df[~df["drive"].isin(trained_on)], stats)
+    out["per_drive"] = {}
+    if not df.empty:
+        per_drive: dict[tuple[str, str], dict[str, Any]] = {}
+        drive_queries: dict[tuple[str, str, str], dict[str, tuple[np.ndarray, np.ndarray]]] = {}
+        per_drive_summaries(df, name, per_drive, drive_queries)
+        # each drive's interval (block bootstrap) depends on its own predictor's queries only
+        for (ds, drive, k), by_pred in drive_queries.items():
+            for n, ci in one_drive_cis(by_pred, stats).items():
+                per_drive[(ds, drive)][n][k]["ci95"] = ci
+        out["per_drive"] = {key: by_name[name] for key, by_name in per_drive.items()}
+    del df
+    from posbench.aggregation.sanity import REFERENCE, sanity_section
+    from posbench.aggregation.track import track_section
+    from posbench.aggregation.uncertainty import uncertainty_section
+
+    out["excluded"] = excluded_summary(c.ts, [name], stats)
+    out["track_errors"] = track_section(c.ts, [name])
+    out["uncertainty"] = uncertainty_section(c.ts, [name])
+    out["losses"] = (
+        sanity_section(c.ts, [REFERENCE, name], datasets, stats)["losses"]
+        if c.sanity and name != REFERENCE
+        else []
+    )
+    return out
+
+
+def limit_figures(
+    runs: Sequence[DriveRun],
+    res: dict[str, Any],
+    stats: Statistics,
+    readers: Mapping[str, bool | None],
+) -> tuple[dict[str, Any] | None, list[dict[str, Any] | None]]:
+    """:func:`~posbench.aggregation.limit.limit_section` and the ``limit`` entry it gives
+    each drive of ``res["drives"]`` (None: none), as values: it may run in a child process."""
+    from posbench.aggregation.limit import limit_section
+
+    section = limit_section(runs, res, stats, readers)
+    return section, [d.get("limit") for d in res["drives"]]
+
+
+def scored_drives(ts: TraceSet, name: str) -> tuple[list[tuple[str, str]], bool]:
+    """The (dataset, drive) pairs with scored rows of predictor ``name``, and whether any
+    of them fell in an outage."""
+    df = ts.scored(name, ["dataset", "drive", "outage"])
+    pairs = df[["dataset", "drive"]].drop_duplicates()
+    found = list(zip(pairs["dataset"].astype(str), pairs["drive"].astype(str), strict=True))
+    return found, bool((df["outage"].to_numpy() >= 0).any())
