@@ -127,12 +127,13 @@ def forked_map(
     fn: Callable[[Any], T], items: Iterable[Any], workers: int = 2, nice: int = 0
 ) -> list[T]:
     """``[fn(item) for item in items]``, each call in a forked child (:class:`Job`), at most
-    ``workers`` at a time, the values in the order of ``items``; with one worker, one item or
-    no fork, in this process. ``nice``: as :class:`Job` (0: the parent's priority, for work
+    ``workers`` at a time, the values in the order of ``items``; with one worker or no fork,
+    in this process (a single item still gets its child: what it allocates goes back to the
+    system when the child ends). ``nice``: as :class:`Job` (0: the parent's priority, for work
     the parent waits on). An exception of one call is raised here once the calls before it
     are done, and ends the children still running."""
     todo = list(items)
-    if workers <= 1 or len(todo) <= 1 or not can_fork():
+    if workers <= 1 or not todo or not can_fork():
         return [fn(x) for x in todo]
     running: deque[Job[T]] = deque()
     out: list[T] = []

@@ -90,3 +90,14 @@ def test_forked_map_keeps_order_and_raises_what_a_child_raised():
     assert forked_map(_square, [5, 1], workers=1) == [25, 1]
     with pytest.raises(ValueError, match="three"):
         forked_map(_square, [1, 3, 2, 4], workers=2)
+
+
+def _pid(_: object) -> int:
+    return os.getpid()
+
+
+@needs_fork
+def test_one_item_still_gets_a_child_and_one_worker_none():
+    """A run of one predictor combines it in a child too (its allocations go with it)."""
+    assert forked_map(_pid, [0], workers=2) != [os.getpid()]
+    assert forked_map(_pid, [0, 1], workers=1) == [os.getpid()] * 2
