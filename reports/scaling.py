@@ -25,12 +25,13 @@ script lists the wrapper's process tree with psutil and reads each process's pea
 kernel's high-water mark (VmHWM of /proc/PID/status, Linux), else the RSS sampled. Per
 predictor set it records, in MB (10^6 bytes): ``main`` (bench's own process; the Ray driver
 in the ray case), ``worker`` (the largest child process below it: replay workers, loaders,
-figure writers; the Ray processes in the ray case; forked children count the pages they
-share with the main process) and ``largest`` (the larger of the two), and as a cross-check
-``largest_rusage``: the wrapper's getrusage(RUSAGE_CHILDREN).ru_maxrss, the largest single
-process among the descendants that were waited for. psutil is not a dependency of posbench
-(the dev environment has it through rerun-sdk, the viz extra): it is imported here only;
-without it only ``largest_rusage`` is recorded.
+the children combining one predictor's figures each, figure writers; the Ray processes in
+the ray case; forked children count the pages they share with the main process) and
+``largest`` (the larger of the two), and as a cross-check ``largest_rusage``: the wrapper's
+getrusage(RUSAGE_CHILDREN).ru_maxrss, the largest single process among the descendants that
+were waited for. psutil is not a dependency of posbench (the dev environment has it through
+rerun-sdk, the viz extra): it is imported here only; without it only ``largest_rusage`` is
+recorded.
 
 Run from the repository root with posbench's environment's python (its bench is used, else
 the one on PATH):
