@@ -26,7 +26,7 @@ import warnings
 from collections.abc import Callable, Iterator, Mapping, Sequence
 from contextlib import contextmanager
 from pathlib import Path
-from typing import IO, NoReturn
+from typing import IO, Any, NoReturn
 
 import pytest
 
@@ -375,3 +375,15 @@ class Started:
         except (ProcessLookupError, PermissionError):
             pass
         self.proc.wait()
+
+
+def without_timings(x: Any, nan_as_null: bool = False) -> Any:
+    """results.json (or part of it) without the measured timings (keys ending ``_us``), which
+    differ from run to run; ``nan_as_null``: NaN as None, as a saved results.json holds it."""
+    if nan_as_null and isinstance(x, float) and x != x:
+        return None
+    if isinstance(x, dict):
+        return {k: without_timings(v, nan_as_null) for k, v in x.items() if not k.endswith("_us")}
+    if isinstance(x, list):
+        return [without_timings(v, nan_as_null) for v in x]
+    return x

@@ -9,6 +9,7 @@ import json
 import os
 
 import pytest
+from helpers import without_timings
 
 from posbench.aggregation.aggregate import aggregate
 from posbench.config import RunConfig
@@ -38,15 +39,7 @@ MODELS = {"kf": {"model": "test", "bundled": False, "train_drives": ["synthetic-
 
 def _text(res: dict) -> str:
     """results.json's figures as text, key order kept, timings left out (they are measured)."""
-
-    def strip(x):
-        if isinstance(x, dict):
-            return {k: strip(v) for k, v in x.items() if not k.endswith("_us")}
-        if isinstance(x, list):
-            return [strip(v) for v in x]
-        return x
-
-    return json.dumps(strip(res))
+    return json.dumps(without_timings(res))
 
 
 @needs_fork

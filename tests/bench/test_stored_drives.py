@@ -12,6 +12,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 import pytest
+from helpers import without_timings
 
 from posbench.config import RunConfig, gps_condition
 from posbench.pipeline.data_check import check_drives, to_results
@@ -103,18 +104,8 @@ def test_options_and_plans_read_the_same_from_a_description(folder, tmp_path, pr
 def _figures(res: dict) -> dict:
     """results.json without what differs from run to run (timings, provenance); NaN as
     the saved file holds it (null)."""
-
-    def strip(x):
-        if isinstance(x, float) and x != x:
-            return None
-        if isinstance(x, dict):
-            return {k: strip(v) for k, v in x.items() if not k.endswith("_us")}
-        if isinstance(x, list):
-            return [strip(v) for v in x]
-        return x
-
     keep = ("predictors", "by_dataset", "by_label", "paired", "drives", "consistency", "limit")
-    return {k: strip(res[k]) for k in keep if k in res}
+    return {k: without_timings(res[k], nan_as_null=True) for k in keep if k in res}
 
 
 @pytest.mark.slow

@@ -11,6 +11,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 import pytest
+from helpers import without_timings
 
 from posbench.aggregation.aggregate import aggregate
 from posbench.config import RunConfig
@@ -40,14 +41,6 @@ def both(drives, tmp_path_factory):
     )
 
 
-def _without_timings(x):
-    if isinstance(x, dict):
-        return {k: _without_timings(v) for k, v in x.items() if not k.endswith("_us")}
-    if isinstance(x, list):
-        return [_without_timings(v) for v in x]
-    return x
-
-
 def test_records_from_parts_hold_nothing_that_grows_with_the_drive(both):
     _, spilled = both
     for r in spilled:
@@ -62,8 +55,8 @@ def test_every_figure_from_parts_equals_the_in_memory_one(both):
     a = aggregate(memory, CFG, models={})
     b = aggregate(spilled, CFG, models={})
     assert a["outages"] and a["limit"]  # the families that read more than the traces
-    assert json.dumps(_without_timings(a), sort_keys=True, default=str) == json.dumps(
-        _without_timings(b), sort_keys=True, default=str
+    assert json.dumps(without_timings(a), sort_keys=True, default=str) == json.dumps(
+        without_timings(b), sort_keys=True, default=str
     )
     # the same calls were timed, read back from the spilled timings
     for name in CFG.predictors:
