@@ -7,7 +7,8 @@ option by building each predictor once, ``bench predictors``, a report) should n
 that: with the kernels compiled at import, the main process of a run over the shared data
 grew from 731 MB to 792 MB at its peak.
 
-Use: decorate a module's kernels with :func:`kernel`. The first call of any of them
+Use: decorate a module's kernels with :func:`kernel` (or :func:`fast_kernel`, for float
+arithmetic that may be reassociated: vectorised sums). The first call of any of them
 replaces every kernel of that module by ``numba.njit(cache=True)`` of it (in the
 module's namespace, where the kernels find one another and the callers find them, as
 ``module.name``), after running the module's ``_numba_setup()`` if it has one (numba
@@ -26,10 +27,22 @@ F = TypeVar("F", bound=Callable[..., Any])
 
 #: the attribute that marks a kernel's wrapper and holds the Python function
 SOURCE = "_kernel_source"
+#: the attribute that holds a kernel's options for ``numba.njit``
+OPTIONS = "_kernel_options"
+#: numba's fast-math flags without ``nnan`` and ``ninf``: sums may be reassociated and
+#: vectorised, products contracted to FMAs, but NaN and infinity still propagate
+REASSOCIATE = frozenset({"reassoc", "contract", "nsz", "arcp", "afn"})
 
 
-def kernel(fn: F) -> F:
-    """Mark ``fn`` as a kernel of its module (module docstring)."""
+def fast_kernel(fn: F) -> F:
+    """:func:`kernel` compiled with :data:`REASSOCIATE` (results differ from the written
+    order by float rounding)."""
+    return kernel(fn, fastmath=set(REASSOCIATE))
+
+
+def kernel(fn: F, **options: Any) -> F:
+    """Mark ``fn`` as a kernel of its module (module docstring); ``options`` go to
+    ``numba.njit``."""
     namespace = fn.__globals__
     name = fn.__name__
 
@@ -38,6 +51,7 @@ def kernel(fn: F) -> F:
         return namespace[name](*args)
 
     setattr(first_call, SOURCE, fn)
+    setattr(first_call, OPTIONS, options)
     first_call.__name__ = name
     first_call.__doc__ = fn.__doc__
     first_call.__wrapped__ = fn  # type: ignore[attr-defined]
@@ -58,7 +72,7 @@ def compile_module(namespace: dict[str, Any]) -> None:
             continue
         home = source.__globals__
         if home is namespace:
-            namespace[key] = njit(cache=True)(source)
+            namespace[key] = njit(cache=True, **getattr(value, OPTIONS, {}))(source)
         else:  # a kernel of another module, imported by name: its module's dispatcher
             if getattr(home[source.__name__], SOURCE, None) is not None:
                 compile_module(home)

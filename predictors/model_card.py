@@ -187,9 +187,9 @@ def model_card(info: dict, kind: str) -> str:
         core = info.get("core")
         if core:
             lines.append(
-                f"- runtime: `{core['file']}` beside the model is the same network "
-                "without its in-graph normalisation (the fused step runs it; checked "
-                "against model.onnx to 1e-5 m on load)"
+                f"- runtime: `{core['file']}` beside the model holds the same network's "
+                "weights without its in-graph normalisation (the fused step runs them in "
+                "one compiled call; checked against model.onnx to 1e-5 m on load)"
             )
     else:
         lines.append(
@@ -197,6 +197,13 @@ def model_card(info: dict, kind: str) -> str:
             f"{(info.get('prior') or {}).get('predictor')} with its tuned parameters "
             "per GPS condition (model.json `prior.params`)"
         )
+        core = info.get("core")
+        if core:
+            lines.append(
+                f"- runtime: `{core['file']}` beside the model holds the same network's "
+                "weights with its normalisation folded in (run in one compiled call; "
+                "checked against model.onnx on load)"
+            )
     lines += [
         "",
         "## Data",

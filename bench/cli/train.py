@@ -46,7 +46,7 @@ def train(
             "--out",
             "-o",
             metavar="DIR",
-            help="Folder for model.onnx, model.json, MODEL_CARD.md and (lstm) model.core.onnx.",
+            help="Folder for model.onnx, model.json, MODEL_CARD.md and (lstm) model.core.npz.",
         ),
     ] = Path("model-out"),
     epochs: Annotated[
@@ -366,6 +366,6 @@ def print_summary(
         ("model", "model.onnx"),
         ("model card", "model.json"),
         ("model card (text)", "MODEL_CARD.md"),
-        *((("core graph", core),) if core else ()),
+        *((("core weights", core),) if core else ()),
     ):
         console.print(f"{what}: {out / name}", markup=False, highlight=False, soft_wrap=True)

@@ -1,25 +1,28 @@
-"""Build the *core* network of a ``"speed"``-form model: its layers without the in-graph
-normalisation, for the fused fix step (export side: needs the ``onnx`` package).
+"""Cut the *core* network out of a ``"speed"``-form model: its layers without the in-graph
+normalisation, as folded weights for the fused step (export side: needs the ``onnx``
+package).
 
 The exported ``model.onnx`` keeps the public interface (raw features ``[B, 8, 6]`` in, raw
 next-sample features ``[B, 6]`` out, :mod:`posbench.predictors.lstm.model`). Its normalisation
-(speed scale, log, divisions, residual) is ~30 small onnxruntime nodes of ~0.7 us each around a
-network of 6; for one window per call that overhead is half the inference time. The core
-graph is the same weights with the input affine parts folded in:
+(speed scale, log, divisions, residual) is ~30 small onnxruntime nodes around a network of 6,
+and for one window per call onnxruntime's per-node overhead is most of the inference time.
+The core is the same weights with the input affine parts folded in:
 
 - input ``z`` ``[8, 7]`` float32: columns 0-1 the displacements already scaled by the fused
   step (rows 1-7 divided by the window's speed scale s, row 0 by ``res_std``: what
   :meth:`LstmNet.encode_input` does), columns 2-5 the RAW ax, ay, yaw, t, column 6 the RAW
   ``log s``: their standardisation ``(v - mean) / std`` is folded into the encoder's weights
   and bias (exact algebra, float32 rounding);
-- Gemm -> LeakyReLU -> LSTM (last hidden state) -> Gemm -> LeakyReLU -> Gemm with the
+- Linear -> LeakyReLU -> LSTM (last hidden state) -> Linear -> LeakyReLU -> Linear with the
   decoder's last layer cut to its 2 displacement rows;
-- output ``o`` ``[1, 2]``: the standardised residual; the caller adds
-  ``d_7 + o * res_std`` (the last grid step plus the residual, [m], the model's frame).
+- output: the standardised residual (2,); the caller adds ``d_7 + o * res_std`` (the last
+  grid step plus the residual, [m], the model's frame).
 
-:func:`write_core` writes ``<stem>.core.onnx`` beside the model and returns the
-``model.json["core"]`` entry; the runtime (:mod:`posbench.predictors.lstm.core_net`) checks on load
-that core and full graph agree (to 1e-5 m) and refuses a core that does not.
+:func:`write_core` writes ``<stem>.core.npz`` (the arrays of
+:data:`~posbench.predictors.lstm.core_kernel.WEIGHT_SHAPES` and ``slope``) beside the model and
+returns the ``model.json["core"]`` entry; the runtime (:mod:`posbench.predictors.lstm.core_net`,
+:mod:`posbench.predictors.lstm.core_kernel`) checks on load that core and full graph agree (to
+1e-5 m) and refuses a core that does not.
 """
 
 from __future__ import annotations
@@ -28,13 +31,10 @@ from pathlib import Path
 
 import numpy as np
 import onnx
-from onnx import TensorProto, helper, numpy_helper
+from onnx import helper, numpy_helper
 
+from posbench.predictors.lstm.core_kernel import check_shapes
 from posbench.predictors.lstm.features import N_FEATURES, SPEED_EPS_M
-from posbench.predictors.lstm.resample import N_STEPS
-
-#: opset of the core graph (Gemm, LeakyRelu, Reshape, LSTM as in opset 14+)
-CORE_OPSET = 17
 
 
 class NoCoreGraph(ValueError):
@@ -52,8 +52,9 @@ def _attrs(node: onnx.NodeProto) -> dict:
     return {a.name: helper.get_attribute_value(a) for a in node.attribute}
 
 
-def core_model(full: onnx.ModelProto) -> onnx.ModelProto:
-    """The core graph of a ``"speed"``-form model exported by :mod:`posbench.predictors.lstm.export`
+def core_weights(full: onnx.ModelProto) -> dict[str, np.ndarray]:
+    """The core's weights (float32; ``slope`` the LeakyReLU slope) of a ``"speed"``-form
+    model exported by :mod:`posbench.predictors.lstm.export`
     (one encoder layer, one LSTM layer; initializer names as torch exports them).
 
     Raises:
@@ -116,7 +117,7 @@ def core_model(full: onnx.ModelProto) -> onnx.ModelProto:
     w[N_FEATURES] = w_enc[N_FEATURES] / ls_s
 
     f32 = np.float32
-    tensors: dict[str, np.ndarray] = {
+    weights: dict[str, np.ndarray] = {
         "enc_w": w.T.astype(f32),
         "enc_b": b.astype(f32),
         "lstm_w": init[lstm.input[1]].astype(f32),
@@ -126,40 +127,14 @@ def core_model(full: onnx.ModelProto) -> onnx.ModelProto:
         "dec0_b": init["net.decoder.0.bias"].astype(f32),
         "dec2_w": init["net.decoder.2.weight"][:2].astype(f32),
         "dec2_b": init["net.decoder.2.bias"][:2].astype(f32),
-        "seq_shape": np.array([N_STEPS, 1, hidden], np.int64),
-        "row_shape": np.array([1, hidden], np.int64),
+        "slope": np.array(slope, f32),
     }
-    nodes = [
-        helper.make_node("Gemm", ["z", "enc_w", "enc_b"], ["e"], transB=1),
-        helper.make_node("LeakyRelu", ["e"], ["e_act"], alpha=slope),
-        helper.make_node("Reshape", ["e_act", "seq_shape"], ["seq"]),
-        helper.make_node(
-            "LSTM", ["seq", "lstm_w", "lstm_r", "lstm_b"], ["", "h_last"], hidden_size=hidden
-        ),
-        helper.make_node("Reshape", ["h_last", "row_shape"], ["h"]),
-        helper.make_node("Gemm", ["h", "dec0_w", "dec0_b"], ["d"], transB=1),
-        helper.make_node("LeakyRelu", ["d"], ["d_act"], alpha=slope),
-        helper.make_node("Gemm", ["d_act", "dec2_w", "dec2_b"], ["o"], transB=1),
-    ]
-    graph = helper.make_graph(
-        nodes,
-        "posbench_lstm_core",
-        [helper.make_tensor_value_info("z", TensorProto.FLOAT, [N_STEPS, N_FEATURES + 1])],
-        [helper.make_tensor_value_info("o", TensorProto.FLOAT, [1, 2])],
-        [numpy_helper.from_array(v, k) for k, v in tensors.items()],
-    )
-    model = helper.make_model(
-        graph,
-        opset_imports=[helper.make_opsetid("", CORE_OPSET)],
-        producer_name="posbench.core_graph",
-    )
-    model.ir_version = min(full.ir_version, model.ir_version)
-    onnx.checker.check_model(model)
-    return model
+    check_shapes(weights)
+    return weights
 
 
 def write_core(onnx_path: Path) -> dict:
-    """Write ``<stem>.core.onnx`` beside ``onnx_path`` (a speed-form model); returns the
+    """Write ``<stem>.core.npz`` beside ``onnx_path`` (a speed-form model); returns the
     ``model.json["core"]`` entry (file name relative to the model, input/output names,
     ``res_std_m`` [m] and ``speed_eps_m`` [m] the runtime needs).
 
@@ -168,18 +143,15 @@ def write_core(onnx_path: Path) -> dict:
     """
     onnx_path = Path(onnx_path)
     full = onnx.load(str(onnx_path))
-    core = core_model(full)
-    out = onnx_path.with_name(onnx_path.stem + ".core.onnx")
-    onnx.save(core, str(out))
+    out = onnx_path.with_name(onnx_path.stem + ".core.npz")
+    np.savez(out, **core_weights(full))  # type: ignore[arg-type]  # stub: allow_pickle
     res_std = next(
         numpy_helper.to_array(i) for i in full.graph.initializer if i.name == "net.res_std"
     )
     return {
         "file": out.name,
-        "input": "z",
-        "output": "o",
         "res_std_m": [float(v) for v in res_std],
         "speed_eps_m": SPEED_EPS_M,
-        "about": "the network without its in-graph normalisation, for the fused step "
-        "(predictors.lstm.core_graph); checked against model.onnx on load",
+        "about": "the network's weights without its in-graph normalisation, for the fused "
+        "step (predictors.lstm.core_graph, core_kernel); checked against model.onnx on load",
     }

@@ -1,6 +1,7 @@
 """The core network of a ``"speed"``-form model at run time: the fused step's inference
-without the ~30 normalisation nodes of the full graph (see
-:mod:`posbench.predictors.lstm.core_graph`, which builds it; onnxruntime only here).
+without the ~30 normalisation nodes of the full graph and without onnxruntime (see
+:mod:`posbench.predictors.lstm.core_graph`, which folds its weights, and
+:mod:`posbench.predictors.lstm.core_kernel`, which runs them in one compiled call).
 
 The fused step writes its (8, 6) float64 window once; :meth:`CoreNet.load` applies the
 model's input scaling in three numpy calls (the displacements divided by the window's speed
@@ -9,9 +10,12 @@ other columns lives in the core's weights) and :meth:`CoreNet.displacement` turn
 standardised residual into the displacement 200 ms ahead [m, the model's frame]:
 ``d_7 + o * res_std``, as :class:`posbench.predictors.lstm.model.FuturePoint` does in-graph.
 
-A core is used only if it reproduces its full graph: on load both answer the same
-deterministic windows (0-40 m/s, turning, braking) and must agree to :data:`CORE_TOL_M`; a
-core that does not is refused with a one-line :class:`~posbench.scenarios.errors.DataError`.
+A core is used only if it reproduces its full graph: on load, its weights (through the numpy
+reference :func:`~posbench.predictors.lstm.core_kernel.core_forward_numpy`, so that building
+a predictor does not import numba) and the full graph answer the same deterministic windows
+(0-40 m/s, turning, braking) and must agree to :data:`CORE_TOL_M`; a core that does not, or a
+weights file that cannot be read, is refused with a one-line
+:class:`~posbench.scenarios.errors.DataError`.
 """
 
 from __future__ import annotations
@@ -21,6 +25,7 @@ from pathlib import Path
 
 import numpy as np
 
+from posbench.predictors.lstm import core_kernel
 from posbench.predictors.lstm.features import N_FEATURES
 from posbench.predictors.lstm.resample import DT, N_STEPS
 from posbench.predictors.lstm.runtime import OnnxModel
@@ -64,7 +69,8 @@ def has_core(onnx_path: Path, info: dict) -> bool:
 
 
 class CoreNet:
-    """The core graph beside a full model, with the scaling the fused step applies.
+    """The core beside a full model (its folded weights, ``<stem>.core.npz``), with the
+    scaling the fused step applies.
 
     Args:
         onnx_path: the full ``model.onnx`` (the core's file name in ``entry`` is relative
@@ -72,19 +78,24 @@ class CoreNet:
         entry: ``model.json["core"]`` (:func:`posbench.predictors.lstm.core_graph.write_core`).
         full: the full model's session, to check the core against.
     Raises:
-        DataError: the core file is missing, has another input shape, or does not
-            reproduce the full graph.
+        DataError: the core file is missing or unreadable, its arrays have other shapes, or
+            it does not reproduce the full graph.
     """
 
     def __init__(self, onnx_path: Path, entry: dict, full: OnnxModel) -> None:
         path = Path(onnx_path).with_name(str(entry.get("file", "")))
         self.path = path
-        self.net = OnnxModel(path, output=entry.get("output"))
-        if list(self.net.input_shape) != [N_STEPS, N_FEATURES + 1]:
+        weights, slope = core_kernel.load_weights(path)
+        self.core = core_kernel.CompiledCore(weights, slope)
+        d = self.core.dims
+        if (d.n_in, d.n_extra, d.n_out) != (N_FEATURES + 1, 0, 2):
             raise DataError(
                 path,
-                f"core input shape {self.net.input_shape}, expected [{N_STEPS}, {N_FEATURES + 1}]",
+                f"core of {d.n_in} inputs, {d.n_extra} extra and {d.n_out} outputs, "
+                f"expected {N_FEATURES + 1}, 0 and 2",
             )
+        #: the core's input (8, 7) float32: :meth:`load` or the fused step writes it
+        self.buf = np.zeros((N_STEPS, N_FEATURES + 1), np.float32)
         self.res_std = (float(entry["res_std_m"][0]), float(entry["res_std_m"][1]))
         self.eps = float(entry["speed_eps_m"])
         #: per-element input scale: rows 1-7 of the displacement columns are set to 1/s per
@@ -100,32 +111,42 @@ class CoreNet:
                 "export the model again with `bench train`",
             )
 
-    def load(self, x: np.ndarray) -> None:
-        """Write the raw window ``x`` (8, 6) float64 (row 0: the fix offset) into the core's
-        input, scaled as the full graph's ``encode_input``; s [m] = mean length of the grid
-        displacements of rows 1-7 + ``speed_eps_m``."""
+    def _scaled(self, x: np.ndarray) -> tuple[np.ndarray, float]:
+        """The core's input for the raw window ``x`` (8, 6) float64 and its speed scale s
+        [m] = mean length of the grid displacements of rows 1-7 + ``speed_eps_m``."""
         s = float(np.hypot(x[1:, 0], x[1:, 1]).sum()) / (N_STEPS - 1) + self.eps
         sc = self._scale
         sc[1:, :2] = 1.0 / s
-        z = self.net.buf
-        np.multiply(x, sc, out=z[:, :N_FEATURES])
+        z = np.empty((N_STEPS, N_FEATURES + 1), np.float32)
+        np.multiply(x, sc, out=z[:, :N_FEATURES], casting="same_kind")
         z[:, N_FEATURES] = math.log(s)
+        return z, s
+
+    def load(self, x: np.ndarray) -> None:
+        """Write the raw window ``x`` (8, 6) float64 (row 0: the fix offset) into
+        :attr:`buf`, scaled as the full graph's ``encode_input``."""
+        self.buf[...] = self._scaled(x)[0]
+
+    def run(self) -> tuple[float, float]:
+        """The core on :attr:`buf` (compiled): its standardised residual."""
+        o = self.core.run(self.buf)
+        return float(o[0]), float(o[1])
 
     def displacement(self, x: np.ndarray) -> tuple[float, float]:
         """The core on the loaded window: the displacement 200 ms ahead [m, the model's
         frame] = the last grid displacement of ``x`` + the residual x ``res_std``."""
-        o0, o1 = self.net.run_buffer().tolist()
+        o0, o1 = self.run()
         return (
             float(x[N_STEPS - 1, 0]) + o0 * self.res_std[0],
             float(x[N_STEPS - 1, 1]) + o1 * self.res_std[1],
         )
 
     def difference(self, full: OnnxModel) -> float:
-        """Largest |displacement| difference [m] between this core and ``full`` on
-        :func:`check_windows`."""
-        diffs = []
-        for x in check_windows():
-            want = full.run(x)[:2].astype(np.float64)
-            self.load(x)
-            diffs.append(np.abs(np.asarray(self.displacement(x)) - want))
-        return float(np.max(diffs))  # NaN if either answered NaN
+        """Largest |displacement| difference [m] between this core's weights (numpy
+        reference, exact sigmoid and tanh) and ``full`` on :func:`check_windows`."""
+        windows = check_windows()
+        z = np.stack([self._scaled(x)[0] for x in windows])
+        o = self.core.reference(z).astype(np.float64)
+        got = windows[:, N_STEPS - 1, :2] + o * np.asarray(self.res_std)
+        want = np.stack([full.run(x)[:2] for x in windows]).astype(np.float64)
+        return float(np.max(np.abs(got - want)))  # NaN if either answered NaN

@@ -1,21 +1,19 @@
-"""The fused ``lstm`` fix step: the same maths as the staged step, in few numpy calls.
+"""The fused ``lstm`` fix step: the same maths as the staged step, in four compiled calls.
 
 The staged step (:meth:`posbench.predictors.lstm.predictor.LstmPredictor._step_on_fixes` with
 ``step="staged"``) stays the readable reference; this module computes the same answer
 (to float rounding; a test holds them within 1e-6 m on every shared drive) with the
-per-call overhead taken out:
+per-call overhead taken out (:mod:`posbench.predictors.lstm.fused_kernels`):
 
-- both cubic regressions (the fixes' x, y and the IMU's ax, ay, yaw) are one batched
-  solve of two 4 x 4 normal-equation systems. Each system comes from ONE matrix product
-  ``V.T @ [V | Y]`` over a preallocated block ``[1, s, s^2, s^3, y...]`` (s = t - t_fix
-  [s], no scaling: the windows span ~2 s, so the normal equations stay well conditioned);
-- both cubics are evaluated on the 8 grid times (and +0.2 s) by one product with a
-  precomputed Vandermonde matrix;
-- the features are written straight into the float32 input buffer of the ONNX session
-  (rotations as complex products); a ``"speed"``-form model with a core graph
-  (:mod:`posbench.predictors.lstm.core_net`) is fed its normalised input instead and runs without
-  the ~30 normalisation nodes of the full graph;
-- the current-position cubic (8 grid points + the prediction) is one product with the
+- both cubic regressions (the fixes' x, y and the IMU's ax, ay, yaw) are 4 x 4
+  normal-equation systems from power sums of s = t - t_fix [s] (no scaling: the windows
+  span ~2 s, so the normal equations stay well conditioned), solved and evaluated on the 8
+  grid times (and +0.2 s) in one call;
+- the features are written straight into the float32 input buffer in one call; a
+  ``"speed"``-form model with a core (:mod:`posbench.predictors.lstm.core_net`) is fed its
+  normalised input instead and runs in one compiled call
+  (:mod:`posbench.predictors.lstm.core_kernel`), without onnxruntime;
+- the current-position cubic (8 grid points + the prediction) is one call with the
   precomputed pseudo-inverse.
 
 Frames: positions [m] in the drive's local ENU frame; IMU acceleration [m/s^2] in the
@@ -33,29 +31,16 @@ import math
 
 import numpy as np
 
+from posbench.predictors.lstm import fused_kernels
 from posbench.predictors.lstm.core_net import CoreNet
-from posbench.predictors.lstm.features import N_FEATURES, gps_substitute_imu, time_feature
+from posbench.predictors.lstm.features import gps_substitute_imu, time_feature
 from posbench.predictors.lstm.resample import DT, GRID_OFFSETS, N_STEPS, powers
 from posbench.predictors.lstm.runtime import OnnxModel
 
-try:  # the gufunc behind np.linalg.solve, without its Python-side checks (~3 us)
-    from numpy.linalg import _umath_linalg
-
-    def _solve(a: np.ndarray, b: np.ndarray, out: np.ndarray) -> np.ndarray:
-        return _umath_linalg.solve(a, b, signature="dd->d", out=out)
-except (ImportError, AttributeError):  # pragma: no cover - other NumPy layouts
-
-    def _solve(a: np.ndarray, b: np.ndarray, out: np.ndarray) -> np.ndarray:
-        out[...] = np.linalg.solve(a, b)
-        return out
-
-
-#: columns of a fit block: s^2, s^3, 1, s, then 3 value channels (x, y, 0 for the fixes;
-#: ax, ay, yaw for the IMU). With this order one subtraction of (t_end, 0, ...) from the
-#: buffer's rows (t, values...) writes s and the values at once, and the basis columns
-#: (s^2, s^3, 1, s) are adjacent: coefficients come out in that order (``_C0``.. below)
-_COLS = 7
+#: the rows of a block's coefficients: s^2, s^3, 1, s
 _C2, _C3, _C0, _C1 = 0, 1, 2, 3
+#: no IMU samples in the window
+_NO_IMU = np.empty((0, 4))
 #: the 8 grid times and the prediction's time, relative to the fix [s]
 _TIMES9 = np.append(GRID_OFFSETS, DT)
 
@@ -70,7 +55,7 @@ def _eval_rows() -> np.ndarray:
     return np.concatenate([p, p[1:8] - p[:7], rel])
 
 
-_VAL, _DIFF, _REL = slice(0, 9), slice(9, 16), slice(16, 24)
+_REL = slice(16, 24)
 
 
 class FusedStep:
@@ -121,49 +106,41 @@ class FusedStep:
         self.__dict__.update(state)
         self._alloc()
 
-    def _alloc(self, rows: int = 256) -> None:
-        # the two fit blocks, fixes [0] and IMU [1], stored by column (each column's
-        # samples contiguous) and padded with all-zero samples (which add nothing to the
-        # normal equations) so that one product serves both
-        self._w = np.zeros((2, _COLS, rows))
-        self._live = [0, 0]  # samples of each block with the 1 set; all-zero beyond
-        self._t3 = np.zeros((3, 1))  # (t_end, 0, 0): subtracted from fix rows (t, x, y)
-        self._t4 = np.zeros((4, 1))  # (t_end, 0, 0, 0): from IMU rows (t, ax, ay, yaw)
-        self._m = np.empty((2, 4, _COLS))
-        self._x = np.empty((2, 4, 3))
+    def _alloc(self) -> None:
+        self._x = np.empty((2, 4, 3))  # coefficients of the fixes' [0] and IMU's [1] cubics
         self._rows_eval = _eval_rows()
         # [0]: x, y (+ an unused 0), [1]: ax, ay, yaw; rows as in _eval_rows; row 8 of
         # [0] becomes the prediction
         self._e = np.empty((2, 24, 3))
         self.pts = self._e[0, :9, :2]
-        self._ec = self._e[:, :, :2].view(np.complex128)[..., 0]  # x + iy, ax + i ay
-        self._x64 = np.zeros((8, 6))  # features in float64, cast once into net.buf
+        self._x64 = np.zeros((8, 6))  # features in float64, cast once into the input
         self._x64[:, 5] = time_feature()
-        self._xc = self._x64[:, :4].view(np.complex128)  # (8, 2): dx + i dy, ax + i ay
-        self._cs = np.empty((8, 2))
-        self._csc = self._cs.view(np.complex128)[:, 0]  # cos + i sin of the relative yaw
         self._cf = np.empty((2, 4))
         self._pinv_t = np.ascontiguousarray(self.final_pinv.T)  # (9, 4)
         self.coef: tuple[float, ...] = (0.0,) * 8
-        self._fix_c = 0j  # the newest fix as x + iy (fix_offset models)
-        self._s = 1.0  # the window's speed scale [m] (core graphs)
+        self._fix_xy = (0.0, 0.0)  # the newest fix [m] (fix_offset models)
+        # the core's input scales (speed_eps_m, res_std x, y), empty for a full graph
+        core = self.core
+        self._scales = np.array([core.eps, *core.res_std]) if core is not None else np.empty(0)
+        self._s = 1.0  # the window's speed scale [m] (cores)
         self.psi = 0.0
         self.speed = math.nan
 
-    def _rows(self, k: int, n: int) -> np.ndarray:
-        """Block k (columns x samples) with exactly n live samples (grown when too small)."""
-        w = self._w
-        if n > w.shape[2]:
-            g = np.zeros((2, _COLS, max(n, 2 * w.shape[2])))
-            g[:, :, : w.shape[2]] = w
-            self._w = w = g
-        live = self._live[k]
-        if n > live:
-            w[k, _C0, live:n] = 1.0
-        elif n < live:
-            w[k, :, n:live] = 0.0
-        self._live[k] = n
-        return w[k]
+    def warm_up(self) -> None:
+        """Run the compiled calls once on a made-up window (a straight line at 10 m/s, with
+        IMU samples), so that no timed step pays their loading; every buffer they write
+        is scratch, overwritten by the next step."""
+        t = np.linspace(-2.0, 0.0, 11)
+        ti = np.linspace(-2.0, 0.0, 101)
+        self.fit(
+            np.column_stack([t, 10.0 * t, 0.0 * t]),
+            np.column_stack([ti, 0 * ti, 0 * ti, 0 * ti]),
+            0.0,
+        )
+        self.features()
+        if self.core is not None:
+            self.core.run()
+        self.finish(0.0, 0.0)
 
     def fit(
         self, fix: np.ndarray, imu: np.ndarray | None, t_end: float, yaw_ok: bool = True
@@ -179,101 +156,58 @@ class FusedStep:
                 GPS curve's heading.
         """
         nf = fix.shape[0]
-        ni = 0 if imu is None else imu.shape[0]
-        self._fix_c = complex(fix[nf - 1, 1], fix[nf - 1, 2])
-        t3 = self._t3
-        t3[0, 0] = t_end
-        np.subtract(fix.T, t3, out=self._rows(0, nf)[3:6, :nf])
-        b = self._rows(1, ni)
-        if imu is not None and ni:
-            t4 = self._t4
-            t4[0, 0] = t_end
-            np.subtract(imu.T, t4, out=b[3:7, :ni])
-            if not yaw_ok:
-                b[6, :ni] = 0.0
-        w = self._w[:, :, : max(nf, ni)]
-        s = w[:, _C1]
-        np.multiply(s, s, out=w[:, _C2])
-        np.multiply(w[:, _C2], s, out=w[:, _C3])
-        m = np.matmul(w[:, :4], w.transpose(0, 2, 1), out=self._m)
+        self._fix_xy = (float(fix[nf - 1, 1]), float(fix[nf - 1, 2]))
+        samples = imu if imu is not None and imu.shape[0] > 0 else _NO_IMU
+        has_imu = samples is not _NO_IMU
         x = self._x
         e = self._e
-        if ni:
-            _solve(m[:, :, :4], m[:, :, 4:], x)
-            np.matmul(self._rows_eval, x, out=e)
-        else:
-            _solve(m[0, :, :4], m[0, :, 4:], x[0])
-            np.matmul(self._rows_eval, x[0], out=e[0])
-        if not (ni and yaw_ok):
+        fused_kernels.fit_cubics(fix, samples, t_end, yaw_ok, self._rows_eval, x, e)
+        if not (has_imu and yaw_ok):
             coef = x[0, [_C0, _C1, _C2, _C3], :2]
             ax, ay, yaw = gps_substitute_imu(coef, 1.0, GRID_OFFSETS)
-            if not ni:
+            if not has_imu:
                 e[1, :8, 0] = ax
                 e[1, :8, 1] = ay
             e[1, :8, 2] = yaw
             e[1, _REL, 2] = yaw - yaw[7]
-        c1x, c1y = x[0, _C1, :2].tolist()
+        c1x, c1y = float(x[0, _C1, 0]), float(x[0, _C1, 1])
         self.speed = math.hypot(c1x, c1y)
         self.psi = math.atan2(c1y, c1x)
 
     def features(self) -> None:
-        """The network input (8, 6) from the grid values, cast once into ``net.buf[0]``.
+        """The network input (8, 6) from the grid values, written into the input buffer
+        (the core's, or ``net.buf[0]``) in one compiled call
+        (:func:`~posbench.predictors.lstm.fused_kernels.window_features`).
 
-        Rotations are complex products: (dx + i dy) e^(-i psi) and (ax + i ay) e^(i rel)
-        (the same products and sums as :func:`posbench.predictors.lstm.features.features_one`)."""
-        x64 = self._x64
-        xc = self._xc
-        ec = self._ec
-        imu = self._e[1]
+        Rotations: (dx + i dy) e^(-i psi) and (ax + i ay) e^(i rel) (the same products and
+        sums as :func:`posbench.predictors.lstm.features.features_one`). A core takes the
+        displacements divided by the window's speed scale s [m] (rotation-invariant: from
+        the grid differences before any rotation), row 0 by res_std, and log s as a 7th
+        column (:meth:`~posbench.predictors.lstm.core_net.CoreNet.load` is the reference)."""
         core = self.core
-        # a core graph takes the displacements divided by the window's speed scale s [m]
-        # (rotation-invariant: from the grid differences before any rotation) and row 0 by
-        # res_std, and log s as a 7th column (core_net.CoreNet.load is the reference)
-        if core is not None:
-            s = sum(map(abs, ec[0, _DIFF].tolist())) / (N_STEPS - 1) + core.eps
-            self._s = s
-            k = 1.0 / s
-        else:
-            k = 1.0
-        if self.frame == "heading":
-            rot = complex(math.cos(self.psi), -math.sin(self.psi))
-            np.multiply(ec[0, _DIFF], rot * k, out=xc[1:, 0])
-            if self.fix_offset:  # row 0: the newest fix minus the newest grid point
-                off = (self._fix_c - ec[0, 7]) * rot
-            rel = imu[_REL, 2]  # yaw relative to the newest sample
-            x64[:, 4] = rel
-        else:
-            np.multiply(ec[0, _DIFF], k, out=xc[1:, 0])
-            if self.fix_offset:
-                off = self._fix_c - ec[0, 7]
-            rel = imu[:8, 2]
-            x64[:, 4] = np.pi - np.mod(np.pi - rel, 2 * np.pi)
-        if self.fix_offset:
-            xc[0, 0] = (
-                off
-                if core is None
-                else complex(off.real / core.res_std[0], off.imag / core.res_std[1])
-            )
-        cs = self._cs
-        np.cos(rel, out=cs[:, 0])
-        np.sin(rel, out=cs[:, 1])
-        np.multiply(ec[1, :8], self._csc, out=xc[:, 1])
-        if core is not None:
-            z = core.net.buf
-            z[:, :N_FEATURES] = x64
-            z[:, N_FEATURES] = math.log(s)
-        else:
-            self.net.buf[0] = x64
+        fx, fy = self._fix_xy
+        self._s = fused_kernels.window_features(
+            self._e,
+            self.psi,
+            fx,
+            fy,
+            self.frame == "heading",
+            self.fix_offset,
+            self._scales,
+            self._x64,
+            core.buf if core is not None else self.net.buf[0],
+        )
 
     def infer(self) -> tuple[float, float]:
         """The network on the window :meth:`features` wrote: its displacement output [m] in
-        the model's frame (through the core graph where the model has one: the last grid
-        step, unscaled, plus the residual x res_std)."""
+        the model's frame (through the core where the model has one: the last grid step,
+        unscaled, plus the residual x res_std)."""
         core = self.core
         if core is not None:
-            o0, o1 = core.net.run_buffer().tolist()
-            d7 = complex(self._xc[N_STEPS - 1, 0]) * self._s
-            return d7.real + o0 * core.res_std[0], d7.imag + o1 * core.res_std[1]
+            o0, o1 = core.run()
+            s = self._s
+            x7 = self._x64[N_STEPS - 1]
+            return float(x7[0]) * s + o0 * core.res_std[0], float(x7[1]) * s + o1 * core.res_std[1]
         out = self.net.run_buffer()
         return float(out[0]), float(out[1])
 
@@ -281,16 +215,10 @@ class FusedStep:
         """The prediction from the network's displacement (d0, d1) [m, model frame] and the
         current-position cubic; False if the prediction is not finite (the caller then
         runs the staged step)."""
-        if self.frame == "heading":
-            c, s = math.cos(self.psi), math.sin(self.psi)
-            d0, d1 = c * d0 - s * d1, s * d0 + c * d1
-        pts = self.pts
-        px = float(pts[7, 0]) + d0
-        py = float(pts[7, 1]) + d1
-        if not (math.isfinite(px) and math.isfinite(py)):
+        cf = self._cf
+        if not fused_kernels.finish_step(
+            self._e, d0, d1, self.psi, self.frame == "heading", self._pinv_t, cf
+        ):
             return False
-        pts[8, 0] = px
-        pts[8, 1] = py
-        cf = np.matmul(pts.T, self._pinv_t, out=self._cf)  # (2, 4): x0..x3, y0..y3
         self.coef = tuple(cf.ravel().tolist())
         return True

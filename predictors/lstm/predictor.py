@@ -204,6 +204,11 @@ class LstmPredictor(ModelFileSeams, Predictor):
         self.stage_timer = None
         self.reset()
 
+    def warm_up(self) -> None:
+        """Load the fused step's compiled calls (numba) before a run's clock starts."""
+        if self._fused is not None:
+            self._fused.warm_up()
+
     def config(self) -> dict:
         return {
             "model": str(self.model_path),

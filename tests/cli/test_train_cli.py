@@ -35,7 +35,7 @@ def test_train_ends_with_summary_table(tmp_path) -> None:
     assert '"mean_m"' not in out and "history" not in out
     assert f"model card: {tmp_path / 'model.json'}" in out
     assert f"model: {tmp_path / 'model.onnx'}" in out
-    assert f"core graph: {tmp_path / 'model.core.onnx'}" in out
+    assert f"core weights: {tmp_path / 'model.core.npz'}" in out
     assert "2 of 2" in out and "early stop at" not in out
     rows = {line.split("│")[1].strip(): line for line in lines if line.startswith("│")}
     assert rows["early stopping"].split("│")[2].strip() == (

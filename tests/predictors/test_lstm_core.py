@@ -41,7 +41,7 @@ def test_core_reproduces_torch_and_the_full_graph(tmp_path: Path) -> None:
     net = _speed_net(3)
     export_best(net, tmp_path / "model.onnx", n_calls=10)
     entry = write_core(tmp_path / "model.onnx")
-    assert (tmp_path / "model.core.onnx").is_file() and entry["file"] == "model.core.onnx"
+    assert (tmp_path / "model.core.npz").is_file() and entry["file"] == "model.core.npz"
     full = OnnxModel(tmp_path / "model.onnx")
     core = CoreNet(tmp_path / "model.onnx", entry, full)
     assert core.difference(full) <= 1e-6
@@ -72,7 +72,7 @@ def test_bundled_model_runs_its_core_and_config_says_so() -> None:
 def _copy_bundled(dst: Path, with_core: bool = True) -> Path:
     src = bundled_model().parent
     dst.mkdir()
-    for name in ("model.onnx", "model.json") + (("model.core.onnx",) if with_core else ()):
+    for name in ("model.onnx", "model.json") + (("model.core.npz",) if with_core else ()):
         shutil.copy(src / name, dst / name)
     return dst
 
@@ -103,7 +103,7 @@ def test_a_core_that_does_not_reproduce_its_model_is_refused(tmp_path: Path) -> 
     other.mkdir()
     export_best(_speed_net(7, hidden=64), other / "model.onnx", n_calls=10)
     write_core(other / "model.onnx")
-    shutil.copy(other / "model.core.onnx", d / "model.core.onnx")
+    shutil.copy(other / "model.core.npz", d / "model.core.npz")
     with pytest.raises(DataError, match="does not reproduce model.onnx"):
         LstmPredictor(str(d))
     r = subprocess.run(
@@ -126,11 +126,11 @@ def test_a_core_that_does_not_reproduce_its_model_is_refused(tmp_path: Path) -> 
     )
     assert r.returncode == 2, r.stderr
     lines = r.stderr.strip().splitlines()
-    assert len(lines) == 1 and lines[0].startswith("error: ") and "model.core.onnx" in lines[0]
+    assert len(lines) == 1 and lines[0].startswith("error: ") and "model.core.npz" in lines[0]
 
 
 def test_core_entry_in_model_json_names_its_scales() -> None:
     info = json.loads(bundled_model().with_suffix(".json").read_text())
     entry = info["core"]
-    assert entry["file"] == "model.core.onnx"
+    assert entry["file"] == "model.core.npz"
     np.testing.assert_allclose(entry["res_std_m"], info["speed_stats"]["res_std_m"], rtol=1e-6)

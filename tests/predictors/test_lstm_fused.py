@@ -118,7 +118,7 @@ def test_fused_step_in_the_world_frame(tmp_path: Path) -> None:
     reinterpreted: the arithmetic, not the accuracy, is under test)."""
     src = bundled_model()
     shutil.copy(src, tmp_path / "model.onnx")
-    shutil.copy(src.with_name("model.core.onnx"), tmp_path / "model.core.onnx")
+    shutil.copy(src.with_name("model.core.npz"), tmp_path / "model.core.npz")
     info = json.loads(src.with_suffix(".json").read_text())
     info["frame"] = "world"
     (tmp_path / "model.json").write_text(json.dumps(info))

@@ -72,9 +72,9 @@ def test_tiny_retrain_end_to_end(tmp_path) -> None:
     card = (tmp_path / "MODEL_CARD.md").read_text()
     assert card.startswith("# Model card: `lstm`") and "never KITTI" in card
     assert f"{js['data']['train_windows']} windows" in card
-    assert "`model.core.onnx` beside the model" in card
+    assert "`model.core.npz` beside the model" in card
     p = LstmPredictor(str(tmp_path / "model.onnx"))
-    assert js["core"]["file"] == "model.core.onnx" and p.core is not None  # the fused step's
+    assert js["core"]["file"] == "model.core.npz" and p.core is not None  # the fused step's
     d = drives[0]
     for i in range(40):
         p.observe_gps(d.gps.t[i], d.gps.x[i], d.gps.y[i])
