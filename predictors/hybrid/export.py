@@ -27,6 +27,7 @@ import numpy as np
 import onnxruntime as ort
 import torch
 
+from posbench.predictors.hybrid.core import fold, write_core
 from posbench.predictors.hybrid.data import HybridWindows, hybrid_windows
 from posbench.predictors.hybrid.model import HybridNet
 from posbench.predictors.hybrid.model_info import (
@@ -156,8 +157,10 @@ def model_info(net: HybridNet, prior_params: dict[str, dict], **extra: Any) -> d
 def save_model(
     net: HybridNet, out_dir: Path, prior_params: dict[str, dict], **extra: Any
 ) -> dict[str, Any]:
-    """Write ``out_dir/model.onnx`` and ``model.json``; raises RuntimeError if the ONNX graph
-    differs from torch by more than :data:`PARITY_TOL`. Returns model.json's content."""
+    """Write ``out_dir/model.onnx``, its compiled core's weights (``model.core.npz``,
+    :func:`posbench.predictors.hybrid.core.write_core`) and ``model.json``; raises
+    RuntimeError if the ONNX graph differs from torch by more than :data:`PARITY_TOL`.
+    Returns model.json's content."""
     out_dir.mkdir(parents=True, exist_ok=True)
     with tempfile.TemporaryDirectory() as tmp:
         tmp_onnx = Path(tmp) / "model.onnx"
@@ -166,9 +169,31 @@ def save_model(
         if not err <= PARITY_TOL:
             raise RuntimeError(f"ONNX export differs from torch by {err:.3g} > {PARITY_TOL}")
         (out_dir / "model.onnx").write_bytes(tmp_onnx.read_bytes())
-    info = model_info(net, prior_params, parity_max_abs=err, **extra)
+    core = write_core(out_dir / "model.onnx", core_weights(net))
+    info = model_info(net, prior_params, parity_max_abs=err, **extra, core=core)
     (out_dir / "model.json").write_text(json.dumps(info, indent=1) + "\n")
     return info
+
+
+def core_weights(net: HybridNet) -> dict[str, np.ndarray]:
+    """The compiled core's weights (:func:`posbench.predictors.hybrid.core.fold`) from the
+    torch net: its LSTM's gates reordered from torch's (i, f, g, o) to ONNX's (i, o, f, c)
+    and its two biases side by side, as the ONNX LSTM node holds them."""
+    if len(net.encoder) != 2 or net.lstm.num_layers != 1:
+        raise ValueError("the compiled core takes one encoder layer and one LSTM layer")
+    sd = {k: v.detach().cpu().numpy().astype(np.float64) for k, v in net.state_dict().items()}
+    h = net.lstm.hidden_size
+    order = np.concatenate([np.arange(k * h, (k + 1) * h) for k in (0, 3, 1, 2)])
+    lstm = (
+        sd["lstm.weight_ih_l0"][order][None],
+        sd["lstm.weight_hh_l0"][order][None],
+        np.concatenate([sd["lstm.bias_ih_l0"][order], sd["lstm.bias_hh_l0"][order]])[None],
+    )
+    act = net.encoder[1]
+    if not isinstance(act, torch.nn.LeakyReLU):
+        raise ValueError(f"the encoder's activation is {type(act).__name__}, not LeakyReLU")
+    slope = float(act.negative_slope)
+    return fold(sd, sd["encoder.0.weight"].T, lstm, slope)
 
 
 def prior_kf_params() -> dict[str, dict]:

@@ -58,6 +58,7 @@ from pathlib import Path
 import numpy as np
 
 from posbench.predictors.base import GpsCondition, ModelFileSeams, Predictor
+from posbench.predictors.hybrid.core import HybridCore
 from posbench.predictors.hybrid.gate import EvidenceGate, envelope_arrays, inside_envelope
 from posbench.predictors.hybrid.model_info import (
     BUNDLED_TEXT,
@@ -71,6 +72,7 @@ from posbench.predictors.hybrid.model_info import (
     prior_params,
 )
 from posbench.predictors.kf_bank import KalmanBank
+from posbench.predictors.lstm.core_net import has_core
 from posbench.predictors.lstm.fused import FusedStep
 from posbench.predictors.lstm.history import FIX_CAP, ImuHistory, RowBuffer, fit_fused_window
 from posbench.predictors.lstm.predictor import RESTART_GAP_S, STILL_SPEED_MPS
@@ -128,6 +130,13 @@ class HybridPredictor(ModelFileSeams, Predictor):
             self.model_path, output=self.info.get("output", OUTPUT), batch_dim=batch_dim
         )
         check_net(self.model_path, self.net)
+        #: the network's compiled core (model.json "core"; :mod:`posbench.predictors.hybrid.core`),
+        #: or None: the full graph through onnxruntime (a model copied without its core file)
+        self.core = (
+            HybridCore(self.model_path, self.info["core"], self.info, self.net)
+            if has_core(self.model_path, self.info)
+            else None
+        )
         pinv = np.linalg.pinv(np.vander(np.append(GRID_OFFSETS, DT), 4, increasing=True))
         self._fused = FusedStep(self.net, "heading", pinv)
         self._prior = np.zeros((N_H, 2))
@@ -151,6 +160,7 @@ class HybridPredictor(ModelFileSeams, Predictor):
                 "params": self.kf.config(),
             },
             "architecture": self.info.get("architecture"),
+            "core": self.core is not None,
             "command": self.info.get("command"),
         }
 
@@ -168,6 +178,9 @@ class HybridPredictor(ModelFileSeams, Predictor):
         """The prior's start-up work (its kernels) and the input box's kernel, before a
         run's clock starts."""
         self.kf.warm_up()
+        self._fused.warm_up()
+        if self.core is not None:
+            self.core.run(self.net.bufs[0][0], self.net.bufs[1][0].reshape(-1))
         if self._box is not None:
             inside_envelope(self.net.bufs[0][0], self.net.bufs[1][0], self._box)
 
@@ -249,7 +262,12 @@ class HybridPredictor(ModelFileSeams, Predictor):
         ):
             self.outside += 1
             return False
-        out = self.net.run_buffer()  # (4, 4): dx, dy [m, heading frame], log var along/across
+        # (4, 4): dx, dy [m, heading frame], log var along/across
+        core = self.core
+        if core is not None:
+            out = core.run(self.net.bufs[0][0], self.net.bufs[1][0].reshape(-1))
+        else:
+            out = self.net.run_buffer()
         self._gps_v = f.speed
         if not np.isfinite(out).all() or out[:, 2:].max() > MAX_LOGVAR:
             return False

@@ -240,6 +240,9 @@ def test_onnx_matches_torch_on_random_inputs(tmp_path):
         want = net(torch.from_numpy(f[None]), torch.from_numpy(p[None])).numpy()[0]
     np.testing.assert_allclose(got, want, atol=1e-5)
     assert got.shape == (4, 4)
+    # and the compiled core the export folded from the torch net (gates reordered)
+    assert hy.core is not None and (tmp_path / "model.core.npz").is_file()
+    np.testing.assert_allclose(hy.core.run(f, p.reshape(-1)), want, atol=1e-5)
 
 
 def test_untrained_net_outputs_zero_correction():
