@@ -139,7 +139,6 @@ class HybridPredictor(ModelFileSeams, Predictor):
         )
         pinv = np.linalg.pinv(np.vander(np.append(GRID_OFFSETS, DT), 4, increasing=True))
         self._fused = FusedStep(self.net, "heading", pinv)
-        self._prior = np.zeros((N_H, 2))
         self.gate = bool(gate)
         g = self.info.get("gate") or {}
         shrink = g.get("shrink", [1.0] * N_H) if self.gate else [1.0] * N_H
@@ -249,34 +248,43 @@ class HybridPredictor(ModelFileSeams, Predictor):
         psi = f.psi
         c, s = math.cos(psi), math.sin(psi)
         gx, gy = f.pts[7].tolist()
-        pr = self._prior
         kf_at = self.kf.position_at
-        for k, h in enumerate(HORIZONS):
+        rows = []
+        for h in HORIZONS:
             px, py = kf_at(t_end + h)
             dx, dy = px - gx, py - gy
-            pr[k, 0] = c * dx + s * dy
-            pr[k, 1] = c * dy - s * dx
-        self.net.bufs[1][0] = pr
-        if self._box is not None and not inside_envelope(
-            self.net.bufs[0][0], self.net.bufs[1][0], self._box
-        ):
+            rows.append((c * dx + s * dy, c * dy - s * dx))
+        features, prior = self.net.bufs[0][0], self.net.bufs[1][0]
+        prior[...] = rows  # one cast into the float32 input
+        if self._box is not None and not inside_envelope(features, prior, self._box):
             self.outside += 1
             return False
         # (4, 4): dx, dy [m, heading frame], log var along/across
         core = self.core
-        if core is not None:
-            out = core.run(self.net.bufs[0][0], self.net.bufs[1][0].reshape(-1))
-        else:
-            out = self.net.run_buffer()
+        out = core.run(features, prior.reshape(-1)) if core is not None else self.net.run_buffer()
         self._gps_v = f.speed
-        if not np.isfinite(out).all() or out[:, 2:].max() > MAX_LOGVAR:
-            return False
         o = out.tolist()
+        # a sum of the 16 outputs is finite only where each is (or NaN / inf results)
+        if not math.isfinite(sum(map(sum, o))) or max(max(r[2], r[3]) for r in o) > MAX_LOGVAR:
+            return False
         a = self._shrink
-        self._kx = (0.0,) + tuple(a[k + 1] * (c * r[0] - s * r[1]) for k, r in enumerate(o))
-        self._ky = (0.0,) + tuple(a[k + 1] * (s * r[0] + c * r[1]) for k, r in enumerate(o))
-        self._lva = (0.0,) + tuple(r[2] for r in o)
-        self._lvc = (0.0,) + tuple(r[3] for r in o)
+        (x1, y1, v1, w1), (x2, y2, v2, w2), (x3, y3, v3, w3), (x4, y4, v4, w4) = o
+        self._kx = (
+            0.0,
+            a[1] * (c * x1 - s * y1),
+            a[2] * (c * x2 - s * y2),
+            a[3] * (c * x3 - s * y3),
+            a[4] * (c * x4 - s * y4),
+        )
+        self._ky = (
+            0.0,
+            a[1] * (s * x1 + c * y1),
+            a[2] * (s * x2 + c * y2),
+            a[3] * (s * x3 + c * y3),
+            a[4] * (s * x4 + c * y4),
+        )
+        self._lva = (0.0, v1, v2, v3, v4)
+        self._lvc = (0.0, w1, w2, w3, w4)
         self._cs = (c, s)
         self._t_fix = t_end
         self._has = True
