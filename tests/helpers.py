@@ -387,3 +387,12 @@ def without_timings(x: Any, nan_as_null: bool = False) -> Any:
     if isinstance(x, list):
         return [without_timings(v, nan_as_null) for v in x]
     return x
+
+
+def copy_model(src: Path, dst: Path, with_core: bool = True) -> Path:
+    """A copy of the model folder ``src`` (model.onnx, model.json and, with ``with_core``,
+    model.core.npz) in the new folder ``dst``; returns ``dst``."""
+    dst.mkdir()
+    for name in ("model.onnx", "model.json") + (("model.core.npz",) if with_core else ()):
+        shutil.copy(src / name, dst / name)
+    return dst

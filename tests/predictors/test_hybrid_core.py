@@ -4,11 +4,11 @@ reproduce its model is refused in one line; the export writes the committed weig
 
 from __future__ import annotations
 
-import shutil
 from pathlib import Path
 
 import numpy as np
 import pytest
+from helpers import copy_model
 
 from posbench.predictors.hybrid.core import CORE_TOL, check_inputs
 from posbench.predictors.hybrid.model_info import bundled_model
@@ -18,11 +18,7 @@ from posbench.scenarios.synthetic import generate_drive
 
 
 def _copy_bundled(dst: Path, with_core: bool = True) -> Path:
-    src = bundled_model().parent
-    dst.mkdir()
-    for name in ("model.onnx", "model.json") + (("model.core.npz",) if with_core else ()):
-        shutil.copy(src / name, dst / name)
-    return dst
+    return copy_model(bundled_model().parent, dst, with_core)
 
 
 def test_bundled_hybrid_runs_its_core_and_it_reproduces_the_graph() -> None:

@@ -12,6 +12,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from helpers import copy_model
 
 torch = pytest.importorskip("torch")
 
@@ -70,11 +71,7 @@ def test_bundled_model_runs_its_core_and_config_says_so() -> None:
 
 
 def _copy_bundled(dst: Path, with_core: bool = True) -> Path:
-    src = bundled_model().parent
-    dst.mkdir()
-    for name in ("model.onnx", "model.json") + (("model.core.npz",) if with_core else ()):
-        shutil.copy(src / name, dst / name)
-    return dst
+    return copy_model(bundled_model().parent, dst, with_core)
 
 
 def test_model_copied_without_its_core_runs_the_full_graph_with_the_same_answers(
