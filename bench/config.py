@@ -56,7 +56,7 @@ class RunConfig:
         predictor_options: per-predictor constructor overrides, e.g.
             ``{"lstm-authors": {"model": p}}``.
         gate: put every predictor behind the GPS outlier gate
-            (:class:`posbench.predictors.gate.FixGate`, default limits): a fix implying
+            (:class:`posbench.replay.gps_outliers.FixGate`, default limits): a fix implying
             impossible motion is dropped before the predictor sees it (bridged like a missing
             fix) and counted. False = the paper's ungated behaviour. Scoring is unaffected: the
             reference is never gated.

@@ -63,7 +63,7 @@ fixes' noise would achieve, which :mod:`posbench.metrics.jerk_psd` estimates fro
 reference track (also as it varies along the track; ``q`` may be such a profile,
 :data:`JerkPsd`, each interval of the recursion and each query then taking its own).
 
-**A receiver's slow error** (``predictors/_gnss_noise.py``: a fix's stated variance is a
+**A receiver's slow error** (``predictors/kalman/gnss_noise.py``: a fix's stated variance is a
 white part plus a slow part that wanders over seconds to minutes): the recursion takes the
 white part as ``R``; against an independent truth the slow part adds its variance to the
 bound (no fix can reveal it), against the receiver's own fixes it adds nothing
@@ -78,6 +78,12 @@ import math
 
 import numpy as np
 
+from posbench.metrics.ca_model import (
+    ca_noise_entries,
+    ca_noise_matrix,
+    ca_predict_block,
+    ca_transition_matrix,
+)
 from posbench.metrics.jerk_psd import check_times as _check_times
 
 #: default prior standard deviations of velocity [m/s] and acceleration [m/s^2] at the first
@@ -120,32 +126,9 @@ _UPPER = ((0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2))
 _POSITION, _ACCELERATION = 0, 1
 
 
-def transition_matrix(dt: np.ndarray | float) -> np.ndarray:
-    """``F(dt)`` (..., 3, 3) of the constant-acceleration model over ``dt`` [s]."""
-    d = np.asarray(dt, dtype=float)
-    f = np.zeros((*d.shape, 3, 3))
-    f[..., 0, 0] = f[..., 1, 1] = f[..., 2, 2] = 1.0
-    f[..., 0, 1] = f[..., 1, 2] = d
-    f[..., 0, 2] = 0.5 * d * d
-    return f
-
-
-def process_noise(dt: np.ndarray | float, q: float) -> np.ndarray:
-    """``Q(dt)`` (..., 3, 3) [m^2, m^2/s, ...] of white jerk of PSD ``q`` [m^2/s^5] over
-    ``dt`` [s] (the kf's ``ca_process_noise``, per axis)."""
-    d = np.asarray(dt, dtype=float)
-    d2 = d * d
-    d3 = d2 * d
-    blk = (
-        (d3 * d2 / 20.0, d2 * d2 / 8.0, d3 / 6.0),
-        (d2 * d2 / 8.0, d3 / 3.0, d2 / 2.0),
-        (d3 / 6.0, d2 / 2.0, d),
-    )
-    out = np.empty((*d.shape, 3, 3))
-    for i in range(3):
-        for j in range(3):
-            out[..., i, j] = q * blk[i][j]
-    return out
+#: ``F(dt)`` and ``Q(dt)`` per axis (:mod:`posbench.metrics.ca_model`, the kf's model)
+transition_matrix = ca_transition_matrix
+process_noise = ca_noise_matrix
 
 
 def default_prior() -> tuple[float, float, float]:
@@ -294,20 +277,10 @@ def _recursion(
         h = t - t_prev
         gap = False
         if h > 0.0:
-            g = 0.5 * h * h
-            # M = F P, rows m0, m1 (m2 = P's last row); then F P F' + Q
-            m00, m01, m02 = a + h * b + g * c, b + h * d + g * e, c + h * e + g * f
-            m11, m12 = d + h * e, e + h * f
-            h2 = h * h
-            h3 = h2 * h
-            a = m00 + h * m01 + g * m02 + qk * h3 * h2 / 20.0
-            b = m01 + h * m02 + qk * h2 * h2 / 8.0
-            c = m02 + qk * h3 / 6.0
-            d = m11 + h * m12 + qk * h3 / 3.0
-            e = m12 + qk * h2 / 2.0
-            f = f + qk * h
+            q = ca_noise_entries(h, qk)
+            a, b, c, d, e, f = ca_predict_block((a, b, c, d, e, f), h, 0.5 * h * h, q)
             t_prev = t
-            gap = qk * h3 / 3.0 > pv
+            gap = q[3] > pv
         if kind == _POSITION:  # H = [1, 0, 0]
             a, b, c, d, e, f = _update(a, b, c, d, e, f, rv)
         else:  # H = [0, 0, 1]: the same update with p and a swapped
@@ -450,7 +423,7 @@ def position_variance_bound_with_acceleration(
 
 def with_slow_error(var: np.ndarray, slow_var: float, *, independent_truth: bool) -> np.ndarray:
     """The bound ``var`` [m^2] per axis with a receiver's slow error (variance ``slow_var``
-    [m^2] per axis; ``predictors/_gnss_noise.py``: the stated total minus the white part).
+    [m^2] per axis; ``predictors/kalman/gnss_noise.py``: the stated total minus the white part).
 
     The recursion takes the fixes' white part as their noise ``R``. A slow error shifts every
     fix of a stretch alike, so the fixes cannot tell it from the motion: against an

@@ -42,7 +42,9 @@ def fast_kernel(fn: F) -> F:
 
 def kernel(fn: F, **options: Any) -> F:
     """Mark ``fn`` as a kernel of its module (module docstring); ``options`` go to
-    ``numba.njit``."""
+    ``numba.njit``. ``name = kernel(plain_function)`` of another module's plain function
+    (scalar maths, e.g. :mod:`posbench.metrics.ca_model`'s) makes it a kernel of the
+    module that writes this line, which its kernels call as ``name``."""
     namespace = fn.__globals__
     name = fn.__name__
 
@@ -71,7 +73,8 @@ def compile_module(namespace: dict[str, Any]) -> None:
         if source is None:
             continue
         home = source.__globals__
-        if home is namespace:
+        if home is namespace or home.get(source.__name__) is source:
+            # this module's kernel, or another module's plain function compiled here
             namespace[key] = njit(cache=True, **getattr(value, OPTIONS, {}))(source)
         else:  # a kernel of another module, imported by name: its module's dispatcher
             if getattr(home[source.__name__], SOURCE, None) is not None:
@@ -82,7 +85,7 @@ def compile_module(namespace: dict[str, Any]) -> None:
 def fused_multiply_add() -> Any:
     """A numba intrinsic ``fma(a, b, c)``: ``a * b + c`` of float64s rounded once (LLVM's
     ``llvm.fma.f64``: the instruction where the CPU has one), for kernels that must round
-    as BLAS does (:mod:`~posbench.predictors._ctra_batch`). Imports numba."""
+    as BLAS does (:mod:`~posbench.predictors.kalman.ctra_rows`). Imports numba."""
     from llvmlite import ir  # type: ignore[import-untyped]
     from numba import types
     from numba.core import cgutils
@@ -174,7 +177,7 @@ def hypot(a: float, b: float) -> float:
 
 @kernel
 def huber_log_likelihood(ex: float, ey: float, a: float, b: float, d: float, k: float) -> float:
-    """:meth:`~posbench.predictors.bank.ModelBank._log_likelihood` of a fix's innovation
+    """``ModelBank._log_likelihood`` of a fix's innovation
     ``(ex, ey)`` [m] with covariance ``[[a, b], [b, d]]`` [m^2], Huber k ``k``; NaN where the
     covariance is not positive definite."""
     det = a * d - b * b
@@ -187,7 +190,7 @@ def huber_log_likelihood(ex: float, ey: float, a: float, b: float, d: float, k: 
 
 @kernel
 def update_scores(S: Any, n: int, ll: int, scores: Any, keep: float) -> int:
-    """The bank's scores after a fix (:class:`~posbench.predictors.bank.ModelBank`): where
+    """The bank's scores after a fix (``ModelBank``): where
     every member row 0..n-1 has a likelihood in column ``ll`` of ``S``, ``keep`` x score +
     likelihood, and the best row (the first of the highest); else -1, the scores as they
     stand."""

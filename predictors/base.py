@@ -123,7 +123,7 @@ class ModelFileSeams:
 def accepts_sigma(observe_gps: Callable[..., object]) -> bool:
     """Whether an ``observe_gps`` (bound or not) takes the fix accuracy: it declares a
     parameter named ``sigma`` (or ``**kwargs``). Checked once per predictor by the runner
-    and by :class:`~posbench.predictors.gate.GatedPredictor`, not per fix."""
+    and by :class:`~posbench.replay.gps_outliers.GatedPredictor`, not per fix."""
     try:
         params = inspect.signature(observe_gps).parameters.values()
     except (TypeError, ValueError):  # a builtin without a signature: the old form

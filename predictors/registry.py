@@ -79,7 +79,7 @@ _REGISTRY: dict[str, Entry] = {
         "the paper's cubic regression over recent fixes, extrapolated",
     ),
     "kf": Entry(
-        "posbench.predictors.kf_bank:KalmanBank",
+        "posbench.predictors.kalman.kf:KalmanBank",
         "linear Kalman filters (constant acceleration; IMU-aided and fixes-only, "
         "4 process noises), the one that predicts the fixes best answers",
     ),
@@ -88,7 +88,7 @@ _REGISTRY: dict[str, Entry] = {
         "the paper's Kalman baseline as its authors published it",
     ),
     "ekf": Entry(
-        "posbench.predictors.ekf_bank:EkfBank",
+        "posbench.predictors.kalman.ekf:EkfBank",
         "extended Kalman filters (CTRA; IMU- and speed-aided and fixes-only, "
         "4 process noises), the one that predicts the fixes best answers",
     ),
@@ -349,7 +349,7 @@ def constructor_options(cls: type[Predictor]) -> tuple[dict[str, Any], bool]:
     when required), and whether it takes any keyword at all (``**kwargs``).
 
     A class whose ``**kwargs`` are named options of its own (the Kalman filters' flat names,
-    :class:`~posbench.predictors.filter_inputs.FlatNames`) says which by a classmethod
+    :class:`~posbench.predictors.kalman.inputs.FlatNames`) says which by a classmethod
     ``flat_options()`` (name -> default): those are listed too, and it takes no others."""
     try:
         params = inspect.signature(cls).parameters.values()

@@ -280,7 +280,7 @@ def check_gradient(
         raise UsageError(f"--lr must be > 0 and <= 10; got {lr:g}")
     if not 0.0 <= holdout < 1.0:
         raise UsageError(f"--holdout must be >= 0 and < 1; got {holdout:g}")
-    from posbench.predictors.kf_gradient import TRAIN_EXTRA, require_torch
+    from posbench.predictors.kalman.tuning.gradient import TRAIN_EXTRA, require_torch
 
     try:
         require_torch()

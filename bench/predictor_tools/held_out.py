@@ -136,13 +136,13 @@ def gradient_priors(
     tell: Callable[[str], None] | None = None,
 ) -> dict[str, dict[str, Any]]:
     """The kf with its noise fitted by gradient (``bench tune kf --method gradient``,
-    :func:`posbench.predictors.kf_gradient.gradient_tune`) on the hybrid's own training
+    :func:`posbench.predictors.kalman.tuning.gradient.gradient_tune`) on the hybrid's own training
     drives, per GPS condition they give: their own fixes (``native``) for drives without a
     truth, each of ``profiles`` for those with one. A condition none gives is not fitted.
     At most about :data:`GRADIENT_MINUTES` of drives per condition (every k-th drive by
     name): the fit's cost grows with the drive time (about 1 s per Adam step for 10 min).
     ``tell`` hears one line per fit."""
-    from posbench.predictors.kf_gradient import gradient_tune
+    from posbench.predictors.kalman.tuning.gradient import gradient_tune
 
     def spread(ds: list[Drive]) -> list[Drive]:
         ds = sorted(ds, key=lambda d: d.name)
@@ -192,7 +192,7 @@ def hybrid_held_out(
     res["gradient_prior"] = {
         c: {k: g[k] for k in ("params", "Q_c", "R", "sigma_a", "loss", "best_iteration")}
         | {
-            "how": "predictors.kf_gradient.gradient_tune on the training drives "
+            "how": "predictors.kalman.tuning.gradient.gradient_tune on the training drives "
             "(bench tune kf --method gradient), defaults"
         }
         for c, g in gradient.items()

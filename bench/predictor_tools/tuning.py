@@ -20,7 +20,7 @@ command: maintainers copy a file made this way into the source tree.
 
 ``kf`` can also be tuned by gradient descent instead of the grid (:func:`gradient_search`,
 ``bench tune kf --method gradient``): its noise fitted as OKF does
-(:mod:`posbench.predictors.kf_gradient`, needs torch), then calibrated the same way.
+(:mod:`posbench.predictors.kalman.tuning.gradient`, needs torch), then calibrated the same way.
 """
 
 from __future__ import annotations
@@ -269,12 +269,12 @@ def gradient_search(
     **fit: Any,
 ) -> dict[str, Any]:
     """The ``kf``'s noise fitted by gradient descent on ``drives``
-    (:func:`posbench.predictors.kf_gradient.gradient_tune`, whose result this returns) on the
-    fixes a run with ``seed`` feeds under ``gps_profile``
+    (:func:`posbench.predictors.kalman.tuning.gradient.gradient_tune`, whose result this returns)
+    on the fixes a run with ``seed`` feeds under ``gps_profile``
     (:func:`~posbench.replay.prepare.prepare_drive`: the calibration's replay sees the same
     fixes). ``fit``: the keywords of ``gradient_tune``
     (``iterations``, ``lr``, ``holdout``, ...). Raises ImportError without torch."""
-    from posbench.predictors.kf_gradient import gradient_tune, require_torch
+    from posbench.predictors.kalman.tuning.gradient import gradient_tune, require_torch
     from posbench.replay.prepare import prepare_drive
 
     require_torch()

@@ -17,7 +17,7 @@ per drive:
   receiver's own fixes: estimated from the fixes
   (:func:`~posbench.metrics.limit.fix_white_variance`) and, where they state an accuracy,
   the white part of the statement as the filters split it
-  (:func:`posbench.predictors._gnss_noise.white_share`; a statement held within 1 mm, the
+  (:func:`posbench.predictors.kalman.gnss_noise.white_share`; a statement held within 1 mm, the
   bound's floor, and :data:`MAX_STATED_SIGMA_M`, so its square neither underflows to 0 nor
   overflows);
 - **the slow floor**, added where a truth is the reference (none where the receiver's own
@@ -98,7 +98,7 @@ def fix_noise(prep: PreparedDrive, cfg: RunConfig) -> dict[str, Any]:
             + ("; slow: the error drawn for this drive" if drawn else "")
             + ")",
         }
-    from posbench.predictors._gnss_noise import white_share
+    from posbench.predictors.kalman.gnss_noise import white_share
 
     est = fix_white_variance(gps.t, gps.x, gps.y)
     stated = np.asarray(gps.accuracy, dtype=float) if gps.accuracy is not None else np.empty(0)

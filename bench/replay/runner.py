@@ -15,8 +15,8 @@ import numpy as np
 import pandas as pd
 
 from posbench.config import RunConfig
-from posbench.predictors.gate import GatedPredictor
 from posbench.predictors.registry import create
+from posbench.replay.gps_outliers import GatedPredictor
 from posbench.replay.loop import replay
 from posbench.replay.prepare import PreparedDrive, prepare_drive
 from posbench.replay.queries import query_frame

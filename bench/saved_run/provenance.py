@@ -18,7 +18,7 @@ VERSIONED = (
     "numpy",
     "scipy",
     "pandas",
-    "filterpy",
+    "numba",
     "onnxruntime",
     "rosbags",
     "pymap3d",

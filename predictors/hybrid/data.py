@@ -26,7 +26,7 @@ from dataclasses import dataclass, fields
 import numpy as np
 
 from posbench.predictors.hybrid.model_info import HORIZONS, N_H
-from posbench.predictors.kf_bank import KalmanBank
+from posbench.predictors.kalman.kf import KalmanBank
 from posbench.predictors.lstm.resample import N_STEPS, centred_cubic_batch
 from posbench.predictors.lstm.windows import drive_windows
 from posbench.scenarios.drive import Drive, GpsStream

@@ -200,7 +200,7 @@ def prior_kf_params() -> dict[str, dict]:
     """The prior's parameters per GPS condition: the ``kf``'s package tuning for each
     (``predictors/tuned.json``, through :func:`posbench.predictors.registry.tuned_params`;
     {} where it has none). The prior is the ``kf`` itself
-    (:class:`~posbench.predictors.kf_bank.KalmanBank`) as ``bench run -p kf`` builds it,
+    (:class:`~posbench.predictors.kalman.kf.KalmanBank`) as ``bench run -p kf`` builds it,
     so that the hybrid is held against the filter under it."""
     from posbench.predictors.registry import tuned_params
 

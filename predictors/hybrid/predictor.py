@@ -1,7 +1,7 @@
 """``hybrid``: the ``kf`` bank as prior plus a learned residual, applied only as far as it
 has earned it (numpy + onnxruntime, no torch).
 
-The prior is the ``kf`` itself, :class:`posbench.predictors.kf_bank.KalmanBank`, run inside
+The prior is the ``kf`` itself, :class:`posbench.predictors.kalman.kf.KalmanBank`, run inside
 the hybrid on every observation (fixes with their stated sigma, IMU, wheel speed) with
 the parameters the network was trained with (model.json ``prior.params[condition]``, the
 kf's tuning for that GPS condition at training time; see
@@ -71,7 +71,7 @@ from posbench.predictors.hybrid.model_info import (
     load_model_info,
     prior_params,
 )
-from posbench.predictors.kf_bank import KalmanBank
+from posbench.predictors.kalman.kf import KalmanBank
 from posbench.predictors.lstm.core_net import has_core
 from posbench.predictors.lstm.fused import FusedStep
 from posbench.predictors.lstm.history import FIX_CAP, ImuHistory, RowBuffer, fit_fused_window

@@ -32,8 +32,8 @@ from posbench.predictor_tools.contract.clauses import (
     run_replay,
 )
 from posbench.predictor_tools.contract.inputs import HORIZON_S, cut_prepared, inputs
-from posbench.predictors.gate import GatedPredictor
 from posbench.predictors.registry import available, create
+from posbench.replay.gps_outliers import GatedPredictor
 from posbench.replay.loop import events, feed
 
 #: every registered predictor but the spies test modules register for themselves

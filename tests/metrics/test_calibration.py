@@ -8,6 +8,7 @@ import math
 
 import numpy as np
 import pytest
+from reference_filters.linear_kalman import LinearKalman
 
 from posbench.metrics.calibration import (
     CALIBRATED,
@@ -24,7 +25,6 @@ from posbench.metrics.calibration import (
     since_fix_bin,
     verdict,
 )
-from posbench.predictors.kf import LinearKalman
 
 
 # ----------------------------------------------------------------------- pure metrics
@@ -126,7 +126,7 @@ def _white_jerk_drive(rng: np.random.Generator, n_fix: int) -> tuple[np.ndarray,
     irregular fix times (0.1-0.4 s apart) and at each fix time + HORIZON_S; fixes carry
     white noise GPS_SIGMA per axis. Returns fix times, fixes (n, 2), query times, truth
     at the queries (n, 2)."""
-    from posbench.predictors._ca_kalman import ca_noise_block
+    from reference_filters.ca_filter import ca_noise_block
 
     t_fix = np.cumsum(rng.uniform(0.1, 0.4, n_fix))
     t_q = t_fix + HORIZON_S

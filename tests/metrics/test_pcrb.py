@@ -12,6 +12,7 @@ import warnings
 import numpy as np
 import pytest
 from helpers import missing
+from reference_filters.linear_kalman import LinearKalman
 
 from posbench.metrics import jerk_psd, pcrb
 from posbench.metrics.jerk_psd import jerk_psd_from_track
@@ -26,7 +27,6 @@ from posbench.metrics.pcrb import (
     transition_matrix,
     with_slow_error,
 )
-from posbench.predictors.kf import LinearKalman
 
 JERK_PSD = 2.0  # [m^2/s^5]
 GPS_SIGMA = 0.3  # [m] per axis

@@ -1,9 +1,9 @@
-"""The ekf bank as rows of one array (predictors/_ctra_batch.py) answers as its members do.
+"""The ekf bank as rows of one array (predictors/kalman/ctra_rows.py) answers as its members do.
 
-:class:`~posbench.predictors.ekf_bank.EkfBank` steps all its filters (and their shadows)
+:class:`~posbench.predictors.kalman.ekf.EkfBank` steps all its filters (and their shadows)
 in one compiled call per observation; :meth:`EkfBank.member_bank` builds the same bank
-from :class:`~posbench.predictors.ekf.CtraEkf` objects under a
-:class:`~posbench.predictors.bank.ModelBank`, the readable reference. Both replay the
+from :class:`~reference_filters.ctra_ekf.CtraEkf` objects under a
+:class:`~reference_filters.model_bank.ModelBank`, the readable reference. Both replay the
 same drives (synthetic, and one of each shared data set: aslan, KITTI, comma2k19), with
 and without simulated outages, with the fixes' own accuracy and simulated RTK, and under
 options that take other paths through the step (no IMU, no speed, no IMU yaw, a single
@@ -27,9 +27,10 @@ from typing import Any
 
 import numpy as np
 import pytest
+from reference_filters.banks import member_bank
 
 from posbench.config import RunConfig
-from posbench.predictors.ekf_bank import EkfBank
+from posbench.predictors.kalman.ekf import EkfBank
 from posbench.replay.loop import replay
 from posbench.replay.prepare import prepare_drive
 from posbench.scenarios.drive import Drive
@@ -46,7 +47,7 @@ def assert_same_answers(
 ) -> None:
     prep = prepare_drive(drive, RunConfig(dropouts=dropouts, gps_profile=profile))
     fast = EkfBank(**options)
-    ref = fast.member_bank()
+    ref = member_bank(fast)
     a, b = replay(fast, prep, 0.2), replay(ref, prep, 0.2)
     assert np.isfinite(a.future_xy).any()
     for x, y in ((a.future_xy, b.future_xy), (a.now_xy, b.now_xy), (a.cov, b.cov)):

@@ -1,12 +1,13 @@
 """The baseline filters' fixed-size fast paths against filterpy as the reference.
 
-``kf`` runs its plain-float :class:`~posbench.predictors._ca_kalman.CaFilter2D`; the reference here
+``kf`` runs its plain-float :class:`~reference_filters.ca_filter.CaFilter2D`; the reference here
 is the same predictor with ``filterpy.kalman.KalmanFilter`` as its filter core (the
-implementation before issue 16, transcribed: F, Q from :func:`posbench.predictors.kf.ca_transition`
-/ :func:`posbench.predictors.kf.ca_process_noise`, H selecting rows, filterpy's Joseph-form update).
-Both are fed every event of a drive in lock step: after every observation their means
-must agree to 1e-9 (m, m/s, m/s^2) and their covariances to 1e-9 relative, and every
-answer (future and "now" queries) to 1e-9 m.
+implementation before issue 16, transcribed: F, Q from
+:func:`reference_filters.linear_kalman.ca_transition` /
+:func:`reference_filters.linear_kalman.ca_process_noise`, H selecting rows, filterpy's Joseph-form
+update). Both are fed every event of a drive in lock step: after every observation their means must
+agree to 1e-9 (m, m/s, m/s^2) and their covariances to 1e-9 relative, and every answer (future and
+"now" queries) to 1e-9 m.
 
 ``ekf`` keeps its own CTRA model, but its numpy fast path (2-D fix update with S^-1 in
 closed form, in-place products, gains without ``np.outer``) is checked against filterpy's
@@ -32,12 +33,15 @@ from pathlib import Path
 import numpy as np
 import pytest
 from filterpy.kalman import ExtendedKalmanFilter, KalmanFilter
+from reference_filters.ctra_ekf import CtraEkf
+from reference_filters.linear_kalman import LinearKalman, ca_process_noise, ca_transition
 
 from posbench.config import RunConfig
 from posbench.predictors._cubic_xy import fit_cubic_xy
 from posbench.predictors._geometry import wrap_angle
 from posbench.predictors.base import Predictor
-from posbench.predictors.ctra import (
+from posbench.predictors.cubic import fit_cubic
+from posbench.predictors.kalman.ctra_model import (
     IA,
     IBA,
     IBW,
@@ -51,9 +55,6 @@ from posbench.predictors.ctra import (
     N_STATE,
     ctra_integrals,
 )
-from posbench.predictors.cubic import fit_cubic
-from posbench.predictors.ekf import CtraEkf
-from posbench.predictors.kf import LinearKalman, ca_process_noise, ca_transition
 from posbench.predictors.kf_paper import PaperKalman
 from posbench.predictors.poly import PolyExtrapolator
 from posbench.replay.loop import replay
@@ -74,7 +75,8 @@ for _k, _h in _H.items():
 
 class FilterpyCore:
     """The interface of :class:`CaFilter2D` on ``filterpy.kalman.KalmanFilter``: what
-    predictors/kf.py ran before the fast path (state order ``[x, y, vx, vy, ax, ay]``)."""
+    tests/reference_filters/linear_kalman.py ran before the fast path (state order ``[x, y, vx, vy,
+    ax, ay]``)."""
 
     def __init__(self) -> None:
         self.f = KalmanFilter(dim_x=6, dim_z=2)

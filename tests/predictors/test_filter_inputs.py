@@ -5,12 +5,13 @@ fixes-only member takes no sensor input; ``config()`` round-trips."""
 from __future__ import annotations
 
 import pytest
+from reference_filters.banks import member_bank
+from reference_filters.ctra_ekf import CtraEkf
+from reference_filters.linear_kalman import LinearKalman
 
-from posbench.predictors.ekf import EKF_FLAT, CtraEkf
-from posbench.predictors.ekf_bank import EkfBank
-from posbench.predictors.filter_inputs import AccelInput, GnssInput, SpeedInput
-from posbench.predictors.kf import KF_FLAT, LinearKalman
-from posbench.predictors.kf_bank import KalmanBank
+from posbench.predictors.kalman.ekf import EkfBank
+from posbench.predictors.kalman.inputs import EKF_FLAT, KF_FLAT, AccelInput, GnssInput, SpeedInput
+from posbench.predictors.kalman.kf import KalmanBank
 from posbench.predictors.registry import constructor_options
 from posbench.scenarios.errors import DataError
 
@@ -62,14 +63,14 @@ def test_config_round_trips(make):
 
 def test_bank_options_reach_the_aided_members_and_fixes_only_members_take_no_sensor():
     kb = KalmanBank(accel_sigma=0.6, use_speed=False, gps_sigma=0.5)
-    for m, label in zip(kb.member_bank().members, kb.labels, strict=True):
+    for m, label in zip(member_bank(kb).members, kb.labels, strict=True):
         assert m.gnss.sigma == 0.5  # type: ignore[attr-defined]
         if label.startswith("aided"):
             assert m.imu.sigma == 0.6 and m.speed is None  # type: ignore[attr-defined]
         else:
             assert m.imu is None and m.speed is None  # type: ignore[attr-defined]
     eb = EkfBank(yaw_rate_sigma=0.03)
-    for m, label in zip(eb.member_bank().members, eb.labels, strict=True):
+    for m, label in zip(member_bank(eb).members, eb.labels, strict=True):
         if label.startswith("aided"):
             assert m.imu.yaw_rate_sigma == 0.03  # type: ignore[attr-defined]
         else:

@@ -15,8 +15,8 @@ from hypothesis import strategies as st
 
 from posbench.predictors import registry
 from posbench.predictors.cubic import fit_cubic
-from posbench.predictors.gate import GatedPredictor
 from posbench.predictors.lstm.resample import fit_poly
+from posbench.replay.gps_outliers import GatedPredictor
 from posbench.scenarios.errors import DataError
 from posbench.scenarios.safe_pickle import safe_loads
 

@@ -1,4 +1,4 @@
-"""The GPS outlier gate (predictors.gate): what it rejects, what it never rejects, the
+"""The GPS outlier gate (replay.gps_outliers): what it rejects, what it never rejects, the
 wrapper that hides rejected fixes from a predictor, and the runner / report / CLI wiring."""
 
 from __future__ import annotations
@@ -12,7 +12,7 @@ from posbench.aggregation.aggregate import gate_summary
 from posbench.config import RunConfig
 from posbench.predictors import registry
 from posbench.predictors.base import Predictor
-from posbench.predictors.gate import FixGate, GatedPredictor
+from posbench.replay.gps_outliers import FixGate, GatedPredictor
 from posbench.replay.runner import run_drive
 from posbench.report.markdown import gate_lines
 from posbench.scenarios.degrade import degrade_gps

@@ -115,7 +115,7 @@ def test_bench_train_hybrid_prints_and_records_the_held_out_table(tmp_path, monk
     """The held-out table in the terminal, model.json and the card, beside the kf tuned by
     gradient on the training drives (its fit is tested in test_kf_gradient.py; here a
     stand-in that records what it was given)."""
-    import posbench.predictors.kf_gradient as kg
+    import posbench.predictors.kalman.tuning.gradient as kg
 
     fitted = []
 

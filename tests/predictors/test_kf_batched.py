@@ -1,9 +1,9 @@
-"""The kf bank as rows of one array (predictors/_ca_batch.py) answers as its members do.
+"""The kf bank as rows of one array (predictors/kalman/ca_rows.py) answers as its members do.
 
-:class:`~posbench.predictors.kf_bank.KalmanBank` steps all its filters (and their
+:class:`~posbench.predictors.kalman.kf.KalmanBank` steps all its filters (and their
 shadows) in one compiled call per observation; :meth:`KalmanBank.member_bank` builds the
-same bank from :class:`~posbench.predictors.kf.LinearKalman` objects under a
-:class:`~posbench.predictors.bank.ModelBank`, the readable reference. Both replay the
+same bank from :class:`~reference_filters.linear_kalman.LinearKalman` objects under a
+:class:`~reference_filters.model_bank.ModelBank`, the readable reference. Both replay the
 same drives (synthetic, and one of each shared data set: aslan, KITTI, comma2k19), with
 and without simulated outages, with the fixes' own accuracy and simulated RTK, and under
 options that take other paths through the step (no IMU, no speed, a single density, no
@@ -19,9 +19,10 @@ from typing import Any
 
 import numpy as np
 import pytest
+from reference_filters.banks import member_bank
 
 from posbench.config import RunConfig
-from posbench.predictors.kf_bank import KalmanBank
+from posbench.predictors.kalman.kf import KalmanBank
 from posbench.replay.loop import replay
 from posbench.replay.prepare import prepare_drive
 from posbench.scenarios.drive import Drive
@@ -34,7 +35,7 @@ TOL_M = 1e-9
 def assert_same_answers(drive: Drive, dropouts: str, profile: str, **options: Any) -> None:
     prep = prepare_drive(drive, RunConfig(dropouts=dropouts, gps_profile=profile))
     fast = KalmanBank(**options)
-    ref = fast.member_bank()
+    ref = member_bank(fast)
     a, b = replay(fast, prep, 0.2), replay(ref, prep, 0.2)
     assert np.isfinite(a.future_xy).any()
     for x, y in ((a.future_xy, b.future_xy), (a.now_xy, b.now_xy), (a.cov, b.cov)):

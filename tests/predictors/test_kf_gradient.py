@@ -11,15 +11,15 @@ from pathlib import Path
 import numpy as np
 import pytest
 from helpers import assert_one_error_line, bench
+from reference_filters.linear_kalman import LinearKalman
 
-from posbench.predictors import _kf_steps as ks
-from posbench.predictors.kf import LinearKalman
+from posbench.predictors.kalman.tuning import steps as ks
 from posbench.scenarios.drive import Drive, DriveMeta, GpsStream, ImuStream, TruthStream
 from posbench.scenarios.synthetic import generate_drive
 
 torch = pytest.importorskip("torch")
-kg = pytest.importorskip("posbench.predictors.kf_gradient")
-kt = pytest.importorskip("posbench.predictors._kf_torch")
+kg = pytest.importorskip("posbench.predictors.kalman.tuning.gradient")
+kt = pytest.importorskip("posbench.predictors.kalman.tuning.torch_steps")
 
 DT = 0.01  # the simulation's grid [s]
 
@@ -268,8 +268,8 @@ def test_the_module_does_not_import_torch_until_a_fit() -> None:
     import subprocess
 
     code = (
-        "import sys, posbench.predictors.kf_gradient, posbench.predictors._kf_steps; "
-        "print('torch' in sys.modules)"
+        "import sys, posbench.predictors.kalman.tuning.gradient, "
+        "posbench.predictors.kalman.tuning.steps; print('torch' in sys.modules)"
     )
     out = subprocess.run(
         [sys.executable, "-c", code], capture_output=True, text=True, timeout=60, check=True

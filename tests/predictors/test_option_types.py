@@ -14,7 +14,7 @@ import pytest
 from helpers import assert_one_error_line, bench
 
 from posbench.errors import UsageError
-from posbench.predictors.filter_inputs import AccelInput
+from posbench.predictors.kalman.inputs import AccelInput
 from posbench.predictors.option_types import (
     BOOL_TEXT,
     OptionValueError,

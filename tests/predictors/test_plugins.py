@@ -24,7 +24,7 @@ from helpers import ROOT
 from posbench.errors import UsageError
 from posbench.predictors import registry
 from posbench.predictors.base import Predictor
-from posbench.predictors.kf_bank import JERK_PSDS
+from posbench.predictors.kalman.kf import JERK_PSDS
 from posbench.predictors.registry import (
     ENTRY_POINT,
     IMPORT_PATH,

@@ -18,8 +18,8 @@ from scipy.integrate import quad
 
 from posbench.predictors import registry
 from posbench.predictors._geometry import FixBuffer, vehicle_to_world, wrap_angle
-from posbench.predictors.ctra import ctra_displacement, ctra_integrals, ctra_step
 from posbench.predictors.cv import ConstantVelocity
+from posbench.predictors.kalman.ctra_model import ctra_displacement, ctra_integrals, ctra_step
 from posbench.predictors.kf_paper import PaperKalman, paper_window_predict
 from posbench.scenarios.errors import DataError
 

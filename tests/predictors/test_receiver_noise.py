@@ -12,12 +12,13 @@ from dataclasses import replace
 import numpy as np
 import pandas as pd
 import pytest
+from reference_filters.banks import member_bank
+from reference_filters.ctra_ekf import CtraEkf
+from reference_filters.linear_kalman import LinearKalman
 
 from posbench.config import RunConfig
-from posbench.predictors._gnss_noise import GnssNoise, white_share
-from posbench.predictors.ekf import CtraEkf
-from posbench.predictors.kf import LinearKalman
-from posbench.predictors.kf_bank import KalmanBank
+from posbench.predictors.kalman.gnss_noise import GnssNoise, white_share
+from posbench.predictors.kalman.kf import KalmanBank
 from posbench.replay.runner import run
 from posbench.scenarios.degrade import draw_fix_times, gps_noise, interpolate_truth
 from posbench.scenarios.drive import Drive, GpsStream
@@ -205,12 +206,12 @@ def test_a_copy_of_the_members_answers_exactly_as_they_do(bank_cls):
     and exact: fed the rest of a drive, each answers as its member does, to the bit."""
     import copy
 
-    from posbench.predictors.ekf_bank import EkfBank
+    from posbench.predictors.kalman.ekf import EkfBank
     from posbench.replay.loop import events, feed
 
     # the members as objects: the banks' reference (the banks themselves run them as rows)
     cls = KalmanBank if bank_cls == "kf" else EkfBank
-    bank = cls(horizons_s=()).member_bank()
+    bank = member_bank(cls(horizons_s=()))
     evs = events(prepared(generate_drive(seed=3301, route="turns", duration_s=60.0)))
     half = len(evs) // 2
     feed(bank, evs, 0.2, stop=half)
@@ -244,7 +245,7 @@ def far_errors(bank_factory, drives) -> dict[str, float]:
     err: dict[str, list[np.ndarray]] = {}
     for d, prep in drives:
         bank = bank_factory()
-        source = bank.member_bank()
+        source = member_bank(bank)
         members = [copy.deepcopy(m) for m in source.members]  # type: ignore[attr-defined]
         tq = prep.now.t_query
         ref = np.column_stack(interpolate_truth(d.truth, tq))
@@ -264,7 +265,7 @@ def test_over_an_outage_the_bank_answers_no_worse_than_its_best_member(bank_cls)
     10 % of the best member's mean error (measured: kf 0.583 m = its best member,
     ekf 1.688 m against 1.669), where the one-fix-ahead choice alone is off by 4.1 m and
     4.6 m."""
-    from posbench.predictors.ekf_bank import EkfBank
+    from posbench.predictors.kalman.ekf import EkfBank
 
     cls = KalmanBank if bank_cls == "kf" else EkfBank
     drives = late_imu_outage_drives()
@@ -276,13 +277,13 @@ def test_over_an_outage_the_bank_answers_no_worse_than_its_best_member(bank_cls)
 
 
 def test_every_attribute_of_a_filter_is_listed_for_its_copy():
-    """The copies list attributes by name (``_ATTRS``, :mod:`posbench.predictors._copying`):
+    """The copies list attributes by name (``_ATTRS``, :mod:`posbench.predictors.kalman.copying`):
     one missing would leave a shadow sharing, or lacking, a piece of its member's state."""
-    from posbench.predictors.ekf_bank import EkfBank
+    from posbench.predictors.kalman.ekf import EkfBank
     from posbench.replay.loop import replay
 
     prep = prepared(generate_drive(seed=3501, route="mixed", duration_s=60.0), "outages")
-    kb, eb = KalmanBank().member_bank(), EkfBank().member_bank()
+    kb, eb = member_bank(KalmanBank()), member_bank(EkfBank())
     replay(kb, prep, 0.2)
     replay(eb, prep, 0.2)
     aided = kb.members[0]

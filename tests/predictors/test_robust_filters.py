@@ -10,9 +10,9 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
+from reference_filters.linear_kalman import LinearKalman
 
 from posbench.config import RunConfig
-from posbench.predictors.kf import LinearKalman
 from posbench.replay.runner import run
 from posbench.scenarios.degrade import enu_to_latlon, gps_noise
 from posbench.scenarios.drive import Drive, GpsStream, ImuStream, TruthStream

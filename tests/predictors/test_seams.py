@@ -14,7 +14,6 @@ import pytest
 
 from posbench.config import RunConfig
 from posbench.predictors.base import Predictor
-from posbench.predictors.gate import GatedPredictor
 from posbench.predictors.lstm.predictor import (
     BUNDLED_TEXT,
     FUSED_STAGES,
@@ -26,6 +25,7 @@ from posbench.predictors.lstm.predictor import (
 )
 from posbench.predictors.lstm.resample import DT, GRID_OFFSETS, MIN_SPAN_S, FixedGridFit
 from posbench.predictors.registry import create
+from posbench.replay.gps_outliers import GatedPredictor
 from posbench.replay.loop import replay
 from posbench.replay.predictor_setup import learned_models
 from posbench.replay.prepare import prepare_drive

@@ -11,8 +11,8 @@ import pytest
 from test_loader_rosbag import _Msgs, _ns, _trajectory, _write_bag
 
 from posbench.predictors.base import Predictor, accepts_sigma
-from posbench.predictors.gate import GatedPredictor
 from posbench.predictors.registry import create
+from posbench.replay.gps_outliers import GatedPredictor
 from posbench.replay.loop import replay
 from posbench.scenarios import loaders
 from posbench.scenarios.degrade import (

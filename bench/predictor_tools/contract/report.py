@@ -99,7 +99,7 @@ def check_contract(
     Raises:
         UsageError: an unknown name or a predictor that cannot be built (one line).
     """
-    from posbench.predictors.gate import GatedPredictor
+    from posbench.replay.gps_outliers import GatedPredictor
 
     factory = resolve_predictor(spec, options)
     checked = (lambda: GatedPredictor(factory())) if gate else factory

@@ -6,9 +6,9 @@ matrices as parameters and fit them by gradient descent on the filter's own pred
 instead of deriving them from assumptions about the noise (or searching a grid).
 
 **The filter** is the constant-acceleration model of
-:class:`~posbench.predictors.kf.LinearKalman` (:mod:`~posbench.predictors._ca_kalman`),
-differentiable in torch (:mod:`~posbench.predictors._kf_torch`): state ``[x, y, vx, vy,
-ax, ay]`` (m, m/s, m/s^2, local ENU), ``F(dt) = f(dt) (x) I2`` with the per-axis
+``LinearKalman`` (``ca_filter``),
+differentiable in torch (:mod:`~posbench.predictors.kalman.tuning.torch_steps`): state ``[x, y, vx,
+vy, ax, ay]`` (m, m/s, m/s^2, local ENU), ``F(dt) = f(dt) (x) I2`` with the per-axis
 ``f = [[1, dt, dt^2/2], [0, 1, dt], [0, 0, 1]]``, white jerk ``Q(dt) = q(dt) (x) Q_c`` with
 the per-axis white-jerk block ``q(dt)`` and a 2x2 jerk density ``Q_c`` [m^2/s^5] (x and y
 may differ and correlate; LinearKalman's ``jerk_psd`` is ``Q_c = jerk_psd I2``). Updates at
@@ -16,8 +16,8 @@ the drive's own (irregular) fix times with fix noise ``R`` [m^2] (2x2; a fix sta
 accuracy ``s`` is weighed ``(s / sigma_ref)^2 R``), the IMU's vehicle-frame acceleration
 rotated to ENU with its yaw (else the filter's heading, as LinearKalman) as a measurement
 of ``(ax, ay)`` with noise ``sigma_a^2 I2`` [m^2/s^4], and the wheel speed along the heading
-with the kf's fixed speed noise (:class:`~posbench.predictors.filter_inputs.SpeedInput`),
-all in the runner's order (:mod:`~posbench.predictors._kf_steps`). With the same noise it
+with the kf's fixed speed noise (:class:`~posbench.predictors.kalman.inputs.SpeedInput`),
+all in the runner's order (:mod:`~posbench.predictors.kalman.tuning.steps`). With the same noise it
 gives LinearKalman's answers (default inputs: no bias estimate, gate or adapted noise) to
 rounding. The kf bank's robust extras (accelerometer bias estimate, adapted IMU noise,
 gates, the fixes' own noise estimate) are not part of it: it is the plain linear filter
@@ -30,7 +30,7 @@ and, optionally (``slow``), a 2x2 covariance of the receiver's *slow* error (its
 factor the same way): against a truth, a receiver whose error wanders over minutes
 (``consumer``: 1 m with a 45 s time constant) leaves an offset no filter of its fixes can
 remove, so the predicted covariance against a truth becomes ``P + S_slow`` (a consider
-term, as :class:`~posbench.predictors._gnss_noise.GnssNoise` adds one); it never weighs a
+term, as :class:`~posbench.predictors.kalman.gnss_noise.GnssNoise` adds one); it never weighs a
 fix. Without it the fit inflates ``q`` and ``R`` to explain that offset (``consumer``, 4
 synthetic drives: q ~ 700-15000 m^2/s^5, mean error up 6 %). It is off by default: for a
 white receiver it is only weakly identifiable beside ``R`` (at the 0.2 s horizon both
@@ -60,7 +60,7 @@ no accuracy, ``gps_sigma_scale`` = that sigma / the stated sigma where they do,
 ``accel_sigma`` = ``sigma_a``.
 
 Batched: drives are cut into overlapping segments, padded to a common length and stacked
-(:func:`~posbench.predictors._kf_steps.batch`), so an iteration is a few tensor
+(:func:`~posbench.predictors.kalman.tuning.steps.batch`), so an iteration is a few tensor
 operations per step over all segments at once. Adam, full batch, float64, one thread:
 seeded and deterministic. Optional early stop on held-out segments' NLL.
 
@@ -78,8 +78,8 @@ from typing import Any
 
 import numpy as np
 
-from posbench.predictors import _kf_steps as ks
-from posbench.predictors.filter_inputs import SpeedInput
+from posbench.predictors.kalman.inputs import SpeedInput
+from posbench.predictors.kalman.tuning import steps as ks
 from posbench.scenarios.drive import Drive, GpsStream
 
 #: what to install when torch is missing
@@ -199,7 +199,8 @@ def gradient_tune(
         holdout: fraction of the segments held out; > 0: keep the parameters of the best
             held-out NLL and stop after ``patience`` steps without improvement.
         segment_s, burn_in_s: scored length [s] of a segment and the burn-in [s] before it
-            (:func:`~posbench.predictors._kf_steps.segment`); segment_s <= 0: whole drives.
+            (:func:`~posbench.predictors.kalman.tuning.steps.segment`); segment_s <= 0: whole
+            drives.
         use_imu: fit with the IMU's acceleration (and its noise sigma_a); False: fixes (and
             speed) only. speed: the wheel speed's fixed noise; None: no speed updates.
         slow: fit the receiver's slow error too (module docstring: for receivers whose error
@@ -226,7 +227,7 @@ def gradient_tune(
         ValueError: no drive has a fix to fit on.
     """
     torch = require_torch()
-    from posbench.predictors import _kf_torch as kt
+    from posbench.predictors.kalman.tuning import torch_steps as kt
 
     t_start = time.perf_counter()
     fixes = list(gps) if gps is not None else drive_fixes(drives, gps_profile, seed)

@@ -1,5 +1,5 @@
 """The CTRA motion model (constant turn rate and acceleration) of
-:class:`~posbench.predictors.ekf.CtraEkf`: pure maths on floats and numpy buffers.
+``CtraEkf``: pure maths on floats and numpy buffers.
 
 State: :data:`IX` ... :data:`IA` index the motion block ``[x, y, yaw, v, yaw_rate, a]``: ENU
 position [m], heading [rad, ENU], speed along the heading [m/s], yaw rate [rad/s],
@@ -18,6 +18,10 @@ Process noise: white jerk (``jerk_psd`` [m^2/s^5]) on the (position-along-headin
 chain, white yaw acceleration (``yaw_acc_psd`` [rad^2/s^3]) on (yaw, yaw_rate), and a
 small position random walk (``pos_psd`` [m^2/s]) for what CTRA does not model (slip,
 lane changes at constant yaw rate, GNSS wander).
+
+The scalar functions are kernels (:func:`~posbench.predictors._kernels.kernel`): the ekf's
+rows (:mod:`~posbench.predictors.kalman.ctra_rows`) call them compiled; from Python they
+run compiled too, after numba's first load.
 """
 
 from __future__ import annotations
@@ -27,12 +31,14 @@ import math
 import numpy as np
 
 from posbench.predictors._geometry import wrap_angle
+from posbench.predictors._kernels import kernel
 
 SERIES_LIMIT = 0.05  # |w T| below which the integrals use their Taylor series
 IX, IY, IYAW, IV, IW, IA, IBA, IBW, IBY, IKV = range(10)
 N_STATE = 10
 
 
+@kernel
 def ctra_integrals(w: float, T: float) -> tuple[float, float, float, float, float, float]:
     """(C0, S0, C1, S1, C2, S2) with C_n = int_0^T s^n cos(w s) ds, S_n likewise with sin.
 
@@ -65,6 +71,7 @@ def ctra_integrals(w: float, T: float) -> tuple[float, float, float, float, floa
     return C0, S0, C1, S1, C2, S2
 
 
+@kernel
 def ctra_displacement(yaw: float, v: float, w: float, a: float, T: float) -> tuple[float, float]:
     """ENU displacement [m] over T [s] under CTRA from heading yaw, speed v, yaw rate w, accel a."""
     C0, S0, C1, S1, _, _ = ctra_integrals(w, T)
@@ -83,7 +90,7 @@ def _flat(what: str, ncols: int) -> np.ndarray:
     ("jac") or ``ctra_process_noise`` ("q") write, in the order they write them."""
     key = (what, ncols)
     if key not in _FLAT:
-        rc = _JAC_ENTRIES if what == "jac" else _Q_ENTRIES
+        rc = _JAC_ENTRIES if what == "jac" else Q_ENTRIES
         _FLAT[key] = np.array([r * ncols + c for r, c in rc])
     return _FLAT[key]
 
@@ -91,13 +98,13 @@ def _flat(what: str, ncols: int) -> np.ndarray:
 _JAC_ENTRIES = ((0, 2), (1, 2), (0, 3), (1, 3), (0, 4), (1, 4), (0, 5), (1, 5), (2, 4), (3, 5))
 
 
-def ctra_step(x: np.ndarray, T: float, F: np.ndarray) -> None:
-    """Advance the state x (first 6 entries) by T [s] in place; write the Jacobian into F.
-
-    F (C order, at least 6x6) must hold the identity outside rows 0-3's model entries (it is
-    fully rewritten there).
-    """
-    px, py, yaw, v, w, a = x[: IA + 1].tolist()
+@kernel
+def ctra_motion(yaw: float, v: float, w: float, a: float, T: float) -> tuple:
+    """The CTRA step over T [s] from heading ``yaw`` [rad], speed ``v`` [m/s], yaw rate ``w``
+    [rad/s] and acceleration ``a`` [m/s^2]: ``(dx, dy, f02, f03, f04, f05, f12, f13, f14,
+    f15, c, s)``, the ENU displacement [m], the Jacobian's entries of the position rows
+    (F[0, 2..5], F[1, 2..5]; F[2, 4] = F[3, 5] = T and the identity elsewhere) and the
+    cosine and sine of ``yaw``."""
     C0, S0, C1, S1, C2, S2 = ctra_integrals(w, T)
     dxb = v * C0 + a * C1
     dyb = v * S0 + a * S1
@@ -107,26 +114,28 @@ def ctra_step(x: np.ndarray, T: float, F: np.ndarray) -> None:
     dy = s * dxb + c * dyb
     ddxb_dw = -(v * S1 + a * S2)
     ddyb_dw = v * C1 + a * C2
+    f04 = c * ddxb_dw - s * ddyb_dw
+    f14 = s * ddxb_dw + c * ddyb_dw
+    f03, f13 = c * C0 - s * S0, s * C0 + c * S0
+    f05, f15 = c * C1 - s * S1, s * C1 + c * S1
+    return dx, dy, -dy, f03, f04, f05, dx, f13, f14, f15, c, s
+
+
+def ctra_step(x: np.ndarray, T: float, F: np.ndarray) -> None:
+    """Advance the state x (first 6 entries) by T [s] in place; write the Jacobian into F
+    (:func:`ctra_motion`).
+
+    F (C order, at least 6x6) must hold the identity outside rows 0-3's model entries (it is
+    fully rewritten there).
+    """
+    px, py, yaw, v, w, a = x[: IA + 1].tolist()
+    dx, dy, f02, f03, f04, f05, f12, f13, f14, f15, _, _ = ctra_motion(yaw, v, w, a, T)
     # F[0, 2], F[1, 2], F[0, 3], F[1, 3], F[0, 4], F[1, 4], F[0, 5], F[1, 5], F[2, 4], F[3, 5]
-    F.put(
-        _flat("jac", F.shape[1]),
-        (
-            -dy,
-            dx,
-            c * C0 - s * S0,
-            s * C0 + c * S0,
-            c * ddxb_dw - s * ddyb_dw,
-            s * ddxb_dw + c * ddyb_dw,
-            c * C1 - s * S1,
-            s * C1 + c * S1,
-            T,
-            T,
-        ),
-    )
+    F.put(_flat("jac", F.shape[1]), (f02, f12, f03, f13, f04, f14, f05, f15, T, T))
     x[:IW] = (px + dx, py + dy, wrap_angle(yaw + w * T), v + a * T)
 
 
-_Q_ENTRIES = (
+Q_ENTRIES = (
     (0, 0),
     (1, 1),
     (0, 1),
@@ -150,16 +159,15 @@ _Q_ENTRIES = (
 )
 
 
-def ctra_process_noise(
-    yaw: float, T: float, jerk_psd: float, yaw_acc_psd: float, pos_psd: float, out: np.ndarray
-) -> np.ndarray:
-    """Write the process noise over T [s] at heading yaw into the motion block (6x6) of
-    ``out`` (C order, at least 6x6; its other entries are left as they are: zeros in a
-    Q buffer)."""
+@kernel
+def ctra_noise_entries(
+    c: float, s: float, T: float, jerk_psd: float, yaw_acc_psd: float, pos_psd: float
+) -> tuple:
+    """The process noise's entries over T [s] at a heading of cosine ``c`` and sine ``s``,
+    in the order of :data:`Q_ENTRIES` (white jerk along the heading, white yaw
+    acceleration, a position random walk; module docstring)."""
     T2 = T * T
     T3 = T2 * T
-    c = math.cos(yaw)
-    s = math.sin(yaw)
     qj = jerk_psd
     pp = qj * T3 * T2 / 20.0  # along-heading position
     pv = qj * T2 * T2 / 8.0
@@ -169,29 +177,36 @@ def ctra_process_noise(
     q_va = qj * T2 / 2.0
     qw = yaw_acc_psd
     q_yw = qw * T2 / 2.0
-    out.put(
-        _flat("q", out.shape[1]),
-        (
-            pp * c * c + pos_psd * T,
-            pp * s * s + pos_psd * T,  # (0,0), (1,1)
-            pcs,
-            pcs,
-            pvc,
-            pvc,
-            pvs,
-            pvs,
-            pac,
-            pac,
-            pas,
-            pas,  # (0|1, 1|3|5), sym.
-            qj * T3 / 3.0,
-            q_va,
-            q_va,
-            qj * T,  # (3,3), (3,5), (5,3), (5,5)
-            qw * T3 / 3.0,
-            q_yw,
-            q_yw,
-            qw * T,
-        ),
-    )  # (2,2), (2,4), (4,2), (4,4)
+    return (
+        pp * c * c + pos_psd * T,
+        pp * s * s + pos_psd * T,  # (0,0), (1,1)
+        pcs,
+        pcs,
+        pvc,
+        pvc,
+        pvs,
+        pvs,
+        pac,
+        pac,
+        pas,
+        pas,  # (0|1, 1|3|5), sym.
+        qj * T3 / 3.0,
+        q_va,
+        q_va,
+        qj * T,  # (3,3), (3,5), (5,3), (5,5)
+        qw * T3 / 3.0,
+        q_yw,
+        q_yw,
+        qw * T,  # (2,2), (2,4), (4,2), (4,4)
+    )
+
+
+def ctra_process_noise(
+    yaw: float, T: float, jerk_psd: float, yaw_acc_psd: float, pos_psd: float, out: np.ndarray
+) -> np.ndarray:
+    """Write the process noise over T [s] at heading yaw into the motion block (6x6) of
+    ``out`` (C order, at least 6x6; its other entries are left as they are: zeros in a
+    Q buffer)."""
+    q = ctra_noise_entries(math.cos(yaw), math.sin(yaw), T, jerk_psd, yaw_acc_psd, pos_psd)
+    out.put(_flat("q", out.shape[1]), q)
     return out

@@ -24,8 +24,8 @@ import math
 
 import numpy as np
 
-from posbench.predictors._copying import copy_attrs
 from posbench.predictors._kernels import kernel
+from posbench.predictors.kalman.copying import copy_attrs
 
 #: the state array: heading [rad], its variance [rad^2], its time [s], the yaw integrated
 #: since the start [rad], the newest yaw rate [rad/s], the newest fix's time [s], and the
@@ -138,7 +138,7 @@ class CourseHeading:
         self.hold_psd = float(hold_psd)
         self.reset()
 
-    #: every instance attribute, for :func:`~posbench.predictors._copying.copy_attrs`
+    #: every instance attribute, for :func:`~posbench.predictors.kalman.copying.copy_attrs`
     _ATTRS = ("gate", "max_chord_s", "rate_psd", "hold_psd", "_st")
 
     def __deepcopy__(self, memo: dict) -> CourseHeading:

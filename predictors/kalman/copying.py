@@ -1,8 +1,8 @@
 """Copies of the filters' state objects that leave the original as fast as it was.
 
-A bank's shadows (:class:`~posbench.predictors.bank.ModelBank`) copy its members every
-few seconds. ``copy.copy`` reads an object's ``__dict__``, and in CPython 3.11+ reading it
-turns the object's inline attribute storage into a real dict for good: every attribute
+A bank's shadows copy its members' helpers (heading tracker, bias estimator, fix-noise
+model) every few seconds. ``copy.copy`` reads an object's ``__dict__``, and in CPython 3.11+
+reading it turns the object's inline attribute storage into a real dict for good: every attribute
 access of the *original* is then slower (measured: the kf bank's fix step +20 % at p50
 after one copy). So the filters copy their attributes by name (each class lists them in
 ``_ATTRS``; a test checks that the list holds every attribute an instance has), which

@@ -1,29 +1,27 @@
 """``kf``: the constant-acceleration linear Kalman filter as a bank that adapts to its data.
 
-Members: :class:`~posbench.predictors.kf.LinearKalman` at each white-jerk density of
-``jerk_psds`` [m^2/s^5] (motorway-smooth to city manoeuvres), each once *aided* (IMU
-acceleration and wheel speed) and once on fixes alone. The aided members treat the IMU
+Members: a linear constant-acceleration filter (:mod:`posbench.metrics.ca_model`) at
+each white-jerk density of ``jerk_psds`` [m^2/s^5] (motorway-smooth to city manoeuvres), each once
+*aided* (IMU acceleration and wheel speed) and once on fixes alone. The aided members treat the IMU
 as the raw sensor it may be: vehicle-frame accelerometer bias estimated from the
 innovations, noise adapted to the innovations, 99.9 % innovation gate, heading from fix
 chords longer than their noise carried by the gyro (never from a velocity that is
 mostly noise). Fixes that state no accuracy have their noise estimated from the fixes
-themselves. :class:`~posbench.predictors.bank.ModelBank` answers with the member
-whose predictions of the fixes have the highest recent likelihood, so an input that
-does not help on a drive (a tilted, late or vibrating IMU, a mis-scaled wheel speed) or
-a process noise that does not fit it is weighed down by the drive's own innovations.
-By construction the fixes-only members keep the bank near the best fixes-only filter
+themselves. The bank answers with the member whose predictions of the fixes have the highest recent
+likelihood, so an input that does not help on a drive (a tilted, late or vibrating IMU, a
+mis-scaled wheel speed) or a process noise that does not fit it is weighed down by the drive's own
+innovations. By construction the fixes-only members keep the bank near the best fixes-only filter
 wherever the aiding misleads.
 
 Implementation: the members (and their shadows) are rows of one array stepped by
-compiled kernels, :mod:`~posbench.predictors._ca_batch`: one call per observation for
+compiled kernels, :mod:`~posbench.predictors.kalman.ca_rows`: one call per observation for
 the whole bank, about the cost of one filter object. A fix's answer comes first: what
 only the next IMU and speed updates read (the heading tracker and the bias estimator
 taking the fix) and the start of new shadows wait for the next observation, which does
 them before anything else (the answers are the same; the work moves off the fix step).
-:meth:`KalmanBank.member_bank` builds the same bank from
-:class:`~posbench.predictors.kf.LinearKalman` objects under a
-:class:`~posbench.predictors.bank.ModelBank`, the readable reference the tests hold the
-rows to (tests/predictors/test_kf_batched.py).
+The tests hold the rows to a bank of member objects (tests/reference_filters:
+``LinearKalman`` under a ``ModelBank``; tests/predictors/test_kf_batched.py), and those
+to filterpy.
 
 Units: seconds, metres, local ENU.
 """
@@ -37,15 +35,19 @@ from typing import Any
 
 import numpy as np
 
-from posbench.predictors import _ca_batch as kb
-from posbench.predictors._accel_bias import AccelBiasEstimator
-from posbench.predictors._ca_kalman import ca_noise_block, predict_cross, predict_sym
+from posbench.metrics.ca_model import ca_noise_entries, ca_predict_block, ca_predict_cross
 from posbench.predictors._geometry import COV_SCALE_RANGE, check_config
-from posbench.predictors._heading import CourseHeading
-from posbench.predictors.bank import ModelBank
-from posbench.predictors.filter_inputs import AccelInput, GnssInput, HeadingInput, SpeedInput
-from posbench.predictors.kf import KF_FLAT, LinearKalman
-from posbench.predictors.row_bank import RowBank
+from posbench.predictors.kalman import ca_rows as kb
+from posbench.predictors.kalman.accel_bias import AccelBiasEstimator
+from posbench.predictors.kalman.course_heading import CourseHeading
+from posbench.predictors.kalman.inputs import (
+    KF_FLAT,
+    AccelInput,
+    GnssInput,
+    HeadingInput,
+    SpeedInput,
+)
+from posbench.predictors.kalman.row_bank import RowBank
 
 NAN2 = (math.nan, math.nan)
 
@@ -54,7 +56,7 @@ NAN2 = (math.nan, math.nan)
 JERK_PSDS = (0.5, 4.0, 32.0, 256.0)
 
 #: horizons [s] the members are also scored at, for queries that far after the newest fix
-#: (outages; :class:`~posbench.predictors.bank.ModelBank`)
+#: (outages; ``ModelBank``)
 HORIZONS_S = (1.0, 3.0)
 
 
@@ -72,12 +74,12 @@ BANK_INPUTS: dict[str, Any] = {
 class KalmanBank(RowBank):
     """Linear CA Kalman filters, aided and fixes-only at several process noises, selected
     by the likelihood of their fix predictions (module docstring); the behaviour of
-    :class:`~posbench.predictors.bank.ModelBank` over
-    :class:`~posbench.predictors.kf.LinearKalman` members (:meth:`member_bank`), batched.
+    ``ModelBank`` over
+    ``LinearKalman`` members (:meth:`member_bank`), batched.
 
     Args:
         gnss, imu, heading, speed: the aided members' inputs
-            (:mod:`~posbench.predictors.filter_inputs`; defaults :data:`BANK_INPUTS`); a
+            (:mod:`~posbench.predictors.kalman.inputs`; defaults :data:`BANK_INPUTS`); a
             fixes-only member takes ``gnss`` alone. ``imu`` or ``speed`` None: the aided
             members go without it.
         init_vel_sigma, init_acc_sigma: every member's prior at its first fix.
@@ -88,10 +90,10 @@ class KalmanBank(RowBank):
         cov_scale: ``covariance_at`` reports ``cov_scale`` x the selected member's own
             covariance (1: as its model says).
         horizons_s, horizon_memory: the horizons [s] members are also scored at and the
-            memory of those scores (:class:`~posbench.predictors.bank.ModelBank`); ``[]``:
+            memory of those scores (``ModelBank``); ``[]``:
             one fix ahead only.
         **flat: the inputs' fields by their flat names (``gps_sigma``, ``accel_sigma``,
-            ``use_speed``, ...: :data:`~posbench.predictors.kf.KF_FLAT`), as ``--set kf.X``
+            ``use_speed``, ...: ``KF_FLAT``), as ``--set kf.X``
             and tuning files give them.
     """
 
@@ -354,33 +356,13 @@ class KalmanBank(RowBank):
         C = tuple(row[kb.C : kb.C + 9])
         if d > 0.0:
             h = 0.5 * d * d
-            q = ca_noise_block(d, self._rp.item(i, kb.PSD))
-            pxx = predict_sym(A, d, h, q)[0]
-            pyy = predict_sym(B, d, h, q)[0]
-            pxy = predict_cross(C, d, h)[0]
+            q = ca_noise_entries(d, self._rp.item(i, kb.PSD))
+            pxx = ca_predict_block(A, d, h, q)[0]
+            pyy = ca_predict_block(B, d, h, q)[0]
+            pxy = ca_predict_cross(C, d, h)[0]
         else:
             pxx, pyy, pxy = A[0], B[0], C[0]
         return self._bank_covariance(pxx, pxy, pyy)
-
-    # -- options and the reference --------------------------------------------------------
-    def member_bank(self) -> ModelBank:
-        """The same bank as :class:`~posbench.predictors.kf.LinearKalman` objects under a
-        :class:`~posbench.predictors.bank.ModelBank`: the readable reference these rows
-        answer as (tests/predictors/test_kf_batched.py)."""
-        inputs = self.inputs
-        prior: dict[str, Any] = {
-            "init_vel_sigma": self.init_vel_sigma,
-            "init_acc_sigma": self.init_acc_sigma,
-        }
-        imu_in = inputs["imu"]
-        course = CourseHeading()  # one heading tracker and bias estimator for the aided
-        tau = imu_in.bias_tau_s if imu_in is not None else 0.0
-        bias = AccelBiasEstimator(tau) if tau > 0.0 else None
-        members = []
-        for j in self.jerk_psds:
-            members.append(LinearKalman(j, **inputs, **prior, course=course, bias_estimator=bias))
-            members.append(LinearKalman(j, gnss=inputs["gnss"], imu=None, speed=None, **prior))
-        return self._model_bank(members)
 
     @classmethod
     def flat_options(cls) -> dict[str, Any]:

@@ -3,11 +3,13 @@
 Why: a bank of 8 CTRA EKFs (plus 8 shadows) as Python objects costs 8-16 Python calls,
 each a few 10x10 numpy products, per IMU sample, wheel speed and fix (a fix step ~180 us,
 ~90x constant velocity's). So each observation is one call to a compiled kernel that
-loops over the rows, as :mod:`~posbench.predictors._ca_batch` does for the kf bank.
+loops over the rows, as :mod:`~posbench.predictors.kalman.ca_rows` does for the kf bank.
 
-The maths is :class:`~posbench.predictors.ekf.CtraEkf` with the CTRA model of
-:mod:`~posbench.predictors.ctra` written out per row in the same order of operations,
-rounding included: where the members multiply matrices with numpy (BLAS: each entry a
+The motion model is :mod:`~posbench.predictors.kalman.ctra_model`'s, compiled into these
+kernels (its integrals, step and Jacobian, and process noise: written once); the
+covariance algebra and the updates are the tests' member objects (tests/reference_filters:
+``CtraEkf``) written out per row in the same order of operations, rounding included:
+where the members multiply matrices with numpy (BLAS: each entry a
 chain of fused multiply-adds in index order; here those of OpenBLAS's kernels for this
 CPU) the rows take the same fused chains (:func:`_fma`), skipping only the Jacobian's
 zeros, which add nothing; squares the members take as ``x ** 2`` go through libm's pow
@@ -15,7 +17,7 @@ and distances through CPython's hypot (:func:`~posbench.predictors._kernels.hypo
 the rows answer as the member objects do, to the bit where BLAS rounds as here
 (tests/predictors/test_ekf_batched.py, on every shared drive). That matters: a member
 that loses its heading (a fixes-only filter at a standstill) amplifies a difference in
-the last bit ~10x a second. The member objects stay the readable reference.
+the last bit ~10x a second.
 
 Layout. Row state ``S[i]`` (float64): the mean ``[x, y, yaw, v, yaw_rate, a, b_a, b_w,
 b_y, k_v]`` at :data:`X` (``CtraEkf.x``), the 10x10 covariance row-major at :data:`P`,
@@ -40,6 +42,12 @@ from posbench.predictors._kernels import (
     hypot,
     kernel,
     update_scores,
+)
+from posbench.predictors.kalman.ctra_model import (
+    Q_ENTRIES,
+    ctra_displacement,
+    ctra_motion,
+    ctra_noise_entries,
 )
 
 X, P = 0, 10
@@ -68,7 +76,8 @@ NW = 80
 
 TWO_PI = 2.0 * math.pi  # as predictors/_geometry.py
 PI2 = math.pi**2
-SERIES_LIMIT = 0.05  # as predictors/ctra.py
+#: where :func:`_noise`'s entries go in a row's covariance (10 x 10, C order, from P)
+_Q_FLAT = tuple(r * 10 + c for r, c in Q_ENTRIES)
 VAR_W0 = 0.3**2  # the prior yaw rate and acceleration variances of CtraEkf._init
 VAR_A0 = 2.0**2
 #: the two states an IMU channel (yaw rate, accel, yaw) measures the sum of: yaw_rate +
@@ -103,53 +112,14 @@ def _wrap(a: float) -> float:
     return (a + math.pi) % TWO_PI - math.pi
 
 
-@kernel
-def _integrals(w: float, T: float) -> tuple[float, float, float, float, float, float]:
-    """``ctra.ctra_integrals``: (C0, S0, C1, S1, C2, S2)."""
-    p = w * T
-    if abs(p) < SERIES_LIMIT:
-        T2 = T * T
-        p2 = p * p
-        p4 = p2 * p2
-        C0 = T * (1.0 - p2 / 6.0 + p4 / 120.0)
-        S0 = T * (p / 2.0 - p * p2 / 24.0 + p * p4 / 720.0)
-        C1 = T2 * (0.5 - p2 / 8.0 + p4 / 144.0)
-        S1 = T2 * (p / 3.0 - p * p2 / 30.0 + p * p4 / 840.0)
-        C2 = T2 * T * (1.0 / 3.0 - p2 / 10.0 + p4 / 168.0)
-        S2 = T2 * T * (p / 4.0 - p * p2 / 36.0 + p * p4 / 960.0)
-        return C0, S0, C1, S1, C2, S2
-    s = math.sin(p)
-    c = math.cos(p)
-    iw = 1.0 / w
-    iw2 = iw * iw
-    C0 = s * iw
-    S0 = (1.0 - c) * iw
-    C1 = T * s * iw + (c - 1.0) * iw2
-    S1 = -T * c * iw + s * iw2
-    C2 = T * T * s * iw - 2.0 * iw * S1
-    S2 = -T * T * c * iw + 2.0 * iw * C1
-    return C0, S0, C1, S1, C2, S2
+#: the CTRA model's maths (:mod:`~posbench.predictors.kalman.ctra_model`'s kernels)
+_motion, _displacement, _noise = ctra_motion, ctra_displacement, ctra_noise_entries
 
 
 @kernel
 def _jacobian(S: np.ndarray, i: int, T: float) -> tuple[float, ...]:
-    """``ctra.ctra_step``'s displacement (dx, dy) and its Jacobian's entries of rows 0-1
-    (F[0, 2..5], F[1, 2..5]) at row i's mean over T [s]."""
-    yaw, v, w, a = S[i, 2], S[i, 3], S[i, 4], S[i, 5]
-    C0, S0, C1, S1, C2, S2 = _integrals(w, T)
-    dxb = v * C0 + a * C1
-    dyb = v * S0 + a * S1
-    c = math.cos(yaw)
-    s = math.sin(yaw)
-    dx = c * dxb - s * dyb
-    dy = s * dxb + c * dyb
-    ddxb_dw = -(v * S1 + a * S2)
-    ddyb_dw = v * C1 + a * C2
-    f04 = c * ddxb_dw - s * ddyb_dw
-    f14 = s * ddxb_dw + c * ddyb_dw
-    f03, f13 = c * C0 - s * S0, s * C0 + c * S0
-    f05, f15 = c * C1 - s * S1, s * C1 + c * S1
-    return dx, dy, -dy, f03, f04, f05, dx, f13, f14, f15, c, s
+    """:func:`~posbench.predictors.kalman.ctra_model.ctra_motion` at row i's mean over T [s]."""
+    return _motion(S[i, 2], S[i, 3], S[i, 4], S[i, 5], T)
 
 
 @kernel
@@ -187,36 +157,9 @@ def _predict(S: np.ndarray, RP: np.ndarray, CF: np.ndarray, i: int, t: float) ->
         S[i, o + 2] = _fma(q4, T, q2)
         S[i, o + 3] = _fma(q5, T, q3)
     # + Q (ctra.ctra_process_noise at the heading before the step, and the sensor states)
-    T2 = T * T
-    T3 = T2 * T
-    qj, qw, pos = RP[i, JERK], RP[i, YAWACC], CF[POS_PSD]
-    pp = qj * T3 * T2 / 20.0
-    pv = qj * T2 * T2 / 8.0
-    pa = qj * T3 / 6.0
-    pcs = pp * c * s
-    pvc, pvs, pac, pas = pv * c, pv * s, pa * c, pa * s
-    q_va = qj * T2 / 2.0
-    q_yw = qw * T2 / 2.0
-    S[i, P + 0] += pp * c * c + pos * T
-    S[i, P + 11] += pp * s * s + pos * T
-    S[i, P + 1] += pcs
-    S[i, P + 10] += pcs
-    S[i, P + 3] += pvc
-    S[i, P + 30] += pvc
-    S[i, P + 13] += pvs
-    S[i, P + 31] += pvs
-    S[i, P + 5] += pac
-    S[i, P + 50] += pac
-    S[i, P + 15] += pas
-    S[i, P + 51] += pas
-    S[i, P + 33] += qj * T3 / 3.0
-    S[i, P + 35] += q_va
-    S[i, P + 53] += q_va
-    S[i, P + 55] += qj * T
-    S[i, P + 22] += qw * T3 / 3.0
-    S[i, P + 24] += q_yw
-    S[i, P + 42] += q_yw
-    S[i, P + 44] += qw * T
+    q = _noise(c, s, T, RP[i, JERK], RP[i, YAWACC], CF[POS_PSD])
+    for k in range(20):
+        S[i, P + _Q_FLAT[k]] += q[k]
     S[i, P + 66] += RP[i, QBA] * T
     S[i, P + 77] += RP[i, QBW] * T
     S[i, P + 88] += CF[CALIB_PSD] * T
@@ -413,7 +356,7 @@ def fix_rows(
     keep: float,
 ) -> int:
     """A finite fix (x, y) [m] at t [s] weighed with r [m^2] per axis for rows 0..n-1 (the
-    members), as :func:`~posbench.predictors._ca_batch.fix_rows` (innovation, likelihood,
+    members), as :func:`~posbench.predictors.kalman.ca_rows.fix_rows` (innovation, likelihood,
     update, scores; returns the best row or -1); a row not yet initialised tries to
     (``CtraEkf._try_init``) and leaves the scores as they stand."""
     k = CF[HUBER_K]
@@ -489,13 +432,8 @@ def position(S: np.ndarray, i: int, t: float) -> tuple[float, float]:
     T = t - S[i, TS]
     if not T > 0.0:
         return x, y
-    yaw, v, w, a = S[i, 2], S[i, 3], S[i, 4], S[i, 5]
-    C0, S0, C1, S1, _, _ = _integrals(w, T)
-    dxb = v * C0 + a * C1
-    dyb = v * S0 + a * S1
-    c = math.cos(yaw)
-    s = math.sin(yaw)
-    return x + (c * dxb - s * dyb), y + (s * dxb + c * dyb)
+    dx, dy = _displacement(S[i, 2], S[i, 3], S[i, 4], S[i, 5], T)
+    return x + dx, y + dy
 
 
 @kernel
@@ -525,14 +463,11 @@ def covariance(S: np.ndarray, RP: np.ndarray, CF: np.ndarray, i: int, t: float) 
         o01 = _fma(m0[k + 2], f1[k], o01)
         o10 = _fma(m1[k + 2], f0[k], o10)
         o11 = _fma(m1[k + 2], f1[k], o11)
-    T2 = T * T
-    pp = RP[i, JERK] * (T2 * T) * T2 / 20.0
-    pos = CF[POS_PSD] * T
-    pcs = pp * c * s
-    o00 += pp * c * c + pos
-    o11 += pp * s * s + pos
-    o01 += pcs
-    o10 += pcs
+    q = _noise(c, s, T, RP[i, JERK], RP[i, YAWACC], CF[POS_PSD])
+    o00 += q[0]
+    o11 += q[1]
+    o01 += q[2]
+    o10 += q[3]
     return 0.5 * (o00 + o00), 0.5 * (o01 + o10), 0.5 * (o11 + o11)
 
 

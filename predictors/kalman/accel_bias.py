@@ -4,7 +4,7 @@ Why not from the IMU innovations of the filter that uses the IMU: at 50-100 Hz t
 dominates that filter's acceleration state, so its innovations stay near zero whatever the
 bias (the bias turns into a velocity drift that the fixes keep correcting). Here the
 reference is independent of the IMU: a fixes-only constant-acceleration filter
-(:class:`~posbench.predictors._ca_kalman.CaFilter2D`, white jerk ``REF_JERK_PSD``).
+(``CaFilter2D``, white jerk ``REF_JERK_PSD``).
 
 Over a window between two fixes ``[t0, t1]`` (at least ``min_window_s``), the IMU's
 velocity change rotated into ENU by the heading ``h`` is ``dv_imu = int R(h) a dt`` while
@@ -21,8 +21,8 @@ from __future__ import annotations
 
 import math
 
-from posbench.predictors import _ca_batch as kb
-from posbench.predictors._copying import copy_attrs
+from posbench.predictors.kalman import ca_rows as kb
+from posbench.predictors.kalman.copying import copy_attrs
 
 #: white jerk of the fixes-only reference [m^2/s^5] (smooth: its velocity is what counts)
 REF_JERK_PSD = 4.0
@@ -50,7 +50,7 @@ class AccelBiasEstimator:
         self._ref = kb.new_rows(1)  # the fixes-only reference filter
         self.reset()
 
-    #: every instance attribute, for :func:`~posbench.predictors._copying.copy_attrs`
+    #: every instance attribute, for :func:`~posbench.predictors.kalman.copying.copy_attrs`
     _ATTRS = (
         "tau_s",
         "min_window_s",

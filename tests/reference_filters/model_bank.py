@@ -23,7 +23,7 @@ observation, before the members take it: the same state, off the fix's step). A 
 more than ``h`` after the newest fix (the largest such ``h``) is answered by the member
 whose shadows did best at ``h``; a query nearer the fix by the likelihood's choice above.
 The shadows cost about one more run of the aided members on the IMU and speed (the
-copies themselves 55-75 us per window, :mod:`~posbench.predictors._copying`).
+copies themselves 55-75 us per window, :mod:`~posbench.predictors.kalman.copying`).
 The distance, not a likelihood, scores a horizon because there the question is only
 which member's answer lands nearer: the fix's noise is the same for every member.
 

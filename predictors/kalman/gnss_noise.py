@@ -13,7 +13,7 @@ The model here, per axis (ENU, m^2):
   states nothing, the white part alone (estimated, or ``gps_sigma^2``): nothing is known
   of its slow part, and the fixes themselves cannot show it.
 - **white** ``W``: estimated from the fixes alone by
-  :class:`~posbench.predictors._fix_noise.FixNoise` (each fix against the quadratic
+  :class:`~posbench.predictors.kalman.fix_noise.FixNoise` (each fix against the quadratic
   through the three before it; a filter's innovations would feed its own lag back). A
   receiver whose estimate ``E`` stays near its statement is white: ``W = T``. Where the
   fixes are much smoother than stated, ``W = E``. In between the weight moves linearly:
@@ -38,8 +38,8 @@ from __future__ import annotations
 
 import copy
 
-from posbench.predictors._copying import copy_attrs
-from posbench.predictors._fix_noise import FixNoise
+from posbench.predictors.kalman.copying import copy_attrs
+from posbench.predictors.kalman.fix_noise import FixNoise
 
 #: estimate / stated total at and above which a receiver counts as white (W = T)
 WHITE_RATIO = 0.3
@@ -72,7 +72,7 @@ class GnssNoise:
         gps_sigma_scale: a fix stating ``sigma`` [m] states a total of
             ``(gps_sigma_scale * sigma)^2`` per axis.
         memory: > 0: estimate the white part from the fixes
-            (:class:`~posbench.predictors._fix_noise.FixNoise`, this many fixes of memory);
+            (:class:`~posbench.predictors.kalman.fix_noise.FixNoise`, this many fixes of memory);
             0: no estimate (a fix's total is all white, an unstated fix ``gps_sigma^2``).
         split: split a stated total into white and slow parts (needs ``memory`` > 0);
             False: a stated total is all white (weighed as stated).
@@ -87,7 +87,7 @@ class GnssNoise:
         self.split_stated = bool(split) and self.estimator is not None
         self.reset()
 
-    #: every instance attribute, for :func:`~posbench.predictors._copying.copy_attrs`
+    #: every instance attribute, for :func:`~posbench.predictors.kalman.copying.copy_attrs`
     _ATTRS = ("default_var", "scale", "estimator", "split_stated", "slow_var")
 
     def __deepcopy__(self, memo: dict) -> GnssNoise:

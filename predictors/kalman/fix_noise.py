@@ -22,8 +22,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from posbench.predictors._copying import copy_attrs
 from posbench.predictors._kernels import kernel
+from posbench.predictors.kalman.copying import copy_attrs
 
 #: the state array: the last three fixes ``(t, x, y)`` (oldest first), how many are held,
 #: the running mean of the samples [m^2] and their count
@@ -100,7 +100,7 @@ class FixNoise:
         self.warmup = int(warmup)
         self.reset()
 
-    #: every instance attribute, for :func:`~posbench.predictors._copying.copy_attrs`
+    #: every instance attribute, for :func:`~posbench.predictors.kalman.copying.copy_attrs`
     _ATTRS = (
         "initial_var",
         "memory",

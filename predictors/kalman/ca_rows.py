@@ -6,11 +6,11 @@ the arithmetic is ~200 flops per filter. Batched numpy does not help at this siz
 6x6 batched predict is ~7 us of numpy call overhead, against ~0.1 us compiled). So each
 observation is one call to a compiled kernel that loops over the rows.
 
-The maths is :class:`~posbench.predictors._ca_kalman.CaFilter2D` and
-:class:`~posbench.predictors.kf.LinearKalman` written out per row, in the same order of
-operations, so the rows answer as the member objects do (the tests compare them on every
-shared drive: tests/predictors/test_kf_batched.py). The member objects stay the readable
-reference.
+The motion model is :mod:`posbench.metrics.ca_model`'s (F and the white-jerk Q, written
+once), compiled into these kernels; the updates are the tests' member objects
+(tests/reference_filters: ``CaFilter2D``, ``LinearKalman``) written out per row, in the
+same order of operations, so the rows answer as they do (the tests compare them on every
+shared drive: tests/predictors/test_kf_batched.py).
 
 Layout. Row state ``S[i]`` (float64): per-axis means ``mx = [x, vx, ax]`` at
 :data:`MX`, ``my`` at :data:`MY` (m, m/s, m/s^2, ENU), the covariance blocks ``A``, ``B``
@@ -29,6 +29,7 @@ import math
 
 import numpy as np
 
+from posbench.metrics.ca_model import ca_noise_entries, ca_predict_block, ca_predict_cross
 from posbench.predictors._kernels import huber_log_likelihood, hypot, kernel, update_scores
 
 MX, MY, A, B, C = 0, 3, 6, 12, 18
@@ -74,6 +75,12 @@ def _sym_entry(k: int, j: int) -> int:
     return (2, 4, 5)[j]
 
 
+#: the CA model's maths (:mod:`posbench.metrics.ca_model`), compiled
+_noise = kernel(ca_noise_entries)
+_predict_block = kernel(ca_predict_block)
+_predict_cross = kernel(ca_predict_cross)
+
+
 @kernel
 def _predict(S: np.ndarray, i: int, t: float, psd: float) -> None:
     """Row i to time t [s] (``LinearKalman._predict_to``: only forward)."""
@@ -87,46 +94,26 @@ def _predict(S: np.ndarray, i: int, t: float, psd: float) -> None:
     p, v, a = S[i, 3], S[i, 4], S[i, 5]
     S[i, 3] = p + d * v + h * a
     S[i, 4] = v + d * a
-    d2 = d * d
-    d3 = d2 * d
-    q0 = psd * (d3 * d2 / 20.0)
-    q1 = psd * (d2 * d2 / 8.0)
-    q2 = psd * (d3 / 6.0)
-    q3 = psd * (d3 / 3.0)
-    q4 = psd * (d2 / 2.0)
-    q5 = psd * d
+    q = _noise(d, psd)
     for o in (A, B):
-        m00, m01, m02 = S[i, o], S[i, o + 1], S[i, o + 2]
-        m11, m12, m22 = S[i, o + 3], S[i, o + 4], S[i, o + 5]
-        g00 = m00 + d * m01 + h * m02
-        g01 = m01 + d * m11 + h * m12
-        g02 = m02 + d * m12 + h * m22
-        g11 = m11 + d * m12
-        g12 = m12 + d * m22
-        S[i, o] = g00 + d * g01 + h * g02 + q0
-        S[i, o + 1] = g01 + d * g02 + q1
-        S[i, o + 2] = g02 + q2
-        S[i, o + 3] = g11 + d * g12 + q3
-        S[i, o + 4] = g12 + q4
-        S[i, o + 5] = m22 + q5
-    c00, c01, c02 = S[i, C], S[i, C + 1], S[i, C + 2]
-    c10, c11, c12 = S[i, C + 3], S[i, C + 4], S[i, C + 5]
-    c20, c21, c22 = S[i, C + 6], S[i, C + 7], S[i, C + 8]
-    g00 = c00 + d * c10 + h * c20
-    g01 = c01 + d * c11 + h * c21
-    g02 = c02 + d * c12 + h * c22
-    g10 = c10 + d * c20
-    g11 = c11 + d * c21
-    g12 = c12 + d * c22
-    S[i, C] = g00 + d * g01 + h * g02
-    S[i, C + 1] = g01 + d * g02
-    S[i, C + 2] = g02
-    S[i, C + 3] = g10 + d * g11 + h * g12
-    S[i, C + 4] = g11 + d * g12
-    S[i, C + 5] = g12
-    S[i, C + 6] = c20 + d * c21 + h * c22
-    S[i, C + 7] = c21 + d * c22
-    S[i, C + 8] = c22
+        m = (S[i, o], S[i, o + 1], S[i, o + 2], S[i, o + 3], S[i, o + 4], S[i, o + 5])
+        m = _predict_block(m, d, h, q)
+        for k in range(6):
+            S[i, o + k] = m[k]
+    c = (
+        S[i, C],
+        S[i, C + 1],
+        S[i, C + 2],
+        S[i, C + 3],
+        S[i, C + 4],
+        S[i, C + 5],
+        S[i, C + 6],
+        S[i, C + 7],
+        S[i, C + 8],
+    )
+    c = _predict_cross(c, d, h)
+    for k in range(9):
+        S[i, C + k] = c[k]
     S[i, TS] = t
 
 
@@ -250,7 +237,7 @@ def fix_rows(
 ) -> int:
     """A fix (x, y) [m] at t [s] weighed with r [m^2] per axis, for rows 0..n-1 (the
     members): predict, store the innovation and its robust log-likelihood
-    (:meth:`~posbench.predictors.bank.ModelBank._log_likelihood`), update. Then the scores:
+    (``ModelBank._log_likelihood``), update. Then the scores:
     ``keep`` x scores + likelihoods where every row scored; returns the best row, or -1
     when not every row scored (the scores stand)."""
     for i in range(n):

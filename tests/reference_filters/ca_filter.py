@@ -1,4 +1,5 @@
-"""The 2-D constant-acceleration Kalman filter of :mod:`posbench.predictors.kf` in plain floats.
+"""The 2-D constant-acceleration Kalman filter of :mod:`reference_filters.linear_kalman` in plain
+floats.
 
 Same maths as ``filterpy.kalman.KalmanFilter`` with ``F``, ``Q`` of the CA model and the
 kf's measurements, written for the fixed size: at IMU rate numpy's per-call overhead
@@ -26,65 +27,13 @@ from __future__ import annotations
 
 import numpy as np
 
-from posbench.predictors._copying import copy_attrs
+from posbench.metrics.ca_model import ca_noise_entries as ca_noise_block
+from posbench.metrics.ca_model import ca_predict_block as predict_sym
+from posbench.metrics.ca_model import ca_predict_cross as predict_cross
+from posbench.predictors.kalman.copying import copy_attrs
 
 #: entries of a symmetric 3x3 block in storage order, by (row, column)
 _SYM = ((0, 1, 2), (1, 3, 4), (2, 4, 5))
-
-
-def predict_sym(m: tuple, d: float, h: float, q: tuple) -> tuple:
-    """``f M f' + Q`` for a symmetric block M (six upper entries), f = CA transition over
-    dt = d [s] (h = d^2/2), Q block q (six upper entries)."""
-    m00, m01, m02, m11, m12, m22 = m
-    g00 = m00 + d * m01 + h * m02
-    g01 = m01 + d * m11 + h * m12
-    g02 = m02 + d * m12 + h * m22
-    g11 = m11 + d * m12
-    g12 = m12 + d * m22
-    return (
-        g00 + d * g01 + h * g02 + q[0],
-        g01 + d * g02 + q[1],
-        g02 + q[2],
-        g11 + d * g12 + q[3],
-        g12 + q[4],
-        m22 + q[5],
-    )
-
-
-def predict_cross(c: tuple, d: float, h: float) -> tuple:
-    """``f C f'`` for a general 3x3 block C (nine entries, row-major)."""
-    c00, c01, c02, c10, c11, c12, c20, c21, c22 = c
-    g00 = c00 + d * c10 + h * c20
-    g01 = c01 + d * c11 + h * c21
-    g02 = c02 + d * c12 + h * c22
-    g10 = c10 + d * c20
-    g11 = c11 + d * c21
-    g12 = c12 + d * c22
-    return (
-        g00 + d * g01 + h * g02,
-        g01 + d * g02,
-        g02,
-        g10 + d * g11 + h * g12,
-        g11 + d * g12,
-        g12,
-        c20 + d * c21 + h * c22,
-        c21 + d * c22,
-        c22,
-    )
-
-
-def ca_noise_block(d: float, psd: float) -> tuple:
-    """Six upper entries of the per-axis white-jerk Q (psd [m^2/s^5]) over d [s]."""
-    d2 = d * d
-    d3 = d2 * d
-    return (
-        psd * (d3 * d2 / 20.0),
-        psd * (d2 * d2 / 8.0),
-        psd * (d3 / 6.0),
-        psd * (d3 / 3.0),
-        psd * (d2 / 2.0),
-        psd * d,
-    )
 
 
 class CaFilter2D:
@@ -98,7 +47,7 @@ class CaFilter2D:
     def __init__(self) -> None:
         self.init(0.0, 0.0, 1.0, 1.0, 1.0)
 
-    #: every instance attribute, for :func:`~posbench.predictors._copying.copy_attrs`
+    #: every instance attribute, for :func:`~posbench.predictors.kalman.copying.copy_attrs`
     _ATTRS = ("mx", "my", "A", "B", "C")
 
     def __deepcopy__(self, memo: dict) -> CaFilter2D:

@@ -30,7 +30,7 @@ small but road vibration and pitch (1 deg -> 0.17 m/s^2 of gravity) give ~0.3 m/
 wheel speed ~0.2 m/s plus a 3 % scale error (tyre radius; KITTI drive 0005's speed
 reads 2.5 % above its position-derived speed).
 
-Implementation: :class:`posbench.predictors._ca_kalman.CaFilter2D`, the same filter as
+Implementation: :class:`reference_filters.ca_filter.CaFilter2D`, the same filter as
 ``filterpy.kalman.KalmanFilter`` with F = :func:`ca_transition`, Q = :func:`ca_process_noise`
 written out in plain floats for the fixed 6-state size (fix step p50 ~23 -> ~5 us); the
 tests run filterpy beside it (``filter_core``) and check mean, covariance and every answer.
@@ -44,51 +44,29 @@ from typing import Any
 
 import numpy as np
 
-from posbench.predictors._accel_bias import AccelBiasEstimator
-from posbench.predictors._ca_kalman import CaFilter2D, ca_noise_block, predict_cross, predict_sym
-from posbench.predictors._copying import copy_attrs
+from posbench.metrics.ca_model import (
+    ca_noise_entries,
+    ca_noise_matrix,
+    ca_predict_block,
+    ca_predict_cross,
+)
 from posbench.predictors._geometry import COV_SCALE_RANGE, check_config
-from posbench.predictors._heading import CourseHeading
 from posbench.predictors._kernels import warm_up_once
 from posbench.predictors.base import Predictor
-from posbench.predictors.filter_inputs import (
+from posbench.predictors.kalman.accel_bias import AccelBiasEstimator
+from posbench.predictors.kalman.copying import copy_attrs
+from posbench.predictors.kalman.course_heading import CourseHeading
+from posbench.predictors.kalman.inputs import (
+    KF_FLAT,
+    KF_INPUTS,
     AccelInput,
-    FlatNames,
     GnssInput,
     HeadingInput,
     SpeedInput,
 )
+from reference_filters.ca_filter import CaFilter2D
 
 NAN2 = (math.nan, math.nan)
-
-#: the kf's inputs as :class:`LinearKalman` takes them by default
-KF_INPUTS: dict[str, Any] = {
-    "gnss": GnssInput(),
-    "imu": AccelInput(),
-    "heading": HeadingInput(),
-    "speed": SpeedInput(),
-}
-#: flat option names (``--set kf.X``, tuning files, ``config()``) -> the inputs' fields
-KF_FLAT = FlatNames(
-    {
-        "gps_sigma": ("gnss", "sigma"),
-        "gps_sigma_scale": ("gnss", "sigma_scale"),
-        "fix_noise_memory": ("gnss", "noise_memory"),
-        "gps_split": ("gnss", "split"),
-        "use_imu": ("imu", None),
-        "accel_sigma": ("imu", "sigma"),
-        "accel_bias_tau_s": ("imu", "bias_tau_s"),
-        "imu_gate": ("imu", "gate"),
-        "imu_noise_tau_s": ("imu", "noise_tau_s"),
-        "heading_from_fixes": ("heading", "from_fixes"),
-        "heading_sigma_max": ("heading", "sigma_max"),
-        "heading_min_speed": ("heading", "min_speed"),
-        "use_speed": ("speed", None),
-        "speed_sigma": ("speed", "sigma"),
-        "speed_rel_sigma": ("speed", "rel_sigma"),
-        "stop_speed": ("speed", "stop_speed"),
-    }
-)
 
 #: per-axis component of a measurement (CaFilter2D.update_pair): position, velocity, accel
 POS, VEL, ACC = 0, 1, 2
@@ -104,20 +82,12 @@ def ca_transition(dt: float, out: np.ndarray) -> np.ndarray:
 
 
 def ca_process_noise(dt: float, jerk_psd: float, out: np.ndarray) -> np.ndarray:
-    """Fill ``out`` (6x6, zeros elsewhere) with Q of white jerk (psd [m^2/s^5]) over dt [s]."""
-    d2 = dt * dt
-    d3 = d2 * dt
-    q = jerk_psd
-    blk = (
-        (d3 * d2 / 20.0, d2 * d2 / 8.0, d3 / 6.0),
-        (d2 * d2 / 8.0, d3 / 3.0, d2 / 2.0),
-        (d3 / 6.0, d2 / 2.0, dt),
-    )
+    """Fill ``out`` (6x6, zeros elsewhere) with Q of white jerk (psd [m^2/s^5]) over dt [s]
+    (:func:`~posbench.metrics.ca_model.ca_noise_matrix` per axis)."""
+    blk = ca_noise_matrix(dt, jerk_psd)
     for i in range(3):
         for j in range(3):
-            v = q * blk[i][j]
-            out[2 * i, 2 * j] = v
-            out[2 * i + 1, 2 * j + 1] = v
+            out[2 * i, 2 * j] = out[2 * i + 1, 2 * j + 1] = blk[i, j]
     return out
 
 
@@ -125,19 +95,19 @@ class LinearKalman(Predictor):
     """Constant-acceleration linear KF fed by GNSS fixes, IMU acceleration and wheel speed.
 
     Composed of the CA motion model and its sensor inputs
-    (:mod:`~posbench.predictors.filter_inputs`); a fixes-only filter is ``imu=None,
+    (:mod:`~posbench.predictors.kalman.inputs`); a fixes-only filter is ``imu=None,
     speed=None``.
 
     Args:
         jerk_psd: process noise, white-jerk spectral density [m^2/s^5].
-        gnss: the fixes (:class:`~posbench.predictors.filter_inputs.GnssInput`: noise for
+        gnss: the fixes (:class:`~posbench.predictors.kalman.inputs.GnssInput`: noise for
             fixes that state none, scale of a statement, white/slow split).
         imu: IMU acceleration as an observation
-            (:class:`~posbench.predictors.filter_inputs.AccelInput`: noise, bias estimate,
+            (:class:`~posbench.predictors.kalman.inputs.AccelInput`: noise, bias estimate,
             adapted noise, gate); None: no IMU updates.
         heading: where the IMU states no yaw, the heading it and the speed are taken along
-            (:class:`~posbench.predictors.filter_inputs.HeadingInput`).
-        speed: wheel speed (:class:`~posbench.predictors.filter_inputs.SpeedInput`); None:
+            (:class:`~posbench.predictors.kalman.inputs.HeadingInput`).
+        speed: wheel speed (:class:`~posbench.predictors.kalman.inputs.SpeedInput`); None:
             no speed updates.
         init_vel_sigma: prior velocity uncertainty [m/s] at the first fix.
         init_acc_sigma: prior acceleration uncertainty [m/s^2] at the first fix.
@@ -179,7 +149,7 @@ class LinearKalman(Predictor):
         inputs = KF_FLAT.compose(
             "kf", {"gnss": gnss, "imu": imu, "heading": heading, "speed": speed}, KF_INPUTS, flat
         )
-        #: the sensor inputs (:mod:`~posbench.predictors.filter_inputs`); None: not used
+        #: the sensor inputs (:mod:`~posbench.predictors.kalman.inputs`); None: not used
         self.gnss: GnssInput = inputs["gnss"]
         self.imu: AccelInput | None = inputs["imu"]
         self.heading: HeadingInput = inputs["heading"]
@@ -198,7 +168,7 @@ class LinearKalman(Predictor):
         self.kf = self.filter_core()
         self.reset()
 
-    #: every instance attribute, for :func:`~posbench.predictors._copying.copy_attrs`
+    #: every instance attribute, for :func:`~posbench.predictors.kalman.copying.copy_attrs`
     _ATTRS = (
         "gnss",
         "imu",
@@ -226,7 +196,7 @@ class LinearKalman(Predictor):
     )
 
     def __deepcopy__(self, memo: dict) -> LinearKalman:
-        """An independent copy (a bank's shadows, :class:`~posbench.predictors.bank.ModelBank`):
+        """An independent copy (a bank's shadows, :class:`~reference_filters.model_bank.ModelBank`):
         its own filter state; the heading tracker and bias estimator copied once per
         ``memo``, so copies of a bank's members share them as the members do."""
         new = copy_attrs(self, self._ATTRS)
@@ -299,14 +269,14 @@ class LinearKalman(Predictor):
     # -- observations -----------------------------------------------------------------
     def fix_variance(self, sigma: float | None) -> float:
         """R per axis [m^2] a fix stating per-axis 1-sigma ``sigma`` [m] is weighed with:
-        its white part (:class:`~posbench.predictors._gnss_noise.GnssNoise`); without
+        its white part (:class:`~posbench.predictors.kalman.gnss_noise.GnssNoise`); without
         ``fix_noise_memory`` ``(gps_sigma_scale * sigma)^2``, or ``gps_sigma^2`` when it
         states none (None, not finite, or <= 0)."""
         return self._gnss.parts(sigma)[0]
 
     #: the newest fix's innovation and its covariance before the update, ``(nu_x, nu_y,
     #: S_xx, S_xy, S_yy)`` [m, m^2]; None before the filter's second fix (read by
-    #: :class:`~posbench.predictors.bank.ModelBank`)
+    #: :class:`~reference_filters.model_bank.ModelBank`)
     fix_innovation: tuple[float, float, float, float, float] | None = None
 
     def observe_gps(self, t: float, x: float, y: float, sigma: float | None = None) -> None:
@@ -449,7 +419,7 @@ class LinearKalman(Predictor):
     def slow_variance(self) -> float:
         """The slow part [m^2] per axis of the newest fix's stated error, which
         ``covariance_at`` adds to the filter's own covariance (0 for a white receiver or
-        one that states nothing; :class:`~posbench.predictors._gnss_noise.GnssNoise`)."""
+        one that states nothing; :class:`~posbench.predictors.kalman.gnss_noise.GnssNoise`)."""
         return self._gnss.slow_var
 
     # -- query ------------------------------------------------------------------------
@@ -466,7 +436,7 @@ class LinearKalman(Predictor):
         propagated over dt = t - (time of the state) exactly as a predict step would
         (``F P F' + Q(dt)`` with the white-jerk Q), without changing the filter, times
         ``cov_scale``, plus the slow part of the newest fix's stated error (a consider
-        term: :class:`~posbench.predictors._gnss_noise.GnssNoise`). None before the first
+        term: :class:`~posbench.predictors.kalman.gnss_noise.GnssNoise`). None before the first
         fix."""
         if not self._ready:
             return None
@@ -474,10 +444,10 @@ class LinearKalman(Predictor):
         d = t - self._ts
         if d > 0.0:
             h = 0.5 * d * d
-            q = ca_noise_block(d, self.jerk_psd)
-            pxx = predict_sym(kf.A, d, h, q)[0]
-            pyy = predict_sym(kf.B, d, h, q)[0]
-            pxy = predict_cross(kf.C, d, h)[0]
+            q = ca_noise_entries(d, self.jerk_psd)
+            pxx = ca_predict_block(kf.A, d, h, q)[0]
+            pyy = ca_predict_block(kf.B, d, h, q)[0]
+            pxy = ca_predict_cross(kf.C, d, h)[0]
         else:
             pxx, pyy, pxy = kf.A[0], kf.B[0], kf.C[0]
         k = self.cov_scale

@@ -5,7 +5,8 @@ along the heading [m/s], yaw rate [rad/s], longitudinal acceleration [m/s^2].
 
 Prediction over T seconds (the CTRA closed form and its analytic Jacobian) and the process
 noise (white jerk ``jerk_psd`` [m^2/s^5], white yaw acceleration ``yaw_acc_psd``
-[rad^2/s^3], a position random walk ``pos_psd`` [m^2/s]) are :mod:`posbench.predictors.ctra`.
+[rad^2/s^3], a position random walk ``pos_psd`` [m^2/s]) are
+:mod:`posbench.predictors.kalman.ctra_model`.
 
 Sensor biases: two more states, the accelerometer's longitudinal bias ``b_a`` [m/s^2]
 (mounting pitch and gravity leakage: the comma2k19 segment's accelerometer reads about
@@ -43,10 +44,10 @@ from typing import Any
 
 import numpy as np
 
-from posbench.predictors._copying import copy_attrs
 from posbench.predictors._geometry import COV_SCALE_RANGE, check_config, wrap_angle
 from posbench.predictors.base import Predictor
-from posbench.predictors.ctra import (
+from posbench.predictors.kalman.copying import copy_attrs
+from posbench.predictors.kalman.ctra_model import (
     IA,
     IBA,
     IBW,
@@ -62,7 +63,13 @@ from posbench.predictors.ctra import (
     ctra_process_noise,
     ctra_step,
 )
-from posbench.predictors.filter_inputs import CtraImuInput, CtraSpeedInput, FlatNames, GnssInput
+from posbench.predictors.kalman.inputs import (
+    EKF_FLAT,
+    EKF_INPUTS,
+    CtraImuInput,
+    CtraSpeedInput,
+    GnssInput,
+)
 
 NAN2 = (math.nan, math.nan)
 #: the IMU's measurements as sums of two states: yaw rate, longitudinal accel, yaw
@@ -82,53 +89,22 @@ def _sym_inverse(S: list[list[float]]) -> list[list[float]]:
     return [[A00 * w, A01 * w, A02 * w], [A01 * w, A11 * w, A12 * w], [A02 * w, A12 * w, A22 * w]]
 
 
-#: the ekf's inputs as :class:`CtraEkf` takes them by default
-EKF_INPUTS: dict[str, Any] = {
-    "gnss": GnssInput(),
-    "imu": CtraImuInput(),
-    "speed": CtraSpeedInput(),
-}
-#: flat option names (``--set ekf.X``, tuning files, ``config()``) -> the inputs' fields
-EKF_FLAT = FlatNames(
-    {
-        "gps_sigma": ("gnss", "sigma"),
-        "gps_sigma_scale": ("gnss", "sigma_scale"),
-        "fix_noise_memory": ("gnss", "noise_memory"),
-        "gps_split": ("gnss", "split"),
-        "use_imu": ("imu", None),
-        "yaw_rate_sigma": ("imu", "yaw_rate_sigma"),
-        "accel_sigma": ("imu", "accel_sigma"),
-        "yaw_sigma": ("imu", "yaw_sigma"),
-        "use_imu_yaw": ("imu", "use_yaw"),
-        "accel_bias_psd": ("imu", "accel_bias_psd"),
-        "gyro_bias_psd": ("imu", "gyro_bias_psd"),
-        "accel_bias_sigma0": ("imu", "accel_bias_sigma0"),
-        "gyro_bias_sigma0": ("imu", "gyro_bias_sigma0"),
-        "yaw_offset_sigma0": ("imu", "yaw_offset_sigma0"),
-        "use_speed": ("speed", None),
-        "speed_sigma": ("speed", "sigma"),
-        "speed_rel_sigma": ("speed", "rel_sigma"),
-        "speed_scale_sigma0": ("speed", "scale_sigma0"),
-    }
-)
-
-
 class CtraEkf(Predictor):
     """CTRA extended Kalman filter over GNSS, IMU yaw rate / accel / yaw and wheel speed.
 
     Composed of the CTRA motion model and its sensor inputs
-    (:mod:`~posbench.predictors.filter_inputs`); a fixes-only filter is ``imu=None,
+    (:mod:`~posbench.predictors.kalman.inputs`); a fixes-only filter is ``imu=None,
     speed=None``.
 
     Args:
         jerk_psd: white-jerk spectral density [m^2/s^5].
         yaw_acc_psd: white yaw-acceleration spectral density [rad^2/s^3].
         pos_psd: position random-walk density [m^2/s].
-        gnss: the fixes (:class:`~posbench.predictors.filter_inputs.GnssInput`).
+        gnss: the fixes (:class:`~posbench.predictors.kalman.inputs.GnssInput`).
         imu: yaw rate, longitudinal acceleration and yaw with their biases
-            (:class:`~posbench.predictors.filter_inputs.CtraImuInput`); None: no IMU.
+            (:class:`~posbench.predictors.kalman.inputs.CtraImuInput`); None: no IMU.
         speed: wheel speed with its scale error
-            (:class:`~posbench.predictors.filter_inputs.CtraSpeedInput`); None: no speed.
+            (:class:`~posbench.predictors.kalman.inputs.CtraSpeedInput`); None: no speed.
         init_vel_sigma: prior speed uncertainty [m/s] when initialised from IMU yaw only.
         calib_psd: random-walk density of the IMU yaw offset and the speed scale.
         cov_scale: calibration: ``covariance_at`` reports ``cov_scale`` x the filter's own
@@ -168,7 +144,7 @@ class CtraEkf(Predictor):
         inputs = EKF_FLAT.compose(
             "ekf", {"gnss": gnss, "imu": imu, "speed": speed}, EKF_INPUTS, flat
         )
-        #: the sensor inputs (:mod:`~posbench.predictors.filter_inputs`); None: not used
+        #: the sensor inputs (:mod:`~posbench.predictors.kalman.inputs`); None: not used
         self.gnss: GnssInput = inputs["gnss"]
         self.imu: CtraImuInput | None = inputs["imu"]
         self.speed: CtraSpeedInput | None = inputs["speed"]
@@ -206,7 +182,7 @@ class CtraEkf(Predictor):
             self._H_imu[sel] = (H, tuple(r_imu[k] for k in sel))
         self.reset()
 
-    #: every instance attribute, for :func:`~posbench.predictors._copying.copy_attrs`
+    #: every instance attribute, for :func:`~posbench.predictors.kalman.copying.copy_attrs`
     _ATTRS = (
         "gnss",
         "imu",
@@ -416,14 +392,14 @@ class CtraEkf(Predictor):
     # -- observations ----------------------------------------------------------------
     def fix_variance(self, sigma: float | None) -> float:
         """R per axis [m^2] a fix stating per-axis 1-sigma ``sigma`` [m] is weighed with:
-        its white part (:class:`~posbench.predictors._gnss_noise.GnssNoise`); without
+        its white part (:class:`~posbench.predictors.kalman.gnss_noise.GnssNoise`); without
         ``fix_noise_memory`` ``(gps_sigma_scale * sigma)^2``, or ``gps_sigma^2`` when it
         states none (None, not finite, or <= 0)."""
         return self._gnss.parts(sigma)[0]
 
     #: the newest fix's innovation and its covariance before the update, ``(nu_x, nu_y,
     #: S_xx, S_xy, S_yy)`` [m, m^2]; None before the filter is initialised (read by
-    #: :class:`~posbench.predictors.bank.ModelBank`)
+    #: :class:`~reference_filters.model_bank.ModelBank`)
     fix_innovation: tuple[float, float, float, float, float] | None = None
 
     def observe_gps(self, t: float, x: float, y: float, sigma: float | None = None) -> None:
@@ -490,7 +466,7 @@ class CtraEkf(Predictor):
     def slow_variance(self) -> float:
         """The slow part [m^2] per axis of the newest fix's stated error, which
         ``covariance_at`` adds to the filter's own covariance (0 for a white receiver or
-        one that states nothing; :class:`~posbench.predictors._gnss_noise.GnssNoise`)."""
+        one that states nothing; :class:`~posbench.predictors.kalman.gnss_noise.GnssNoise`)."""
         return self._gnss.slow_var
 
     # -- query -------------------------------------------------------------------------
@@ -510,7 +486,7 @@ class CtraEkf(Predictor):
         predict step over T = t - (time of the state), ``F P F' + Q(T)`` with the CTRA
         Jacobian F at the current mean (the linearisation the filter itself uses), without
         changing the filter, times ``cov_scale``, plus the slow part of the newest fix's
-        stated error (a consider term: :class:`~posbench.predictors._gnss_noise.GnssNoise`).
+        stated error (a consider term: :class:`~posbench.predictors.kalman.gnss_noise.GnssNoise`).
         None before initialisation (``position_at`` then
         holds the newest fix with no motion model behind it)."""
         if not self._ready:

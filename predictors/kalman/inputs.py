@@ -1,9 +1,9 @@
 """The sensor inputs of the Kalman filters, as small frozen option types, and the flat
 names that address them.
 
-A filter is composed, not configured: one motion model (constant acceleration in
-:mod:`~posbench.predictors.kf`, CTRA in :mod:`~posbench.predictors.ekf`; their maths stay
-in their own files) plus the sensor inputs it takes, each an option type below or
+A filter is composed, not configured: one motion model (constant acceleration,
+:mod:`posbench.metrics.ca_model`; CTRA, :mod:`~posbench.predictors.kalman.ctra_model`)
+plus the sensor inputs it takes, each an option type below or
 ``None`` (a fixes-only filter takes the GNSS alone). Each type holds its own defaults and
 checks its own ranges (``check(owner)``); a bank builds its members from the same input
 objects, so no option is declared twice. Stone Soup's split (a transition model, one
@@ -25,7 +25,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from posbench.predictors._geometry import check_config
-from posbench.predictors._gnss_noise import GnssNoise
+from posbench.predictors.kalman.gnss_noise import GnssNoise
 from posbench.scenarios.errors import DataError
 
 KMH = 1.0 / 3.6
@@ -33,7 +33,7 @@ KMH = 1.0 / 3.6
 
 @dataclass(frozen=True)
 class GnssInput:
-    """GNSS fixes (:class:`~posbench.predictors._gnss_noise.GnssNoise`).
+    """GNSS fixes (:class:`~posbench.predictors.kalman.gnss_noise.GnssNoise`).
 
     Attributes:
         sigma: fix noise [m] per axis for fixes that state no accuracy.
@@ -100,8 +100,8 @@ class HeadingInput:
 
     Attributes:
         from_fixes: from fix chords longer than their noise, carried by the gyro
-            (:class:`~posbench.predictors._heading.CourseHeading`), used while its standard
-            deviation is below ``sigma_max`` [rad]; False: from the velocity state above
+            (:class:`~posbench.predictors.kalman.course_heading.CourseHeading`), used while its
+            standard deviation is below ``sigma_max`` [rad]; False: from the velocity state above
             ``min_speed`` [m/s].
     """
 
@@ -282,3 +282,64 @@ class CtraSpeedInput:
             speed_rel_sigma=(self.rel_sigma, 0.0, 1.0),
             speed_scale_sigma0=(self.scale_sigma0, 1e-9, 10.0),
         )
+
+
+#: one linear CA filter's inputs by default (the kf bank's aided members take
+#: :data:`~posbench.predictors.kalman.kf.BANK_INPUTS`)
+KF_INPUTS: dict[str, Any] = {
+    "gnss": GnssInput(),
+    "imu": AccelInput(),
+    "heading": HeadingInput(),
+    "speed": SpeedInput(),
+}
+#: flat option names (``--set kf.X``, tuning files, ``config()``) -> the inputs' fields
+KF_FLAT = FlatNames(
+    {
+        "gps_sigma": ("gnss", "sigma"),
+        "gps_sigma_scale": ("gnss", "sigma_scale"),
+        "fix_noise_memory": ("gnss", "noise_memory"),
+        "gps_split": ("gnss", "split"),
+        "use_imu": ("imu", None),
+        "accel_sigma": ("imu", "sigma"),
+        "accel_bias_tau_s": ("imu", "bias_tau_s"),
+        "imu_gate": ("imu", "gate"),
+        "imu_noise_tau_s": ("imu", "noise_tau_s"),
+        "heading_from_fixes": ("heading", "from_fixes"),
+        "heading_sigma_max": ("heading", "sigma_max"),
+        "heading_min_speed": ("heading", "min_speed"),
+        "use_speed": ("speed", None),
+        "speed_sigma": ("speed", "sigma"),
+        "speed_rel_sigma": ("speed", "rel_sigma"),
+        "stop_speed": ("speed", "stop_speed"),
+    }
+)
+
+#: one CTRA EKF's inputs by default (the ekf bank's members take these)
+EKF_INPUTS: dict[str, Any] = {
+    "gnss": GnssInput(),
+    "imu": CtraImuInput(),
+    "speed": CtraSpeedInput(),
+}
+#: flat option names (``--set ekf.X``, tuning files, ``config()``) -> the inputs' fields
+EKF_FLAT = FlatNames(
+    {
+        "gps_sigma": ("gnss", "sigma"),
+        "gps_sigma_scale": ("gnss", "sigma_scale"),
+        "fix_noise_memory": ("gnss", "noise_memory"),
+        "gps_split": ("gnss", "split"),
+        "use_imu": ("imu", None),
+        "yaw_rate_sigma": ("imu", "yaw_rate_sigma"),
+        "accel_sigma": ("imu", "accel_sigma"),
+        "yaw_sigma": ("imu", "yaw_sigma"),
+        "use_imu_yaw": ("imu", "use_yaw"),
+        "accel_bias_psd": ("imu", "accel_bias_psd"),
+        "gyro_bias_psd": ("imu", "gyro_bias_psd"),
+        "accel_bias_sigma0": ("imu", "accel_bias_sigma0"),
+        "gyro_bias_sigma0": ("imu", "gyro_bias_sigma0"),
+        "yaw_offset_sigma0": ("imu", "yaw_offset_sigma0"),
+        "use_speed": ("speed", None),
+        "speed_sigma": ("speed", "sigma"),
+        "speed_rel_sigma": ("speed", "rel_sigma"),
+        "speed_scale_sigma0": ("speed", "scale_sigma0"),
+    }
+)

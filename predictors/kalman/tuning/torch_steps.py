@@ -1,8 +1,8 @@
-"""The differentiable Kalman filter of :mod:`posbench.predictors.kf_gradient`, in torch.
+"""The differentiable Kalman filter of :mod:`posbench.predictors.kalman.tuning.gradient`, in torch.
 
-The constant-acceleration filter of :class:`~posbench.predictors.kf.LinearKalman` over a
-:class:`~posbench.predictors._kf_steps.Batch` of padded segments: one pass of a few batched
-tensor operations per step for all segments at once, float64. Every function takes the
+The constant-acceleration filter of ``LinearKalman`` over a
+:class:`~posbench.predictors.kalman.tuning.steps.Batch` of padded segments: one pass of a few
+batched tensor operations per step for all segments at once, float64. Every function takes the
 ``torch`` module as its first argument (imported by the caller: torch is the ``train``
 extra, never imported when predictors are built). Units: seconds, metres, radians, ENU.
 """
@@ -14,8 +14,9 @@ from typing import TYPE_CHECKING, Any, NamedTuple
 
 import numpy as np
 
-from posbench.predictors import _kf_steps as ks
-from posbench.predictors.filter_inputs import HeadingInput
+from posbench.metrics.ca_model import ca_noise_entries, ca_noise_matrix, ca_transition_matrix
+from posbench.predictors.kalman.inputs import HeadingInput
+from posbench.predictors.kalman.tuning import steps as ks
 
 if TYPE_CHECKING:
     import torch
@@ -63,26 +64,15 @@ def noise(torch: Any, theta: torch.Tensor, floors: torch.Tensor) -> Noise:
 
 # -------------------------------------------------------------------------- filter
 def _ca_blocks(dt: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """(F (..., 6, 6), white-jerk block per unit density (..., 3, 3)) over dt [s]."""
-    f = np.zeros(dt.shape + (3, 3))
-    f[..., 0, 0] = f[..., 1, 1] = f[..., 2, 2] = 1.0
-    f[..., 0, 1] = f[..., 1, 2] = dt
-    f[..., 0, 2] = 0.5 * dt * dt
+    """(F (..., 6, 6), white-jerk block per unit density (..., 3, 3)) over dt [s]
+    (:mod:`posbench.metrics.ca_model`)."""
+    f = ca_transition_matrix(dt)
     F = np.einsum("...ij,kl->...ikjl", f, np.eye(2)).reshape(dt.shape + (6, 6))
-    d2, d3 = dt * dt, dt * dt * dt
-    q = np.stack(
-        [
-            np.stack([d3 * d2 / 20.0, d2 * d2 / 8.0, d3 / 6.0], -1),
-            np.stack([d2 * d2 / 8.0, d3 / 3.0, d2 / 2.0], -1),
-            np.stack([d3 / 6.0, d2 / 2.0, dt], -1),
-        ],
-        -2,
-    )
-    return F, q
+    return F, ca_noise_matrix(dt, 1.0)
 
 
 class BatchTensors:
-    """A :class:`~posbench.predictors._kf_steps.Batch` as float64 tensors, with what does
+    """A :class:`~posbench.predictors.kalman.tuning.steps.Batch` as float64 tensors, with what does
     not depend on the parameters computed once: F and the white-jerk blocks per step, the
     position rows of F and the jerk weight of each scored fix's horizon; ``slow``: the
     predictions against a truth carry the receiver's slow error (:class:`Noise`)."""
@@ -103,7 +93,7 @@ class BatchTensors:
         Fh[:, 0, 0] = Fh[:, 1, 1] = 1.0
         Fh[:, 0, 2] = Fh[:, 1, 3] = h
         Fh[:, 0, 4] = Fh[:, 1, 5] = 0.5 * h * h
-        self.Fh, self.qh = tens(Fh), tens(h**5 / 20.0)
+        self.Fh, self.qh = tens(Fh), tens(ca_noise_entries(h, 1.0)[0])
         self.ref, self.ref_w = tens(bt.ref), tens(bt.ref_w)
         #: 1 where the receiver's slow error counts (``slow`` and a truth reference), else 0
         self.truth_w = tens((slow & (bt.ref_w == 0.0)).astype(float))
@@ -118,7 +108,7 @@ def _pad(torch: Any, m: torch.Tensor, n: int) -> torch.Tensor:
 
 class _Heading:
     """The heading of steps whose IMU states no yaw, from the filter itself, as
-    :meth:`~posbench.predictors.kf.LinearKalman._heading` takes it: the velocity's direction
+    ``LinearKalman._heading`` takes it: the velocity's direction
     above ``min_speed``, else the last heading advanced by the yaw rate (not differentiated:
     the kf uses it as a given). The last heading is the newer of the last one the IMU stated
     (from the steps, :func:`_last_known`) and the last one taken here."""

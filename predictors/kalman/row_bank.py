@@ -1,9 +1,10 @@
 """A filter bank whose members are rows of one array: the selection around the kernels.
 
-:class:`~posbench.predictors.bank.ModelBank` runs member objects; the ``kf`` and ``ekf``
-banks run their members (and the members' shadows) as rows stepped by compiled kernels
-(:mod:`~posbench.predictors._ca_batch`, :mod:`~posbench.predictors._ctra_batch`).
-:class:`RowBank` is what both do around their kernels, with ModelBank's behaviour: the
+The ``kf`` and ``ekf`` banks run their members (and the members' shadows) as rows stepped by
+compiled kernels (:mod:`~posbench.predictors.kalman.ca_rows`,
+:mod:`~posbench.predictors.kalman.ctra_rows`).
+:class:`RowBank` is what both do around their kernels (the behaviour of the tests'
+member-object ``ModelBank``, tests/reference_filters): the
 one-fix-ahead scores (kept by the kernels), the shadows (rows ``n..2n-1``, copies of
 the members' rows) and their horizon scores, and which member answers a query.
 
@@ -21,14 +22,13 @@ Units: seconds, metres, ENU.
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Sequence
+from collections.abc import Callable
 
 import numpy as np
 
-from posbench.predictors._gnss_noise import GnssNoise
 from posbench.predictors._kernels import warm_up_once
-from posbench.predictors.bank import ModelBank
 from posbench.predictors.base import Predictor
+from posbench.predictors.kalman.gnss_noise import GnssNoise
 
 #: a kernel filling ``out`` with the shadows' distances [m] to a fix (t, x, y) and saying
 #: whether every one is finite: ``(S, n, t, x, y, out) -> bool``
@@ -42,7 +42,7 @@ class RowBank(Predictor):
     rows in ``reset`` and wraps its kernels in :meth:`_fix_begins` / :meth:`_fix_ends`;
     every ``observe_*`` starts with ``if self._due: self._catch_up()``."""
 
-    #: Huber k of the fix likelihood (:class:`~posbench.predictors.bank.ModelBank`'s default)
+    #: Huber k of the fix likelihood (``ModelBank``'s default)
     huber_k = 3.0
     #: the shadows' distance kernel
     _distances: ShadowDistances
@@ -160,7 +160,7 @@ class RowBank(Predictor):
     def answering(self, t: float) -> int:
         """Index of the member that answers a query at t [s]: the horizon choice of the
         largest horizon at most ``t`` - (newest fix) that has been scored, else the
-        one-fix-ahead choice (:meth:`~posbench.predictors.bank.ModelBank.answering`)."""
+        one-fix-ahead choice (``ModelBank.answering``)."""
         gap = t - self._t_fix
         hs = self.horizons_s
         if not (hs and gap >= hs[0]):
@@ -172,20 +172,6 @@ class RowBank(Predictor):
                 return self.horizon_best[i]
         return self.best
 
-    def _model_bank(self, members: Sequence[Predictor]) -> ModelBank:
-        """``members`` (objects, in the rows' order) under a
-        :class:`~posbench.predictors.bank.ModelBank` with this bank's selection options:
-        the readable reference the rows answer as."""
-        return ModelBank(
-            members,
-            self.labels,
-            memory_fixes=self.memory_fixes,
-            huber_k=self.huber_k,
-            cov_scale=self.cov_scale,
-            horizons_s=self.horizons_s,
-            horizon_memory=self.horizon_memory,
-        )
-
     def fix_variance(self, sigma: float | None) -> float:
         """R per axis [m^2] of a fix stating ``sigma``, as the members weigh it."""
         return self._gnss.parts(sigma)[0]
@@ -193,7 +179,8 @@ class RowBank(Predictor):
     @property
     def slow_variance(self) -> float:
         """The slow part [m^2] per axis of the newest fix's stated error, which
-        ``covariance_at`` adds unscaled (:class:`~posbench.predictors._gnss_noise.GnssNoise`)."""
+        ``covariance_at`` adds unscaled
+        (:class:`~posbench.predictors.kalman.gnss_noise.GnssNoise`)."""
         return self._gnss.slow_var
 
     def _bank_covariance(self, pxx: float, pxy: float, pyy: float) -> np.ndarray:

@@ -1,4 +1,5 @@
-"""The steps of :mod:`posbench.predictors.kf_gradient`'s batched Kalman filter (numpy only).
+"""The steps of :mod:`posbench.predictors.kalman.tuning.gradient`'s batched Kalman filter (numpy
+only).
 
 One drive becomes a time-ordered list of *steps* in the runner's order (at equal times the
 fix first, then the IMU, then the speed): a **fix step** (a position measurement) or a
@@ -9,7 +10,7 @@ world acceleration (ax, ay), rows 2-3 the speed along the heading (row 2) or, be
 stop speed, a zero-velocity update (rows 2 and 3). An unused row has ``H = 0``, ``z = 0``
 and unit variance, so it changes nothing. The vehicle-frame IMU sample ``(a_fwd, a_left)``
 is rotated to ENU with the IMU's yaw psi, ``(c a_fwd - s a_left, s a_fwd + c a_left)``
-with ``c, s = cos psi, sin psi``, as :class:`~posbench.predictors.kf.LinearKalman` does;
+with ``c, s = cos psi, sin psi``, as ``LinearKalman`` does;
 where the IMU states no yaw the heading is left to the filter (``need_heading``: the
 filter takes it from its velocity, as LinearKalman does).
 
@@ -33,7 +34,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from posbench.predictors.filter_inputs import SpeedInput
+from posbench.predictors.kalman.inputs import SpeedInput
 from posbench.scenarios.drive import Drive, GpsStream
 
 #: the horizon [s] of the fit's reference after each fix (the benchmark's future point)

@@ -1,24 +1,22 @@
 """``ekf``: the CTRA extended Kalman filter as a bank that adapts to its data.
 
-Members: :class:`~posbench.predictors.ekf.CtraEkf` at each pair of white-jerk and
-white-yaw-acceleration densities of ``noise_levels`` (steady motorway to city
+Members: a CTRA EKF (:mod:`~posbench.predictors.kalman.ctra_model`) at each pair of
+white-jerk and white-yaw-acceleration densities of ``noise_levels`` (steady motorway to city
 manoeuvres), each once *aided* (IMU yaw rate, acceleration and yaw, wheel speed; the
 filter estimates their biases, offset and scale) and once on fixes alone.
-:class:`~posbench.predictors.bank.ModelBank` answers with the member whose predictions
+The bank answers with the member whose predictions
 of the fixes have the highest recent likelihood, so an input that does not help on a
 drive, or a process noise that does not fit it, is weighed down by the drive's own
-innovations (see :mod:`posbench.predictors.kf_bank`, the same idea for ``kf``). Fixes
+innovations (see :mod:`posbench.predictors.kalman.kf`, the same idea for ``kf``). Fixes
 that state no accuracy have their noise estimated from the fixes themselves
 (``fix_noise_memory``, 30 fixes).
 
 Implementation: the members (and their shadows) are rows of one array stepped by
-compiled kernels, :mod:`~posbench.predictors._ctra_batch`: one call per observation for
+compiled kernels, :mod:`~posbench.predictors.kalman.ctra_rows`: one call per observation for
 the whole bank, about the cost of one filter object; the fix-noise model is one for all
-members (each member's would see the same fixes and hold the same values).
-:meth:`EkfBank.member_bank` builds the same bank from
-:class:`~posbench.predictors.ekf.CtraEkf` objects under a
-:class:`~posbench.predictors.bank.ModelBank`, the readable reference the tests hold the
-rows to (tests/predictors/test_ekf_batched.py).
+members (each member's would see the same fixes and hold the same values). The tests
+hold the rows to a bank of member objects (tests/reference_filters: ``CtraEkf`` under a
+``ModelBank``; tests/predictors/test_ekf_batched.py), and those to filterpy.
 
 Units: seconds, metres, radians, local ENU.
 """
@@ -31,13 +29,17 @@ from typing import Any
 
 import numpy as np
 
-from posbench.predictors import _ctra_batch as cb
 from posbench.predictors._geometry import COV_SCALE_RANGE, check_config
-from posbench.predictors.bank import ModelBank
-from posbench.predictors.ekf import EKF_FLAT, EKF_INPUTS, CtraEkf
-from posbench.predictors.filter_inputs import CtraImuInput, CtraSpeedInput, GnssInput
-from posbench.predictors.kf_bank import HORIZONS_S
-from posbench.predictors.row_bank import RowBank
+from posbench.predictors.kalman import ctra_rows as cb
+from posbench.predictors.kalman.inputs import (
+    EKF_FLAT,
+    EKF_INPUTS,
+    CtraImuInput,
+    CtraSpeedInput,
+    GnssInput,
+)
+from posbench.predictors.kalman.kf import HORIZONS_S
+from posbench.predictors.kalman.row_bank import RowBank
 
 NAN2 = (math.nan, math.nan)
 
@@ -45,7 +47,7 @@ NAN2 = (math.nan, math.nan)
 NOISE_LEVELS = ((0.5, 0.03), (4.0, 0.3), (32.0, 3.0), (256.0, 10.0))
 
 
-#: the aided members' inputs: as :class:`~posbench.predictors.ekf.CtraEkf`'s, with the
+#: the aided members' inputs: as ``CtraEkf``'s, with the
 #: fixes' noise estimated over 30 fixes
 BANK_INPUTS: dict[str, Any] = {**EKF_INPUTS, "gnss": GnssInput(noise_memory=30.0)}
 
@@ -53,26 +55,26 @@ BANK_INPUTS: dict[str, Any] = {**EKF_INPUTS, "gnss": GnssInput(noise_memory=30.0
 class EkfBank(RowBank):
     """CTRA EKFs, aided and fixes-only at several process noises, selected by the
     likelihood of their fix predictions (module docstring); the behaviour of
-    :class:`~posbench.predictors.bank.ModelBank` over
-    :class:`~posbench.predictors.ekf.CtraEkf` members (:meth:`member_bank`), batched.
+    ``ModelBank`` over
+    ``CtraEkf`` members (:meth:`member_bank`), batched.
 
     Args:
         noise_levels: ``(jerk_psd, yaw_acc_psd)`` pairs, one pair of members each.
         jerk_psd, yaw_acc_psd: one level instead of ``noise_levels`` (a bank of one aided
             and one fixes-only member; the one not given takes
-            :class:`~posbench.predictors.ekf.CtraEkf`'s default), e.g. ``--set ekf.jerk_psd=4``.
-        gnss, imu, speed: the aided members' inputs (:mod:`~posbench.predictors.filter_inputs`;
+            ``CtraEkf``'s default), e.g. ``--set ekf.jerk_psd=4``.
+        gnss, imu, speed: the aided members' inputs (:mod:`~posbench.predictors.kalman.inputs`;
             defaults :data:`BANK_INPUTS`); a fixes-only member takes ``gnss`` alone.
         pos_psd, init_vel_sigma, calib_psd: every member's
-            (:class:`~posbench.predictors.ekf.CtraEkf`).
+            (``CtraEkf``).
         memory_fixes: exponential memory of the member scores, in fixes.
         cov_scale: ``covariance_at`` reports ``cov_scale`` x the selected member's own
             covariance.
         horizons_s, horizon_memory: the horizons [s] members are also scored at and the
-            memory of those scores (:class:`~posbench.predictors.bank.ModelBank`); ``[]``:
+            memory of those scores (``ModelBank``); ``[]``:
             one fix ahead only.
         **flat: the inputs' fields by their flat names (``gps_sigma``, ``yaw_rate_sigma``,
-            ``use_speed``, ...: :data:`~posbench.predictors.ekf.EKF_FLAT`), as ``--set ekf.X``
+            ``use_speed``, ...: ``EKF_FLAT``), as ``--set ekf.X``
             and tuning files give them.
     """
 
@@ -170,7 +172,7 @@ class EkfBank(RowBank):
     def _row_params(
         j: float, w: float, imu: CtraImuInput | None, speed: CtraSpeedInput | None
     ) -> list[float]:
-        """One row's parameters (:data:`~posbench.predictors._ctra_batch.RP_NAMES`): a
+        """One row's parameters (:data:`~posbench.predictors.kalman.ctra_rows.RP_NAMES`): a
         sensor not taken keeps its calibration states at the default priors, as
         ``CtraEkf`` does."""
         imu_c = imu if imu is not None else EKF_INPUTS["imu"]
@@ -246,19 +248,6 @@ class EkfBank(RowBank):
             return None
         pxx, pxy, pyy = cb.covariance(self._S, self._rp, self._cf, i, t)
         return self._bank_covariance(pxx, pxy, pyy)
-
-    # -- options and the reference --------------------------------------------------------
-    def member_bank(self) -> ModelBank:
-        """The same bank as :class:`~posbench.predictors.ekf.CtraEkf` objects under a
-        :class:`~posbench.predictors.bank.ModelBank`: the readable reference these rows
-        answer as (tests/predictors/test_ekf_batched.py)."""
-        inputs = self.inputs
-        members = []
-        for j, w in self.noise_levels:
-            members.append(CtraEkf(j, w, **inputs, **self._member))
-            # a fixes-only member takes no sensor input at all
-            members.append(CtraEkf(j, w, gnss=inputs["gnss"], imu=None, speed=None, **self._member))
-        return self._model_bank(members)
 
     @classmethod
     def flat_options(cls) -> dict[str, Any]:
