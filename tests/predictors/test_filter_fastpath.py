@@ -22,6 +22,17 @@ lstsq), compared curve by curve on random windows and answer by answer on the dr
 the synthetic set (with and without wheel speed, with and without IMU yaw) and one shared drive
 per data set (aslan: IMU, no speed; KITTI: IMU with yaw, speed; comma2k19: IMU without yaw, CAN
 speed).
+
+Fixes that state their accuracy: kf and ekf take a fix's stated per-axis sigma, split it into
+a white part (R of the fix) and a slow part (added to ``covariance_at``) by
+:class:`~posbench.predictors._gnss_noise.GnssNoise`. The references inherit that weighing
+(``observe_gps`` is the predictors' own), so filterpy checks what it yields: every stated
+fix's R in filterpy's init and update, and ``covariance_at`` (filterpy's P propagated by the
+transcribed F and Q, plus the slow part). :class:`StatedLockstep` takes ``sigma``, so the
+replay passes it as it passes it to kf and ekf; drives: synthetic ones with consumer fixes,
+their own receiver's, and the same re-stated fix by fix (some fixes stating none, others far
+more than their noise), each with and without the white/slow split; KITTI's OXTS fixes (the
+only shared drive of the three that states an accuracy).
 """
 
 from __future__ import annotations
@@ -57,11 +68,11 @@ from posbench.predictors.kalman.ctra_model import (
 )
 from posbench.predictors.kf_paper import PaperKalman
 from posbench.predictors.poly import PolyExtrapolator
-from posbench.replay.loop import replay
+from posbench.replay.loop import fix_sigma, replay
 from posbench.replay.prepare import prepare_drive
 from posbench.scenarios.drive import Drive
 from posbench.scenarios.loaders import load
-from posbench.scenarios.synthetic import default_drives
+from posbench.scenarios.synthetic import default_drives, generate_drive
 
 TOL_M = 1e-9  # mean and answers [m, m/s, m/s^2]
 TOL_P = 1e-9  # covariance, relative to its largest entry
@@ -116,9 +127,23 @@ class FilterpyCore:
 
 
 class FilterpyKalman(LinearKalman):
-    """``kf`` on filterpy: the reference."""
+    """``kf`` on filterpy: the reference. ``observe_gps`` is the kf's own (a stated ``sigma``
+    is weighed by the same :class:`~posbench.predictors._gnss_noise.GnssNoise`, whose white
+    part reaches filterpy as R of the first fix's prior and of every update)."""
 
     filter_core = FilterpyCore
+
+    def covariance_at(self, t: float) -> np.ndarray | None:
+        """filterpy's P propagated as its own ``predict`` would (F P F' + Q), position
+        block, times ``cov_scale``, plus the slow part of the newest fix's statement."""
+        if not self._ready:
+            return None
+        P = self.kf.f.P
+        d = t - self._ts
+        if d > 0.0:
+            F = ca_transition(d, np.eye(6))
+            P = F @ P @ F.T + ca_process_noise(d, self.jerk_psd, np.zeros((6, 6)))
+        return self.cov_scale * P[:2, :2] + self.slow_variance * np.eye(2)
 
 
 # --- lock step -------------------------------------------------------------------------
@@ -172,6 +197,38 @@ class Lockstep(Predictor):
         return a
 
 
+class StatedLockstep(Lockstep):
+    """:class:`Lockstep` for fixes that state their accuracy: its ``observe_gps`` takes
+    ``sigma``, so the replay passes each fix's stated accuracy (``accepts_sigma``,
+    :func:`~posbench.replay.loop.fix_sigma`) exactly as it passes it to kf and ekf, and it
+    hands it to both unchanged. It also reports covariance, so the replay asks
+    ``covariance_at`` after every answer; both predictors' must agree to TOL_P relative
+    (the filter's covariance plus the slow part of the newest fix's statement, the
+    consider term). Counts the fixes that stated an accuracy (``stated``), those whose
+    statement had a slow part (``split``: ``slow_variance`` > 0) and the covariances
+    compared (``cov_checks``)."""
+
+    def __init__(self, fast: Predictor, ref: Predictor, compare) -> None:
+        super().__init__(fast, ref, compare)
+        self.stated = self.split = self.cov_checks = 0
+
+    def observe_gps(self, t: float, x: float, y: float, sigma: float | None = None) -> None:
+        self.fast.observe_gps(t, x, y, sigma=sigma)
+        self.ref.observe_gps(t, x, y, sigma=sigma)
+        self.stated += sigma is not None
+        self.split += self.fast.slow_variance > 0.0
+        self._check("fix", t)
+
+    def covariance_at(self, t: float) -> np.ndarray | None:
+        a, b = self.fast.covariance_at(t), self.ref.covariance_at(t)
+        assert (a is None) == (b is None), f"covariance_at({t:.3f}): {a} vs {b}"
+        if a is not None:
+            scale = max(1.0, float(np.abs(b).max()))
+            assert close(a, b, TOL_P * scale), f"covariance_at({t:.3f}): fast {a} vs ref {b}"
+            self.cov_checks += 1
+        return a
+
+
 def compare_kf(fast: LinearKalman, ref: LinearKalman) -> str | None:
     tf, mf, Pf = fast.state()
     tr, mr, Pr = ref.state()
@@ -188,13 +245,24 @@ def compare_kf(fast: LinearKalman, ref: LinearKalman) -> str | None:
     return None
 
 
-def lockstep_run(drive: Drive, fast: Predictor, ref: Predictor, compare) -> Lockstep:
-    cfg = RunConfig(predictors=("kf",))
+def lockstep_run(
+    drive: Drive, fast: Predictor, ref: Predictor, compare, gps_profile: str = "auto"
+) -> Lockstep:
+    """Replay ``drive`` (fixes of ``gps_profile``) through a :class:`Lockstep` of ``fast``
+    and ``ref``; with a stated-accuracy profile (any but "auto") a :class:`StatedLockstep`,
+    which must have passed every stated accuracy on and compared every covariance."""
+    cfg = RunConfig(predictors=("kf",), gps_profile=gps_profile)
     prep = prepare_drive(drive, cfg)
-    ls = Lockstep(fast, ref, compare)
+    stated = gps_profile != "auto"
+    ls = (StatedLockstep if stated else Lockstep)(fast, ref, compare)
     res = replay(ls, prep, cfg.horizon_s)
     assert np.isfinite(res.future_xy).any()
     assert ls.checks >= len(prep.gps)
+    if isinstance(ls, StatedLockstep):
+        acc = prep.gps.accuracy
+        n_stated = 0 if acc is None else sum(fix_sigma(a) is not None for a in acc.tolist())
+        assert ls.stated == n_stated, (ls.stated, n_stated)
+        assert res.cov is not None and ls.cov_checks == np.isfinite(res.cov[:, 0]).sum() > 0
     return ls
 
 
@@ -378,6 +446,20 @@ class FilterpyEkf(CtraEkf):
         self._store()
         self._ts = t
 
+    def covariance_at(self, t: float) -> np.ndarray | None:
+        """The reference's P propagated over T by the transcribed F and Q (F P F' + Q),
+        position block, times ``cov_scale``, plus the slow part of the newest fix's
+        statement."""
+        if not self._ready:
+            return None
+        P = self.P
+        T = t - self._ts
+        if T > 0.0:
+            F = np.eye(N_STATE)
+            ref_ctra_step(np.array(self._s), T, F)
+            P = F @ P @ F.T + ref_process_noise(self, self._s[IYAW], T)
+        return self.cov_scale * P[:2, :2] + self.slow_variance * np.eye(2)
+
     def _update_position(self, zx: float, zy: float) -> None:
         self._scalar(zx, _row(i0=1.0), float(self.x[IX]), self._r_fix)
         self._scalar(zy, _row(i1=1.0), float(self.x[IY]), self._r_fix)
@@ -436,6 +518,109 @@ def test_ekf_matches_filterpy_on_synthetic(drive: Drive) -> None:
 def test_ekf_matches_filterpy_on_shared_drives(shared: list[Drive], which: int) -> None:
     ls = lockstep_run(shared[which], CtraEkf(), FilterpyEkf(), compare_ekf)
     assert ls.worst < TOL_M
+
+
+# --- fixes that state their accuracy ---------------------------------------------------
+def restated(drive: Drive, seed: int = 47) -> Drive:
+    """``drive`` with its own receiver's fixes re-stated fix by fix: its honest statement
+    times 0.5, 1, 3, 10 or 30, and about one fix in six stating none (NaN), so that one
+    replay weighs unstated fixes, stated ones the receiver's noise fills (white) and stated
+    ones far above it (split into white and slow, in both ranges of the split)."""
+    rng = np.random.default_rng(seed)
+    acc = drive.gps.accuracy * rng.choice([0.5, 1.0, 3.0, 10.0, 30.0], len(drive.gps))
+    acc[rng.random(acc.size) < 1.0 / 6.0] = np.nan
+    gps = dataclasses.replace(drive.gps, accuracy=acc)
+    return dataclasses.replace(
+        drive, gps=gps, meta=dataclasses.replace(drive.meta, name=drive.name + "-restated")
+    )
+
+
+STATED_DRIVES = {  # 40 s of two synthetic routes: the ekf's filterpy reference is slow
+    "mixed": generate_drive(seed=3, route="mixed", duration_s=40.0),
+    "turns": generate_drive(seed=3, route="turns", duration_s=40.0),
+}
+STATED_DRIVES["restated"] = restated(STATED_DRIVES["mixed"])
+#: id: (drive, GPS profile, options of both filters, whether a statement is split into a
+#: white and a slow part somewhere: True, False or None = not asserted). consumer fixes
+#: state 0.5 m, their white part only: with the white estimate they still look white (no
+#: split). The synthetic receiver's own (``native``) fixes state their total, ~2x their
+#: white noise: split once the estimate has warmed up, unless the split is off or there is
+#: no estimate (``fix_noise_memory`` 0, the default: a statement weighs as stated).
+STATED_RUNS = {
+    "consumer-as-stated": ("mixed", "consumer", {}, False),
+    "consumer-split": ("mixed", "consumer", {"fix_noise_memory": 30.0}, False),
+    "native-split-scaled": (
+        "turns",
+        "native",
+        {"fix_noise_memory": 30.0, "gps_sigma_scale": 1.5},
+        True,
+    ),
+    "native-no-split": ("turns", "native", {"fix_noise_memory": 30.0, "gps_split": False}, False),
+    "restated-as-stated": ("restated", "native", {}, False),
+    "restated-split": ("restated", "native", {"fix_noise_memory": 30.0}, True),
+}
+
+
+def check_stated(ls: Lockstep, must_split: bool | None) -> None:
+    """Some fixes stated an accuracy; the split ran where it must (and only there);
+    answers within TOL_M."""
+    assert isinstance(ls, StatedLockstep) and ls.stated > 0
+    if must_split is not None:
+        assert (ls.split > 0) == must_split, (ls.split, must_split)
+    assert ls.worst < TOL_M
+
+
+@pytest.mark.parametrize("run", STATED_RUNS.keys())
+def test_kf_matches_filterpy_with_stated_accuracy(run: str) -> None:
+    drive, profile, opts, must_split = STATED_RUNS[run]
+    fast, ref = LinearKalman(**opts), FilterpyKalman(**opts)
+    check_stated(lockstep_run(STATED_DRIVES[drive], fast, ref, compare_kf, profile), must_split)
+
+
+@pytest.mark.parametrize("run", STATED_RUNS.keys())
+def test_ekf_matches_filterpy_with_stated_accuracy(run: str) -> None:
+    drive, profile, opts, must_split = STATED_RUNS[run]
+    fast, ref = CtraEkf(**opts), FilterpyEkf(**opts)
+    check_stated(lockstep_run(STATED_DRIVES[drive], fast, ref, compare_ekf, profile), must_split)
+
+
+def test_restated_drive_weighs_fixes_every_way() -> None:
+    """The restated drive reaches each way a fix is weighed (kf with the split): no
+    statement, a statement taken as white, and a split in each range of
+    :func:`~posbench.predictors._gnss_noise.white_share` (W = E, and between)."""
+    from posbench.predictors._gnss_noise import SMOOTH_RATIO, WHITE_RATIO
+
+    prep = prepare_drive(STATED_DRIVES["restated"], RunConfig(gps_profile="native"))
+    p = LinearKalman(fix_noise_memory=30.0)
+    seen = set()
+    for t, x, y, a in zip(
+        *(c.tolist() for c in (prep.gps.t, prep.gps.x, prep.gps.y, prep.gps.accuracy)), strict=True
+    ):
+        sigma = fix_sigma(a)
+        p.observe_gps(t, x, y, sigma=sigma)
+        if sigma is None:
+            seen.add("unstated")
+        elif p.slow_variance == 0.0:
+            seen.add("white")
+        else:
+            ratio = p._gnss.estimate / sigma**2
+            seen.add("estimate" if ratio <= SMOOTH_RATIO else "between")
+            assert ratio < WHITE_RATIO
+    assert seen == {"unstated", "white", "estimate", "between"}
+
+
+def test_kf_and_ekf_match_filterpy_on_kitti_stated_accuracy(shared: list[Drive]) -> None:
+    """KITTI's own OXTS fixes (``native``), each stating its ``pos_accuracy`` (0.3-0.5 m,
+    far above the fixes' white noise: the split weighs them by their white part). The other
+    shared drives state none (aslan's routes, comma2k19)."""
+    kitti = shared[1]
+    for opts in ({}, {"fix_noise_memory": 30.0}):
+        for fast, ref, cmp in (
+            (LinearKalman(**opts), FilterpyKalman(**opts), compare_kf),
+            (CtraEkf(**opts), FilterpyEkf(**opts), compare_ekf),
+        ):
+            ls = lockstep_run(kitti, fast, ref, cmp, "native")
+            check_stated(ls, bool(opts))
 
 
 # --- poly: the normal equations in plain floats against lstsq ---------------------------

@@ -6,10 +6,18 @@ and holds each step's p50 and p99 to budgets in ``latency_budgets.json`` that ar
 to constant velocity's step timed in the same run (best of five interleaved rounds), so
 that neither a slower nor a busier machine flips it. A benchmark whose stats are missing
 (``--benchmark-disable``, xdist) fails the gate instead of passing by being skipped.
+
+The pytest-benchmark tests time one real step of a replayed drive per round: a fresh copy
+of the predictor fed every event before a fix (:func:`~posbench.replay.loop.feed`) takes
+that fix as the replay gives it (with its stated accuracy where the predictor takes one)
+and answers the future query; each must answer exactly what the replay answered there,
+from a state the fix moved on (the filters' time, the lstm's network step). The lstm's
+``position_at`` is timed likewise on a "now" query between fixes.
 """
 
 from __future__ import annotations
 
+import copy
 import json
 from pathlib import Path
 from time import perf_counter_ns
@@ -18,12 +26,16 @@ import numpy as np
 import pytest
 
 from posbench.config import RunConfig
+from posbench.predictors import _ca_batch, _ctra_batch
+from posbench.predictors.base import Predictor, accepts_sigma
 from posbench.predictors.registry import create
-from posbench.replay.loop import replay
+from posbench.replay.loop import GPS, QUERY, events, feed, fix_sigma, replay
 from posbench.replay.prepare import prepare_drive
 from posbench.scenarios.synthetic import generate_drive
 
 BUDGETS = json.loads((Path(__file__).with_name("latency_budgets.json")).read_text())
+HORIZON_S = 0.2  # the future query after each fix [s] (RunConfig's)
+ROUNDS = 300  # the benchmarks' timed calls, each on a fresh copy (setup, checks untimed)
 
 
 @pytest.fixture(scope="module")
@@ -32,11 +44,12 @@ def prepared():
 
 
 def warmed(name: str, prepared, **kw):
-    """A predictor that has replayed the drive up to its last fix; returns it and that fix."""
+    """A predictor that has replayed the whole drive; returns it, the drive's last fix
+    ``(t, x, y)`` and the replay's answer to that fix's future query."""
     p = create(name, "rtk", **kw)
-    replay(p, prepared, 0.2)
+    answer = tuple(replay(p, prepared, HORIZON_S).future_xy[-1].tolist())
     g = prepared.gps
-    return p, (float(g.t[-1]), float(g.x[-1]), float(g.y[-1]))
+    return p, (float(g.t[-1]), float(g.x[-1]), float(g.y[-1])), answer
 
 
 def percentiles_us(fn, n: int = 2000, repeats: int = 3) -> tuple[float, float]:
@@ -56,12 +69,16 @@ def percentiles_us(fn, n: int = 2000, repeats: int = 3) -> tuple[float, float]:
     return best
 
 
-def step_fn(p, fix):
+def lstm_repeat_step(p, fix):
+    """The lstm's fix step on its newest fix again, for the gate's lstm-only ratios: a fix
+    at the time of the newest replaces it, so each call refits the same window and runs the
+    network again, answering what the replay answered at that fix (checked in the gate).
+    Not for the filters: they would re-apply the update without a predict."""
     t, x, y = fix
 
     def step():
-        p.observe_gps(t, x, y)  # a repeated fix at the same time replaces itself: same state
-        p.position_at(t + 0.2)
+        p.observe_gps(t, x, y)
+        return p.position_at(t + HORIZON_S)
 
     return step
 
@@ -73,17 +90,96 @@ def require_stats(benchmark) -> float:
     return float(stats.stats.median) * 1e6
 
 
+def fresh(p: Predictor) -> Predictor:
+    """A deep copy of ``p`` that shares its read-only model (the lstm's network, compiled
+    core and model info: copying them takes ~30 ms a round; the copies run one at a time)."""
+    memo = {id(v): v for k in ("net", "core", "info") if (v := getattr(p, k, None)) is not None}
+    return copy.deepcopy(p, memo)
+
+
+def state_times(name: str, p: Predictor) -> np.ndarray:
+    """When ``name``'s state stands [s]: the time of each kf / ekf member's filter, cv's
+    newest fix, the fix the lstm's newest network step ran on (NaN: none)."""
+    if name in ("kf", "ekf"):
+        ts = {"kf": _ca_batch.TS, "ekf": _ctra_batch.TS}[name]
+        return p._S[: p._n, ts].copy()
+    if name == "cv":
+        return np.array([p._t])
+    step = p.last_step()
+    return np.array([step.t_fix if step is not None else np.nan])
+
+
 @pytest.mark.parametrize("name", ["cv", "kf", "ekf", "lstm"])
 def test_benchmark_step(benchmark, prepared, name):
-    p, fix = warmed(name, prepared)
-    benchmark(step_fn(p, fix))
-    assert require_stats(benchmark) > 0
+    """One real fix step (the drive's last fix) per round, on a fresh copy of the predictor
+    fed every event before it; each round's step moves the state to the fix and answers
+    exactly what the replay answered there."""
+    p = create(name, "rtk")
+    want = tuple(replay(p, prepared, HORIZON_S).future_xy[-1].tolist())
+    evs = events(prepared)
+    k = max(i for i, e in enumerate(evs) if e[0] == GPS)
+    _, t, (x, y, acc) = evs[k]
+    assert t == prepared.gps.t[-1]
+    p.reset()
+    feed(p, evs, HORIZON_S, stop=k)
+    before = state_times(name, p)
+    assert np.all(before < t), before  # the fix is new to every filter: a predict is due
+    stale = fresh(p).position_at(t + HORIZON_S)
+    sigma = fix_sigma(acc) if accepts_sigma(p.observe_gps) else None
+    assert (sigma is not None) == (name in ("kf", "ekf"))  # rtk fixes state 2 cm
+
+    if sigma is None:
+
+        def step(q):
+            q.observe_gps(t, x, y)
+            return q.position_at(t + HORIZON_S)
+    else:
+
+        def step(q):
+            q.observe_gps(t, x, y, sigma=sigma)
+            return q.position_at(t + HORIZON_S)
+
+    after = []
+
+    def check(q):
+        after.append((state_times(name, q), q.position_at(t + HORIZON_S)))
+
+    got = benchmark.pedantic(
+        step, setup=lambda: ((fresh(p),), {}), teardown=check, rounds=ROUNDS, iterations=1
+    )
+    median_us = require_stats(benchmark)
+    assert got == want, (got, want)
+    assert len(after) == ROUNDS
+    for times, answer in after:
+        assert np.all(times == t), times
+        assert answer == want, (answer, want)
+    assert stale != want  # the fix changed the answer
+    assert median_us > 0 and benchmark.stats.stats.rounds == ROUNDS  # every round timed
 
 
 def test_benchmark_lstm_position_at(benchmark, prepared):
-    p, (t, _, _) = warmed("lstm", prepared)
-    benchmark(lambda: p.position_at(t + 0.1))
-    assert require_stats(benchmark) > 0
+    """The lstm's answer to a "now" query between fixes (the drive's last one at least
+    0.1 s after its fix) per round, on a fresh copy fed every event before the query: the
+    replay's answer to that query."""
+    p = create("lstm", "rtk")
+    res = replay(p, prepared, HORIZON_S)
+    now = prepared.now
+    j = int(np.flatnonzero(now.since_fix_s >= 0.1)[-1])
+    want = tuple(res.now_xy[j].tolist())
+    evs = events(prepared)
+    k = [i for i, e in enumerate(evs) if e[0] == QUERY][j]
+    tq = evs[k][1]
+    assert tq == now.t_query[j]
+    p.reset()
+    feed(p, evs, HORIZON_S, stop=k)
+    t_fix = state_times("lstm", p)[0]
+    assert t_fix < tq and np.isfinite(want).all()
+    got = benchmark.pedantic(
+        lambda q: q.position_at(tq), setup=lambda: ((fresh(p),), {}), rounds=ROUNDS, iterations=1
+    )
+    median_us = require_stats(benchmark)
+    assert got == want, (got, want)
+    assert median_us > 0 and benchmark.stats.stats.rounds == ROUNDS  # every round timed
 
 
 @pytest.mark.slow
@@ -95,19 +191,21 @@ def test_latency_gate(prepared):
     ratio = ratios_to_cv(res)
     # the fused lstm step (default) and the staged reference, measured in the same run, in
     # alternating rounds so that a burst of load hits both
-    pf, fix_f = warmed("lstm", prepared)
-    ps, fix_s = warmed("lstm", prepared, step="staged")
+    pf, fix_f, want_f = warmed("lstm", prepared)
+    ps, fix_s, want_s = warmed("lstm", prepared, step="staged")
+    pl, fix, want_l = warmed("lstm", prepared, fit="lbfgs")
+    for q, fx, want in ((pf, fix_f, want_f), (ps, fix_s, want_s), (pl, fix, want_l)):
+        assert lstm_repeat_step(q, fx)() == want  # what the lstm ratios time: a real step
     fused, staged = (np.inf, np.inf), (np.inf, np.inf)
     for _ in range(3):
-        f = percentiles_us(step_fn(pf, fix_f), repeats=1)
-        s = percentiles_us(step_fn(ps, fix_s), repeats=1)
+        f = percentiles_us(lstm_repeat_step(pf, fix_f), repeats=1)
+        s = percentiles_us(lstm_repeat_step(ps, fix_s), repeats=1)
         fused = (min(fused[0], f[0]), min(fused[1], f[1]))
         staged = (min(staged[0], s[0]), min(staged[1], s[1]))
-    p, (t, _, _) = warmed("lstm", prepared)
+    p, (t, _, _), _ = warmed("lstm", prepared)
     pos50, _ = percentiles_us(lambda: p.position_at(t + 0.1))
-    lstm50, _ = percentiles_us(step_fn(pf, fix_f))
-    pl, fix = warmed("lstm", prepared, fit="lbfgs")
-    lbfgs50, _ = percentiles_us(step_fn(pl, fix), n=100, repeats=1)
+    lstm50, _ = percentiles_us(lstm_repeat_step(pf, fix_f))
+    lbfgs50, _ = percentiles_us(lstm_repeat_step(pl, fix), n=100, repeats=1)
     steps = {
         n: (round(r["step_us"]["p50"], 1), round(r["step_us"]["p99"], 1)) for n, r in res.items()
     }
