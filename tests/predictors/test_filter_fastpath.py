@@ -25,7 +25,7 @@ speed).
 
 Fixes that state their accuracy: kf and ekf take a fix's stated per-axis sigma, split it into
 a white part (R of the fix) and a slow part (added to ``covariance_at``) by
-:class:`~posbench.predictors._gnss_noise.GnssNoise`. The references inherit that weighing
+:class:`~posbench.predictors.kalman.gnss_noise.GnssNoise`. The references inherit that weighing
 (``observe_gps`` is the predictors' own), so filterpy checks what it yields: every stated
 fix's R in filterpy's init and update, and ``covariance_at`` (filterpy's P propagated by the
 transcribed F and Q, plus the slow part). :class:`StatedLockstep` takes ``sigma``, so the
@@ -128,7 +128,7 @@ class FilterpyCore:
 
 class FilterpyKalman(LinearKalman):
     """``kf`` on filterpy: the reference. ``observe_gps`` is the kf's own (a stated ``sigma``
-    is weighed by the same :class:`~posbench.predictors._gnss_noise.GnssNoise`, whose white
+    is weighed by the same :class:`~posbench.predictors.kalman.gnss_noise.GnssNoise`, whose white
     part reaches filterpy as R of the first fix's prior and of every update)."""
 
     filter_core = FilterpyCore
@@ -587,8 +587,8 @@ def test_ekf_matches_filterpy_with_stated_accuracy(run: str) -> None:
 def test_restated_drive_weighs_fixes_every_way() -> None:
     """The restated drive reaches each way a fix is weighed (kf with the split): no
     statement, a statement taken as white, and a split in each range of
-    :func:`~posbench.predictors._gnss_noise.white_share` (W = E, and between)."""
-    from posbench.predictors._gnss_noise import SMOOTH_RATIO, WHITE_RATIO
+    :func:`~posbench.predictors.kalman.gnss_noise.white_share` (W = E, and between)."""
+    from posbench.predictors.kalman.gnss_noise import SMOOTH_RATIO, WHITE_RATIO
 
     prep = prepare_drive(STATED_DRIVES["restated"], RunConfig(gps_profile="native"))
     p = LinearKalman(fix_noise_memory=30.0)

@@ -26,8 +26,8 @@ import numpy as np
 import pytest
 
 from posbench.config import RunConfig
-from posbench.predictors import _ca_batch, _ctra_batch
 from posbench.predictors.base import Predictor, accepts_sigma
+from posbench.predictors.kalman import ca_rows, ctra_rows
 from posbench.predictors.registry import create
 from posbench.replay.loop import GPS, QUERY, events, feed, fix_sigma, replay
 from posbench.replay.prepare import prepare_drive
@@ -101,7 +101,7 @@ def state_times(name: str, p: Predictor) -> np.ndarray:
     """When ``name``'s state stands [s]: the time of each kf / ekf member's filter, cv's
     newest fix, the fix the lstm's newest network step ran on (NaN: none)."""
     if name in ("kf", "ekf"):
-        ts = {"kf": _ca_batch.TS, "ekf": _ctra_batch.TS}[name]
+        ts = {"kf": ca_rows.TS, "ekf": ctra_rows.TS}[name]
         return p._S[: p._n, ts].copy()
     if name == "cv":
         return np.array([p._t])
