@@ -21,7 +21,7 @@ from typing import Any
 import numpy as np
 
 
-def ca_noise_entries(d: Any, psd: Any) -> tuple:
+def ca_noise_entries(d: Any, psd: Any) -> tuple[Any, ...]:
     """The six upper entries of the per-axis white-jerk Q over ``d`` [s] at density
     ``psd`` [m^2/s^5] (floats, or arrays elementwise)."""
     d2 = d * d
@@ -36,7 +36,7 @@ def ca_noise_entries(d: Any, psd: Any) -> tuple:
     )
 
 
-def ca_predict_block(m: tuple, d: float, h: float, q: tuple) -> tuple:
+def ca_predict_block(m: tuple[Any, ...], d: float, h: float, q: tuple[Any, ...]) -> tuple[Any, ...]:
     """``f M f' + Q`` of a symmetric block M (six upper entries) over dt = ``d`` [s]
     (``h`` = d^2/2), Q's block ``q`` (six upper entries, :func:`ca_noise_entries`)."""
     m00, m01, m02, m11, m12, m22 = m
@@ -55,7 +55,7 @@ def ca_predict_block(m: tuple, d: float, h: float, q: tuple) -> tuple:
     )
 
 
-def ca_predict_cross(c: tuple, d: float, h: float) -> tuple:
+def ca_predict_cross(c: tuple[Any, ...], d: float, h: float) -> tuple[Any, ...]:
     """``f C f'`` of a general block C (nine entries, row-major: the covariance between
     the two axes, which takes no process noise) over dt = ``d`` [s], ``h`` = d^2/2."""
     c00, c01, c02, c10, c11, c12, c20, c21, c22 = c

@@ -277,10 +277,10 @@ def _recursion(
         h = t - t_prev
         gap = False
         if h > 0.0:
-            q = ca_noise_entries(h, qk)
-            a, b, c, d, e, f = ca_predict_block((a, b, c, d, e, f), h, 0.5 * h * h, q)
+            qb = ca_noise_entries(h, qk)
+            a, b, c, d, e, f = ca_predict_block((a, b, c, d, e, f), h, 0.5 * h * h, qb)
             t_prev = t
-            gap = q[3] > pv
+            gap = qb[3] > pv
         if kind == _POSITION:  # H = [1, 0, 0]
             a, b, c, d, e, f = _update(a, b, c, d, e, f, rv)
         else:  # H = [0, 0, 1]: the same update with p and a swapped

@@ -91,7 +91,7 @@ class FixGate:
         self.warmup = int(warmup)
         self.reset()
 
-    def config(self) -> dict:
+    def config(self) -> dict[str, Any]:
         return {
             "speed_limit": self.speed_limit,
             "accel_limit": self.accel_limit,
@@ -251,7 +251,7 @@ class GatedPredictor(Predictor):
     def position_at(self, t: float) -> tuple[float, float]:  # replaced per instance
         return self.inner.position_at(t)
 
-    def config(self) -> dict:
+    def config(self) -> dict[str, Any]:
         return {**self.inner.config(), "gate": self.gate.config()}
 
 

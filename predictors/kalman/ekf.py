@@ -79,6 +79,8 @@ class EkfBank(RowBank):
     """
 
     name = "ekf"
+    flat_names = EKF_FLAT
+    bank_inputs = BANK_INPUTS
     _distances = staticmethod(cb.shadow_distances)
 
     def __init__(
@@ -249,24 +251,10 @@ class EkfBank(RowBank):
         pxx, pxy, pyy = cb.covariance(self._S, self._rp, self._cf, i, t)
         return self._bank_covariance(pxx, pxy, pyy)
 
-    @classmethod
-    def flat_options(cls) -> dict[str, Any]:
-        """The flat option names and their defaults (for ``bench predictors`` and
-        ``--set`` checks)."""
-        return EKF_FLAT.flatten(BANK_INPUTS, BANK_INPUTS)
-
-    @classmethod
-    def flat_option_types(cls) -> dict[str, Any]:
-        """The flat option names and their declared types (``--set`` parses by them)."""
-        return EKF_FLAT.types(BANK_INPUTS)
-
     def config(self) -> dict:
         return {
-            **EKF_FLAT.flatten(self.inputs, BANK_INPUTS),
+            **self._flat_config(),
             **self._member,
             "noise_levels": [list(p) for p in self.noise_levels],
-            "memory_fixes": self.memory_fixes,
-            "cov_scale": self.cov_scale,
-            "horizons_s": list(self.horizons_s),
-            "horizon_memory": self.horizon_memory,
+            **self._selection_config(),
         }

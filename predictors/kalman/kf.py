@@ -98,6 +98,8 @@ class KalmanBank(RowBank):
     """
 
     name = "kf"
+    flat_names = KF_FLAT
+    bank_inputs = BANK_INPUTS
     _distances = staticmethod(kb.shadow_distances)
 
     def __init__(
@@ -364,25 +366,11 @@ class KalmanBank(RowBank):
             pxx, pyy, pxy = A[0], B[0], C[0]
         return self._bank_covariance(pxx, pxy, pyy)
 
-    @classmethod
-    def flat_options(cls) -> dict[str, Any]:
-        """The flat option names and their defaults (for ``bench predictors`` and
-        ``--set`` checks)."""
-        return KF_FLAT.flatten(BANK_INPUTS, BANK_INPUTS)
-
-    @classmethod
-    def flat_option_types(cls) -> dict[str, Any]:
-        """The flat option names and their declared types (``--set`` parses by them)."""
-        return KF_FLAT.types(BANK_INPUTS)
-
     def config(self) -> dict:
         return {
-            **KF_FLAT.flatten(self.inputs, BANK_INPUTS),
+            **self._flat_config(),
             "init_vel_sigma": self.init_vel_sigma,
             "init_acc_sigma": self.init_acc_sigma,
             "jerk_psds": list(self.jerk_psds),
-            "memory_fixes": self.memory_fixes,
-            "cov_scale": self.cov_scale,
-            "horizons_s": list(self.horizons_s),
-            "horizon_memory": self.horizon_memory,
+            **self._selection_config(),
         }

@@ -23,12 +23,14 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
+from typing import Any
 
 import numpy as np
 
 from posbench.predictors._kernels import warm_up_once
 from posbench.predictors.base import Predictor
 from posbench.predictors.kalman.gnss_noise import GnssNoise
+from posbench.predictors.kalman.inputs import FlatNames
 
 #: a kernel filling ``out`` with the shadows' distances [m] to a fix (t, x, y) and saying
 #: whether every one is finite: ``(S, n, t, x, y, out) -> bool``
@@ -46,6 +48,12 @@ class RowBank(Predictor):
     huber_k = 3.0
     #: the shadows' distance kernel
     _distances: ShadowDistances
+
+    #: the flat option names of the inputs, and the bank's default inputs
+    flat_names: FlatNames
+    bank_inputs: dict[str, Any]
+    #: the inputs the members take (a subclass composes them)
+    inputs: dict[str, Any]
 
     labels: tuple[str, ...]
     horizons_s: tuple[float, ...]
@@ -171,6 +179,31 @@ class RowBank(Predictor):
             if gap >= hs[i] and self._horizon_seen[i]:
                 return self.horizon_best[i]
         return self.best
+
+    # -- options ---------------------------------------------------------------------------
+    @classmethod
+    def flat_options(cls) -> dict[str, Any]:
+        """The flat option names and their defaults (for ``bench predictors`` and
+        ``--set`` checks)."""
+        return cls.flat_names.flatten(cls.bank_inputs, cls.bank_inputs)
+
+    @classmethod
+    def flat_option_types(cls) -> dict[str, Any]:
+        """The flat option names and their declared types (``--set`` parses by them)."""
+        return cls.flat_names.types(cls.bank_inputs)
+
+    def _flat_config(self) -> dict[str, Any]:
+        """The inputs' options by their flat names, as ``config()`` gives them."""
+        return self.flat_names.flatten(self.inputs, self.bank_inputs)
+
+    def _selection_config(self) -> dict[str, Any]:
+        """The selection's options, as ``config()`` gives them."""
+        return {
+            "memory_fixes": self.memory_fixes,
+            "cov_scale": self.cov_scale,
+            "horizons_s": list(self.horizons_s),
+            "horizon_memory": self.horizon_memory,
+        }
 
     def fix_variance(self, sigma: float | None) -> float:
         """R per axis [m^2] of a fix stating ``sigma``, as the members weigh it."""
