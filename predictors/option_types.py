@@ -104,6 +104,13 @@ def declared_types(cls: type) -> dict[str, Any]:
     return out
 
 
+def declared_meanings(cls: type) -> dict[str, str]:
+    """Option name -> what it means (its doc, unit and range in one line), for the options
+    ``cls.flat_option_docs()`` declares; none for the others."""
+    docs = getattr(cls, "flat_option_docs", None)
+    return {name: d.text() for name, d in docs().items()} if callable(docs) else {}
+
+
 @lru_cache(maxsize=64)
 def field_types(cls: type) -> dict[str, Any]:
     """Field name -> type of an option dataclass."""

@@ -35,7 +35,7 @@ def predictor_info(name: str, options: bool = False, tuning: Path | None = None)
     built-in's class is imported only for its options; an entry point's or import path's to
     read its docstring."""
     from posbench.config import GPS_CONDITIONS
-    from posbench.predictors.option_types import declared_types, takes_text
+    from posbench.predictors.option_types import declared_meanings, declared_types, takes_text
     from posbench.predictors.registry import (
         PredictorError,
         base_name,
@@ -61,12 +61,14 @@ def predictor_info(name: str, options: bool = False, tuning: Path | None = None)
             cls = predictor_class(name)
             accepted, any_option = constructor_options(cls)
             types = declared_types(cls)
+            meanings = declared_meanings(cls)
             info["options"] = [
                 {
                     "name": k,
                     "default": None if v is inspect.Parameter.empty else _jsonable(v),
                     "required": v is inspect.Parameter.empty,
                     "takes": takes_text(types.get(k, Any)),
+                    "meaning": meanings.get(k),
                 }
                 for k, v in accepted.items()
             ]
@@ -167,8 +169,13 @@ def list_predictors(
                 [o["name"], "(required)" if o["required"] else shown(o["default"]), o["takes"]]
                 for o in i["options"]
             ]
+            header = ["option", "default", "takes"]
+            if any(o["meaning"] for o in i["options"]):
+                header.append("meaning")
+                for row, o in zip(option_rows, i["options"], strict=True):
+                    row.append(o["meaning"] or "")
             if option_rows:
-                print_table(console, ["option", "default", "takes"], option_rows, left_columns=3)
+                print_table(console, header, option_rows, left_columns=len(header))
             for cond, tuned in i.get("by_condition", {}).items():
                 values = ", ".join(f"{k}={v!r}" for k, v in tuned["params"].items())
                 console.print(

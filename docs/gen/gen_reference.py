@@ -281,7 +281,12 @@ def predictor_options_markdown() -> str:
     """One table per built-in predictor: every option ``--set NAME.OPTION=VALUE`` takes, its
     default and what values it takes, read from the constructor's declared types
     (:mod:`posbench.predictors.option_types`), as ``bench predictors NAME`` prints them."""
-    from posbench.predictors.option_types import declared_types, shown, takes_text
+    from posbench.predictors.option_types import (
+        declared_meanings,
+        declared_types,
+        shown,
+        takes_text,
+    )
     from posbench.predictors.registry import (
         BUILT_IN,
         available,
@@ -296,13 +301,15 @@ def predictor_options_markdown() -> str:
         cls = predictor_class(name)
         defaults, _ = constructor_options(cls)
         types = declared_types(cls)
+        meanings = declared_meanings(cls)
         out += [f"## `{name}`", "", cell(entry.description), ""]
-        out += ["| option | default | takes |", "|---|---|---|"]
+        out += ["| option | default | takes | meaning |", "|---|---|---|---|"]
         for option, default in defaults.items():
             value = "(required)" if default is inspect.Parameter.empty else shown(default)
             if len(value) > 60:  # an input object's repr: its fields are listed as options
                 value = type(default).__name__ + "(...)"
             takes = takes_text(types.get(option, Any))
-            out.append(f"| `{option}` | `{cell(value)}` | {cell(takes)} |")
+            meaning = cell(meanings.get(option, ""))
+            out.append(f"| `{option}` | `{cell(value)}` | {cell(takes)} | {meaning} |")
         out.append("")
     return "\n".join(out)

@@ -4,10 +4,12 @@ names that address them.
 A filter is composed, not configured: one motion model (constant acceleration,
 :mod:`posbench.metrics.ca_model`; CTRA, :mod:`~posbench.predictors.kalman.ctra_model`)
 plus the sensor inputs it takes, each an option type below or
-``None`` (a fixes-only filter takes the GNSS alone). Each type holds its own defaults and
-checks its own ranges (``check(owner)``); a bank builds its members from the same input
-objects, so no option is declared twice. Stone Soup's split (a transition model, one
-updater per sensor) is the model.
+``None`` (a fixes-only filter takes the GNSS alone). Each field of a type is declared
+once (:func:`option`): default, flat name, meaning, unit and range; from that declaration
+come the type's range check (``check(owner)``), the flat names (:meth:`FlatNames.of`), the
+types ``--set`` parses by and the meanings ``bench predictors`` and the Predictor options
+page show. A bank builds its members from the same input objects. Stone Soup's split (a
+transition model, one updater per sensor) is the model.
 
 Flat names. ``--set kf.gps_sigma=0.5``, the keys of a tuning file, ``config()`` and the
 hybrid's saved prior all use flat names (``gps_sigma``, ``accel_sigma``, ``use_imu``, ...).
@@ -31,31 +33,100 @@ from posbench.scenarios.errors import DataError
 KMH = 1.0 / 3.6
 
 
+def option(
+    default: Any,
+    flat: str,
+    doc: str,
+    unit: str = "",
+    low: float | None = None,
+    high: float | None = None,
+) -> Any:
+    """A field of an input type, declared once: its ``default``, its ``flat`` name (``--set``,
+    tuning files, ``config()``), what it means (``doc``), its ``unit`` and, for a number, the
+    range ``[low, high]`` :meth:`InputType.check` holds it to."""
+    meta = {"flat": flat, "doc": doc, "unit": unit, "range": None}
+    if low is not None and high is not None:
+        meta["range"] = (low, high)
+    return dataclasses.field(default=default, metadata=meta)
+
+
 @dataclass(frozen=True)
-class GnssInput:
-    """GNSS fixes (:class:`~posbench.predictors.kalman.gnss_noise.GnssNoise`).
+class OptionDoc:
+    """What one flat option is: its meaning, unit and range (None: a yes/no or no range)."""
 
-    Attributes:
-        sigma: fix noise [m] per axis for fixes that state no accuracy.
-        sigma_scale: a fix stating ``s`` [m] states a total of ``(sigma_scale * s)^2``.
-        noise_memory: > 0: estimate the white noise from the fixes (this many fixes of
-            memory); it replaces ``sigma`` for fixes that state none and splits a statement.
-        split: take a statement as the total of a white part (weighs the fix) and a slow
-            part (added to the reported covariance); needs ``noise_memory`` > 0.
-    """
+    doc: str
+    unit: str
+    range: tuple[float, float] | None
 
-    sigma: float = 0.3
-    sigma_scale: float = 1.0
-    noise_memory: float = 0.0
-    split: bool = True
+    def text(self) -> str:
+        """One line: meaning, then unit and range where they are declared."""
+        parts = [self.doc]
+        if self.range is not None:
+            low, high = self.range
+            parts.append(f"in [{low:g}, {high:g}]" + (f" {self.unit}" if self.unit else ""))
+        elif self.unit:
+            parts.append(self.unit)
+        return "; ".join(parts)
+
+
+class InputType:
+    """Base of the input types: :meth:`check` and :meth:`option_docs` read the fields'
+    declarations (:func:`option`)."""
 
     def check(self, owner: str) -> None:
-        check_config(
-            owner,
-            gps_sigma=(self.sigma, 1e-4, 1e3),
-            gps_sigma_scale=(self.sigma_scale, 1e-3, 1e3),
-            fix_noise_memory=(self.noise_memory, 0.0, 1e6),
-        )
+        """Raise :class:`~posbench.scenarios.errors.DataError` naming ``owner`` and the flat
+        name of a field outside its declared range."""
+        checks = {
+            f.metadata["flat"]: (getattr(self, f.name), *f.metadata["range"])
+            for f in dataclasses.fields(self)  # type: ignore[arg-type]
+            if f.metadata.get("range") is not None
+        }
+        check_config(owner, **checks)
+
+    @classmethod
+    def option_docs(cls) -> dict[str, OptionDoc]:
+        """Each field's declaration by the field's name."""
+        return {
+            f.name: OptionDoc(f.metadata["doc"], f.metadata["unit"], f.metadata["range"])
+            for f in dataclasses.fields(cls)  # type: ignore[arg-type]
+        }
+
+    @classmethod
+    def flat_name(cls, field: str) -> str:
+        """A field's flat name."""
+        return {f.name: f.metadata["flat"] for f in dataclasses.fields(cls)}[field]  # type: ignore[arg-type]
+
+
+@dataclass(frozen=True)
+class GnssInput(InputType):
+    """GNSS fixes (:class:`~posbench.predictors.kalman.gnss_noise.GnssNoise`)."""
+
+    sigma: float = option(
+        0.3, "gps_sigma", "fix noise per axis for fixes that state no accuracy", "m", 1e-4, 1e3
+    )
+    sigma_scale: float = option(
+        1.0,
+        "gps_sigma_scale",
+        "a fix stating s states a total of (gps_sigma_scale s)^2",
+        "",
+        1e-3,
+        1e3,
+    )
+    noise_memory: float = option(
+        0.0,
+        "fix_noise_memory",
+        "> 0: estimate the white noise from the fixes, with this memory; it replaces "
+        "gps_sigma for fixes that state none and splits a statement",
+        "fixes",
+        0.0,
+        1e6,
+    )
+    split: bool = option(
+        True,
+        "gps_split",
+        "take a statement as a white part (weighs the fix) plus a slow part (added to the "
+        "reported covariance); needs fix_noise_memory > 0",
+    )
 
     def noise(self) -> GnssNoise:
         """A new noise model of this input's fixes."""
@@ -63,30 +134,32 @@ class GnssInput:
 
 
 @dataclass(frozen=True)
-class AccelInput:
-    """IMU acceleration, vehicle frame, as an observation of the filter's acceleration.
+class AccelInput(InputType):
+    """IMU acceleration, vehicle frame, as an observation of the filter's acceleration."""
 
-    Attributes:
-        sigma: noise [m/s^2] per axis (the floor of the adapted noise).
-        bias_tau_s: > 0: estimate the vehicle-frame bias from the IMU's velocity changes
-            against a fixes-only filter, with this forgetting time [s].
-        gate: > 0: skip an update whose 2-D innovation NIS exceeds this.
-        noise_tau_s: > 0: adapt the noise to the innovations over this many seconds.
-    """
-
-    sigma: float = 0.3
-    bias_tau_s: float = 0.0
-    gate: float = 0.0
-    noise_tau_s: float = 0.0
-
-    def check(self, owner: str) -> None:
-        check_config(
-            owner,
-            accel_sigma=(self.sigma, 1e-4, 1e3),
-            accel_bias_tau_s=(self.bias_tau_s, 0.0, 1e6),
-            imu_gate=(self.gate, 0.0, 1e9),
-            imu_noise_tau_s=(self.noise_tau_s, 0.0, 1e6),
-        )
+    sigma: float = option(
+        0.3, "accel_sigma", "noise per axis (the floor of the adapted noise)", "m/s^2", 1e-4, 1e3
+    )
+    bias_tau_s: float = option(
+        0.0,
+        "accel_bias_tau_s",
+        "> 0: estimate the vehicle-frame bias from the IMU's velocity changes against a "
+        "fixes-only filter, with this forgetting time",
+        "s",
+        0.0,
+        1e6,
+    )
+    gate: float = option(
+        0.0, "imu_gate", "> 0: skip an update whose 2-D innovation NIS exceeds this", "", 0.0, 1e9
+    )
+    noise_tau_s: float = option(
+        0.0,
+        "imu_noise_tau_s",
+        "> 0: adapt the noise to the innovations over this time",
+        "s",
+        0.0,
+        1e6,
+    )
 
     @property
     def robust(self) -> bool:
@@ -95,48 +168,85 @@ class AccelInput:
 
 
 @dataclass(frozen=True)
-class HeadingInput:
-    """Where the IMU states no yaw, how the IMU and the wheel speed get a heading.
+class HeadingInput(InputType):
+    """Where the IMU states no yaw, how the IMU and the wheel speed get a heading."""
 
-    Attributes:
-        from_fixes: from fix chords longer than their noise, carried by the gyro
-            (:class:`~posbench.predictors.kalman.course_heading.CourseHeading`), used while its
-            standard deviation is below ``sigma_max`` [rad]; False: from the velocity state above
-            ``min_speed`` [m/s].
-    """
-
-    from_fixes: bool = False
-    sigma_max: float = 0.15
-    min_speed: float = 1.0
-
-    def check(self, owner: str) -> None:
-        check_config(
-            owner,
-            heading_sigma_max=(self.sigma_max, 1e-4, 3.2),
-            heading_min_speed=(self.min_speed, 0.0, 100.0),
-        )
+    from_fixes: bool = option(
+        False,
+        "heading_from_fixes",
+        "from fix chords longer than their noise, carried by the gyro, while its standard "
+        "deviation is below heading_sigma_max; no: from the velocity above heading_min_speed",
+    )
+    sigma_max: float = option(
+        0.15, "heading_sigma_max", "the most a course heading may be unsure", "rad", 1e-4, 3.2
+    )
+    min_speed: float = option(
+        1.0,
+        "heading_min_speed",
+        "the speed above which the velocity gives a heading",
+        "m/s",
+        0.0,
+        100.0,
+    )
 
 
 @dataclass(frozen=True)
-class SpeedInput:
-    """Wheel or CAN speed along the heading.
+class SpeedInput(InputType):
+    """Wheel or CAN speed along the heading."""
 
-    Attributes:
-        sigma: noise [m/s]. rel_sigma: scale error (tyre radius), a fraction of v.
-        stop_speed: below this [m/s] a zero-velocity update of both components.
-    """
+    sigma: float = option(0.2, "speed_sigma", "noise", "m/s", 1e-4, 1e3)
+    rel_sigma: float = option(
+        0.03, "speed_rel_sigma", "scale error (tyre radius), a fraction of v", "", 0.0, 1.0
+    )
+    stop_speed: float = option(
+        0.15 * KMH,
+        "stop_speed",
+        "below this speed, a zero-velocity update of both components",
+        "m/s",
+        0.0,
+        10.0,
+    )
 
-    sigma: float = 0.2
-    rel_sigma: float = 0.03
-    stop_speed: float = 0.15 * KMH
 
-    def check(self, owner: str) -> None:
-        check_config(
-            owner,
-            speed_sigma=(self.sigma, 1e-4, 1e3),
-            speed_rel_sigma=(self.rel_sigma, 0.0, 1.0),
-            stop_speed=(self.stop_speed, 0.0, 10.0),
-        )
+@dataclass(frozen=True)
+class CtraImuInput(InputType):
+    """The IMU of the CTRA EKF: yaw rate, longitudinal acceleration and yaw, each the
+    signal plus a sensor bias the filter estimates."""
+
+    yaw_rate_sigma: float = option(0.02, "yaw_rate_sigma", "gyro noise", "rad/s", 1e-6, 1e3)
+    accel_sigma: float = option(
+        0.3, "accel_sigma", "longitudinal acceleration noise", "m/s^2", 1e-4, 1e3
+    )
+    yaw_sigma: float = option(0.05, "yaw_sigma", "IMU yaw noise", "rad", 1e-6, 10.0)
+    use_yaw: bool = option(True, "use_imu_yaw", "no: ignore the IMU's yaw")
+    accel_bias_psd: float = option(
+        1e-3, "accel_bias_psd", "random-walk density of the accelerometer bias", "m^2/s^5", 0.0, 1e6
+    )
+    gyro_bias_psd: float = option(
+        1e-6, "gyro_bias_psd", "random-walk density of the gyro bias", "rad^2/s^3", 0.0, 1e6
+    )
+    accel_bias_sigma0: float = option(
+        0.5, "accel_bias_sigma0", "prior 1-sigma of the accelerometer bias", "m/s^2", 1e-9, 1e3
+    )
+    gyro_bias_sigma0: float = option(
+        0.01, "gyro_bias_sigma0", "prior 1-sigma of the gyro bias", "rad/s", 1e-9, 1e3
+    )
+    yaw_offset_sigma0: float = option(
+        0.1, "yaw_offset_sigma0", "prior 1-sigma of the IMU yaw offset", "rad", 1e-9, 10.0
+    )
+
+
+@dataclass(frozen=True)
+class CtraSpeedInput(InputType):
+    """Wheel speed of the CTRA EKF, ``(1 + k_v) v`` with a scale error k_v it estimates."""
+
+    sigma: float = option(0.2, "speed_sigma", "noise", "m/s", 1e-4, 1e3)
+    rel_sigma: float = option(
+        0.03, "speed_rel_sigma", "scale error as noise, a fraction of v", "", 0.0, 1.0
+    )
+    scale_sigma0: float = option(
+        0.05, "speed_scale_sigma0", "prior 1-sigma of the scale error k_v", "", 1e-9, 10.0
+    )
 
 
 class FlatNames:
@@ -149,6 +259,30 @@ class FlatNames:
 
     def __init__(self, fields: Mapping[str, tuple[str, str | None]]) -> None:
         self.fields = dict(fields)
+        self._docs: dict[str, OptionDoc] = {}
+
+    @classmethod
+    def of(cls, inputs: Mapping[str, type[InputType]], optional: tuple[str, ...]) -> FlatNames:
+        """The flat names the input types declare (:func:`option`), input by input in
+        ``inputs``' order; an input in ``optional`` has a ``use_<input>`` switch first."""
+        fields: dict[str, tuple[str, str | None]] = {}
+        docs: dict[str, OptionDoc] = {}
+        for key, tp in inputs.items():
+            if key in optional:
+                fields[f"use_{key}"] = (key, None)
+                docs[f"use_{key}"] = OptionDoc(
+                    f"no: the aided members go without the {key}", "", None
+                )
+            for f in dataclasses.fields(tp):  # type: ignore[arg-type]
+                fields[f.metadata["flat"]] = (key, f.name)
+                docs[f.metadata["flat"]] = tp.option_docs()[f.name]
+        out = cls(fields)
+        out._docs = docs
+        return out
+
+    def docs(self) -> dict[str, OptionDoc]:
+        """Each flat name's declaration (meaning, unit, range), where the types declare one."""
+        return dict(self._docs)
 
     def compose(
         self,
@@ -225,65 +359,6 @@ class FlatNames:
         return out
 
 
-@dataclass(frozen=True)
-class CtraImuInput:
-    """The IMU of the CTRA EKF: yaw rate, longitudinal acceleration and yaw, each the
-    signal plus a sensor bias the filter estimates.
-
-    Attributes:
-        yaw_rate_sigma: gyro noise [rad/s]. accel_sigma: longitudinal accel noise [m/s^2].
-        yaw_sigma: IMU yaw noise [rad]; use_yaw: False ignores the IMU's yaw.
-        accel_bias_psd, gyro_bias_psd: random-walk densities of the biases
-            [m^2/s^5, rad^2/s^3]; accel_bias_sigma0, gyro_bias_sigma0, yaw_offset_sigma0:
-            their prior 1-sigma [m/s^2, rad/s, rad].
-    """
-
-    yaw_rate_sigma: float = 0.02
-    accel_sigma: float = 0.3
-    yaw_sigma: float = 0.05
-    use_yaw: bool = True
-    accel_bias_psd: float = 1e-3
-    gyro_bias_psd: float = 1e-6
-    accel_bias_sigma0: float = 0.5
-    gyro_bias_sigma0: float = 0.01
-    yaw_offset_sigma0: float = 0.1
-
-    def check(self, owner: str) -> None:
-        check_config(
-            owner,
-            yaw_rate_sigma=(self.yaw_rate_sigma, 1e-6, 1e3),
-            accel_sigma=(self.accel_sigma, 1e-4, 1e3),
-            yaw_sigma=(self.yaw_sigma, 1e-6, 10.0),
-            accel_bias_psd=(self.accel_bias_psd, 0.0, 1e6),
-            gyro_bias_psd=(self.gyro_bias_psd, 0.0, 1e6),
-            accel_bias_sigma0=(self.accel_bias_sigma0, 1e-9, 1e3),
-            gyro_bias_sigma0=(self.gyro_bias_sigma0, 1e-9, 1e3),
-            yaw_offset_sigma0=(self.yaw_offset_sigma0, 1e-9, 10.0),
-        )
-
-
-@dataclass(frozen=True)
-class CtraSpeedInput:
-    """Wheel speed of the CTRA EKF, ``(1 + k_v) v`` with a scale error k_v it estimates.
-
-    Attributes:
-        sigma: noise [m/s]. rel_sigma: scale error as noise, a fraction of v.
-        scale_sigma0: prior 1-sigma of k_v.
-    """
-
-    sigma: float = 0.2
-    rel_sigma: float = 0.03
-    scale_sigma0: float = 0.05
-
-    def check(self, owner: str) -> None:
-        check_config(
-            owner,
-            speed_sigma=(self.sigma, 1e-4, 1e3),
-            speed_rel_sigma=(self.rel_sigma, 0.0, 1.0),
-            speed_scale_sigma0=(self.scale_sigma0, 1e-9, 10.0),
-        )
-
-
 #: one linear CA filter's inputs by default (the kf bank's aided members take
 #: :data:`~posbench.predictors.kalman.kf.BANK_INPUTS`)
 KF_INPUTS: dict[str, Any] = {
@@ -293,25 +368,9 @@ KF_INPUTS: dict[str, Any] = {
     "speed": SpeedInput(),
 }
 #: flat option names (``--set kf.X``, tuning files, ``config()``) -> the inputs' fields
-KF_FLAT = FlatNames(
-    {
-        "gps_sigma": ("gnss", "sigma"),
-        "gps_sigma_scale": ("gnss", "sigma_scale"),
-        "fix_noise_memory": ("gnss", "noise_memory"),
-        "gps_split": ("gnss", "split"),
-        "use_imu": ("imu", None),
-        "accel_sigma": ("imu", "sigma"),
-        "accel_bias_tau_s": ("imu", "bias_tau_s"),
-        "imu_gate": ("imu", "gate"),
-        "imu_noise_tau_s": ("imu", "noise_tau_s"),
-        "heading_from_fixes": ("heading", "from_fixes"),
-        "heading_sigma_max": ("heading", "sigma_max"),
-        "heading_min_speed": ("heading", "min_speed"),
-        "use_speed": ("speed", None),
-        "speed_sigma": ("speed", "sigma"),
-        "speed_rel_sigma": ("speed", "rel_sigma"),
-        "stop_speed": ("speed", "stop_speed"),
-    }
+KF_FLAT = FlatNames.of(
+    {"gnss": GnssInput, "imu": AccelInput, "heading": HeadingInput, "speed": SpeedInput},
+    optional=("imu", "speed"),
 )
 
 #: one CTRA EKF's inputs by default (the ekf bank's members take these)
@@ -321,25 +380,6 @@ EKF_INPUTS: dict[str, Any] = {
     "speed": CtraSpeedInput(),
 }
 #: flat option names (``--set ekf.X``, tuning files, ``config()``) -> the inputs' fields
-EKF_FLAT = FlatNames(
-    {
-        "gps_sigma": ("gnss", "sigma"),
-        "gps_sigma_scale": ("gnss", "sigma_scale"),
-        "fix_noise_memory": ("gnss", "noise_memory"),
-        "gps_split": ("gnss", "split"),
-        "use_imu": ("imu", None),
-        "yaw_rate_sigma": ("imu", "yaw_rate_sigma"),
-        "accel_sigma": ("imu", "accel_sigma"),
-        "yaw_sigma": ("imu", "yaw_sigma"),
-        "use_imu_yaw": ("imu", "use_yaw"),
-        "accel_bias_psd": ("imu", "accel_bias_psd"),
-        "gyro_bias_psd": ("imu", "gyro_bias_psd"),
-        "accel_bias_sigma0": ("imu", "accel_bias_sigma0"),
-        "gyro_bias_sigma0": ("imu", "gyro_bias_sigma0"),
-        "yaw_offset_sigma0": ("imu", "yaw_offset_sigma0"),
-        "use_speed": ("speed", None),
-        "speed_sigma": ("speed", "sigma"),
-        "speed_rel_sigma": ("speed", "rel_sigma"),
-        "speed_scale_sigma0": ("speed", "scale_sigma0"),
-    }
+EKF_FLAT = FlatNames.of(
+    {"gnss": GnssInput, "imu": CtraImuInput, "speed": CtraSpeedInput}, optional=("imu", "speed")
 )

@@ -30,7 +30,7 @@ import numpy as np
 from posbench.predictors._kernels import warm_up_once
 from posbench.predictors.base import Predictor
 from posbench.predictors.kalman.gnss_noise import GnssNoise
-from posbench.predictors.kalman.inputs import FlatNames
+from posbench.predictors.kalman.inputs import FlatNames, OptionDoc
 
 #: a kernel filling ``out`` with the shadows' distances [m] to a fix (t, x, y) and saying
 #: whether every one is finite: ``(S, n, t, x, y, out) -> bool``
@@ -191,6 +191,12 @@ class RowBank(Predictor):
     def flat_option_types(cls) -> dict[str, Any]:
         """The flat option names and their declared types (``--set`` parses by them)."""
         return cls.flat_names.types(cls.bank_inputs)
+
+    @classmethod
+    def flat_option_docs(cls) -> dict[str, OptionDoc]:
+        """What each flat option means, its unit and range, as the input types declare
+        them (``bench predictors NAME``, the Predictor options page)."""
+        return cls.flat_names.docs()
 
     def _flat_config(self) -> dict[str, Any]:
         """The inputs' options by their flat names, as ``config()`` gives them."""

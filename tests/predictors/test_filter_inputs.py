@@ -87,3 +87,27 @@ def test_an_input_given_as_its_fields():
         LinearKalman(accel_sigma=-1)
     with pytest.raises(TypeError, match="unexpected option 'bogus'"):
         LinearKalman(bogus=1)
+
+
+@pytest.mark.parametrize("bank", [KalmanBank, EkfBank])
+def test_every_flat_option_is_declared_once_with_its_meaning_and_range(bank):
+    """Each flat option's meaning, unit and range come from its input field's declaration:
+    the range is the one ``check`` enforces (a value just outside is refused, naming the
+    flat option), and ``bench predictors`` shows the meaning."""
+    docs = bank.flat_option_docs()
+    assert list(docs) == list(bank.flat_names.fields)
+    assert all(d.doc for d in docs.values())
+    ranged = {name: d.range for name, d in docs.items() if d.range is not None}
+    assert len(ranged) >= 12
+    for name, (low, high) in ranged.items():
+        bank(**{name: low})  # the ends are accepted
+        bank(**{name: high})
+        for outside in (low - 1.0, high * 2.0):
+            with pytest.raises(DataError, match=rf"{bank.name}: {name}=.* must be in"):
+                bank(**{name: outside})
+    from posbench.cli.predictors import predictor_info
+
+    info = predictor_info(bank.name, options=True)
+    meanings = {o["name"]: o["meaning"] for o in info["options"]}
+    assert meanings["gps_sigma"] == docs["gps_sigma"].text()
+    assert "[0.0001, 1000] m" in meanings["gps_sigma"]
