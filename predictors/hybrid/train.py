@@ -3,7 +3,7 @@
 :func:`run_training` is what ``bench train --model hybrid`` calls; its arguments mirror
 :func:`posbench.predictors.lstm.train.run_training`. Pipeline: drives (``--data``, the benchmark's
 synthetic generator, hours of :mod:`posbench.scenarios.corpus`) -> split by route
-(:func:`posbench.predictors.lstm.train.split_by_route`) -> rows
+(:func:`posbench.predictors.lstm.training_data.split_by_route`) -> rows
 (:func:`posbench.predictors.hybrid.data.hybrid_windows`):
 drives with truth get their fixes drawn from it under each of ``profiles`` and the kf prior
 with that profile's tuned parameters (``predictors/tuned.json``); drives without truth
@@ -37,14 +37,16 @@ from posbench.predictors.hybrid.gate import fit_shrink, input_envelope
 from posbench.predictors.lstm.train import (
     EarlyStop,
     Progress,
-    corpus_card,
     error_stats,
-    gather_drives,
-    group_of,
-    manifest,
     package_versions,
     sample_weights,
     subsample,
+)
+from posbench.predictors.lstm.training_data import (
+    corpus_card,
+    gather_drives,
+    group_of,
+    manifest,
     synthetic_seeds,
 )
 from posbench.scenarios.drive import Drive
@@ -292,7 +294,7 @@ def run_training(
             "in_memory_drives": [d.name for d in (drives or [])],
             "train_drives": [d.name for d in train_d],
             "val_drives": [d.name for d in val_d],
-            "split": "by route (predictors.lstm.train.split_by_route)",
+            "split": "by route (predictors.lstm.training_data.split_by_route)",
             "train_windows": len(tr),
             "val_windows": len(va),
             "train_labels": {

@@ -9,8 +9,15 @@ from bisect import bisect_left, bisect_right
 
 import numpy as np
 
+from posbench.predictors.lstm.features import gps_substitute_imu
 from posbench.predictors.lstm.fused import FusedStep
-from posbench.predictors.lstm.resample import ACCEL_GLITCH, MIN_SPAN_S
+from posbench.predictors.lstm.resample import (
+    ACCEL_GLITCH,
+    GRID_OFFSETS,
+    MIN_SPAN_S,
+    eval_poly,
+    fit_poly,
+)
 
 FIX_CAP = 512
 IMU_CAP = 8192
@@ -102,3 +109,39 @@ def fit_fused_window(f: FusedStep, fb: RowBuffer, im: ImuHistory, t_end: float) 
             yaw_ok = im.t_yaw_nan < it[i0]
     f.fit(fb.a[start : end + 1], imu, t_end, yaw_ok)
     return True
+
+
+def fit_window(tt: np.ndarray, y: np.ndarray, t_ref: float, scale: float, fit: str) -> np.ndarray:
+    """The cubic (coefficients in ``(t - t_ref) / scale``) through a window's samples
+    ``y`` at times ``tt`` [s]: closed form (``fit="closed"``) or the paper's L-BFGS
+    regression (``"lbfgs"``)."""
+    if fit == "lbfgs":
+        from posbench.predictors.cubic import fit_cubic_lbfgs
+
+        return fit_cubic_lbfgs(tt, y, t_ref=t_ref, scale=scale).coef
+    return fit_poly(tt, y, t_ref, scale)
+
+
+def imu_on_grid(
+    im: ImuHistory, t0: float, t_end: float, coef: np.ndarray, scale: float, fit: str
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """ax, ay [m/s^2, vehicle frame] and yaw [rad] on the grid ending at ``t_end`` [s]: a
+    cubic through the IMU samples over [t0, t_end], or the stand-ins of the GPS curve
+    ``coef`` (in ``(t - t_end) / scale``) where the IMU (or its yaw) is missing."""
+    a = im.view()
+    vals = None
+    if a.shape[0] > 3:
+        ti = a[:, 0]
+        i0 = int(np.searchsorted(ti, t0, side="left"))
+        i1 = int(np.searchsorted(ti, t_end, side="right"))
+        if i1 - i0 > 3:
+            tt = ti[i0:i1]
+            sc = max(t_end - t0, 1e-3)
+            yv = a[i0:i1, 1:] if im.t_yaw_nan < tt[0] else a[i0:i1, 1:3]
+            vals = eval_poly(fit_window(tt, yv, t_end, sc, fit), GRID_OFFSETS / sc)
+    if vals is not None and vals.shape[1] == 3:
+        return vals[:, 0], vals[:, 1], vals[:, 2]
+    sax, say, syaw = gps_substitute_imu(coef, scale, GRID_OFFSETS / scale)
+    if vals is not None:
+        return vals[:, 0], vals[:, 1], syaw
+    return sax, say, syaw

@@ -43,9 +43,7 @@ Public seams (for benchmarks and figures, nothing private to reach into):
 
 from __future__ import annotations
 
-import json
 import math
-from importlib import resources
 from pathlib import Path
 from time import perf_counter_ns
 from typing import Literal, get_args
@@ -54,13 +52,21 @@ import numpy as np
 
 from posbench.predictors.base import ModelFileSeams, Predictor
 from posbench.predictors.lstm.core_net import CoreNet, has_core
-from posbench.predictors.lstm.features import FRAMES, features_one, gps_substitute_imu
+from posbench.predictors.lstm.features import features_one
 from posbench.predictors.lstm.fused import FusedStep
 from posbench.predictors.lstm.history import (
     FIX_CAP,
     ImuHistory,
     RowBuffer,
     fit_fused_window,
+    fit_window,
+    imu_on_grid,
+)
+from posbench.predictors.lstm.model_info import (
+    BUNDLED_TEXT,
+    bundled_model,
+    check_model,
+    load_model_info,
 )
 from posbench.predictors.lstm.resample import (
     DT,
@@ -81,7 +87,6 @@ from posbench.predictors.lstm.stages import (
     StageTimer,
     lap,
 )
-from posbench.scenarios.errors import DataError
 
 STILL_SPEED_MPS = 0.15 / 3.6
 STILL_FIXES = 5  # fixes averaged for the standstill hold
@@ -95,53 +100,6 @@ FITS: tuple[str, ...] = get_args(Fit)
 #: ``staged``: the readable reference, stage by stage (same answers to float rounding)
 Step = Literal["fused", "staged"]
 STEPS: tuple[str, ...] = get_args(Step)
-N_FEATURES = 6
-#: text recorded in results for the bundled model
-#: (:meth:`~posbench.predictors.base.ModelFileSeams.model_description`)
-BUNDLED_TEXT = "bundled (predictors/lstm/bundled/model.onnx)"
-
-
-def bundled_model() -> Path:
-    """Path of the bundled ``model.onnx`` (package data of predictors.lstm)."""
-    return Path(str(resources.files("posbench.predictors.lstm") / "bundled" / "model.onnx"))
-
-
-def load_model_info(onnx_path: Path) -> dict:
-    """The ``model.json`` next to an ``model.onnx`` (same stem)."""
-    js = onnx_path.with_suffix(".json")
-    if not js.is_file():
-        raise DataError(js, "model description not found (expected next to the .onnx file)")
-    try:
-        info = json.loads(js.read_text())
-    except json.JSONDecodeError as exc:
-        raise DataError(js, f"not valid JSON (line {exc.lineno}): {exc.msg}") from None
-    if info.get("format") != "posbench-lstm":
-        raise DataError(js, "not a posbench-lstm model description (key 'format')")
-    return info
-
-
-def _check_model(onnx_path: Path, info: dict, net: OnnxModel) -> None:
-    """model.json and the network must both match the features this predictor builds
-    (frame, window of N_STEPS x 6): a one-line :class:`DataError` naming the file if not."""
-    js = onnx_path.with_suffix(".json")
-    if info.get("frame", "heading") not in FRAMES:
-        raise DataError(
-            js, f"unknown frame {info.get('frame')!r} (key 'frame'; known: {', '.join(FRAMES)})"
-        )
-    want = [N_STEPS, N_FEATURES]
-    declared = info.get("input_shape")
-    if declared is not None and list(declared)[1:] != want:
-        raise DataError(
-            js,
-            f"input_shape {declared} does not match the features [batch, {N_STEPS}, {N_FEATURES}]",
-        )
-    got = list(net.input_shape)[1:]
-    if len(got) != 2 or any(isinstance(g, int) and g != w for g, w in zip(got, want, strict=True)):
-        raise DataError(
-            onnx_path,
-            f"network input shape {net.input_shape} does not match the "
-            f"features [batch, {N_STEPS}, {N_FEATURES}]",
-        )
 
 
 class LstmPredictor(ModelFileSeams, Predictor):
@@ -180,7 +138,7 @@ class LstmPredictor(ModelFileSeams, Predictor):
         declared = self.info.get("input_shape") or [None]
         batch_dim = declared[0] if isinstance(declared[0], str) else None
         self.net = OnnxModel(self.model_path, output=self.info.get("output"), batch_dim=batch_dim)
-        _check_model(self.model_path, self.info, self.net)
+        check_model(self.model_path, self.info, self.net)
         self._init_buffers()
 
     def _init_buffers(self) -> None:
@@ -343,47 +301,13 @@ class LstmPredictor(ModelFileSeams, Predictor):
         tt = t[start : end + 1]
         xy = a[start : end + 1, 1:]
         scale = t_end - float(tt[0])
-        if self.fit == "lbfgs":
-            from posbench.predictors.cubic import fit_cubic_lbfgs
-
-            coef = fit_cubic_lbfgs(tt, xy, t_ref=t_end, scale=scale).coef
-        else:
-            coef = fit_poly(tt, xy, t_end, scale)
+        coef = fit_window(tt, xy, t_end, scale, self.fit)
         grid = eval_poly(coef, GRID_OFFSETS / scale)
         self._gps_v = math.hypot(coef[1, 0], coef[1, 1]) / scale
         psi = math.atan2(coef[1, 1], coef[1, 0])
         if timer is not None:
             c0 = lap(timer, "resample_positions", c0)
         self._run_net(grid, t_end, float(tt[0]), psi, coef, scale, timer, c0)
-
-    def _imu_on_grid(
-        self, t0: float, t_end: float, coef: np.ndarray, scale: float
-    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """ax, ay [vehicle frame] and yaw on the grid: IMU cubic over [t0, t_end], or the
-        GPS curve's stand-ins where the IMU (or its yaw) is missing."""
-        im = self._imu.view()
-        vals = None
-        if im.shape[0] > 3:
-            ti = im[:, 0]
-            i0 = int(np.searchsorted(ti, t0, side="left"))
-            i1 = int(np.searchsorted(ti, t_end, side="right"))
-            if i1 - i0 > 3:
-                tt = ti[i0:i1]
-                sc = max(t_end - t0, 1e-3)
-                yv = im[i0:i1, 1:] if self._imu.t_yaw_nan < tt[0] else im[i0:i1, 1:3]
-                if self.fit == "lbfgs":
-                    from posbench.predictors.cubic import fit_cubic_lbfgs
-
-                    c = fit_cubic_lbfgs(tt, yv, t_ref=t_end, scale=sc).coef
-                else:
-                    c = fit_poly(tt, yv, t_end, sc)
-                vals = eval_poly(c, GRID_OFFSETS / sc)
-        if vals is not None and vals.shape[1] == 3:
-            return vals[:, 0], vals[:, 1], vals[:, 2]
-        sax, say, syaw = gps_substitute_imu(coef, scale, GRID_OFFSETS / scale)
-        if vals is not None:
-            return vals[:, 0], vals[:, 1], syaw
-        return sax, say, syaw
 
     def _run_net(
         self,
@@ -396,7 +320,7 @@ class LstmPredictor(ModelFileSeams, Predictor):
         timer: StageTimer | None,
         c0: int,
     ) -> None:
-        ax, ay, yaw = self._imu_on_grid(t0, t_end, coef, scale)
+        ax, ay, yaw = imu_on_grid(self._imu, t0, t_end, coef, scale, self.fit)
         if timer is not None:
             c0 = lap(timer, "resample_imu", c0)
         x = self._net_input(grid, ax, ay, yaw, psi, coef, scale)

@@ -14,7 +14,8 @@ from posbench.predictors.lstm.export import export_best  # noqa: E402
 from posbench.predictors.lstm.model import FuturePoint, LstmNet  # noqa: E402
 from posbench.predictors.lstm.predictor import LstmPredictor  # noqa: E402
 from posbench.predictors.lstm.runtime import OnnxModel  # noqa: E402
-from posbench.predictors.lstm.train import run_training, sample_weights, split_by_route  # noqa: E402
+from posbench.predictors.lstm.train import run_training, sample_weights  # noqa: E402
+from posbench.predictors.lstm.training_data import split_by_route  # noqa: E402
 from posbench.scenarios.synthetic import generate_drive  # noqa: E402
 
 
