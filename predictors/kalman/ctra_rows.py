@@ -44,7 +44,6 @@ from posbench.predictors._kernels import (
     update_scores,
 )
 from posbench.predictors.kalman.ctra_model import (
-    Q_ENTRIES,
     ctra_displacement,
     ctra_motion,
     ctra_noise_entries,
@@ -76,8 +75,6 @@ NW = 80
 
 TWO_PI = 2.0 * math.pi  # as predictors/_geometry.py
 PI2 = math.pi**2
-#: where :func:`_noise`'s entries go in a row's covariance (10 x 10, C order, from P)
-_Q_FLAT = tuple(r * 10 + c for r, c in Q_ENTRIES)
 VAR_W0 = 0.3**2  # the prior yaw rate and acceleration variances of CtraEkf._init
 VAR_A0 = 2.0**2
 #: the two states an IMU channel (yaw rate, accel, yaw) measures the sum of: yaw_rate +
@@ -158,8 +155,27 @@ def _predict(S: np.ndarray, RP: np.ndarray, CF: np.ndarray, i: int, t: float) ->
         S[i, o + 3] = _fma(q5, T, q3)
     # + Q (ctra.ctra_process_noise at the heading before the step, and the sensor states)
     q = _noise(c, s, T, RP[i, JERK], RP[i, YAWACC], CF[POS_PSD])
-    for k in range(20):
-        S[i, P + _Q_FLAT[k]] += q[k]
+    # Q_ENTRIES' places, written out: constant indices into the tuple
+    S[i, P + 0] += q[0]
+    S[i, P + 11] += q[1]
+    S[i, P + 1] += q[2]
+    S[i, P + 10] += q[3]
+    S[i, P + 3] += q[4]
+    S[i, P + 30] += q[5]
+    S[i, P + 13] += q[6]
+    S[i, P + 31] += q[7]
+    S[i, P + 5] += q[8]
+    S[i, P + 50] += q[9]
+    S[i, P + 15] += q[10]
+    S[i, P + 51] += q[11]
+    S[i, P + 33] += q[12]
+    S[i, P + 35] += q[13]
+    S[i, P + 53] += q[14]
+    S[i, P + 55] += q[15]
+    S[i, P + 22] += q[16]
+    S[i, P + 24] += q[17]
+    S[i, P + 42] += q[18]
+    S[i, P + 44] += q[19]
     S[i, P + 66] += RP[i, QBA] * T
     S[i, P + 77] += RP[i, QBW] * T
     S[i, P + 88] += CF[CALIB_PSD] * T
