@@ -5,14 +5,11 @@ from __future__ import annotations
 
 import json
 import math
-import os
-import subprocess
-import sys
 
 import numpy as np
 import pandas as pd
 import pytest
-from helpers import ROOT
+from helpers import ROOT, bench
 
 from posbench.config import RunConfig
 from posbench.pipeline.results import build_results
@@ -175,13 +172,7 @@ def test_golden_synthetic_run_equals_the_committed_report(tmp_path):
     args = golden.results["command"].split()[2:]  # "bench run ..." as recorded
     out_i = args.index("--out")
     args[out_i + 1] = str(tmp_path / "o")
-    r = subprocess.run(
-        [sys.executable, "-m", "posbench", "run", *args],
-        capture_output=True,
-        text=True,
-        timeout=900,
-        env={**os.environ, "COLUMNS": "200"},
-    )
+    r = bench("run", *args, columns=200)
     assert r.returncode == 0, r.stderr
     fresh = load_run(tmp_path / "o")
     validate(fresh.results)
