@@ -92,14 +92,10 @@ def test_merge_matches_run_drive(drives):
             assert a == b, f.name
 
 
-def test_cli_ray_equals_local(tmp_path, monkeypatch):
+def test_cli_ray_equals_local(cv_kf_run, tmp_path, monkeypatch):
     """`bench run --executor ray` (its own local Ray instance) writes the same error figures
-    as `--executor local`; a missing Ray is one line naming the extra."""
-    local, remote = tmp_path / "local", tmp_path / "ray"
-    r = bench(
-        "run", "-p", "cv,kf", "--workers", "2", "--executor", "local", "--out", local, columns=200
-    )
-    assert r.returncode == 0, r.stdout + r.stderr
+    as `--executor local` (the session's `bench run -p cv,kf`, tests/conftest.py); a missing
+    Ray is one line naming the extra."""
     # a new process: the command starts a Ray instance of its own and shuts it down, which
     # in this one would find ray_session's instance (if a test started it) and use that
     r = bench(
@@ -110,8 +106,10 @@ def test_cli_ray_equals_local(tmp_path, monkeypatch):
         "2",
         "--executor",
         "ray",
+        "--drive-plots",
+        "0",
         "--out",
-        remote,
+        tmp_path / "ray",
         columns=200,
         process=True,
         timeout=240,
@@ -119,7 +117,7 @@ def test_cli_ray_equals_local(tmp_path, monkeypatch):
     assert r.returncode == 0, r.stdout + r.stderr
     res = {
         ex: json.loads((o / "results.json").read_text())
-        for ex, o in (("local", local), ("ray", remote))
+        for ex, o in (("local", cv_kf_run), ("ray", tmp_path / "ray"))
     }
     assert len(res["ray"]["drives"]) == 4
     assert error_figures(res["ray"]) == error_figures(res["local"])
