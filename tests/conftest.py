@@ -4,6 +4,8 @@ without it, but fail when the ``CI`` environment variable is set."""
 
 from __future__ import annotations
 
+import json
+import subprocess
 from pathlib import Path
 
 import pytest
@@ -26,6 +28,20 @@ def cv_kf_run(tmp_path_factory: pytest.TempPathFactory) -> Path:
     r = bench("run", "-p", "cv,kf", "--out", str(out), "--drive-plots", "0", timeout=300)
     assert r.returncode == 0, r.stderr
     return out
+
+
+@pytest.fixture(scope="session")
+def default_run(
+    tmp_path_factory: pytest.TempPathFactory,
+) -> tuple[subprocess.CompletedProcess[str], dict, Path]:
+    """``bench run`` as it comes: no option but --out, at a terminal 100 columns wide (as
+    issue 49 measures its first screen), once per session: what it printed, its results.json
+    and its folder (copy it before changing anything in it). The first screen's tests read
+    what it printed, the golden test, the default report's and the paper figures' its files."""
+    out = tmp_path_factory.mktemp("default-run") / "o"
+    r = bench("run", "--out", out, columns=100)
+    assert r.returncode == 0, r.stderr
+    return r, json.loads((out / "results.json").read_text()), out
 
 
 @pytest.fixture(scope="session")

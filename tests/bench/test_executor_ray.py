@@ -8,13 +8,13 @@ from __future__ import annotations
 
 import json
 import os
-import subprocess
 import sys
 from dataclasses import fields, replace
 
 import numpy as np
 import pandas as pd
 import pytest
+from helpers import bench
 
 from posbench.config import RunConfig
 from posbench.pipeline.results import build_results
@@ -92,53 +92,45 @@ def test_merge_matches_run_drive(drives):
             assert a == b, f.name
 
 
-def test_cli_ray_equals_local(tmp_path):
+def test_cli_ray_equals_local(cv_kf_run, tmp_path, monkeypatch):
     """`bench run --executor ray` (its own local Ray instance) writes the same error figures
-    as `--executor local`; a missing Ray is one line naming the extra."""
-    outs = {}
-    for ex in ("local", "ray"):
-        outs[ex] = tmp_path / ex
-        r = subprocess.run(
-            [
-                sys.executable,
-                "-m",
-                "posbench",
-                "run",
-                "-p",
-                "cv,kf",
-                "--workers",
-                "2",
-                "--executor",
-                ex,
-                "--out",
-                str(outs[ex]),
-            ],
-            capture_output=True,
-            text=True,
-            timeout=240,
-            env={**os.environ, "COLUMNS": "200"},
-        )
-        assert r.returncode == 0, r.stdout + r.stderr
-    res = {ex: json.loads((o / "results.json").read_text()) for ex, o in outs.items()}
+    as `--executor local` (the session's `bench run -p cv,kf`, tests/conftest.py); a missing
+    Ray is one line naming the extra."""
+    # a new process: the command starts a Ray instance of its own and shuts it down, which
+    # in this one would find ray_session's instance (if a test started it) and use that
+    r = bench(
+        "run",
+        "-p",
+        "cv,kf",
+        "--workers",
+        "2",
+        "--executor",
+        "ray",
+        "--drive-plots",
+        "0",
+        "--out",
+        tmp_path / "ray",
+        columns=200,
+        process=True,
+        timeout=240,
+    )
+    assert r.returncode == 0, r.stdout + r.stderr
+    res = {
+        ex: json.loads((o / "results.json").read_text())
+        for ex, o in (("local", cv_kf_run), ("ray", tmp_path / "ray"))
+    }
     assert len(res["ray"]["drives"]) == 4
     assert error_figures(res["ray"]) == error_figures(res["local"])
     assert (
         res["ray"]["predictors"]["kf"]["latency_us"]["count"]
         == res["local"]["predictors"]["kf"]["latency_us"]["count"]
     )
-    no_ray = (
-        "import sys; sys.modules['ray'] = None; sys.argv = ['bench', 'run', '--executor', "
-        "'ray']; from posbench.cli.app import main; main()"
-    )
-    r = subprocess.run([sys.executable, "-c", no_ray], capture_output=True, text=True, timeout=60)
+    with monkeypatch.context() as m:
+        m.setitem(sys.modules, "ray", None)  # `import ray` fails as it does without Ray
+        r = bench("run", "--executor", "ray")
     assert r.returncode == 2 and "pip install 'posbench-harness[ray]'" in r.stderr, r.stderr
     assert "Traceback" not in r.stderr
-    r = subprocess.run(
-        [sys.executable, "-m", "posbench", "run", "--address", "auto"],
-        capture_output=True,
-        text=True,
-        timeout=60,
-    )
+    r = bench("run", "--address", "auto")
     assert r.returncode == 2 and "--address is for --executor ray" in r.stderr, r.stderr
 
 

@@ -96,11 +96,9 @@ def test_inspect_all_shared_drives(kitti_dir, comma_dir, aslan_dir):
 
 
 @pytest.mark.slow
-def test_run_default_writes_report(tmp_path):
-    out = tmp_path / "out"
-    r = bench("run", "-p", "cv,kf,lstm", "--out", str(out), "--workers", "2")
-    assert r.returncode == 0, r.stderr
-    res = json.loads((out / "results.json").read_text())
+def test_run_default_writes_report(default_run):
+    """`bench run` as it comes (tests/conftest.py: all default predictors, two workers)."""
+    _, res, out = default_run
     for name in ("cv", "kf", "lstm"):
         f = res["predictors"][name]["future"]
         assert f["count"] > 1000 and 0 < f["mean_m"] < 0.5
@@ -115,11 +113,10 @@ def test_run_default_writes_report(tmp_path):
 
 
 @pytest.mark.slow
-def test_run_with_lstm_writes_paper_figures(tmp_path):
-    out = tmp_path / "o"
-    r = bench("run", "-p", "kf-paper,lstm", "--out", str(out), "--workers", "1")
-    assert r.returncode == 0, r.stderr
-    res = json.loads((out / "results.json").read_text())
+def test_run_with_lstm_writes_paper_figures(default_run):
+    """The paper's figures need kf-paper and lstm: the default run has both."""
+    _, res, out = default_run
+    assert {"kf-paper", "lstm"} <= set(res["config"]["predictors"])
     files = [f["file"] for f in res["paper_figures"]]
     assert files == [
         "paper_fig_prediction.png",

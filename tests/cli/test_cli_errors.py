@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import os
 import shutil
-import subprocess
 import sys
 from pathlib import Path
 
@@ -213,15 +212,15 @@ def test_view_without_display_says_how_to_open_it_elsewhere(tmp_path):
     rerun = fake_bin / "rerun"  # a viewer that must not be started without a display
     rerun.write_text(f"#!/bin/sh\ntouch {tmp_path / 'viewer-started'}\n")
     rerun.chmod(0o755)
-    env = {k: v for k, v in os.environ.items() if k not in ("DISPLAY", "WAYLAND_DISPLAY")}
-    env["PATH"] = f"{fake_bin}{os.pathsep}{env.get('PATH', '')}"
-    r = subprocess.run(
-        [sys.executable, "-m", "posbench", "view", str(rrd)],
-        capture_output=True,
-        text=True,
-        timeout=120,
+    r = bench(
+        "view",
+        str(rrd),
         cwd=ROOT,
-        env={**env, "COLUMNS": "80"},
+        env={
+            "DISPLAY": None,
+            "WAYLAND_DISPLAY": None,
+            "PATH": f"{fake_bin}{os.pathsep}{os.environ.get('PATH', '')}",
+        },
     )
     line = assert_one_error_line(r, "no display", f"rerun {rrd}", f"bench view {rrd} --web")
     assert "URL" in line

@@ -4,7 +4,6 @@ fits 100 columns and one line per warning or finding, pointing to report.md; ``-
 
 from __future__ import annotations
 
-import json
 import math
 import re
 from pathlib import Path
@@ -20,6 +19,8 @@ from posbench.saved_run import load_run
 PAGE_MARK = re.compile(r"\(\d+/\d+\)")
 MAX_ROWS = 30
 
+# default_run (tests/conftest.py): `bench run --out DIR` at 100 columns, once per session
+
 
 def screen_rows(text: str, width: int) -> int:
     """Rows ``text`` takes on a terminal ``width`` columns wide (a longer line wraps)."""
@@ -33,15 +34,6 @@ def table_rows(stdout: str) -> dict[str, str]:
         for line in stdout.splitlines()
         if line.startswith("│") and line.count("│") > 2
     }
-
-
-@pytest.fixture(scope="module")
-def default_run(tmp_path_factory):
-    """``bench run`` as the issue measures it: no option but --out, 100 columns."""
-    out = tmp_path_factory.mktemp("first") / "o"
-    r = bench("run", "--out", out, columns=100)
-    assert r.returncode == 0, r.stderr
-    return r, json.loads((out / "results.json").read_text()), out
 
 
 @pytest.mark.slow

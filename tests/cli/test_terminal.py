@@ -3,12 +3,10 @@
 from __future__ import annotations
 
 import io
-import os
-import subprocess
-import sys
 
 import numpy as np
 import pytest
+from helpers import bench
 from rich.console import Console
 
 from posbench.cli.terminal import column_widths, print_table, split_columns, table_width
@@ -110,14 +108,7 @@ def test_inspect_at_100_columns_cuts_nothing() -> None:
     from posbench.scenarios.summary import summarize_drive
     from posbench.scenarios.synthetic import default_drives
 
-    env = {**os.environ, "COLUMNS": "100"}
-    r = subprocess.run(
-        [sys.executable, "-m", "posbench", "data", "inspect"],
-        capture_output=True,
-        text=True,
-        env=env,
-        timeout=300,
-    )
+    r = bench("data", "inspect", columns=100)
     assert r.returncode == 0, r.stderr
     lines = r.stdout.splitlines()
     assert "…" not in r.stdout and max(len(line) for line in lines) <= 100

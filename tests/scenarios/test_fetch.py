@@ -3,13 +3,11 @@
 from __future__ import annotations
 
 import json
-import os
-import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
+from helpers import bench
 
 from posbench.scenarios.errors import DataError
 from posbench.scenarios.loaders import load
@@ -88,47 +86,14 @@ def test_cli_run_on_url_equals_local_path(tmp_path):
     res = {}
     for key, arg in (("path", str(src)), ("url", f"file://{src}")):
         out = tmp_path / key
-        r = subprocess.run(
-            [
-                sys.executable,
-                "-m",
-                "posbench",
-                "run",
-                "--data",
-                arg,
-                "-p",
-                "cv",
-                "--workers",
-                "1",
-                "--out",
-                str(out),
-            ],
-            capture_output=True,
-            text=True,
-            timeout=120,
-            env={**os.environ, "COLUMNS": "200"},
-        )
+        r = bench("run", "--data", arg, "-p", "cv", "--workers", "1", "--out", out, columns=200)
         assert r.returncode == 0, r.stdout + r.stderr
         res[key] = json.loads((out / "results.json").read_text())
     assert [d["name"] for d in res["url"]["drives"]] == ["drive_a"]
     assert json.dumps(res["url"]["predictors"]["cv"]["future"]) == json.dumps(
         res["path"]["predictors"]["cv"]["future"]
     )
-    r = subprocess.run(
-        [
-            sys.executable,
-            "-m",
-            "posbench",
-            "run",
-            "--data",
-            f"file://{tmp_path}/missing",
-            "-p",
-            "cv",
-        ],
-        capture_output=True,
-        text=True,
-        timeout=60,
-    )
+    r = bench("run", "--data", f"file://{tmp_path}/missing", "-p", "cv", columns=None)
     assert (
         r.returncode == 2 and "no such file or folder" in r.stderr and "Traceback" not in r.stderr
     )

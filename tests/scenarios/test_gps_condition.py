@@ -5,13 +5,12 @@ fixes *are* the truth (KITTI's OXTS, the synthetic drives) or when asked (issue 
 from __future__ import annotations
 
 import json
-import subprocess
-import sys
 from dataclasses import replace
 
 import numpy as np
 import pandas as pd
 import pytest
+from helpers import bench
 
 from posbench.config import GPS_CONDITIONS, RunConfig, gps_condition
 from posbench.replay.prepare import prepare_drive
@@ -101,23 +100,8 @@ def test_bench_run_scores_the_users_receiver_by_default(tmp_path):
     csv = tmp_path / "canyon.csv"
     _csv(csv)
     out = tmp_path / "o"
-    r = subprocess.run(
-        [
-            sys.executable,
-            "-m",
-            "posbench",
-            "run",
-            "--data",
-            str(csv),
-            "-p",
-            "cv",
-            "--out",
-            str(out),
-            "--workers",
-            "1",
-        ],
-        capture_output=True,
-        text=True,
+    r = bench(
+        "run", "--data", str(csv), "-p", "cv", "--out", str(out), "--workers", "1", columns=None
     )
     assert r.returncode == 0, r.stderr
     assert (
@@ -138,26 +122,20 @@ def test_bench_run_scores_the_users_receiver_by_default(tmp_path):
     assert "fixes: the recording's own receiver." in md
 
     out2 = tmp_path / "o2"
-    r = subprocess.run(
-        [
-            sys.executable,
-            "-m",
-            "posbench",
-            "run",
-            "--data",
-            str(csv),
-            "-p",
-            "cv",
-            "--out",
-            str(out2),
-            "--workers",
-            "1",
-            "--gps-profile",
-            "rtk",
-            "-q",
-        ],
-        capture_output=True,
-        text=True,
+    r = bench(
+        "run",
+        "--data",
+        str(csv),
+        "-p",
+        "cv",
+        "--out",
+        str(out2),
+        "--workers",
+        "1",
+        "--gps-profile",
+        "rtk",
+        "-q",
+        columns=None,
     )
     assert r.returncode == 0, r.stderr
     res2 = json.loads((out2 / "results.json").read_text())
@@ -214,23 +192,8 @@ def test_urban_canyon_csv_is_scored_on_its_receiver_without_blaming_the_truth(tm
     d = urban_canyon_drive()
     write_table(d, csv)
     out = tmp_path / "o"
-    r = subprocess.run(
-        [
-            sys.executable,
-            "-m",
-            "posbench",
-            "run",
-            "--data",
-            str(csv),
-            "-p",
-            "cv",
-            "--out",
-            str(out),
-            "--workers",
-            "1",
-        ],
-        capture_output=True,
-        text=True,
+    r = bench(
+        "run", "--data", str(csv), "-p", "cv", "--out", str(out), "--workers", "1", columns=None
     )
     assert r.returncode == 0, r.stderr
     assert "FAIL" not in r.stdout + r.stderr and "poor receiver" in r.stdout + r.stderr

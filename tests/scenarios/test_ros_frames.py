@@ -8,9 +8,6 @@ from __future__ import annotations
 
 import json
 import math
-import os
-import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
@@ -250,14 +247,7 @@ def test_drifting_odometry_named_as_truth_refused(bags) -> None:
     path, _ = bags["truth"]
     with pytest.raises(DataError, match=r"residual RMS \d+\.\d\d m .* exceeds the limit 5\.00 m"):
         load_rosbag(path, topics={"truth": "/odom"})
-    env = {**os.environ, "COLUMNS": "200"}
-    r = subprocess.run(
-        [sys.executable, "-m", "posbench", "data", "inspect", str(path), "--topic", "truth=/odom"],
-        capture_output=True,
-        text=True,
-        env=env,
-        timeout=300,
-    )
+    r = bench("data", "inspect", path, "--topic", "truth=/odom", columns=200)
     assert r.returncode == 2, r.stdout + r.stderr
     lines = r.stderr.strip().splitlines()
     assert len(lines) == 1 and lines[0].startswith("error:") and "residual RMS" in lines[0]
