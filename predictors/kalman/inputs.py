@@ -44,7 +44,7 @@ def option(
     """A field of an input type, declared once: its ``default``, its ``flat`` name (``--set``,
     tuning files, ``config()``), what it means (``doc``), its ``unit`` and, for a number, the
     range ``[low, high]`` :meth:`InputType.check` holds it to."""
-    meta = {"flat": flat, "doc": doc, "unit": unit, "range": None}
+    meta: dict[str, Any] = {"flat": flat, "doc": doc, "unit": unit, "range": None}
     if low is not None and high is not None:
         meta["range"] = (low, high)
     return dataclasses.field(default=default, metadata=meta)
