@@ -31,6 +31,7 @@ import numpy as np
 
 from posbench.metrics.ca_model import ca_noise_entries, ca_predict_block, ca_predict_cross
 from posbench.predictors._kernels import huber_log_likelihood, hypot, kernel, update_scores
+from posbench.predictors.kalman.inputs import stopped
 
 MX, MY, A, B, C = 0, 3, 6, 12, 18
 TS, YAW, YAW_T, IMU_T, IMU_M2 = 27, 28, 29, 30, 31
@@ -79,6 +80,8 @@ def _sym_entry(k: int, j: int) -> int:
 _noise = kernel(ca_noise_entries)
 _predict_block = kernel(ca_predict_block)
 _predict_cross = kernel(ca_predict_cross)
+#: the standstill rule (:func:`~posbench.predictors.kalman.inputs.stopped`), compiled
+_stopped = kernel(stopped)
 
 
 @kernel
@@ -375,7 +378,7 @@ def speed_rows(
         if RP[i, HAS_SPEED] == 0.0:
             continue
         _predict(S, i, t, RP[i, PSD])
-        if abs(v) < CF[STOP_SPEED]:
+        if _stopped(v, CF[STOP_SPEED]):
             _update_pair(S, i, 1, 0.0, 0.0, r_spd)
             continue
         if CF[COURSE] > 0.0 and not imu_yaw:

@@ -208,6 +208,14 @@ class SpeedInput(InputType):
     )
 
 
+def stopped(v: Any, stop_speed: Any) -> Any:
+    """Whether a wheel speed ``v`` [m/s] (a float, or arrays elementwise) is a standstill:
+    below ``stop_speed`` [m/s], it is a zero-velocity update of both components; at or
+    above, a speed along the heading. The one statement of the rule (the kf's rows compile
+    it, the kf bank, the gradient tuning and the reference call it)."""
+    return abs(v) < stop_speed
+
+
 @dataclass(frozen=True)
 class CtraImuInput(InputType):
     """The IMU of the CTRA EKF: yaw rate, longitudinal acceleration and yaw, each the

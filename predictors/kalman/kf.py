@@ -46,6 +46,7 @@ from posbench.predictors.kalman.inputs import (
     GnssInput,
     HeadingInput,
     SpeedInput,
+    stopped,
 )
 from posbench.predictors.kalman.row_bank import RowBank
 
@@ -313,7 +314,7 @@ class KalmanBank(RowBank):
             return
         shadows = self._shadows_on
         hm = hs = math.nan
-        if self._course is not None and not self._imu_yaw and abs(v) >= self._stop_speed:
+        if self._course is not None and not self._imu_yaw and not stopped(v, self._stop_speed):
             hm = self._course_heading(self._course, t)
             if shadows:
                 hs = self._course_heading(self._shadow_course, t)

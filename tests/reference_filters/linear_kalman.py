@@ -63,6 +63,7 @@ from posbench.predictors.kalman.inputs import (
     GnssInput,
     HeadingInput,
     SpeedInput,
+    stopped,
 )
 from reference_filters.ca_filter import CaFilter2D
 
@@ -382,7 +383,7 @@ class LinearKalman(Predictor):
         if not (self._ready and speed is not None and math.isfinite(v)):
             return
         self._predict_to(t)
-        if abs(v) < speed.stop_speed:
+        if stopped(v, speed.stop_speed):
             self.kf.update_pair(VEL, 0.0, 0.0, self._r_spd)
         else:
             h = self._speed_heading(t)

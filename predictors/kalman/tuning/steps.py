@@ -34,7 +34,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from posbench.predictors.kalman.inputs import SpeedInput
+from posbench.predictors.kalman.inputs import SpeedInput, stopped
 from posbench.scenarios.drive import Drive, GpsStream
 
 #: the horizon [s] of the fit's reference after each fix (the benchmark's future point)
@@ -210,7 +210,7 @@ def drive_steps(
     if speed is not None:
         has_v = np.isfinite(v)
         r_spd = speed.sigma**2
-        stop = has_v & (np.abs(v) < speed.stop_speed)
+        stop = has_v & stopped(v, speed.stop_speed)
         H[stop, 2, 2] = H[stop, 3, 3] = 1.0
         var[stop, 2:] = r_spd
         along = has_v & ~stop
