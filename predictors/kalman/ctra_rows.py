@@ -109,14 +109,10 @@ def _wrap(a: float) -> float:
     return (a + math.pi) % TWO_PI - math.pi
 
 
-#: the CTRA model's maths (:mod:`~posbench.predictors.kalman.ctra_model`'s kernels)
-_motion, _displacement, _noise = ctra_motion, ctra_displacement, ctra_noise_entries
-
-
 @kernel
 def _jacobian(S: np.ndarray, i: int, T: float) -> tuple[float, ...]:
     """:func:`~posbench.predictors.kalman.ctra_model.ctra_motion` at row i's mean over T [s]."""
-    return _motion(S[i, 2], S[i, 3], S[i, 4], S[i, 5], T)
+    return ctra_motion(S[i, 2], S[i, 3], S[i, 4], S[i, 5], T)
 
 
 @kernel
@@ -154,7 +150,7 @@ def _predict(S: np.ndarray, RP: np.ndarray, CF: np.ndarray, i: int, t: float) ->
         S[i, o + 2] = _fma(q4, T, q2)
         S[i, o + 3] = _fma(q5, T, q3)
     # + Q (ctra.ctra_process_noise at the heading before the step, and the sensor states)
-    q = _noise(c, s, T, RP[i, JERK], RP[i, YAWACC], CF[POS_PSD])
+    q = ctra_noise_entries(c, s, T, RP[i, JERK], RP[i, YAWACC], CF[POS_PSD])
     # Q_ENTRIES' places, written out: constant indices into the tuple
     S[i, P + 0] += q[0]
     S[i, P + 11] += q[1]
@@ -448,7 +444,7 @@ def position(S: np.ndarray, i: int, t: float) -> tuple[float, float]:
     T = t - S[i, TS]
     if not T > 0.0:
         return x, y
-    dx, dy = _displacement(S[i, 2], S[i, 3], S[i, 4], S[i, 5], T)
+    dx, dy = ctra_displacement(S[i, 2], S[i, 3], S[i, 4], S[i, 5], T)
     return x + dx, y + dy
 
 
@@ -479,7 +475,7 @@ def covariance(S: np.ndarray, RP: np.ndarray, CF: np.ndarray, i: int, t: float) 
         o01 = _fma(m0[k + 2], f1[k], o01)
         o10 = _fma(m1[k + 2], f0[k], o10)
         o11 = _fma(m1[k + 2], f1[k], o11)
-    q = _noise(c, s, T, RP[i, JERK], RP[i, YAWACC], CF[POS_PSD])
+    q = ctra_noise_entries(c, s, T, RP[i, JERK], RP[i, YAWACC], CF[POS_PSD])
     o00 += q[0]
     o11 += q[1]
     o01 += q[2]

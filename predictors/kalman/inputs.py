@@ -265,9 +265,13 @@ class FlatNames:
             switch ``use_<input>``: False drops the input (None), True keeps or restores it.
     """
 
-    def __init__(self, fields: Mapping[str, tuple[str, str | None]]) -> None:
+    def __init__(
+        self,
+        fields: Mapping[str, tuple[str, str | None]],
+        docs: Mapping[str, OptionDoc] | None = None,
+    ) -> None:
         self.fields = dict(fields)
-        self._docs: dict[str, OptionDoc] = {}
+        self._docs = dict(docs or {})
 
     @classmethod
     def of(cls, inputs: Mapping[str, type[InputType]], optional: tuple[str, ...]) -> FlatNames:
@@ -284,9 +288,7 @@ class FlatNames:
             for f in dataclasses.fields(tp):  # type: ignore[arg-type]
                 fields[f.metadata["flat"]] = (key, f.name)
                 docs[f.metadata["flat"]] = tp.option_docs()[f.name]
-        out = cls(fields)
-        out._docs = docs
-        return out
+        return cls(fields, docs)
 
     def docs(self) -> dict[str, OptionDoc]:
         """Each flat name's declaration (meaning, unit, range), where the types declare one."""
