@@ -11,10 +11,9 @@ Use: decorate a module's kernels with :func:`kernel` (or :func:`fast_kernel`, fo
 arithmetic that may be reassociated: vectorised sums). The first call of any of them
 replaces every kernel of that module by ``numba.njit(cache=True)`` of it (in the
 module's namespace, where the kernels find one another and the callers find them, as
-``module.name``), after running the module's ``_numba_setup()`` if it has one (numba
-pieces that are not kernels, e.g. an intrinsic), then makes the call. Compiled code is
-cached beside the module (numba's ``cache=True``; numba falls back to a user cache folder
-where that is not writable), so a new process loads it instead of compiling again.
+``module.name``), then makes the call. Compiled code is cached beside the module
+(numba's ``cache=True``; numba falls back to a user cache folder where that is not
+writable), so a new process loads it instead of compiling again.
 """
 
 from __future__ import annotations
@@ -65,9 +64,6 @@ def compile_module(namespace: dict[str, Any]) -> None:
     compiles, or loads from the cache, at its first call)."""
     from numba import njit
 
-    setup = namespace.get("_numba_setup")
-    if setup is not None:
-        setup()
     for key, value in list(namespace.items()):
         source = getattr(value, SOURCE, None)
         if source is None:
@@ -80,27 +76,6 @@ def compile_module(namespace: dict[str, Any]) -> None:
             if getattr(home[source.__name__], SOURCE, None) is not None:
                 compile_module(home)
             namespace[key] = home[source.__name__]
-
-
-def fused_multiply_add() -> Any:
-    """A numba intrinsic ``fma(a, b, c)``: ``a * b + c`` of float64s rounded once (LLVM's
-    ``llvm.fma.f64``: the instruction where the CPU has one), for kernels that must round
-    as BLAS does (:mod:`~posbench.predictors.kalman.ctra_rows`). Imports numba."""
-    from llvmlite import ir  # type: ignore[import-untyped]
-    from numba import types
-    from numba.core import cgutils
-    from numba.extending import intrinsic
-
-    def typer(typingctx: Any, a: Any, b: Any, c: Any) -> Any:
-        def codegen(context: Any, builder: Any, signature: Any, args: Any) -> Any:
-            d = ir.DoubleType()
-            fnty = ir.FunctionType(d, [d, d, d])
-            fn = cgutils.get_or_insert_function(builder.module, fnty, "llvm.fma.f64")
-            return builder.call(fn, args)
-
-        return types.float64(types.float64, types.float64, types.float64), codegen
-
-    return intrinsic(typer)
 
 
 #: the predictor classes whose kernels this process has run (:func:`warm_up_once`)
@@ -130,49 +105,6 @@ def warm_up_once(make_probe: Callable[[], Any]) -> None:
             probe.position_at(tf + dt)
             probe.covariance_at(tf + dt)
     _WARM.add(cls)
-
-
-#: a * b + c rounded once, for :func:`hypot`; made by :func:`_numba_setup`
-_fma: Any = None
-
-
-def _numba_setup() -> None:
-    """:data:`_fma`, made when this module's kernels are compiled."""
-    global _fma
-    _fma = fused_multiply_add()
-
-
-@kernel
-def hypot(a: float, b: float) -> float:
-    """CPython's ``math.hypot`` of two floats (its ``vector_norm``: exact squares and sums,
-    one correction step), to the bit; libm's hypot differs in the last bit now and then."""
-    x, y = abs(a), abs(b)
-    if math.isinf(x) or math.isinf(y):
-        return math.inf
-    if x != x or y != y:
-        return math.nan
-    mx = max(x, y)
-    if mx == 0.0:
-        return mx
-    e = math.frexp(mx)[1]
-    if e < -1021:  # subnormal: not worth the rescaling
-        return math.hypot(a, b)
-    scale = math.ldexp(1.0, -e)
-    csum, frac1, frac2 = 1.0, 0.0, 0.0
-    for v in (x * scale, y * scale):
-        hi = v * v
-        s = csum + hi
-        frac1 += _fma(v, v, -hi)
-        frac2 += (csum - s) + hi
-        csum = s
-    h = math.sqrt(csum - 1.0 + (frac1 + frac2))
-    hi = -h * h
-    s = csum + hi
-    frac1 += _fma(-h, h, -hi)
-    frac2 += (csum - s) + hi
-    csum = s
-    h += (csum - 1.0 + (frac1 + frac2)) / (2.0 * h)
-    return h / scale
 
 
 @kernel

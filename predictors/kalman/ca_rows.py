@@ -30,7 +30,7 @@ import math
 import numpy as np
 
 from posbench.metrics.ca_model import ca_noise_entries, ca_predict_block, ca_predict_cross
-from posbench.predictors._kernels import huber_log_likelihood, hypot, kernel, update_scores
+from posbench.predictors._kernels import huber_log_likelihood, kernel, update_scores
 from posbench.predictors.kalman.inputs import stopped
 
 MX, MY, A, B, C = 0, 3, 6, 12, 18
@@ -42,12 +42,13 @@ PSD, HAS_IMU, HAS_SPEED = 0, 1, 2
 #: columns of a row's parameters
 NP = 3
 #: the options array ``CF``, in order: IMU acceleration variance [m^2/s^4], wheel speed
-#: variance [m^2/s^2], stop speed [m/s], heading min speed [m/s],
+#: variance [m^2/s^2] and relative sigma, stop speed [m/s], heading min speed [m/s],
 #: IMU gate, IMU noise time constant [s], robust IMU update (0/1), course heading (0/1),
 #: Huber k of the fix likelihood
 CF_NAMES = (
     "r_acc",
     "r_spd",
+    "rel_sigma",
     "stop_speed",
     "min_speed",
     "gate",
@@ -56,7 +57,7 @@ CF_NAMES = (
     "course",
     "huber_k",
 )
-R_ACC, R_SPD, STOP_SPEED, MIN_SPEED, GATE, NOISE_TAU, ROBUST, COURSE, HUBER_K = range(9)
+R_ACC, R_SPD, REL_SIGMA, STOP_SPEED, MIN_SPEED, GATE, NOISE_TAU, ROBUST, COURSE, HUBER_K = range(10)
 
 
 def new_rows(n: int) -> np.ndarray:
@@ -85,7 +86,7 @@ _stopped = kernel(stopped)
 
 
 @kernel
-def _predict(S: np.ndarray, i: int, t: float, psd: float) -> None:
+def predict(S: np.ndarray, i: int, t: float, psd: float) -> None:
     """Row i to time t [s] (``LinearKalman._predict_to``: only forward)."""
     d = t - S[i, TS]
     if not d > 0.0:
@@ -169,7 +170,7 @@ def _update(
 
 
 @kernel
-def _update_pair(S: np.ndarray, i: int, k: int, zx: float, zy: float, r: float) -> None:
+def update_pair(S: np.ndarray, i: int, k: int, zx: float, zy: float, r: float) -> None:
     """Component k (0 position, 1 velocity, 2 acceleration) of both axes, noise r I2
     (``CaFilter2D.update_pair``: x, then y)."""
     i0, i1, i2 = _sym_entry(k, 0), _sym_entry(k, 1), _sym_entry(k, 2)
@@ -184,7 +185,7 @@ def _update_pair(S: np.ndarray, i: int, k: int, zx: float, zy: float, r: float) 
 
 
 @kernel
-def _update_speed(S: np.ndarray, i: int, c: float, s: float, z: float, r: float) -> None:
+def update_speed(S: np.ndarray, i: int, c: float, s: float, z: float, r: float) -> None:
     """Speed z [m/s] along (c, s), noise r (``CaFilter2D.update_speed``)."""
     x0 = c * S[i, A + 1] + s * S[i, C + 1]
     x1 = c * S[i, A + 3] + s * S[i, C + 4]
@@ -220,8 +221,8 @@ def fix_one(
     """Row i, a fixes-only filter of white-jerk density psd [m^2/s^5], takes a fix (x, y)
     [m] at t [s] of variance r [m^2] per axis (predict, then ``update_pair`` of the
     position); returns its velocity (vx, vy) [m/s]."""
-    _predict(S, i, t, psd)
-    _update_pair(S, i, 0, x, y, r)
+    predict(S, i, t, psd)
+    update_pair(S, i, 0, x, y, r)
     return S[i, 1], S[i, 4]
 
 
@@ -244,7 +245,7 @@ def fix_rows(
     ``keep`` x scores + likelihoods where every row scored; returns the best row, or -1
     when not every row scored (the scores stand)."""
     for i in range(n):
-        _predict(S, i, t, RP[i, PSD])
+        predict(S, i, t, RP[i, PSD])
         ex = x - S[i, 0]
         ey = y - S[i, 3]
         a = S[i, A] + r
@@ -256,7 +257,7 @@ def fix_rows(
         S[i, INNOV + 3] = b
         S[i, INNOV + 4] = d
         S[i, LL] = huber_log_likelihood(ex, ey, a, b, d, huber_k)
-        _update_pair(S, i, 0, x, y, r)
+        update_pair(S, i, 0, x, y, r)
     return update_scores(S, n, LL, scores, keep)
 
 
@@ -269,11 +270,43 @@ def _row_heading(
     if math.isfinite(yaw):
         return yaw
     vx, vy = S[i, 1], S[i, 4]
-    if hypot(vx, vy) > min_speed:
+    if math.hypot(vx, vy) > min_speed:
         return math.atan2(vy, vx)
     if math.isfinite(S[i, YAW]) and math.isfinite(yaw_rate):
         return S[i, YAW] + yaw_rate * (t - S[i, YAW_T])
     return S[i, YAW]
+
+
+@kernel
+def update_accel(
+    S: np.ndarray, CF: np.ndarray, i: int, t: float, h: float, ax: float, ay: float, bias: tuple
+) -> None:
+    """Row i takes the vehicle-frame acceleration (ax, ay) [m/s^2] turned to ENU by the
+    heading h [rad] (``LinearKalman.observe_imu``). Robust (``CF[ROBUST]``): less the bias
+    (bx, by) [m/s^2], its noise floored by the adapted innovation power (time constant
+    ``CF[NOISE_TAU]``), skipped when its innovation is beyond the gate."""
+    c, s = math.cos(h), math.sin(h)
+    r = CF[R_ACC]
+    if not CF[ROBUST] > 0.0:
+        update_pair(S, i, 2, c * ax - s * ay, s * ax + c * ay, r)
+        return
+    mx, my = ax - bias[0], ay - bias[1]
+    pax, pay = S[i, 2], S[i, 5]
+    nx = mx - (c * pax + s * pay)
+    ny = my - (-s * pax + c * pay)
+    pa = 0.5 * (S[i, A + 5] + S[i, B + 5])
+    dt = t - S[i, IMU_T]
+    dt = min(dt, 0.5) if dt > 0.0 else 0.0
+    m2 = 0.5 * (nx * nx + ny * ny)
+    tau = CF[NOISE_TAU]
+    if tau > 0.0:
+        S[i, IMU_M2] += min(dt / tau, 1.0) * (m2 - S[i, IMU_M2])
+        floor = S[i, IMU_M2] - pa
+        if floor > r:
+            r = floor
+    gate = CF[GATE]
+    if not (gate > 0.0 and 2.0 * m2 > gate * (pa + r)):
+        update_pair(S, i, 2, c * mx - s * my, s * mx + c * my, r)
 
 
 @kernel
@@ -288,70 +321,37 @@ def imu_rows(
     ay: float,
     yaw: float,
     yaw_rate: float,
-    course_m: float,
-    course_s: float,
-    bx_m: float,
-    by_m: float,
-    bx_s: float,
-    by_s: float,
+    courses: tuple,
+    biases: tuple,
 ) -> tuple[float, float]:
     """An IMU sample (vehicle-frame ax, ay [m/s^2], yaw [rad], yaw rate [rad/s]) at t [s]
     for the rows 0..hi-1 that take the IMU (``LinearKalman.observe_imu`` after its first
-    fix). Rows at and above ``n`` are shadows: their course heading ``course_s`` [rad] and
-    bias (``bx_s``, ``by_s``) [m/s^2], the members' ``course_m``, ``bx_m``, ``by_m``.
-    Returns the heading used by the first IMU row of the members and of the shadows (NaN
-    where none), for the bias estimators."""
-    use_course = CF[COURSE] > 0.0
-    robust = CF[ROBUST] > 0.0
-    r_acc = CF[R_ACC]
-    gate = CF[GATE]
-    tau = CF[NOISE_TAU]
-    h_m = math.nan
-    h_s = math.nan
-    first_m = True
-    first_s = True
+    fix): predict, the heading (:func:`_row_heading`, or the course tracker's of
+    ``courses`` when there is no yaw), :func:`update_accel`. ``courses`` (members',
+    shadows') [rad] and ``biases`` ((bx, by) of each) [m/s^2]: rows at and above ``n``
+    are shadows. Returns the heading used by the first IMU row of the members and of the
+    shadows (NaN where none), for the bias estimators."""
+    use_course = CF[COURSE] > 0.0 and not math.isfinite(yaw)
+    accel = math.isfinite(ax) and math.isfinite(ay)
+    used = [math.nan, math.nan]
+    first = [True, True]
     for i in range(hi):
         if RP[i, HAS_IMU] == 0.0:
             continue
-        _predict(S, i, t, RP[i, PSD])
-        shadow = i >= n
-        if use_course and not math.isfinite(yaw):
-            h = course_s if shadow else course_m
+        predict(S, i, t, RP[i, PSD])
+        group = 1 if i >= n else 0
+        if use_course:
+            h = courses[group]
         else:
             h = _row_heading(S, i, t, yaw, yaw_rate, CF[MIN_SPEED])
         S[i, YAW] = h
         S[i, YAW_T] = t
-        if shadow:
-            if first_s:
-                h_s, first_s = h, False
-            bx, by = bx_s, by_s
-        else:
-            if first_m:
-                h_m, first_m = h, False
-            bx, by = bx_m, by_m
-        if math.isfinite(ax) and math.isfinite(ay) and math.isfinite(h):
-            c, s = math.cos(h), math.sin(h)
-            if not robust:
-                _update_pair(S, i, 2, c * ax - s * ay, s * ax + c * ay, r_acc)
-            else:
-                mx, my = ax - bx, ay - by
-                pax, pay = S[i, 2], S[i, 5]
-                nx = mx - (c * pax + s * pay)
-                ny = my - (-s * pax + c * pay)
-                pa = 0.5 * (S[i, A + 5] + S[i, B + 5])
-                dt = t - S[i, IMU_T]
-                dt = min(dt, 0.5) if dt > 0.0 else 0.0
-                m2 = 0.5 * (nx * nx + ny * ny)
-                r = r_acc
-                if tau > 0.0:
-                    S[i, IMU_M2] += min(dt / tau, 1.0) * (m2 - S[i, IMU_M2])
-                    cand = S[i, IMU_M2] - pa
-                    if cand > r:
-                        r = cand
-                if not (gate > 0.0 and 2.0 * m2 > gate * (pa + r)):
-                    _update_pair(S, i, 2, c * mx - s * my, s * mx + c * my, r)
+        if first[group]:
+            used[group], first[group] = h, False
+        if accel and math.isfinite(h):
+            update_accel(S, CF, i, t, h, ax, ay, biases[group])
         S[i, IMU_T] = t
-    return h_m, h_s
+    return used[0], used[1]
 
 
 @kernel
@@ -363,33 +363,32 @@ def speed_rows(
     n: int,
     t: float,
     v: float,
-    r_v: float,
     imu_yaw: bool,
-    course_m: float,
-    course_s: float,
+    courses: tuple,
 ) -> None:
     """A wheel speed v [m/s] at t [s] for the rows 0..hi-1 that take it
-    (``LinearKalman.observe_speed`` after its first fix; shadows as in :func:`imu_rows`);
-    ``r_v`` [m^2/s^2]: its variance along the heading, ``r_spd + (rel_sigma v) ** 2``
-    computed by the caller as the members do (libm's pow, which is not always ``x * x``
-    in the last bit)."""
+    (``LinearKalman.observe_speed`` after its first fix; shadows and ``courses`` as in
+    :func:`imu_rows`): at a standstill zero velocity, else the speed along the heading
+    (:func:`update_speed`) of variance ``r_spd + (rel_sigma v)^2`` [m^2/s^2]."""
     r_spd = CF[R_SPD]
+    rel = CF[REL_SIGMA] * v
+    r_v = r_spd + rel * rel
     for i in range(hi):
         if RP[i, HAS_SPEED] == 0.0:
             continue
-        _predict(S, i, t, RP[i, PSD])
+        predict(S, i, t, RP[i, PSD])
         if _stopped(v, CF[STOP_SPEED]):
-            _update_pair(S, i, 1, 0.0, 0.0, r_spd)
+            update_pair(S, i, 1, 0.0, 0.0, r_spd)
             continue
         if CF[COURSE] > 0.0 and not imu_yaw:
-            h = course_s if i >= n else course_m
+            h = courses[1 if i >= n else 0]
         else:
             h = S[i, YAW]
             vx, vy = S[i, 1], S[i, 4]
-            if not math.isfinite(h) and hypot(vx, vy) > CF[MIN_SPEED]:
+            if not math.isfinite(h) and math.hypot(vx, vy) > CF[MIN_SPEED]:
                 h = math.atan2(vy, vx)
         if math.isfinite(h):
-            _update_speed(S, i, math.cos(h), math.sin(h), v, r_v)
+            update_speed(S, i, math.cos(h), math.sin(h), v, r_v)
 
 
 @kernel
@@ -403,7 +402,7 @@ def shadow_distances(S: np.ndarray, n: int, t: float, x: float, y: float, out: n
         h = 0.5 * d * d
         px = S[i, 0] + S[i, 1] * d + S[i, 2] * h
         py = S[i, 3] + S[i, 4] * d + S[i, 5] * h
-        out[j] = hypot(x - px, y - py)
+        out[j] = math.hypot(x - px, y - py)
         if not out[j] < math.inf:
             ok = False
     return ok

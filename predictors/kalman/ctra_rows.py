@@ -5,19 +5,14 @@ each a few 10x10 numpy products, per IMU sample, wheel speed and fix (a fix step
 ~90x constant velocity's). So each observation is one call to a compiled kernel that
 loops over the rows, as :mod:`~posbench.predictors.kalman.ca_rows` does for the kf bank.
 
-The motion model is :mod:`~posbench.predictors.kalman.ctra_model`'s, compiled into these
-kernels (its integrals, step and Jacobian, and process noise: written once); the
-covariance algebra and the updates are the tests' member objects (tests/reference_filters:
-``CtraEkf``) written out per row in the same order of operations, rounding included:
-where the members multiply matrices with numpy (BLAS: each entry a
-chain of fused multiply-adds in index order; here those of OpenBLAS's kernels for this
-CPU) the rows take the same fused chains (:func:`_fma`), skipping only the Jacobian's
-zeros, which add nothing; squares the members take as ``x ** 2`` go through libm's pow
-and distances through CPython's hypot (:func:`~posbench.predictors._kernels.hypot`). So
-the rows answer as the member objects do, to the bit where BLAS rounds as here
-(tests/predictors/test_ekf_batched.py, on every shared drive). That matters: a member
-that loses its heading (a fixes-only filter at a standstill) amplifies a difference in
-the last bit ~10x a second.
+How a row is composed (Stone Soup's split): the motion model is
+:mod:`~posbench.predictors.kalman.ctra_model`'s (its step, Jacobian and process noise,
+compiled into :func:`predict`: written once); each sensor's update only says what it
+measures, as the columns of ``P H'``, ``H P H' + R`` and the innovation
+(:func:`update_fix`, :func:`update_imu`, :func:`update_speed`), and one linear update
+(:func:`linear_update`, up to 3 measurements at once, ``S^-1`` in closed form) does the
+rest. The tests hold the rows to a readable reference (tests/reference_filters:
+``CtraEkf``, and filterpy's EKF through it) at a tolerance, not to the bit.
 
 Layout. Row state ``S[i]`` (float64): the mean ``[x, y, yaw, v, yaw_rate, a, b_a, b_w,
 b_y, k_v]`` at :data:`X` (``CtraEkf.x``), the 10x10 covariance row-major at :data:`P`,
@@ -32,17 +27,10 @@ robust log-likelihood at :data:`LL`. Row parameters ``RP[i]``: :data:`RP_NAMES`.
 from __future__ import annotations
 
 import math
-from typing import Any
 
 import numpy as np
 
-from posbench.predictors._kernels import (
-    fused_multiply_add,
-    huber_log_likelihood,
-    hypot,
-    kernel,
-    update_scores,
-)
+from posbench.predictors._kernels import huber_log_likelihood, kernel, update_scores
 from posbench.predictors.kalman.ctra_model import (
     ctra_displacement,
     ctra_motion,
@@ -66,12 +54,13 @@ RP_NAMES = tuple(
 NP = len(RP_NAMES)
 #: the options array ``CF``, in order: position random-walk density [m^2/s], calibration
 #: random-walk density, prior speed variance without a speed [m^2/s^2], Huber k of the
-#: fix likelihood, and 2.0: the exponent of the members' ``x ** 2`` (libm's pow, now and
-#: then not x * x in the last bit; a constant exponent would be compiled into x * x)
-CF_NAMES = ("pos_psd", "calib_psd", "var_v0", "huber_k", "two")
-POS_PSD, CALIB_PSD, VAR_V0, HUBER_K, TWO = range(5)
-#: floats of the work buffer
+#: fix likelihood
+CF_NAMES = ("pos_psd", "calib_psd", "var_v0", "huber_k")
+POS_PSD, CALIB_PSD, VAR_V0, HUBER_K = range(4)
+#: floats of the work buffer: P H' (10 x 3 by columns) at 0, the gain K at :data:`WK`,
+#: H P H' + R (3 x 3) at :data:`WS`, its inverse at :data:`WI`
 NW = 80
+WK, WS, WI = 30, 60, 69
 
 TWO_PI = 2.0 * math.pi  # as predictors/_geometry.py
 PI2 = math.pi**2
@@ -80,6 +69,8 @@ VAR_A0 = 2.0**2
 #: the two states an IMU channel (yaw rate, accel, yaw) measures the sum of: yaw_rate +
 #: b_w, a + b_a, yaw + b_y
 IMU_J, IMU_B = (4, 5, 2), (7, 6, 8)
+#: the entries of the covariance Q adds to, in ctra_noise_entries' order (ctra_model.Q_ENTRIES)
+Q_AT = (0, 11, 1, 10, 3, 30, 13, 31, 5, 50, 15, 51, 33, 35, 53, 55, 22, 24, 42, 44)
 
 
 def new_rows(n: int) -> np.ndarray:
@@ -91,17 +82,6 @@ def new_rows(n: int) -> np.ndarray:
     S[:, FIX : FIX + 3] = math.nan
     S[:, YAW_MEAS] = S[:, SPEED_MEAS] = math.nan
     return S
-
-
-#: a * b + c rounded once (LLVM's fma: the instruction, where the CPU has one), as BLAS
-#: computes the products numpy hands it; made by :func:`_numba_setup`
-_fma: Any = None
-
-
-def _numba_setup() -> None:
-    """:data:`_fma`, made when this module's kernels are compiled."""
-    global _fma
-    _fma = fused_multiply_add()
 
 
 @kernel
@@ -116,9 +96,10 @@ def _jacobian(S: np.ndarray, i: int, T: float) -> tuple[float, ...]:
 
 
 @kernel
-def _predict(S: np.ndarray, RP: np.ndarray, CF: np.ndarray, i: int, t: float) -> None:
+def predict(S: np.ndarray, RP: np.ndarray, CF: np.ndarray, i: int, t: float) -> None:
     """Row i to time t [s] (``CtraEkf._predict_to``: only forward): the CTRA step, then
-    P = F P F' + Q, symmetrised."""
+    P = F P F' + Q, symmetrised. F is the identity but for rows 0-3 (x, y from yaw, v,
+    yaw_rate, a; yaw from yaw_rate; v from a), so only those rows and columns change."""
     T = t - S[i, TS]
     if not T > 0.0:
         return
@@ -128,50 +109,24 @@ def _predict(S: np.ndarray, RP: np.ndarray, CF: np.ndarray, i: int, t: float) ->
     S[i, 1] += dy
     S[i, 2] = _wrap(yaw + w * T)
     S[i, 3] = v + a * T
-    # F P in place (numpy's dot: BLAS, each entry a chain of fused multiply-adds over F's
-    # row in order, zeros adding nothing): rows 0 and 1 read the old rows 2-5, then 2 and 3
-    for j in range(10):
+    for j in range(10):  # F P: rows 0 and 1 read the old rows 2-5, then rows 2 and 3
         p2, p3 = S[i, P + 20 + j], S[i, P + 30 + j]
         p4, p5 = S[i, P + 40 + j], S[i, P + 50 + j]
-        acc = _fma(f02, p2, S[i, P + j])
-        S[i, P + j] = _fma(f05, p5, _fma(f04, p4, _fma(f03, p3, acc)))
-        acc = _fma(f12, p2, S[i, P + 10 + j])
-        S[i, P + 10 + j] = _fma(f15, p5, _fma(f14, p4, _fma(f13, p3, acc)))
-        S[i, P + 20 + j] = _fma(T, p4, p2)
-        S[i, P + 30 + j] = _fma(T, p5, p3)
-    # (F P) F' in place, by columns alike
-    for r in range(10):
+        S[i, P + j] += f02 * p2 + f03 * p3 + f04 * p4 + f05 * p5
+        S[i, P + 10 + j] += f12 * p2 + f13 * p3 + f14 * p4 + f15 * p5
+        S[i, P + 20 + j] = p2 + T * p4
+        S[i, P + 30 + j] = p3 + T * p5
+    for r in range(10):  # (F P) F', by columns alike
         o = P + 10 * r
         q2, q3, q4, q5 = S[i, o + 2], S[i, o + 3], S[i, o + 4], S[i, o + 5]
-        acc = _fma(q2, f02, S[i, o])
-        S[i, o] = _fma(q5, f05, _fma(q4, f04, _fma(q3, f03, acc)))
-        acc = _fma(q2, f12, S[i, o + 1])
-        S[i, o + 1] = _fma(q5, f15, _fma(q4, f14, _fma(q3, f13, acc)))
-        S[i, o + 2] = _fma(q4, T, q2)
-        S[i, o + 3] = _fma(q5, T, q3)
-    # + Q (ctra.ctra_process_noise at the heading before the step, and the sensor states)
+        S[i, o] += q2 * f02 + q3 * f03 + q4 * f04 + q5 * f05
+        S[i, o + 1] += q2 * f12 + q3 * f13 + q4 * f14 + q5 * f15
+        S[i, o + 2] = q2 + q4 * T
+        S[i, o + 3] = q3 + q5 * T
+    # + Q: the motion's at the heading before the step, and the sensor states' random walks
     q = ctra_noise_entries(c, s, T, RP[i, JERK], RP[i, YAWACC], CF[POS_PSD])
-    # Q_ENTRIES' places, written out: constant indices into the tuple
-    S[i, P + 0] += q[0]
-    S[i, P + 11] += q[1]
-    S[i, P + 1] += q[2]
-    S[i, P + 10] += q[3]
-    S[i, P + 3] += q[4]
-    S[i, P + 30] += q[5]
-    S[i, P + 13] += q[6]
-    S[i, P + 31] += q[7]
-    S[i, P + 5] += q[8]
-    S[i, P + 50] += q[9]
-    S[i, P + 15] += q[10]
-    S[i, P + 51] += q[11]
-    S[i, P + 33] += q[12]
-    S[i, P + 35] += q[13]
-    S[i, P + 53] += q[14]
-    S[i, P + 55] += q[15]
-    S[i, P + 22] += q[16]
-    S[i, P + 24] += q[17]
-    S[i, P + 42] += q[18]
-    S[i, P + 44] += q[19]
+    for k in range(20):
+        S[i, P + Q_AT[k]] += q[k]
     S[i, P + 66] += RP[i, QBA] * T
     S[i, P + 77] += RP[i, QBW] * T
     S[i, P + 88] += CF[CALIB_PSD] * T
@@ -185,122 +140,100 @@ def _predict(S: np.ndarray, RP: np.ndarray, CF: np.ndarray, i: int, t: float) ->
 
 
 @kernel
-def _gain(S: np.ndarray, W: np.ndarray, i: int, s: float, innov: float) -> None:
-    """Scalar update of row i given ph = P h' in W[0:10], s = h P h' + r and the innovation
-    (``CtraEkf._gain``)."""
-    w = 1.0 / s
-    for r in range(10):
-        W[10 + r] = W[r] * w
-    for r in range(10):
-        S[i, r] += W[10 + r] * innov
-    for a in range(10):
-        ka = W[10 + a]
+def linear_update(S: np.ndarray, W: np.ndarray, i: int, m: int, e: tuple) -> None:
+    """Row i takes m (1-3) measurements at once: with the columns of P H' in W[10 l + q]
+    (l < m, q < 10), H P H' + R in W[WS + 3 l + c] and the innovations ``e[:m]``,
+    K = P H' S^-1, x += K e, P -= K (P H')' (``CtraEkf._gain``, ``_update_position`` and
+    ``update_imu``)."""
+    s = W[WS:]
+    si = W[WI:]
+    if m == 1:
+        si[0] = 1.0 / s[0]
+    elif m == 2:
+        det = s[0] * s[4] - s[1] * s[3]
+        si[0], si[1], si[3], si[4] = s[4] / det, -s[1] / det, -s[3] / det, s[0] / det
+    else:
+        a, b, c, d, ee, f = s[0], s[1], s[2], s[4], s[5], s[8]
+        A00, A01, A02 = d * f - ee * ee, c * ee - b * f, b * ee - c * d
+        A11, A12, A22 = a * f - c * c, b * c - a * ee, a * d - b * b
+        w = 1.0 / (a * A00 + b * A01 + c * A02)
+        si[0], si[1], si[2] = A00 * w, A01 * w, A02 * w
+        si[3], si[4], si[5] = A01 * w, A11 * w, A12 * w
+        si[6], si[7], si[8] = A02 * w, A12 * w, A22 * w
+    for q in range(10):  # K = P H' S^-1, then x += K e
+        dx = 0.0
+        for c in range(m):
+            acc = 0.0
+            for k in range(m):
+                acc += W[10 * k + q] * si[3 * k + c]
+            W[WK + 10 * c + q] = acc
+            dx += acc * e[c]
+        S[i, q] += dx
+    for a in range(10):  # P -= K (P H')'
         for b in range(10):
-            S[i, P + 10 * a + b] -= ka * W[b]
+            acc = 0.0
+            for c in range(m):
+                acc += W[WK + 10 * c + a] * W[10 * c + b]
+            S[i, P + 10 * a + b] -= acc
 
 
 @kernel
-def _update_fix(S: np.ndarray, W: np.ndarray, i: int, zx: float, zy: float, r: float) -> None:
-    """The 2-D fix update of row i with S^-1 in closed form (``CtraEkf._update_position``);
-    stores the innovation and its covariance at :data:`INNOV`."""
-    s00, s01, s11 = S[i, P] + r, S[i, P + 1], S[i, P + 11] + r
-    det = s00 * s11 - s01 * s01
-    i00, i01, i11 = s11 / det, -s01 / det, s00 / det
+def update_fix(S: np.ndarray, W: np.ndarray, i: int, zx: float, zy: float, r: float) -> None:
+    """A position fix (zx, zy) [m] of variance r [m^2] per axis for row i (H selects x,
+    y); stores the innovation and its covariance at :data:`INNOV`."""
+    for q in range(10):
+        W[q], W[10 + q] = S[i, P + 10 * q], S[i, P + 10 * q + 1]
+    W[WS], W[WS + 1] = W[0] + r, W[1]
+    W[WS + 3], W[WS + 4] = W[10], W[11] + r
     e0, e1 = zx - S[i, 0], zy - S[i, 1]
-    S[i, INNOV] = e0
-    S[i, INNOV + 1] = e1
-    S[i, INNOV + 2] = s00
-    S[i, INNOV + 3] = s01
-    S[i, INNOV + 4] = s11
-    for k in range(10):  # ph = P[:, :2], K = ph S^-1 (BLAS: fused, in order)
-        p0, p1 = S[i, P + 10 * k], S[i, P + 10 * k + 1]
-        W[k], W[10 + k] = p0, p1
-        W[20 + k] = _fma(p1, i01, p0 * i00)
-        W[30 + k] = _fma(p1, i11, p0 * i01)
-    for k in range(10):  # x += K e (BLAS gemv: the second term first)
-        S[i, k] += _fma(W[20 + k], e0, W[30 + k] * e1)
-    for a in range(10):  # P -= K ph'
-        k0, k1 = W[20 + a], W[30 + a]
-        for b in range(10):
-            S[i, P + 10 * a + b] -= _fma(k1, W[10 + b], k0 * W[b])
+    S[i, INNOV], S[i, INNOV + 1] = e0, e1
+    S[i, INNOV + 2], S[i, INNOV + 3], S[i, INNOV + 4] = W[WS], W[WS + 1], W[WS + 4]
+    linear_update(S, W, i, 2, (e0, e1, 0.0))
 
 
 @kernel
-def _update_imu(
+def update_imu(
     S: np.ndarray, RP: np.ndarray, W: np.ndarray, i: int, yaw_rate: float, ax: float, yaw: float
 ) -> None:
-    """The finite ones of yaw rate, ax and yaw (innovation wrapped) for row i: one scalar
-    update, or one joint update with S^-1 in closed form (``CtraEkf._update_imu``)."""
+    """The finite ones of yaw rate [rad/s], longitudinal acceleration [m/s^2] and yaw [rad]
+    for row i, at once: each measures a state plus its bias (:data:`IMU_J`,
+    :data:`IMU_B`); the yaw's innovation is wrapped (``CtraEkf.update_imu``)."""
     z = (yaw_rate, ax, yaw)
     rr = (RP[i, R_W], RP[i, R_A], RP[i, R_YAW])
     sel = [0, 0, 0]
+    e = [0.0, 0.0, 0.0]
     m = 0
     for k in range(3):
         if math.isfinite(z[k]):
+            j, b = IMU_J[k], IMU_B[k]
+            for q in range(10):
+                W[10 * m + q] = S[i, P + 10 * q + j] + S[i, P + 10 * q + b]
+            innov = z[k] - S[i, j] - S[i, b]
+            e[m] = _wrap(innov) if k == 2 else innov
             sel[m] = k
             m += 1
     if m == 0:
         return
-    if m == 1:  # _update_sum / _update_yaw_offset
-        k = sel[0]
-        j, b = IMU_J[k], IMU_B[k]
-        for q in range(10):
-            W[q] = S[i, P + 10 * q + j] + S[i, P + 10 * q + b]
-        innov = z[k] - S[i, j] - S[i, b]
-        innov = _wrap(innov) if k == 2 else innov
-        _gain(S, W, i, W[j] + W[b] + rr[k], innov)
-        if k == 2:
-            S[i, 2] = _wrap(S[i, 2])
-        return
-    # PHt (10 x m) at W[10 l + q], S (m x m) with R on its diagonal, the innovations
-    Sm = np.zeros((3, 3))
-    e = [0.0, 0.0, 0.0]
-    for col in range(m):
-        j, b = IMU_J[sel[col]], IMU_B[sel[col]]
-        for q in range(10):
-            W[10 * col + q] = S[i, P + 10 * q + j] + S[i, P + 10 * q + b]
-        e[col] = z[sel[col]] - S[i, j] - S[i, b]
     for row in range(m):
         j, b = IMU_J[sel[row]], IMU_B[sel[row]]
         for col in range(m):
-            Sm[row, col] = W[10 * col + j] + W[10 * col + b]
-        Sm[row, row] += rr[sel[row]]
-    has_yaw = sel[m - 1] == 2
-    if has_yaw:
-        e[m - 1] = _wrap(e[m - 1])
-    Si = np.zeros((3, 3))  # ekf._sym_inverse
-    if m == 2:
-        a, b, d = Sm[0, 0], Sm[0, 1], Sm[1, 1]
-        det = a * d - b * b
-        Si[0, 0], Si[0, 1], Si[1, 0], Si[1, 1] = d / det, -b / det, -b / det, a / det
-    else:
-        a, b, c = Sm[0, 0], Sm[0, 1], Sm[0, 2]
-        d, ee, f = Sm[1, 1], Sm[1, 2], Sm[2, 2]
-        A00, A01, A02 = d * f - ee * ee, c * ee - b * f, b * ee - c * d
-        A11, A12, A22 = a * f - c * c, b * c - a * ee, a * d - b * b
-        w = 1.0 / (a * A00 + b * A01 + c * A02)
-        Si[0, 0], Si[0, 1], Si[0, 2] = A00 * w, A01 * w, A02 * w
-        Si[1, 0], Si[1, 1], Si[1, 2] = A01 * w, A11 * w, A12 * w
-        Si[2, 0], Si[2, 1], Si[2, 2] = A02 * w, A12 * w, A22 * w
-    for q in range(10):  # K = PHt S^-1 at W[40 + 10 c + q] (BLAS: fused, in order)
-        for c in range(m):
-            acc = W[q] * Si[0, c]
-            for k in range(1, m):
-                acc = _fma(W[10 * k + q], Si[k, c], acc)
-            W[40 + 10 * c + q] = acc
-    for q in range(10):  # x += K e (BLAS gemv: the second term, the first, the third)
-        acc = _fma(W[40 + q], e[0], W[50 + q] * e[1])
-        if m == 3:
-            acc = _fma(W[60 + q], e[2], acc)
-        S[i, q] += acc
-    for a in range(10):  # P -= K PHt'
-        for b in range(10):
-            acc = W[40 + a] * W[b]
-            for c in range(1, m):
-                acc = _fma(W[40 + 10 * c + a], W[10 * c + b], acc)
-            S[i, P + 10 * a + b] -= acc
-    if has_yaw:
+            W[WS + 3 * row + col] = W[10 * col + j] + W[10 * col + b]
+        W[WS + 4 * row] += rr[sel[row]]
+    linear_update(S, W, i, m, (e[0], e[1], e[2]))
+    if sel[m - 1] == 2:
         S[i, 2] = _wrap(S[i, 2])
+
+
+@kernel
+def update_speed(S: np.ndarray, RP: np.ndarray, W: np.ndarray, i: int, v: float) -> None:
+    """A wheel speed v [m/s] for row i: z = (1 + k_v) v, linearised at the mean, of
+    variance ``r_v + (rel_sigma v)^2`` (``CtraEkf.observe_speed``)."""
+    rel = RP[i, REL] * v
+    vs, g = S[i, 3], 1.0 + S[i, 9]
+    for q in range(10):
+        W[q] = g * S[i, P + 10 * q + 3] + vs * S[i, P + 10 * q + 9]
+    W[WS] = g * W[3] + vs * W[9] + RP[i, R_V] + rel * rel
+    linear_update(S, W, i, 1, (v - g * vs, 0.0, 0.0))
 
 
 @kernel
@@ -345,11 +278,11 @@ def _try_init(
     S[i, FIX], S[i, FIX + 1], S[i, FIX + 2] = t, x, y
     if not t > t0:
         return
-    d = hypot(x - x0, y - y0)
+    d = math.hypot(x - x0, y - y0)
     var_yaw = min(4.0 * r / (d * d), PI2) if d > 0 else PI2
     if not v_known:
         v0 = d / (t - t0)
-        var_v = 2.0 * r / (t - t0) ** CF[TWO] + 1.0
+        var_v = 2.0 * r / ((t - t0) * (t - t0)) + 1.0
     _init_row(S, RP, i, t, x, y, math.atan2(y - y0, x - x0), v0, var_yaw, var_v, r)
 
 
@@ -377,8 +310,8 @@ def fix_rows(
             _try_init(S, RP, CF, i, t, x, y, r)
             S[i, LL] = math.nan
             continue
-        _predict(S, RP, CF, i, t)
-        _update_fix(S, W, i, x, y, r)
+        predict(S, RP, CF, i, t)
+        update_fix(S, W, i, x, y, r)
         ex, ey = S[i, INNOV], S[i, INNOV + 1]
         a, b, d = S[i, INNOV + 2], S[i, INNOV + 3], S[i, INNOV + 4]
         S[i, LL] = huber_log_likelihood(ex, ey, a, b, d, k)
@@ -407,8 +340,8 @@ def imu_rows(
             if use_yaw and math.isfinite(yaw):
                 S[i, YAW_MEAS] = yaw
             continue
-        _predict(S, RP, CF, i, t)
-        _update_imu(S, RP, W, i, yaw_rate, ax, yaw if use_yaw else math.nan)
+        predict(S, RP, CF, i, t)
+        update_imu(S, RP, W, i, yaw_rate, ax, yaw if use_yaw else math.nan)
 
 
 @kernel
@@ -423,12 +356,8 @@ def speed_rows(
         if S[i, READY] == 0.0:
             S[i, SPEED_MEAS] = v
             continue
-        _predict(S, RP, CF, i, t)
-        r = RP[i, R_V] + (RP[i, REL] * v) ** CF[TWO]
-        vs, g = S[i, 3], 1.0 + S[i, 9]
-        for q in range(10):
-            W[q] = g * S[i, P + 10 * q + 3] + vs * S[i, P + 10 * q + 9]
-        _gain(S, W, i, g * W[3] + vs * W[9] + r, v - g * vs)
+        predict(S, RP, CF, i, t)
+        update_speed(S, RP, W, i, v)
 
 
 @kernel
@@ -457,30 +386,30 @@ def covariance(S: np.ndarray, RP: np.ndarray, CF: np.ndarray, i: int, t: float) 
     if not T > 0.0:
         return S[i, P], S[i, P + 1], S[i, P + 11]
     _, _, f02, f03, f04, f05, f12, f13, f14, f15, c, s = _jacobian(S, i, T)
+    # rows 0, 1 of F P F' from P's top-left 6x6 block (F's rows 0, 1: e_0 + f0, e_1 + f1)
     f0 = (f02, f03, f04, f05)
     f1 = (f12, f13, f14, f15)
-    m0 = [0.0] * 6  # rows 0, 1 of Fp P[:6, :6] (numpy's matmul: BLAS, fused, in order)
+    m0 = [0.0] * 6  # rows 0, 1 of F P
     m1 = [0.0] * 6
     for col in range(6):
-        a0 = S[i, P + col]
-        a1 = S[i, P + 10 + col]
+        a0, a1 = S[i, P + col], S[i, P + 10 + col]
         for k in range(4):
             pk = S[i, P + 10 * (k + 2) + col]
-            a0 = _fma(f0[k], pk, a0)
-            a1 = _fma(f1[k], pk, a1)
+            a0 += f0[k] * pk
+            a1 += f1[k] * pk
         m0[col], m1[col] = a0, a1
     o00, o01, o10, o11 = m0[0], m0[1], m1[0], m1[1]
     for k in range(4):
-        o00 = _fma(m0[k + 2], f0[k], o00)
-        o01 = _fma(m0[k + 2], f1[k], o01)
-        o10 = _fma(m1[k + 2], f0[k], o10)
-        o11 = _fma(m1[k + 2], f1[k], o11)
+        o00 += m0[k + 2] * f0[k]
+        o01 += m0[k + 2] * f1[k]
+        o10 += m1[k + 2] * f0[k]
+        o11 += m1[k + 2] * f1[k]
     q = ctra_noise_entries(c, s, T, RP[i, JERK], RP[i, YAWACC], CF[POS_PSD])
     o00 += q[0]
     o11 += q[1]
     o01 += q[2]
     o10 += q[3]
-    return 0.5 * (o00 + o00), 0.5 * (o01 + o10), 0.5 * (o11 + o11)
+    return o00, 0.5 * (o01 + o10), o11
 
 
 @kernel
@@ -490,7 +419,7 @@ def shadow_distances(S: np.ndarray, n: int, t: float, x: float, y: float, out: n
     ok = True
     for j in range(n):
         px, py = position(S, n + j, t)
-        out[j] = hypot(x - px, y - py)
+        out[j] = math.hypot(x - px, y - py)
         if not out[j] < math.inf:
             ok = False
     return ok

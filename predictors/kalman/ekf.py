@@ -161,7 +161,6 @@ class EkfBank(RowBank):
             "calib_psd": float(self._member["calib_psd"]),
             "var_v0": float(self._member["init_vel_sigma"]) ** 2,
             "huber_k": self.huber_k,
-            "two": 2.0,
         }
         self._cf = np.array([cf[name] for name in cb.CF_NAMES])
         self._has_imu = imu is not None

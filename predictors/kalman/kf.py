@@ -169,6 +169,7 @@ class KalmanBank(RowBank):
         cf = {
             "r_acc": self._r_acc,
             "r_spd": speed.sigma**2 if speed is not None else math.nan,
+            "rel_sigma": speed.rel_sigma if speed is not None else 0.0,
             "stop_speed": speed.stop_speed if speed is not None else 0.0,
             "min_speed": heading.min_speed,
             "gate": imu.gate if imu is not None else 0.0,
@@ -181,8 +182,6 @@ class KalmanBank(RowBank):
         self._has_imu = imu is not None
         self._has_speed = speed is not None
         self._stop_speed = cf["stop_speed"]
-        self._r_spd = cf["r_spd"]
-        self._rel_sigma = speed.rel_sigma if speed is not None else 0.0
         self._sigma_max = heading.sigma_max
         # one fix-noise model, heading tracker and bias estimator for all members: each
         # member's would see the same inputs and hold the same values
@@ -295,12 +294,8 @@ class KalmanBank(RowBank):
             ay,
             yaw,
             yaw_rate,
-            hm,
-            hs,
-            bxm,
-            bym,
-            bxs,
-            bys,
+            (hm, hs),
+            ((bxm, bym), (bxs, bys)),
         )
         if bias is not None:
             bias.observe_imu(t, ax, ay, h_m)
@@ -327,10 +322,8 @@ class KalmanBank(RowBank):
             n,
             t,
             v,
-            self._r_spd + (self._rel_sigma * v) ** 2,
             self._imu_yaw,
-            hm,
-            hs,
+            (hm, hs),
         )
 
     # -- answers --------------------------------------------------------------------------

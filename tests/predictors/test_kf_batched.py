@@ -8,8 +8,9 @@ same drives (synthetic, and one of each shared data set: aslan, KITTI, comma2k19
 and without simulated outages, with the fixes' own accuracy and simulated RTK, and under
 options that take other paths through the step (no IMU, no speed, a single density, no
 heading from fixes, no horizons); every answer, covariance and the member each query is
-answered by must agree to 1e-9 m (measured: every answer and covariance identical to the
-bit).
+answered by must agree to 1e-9 m. The rows are plain compiled arithmetic, not a copy of the
+members' rounding; measured (2026-11-28): every answer identical to the members', the
+covariances within 2.2e-19 m^2.
 """
 
 from __future__ import annotations
