@@ -29,7 +29,7 @@ from typing import Any
 
 import numpy as np
 
-from posbench.predictors._geometry import COV_SCALE_RANGE, check_config
+from posbench.predictors._geometry import check_config
 from posbench.predictors.kalman import ctra_rows as cb
 from posbench.predictors.kalman.inputs import (
     EKF_FLAT,
@@ -38,8 +38,7 @@ from posbench.predictors.kalman.inputs import (
     CtraSpeedInput,
     GnssInput,
 )
-from posbench.predictors.kalman.kf import HORIZONS_S
-from posbench.predictors.kalman.row_bank import RowBank
+from posbench.predictors.kalman.row_bank import HORIZONS_S, RowBank
 
 NAN2 = (math.nan, math.nan)
 
@@ -119,11 +118,8 @@ class EkfBank(RowBank):
             pos_psd=(pos_psd, 0.0, 1e6),
             init_vel_sigma=(init_vel_sigma, 1e-3, 1e3),
             calib_psd=(calib_psd, 0.0, 1e6),
-            memory_fixes=(memory_fixes, 1.0, 1e6),
-            cov_scale=(cov_scale, *COV_SCALE_RANGE),
-            horizon_memory=(horizon_memory, 1.0, 1e6),
-            **{f"horizons_s[{i}]": (h, 1e-3, 3600.0) for i, h in enumerate(horizons_s)},
         )
+        self._set_selection(memory_fixes, cov_scale, horizons_s, horizon_memory)
         if not levels:
             raise ValueError("ekf: noise_levels must name at least one pair")
         self.inputs = EKF_FLAT.compose(
@@ -135,10 +131,6 @@ class EkfBank(RowBank):
             "init_vel_sigma": init_vel_sigma,
             "calib_psd": calib_psd,
         }
-        self.memory_fixes = float(memory_fixes)
-        self.cov_scale = float(cov_scale)
-        self.horizons_s = tuple(sorted(float(h) for h in horizons_s))
-        self.horizon_memory = float(horizon_memory)
         self.labels = tuple(
             label for j, w in levels for label in (f"aided j{j:g} w{w:g}", f"fixes j{j:g} w{w:g}")
         )

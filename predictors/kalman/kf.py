@@ -36,7 +36,7 @@ from typing import Any
 import numpy as np
 
 from posbench.metrics.ca_model import ca_noise_entries, ca_predict_block, ca_predict_cross
-from posbench.predictors._geometry import COV_SCALE_RANGE, check_config
+from posbench.predictors._geometry import check_config
 from posbench.predictors.kalman import ca_rows as kb
 from posbench.predictors.kalman.accel_bias import AccelBiasEstimator
 from posbench.predictors.kalman.course_heading import CourseHeading
@@ -48,17 +48,13 @@ from posbench.predictors.kalman.inputs import (
     SpeedInput,
     stopped,
 )
-from posbench.predictors.kalman.row_bank import RowBank
+from posbench.predictors.kalman.row_bank import HORIZONS_S, RowBank
 
 NAN2 = (math.nan, math.nan)
 
 #: white-jerk densities of the members [m^2/s^5]: from ~0.7 m/s^3 over a second (steady
 #: motorway) to ~16 m/s^3 (hard city manoeuvres); a factor 8 apart
 JERK_PSDS = (0.5, 4.0, 32.0, 256.0)
-
-#: horizons [s] the members are also scored at, for queries that far after the newest fix
-#: (outages; ``ModelBank``)
-HORIZONS_S = (1.0, 3.0)
 
 
 #: the aided members' inputs: the IMU as the raw sensor it may be (vehicle-frame bias
@@ -127,12 +123,9 @@ class KalmanBank(RowBank):
             "kf",
             init_vel_sigma=(init_vel_sigma, 1e-3, 1e3),
             init_acc_sigma=(init_acc_sigma, 1e-3, 1e3),
-            memory_fixes=(memory_fixes, 1.0, 1e6),
-            cov_scale=(cov_scale, *COV_SCALE_RANGE),
-            horizon_memory=(horizon_memory, 1.0, 1e6),
             **{f"jerk_psds[{i}]": (j, 1e-9, 1e6) for i, j in enumerate(jerk_psds)},
-            **{f"horizons_s[{i}]": (h, 1e-3, 3600.0) for i, h in enumerate(horizons_s)},
         )
+        self._set_selection(memory_fixes, cov_scale, horizons_s, horizon_memory)
         if not jerk_psds:
             raise ValueError("kf: jerk_psds must name at least one density")
         self.inputs = KF_FLAT.compose(
@@ -144,10 +137,6 @@ class KalmanBank(RowBank):
         self.init_vel_sigma = float(init_vel_sigma)
         self.init_acc_sigma = float(init_acc_sigma)
         self.jerk_psds = tuple(float(j) for j in jerk_psds)
-        self.memory_fixes = float(memory_fixes)
-        self.cov_scale = float(cov_scale)
-        self.horizons_s = tuple(sorted(float(h) for h in horizons_s))
-        self.horizon_memory = float(horizon_memory)
         self.labels = tuple(
             label for j in self.jerk_psds for label in (f"aided j{j:g}", f"fixes j{j:g}")
         )

@@ -22,11 +22,12 @@ Units: seconds, metres, ENU.
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from typing import Any
 
 import numpy as np
 
+from posbench.predictors._geometry import COV_SCALE_RANGE, check_config
 from posbench.predictors._kernels import warm_up_once
 from posbench.predictors.base import Predictor
 from posbench.predictors.kalman.gnss_noise import GnssNoise
@@ -35,6 +36,9 @@ from posbench.predictors.kalman.inputs import FlatNames, OptionDoc
 #: a kernel filling ``out`` with the shadows' distances [m] to a fix (t, x, y) and saying
 #: whether every one is finite: ``(S, n, t, x, y, out) -> bool``
 ShadowDistances = Callable[[np.ndarray, int, float, float, float, np.ndarray], bool]
+
+#: the horizons [s] after a fix at which the shadows score the members (outages)
+HORIZONS_S = (1.0, 3.0)
 
 
 class RowBank(Predictor):
@@ -62,6 +66,28 @@ class RowBank(Predictor):
     cov_scale: float
     _n: int
     _gnss: GnssNoise
+
+    def _set_selection(
+        self,
+        memory_fixes: float,
+        cov_scale: float,
+        horizons_s: Sequence[float],
+        horizon_memory: float,
+    ) -> None:
+        """Check and keep the selection's options, the same for every bank: the scores'
+        memory in fixes, the covariance scale, the horizons [s] the shadows score at and
+        their scores' memory."""
+        check_config(
+            self.name,
+            memory_fixes=(memory_fixes, 1.0, 1e6),
+            cov_scale=(cov_scale, *COV_SCALE_RANGE),
+            horizon_memory=(horizon_memory, 1.0, 1e6),
+            **{f"horizons_s[{i}]": (h, 1e-3, 3600.0) for i, h in enumerate(horizons_s)},
+        )
+        self.memory_fixes = float(memory_fixes)
+        self.cov_scale = float(cov_scale)
+        self.horizons_s = tuple(sorted(float(h) for h in horizons_s))
+        self.horizon_memory = float(horizon_memory)
 
     def _reset_bank(self, rows: np.ndarray) -> None:
         """Forget the selection; ``rows`` (2n rows: members, then shadows) new."""
