@@ -27,7 +27,8 @@ from typing import Any
 
 import numpy as np
 
-from posbench.metrics.bootstrap import DEFAULT_RESAMPLES, LEVEL, summary_ci
+from posbench.metrics.bootstrap import summary_ci
+from posbench.metrics.cluster_bootstrap import DEFAULT_RESAMPLES, LEVEL
 from posbench.metrics.pcrb import (
     JerkPsd,
     mean_error_bound,

@@ -22,13 +22,9 @@ import pandas as pd
 
 from posbench.aggregation.intervals import Statistics
 from posbench.config import RunConfig
-from posbench.metrics.bootstrap import (
-    block_length,
-    block_resample,
-    cluster_weights,
-    ratio_ci,
-    summary_ci,
-)
+from posbench.metrics.block_bootstrap import block_length, block_resample
+from posbench.metrics.bootstrap import summary_ci
+from posbench.metrics.cluster_bootstrap import cluster_weights, ratio_ci
 from posbench.metrics.outage_lengths import (
     length_classes,
     length_figures,
