@@ -12,7 +12,6 @@ import pytest
 
 from posbench.scenarios.consistency import check_drive
 from posbench.scenarios.corpus import (
-    MANOEUVRES,
     PROFILES,
     corpus_drive,
     corpus_drives,
@@ -21,6 +20,7 @@ from posbench.scenarios.corpus import (
     envelope,
     iter_corpus,
 )
+from posbench.scenarios.corpus_routes import MANOEUVRES
 from posbench.scenarios.degrade import interpolate_truth
 from posbench.scenarios.drive import Drive
 from posbench.scenarios.labels import LABELS, label_times
