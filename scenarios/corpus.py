@@ -46,15 +46,14 @@ from posbench.scenarios.corpus_routes import (
 )
 from posbench.scenarios.drive import FIXES_FROM_TRUTH, Drive, DriveMeta, TruthStream
 from posbench.scenarios.labels import LABELS
-from posbench.scenarios.synthetic import (
-    EPOCH_S,
+from posbench.scenarios.synthetic import EPOCH_S
+from posbench.scenarios.synthetic_motion import Segment, simulate
+from posbench.scenarios.synthetic_sensors import (
     ORIGIN_LAT,
     ORIGIN_LON,
-    Segment,
     can_speed_stream,
     gps_stream,
     imu_stream,
-    simulate,
 )
 
 PROFILES = ("urban", "rural", "highway")
@@ -99,9 +98,10 @@ def _est_time_s(seg: Segment, lim: VehicleLimits) -> float:
 
 
 def _ay_window_m(segs: list[Segment], lim: VehicleLimits) -> float:
-    """The curve-limit window [m] of :func:`posbench.scenarios.synthetic.simulate` that keeps the
-    smoothed speed within ``ay_max``: the speed kernels' reach (+-``v_smooth_s``) at the
-    route's top speed, plus 2 m for the shift of the re-integrated path."""
+    """The curve-limit window [m] of :func:`posbench.scenarios.synthetic_motion.simulate`
+    that keeps the smoothed speed within ``ay_max``: the speed kernels' reach
+    (+-``v_smooth_s``) at the route's top speed, plus 2 m for the shift of the re-integrated
+    path."""
     return lim.v_smooth_s * max(g.speed_mps for g in segs) + 2.0
 
 

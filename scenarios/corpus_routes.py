@@ -1,5 +1,5 @@
 """The training corpus's routes: per profile, random manoeuvre blocks for the kinematic
-simulator (:func:`posbench.scenarios.synthetic.simulate`), and the vehicle limits drawn per
+simulator (:func:`posbench.scenarios.synthetic_motion.simulate`), and the vehicle limits drawn per
 drive that they are driven with.
 
 Per profile (speed targets in :data:`PROFILE_SPEEDS_MPS`):
@@ -31,7 +31,8 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from posbench.scenarios.labels import LabelThresholds
-from posbench.scenarios.synthetic import Segment, roundabout, stop, straight
+from posbench.scenarios.synthetic import roundabout
+from posbench.scenarios.synthetic_motion import Segment, stop, straight
 
 #: the finer manoeuvre kinds of ``meta.extra["manoeuvres"]``
 MANOEUVRES = (
@@ -60,7 +61,7 @@ _ROUNDABOUT_RADIUS_M = LabelThresholds().roundabout_radius_m
 class VehicleLimits:
     """One drive's vehicle: ``a_acc`` acceleration, ``a_dec`` braking, ``ay_max`` lateral
     acceleration [m/s^2], ``v_smooth_s`` speed smoothing [s], ``kappa_smooth_m`` curvature
-    smoothing [m] (the keyword limits of :func:`posbench.scenarios.synthetic.simulate`)."""
+    smoothing [m] (the keyword limits of :func:`posbench.scenarios.synthetic_motion.simulate`)."""
 
     a_acc: float
     a_dec: float
