@@ -17,14 +17,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from posbench.scenarios.degrade import (
-    draw_intervals,
-    drop_windows,
-    enu_to_latlon,
-    gps_noise,
-    outage_windows,
-)
+from posbench.scenarios.degrade import draw_intervals, enu_to_latlon, gps_noise
 from posbench.scenarios.drive import GpsStream, ImuStream, SpeedStream
+from posbench.scenarios.dropouts import drop_windows, outage_windows
 
 #: the synthetic drives' ENU origin [deg]
 ORIGIN_LAT = 45.8

@@ -31,7 +31,7 @@ from posbench.metrics.outage_lengths import (
     path_lengths,
     per_outage_ate,
 )
-from posbench.scenarios.degrade import FIELD_OUTAGE_LENGTHS_S, FIELD_OUTAGES
+from posbench.scenarios.dropouts import FIELD_OUTAGE_LENGTHS_S, FIELD_OUTAGES
 from posbench.scoring.records import DriveRun
 from posbench.scoring.schema import scored_mask
 
