@@ -51,7 +51,7 @@ from posbench.scoring.schema import COV_COLUMNS, KINDS
 from posbench.scoring.score import MATCH_TOLERANCE_S, answer_positions, score
 
 if TYPE_CHECKING:
-    from posbench.scenarios.loaders.table import TableFile
+    from posbench.scenarios.loaders.table_file import TableFile
 
 REQUIRED = ("drive", "kind", "t_query", "x", "y")
 #: the farthest an answer's x or y may lie from its drive's origin [m]: no point on Earth is
@@ -122,7 +122,7 @@ def read_answers(path: str | Path) -> Answers:
             y, an unknown kind, a negative latency or one over :data:`MAX_LATENCY_US`; each
             naming the first row at fault.
     """
-    from posbench.scenarios.loaders.table import numeric_column, read_table_file
+    from posbench.scenarios.loaders.table_file import numeric_column, read_table_file
 
     path = Path(path)
     if is_tum(path):
@@ -282,7 +282,7 @@ def tum_drive(folder: QueryFolder, answers: Answers) -> str:
 def _covariance(tab: Any, path: Path) -> dict[str, np.ndarray]:
     """The optional covariance columns [m^2] (NaN where a row gives none); a DataError for
     only some of the three columns, or a row whose covariance is not positive semi-definite."""
-    from posbench.scenarios.loaders.table import numeric_column
+    from posbench.scenarios.loaders.table_file import numeric_column
 
     df = tab.df
     given = [c for c in COVARIANCE if c in df.columns]
