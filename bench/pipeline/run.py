@@ -21,7 +21,7 @@ from posbench.errors import UsageError
 from posbench.naming import plural
 from posbench.pipeline.publish import Published
 from posbench.pipeline.reporter import SILENT, Reporter
-from posbench.report.markdown import TABLE_FORMATS, parse_report_formats
+from posbench.report.table_files import TABLE_FORMATS, parse_report_formats
 from posbench.scenarios.drive import Drive
 
 if TYPE_CHECKING:

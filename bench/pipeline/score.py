@@ -11,7 +11,7 @@ from posbench.naming import plural
 from posbench.offline.answers import Scored
 from posbench.pipeline.publish import Published
 from posbench.pipeline.reporter import SILENT, Reporter
-from posbench.report.markdown import TABLE_FORMATS
+from posbench.report.table_files import TABLE_FORMATS
 
 #: what a scored system may be called: it names the predictor in every table, file and key
 NAME_PATTERN = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.+@-]*$")
