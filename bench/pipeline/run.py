@@ -166,10 +166,9 @@ def plan_run(options: RunOptions, given: Mapping[tuple[str, str], str] | None = 
         resolve_color_by,
     )
     from posbench.replay.executors import EXECUTORS, RAY_MISSING, ray_available
+    from posbench.replay.predictor_options import merge_options, model_options
     from posbench.replay.predictor_setup import (
         check_tuning_file,
-        merge_options,
-        model_options,
         plan_predictors,
         with_model_aliases,
     )

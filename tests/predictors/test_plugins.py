@@ -38,13 +38,8 @@ from posbench.predictors.registry import (
     resolve,
     tuned_params,
 )
-from posbench.replay.predictor_setup import (
-    merge_options,
-    parse_set,
-    parse_value,
-    validate_predictors,
-    with_model_aliases,
-)
+from posbench.replay.predictor_options import merge_options, parse_set, parse_value
+from posbench.replay.predictor_setup import validate_predictors, with_model_aliases
 
 GUIDE = ROOT / "docs" / "guides" / "own-predictor.md"
 SECTION = GUIDE.read_text(encoding="utf-8")
