@@ -14,6 +14,7 @@ import pytest
 from helpers import assert_one_error_line, bench
 
 from posbench.errors import UsageError
+from posbench.predictors.catalogue import BUILT_IN
 from posbench.predictors.kalman.inputs import AccelInput
 from posbench.predictors.option_types import (
     BOOL_TEXT,
@@ -23,7 +24,7 @@ from posbench.predictors.option_types import (
     parse_value,
     takes_text,
 )
-from posbench.predictors.registry import BUILT_IN, available, create, predictor_class
+from posbench.predictors.registry import available, create, predictor_class
 
 #: built-in predictors that can be built without a model file of the user's
 BUILDABLE = [n for n, e in available().items() if e.source == BUILT_IN and n != "lstm-authors"]

@@ -24,10 +24,9 @@ from helpers import ROOT
 from posbench.errors import UsageError
 from posbench.predictors import registry
 from posbench.predictors.base import Predictor
+from posbench.predictors.catalogue import ENTRY_POINT, IMPORT_PATH
 from posbench.predictors.kalman.kf import JERK_PSDS
 from posbench.predictors.registry import (
-    ENTRY_POINT,
-    IMPORT_PATH,
     PredictorError,
     available,
     base_name,
