@@ -49,11 +49,7 @@ def resample_counts(
     Returns:
         (n_resamples, n_clusters) int64 array.
     """
-    if n_clusters < 1 or n_resamples < 1:
-        raise ValueError(
-            f"need at least one cluster and one resample, got {n_clusters}, {n_resamples}"
-        )
-    return _cluster_counts(int(n_clusters), int(n_resamples), int(seed)).astype(np.int64)
+    return cluster_weights(n_clusters, n_resamples, seed).astype(np.int64)
 
 
 def cluster_weights(
