@@ -239,7 +239,8 @@ def check(
         ``clauses``, ``failed``).
     """
     from posbench.predictor_tools.contract import check_contract
-    from posbench.replay.predictor_setup import model_options, validate_predictors
+    from posbench.replay.predictor_options import model_options
+    from posbench.replay.predictor_setup import validate_predictors
 
     opts = {predictor: dict(options or {})}
     if model is not None:

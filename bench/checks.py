@@ -75,8 +75,8 @@ def check_horizon(seconds: float, option: str = "--horizon") -> float:
 def check_dropouts(profile: str) -> str:
     """A GPS dropout profile (``none``, ``random:P``, ``outages``, ``outage:L``,
     ``outage-lengths``), checked by
-    the parser that applies it (:func:`posbench.scenarios.degrade.parse_dropouts`)."""
-    from posbench.scenarios.degrade import parse_dropouts
+    the parser that applies it (:func:`posbench.scenarios.dropouts.parse_dropouts`)."""
+    from posbench.scenarios.dropouts import parse_dropouts
 
     try:
         parse_dropouts(profile)

@@ -1,5 +1,5 @@
 """Sample autocovariances of a long series in memory that does not grow with its length
-(the block bootstrap's block length, :func:`posbench.metrics.bootstrap.block_length`)."""
+(the block bootstrap's block length, :func:`posbench.metrics.block_bootstrap.block_length`)."""
 
 from __future__ import annotations
 

@@ -27,14 +27,14 @@ from typing import Any
 
 import numpy as np
 
-from posbench.metrics.bootstrap import DEFAULT_RESAMPLES, LEVEL, summary_ci
+from posbench.metrics.bootstrap import summary_ci
+from posbench.metrics.cluster_bootstrap import DEFAULT_RESAMPLES, LEVEL
 from posbench.metrics.pcrb import (
     JerkPsd,
-    mean_error_bound,
     position_variance_bound,
     position_variance_bound_with_acceleration,
-    with_slow_error,
 )
+from posbench.metrics.pcrb_mean_error import mean_error_bound, with_slow_error
 
 #: how the bound is named wherever it appears beside the predictors (never ranked with them)
 LIMIT_NAME = "limit (PCRB, CA model)"
@@ -152,7 +152,7 @@ def mean_error_offset(var: np.ndarray | float, offset_m: np.ndarray | float) -> 
     distribution, ``s sqrt(pi/2) L_1/2(-a)`` with ``s = sqrt(var)``, ``a = nu^2 / (2 s^2)``,
     taken as ``(1 + a) i0e(a/2) + a i1e(a/2)`` (scipy's exponentially scaled Bessel
     functions: no overflow) and as ``nu + s^2 / (2 nu)`` beyond :data:`RICE_ASYMPTOTIC`.
-    ``offset_m = 0`` gives :func:`~posbench.metrics.pcrb.mean_error_bound` (the Rayleigh
+    ``offset_m = 0`` gives :func:`~posbench.metrics.pcrb_mean_error.mean_error_bound` (the Rayleigh
     mean), ``var = 0`` gives ``offset_m``; averaged over offsets drawn from a 2-D Gaussian
     of per-axis variance ``v``, it is the Rayleigh mean of ``var + v``. NaN where either is
     NaN."""
@@ -243,14 +243,14 @@ def mean_error_bounds(
     that holds the position at ``t - latency_s`` [s] (a receiver's latency) is an
     observation at ``t - latency_s``, known from ``t`` on. ``slow_var`` [m^2] per axis, the
     receiver's slow error, is added where ``independent_truth`` is the reference
-    (:func:`~posbench.metrics.pcrb.with_slow_error`); ``slow_offset_m`` [m] (same shape as
-    the queries), a slow error's realised length at each query, instead takes it as an
-    offset (:func:`mean_error_offset`; ``slow_var`` is then not added). ``t_acc`` [s],
+    (:func:`~posbench.metrics.pcrb_mean_error.with_slow_error`); ``slow_offset_m`` [m] (same
+    shape as the queries), a slow error's realised length at each query, instead takes it as
+    an offset (:func:`mean_error_offset`; ``slow_var`` is then not added). ``t_acc`` [s],
     ``r_acc`` [m^2/s^4]: IMU samples observing the acceleration per axis
     (:func:`~posbench.metrics.pcrb.position_variance_bound_with_acceleration`; with a
     latency, the IMU samples of the last ``latency_s`` before a query are not used).
     Both axes alike, so the mean error is the Rayleigh mean of the per-axis variance
-    (:func:`~posbench.metrics.pcrb.mean_error_bound`). NaN before the first fix and
+    (:func:`~posbench.metrics.pcrb_mean_error.mean_error_bound`). NaN before the first fix and
     everywhere when ``q`` is not finite (or an empty profile) or there is no fix.
     """
     ti = np.asarray(t_issue, dtype=float)

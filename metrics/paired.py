@@ -3,7 +3,7 @@
 Two runs (OLD, NEW) scored the same drives; a statistic of each run pooled over those drives
 (mean, RMSE, max, a quantile of the errors [m]) is recomputed under the same cluster-bootstrap
 resamples of the drives (rows of ``weights``: each drive's multiplicity,
-:func:`posbench.metrics.bootstrap.resample_counts`), so drive-to-drive variation both runs
+:func:`posbench.metrics.cluster_bootstrap.resample_counts`), so drive-to-drive variation both runs
 share cancels in NEW - OLD. The percentile interval of the resampled differences is the
 paired CI (:func:`paired_interval`).
 """
@@ -14,7 +14,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from posbench.metrics.bootstrap import LEVEL, percentile_interval, resampled_means
+from posbench.metrics.cluster_bootstrap import LEVEL, percentile_interval, resampled_means
 from posbench.metrics.resampled_quantiles import resampled_quantiles
 
 #: statistics pooled from per-drive summaries alone (count, mean / RMSE); the others need

@@ -2,7 +2,8 @@
 
 A predictor is named in one of three ways, resolved in this order:
 
-- a **built-in** (or :func:`register`-ed) name: ``cv``, ``kf``, ``lstm``, ...;
+- a **built-in** (or :func:`~posbench.predictors.catalogue.register`-ed) name: ``cv``,
+  ``kf``, ``lstm``, ... (:mod:`posbench.predictors.catalogue`);
 - an **entry point** of the group ``posbench.predictors`` that an installed
   distribution declares (``name = module:Class`` in its ``entry_points.txt``); a
   built-in name always wins over an entry point of the same name;
@@ -24,17 +25,12 @@ import inspect
 import json
 import re
 import sys
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 from posbench.predictors.base import Predictor
-
-#: where a predictor comes from (:attr:`Entry.source`)
-BUILT_IN = "built-in"
-REGISTERED = "registered"
-ENTRY_POINT = "entry point"
-IMPORT_PATH = "import path"
+from posbench.predictors.catalogue import ENTRY_POINT, IMPORT_PATH, REGISTRY, Entry
 
 #: the entry-point group installed packages declare their predictors in
 ENTRY_POINT_GROUP = "posbench.predictors"
@@ -56,71 +52,8 @@ class PredictorError(Exception):
     importable, not a Predictor subclass. One line naming the predictor."""
 
 
-@dataclass(frozen=True)
-class Entry:
-    """A known predictor: where its class lives (``module:Class``), its default options,
-    a one-line description, where it comes from (:data:`BUILT_IN`, :data:`REGISTERED`,
-    :data:`ENTRY_POINT`, :data:`IMPORT_PATH`) and, for an entry point, the distribution
-    that declares it (``NAME VERSION``)."""
-
-    target: str
-    description: str
-    defaults: dict[str, Any] = field(default_factory=dict)
-    source: str = BUILT_IN
-    distribution: str | None = None
-
-
-_REGISTRY: dict[str, Entry] = {
-    "cv": Entry(
-        "posbench.predictors.cv:ConstantVelocity", "constant velocity from the last two fixes"
-    ),
-    "poly": Entry(
-        "posbench.predictors.poly:PolyExtrapolator",
-        "the paper's cubic regression over recent fixes, extrapolated",
-    ),
-    "kf": Entry(
-        "posbench.predictors.kalman.kf:KalmanBank",
-        "linear Kalman filters (constant acceleration; IMU-aided and fixes-only, "
-        "4 process noises), the one that predicts the fixes best answers",
-    ),
-    "kf-paper": Entry(
-        "posbench.predictors.kf_paper:PaperKalman",
-        "the paper's Kalman baseline as its authors published it",
-    ),
-    "ekf": Entry(
-        "posbench.predictors.kalman.ekf:EkfBank",
-        "extended Kalman filters (CTRA; IMU- and speed-aided and fixes-only, "
-        "4 process noises), the one that predicts the fixes best answers",
-    ),
-    "lstm": Entry(
-        "posbench.predictors.lstm.predictor:LstmPredictor",
-        "the paper's system: cubic resampling + MLP-LSTM-MLP (ONNX) + cubic",
-    ),
-    "lstm-authors": Entry(
-        "posbench.predictors.lstm.authors:AuthorsLstmPredictor",
-        "the paper authors' published ONNX network (needs --model PATH)",
-    ),
-    "hybrid": Entry(
-        "posbench.predictors.hybrid.predictor:HybridPredictor",
-        "the kf as prior + a learned residual (ONNX), applied as far as it has earned it",
-    ),
-}
-
 #: a constructor parameter of this name receives the run's GPS condition (:func:`create`)
 CONDITION_PARAM = "gps_condition"
-
-
-def register(name: str, target: str, description: str, **defaults: Any) -> None:
-    """Add (or replace) a predictor under ``name``; ``target`` is ``"module:Class"``."""
-    _REGISTRY[name] = Entry(
-        target,
-        description,
-        dict(defaults),
-        source=BUILT_IN if name in _BUILT_IN_NAMES else REGISTERED,
-    )
-
-
-_BUILT_IN_NAMES = frozenset(_REGISTRY)
 
 
 # ------------------------------------------------------------------- entry points
@@ -160,10 +93,10 @@ def _read_entry_points() -> _Plugins:
                 f"entry point {ep.name!r} of {who} is ignored: a predictor name "
                 "takes letters, digits and _ . + - only"
             )
-        elif ep.name in _REGISTRY:
+        elif ep.name in REGISTRY:
             notes.append(
                 f"entry point {ep.name} of {who} is ignored: {ep.name} is "
-                f"{_REGISTRY[ep.name].source}"
+                f"{REGISTRY[ep.name].source}"
             )
         elif ep.name in entries:
             notes.append(
@@ -200,9 +133,9 @@ def is_import_path(name: str) -> bool:
 
 def available() -> dict[str, Entry]:
     """Every predictor that can be named without an import path: the built-ins (and
-    :func:`register`-ed ones), then the entry points of installed distributions. Nothing
-    is imported."""
-    out = dict(_REGISTRY)
+    :func:`~posbench.predictors.catalogue.register`-ed ones), then the entry points of
+    installed distributions. Nothing is imported."""
+    out = dict(REGISTRY)
     out.update((n, e) for n, e in _plugins().entries.items() if n not in out)
     return out
 
@@ -220,9 +153,10 @@ def known_names_text() -> str:
 
 
 def resolve(name: str) -> Entry:
-    """The :class:`Entry` behind ``name`` (``NAME``, ``NAME@ALIAS``, ``module:Class``,
-    ``module:Class@ALIAS``), without importing anything. Raises :class:`PredictorError`
-    for an unknown name, an empty alias or a malformed import path."""
+    """The :class:`~posbench.predictors.catalogue.Entry` behind ``name`` (``NAME``,
+    ``NAME@ALIAS``, ``module:Class``, ``module:Class@ALIAS``), without importing anything.
+    Raises :class:`PredictorError` for an unknown name, an empty alias or a malformed import
+    path."""
     base, sep, alias = name.partition(ALIAS_SEP)
     if sep and not alias.strip():
         raise PredictorError(

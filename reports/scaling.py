@@ -67,7 +67,7 @@ from posbench.config import DEFAULT_PREDICTORS
 from posbench.scenarios.corpus import PROFILES, corpus_drive, corpus_plan
 from posbench.scenarios.degrade import gps_noise
 from posbench.scenarios.drive import Drive, GpsStream
-from posbench.scenarios.synthetic import GPS_GM_SD, GPS_GM_TAU_S, GPS_WHITE_SD, imu_stream
+from posbench.scenarios.synthetic_sensors import GPS_GM_SD, GPS_GM_TAU_S, GPS_WHITE_SD, imu_stream
 
 OUT = Path(__file__).with_name("scaling.json")
 CASES = ("corpus", "long-1hz", "long-10hz", "ray")

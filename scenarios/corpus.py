@@ -1,22 +1,12 @@
 """The training corpus: seeded vehicle-dynamics drives that cover the driving envelope.
 
 Random routes from :mod:`posbench.scenarios.synthetic`'s kinematic simulator, per profile
-(:data:`PROFILES`; speed targets in :data:`PROFILE_SPEEDS_MPS`):
+(:data:`PROFILES`), drawn by :mod:`posbench.scenarios.corpus_routes` (the profiles'
+manoeuvres, lane changes and the vehicle's limits drawn per drive). Every drive starts at a
+standstill.
 
-- ``urban`` (3-16 m/s): turns (radius 8-60 m, 30-120 deg), roundabouts (ring radius
-  8-40 m), lane changes, U-turns (180 deg at radius 6-12 m, 2.5-5 m/s), traffic-light stops
-  and stop-and-go (dwell 1-30 s, log-uniform, creeping at 0.5-2 m/s between stops);
-- ``rural`` (10-27 m/s): turns (radius 30-300 m), junction turns (8-20 m), curves
-  (300-1000 m), roundabouts (15-40 m), overtaking lane changes, junction stops, rare U-turns;
-- ``highway`` (22-40 m/s): from a standstill up an on-ramp (radius 50-150 m), then gentle
-  curves (radius 300-2000 m, 3-30 deg), lane changes, long straights, rare jams.
-
-A lane change is two opposite arcs moving the car 3.5 m sideways over 30-120 m
-(``theta = 2 atan(3.5 / L)``, ``R = L / (2 sin theta)``). Every drive starts at a standstill.
-
-Per drive, the vehicle's limits are drawn (:class:`VehicleLimits`: acceleration
-1-3.5 m/s^2, braking 1.5-6 m/s^2, lateral acceleration 2-5 m/s^2, speed smoothing
-0.8-1.6 s bounding the jerk, curvature smoothing 4-10 m) and so are its sensors
+Per drive, the vehicle's limits are drawn
+(:class:`posbench.scenarios.corpus_routes.VehicleLimits`) and so are its sensors
 (:class:`SensorSpec`: IMU at 50 or 100 Hz, accelerometer white noise 0.02-0.2 m/s^2 and
 bias sigma 0.02-0.3 m/s^2, yaw noise 0.002-0.02 rad, yaw-rate noise 0.002-0.02 rad/s,
 gyro bias sigma 0-0.005 rad/s). CAN speed, GPS fixes (the paper's fix-interval
@@ -29,7 +19,8 @@ distribution with late fixes, white + Gauss-Markov noise) and dropouts are those
 and creeping ``straight``; arcs and curves ``turn`` if the yaw rate at the speed the car
 can take them exceeds 0.1 rad/s or the radius is < 50 m, else ``straight``; roundabouts
 with a ring radius >= 30 m ``turn``), ``manoeuvres`` (``[kind, t_start, t_end]``, kind one of
-:data:`MANOEUVRES`), ``gps_outages``, ``vehicle`` and ``sensors`` (the draws).
+:data:`posbench.scenarios.corpus_routes.MANOEUVRES`), ``gps_outages``, ``vehicle`` and
+``sensors`` (the draws).
 Times in seconds from the drive's start, positions in metres (ENU), as every Drive.
 
 Seeds: drive ``i`` of corpus seed ``s`` uses generator seed ``100000 + 1000 s + i``
@@ -41,64 +32,33 @@ from __future__ import annotations
 
 import math
 import zlib
-from collections.abc import Callable, Iterable, Iterator, Sequence
-from dataclasses import asdict, dataclass, replace
+from collections.abc import Iterable, Iterator, Sequence
+from dataclasses import asdict, dataclass
 
 import numpy as np
 
+from posbench.scenarios.corpus_routes import (
+    MANOEUVRES,
+    ProfileRoute,
+    VehicleLimits,
+    draw_limits,
+    loguniform,
+)
 from posbench.scenarios.drive import FIXES_FROM_TRUTH, Drive, DriveMeta, TruthStream
-from posbench.scenarios.labels import LABELS, LabelThresholds
-from posbench.scenarios.synthetic import (
-    EPOCH_S,
+from posbench.scenarios.labels import LABELS
+from posbench.scenarios.synthetic import EPOCH_S
+from posbench.scenarios.synthetic_motion import Segment, simulate
+from posbench.scenarios.synthetic_sensors import (
     ORIGIN_LAT,
     ORIGIN_LON,
-    Segment,
     can_speed_stream,
     gps_stream,
     imu_stream,
-    roundabout,
-    simulate,
-    stop,
-    straight,
 )
 
 PROFILES = ("urban", "rural", "highway")
-#: the finer manoeuvre kinds of ``meta.extra["manoeuvres"]``
-MANOEUVRES = (
-    "straight",
-    "turn",
-    "curve",
-    "roundabout",
-    "lane_change",
-    "u_turn",
-    "start_stop",
-    "creep",
-)
-#: speed targets [m/s] of each profile's straights
-PROFILE_SPEEDS_MPS: dict[str, tuple[float, float]] = {
-    "urban": (3.0, 16.0),
-    "rural": (10.0, 27.0),
-    "highway": (22.0, 40.0),
-}
 DEFAULT_MIX = (0.4, 0.35, 0.25)
 SEED_BASE = 100_000
-LANE_WIDTH_M = 3.5
-_TURN_YAW_RATE = LabelThresholds().turn_yaw_rate_rps
-_TURN_RADIUS_M = 1.0 / LabelThresholds().turn_curvature_inv_m
-_ROUNDABOUT_RADIUS_M = LabelThresholds().roundabout_radius_m
-
-
-@dataclass(frozen=True)
-class VehicleLimits:
-    """One drive's vehicle: ``a_acc`` acceleration, ``a_dec`` braking, ``ay_max`` lateral
-    acceleration [m/s^2], ``v_smooth_s`` speed smoothing [s], ``kappa_smooth_m`` curvature
-    smoothing [m] (the keyword limits of :func:`posbench.scenarios.synthetic.simulate`)."""
-
-    a_acc: float
-    a_dec: float
-    ay_max: float
-    v_smooth_s: float
-    kappa_smooth_m: float
 
 
 @dataclass(frozen=True)
@@ -114,205 +74,16 @@ class SensorSpec:
     gyro_bias_sd: float
 
 
-def _loguniform(rng: np.random.Generator, lo: float, hi: float) -> float:
-    return float(math.exp(rng.uniform(math.log(lo), math.log(hi))))
-
-
-def draw_limits(rng: np.random.Generator) -> VehicleLimits:
-    """A vehicle's limits, uniform in the ranges of the module doc."""
-    return VehicleLimits(
-        a_acc=float(rng.uniform(1.0, 3.5)),
-        a_dec=float(rng.uniform(1.5, 6.0)),
-        ay_max=float(rng.uniform(2.0, 5.0)),
-        v_smooth_s=float(rng.uniform(0.8, 1.6)),
-        kappa_smooth_m=float(rng.uniform(4.0, 10.0)),
-    )
-
-
 def draw_sensors(rng: np.random.Generator) -> SensorSpec:
     """An IMU: rate 50 or 100 Hz; noises log-uniform, biases uniform (module doc ranges)."""
     return SensorSpec(
         imu_hz=int(rng.choice([50, 100])),
-        accel_sd=_loguniform(rng, 0.02, 0.2),
+        accel_sd=loguniform(rng, 0.02, 0.2),
         bias_sd=float(rng.uniform(0.02, 0.3)),
-        yaw_sd=_loguniform(rng, 0.002, 0.02),
-        yaw_rate_sd=_loguniform(rng, 0.002, 0.02),
+        yaw_sd=loguniform(rng, 0.002, 0.02),
+        yaw_rate_sd=loguniform(rng, 0.002, 0.02),
         gyro_bias_sd=float(rng.uniform(0.0, 0.005)),
     )
-
-
-def _arc_label(radius_m: float, speed_mps: float, ay_max: float) -> str:
-    """``turn`` where the labeller would see one (yaw rate above its threshold at the speed
-    the car can take the arc, or a tight radius), else ``straight``."""
-    v = min(speed_mps, math.sqrt(ay_max * radius_m))
-    return "turn" if (v / radius_m > _TURN_YAW_RATE or radius_m < _TURN_RADIUS_M) else "straight"
-
-
-def _arc(
-    angle_deg: float,
-    radius_m: float,
-    speed_mps: float,
-    label: str,
-    manoeuvre: str,
-    cont: bool = False,
-) -> Segment:
-    return Segment(
-        "arc",
-        angle_rad=math.radians(angle_deg),
-        radius_m=radius_m,
-        speed_mps=speed_mps,
-        label=label,
-        manoeuvre=manoeuvre,
-        cont=cont,
-    )
-
-
-def lane_change(length_m: float, speed_mps: float, side: float) -> list[Segment]:
-    """Two opposite arcs moving the car :data:`LANE_WIDTH_M` to the left (``side`` = +1) or
-    right (-1) over ``length_m`` [m] along the road."""
-    theta = 2.0 * math.atan(LANE_WIDTH_M / length_m)
-    radius = length_m / (2.0 * math.sin(theta))
-    deg = math.degrees(theta) * side
-    # labelled straight: the two arcs are too short and gentle for the labeller's turn
-    return [
-        _arc(deg, radius, speed_mps, "straight", "lane_change"),
-        _arc(-deg, radius, speed_mps, "straight", "lane_change", cont=True),
-    ]
-
-
-class _Route:
-    """Draws one profile's manoeuvre blocks from a seeded generator."""
-
-    def __init__(self, profile: str, rng: np.random.Generator, lim: VehicleLimits) -> None:
-        self.profile, self.rng, self.lim = profile, rng, lim
-        self.v_lo, self.v_hi = PROFILE_SPEEDS_MPS[profile]
-
-    def u(self, lo: float, hi: float) -> float:
-        return float(self.rng.uniform(lo, hi))
-
-    def side(self) -> float:
-        return 1.0 if self.rng.random() < 0.5 else -1.0
-
-    def speed(self) -> float:
-        return self.u(self.v_lo, self.v_hi)
-
-    def turn(
-        self, r_lo: float, r_hi: float, a_lo: float, a_hi: float, v: float, kind: str = "turn"
-    ) -> list[Segment]:
-        r = self.u(r_lo, r_hi)
-        return [
-            _arc(self.side() * self.u(a_lo, a_hi), r, v, _arc_label(r, v, self.lim.ay_max), kind)
-        ]
-
-    def roundabout(self, r_lo: float, r_hi: float) -> list[Segment]:
-        r = self.u(r_lo, r_hi)
-        # the labeller calls a ring of radius >= its roundabout_radius_m (30 m) a turn
-        lab = "roundabout" if r < _ROUNDABOUT_RADIUS_M else "turn"
-        return [
-            replace(g, label=lab, manoeuvre="roundabout")
-            for g in roundabout(self.rng, self.u, radius_m=r, speed_mps=self.u(5.0, 10.0))
-        ]
-
-    def u_turn(self) -> list[Segment]:
-        r, v = self.u(6.0, 12.0), self.u(2.5, 5.0)
-        return [straight(self.u(15, 30), v), _arc(self.side() * 180.0, r, v, "turn", "u_turn")]
-
-    def stop_and_go(self, v_hi: float) -> list[Segment]:
-        out: list[Segment] = []
-        for _ in range(int(self.rng.integers(1, 5))):
-            out += [
-                straight(self.u(10, 60), self.u(3.0, v_hi)),
-                stop(_loguniform(self.rng, 1.0, 30.0)),
-            ]
-            if self.rng.random() < 0.5:  # creep up the queue and stop again
-                out += [
-                    Segment(
-                        "straight",
-                        length_m=self.u(2, 15),
-                        speed_mps=self.u(0.5, 2.0),
-                        label="straight",
-                        manoeuvre="creep",
-                    ),
-                    stop(_loguniform(self.rng, 1.0, 10.0)),
-                ]
-        return out
-
-    def lane_change(self, l_lo: float, l_hi: float, v: float) -> list[Segment]:
-        return lane_change(self.u(l_lo, l_hi), v, self.side())
-
-    def block(self) -> list[Segment]:
-        """A straight lead-in and one manoeuvre, drawn with the profile's weights."""
-        v = self.speed()
-        if self.profile == "urban":
-            lead = straight(self.u(30, 250), v)
-            opts: dict[str, Callable[[], list[Segment]]] = {
-                "straight": lambda: [straight(self.u(50, 300), self.speed())],
-                "turn": lambda: self.turn(8, 60, 30, 120, self.u(3.0, 12.0)),
-                "roundabout": lambda: self.roundabout(8, 40),
-                "lane_change": lambda: self.lane_change(30, 80, v),
-                "u_turn": self.u_turn,
-                "stop_and_go": lambda: self.stop_and_go(8.0),
-                "stop": lambda: [stop(_loguniform(self.rng, 1.0, 30.0))],
-            }
-            w = {
-                "straight": 0.15,
-                "turn": 0.25,
-                "roundabout": 0.12,
-                "lane_change": 0.15,
-                "u_turn": 0.06,
-                "stop_and_go": 0.12,
-                "stop": 0.15,
-            }
-        elif self.profile == "rural":
-            lead = straight(self.u(100, 800), v)
-            opts = {
-                "straight": lambda: [straight(self.u(200, 1000), self.speed())],
-                "turn": lambda: self.turn(30, 300, 15, 90, v),
-                "junction": lambda: self.turn(8, 20, 80, 100, self.u(5.0, 8.0)),
-                "curve": lambda: self.turn(300, 1000, 5, 30, v, "curve"),
-                "roundabout": lambda: self.roundabout(15, 40),
-                "lane_change": lambda: self.lane_change(60, 120, v),
-                "stop": lambda: [
-                    straight(self.u(30, 60), self.u(5.0, 10.0)),
-                    stop(_loguniform(self.rng, 1.0, 15.0)),
-                ],
-                "u_turn": self.u_turn,
-                "stop_and_go": lambda: self.stop_and_go(10.0),
-            }
-            w = {
-                "straight": 0.13,
-                "turn": 0.2,
-                "junction": 0.08,
-                "curve": 0.2,
-                "roundabout": 0.1,
-                "lane_change": 0.15,
-                "stop": 0.07,
-                "u_turn": 0.04,
-                "stop_and_go": 0.03,
-            }
-        else:
-            lead = straight(self.u(300, 2000), v)
-            opts = {
-                "straight": lambda: [straight(self.u(500, 3000), self.speed())],
-                "curve": lambda: self.turn(300, 2000, 3, 30, v, "curve"),
-                "lane_change": lambda: self.lane_change(60, 120, v),
-                "stop_and_go": lambda: self.stop_and_go(8.0),
-            }
-            w = {"straight": 0.3, "curve": 0.4, "lane_change": 0.25, "stop_and_go": 0.05}
-        keys = list(w)
-        p = np.array([w[k] for k in keys])
-        pick = keys[int(self.rng.choice(len(keys), p=p / p.sum()))]
-        return [lead, *opts[pick]()]
-
-    def start(self) -> list[Segment]:
-        """A standstill, and for the highway an on-ramp."""
-        out = [stop(self.u(1.0, 5.0))]
-        if self.profile == "highway":
-            out += [
-                straight(self.u(20, 60), self.u(8.0, 12.0)),
-                *self.turn(50, 150, 60, 120, self.u(10.0, 16.0)),
-            ]
-        return out
 
 
 def _est_time_s(seg: Segment, lim: VehicleLimits) -> float:
@@ -327,9 +98,10 @@ def _est_time_s(seg: Segment, lim: VehicleLimits) -> float:
 
 
 def _ay_window_m(segs: list[Segment], lim: VehicleLimits) -> float:
-    """The curve-limit window [m] of :func:`posbench.scenarios.synthetic.simulate` that keeps the
-    smoothed speed within ``ay_max``: the speed kernels' reach (+-``v_smooth_s``) at the
-    route's top speed, plus 2 m for the shift of the re-integrated path."""
+    """The curve-limit window [m] of :func:`posbench.scenarios.synthetic_motion.simulate`
+    that keeps the smoothed speed within ``ay_max``: the speed kernels' reach
+    (+-``v_smooth_s``) at the route's top speed, plus 2 m for the shift of the re-integrated
+    path."""
     return lim.v_smooth_s * max(g.speed_mps for g in segs) + 2.0
 
 
@@ -355,7 +127,7 @@ def corpus_drive(seed: int, profile: str, duration_s: float = 600.0) -> Drive:
         np.random.default_rng(q) for q in ss.spawn(8)
     )
     lim, sens = draw_limits(r_veh), draw_sensors(r_sens)
-    route = _Route(profile, r_route, lim)
+    route = ProfileRoute(profile, r_route, lim)
     yaw0 = float(r_route.uniform(-np.pi, np.pi))
     segs = route.start()
     target = 1.1 * duration_s

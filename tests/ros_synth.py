@@ -44,7 +44,8 @@ from posbench.scenarios.degrade import enu_to_latlon
 from posbench.scenarios.drive import TruthStream
 from posbench.scenarios.imu_frames import G0, matrix_to_quat, rpy_to_matrix
 from posbench.scenarios.loaders.ros_tf import register_tfmessage
-from posbench.scenarios.synthetic import ORIGIN_LAT, ORIGIN_LON, generate_drive
+from posbench.scenarios.synthetic import generate_drive
+from posbench.scenarios.synthetic_sensors import ORIGIN_LAT, ORIGIN_LON
 
 T0_NS = 1_700_000_000_000_000_000
 

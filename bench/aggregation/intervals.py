@@ -22,14 +22,9 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from posbench.metrics.bootstrap import (
-    DEFAULT_RESAMPLES,
-    LEVEL,
-    MIN_BLOCKS,
-    group_cis,
-    paired_summary,
-    summary_ci,
-)
+from posbench.metrics.block_bootstrap import MIN_BLOCKS
+from posbench.metrics.bootstrap import group_cis, paired_summary, summary_ci
+from posbench.metrics.cluster_bootstrap import DEFAULT_RESAMPLES, LEVEL
 from posbench.metrics.outages import (
     MISS_THRESHOLD_M,
     outage_drive,
@@ -105,8 +100,8 @@ def one_drive_cis(
 ) -> dict[str, dict[str, Any]]:
     """``ci95`` per predictor of one drive and kind (block bootstrap): ``queries`` maps each
     predictor to its errors [m] and query times [s]. Each predictor is resampled in blocks
-    of its own :func:`posbench.metrics.bootstrap.block_length`, so its interval does not depend on
-    which other predictors share the run (a run of ``cv`` alone, or answers scored by
+    of its own :func:`posbench.metrics.block_bootstrap.block_length`, so its interval does
+    not depend on which other predictors share the run (a run of ``cv`` alone, or answers scored by
     ``bench score``, give ``cv`` the same interval as a run of every predictor)."""
     out: dict[str, dict[str, Any]] = {}
     for name, (errors, times) in queries.items():

@@ -22,20 +22,16 @@ import pandas as pd
 
 from posbench.aggregation.intervals import Statistics
 from posbench.config import RunConfig
-from posbench.metrics.bootstrap import (
-    block_length,
-    block_resample,
-    cluster_weights,
-    ratio_ci,
-    summary_ci,
-)
+from posbench.metrics.block_bootstrap import block_length, block_resample
+from posbench.metrics.bootstrap import summary_ci
+from posbench.metrics.cluster_bootstrap import cluster_weights, ratio_ci
 from posbench.metrics.outage_lengths import (
     length_classes,
     length_figures,
     path_lengths,
     per_outage_ate,
 )
-from posbench.scenarios.degrade import FIELD_OUTAGE_LENGTHS_S, FIELD_OUTAGES
+from posbench.scenarios.dropouts import FIELD_OUTAGE_LENGTHS_S, FIELD_OUTAGES
 from posbench.scoring.records import DriveRun
 from posbench.scoring.schema import scored_mask
 

@@ -87,11 +87,8 @@ def check(
     from posbench.checks import parse_pairs
     from posbench.cli.terminal import reporter, say
     from posbench.predictor_tools.contract import check_contract
-    from posbench.replay.predictor_setup import (
-        model_options,
-        validate_predictors,
-        with_model_aliases,
-    )
+    from posbench.replay.predictor_options import model_options
+    from posbench.replay.predictor_setup import validate_predictors, with_model_aliases
 
     options = model_options(parse_pairs(model, "--model"))
     specs = list(predictors or default_names(options))

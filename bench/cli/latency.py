@@ -19,7 +19,8 @@ from posbench.cli.options import (
 from posbench.cli.terminal import console, print_table, reporter
 from posbench.config import DEFAULT_PREDICTORS
 from posbench.errors import UsageError
-from posbench.replay.predictor_setup import model_options, validate_predictors
+from posbench.replay.predictor_options import model_options
+from posbench.replay.predictor_setup import validate_predictors
 
 #: the predictors timed by default: those of `bench run`, and hybrid (the CI latency gate
 #: times it too)

@@ -164,7 +164,7 @@ def run(
     from posbench.cli.summary import print_run_summary
     from posbench.cli.terminal import reporter
     from posbench.pipeline.run import RunOptions, execute_run, plan_run
-    from posbench.replay.predictor_setup import parse_set
+    from posbench.replay.predictor_options import parse_set
 
     if old_format is not None:
         renamed("--format", "--table-format", "bench run")

@@ -81,7 +81,7 @@ def score(
     from posbench.cli.summary import print_run_summary
     from posbench.cli.terminal import reporter
     from posbench.pipeline.score import check_score_options, score_answers_file
-    from posbench.report.markdown import parse_report_formats
+    from posbench.report.table_files import parse_report_formats
 
     if old_format is not None:
         renamed("--format", "--table-format", "bench score")

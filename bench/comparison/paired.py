@@ -16,7 +16,7 @@ from typing import Any
 import numpy as np
 
 from posbench.comparison.align import Metric
-from posbench.metrics.bootstrap import DEFAULT_RESAMPLES, resample_counts
+from posbench.metrics.cluster_bootstrap import DEFAULT_RESAMPLES, resample_counts
 from posbench.metrics.paired import (
     QUANTILE_STATS,
     paired_interval,

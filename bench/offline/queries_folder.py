@@ -28,7 +28,7 @@ Python's ``repr`` of the float, exact through a CSV round trip. ``drive`` is the
 file's stem (the drive name, with characters unsafe in file names replaced by ``_``).
 
 :func:`write_queries` writes a folder; :func:`read_queries` reads and checks one back
-(:class:`QueryFolder`); :mod:`posbench.offline.answers` scores answers against it.
+(:class:`QueryFolder`); :mod:`posbench.offline.answer_scoring` scores answers against it.
 """
 
 from __future__ import annotations

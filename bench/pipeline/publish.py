@@ -13,7 +13,7 @@ import pandas as pd
 from posbench.errors import UsageError
 from posbench.naming import plural
 from posbench.pipeline.reporter import SILENT, Reporter
-from posbench.report.markdown import TABLE_FORMATS
+from posbench.report.table_files import TABLE_FORMATS
 from posbench.saved_run.run import Run
 from posbench.scenarios.errors import DataError
 from posbench.scenarios.truth_gaps import TRUTH_MAX_GAP_S

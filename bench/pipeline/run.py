@@ -21,7 +21,7 @@ from posbench.errors import UsageError
 from posbench.naming import plural
 from posbench.pipeline.publish import Published
 from posbench.pipeline.reporter import SILENT, Reporter
-from posbench.report.markdown import TABLE_FORMATS, parse_report_formats
+from posbench.report.table_files import TABLE_FORMATS, parse_report_formats
 from posbench.scenarios.drive import Drive
 
 if TYPE_CHECKING:
@@ -166,10 +166,9 @@ def plan_run(options: RunOptions, given: Mapping[tuple[str, str], str] | None = 
         resolve_color_by,
     )
     from posbench.replay.executors import EXECUTORS, RAY_MISSING, ray_available
+    from posbench.replay.predictor_options import merge_options, model_options
     from posbench.replay.predictor_setup import (
         check_tuning_file,
-        merge_options,
-        model_options,
         plan_predictors,
         with_model_aliases,
     )

@@ -8,10 +8,10 @@ from pathlib import Path
 
 from posbench.errors import UsageError
 from posbench.naming import plural
-from posbench.offline.answers import Scored
+from posbench.offline.answer_scoring import Scored
 from posbench.pipeline.publish import Published
 from posbench.pipeline.reporter import SILENT, Reporter
-from posbench.report.markdown import TABLE_FORMATS
+from posbench.report.table_files import TABLE_FORMATS
 
 #: what a scored system may be called: it names the predictor in every table, file and key
 NAME_PATTERN = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.+@-]*$")
@@ -61,7 +61,8 @@ def score_answers_file(
         DataError: a queries folder or answers file that cannot be read, or answers that do
             not match the queries (the file and row named).
     """
-    from posbench.offline.answers import read_answers, score_answers
+    from posbench.offline.answer_scoring import score_answers
+    from posbench.offline.answers import read_answers
     from posbench.offline.queries_folder import read_queries
     from posbench.pipeline.publish import OutputWriter, publish
     from posbench.pipeline.results import build_results

@@ -12,7 +12,7 @@ Each figure is the mean error [m] of the scored queries of one kind (``future``:
 horizon after each fix; ``now``: the current position between fixes), pooled over the
 drives; each difference (hybrid minus the other, negative = the hybrid is better) has a
 95 % paired cluster-bootstrap interval over the drives
-(:func:`posbench.metrics.bootstrap.paired_ratio_diff`).
+(:func:`posbench.metrics.cluster_bootstrap.paired_ratio_diff`).
 """
 
 from __future__ import annotations
@@ -25,7 +25,7 @@ from typing import Any
 import numpy as np
 
 from posbench.config import RunConfig
-from posbench.metrics.bootstrap import paired_ratio_diff, resample_counts
+from posbench.metrics.cluster_bootstrap import paired_ratio_diff, resample_counts
 from posbench.replay.runner import run
 from posbench.scenarios.drive import Drive
 from posbench.scoring.schema import scored_mask

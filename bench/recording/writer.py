@@ -65,27 +65,23 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from posbench.metrics.ellipses import ellipse_outlines
-from posbench.recording.blueprint import TIMELINE, blueprint
+from posbench.recording.blueprint import blueprint
 from posbench.recording.layout import (
     DROPPED_RGB,
-    ELLIPSE_RADIUS,
     RECEIVED_RGB,
     TRUTH_RGB,
     application_id,
     change_points,
     drive_paths,
-    error_colours,
     finite_runs,
-    last_fixes,
-    nice_scale,
     outage_steps,
     predictor_color,
     recording_ids,
-    road_around,
     sanitise,
     screen,
 )
+from posbench.recording.reference_views import around_view, track_colours
+from posbench.recording.sender import Sender
 from posbench.recording.traces import drive_traces
 from posbench.scoring.schema import COV_COLUMNS
 
@@ -96,92 +92,22 @@ if TYPE_CHECKING:
     from posbench.scoring.trace_set import TraceSet
 
 
-#: an RGB colour, 0-255 per channel
-_Rgb = tuple[int, int, int]
 #: a drive's traces per (predictor, kind), sorted by query time
 _Groups = dict[tuple[str, str], "pd.DataFrame"]
 
 VIZ_HINT = "rerun recordings need the viz extra: pip install 'posbench-harness[viz]'"
 
 
-class _Writer:
+class _Writer(Sender):
     """Sends one drive to a recording stream."""
 
     def __init__(self, rr: Any, rec: Any, predictors: Sequence[str], color_by: str | None) -> None:
-        self.rr, self.rec = rr, rec
+        super().__init__(rr, rec)
         self.predictors = list(predictors)
         self.pred_parts = [sanitise(p) for p in predictors]
         self.color_by = (
             color_by if color_by is not None else (self.predictors[0] if self.predictors else None)
         )
-
-    def _time(self, t: np.ndarray) -> Any:
-        return self.rr.TimeColumn(TIMELINE, duration=np.asarray(t, dtype=np.float64))
-
-    def points(self, path: str, t: np.ndarray, xy: np.ndarray, color: _Rgb, radius: float) -> None:
-        """One point per row at its time, in screen coordinates (:func:`screen`); rows with
-        NaN time or position are left out."""
-        rr = self.rr
-        ok = np.isfinite(t) & np.all(np.isfinite(xy), axis=1)
-        self.rec.log(path, rr.Points2D.from_fields(colors=[color], radii=[radius]), static=True)
-        if ok.any():
-            rr.send_columns(
-                path,
-                indexes=[self._time(t[ok])],
-                columns=rr.Points2D.columns(positions=screen(xy[ok])),
-                recording=self.rec,
-            )
-
-    def ellipses(
-        self, path: str, t: np.ndarray, xy: np.ndarray, cov: np.ndarray, color: _Rgb
-    ) -> None:
-        """The 95 % ellipse of each answer (centre ``xy`` [m, ENU], covariance ``cov`` (N, 3)
-        (xx, xy, yy) [m^2]) as a closed line strip at its time, in screen coordinates; a
-        row without a valid covariance or position holds no strip (the previous ellipse is
-        cleared). Nothing is logged when no row has one (a predictor without uncertainty)."""
-        rr = self.rr
-        keep = np.isfinite(t)
-        t, xy, cov = t[keep], xy[keep], cov[keep]
-        outline = ellipse_outlines(cov)
-        has = np.all(np.isfinite(xy), axis=1) & np.all(np.isfinite(outline), axis=(1, 2))
-        if not has.any():
-            return
-        pts = outline[has] + xy[has, None, :]
-        k, m, _ = pts.shape
-        self.rec.log(
-            path, rr.LineStrips2D.from_fields(colors=[color], radii=[ELLIPSE_RADIUS]), static=True
-        )
-        rr.send_columns(
-            path,
-            indexes=[self._time(t)],
-            columns=rr.LineStrips2D.columns(
-                strips=screen(pts.reshape(-1, 2)).reshape(k, m, 2)
-            ).partition(has.astype(np.int64)),
-            recording=self.rec,
-        )
-
-    def scalars(self, path: str, t: np.ndarray, v: np.ndarray) -> None:
-        ok = np.isfinite(t)
-        if ok.any():
-            self.rr.send_columns(
-                path,
-                indexes=[self._time(t[ok])],
-                columns=self.rr.Scalars.columns(scalars=v[ok]),
-                recording=self.rec,
-            )
-
-    def series(
-        self, path: str, t: np.ndarray, v: np.ndarray, name: str, color: _Rgb, kind: str
-    ) -> None:
-        """A time series: a line for ``now`` queries, points for ``future`` ones."""
-        rr = self.rr
-        style = (
-            rr.SeriesLines(colors=[color], names=[name], widths=[1.5])
-            if kind == "now"
-            else rr.SeriesPoints(colors=[color], names=[name], marker_sizes=[2.0])
-        )
-        self.rec.log(path, style, static=True)
-        self.scalars(path, t, v)
 
     def drive(self, root: str, run: DriveRun, tr: pd.DataFrame | None) -> None:
         """Send drive ``run`` under ``root``; ``tr``: its traces (None or empty: none)."""
@@ -223,8 +149,14 @@ class _Writer:
             key: g.sort_values("t_query", kind="stable")
             for key, g in tr.groupby(["predictor", "kind"], sort=False, observed=True)
         }
-        self._around_common(root, run, groups, received)
-        self._track_colours(root, run, groups)
+        around_view(self, root, run, self._now_reference(groups), received)
+        track_colours(
+            self,
+            root,
+            run,
+            groups.get((self.color_by, "now")) if self.color_by else None,
+            self.color_by,
+        )
         rec.log(
             f"{root}/vehicle_frame/axes",
             rr.LineStrips2D(
@@ -281,26 +213,9 @@ class _Writer:
                             0.02,
                         )
                 if kind == "now":
-                    self._arrows(f"{root}/around/{part}/error", t, xy - ref, color)
+                    self.arrows(f"{root}/around/{part}/error", t, xy - ref, color)
         self._labels(root, tr)
         self._outages(root, run, tr)
-
-    def _arrows(self, path: str, t: np.ndarray, rel: np.ndarray, color: _Rgb) -> None:
-        """Arrows from (0, 0) (the reference) to each relative answer, at their times."""
-        rr = self.rr
-        ok = np.isfinite(t) & np.all(np.isfinite(rel), axis=1)
-        self.rec.log(
-            path,
-            rr.Arrows2D.from_fields(colors=[color], radii=[0.03], origins=[[0.0, 0.0]]),
-            static=True,
-        )
-        if ok.any():
-            rr.send_columns(
-                path,
-                indexes=[self._time(t[ok])],
-                columns=rr.Arrows2D.columns(vectors=screen(rel[ok])),
-                recording=self.rec,
-            )
 
     def _now_reference(self, groups: _Groups) -> tuple[np.ndarray, np.ndarray] | None:
         """Times [s] and reference positions [m] of the 'now' queries (any predictor's rows:
@@ -314,113 +229,6 @@ class _Writer:
                 )
         return None
 
-    def _around_common(
-        self,
-        root: str,
-        run: DriveRun,
-        groups: _Groups,
-        received: tuple[np.ndarray, np.ndarray] | None,
-    ) -> None:
-        """The reference at (0, 0), and at each 'now' query time the last fixes and the road
-        ahead and behind, relative to the reference then (``received``: the received fixes'
-        times [s] and positions [m], None without fixes)."""
-        rr, rec = self.rr, self.rec
-        rec.log(
-            f"{root}/around/reference",
-            rr.Points2D([[0.0, 0.0]], colors=[(0, 0, 0)], radii=[0.15], labels=["reference"]),
-            static=True,
-        )
-        now = self._now_reference(groups)
-        if now is None:
-            return
-        t, ref = now
-        ok = np.isfinite(t) & np.all(np.isfinite(ref), axis=1)
-        t, ref = t[ok], ref[ok]
-        if t.size == 0:
-            return
-        if received is not None and received[0].size:
-            fix_t, fix_xy = received
-            idx, lengths = last_fixes(t, fix_t)
-            rel = fix_xy[idx] - np.repeat(ref, lengths, axis=0)
-            rec.log(
-                f"{root}/around/fixes",
-                rr.Points2D.from_fields(colors=[RECEIVED_RGB], radii=[0.1]),
-                static=True,
-            )
-            rr.send_columns(
-                f"{root}/around/fixes",
-                indexes=[self._time(t)],
-                columns=rr.Points2D.columns(positions=screen(rel)).partition(lengths),
-                recording=rec,
-            )
-        if run.track is not None and len(run.track) >= 2:
-            tt = run.track["t"].to_numpy(np.float64)
-            txy = run.track[["x", "y"]].to_numpy(np.float64)
-            if np.all(np.isfinite(txy), axis=1).sum() >= 2:
-                road = road_around(t, tt, txy) - ref[:, None, :]
-                k, m, _ = road.shape
-                rec.log(
-                    f"{root}/around/road",
-                    rr.LineStrips2D.from_fields(colors=[TRUTH_RGB], radii=[0.05]),
-                    static=True,
-                )
-                rr.send_columns(
-                    f"{root}/around/road",
-                    indexes=[self._time(t)],
-                    columns=rr.LineStrips2D.columns(
-                        strips=screen(road.reshape(-1, 2)).reshape(k, m, 2)
-                    ).partition(np.ones(k, dtype=np.int64)),
-                    recording=rec,
-                )
-
-    def _track_colours(self, root: str, run: DriveRun, groups: _Groups) -> None:
-        """The reference track in segments coloured by ``color_by``'s 'now' error, and the
-        colour scale as text."""
-        rr, rec = self.rr, self.rec
-        g = groups.get((self.color_by, "now")) if self.color_by else None
-        if g is None or g.empty or run.track is None or len(run.track) < 2:
-            return
-        te = g["t_query"].to_numpy(np.float64)
-        e = g["error_m"].to_numpy(np.float64)
-        ok = np.isfinite(te) & np.isfinite(e)
-        if not ok.any():
-            return
-        te, e = te[ok], e[ok]
-        tt = run.track["t"].to_numpy(np.float64)
-        xy = run.track[["x", "y"]].to_numpy(np.float64)
-        mid = 0.5 * (tt[1:] + tt[:-1])
-        seg_e = np.interp(mid, te, e, left=np.nan, right=np.nan)
-        # no colour where the nearest answer is far (an outage of the predictor's answers)
-        j = np.searchsorted(te, mid)
-        near = np.minimum(
-            np.abs(mid - te[np.clip(j - 1, 0, te.size - 1)]),
-            np.abs(te[np.clip(j, 0, te.size - 1)] - mid),
-        )
-        seg_e[near > 0.5] = np.nan
-        seg = np.stack([xy[:-1], xy[1:]], axis=1)
-        good = np.all(np.isfinite(seg), axis=(1, 2))
-        top = nice_scale(e)
-        if good.any():
-            strips = screen(seg[good].reshape(-1, 2)).reshape(-1, 2, 2)
-            path = f"{root}/map/track_error"
-            rec.log(path, rr.LineStrips2D.from_fields(radii=[0.4]), static=True)
-            # one static row of all segments (indexes=[]: static), the fast columnar path
-            rr.send_columns(
-                path,
-                indexes=[],
-                columns=rr.LineStrips2D.columns(
-                    strips=strips, colors=error_colours(seg_e[good], top)
-                ).partition([len(strips)]),
-                recording=rec,
-            )
-        text = (
-            f"Reference track coloured by the current-position (now) error of "
-            f"{self.color_by}: green 0 m, yellow {top / 2:g} m, red >= {top:g} m "
-            f"(the scale's top is the drive's p95 rounded up); grey: no answer. "
-            f"Choose the predictor with --rerun-color-by."
-        )
-        rec.log(f"{root}/colour_scale", rr.TextDocument(text), static=True)
-
     def _labels(self, root: str, tr: pd.DataFrame) -> None:
         """Label changes along the 'now' queries of one predictor (labels depend only on time)."""
         rr = self.rr
@@ -433,7 +241,7 @@ class _Writer:
         if idx.size:
             rr.send_columns(
                 f"{root}/labels",
-                indexes=[self._time(now["t_query"].to_numpy(np.float64)[idx])],
+                indexes=[self.time_column(now["t_query"].to_numpy(np.float64)[idx])],
                 columns=rr.TextLog.columns(text=lab[idx], level=["INFO"] * idx.size),
                 recording=self.rec,
             )

@@ -26,15 +26,8 @@ from typing import Any
 import pandas as pd
 
 from posbench.config import RunConfig
-from posbench.predictors.registry import (
-    BUILT_IN,
-    Entry,
-    available,
-    base_name,
-    predictor_class,
-    register,
-    resolve,
-)
+from posbench.predictors.catalogue import BUILT_IN, Entry, register
+from posbench.predictors.registry import available, base_name, predictor_class, resolve
 from posbench.replay.runner import part_name, run, run_drive
 from posbench.scenarios.drive import Drive
 from posbench.scenarios.stored_drive import DriveInfo, StoredDrive

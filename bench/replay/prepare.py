@@ -125,7 +125,7 @@ def prepare_drive(drive: Drive, cfg: RunConfig) -> PreparedDrive:
     gps_all = gps
     outages: list[tuple[float, float]] = []
     if cfg.dropouts != "none":
-        from posbench.scenarios.degrade import apply_dropouts
+        from posbench.scenarios.dropouts import apply_dropouts
 
         gps, outages = apply_dropouts(gps, cfg.dropouts, seed=seed + 1)
         notes.append(f"dropouts {cfg.dropouts}: {len(outages)} outages")

@@ -9,7 +9,6 @@ from collections.abc import Iterable
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from posbench.errors import UsageError
 from posbench.figures.per_drive import DEFAULT_DRIVE_PLOTS
 from posbench.figures.style import PlotsWritten, shown_format
 from posbench.figures.writer import joined, write_plots, write_result_plots
@@ -32,33 +31,24 @@ from posbench.report.notes import (
     tuning_lines,
 )
 from posbench.report.outage_lengths import figure_file, outage_length_lines
+from posbench.report.sections import answers_lines, gate_lines, sanity_report_lines, seeds_lines
+from posbench.report.table_files import TABLE_FORMATS, write_tables
 from posbench.scoring.reference import reference_lines, references
 from posbench.scoring.schema import KINDS
-from posbench.tables.outage_lengths import outage_length_tables
-from posbench.tables.run_tables import (
+from posbench.tables.breakdown_tables import (
     NOT_CONCLUSIVE,
-    dataset_table,
     drives_table,
-    gate_drive_table,
-    gate_table,
     label_table,
     outage_table,
     speed_table,
-    summary_table,
-    warmup_table,
 )
-from posbench.tables.stat_tables import paired_label_table, paired_table, seeds_table
-from posbench.tables.table import Table
+from posbench.tables.run_tables import dataset_table, summary_table, warmup_table
+from posbench.tables.stat_tables import paired_label_table, paired_table
 from posbench.tables.track import TRACK_NOTE, track_table
 from posbench.tables.uncertainty import UNCERTAINTY_NOTE, uncertainty_table
 
 if TYPE_CHECKING:
     from posbench.saved_run.run import Run
-
-#: what ``--format`` may list: report.md is always written; csv and latex add table files
-REPORT_FORMATS = ("md", "csv", "latex")
-#: table file formats beside report.md: full-precision CSV, booktabs LaTeX (the default: both)
-TABLE_FORMATS = ("csv", "latex")
 
 
 #: where a run's latency figures come from: a replay's (False) or an answers file's (True)
@@ -67,21 +57,6 @@ LATENCY_WHERE = {
     "(`bench latency` gives single-process figures).",
     True: "as the answers file gives them.",
 }
-
-
-def parse_report_formats(text: str, option: str = "--format") -> tuple[str, ...]:
-    """``--format md,csv,latex`` -> the table file formats to write beside report.md
-    (``("csv", "latex")``; ``md`` alone: none)."""
-    items = [f.strip().lower() for f in text.split(",") if f.strip()]
-    if not items:
-        raise UsageError(f"{option}: give one or more of {', '.join(REPORT_FORMATS)}")
-    for f in items:
-        if f not in REPORT_FORMATS:
-            raise UsageError(
-                f"{option}: unknown format {f!r}; use one or more of "
-                f"{', '.join(REPORT_FORMATS)} (e.g. md,csv)"
-            )
-    return tuple(f for f in REPORT_FORMATS[1:] if f in items)
 
 
 def write_report(
@@ -94,9 +69,10 @@ def write_report(
 ) -> list[Path]:
     """Write the run's plots (in each of ``formats``: png, svg, pdf; ValueError on others),
     ``report.md`` and its tables as files (``table_formats``: csv, latex; see
-    :func:`write_tables`) into ``out``; return the paths written. The run itself
-    (results.json, traces) is written by :func:`posbench.saved_run.run.save_run`. ``plots``: the
-    plots already drawn into ``out`` (``bench run`` draws them while it aggregates,
+    :func:`posbench.report.table_files.write_tables`) into ``out``; return the paths written.
+    The run itself (results.json, traces) is written by
+    :func:`posbench.saved_run.run.save_run`. ``plots``: the plots already drawn into ``out``
+    (``bench run`` draws them while it aggregates,
     :mod:`posbench.pipeline.jobs`); None draws them here."""
     shown = "." + shown_format(formats)  # checks the formats before anything is written
     out.mkdir(parents=True, exist_ok=True)
@@ -115,65 +91,6 @@ def write_report(
         out / "report.md",
         *write_tables(run.results, out / "tables", table_formats),
     ]
-
-
-def report_tables(res: dict[str, Any]) -> list[Table]:
-    """Every table of the report, as numeric tables (for the CSV and LaTeX forms)."""
-    if not res.get("drives"):
-        return []
-    tables = [summary_table(res), warmup_table(res)]
-    if has_paired(res):
-        tables.append(paired_table(res))
-    if res.get("seeds"):
-        tables.append(seeds_table(res))
-    if res.get("held_out_all"):
-        tables.append(summary_table(res, held_out=True))
-    if has_held_out_paired(res):
-        tables.append(paired_table(res, held_out=True))
-    for ds in res["by_dataset"]:
-        tables += [
-            dataset_table(res, ds),
-            label_table(res, ds, "future"),
-            label_table(res, ds, "now"),
-        ]
-        if has_paired(res):
-            tables += [paired_table(res, ds), paired_label_table(res, ds, "future")]
-        if res.get("held_out", {}).get(ds, {}).get("drives"):
-            tables += [label_table(res, ds, k, held_out=True) for k in KINDS]
-            if has_held_out_paired(res, ds):
-                tables.append(paired_table(res, ds, held_out=True))
-    if res.get("track_errors", {}).get("predictors"):
-        tables.append(track_table(res))
-    if "uncertainty" in res:
-        tables.append(uncertainty_table(res))
-        if res["uncertainty"].get("by_since_fix"):
-            tables.append(uncertainty_table(res, "by_since_fix"))
-    if res.get("by_speed"):
-        tables.append(speed_table(res))
-    if res.get("outages"):
-        tables.append(outage_table(res))
-    tables += outage_length_tables(res)
-    if res.get("gate", {}).get("enabled"):
-        tables.append(gate_table(res))
-    tables.append(drives_table(res))
-    return tables
-
-
-def write_tables(
-    res: dict[str, Any], folder: Path, table_formats: Iterable[str] = TABLE_FORMATS
-) -> list[Path]:
-    """Each report table as ``NAME.csv`` (full precision) and/or ``NAME.tex`` (booktabs) in
-    ``folder``, as ``table_formats`` asks; return the paths written."""
-    written = []
-    wanted = set(table_formats)
-    for t in report_tables(res) if wanted else []:
-        folder.mkdir(parents=True, exist_ok=True)
-        forms = (("csv", "csv", t.csv), ("latex", "tex", t.latex))
-        for ext, text in ((ext, render()) for name, ext, render in forms if name in wanted):
-            path = folder / f"{t.name}.{ext}"
-            path.write_text(text)
-            written.append(path)
-    return written
 
 
 def render_markdown(
@@ -410,100 +327,3 @@ def render_markdown(
     )
     lines += glossary_lines(res)
     return "\n".join(lines)
-
-
-def sanity_report_lines(res: dict[str, Any]) -> list[str]:
-    """The sanity check against constant velocity (results.json ``sanity``): a heading and
-    one line per predictor that loses to cv on a data set, or one line that none does."""
-    from posbench.report.notes import sanity_lines
-
-    section = res.get("sanity")
-    if not section or not section.get("checked"):
-        return []
-    lines = sanity_lines(res)
-    if not lines:
-        return [
-            "Sanity check: no predictor loses to constant velocity (`cv`) on any data set "
-            "(paired 95 % CI of the difference in mean error above 0).",
-            "",
-        ]
-    return [
-        "### Implausible results",
-        "",
-        "A predictor that loses to constant velocity (`cv`, the last two fixes extrapolated) "
-        "on the same queries, with the paired 95 % interval of the difference above 0:",
-        "",
-        *[f"- {line}" for line in lines],
-        "",
-    ]
-
-
-def answers_lines(res: dict[str, Any]) -> list[str]:
-    """For answers scored by ``bench score``: where they came from, how many queries they
-    left unanswered, and what posbench could not check."""
-    a = res.get("answers")
-    if not a:
-        return []
-    missing = a["queries"] - a["answered"]
-    return [
-        f"Answers produced outside posbench (`{a['file']}`), scored against the queries "
-        f"folder `{a['queries_folder']}`: {a['answered']} of {a['queries']} queries answered"
-        + (
-            f", {missing} without an answer (scored as `missing`; per drive in the drive "
-            f"notes of results.json)"
-            if missing
-            else ""
-        )
-        + ". posbench cannot check such answers for look-ahead (use of inputs stamped after "
-        "the query's t_issue), as it does for a predictor it replays; latency is what the "
-        "file's `latency_us` column gives (`-`: none given).",
-        "",
-    ]
-
-
-def seeds_lines(res: dict[str, Any]) -> list[str]:
-    """The "Repeated over seeds" section (runs with --seeds)."""
-    seeds = res.get("seeds")
-    if not seeds:
-        return []
-    listed = ", ".join(str(s) for s in seeds["seeds"])
-    return [
-        f"## Repeated over {len(seeds['seeds'])} seeds ({listed})",
-        "",
-        f"The same drives and predictors replayed with each seed's GPS noise and dropouts. "
-        f"Every other figure, interval, table and plot of this report, and traces.parquet, "
-        f"are from seed {seeds['traces_seed']}; results.json keeps each seed's headline "
-        f"figures (`seeds.runs`). Beside seed {seeds['traces_seed']}'s mean and its 95 % "
-        f"interval (other drives), the spread over seeds (other random draws):",
-        "",
-        seeds_table(res).markdown(),
-        "",
-    ]
-
-
-def gate_lines(res: dict[str, Any]) -> list[str]:
-    """The "GPS outlier gate" section: fixes rejected per predictor, and per drive."""
-    gate = res.get("gate")
-    if not gate:
-        return []
-    lines = ["## GPS outlier gate: fixes rejected per predictor", ""]
-    if not gate.get("enabled"):
-        if res.get("answers"):
-            return lines + [
-                "None: answers scored by `bench score` come from a system that got "
-                "every fed fix; any gating is its own.",
-                "",
-            ]
-        return lines + ["Off (`--no-gate`): every fix reached the predictors, as in the paper.", ""]
-    lines += [
-        "A fix implying impossible motion (speed > 60 m/s, or a miss of the constant-velocity "
-        "prediction beyond 15 m/s^2 of acceleration plus 4 sigma of fix noise; a repeated "
-        "stale fix while moving) is dropped before the predictor and bridged like a "
-        "missing fix. Scores still use the ungated reference.",
-        "",
-    ]
-    lines += [gate_table(res).markdown(), ""]
-    per_drive = gate_drive_table(res)
-    if not per_drive.frame.empty:
-        lines += [per_drive.markdown(), ""]
-    return lines

@@ -12,13 +12,8 @@ import pandas as pd
 
 from posbench.scenarios.labels import LABELS
 from posbench.scoring.schema import KINDS
-from posbench.tables.run_tables import (
-    LABEL_TITLES,
-    TRAINED_MARK,
-    ci_map,
-    put_figure,
-    trained_in_run,
-)
+from posbench.tables.breakdown_tables import LABEL_TITLES
+from posbench.tables.run_tables import TRAINED_MARK, ci_map, put_figure, trained_in_run
 from posbench.tables.table import Table, as_float
 
 #: the marker of a paired difference whose 95 % interval excludes 0

@@ -281,18 +281,14 @@ def predictor_options_markdown() -> str:
     """One table per built-in predictor: every option ``--set NAME.OPTION=VALUE`` takes, its
     default and what values it takes, read from the constructor's declared types
     (:mod:`posbench.predictors.option_types`), as ``bench predictors NAME`` prints them."""
+    from posbench.predictors.catalogue import BUILT_IN
     from posbench.predictors.option_types import (
         declared_meanings,
         declared_types,
         shown,
         takes_text,
     )
-    from posbench.predictors.registry import (
-        BUILT_IN,
-        available,
-        constructor_options,
-        predictor_class,
-    )
+    from posbench.predictors.registry import available, constructor_options, predictor_class
 
     out = []
     for name, entry in available().items():

@@ -230,3 +230,41 @@ def pose_fields(items: list, msgtype: str, topic: str, path: Path) -> dict[str, 
         "frames": sorted({str(m.header.frame_id) for _, m in items}),
         "src": src,
     }
+
+
+def imu_fields(items: list, topic: str, path: Path) -> dict[str, Any]:
+    """Raw IMU fields in the sensor frame: f (N, 3) [m/s^2], w (N, 3) [rad/s], q (N, 4) w x y z
+    (NaN rows where REP 145's covariance[0] == -1 marks the field absent, or a zero quaternion).
+    A field a message carries that is not finite is refused, naming the message
+    (:func:`~posbench.scenarios.loaders.ros_msgs.refuse_nonfinite`)."""
+    stamps, recv = [], []
+    n = len(items)
+    f, w, q = np.full((n, 3), np.nan), np.full((n, 3), np.nan), np.full((n, 4), np.nan)
+    has_f, has_w, has_q = (np.zeros(n, dtype=bool) for _ in range(3))
+    for i, (t_ns, m) in enumerate(items):
+        stamps.append(stamp_ns(m))
+        recv.append(t_ns)
+        if float(m.linear_acceleration_covariance[0]) != -1.0:
+            a = m.linear_acceleration
+            f[i], has_f[i] = (a.x, a.y, a.z), True
+        if float(m.orientation_covariance[0]) != -1.0:
+            o = m.orientation
+            q[i], has_q[i] = (o.w, o.x, o.y, o.z), True
+        if float(m.angular_velocity_covariance[0]) != -1.0:
+            g = m.angular_velocity
+            w[i], has_w[i] = (g.x, g.y, g.z), True
+    zero_q = np.sum(q * q, axis=1) < 1e-12  # a zero quaternion: no orientation
+    q[zero_q] = np.nan
+    refuse_nonfinite(f, topic, path, "linear_acceleration", has_f)
+    refuse_nonfinite(w, topic, path, "angular_velocity", has_w)
+    refuse_nonfinite(q, topic, path, "orientation (w, x, y, z)", has_q & ~zero_q)
+    t, src = times(stamps, recv)
+    frames = sorted({str(m.header.frame_id) for _, m in items})
+    return {
+        "t": t,
+        "f": f,
+        "q": q if np.any(np.isfinite(q)) else None,
+        "w": w if np.any(np.isfinite(w)) else None,
+        "src": src,
+        "frames": frames,
+    }

@@ -40,9 +40,6 @@ records which per role. t = 0 is the earliest sample of any stream [s].
 
 from __future__ import annotations
 
-import sqlite3
-import struct
-from collections.abc import Iterable
 from pathlib import Path
 from typing import Any
 
@@ -68,16 +65,20 @@ from posbench.scenarios.loaders.ros_msgs import (
     POSE_STAMPED,
     TWIST_COV_STAMPED,
     TWIST_STAMPED,
+    imu_fields,
     navsat_fields,
     normalize_msgtype,
     quat_yaw,
-    refuse_nonfinite,
     short_type,
     speed_fields,
-    stamp_ns,
-    times,
 )
-from posbench.scenarios.loaders.ros_tf import TF_TOPICS, TFMESSAGE, edges_from_messages, find_mount
+from posbench.scenarios.loaders.ros_read import (
+    bag_topic_types,
+    open_reader,
+    read_errors,
+    read_messages,
+    read_tf_edges,
+)
 from posbench.scenarios.loaders.ros_topics import (
     FALLBACK_TYPES,
     ROLE_TYPES,
@@ -106,129 +107,6 @@ __all__ = [
 ]
 
 
-_READ_ERRORS: tuple[type[BaseException], ...] = (
-    sqlite3.DatabaseError,
-    struct.error,
-    EOFError,
-    ValueError,
-    KeyError,
-    IndexError,
-    AssertionError,
-    UnicodeDecodeError,
-    OSError,
-    TypeError,
-    AttributeError,
-)
-
-
-def _rosbags_errors() -> tuple[type[BaseException], ...]:
-    from rosbags.highlevel.anyreader import AnyReaderError
-    from rosbags.rosbag1 import ReaderError as R1Error
-    from rosbags.rosbag2 import ReaderError as R2Error
-    from rosbags.serde import SerdeError
-    from rosbags.typesys import TypesysError
-
-    extra: tuple[type[BaseException], ...] = ()
-    try:  # rosbags reads .db3 through apsw, whose errors are not sqlite3's
-        import apsw
-
-        extra = (apsw.Error,)
-    except ImportError:  # pragma: no cover - depends on the rosbags version
-        pass
-    return (AnyReaderError, R1Error, R2Error, SerdeError, TypesysError) + extra + _READ_ERRORS
-
-
-def _read(path: Path, wanted: dict[str, str | None], reader: Any) -> dict[str, list]:
-    """Deserialize the chosen topics' messages: role -> list of (receive_ns, msg)."""
-    by_topic: dict[str, list[str]] = {}
-    for role, topic in wanted.items():
-        if topic is not None:
-            by_topic.setdefault(topic, []).append(role)
-    conns = [c for c in reader.connections if c.topic in by_topic]
-    out: dict[str, list] = {role: [] for role, t in wanted.items() if t is not None}
-    for conn, t_ns, raw in reader.messages(connections=conns):
-        msg = reader.deserialize(raw, conn.msgtype)
-        for role in by_topic[conn.topic]:
-            out[role].append((int(t_ns), msg))
-    return out
-
-
-def _read_tf(
-    reader: Any, topic_types: dict[str, str], imu_frame: str | None
-) -> dict[tuple[str, str], np.ndarray]:
-    """tf edges from ``/tf_static`` (all of it), then from ``/tf`` only while the IMU's mount
-    is still unknown (stops reading as soon as it is found)."""
-    from posbench.scenarios.loaders.ros_tf import frame_name
-
-    edges: dict[tuple[str, str], np.ndarray] = {}
-    if not imu_frame:
-        return edges
-    for topic in TF_TOPICS:
-        if topic_types.get(topic) != TFMESSAGE:
-            continue
-        if find_mount(edges, imu_frame)[0] is not None:
-            break
-        conns = [c for c in reader.connections if c.topic == topic]
-        for conn, _, raw in reader.messages(connections=conns):
-            new = edges_from_messages([reader.deserialize(raw, conn.msgtype)])
-            added = {k: v for k, v in new.items() if k not in edges}
-            if not added:
-                continue
-            edges.update(added)
-            if (
-                topic != "/tf_static"
-                and any(frame_name(imu_frame) in k for k in added)
-                and find_mount(edges, imu_frame)[0] is not None
-            ):
-                break
-    return edges
-
-
-def _imu(items: list, topic: str, path: Path) -> dict[str, Any]:
-    """Raw IMU fields in the sensor frame: f (N, 3) [m/s^2], w (N, 3) [rad/s], q (N, 4) w x y z
-    (NaN rows where REP 145's covariance[0] == -1 marks the field absent, or a zero quaternion).
-    A field a message carries that is not finite is refused, naming the message
-    (:func:`~posbench.scenarios.loaders.ros_msgs.refuse_nonfinite`)."""
-    stamps, recv = [], []
-    n = len(items)
-    f, w, q = np.full((n, 3), np.nan), np.full((n, 3), np.nan), np.full((n, 4), np.nan)
-    has_f, has_w, has_q = (np.zeros(n, dtype=bool) for _ in range(3))
-    for i, (t_ns, m) in enumerate(items):
-        stamps.append(stamp_ns(m))
-        recv.append(t_ns)
-        if float(m.linear_acceleration_covariance[0]) != -1.0:
-            a = m.linear_acceleration
-            f[i], has_f[i] = (a.x, a.y, a.z), True
-        if float(m.orientation_covariance[0]) != -1.0:
-            o = m.orientation
-            q[i], has_q[i] = (o.w, o.x, o.y, o.z), True
-        if float(m.angular_velocity_covariance[0]) != -1.0:
-            g = m.angular_velocity
-            w[i], has_w[i] = (g.x, g.y, g.z), True
-    zero_q = np.sum(q * q, axis=1) < 1e-12  # a zero quaternion: no orientation
-    q[zero_q] = np.nan
-    refuse_nonfinite(f, topic, path, "linear_acceleration", has_f)
-    refuse_nonfinite(w, topic, path, "angular_velocity", has_w)
-    refuse_nonfinite(q, topic, path, "orientation (w, x, y, z)", has_q & ~zero_q)
-    t, src = times(stamps, recv)
-    frames = sorted({str(m.header.frame_id) for _, m in items})
-    return {
-        "t": t,
-        "f": f,
-        "q": q if np.any(np.isfinite(q)) else None,
-        "w": w if np.any(np.isfinite(w)) else None,
-        "src": src,
-        "frames": frames,
-    }
-
-
-def _open_reader(path: Path) -> Any:
-    from rosbags.highlevel import AnyReader
-    from rosbags.typesys import Stores, get_typestore
-
-    return AnyReader([path], default_typestore=get_typestore(Stores.ROS2_HUMBLE))
-
-
 def load_rosbag(path: Path, projection: str = "enu", topics: dict[str, str] | None = None) -> Drive:
     """Read a ROS 1 or ROS 2 bag into a :class:`Drive` (see the module notes).
 
@@ -247,21 +125,21 @@ def load_rosbag(path: Path, projection: str = "enu", topics: dict[str, str] | No
     if not path.exists():
         raise DataError(path, "no such file or folder")
     fmt = "ros1" if path.suffix.lower() == ".bag" else "ros2"
-    errors = _rosbags_errors()
+    errors = read_errors()
     try:
-        reader = _open_reader(path)
+        reader = open_reader(path)
         with reader:
             if reader.message_count == 0:
                 raise DataError(
                     path,
                     "empty bag: it holds no messages "
-                    f"(topics: {describe(_topic_types(reader.connections))})",
+                    f"(topics: {describe(bag_topic_types(reader.connections))})",
                 )
-            topic_types = _topic_types(reader.connections)
+            topic_types = bag_topic_types(reader.connections)
             chosen, why = select_topics(topic_types, topics, path)
-            items = _read(path, chosen, reader)
+            items = read_messages(path, chosen, reader)
             imu_items = items.get("imu") or []
-            edges = _read_tf(
+            edges = read_tf_edges(
                 reader, topic_types, str(imu_items[0][1].header.frame_id) if imu_items else None
             )
     except DataError:
@@ -288,10 +166,6 @@ def load_rosbag(path: Path, projection: str = "enu", topics: dict[str, str] | No
         roles,
         unused_topics(topic_types, chosen, topics),
     )
-
-
-def _topic_types(connections: Iterable[Any]) -> dict[str, str]:
-    return {c.topic: normalize_msgtype(c.msgtype) for c in connections}
 
 
 def _no_truth_notes(
@@ -367,7 +241,7 @@ def _assemble(
     sources["gps"] = g["src"]
     streams: dict[str, dict[str, Any]] = {"gps": g}
     if chosen["imu"] is not None and items["imu"]:
-        streams["imu"] = _imu(items["imu"], str(chosen["imu"]), path)
+        streams["imu"] = imu_fields(items["imu"], str(chosen["imu"]), path)
     if chosen["speed"] is not None and items["speed"]:
         streams["speed"] = speed_fields(items["speed"], str(chosen["speed"]), path)
     truth_topic = chosen["truth"]

@@ -24,14 +24,10 @@ from helpers import bench as run_bench
 from posbench.cli.check import NEEDS_MODEL
 from posbench.errors import UsageError
 from posbench.predictor_tools.contract import resolve_predictor
-from posbench.predictor_tools.contract.clauses import (
-    CLAUSE_IDS,
-    ClauseResult,
-    check_predictor,
-    no_look_ahead_cuts,
-    run_replay,
-)
+from posbench.predictor_tools.contract.checker import CLAUSE_IDS, ClauseResult, check_predictor
+from posbench.predictor_tools.contract.clauses import no_look_ahead_cuts
 from posbench.predictor_tools.contract.inputs import HORIZON_S, cut_prepared, inputs
+from posbench.predictor_tools.contract.measure import run_replay
 from posbench.predictors.registry import available, create
 from posbench.replay.gps_outliers import GatedPredictor
 from posbench.replay.loop import events, feed
@@ -192,7 +188,7 @@ def test_an_exception_fails_clauses_and_names_where_it_was_raised():
 
 
 def test_differences_treat_nan_as_equal_only_to_nan():
-    from posbench.predictor_tools.contract.clauses import differences
+    from posbench.predictor_tools.contract.measure import differences
 
     nan, inf = np.nan, np.inf
     a = np.array([[1, 2], [nan, nan], [nan, 1], [1, inf], [1, inf], [0, 0]], dtype=float)

@@ -25,7 +25,8 @@ import pytest
 from helpers import assert_one_error_line, bench, missing
 
 from posbench.config import RunConfig
-from posbench.offline.answers import read_answers, score_answers
+from posbench.offline.answer_scoring import score_answers
+from posbench.offline.answers import read_answers
 from posbench.offline.export import export_run, track_stem
 from posbench.offline.queries_folder import MANIFEST, read_queries, write_queries
 from posbench.offline.tum import read_tum

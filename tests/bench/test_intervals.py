@@ -23,7 +23,8 @@ from posbench.replay.runner import run
 from posbench.report.markdown import render_markdown
 from posbench.saved_run.run import SCHEMA_VERSION, Run, load_run, results_schema
 from posbench.scenarios.synthetic import default_drives
-from posbench.tables.run_tables import NOT_CONCLUSIVE, label_table, summary_table
+from posbench.tables.breakdown_tables import NOT_CONCLUSIVE, label_table
+from posbench.tables.run_tables import summary_table
 from posbench.tables.stat_tables import paired_table
 
 

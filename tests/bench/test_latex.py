@@ -176,7 +176,7 @@ def test_value_columns_are_right_aligned_in_latex_and_markdown() -> None:
 
 def test_report_tables_of_the_committed_reports() -> None:
     """Every report table of every committed run, rendered by the code as it is now."""
-    from posbench.report.markdown import report_tables
+    from posbench.report.table_files import report_tables
 
     runs = sorted(ROOT.glob("reports/*/results.json"))
     assert runs

@@ -21,11 +21,13 @@ from posbench.config import RunConfig
 from posbench.metrics.limit import LIMIT_IMU_NAME, LIMIT_NAME
 from posbench.pipeline.results import build_results
 from posbench.replay.runner import run, run_drive
-from posbench.report.markdown import render_markdown, report_tables
+from posbench.report.markdown import render_markdown
+from posbench.report.table_files import report_tables
 from posbench.saved_run.run import SCHEMA_VERSION, Run, load_run, results_schema, save_run
 from posbench.scenarios.synthetic import generate_drive
 from posbench.scoring.schema import scored_mask
-from posbench.tables.run_tables import dataset_table, drives_table, label_table, summary_table
+from posbench.tables.breakdown_tables import drives_table, label_table
+from posbench.tables.run_tables import dataset_table, summary_table
 
 FIXES_ONLY = {"use_imu": False, "use_speed": False}
 

@@ -20,7 +20,8 @@ import pytest
 from helpers import assert_one_error_line, bench
 
 from posbench.config import RunConfig
-from posbench.offline.answers import read_answers, score_answers
+from posbench.offline.answer_scoring import score_answers
+from posbench.offline.answers import read_answers
 from posbench.offline.queries_folder import (
     KEY_QUERIES,
     MANIFEST,

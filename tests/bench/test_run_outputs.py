@@ -19,7 +19,7 @@ from posbench.replay.runner import run, run_drive
 from posbench.report.markdown import render_markdown
 from posbench.scenarios.synthetic import default_drives
 from posbench.scoring.schema import scored_mask
-from posbench.tables.run_tables import label_table
+from posbench.tables.breakdown_tables import label_table
 
 
 def bench(*args: str, cwd: Path | None = None, columns: int = 200) -> subprocess.CompletedProcess:
@@ -328,8 +328,9 @@ def test_tables_are_numeric_until_rendered(cv_kf_result, tmp_path):
     from rich.console import Console
 
     from posbench.cli.terminal import print_table
-    from posbench.report.markdown import report_tables, write_tables
-    from posbench.tables.run_tables import label_table, summary_table
+    from posbench.report.table_files import report_tables, write_tables
+    from posbench.tables.breakdown_tables import label_table
+    from posbench.tables.run_tables import summary_table
 
     _, res = cv_kf_result
     t = summary_table(res)

@@ -7,7 +7,7 @@ import pytest
 
 from posbench.config import RunConfig
 from posbench.predictors.base import Predictor
-from posbench.predictors.registry import register
+from posbench.predictors.catalogue import register
 from posbench.replay.loop import replay
 from posbench.replay.prepare import prepare_drive
 from posbench.replay.reference import cubic_through_fixes, truth_at

@@ -11,24 +11,17 @@ import math
 import numpy as np
 import pytest
 
-from posbench.metrics.bootstrap import (
-    DEFINITIONS,
-    MIN_BLOCKS,
-    block_length,
-    block_resample,
+from posbench.metrics.block_bootstrap import MIN_BLOCKS, block_length, block_resample, unit_length
+from posbench.metrics.bootstrap import DEFINITIONS, paired_summary, summary_ci, summary_cis
+from posbench.metrics.cluster_bootstrap import (
     cluster_weights,
     paired_ratio_diff,
-    paired_summary,
     quantile_ci,
     ratio_ci,
     resample_counts,
     resampled_means,
-    resampled_quantiles,
-    resampled_quantiles_many,
-    summary_ci,
-    summary_cis,
-    unit_length,
 )
+from posbench.metrics.resampled_quantiles import resampled_quantiles, resampled_quantiles_many
 
 
 def _ar1(n: int, phi: float, rng: np.random.Generator) -> np.ndarray:

@@ -19,7 +19,8 @@ from posbench.metrics.limit import (
     mean_ci,
     mean_error_bounds,
 )
-from posbench.metrics.pcrb import mean_error_bound, position_variance_bound
+from posbench.metrics.pcrb import position_variance_bound
+from posbench.metrics.pcrb_mean_error import mean_error_bound
 
 
 def _ca_track(n: int, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

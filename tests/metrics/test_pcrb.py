@@ -19,14 +19,12 @@ from posbench.metrics.jerk_psd import jerk_psd_from_track
 from posbench.metrics.pcrb import (
     filtered_bound,
     information_recursion,
-    mean_error_2d,
-    mean_error_bound,
     position_variance_bound,
     position_variance_bound_with_acceleration,
     process_noise,
     transition_matrix,
-    with_slow_error,
 )
+from posbench.metrics.pcrb_mean_error import mean_error_2d, mean_error_bound, with_slow_error
 
 JERK_PSD = 2.0  # [m^2/s^5]
 GPS_SIGMA = 0.3  # [m] per axis

@@ -14,7 +14,7 @@ from posbench.predictors import registry
 from posbench.predictors.base import Predictor
 from posbench.replay.gps_outliers import FixGate, GatedPredictor
 from posbench.replay.runner import run_drive
-from posbench.report.markdown import gate_lines
+from posbench.report.sections import gate_lines
 from posbench.scenarios.degrade import degrade_gps
 from posbench.scenarios.drive import Drive, DriveMeta, GpsStream
 from posbench.scenarios.errors import DataError

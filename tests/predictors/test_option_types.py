@@ -14,6 +14,7 @@ import pytest
 from helpers import assert_one_error_line, bench
 
 from posbench.errors import UsageError
+from posbench.predictors.catalogue import BUILT_IN
 from posbench.predictors.kalman.inputs import AccelInput
 from posbench.predictors.option_types import (
     BOOL_TEXT,
@@ -23,7 +24,7 @@ from posbench.predictors.option_types import (
     parse_value,
     takes_text,
 )
-from posbench.predictors.registry import BUILT_IN, available, create, predictor_class
+from posbench.predictors.registry import available, create, predictor_class
 
 #: built-in predictors that can be built without a model file of the user's
 BUILDABLE = [n for n, e in available().items() if e.source == BUILT_IN and n != "lstm-authors"]
@@ -56,7 +57,7 @@ def test_bench_run_set_no_false_0_off_mean_off_and_maybe_is_refused(name, option
     """`bench run --set NAME.OPTION=VALUE` as the command line gives it (a bare word is
     text): the plan resolves no/false/0/off to False, 'maybe' to one error line."""
     from posbench.pipeline.run import RunOptions, plan_run
-    from posbench.replay.predictor_setup import parse_set
+    from posbench.replay.predictor_options import parse_set
 
     for word in OFF:
         sets, given = parse_set([f"{name}.{option}={word}"])

@@ -24,10 +24,9 @@ from helpers import ROOT
 from posbench.errors import UsageError
 from posbench.predictors import registry
 from posbench.predictors.base import Predictor
+from posbench.predictors.catalogue import ENTRY_POINT, IMPORT_PATH
 from posbench.predictors.kalman.kf import JERK_PSDS
 from posbench.predictors.registry import (
-    ENTRY_POINT,
-    IMPORT_PATH,
     PredictorError,
     available,
     base_name,
@@ -38,13 +37,8 @@ from posbench.predictors.registry import (
     resolve,
     tuned_params,
 )
-from posbench.replay.predictor_setup import (
-    merge_options,
-    parse_set,
-    parse_value,
-    validate_predictors,
-    with_model_aliases,
-)
+from posbench.replay.predictor_options import merge_options, parse_set, parse_value
+from posbench.replay.predictor_setup import validate_predictors, with_model_aliases
 
 GUIDE = ROOT / "docs" / "guides" / "own-predictor.md"
 SECTION = GUIDE.read_text(encoding="utf-8")

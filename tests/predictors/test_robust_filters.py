@@ -16,15 +16,9 @@ from posbench.config import RunConfig
 from posbench.replay.runner import run
 from posbench.scenarios.degrade import enu_to_latlon, gps_noise
 from posbench.scenarios.drive import Drive, GpsStream, ImuStream, TruthStream
-from posbench.scenarios.synthetic import (
-    ORIGIN_LAT,
-    ORIGIN_LON,
-    generate_drive,
-    simulate,
-    stop,
-    straight,
-    turn,
-)
+from posbench.scenarios.synthetic import generate_drive
+from posbench.scenarios.synthetic_motion import simulate, stop, straight, turn
+from posbench.scenarios.synthetic_sensors import ORIGIN_LAT, ORIGIN_LON
 
 BIAS = (0.45, -0.25)  # accelerometer bias, vehicle frame [m/s^2] (~2.6 deg of pitch)
 

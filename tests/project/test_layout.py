@@ -83,7 +83,7 @@ import sys
 import posbench
 run = posbench.load({str(out)!r})
 run.summary(); run.traces
-from posbench.report.markdown import report_tables
+from posbench.report.table_files import report_tables
 for t in report_tables(run.results):
     t.markdown(); t.csv(); t.latex()
 run.report({str(tmp_path / "rendered")!r}, drive_plots=1)

@@ -40,7 +40,7 @@ from posbench.scenarios.drive import (
     TruthStream,
 )
 from posbench.scenarios.grid import gaussian_kernel, smooth
-from posbench.scenarios.synthetic import simulate, stop, straight, turn
+from posbench.scenarios.synthetic_motion import simulate, stop, straight, turn
 
 
 def _wrap(a: np.ndarray) -> np.ndarray:

@@ -12,7 +12,6 @@ import pytest
 
 from posbench.scenarios.consistency import check_drive
 from posbench.scenarios.corpus import (
-    MANOEUVRES,
     PROFILES,
     corpus_drive,
     corpus_drives,
@@ -21,10 +20,12 @@ from posbench.scenarios.corpus import (
     envelope,
     iter_corpus,
 )
+from posbench.scenarios.corpus_routes import MANOEUVRES
 from posbench.scenarios.degrade import interpolate_truth
 from posbench.scenarios.drive import Drive
 from posbench.scenarios.labels import LABELS, label_times
-from posbench.scenarios.synthetic import default_drives, simulate, stop, straight, turn
+from posbench.scenarios.synthetic import default_drives
+from posbench.scenarios.synthetic_motion import simulate, stop, straight, turn
 
 #: A fingerprint of default_drives(0), taken on main at commit 34f3d46 (where the earlier
 #: sha256 of every array, 80c6912's, still held): per stream array its length and 65 values

@@ -9,15 +9,13 @@ from scipy.interpolate import CubicSpline
 from posbench.scenarios.degrade import (
     ASLAN_FIX_INTERVAL_QUANTILES_S,
     GPS_PROFILES,
-    OUTAGE_LENGTHS_S,
     _quantile_table,
-    apply_dropouts,
     degrade_gps,
     draw_fix_times,
     gauss_markov,
-    outage_windows,
 )
 from posbench.scenarios.drive import GpsStream, TruthStream
+from posbench.scenarios.dropouts import OUTAGE_LENGTHS_S, apply_dropouts, outage_windows
 from posbench.scenarios.errors import DataError
 
 # the fix-interval table, whichever measured constant is in use: {p: q} or even-p quantiles

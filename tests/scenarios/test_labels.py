@@ -7,7 +7,8 @@ import pytest
 
 from posbench.scenarios.errors import DataError
 from posbench.scenarios.labels import LABELS, LabelThresholds, label_shares, label_times
-from posbench.scenarios.synthetic import generate_drive, simulate, stop, straight, turn
+from posbench.scenarios.synthetic import generate_drive
+from posbench.scenarios.synthetic_motion import simulate, stop, straight, turn
 
 
 def _roundabout() -> list:

@@ -10,14 +10,14 @@ import pytest
 from posbench.checks import check_dropouts
 from posbench.errors import UsageError
 from posbench.metrics.outage_lengths import length_classes
-from posbench.scenarios.degrade import (
+from posbench.scenarios.drive import GpsStream
+from posbench.scenarios.dropouts import (
     FIELD_OUTAGE_LENGTHS_S,
     OUTAGE_SEPARATION_S,
     apply_dropouts,
     packed_outage_windows,
     parse_dropouts,
 )
-from posbench.scenarios.drive import GpsStream
 
 
 def _windows(t_end: float, seed: int = 0) -> np.ndarray:

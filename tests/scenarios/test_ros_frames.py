@@ -25,7 +25,7 @@ from posbench.scenarios.errors import DataError
 from posbench.scenarios.loaders.ros_tf import chain_rotation, find_mount
 from posbench.scenarios.loaders.rosbag import load_rosbag
 from posbench.scenarios.projection import to_local
-from posbench.scenarios.synthetic import ORIGIN_LAT, ORIGIN_LON
+from posbench.scenarios.synthetic_sensors import ORIGIN_LAT, ORIGIN_LON
 
 # --------------------------------------------------------------------------- pure maths
 

@@ -24,7 +24,7 @@ from posbench.scenarios.errors import DataError
 from posbench.scenarios.imu_frames import wrap
 from posbench.scenarios.loaders.rosbag import load_rosbag
 from posbench.scenarios.projection import to_local
-from posbench.scenarios.synthetic import ORIGIN_LAT, ORIGIN_LON
+from posbench.scenarios.synthetic_sensors import ORIGIN_LAT, ORIGIN_LON
 
 SHORT = {"duration_s": 60.0, "gps_interval_s": (0.1, 0.1), "imu_hz": 20.0}
 CASES = {

@@ -10,17 +10,9 @@ import pytest
 from posbench.scenarios.degrade import interpolate_truth
 from posbench.scenarios.drive import Drive
 from posbench.scenarios.projection import to_local
-from posbench.scenarios.synthetic import (
-    DEFAULT_ROUTES,
-    ORIGIN_LAT,
-    ORIGIN_LON,
-    default_drives,
-    generate_drive,
-    simulate,
-    stop,
-    straight,
-    turn,
-)
+from posbench.scenarios.synthetic import DEFAULT_ROUTES, default_drives, generate_drive
+from posbench.scenarios.synthetic_motion import simulate, stop, straight, turn
+from posbench.scenarios.synthetic_sensors import ORIGIN_LAT, ORIGIN_LON
 
 
 def _arrays(d: Drive) -> dict[str, np.ndarray]:

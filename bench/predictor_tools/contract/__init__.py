@@ -27,7 +27,7 @@ that draws random numbers without a fixed seed fails them all.
 Units: seconds, metres (local ENU).
 """
 
-from posbench.predictor_tools.contract.clauses import (
+from posbench.predictor_tools.contract.checker import (
     CLAUSE_IDS,
     CLAUSES,
     ClauseResult,

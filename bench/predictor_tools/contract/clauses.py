@@ -1,18 +1,12 @@
 """The contract's clauses: one function each, deciding pass or fail from the numbers it
 measured on the inputs of :mod:`posbench.predictor_tools.contract.inputs` (see
-:mod:`posbench.predictor_tools.contract` for what they are and what they prove), and
-:func:`check_predictor`, which runs them."""
+:mod:`posbench.predictor_tools.contract` for what they are and what they prove); their ids,
+descriptions and order are :data:`posbench.predictor_tools.contract.checker.CLAUSES`."""
 
 from __future__ import annotations
 
 import math
 import pickle
-import traceback
-import warnings
-from collections.abc import Callable
-from dataclasses import dataclass
-from pathlib import Path
-from typing import Any
 
 import numpy as np
 
@@ -20,7 +14,6 @@ from posbench.predictor_tools.contract.inputs import (
     DRIVE_S,
     HORIZON_S,
     LINE_BOUND_M,
-    LINE_SPEED,
     PSD_TOL,
     SAME_M,
     STAND_BOUND_M,
@@ -29,103 +22,20 @@ from posbench.predictor_tools.contract.inputs import (
     Factory,
     Inputs,
     cut_prepared,
-    inputs,
     last_observation_s,
     line_position,
 )
-from posbench.predictors.base import Predictor
-from posbench.replay.loop import GPS, IMU, QUERY, events, feed, replay
+from posbench.predictor_tools.contract.measure import (
+    differences,
+    metres,
+    raised_line,
+    run_replay,
+    xy_text,
+)
+from posbench.replay.loop import GPS, IMU, QUERY, events, feed
 from posbench.replay.prepare import PreparedDrive
 
 
-@dataclass(frozen=True)
-class ClauseResult:
-    """The outcome of one clause for one predictor.
-
-    Attributes:
-        clause: the clause's id (``reset``, ``no_look_ahead``, ...).
-        description: what the clause requires, one line.
-        passed: whether the predictor obeyed it.
-        evidence: the numbers that decided it, one line.
-    """
-
-    clause: str
-    description: str
-    passed: bool
-    evidence: str
-
-    def to_dict(self) -> dict[str, Any]:
-        return {
-            "clause": self.clause,
-            "description": self.description,
-            "passed": self.passed,
-            "evidence": self.evidence,
-        }
-
-
-# ------------------------------------------------------------------------- helpers
-@dataclass(frozen=True)
-class Answers:
-    """A replay's answers in one array: query time [s], issue time [s], x, y [m]."""
-
-    t_query: np.ndarray
-    t_issue: np.ndarray
-    xy: np.ndarray  # (N, 2)
-
-    def __len__(self) -> int:
-        return int(self.t_query.size)
-
-
-def run_replay(factory: Factory, prep: PreparedDrive, pred: Predictor | None = None) -> Answers:
-    """Replay ``prep`` through a fresh predictor (or ``pred``) with
-    :func:`posbench.replay.loop.replay`; future answers first, then the now answers."""
-    p = factory() if pred is None else pred
-    res = replay(p, prep, HORIZON_S)
-    return Answers(
-        np.concatenate([prep.future.t_query, prep.now.t_query]),
-        np.concatenate([prep.future.t_issue, prep.now.t_issue]),
-        np.concatenate([res.future_xy, res.now_xy]).astype(float),
-    )
-
-
-def differences(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Distance [m] between answers row by row: 0 where the rows are equal (NaN equal to NaN),
-    inf where they differ and one holds a NaN or an inf."""
-    a, b = np.asarray(a, dtype=float), np.asarray(b, dtype=float)
-    with np.errstate(invalid="ignore", over="ignore"):
-        d: np.ndarray = np.hypot(a[:, 0] - b[:, 0], a[:, 1] - b[:, 1])
-        same = np.all((a == b) | (np.isnan(a) & np.isnan(b)), axis=1)
-    d[same] = 0.0
-    d[~np.isfinite(d)] = np.inf
-    return d
-
-
-def metres(x: float) -> str:
-    """A distance for evidence lines: ``0 m``, ``3.2e-12 m``, ``0.412 m``, or ``inf m (a NaN
-    or inf on one side)``."""
-    if x == 0.0:
-        return "0 m"
-    if not math.isfinite(x):
-        return "inf m (a NaN or inf on one side)"
-    return f"{x:.3g} m" if x < 1e-3 else f"{x:.3f} m"
-
-
-def _xy(p: tuple[float, float] | np.ndarray) -> str:
-    return f"({float(p[0]):.3f}, {float(p[1]):.3f})"
-
-
-def raised_line(e: BaseException) -> str:
-    """``raised TypeError: msg (file.py:12)``, one line."""
-    text = str(e).strip().splitlines()
-    msg = f"raised {type(e).__name__}" + (f": {text[0][:200]}" if text else "")
-    # where: the innermost frame outside this module (pickle, numpy in C leave none)
-    tb = [f for f in traceback.extract_tb(e.__traceback__) if f.filename != __file__]
-    if tb:
-        msg += f" ({Path(tb[-1].filename).name}:{tb[-1].lineno})"
-    return msg
-
-
-# ------------------------------------------------------------------------- clauses
 def clause_reset(factory: Factory, inp: Inputs) -> tuple[bool, str]:
     """reset(): after a full replay, ``reset()`` and a second replay give the first one's
     answers, and the answer right after ``reset()`` is a fresh instance's."""
@@ -140,8 +50,8 @@ def clause_reset(factory: Factory, inp: Inputs) -> tuple[bool, str]:
     d0 = differences(before, after)[0]
     if d0 > SAME_M:
         return False, (
-            f"answer for t={t0:.2f} s right after reset() was {_xy(after[0])}, a "
-            f"fresh instance answered {_xy(before[0])}"
+            f"answer for t={t0:.2f} s right after reset() was {xy_text(after[0])}, a "
+            f"fresh instance answered {xy_text(before[0])}"
         )
     d = differences(first.xy, second.xy)
     i = int(np.argmax(d))
@@ -171,7 +81,7 @@ def clause_nan_before_first_fix(factory: Factory, inp: Inputs) -> tuple[bool, st
         t, xy = bad[0]
         return False, (
             f"answer for t={t:.2f} s before the first fix ({inp.line_first_fix_s:.2f}"
-            f" s) was {_xy(xy)}, not (nan, nan) ({len(bad)} of {len(asked)} answers)"
+            f" s) was {xy_text(xy)}, not (nan, nan) ({len(bad)} of {len(asked)} answers)"
         )
     return True, (
         f"(nan, nan) at all {len(asked)} queries before the first fix "
@@ -324,7 +234,7 @@ def clause_query_order(factory: Factory, inp: Inputs) -> tuple[bool, str]:
             if not (math.isfinite(x) and math.isfinite(y)):
                 failures.append(
                     f"answer for t={t:.2f} s ({off:g} s after the newest "
-                    f"observation) is {_xy((x, y))}"
+                    f"observation) is {xy_text((x, y))}"
                 )
                 return
             if off in seen:
@@ -442,77 +352,3 @@ def clause_covariance_psd(factory: Factory, inp: Inputs) -> tuple[bool, str]:
     if n == 0:
         return True, "not reported (covariance_at always None)"
     return True, f"{n} matrices symmetric, smallest eigenvalue {min_eig:.3g} m^2"
-
-
-#: every clause: id, one-line description, function (its docstring says what it proves)
-CLAUSES: tuple[tuple[str, str, Callable[[Factory, Inputs], tuple[bool, str]]], ...] = (
-    (
-        "reset",
-        "reset() forgets the drive: a second replay gives the first one's answers",
-        clause_reset,
-    ),
-    (
-        "nan_before_first_fix",
-        "(nan, nan) before the first fix, also after IMU and speed samples",
-        clause_nan_before_first_fix,
-    ),
-    (
-        "no_look_ahead",
-        "an answer depends only on observations stamped up to its issue time",
-        clause_no_look_ahead,
-    ),
-    (
-        "finite_after_first_fix",
-        "every answer from the first fix on is finite",
-        clause_finite_after_first_fix,
-    ),
-    (
-        "straight_line",
-        f"within {LINE_BOUND_M:g} m on a {LINE_SPEED:g} m/s line "
-        f"({HORIZON_S:g} s ahead), within {STAND_BOUND_M:g} m at standstill",
-        clause_straight_line,
-    ),
-    (
-        "query_order",
-        "out-of-order and repeated queries: finite, same time gives same answer",
-        clause_query_order,
-    ),
-    (
-        "picklable",
-        "pickled fresh and mid-drive, the copy answers like the original",
-        clause_picklable,
-    ),
-    (
-        "deterministic",
-        "two fresh instances give the same answers on the same drive",
-        clause_deterministic,
-    ),
-    (
-        "covariance_psd",
-        "covariance_at(t), if reported, is symmetric positive semi-definite",
-        clause_covariance_psd,
-    ),
-)
-#: the clause ids, in the order they run
-CLAUSE_IDS: tuple[str, ...] = tuple(c for c, _, _ in CLAUSES)
-
-
-def check_predictor(
-    factory: Factory, name: str, clauses: tuple[str, ...] | None = None
-) -> list[ClauseResult]:
-    """Run the contract's clauses (all, or those named in ``clauses``) on the predictors that
-    ``factory`` builds; ``name`` only words errors. Never raises for the predictor's faults:
-    an exception inside a clause fails that clause with what was raised and where."""
-    inp = inputs()
-    out = []
-    for cid, text, fn in CLAUSES:
-        if clauses is not None and cid not in clauses:
-            continue
-        try:
-            with warnings.catch_warnings(), np.errstate(all="ignore"):
-                warnings.simplefilter("ignore", RuntimeWarning)
-                passed, evidence = fn(factory, inp)
-        except Exception as e:  # noqa: BLE001 - the predictor's fault is the clause's failure
-            passed, evidence = False, f"{name} {raised_line(e)}"
-        out.append(ClauseResult(cid, text, bool(passed), evidence))
-    return out

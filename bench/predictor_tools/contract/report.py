@@ -1,6 +1,6 @@
 """One predictor checked against the contract: :func:`check_contract` resolves a name (or
 ``module:Class``) into fresh instances, runs every clause
-(:func:`~posbench.predictor_tools.contract.clauses.check_predictor`) and returns a
+(:func:`~posbench.predictor_tools.contract.checker.check_predictor`) and returns a
 :class:`ContractReport`."""
 
 from __future__ import annotations
@@ -11,8 +11,9 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from posbench.errors import UsageError
-from posbench.predictor_tools.contract.clauses import ClauseResult, check_predictor, raised_line
+from posbench.predictor_tools.contract.checker import ClauseResult, check_predictor
 from posbench.predictor_tools.contract.inputs import Factory
+from posbench.predictor_tools.contract.measure import raised_line
 from posbench.predictors.base import Predictor
 
 
