@@ -73,5 +73,19 @@ def aslan_dir(shared_dir: Path) -> Path:
 
 
 @pytest.fixture(scope="session")
+def filter_parity_drives(aslan_dir: Path, kitti_dir: Path, comma_dir: Path) -> list:
+    """One drive of each shared data set, loaded once for the filters' reference tests:
+    aslan (IMU, no speed), KITTI (IMU with yaw, speed, stated accuracy), comma2k19 (IMU
+    without yaw, CAN speed). Read only: a test must not change them."""
+    from posbench.scenarios.loaders import load
+
+    return [
+        load(aslan_dir / "aslan-20220409115940.pickle")[0],
+        load(kitti_dir / "2011_09_26" / "2011_09_26_drive_0005_sync")[0],
+        load(comma_dir)[0],
+    ]
+
+
+@pytest.fixture(scope="session")
 def authors_models_dir(shared_dir: Path) -> Path:
     return _need(shared_dir / "models" / "authors")

@@ -21,7 +21,6 @@ option sets. The member chosen was the same everywhere.
 
 from __future__ import annotations
 
-from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -33,7 +32,6 @@ from posbench.predictors.kalman.ekf import EkfBank
 from posbench.replay.loop import replay
 from posbench.replay.prepare import prepare_drive
 from posbench.scenarios.drive import Drive
-from posbench.scenarios.loaders import load
 from posbench.scenarios.synthetic import default_drives, generate_drive
 
 TOL_M = 1e-9
@@ -93,19 +91,10 @@ def test_a_bank_reset_answers_as_a_new_one() -> None:
     np.testing.assert_array_equal(first.cov, again.cov)
 
 
-@pytest.fixture(scope="module")
-def shared_drives(aslan_dir: Path, kitti_dir: Path, comma_dir: Path) -> list[Drive]:
-    return [
-        load(aslan_dir / "aslan-20220409115940.pickle")[0],
-        load(kitti_dir / "2011_09_26" / "2011_09_26_drive_0005_sync")[0],
-        load(comma_dir)[0],
-    ]
-
-
 @pytest.mark.parametrize("which", [0, 1, 2], ids=["aslan", "kitti", "comma2k19"])
 @pytest.mark.parametrize("dropouts", ["none", "outages"])
 def test_rows_answer_as_the_members_on_shared_drives(
-    shared_drives: list[Drive], which: int, dropouts: str
+    filter_parity_drives: list[Drive], which: int, dropouts: str
 ) -> None:
     for profile in ("native", "rtk"):
-        assert_same_answers(shared_drives[which], dropouts, profile)
+        assert_same_answers(filter_parity_drives[which], dropouts, profile)

@@ -39,7 +39,6 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -71,7 +70,6 @@ from posbench.predictors.poly import PolyExtrapolator
 from posbench.replay.loop import fix_sigma, replay
 from posbench.replay.prepare import prepare_drive
 from posbench.scenarios.drive import Drive
-from posbench.scenarios.loaders import load
 from posbench.scenarios.synthetic import default_drives, generate_drive
 
 TOL_M = 1e-9  # mean and answers [m, m/s, m/s^2]
@@ -315,22 +313,11 @@ def test_kf_matches_filterpy_with_other_settings() -> None:
         lockstep_run(d, LinearKalman(**robust), FilterpyKalman(**robust), compare_kf)
 
 
-def shared_drives(aslan_dir: Path, kitti_dir: Path, comma_dir: Path) -> list[Drive]:
-    return [
-        load(aslan_dir / "aslan-20220409115940.pickle")[0],
-        load(kitti_dir / "2011_09_26" / "2011_09_26_drive_0005_sync")[0],
-        load(comma_dir)[0],
-    ]
-
-
-@pytest.fixture(scope="module")
-def shared(aslan_dir: Path, kitti_dir: Path, comma_dir: Path) -> list[Drive]:
-    return shared_drives(aslan_dir, kitti_dir, comma_dir)
-
-
 @pytest.mark.parametrize("which", [0, 1, 2], ids=["aslan", "kitti", "comma2k19"])
-def test_kf_matches_filterpy_on_shared_drives(shared: list[Drive], which: int) -> None:
-    d = shared[which]
+def test_kf_matches_filterpy_on_shared_drives(
+    filter_parity_drives: list[Drive], which: int
+) -> None:
+    d = filter_parity_drives[which]
     ls = lockstep_run(d, LinearKalman(), FilterpyKalman(), compare_kf)
     assert ls.worst < TOL_M
 
@@ -515,8 +502,10 @@ def test_ekf_matches_filterpy_on_synthetic(drive: Drive) -> None:
 
 
 @pytest.mark.parametrize("which", [0, 1, 2], ids=["aslan", "kitti", "comma2k19"])
-def test_ekf_matches_filterpy_on_shared_drives(shared: list[Drive], which: int) -> None:
-    ls = lockstep_run(shared[which], CtraEkf(), FilterpyEkf(), compare_ekf)
+def test_ekf_matches_filterpy_on_shared_drives(
+    filter_parity_drives: list[Drive], which: int
+) -> None:
+    ls = lockstep_run(filter_parity_drives[which], CtraEkf(), FilterpyEkf(), compare_ekf)
     assert ls.worst < TOL_M
 
 
@@ -609,11 +598,13 @@ def test_restated_drive_weighs_fixes_every_way() -> None:
     assert seen == {"unstated", "white", "estimate", "between"}
 
 
-def test_kf_and_ekf_match_filterpy_on_kitti_stated_accuracy(shared: list[Drive]) -> None:
+def test_kf_and_ekf_match_filterpy_on_kitti_stated_accuracy(
+    filter_parity_drives: list[Drive],
+) -> None:
     """KITTI's own OXTS fixes (``native``), each stating its ``pos_accuracy`` (0.3-0.5 m,
     far above the fixes' white noise: the split weighs them by their white part). The other
     shared drives state none (aslan's routes, comma2k19)."""
-    kitti = shared[1]
+    kitti = filter_parity_drives[1]
     for opts in ({}, {"fix_noise_memory": 30.0}):
         for fast, ref, cmp in (
             (LinearKalman(**opts), FilterpyKalman(**opts), compare_kf),
@@ -748,8 +739,8 @@ def test_poly_matches_lstsq_on_synthetic(drive: Drive) -> None:
 
 
 @pytest.mark.parametrize("which", [0, 1, 2], ids=["aslan", "kitti", "comma2k19"])
-def test_poly_matches_lstsq_on_shared_drives(shared: list[Drive], which: int) -> None:
-    ls = lockstep_run(shared[which], PolyExtrapolator(), LstsqPoly(), no_state)
+def test_poly_matches_lstsq_on_shared_drives(filter_parity_drives: list[Drive], which: int) -> None:
+    ls = lockstep_run(filter_parity_drives[which], PolyExtrapolator(), LstsqPoly(), no_state)
     assert ls.worst < TOL_M
 
 
@@ -767,6 +758,8 @@ def test_kf_paper_matches_lstsq_on_synthetic(drive: Drive) -> None:
 
 
 @pytest.mark.parametrize("which", [0, 1, 2], ids=["aslan", "kitti", "comma2k19"])
-def test_kf_paper_matches_lstsq_on_shared_drives(shared: list[Drive], which: int) -> None:
-    ls = lockstep_run(shared[which], PaperKalman(), LstsqPaperKalman(), no_state)
+def test_kf_paper_matches_lstsq_on_shared_drives(
+    filter_parity_drives: list[Drive], which: int
+) -> None:
+    ls = lockstep_run(filter_parity_drives[which], PaperKalman(), LstsqPaperKalman(), no_state)
     assert ls.worst < TOL_M

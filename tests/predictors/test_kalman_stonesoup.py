@@ -20,7 +20,6 @@ from __future__ import annotations
 
 import datetime
 import math
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -28,7 +27,6 @@ from helpers import missing
 
 from posbench.predictors.kalman import ca_rows
 from posbench.scenarios.drive import Drive
-from posbench.scenarios.loaders import load
 from posbench.scenarios.synthetic import generate_drive
 
 try:
@@ -169,18 +167,9 @@ def test_kf_maths_match_stone_soup_on_synthetic_drives(route: str) -> None:
     assert assert_kf_maths_match_stone_soup(drive, 60.0) > 300
 
 
-@pytest.fixture(scope="module")
-def shared_drives(aslan_dir: Path, kitti_dir: Path, comma_dir: Path) -> list[Drive]:
-    return [
-        load(aslan_dir / "aslan-20220409115940.pickle")[0],
-        load(kitti_dir / "2011_09_26" / "2011_09_26_drive_0005_sync")[0],
-        load(comma_dir)[0],
-    ]
-
-
 @pytest.mark.shared
 @pytest.mark.parametrize("which", [0, 1, 2], ids=["aslan", "kitti", "comma2k19"])
 def test_kf_maths_match_stone_soup_on_shared_segments(
-    shared_drives: list[Drive], which: int
+    filter_parity_drives: list[Drive], which: int
 ) -> None:
-    assert assert_kf_maths_match_stone_soup(shared_drives[which], 60.0) > 100
+    assert assert_kf_maths_match_stone_soup(filter_parity_drives[which], 60.0) > 100

@@ -15,7 +15,6 @@ covariances within 2.2e-19 m^2.
 
 from __future__ import annotations
 
-from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -27,7 +26,6 @@ from posbench.predictors.kalman.kf import KalmanBank
 from posbench.replay.loop import replay
 from posbench.replay.prepare import prepare_drive
 from posbench.scenarios.drive import Drive
-from posbench.scenarios.loaders import load
 from posbench.scenarios.synthetic import default_drives, generate_drive
 
 TOL_M = 1e-9
@@ -74,22 +72,13 @@ def test_rows_answer_as_the_members_under_other_options(options: dict[str, Any])
     assert_same_answers(d, "outages", "native", **options)
 
 
-@pytest.fixture(scope="module")
-def shared_drives(aslan_dir: Path, kitti_dir: Path, comma_dir: Path) -> list[Drive]:
-    return [
-        load(aslan_dir / "aslan-20220409115940.pickle")[0],
-        load(kitti_dir / "2011_09_26" / "2011_09_26_drive_0005_sync")[0],
-        load(comma_dir)[0],
-    ]
-
-
 @pytest.mark.parametrize("which", [0, 1, 2], ids=["aslan", "kitti", "comma2k19"])
 @pytest.mark.parametrize("dropouts", ["none", "outages"])
 def test_rows_answer_as_the_members_on_shared_drives(
-    shared_drives: list[Drive], which: int, dropouts: str
+    filter_parity_drives: list[Drive], which: int, dropouts: str
 ) -> None:
     for profile in ("native", "rtk"):
-        assert_same_answers(shared_drives[which], dropouts, profile)
+        assert_same_answers(filter_parity_drives[which], dropouts, profile)
 
 
 def test_building_predictors_leaves_numba_unimported() -> None:
