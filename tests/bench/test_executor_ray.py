@@ -29,7 +29,9 @@ if os.environ.get("CI"):
 else:
     ray = pytest.importorskip("ray")
 
-pytestmark = pytest.mark.slow  # each Ray start costs ~5 s; the whole file runs in ~45 s
+# each Ray start costs ~5 s; the whole file runs in ~45 s; serial: `--address auto` must find
+# this file's Ray, not another worker's
+pytestmark = [pytest.mark.slow, pytest.mark.serial]
 
 CFG = RunConfig(predictors=("cv", "kf"))
 LATENCY = ("latency_us", "query_us", "covariance_us")

@@ -17,7 +17,10 @@ from pathlib import Path
 import pytest
 from helpers import HAS_PROC, Started
 
-pytestmark = pytest.mark.skipif(not HAS_PROC, reason="reads processes from /proc (Linux)")
+pytestmark = [
+    pytest.mark.skipif(not HAS_PROC, reason="reads processes from /proc (Linux)"),
+    pytest.mark.serial,  # children must be gone within deadlines
+]
 
 #: the issue's target: no process left this long after its parent is killed [s]
 GONE_WITHIN_S = 10.0

@@ -41,7 +41,8 @@ from test_view_web import ROOT, free_port_pair, read_until
 
 from posbench.recording import web as rerun_web
 
-pytestmark = [pytest.mark.browser, pytest.mark.slow]
+# serial: a software-WebGL browser and a server on free ports, within deadlines
+pytestmark = [pytest.mark.browser, pytest.mark.slow, pytest.mark.serial]
 
 PREDICTORS = ("cv", "kf")
 VIEWPORT = {"width": 1600, "height": 1000}

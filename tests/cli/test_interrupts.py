@@ -26,6 +26,8 @@ from helpers import HAS_PROC, Started, alive
 
 from posbench.cli import INTERRUPTED, INTERRUPTED_LINE
 
+pytestmark = pytest.mark.serial  # signals sent at moments polled for, within deadlines
+
 needs_proc = pytest.mark.skipif(not HAS_PROC, reason="reads processes from /proc (Linux)")
 
 

@@ -19,6 +19,8 @@ from helpers import ROOT, assert_one_error_line, bench
 from posbench.errors import UsageError
 from posbench.recording import web as rerun_web
 
+pytestmark = pytest.mark.serial  # serves free ports, read within deadlines
+
 
 def free_port_pair() -> int:
     """A port N with N and N+1 both free on 127.0.0.1 (the OS picks N)."""

@@ -48,11 +48,22 @@ def assert_same_answers(drive: Drive, dropouts: str, profile: str, **options: An
     assert fast.best == ref.best and fast.horizon_best == ref.horizon_best
 
 
-@pytest.mark.parametrize("dropouts", ["none", "outages"])
-@pytest.mark.parametrize("profile", ["rtk", "native"])
-def test_rows_answer_as_the_members_on_synthetic_drives(dropouts: str, profile: str) -> None:
-    for d in default_drives():
-        assert_same_answers(d, dropouts, profile)
+#: which default drives each (profile, dropouts) pair replays: every drive under both
+#: profiles and both dropout settings, each pair on half the drives (the member objects
+#: are slow Python)
+SYNTHETIC_CASES = {
+    ("rtk", "none"): (0, 1),
+    ("native", "outages"): (0, 1),
+    ("rtk", "outages"): (2, 3),
+    ("native", "none"): (2, 3),
+}
+
+
+@pytest.mark.parametrize(("profile", "dropouts"), SYNTHETIC_CASES, ids="-".join)
+def test_rows_answer_as_the_members_on_synthetic_drives(profile: str, dropouts: str) -> None:
+    drives = default_drives()
+    for i in SYNTHETIC_CASES[profile, dropouts]:
+        assert_same_answers(drives[i], dropouts, profile)
 
 
 OPTIONS = [

@@ -302,6 +302,7 @@ def _ray():
 
 
 @pytest.mark.slow
+@pytest.mark.serial  # a local Ray, one at a time (tests/bench/test_executor_ray.py)
 def test_readme_example_under_ray(plugin_dir, tmp_path):
     """The guide's import-path example on `--executor ray`: the error figures of a local run."""
     _ray()
@@ -311,6 +312,7 @@ def test_readme_example_under_ray(plugin_dir, tmp_path):
 
 
 @pytest.mark.slow
+@pytest.mark.serial
 def test_ray_workers_get_the_plugin_folder(plugin_dir, monkeypatch):
     """A module the driver imports through its sys.path only (not PYTHONPATH, not the
     current folder, both of which Ray passes on by itself) is found by the workers because

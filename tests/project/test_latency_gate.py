@@ -33,6 +33,8 @@ from posbench.replay.loop import GPS, QUERY, events, feed, fix_sigma, replay
 from posbench.replay.prepare import prepare_drive
 from posbench.scenarios.synthetic import generate_drive
 
+pytestmark = pytest.mark.serial  # timed steps: alone, not beside other tests' work
+
 BUDGETS = json.loads((Path(__file__).with_name("latency_budgets.json")).read_text())
 HORIZON_S = 0.2  # the future query after each fix [s] (RunConfig's)
 ROUNDS = 300  # the benchmarks' timed calls, each on a fresh copy (setup, checks untimed)
