@@ -5,11 +5,27 @@ without it, but fail when the ``CI`` environment variable is set."""
 from __future__ import annotations
 
 import json
+import os
 import subprocess
 from pathlib import Path
 
-import pytest
-from helpers import ROOT, bench, chromium_executable, missing
+# A pytest-xdist worker starts with COLUMNS=80 and LINES=24 in its environment whatever the
+# command's own were; the tests read COLUMNS as a user's terminal sets it, so each worker
+# takes the values the controller started with (before anything builds a console from them).
+_TERMINAL = ("COLUMNS", "LINES")
+if "PYTEST_XDIST_WORKER" in os.environ:
+    for _name in _TERMINAL:
+        _value = os.environ.get(f"POSBENCH_TESTS_{_name}", "")
+        if _value:
+            os.environ[_name] = _value
+        else:
+            os.environ.pop(_name, None)
+else:
+    for _name in _TERMINAL:
+        os.environ[f"POSBENCH_TESTS_{_name}"] = os.environ.get(_name, "")
+
+import pytest  # noqa: E402
+from helpers import ROOT, bench, chromium_executable, missing  # noqa: E402
 
 SHARED = ROOT.parent / "shared"
 
