@@ -27,6 +27,14 @@ from posbench.scoring.schema import scored_mask
 TEXT = ("dataset", "drive", "predictor")
 #: what :func:`posbench.scoring.schema.scored_mask` reads
 MASK_COLUMNS = ("x_ref", "y_ref", "warmup")
+#: on disk, a predictor with at most this many rows (~30 min of drives at 20 queries/s;
+#: ~25 bytes a row and column, ~10 MB) is read once, every column, and held for the reads
+#: of it that follow (aggregation reads a predictor's rows for each figure family): a small
+#: run's reads cost one pass over the parts, not one per family. A larger predictor is read
+#: from the parts each time, so what is held never grows with drive hours.
+HOLD_ROWS = 50_000
+#: how many predictors' rows are held at most (a predictor, its baseline and cv)
+HOLD_PREDICTORS = 3
 
 
 def write_part(folder: Path, traces: pd.DataFrame, name: str) -> Path:
@@ -105,6 +113,10 @@ class TraceSet:
         self._part_drives: list[list[str]] | None = None
         #: in memory: the drive column's codes and names (:func:`pandas.factorize`, once)
         self._drive_codes: tuple[np.ndarray, list[str]] | None = None
+        #: on disk: per part, rows per predictor (None: a row group holds several)
+        self._part_counts: list[dict[str, int] | None] | None = None
+        #: on disk: small predictors' rows, read once (:data:`HOLD_ROWS`), last used last
+        self._held: dict[str, pd.DataFrame] = {}
 
     # -- what it holds ------------------------------------------------------------------
     @property
@@ -168,8 +180,15 @@ class TraceSet:
             if keep is not None:
                 df = df.loc[keep]
             if columns is not None:
-                df = df[[c for c in columns if c in df.columns]] if not df.empty else df
+                keep_cols = list(dict.fromkeys(c for c in columns if c in df.columns))
+                df = df[keep_cols] if not df.empty else df
             return lean_traces(df)
+        if predictor is not None and drive is None:
+            held = self._held_rows(predictor)
+            if held is not None:  # a new frame: the caller may add columns to it
+                if columns is None:
+                    return held.copy(deep=False)
+                return held[list(dict.fromkeys(c for c in columns if c in held.columns))]
         cols = None if columns is None else [c for c in columns if c in self.columns]
         parts = self.parts
         if drive is not None:
@@ -179,6 +198,32 @@ class TraceSet:
         frames = [read_part(p, cols, predictor, drive) for p in parts]
         frames = [f for f in frames if len(f)] or frames[:1]
         return _concat(frames)
+
+    def _held_rows(self, predictor: str) -> pd.DataFrame | None:
+        """On disk: ``predictor``'s rows, every column, in memory, when it has at most
+        :data:`HOLD_ROWS` (read once, then held; see there); else None."""
+        if predictor in self._held:
+            self._held[predictor] = self._held.pop(predictor)  # last used last
+            return self._held[predictor]
+        counts = self._counts_per_part()
+        if any(c is None for c in counts):
+            return None
+        n = sum(c.get(predictor, 0) for c in counts if c is not None)
+        if n == 0 or n > HOLD_ROWS:
+            return None
+        parts = [p for p, c in zip(self.parts, counts, strict=True) if c and predictor in c]
+        held = _concat([read_part(p, None, predictor) for p in parts])
+        self._held[predictor] = held
+        while len(self._held) > HOLD_PREDICTORS:
+            del self._held[next(iter(self._held))]
+        return held
+
+    def _counts_per_part(self) -> list[dict[str, int] | None]:
+        """Per part, its rows per predictor, from the row groups' statistics (None for a
+        part whose row groups do not each hold one predictor)."""
+        if self._part_counts is None:
+            self._part_counts = [_rows_per_value(p, "predictor") for p in self.parts]
+        return self._part_counts
 
     def predictors(self) -> list[str]:
         """The predictors, in the order they first appear (the run's order)."""
@@ -286,6 +331,30 @@ def _values(path: Path, column: str) -> list[str]:
                 col = pf.read_row_group(i, columns=[column]).column(0).to_pandas()
                 out.update(dict.fromkeys(str(v) for v in pd.unique(col.dropna())))
     return list(out)
+
+
+def _rows_per_value(path: Path, column: str) -> dict[str, int] | None:
+    """Rows per value of text ``column`` in part ``path``, from its row groups' statistics;
+    None when a row group holds more than one value (or has no statistics)."""
+    import pyarrow.parquet as pq
+
+    out: dict[str, int] = {}
+    meta = pq.ParquetFile(path).metadata
+    names = meta.schema.names
+    if column not in names:
+        return None
+    j = names.index(column)
+    for i in range(meta.num_row_groups):
+        group = meta.row_group(i)
+        if group.num_rows == 0:
+            continue
+        stats = group.column(j).statistics
+        if stats is None or not stats.has_min_max or stats.min != stats.max:
+            return None
+        v = stats.min
+        key = v.decode() if isinstance(v, bytes) else str(v)
+        out[key] = out.get(key, 0) + group.num_rows
+    return out
 
 
 def lean_traces(traces: pd.DataFrame) -> pd.DataFrame:

@@ -13,6 +13,7 @@ import pandas as pd
 import pytest
 from helpers import without_timings
 
+import posbench.scoring.trace_set as trace_set_module
 from posbench.aggregation.aggregate import aggregate
 from posbench.config import RunConfig
 from posbench.replay.runner import run
@@ -64,6 +65,51 @@ def test_every_figure_from_parts_equals_the_in_memory_one(both):
             a["predictors"][name]["latency_us"]["count"]
             == b["predictors"][name]["latency_us"]["count"]
         )
+
+
+@pytest.mark.parametrize("hold_rows", [0, 10**9], ids=["from the parts", "held"])
+def test_every_figure_is_the_same_whether_a_predictor_is_held_or_read_again(
+    both, monkeypatch, hold_rows
+):
+    memory, spilled = both
+    monkeypatch.setattr(trace_set_module, "HOLD_ROWS", hold_rows)
+    a = aggregate(memory, CFG, models={})
+    b = aggregate(spilled, CFG, models={})
+    assert json.dumps(without_timings(a), sort_keys=True, default=str) == json.dumps(
+        without_timings(b), sort_keys=True, default=str
+    )
+
+
+def test_a_small_predictor_is_read_from_the_parts_once(both, monkeypatch):
+    """Up to HOLD_ROWS rows, a predictor's reads after the first come from what the first
+    read: the same rows, columns, dtypes and categories as reads from the parts; beyond, no
+    read is held."""
+    _, spilled = both
+    calls: list[str] = []
+    read_part = trace_set_module.read_part
+
+    def counted(path, *args, **kwargs):
+        calls.append(str(path))
+        return read_part(path, *args, **kwargs)
+
+    monkeypatch.setattr(trace_set_module, "read_part", counted)
+    asks = [(["drive", "error_m"], "kf"), (None, "kf"), (["kind", "x", "drive", "x"], "kf")]
+    monkeypatch.setattr(trace_set_module, "HOLD_ROWS", 0)
+    again = trace_set(spilled)
+    want = [again.frame(cols, name) for cols, name in asks]
+    want_scored = again.scored("kf", ["t_query", "error_m", "drive"])
+    assert len(calls) == 3 * len(again.parts) + len(again.parts)  # every read, every part
+    monkeypatch.setattr(trace_set_module, "HOLD_ROWS", 10**9)
+    calls.clear()
+    held = trace_set(spilled)
+    got = [held.frame(cols, name) for cols, name in asks]
+    got_scored = held.scored("kf", ["t_query", "error_m", "drive"])
+    for g, w in [*zip(got, want, strict=True), (got_scored, want_scored)]:
+        pd.testing.assert_frame_equal(g, w)  # categories included
+    kf_parts = [p for p in held.parts if "kf" in trace_set_module._values(p, "predictor")]
+    assert 0 < len(calls) == len(kf_parts)  # once, only the parts that hold kf
+    got[0]["added"] = 1.0  # a caller's change is its own
+    assert "added" not in held.frame(None, "kf")
 
 
 def test_the_trace_set_reads_the_rows_of_the_frame(both, tmp_path):
