@@ -69,19 +69,3 @@ def clean_times(
     """
     t, idx = clean_index(t, what, warnings)
     return t, {k: take(v, idx) for k, v in cols.items()}
-
-
-def drop_nonfinite(
-    t: np.ndarray,
-    cols: Mapping[str, np.ndarray],
-    required: tuple[str, ...],
-    what: str,
-    warnings: list[str],
-) -> tuple[np.ndarray, dict[str, np.ndarray]]:
-    """Drop samples whose required columns are NaN/inf, counting them in ``warnings``."""
-    keep = np.ones(np.asarray(t).size, dtype=bool)
-    for k in required:
-        keep &= np.isfinite(cols[k])
-    if not np.all(keep):
-        warnings.append(f"{what}: dropped {int((~keep).sum())} samples with non-finite values")
-    return np.asarray(t)[keep], {k: v[keep] for k, v in cols.items()}

@@ -84,13 +84,6 @@ class Reference:
             return np.where(self.rolling, self.heading, np.nan), f"{self.source} yaw"
         return self.course, f"{self.source} course"
 
-    def gate_note(self) -> str:
-        """Why a position-derived course rate was gated (for an n/a reason)."""
-        return (
-            f"{self.source} course rate unusable below {self.rate_gate_mps:.1f} m/s "
-            f"(position noise {self.noise_m:.2f} m)"
-        )
-
 
 #: the kinematics of a drive as the GPS implies them (the name the checks had first)
 GpsKinematics = Reference

@@ -207,13 +207,6 @@ def _check_profile(profile: str) -> None:
         raise DataError(None, f"unknown GPS profile {profile!r}; choose one of {GPS_PROFILES}")
 
 
-def nominal_accuracy_m(profile: str) -> float:
-    """Horizontal RMS error [m] of a noise profile (sqrt of both axes' variances)."""
-    _check_profile(profile)
-    w, g, _ = NOISE_PARAMS[profile]
-    return float(np.sqrt(2.0 * (w * w + g * g)))
-
-
 def true_sigma_m(profile: str) -> float:
     """True per-axis 1-sigma [m] of a profile's fix error (white and Gauss-Markov together)."""
     _check_profile(profile)

@@ -91,11 +91,6 @@ class InputType:
             for f in dataclasses.fields(cls)  # type: ignore[arg-type]
         }
 
-    @classmethod
-    def flat_name(cls, field: str) -> str:
-        """A field's flat name."""
-        return {f.name: f.metadata["flat"] for f in dataclasses.fields(cls)}[field]  # type: ignore[arg-type]
-
 
 @dataclass(frozen=True)
 class GnssInput(InputType):

@@ -29,8 +29,8 @@ if os.environ.get("CI"):
 else:
     ray = pytest.importorskip("ray")
 
-# each Ray start costs ~5 s; the whole file runs in ~45 s; serial: `--address auto` must find
-# this file's Ray, not another worker's
+# each Ray start costs ~5 s; the whole file runs in ~45 s; serial: one local Ray at a time
+# (its processes and ports), not one per test worker
 pytestmark = [pytest.mark.slow, pytest.mark.serial]
 
 CFG = RunConfig(predictors=("cv", "kf"))

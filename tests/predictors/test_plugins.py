@@ -304,11 +304,11 @@ def _ray():
 @pytest.mark.slow
 @pytest.mark.serial  # a local Ray, one at a time (tests/bench/test_executor_ray.py)
 def test_readme_example_under_ray(plugin_dir, tmp_path):
-    """The guide's import-path example on `--executor ray`: the error figures of a local run."""
+    """The guide's import-path example on `--executor ray`: the error figures the guide
+    prints, which a local run gives (test_readme_example_by_import_path)."""
     _ray()
-    (args, _), _, _ = readme_runs()
-    local = run_readme_command(args, {}, tmp_path / "local", [plugin_dir])["_rows"]
-    run_readme_command(args, local, tmp_path / "ray", [plugin_dir], extra=("--executor", "ray"))
+    (args, rows), _, _ = readme_runs()
+    run_readme_command(args, rows, tmp_path / "ray", [plugin_dir], extra=("--executor", "ray"))
 
 
 @pytest.mark.slow
