@@ -59,7 +59,9 @@ SYNTHETIC_CASES = {
 }
 
 
-@pytest.mark.parametrize(("profile", "dropouts"), SYNTHETIC_CASES, ids="-".join)
+@pytest.mark.parametrize(
+    ("profile", "dropouts"), SYNTHETIC_CASES, ids=[f"{p}-{d}" for p, d in SYNTHETIC_CASES]
+)
 def test_rows_answer_as_the_members_on_synthetic_drives(profile: str, dropouts: str) -> None:
     drives = default_drives()
     for i in SYNTHETIC_CASES[profile, dropouts]:
