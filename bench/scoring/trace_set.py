@@ -14,8 +14,9 @@ figures do not depend on where the traces are.
 from __future__ import annotations
 
 import os
-from collections.abc import Iterator, Sequence
+from collections.abc import Iterable, Iterator, Sequence
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pandas as pd
@@ -113,8 +114,11 @@ class TraceSet:
         self._part_drives: list[list[str]] | None = None
         #: in memory: the drive column's codes and names (:func:`pandas.factorize`, once)
         self._drive_codes: tuple[np.ndarray, list[str]] | None = None
-        #: on disk: per part, rows per predictor (None: a row group holds several)
-        self._part_counts: list[dict[str, int] | None] | None = None
+        #: on disk: rows per predictor of the parts looked at so far, by part index (None: a
+        #: row group holds several predictors)
+        self._part_counts: dict[int, dict[str, int] | None] = {}
+        #: on disk: predictors found too large to hold, or in parts that cannot say
+        self._not_held: set[str] = set()
         #: on disk: small predictors' rows, read once (:data:`HOLD_ROWS`), last used last
         self._held: dict[str, pd.DataFrame] = {}
 
@@ -180,15 +184,14 @@ class TraceSet:
             if keep is not None:
                 df = df.loc[keep]
             if columns is not None:
-                keep_cols = list(dict.fromkeys(c for c in columns if c in df.columns))
-                df = df[keep_cols] if not df.empty else df
+                df = df[_present(columns, df.columns)] if not df.empty else df
             return lean_traces(df)
         if predictor is not None and drive is None:
             held = self._held_rows(predictor)
             if held is not None:  # a new frame: the caller may add columns to it
                 if columns is None:
                     return held.copy(deep=False)
-                return held[list(dict.fromkeys(c for c in columns if c in held.columns))]
+                return held[_present(columns, held.columns)]
         cols = None if columns is None else [c for c in columns if c in self.columns]
         parts = self.parts
         if drive is not None:
@@ -205,25 +208,27 @@ class TraceSet:
         if predictor in self._held:
             self._held[predictor] = self._held.pop(predictor)  # last used last
             return self._held[predictor]
-        counts = self._counts_per_part()
-        if any(c is None for c in counts):
+        if predictor in self._not_held:
             return None
-        n = sum(c.get(predictor, 0) for c in counts if c is not None)
-        if n == 0 or n > HOLD_ROWS:
+        n, parts = 0, []
+        for i, path in enumerate(self.parts):  # until the rows exceed HOLD_ROWS, no further
+            if i not in self._part_counts:
+                self._part_counts[i] = _rows_per_value(path, "predictor")
+            counts = self._part_counts[i]
+            if counts is None or n + counts.get(predictor, 0) > HOLD_ROWS:
+                self._not_held.add(predictor)
+                return None
+            if predictor in counts:
+                n += counts[predictor]
+                parts.append(path)
+        if n == 0:
+            self._not_held.add(predictor)
             return None
-        parts = [p for p, c in zip(self.parts, counts, strict=True) if c and predictor in c]
         held = _concat([read_part(p, None, predictor) for p in parts])
         self._held[predictor] = held
         while len(self._held) > HOLD_PREDICTORS:
             del self._held[next(iter(self._held))]
         return held
-
-    def _counts_per_part(self) -> list[dict[str, int] | None]:
-        """Per part, its rows per predictor, from the row groups' statistics (None for a
-        part whose row groups do not each hold one predictor)."""
-        if self._part_counts is None:
-            self._part_counts = [_rows_per_value(p, "predictor") for p in self.parts]
-        return self._part_counts
 
     def predictors(self) -> list[str]:
         """The predictors, in the order they first appear (the run's order)."""
@@ -323,10 +328,9 @@ def _values(path: Path, column: str) -> list[str]:
             return []
         j = pf.metadata.schema.names.index(column)
         for i in range(pf.metadata.num_row_groups):
-            stats = pf.metadata.row_group(i).column(j).statistics
-            if stats is not None and stats.has_min_max and stats.min == stats.max:
-                v = stats.min
-                out[v.decode() if isinstance(v, bytes) else str(v)] = None
+            value = _single_value(pf.metadata.row_group(i).column(j).statistics)
+            if value is not None:
+                out[value] = None
             else:  # dictionary codes: cheap to read, one row group at a time
                 col = pf.read_row_group(i, columns=[column]).column(0).to_pandas()
                 out.update(dict.fromkeys(str(v) for v in pd.unique(col.dropna())))
@@ -348,13 +352,26 @@ def _rows_per_value(path: Path, column: str) -> dict[str, int] | None:
         group = meta.row_group(i)
         if group.num_rows == 0:
             continue
-        stats = group.column(j).statistics
-        if stats is None or not stats.has_min_max or stats.min != stats.max:
+        value = _single_value(group.column(j).statistics)
+        if value is None:
             return None
-        v = stats.min
-        key = v.decode() if isinstance(v, bytes) else str(v)
-        out[key] = out.get(key, 0) + group.num_rows
+        out[value] = out.get(value, 0) + group.num_rows
     return out
+
+
+def _single_value(stats: Any) -> str | None:
+    """The one value a row group's column holds, from its statistics (pyarrow's
+    ``Statistics``); None when it holds several or has no statistics."""
+    if stats is None or not stats.has_min_max or stats.min != stats.max:
+        return None
+    v = stats.min
+    return v.decode() if isinstance(v, bytes) else str(v)
+
+
+def _present(columns: Sequence[str], have: Iterable[object]) -> list[str]:
+    """``columns`` that are in ``have``, in their order, each once."""
+    present = set(have)
+    return list(dict.fromkeys(c for c in columns if c in present))
 
 
 def lean_traces(traces: pd.DataFrame) -> pd.DataFrame:

@@ -25,14 +25,14 @@ from typing import Any
 
 import numpy as np
 import pytest
-from reference_filters.banks import member_bank
+from reference_filters.banks import SYNTHETIC_CASES, SYNTHETIC_IDS, member_bank, synthetic_drives
 
 from posbench.config import RunConfig
 from posbench.predictors.kalman.ekf import EkfBank
 from posbench.replay.loop import replay
 from posbench.replay.prepare import prepare_drive
 from posbench.scenarios.drive import Drive
-from posbench.scenarios.synthetic import default_drives, generate_drive
+from posbench.scenarios.synthetic import generate_drive
 
 TOL_M = 1e-9
 #: under the option sets, where members lose their heading more often (module docstring)
@@ -58,24 +58,10 @@ def assert_same_answers(
     assert fast.fix_variance(0.5) == ref.fix_variance(0.5)
 
 
-#: which default drives each (profile, dropouts) pair replays: every drive under both
-#: profiles and both dropout settings, each pair on half the drives (the member objects
-#: are slow Python)
-SYNTHETIC_CASES = {
-    ("rtk", "none"): (0, 1),
-    ("native", "outages"): (0, 1),
-    ("rtk", "outages"): (2, 3),
-    ("native", "none"): (2, 3),
-}
-
-
-@pytest.mark.parametrize(
-    ("profile", "dropouts"), SYNTHETIC_CASES, ids=[f"{p}-{d}" for p, d in SYNTHETIC_CASES]
-)
+@pytest.mark.parametrize(("profile", "dropouts"), SYNTHETIC_CASES, ids=SYNTHETIC_IDS)
 def test_rows_answer_as_the_members_on_synthetic_drives(profile: str, dropouts: str) -> None:
-    drives = default_drives()
-    for i in SYNTHETIC_CASES[profile, dropouts]:
-        assert_same_answers(drives[i], dropouts, profile)
+    for d in synthetic_drives(profile, dropouts):
+        assert_same_answers(d, dropouts, profile)
 
 
 OPTIONS = [

@@ -10,9 +10,29 @@ from posbench.predictors.kalman.course_heading import CourseHeading
 from posbench.predictors.kalman.ekf import EkfBank
 from posbench.predictors.kalman.kf import KalmanBank
 from posbench.predictors.kalman.row_bank import RowBank
+from posbench.scenarios.drive import Drive
+from posbench.scenarios.synthetic import default_drives
 from reference_filters.ctra_ekf import CtraEkf
 from reference_filters.linear_kalman import LinearKalman
 from reference_filters.model_bank import ModelBank
+
+#: the parity tests' synthetic cases: the default drives (by index) each (GPS profile,
+#: dropouts) pair replays; every drive under both profiles and both dropout settings, each
+#: pair on half the drives (the member objects are slow Python)
+SYNTHETIC_CASES = {
+    ("rtk", "none"): (0, 1),
+    ("native", "outages"): (0, 1),
+    ("rtk", "outages"): (2, 3),
+    ("native", "none"): (2, 3),
+}
+#: their test ids: ``rtk-none``, ...
+SYNTHETIC_IDS = [f"{profile}-{dropouts}" for profile, dropouts in SYNTHETIC_CASES]
+
+
+def synthetic_drives(profile: str, dropouts: str) -> list[Drive]:
+    """The default drives the case ``(profile, dropouts)`` of :data:`SYNTHETIC_CASES` replays."""
+    drives = default_drives()
+    return [drives[i] for i in SYNTHETIC_CASES[profile, dropouts]]
 
 
 def member_bank(bank: RowBank) -> ModelBank:
