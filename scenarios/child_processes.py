@@ -203,8 +203,10 @@ class WorkerPool(ProcessPoolExecutor):
         and that pipe are ``ProcessPoolExecutor`` internals (``_processes``,
         ``_result_queue``, ``_executor_manager_thread``: CPython 3.8 to 3.14), each read with a
         default: a version without one skips that step."""
+        # shutdown() forgets all three (sets them to None): read before it
         workers = list((getattr(self, "_processes", None) or {}).values())
-        results = getattr(self, "_result_queue", None)  # shutdown() forgets it
+        results = getattr(self, "_result_queue", None)
+        manager = getattr(self, "_executor_manager_thread", None)
         self.shutdown(wait=False, cancel_futures=True)
         for w in workers:
             with contextlib.suppress(ProcessLookupError, ValueError):  # gone, or closed
@@ -217,7 +219,6 @@ class WorkerPool(ProcessPoolExecutor):
         # concurrent.futures._python_exit checks without the pool's lock): racing with the
         # close, it printed "Exception ignored ... Bad file descriptor" after Ctrl-C. Waiting
         # for the thread here (it ends at once: nothing is left to wait for) leaves no race.
-        manager = getattr(self, "_executor_manager_thread", None)
         if manager is not None and manager.is_alive():
             manager.join(timeout=5.0)
 

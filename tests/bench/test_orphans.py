@@ -133,6 +133,23 @@ def test_a_pool_refuses_a_fork_server():
         WorkerPool(1, mp_context=mp.get_context("forkserver"))
 
 
+def test_an_interrupted_pool_has_ended_its_manager_thread():
+    """Left by an exception, a pool returns once its manager thread has ended: that thread
+    closes a wake-up pipe which the interpreter's exit writes to, and racing with the close
+    the exit printed "Exception ignored ... Bad file descriptor" after Ctrl-C (the wait was
+    there but read the thread after ``shutdown()`` had forgotten it, so never waited)."""
+    from posbench.scenarios.child_processes import WorkerPool
+
+    pool = WorkerPool(2)
+    futures = [pool.submit(time.sleep, 60) for _ in range(3)]
+    manager = pool._executor_manager_thread  # started by the first submit
+    assert manager is not None and manager.is_alive()
+    with pytest.raises(KeyboardInterrupt), pool:
+        raise KeyboardInterrupt
+    assert not manager.is_alive()
+    assert all(f.done() for f in futures)
+
+
 def test_children_end_with_their_parent_without_the_kernels_help(tmp_path):
     """Where the parent-death signal (Linux prctl) is not available, a thread in the child
     watches its parent and ends the child within ``PARENT_POLL_S`` seconds."""
