@@ -3,8 +3,9 @@
 The gate times every predictor as ``bench latency`` does (one process, one thread, warm,
 real fix steps of a replayed drive: :func:`posbench.predictor_tools.latency.time_predictors`)
 and holds each step's p50 and p99 to budgets in ``latency_budgets.json`` that are ratios
-to constant velocity's step timed in the same run (best of five interleaved rounds), so
-that neither a slower nor a busier machine flips it. A benchmark whose stats are missing
+to constant velocity's step timed in the same run (five interleaved rounds: a step p50
+ratio is the median of the rounds' ratios, each over cv's p50 of its round), so that
+neither a slower nor a busier machine flips it. A benchmark whose stats are missing
 (``--benchmark-disable``, xdist) fails the gate instead of passing by being skipped.
 
 The pytest-benchmark tests time one real step of a replayed drive per round: a fresh copy
