@@ -35,6 +35,15 @@ def latency(
     steps: Annotated[
         int, typer.Option(help="Fix steps to time per predictor (after warm-up).")
     ] = 2000,
+    rounds: Annotated[
+        int,
+        typer.Option(
+            help="Time the predictors in turn this many times: each percentile is the lowest "
+            "of its rounds, each ratio to cv the median of the rounds' ratios (each over cv "
+            "timed in the same round), so that a slow or fast stretch of the machine does "
+            "not decide a figure."
+        ),
+    ] = 5,
     data: DataOpt = None,
     as_json: Annotated[bool, typer.Option("--json", help="Print JSON instead of tables.")] = False,
     model: ModelOpt = None,
@@ -43,11 +52,13 @@ def latency(
     verbose: VerboseOpt = False,
 ) -> None:
     """Per-call latency percentiles (us) in one process and thread, each predictor's step as a
-    ratio to constant velocity's (timed in the same run: ratios carry across machines), the
+    ratio to constant velocity's (timed in the same run: ratios carry across machines; with
+    --rounds, the median of the rounds' ratios, each over cv timed in the same round), the
     lstm's stages and batch throughput, beside the paper's figures (2 ms fit + 2 ms LSTM,
     4-6 ms per step)."""
     # every option is checked before a drive is loaded or a predictor timed
     check_at_least(steps, 1, "--steps")
+    check_at_least(rounds, 1, "--rounds")
     check_data_paths(data)
     names = list(parse_predictor_names(predictors or DEFAULT_TIMED))
     if "cv" not in names:  # the yardstick of the ratios
@@ -62,7 +73,7 @@ def latency(
         lstm_stages,
         ratios_to_cv,
         single_thread,
-        time_predictor,
+        time_predictors,
     )
     from posbench.predictors.registry import available
 
@@ -74,9 +85,16 @@ def latency(
     drive = max(drives, key=lambda d: len(d.gps))
     res: dict[str, Any] = {}
     with reporter().phase("timing...") as status:
-        for n in names:
-            status(f"timing {n} on {drive.name}...")
-            res[n] = time_predictor(n, drive, steps, options.get(n))
+        res.update(
+            time_predictors(
+                names,
+                drive,
+                steps,
+                options,
+                rounds,
+                on_timing=lambda n, k: status(f"timing {n} on {drive.name}, round {k}/{rounds}..."),
+            )
+        )
         if "lstm" in names:
             status("timing lstm stages...")
             res["lstm_stages"] = lstm_stages(drive, steps)
@@ -123,7 +141,7 @@ def latency(
             "paper",
         ),
         rows,
-        title=f"per-call latency (us) on {drive.name} (one process, one thread)",
+        title=f"per-call latency (us) on {drive.name}, one thread, {rounds} rounds",
     )
     if "lstm_stages" in res:
         pp = {

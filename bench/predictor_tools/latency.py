@@ -66,15 +66,19 @@ def time_predictors(
     steps: int,
     options: dict[str, dict[str, Any]] | None = None,
     rounds: int = 1,
+    on_timing: Callable[[str, int], object] | None = None,
 ) -> dict[str, dict[str, Any]]:
     """:func:`time_predictor` for each name; with ``rounds`` > 1 the predictors are timed in
     turn that many times and each percentile is the lowest of its rounds, so that a burst
     of load from another process, which hits one round, does not decide a figure. Each
     predictor's ``step_p50_rounds`` lists its rounds' step p50 [us] in order, which
-    :func:`ratios_to_cv` pairs with cv's of the same round."""
+    :func:`ratios_to_cv` pairs with cv's of the same round. ``on_timing(name, round)``
+    (rounds from 1) is called before each timing (a progress line)."""
     out: dict[str, dict[str, Any]] = {}
-    for _ in range(rounds):
+    for round_no in range(1, rounds + 1):
         for n in names:
+            if on_timing is not None:
+                on_timing(n, round_no)
             r = time_predictor(n, drive, steps, (options or {}).get(n))
             if n not in out:
                 out[n] = {**r, "step_p50_rounds": [r["step_us"]["p50"]]}

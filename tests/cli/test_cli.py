@@ -140,9 +140,14 @@ def test_installed_package_ships_tuned_parameters_and_model():
 
 @pytest.mark.slow
 def test_latency_json_shape():
-    r = bench("latency", "-p", "cv,lstm", "--steps", "200", "--json")
+    r = bench("latency", "-p", "cv,lstm", "--steps", "200", "--rounds", "2", "--json")
     assert r.returncode == 0, r.stderr
     res = json.loads(r.stdout)
+    cv_rounds, lstm_rounds = res["cv"]["step_p50_rounds"], res["lstm"]["step_p50_rounds"]
+    assert len(cv_rounds) == len(lstm_rounds) == 2  # timed in turn, twice
+    assert res["cv"]["step_us"]["p50"] == min(cv_rounds)  # the lowest of the rounds
+    ratios = sorted(a / b for a, b in zip(lstm_rounds, cv_rounds, strict=True))
+    assert res["ratio_to_cv"]["lstm"]["step_p50"] == pytest.approx(sum(ratios) / 2)
     for name in ("cv", "lstm"):
         assert {"p50", "p99"} <= set(res[name]["step_us"]) and {"p50", "p99"} <= set(
             res[name]["query_us"]

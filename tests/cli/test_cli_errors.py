@@ -147,6 +147,7 @@ CASES = [
     ("tune-drives-0", "tune kf --drives 0", "--drives", True),
     ("latency-predictor", "latency -p nope", "nope", False),
     ("latency-steps-0", "latency --steps 0", "--steps", False),
+    ("latency-rounds-0", "latency --rounds 0", "--rounds", False),
     ("latency-model-missing", "latency -p lstm --model lstm={ws}/nope.onnx", "nope.onnx", False),
     ("train-epochs-0", "train --epochs 0 --synthetic 1", "--epochs", False),
     ("train-out-is-a-file", "train --synthetic 1 --out {ws}/notes.txt", "notes.txt", False),
