@@ -223,8 +223,10 @@ def test_latency_gate(prepared):
     for name in ("cv", "kf", "ekf", "lstm", "hybrid"):
         spread = ratio[name]["p99_over_p50"]
         assert spread <= BUDGETS["max_step_p99_over_p50"], (name, spread)
-    lstm_kf = res["lstm"]["step_us"]["p50"] + res["kf"]["step_us"]["p50"]
-    hybrid = res["hybrid"]["step_us"]["p50"] / lstm_kf
+    # the hybrid over its parts round by round, the median of the rounds (the lowest p50 of
+    # each could come from different rounds: different stretches of the machine's speed)
+    rounds = {n: np.array(res[n]["step_p50_rounds"]) for n in ("hybrid", "lstm", "kf")}
+    hybrid = float(np.median(rounds["hybrid"] / (rounds["lstm"] + rounds["kf"])))
     assert hybrid <= BUDGETS["max_hybrid_step_p50_over_lstm_plus_kf"], hybrid
     assert fused[0] / staged[0] <= BUDGETS["max_ratio_lstm_fused_over_staged_step_p50"]
     assert pos50 / res["cv"]["step_us"]["p50"] <= BUDGETS["max_lstm_position_at_p50_x_cv_step"]
