@@ -98,8 +98,8 @@ def ratios_to_cv(results: dict[str, Any]) -> dict[str, dict[str, float]]:
     Timed in several rounds (:func:`time_predictors`), the p50 ratio is the median of the
     rounds' ratios, each round's p50 over cv's p50 of that round (timed just before it): a
     round in which cv ran unusually fast, or the predictor unusually slow, does not decide
-    it, as it could when the lowest p50 of each was divided (kf 4.2x cv once in CI, where
-    the same code measures 2.1-3.2x)."""
+    it, as it could when the lowest p50 of each was divided (kf 4.2x cv once in CI; the
+    rounds' median read the same code at 3.0-3.6x in 8 processes on the development machine)."""
     cv_result = results.get("cv", {})
     cv = cv_result.get("step_us", {}).get("p50")
     if not cv:

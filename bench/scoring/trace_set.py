@@ -192,7 +192,7 @@ class TraceSet:
                 if columns is None:
                     return held.copy(deep=False)
                 return held[_present(columns, held.columns)]
-        cols = None if columns is None else [c for c in columns if c in self.columns]
+        cols = None if columns is None else _present(columns, self.columns)
         parts = self.parts
         if drive is not None:
             held = self._drives_per_part()
