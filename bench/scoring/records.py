@@ -12,7 +12,8 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from posbench.scoring.trace_set import TraceSet, write_part
+from posbench.scoring.trace_parts import write_part
+from posbench.scoring.trace_set import TraceSet
 
 
 @dataclass
@@ -55,7 +56,7 @@ class DriveRun:
     #: "" where none
     reference_gaps: str = ""
     #: where its traces are when the worker wrote them to disk
-    #: (:func:`posbench.scoring.trace_set.write_part`, one part per task, in predictor
+    #: (:func:`posbench.scoring.trace_parts.write_part`, one part per task, in predictor
     #: order): ``traces`` is then empty and these hold its ``trace_rows`` rows
     trace_parts: list[str] = field(default_factory=list)
     trace_rows: int = 0
@@ -105,7 +106,7 @@ class DriveRun:
 
     def spill(self, folder: Path, name: str) -> DriveRun:
         """This record with what grows with the drive's span - its traces
-        (:func:`~posbench.scoring.trace_set.write_part`), call durations and bound's rows -
+        (:func:`~posbench.scoring.trace_parts.write_part`), call durations and bound's rows -
         written to ``folder`` under ``name`` and dropped from memory: what remains is small
         and the same for a drive of any length, but for notes and fixes."""
         folder.mkdir(parents=True, exist_ok=True)

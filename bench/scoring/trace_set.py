@@ -2,13 +2,13 @@
 task, written by the worker that replayed it), read one predictor or one drive at a time.
 
 ``bench run`` keeps no drive's answers in the process that combines the figures: each worker
-writes its drive's traces as a part (:func:`write_part`, one row group per predictor) and
-returns a :class:`~posbench.scoring.records.DriveRun` that names the part. Aggregation, the
-figures and the saved run then read from the parts only the rows and columns they need
-(:meth:`TraceSet.scored`, :meth:`TraceSet.frame`), so what the combining process holds is one
-predictor's columns, never every answer of the run. A frame in memory (``bench score``, a
-notebook, the tests) answers the same calls, with the same rows in the same order: the
-figures do not depend on where the traces are.
+writes its drive's traces as a part (:mod:`posbench.scoring.trace_parts`: one row group per
+predictor) and returns a :class:`~posbench.scoring.records.DriveRun` that names the part.
+Aggregation, the figures and the saved run then read from the parts only the rows and
+columns they need (:meth:`TraceSet.scored`, :meth:`TraceSet.frame`), so what the combining
+process holds is one predictor's columns, never every answer of the run. A frame in memory
+(``bench score``, a notebook, the tests) answers the same calls, with the same rows in the
+same order: the figures do not depend on where the traces are.
 """
 
 from __future__ import annotations
@@ -16,16 +16,19 @@ from __future__ import annotations
 import os
 from collections.abc import Iterable, Iterator, Sequence
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 import pandas as pd
 
 from posbench.scoring.schema import scored_mask
+from posbench.scoring.trace_parts import (
+    TEXT,
+    concat_parts,
+    part_values,
+    read_part,
+    rows_per_value,
+)
 
-#: the text columns that aggregation and figures filter and group by, again and again: read
-#: as categoricals (dictionary-encoded), small codes instead of strings
-TEXT = ("dataset", "drive", "predictor")
 #: what :func:`posbench.scoring.schema.scored_mask` reads
 MASK_COLUMNS = ("x_ref", "y_ref", "warmup")
 #: on disk, a predictor with at most this many rows (~30 min of drives at 20 queries/s;
@@ -36,58 +39,6 @@ MASK_COLUMNS = ("x_ref", "y_ref", "warmup")
 HOLD_ROWS = 50_000
 #: how many predictors' rows are held at most (a predictor, its baseline and cv)
 HOLD_PREDICTORS = 3
-
-
-def write_part(folder: Path, traces: pd.DataFrame, name: str) -> Path:
-    """``traces`` (one drive's, or one drive and predictor's) as ``folder/name.parquet``, one
-    row group per predictor so that a read of one predictor skips the others; written to a
-    temporary name and renamed, so a part that exists is whole. The path."""
-    import pyarrow as pa
-    import pyarrow.parquet as pq
-
-    folder.mkdir(parents=True, exist_ok=True)
-    path = folder / f"{name}.parquet"
-    tmp = folder / f".{name}.{os.getpid()}.tmp"
-    writer = None
-    try:
-        for _, rows in traces.groupby("predictor", sort=False, observed=True):
-            table = pa.Table.from_pandas(rows, preserve_index=False)
-            if writer is None:
-                writer = pq.ParquetWriter(tmp, table.schema)
-            writer.write_table(table)
-        if writer is None:  # no rows: an empty part keeps the columns
-            pq.write_table(pa.Table.from_pandas(traces, preserve_index=False), tmp)
-        else:
-            writer.close()
-            writer = None
-        os.replace(tmp, path)
-    finally:
-        if writer is not None:
-            writer.close()
-        tmp.unlink(missing_ok=True)
-    return path
-
-
-def read_part(
-    path: str | Path,
-    columns: Sequence[str] | None = None,
-    predictor: str | None = None,
-    drive: str | None = None,
-) -> pd.DataFrame:
-    """One part's rows (of ``predictor`` only, and of ``drive`` only, given them), its text
-    columns as categoricals."""
-    import pyarrow.parquet as pq
-
-    cols = None if columns is None else list(dict.fromkeys(columns))
-    wanted = (("predictor", predictor), ("drive", drive))
-    filters = [(c, "==", v) for c, v in wanted if v is not None] or None
-    table = pq.read_table(
-        path,
-        columns=cols,
-        filters=filters,
-        read_dictionary=[c for c in TEXT if cols is None or c in cols],
-    )
-    return table.to_pandas()
 
 
 def as_trace_set(traces: TraceSet | pd.DataFrame) -> TraceSet:
@@ -200,7 +151,7 @@ class TraceSet:
             parts = parts or self.parts[:1]
         frames = [read_part(p, cols, predictor, drive) for p in parts]
         frames = [f for f in frames if len(f)] or frames[:1]
-        return _concat(frames)
+        return concat_parts(frames)
 
     def _held_rows(self, predictor: str) -> pd.DataFrame | None:
         """On disk: ``predictor``'s rows, every column, in memory, when it has at most
@@ -213,7 +164,7 @@ class TraceSet:
         n, parts = 0, []
         for i, path in enumerate(self.parts):  # until the rows exceed HOLD_ROWS, no further
             if i not in self._part_counts:
-                self._part_counts[i] = _rows_per_value(path, "predictor")
+                self._part_counts[i] = rows_per_value(path, "predictor")
             counts = self._part_counts[i]
             if counts is None or n + counts.get(predictor, 0) > HOLD_ROWS:
                 self._not_held.add(predictor)
@@ -224,7 +175,7 @@ class TraceSet:
         if n == 0:
             self._not_held.add(predictor)
             return None
-        held = _concat([read_part(p, None, predictor) for p in parts])
+        held = concat_parts([read_part(p, None, predictor) for p in parts])
         self._held[predictor] = held
         while len(self._held) > HOLD_PREDICTORS:
             del self._held[next(iter(self._held))]
@@ -235,7 +186,7 @@ class TraceSet:
         if self._frame is not None:
             df = self._frame
             return [] if df.empty else [str(p) for p in pd.unique(df["predictor"])]
-        return list(dict.fromkeys(v for p in self.parts for v in _values(p, "predictor")))
+        return list(dict.fromkeys(v for p in self.parts for v in part_values(p, "predictor")))
 
     def drives(self) -> list[str]:
         """The drives, in the order they first appear (drive order)."""
@@ -254,7 +205,7 @@ class TraceSet:
     def _drives_per_part(self) -> list[list[str]]:
         """Per part, the drives it holds, in order."""
         if self._part_drives is None:
-            self._part_drives = [_values(p, "drive") for p in self.parts]
+            self._part_drives = [part_values(p, "drive") for p in self.parts]
         return self._part_drives
 
     def scored(self, predictor: str, columns: Sequence[str]) -> pd.DataFrame:
@@ -290,7 +241,7 @@ class TraceSet:
             return self._frame
         import pyarrow.parquet as pq
 
-        return _concat([pq.read_table(p).to_pandas() for p in self.parts])
+        return concat_parts([pq.read_table(p).to_pandas() for p in self.parts])
 
     def write(self, path: Path) -> Path | None:
         """Every row into one Parquet file ``path`` (one row group per part, a part at a time:
@@ -316,58 +267,6 @@ class TraceSet:
         return path
 
 
-def _values(path: Path, column: str) -> list[str]:
-    """The values of text ``column`` in part ``path``, in the order they first appear: from
-    each row group's statistics where they hold one value (a part has one row group per
-    predictor, and one drive), else read from that row group's column alone."""
-    import pyarrow.parquet as pq
-
-    out: dict[str, None] = {}
-    with pq.ParquetFile(path, read_dictionary=[column]) as pf:
-        if column not in pf.schema_arrow.names:
-            return []
-        j = pf.metadata.schema.names.index(column)
-        for i in range(pf.metadata.num_row_groups):
-            value = _single_value(pf.metadata.row_group(i).column(j).statistics)
-            if value is not None:
-                out[value] = None
-            else:  # dictionary codes: cheap to read, one row group at a time
-                col = pf.read_row_group(i, columns=[column]).column(0).to_pandas()
-                out.update(dict.fromkeys(str(v) for v in pd.unique(col.dropna())))
-    return list(out)
-
-
-def _rows_per_value(path: Path, column: str) -> dict[str, int] | None:
-    """Rows per value of text ``column`` in part ``path``, from its row groups' statistics;
-    None when a row group holds more than one value (or has no statistics)."""
-    import pyarrow.parquet as pq
-
-    out: dict[str, int] = {}
-    meta = pq.ParquetFile(path).metadata
-    names = meta.schema.names
-    if column not in names:
-        return None
-    j = names.index(column)
-    for i in range(meta.num_row_groups):
-        group = meta.row_group(i)
-        if group.num_rows == 0:
-            continue
-        value = _single_value(group.column(j).statistics)
-        if value is None:
-            return None
-        out[value] = out.get(value, 0) + group.num_rows
-    return out
-
-
-def _single_value(stats: Any) -> str | None:
-    """The one value a row group's column holds, from its statistics (pyarrow's
-    ``Statistics``); None when it holds several or has no statistics."""
-    if stats is None or not stats.has_min_max or stats.min != stats.max:
-        return None
-    v = stats.min
-    return v.decode() if isinstance(v, bytes) else str(v)
-
-
 def _present(columns: Sequence[str], have: Iterable[object]) -> list[str]:
     """``columns`` that are in ``have``, in their order, each once."""
     present = set(have)
@@ -386,22 +285,3 @@ def lean_traces(traces: pd.DataFrame) -> pd.DataFrame:
         if c in traces.columns and not isinstance(traces[c].dtype, pd.CategoricalDtype)
     }
     return traces.astype(cols) if cols else traces
-
-
-def _concat(frames: list[pd.DataFrame]) -> pd.DataFrame:
-    """Frames read from parts as one, with a fresh index; dictionary columns stay categorical
-    (their categories united)."""
-    if not frames:
-        return pd.DataFrame()
-    if len(frames) == 1:
-        return frames[0].reset_index(drop=True)
-    cats = [c for c in frames[0].columns if isinstance(frames[0][c].dtype, pd.CategoricalDtype)]
-    if cats:
-        from pandas.api.types import union_categoricals
-
-        united = {
-            c: union_categoricals([f[c] for f in frames], ignore_order=True).categories
-            for c in cats
-        }
-        frames = [f.astype({c: pd.CategoricalDtype(united[c]) for c in cats}) for f in frames]
-    return pd.concat(frames, ignore_index=True)

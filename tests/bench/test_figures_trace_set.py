@@ -13,7 +13,8 @@ import pytest
 from test_plots import make_traces, res_for
 
 from posbench.figures.writer import write_plots
-from posbench.scoring.trace_set import TraceSet, write_part
+from posbench.scoring.trace_parts import write_part
+from posbench.scoring.trace_set import TraceSet
 
 
 def _files(folder: Path) -> dict[str, bytes]:

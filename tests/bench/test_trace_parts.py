@@ -19,6 +19,7 @@ from posbench.config import RunConfig
 from posbench.replay.runner import run
 from posbench.scenarios.synthetic import generate_drive
 from posbench.scoring.records import all_traces, trace_set
+from posbench.scoring.trace_parts import part_values
 from posbench.scoring.trace_set import TraceSet
 
 CFG = RunConfig(predictors=("cv", "kf", "poly"), dropouts="outages")
@@ -106,7 +107,7 @@ def test_a_small_predictor_is_read_from_the_parts_once(both, monkeypatch):
     got_scored = held.scored("kf", ["t_query", "error_m", "drive"])
     for g, w in [*zip(got, want, strict=True), (got_scored, want_scored)]:
         pd.testing.assert_frame_equal(g, w)  # categories included
-    kf_parts = [p for p in held.parts if "kf" in trace_set_module._values(p, "predictor")]
+    kf_parts = [p for p in held.parts if "kf" in part_values(p, "predictor")]
     assert 0 < len(calls) == len(kf_parts)  # once, only the parts that hold kf
     got[0]["added"] = 1.0  # a caller's change is its own
     assert "added" not in held.frame(None, "kf")
