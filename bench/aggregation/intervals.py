@@ -32,6 +32,7 @@ from posbench.metrics.outages import (
 )
 from posbench.scenarios.labels import LABELS
 from posbench.scoring.schema import KINDS
+from posbench.scoring.trace_parts import text_values
 
 
 @dataclass(frozen=True)
@@ -205,7 +206,7 @@ def _aligned(df: pd.DataFrame, base: pd.DataFrame) -> tuple[pd.DataFrame, np.nda
     same = (
         len(df) == len(base)
         and all(
-            np.array_equal(df[k].to_numpy(), base[k].to_numpy())
+            np.array_equal(text_values(df[k]), text_values(base[k]))
             for k in ("code", "kind", "t_query")
         )
         and all(np.array_equal(pd.unique(df[k]), pd.unique(base[k])) for k in ("dataset", "drive"))
@@ -227,7 +228,7 @@ def _paired_columns(
     return (
         both,
         codes,
-        both["kind"].to_numpy(),
+        text_values(both["kind"]),
         both["error_m"].to_numpy(dtype=float),
         both["error_base"].to_numpy(dtype=float),
         both["t_query"].to_numpy(dtype=float),
@@ -258,7 +259,7 @@ def paired_by_dataset(
     """``{ds: {kind: entry}}`` of :func:`paired_results` alone (no overall, no labels): one
     predictor's scored rows ``df`` against ``base`` per data set and query kind."""
     both, codes, kind, e, eb, t = _paired_columns(df, base)
-    ds = both["dataset"].astype(str).to_numpy()
+    ds = text_values(both["dataset"], as_str=True)
     out: dict[str, dict[str, Any]] = {}
     for name in datasets:
         out[name] = {}

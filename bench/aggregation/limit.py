@@ -34,6 +34,7 @@ from posbench.scenarios.labels import LABELS
 from posbench.scoring.records import DriveRun
 from posbench.scoring.reference import KIND_FIXES
 from posbench.scoring.schema import KINDS
+from posbench.scoring.trace_parts import text_values
 
 #: what the bound assumes, in one paragraph (results.json ``limit.assumptions``, report.md)
 ASSUMPTIONS = (
@@ -124,7 +125,7 @@ def _kind_summaries(
     e = df[column].to_numpy(dtype=float)
     if not np.isfinite(e).any():
         return None
-    kind = df["kind"].to_numpy()
+    kind = text_values(df["kind"], as_str=True)
     codes = drive_codes(df)
     t = df["t_query"].to_numpy(dtype=float)
     slow_sd = df["slow_sd_m2"].to_numpy(dtype=float)
@@ -315,7 +316,7 @@ def below_limit(
 def _drive_entry(r: DriveRun, rows: pd.DataFrame) -> dict[str, Any]:
     """``drives[].limit``: what the drive's bound took, and its mean per kind."""
     info = {k: v for k, v in r.limit_info.items() if k != "cost_s"}  # timing: run-wide only
-    kind = rows["kind"].astype(str).to_numpy()
+    kind = text_values(rows["kind"], as_str=True)
     imu = rows["limit_imu_m"].to_numpy(dtype=float)
     return {
         **info,
@@ -349,7 +350,6 @@ def limit_section(
     df = _frames(runs)
     if df.empty:
         return None
-    df["kind"] = df["kind"].astype(str)
     by_drive = {name: g for name, g in df.groupby(["dataset", "drive"], sort=False)}
     for d, r in zip(res["drives"], runs, strict=True):
         rows = by_drive.get((r.dataset, r.name))
@@ -379,11 +379,11 @@ def limit_section(
         entry["gps_conditions"] = dict(sorted(conditions.items()))
         entry["slow_floor"] = {"added": added, "not_added": len(mine) - added}
         section["by_dataset"][ds] = entry
-        kind = part["kind"].to_numpy()
+        kind = text_values(part["kind"], as_str=True)
         section["by_label"][ds] = {
             k: summarize_groups(
                 part["limit_m"].to_numpy(dtype=float)[kind == k],
-                part["label"].astype(str).to_numpy()[kind == k],
+                text_values(part["label"], as_str=True)[kind == k],
                 order=list(LABELS),
             )
             for k in KINDS

@@ -24,6 +24,7 @@ from posbench.aggregation.intervals import (
     paired_results,
     with_ci,
 )
+from posbench.heap import trim_heap
 from posbench.metrics.accuracy import speed_bin_labels, speed_bin_order, summarize, summarize_groups
 from posbench.metrics.latency import latency_summary
 from posbench.metrics.outages import (
@@ -35,6 +36,7 @@ from posbench.metrics.outages import (
 from posbench.scenarios.labels import LABELS
 from posbench.scoring.records import DriveRun
 from posbench.scoring.schema import KINDS
+from posbench.scoring.trace_parts import text_values
 from posbench.scoring.trace_set import TraceSet, as_trace_set
 
 #: the trace columns aggregation reads (positions are not needed once errors exist)
@@ -68,7 +70,7 @@ def excluded_summary(
         no_ref = (df["x_ref"].isna() | df["y_ref"].isna()).to_numpy()
         warm = df["warmup"].to_numpy(dtype=bool) if "warmup" in df else np.zeros(len(df), bool)
         out["warmup"][name] = kind_summaries(with_codes(df[warm & ~no_ref]), stats)
-        kind = df["kind"].to_numpy()
+        kind = text_values(df["kind"])
         out["no_reference"][name] = {k: int((no_ref & (kind == k)).sum()) for k in KINDS}
     return out
 
@@ -96,7 +98,7 @@ def kind_summaries(df: pd.DataFrame, stats: Statistics | None = None) -> dict[st
     needs the ``code`` column of :func:`with_codes`)."""
     if stats is None:
         return {k: summarize(df.loc[df["kind"] == k, "error_m"].to_numpy()) for k in KINDS}
-    kind = df["kind"].to_numpy()
+    kind = text_values(df["kind"])
     out = {k: summarize(df["error_m"].to_numpy(dtype=float)[kind == k]) for k in KINDS}
     add_group_cis(
         out,
@@ -114,7 +116,7 @@ def label_summaries(df: pd.DataFrame, stats: Statistics | None = None) -> dict[s
     for kind in KINDS:
         m = (df["kind"] == kind).to_numpy()
         e = df["error_m"].to_numpy(dtype=float)[m]
-        labels = df["label"].to_numpy()[m]
+        labels = text_values(df["label"])[m]
         out[kind] = summarize_groups(e, labels, order=list(LABELS))
         if stats is not None:
             add_group_cis(
@@ -235,6 +237,7 @@ def predictor_figures(c: Combining, name: str) -> dict[str, Any]:
                 stats,
             )
     del base_df
+    trim_heap()
     groups = {str(ds): g for ds, g in df.groupby("dataset", sort=True, observed=True)}
     out["by_dataset"], out["by_label"], out["held_out"] = {}, {}, {}
     for ds in datasets:
@@ -258,13 +261,18 @@ def predictor_figures(c: Combining, name: str) -> dict[str, Any]:
                 per_drive[(ds, drive)][n][k]["ci95"] = ci
         out["per_drive"] = {key: by_name[name] for key, by_name in per_drive.items()}
     del df
+    trim_heap()
     from posbench.aggregation.sanity import REFERENCE, sanity_section
     from posbench.aggregation.track import track_section
     from posbench.aggregation.uncertainty import uncertainty_section
 
+    # each section reads this predictor's rows again: what the one before freed goes back
     out["excluded"] = excluded_summary(c.ts, [name], stats)
+    trim_heap()
     out["track_errors"] = track_section(c.ts, [name])
+    trim_heap()
     out["uncertainty"] = uncertainty_section(c.ts, [name])
+    trim_heap()
     out["losses"] = (
         sanity_section(c.ts, [REFERENCE, name], datasets, stats)["losses"]
         if c.sanity and name != REFERENCE

@@ -16,6 +16,7 @@ import numpy as np
 from posbench.metrics.track_errors import inward_cross, track_summary
 from posbench.scenarios.labels import LABELS
 from posbench.scoring.schema import KINDS
+from posbench.scoring.trace_parts import text_values
 from posbench.scoring.trace_set import TraceSet
 
 NEEDED = ("predictor", "kind", "label", "error_m", "along_m", "cross_m", "yaw_rate_ref")
@@ -30,8 +31,8 @@ def track_section(traces: TraceSet, predictors: Sequence[str]) -> dict[str, Any]
     if traces.empty or any(c not in traces for c in NEEDED):
         return out
     for name, rows in traces.per_predictor(predictors, NEEDED):
-        kind = rows["kind"].to_numpy()
-        label = rows["label"].astype(str).to_numpy()
+        kind = text_values(rows["kind"])
+        label = text_values(rows["label"], as_str=True)
         cols = np.column_stack(
             [
                 rows["along_m"].to_numpy(float),

@@ -12,6 +12,7 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 import pandas as pd
 
 #: the text columns that aggregation and figures filter and group by, again and again: read
@@ -121,6 +122,21 @@ def single_value(stats: Any) -> str | None:
         return None
     v = stats.min
     return v.decode() if isinstance(v, bytes) else str(v)
+
+
+def text_values(column: pd.Series, as_str: bool = False) -> np.ndarray:
+    """A text column's values as a numpy object array. A categorical's are its categories
+    taken by code, one shared string per category: pandas' own ``to_numpy()`` (and
+    ``astype(str)``) builds a new string for every row of a ``str`` categorical, about 60
+    bytes a row, which for a predictor's rows of a long run is tens of MB at a time.
+    ``as_str``: the categories as ``str`` (as ``astype(str)`` gives them); missing values
+    are NaN either way (as pandas 3's ``str`` columns keep them)."""
+    if not isinstance(column.dtype, pd.CategoricalDtype):
+        return column.astype(str).to_numpy() if as_str else column.to_numpy()
+    cats = column.cat.categories
+    values = [str(v) for v in cats] if as_str else list(cats)
+    table = np.array([*values, np.nan], dtype=object)
+    return table[column.cat.codes.to_numpy()]  # code -1 (missing): the last entry
 
 
 def concat_parts(frames: list[pd.DataFrame]) -> pd.DataFrame:

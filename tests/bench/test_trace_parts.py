@@ -19,7 +19,7 @@ from posbench.config import RunConfig
 from posbench.replay.runner import run
 from posbench.scenarios.synthetic import generate_drive
 from posbench.scoring.records import all_traces, trace_set
-from posbench.scoring.trace_parts import part_values
+from posbench.scoring.trace_parts import part_values, text_values
 from posbench.scoring.trace_set import TraceSet
 
 CFG = RunConfig(predictors=("cv", "kf", "poly"), dropouts="outages")
@@ -158,3 +158,27 @@ def test_a_run_into_a_folder_leaves_no_parts_behind(tmp_path):
     result = posbench.run(predictors=["cv"], synthetic_duration_s=60.0, out=out)
     assert not [p for p in out.iterdir() if p.name.startswith(".parts-")]
     assert len(pd.read_parquet(out / "traces.parquet")) == len(result.traces) > 0
+
+
+@pytest.mark.parametrize("as_str", [False, True])
+def test_text_values_are_the_columns_values_with_one_string_per_category(as_str):
+    values = ["now", None, "future", "now", "future", None, "now"]
+    column = pd.Series(pd.Categorical(values, categories=["future", "now", "unused"]))
+    got = text_values(column, as_str=as_str)
+    want = column.astype(str).to_numpy() if as_str else column.to_numpy()
+    assert got.dtype == object and len(got) == len(want)
+    assert [v if v == v else "missing" for v in got] == [v if v == v else "missing" for v in want]
+    present = [v for v in got if v == v and v != "nan"]
+    assert len({id(v) for v in present}) == 2  # shared: one object per category used
+    plain = pd.Series(["a", "b", "a"])  # not categorical: pandas' own values
+    assert text_values(plain).tolist() == ["a", "b", "a"]
+
+
+def test_trim_heap_calls_the_c_librarys_trim_where_there_is_one():
+    import platform
+
+    from posbench.heap import _malloc_trim, trim_heap
+
+    assert trim_heap() is None
+    if platform.system() == "Linux" and platform.libc_ver()[0] == "glibc":
+        assert _malloc_trim() is not None
