@@ -26,6 +26,7 @@ from posbench.metrics.calibration import (
     since_fix_bin,
 )
 from posbench.scoring.schema import COV_COLUMNS, KINDS
+from posbench.scoring.trace_parts import text_values
 from posbench.scoring.trace_set import TraceSet
 
 COV = list(COV_COLUMNS)
@@ -45,9 +46,10 @@ NEEDED = (
 )
 
 
-def _arrays(rows: pd.DataFrame) -> tuple[np.ndarray, np.ndarray]:
-    err = rows[["x", "y"]].to_numpy(float) - rows[["x_ref", "y_ref"]].to_numpy(float)
-    return err, rows[COV].to_numpy(float)
+def _errors(rows: pd.DataFrame) -> np.ndarray:
+    """(N, 2) answer minus reference [m, ENU]."""
+    err: np.ndarray = rows[["x", "y"]].to_numpy(float) - rows[["x_ref", "y_ref"]].to_numpy(float)
+    return err
 
 
 def uncertainty_section(traces: TraceSet, predictors: Sequence[str]) -> dict[str, Any]:
@@ -68,25 +70,36 @@ def uncertainty_section(traces: TraceSet, predictors: Sequence[str]) -> dict[str
         out["none"] = list(predictors)
         return out
     for name, sub in traces.per_predictor(predictors, NEEDED):
-        if not np.isfinite(sub["cov_xx"].to_numpy(float)).any():
+        cov_all = sub[COV].to_numpy(float)
+        if not np.isfinite(cov_all[:, 0]).any():
             out["none"].append(name)
             continue
+        # the columns as arrays once, the frame let go: each kind takes its rows of these
+        err_all = _errors(sub)
+        kind = text_values(sub["kind"])
+        codes_all = drive_codes(sub)
+        times = sub["t_query"].to_numpy(float)
+        since = sub["since_fix_s"].to_numpy(float)
+        text = {col: text_values(sub[col]) for col in ("dataset", "label")}
+        del sub
         for block in ("predictors", "by_dataset", "by_label", "by_since_fix", "curve"):
             out[block][name] = {}
         for k in KINDS:
-            rows = sub[(sub["kind"] == k).to_numpy()]
-            err, cov = _arrays(rows)
+            m = kind == k
+            err, cov = err_all[m], cov_all[m]
+            # the kind's drives numbered in order of appearance, as drive_codes numbers them
+            clusters = pd.factorize(codes_all[m])[0].astype(np.int64)
             out["predictors"][name][k] = calibration_summary(
-                err, cov, clusters=drive_codes(rows), times=rows["t_query"].to_numpy(float)
+                err, cov, clusters=clusters, times=times[m]
             )
             out["curve"][name][k] = [list(pq) for pq in calibration_curve(mahalanobis_sq(err, cov))]
             for block, col in (("by_dataset", "dataset"), ("by_label", "label")):
-                code, groups = pd.factorize(rows[col])  # in order of appearance
+                code, groups = pd.factorize(text[col][m])  # in order of appearance
                 out[block][name][k] = {
                     str(g): calibration_summary(err[code == i], cov[code == i], with_ci=False)
                     for i, g in enumerate(groups)
                 }
-            idx, names = since_fix_bin(rows["since_fix_s"].to_numpy(float))
+            idx, names = since_fix_bin(since[m])
             out["by_since_fix"][name][k] = {
                 b: calibration_summary(err[idx == i], cov[idx == i], with_ci=False)
                 for i, b in enumerate(names)
