@@ -132,11 +132,13 @@ def text_values(column: pd.Series, as_str: bool = False) -> np.ndarray:
     ``as_str``: the categories as ``str`` (as ``astype(str)`` gives them); missing values
     are NaN either way (as pandas 3's ``str`` columns keep them)."""
     if not isinstance(column.dtype, pd.CategoricalDtype):
-        return column.astype(str).to_numpy() if as_str else column.to_numpy()
+        plain: np.ndarray = column.astype(str).to_numpy() if as_str else column.to_numpy()
+        return plain
     cats = column.cat.categories
     values = [str(v) for v in cats] if as_str else list(cats)
     table = np.array([*values, np.nan], dtype=object)
-    return table[column.cat.codes.to_numpy()]  # code -1 (missing): the last entry
+    taken: np.ndarray = table[column.cat.codes.to_numpy()]  # code -1 (missing): last entry
+    return taken
 
 
 def concat_parts(frames: list[pd.DataFrame]) -> pd.DataFrame:
