@@ -205,10 +205,8 @@ def _aligned(df: pd.DataFrame, base: pd.DataFrame) -> tuple[pd.DataFrame, np.nda
     keys = ["dataset", "drive", "kind", "t_query"]
     same = (
         len(df) == len(base)
-        and all(
-            np.array_equal(text_values(df[k]), text_values(base[k]))
-            for k in ("code", "kind", "t_query")
-        )
+        and all(np.array_equal(df[k].to_numpy(), base[k].to_numpy()) for k in ("code", "t_query"))
+        and np.array_equal(text_values(df["kind"]), text_values(base["kind"]))
         and all(np.array_equal(pd.unique(df[k]), pd.unique(base[k])) for k in ("dataset", "drive"))
     )
     if same:  # the same drives in the same order, the same queries in each
