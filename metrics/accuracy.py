@@ -75,7 +75,8 @@ def speed_bin_labels(
     speed_mps: np.ndarray, edges_mps: Sequence[float] = (0.5, 5, 10, 15, 20, 30)
 ) -> np.ndarray:
     """Bin names like ``"5-10 m/s"`` for each speed [m/s]; ``"<0.5 m/s"`` and ``">=30 m/s"``
-    at the ends."""
+    at the ends; ``"unknown"`` where the speed is not finite. An object array whose rows
+    share one string per bin (8 bytes a row, not a fixed-width string each)."""
     s = np.asarray(speed_mps, dtype=float)
     edges = list(edges_mps)
     names = [f"<{edges[0]:g} m/s"] + [
@@ -83,9 +84,9 @@ def speed_bin_labels(
     ]
     names.append(f">={edges[-1]:g} m/s")
     idx = np.searchsorted(edges, s, side="right")
-    out = np.asarray(names, dtype=object)[idx]
-    out[~np.isfinite(s)] = "unknown"
-    return out.astype(str)
+    idx[~np.isfinite(s)] = len(names)
+    out: np.ndarray = np.asarray([*names, "unknown"], dtype=object)[idx]
+    return out
 
 
 def speed_bin_order(edges_mps: Sequence[float] = (0.5, 5, 10, 15, 20, 30)) -> list[str]:

@@ -146,7 +146,10 @@ def add_group_cis(
         return
     code, names = pd.factorize(np.asarray(keys))
     wanted = {str(n): i for i, n in enumerate(names) if str(n) in summaries}
-    m = np.isin(code, list(wanted.values()))  # only the groups that have a summary
+    wanted_rows = np.isin(code, list(wanted.values()))  # only the groups with a summary
+    # every row in a wanted group: the arrays as they are, not copies
+    m: np.ndarray | slice = slice(None) if wanted_rows.all() else wanted_rows
+    del wanted_rows
     cis = group_cis(
         errors[m],
         code[m],

@@ -197,7 +197,33 @@ class Combining:
 def predictor_figures(c: Combining, name: str) -> dict[str, Any]:
     """Every figure of predictor ``name``, from its scored rows (and the baseline's, for the
     paired comparison): the pieces :func:`aggregate` puts in place. Reads and holds this
-    predictor's rows only (and the baseline's)."""
+    predictor's rows only (and the baseline's), one figure family at a time: each family
+    reads the columns it needs and lets them go before the next reads its own."""
+    out = error_figures(c, name)
+    trim_heap()
+    from posbench.aggregation.sanity import REFERENCE, sanity_section
+    from posbench.aggregation.track import track_section
+    from posbench.aggregation.uncertainty import uncertainty_section
+
+    out["excluded"] = excluded_summary(c.ts, [name], c.stats)
+    trim_heap()
+    out["track_errors"] = track_section(c.ts, [name])
+    trim_heap()
+    out["uncertainty"] = uncertainty_section(c.ts, [name])
+    trim_heap()
+    out["losses"] = (
+        sanity_section(c.ts, [REFERENCE, name], c.datasets, c.stats)["losses"]
+        if c.sanity and name != REFERENCE
+        else []
+    )
+    return out
+
+
+def error_figures(c: Combining, name: str) -> dict[str, Any]:
+    """Predictor ``name``'s figures of the error column: the headline entry with latency,
+    by speed, outages, the paired comparison with the baseline, by data set and route type,
+    held out, per drive. Its own function so that every array it makes is gone when it
+    returns (a local of :func:`predictor_figures` would live on through the sections)."""
     stats, datasets, trained_on = c.stats, c.datasets, c.trained_on
     base_df = c.scored_rows(stats.baseline) if stats.baseline else None
     df = base_df if base_df is not None and name == stats.baseline else c.scored_rows(name)
@@ -260,24 +286,6 @@ def predictor_figures(c: Combining, name: str) -> dict[str, Any]:
             for n, ci in one_drive_cis(by_pred, stats).items():
                 per_drive[(ds, drive)][n][k]["ci95"] = ci
         out["per_drive"] = {key: by_name[name] for key, by_name in per_drive.items()}
-    del df
-    trim_heap()
-    from posbench.aggregation.sanity import REFERENCE, sanity_section
-    from posbench.aggregation.track import track_section
-    from posbench.aggregation.uncertainty import uncertainty_section
-
-    # each section reads this predictor's rows again: what the one before freed goes back
-    out["excluded"] = excluded_summary(c.ts, [name], stats)
-    trim_heap()
-    out["track_errors"] = track_section(c.ts, [name])
-    trim_heap()
-    out["uncertainty"] = uncertainty_section(c.ts, [name])
-    trim_heap()
-    out["losses"] = (
-        sanity_section(c.ts, [REFERENCE, name], datasets, stats)["losses"]
-        if c.sanity and name != REFERENCE
-        else []
-    )
     return out
 
 

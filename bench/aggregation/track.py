@@ -41,6 +41,7 @@ def track_section(traces: TraceSet, predictors: Sequence[str]) -> dict[str, Any]
                 rows["error_m"].to_numpy(float),
             ]
         )
+        del rows  # the arrays above are what the summaries read
         out["predictors"][name] = {}
         out["by_label"][name] = {}
         for k in KINDS:

@@ -74,18 +74,25 @@ def uncertainty_section(traces: TraceSet, predictors: Sequence[str]) -> dict[str
         if not np.isfinite(cov_all[:, 0]).any():
             out["none"].append(name)
             continue
-        # the columns as arrays once, the frame let go: each kind takes its rows of these
-        err_all = _errors(sub)
-        kind = text_values(sub["kind"])
-        codes_all = drive_codes(sub)
-        times = sub["t_query"].to_numpy(float)
-        since = sub["since_fix_s"].to_numpy(float)
-        text = {col: text_values(sub[col]) for col in ("dataset", "label")}
-        del sub
+        # the columns as arrays once, rows grouped by kind (a stable order: each kind's rows
+        # keep theirs), the frame let go: each kind's rows are a slice of these, not a copy
+        kind_code, kind_names = pd.factorize(sub["kind"])
+        order = np.argsort(kind_code, kind="stable")
+        bounds = np.searchsorted(kind_code[order], np.arange(len(kind_names) + 1))
+        rows_of = {
+            str(k): slice(a, b) for k, a, b in zip(kind_names, bounds[:-1], bounds[1:], strict=True)
+        }
+        cov_all = cov_all[order]
+        err_all = _errors(sub)[order]
+        codes_all = drive_codes(sub)[order]
+        times = sub["t_query"].to_numpy(float)[order]
+        since = sub["since_fix_s"].to_numpy(float)[order]
+        text = {col: text_values(sub[col])[order] for col in ("dataset", "label")}
+        del sub, order, kind_code
         for block in ("predictors", "by_dataset", "by_label", "by_since_fix", "curve"):
             out[block][name] = {}
         for k in KINDS:
-            m = kind == k
+            m = rows_of.get(k, slice(0, 0))
             err, cov = err_all[m], cov_all[m]
             # the kind's drives numbered in order of appearance, as drive_codes numbers them
             clusters = pd.factorize(codes_all[m])[0].astype(np.int64)

@@ -22,6 +22,7 @@ from posbench.figures.style import (
 from posbench.metrics.accuracy import error_cdf, speed_bin_labels, speed_bin_order, summarize_groups
 from posbench.metrics.outages import SINCE_FIX_CURVE_EDGES_S, since_fix_bins
 from posbench.scoring.schema import COV_COLUMNS, KINDS
+from posbench.scoring.trace_parts import text_values
 from posbench.scoring.trace_set import TraceSet, as_trace_set
 
 if TYPE_CHECKING:  # matplotlib is imported when a figure is drawn: importing this module is cheap
@@ -219,19 +220,25 @@ def plot_calibration(traces: TraceSet | pd.DataFrame, preds: Sequence[str]) -> F
     curves: dict[str, dict[str, np.ndarray]] = {}  # predictor -> kind -> (p, observed) rows
     reports = False
     for p in ts.predictors():
-        t, _ = past_warmup(ts, p, cols[1:])
-        t = finite_errors(t)
-        t = t[np.isfinite(t["cov_xx"].to_numpy(dtype=float))]
-        reports |= len(t) > 0
-        if len(t) == 0 or p not in preds:
+        # past the warm-up with a reference (each part filtered as it is read), a finite
+        # error and a reported covariance: one mask, then each kind's rows taken from the
+        # columns (not a filtered copy of the frame per step)
+        rows = ts.scored(p, cols[1:])
+        keep = np.isfinite(rows["error_m"].to_numpy(dtype=float))
+        keep &= np.isfinite(rows["cov_xx"].to_numpy(dtype=float))
+        reports |= bool(keep.any())
+        if not keep.any() or p not in preds:
             continue
+        kinds = text_values(rows["kind"])
         curves[p] = {}
         for kind in KINDS:
-            r = t[t.kind == kind]
-            err = r[["x", "y"]].to_numpy(float) - r[["x_ref", "y_ref"]].to_numpy(float)
-            curves[p][kind] = np.array(
-                calibration_curve(mahalanobis_sq(err, r[list(COV_COLUMNS)].to_numpy(float)))
+            m = keep & (kinds == kind)
+            err = np.column_stack(
+                [rows[c].to_numpy(float)[m] - rows[f"{c}_ref"].to_numpy(float)[m] for c in "xy"]
             )
+            cov = np.column_stack([rows[c].to_numpy(float)[m] for c in COV_COLUMNS])
+            curves[p][kind] = np.array(calibration_curve(mahalanobis_sq(err, cov)))
+        del rows
     if not reports:
         raise NothingToPlot("no predictor reports uncertainty for an answer with a known error")
     colors = colors_for(preds)

@@ -23,6 +23,7 @@ from posbench.figures.outage_lengths import NAME as OUTAGE_LENGTHS
 from posbench.figures.outage_lengths import plot_outage_lengths
 from posbench.figures.per_drive import DEFAULT_DRIVE_PLOTS, write_error_over_time
 from posbench.figures.style import NothingToPlot, PlotsWritten, check_formats, save_figure
+from posbench.heap import trim_heap
 from posbench.scoring.trace_set import TraceSet, as_trace_set
 
 FIGURES = {
@@ -85,12 +86,12 @@ def write_summary_plots(
     out.mkdir(parents=True, exist_ok=True)
     for name, draw in FIGURES.items():
         try:
-            fig = draw(traces, list(preds))
-            written.files += save_figure(fig, out, name, fmts)
+            written.files += save_figure(draw(traces, list(preds)), out, name, fmts)
         except NothingToPlot as e:
             written.notes[name] = str(e)
         except Exception as e:  # noqa: BLE001 - one bad figure must not lose the report
             written.notes[name] = f"failed ({type(e).__name__}: {e})"
+        trim_heap()  # what this figure read goes back: the next one's peak is its own
     return written
 
 

@@ -221,10 +221,16 @@ class TraceSet:
                 self._keep = scored_mask(df)
             mine = self._keep & (df["predictor"] == predictor).to_numpy()
             return lean_traces(df.loc[mine, cols])
-        df = self.frame([*cols, *MASK_COLUMNS], predictor)
-        if df.empty:
-            return df[cols]
-        return df.loc[scored_mask(df), cols].reset_index(drop=True)
+        if self._held_rows(predictor) is not None:
+            df = self.frame([*cols, *MASK_COLUMNS], predictor)
+            return df[cols] if df.empty else df.loc[scored_mask(df), cols].reset_index(drop=True)
+        # each part's rows filtered as it is read: what is held at once is the scored rows
+        # (and one part's), not every row of the predictor and then a copy of the scored
+        frames = [
+            _scored_rows(read_part(p, [*cols, *MASK_COLUMNS], predictor), cols) for p in self.parts
+        ]
+        frames = [f for f in frames if len(f)] or frames[:1]
+        return concat_parts(frames)
 
     def per_predictor(
         self, predictors: Sequence[str], columns: Sequence[str], scored: bool = True
@@ -265,6 +271,12 @@ class TraceSet:
         finally:
             tmp.unlink(missing_ok=True)
         return path
+
+
+def _scored_rows(rows: pd.DataFrame, columns: list[str]) -> pd.DataFrame:
+    """The scored rows of ``rows`` (:func:`~posbench.scoring.schema.scored_mask`), ``columns``
+    only."""
+    return rows[columns] if rows.empty else rows.loc[scored_mask(rows), columns]
 
 
 def _present(columns: Sequence[str], have: Iterable[object]) -> list[str]:

@@ -45,6 +45,9 @@ def test_groups_and_order():
 def test_speed_bins():
     lab = speed_bin_labels(np.array([0.1, 4.9, 5.0, 35.0, np.nan]))
     assert lab.tolist() == ["<0.5 m/s", "0.5-5 m/s", "5-10 m/s", ">=30 m/s", "unknown"]
+    # one string object per bin, shared by its rows (a long run's rows cost 8 bytes each)
+    many = speed_bin_labels(np.full(1000, 7.0))
+    assert many.dtype == object and len({id(v) for v in many}) == 1
 
 
 def test_latency_summary_us():
