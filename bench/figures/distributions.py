@@ -18,6 +18,7 @@ from posbench.figures.style import (
     finite_errors,
     floor_note,
     log_values,
+    warmup_mask,
 )
 from posbench.metrics.accuracy import error_cdf, speed_bin_labels, speed_bin_order, summarize_groups
 from posbench.metrics.outages import SINCE_FIX_CURVE_EDGES_S, since_fix_bins
@@ -166,16 +167,23 @@ def plot_error_vs_since_fix(traces: TraceSet | pd.DataFrame, preds: Sequence[str
     means: dict[str, pd.Series] = {}  # predictor -> mean error [m] per occupied bin
     firsts: dict[str, str] = {}
     outages = False
+    cols = ["drive", "kind", "error_m", "since_fix_s", "outage", "warmup"]
     for p in ts.predictors():
-        t, _ = past_warmup(ts, p, ["drive", "kind", "error_m", "since_fix_s", "outage"])
-        now = t[t.kind == "now"]
-        outages |= bool((now["outage"] >= 0).any())
-        now = finite_errors(now[np.isfinite(now["since_fix_s"].to_numpy(dtype=float))])
-        if len(now):
-            b = since_fix_bins(now["since_fix_s"].to_numpy(dtype=float), edges, open_last=True)
-            e = now["error_m"].to_numpy(dtype=float)
-            means[p] = pd.DataFrame({"b": b, "e": e}).groupby("b", sort=True)["e"].mean()
-            firsts[p] = str(now["drive"].iloc[0])
+        # one part of the traces at a time, each reduced to its now-rows' bins and errors
+        bins: list[np.ndarray] = []
+        errors: list[np.ndarray] = []
+        for rows in ts.scored_parts(p, cols, scored=False):
+            now = rows[~warmup_mask(rows) & (text_values(rows["kind"]) == "now")]
+            outages |= bool((now["outage"] >= 0).any())
+            now = finite_errors(now[np.isfinite(now["since_fix_s"].to_numpy(dtype=float))])
+            if len(now):
+                since = now["since_fix_s"].to_numpy(dtype=float)
+                bins.append(since_fix_bins(since, edges, open_last=True))
+                errors.append(now["error_m"].to_numpy(dtype=float))
+                firsts.setdefault(p, str(now["drive"].iloc[0]))
+        if bins:
+            frame = pd.DataFrame({"b": np.concatenate(bins), "e": np.concatenate(errors)})
+            means[p] = frame.groupby("b", sort=True)["e"].mean()
     if not outages:
         raise NothingToPlot("no GPS outage in this run")
     if not means:
@@ -220,25 +228,31 @@ def plot_calibration(traces: TraceSet | pd.DataFrame, preds: Sequence[str]) -> F
     curves: dict[str, dict[str, np.ndarray]] = {}  # predictor -> kind -> (p, observed) rows
     reports = False
     for p in ts.predictors():
-        # past the warm-up with a reference (each part filtered as it is read), a finite
-        # error and a reported covariance: one mask, then each kind's rows taken from the
-        # columns (not a filtered copy of the frame per step)
-        rows = ts.scored(p, cols[1:])
-        keep = np.isfinite(rows["error_m"].to_numpy(dtype=float))
-        keep &= np.isfinite(rows["cov_xx"].to_numpy(dtype=float))
-        reports |= bool(keep.any())
-        if not keep.any() or p not in preds:
-            continue
-        kinds = text_values(rows["kind"])
-        curves[p] = {}
-        for kind in KINDS:
-            m = keep & (kinds == kind)
-            err = np.column_stack(
-                [rows[c].to_numpy(float)[m] - rows[f"{c}_ref"].to_numpy(float)[m] for c in "xy"]
-            )
-            cov = np.column_stack([rows[c].to_numpy(float)[m] for c in COV_COLUMNS])
-            curves[p][kind] = np.array(calibration_curve(mahalanobis_sq(err, cov)))
-        del rows
+        # past the warm-up with a reference, a finite error and a reported covariance, one
+        # part of the traces at a time: each part reduced to its rows' Mahalanobis distances
+        # per kind (8 bytes a row), so a long run's columns are never held together
+        d2: dict[str, list[np.ndarray]] = {k: [] for k in KINDS}
+        kept = False
+        for rows in ts.scored_parts(p, cols[1:]):
+            keep = np.isfinite(rows["error_m"].to_numpy(dtype=float))
+            keep &= np.isfinite(rows["cov_xx"].to_numpy(dtype=float))
+            kept |= bool(keep.any())
+            if p not in preds:
+                continue
+            kinds = text_values(rows["kind"])
+            for kind in KINDS:
+                m = keep & (kinds == kind)
+                err = np.column_stack(
+                    [rows[c].to_numpy(float)[m] - rows[f"{c}_ref"].to_numpy(float)[m] for c in "xy"]
+                )
+                cov = np.column_stack([rows[c].to_numpy(float)[m] for c in COV_COLUMNS])
+                d2[kind].append(mahalanobis_sq(err, cov))
+        reports |= kept
+        if kept and p in preds:
+            curves[p] = {
+                k: np.array(calibration_curve(np.concatenate(d2[k]) if d2[k] else np.empty(0)))
+                for k in KINDS
+            }
     if not reports:
         raise NothingToPlot("no predictor reports uncertainty for an answer with a known error")
     colors = colors_for(preds)

@@ -232,6 +232,26 @@ class TraceSet:
         frames = [f for f in frames if len(f)] or frames[:1]
         return concat_parts(frames)
 
+    def scored_parts(
+        self, predictor: str, columns: Sequence[str], scored: bool = True
+    ) -> Iterator[pd.DataFrame]:
+        """:meth:`scored` (every row, :meth:`frame`, with ``scored`` False) in pieces, in the
+        same row order: on disk, one part's rows at a time (a predictor held in memory, and a
+        frame in memory, as one piece), for figures that reduce each piece to a little (a
+        drawing's curve) and need never hold them all. Pieces may differ in a text column's
+        categories."""
+        if self._frame is not None or self._held_rows(predictor) is not None:
+            yield self.scored(predictor, columns) if scored else self.frame(columns, predictor)
+            return
+        cols = _present(columns, self.columns)
+        for path in self.parts:
+            if scored:
+                rows = _scored_rows(read_part(path, [*cols, *MASK_COLUMNS], predictor), cols)
+            else:
+                rows = read_part(path, cols, predictor)
+            if len(rows):
+                yield rows.reset_index(drop=True)
+
     def per_predictor(
         self, predictors: Sequence[str], columns: Sequence[str], scored: bool = True
     ) -> Iterator[tuple[str, pd.DataFrame]]:
