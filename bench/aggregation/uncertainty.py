@@ -52,6 +52,48 @@ def _errors(rows: pd.DataFrame) -> np.ndarray:
     return err
 
 
+def _kind_columns(traces: TraceSet, name: str) -> dict[str, Any] | None:
+    """Predictor ``name``'s scored rows as arrays, read one part of the traces at a time
+    (never a frame of every row beside them), grouped by query kind in a stable order (each
+    kind's rows keep theirs): ``err`` (N, 2) [m], ``cov`` (N, 3) [m^2], ``code`` (the drive,
+    numbered as :func:`~posbench.aggregation.intervals.drive_codes` numbers them),
+    ``t_query`` and ``since_fix_s`` [s], ``dataset`` and ``label`` (text), and ``rows_of``:
+    each kind of :data:`KINDS` -> its slice. None when no row reports a covariance."""
+    pieces: dict[str, list[np.ndarray]] = {
+        c: [] for c in ("err", "cov", "kind", "code", "t_query", "since_fix_s", "dataset", "label")
+    }
+    pair_code: dict[tuple[object, object], int] = {}
+    for rows in traces.scored_parts(name, NEEDED):
+        pieces["err"].append(_errors(rows))
+        pieces["cov"].append(rows[COV].to_numpy(float))
+        kind = text_values(rows["kind"])
+        pieces["kind"].append(
+            np.select([kind == k for k in KINDS], np.arange(len(KINDS)), -1).astype(np.int8)
+        )
+        # the part's drives numbered in order of appearance, then as across the parts so far
+        local = drive_codes(rows)
+        first = np.unique(local, return_index=True)[1]
+        ds, dr = text_values(rows["dataset"]), text_values(rows["drive"])
+        to_run = [pair_code.setdefault((ds[i], dr[i]), len(pair_code)) for i in first]
+        pieces["code"].append(np.asarray(to_run, dtype=np.int64)[local])
+        for col in ("t_query", "since_fix_s"):
+            pieces[col].append(rows[col].to_numpy(float))
+        pieces["dataset"].append(ds)
+        pieces["label"].append(text_values(rows["label"]))
+    if not pieces["cov"] or not any(np.isfinite(c[:, 0]).any() for c in pieces["cov"]):
+        return None
+    kind = np.concatenate(pieces.pop("kind"))
+    order = np.argsort(kind, kind="stable")
+    bounds = np.searchsorted(kind[order], np.arange(len(KINDS) + 1))
+    out: dict[str, Any] = {
+        "rows_of": {k: slice(int(bounds[i]), int(bounds[i + 1])) for i, k in enumerate(KINDS)}
+    }
+    del kind
+    for col in list(pieces):  # one column at a time: joined, put in kind order, parts let go
+        out[col] = np.concatenate(pieces.pop(col))[order]
+    return out
+
+
 def uncertainty_section(traces: TraceSet, predictors: Sequence[str]) -> dict[str, Any]:
     """``{"predictors": {name: {kind: summary}}, "by_dataset": {name: {kind: {ds: summary}}},
     "by_label": {...}, "by_since_fix": {name: {kind: {bin: summary}}}, "curve": {name:
@@ -69,30 +111,20 @@ def uncertainty_section(traces: TraceSet, predictors: Sequence[str]) -> dict[str
     if traces.empty or any(c not in traces for c in NEEDED):
         out["none"] = list(predictors)
         return out
-    for name, sub in traces.per_predictor(predictors, NEEDED):
-        cov_all = sub[COV].to_numpy(float)
-        if not np.isfinite(cov_all[:, 0]).any():
+    for name in predictors:
+        cols = _kind_columns(traces, name)
+        if cols is None:
             out["none"].append(name)
             continue
-        # the columns as arrays once, rows grouped by kind (a stable order: each kind's rows
-        # keep theirs), the frame let go: each kind's rows are a slice of these, not a copy
-        kind_code, kind_names = pd.factorize(sub["kind"])
-        order = np.argsort(kind_code, kind="stable")
-        bounds = np.searchsorted(kind_code[order], np.arange(len(kind_names) + 1))
-        rows_of = {
-            str(k): slice(a, b) for k, a, b in zip(kind_names, bounds[:-1], bounds[1:], strict=True)
-        }
-        cov_all = cov_all[order]
-        err_all = _errors(sub)[order]
-        codes_all = drive_codes(sub)[order]
-        times = sub["t_query"].to_numpy(float)[order]
-        since = sub["since_fix_s"].to_numpy(float)[order]
-        text = {col: text_values(sub[col])[order] for col in ("dataset", "label")}
-        del sub, order, kind_code
+        err_all, cov_all, codes_all = cols["err"], cols["cov"], cols["code"]
+        times, since = cols["t_query"], cols["since_fix_s"]
+        text = {col: cols[col] for col in ("dataset", "label")}
+        rows_of = cols["rows_of"]
+        del cols
         for block in ("predictors", "by_dataset", "by_label", "by_since_fix", "curve"):
             out[block][name] = {}
         for k in KINDS:
-            m = rows_of.get(k, slice(0, 0))
+            m = rows_of[k]
             err, cov = err_all[m], cov_all[m]
             # the kind's drives numbered in order of appearance, as drive_codes numbers them
             clusters = pd.factorize(codes_all[m])[0].astype(np.int64)
