@@ -11,7 +11,6 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 import pandas as pd
 
-from posbench.figures.reading import past_warmup
 from posbench.figures.style import (
     FLOOR_M,
     TURN_LABELS,
@@ -23,7 +22,9 @@ from posbench.figures.style import (
     in_order,
     most_turning,
     turn_counts,
+    warmup_mask,
 )
+from posbench.scoring.trace_parts import text_values
 from posbench.scoring.trace_set import TraceSet, as_trace_set
 
 if TYPE_CHECKING:  # matplotlib is imported when a figure is drawn: importing this module is cheap
@@ -56,14 +57,20 @@ def turning_drive(ts: TraceSet, known_error: bool) -> tuple[str, bool] | None:
     no such query. Reads per predictor: drive, kind, x_ref, label, error_m, warmup."""
     turns: dict[str, int] = {}
     firsts: list[str] = []
+    cols = ["drive", "kind", "x_ref", "label", "error_m", "warmup"]
     for p in ts.predictors():
-        t, _ = past_warmup(ts, p, ["drive", "kind", "x_ref", "label", "error_m"])
-        fut = t[(t.kind == "future").to_numpy() & np.isfinite(t["x_ref"].to_numpy(dtype=float))]
-        fut = finite_errors(fut) if known_error else fut
-        if len(fut):
-            firsts.append(str(fut["drive"].iloc[0]))
-            for d, n in turn_counts(fut).items():
-                turns[d] = turns.get(d, 0) + n
+        first: str | None = None
+        # one part of the traces at a time, each reduced to its drives' turn counts
+        for t in ts.scored_parts(p, cols, scored=False):
+            keep = ~warmup_mask(t) & (text_values(t["kind"]) == "future")
+            keep &= np.isfinite(t["x_ref"].to_numpy(dtype=float))
+            fut = finite_errors(t[keep]) if known_error else t[keep]
+            if len(fut):
+                first = first or str(fut["drive"].iloc[0])
+                for d, n in turn_counts(fut).items():
+                    turns[d] = turns.get(d, 0) + n
+        if first is not None:
+            firsts.append(first)
     if not firsts:
         return None
     if turns:
