@@ -11,7 +11,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 import pandas as pd
 
-from posbench.figures.reading import first_seen, past_warmup
+from posbench.figures.reading import first_seen
 from posbench.figures.style import (
     NothingToPlot,
     colors_for,
@@ -54,14 +54,22 @@ def plot_error_cdf(traces: TraceSet | pd.DataFrame, preds: Sequence[str]) -> Fig
     firsts: dict[str, dict[str, str]] = {k: {} for k in KINDS}
     warm = False
     for p in ts.predictors():
-        rows, had = past_warmup(ts, p, ["drive", "kind", "error_m"])
-        warm |= had
-        rows = finite_errors(rows)
+        # one part of the traces at a time, each reduced to its finite errors per kind
+        errors: dict[str, list[np.ndarray]] = {k: [] for k in KINDS}
+        for rows in ts.scored_parts(p, ["drive", "kind", "error_m", "warmup"], scored=False):
+            w = warmup_mask(rows)
+            warm |= bool(w.any())
+            e = rows["error_m"].to_numpy(dtype=float)
+            keep = ~w & np.isfinite(e)
+            kinds = text_values(rows["kind"])
+            for kind in KINDS:
+                m = keep & (kinds == kind)
+                if m.any():
+                    errors[kind].append(e[m])
+                    firsts[kind].setdefault(p, str(rows["drive"].iloc[int(np.argmax(m))]))
         for kind in KINDS:
-            g = rows[rows.kind == kind]
-            if len(g):
-                curves[kind][p] = _cdf_curve(g["error_m"].to_numpy(dtype=float))
-                firsts[kind][p] = str(g["drive"].iloc[0])
+            if errors[kind]:
+                curves[kind][p] = _cdf_curve(np.concatenate(errors[kind]))
     if not any(curves.values()):
         raise NothingToPlot("no query with a known error (no reference position)")
     colors = colors_for(preds)
@@ -117,17 +125,24 @@ def plot_error_vs_speed(traces: TraceSet | pd.DataFrame, preds: Sequence[str]) -
     order = speed_bin_order()
     found: dict[str, dict[str, dict[str, float]]] = {}
     firsts: dict[str, str] = {}
+    cols = ["drive", "kind", "error_m", "speed_mps", "warmup"]
     for p in ts.predictors():
-        t, _ = past_warmup(ts, p, ["drive", "kind", "error_m", "speed_mps"])
-        speed = t["speed_mps"].to_numpy(dtype=float)
-        fut = finite_errors(t[(t.kind == "future").to_numpy() & np.isfinite(speed)])
-        if len(fut):
+        # one part of the traces at a time, each reduced to its future rows' errors and speeds
+        errors: list[np.ndarray] = []
+        speeds: list[np.ndarray] = []
+        for rows in ts.scored_parts(p, cols, scored=False):
+            e = rows["error_m"].to_numpy(dtype=float)
+            speed = rows["speed_mps"].to_numpy(dtype=float)
+            keep = ~warmup_mask(rows) & (text_values(rows["kind"]) == "future")
+            keep &= np.isfinite(speed) & np.isfinite(e)
+            if keep.any():
+                errors.append(e[keep])
+                speeds.append(speed[keep])
+                firsts.setdefault(p, str(rows["drive"].iloc[int(np.argmax(keep))]))
+        if errors:
             found[p] = summarize_groups(
-                fut["error_m"].to_numpy(dtype=float),
-                speed_bin_labels(fut["speed_mps"].to_numpy(dtype=float)),
-                order,
+                np.concatenate(errors), speed_bin_labels(np.concatenate(speeds)), order
             )
-            firsts[p] = str(fut["drive"].iloc[0])
     if not found:
         raise NothingToPlot("no query with a known speed")
     stats = {p: found[p] for p in first_seen(ts, firsts)}

@@ -12,7 +12,6 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from posbench.figures.reading import past_warmup
 from posbench.figures.style import (
     DRIVE_DPI,
     FLOOR_M,
@@ -26,6 +25,7 @@ from posbench.figures.style import (
     warmup_mask,
 )
 from posbench.naming import unique_file_safe
+from posbench.scoring.trace_parts import text_values
 from posbench.scoring.trace_set import TraceSet, as_trace_set
 
 #: at most this many per-drive error-over-time figures per run (the first drives in run
@@ -162,12 +162,16 @@ def drives_to_plot(
         return [], f"not drawn for the {len(drives)} drives (--drive-plots 0)"
     sums = pd.DataFrame(0.0, index=pd.Index(drives), columns=["sum", "count", "rows"])
     for p in ts.predictors():
-        t, _ = past_warmup(ts, p, ["drive", "kind", "error_m"])
-        fut = t[t.kind == "future"]
-        g = fut.groupby("drive", sort=False, observed=True)["error_m"]
-        part = pd.DataFrame({"sum": g.sum(), "count": g.count(), "rows": g.size()})
-        part.index = pd.Index([str(d) for d in part.index])
-        sums = sums.add(part.reindex(sums.index, fill_value=0.0))
+        pieces = []  # one part of the traces at a time, each reduced to its drives' sums
+        for t in ts.scored_parts(p, ["drive", "kind", "error_m", "warmup"], scored=False):
+            fut = t[~warmup_mask(t) & (text_values(t["kind"]) == "future")]
+            g = fut.groupby("drive", sort=False, observed=True)["error_m"]
+            piece = pd.DataFrame({"sum": g.sum(), "count": g.count(), "rows": g.size()})
+            piece.index = pd.Index([str(d) for d in piece.index])
+            pieces.append(piece)
+        if pieces:  # a drive in several parts (none today) adds up its pieces
+            part = pd.concat(pieces).groupby(level=0, sort=False).sum()
+            sums = sums.add(part.reindex(sums.index, fill_value=0.0))
     sums = sums[sums["rows"] > 0]  # drives with a future query past the warm-up
     mean = (sums["sum"] / sums["count"]).where(sums["count"] > 0)
     worst = mean.sort_values(ascending=False, kind="stable").index[:cap]

@@ -1,6 +1,8 @@
 """How the figures read the traces: from a :class:`~posbench.scoring.trace_set.TraceSet`, one
-predictor or one drive at a time and only the columns a figure draws, so that a figure of a
-long run holds one predictor's few columns (or one drive's rows), never the whole traces.
+predictor's parts one at a time (:meth:`~posbench.scoring.trace_set.TraceSet.scored_parts`,
+each reduced to what the figure draws before the next is read) or one drive's rows, and only
+the columns a figure draws, so that a figure of a long run never holds the whole traces, nor
+one predictor's columns over every drive.
 
 The figures draw what they drew from the whole frame: the same rows in the same order, the
 predictors in the order they first appear among the rows drawn (:func:`first_seen`), the
@@ -8,20 +10,9 @@ most-turning drive picked as before (:func:`most_turning`)."""
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+from collections.abc import Mapping
 
-import pandas as pd
-
-from posbench.figures.style import warmup_mask
 from posbench.scoring.trace_set import TraceSet
-
-
-def past_warmup(ts: TraceSet, predictor: str, columns: Sequence[str]) -> tuple[pd.DataFrame, bool]:
-    """The rows of ``predictor`` past the warm-up (every row without a ``warmup`` column),
-    ``columns`` of them (those the traces have); and whether it had any warm-up row."""
-    rows = ts.frame([*dict.fromkeys([*columns, "warmup"])], predictor)
-    w = warmup_mask(rows)
-    return (rows[~w] if w.any() else rows), bool(w.any())
 
 
 def first_seen(ts: TraceSet, firsts: Mapping[str, str]) -> list[str]:
