@@ -23,13 +23,21 @@ import numpy as np
 import pandas as pd
 
 from posbench.config import RunConfig, gps_condition
-from posbench.figures.style import check_formats, most_turning_drive, save_figure, shown_format
+from posbench.figures.style import (
+    check_formats,
+    most_turning,
+    most_turning_drive,
+    save_figure,
+    shown_format,
+    turn_counts,
+)
 from posbench.predictors.registry import create
 from posbench.replay.loop import replay
 from posbench.replay.prepare import PreparedDrive, prepare_drive
 from posbench.scenarios.drive import Drive
 from posbench.scenarios.stored_drive import StoredDrive, as_drive
 from posbench.scoring.records import DriveRun
+from posbench.scoring.trace_parts import text_values
 from posbench.scoring.trace_set import TraceSet, as_trace_set
 
 if TYPE_CHECKING:
@@ -51,6 +59,23 @@ COLUMNS = (
     "label",
     "speed_mps",
 )
+
+
+def turning_drive(ts: TraceSet, predictor: str) -> str | None:
+    """The drive :func:`pick_moment` picks among ``predictor``'s rows (the most turning, by
+    :func:`~posbench.figures.style.most_turning_drive`), found one part of the traces at a
+    time, each reduced to its drives' turn counts; None without a future query."""
+    turns: dict[str, int] = {}
+    first: str | None = None
+    for rows in ts.scored_parts(predictor, ["drive", "kind", "label"], scored=False):
+        fut = rows[text_values(rows["kind"]) == "future"]
+        if len(fut):
+            first = first or str(fut["drive"].iloc[0])
+            for d, n in turn_counts(fut).items():
+                turns[d] = turns.get(d, 0) + n
+    if first is None:
+        return None
+    return most_turning(turns) if turns else first
 
 
 def pick_moment(traces: pd.DataFrame, predictor: str) -> tuple[str, float] | None:
@@ -122,7 +147,12 @@ def paper_figures(
     held = as_trace_set(traces)
     if "lstm" not in cfg.predictors or held.empty:
         return []
-    lstm_rows = held.frame(COLUMNS, "lstm")  # all the figures draw of the traces
+    drawn = turning_drive(held, "lstm")
+    if drawn is None:
+        return []
+    # all the figures draw of the traces: the drawn drive's rows (pick_moment picks this
+    # drive again among them), never the predictor's rows over every drive
+    lstm_rows = held.frame(COLUMNS, "lstm", drive=drawn)
     moment = pick_moment(lstm_rows, "lstm")
     if moment is None:
         return []
