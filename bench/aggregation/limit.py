@@ -27,14 +27,14 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from posbench.aggregation.intervals import Statistics, drive_codes
+from posbench.aggregation.intervals import Statistics
+from posbench.aggregation.limit_rows import BoundRows, bound_rows
 from posbench.metrics.accuracy import summarize, summarize_groups
 from posbench.metrics.limit import LIMIT_IMU_NAME, LIMIT_NAME, mean_ci
 from posbench.scenarios.labels import LABELS
 from posbench.scoring.records import DriveRun
 from posbench.scoring.reference import KIND_FIXES
 from posbench.scoring.schema import KINDS
-from posbench.scoring.trace_parts import text_values
 
 #: what the bound assumes, in one paragraph (results.json ``limit.assumptions``, report.md)
 ASSUMPTIONS = (
@@ -83,22 +83,6 @@ def imu_readers(
     return out
 
 
-def _frames(runs: Sequence[DriveRun]) -> pd.DataFrame:
-    """Every drive's limit rows, with its data set, drive and ``slow_sd_m2`` (the standard
-    deviation of its measured slow floor, ``limit_info["slow_var_sd_m2"]``: 0 if none)."""
-    frames = ((r, r.load_limit()) for r in runs if r.has_limit and not r.skipped)
-    parts = [
-        rows.assign(
-            dataset=r.dataset,
-            drive=r.name,
-            slow_sd_m2=float(r.limit_info.get("slow_var_sd_m2") or 0.0),
-        )
-        for r, rows in frames
-        if rows is not None and not rows.empty
-    ]
-    return pd.concat(parts, ignore_index=True) if parts else pd.DataFrame()
-
-
 def floor_sd(bound_m: np.ndarray, slow_sd_m2: np.ndarray, codes: np.ndarray) -> float:
     """The standard deviation [m] of the mean of ``bound_m`` (per-query bounds [m]) that its
     drives' measured slow floors leave (``slow_sd_m2`` [m^2] per query, its drive's;
@@ -116,27 +100,32 @@ def floor_sd(bound_m: np.ndarray, slow_sd_m2: np.ndarray, codes: np.ndarray) -> 
 
 
 def _kind_summaries(
-    df: pd.DataFrame, column: str, stats: Statistics | None
+    rows: BoundRows,
+    where: np.ndarray | slice,
+    codes: np.ndarray,
+    column: str,
+    stats: Statistics | None,
 ) -> dict[str, Any] | None:
-    """Per kind, :func:`summarize` of the bound in ``column`` with the ``ci95`` of its mean
-    (drives resampled, as a predictor's; its median and p95 are no bound: no interval),
-    widened by ``floor_sd_m`` (:func:`floor_sd`, in quadrature with the resampling's
-    half-widths); None when no query has one (e.g. no IMU)."""
-    e = df[column].to_numpy(dtype=float)
+    """Per kind, :func:`summarize` of the bound in ``column`` over the rows ``where`` (their
+    drives ``codes``, numbered within them) with the ``ci95`` of its mean (drives resampled,
+    as a predictor's; its median and p95 are no bound: no interval), widened by
+    ``floor_sd_m`` (:func:`floor_sd`, in quadrature with the resampling's half-widths); None
+    when no query has one (e.g. no IMU)."""
+    e = getattr(rows, column)[where]
     if not np.isfinite(e).any():
         return None
-    kind = text_values(df["kind"], as_str=True)
-    codes = drive_codes(df)
-    t = df["t_query"].to_numpy(dtype=float)
-    slow_sd = df["slow_sd_m2"].to_numpy(dtype=float)
+    kind = rows.kind[where]
+    slow_sd = rows.slow_sd_m2()[where]
+    masks = [kind == i for i in range(len(KINDS))]
+    sds = [floor_sd(e[m], slow_sd[m], codes[m]) for m in masks]
+    del slow_sd, kind
     out: dict[str, dict[str, Any]] = {}
-    for k in KINDS:
-        m = kind == k
-        out[k] = dict(summarize(e[m]))
-        sd = floor_sd(e[m], slow_sd[m], codes[m])
+    for k, m, sd in zip(KINDS, masks, sds, strict=True):
+        ek, ck = e[m], codes[m]
+        out[k] = dict(summarize(ek))
         out[k]["floor_sd_m"] = sd
         if stats is not None:
-            r = mean_ci(e[m], codes[m], t[m], stats.resamples, stats.seed, stats.level)
+            r = mean_ci(ek, ck, rows.t_query[where][m], stats.resamples, stats.seed, stats.level)
             out[k]["ci95"] = {
                 "mean_m": _widened(r["mean_m"], out[k]["mean_m"], sd, stats.level),
                 "median_m": r["median_m"],
@@ -172,10 +161,17 @@ def _widened(ci: Any, mean: float, sd: float, level: float) -> Any:
     return [mean * math.exp(-down), mean * math.exp(up)]
 
 
-def _scope(df: pd.DataFrame, stats: Statistics | None) -> dict[str, Any]:
-    """The bound's figures over ``df``'s queries: per kind fixes only, and ``imu``."""
-    out = _kind_summaries(df, "limit_m", stats) or {k: summarize(np.empty(0)) for k in KINDS}
-    return {**out, "imu": _kind_summaries(df, "limit_imu_m", stats)}
+def _scope(rows: BoundRows, where: np.ndarray | slice, stats: Statistics | None) -> dict[str, Any]:
+    """The bound's figures over the rows ``where``: per kind fixes only, and ``imu``. Their
+    drives are numbered within them, in order of first appearance."""
+    if isinstance(where, slice) and where == slice(0, len(rows)):
+        codes = rows.drive  # all rows: numbered in order of first appearance already
+    else:
+        codes = pd.factorize(rows.drive[where])[0].astype(np.int32)
+    out = _kind_summaries(rows, where, codes, "limit_m", stats) or {
+        k: summarize(np.empty(0)) for k in KINDS
+    }
+    return {**out, "imu": _kind_summaries(rows, where, codes, "limit_imu_m", stats)}
 
 
 def _ratio(pred: Mapping[str, Any] | None, bound: Mapping[str, Any] | None) -> float | None:
@@ -313,15 +309,21 @@ def below_limit(
     return out
 
 
-def _drive_entry(r: DriveRun, rows: pd.DataFrame) -> dict[str, Any]:
-    """``drives[].limit``: what the drive's bound took, and its mean per kind."""
+def _drive_entry(r: DriveRun, rows: BoundRows, spans: list[slice]) -> dict[str, Any]:
+    """``drives[].limit``: what the drive's bound took, and its mean per kind, from its rows
+    (``spans`` of ``rows``)."""
     info = {k: v for k, v in r.limit_info.items() if k != "cost_s"}  # timing: run-wide only
-    kind = text_values(rows["kind"], as_str=True)
-    imu = rows["limit_imu_m"].to_numpy(dtype=float)
+    mine = np.r_[tuple(spans)] if len(spans) > 1 else spans[0]
+    kind = rows.kind[mine]
+    bound = rows.limit_m[mine]
+    imu = rows.limit_imu_m[mine]
+    codes = {k: KINDS.index(k) for k in KINDS}
     return {
         **info,
-        **{k: summarize(rows["limit_m"].to_numpy(dtype=float)[kind == k]) for k in KINDS},
-        "imu": {k: summarize(imu[kind == k]) for k in KINDS} if np.isfinite(imu).any() else None,
+        **{k: summarize(bound[kind == c]) for k, c in codes.items()},
+        "imu": {k: summarize(imu[kind == c]) for k, c in codes.items()}
+        if np.isfinite(imu).any()
+        else None,
     }
 
 
@@ -347,30 +349,31 @@ def limit_section(
         (:func:`below_limit`). No timing: results.json's figures are the same on every
         run of the same inputs (``DriveRun.limit_info["cost_s"]`` keeps each drive's).
     """
-    df = _frames(runs)
-    if df.empty:
+    rows = bound_rows(runs)
+    if rows is None:
         return None
-    by_drive = {name: g for name, g in df.groupby(["dataset", "drive"], sort=False)}
+    index = {key: code for code, key in enumerate(rows.drives)}
     for d, r in zip(res["drives"], runs, strict=True):
-        rows = by_drive.get((r.dataset, r.name))
-        if rows is not None:
-            d["limit"] = _drive_entry(r, rows)
+        code = index.get((r.dataset, r.name))
+        if code is not None:
+            d["limit"] = _drive_entry(r, rows, rows.spans[code])
+    everything = slice(0, len(rows))
     section: dict[str, Any] = {
         "name": LIMIT_NAME,
         "name_imu": LIMIT_IMU_NAME,
         "assumptions": ASSUMPTIONS,
-        "overall": _scope(df, stats),
+        "overall": _scope(rows, everything, stats),
         "by_dataset": {},
         "by_label": {},
     }
-    ds_col = df["dataset"].to_numpy()
-    single = len(set(ds_col.tolist())) == 1
+    row_dataset = rows.drive_dataset[rows.drive]
+    single = len(rows.datasets) == 1
     for ds in res["by_dataset"]:
-        part = df[ds_col == ds]
-        if part.empty:
+        if ds not in rows.datasets:
             continue
+        where = row_dataset == rows.datasets.index(ds)
         # one data set: its queries are all of them, the same figures
-        entry = dict(section["overall"]) if single else _scope(part, stats)
+        entry = dict(section["overall"]) if single else _scope(rows, where, stats)
         mine = [r for r in runs if r.dataset == ds and r.has_limit and not r.skipped]
         conditions: dict[str, int] = {}
         for r in mine:
@@ -379,15 +382,16 @@ def limit_section(
         entry["gps_conditions"] = dict(sorted(conditions.items()))
         entry["slow_floor"] = {"added": added, "not_added": len(mine) - added}
         section["by_dataset"][ds] = entry
-        kind = text_values(part["kind"], as_str=True)
+        kind = rows.kind[where]
+        bound = rows.limit_m[where]
+        label = rows.label_text(where)
         section["by_label"][ds] = {
             k: summarize_groups(
-                part["limit_m"].to_numpy(dtype=float)[kind == k],
-                text_values(part["label"], as_str=True)[kind == k],
-                order=list(LABELS),
+                bound[kind == KINDS.index(k)], label[kind == KINDS.index(k)], order=list(LABELS)
             )
             for k in KINDS
         }
+        del where, kind, bound, label
     section["ratios"] = {
         "overall": ratios(res["predictors"], section["overall"]),
         "by_dataset": {

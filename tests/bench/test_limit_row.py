@@ -6,6 +6,7 @@ file still loads and renders without the row."""
 
 from __future__ import annotations
 
+import copy
 import json
 import math
 from dataclasses import replace
@@ -16,7 +17,9 @@ import pandas as pd
 import pytest
 from helpers import bench
 
-from posbench.aggregation.limit import below_limit
+from posbench.aggregation.intervals import Statistics, drive_codes
+from posbench.aggregation.limit import below_limit, limit_section
+from posbench.aggregation.limit_rows import bound_rows
 from posbench.config import RunConfig
 from posbench.metrics.limit import LIMIT_IMU_NAME, LIMIT_NAME
 from posbench.pipeline.results import build_results
@@ -73,6 +76,35 @@ def test_a_drive_split_by_predictor_gets_the_same_bound_once(drives):
     assert {k: v for k, v in split.limit_info.items() if k != "cost_s"} == {
         k: v for k, v in whole.limit_info.items() if k != "cost_s"
     }
+
+
+def test_the_bound_rows_are_read_drive_by_drive_into_compact_columns(result, tmp_path):
+    """Held and spilled runs give the same compact columns as their frames joined: the
+    bound, times, kinds and route types row for row, drives numbered in order of first
+    appearance (as the bootstrap numbers them); and the section is the same from either."""
+    runs, res = result
+    spilled = [runs[0].spill(tmp_path, "a"), runs[1]]  # one from disk, one held
+    assert spilled[0].limit is None and spilled[0].limit_part
+    rows = bound_rows(spilled)
+    joined = pd.concat(
+        [r.limit.assign(dataset=r.dataset, drive=r.name) for r in runs], ignore_index=True
+    )
+    assert len(rows) == len(joined)
+    for column in ("limit_m", "limit_imu_m", "t_query"):
+        np.testing.assert_array_equal(getattr(rows, column), joined[column].to_numpy(float))
+    kinds = np.array(["future", "now"], dtype=object)[rows.kind]
+    assert (kinds == joined["kind"].astype(str).to_numpy()).all()
+    assert (rows.label_text(slice(None)) == joined["label"].to_numpy()).all()
+    np.testing.assert_array_equal(rows.drive, drive_codes(joined))
+    assert rows.drives == [(r.dataset, r.name) for r in runs]
+    assert rows.limit_m.dtype == float and rows.kind.itemsize == 1 and rows.drive.itemsize == 4
+    stats = Statistics(resamples=200)
+    held, read = copy.deepcopy(res), copy.deepcopy(res)
+    a, b = limit_section(runs, held, stats), limit_section(spilled, read, stats)
+    assert a is not None and a["overall"]["future"]["ci95"]["mean_m"][0] > 0
+    assert json.dumps(a) == json.dumps(b)  # NaN (no route of a type) written alike
+    assert json.dumps(held["drives"]) == json.dumps(read["drives"])
+    assert held["drives"][0]["limit"]["future"]["count"] > 0
 
 
 def test_results_carry_the_bound_beside_the_predictors_never_as_one(result):
