@@ -63,7 +63,7 @@ def _kind_columns(traces: TraceSet, name: str) -> dict[str, Any] | None:
         c: [] for c in ("err", "cov", "kind", "code", "t_query", "since_fix_s", "dataset", "label")
     }
     pair_code: dict[tuple[object, object], int] = {}
-    for rows in traces.scored_parts(name, NEEDED):
+    for rows in traces.pieces(name, NEEDED):
         pieces["err"].append(_errors(rows))
         pieces["cov"].append(rows[COV].to_numpy(float))
         kind = text_values(rows["kind"])

@@ -56,7 +56,7 @@ def plot_error_cdf(traces: TraceSet | pd.DataFrame, preds: Sequence[str]) -> Fig
     for p in ts.predictors():
         # one part of the traces at a time, each reduced to its finite errors per kind
         errors: dict[str, list[np.ndarray]] = {k: [] for k in KINDS}
-        for rows in ts.scored_parts(p, ["drive", "kind", "error_m", "warmup"], scored=False):
+        for rows in ts.pieces(p, ["drive", "kind", "error_m", "warmup"], scored=False):
             w = warmup_mask(rows)
             warm |= bool(w.any())
             e = rows["error_m"].to_numpy(dtype=float)
@@ -130,7 +130,7 @@ def plot_error_vs_speed(traces: TraceSet | pd.DataFrame, preds: Sequence[str]) -
         # one part of the traces at a time, each reduced to its future rows' errors and speeds
         errors: list[np.ndarray] = []
         speeds: list[np.ndarray] = []
-        for rows in ts.scored_parts(p, cols, scored=False):
+        for rows in ts.pieces(p, cols, scored=False):
             e = rows["error_m"].to_numpy(dtype=float)
             speed = rows["speed_mps"].to_numpy(dtype=float)
             keep = ~warmup_mask(rows) & (text_values(rows["kind"]) == "future")
@@ -187,7 +187,7 @@ def plot_error_vs_since_fix(traces: TraceSet | pd.DataFrame, preds: Sequence[str
         # one part of the traces at a time, each reduced to its now-rows' bins and errors
         bins: list[np.ndarray] = []
         errors: list[np.ndarray] = []
-        for rows in ts.scored_parts(p, cols, scored=False):
+        for rows in ts.pieces(p, cols, scored=False):
             now = rows[~warmup_mask(rows) & (text_values(rows["kind"]) == "now")]
             outages |= bool((now["outage"] >= 0).any())
             now = finite_errors(now[np.isfinite(now["since_fix_s"].to_numpy(dtype=float))])
@@ -248,7 +248,7 @@ def plot_calibration(traces: TraceSet | pd.DataFrame, preds: Sequence[str]) -> F
         # per kind (8 bytes a row), so a long run's columns are never held together
         d2: dict[str, list[np.ndarray]] = {k: [] for k in KINDS}
         kept = False
-        for rows in ts.scored_parts(p, cols[1:]):
+        for rows in ts.pieces(p, cols[1:]):
             keep = np.isfinite(rows["error_m"].to_numpy(dtype=float))
             keep &= np.isfinite(rows["cov_xx"].to_numpy(dtype=float))
             kept |= bool(keep.any())

@@ -21,7 +21,7 @@ from posbench.figures.style import (
     headline,
     in_order,
     most_turning,
-    turn_counts,
+    tally_turns,
     warmup_mask,
 )
 from posbench.scoring.trace_parts import text_values
@@ -58,17 +58,15 @@ def turning_drive(ts: TraceSet, known_error: bool) -> tuple[str, bool] | None:
     turns: dict[str, int] = {}
     firsts: list[str] = []
     cols = ["drive", "kind", "x_ref", "label", "error_m", "warmup"]
+
+    def future(t: pd.DataFrame) -> pd.DataFrame:
+        keep = ~warmup_mask(t) & (text_values(t["kind"]) == "future")
+        keep &= np.isfinite(t["x_ref"].to_numpy(dtype=float))
+        return finite_errors(t[keep]) if known_error else t[keep]
+
     for p in ts.predictors():
-        first: str | None = None
-        # one part of the traces at a time, each reduced to its drives' turn counts
-        for t in ts.scored_parts(p, cols, scored=False):
-            keep = ~warmup_mask(t) & (text_values(t["kind"]) == "future")
-            keep &= np.isfinite(t["x_ref"].to_numpy(dtype=float))
-            fut = finite_errors(t[keep]) if known_error else t[keep]
-            if len(fut):
-                first = first or str(fut["drive"].iloc[0])
-                for d, n in turn_counts(fut).items():
-                    turns[d] = turns.get(d, 0) + n
+        pieces = (future(t) for t in ts.pieces(p, cols, scored=False))
+        _, first = tally_turns(pieces, turns)  # one part of the traces at a time
         if first is not None:
             firsts.append(first)
     if not firsts:

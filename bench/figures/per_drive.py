@@ -163,7 +163,7 @@ def drives_to_plot(
     sums = pd.DataFrame(0.0, index=pd.Index(drives), columns=["sum", "count", "rows"])
     for p in ts.predictors():
         pieces = []  # one part of the traces at a time, each reduced to its drives' sums
-        for t in ts.scored_parts(p, ["drive", "kind", "error_m", "warmup"], scored=False):
+        for t in ts.pieces(p, ["drive", "kind", "error_m", "warmup"], scored=False):
             fut = t[~warmup_mask(t) & (text_values(t["kind"]) == "future")]
             g = fut.groupby("drive", sort=False, observed=True)["error_m"]
             piece = pd.DataFrame({"sum": g.sum(), "count": g.count(), "rows": g.size()})

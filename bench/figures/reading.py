@@ -1,5 +1,5 @@
 """How the figures read the traces: from a :class:`~posbench.scoring.trace_set.TraceSet`, one
-predictor's parts one at a time (:meth:`~posbench.scoring.trace_set.TraceSet.scored_parts`,
+predictor's parts one at a time (:meth:`~posbench.scoring.trace_set.TraceSet.pieces`,
 each reduced to what the figure draws before the next is read) or one drive's rows, and only
 the columns a figure draws, so that a figure of a long run never holds the whole traces, nor
 one predictor's columns over every drive.

@@ -117,6 +117,23 @@ def turn_counts(fut: pd.DataFrame) -> dict[str, int]:
     return {str(d): int(n) for d, n in counts.items() if n}
 
 
+def tally_turns(
+    parts: Iterable[pd.DataFrame], turns: dict[str, int] | None = None
+) -> tuple[dict[str, int], str | None]:
+    """The turn counts of ``parts`` (pieces of one predictor's future queries, each with
+    drive and label: e.g. one part of the traces at a time) added to ``turns`` (drive ->
+    count; a new dict if None), and the first drive of the first piece with a row (None:
+    no row). Each piece is reduced to its counts before the next is read."""
+    out = {} if turns is None else turns
+    first: str | None = None
+    for fut in parts:
+        if len(fut):
+            first = first or str(fut["drive"].iloc[0])
+            for d, n in turn_counts(fut).items():
+                out[d] = out.get(d, 0) + n
+    return out, first
+
+
 def most_turning(turns: dict[str, int]) -> str:
     """The drive with the most turn / roundabout queries (``turns``: drive -> count, not
     empty), the first by name among equals: what ``groupby("drive").size().idxmax()`` picks

@@ -29,7 +29,7 @@ from posbench.figures.style import (
     most_turning_drive,
     save_figure,
     shown_format,
-    turn_counts,
+    tally_turns,
 )
 from posbench.predictors.registry import create
 from posbench.replay.loop import replay
@@ -65,14 +65,8 @@ def turning_drive(ts: TraceSet, predictor: str) -> str | None:
     """The drive :func:`pick_moment` picks among ``predictor``'s rows (the most turning, by
     :func:`~posbench.figures.style.most_turning_drive`), found one part of the traces at a
     time, each reduced to its drives' turn counts; None without a future query."""
-    turns: dict[str, int] = {}
-    first: str | None = None
-    for rows in ts.scored_parts(predictor, ["drive", "kind", "label"], scored=False):
-        fut = rows[text_values(rows["kind"]) == "future"]
-        if len(fut):
-            first = first or str(fut["drive"].iloc[0])
-            for d, n in turn_counts(fut).items():
-                turns[d] = turns.get(d, 0) + n
+    parts = ts.pieces(predictor, ["drive", "kind", "label"], scored=False)
+    turns, first = tally_turns(rows[text_values(rows["kind"]) == "future"] for rows in parts)
     if first is None:
         return None
     return most_turning(turns) if turns else first

@@ -226,19 +226,21 @@ class TraceSet:
             return df[cols] if df.empty else df.loc[scored_mask(df), cols].reset_index(drop=True)
         # each part's rows filtered as it is read: what is held at once is the scored rows
         # (and one part's), not every row of the predictor and then a copy of the scored
-        frames = [
-            _scored_rows(read_part(p, [*cols, *MASK_COLUMNS], predictor), cols) for p in self.parts
-        ]
-        frames = [f for f in frames if len(f)] or frames[:1]
+        frames = list(self.pieces(predictor, cols))
+        if not frames and self.parts:  # none: the first part's columns, empty
+            frames = [
+                _scored_rows(read_part(self.parts[0], [*cols, *MASK_COLUMNS], predictor), cols)
+            ]
         return concat_parts(frames)
 
-    def scored_parts(
+    def pieces(
         self, predictor: str, columns: Sequence[str], scored: bool = True
     ) -> Iterator[pd.DataFrame]:
-        """:meth:`scored` (every row, :meth:`frame`, with ``scored`` False) in pieces, in the
-        same row order: on disk, one part's rows at a time (a predictor held in memory, and a
-        frame in memory, as one piece), for figures that reduce each piece to a little (a
-        drawing's curve) and need never hold them all. Pieces may differ in a text column's
+        """``predictor``'s rows in pieces, in their order: its scored rows (:meth:`scored`),
+        or with ``scored`` False every row (:meth:`frame`). On disk, one part's rows at a
+        time (a predictor held in memory, and a frame in memory, as one piece; parts without
+        a row of it yield none), for figures that reduce each piece to a little (a drawing's
+        curve) and need never hold them all. Pieces may differ in a text column's
         categories."""
         if self._frame is not None or self._held_rows(predictor) is not None:
             yield self.scored(predictor, columns) if scored else self.frame(columns, predictor)

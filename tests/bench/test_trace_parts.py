@@ -185,7 +185,7 @@ def test_trim_heap_calls_the_c_librarys_trim_where_there_is_one():
 
 
 @pytest.mark.parametrize("hold_rows", [0, 10**9], ids=["from the parts", "held"])
-def test_scored_parts_are_the_scored_rows_in_pieces(both, monkeypatch, hold_rows):
+def test_pieces_are_a_predictors_rows_in_pieces(both, monkeypatch, hold_rows):
     """Read part by part (what a figure that reduces each piece reads), the rows are those of
     one read, in the same order, for the scored rows and for every row; from the parts, one
     piece per part that holds the predictor."""
@@ -195,10 +195,10 @@ def test_scored_parts_are_the_scored_rows_in_pieces(both, monkeypatch, hold_rows
     on_disk, in_memory = trace_set(spilled), trace_set(memory)
     for scored in (True, False):
         whole = on_disk.scored("kf", cols) if scored else on_disk.frame(cols, "kf")
-        pieces = list(on_disk.scored_parts("kf", cols, scored=scored))
+        pieces = list(on_disk.pieces("kf", cols, scored=scored))
         kf_parts = [p for p in on_disk.parts if "kf" in part_values(p, "predictor")]
         assert len(pieces) == (len(kf_parts) if hold_rows == 0 else 1)
         joined = pd.concat([p.astype({"drive": str}) for p in pieces], ignore_index=True)
         pd.testing.assert_frame_equal(joined, whole.astype({"drive": str}))
-        [one] = list(in_memory.scored_parts("kf", cols, scored=scored))
+        [one] = list(in_memory.pieces("kf", cols, scored=scored))
         assert len(one) == len(whole)
