@@ -112,7 +112,8 @@ def coverage(d2: np.ndarray, levels: Sequence[float] = COVERAGE_LEVELS) -> np.nd
     r2 = np.asarray(ellipse_r2(np.asarray(levels, dtype=float)))  # typed float | array: an array
     if d.size == 0:
         return np.full(r2.shape, np.nan)
-    share: np.ndarray = (d[:, None] <= r2[None, :]).mean(axis=0)
+    # a count per level, not an (N, levels) table: the same shares, a row's bytes once
+    share = np.array([np.count_nonzero(d <= r) for r in r2], dtype=float) / d.size
     return share
 
 
@@ -127,7 +128,12 @@ def calibration_curve(
 
 def sharpness_m2(cov: np.ndarray, p: float = 0.95) -> float:
     """Median area [m^2] of the p-ellipses, pi r^2 sqrt(det P) (NaN with none valid)."""
-    ld = log_det(cov)
+    return sharpness_of(log_det(cov), p)
+
+
+def sharpness_of(ln_det: np.ndarray, p: float = 0.95) -> float:
+    """:func:`sharpness_m2` from each covariance's ln det P (:func:`log_det`)."""
+    ld = np.asarray(ln_det, dtype=float)
     ld = ld[np.isfinite(ld)]
     if ld.size == 0:
         return math.nan
@@ -137,7 +143,13 @@ def sharpness_m2(cov: np.ndarray, p: float = 0.95) -> float:
 def log_likelihood(d2: np.ndarray, cov: np.ndarray) -> np.ndarray:
     """Per-row log density [nats] of the truth under
     N(answer, P): -ln 2pi - ln det P / 2 - d^2 / 2."""
-    return -math.log(2.0 * math.pi) - 0.5 * log_det(cov) - 0.5 * np.asarray(d2, dtype=float)
+    return log_likelihood_of(d2, log_det(cov))
+
+
+def log_likelihood_of(d2: np.ndarray, ln_det: np.ndarray) -> np.ndarray:
+    """:func:`log_likelihood` from d^2 and ln det P (:func:`log_det`) per row."""
+    ld = np.asarray(ln_det, dtype=float)
+    return -math.log(2.0 * math.pi) - 0.5 * ld - 0.5 * np.asarray(d2, dtype=float)
 
 
 def coverage_scale(d2: np.ndarray, p: float = 0.95) -> float:
@@ -204,11 +216,28 @@ def calibration_summary(
         "coverage": {"50": .., "90": .., "95": .., "99": ..}, "sharpness_m2",
         "loglik", "verdict"}``; count = queries with a valid covariance and error.
     """
-    d2 = mahalanobis_sq(err, cov)
+    return calibration_of(mahalanobis_sq(err, cov), log_det(cov), clusters, times, with_ci)
+
+
+def calibration_of(
+    d2: np.ndarray,
+    ln_det: np.ndarray,
+    clusters: np.ndarray | None = None,
+    times: np.ndarray | None = None,
+    with_ci: bool = True,
+) -> dict[str, Any]:
+    """:func:`calibration_summary` from each query's d^2 (:func:`mahalanobis_sq`) and ln det
+    P (:func:`log_det`): all it needs of the errors and covariances, two numbers a query
+    (a caller that reads its queries in parts keeps these, not the (N, 2) and (N, 3)
+    arrays). The NEES's interval is the cluster bootstrap's interval of the mean (no
+    quantile pass: the mean's interval is all it reports)."""
+    d2 = np.asarray(d2, dtype=float)
+    ld = np.asarray(ln_det, dtype=float)
     ok = np.isfinite(d2)
     n = int(ok.sum())
-    covered = coverage(d2[ok])
-    nees = float(d2[ok].mean()) if n else math.nan
+    v = d2[ok]
+    covered = coverage(v)
+    nees = float(v.mean()) if n else math.nan
     out: dict[str, Any] = {
         "count": n,
         "nees": nees,
@@ -217,17 +246,15 @@ def calibration_summary(
         "coverage": {
             f"{round(p * 100):d}": float(c) for p, c in zip(COVERAGE_LEVELS, covered, strict=True)
         },
-        "sharpness_m2": sharpness_m2(np.asarray(cov, dtype=float).reshape(-1, 3)[ok]),
-        "loglik": float(np.mean(log_likelihood(d2[ok], np.asarray(cov).reshape(-1, 3)[ok])))
-        if n
-        else math.nan,
+        "sharpness_m2": sharpness_of(ld[ok]),
+        "loglik": float(np.mean(log_likelihood_of(v, ld[ok]))) if n else math.nan,
     }
     if with_ci and n:
         from posbench.metrics.bootstrap import summary_ci
 
         cl = np.zeros(n, dtype=np.int64) if clusters is None else np.asarray(clusters)[ok]
         tt = None if times is None else np.asarray(times, dtype=float)[ok]
-        out["nees_ci95"] = list(summary_ci(d2[ok], cl, tt)["mean_m"])
+        out["nees_ci95"] = list(summary_ci(v, cl, tt, quantiles=False)["mean_m"])
     out["verdict"] = verdict(nees, float(covered[COVERAGE_LEVELS.index(0.95)]), n, out["nees_ci95"])
     return out
 

@@ -19,9 +19,11 @@ import numpy as np
 import pandas as pd
 
 from posbench.aggregation.intervals import drive_codes
+from posbench.aggregation.row_columns import RowColumns
 from posbench.metrics.calibration import (
     calibration_curve,
-    calibration_summary,
+    calibration_of,
+    log_det,
     mahalanobis_sq,
     since_fix_bin,
 )
@@ -52,45 +54,75 @@ def _errors(rows: pd.DataFrame) -> np.ndarray:
     return err
 
 
+def _codes(values: np.ndarray, table: list[Any], index: dict[Any, int]) -> np.ndarray:
+    """``values`` (text, NaN where missing) as int16 indices into ``table``, extended by
+    values not in it yet in order of first appearance; -1 where missing."""
+    codes, uniques = pd.factorize(values, use_na_sentinel=True)
+    mapping = np.array([*(index.setdefault(u, len(index)) for u in uniques), -1], dtype=np.int16)
+    table.extend(list(index)[len(table) :])
+    out: np.ndarray = mapping[codes]
+    return out
+
+
 def _kind_columns(traces: TraceSet, name: str) -> dict[str, Any] | None:
-    """Predictor ``name``'s scored rows as arrays, read one part of the traces at a time
-    (never a frame of every row beside them), grouped by query kind in a stable order (each
-    kind's rows keep theirs): ``err`` (N, 2) [m], ``cov`` (N, 3) [m^2], ``code`` (the drive,
-    numbered as :func:`~posbench.aggregation.intervals.drive_codes` numbers them),
-    ``t_query`` and ``since_fix_s`` [s], ``dataset`` and ``label`` (text), and ``rows_of``:
-    each kind of :data:`KINDS` -> its slice. None when no row reports a covariance."""
-    pieces: dict[str, list[np.ndarray]] = {
-        c: [] for c in ("err", "cov", "kind", "code", "t_query", "since_fix_s", "dataset", "label")
-    }
+    """Predictor ``name``'s scored rows reduced to what the section needs, read one part of
+    the traces at a time (never a frame of every row, nor its errors and covariances, beside
+    them), grouped by query kind in a stable order (each kind's rows keep theirs): ``d2``
+    (:func:`~posbench.metrics.calibration.mahalanobis_sq`) and ``ln_det``
+    (:func:`~posbench.metrics.calibration.log_det`), ``code`` (the drive, numbered as
+    :func:`~posbench.aggregation.intervals.drive_codes` numbers them), ``t_query`` [s],
+    ``since_bin`` (:func:`~posbench.metrics.calibration.since_fix_bin`), ``dataset`` and
+    ``label`` (indices into ``tables[col]``: its values in order of first appearance; -1
+    where missing), and ``rows_of``: each kind of :data:`KINDS` -> its slice. About 34
+    bytes a query. None when no row reports a covariance."""
+    columns = RowColumns(
+        {
+            "d2": np.float64,
+            "ln_det": np.float64,
+            "kind": np.int8,
+            "code": np.int32,
+            "t_query": np.float64,
+            "since_bin": np.int8,
+            "dataset": np.int16,
+            "label": np.int16,
+        },
+        traces.row_bound(name),
+    )
+    tables: dict[str, list[Any]] = {"dataset": [], "label": []}
+    indices: dict[str, dict[Any, int]] = {"dataset": {}, "label": {}}
     pair_code: dict[tuple[object, object], int] = {}
+    reported = False
     for rows in traces.pieces(name, NEEDED):
-        pieces["err"].append(_errors(rows))
-        pieces["cov"].append(rows[COV].to_numpy(float))
+        cov = rows[COV].to_numpy(float)
+        reported = reported or bool(np.isfinite(cov[:, 0]).any())
         kind = text_values(rows["kind"])
-        pieces["kind"].append(
-            np.select([kind == k for k in KINDS], np.arange(len(KINDS)), -1).astype(np.int8)
-        )
         # the part's drives numbered in order of appearance, then as across the parts so far
         local = drive_codes(rows)
         first = np.unique(local, return_index=True)[1]
         ds, dr = text_values(rows["dataset"]), text_values(rows["drive"])
         to_run = [pair_code.setdefault((ds[i], dr[i]), len(pair_code)) for i in first]
-        pieces["code"].append(np.asarray(to_run, dtype=np.int64)[local])
-        for col in ("t_query", "since_fix_s"):
-            pieces[col].append(rows[col].to_numpy(float))
-        pieces["dataset"].append(ds)
-        pieces["label"].append(text_values(rows["label"]))
-    if not pieces["cov"] or not any(np.isfinite(c[:, 0]).any() for c in pieces["cov"]):
+        columns.add(
+            d2=mahalanobis_sq(_errors(rows), cov),
+            ln_det=log_det(cov),
+            kind=np.select([kind == k for k in KINDS], np.arange(len(KINDS)), -1),
+            code=np.asarray(to_run, dtype=np.int32)[local],
+            t_query=rows["t_query"].to_numpy(float),
+            since_bin=since_fix_bin(rows["since_fix_s"].to_numpy(float))[0],
+            dataset=_codes(ds, tables["dataset"], indices["dataset"]),
+            label=_codes(text_values(rows["label"]), tables["label"], indices["label"]),
+        )
+    if not reported:
         return None
-    kind = np.concatenate(pieces.pop("kind"))
+    kind = columns.take("kind")
     order = np.argsort(kind, kind="stable")
     bounds = np.searchsorted(kind[order], np.arange(len(KINDS) + 1))
     out: dict[str, Any] = {
-        "rows_of": {k: slice(int(bounds[i]), int(bounds[i + 1])) for i, k in enumerate(KINDS)}
+        "rows_of": {k: slice(int(bounds[i]), int(bounds[i + 1])) for i, k in enumerate(KINDS)},
+        "tables": tables,
     }
     del kind
-    for col in list(pieces):  # one column at a time: joined, put in kind order, parts let go
-        out[col] = np.concatenate(pieces.pop(col))[order]
+    for col in ("d2", "ln_det", "code", "t_query", "since_bin", "dataset", "label"):
+        out[col] = columns.take(col, order)  # one column at a time, in kind order
     return out
 
 
@@ -116,32 +148,31 @@ def uncertainty_section(traces: TraceSet, predictors: Sequence[str]) -> dict[str
         if cols is None:
             out["none"].append(name)
             continue
-        err_all, cov_all, codes_all = cols["err"], cols["cov"], cols["code"]
-        times, since = cols["t_query"], cols["since_fix_s"]
-        text = {col: cols[col] for col in ("dataset", "label")}
-        rows_of = cols["rows_of"]
-        del cols
+        rows_of, tables = cols["rows_of"], cols["tables"]
         for block in ("predictors", "by_dataset", "by_label", "by_since_fix", "curve"):
             out[block][name] = {}
         for k in KINDS:
             m = rows_of[k]
-            err, cov = err_all[m], cov_all[m]
+            d2, ld = cols["d2"][m], cols["ln_det"][m]
             # the kind's drives numbered in order of appearance, as drive_codes numbers them
-            clusters = pd.factorize(codes_all[m])[0].astype(np.int64)
-            out["predictors"][name][k] = calibration_summary(
-                err, cov, clusters=clusters, times=times[m]
+            clusters = pd.factorize(cols["code"][m])[0].astype(np.int64)
+            out["predictors"][name][k] = calibration_of(
+                d2, ld, clusters=clusters, times=cols["t_query"][m]
             )
-            out["curve"][name][k] = [list(pq) for pq in calibration_curve(mahalanobis_sq(err, cov))]
+            del clusters
+            out["curve"][name][k] = [list(pq) for pq in calibration_curve(d2)]
             for block, col in (("by_dataset", "dataset"), ("by_label", "label")):
-                code, groups = pd.factorize(text[col][m])  # in order of appearance
+                code, groups = pd.factorize(cols[col][m])  # in order of appearance
                 out[block][name][k] = {
-                    str(g): calibration_summary(err[code == i], cov[code == i], with_ci=False)
+                    str(tables[col][g]): calibration_of(d2[code == i], ld[code == i], with_ci=False)
                     for i, g in enumerate(groups)
+                    if g >= 0  # a missing value: in no group
                 }
-            idx, names = since_fix_bin(since[m])
+            idx, names = cols["since_bin"][m], since_fix_bin(np.empty(0))[1]
             out["by_since_fix"][name][k] = {
-                b: calibration_summary(err[idx == i], cov[idx == i], with_ci=False)
+                b: calibration_of(d2[idx == i], ld[idx == i], with_ci=False)
                 for i, b in enumerate(names)
                 if (idx == i).any()
             }
+        del cols
     return out

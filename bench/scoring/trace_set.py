@@ -181,6 +181,24 @@ class TraceSet:
             del self._held[next(iter(self._held))]
         return held
 
+    def row_bound(self, predictor: str) -> int | None:
+        """How many rows ``predictor`` has (its scored rows are at most these), from the
+        parts' row groups without reading them (or counted in a frame in memory); None
+        where a part's row group holds several predictors."""
+        if self._frame is not None:
+            if self._frame.empty:
+                return 0
+            return int((self._frame["predictor"] == predictor).sum())
+        n = 0
+        for i, path in enumerate(self.parts):
+            if i not in self._part_counts:
+                self._part_counts[i] = rows_per_value(path, "predictor")
+            counts = self._part_counts[i]
+            if counts is None:
+                return None
+            n += counts.get(predictor, 0)
+        return n
+
     def predictors(self) -> list[str]:
         """The predictors, in the order they first appear (the run's order)."""
         if self._frame is not None:

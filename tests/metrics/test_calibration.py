@@ -15,9 +15,11 @@ from posbench.metrics.calibration import (
     OVERCONFIDENT,
     UNDERCONFIDENT,
     calibration_curve,
+    calibration_of,
     calibration_summary,
     coverage,
     ellipse_r2,
+    log_det,
     log_likelihood,
     mahalanobis_sq,
     nees_interval,
@@ -28,6 +30,34 @@ from posbench.metrics.calibration import (
 
 
 # ----------------------------------------------------------------------- pure metrics
+def test_two_numbers_a_query_give_the_whole_summary():
+    """calibration_of(d^2, ln det P) is calibration_summary(errors, covariances) to the bit,
+    its NEES interval the bootstrap's interval of the mean (the quantile pass it skips does
+    not move it), and the coverage shares are the (N, levels) table's means."""
+    from posbench.metrics.bootstrap import summary_ci
+
+    rng = np.random.default_rng(3)
+    n = 3000
+    cov = np.column_stack(
+        [rng.uniform(0.5, 2, n), rng.uniform(-0.3, 0.3, n), rng.uniform(0.5, 2, n)]
+    )
+    err = rng.normal(size=(n, 2)) * 1.2
+    err[::97] = np.nan
+    cov[5::101, 1] = 5.0  # not positive definite: left out
+    clusters = np.repeat(np.arange(12), n // 12)
+    times = np.arange(n) * 0.05
+    a = calibration_summary(err, cov, clusters, times)
+    d2 = mahalanobis_sq(err, cov)
+    b = calibration_of(d2, log_det(cov), clusters, times)
+    assert a == b and a["count"] == int(np.isfinite(d2).sum()) < n
+    ok = np.isfinite(d2)
+    full = summary_ci(d2[ok], clusters[ok], times[ok])  # with its quantile pass
+    assert a["nees_ci95"] == list(full["mean_m"])
+    r2 = ellipse_r2(np.array([0.5, 0.9, 0.95, 0.99]))
+    table = (d2[ok][:, None] <= r2[None, :]).mean(axis=0)
+    assert list(coverage(d2)) == list(table)
+
+
 def test_mahalanobis_known_values():
     err = np.array([[1.0, 0.0], [0.0, 2.0], [1.0, 1.0], [np.nan, 0.0], [1.0, 0.0]])
     cov = np.array(
