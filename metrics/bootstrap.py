@@ -223,7 +223,9 @@ def interval_batch(
             if codes is None:
                 blocks[values.size] = max(blocks.get(values.size, 1), block_len)
     shared: dict[tuple[int, int], tuple[np.ndarray, list[tuple[int, np.ndarray, np.ndarray]]]] = {}
-    for i, e, codes, d in prepared:
+    prepared.reverse()
+    while prepared:  # each item let go once its intervals are done
+        i, e, codes, d = prepared.pop()
         if codes is None:
             br = block_resample(
                 e.size, blocks.get(e.size, d) if share_blocks else d, n_resamples, seed
@@ -240,17 +242,30 @@ def interval_batch(
         if not quantiles:
             continue
         order = np.argsort(e)  # ties hold equal values: any order of them gives the same
-        # series over the same queries share a pass when they share their resamples
-        key = (id(w), e.size) if share_blocks else (id(w), i)
-        shared.setdefault(key, (w, []))[1].append((i, e[order], units[order]))
+        member = (i, e[order], units[order])
+        del order, e, units
+        if share_blocks:  # series over the same queries share a pass when they share resamples
+            shared.setdefault((id(w), member[1].size), (w, []))[1].append(member)
+        else:  # a pass of its own, now: its sorted copies are gone before the next item's
+            _quantile_pass(out, w, [member], level)
+        del member
     for w, members in shared.values():
-        stats = resampled_quantiles_many(
-            [(v, u) for _, v, u in members], w, tuple(QUANTILES.values())
-        )
-        for (i, _, _), st in zip(members, stats, strict=True):
-            for j, figure in enumerate(QUANTILES):
-                out[i][figure] = list(percentile_interval(st[:, j], level))
+        _quantile_pass(out, w, members, level)
     return out
+
+
+def _quantile_pass(
+    out: list[dict[str, Any]],
+    w: np.ndarray,
+    members: list[tuple[int, np.ndarray, np.ndarray]],
+    level: float,
+) -> None:
+    """The quantiles' intervals of ``members`` (item index, sorted values, their units),
+    which share the resamples ``w``, into ``out[index]``."""
+    stats = resampled_quantiles_many([(v, u) for _, v, u in members], w, tuple(QUANTILES.values()))
+    for (i, _, _), st in zip(members, stats, strict=True):
+        for j, figure in enumerate(QUANTILES):
+            out[i][figure] = list(percentile_interval(st[:, j], level))
 
 
 def paired_summary(

@@ -15,6 +15,7 @@ writes:
 
 from __future__ import annotations
 
+import copy
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
@@ -291,14 +292,20 @@ def paired_results(
     both, codes, kind, e, eb, t = _paired_columns(df, base)
     ds_code, ds_names = pd.factorize(both["dataset"])
     lab_code, lab_names = pd.factorize(both["label"])
+    ds_code, lab_code = ds_code.astype(np.int32), lab_code.astype(np.int32)
     ds_index = {str(n): i for i, n in enumerate(ds_names)}
     lab_index = {str(n): i for i, n in enumerate(lab_names)}
+    del both
     for k in KINDS:
         mk = kind == k
         out["overall"][k] = _paired(eb[mk], e[mk], codes[mk], t[mk], stats)
+        n_kind = int(mk.sum())
         for ds in datasets:
             m = mk & (ds_code == ds_index.get(ds, -2))
-            out["by_dataset"][ds][k] = _paired(eb[m], e[m], codes[m], t[m], stats)
+            if int(m.sum()) == n_kind:  # the kind's queries are all this data set's
+                out["by_dataset"][ds][k] = copy.deepcopy(out["overall"][k])
+            else:
+                out["by_dataset"][ds][k] = _paired(eb[m], e[m], codes[m], t[m], stats)
             out["by_label"][ds][k] = {}
             for lab in LABELS:
                 ml = m & (lab_code == lab_index.get(lab, -2))

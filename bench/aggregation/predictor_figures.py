@@ -40,6 +40,9 @@ from posbench.scoring.trace_parts import text_values
 from posbench.scoring.trace_set import TraceSet, as_trace_set
 
 #: the trace columns aggregation reads (positions are not needed once errors exist)
+#: the columns of the baseline's rows that the paired comparison reads
+PAIRED = ("dataset", "drive", "kind", "t_query", "error_m")
+
 AGGREGATED = (
     "dataset",
     "drive",
@@ -219,14 +222,59 @@ def predictor_figures(c: Combining, name: str) -> dict[str, Any]:
     return out
 
 
+def _paired_figures(c: Combining, name: str, df: pd.DataFrame) -> dict[str, Any]:
+    """``paired`` (and ``paired_held``) of predictor ``name`` (its scored rows ``df``)
+    against the baseline, from the baseline's rows with the columns the pairing reads
+    alone; none for the baseline itself, or without one."""
+    stats = c.stats
+    if not stats.baseline or name == stats.baseline or df.empty:
+        return {}
+    base = with_codes(c.ts.scored(stats.baseline, [k for k in PAIRED if k in c.cols]))
+    out = {"paired": paired_results(df, base, c.datasets, stats)}
+    if c.held_all or c.held_ds:  # the same comparison without the training drives
+        out["paired_held"] = paired_results(
+            df[~df["drive"].isin(c.trained_on)],
+            base[~base["drive"].isin(c.trained_on)],
+            c.held_ds,
+            stats,
+        )
+    return out
+
+
+def _by_speed(df: pd.DataFrame, stats: Statistics) -> dict[str, Any]:
+    """``by_speed``: per kind, the errors' summary and interval per speed bin."""
+    out = {}
+    for kind in KINDS:
+        e, codes, t, m = kind_columns(df, kind)
+        bins = speed_bin_labels(df["speed_mps"].to_numpy()[m])
+        by_speed = summarize_groups(e, bins, order=speed_bin_order() + ["unknown"])
+        add_group_cis(by_speed, e, bins, codes, t, stats)
+        out[kind] = by_speed
+    return out
+
+
+def _outage_figures(df: pd.DataFrame, stats: Statistics) -> dict[str, Any]:
+    """``outages``: the now-queries' error by time since the last fix, and the outage
+    scores with their intervals."""
+    e, codes, t, m = kind_columns(df, "now")
+    outage = df["outage"].to_numpy()[m]
+    since = df["since_fix_s"].to_numpy()[m]
+    ids = outage_keys(codes, outage)
+    del outage
+    since_fix = error_vs_since_fix(e, since)
+    add_group_cis(since_fix, e, since_fix_checkpoint(since), codes, t, stats)
+    scores: dict[str, Any] = outage_scores(e, t, ids)
+    scores["ci95"] = outage_cis(e, t, ids, stats)
+    return {"since_fix": since_fix, "scores": scores}
+
+
 def error_figures(c: Combining, name: str) -> dict[str, Any]:
     """Predictor ``name``'s figures of the error column: the headline entry with latency,
     by speed, outages, the paired comparison with the baseline, by data set and route type,
     held out, per drive. Its own function so that every array it makes is gone when it
     returns (a local of :func:`predictor_figures` would live on through the sections)."""
     stats, datasets, trained_on = c.stats, c.datasets, c.trained_on
-    base_df = c.scored_rows(stats.baseline) if stats.baseline else None
-    df = base_df if base_df is not None and name == stats.baseline else c.scored_rows(name)
+    df = c.scored_rows(name)
     out: dict[str, Any] = {}
     entry = kind_summaries(df, stats) if not df.empty else empty_kinds(stats)
     steps, queries, covs = (durations(c.runs, call, name) for call in ("step", "query", "cov"))
@@ -235,35 +283,15 @@ def error_figures(c: Combining, name: str) -> dict[str, Any]:
     if covs:  # the covariance_at call, timed apart from the query
         entry["covariance_us"] = latency_summary(np.concatenate(covs))
     out["entry"] = entry
-    if not df.empty:
-        out["by_speed"] = {}
-        for kind in KINDS:
-            e, codes, t, m = kind_columns(df, kind)
-            bins = speed_bin_labels(df["speed_mps"].to_numpy()[m])
-            by_speed = summarize_groups(e, bins, order=speed_bin_order() + ["unknown"])
-            add_group_cis(by_speed, e, bins, codes, t, stats)
-            out["by_speed"][kind] = by_speed
-    if c.with_outages:
-        e, codes, t, m = kind_columns(df, "now")
-        outage = df["outage"].to_numpy()[m]
-        since = df["since_fix_s"].to_numpy()[m]
-        ids = outage_keys(codes, outage)
-        since_fix = error_vs_since_fix(e, since)
-        add_group_cis(since_fix, e, since_fix_checkpoint(since), codes, t, stats)
-        scores: dict[str, Any] = outage_scores(e, t, ids)
-        scores["ci95"] = outage_cis(e, t, ids, stats)
-        out["outages"] = {"since_fix": since_fix, "scores": scores}
-    if base_df is not None and name != stats.baseline and not df.empty:
-        out["paired"] = paired_results(df, base_df, datasets, stats)
-        if c.held_all or c.held_ds:  # the same comparison without the training drives
-            out["paired_held"] = paired_results(
-                df[~df["drive"].isin(trained_on)],
-                base_df[~base_df["drive"].isin(trained_on)],
-                c.held_ds,
-                stats,
-            )
-    del base_df
+    # the paired comparison first, so that the baseline's rows are gone before the rest
+    paired = _paired_figures(c, name, df)
     trim_heap()
+    if not df.empty:
+        out["by_speed"] = _by_speed(df, stats)
+    if c.with_outages:
+        out["outages"] = _outage_figures(df, stats)
+    out.update(paired)
+    del paired
     groups = {str(ds): g for ds, g in df.groupby("dataset", sort=True, observed=True)}
     out["by_dataset"], out["by_label"], out["held_out"] = {}, {}, {}
     for ds in datasets:
