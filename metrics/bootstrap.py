@@ -174,6 +174,7 @@ def group_cis(
     e = np.asarray(errors, dtype=np.float64)[order]
     c = np.asarray(clusters)[order]
     t = None if times is None else np.asarray(times, dtype=np.float64)[order]
+    del order, code, k
     items = [
         (e[a:b], c[a:b], None if t is None else t[a:b]) for a, b in zip(starts, bounds, strict=True)
     ]
@@ -198,7 +199,9 @@ def interval_batch(
     prepared: list[tuple[int, np.ndarray, np.ndarray | None, int]] = []
     for i, (err, clusters, times) in enumerate(items):
         e = np.asarray(err, dtype=np.float64)
-        ok = np.isfinite(e)
+        finite = np.isfinite(e)
+        # every error finite: the arrays as they are, not copies
+        ok: np.ndarray | slice = slice(None) if finite.all() else finite
         e = e[ok]
         out.append(
             {
@@ -291,7 +294,10 @@ def paired_summary(
     """
     a = np.asarray(errors_a, dtype=np.float64)
     b = np.asarray(errors_b, dtype=np.float64)
-    ok = np.isfinite(a) & np.isfinite(b)
+    both = np.isfinite(a) & np.isfinite(b)
+    # every pair finite: the arrays as they are, not copies
+    ok: np.ndarray | slice = slice(None) if both.all() else both
+    del both
     a, b = a[ok], b[ok]
     nan = float("nan")
     if a.size == 0:

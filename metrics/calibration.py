@@ -113,7 +113,7 @@ def coverage(d2: np.ndarray, levels: Sequence[float] = COVERAGE_LEVELS) -> np.nd
     if d.size == 0:
         return np.full(r2.shape, np.nan)
     # a count per level, not an (N, levels) table: the same shares, a row's bytes once
-    share = np.array([np.count_nonzero(d <= r) for r in r2], dtype=float) / d.size
+    share: np.ndarray = np.array([np.count_nonzero(d <= r) for r in r2], dtype=float) / d.size
     return share
 
 
