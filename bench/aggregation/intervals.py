@@ -16,7 +16,7 @@ writes:
 from __future__ import annotations
 
 import copy
-from collections.abc import Mapping, Sequence
+from collections.abc import Collection, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -200,7 +200,27 @@ def outage_cis(
 
 
 # --------------------------------------------------------------- paired
-def _aligned(df: pd.DataFrame, base: pd.DataFrame) -> tuple[pd.DataFrame, np.ndarray]:
+@dataclass(frozen=True)
+class Aligned:
+    """A predictor's scored rows with the baseline's error of the same query beside
+    (column ``error_base``; :func:`align`), their drive codes, and whether the two lists of
+    queries were the same (then ``codes`` are the predictor's own ``code`` column)."""
+
+    rows: pd.DataFrame
+    codes: np.ndarray
+    same: bool
+
+    def without(self, drives: Collection[str]) -> Aligned:
+        """These rows less those of ``drives``, as :func:`align` gives them from the two
+        frames less those drives, when the lists were the same (a subset of two equal lists
+        is equal: the codes are the predictor's own)."""
+        if not self.same:
+            raise ValueError("only the rows of the same queries can be cut without their frames")
+        keep = ~self.rows["drive"].isin(list(drives)).to_numpy()
+        return Aligned(self.rows[keep], self.codes[keep], True)
+
+
+def align(df: pd.DataFrame, base: pd.DataFrame) -> Aligned:
     """``df``'s rows with the baseline's error of the same query beside (column
     ``error_base``), and their drive codes. Traces of one run list every predictor's
     queries in the same order, so this is usually a column copy (both frames need the
@@ -214,19 +234,27 @@ def _aligned(df: pd.DataFrame, base: pd.DataFrame) -> tuple[pd.DataFrame, np.nda
         and all(np.array_equal(pd.unique(df[k]), pd.unique(base[k])) for k in ("dataset", "drive"))
     )
     if same:  # the same drives in the same order, the same queries in each
-        out = df.assign(error_base=base["error_m"].to_numpy())
+        # a copy: the aligned rows keep no block of the baseline's frame alive
+        out = df.assign(error_base=base["error_m"].to_numpy(copy=True))
     else:
         b = base[keys + ["error_m"]].rename(columns={"error_m": "error_base"})
         out = df.merge(b, on=keys, how="inner", sort=False)
-    return out, (out["code"].to_numpy() if same else drive_codes(out))
+    return Aligned(out, out["code"].to_numpy() if same else drive_codes(out), bool(same))
 
 
 def _paired_columns(
     df: pd.DataFrame, base: pd.DataFrame
 ) -> tuple[pd.DataFrame, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """The queries both answered (:func:`_aligned`), their drive codes, and as arrays their
+    """The queries both answered (:func:`align`), their drive codes, and as arrays their
     kind, the predictor's error, the baseline's error [m] and the query time [s]."""
-    both, codes = _aligned(df, base)
+    return _aligned_columns(align(df, base))
+
+
+def _aligned_columns(
+    aligned: Aligned,
+) -> tuple[pd.DataFrame, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """:func:`_paired_columns` of rows already aligned."""
+    both, codes = aligned.rows, aligned.codes
     return (
         both,
         codes,
@@ -275,7 +303,8 @@ def paired_results(
     df: pd.DataFrame, base: pd.DataFrame, datasets: Sequence[str], stats: Statistics
 ) -> dict[str, Any]:
     """One predictor against the baseline: its scored rows ``df`` and the baseline's
-    ``base`` (both with columns dataset, drive, kind, t_query, error_m, label).
+    ``base`` (both with columns dataset, drive, kind, t_query, error_m and ``code``; ``df``
+    with label too): :func:`paired_aligned` of :func:`align`.
 
     Returns:
         ``{"overall": {kind: entry}, "by_dataset": {ds: {kind: entry}},
@@ -284,12 +313,19 @@ def paired_results(
         the baseline), ``ci95``, ``drives``, ``wins``, ``win_share``, ``conclusive``,
         ``queries``, ``block_len`` (see :func:`posbench.metrics.bootstrap.paired_summary`).
     """
+    return paired_aligned(align(df, base), datasets, stats)
+
+
+def paired_aligned(aligned: Aligned, datasets: Sequence[str], stats: Statistics) -> dict[str, Any]:
+    """:func:`paired_results` of rows already aligned (:func:`align`): the baseline's frame
+    need not be held while the intervals are drawn."""
     out: dict[str, Any] = {
         "overall": {},
         "by_dataset": {ds: {} for ds in datasets},
         "by_label": {ds: {} for ds in datasets},
     }
-    both, codes, kind, e, eb, t = _paired_columns(df, base)
+    both, codes, kind, e, eb, t = _aligned_columns(aligned)
+    del aligned
     ds_code, ds_names = pd.factorize(both["dataset"])
     lab_code, lab_names = pd.factorize(both["label"])
     ds_code, lab_code = ds_code.astype(np.int32), lab_code.astype(np.int32)

@@ -18,10 +18,11 @@ import pandas as pd
 from posbench.aggregation.intervals import (
     Statistics,
     add_group_cis,
+    align,
     drive_codes,
     one_drive_cis,
     outage_cis,
-    paired_results,
+    paired_aligned,
     with_ci,
 )
 from posbench.heap import trim_heap
@@ -230,14 +231,20 @@ def _paired_figures(c: Combining, name: str, df: pd.DataFrame) -> dict[str, Any]
     if not stats.baseline or name == stats.baseline or df.empty:
         return {}
     base = with_codes(c.ts.scored(stats.baseline, [k for k in PAIRED if k in c.cols]))
-    out = {"paired": paired_results(df, base, c.datasets, stats)}
-    if c.held_all or c.held_ds:  # the same comparison without the training drives
-        out["paired_held"] = paired_results(
-            df[~df["drive"].isin(c.trained_on)],
-            base[~base["drive"].isin(c.trained_on)],
-            c.held_ds,
-            stats,
-        )
+    full = align(df, base)
+    held = c.held_all or c.held_ds
+    if full.same or not held:
+        del base  # the held-out rows, if asked, are the full alignment's
+    out = {"paired": paired_aligned(full, c.datasets, stats)}
+    if held:  # the same comparison without the training drives
+        if full.same:
+            aligned = full.without(c.trained_on)
+        else:
+            aligned = align(
+                df[~df["drive"].isin(c.trained_on)], base[~base["drive"].isin(c.trained_on)]
+            )
+        del full
+        out["paired_held"] = paired_aligned(aligned, c.held_ds, stats)
     return out
 
 
