@@ -16,6 +16,7 @@ from dataclasses import dataclass
 import numpy as np
 import pandas as pd
 
+from posbench.aggregation.row_columns import extend_codes
 from posbench.scoring.records import DriveRun
 from posbench.scoring.schema import KINDS
 from posbench.scoring.trace_parts import text_values
@@ -42,7 +43,7 @@ class BoundRows:
     t_query: np.ndarray
     kind: np.ndarray
     label: np.ndarray
-    labels: list[str]
+    labels: list[object]
     drive: np.ndarray
     drives: list[tuple[str, str]]
     drive_dataset: np.ndarray
@@ -78,22 +79,6 @@ def _row_count(r: DriveRun) -> int:
     return int(pq.read_metadata(r.limit_part).num_rows)
 
 
-def _codes(values: pd.Series, table: list[str], index: dict[str, int]) -> np.ndarray:
-    """``values`` (text) as indices into ``table``, extended by values not in it yet (in
-    order of first appearance); -1 where missing."""
-    codes, uniques = pd.factorize(values, use_na_sentinel=True)
-    mapping = np.empty(len(uniques) + 1, dtype=np.int16)
-    for i, u in enumerate(uniques):
-        text = str(u)
-        if text not in index:
-            index[text] = len(table)
-            table.append(text)
-        mapping[i] = index[text]
-    mapping[-1] = -1
-    out: np.ndarray = mapping[codes]
-    return out
-
-
 def bound_rows(runs: Sequence[DriveRun]) -> BoundRows | None:
     """Every drive's bound rows read one drive at a time into :class:`BoundRows` (None when
     no drive has any): the columns are allocated once, at their final size."""
@@ -105,8 +90,8 @@ def bound_rows(runs: Sequence[DriveRun]) -> BoundRows | None:
     kind = np.empty(n, dtype=np.int8)
     label = np.empty(n, dtype=np.int16)
     drive = np.empty(n, dtype=np.int32)
-    labels: list[str] = []
-    label_index: dict[str, int] = {}
+    labels: list[object] = []
+    label_index: dict[object, int] = {}
     datasets: list[str] = []
     drive_index: dict[tuple[str, str], int] = {}
     drive_dataset: list[int] = []
@@ -132,7 +117,7 @@ def bound_rows(runs: Sequence[DriveRun]) -> BoundRows | None:
         limit_imu_m[span] = rows["limit_imu_m"].to_numpy(dtype=float)
         t_query[span] = rows["t_query"].to_numpy(dtype=float)
         kind[span] = kinds.get_indexer(text_values(rows["kind"], as_str=True))
-        label[span] = _codes(rows["label"], labels, label_index)
+        label[span] = extend_codes(rows["label"], labels, label_index)
         drive[span] = code
         spans[code].append(span)
         spans_sd[code].append(float(r.limit_info.get("slow_var_sd_m2") or 0.0))

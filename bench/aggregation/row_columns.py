@@ -76,3 +76,17 @@ class RowColumns:
         out = rows.copy() if order is None else rows[order]
         del rows, buffer
         return out
+
+
+def extend_codes(values: object, table: list[object], index: dict[object, int]) -> np.ndarray:
+    """``values`` (a part's text column or array; missing as NaN/None) as int16 indices
+    into ``table``, which grows by the values not in it yet, in order of first appearance
+    (``index``: value -> its index, kept beside ``table``); -1 where missing. Parts read one
+    at a time so get one numbering for all of them."""
+    import pandas as pd
+
+    codes, uniques = pd.factorize(values, use_na_sentinel=True)
+    mapping = np.array([*(index.setdefault(u, len(index)) for u in uniques), -1], dtype=np.int16)
+    table.extend(list(index)[len(table) :])
+    out: np.ndarray = mapping[codes]
+    return out

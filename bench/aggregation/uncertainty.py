@@ -19,7 +19,7 @@ import numpy as np
 import pandas as pd
 
 from posbench.aggregation.intervals import drive_codes
-from posbench.aggregation.row_columns import RowColumns
+from posbench.aggregation.row_columns import RowColumns, extend_codes
 from posbench.metrics.calibration import (
     calibration_curve,
     calibration_of,
@@ -52,16 +52,6 @@ def _errors(rows: pd.DataFrame) -> np.ndarray:
     """(N, 2) answer minus reference [m, ENU]."""
     err: np.ndarray = rows[["x", "y"]].to_numpy(float) - rows[["x_ref", "y_ref"]].to_numpy(float)
     return err
-
-
-def _codes(values: np.ndarray, table: list[Any], index: dict[Any, int]) -> np.ndarray:
-    """``values`` (text, NaN where missing) as int16 indices into ``table``, extended by
-    values not in it yet in order of first appearance; -1 where missing."""
-    codes, uniques = pd.factorize(values, use_na_sentinel=True)
-    mapping = np.array([*(index.setdefault(u, len(index)) for u in uniques), -1], dtype=np.int16)
-    table.extend(list(index)[len(table) :])
-    out: np.ndarray = mapping[codes]
-    return out
 
 
 def _kind_columns(traces: TraceSet, name: str) -> dict[str, Any] | None:
@@ -108,8 +98,8 @@ def _kind_columns(traces: TraceSet, name: str) -> dict[str, Any] | None:
             code=np.asarray(to_run, dtype=np.int32)[local],
             t_query=rows["t_query"].to_numpy(float),
             since_bin=since_fix_bin(rows["since_fix_s"].to_numpy(float))[0],
-            dataset=_codes(ds, tables["dataset"], indices["dataset"]),
-            label=_codes(text_values(rows["label"]), tables["label"], indices["label"]),
+            dataset=extend_codes(ds, tables["dataset"], indices["dataset"]),
+            label=extend_codes(text_values(rows["label"]), tables["label"], indices["label"]),
         )
     if not reported:
         return None
