@@ -24,6 +24,7 @@ from posbench.scoring.schema import scored_mask
 from posbench.scoring.trace_parts import (
     TEXT,
     concat_parts,
+    join_pieces,
     part_values,
     read_part,
     rows_per_value,
@@ -149,9 +150,12 @@ class TraceSet:
             held = self._drives_per_part()
             parts = tuple(p for p, ds in zip(self.parts, held, strict=True) if drive in ds)
             parts = parts or self.parts[:1]
-        frames = [read_part(p, cols, predictor, drive) for p in parts]
-        frames = [f for f in frames if len(f)] or frames[:1]
-        return concat_parts(frames)
+        bound = self.row_bound(predictor) if predictor is not None and drive is None else None
+        read = (read_part(p, cols, predictor, drive) for p in parts)
+        joined = join_pieces((f for f in read if len(f)), bound)
+        if joined.columns.empty and parts:  # no rows: the first part's columns, empty
+            return read_part(parts[0], cols, predictor, drive).reset_index(drop=True)
+        return joined
 
     def _held_rows(self, predictor: str) -> pd.DataFrame | None:
         """On disk: ``predictor``'s rows, every column, in memory, when it has at most
@@ -244,12 +248,11 @@ class TraceSet:
             return df[cols] if df.empty else df.loc[scored_mask(df), cols].reset_index(drop=True)
         # each part's rows filtered as it is read: what is held at once is the scored rows
         # (and one part's), not every row of the predictor and then a copy of the scored
-        frames = list(self.pieces(predictor, cols))
-        if not frames and self.parts:  # none: the first part's columns, empty
-            frames = [
-                _scored_rows(read_part(self.parts[0], [*cols, *MASK_COLUMNS], predictor), cols)
-            ]
-        return concat_parts(frames)
+        joined = join_pieces(self.pieces(predictor, cols), self.row_bound(predictor))
+        if joined.columns.empty and self.parts:  # none: the first part's columns, empty
+            empty = read_part(self.parts[0], [*cols, *MASK_COLUMNS], predictor)
+            return _scored_rows(empty, cols).reset_index(drop=True)
+        return joined
 
     def pieces(
         self, predictor: str, columns: Sequence[str], scored: bool = True
