@@ -27,7 +27,7 @@ interval arithmetic are in :mod:`posbench.metrics.cluster_bootstrap` and
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Collection, Sequence
 from typing import Any
 
 import numpy as np
@@ -153,32 +153,35 @@ def group_cis(
     n_resamples: int = DEFAULT_RESAMPLES,
     seed: int = 0,
     level: float = LEVEL,
+    only: Collection[object] | None = None,
 ) -> dict[object, dict[str, Any]]:
     """:func:`summary_ci` of the errors of each distinct key (e.g. scenario label, speed
-    bin, query kind): key -> intervals, exactly what :func:`summary_ci` gives each group."""
+    bin, query kind; those in ``only``, given it): key -> intervals, exactly what
+    :func:`summary_ci` gives each group. One group at a time: what is held beside the
+    inputs is one group's rows, never a sorted copy of them all."""
     k = np.asarray(keys)
     if k.size == 0:
         return {}
     if k.dtype.kind in "iu" and k.min() >= 0:
-        counts = np.bincount(k)
-        names: Sequence[object] = np.flatnonzero(counts).tolist()
-        code = k
+        present: list[int] = np.flatnonzero(np.bincount(k)).tolist()
+        names: list[object] = list(present)
+        code, ids = k, present
     else:
         uniq, code = np.unique(k, return_inverse=True)
         code = code.ravel()
-        names = uniq.tolist()
-        counts = np.bincount(code)
-    order = np.argsort(code, kind="stable")  # stable: each group keeps its time order
-    bounds = np.cumsum(counts)[np.flatnonzero(counts)]
-    starts = bounds - counts[np.flatnonzero(counts)]
-    e = np.asarray(errors, dtype=np.float64)[order]
-    c = np.asarray(clusters)[order]
-    t = None if times is None else np.asarray(times, dtype=np.float64)[order]
-    del order, code, k
-    items = [
-        (e[a:b], c[a:b], None if t is None else t[a:b]) for a, b in zip(starts, bounds, strict=True)
-    ]
-    return dict(zip(names, interval_batch(items, False, n_resamples, seed, level), strict=True))
+        names, ids = list(uniq.tolist()), list(range(len(uniq)))
+    e, c = np.asarray(errors, dtype=np.float64), np.asarray(clusters)
+    t = None if times is None else np.asarray(times, dtype=np.float64)
+    out: dict[object, dict[str, Any]] = {}
+    for name, i in zip(names, ids, strict=True):
+        if only is not None and name not in only:
+            continue
+        rows = np.flatnonzero(code == i)  # in their order: each group keeps its time order
+        item = (e[rows], c[rows], None if t is None else t[rows])
+        del rows
+        out[name] = interval_batch([item], False, n_resamples, seed, level)[0]
+        del item
+    return out
 
 
 def interval_batch(

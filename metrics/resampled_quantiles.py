@@ -101,22 +101,17 @@ def resampled_quantiles_many(
     n_ser = len(live)
     before = np.zeros((n_units, n_ser, k), dtype=ftype)
     sizes = np.zeros((n_units, n_ser), dtype=ftype)
-    unit_blocks = np.zeros((n_ser, k * length), dtype=np.int64)
-    value_blocks = np.empty((n_ser, k * length))
-    for j, i in enumerate(live):
-        v = np.asarray(series[i][0], dtype=np.float64)
-        u = np.asarray(series[i][1], dtype=np.int64)
-        hist = np.bincount(u * k + np.arange(v.size) // length, minlength=n_units * k)
-        hist = hist.reshape(n_units, k)
+    values = [np.asarray(series[i][0], dtype=np.float64) for i in live]
+    units = [np.asarray(series[i][1]) for i in live]
+    for j, u in enumerate(units):
+        # each unit's count in each block of sorted positions, a block at a time (no
+        # temporaries the size of the series)
+        hist = np.empty((n_units, k), dtype=np.int64)
+        for b in range(k):
+            hist[:, b] = np.bincount(u[b * length : (b + 1) * length], minlength=n_units)
         np.cumsum(hist[:, :-1], axis=1, out=before[:, j, 1:])
         sizes[:, j] = hist.sum(axis=1)
-        # positions past n pad the last block: weight there only adds after the
-        # resample's last value, so it is never counted
-        unit_blocks[j, : v.size] = u
-        value_blocks[j, : v.size] = v
-        value_blocks[j, v.size :] = v[-1]
-    unit_blocks = unit_blocks.reshape(n_ser * k, length)
-    value_blocks = value_blocks.reshape(n_ser * k, length)
+        del hist
     # per (series, resample) row: weight before each block start, and the resample's size
     wm = np.ascontiguousarray(
         (wf @ before.reshape(n_units, n_ser * k)).reshape(n_res, n_ser, k).transpose(1, 0, 2)
@@ -127,6 +122,33 @@ def resampled_quantiles_many(
     series_of = rows // n_res
     flat_w = wf.ravel()
     row_base = ((rows % n_res) * n_units)[:, None]
+    offsets = np.arange(length)
+    sizes_of = np.array([v.size for v in values])
+
+    def positions(tab: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Series of each block-table row ``tab`` and its block's sorted positions, those
+        past the series' end on its last value (its weight adds only after the resample's
+        last value, so is never counted; and that value is the last)."""
+        ser = tab // k
+        pos = (tab % k * length)[:, None] + offsets
+        return ser, np.minimum(pos, (sizes_of[ser] - 1)[:, None])
+
+    def units_at(tab: np.ndarray) -> np.ndarray:
+        ser, pos = positions(tab)
+        out = np.empty(pos.shape, dtype=np.int64)
+        for j, u in enumerate(units):
+            mine = ser == j
+            out[mine] = u[pos[mine]]
+        return out
+
+    def values_at(tab: np.ndarray, at: np.ndarray) -> np.ndarray:
+        ser = tab // k
+        pos = np.minimum(tab % k * length + at, sizes_of[ser] - 1)
+        out = np.empty(tab.shape)
+        for j, v in enumerate(values):
+            mine = ser == j
+            out[mine] = v[pos[mine]]
+        return out
 
     upper = np.triu(np.ones((length, length), dtype=ftype)) if length <= 64 else None
 
@@ -141,7 +163,7 @@ def resampled_quantiles_many(
         blk = _last_at_most(sub, rank)
         tab = blk + (series_of * k if which is None else series_of[which] * k)
         base = row_base if which is None else row_base[which]
-        wts = flat_w.take(unit_blocks[tab] + base)
+        wts = flat_w.take(units_at(tab) + base)
         # a running sum along short rows is faster as a product with a triangle of ones
         cum = wts @ upper if upper is not None else np.cumsum(wts, axis=1)
         cum += sub[np.arange(len(blk)), blk][:, None]
@@ -152,13 +174,13 @@ def resampled_quantiles_many(
         tab, cum = locate(rank)
         at = count_le(cum, rank)
         at1 = count_le(cum, rank + 1)
-        lo = value_blocks[tab, np.minimum(at, length - 1)]
-        hi = value_blocks[tab, np.minimum(at1, length - 1)]
+        lo = values_at(tab, np.minimum(at, length - 1))
+        hi = values_at(tab, np.minimum(at1, length - 1))
         spill = np.flatnonzero(at1 >= length)  # rank + 1 in a later block: look there
         if spill.size:
             tab2, cum2 = locate(rank[spill] + 1, spill)
             at2 = np.minimum(count_le(cum2, rank[spill] + 1), length - 1)
-            hi[spill] = value_blocks[tab2, at2]
+            hi[spill] = values_at(tab2, at2)
         return lo, hi
 
     ok = total > 0

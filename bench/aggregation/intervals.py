@@ -147,18 +147,15 @@ def add_group_cis(
         return
     code, names = pd.factorize(np.asarray(keys))
     wanted = {str(n): i for i, n in enumerate(names) if str(n) in summaries}
-    wanted_rows = np.isin(code, list(wanted.values()))  # only the groups with a summary
-    # every row in a wanted group: the arrays as they are, not copies
-    m: np.ndarray | slice = slice(None) if wanted_rows.all() else wanted_rows
-    del wanted_rows
-    cis = group_cis(
-        errors[m],
-        code[m],
-        codes[m],
-        None if times is None else times[m],
+    cis = group_cis(  # only the groups with a summary, one at a time
+        errors,
+        code,
+        codes,
+        times,
         n_resamples=stats.resamples,
         seed=stats.seed,
         level=stats.level,
+        only=set(wanted.values()),
     )
     empty = _entry(summary_ci(np.empty(0), np.empty(0, dtype=np.int64)))
     for k, s in summaries.items():
