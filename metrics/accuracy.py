@@ -71,21 +71,25 @@ def summarize_groups(
     return {str(n): summarize(e[k == n]) for n in names}
 
 
+def speed_bin_index(
+    speed_mps: np.ndarray, edges_mps: Sequence[float] = (0.5, 5, 10, 15, 20, 30)
+) -> np.ndarray:
+    """Each speed's [m/s] bin as an index into :func:`speed_bin_order` plus ``"unknown"``
+    (the last index: the speed is not finite); int8."""
+    s = np.asarray(speed_mps, dtype=float)
+    idx = np.searchsorted(list(edges_mps), s, side="right").astype(np.int8)
+    idx[~np.isfinite(s)] = len(edges_mps) + 1
+    return idx
+
+
 def speed_bin_labels(
     speed_mps: np.ndarray, edges_mps: Sequence[float] = (0.5, 5, 10, 15, 20, 30)
 ) -> np.ndarray:
     """Bin names like ``"5-10 m/s"`` for each speed [m/s]; ``"<0.5 m/s"`` and ``">=30 m/s"``
     at the ends; ``"unknown"`` where the speed is not finite. An object array whose rows
     share one string per bin (8 bytes a row, not a fixed-width string each)."""
-    s = np.asarray(speed_mps, dtype=float)
-    edges = list(edges_mps)
-    names = [f"<{edges[0]:g} m/s"] + [
-        f"{a:g}-{b:g} m/s" for a, b in zip(edges[:-1], edges[1:], strict=True)
-    ]
-    names.append(f">={edges[-1]:g} m/s")
-    idx = np.searchsorted(edges, s, side="right")
-    idx[~np.isfinite(s)] = len(names)
-    out: np.ndarray = np.asarray([*names, "unknown"], dtype=object)[idx]
+    names = [*speed_bin_order(edges_mps), "unknown"]
+    out: np.ndarray = np.asarray(names, dtype=object)[speed_bin_index(speed_mps, edges_mps)]
     return out
 
 

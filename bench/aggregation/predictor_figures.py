@@ -19,6 +19,7 @@ from posbench.aggregation.intervals import (
     Statistics,
     add_group_cis,
     align,
+    ci_entry,
     drive_codes,
     one_drive_cis,
     outage_cis,
@@ -26,9 +27,11 @@ from posbench.aggregation.intervals import (
     with_ci,
 )
 from posbench.heap import trim_heap
-from posbench.metrics.accuracy import speed_bin_labels, speed_bin_order, summarize, summarize_groups
+from posbench.metrics.accuracy import speed_bin_index, speed_bin_order, summarize
 from posbench.metrics.latency import latency_summary
 from posbench.metrics.outages import (
+    SINCE_FIX_CHECKPOINTS_S,
+    SINCE_FIX_TOLERANCE_S,
     error_vs_since_fix,
     outage_keys,
     outage_scores,
@@ -115,23 +118,53 @@ def kind_summaries(df: pd.DataFrame, stats: Statistics | None = None) -> dict[st
     return out
 
 
-def label_summaries(df: pd.DataFrame, stats: Statistics | None = None) -> dict[str, Any]:
-    out = {}
-    for kind in KINDS:
-        m = (df["kind"] == kind).to_numpy()
-        e = df["error_m"].to_numpy(dtype=float)[m]
-        labels = text_values(df["label"])[m]
-        out[kind] = summarize_groups(e, labels, order=list(LABELS))
-        if stats is not None:
-            add_group_cis(
-                out[kind],
-                e,
-                labels,
-                df["code"].to_numpy()[m],
-                df["t_query"].to_numpy(dtype=float)[m],
-                stats,
-            )
+def category_index(column: pd.Series, table: Sequence[str]) -> np.ndarray:
+    """Each row's value of text ``column`` as its index in ``table`` (-1: not in it, or
+    missing); int16. A categorical's codes are mapped through its categories: no string
+    per row."""
+    if isinstance(column.dtype, pd.CategoricalDtype):
+        cats = [str(c) for c in column.cat.categories]
+        mapping = np.array([*pd.Index(table).get_indexer(cats), -1], dtype=np.int16)
+        out: np.ndarray = mapping[column.cat.codes.to_numpy()]
+        return out
+    found: np.ndarray = pd.Index(table).get_indexer(text_values(column, as_str=True))
+    return found.astype(np.int16)
+
+
+def _kind_groups(
+    df: pd.DataFrame,
+    groups: np.ndarray,
+    names: Sequence[str],
+    stats: Statistics | None,
+) -> dict[str, dict[str, Any]]:
+    """Per kind, per name of ``names``, :func:`summarize` of the errors of the rows whose
+    ``groups`` value is that name's index (-1: in none), with ``ci95`` given ``stats``:
+    what :func:`summarize_groups` and :func:`add_group_cis` give each kind's rows, one
+    group's rows at a time instead of a copy of each kind's columns."""
+    e = df["error_m"].to_numpy(dtype=float)
+    kind = category_index(df["kind"], KINDS)
+    key = np.where((kind >= 0) & (groups >= 0), kind * len(names) + groups, -1)
+    del kind
+    codes, t = np.empty(0, dtype=np.int64), np.empty(0)
+    if stats is not None:
+        codes, t = df["code"].to_numpy(), df["t_query"].to_numpy(dtype=float)
+    out: dict[str, dict[str, Any]] = {}
+    for i, k in enumerate(KINDS):
+        out[k] = {}
+        for j, name in enumerate(names):
+            rows = np.flatnonzero(key == i * len(names) + j)  # in their (time) order
+            mine = e[rows]
+            out[k][str(name)] = summarize(mine)
+            if stats is not None:
+                out[k][str(name)]["ci95"] = ci_entry(mine, codes[rows], t[rows], stats)
+            del rows, mine
     return out
+
+
+def label_summaries(df: pd.DataFrame, stats: Statistics | None = None) -> dict[str, Any]:
+    """Per kind, per route type of :data:`LABELS`, :func:`summarize` of the errors (with
+    ``ci95`` given ``stats``; ``df`` then needs the ``code`` column of :func:`with_codes`)."""
+    return _kind_groups(df, category_index(df["label"], LABELS), LABELS, stats)
 
 
 def per_drive_summaries(
@@ -250,28 +283,32 @@ def _paired_figures(c: Combining, name: str, df: pd.DataFrame) -> dict[str, Any]
 
 def _by_speed(df: pd.DataFrame, stats: Statistics) -> dict[str, Any]:
     """``by_speed``: per kind, the errors' summary and interval per speed bin."""
-    out = {}
-    for kind in KINDS:
-        e, codes, t, m = kind_columns(df, kind)
-        bins = speed_bin_labels(df["speed_mps"].to_numpy()[m])
-        by_speed = summarize_groups(e, bins, order=speed_bin_order() + ["unknown"])
-        add_group_cis(by_speed, e, bins, codes, t, stats)
-        out[kind] = by_speed
-    return out
+    bins = speed_bin_index(df["speed_mps"].to_numpy(dtype=float))
+    return _kind_groups(df, bins, [*speed_bin_order(), "unknown"], stats)
 
 
 def _outage_figures(df: pd.DataFrame, stats: Statistics) -> dict[str, Any]:
     """``outages``: the now-queries' error by time since the last fix, and the outage
-    scores with their intervals."""
-    e, codes, t, m = kind_columns(df, "now")
-    outage = df["outage"].to_numpy()[m]
-    since = df["since_fix_s"].to_numpy()[m]
-    ids = outage_keys(codes, outage)
-    del outage
-    since_fix = error_vs_since_fix(e, since)
-    add_group_cis(since_fix, e, since_fix_checkpoint(since), codes, t, stats)
-    scores: dict[str, Any] = outage_scores(e, t, ids)
-    scores["ci95"] = outage_cis(e, t, ids, stats)
+    scores with their intervals. Each reads only the now-queries it counts (near a
+    checkpoint; in an outage), never a copy of every now-query's columns."""
+    now = category_index(df["kind"], KINDS) == KINDS.index("now")
+    since = df["since_fix_s"].to_numpy(dtype=float)
+    near = np.zeros(len(df), dtype=bool)
+    for c in SINCE_FIX_CHECKPOINTS_S:
+        near |= np.abs(since - c) <= SINCE_FIX_TOLERANCE_S
+    e, codes = df["error_m"].to_numpy(dtype=float), df["code"].to_numpy()
+    t = df["t_query"].to_numpy(dtype=float)
+    rows = np.flatnonzero(now & near)  # in their order
+    del near
+    since_fix = error_vs_since_fix(e[rows], since[rows])
+    add_group_cis(
+        since_fix, e[rows], since_fix_checkpoint(since[rows]), codes[rows], t[rows], stats
+    )
+    outage = df["outage"].to_numpy()
+    rows = np.flatnonzero(now & (outage >= 0))  # the scores read outage queries only
+    ids = outage_keys(codes[rows], outage[rows])
+    scores: dict[str, Any] = outage_scores(e[rows], t[rows], ids)
+    scores["ci95"] = outage_cis(e[rows], t[rows], ids, stats)
     return {"since_fix": since_fix, "scores": scores}
 
 

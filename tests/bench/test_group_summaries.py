@@ -1,0 +1,105 @@
+"""The per-kind group figures (route types, speed bins, time since the last fix, outage
+scores) read one group's rows at a time; they equal the figures of each kind's rows copied
+out and grouped, as they were computed before."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pandas as pd
+
+from posbench.aggregation.intervals import Statistics, add_group_cis, outage_cis
+from posbench.aggregation.predictor_figures import (
+    _by_speed,
+    _outage_figures,
+    label_summaries,
+    with_codes,
+)
+from posbench.metrics.accuracy import speed_bin_labels, speed_bin_order, summarize_groups
+from posbench.metrics.bootstrap import group_cis
+from posbench.metrics.outages import (
+    error_vs_since_fix,
+    outage_keys,
+    outage_scores,
+    since_fix_checkpoint,
+)
+from posbench.scenarios.labels import LABELS
+from posbench.scoring.schema import KINDS
+
+STATS = Statistics(resamples=300, seed=3)
+
+
+def _rows(seed: int = 0, n: int = 3000) -> pd.DataFrame:
+    rng = np.random.default_rng(seed)
+    drive = np.repeat([f"d{i}" for i in range(6)], n // 6)
+    speed = rng.uniform(0, 35, n)
+    speed[rng.random(n) < 0.05] = np.nan
+    since = rng.choice([0.2, 0.5, 1.0, 2.0, 5.0, 3.3], n) + rng.normal(0, 0.03, n)
+    since[rng.random(n) < 0.05] = np.nan
+    df = pd.DataFrame(
+        {
+            "dataset": "set",
+            "drive": drive,
+            "kind": pd.Categorical(rng.choice(["now", "future", "other"], n)),
+            "label": pd.Categorical(rng.choice([*LABELS, "elsewhere", None], n)),
+            "t_query": np.tile(np.arange(n // 6) * 0.05, 6),
+            "error_m": rng.exponential(size=n),
+            "speed_mps": speed,
+            "since_fix_s": since,
+            "outage": np.where(rng.random(n) < 0.3, rng.integers(0, 4, n), -1),
+        }
+    )
+    df.loc[rng.random(n) < 0.02, "error_m"] = np.nan
+    return with_codes(df)
+
+
+def _per_kind(df: pd.DataFrame, keys_of, order) -> dict:
+    """Each kind's rows copied out, grouped by summarize_groups and add_group_cis."""
+    out = {}
+    for k in KINDS:
+        m = (df["kind"] == k).to_numpy()
+        e = df["error_m"].to_numpy(float)[m]
+        keys = keys_of(df)[m]
+        out[k] = summarize_groups(e, keys, order=order)
+        add_group_cis(
+            out[k], e, keys, df["code"].to_numpy()[m], df["t_query"].to_numpy(float)[m], STATS
+        )
+    return out
+
+
+def _same(a, b) -> None:
+    assert json.dumps(a, sort_keys=True) == json.dumps(b, sort_keys=True)
+
+
+def test_route_types_and_speed_bins_are_each_kinds_groups():
+    df = _rows()
+    labels = lambda d: d["label"].astype(object).to_numpy()  # noqa: E731
+    _same(label_summaries(df, STATS), _per_kind(df, labels, list(LABELS)))
+    speeds = lambda d: speed_bin_labels(d["speed_mps"].to_numpy())  # noqa: E731
+    _same(_by_speed(df, STATS), _per_kind(df, speeds, [*speed_bin_order(), "unknown"]))
+
+
+def test_the_outage_figures_are_those_of_every_now_query():
+    df = _rows(1)
+    m = (df["kind"] == "now").to_numpy()
+    e, codes = df["error_m"].to_numpy(float)[m], df["code"].to_numpy()[m]
+    t, since = df["t_query"].to_numpy(float)[m], df["since_fix_s"].to_numpy(float)[m]
+    since_fix = error_vs_since_fix(e, since)
+    add_group_cis(since_fix, e, since_fix_checkpoint(since), codes, t, STATS)
+    ids = outage_keys(codes, df["outage"].to_numpy()[m])
+    scores = outage_scores(e, t, ids)
+    scores["ci95"] = outage_cis(e, t, ids, STATS)
+    got = _outage_figures(df, STATS)
+    assert scores["outages"] > 0 and since_fix["1s"]["count"] > 0
+    _same(got, {"since_fix": since_fix, "scores": scores})
+
+
+def test_group_intervals_of_some_groups_are_those_of_all():
+    rng = np.random.default_rng(5)
+    e, keys = rng.exponential(size=900), rng.choice(["a", "b", "c"], 900)
+    clusters, t = rng.integers(0, 7, 900), np.arange(900) * 0.1
+    every = group_cis(e, keys, clusters, t, n_resamples=200)
+    some = group_cis(e, keys, clusters, t, n_resamples=200, only={"a", "c"})
+    assert list(some) == ["a", "c"]
+    _same({k: every[k] for k in some}, some)
