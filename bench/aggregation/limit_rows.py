@@ -16,7 +16,7 @@ from dataclasses import dataclass
 import numpy as np
 import pandas as pd
 
-from posbench.aggregation.row_columns import extend_codes
+from posbench.aggregation.row_columns import RowColumns, extend_codes
 from posbench.scoring.records import DriveRun
 from posbench.scoring.schema import KINDS
 from posbench.scoring.trace_parts import text_values
@@ -86,10 +86,17 @@ def bound_rows(runs: Sequence[DriveRun]) -> BoundRows | None:
     n = sum(_row_count(r) for r in mine)
     if n == 0:
         return None
-    limit_m, limit_imu_m, t_query = (np.empty(n) for _ in range(3))
-    kind = np.empty(n, dtype=np.int8)
-    label = np.empty(n, dtype=np.int16)
-    drive = np.empty(n, dtype=np.int32)
+    columns = RowColumns(
+        {
+            "limit_m": np.float64,
+            "limit_imu_m": np.float64,
+            "t_query": np.float64,
+            "kind": np.int8,
+            "label": np.int16,
+            "drive": np.int32,
+        },
+        n,
+    )
     labels: list[object] = []
     label_index: dict[object, int] = {}
     datasets: list[str] = []
@@ -98,7 +105,6 @@ def bound_rows(runs: Sequence[DriveRun]) -> BoundRows | None:
     spans: list[list[slice]] = []
     spans_sd: list[list[float]] = []
     kinds = pd.Index(KINDS)
-    at = 0
     for r in mine:
         rows = r.load_limit()
         if rows is None or rows.empty:
@@ -112,25 +118,25 @@ def bound_rows(runs: Sequence[DriveRun]) -> BoundRows | None:
             spans.append([])
             spans_sd.append([])
         code = drive_index[key]
-        span = slice(at, at + len(rows))
-        limit_m[span] = rows["limit_m"].to_numpy(dtype=float)
-        limit_imu_m[span] = rows["limit_imu_m"].to_numpy(dtype=float)
-        t_query[span] = rows["t_query"].to_numpy(dtype=float)
-        kind[span] = kinds.get_indexer(text_values(rows["kind"], as_str=True))
-        label[span] = extend_codes(rows["label"], labels, label_index)
-        drive[span] = code
-        spans[code].append(span)
+        spans[code].append(slice(columns.rows, columns.rows + len(rows)))
         spans_sd[code].append(float(r.limit_info.get("slow_var_sd_m2") or 0.0))
-        at = span.stop
+        columns.add(
+            limit_m=rows["limit_m"].to_numpy(dtype=float),
+            limit_imu_m=rows["limit_imu_m"].to_numpy(dtype=float),
+            t_query=rows["t_query"].to_numpy(dtype=float),
+            kind=kinds.get_indexer(text_values(rows["kind"], as_str=True)),
+            label=extend_codes(rows["label"], labels, label_index),
+            drive=np.full(len(rows), code, dtype=np.int32),
+        )
         del rows
     return BoundRows(
-        limit_m=limit_m,
-        limit_imu_m=limit_imu_m,
-        t_query=t_query,
-        kind=kind,
-        label=label,
+        limit_m=columns.take("limit_m"),
+        limit_imu_m=columns.take("limit_imu_m"),
+        t_query=columns.take("t_query"),
+        kind=columns.take("kind"),
+        label=columns.take("label"),
         labels=labels,
-        drive=drive,
+        drive=columns.take("drive"),
         drives=list(drive_index),
         drive_dataset=np.asarray(drive_dataset, dtype=np.int16),
         datasets=datasets,

@@ -59,6 +59,16 @@ class RowColumns:
                 self._filled[name][self.rows : self.rows + n] = values
         self.rows += n
 
+    def group_order(self, name: str, values: int) -> tuple[np.ndarray, list[slice]]:
+        """Take integer column ``name`` (values 0 .. ``values`` - 1; any other, e.g. -1, in
+        no group) and return the order that puts the rows in groups by value, each group's
+        rows in their own order (a stable sort), and each value's slice in that order:
+        :meth:`take` the other columns in this order and each group is a slice, not a copy."""
+        key = self.take(name)
+        order = np.argsort(key, kind="stable")
+        bounds = np.searchsorted(key[order], np.arange(values + 1))
+        return order, [slice(int(bounds[i]), int(bounds[i + 1])) for i in range(values)]
+
     def take(self, name: str, order: np.ndarray | None = None) -> np.ndarray:
         """Column ``name``'s rows (in ``order``, given one: indices of the rows), as a new
         array; the column's buffer is let go (take each column once)."""

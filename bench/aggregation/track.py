@@ -51,11 +51,8 @@ def _track_columns(traces: TraceSet, name: str) -> tuple[dict[str, np.ndarray], 
             kind=kinds.get_indexer(text_values(rows["kind"])),
             label=labels.get_indexer(text_values(rows["label"], as_str=True)),
         )
-    kind = columns.take("kind")
-    order = np.argsort(kind, kind="stable")
-    bounds = np.searchsorted(kind[order], np.arange(len(KINDS) + 1))
-    rows_of = {k: slice(int(bounds[i]), int(bounds[i + 1])) for i, k in enumerate(KINDS)}
-    del kind
+    order, slices = columns.group_order("kind", len(KINDS))
+    rows_of = dict(zip(KINDS, slices, strict=True))
     cols = {c: columns.take(c, order) for c in ("along", "cross", "inward", "error", "label")}
     return cols, rows_of
 

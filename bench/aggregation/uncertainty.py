@@ -103,14 +103,8 @@ def _kind_columns(traces: TraceSet, name: str) -> dict[str, Any] | None:
         )
     if not reported:
         return None
-    kind = columns.take("kind")
-    order = np.argsort(kind, kind="stable")
-    bounds = np.searchsorted(kind[order], np.arange(len(KINDS) + 1))
-    out: dict[str, Any] = {
-        "rows_of": {k: slice(int(bounds[i]), int(bounds[i + 1])) for i, k in enumerate(KINDS)},
-        "tables": tables,
-    }
-    del kind
+    order, slices = columns.group_order("kind", len(KINDS))
+    out: dict[str, Any] = {"rows_of": dict(zip(KINDS, slices, strict=True)), "tables": tables}
     for col in ("d2", "ln_det", "code", "t_query", "since_bin", "dataset", "label"):
         out[col] = columns.take(col, order)  # one column at a time, in kind order
     return out

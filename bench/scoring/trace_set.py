@@ -147,9 +147,7 @@ class TraceSet:
         cols = None if columns is None else _present(columns, self.columns)
         parts = self.parts
         if drive is not None:
-            held = self._drives_per_part()
-            parts = tuple(p for p, ds in zip(self.parts, held, strict=True) if drive in ds)
-            parts = parts or self.parts[:1]
+            parts = self.parts_with(drive) or self.parts[:1]
         bound = self.row_bound(predictor) if predictor is not None and drive is None else None
         read = (read_part(p, cols, predictor, drive) for p in parts)
         joined = join_pieces((f for f in read if len(f)), bound)
@@ -167,9 +165,7 @@ class TraceSet:
             return None
         n, parts = 0, []
         for i, path in enumerate(self.parts):  # until the rows exceed HOLD_ROWS, no further
-            if i not in self._part_counts:
-                self._part_counts[i] = rows_per_value(path, "predictor")
-            counts = self._part_counts[i]
+            counts = self._part_count(i)
             if counts is None or n + counts.get(predictor, 0) > HOLD_ROWS:
                 self._not_held.add(predictor)
                 return None
@@ -194,14 +190,18 @@ class TraceSet:
                 return 0
             return int((self._frame["predictor"] == predictor).sum())
         n = 0
-        for i, path in enumerate(self.parts):
-            if i not in self._part_counts:
-                self._part_counts[i] = rows_per_value(path, "predictor")
-            counts = self._part_counts[i]
+        for i in range(len(self.parts)):
+            counts = self._part_count(i)
             if counts is None:
                 return None
             n += counts.get(predictor, 0)
         return n
+
+    def _part_count(self, i: int) -> dict[str, int] | None:
+        """Rows per predictor of part ``i`` (:func:`rows_per_value`, read once)."""
+        if i not in self._part_counts:
+            self._part_counts[i] = rows_per_value(self.parts[i], "predictor")
+        return self._part_counts[i]
 
     def predictors(self) -> list[str]:
         """The predictors, in the order they first appear (the run's order)."""
@@ -215,6 +215,11 @@ class TraceSet:
         if self._frame is not None:
             return [] if self._frame.empty else list(self._codes()[1])
         return list(dict.fromkeys(d for ds in self._drives_per_part() for d in ds))
+
+    def parts_with(self, drive: str) -> tuple[Path, ...]:
+        """On disk: the parts that hold rows of ``drive``, in order."""
+        held = self._drives_per_part()
+        return tuple(p for p, ds in zip(self.parts, held, strict=True) if drive in ds)
 
     def _codes(self) -> tuple[np.ndarray, list[str]]:
         """In memory: each row's drive as a code into the drive names (in order)."""
