@@ -86,7 +86,7 @@ def _compact(clusters: np.ndarray) -> tuple[np.ndarray, int]:
     c = np.asarray(clusters)
     if c.dtype.kind in "iu" and (c.size == 0 or c.min() >= 0):
         present = np.bincount(c) > 0 if c.size else np.zeros(0, dtype=bool)
-        index = np.cumsum(present) - 1
+        index = (np.cumsum(present) - 1).astype(np.int32)  # half the bytes of int64
         return index[c], int(present.sum())
     uniq, inv = np.unique(c, return_inverse=True)
     return inv.ravel(), int(uniq.size)
@@ -294,6 +294,7 @@ def paired_summary(
         ``drives`` (clusters with paired queries), ``wins`` (clusters where b's mean error
         is below a's), ``win_share``, ``conclusive`` (the interval excludes 0),
         ``queries`` (paired queries) and ``block_len`` (None unless block-resampled).
+        With several clusters, this is :func:`paired_from_sums` of each cluster's sums.
     """
     a = np.asarray(errors_a, dtype=np.float64)
     b = np.asarray(errors_b, dtype=np.float64)
@@ -302,49 +303,70 @@ def paired_summary(
     ok: np.ndarray | slice = slice(None) if both.all() else both
     del both
     a, b = a[ok], b[ok]
-    nan = float("nan")
     if a.size == 0:
-        return {
-            "diff_m": nan,
-            "ci95": [nan, nan],
-            "drives": 0,
-            "wins": 0,
-            "win_share": nan,
-            "conclusive": False,
-            "queries": 0,
-            "block_len": None,
-        }
+        return paired_from_sums(np.empty(0), np.empty(0), np.empty(0, dtype=np.int64))
     c, d = _compact(np.asarray(clusters)[ok])
-    per_a = np.bincount(c, weights=a, minlength=d)
-    per_b = np.bincount(c, weights=b, minlength=d)
-    wins = int(np.sum(per_b < per_a))  # same counts on both sides: compare the sums
-    block = None
-    if d == 1:
-        order = _time_order(a, None if times is None else np.asarray(times)[ok])
-        a, b = a[order], b[order]
-        block = block_length(b - a)
-        br = block_resample(a.size, block, n_resamples, seed)
-        units, w, block = br.units, br.counts, br.block_len
-    else:
-        units, w = c, cluster_weights(d, n_resamples, seed)
-    n_units = w.shape[1]
-    cnt = np.bincount(units, minlength=n_units)
+    if d > 1:
+        return paired_from_sums(
+            np.bincount(c, weights=a, minlength=d),
+            np.bincount(c, weights=b, minlength=d),
+            np.bincount(c, minlength=d),
+            n_resamples,
+            seed,
+            level,
+        )
+    # the sums as the cluster's (in the queries' given order), before the time order
+    wins = int(np.bincount(c, weights=b)[0] < np.bincount(c, weights=a)[0])
+    order = _time_order(a, None if times is None else np.asarray(times)[ok])
+    a, b = a[order], b[order]
+    br = block_resample(a.size, block_length(b - a), n_resamples, seed)
+    n_units = br.counts.shape[1]
+    cnt = np.bincount(br.units, minlength=n_units)
     r = paired_ratio_diff(
-        np.bincount(units, weights=a, minlength=n_units),
+        np.bincount(br.units, weights=a, minlength=n_units),
         cnt,
-        np.bincount(units, weights=b, minlength=n_units),
+        np.bincount(br.units, weights=b, minlength=n_units),
         cnt,
-        w,
+        br.counts,
         level,
     )
-    conclusive = bool(r["lo"] > 0 or r["hi"] < 0)
+    return _paired_entry(r, 1, wins, int(a.size), br.block_len)
+
+
+def paired_from_sums(
+    sums_a: np.ndarray,
+    sums_b: np.ndarray,
+    counts: np.ndarray,
+    n_resamples: int = DEFAULT_RESAMPLES,
+    seed: int = 0,
+    level: float = LEVEL,
+) -> dict[str, object]:
+    """:func:`paired_summary` of queries from several clusters, from each cluster's sums of
+    both sides' errors [m] over its paired queries (``counts``; clusters in the order of
+    their labels, each with at least one query): all the cluster bootstrap needs, so the
+    figures of many drives come from a few numbers per drive."""
+    d = int(np.size(counts))
+    if d == 0 or int(np.sum(counts)) == 0:
+        nan = float("nan")
+        return _paired_entry({"diff": nan, "lo": nan, "hi": nan}, 0, 0, 0, None)
+    sums_a, sums_b = np.asarray(sums_a, dtype=np.float64), np.asarray(sums_b, dtype=np.float64)
+    cnt = np.asarray(counts)
+    w = cluster_weights(d, n_resamples, seed)
+    r = paired_ratio_diff(sums_a, cnt, sums_b, cnt, w, level)
+    wins = int(np.sum(sums_b < sums_a))  # same counts on both sides: compare the sums
+    return _paired_entry(r, d, wins, int(cnt.sum()), None)
+
+
+def _paired_entry(
+    r: dict[str, float], drives: int, wins: int, queries: int, block: int | None
+) -> dict[str, object]:
     return {
         "diff_m": r["diff"],
         "ci95": [r["lo"], r["hi"]],
-        "drives": d,
+        "drives": drives,
         "wins": wins,
-        "win_share": wins / d,
-        "conclusive": conclusive,
-        "queries": int(a.size),
+        "win_share": wins / drives if drives else float("nan"),
+        "conclusive": bool(r["lo"] > 0 or r["hi"] < 0),
+        "queries": queries,
         "block_len": block,
     }

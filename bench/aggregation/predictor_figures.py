@@ -18,13 +18,17 @@ import pandas as pd
 from posbench.aggregation.intervals import (
     Statistics,
     add_group_cis,
-    align,
     ci_entry,
     drive_codes,
     one_drive_cis,
     outage_cis,
-    paired_aligned,
     with_ci,
+)
+from posbench.aggregation.paired_sums import (
+    drive_indices,
+    paired_groups,
+    paired_sums,
+    rereader,
 )
 from posbench.heap import trim_heap
 from posbench.metrics.accuracy import speed_bin_index, speed_bin_order, summarize
@@ -44,9 +48,6 @@ from posbench.scoring.trace_parts import text_values
 from posbench.scoring.trace_set import TraceSet, as_trace_set
 
 #: the trace columns aggregation reads (positions are not needed once errors exist)
-#: the columns of the baseline's rows that the paired comparison reads
-PAIRED = ("dataset", "drive", "kind", "t_query", "error_m")
-
 AGGREGATED = (
     "dataset",
     "drive",
@@ -103,19 +104,8 @@ def kind_columns(
 def kind_summaries(df: pd.DataFrame, stats: Statistics | None = None) -> dict[str, Any]:
     """Per kind, :func:`summarize` of the errors, with ``ci95`` given ``stats`` (``df`` then
     needs the ``code`` column of :func:`with_codes`)."""
-    if stats is None:
-        return {k: summarize(df.loc[df["kind"] == k, "error_m"].to_numpy()) for k in KINDS}
-    kind = text_values(df["kind"])
-    out = {k: summarize(df["error_m"].to_numpy(dtype=float)[kind == k]) for k in KINDS}
-    add_group_cis(
-        out,
-        df["error_m"].to_numpy(dtype=float),
-        kind,
-        df["code"].to_numpy(),
-        df["t_query"].to_numpy(dtype=float),
-        stats,
-    )
-    return out
+    every = _kind_groups(df, np.zeros(len(df), dtype=np.int8), ["all"], stats)
+    return {k: every[k]["all"] for k in KINDS}
 
 
 def category_index(column: pd.Series, table: Sequence[str]) -> np.ndarray:
@@ -156,7 +146,14 @@ def _kind_groups(
             mine = e[rows]
             out[k][str(name)] = summarize(mine)
             if stats is not None:
-                out[k][str(name)]["ci95"] = ci_entry(mine, codes[rows], t[rows], stats)
+                clusters = codes[rows]
+                # query times order a single drive's queries only: no copy for several
+                drives = clusters[np.isfinite(mine)]
+                one = drives.size > 0 and drives.min() == drives.max()
+                del drives
+                times = t[rows] if one else None
+                out[k][str(name)]["ci95"] = ci_entry(mine, clusters, times, stats)
+                del clusters, times
             del rows, mine
     return out
 
@@ -258,26 +255,17 @@ def predictor_figures(c: Combining, name: str) -> dict[str, Any]:
 
 def _paired_figures(c: Combining, name: str, df: pd.DataFrame) -> dict[str, Any]:
     """``paired`` (and ``paired_held``) of predictor ``name`` (its scored rows ``df``)
-    against the baseline, from the baseline's rows with the columns the pairing reads
-    alone; none for the baseline itself, or without one."""
+    against the baseline, from both predictors' per-drive sums (:mod:`posbench.aggregation.
+    paired_sums`: neither's rows held); none for the baseline itself, or without one."""
     stats = c.stats
     if not stats.baseline or name == stats.baseline or df.empty:
         return {}
-    base = with_codes(c.ts.scored(stats.baseline, [k for k in PAIRED if k in c.cols]))
-    full = align(df, base)
-    held = c.held_all or c.held_ds
-    if full.same or not held:
-        del base  # the held-out rows, if asked, are the full alignment's
-    out = {"paired": paired_aligned(full, c.datasets, stats)}
-    if held:  # the same comparison without the training drives
-        if full.same:
-            aligned = full.without(c.trained_on)
-        else:
-            aligned = align(
-                df[~df["drive"].isin(c.trained_on)], base[~base["drive"].isin(c.trained_on)]
-            )
-        del full
-        out["paired_held"] = paired_aligned(aligned, c.held_ds, stats)
+    sums = paired_sums(c.ts, name, stats.baseline)
+    again = rereader(c.ts, name, stats.baseline, sums)
+    out = {"paired": paired_groups(sums, drive_indices(sums), c.datasets, again, stats)}
+    if c.held_all or c.held_ds:  # the same comparison without the training drives
+        keep = drive_indices(sums, without=c.trained_on)
+        out["paired_held"] = paired_groups(sums, keep, c.held_ds, again, stats)
     return out
 
 

@@ -14,16 +14,14 @@ from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
-import pandas as pd
 
-from posbench.aggregation.intervals import Statistics, drive_codes, paired_by_dataset
+from posbench.aggregation.intervals import Statistics
+from posbench.aggregation.paired_sums import drive_indices, group_entry, paired_sums, rereader
 from posbench.scoring.schema import KINDS
 from posbench.scoring.trace_set import TraceSet
 
 #: the predictor every other is checked against
 REFERENCE = "cv"
-#: columns the comparison needs
-COLUMNS = ["dataset", "drive", "kind", "t_query", "error_m", "label"]
 
 
 def sanity_section(
@@ -39,22 +37,17 @@ def sanity_section(
     if REFERENCE not in predictors or traces.empty:
         return out
     out["checked"] = True
-
-    def rows(name: str) -> pd.DataFrame:
-        df = traces.scored(name, COLUMNS)
-        return df.assign(code=drive_codes(df))
-
-    base = rows(REFERENCE)
     for name in predictors:
         if name == REFERENCE:
             continue
-        df = rows(name)
-        if df.empty:
+        sums = paired_sums(traces, name, REFERENCE)
+        if not sums.drives:
             continue
-        by_ds = paired_by_dataset(df, base, datasets, stats)
+        again = rereader(traces, name, REFERENCE, sums)
         for ds in datasets:
-            for kind in KINDS:
-                e = by_ds[ds][kind]
+            keep = drive_indices(sums, dataset=ds)
+            for i, kind in enumerate(KINDS):
+                e = group_entry(sums, keep, i, 0, again, stats)
                 lo = e["ci95"][0] if e.get("ci95") else None
                 if e["queries"] and lo is not None and np.isfinite(lo) and lo > 0.0:
                     out["losses"].append(

@@ -13,10 +13,16 @@ from posbench.aggregation.intervals import Statistics, add_group_cis, outage_cis
 from posbench.aggregation.predictor_figures import (
     _by_speed,
     _outage_figures,
+    kind_summaries,
     label_summaries,
     with_codes,
 )
-from posbench.metrics.accuracy import speed_bin_labels, speed_bin_order, summarize_groups
+from posbench.metrics.accuracy import (
+    speed_bin_labels,
+    speed_bin_order,
+    summarize,
+    summarize_groups,
+)
 from posbench.metrics.bootstrap import group_cis
 from posbench.metrics.outages import (
     error_vs_since_fix,
@@ -103,3 +109,19 @@ def test_group_intervals_of_some_groups_are_those_of_all():
     some = group_cis(e, keys, clusters, t, n_resamples=200, only={"a", "c"})
     assert list(some) == ["a", "c"]
     _same({k: every[k] for k in some}, some)
+
+
+def test_each_kinds_figures_are_its_rows_grouped():
+    """kind_summaries: each kind's rows, intervals as add_group_cis drew them over the
+    kinds; a kind of one drive gets its block bootstrap (the query times read)."""
+    df = _rows(2)
+    one = df[df["drive"] == "d0"]
+    for rows in (df, one):
+        kind = rows["kind"].astype(object).to_numpy()
+        e = rows["error_m"].to_numpy(float)
+        want = {k: summarize(e[kind == k]) for k in KINDS}
+        add_group_cis(
+            want, e, kind, rows["code"].to_numpy(), rows["t_query"].to_numpy(float), STATS
+        )
+        _same(kind_summaries(rows, STATS), want)
+    assert kind_summaries(one, STATS)["now"]["ci95"]["block_len"] is not None
