@@ -8,6 +8,7 @@ nested dicts of figures out."""
 
 from __future__ import annotations
 
+import copy
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
@@ -88,19 +89,6 @@ def with_codes(df: pd.DataFrame) -> pd.DataFrame:
     return df.assign(code=drive_codes(df))
 
 
-def kind_columns(
-    df: pd.DataFrame, kind: str
-) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """Errors [m], drive codes, query times [s] and the row mask of one kind's rows."""
-    m = (df["kind"] == kind).to_numpy()
-    return (
-        df["error_m"].to_numpy(dtype=float)[m],
-        df["code"].to_numpy()[m],
-        df["t_query"].to_numpy(dtype=float)[m],
-        m,
-    )
-
-
 def kind_summaries(df: pd.DataFrame, stats: Statistics | None = None) -> dict[str, Any]:
     """Per kind, :func:`summarize` of the errors, with ``ci95`` given ``stats`` (``df`` then
     needs the ``code`` column of :func:`with_codes`)."""
@@ -165,14 +153,12 @@ def label_summaries(df: pd.DataFrame, stats: Statistics | None = None) -> dict[s
 
 
 def per_drive_summaries(
-    df: pd.DataFrame,
-    name: str,
-    per_drive: dict[tuple[str, str], dict[str, Any]],
-    queries: dict[tuple[str, str, str], dict[str, tuple[np.ndarray, np.ndarray]]],
-) -> None:
-    """Each drive's summaries of predictor ``name`` (``df``: its scored rows with ``code``)
-    into ``per_drive[(dataset, drive)][name]``, and each drive's errors and query times per
-    kind into ``queries[(dataset, drive, kind)][name]`` (for the intervals, drive by drive)."""
+    df: pd.DataFrame, name: str, stats: Statistics
+) -> dict[tuple[str, str], dict[str, Any]]:
+    """Each drive's figures of predictor ``name`` (``df``: its scored rows with ``code``):
+    ``{(dataset, drive): {kind: summary with ci95}}``, the interval a block bootstrap of
+    the drive's queries (:func:`one_drive_cis`). One drive and kind at a time: nothing is
+    kept of a drive's queries once its figures are drawn."""
     first = df.drop_duplicates("code")
     keys = dict(
         zip(
@@ -181,17 +167,24 @@ def per_drive_summaries(
             strict=True,
         )
     )
-    for key in keys.values():
-        per_drive.setdefault(key, {})[name] = {k: summarize(np.empty(0)) for k in KINDS}
-    for k in KINDS:
-        e, codes, t, _ = kind_columns(df, k)
-        order = np.argsort(codes, kind="stable")  # stable: each drive keeps its time order
-        present, starts, counts = np.unique(codes[order], return_index=True, return_counts=True)
+    out = {key: {k: summarize(np.empty(0)) for k in KINDS} for key in keys.values()}
+    e, t = df["error_m"].to_numpy(dtype=float), df["t_query"].to_numpy(dtype=float)
+    codes, kind = df["code"].to_numpy(), category_index(df["kind"], KINDS)
+    for i, k in enumerate(KINDS):
+        rows = np.flatnonzero(kind == i)
+        mine = codes[rows]
+        order = np.argsort(mine, kind="stable")  # stable: each drive keeps its time order
+        present, starts, counts = np.unique(mine[order], return_index=True, return_counts=True)
+        del mine
         for code, a, n in zip(present.tolist(), starts.tolist(), counts.tolist(), strict=True):
-            ds, drive = keys[code]
-            idx = order[a : a + n]
-            per_drive[(ds, drive)][name][k] = summarize(e[idx])
-            queries.setdefault((ds, drive, k), {})[name] = (e[idx], t[idx])
+            idx = rows[order[a : a + n]]
+            errors = e[idx]
+            figures: dict[str, Any] = dict(summarize(errors))
+            # the interval depends on this predictor's queries of the drive only
+            figures["ci95"] = one_drive_cis({name: (errors, t[idx])}, stats)[name]
+            out[keys[code]][k] = figures
+        del rows, order
+    return out
 
 
 def durations(runs: Sequence[DriveRun], call: str, name: str) -> list[np.ndarray]:
@@ -324,28 +317,26 @@ def error_figures(c: Combining, name: str) -> dict[str, Any]:
         out["outages"] = _outage_figures(df, stats)
     out.update(paired)
     del paired
-    groups = {str(ds): g for ds, g in df.groupby("dataset", sort=True, observed=True)}
     out["by_dataset"], out["by_label"], out["held_out"] = {}, {}, {}
-    for ds in datasets:
-        dfp = groups.get(ds, df.iloc[:0])
-        out["by_dataset"][ds] = kind_summaries(dfp, stats)
+    ds_index = category_index(df["dataset"], [str(ds) for ds in datasets])
+    present = set(np.unique(ds_index).tolist())
+    for j, ds in enumerate(datasets):
+        if present == {j}:  # every row is this data set's: its rows are df, its figures entry's
+            dfp = df
+            out["by_dataset"][ds] = {k: copy.deepcopy(entry[k]) for k in KINDS}
+        else:  # one data set's rows at a time
+            dfp = df[ds_index == j]
+            out["by_dataset"][ds] = kind_summaries(dfp, stats)
         out["by_label"][ds] = label_summaries(dfp, stats)
         if ds in c.held_ds:
             held = dfp[~dfp["drive"].isin(trained_on)]
             out["held_out"][ds] = (kind_summaries(held, stats), label_summaries(held, stats))
-    del groups
+            del held
+        del dfp
+    del ds_index
     if c.held_all:
         out["held_out_all"] = kind_summaries(df[~df["drive"].isin(trained_on)], stats)
-    out["per_drive"] = {}
-    if not df.empty:
-        per_drive: dict[tuple[str, str], dict[str, Any]] = {}
-        drive_queries: dict[tuple[str, str, str], dict[str, tuple[np.ndarray, np.ndarray]]] = {}
-        per_drive_summaries(df, name, per_drive, drive_queries)
-        # each drive's interval (block bootstrap) depends on its own predictor's queries only
-        for (ds, drive, k), by_pred in drive_queries.items():
-            for n, ci in one_drive_cis(by_pred, stats).items():
-                per_drive[(ds, drive)][n][k]["ci95"] = ci
-        out["per_drive"] = {key: by_name[name] for key, by_name in per_drive.items()}
+    out["per_drive"] = per_drive_summaries(df, name, stats) if not df.empty else {}
     return out
 
 
