@@ -12,7 +12,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from posbench.scoring.trace_parts import write_part
+from posbench.scoring.trace_parts import read_file, write_part
 from posbench.scoring.trace_set import TraceSet
 
 
@@ -101,7 +101,7 @@ class DriveRun:
         """Its bound's rows (:data:`posbench.replay.limit.LIMIT_COLUMNS`), from memory or
         disk; None when not computed."""
         if self.limit is None and self.limit_part:
-            return pd.read_parquet(self.limit_part)
+            return read_file(self.limit_part)
         return self.limit
 
     def spill(self, folder: Path, name: str) -> DriveRun:

@@ -50,6 +50,16 @@ def write_part(folder: Path, traces: pd.DataFrame, name: str) -> Path:
     return path
 
 
+def read_file(path: str | Path) -> pd.DataFrame:
+    """A whole Parquet file as a frame, as ``pandas.read_parquet`` gives it, read through
+    ``pyarrow.parquet.ParquetFile`` (``read_parquet`` goes through pyarrow's dataset layer,
+    which keeps about 0.5 MB per file read: see :func:`read_part`)."""
+    import pyarrow.parquet as pq
+
+    with pq.ParquetFile(path) as pf:
+        return pf.read(use_pandas_metadata=True).to_pandas()
+
+
 def read_part(
     path: str | Path,
     columns: Sequence[str] | None = None,
