@@ -20,6 +20,7 @@ unique per drive, kind and time, as replay writes them.)
 from __future__ import annotations
 
 import copy
+import functools
 from collections.abc import Callable, Collection, Iterator, Sequence
 from dataclasses import dataclass, field
 from typing import Any
@@ -201,8 +202,14 @@ def rereader(
     traces: TraceSet, name: str, baseline: str, sums: PairedSums
 ) -> Callable[[int], pd.DataFrame]:
     """``one_drive`` of :func:`group_entry`: drive ``i`` of ``sums``'s paired rows, read
-    again (:func:`drive_pairs`)."""
-    return lambda i: drive_pairs(traces, name, baseline, sums.drives[i])
+    again (:func:`drive_pairs`); the last drive read is kept, so the groups of one drive
+    (its kinds and route types, overall and by data set) read it once, not once each."""
+
+    @functools.lru_cache(maxsize=1)
+    def again(i: int) -> pd.DataFrame:
+        return drive_pairs(traces, name, baseline, sums.drives[i])
+
+    return again
 
 
 def drive_pairs(traces: TraceSet, name: str, baseline: str, drive: Drive) -> pd.DataFrame:
