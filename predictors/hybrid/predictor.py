@@ -248,10 +248,8 @@ class HybridPredictor(ModelFileSeams, Predictor):
         psi = f.psi
         c, s = math.cos(psi), math.sin(psi)
         gx, gy = f.pts[7].tolist()
-        kf_at = self.kf.position_at
         rows = []
-        for h in HORIZONS:
-            px, py = kf_at(t_end + h)
+        for px, py in self.kf.positions_at([t_end + h for h in HORIZONS]):
             dx, dy = px - gx, py - gy
             rows.append((c * dx + s * dy, c * dy - s * dx))
         features, prior = self.net.bufs[0][0], self.net.bufs[1][0]
@@ -263,12 +261,12 @@ class HybridPredictor(ModelFileSeams, Predictor):
         core = self.core
         out = core.run(features, prior.reshape(-1)) if core is not None else self.net.run_buffer()
         self._gps_v = f.speed
-        o = out.tolist()
+        (x1, y1, v1, w1), (x2, y2, v2, w2), (x3, y3, v3, w3), (x4, y4, v4, w4) = out.tolist()
         # a sum of the 16 outputs is finite only where each is (or NaN / inf results)
-        if not math.isfinite(sum(map(sum, o))) or max(max(r[2], r[3]) for r in o) > MAX_LOGVAR:
+        total = x1 + y1 + v1 + w1 + x2 + y2 + v2 + w2 + x3 + y3 + v3 + w3 + x4 + y4 + v4 + w4
+        if not math.isfinite(total) or max(v1, w1, v2, w2, v3, w3, v4, w4) > MAX_LOGVAR:
             return False
         a = self._shrink
-        (x1, y1, v1, w1), (x2, y2, v2, w2), (x3, y3, v3, w3), (x4, y4, v4, w4) = o
         self._kx = (
             0.0,
             a[1] * (c * x1 - s * y1),

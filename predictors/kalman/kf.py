@@ -326,6 +326,24 @@ class KalmanBank(RowBank):
         h = 0.5 * dt * dt
         return x + vx * dt + ax * h, y + vy * dt + ay * h
 
+    def positions_at(self, times: Sequence[float]) -> list[tuple[float, float]]:
+        """:meth:`position_at` of each of ``times`` [s] (the same numbers), each member's
+        state read once: the hybrid's prior at its four horizons in one call."""
+        if not self._ready:
+            return [NAN2] * len(times)
+        out = []
+        states: dict[int, list[float]] = {}
+        for t in times:
+            i = self.answering(t)
+            row = states.get(i)
+            if row is None:
+                row = states[i] = self._S[i, :6].tolist() + [self._S.item(i, kb.TS)]
+            x, vx, ax, y, vy, ay, ts = row
+            dt = t - ts
+            h = 0.5 * dt * dt
+            out.append((x + vx * dt + ax * h, y + vy * dt + ay * h))
+        return out
+
     def covariance_at(self, t: float) -> np.ndarray | None:
         """The answering member's 2x2 ENU position covariance [m^2] at t
         (``LinearKalman.covariance_at``): its own part times ``cov_scale``, plus the slow

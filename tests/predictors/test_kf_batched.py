@@ -97,3 +97,29 @@ def test_building_predictors_leaves_numba_unimported() -> None:
         [sys.executable, "-c", code], capture_output=True, text=True, check=True, timeout=120
     )
     assert out.stdout.split() == ["False", "False"], out.stdout + out.stderr
+
+
+def test_positions_at_answers_as_position_at() -> None:
+    """The hybrid's prior at its horizons in one call: each position bit for bit what
+    ``position_at`` answers for that time (members chosen per horizon), before the first
+    fix (NaN) and after every observation of a drive with an outage."""
+    from posbench.replay.loop import GPS, events, feed
+
+    drive = generate_drive(seed=3, route="roundabout")
+    evs = events(prepare_drive(drive, RunConfig(dropouts="outages", gps_profile="consumer")))
+    kf = KalmanBank()
+    assert np.isnan(kf.positions_at([0.0, 1.0])).all()
+    offsets = (-0.1, 0.0, 0.2, 0.4, 0.6, 0.8, 1.7)
+    checked = 0
+
+    def check(i: int) -> None:
+        nonlocal checked
+        t = evs[i][1]
+        if evs[i][0] != GPS:
+            return
+        got = kf.positions_at([t + h for h in offsets])
+        assert got == [kf.position_at(t + h) for h in offsets]
+        checked += 1
+
+    feed(kf, evs, 0.2, after=check)
+    assert checked > 100
