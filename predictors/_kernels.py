@@ -13,7 +13,10 @@ replaces every kernel of that module by ``numba.njit(cache=True)`` of it (in the
 module's namespace, where the kernels find one another and the callers find them, as
 ``module.name``), then makes the call. Compiled code is cached beside the module
 (numba's ``cache=True``; numba falls back to a user cache folder where that is not
-writable), so a new process loads it instead of compiling again.
+writable), so a new process loads it instead of compiling again. numba keys that cache on
+the kernel's own file and bytecode, not on its options: after changing an option here,
+delete the kernels' ``__pycache__/*.nbi`` and ``*.nbc`` files (or touch their modules), or
+the old compiled code keeps running.
 """
 
 from __future__ import annotations
