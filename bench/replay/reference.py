@@ -3,7 +3,13 @@
 - Drives with a truth stream: the truth interpolated at the query time with a
   cubic spline (truth is 10-100 Hz); NaN outside the truth's span or inside gaps
   longer than ``max_gap_s`` (:data:`~posbench.scenarios.truth_gaps.TRUTH_MAX_GAP_S`, 0.5 s:
-  why in :mod:`posbench.scenarios.truth_gaps`).
+  why in :mod:`posbench.scenarios.truth_gaps`). A truth of more than
+  :data:`SPLINE_MAX_SAMPLES` samples (hours at 100-200 Hz) is splined in blocks of
+  :data:`SPLINE_BLOCK` samples, each with :data:`SPLINE_OVERLAP` samples more on either
+  side, instead of at once (whose coefficients alone take 64 bytes a sample: 714 MB at the
+  peak for an 8 h truth of 5.8 M samples): a not-a-knot end condition's influence shrinks
+  by 2 - sqrt(3) ~ 0.27 per sample, so 64 samples on from a block's edge the blocks give
+  the whole spline's values (tested to 1e-9 m).
 - Drives without truth (the paper's routes): the paper's convention, a cubic
   fitted through the surrounding real fixes (``n_side`` before and after the query,
   past and future); NaN where there are fewer than 2 fixes within ``max_gap_s``
@@ -42,27 +48,65 @@ def reference_at(drive: Drive, tq: np.ndarray) -> np.ndarray:
     return cubic_through_fixes(g.t, g.x, g.y, tq)
 
 
+#: truths up to this many samples are splined at once (every shared and synthetic drive)
+SPLINE_MAX_SAMPLES = 1 << 20
+#: samples per block of a longer truth, and the samples added on either side of a block
+SPLINE_BLOCK = 1 << 17
+SPLINE_OVERLAP = 64
+
+
 def truth_at(
     t_truth: np.ndarray,
     x: np.ndarray,
     y: np.ndarray,
     tq: np.ndarray,
     max_gap_s: float = TRUTH_MAX_GAP_S,
+    max_samples: int = SPLINE_MAX_SAMPLES,
+    block: int = SPLINE_BLOCK,
 ) -> np.ndarray:
-    """(N, 2) truth positions [m] at times tq [s] by cubic spline; NaN where not covered."""
-    from scipy.interpolate import CubicSpline
-
+    """(N, 2) truth positions [m] at times tq [s] by cubic spline; NaN where not covered.
+    A truth of more than ``max_samples`` samples is splined ``block`` samples at a time
+    (module doc)."""
     tq = np.asarray(tq, dtype=float)
     out = np.full((tq.size, 2), np.nan)
     if t_truth.size < 4:
         return out
-    spline = CubicSpline(t_truth, np.column_stack([x, y]), extrapolate=False)
-    val = spline(tq)
+    if t_truth.size <= max_samples:
+        val = _spline_at(t_truth, x, y, tq)
+    else:
+        val = _spline_in_blocks(t_truth, x, y, tq, block)
     i = np.clip(np.searchsorted(t_truth, tq), 1, t_truth.size - 1)
     gap = t_truth[i] - t_truth[i - 1]
     ok = (tq >= t_truth[0]) & (tq <= t_truth[-1]) & (gap <= max_gap_s)
     out[ok] = val[ok]
     return out
+
+
+def _spline_at(t: np.ndarray, x: np.ndarray, y: np.ndarray, tq: np.ndarray) -> np.ndarray:
+    """(N, 2): the not-a-knot cubic spline through (t, x, y) at tq (NaN outside t)."""
+    from scipy.interpolate import CubicSpline
+
+    val: np.ndarray = CubicSpline(t, np.column_stack([x, y]), extrapolate=False)(tq)
+    return val
+
+
+def _spline_in_blocks(
+    t: np.ndarray, x: np.ndarray, y: np.ndarray, tq: np.ndarray, block: int
+) -> np.ndarray:
+    """:func:`_spline_at` of a long truth, ``block`` samples' intervals at a time: each
+    block's queries from a spline through the block and :data:`SPLINE_OVERLAP` samples
+    either side of it (NaN for queries outside t)."""
+    val = np.full((tq.size, 2), np.nan)
+    inside = np.flatnonzero((tq >= t[0]) & (tq <= t[-1]))
+    # the interval [t[k], t[k + 1]] each query falls in decides its block
+    k = np.clip(np.searchsorted(t, tq[inside], side="right") - 1, 0, t.size - 2)
+    owner = k // block
+    for b in np.unique(owner).tolist():
+        lo = max(b * block - SPLINE_OVERLAP, 0)
+        hi = min((b + 1) * block + 1 + SPLINE_OVERLAP, t.size)
+        rows = inside[owner == b]
+        val[rows] = _spline_at(t[lo:hi], x[lo:hi], y[lo:hi], tq[rows])
+    return val
 
 
 #: queries [-] :func:`cubic_through_fixes` solves at once: its batched arrays take about 1 kB

@@ -112,6 +112,29 @@ def test_truth_reference_interpolates():
     assert np.all(np.isnan(ref[2]))
 
 
+@pytest.mark.parametrize("block", [100, 1000, 4096])
+def test_a_long_truth_splined_in_blocks_answers_as_the_whole_spline(block):
+    """A truth longer than max_samples is splined a block at a time (hours of truth at
+    100-200 Hz): at queries anywhere (outside the truth, on its samples, at its ends, in a
+    gap longer than max_gap_s) it answers what one spline through all of it answers, to
+    1e-9 m (measured: to the bit), NaN where that is NaN."""
+    rng = np.random.default_rng(3)
+    n = 20_000
+    t = np.cumsum(rng.uniform(0.004, 0.006, n))
+    t[n // 2 :] += 2.0  # a gap of 2 s
+    x = np.cumsum(rng.normal(0, 0.05, n)) + 10 * np.sin(t / 7)
+    y = np.cumsum(rng.normal(0, 0.05, n)) + 5 * np.cos(t / 3)
+    tq = np.concatenate(
+        [rng.uniform(t[0] - 1, t[-1] + 1, 5000), t[:20], t[-20:], t[n // 2 - 1 : n // 2 + 1]]
+    )
+    whole = truth_at(t, x, y, tq)
+    blocks = truth_at(t, x, y, tq, max_samples=1000, block=block)
+    np.testing.assert_array_equal(np.isnan(blocks), np.isnan(whole))
+    ok = np.isfinite(whole)
+    assert ok.sum() > 4000
+    assert np.max(np.abs(blocks[ok] - whole[ok])) <= 1e-9
+
+
 def test_cubic_through_fixes_is_exact_on_a_cubic():
     rng = np.random.default_rng(1)
     t = np.cumsum(rng.uniform(0.1, 0.4, 60))

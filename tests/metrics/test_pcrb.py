@@ -342,6 +342,26 @@ def test_the_imu_variant_is_below_the_fixes_only_bound_and_tends_to_it():
     assert after[0] < before[0]
 
 
+def test_the_recursion_in_chunks_equals_it_at_once(monkeypatch):
+    """The recursion converts its observations to Python numbers a chunk at a time (hours of
+    IMU samples are millions): chunks of 7 give every bound bit for bit as one chunk does."""
+    rng = np.random.default_rng(9)
+    t_fix = np.cumsum(rng.uniform(0.1, 0.6, 60))
+    t_acc = np.arange(t_fix[0] - 1.0, t_fix[-1] + 1.0, 0.05)
+    t_issue = np.sort(rng.uniform(t_fix[0], t_fix[-1], 300))
+
+    def bound():
+        return position_variance_bound_with_acceleration(
+            t_fix, GPS_SIGMA**2, JERK_PSD, t_issue + HORIZON_S, t_acc, 0.09, t_issue=t_issue
+        )
+
+    whole = bound()
+    monkeypatch.setattr(pcrb, "STEP_CHUNK", 7)
+    chunked = bound()
+    assert np.isfinite(whole).sum() > 250
+    np.testing.assert_array_equal(chunked, whole)
+
+
 def test_slow_error_is_added_against_an_independent_truth_only():
     var = np.array([0.1, np.nan, 0.4])
     np.testing.assert_allclose(
