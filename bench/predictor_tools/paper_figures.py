@@ -154,10 +154,15 @@ def paper_figures(
 
     name, t_fix = moment
     drive = as_drive(next(d for d in drives if d.name == name))  # the one drawn, read here
-    run = next((r for r in runs or [] if r.name == name and r.fixes is not None), None)
-    if run is not None:
-        fixes_fed = run.fixes
-    else:
+    fixes_fed = next(  # the fixes the run fed (read back when its worker wrote them to disk)
+        (
+            f
+            for r in runs or []
+            if r.name == name and (f := r.with_fixes_and_track().fixes) is not None
+        ),
+        None,
+    )
+    if fixes_fed is None:
         g = prepare_drive(drive, cfg).gps
         fixes_fed = pd.DataFrame({"t": g.t, "x": g.x, "y": g.y, "received": True})
     # the predictors replay the run's fixes up to the fix shown; references use a wider window

@@ -125,7 +125,7 @@ class _Writer(Sender):
         rec.log(f"{root}/info", rr.TextDocument("\n".join(info)), static=True)
         if run.skipped:
             return
-
+        run = run.with_fixes_and_track()  # read back here when the worker wrote them to disk
         if run.track is not None and len(run.track):
             strips = finite_runs(run.track[["x", "y"]].to_numpy(np.float64))
             if strips:

@@ -65,6 +65,10 @@ class DriveRun:
     timing_parts: list[str] = field(default_factory=list)
     #: where its bound's rows are when spilled (Parquet); ``limit`` is then None
     limit_part: str = ""
+    #: where its fixes and reference track are when spilled (``.npz``: ``fixes/COLUMN``,
+    #: ``track/COLUMN``); ``fixes`` and ``track`` are then None
+    #: (:meth:`with_fixes_and_track` reads them back)
+    track_part: str = ""
 
     @property
     def has_traces(self) -> bool:
@@ -104,11 +108,26 @@ class DriveRun:
             return read_file(self.limit_part)
         return self.limit
 
+    def with_fixes_and_track(self) -> DriveRun:
+        """This record with its fixes and reference track in memory (read back from
+        ``track_part`` when spilled; itself when not)."""
+        if not self.track_part:
+            return self
+        with np.load(self.track_part) as z:
+            frames = {
+                kind: pd.DataFrame(
+                    {k.split("/", 1)[1]: z[k] for k in z.files if k.startswith(f"{kind}/")}
+                )
+                for kind in {k.split("/", 1)[0] for k in z.files}
+            }
+        return replace(self, fixes=frames.get("fixes"), track=frames.get("track"), track_part="")
+
     def spill(self, folder: Path, name: str) -> DriveRun:
         """This record with what grows with the drive's span - its traces
-        (:func:`~posbench.scoring.trace_parts.write_part`), call durations and bound's rows -
-        written to ``folder`` under ``name`` and dropped from memory: what remains is small
-        and the same for a drive of any length, but for notes and fixes."""
+        (:func:`~posbench.scoring.trace_parts.write_part`), call durations, bound's rows,
+        fixes and reference track - written to ``folder`` under ``name`` and dropped from
+        memory: what remains is small and the same for a drive of any length, but for its
+        notes."""
         folder.mkdir(parents=True, exist_ok=True)
         changes: dict[str, Any] = {}
         if not self.traces.empty:
@@ -131,6 +150,16 @@ class DriveRun:
             path = folder / f"{name}.limit.parquet"
             self.limit.to_parquet(path, index=False)
             changes |= {"limit": None, "limit_part": str(path)}
+        frames = {
+            f"{kind}/{column}": frame[column].to_numpy()
+            for kind in ("fixes", "track")
+            if (frame := getattr(self, kind)) is not None
+            for column in frame.columns
+        }
+        if frames:
+            path = folder / f"{name}.track.npz"
+            np.savez(path, **frames)
+            changes |= {"fixes": None, "track": None, "track_part": str(path)}
         return replace(self, **changes)
 
 

@@ -50,7 +50,22 @@ def test_records_from_parts_hold_nothing_that_grows_with_the_drive(both):
         assert r.traces.empty and r.trace_rows > 0 and r.trace_parts
         assert r.step_ns == {} and r.query_ns == {} and r.cov_ns == {} and r.timing_parts
         assert r.limit is None and Path(r.limit_part).is_file()
+        assert r.fixes is None and r.track is None and Path(r.track_part).is_file()
         assert all(Path(p).is_file() for p in r.trace_parts)
+
+
+def test_fixes_and_track_read_back_are_the_ones_the_replay_made(both):
+    """The fixes fed (received or dropped) and the reference track, written by the workers
+    and read back for the recording and the paper figures: the same columns, dtypes and
+    values; a record that holds them gives itself."""
+    memory, spilled = both
+    for held, written in zip(memory, spilled, strict=True):
+        assert held.with_fixes_and_track() is held
+        back = written.with_fixes_and_track()
+        assert back.track_part == ""
+        assert (~back.fixes["received"]).any()  # the outages' dropped fixes are kept
+        pd.testing.assert_frame_equal(back.fixes, held.fixes)
+        pd.testing.assert_frame_equal(back.track, held.track)
 
 
 def test_every_figure_from_parts_equals_the_in_memory_one(both):
