@@ -247,7 +247,9 @@ PlotFormatOpt = Annotated[
     typer.Option(
         "--plot-format",
         metavar="FORMATS",
-        help="Figure formats, comma-separated: png, svg, pdf (e.g. png,pdf).",
+        help="Figure formats, comma-separated: png, svg, pdf (e.g. png,pdf); none for no "
+        "figures (results, report, tables and traces only: a run ~2 s quicker on the built-in "
+        "drives).",
     ),
 ]
 DrivePlotsOpt = Annotated[

@@ -47,31 +47,46 @@ class NothingToPlot(Exception):
     """A figure has no data to show; the message says why (goes into the report)."""
 
 
+#: the format name that asks for no figures at all (``--plot-format none``)
+NO_FIGURES = "none"
+#: why a run has no figures, in its report
+NO_FIGURES_NOTE = "--plot-format none (no figure asked for)"
+
+
 def check_formats(formats: Iterable[str] | str) -> tuple[str, ...]:
     """The output formats as a tuple of lower-case names from :data:`FORMATS`, in the given
-    order without repeats. A string is split on commas (``"png,svg"``).
+    order without repeats. A string is split on commas (``"png,svg"``). ``"none"`` alone
+    (:data:`NO_FIGURES`), or an empty tuple, is no figure at all: ``()``.
 
     Raises:
-        ValueError: an unknown format, or none at all.
+        ValueError: an unknown format, ``none`` beside a format, or an empty name.
     """
     items = formats.split(",") if isinstance(formats, str) else list(formats)
+    names = [str(f).strip().lower() for f in items]
+    if NO_FIGURES in names:
+        if len(names) > 1:
+            raise ValueError(f"'{NO_FIGURES}' draws no figure: give it alone, not beside a format")
+        return ()
+    if not items:
+        return ()
     out: list[str] = []
     for f in items:
         name = str(f).strip().lower().lstrip(".")
         if name not in FORMATS:
-            raise ValueError(f"unknown plot format {f!r}: use one or more of {', '.join(FORMATS)}")
+            raise ValueError(
+                f"unknown plot format {f!r}: use one or more of {', '.join(FORMATS)}, or "
+                f"{NO_FIGURES} for no figure"
+            )
         if name not in out:
             out.append(name)
-    if not out:
-        raise ValueError(f"no plot format given: use one or more of {', '.join(FORMATS)}")
     return tuple(out)
 
 
 def shown_format(formats: Iterable[str] | str) -> str:
     """The format a report links to among ``formats``: png, else svg, else pdf (the first
-    two show inline in Markdown)."""
+    two show inline in Markdown); "" for no figure (``none``)."""
     fmts = check_formats(formats)
-    return next(f for f in FORMATS if f in fmts)
+    return next((f for f in FORMATS if f in fmts), "")
 
 
 _METADATA = {"png": {"Software": None}, "svg": {"Date": None}, "pdf": {"CreationDate": None}}

@@ -22,7 +22,13 @@ from posbench.figures.maps import plot_path, plot_trajectory_error
 from posbench.figures.outage_lengths import NAME as OUTAGE_LENGTHS
 from posbench.figures.outage_lengths import plot_outage_lengths
 from posbench.figures.per_drive import DEFAULT_DRIVE_PLOTS, write_error_over_time
-from posbench.figures.style import NothingToPlot, PlotsWritten, check_formats, save_figure
+from posbench.figures.style import (
+    NO_FIGURES_NOTE,
+    NothingToPlot,
+    PlotsWritten,
+    check_formats,
+    save_figure,
+)
 from posbench.heap import trim_heap
 from posbench.scoring.trace_set import TraceSet, as_trace_set
 
@@ -78,6 +84,9 @@ def write_summary_plots(
     :func:`write_plots`."""
     fmts = check_formats(formats)
     written = PlotsWritten()
+    if not fmts:  # --plot-format none: one note for every figure of the run
+        written.notes = {"figures": NO_FIGURES_NOTE}
+        return written
     traces = as_trace_set(traces)
     why = _plottable(traces)
     if why:
@@ -106,6 +115,8 @@ def write_drive_plots(
     never raises on thin data (see :func:`write_plots`)."""
     fmts = check_formats(formats)
     written = PlotsWritten()
+    if not fmts:  # --plot-format none (noted by write_summary_plots)
+        return written
     traces = as_trace_set(traces)
     why = _plottable(traces)
     if why:
@@ -129,7 +140,7 @@ def write_result_plots(
     fmts = check_formats(formats)
     written = PlotsWritten()
     for name, (key, draw) in RESULT_FIGURES.items():
-        if not res.get(key):
+        if not res.get(key) or not fmts:
             continue
         try:
             written.files += save_figure(draw(res), out, name, fmts)

@@ -61,6 +61,7 @@ class FigureJobs:
         paper: Callable[[], list[tuple[str, str]]] | None = None,
         background: bool = True,
     ) -> None:
+        background = background and bool(formats)  # none: nothing to draw, nothing to fork
         if background and can_fork():
             import matplotlib.figure  # noqa: F401  (once here, not once per child)
         preds = list(preds)

@@ -139,7 +139,7 @@ def paper_figures(
     """
     fmts = check_formats(formats)
     held = as_trace_set(traces)
-    if "lstm" not in cfg.predictors or held.empty:
+    if "lstm" not in cfg.predictors or held.empty or not fmts:  # not: --plot-format none
         return []
     drawn = turning_drive(held, "lstm")
     if drawn is None:

@@ -197,7 +197,8 @@ def test_formats(tmp_path):
         assert all((tmp_path / f"{n}.{f}").exists() for f in ("png", "svg", "pdf")), n
     assert len(w.files) == 3 * (len(FIGURES) + 1)
     assert check_formats("PNG, svg,png") == ("png", "svg")
-    for bad in (("png", "jpg"), (), "gif"):
+    assert check_formats("none") == check_formats(" None") == check_formats(()) == ()
+    for bad in (("png", "jpg"), "gif", "none,png", ("png", "none"), ""):
         with pytest.raises(ValueError):
             check_formats(bad)
     with pytest.raises(ValueError, match="jpg"):

@@ -12,6 +12,7 @@ import numpy as np
 import pandas as pd
 import pytest
 from helpers import bench as run_bench
+from helpers import without_timings
 
 from posbench.config import RunConfig
 from posbench.pipeline.results import build_results
@@ -146,7 +147,17 @@ def test_two_models_of_one_predictor_named_and_marked(tmp_path):
     model = _model_copy(tmp_path, ["synthetic-mixed-s0", "synthetic-turns-s0"])
     out = tmp_path / "o"
     r = bench(
-        "run", "-p", "cv,lstm", "--model", f"lstm@mine={model}", "--out", str(out), "--workers", "1"
+        "run",
+        "-p",
+        "cv,lstm",
+        "--model",
+        f"lstm@mine={model}",
+        "--out",
+        str(out),
+        "--workers",
+        "1",
+        "--plot-format",
+        "none",
     )
     assert r.returncode == 0, r.stderr
     res = json.loads((out / "results.json").read_text())
@@ -244,7 +255,17 @@ def test_run_table_fits_100_columns_and_cuts_no_number(tmp_path):
     """The full table (--wide), split into pages of at most 100 columns."""
     out = tmp_path / "o"
     r = bench(
-        "run", "-p", "cv,kf-paper", "--out", str(out), "--workers", "1", "--wide", columns=100
+        "run",
+        "-p",
+        "cv,kf-paper",
+        "--out",
+        str(out),
+        "--workers",
+        "1",
+        "--wide",
+        "--plot-format",
+        "none",
+        columns=100,
     )
     assert r.returncode == 0, r.stderr
     assert "…" not in r.stdout
@@ -269,6 +290,36 @@ def test_plot_formats(tmp_path):
     bad = bench("run", "-p", "cv", "--out", str(tmp_path / "b"), "--plot-format", "png,gif")
     assert bad.returncode == 2 and bad.stderr.startswith("error: --plot-format")
     assert not (tmp_path / "b").exists()
+
+
+@pytest.mark.slow
+def test_plot_format_none_writes_every_output_but_the_figures(tmp_path):
+    """--plot-format none: results.json, report.md, tables and traces as with figures (the
+    same figures to the bit), no figure file (not even the paper's, with lstm in the run),
+    and the report says why."""
+    runs = {}
+    for fmt in ("png", "none"):
+        out = tmp_path / fmt
+        r = bench("run", "-p", "cv,lstm", "--out", str(out), "--plot-format", fmt)
+        assert r.returncode == 0, r.stderr
+        runs[fmt] = out
+    drawn = {p.name for p in runs["png"].rglob("*.png")}
+    assert {"error_cdf.png", "paper_fig_prediction.png"} <= drawn
+    assert not list(runs["none"].rglob("*.png")) and not list(runs["none"].rglob("*.svg"))
+    assert (
+        "- figures: --plot-format none (no figure asked for)"
+        in (runs["none"] / "report.md").read_text()
+    )
+    with_figures, without = (
+        without_timings(json.loads((runs[f] / "results.json").read_text())) for f in runs
+    )
+    for res in (with_figures, without):
+        for key in ("outputs", "paper_figures", "command", "config", "provenance"):
+            res.pop(key, None)
+    assert json.dumps(with_figures, sort_keys=True) == json.dumps(without, sort_keys=True)
+    assert {p.name for p in (runs["none"] / "tables").iterdir()} == {
+        p.name for p in (runs["png"] / "tables").iterdir()
+    }
 
 
 @pytest.mark.slow
