@@ -38,10 +38,10 @@ def _need(path: Path) -> Path:
 
 @pytest.fixture(scope="session")
 def cv_kf_run(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    """``bench run -p cv,kf --drive-plots 0`` on the built-in drives, once per session: a
-    saved run folder that tests read (copy it before changing anything in it)."""
+    """``bench run -p cv,kf --plot-format none`` on the built-in drives, once per session: a
+    saved run folder (no figures) that tests read (copy it before changing anything in it)."""
     out = tmp_path_factory.mktemp("cv-kf-run") / "old"
-    r = bench("run", "-p", "cv,kf", "--out", str(out), "--drive-plots", "0", timeout=300)
+    r = bench("run", "-p", "cv,kf", "--out", str(out), "--plot-format", "none", timeout=300)
     assert r.returncode == 0, r.stderr
     return out
 

@@ -48,7 +48,7 @@ def test_a_recording_given_twice_is_run_once(tmp_path, second):
     out = tmp_path / "out"
     r = bench(
         "run", "--data", "a.csv", "--data", second, "-p", "cv", "--out", "out",
-        "--drive-plots", "0", "--table-format", "md", "--workers", "1",
+        "--plot-format", "none", "--table-format", "md", "--workers", "1",
         cwd=tmp_path, columns=200,
     )  # fmt: skip
     assert r.returncode == 0, r.stderr

@@ -167,8 +167,8 @@ def test_seeds_repeat_the_run_and_report_the_spread(tmp_path):
         str(out),
         "--workers",
         "1",
-        "--drive-plots",
-        "0",
+        "--plot-format",
+        "none",
     )
     assert r.returncode == 0, r.stderr
     res = json.loads((out / "results.json").read_text())

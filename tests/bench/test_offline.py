@@ -128,7 +128,15 @@ def synthetic_outages(tmp_path_factory):
     opts = ["--dropouts", "outages", "--seed", "3"]
     ok(
         bench(
-            "run", "-p", "cv,kf", *opts, "--out", str(d / "run"), "--drive-plots", "0", timeout=600
+            "run",
+            "-p",
+            "cv,kf",
+            *opts,
+            "--out",
+            str(d / "run"),
+            "--plot-format",
+            "none",
+            timeout=600,
         )
     )
     ok(bench("queries", *opts, "--out", str(d / "q")))
@@ -176,8 +184,8 @@ def test_real_drive_scored_offline_equals_bench_run(comma_dir, tmp_path):
             *opts,
             "--out",
             str(tmp_path / "run"),
-            "--drive-plots",
-            "0",
+            "--plot-format",
+            "none",
             timeout=600,
         )
     )
@@ -196,8 +204,8 @@ def test_real_drive_scored_offline_equals_bench_run(comma_dir, tmp_path):
             "cv",
             "--out",
             str(tmp_path / "s"),
-            "--drive-plots",
-            "0",
+            "--plot-format",
+            "none",
         )
     )
     assert load_run(tmp_path / "run").results["outages"]["cv"]["scores"]

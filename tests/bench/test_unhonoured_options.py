@@ -69,8 +69,8 @@ def test_a_mixed_run_notes_the_drives_missed_and_records_what_was_scored(tmp_pat
         "consumer",
         "--out",
         out,
-        "--drive-plots",
-        "0",
+        "--plot-format",
+        "none",
         cwd=tmp_path,
         columns=200,
     )
@@ -111,8 +111,8 @@ def test_latency_that_misses_some_drives_is_one_note(tmp_path):
         "0.1",
         "--out",
         tmp_path / "o",
-        "--drive-plots",
-        "0",
+        "--plot-format",
+        "none",
         cwd=tmp_path,
         columns=200,
     )

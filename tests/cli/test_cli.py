@@ -202,6 +202,8 @@ def test_train_command_writes_a_usable_model(tmp_path):
         str(tmp_path / "o"),
         "--workers",
         "1",
+        "--plot-format",
+        "none",
     )
     assert r.returncode == 0, r.stderr
     res = json.loads((tmp_path / "o" / "results.json").read_text())

@@ -63,8 +63,8 @@ def test_predictors_repeat_or_split_on_commas(tmp_path: Path):
             "cv,poly",
             "--workers",
             "1",
-            "--drive-plots",
-            "0",
+            "--plot-format",
+            "none",
             "--synthetic-duration",
             "30",
             "--out",
@@ -79,7 +79,17 @@ def test_predictors_repeat_or_split_on_commas(tmp_path: Path):
 
 @pytest.mark.slow
 def test_quiet_and_verbose(tmp_path: Path):
-    args = ("run", "-p", "cv", "--workers", "1", "--drive-plots", "0", "--synthetic-duration", "30")
+    args = (
+        "run",
+        "-p",
+        "cv",
+        "--workers",
+        "1",
+        "--plot-format",
+        "none",
+        "--synthetic-duration",
+        "30",
+    )
     quiet = ok(bench(*args, "--out", tmp_path / "q", "-q"))
     assert quiet.stdout == "" and quiet.stderr == ""
     assert (tmp_path / "q" / "report.md").is_file()
@@ -97,7 +107,7 @@ def test_quiet_and_verbose(tmp_path: Path):
 def test_config_file_gives_defaults_the_command_line_overrides(tmp_path: Path):
     cfg = tmp_path / "run.toml"
     cfg.write_text(
-        '[run]\npredictors = ["cv"]\nworkers = 1\ndrive-plots = "0"\n'
+        '[run]\npredictors = ["cv"]\nworkers = 1\nplot-format = "none"\n'
         'synthetic_duration = 30.0\ngps-profile = "consumer"\ngate = false\n'
     )
     ok(bench("run", "--config", cfg, "--out", tmp_path / "a", "-q"))
@@ -170,7 +180,7 @@ def _notice(r: subprocess.CompletedProcess, *words: str) -> None:
 
 @pytest.mark.slow
 def test_old_spellings_work_for_one_release_with_a_notice(tmp_path: Path, bag: Path):
-    base = ("--workers", "1", "--drive-plots", "0", "-p", "cv")
+    base = ("--workers", "1", "--plot-format", "none", "-p", "cv")
     r = ok(
         bench(
             "run", "--data", bag, bag, "--topic", "gps=/fix", *base, "--out", tmp_path / "a", "-q"

@@ -91,8 +91,8 @@ def test_tune_out_round_trip_leaves_the_package_tuning_alone(tmp_path, comma_dir
         str(out),
         "--workers",
         "1",
-        "--drive-plots",
-        "0",
+        "--plot-format",
+        "none",
     )
     assert r.returncode == 0, r.stderr
     assert sha256(TUNED_FILE) == before
@@ -143,8 +143,8 @@ def test_sanity_names_a_plugin_that_loses_to_cv(tmp_path):
         str(out),
         "--workers",
         "1",
-        "--drive-plots",
-        "0",
+        "--plot-format",
+        "none",
         cwd=tmp_path,
     )
     assert r.returncode == 0, r.stderr

@@ -222,8 +222,8 @@ def test_run_without_strict_reports_failure(flipped_csv, tmp_path):
         "cv,kf",
         "--out",
         str(out),
-        "--drive-plots",
-        "0",
+        "--plot-format",
+        "none",
         "--table-format",
         "md",
     )

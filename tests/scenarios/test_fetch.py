@@ -86,7 +86,20 @@ def test_cli_run_on_url_equals_local_path(tmp_path):
     res = {}
     for key, arg in (("path", str(src)), ("url", f"file://{src}")):
         out = tmp_path / key
-        r = bench("run", "--data", arg, "-p", "cv", "--workers", "1", "--out", out, columns=200)
+        r = bench(
+            "run",
+            "--data",
+            arg,
+            "-p",
+            "cv",
+            "--workers",
+            "1",
+            "--out",
+            out,
+            "--plot-format",
+            "none",
+            columns=200,
+        )
         assert r.returncode == 0, r.stdout + r.stderr
         res[key] = json.loads((out / "results.json").read_text())
     assert [d["name"] for d in res["url"]["drives"]] == ["drive_a"]

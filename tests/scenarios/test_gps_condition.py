@@ -101,7 +101,18 @@ def test_bench_run_scores_the_users_receiver_by_default(tmp_path):
     _csv(csv)
     out = tmp_path / "o"
     r = bench(
-        "run", "--data", str(csv), "-p", "cv", "--out", str(out), "--workers", "1", columns=None
+        "run",
+        "--data",
+        str(csv),
+        "-p",
+        "cv",
+        "--out",
+        str(out),
+        "--workers",
+        "1",
+        "--plot-format",
+        "none",
+        columns=None,
     )
     assert r.returncode == 0, r.stderr
     assert (
@@ -134,6 +145,8 @@ def test_bench_run_scores_the_users_receiver_by_default(tmp_path):
         "1",
         "--gps-profile",
         "rtk",
+        "--plot-format",
+        "none",
         "-q",
         columns=None,
     )
@@ -193,7 +206,18 @@ def test_urban_canyon_csv_is_scored_on_its_receiver_without_blaming_the_truth(tm
     write_table(d, csv)
     out = tmp_path / "o"
     r = bench(
-        "run", "--data", str(csv), "-p", "cv", "--out", str(out), "--workers", "1", columns=None
+        "run",
+        "--data",
+        str(csv),
+        "-p",
+        "cv",
+        "--out",
+        str(out),
+        "--workers",
+        "1",
+        "--plot-format",
+        "none",
+        columns=None,
     )
     assert r.returncode == 0, r.stderr
     assert "FAIL" not in r.stdout + r.stderr and "poor receiver" in r.stdout + r.stderr

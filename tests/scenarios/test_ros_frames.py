@@ -297,8 +297,8 @@ def test_run_records_sensor_frames_in_results(bags, tmp_path: Path) -> None:
         "cv,kf",
         "--out",
         str(out),
-        "--drive-plots",
-        "0",
+        "--plot-format",
+        "none",
         timeout=300,
     )
     assert r.returncode == 0, r.stderr
