@@ -49,8 +49,8 @@ def cli_run(tmp_path_factory) -> Path:
         "outages",
         "--out",
         str(out),
-        "--drive-plots",
-        "0",
+        "--plot-format",
+        "none",
     )
     assert r.returncode == 0, r.stderr
     return out
@@ -118,7 +118,7 @@ def test_compare_and_its_gate(cli_run: Path, tmp_path: Path):
         dropouts="outages",
         options={"kf": {"jerk_psd": 2000.0}},
         out=tmp_path / "worse",
-        drive_plots=0,
+        plot_formats="none",
     )
     cmp = posbench.compare(cli_run, other, gates=["kf:future.mean_m:1%"], allow_config_change=True)
     assert cmp.labels[0] != cmp.labels[1] and len(cmp.gates) == 1

@@ -131,6 +131,8 @@ def test_untrained_hybrid_equals_kf_through_the_runner_command(untrained, tmp_pa
             str(out),
             "--workers",
             "1",
+            "--plot-format",
+            "none",
         ],
         capture_output=True,
         text=True,

@@ -70,7 +70,7 @@ def test_the_api_works_beside_a_users_own_metrics_package(installed: Path, tmp_p
     code = textwrap.dedent(f"""
         import metrics, predictors
         import posbench
-        run = posbench.run(predictors="cv,kf", out="out", workers=1, drive_plots=0)
+        run = posbench.run(predictors="cv,kf", out="out", workers=1, plot_formats="none")
         loaded = posbench.load("out")
         table = loaded.summary()
         assert list(table.index.names) == ["predictor", "kind"] and len(table) == 4
