@@ -62,16 +62,13 @@ def check_formats(formats: Iterable[str] | str) -> tuple[str, ...]:
         ValueError: an unknown format, ``none`` beside a format, or an empty name.
     """
     items = formats.split(",") if isinstance(formats, str) else list(formats)
-    names = [str(f).strip().lower() for f in items]
+    names = [str(f).strip().lower().lstrip(".") for f in items]
     if NO_FIGURES in names:
         if len(names) > 1:
             raise ValueError(f"'{NO_FIGURES}' draws no figure: give it alone, not beside a format")
         return ()
-    if not items:
-        return ()
     out: list[str] = []
-    for f in items:
-        name = str(f).strip().lower().lstrip(".")
+    for f, name in zip(items, names, strict=True):
         if name not in FORMATS:
             raise ValueError(
                 f"unknown plot format {f!r}: use one or more of {', '.join(FORMATS)}, or "

@@ -139,8 +139,10 @@ def write_result_plots(
     never raises on thin data (see :func:`write_plots`)."""
     fmts = check_formats(formats)
     written = PlotsWritten()
+    if not fmts:  # --plot-format none (noted by write_summary_plots)
+        return written
     for name, (key, draw) in RESULT_FIGURES.items():
-        if not res.get(key) or not fmts:
+        if not res.get(key):
             continue
         try:
             written.files += save_figure(draw(res), out, name, fmts)
