@@ -5,7 +5,9 @@ fixes *are* the truth (KITTI's OXTS, the synthetic drives) or when asked (issue 
 from __future__ import annotations
 
 import json
+import subprocess
 from dataclasses import replace
+from pathlib import Path
 
 import numpy as np
 import pandas as pd
@@ -95,12 +97,10 @@ def _csv(path, offset_m: float = 3.0) -> None:
     pd.concat(rows).sort_values("t", kind="stable").to_csv(path, index=False)
 
 
-@pytest.mark.slow
-def test_bench_run_scores_the_users_receiver_by_default(tmp_path):
-    csv = tmp_path / "canyon.csv"
-    _csv(csv)
-    out = tmp_path / "o"
-    r = bench(
+def _run_cv(csv: Path, out: Path, *extra: str) -> subprocess.CompletedProcess[str]:
+    """``bench run --data CSV -p cv --out OUT`` with one worker and no figures (the tests
+    here read results.json and report.md), plus ``extra``; output piped (no terminal)."""
+    return bench(
         "run",
         "--data",
         str(csv),
@@ -112,8 +112,17 @@ def test_bench_run_scores_the_users_receiver_by_default(tmp_path):
         "1",
         "--plot-format",
         "none",
+        *extra,
         columns=None,
     )
+
+
+@pytest.mark.slow
+def test_bench_run_scores_the_users_receiver_by_default(tmp_path):
+    csv = tmp_path / "canyon.csv"
+    _csv(csv)
+    out = tmp_path / "o"
+    r = _run_cv(csv, out)
     assert r.returncode == 0, r.stderr
     assert (
         "reference in table: the truth, the file's truth rows (errors in true metres); fixes "
@@ -133,23 +142,7 @@ def test_bench_run_scores_the_users_receiver_by_default(tmp_path):
     assert "fixes: the recording's own receiver." in md
 
     out2 = tmp_path / "o2"
-    r = bench(
-        "run",
-        "--data",
-        str(csv),
-        "-p",
-        "cv",
-        "--out",
-        str(out2),
-        "--workers",
-        "1",
-        "--gps-profile",
-        "rtk",
-        "--plot-format",
-        "none",
-        "-q",
-        columns=None,
-    )
+    r = _run_cv(csv, out2, "--gps-profile", "rtk", "-q")
     assert r.returncode == 0, r.stderr
     res2 = json.loads((out2 / "results.json").read_text())
     assert res2["drives"][0]["gps_condition"] == "rtk"
@@ -205,20 +198,7 @@ def test_urban_canyon_csv_is_scored_on_its_receiver_without_blaming_the_truth(tm
     d = urban_canyon_drive()
     write_table(d, csv)
     out = tmp_path / "o"
-    r = bench(
-        "run",
-        "--data",
-        str(csv),
-        "-p",
-        "cv",
-        "--out",
-        str(out),
-        "--workers",
-        "1",
-        "--plot-format",
-        "none",
-        columns=None,
-    )
+    r = _run_cv(csv, out)
     assert r.returncode == 0, r.stderr
     assert "FAIL" not in r.stdout + r.stderr and "poor receiver" in r.stdout + r.stderr
     res = json.loads((out / "results.json").read_text())
