@@ -164,10 +164,13 @@ def iter_load_many(
     ``keep``: what to make of each drive in the process that loaded it, given its index in
     the order of the recordings (e.g. write it to disk and describe it:
     :func:`posbench.scenarios.stored_drive.store_drive`); its results are yielded instead of
-    the drives, so no drive crosses back to this process."""
+    the drives, so no drive crosses back to this process: with ``keep`` and ``workers`` > 1 a
+    single recording is loaded in a child too, so that this process never holds a drive's
+    loading peak (nor do the processes forked from it later)."""
     recs = [r for p in paths for r in _recordings(p)]
     job = functools.partial(_load_and_keep, projection=projection, topics=topics, keep=keep)
-    if workers <= 1 or len(recs) <= 1 or not _can_fork():
+    alone = len(recs) <= 1 and keep is None  # one drive that comes back here anyway
+    if workers <= 1 or alone or not _can_fork():
         for i, (rec_path, fmt) in enumerate(recs):
             yield job(i, rec_path, fmt)
         return

@@ -57,7 +57,7 @@ where it starts; all streams together may span at most
 from __future__ import annotations
 
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, overload
 
 import numpy as np
 
@@ -83,31 +83,51 @@ STREAMS = ("gps", "imu", "speed", "truth")
 NUMERIC = ("t", "t_ns", "lat", "lon", "x", "y", "accuracy", "ax", "ay", "yaw", "yaw_rate", "v")
 KNOWN = ("stream", *NUMERIC)
 REQUIRED = {"imu": ("ax", "ay"), "speed": ("v",)}
+#: the columns each stream takes from its rows (the times apart)
+USES = {
+    "gps": ("lat", "lon", "x", "y", "accuracy"),
+    "imu": ("ax", "ay", "yaw", "yaw_rate"),
+    "speed": ("v",),
+    "truth": ("lat", "lon", "x", "y", "yaw", "v", "accuracy"),
+}
 UNIX_MIN_S = 1e8
 
+#: a stream's rows (indices into the table, in file order) and its cells of each column it
+#: uses: ``cells[(stream, column)]``
+Cells = dict[tuple[str, str], np.ndarray]
 
-def _times(tab: TableFile, rows: np.ndarray) -> tuple[np.ndarray, float]:
-    """Times [s] relative to the earliest selected row and that row's absolute time [s].
+
+def _times(
+    tab: TableFile, keep: np.ndarray, rows: dict[str, np.ndarray]
+) -> tuple[dict[str, np.ndarray], float]:
+    """Each stream's times [s] relative to the earliest kept row, and that row's absolute
+    time [s].
 
     An integer ``t_ns`` column is differenced in int64 so Unix-epoch stamps keep ns
     precision (a ``t_ns`` column with empty cells is read as float: ~0.4 us steps).
     """
     import pandas as pd
 
-    df = tab.df
-    if "t_ns" in df.columns:
-        col = "t_ns"
-        if pd.api.types.is_integer_dtype(df["t_ns"].dtype):
-            ns = df["t_ns"].to_numpy(dtype=np.int64)[rows]
-            ns0 = int(ns.min())
-            return (ns - ns0).astype(np.float64) / 1e9, ns0 / 1e9
-        t = numeric_column(tab, col)[rows] / 1e9
+    col = "t_ns" if "t_ns" in tab.columns else "t"
+    if col == "t_ns":
+        s = tab.column(col)
+        if pd.api.types.is_integer_dtype(s.dtype):
+            ns = s.to_numpy(dtype=np.int64)
+            ns0 = int(ns[keep].min())
+            return {k: (ns[r] - ns0).astype(np.float64) / 1e9 for k, r in rows.items()}, ns0 / 1e9
+        t = numeric_column(tab, col) / 1e9
     else:
-        col = "t"
-        t = numeric_column(tab, col)[rows]
-    _need_cells(tab, rows, ~np.isfinite(t), col)
-    t0 = float(t.min())
-    return t - t0, t0
+        t = numeric_column(tab, col)
+    missing = ~np.isfinite(t) & keep
+    if np.any(missing):
+        i = int(np.flatnonzero(missing)[0])
+        raise DataError(
+            tab.path,
+            f"{tab.where(i)}, column {col!r}: missing or non-finite value; "
+            f"{int(missing.sum())} such rows in all",
+        )
+    t0 = float(t[keep].min())
+    return {k: t[r] - t0 for k, r in rows.items()}, t0
 
 
 def _need_cells(
@@ -123,38 +143,51 @@ def _need_cells(
         )
 
 
-def _stream_labels(tab: TableFile, warnings: list[str]) -> tuple[np.ndarray, np.ndarray]:
-    """(labels per row, mask of rows kept); blank CSV lines are dropped with a warning."""
+def _blank_rows(tab: TableFile) -> np.ndarray:
+    """Rows with every cell empty (a blank CSV line), one column at a time (done at the first
+    column with no empty cell, usually ``stream``)."""
+    blank = np.ones(tab.n_rows, dtype=bool)
+    for c in sorted(tab.columns, key=lambda c: c != "stream"):
+        blank &= tab.column(c).isna().to_numpy()
+        if not blank.any():
+            break
+    return blank
+
+
+def _stream_codes(tab: TableFile, warnings: list[str]) -> tuple[np.ndarray, np.ndarray]:
+    """(each row's index into :data:`STREAMS`, -1 for none; mask of rows kept); blank CSV
+    lines are dropped with a warning."""
     import pandas as pd
 
-    df = tab.df
-    blank = df.isna().all(axis=1).to_numpy()
+    blank = _blank_rows(tab)
     if blank.any():
         warnings.append(f"table: dropped {int(blank.sum())} blank lines")
-    if "stream" not in df.columns:
-        labels = np.full(len(df), "gps", dtype=object)
+    if "stream" not in tab.columns:
         warnings.append("table: no 'stream' column, every row read as a GPS fix")
-        return labels, ~blank
-    # each distinct value cleaned once, the rows sharing its string (a long drive has
-    # millions of rows and a handful of streams: a new string per row was 420 MB at 8 h)
-    codes, uniques = pd.factorize(df["stream"])
-    cleaned = pd.Series(uniques, dtype=object).astype("string").str.strip().str.lower()
-    table = np.array([*cleaned.fillna("").to_numpy(dtype=object), ""], dtype=object)
-    labels = table[codes]  # missing (code -1): the last entry, ""
-    unknown = ~np.isin(labels, STREAMS) & ~blank
+        return np.zeros(tab.n_rows, dtype=np.int8), ~blank
+    # each distinct value cleaned once, the rows sharing its code (a long drive has millions
+    # of rows and a handful of streams)
+    stream = tab.column("stream")
+    codes, uniques = pd.factorize(stream)
+    cleaned = pd.Series(np.asarray(uniques, dtype=object), dtype=object)
+    cleaned = cleaned.astype("string").str.strip().str.lower().fillna("")
+    index = {s: i for i, s in enumerate(STREAMS)}
+    lookup = np.array([*(index.get(v, -1) for v in cleaned), -1], dtype=np.int8)
+    found = lookup[codes]  # missing (code -1): the last entry, -1
+    unknown = (found < 0) & ~blank
     if unknown.any():
         i = int(np.flatnonzero(unknown)[0])
         raise DataError(
             tab.path,
             f"{tab.where(i)}, column 'stream': unknown stream "
-            f"{df['stream'].iloc[i]!r} (expected one of "
+            f"{stream.iloc[i]!r} (expected one of "
             f"{', '.join(STREAMS)}); {int(unknown.sum())} such rows",
         )
-    return labels, ~blank
+    return found, ~blank
 
 
 def _check_columns(tab: TableFile, present_streams: set[str]) -> None:
-    cols = set(tab.df.columns)
+    cols = set(tab.columns)
     missing: list[str] = []
     if not ({"t", "t_ns"} & cols):
         missing.append("t (or t_ns)")
@@ -168,56 +201,80 @@ def _check_columns(tab: TableFile, present_streams: set[str]) -> None:
         raise DataError(tab.path, f"missing required column(s): {'; '.join(missing)}")
 
 
-def _refuse_infinite(tab: TableFile, keep: np.ndarray, num: dict[str, np.ndarray]) -> None:
-    """Refuse an infinite cell in any numeric column (an empty cell means "not given"; no
-    value is infinite), naming its line and column."""
-    for c, v in num.items():
-        inf = np.isinf(v) & keep
-        if np.any(inf):
-            i = int(np.flatnonzero(inf)[0])
-            raise DataError(
-                tab.path,
-                f"{tab.where(i)}, column {c!r}: infinite value {float(v[i])!r}; "
-                f"{int(inf.sum())} such row{'s' * (int(inf.sum()) != 1)} in all",
-            )
+def _refuse_infinite(tab: TableFile, keep: np.ndarray, c: str, v: np.ndarray) -> None:
+    """Refuse an infinite cell in numeric column ``c`` (an empty cell means "not given"; no
+    value is infinite), naming its line."""
+    inf = np.isinf(v) & keep
+    if np.any(inf):
+        i = int(np.flatnonzero(inf)[0])
+        raise DataError(
+            tab.path,
+            f"{tab.where(i)}, column {c!r}: infinite value {float(v[i])!r}; "
+            f"{int(inf.sum())} such row{'s' * (int(inf.sum()) != 1)} in all",
+        )
 
 
-def _refuse_far(tab: TableFile, keep: np.ndarray, num: dict[str, np.ndarray]) -> None:
+def _refuse_far(tab: TableFile, keep: np.ndarray, c: str, v: np.ndarray) -> None:
     """Refuse an x or y cell farther than :data:`~posbench.scenarios.drive.MAX_POSITION_M`
-    from the origin (no vehicle can be there), naming its line and column."""
-    for c in ("x", "y"):
-        if c not in num:
+    from the origin (no vehicle can be there), naming its line."""
+    far = (np.abs(v) > MAX_POSITION_M) & keep
+    if np.any(far):
+        i = int(np.flatnonzero(far)[0])
+        n = int(far.sum())
+        raise DataError(
+            tab.path,
+            f"{tab.where(i)}, column {c!r}: {float(v[i]):g} m is no position: more "
+            f"than {MAX_POSITION_M:g} m from the origin, farther than any point on Earth; "
+            f"{n} such row{'s' * (n != 1)} in all",
+        )
+
+
+def _stream_cells(tab: TableFile, keep: np.ndarray, rows: dict[str, np.ndarray]) -> Cells:
+    """Every numeric column read one at a time (non-numeric, infinite and impossible x/y
+    cells refused), and each stream's cells of the columns it uses kept: the whole table's
+    columns are never held at once."""
+    cells: Cells = {}
+    for c in NUMERIC:
+        if c not in tab.columns or c == "t_ns":
             continue
-        far = (np.abs(num[c]) > MAX_POSITION_M) & keep
-        if np.any(far):
-            i = int(np.flatnonzero(far)[0])
-            n = int(far.sum())
-            raise DataError(
-                tab.path,
-                f"{tab.where(i)}, column {c!r}: {float(num[c][i]):g} m is no position: more "
-                f"than {MAX_POSITION_M:g} m from the origin, farther than any point on Earth; "
-                f"{n} such row{'s' * (n != 1)} in all",
-            )
+        v = numeric_column(tab, c)
+        _refuse_infinite(tab, keep, c, v)
+        if c in ("x", "y"):
+            _refuse_far(tab, keep, c, v)
+        for s, r in rows.items():
+            if c in USES[s]:
+                cells[(s, c)] = v[r]
+    return cells
 
 
-def _position_frame(tab: TableFile, rows: np.ndarray, num: dict[str, np.ndarray]) -> str:
+def _first_row(rows: dict[str, np.ndarray], masks: dict[str, np.ndarray]) -> int:
+    """The first table row (in file order) among each stream's rows where its mask holds."""
+    return min(int(rows[s][np.flatnonzero(m)[0]]) for s, m in masks.items() if m.any())
+
+
+def _position_frame(tab: TableFile, rows: dict[str, np.ndarray], cells: Cells) -> str:
     """'latlon' or 'xy': which columns every gps/truth row fills."""
+    pos = {s: rows[s] for s in ("gps", "truth")}
 
-    def complete(a: str, b: str) -> np.ndarray:
-        if a not in num or b not in num:
-            return np.zeros(rows.size, dtype=bool)
-        return np.isfinite(num[a][rows]) & np.isfinite(num[b][rows])
+    def complete(a: str, b: str) -> dict[str, np.ndarray]:
+        out = {}
+        for s, r in pos.items():
+            if (s, a) in cells and (s, b) in cells:
+                out[s] = np.isfinite(cells[(s, a)]) & np.isfinite(cells[(s, b)])
+            else:
+                out[s] = np.zeros(r.size, dtype=bool)
+        return out
 
     ll, xy = complete("lat", "lon"), complete("x", "y")
-    if ll.all():
+    if all(m.all() for m in ll.values()):
         return "latlon"
-    if xy.all():
+    if all(m.all() for m in xy.values()):
         return "xy"
-    neither = ~ll & ~xy
-    if neither.any():
-        i = int(rows[np.flatnonzero(neither)[0]])
+    neither = {s: ~ll[s] & ~xy[s] for s in pos}
+    if any(m.any() for m in neither.values()):
+        i = _first_row(pos, neither)
         raise DataError(tab.path, f"{tab.where(i)}: position row has neither lat/lon nor x/y")
-    i = int(rows[np.flatnonzero(~ll)[0]])
+    i = _first_row(pos, {s: ~m for s, m in ll.items()})
     raise DataError(
         tab.path,
         f"{tab.where(i)}: some position rows give only x/y and others "
@@ -229,79 +286,93 @@ def _opt(a: np.ndarray | None) -> np.ndarray | None:
     return None if a is None or not np.any(np.isfinite(a)) else a
 
 
+@overload
+def _kept(col: np.ndarray, kept: np.ndarray) -> np.ndarray: ...
+@overload
+def _kept(col: None, kept: np.ndarray) -> None: ...
+@overload
+def _kept(col: np.ndarray | None, kept: np.ndarray) -> np.ndarray | None: ...
+def _kept(col: np.ndarray | None, kept: np.ndarray) -> np.ndarray | None:
+    """:func:`~posbench.scenarios.cleaning.take` without a copy where every sample is kept in
+    order (a clean stream: the usual case), for cells read here and held by nobody else."""
+    if col is not None and kept.size == col.size and np.array_equal(kept, np.arange(kept.size)):
+        return col
+    return take(col, kept)
+
+
 def load_table(path: Path, projection: str = "enu") -> Drive:
-    """Load a long-format (or wide GPS-only) CSV / Parquet table; see the module docstring."""
+    """Load a long-format (or wide GPS-only) CSV / Parquet table; see the module docstring.
+    A Parquet file is read one column at a time, each stream keeping only its own cells."""
     path = Path(path)
     warnings: list[str] = []
     tab = read_table_file(path)
-    df = tab.df
-    if len(df) == 0:
+    if tab.n_rows == 0:
         raise DataError(path, "no data rows (only a header)")
-    labels, keep = _stream_labels(tab, warnings)
+    codes, keep = _stream_codes(tab, warnings)
     if not keep.any():
         raise DataError(path, "no data rows (only blank lines)")
-    present = {s for s in STREAMS if np.any((labels == s) & keep)}
+    rows = {s: np.flatnonzero((codes == i) & keep) for i, s in enumerate(STREAMS)}
+    del codes
+    present = {s for s, r in rows.items() if r.size}
     _check_columns(tab, present)
-    ignored = [c for c in df.columns if c not in KNOWN]
+    ignored = [c for c in tab.columns if c not in KNOWN]
     if ignored:
         warnings.append(f"table: ignored unknown columns {', '.join(ignored)}")
 
-    num = {c: numeric_column(tab, c) for c in NUMERIC if c in df.columns and c != "t_ns"}
-    _refuse_infinite(tab, keep, num)
-    _refuse_far(tab, keep, num)
-    all_rows = np.flatnonzero(keep)
-    t_all, t_origin = _times(tab, all_rows)
-    t_full = np.full(len(df), np.nan)
-    t_full[all_rows] = t_all
+    cells = _stream_cells(tab, keep, rows)
+    t_of, t_origin = _times(tab, keep, rows)
+    n_kept = int(keep.sum())
+    del keep
 
-    def rows_of(s: str) -> np.ndarray:
-        return np.flatnonzero((labels == s) & keep)
-
-    def col(c: str, rows: np.ndarray) -> np.ndarray | None:
-        return num[c][rows] if c in num else None
+    def col(s: str, c: str) -> np.ndarray | None:
+        """Stream ``s``'s cells of column ``c``, handed over (None: not in the file)."""
+        return cells.pop((s, c), None)
 
     for s, req in REQUIRED.items():
-        r = rows_of(s)
         for c in req:
-            if r.size:
-                _need_cells(tab, r, ~np.isfinite(num[c][r]), c, s)
+            if rows[s].size:
+                _need_cells(tab, rows[s], ~np.isfinite(cells[(s, c)]), c, s)
 
-    pos_rows = np.flatnonzero(np.isin(labels, ("gps", "truth")) & keep)
-    frame = _position_frame(tab, pos_rows, num) if pos_rows.size else "xy"
+    frame = _position_frame(tab, rows, cells) if rows["gps"].size + rows["truth"].size else "xy"
     origin_lat = origin_lon = float("nan")
     proj = "source"
     xs: dict[str, tuple[np.ndarray, np.ndarray]] = {}
     if frame == "latlon":
         for s in ("gps", "truth"):
-            r = rows_of(s)
-            if r.size:
-                validate_latlon(num["lat"][r], num["lon"][r], str(path), what=f"{s} row")
-        first = rows_of("gps") if rows_of("gps").size else rows_of("truth")
-        i0 = first[np.argmin(t_full[first])]
-        origin_lat, origin_lon = float(num["lat"][i0]), float(num["lon"][i0])
+            if rows[s].size:
+                validate_latlon(cells[(s, "lat")], cells[(s, "lon")], str(path), what=f"{s} row")
+        first = "gps" if rows["gps"].size else "truth"
+        i0 = int(np.argmin(t_of[first]))
+        origin_lat, origin_lon = float(cells[(first, "lat")][i0]), float(cells[(first, "lon")][i0])
         proj = projection
         for s in ("gps", "truth"):
-            r = rows_of(s)
-            xs[s] = to_local(num["lat"][r], num["lon"][r], origin_lat, origin_lon, projection)
+            if rows[s].size:
+                xs[s] = to_local(
+                    cells[(s, "lat")], cells[(s, "lon")], origin_lat, origin_lon, projection
+                )
+            else:
+                xs[s] = (np.empty(0), np.empty(0))
     else:
         for s in ("gps", "truth"):
-            r = rows_of(s)
-            xs[s] = (num["x"][r], num["y"][r]) if r.size else (np.empty(0), np.empty(0))
+            xs[s] = (
+                (cells[(s, "x")], cells[(s, "y")]) if rows[s].size else (np.empty(0), np.empty(0))
+            )
 
-    t_col, t_unit = ("t_ns", "nanoseconds") if "t_ns" in df.columns else ("t", "seconds")
+    cells.pop(("truth", "lat"), None), cells.pop(("truth", "lon"), None)  # served x/y only
+
+    t_col, t_unit = ("t_ns", "nanoseconds") if "t_ns" in tab.columns else ("t", "seconds")
 
     def clean(s: str) -> tuple[np.ndarray, np.ndarray]:
         """Stream ``s``'s times [s] cleaned and checked (:mod:`~posbench.scenarios.time_axis`),
         and the kept ones' indices into its rows."""
-        r = rows_of(s)
-        t, kept = clean_index(t_full[r], f"table {s}", warnings)
+        r = rows[s]
+        t, kept = clean_index(t_of.pop(s), f"table {s}", warnings)
         check_stream_times(
             t, s, path, lambda i: tab.where(int(r[kept[i]])), what=t_col, unit=t_unit
         )
         return t, kept
 
-    r = rows_of("gps")
-    lat_g, lon_g = col("lat", r), col("lon", r)
+    lat_g, lon_g = col("gps", "lat"), col("gps", "lon")
     if (
         lat_g is None
         or lon_g is None
@@ -309,40 +380,39 @@ def load_table(path: Path, projection: str = "enu") -> Drive:
     ):
         lat_g = lon_g = None  # kept only when every fix has them
     t, kept = clean("gps")
+    x, y = xs.pop("gps")
     gps = GpsStream(
         t,
-        take(xs["gps"][0], kept),
-        take(xs["gps"][1], kept),
-        lat=take(lat_g, kept),
-        lon=take(lon_g, kept),
-        accuracy=_opt(take(col("accuracy", r), kept)),
+        _kept(x, kept),
+        _kept(y, kept),
+        lat=_kept(lat_g, kept),
+        lon=_kept(lon_g, kept),
+        accuracy=_opt(_kept(col("gps", "accuracy"), kept)),
     )
 
     imu = speed = truth = None
-    r = rows_of("imu")
-    if r.size:
+    if rows["imu"].size:
         t, kept = clean("imu")
         imu = ImuStream(
             t,
-            take(num["ax"][r], kept),
-            take(num["ay"][r], kept),
-            yaw=_opt(take(col("yaw", r), kept)),
-            yaw_rate=_opt(take(col("yaw_rate", r), kept)),
+            _kept(cells.pop(("imu", "ax")), kept),  # required: checked above
+            _kept(cells.pop(("imu", "ay")), kept),
+            yaw=_opt(_kept(col("imu", "yaw"), kept)),
+            yaw_rate=_opt(_kept(col("imu", "yaw_rate"), kept)),
         )
-    r = rows_of("speed")
-    if r.size:
+    if rows["speed"].size:
         t, kept = clean("speed")
-        speed = SpeedStream(t, take(num["v"][r], kept))
-    r = rows_of("truth")
-    if r.size:
+        speed = SpeedStream(t, _kept(cells.pop(("speed", "v")), kept))
+    if rows["truth"].size:
         t, kept = clean("truth")
+        x, y = xs.pop("truth")
         truth = TruthStream(
             t,
-            take(xs["truth"][0], kept),
-            take(xs["truth"][1], kept),
-            yaw=_opt(take(col("yaw", r), kept)),
-            v=_opt(take(col("v", r), kept)),
-            accuracy=_opt(take(col("accuracy", r), kept)),
+            _kept(x, kept),
+            _kept(y, kept),
+            yaw=_opt(_kept(col("truth", "yaw"), kept)),
+            v=_opt(_kept(col("truth", "v"), kept)),
+            accuracy=_opt(_kept(col("truth", "accuracy"), kept)),
         )
 
     epoch = t_origin if t_origin > UNIX_MIN_S else float("nan")
@@ -354,9 +424,9 @@ def load_table(path: Path, projection: str = "enu") -> Drive:
         origin_lat=origin_lat,
         origin_lon=origin_lon,
         projection=proj,
-        time_source="t_ns column" if "t_ns" in df.columns else "t column",
+        time_source="t_ns column" if "t_ns" in tab.columns else "t column",
         warnings=warnings,
-        extra={"rows": int(keep.sum())},
+        extra={"rows": n_kept},
     )
     return Drive(meta=meta, gps=gps, imu=imu, speed=speed, truth=truth)
 

@@ -1,18 +1,19 @@
 """Reading a CSV or Parquet file as a table whose rows are named as the user sees them.
 
-:func:`read_table_file` reads the file (column names stripped and lower-cased, the named text
-columns kept as text) into a :class:`TableFile`, which names a data row by its CSV line
-(header = line 1) or its 1-based Parquet row; :func:`numeric_column` reads a column as
-float64. Every problem is a :class:`~posbench.scenarios.errors.DataError` naming the file
-and, where there is one, the line and column. Used by the drive tables
-(:mod:`posbench.scenarios.loaders.table`) and by the offline answers files.
+:func:`read_table_file` reads a CSV file (column names stripped and lower-cased, the named
+text columns kept as text), or opens a Parquet file to be read one column at a time, as a
+:class:`TableFile`, which names a data row by its CSV line (header = line 1) or its 1-based
+Parquet row; :func:`numeric_column` reads a column as float64. Every problem is a
+:class:`~posbench.scenarios.errors.DataError` naming the file and, where there is one, the
+line and column. Used by the drive tables (:mod:`posbench.scenarios.loaders.table`) and by
+the offline answers files.
 """
 
 from __future__ import annotations
 
 import re
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -23,12 +24,58 @@ if TYPE_CHECKING:  # pandas is imported when a table is read
 
 
 class TableFile:
-    """A read table (``df``, a pandas DataFrame) with its file and a way to name rows."""
+    """A read table with its file and a way to name rows. A CSV is held whole (``df``, a pandas
+    DataFrame); a Parquet file is read one column at a time (:meth:`column`), so that a long
+    drive's table (millions of rows, most cells empty) is never held whole; ``df`` reads it
+    whole where a caller wants that."""
 
-    def __init__(self, path: Path, df: pd.DataFrame, is_csv: bool) -> None:
+    def __init__(
+        self,
+        path: Path,
+        is_csv: bool,
+        columns: list[str],
+        n_rows: int,
+        frame: pd.DataFrame | None = None,
+        parquet: Any = None,
+        stored_names: dict[str, str] | None = None,
+    ) -> None:
         self.path = path
-        self.df = df
         self.is_csv = is_csv
+        self.columns = columns  # stripped, lower-case
+        self.n_rows = n_rows
+        self._frame = frame
+        self._parquet = parquet  # a pyarrow.parquet.ParquetFile
+        self._stored = stored_names or {}  # lower-case name -> the name in the file
+
+    @property
+    def df(self) -> pd.DataFrame:
+        """The whole table (read once, kept)."""
+        if self._frame is None:
+            import pandas as pd
+
+            try:
+                df = pd.read_parquet(self.path)
+            except Exception as e:  # pyarrow raises several types for damaged files
+                raise DataError(self.path, _parquet_error(e)) from None
+            df.columns = [str(c).strip().lower() for c in df.columns]
+            self._frame = df
+        return self._frame
+
+    def column(self, name: str) -> pd.Series:
+        """Column ``name`` (stripped, lower-case) as a pandas Series; a Parquet file's text
+        columns as categoricals."""
+        if self._frame is not None or self._parquet is None:
+            return self.df[name]
+        try:
+            arr = self._parquet.read(columns=[self._stored[name]], use_threads=False).column(0)
+        except Exception as e:  # a damaged column chunk
+            raise DataError(self.path, _parquet_error(e)) from None
+        out = arr.to_pandas()
+        del arr
+        import pyarrow as pa
+
+        pa.default_memory_pool().release_unused()  # the column's buffers back to the system
+        return out
 
     def where(self, i: int) -> str:
         """Name data row ``i`` (0-based) as the user sees it."""
@@ -36,9 +83,10 @@ class TableFile:
 
 
 def read_table_file(path: Path, text_columns: tuple[str, ...] = ("stream",)) -> TableFile:
-    """Read a CSV (``text_columns``, named in lower case, kept as text) or Parquet file; column
-    names stripped and lower-cased. Raises :class:`DataError` (naming the file and the line) when it
-    is missing, empty, damaged or has duplicate columns."""
+    """Read a CSV (``text_columns``, named in lower case, kept as text) or open a Parquet file
+    (its columns read when asked for, ``text_columns`` as categoricals); column names stripped
+    and lower-cased. Raises :class:`DataError` (naming the file and the line) when it is
+    missing, empty, damaged or has duplicate columns."""
     import pandas as pd
 
     if not path.is_file():
@@ -47,11 +95,7 @@ def read_table_file(path: Path, text_columns: tuple[str, ...] = ("stream",)) -> 
         raise DataError(path, "empty file")
     suffix = path.suffix.lower()
     if suffix in (".parquet", ".pq"):
-        try:
-            df = pd.read_parquet(path)
-        except Exception as e:  # pyarrow raises several types for damaged files
-            raise DataError(path, f"cannot read Parquet: {str(e).splitlines()[0]}") from None
-        is_csv = False
+        tab = _open_parquet(path, text_columns)
     else:
         try:
             header = pd.read_csv(path, nrows=0).columns  # text columns by any case or spacing
@@ -63,12 +107,38 @@ def read_table_file(path: Path, text_columns: tuple[str, ...] = ("stream",)) -> 
             raise DataError(path, _parser_error(str(e))) from None
         except UnicodeDecodeError as e:
             raise DataError(path, f"not a text CSV file: {e}") from None
-        is_csv = True
-    df.columns = [str(c).strip().lower() for c in df.columns]
-    dup = sorted({c for c in df.columns if list(df.columns).count(c) > 1})
+        df.columns = [str(c).strip().lower() for c in df.columns]
+        tab = TableFile(path, True, list(df.columns), len(df), frame=df)
+    dup = sorted({c for c in tab.columns if tab.columns.count(c) > 1})
     if dup:
         raise DataError(path, f"duplicate columns: {', '.join(dup)}")
-    return TableFile(path, df, is_csv)
+    return tab
+
+
+def _open_parquet(path: Path, text_columns: tuple[str, ...]) -> TableFile:
+    """A Parquet file's schema and row count; its data columns only (a stored pandas index is
+    the frame's index, not a column, as pandas reads it)."""
+    import pyarrow.parquet as pq
+
+    try:
+        schema = pq.read_schema(path)
+        index = {
+            c for c in (schema.pandas_metadata or {}).get("index_columns", []) if isinstance(c, str)
+        }
+        stored = [n for n in schema.names if n not in index]
+        text = [n for n in stored if n.strip().lower() in text_columns]
+        pf = pq.ParquetFile(path, read_dictionary=text)
+        n_rows = pf.metadata.num_rows
+    except Exception as e:  # pyarrow raises several types for damaged files
+        raise DataError(path, _parquet_error(e)) from None
+    names = [n.strip().lower() for n in stored]
+    return TableFile(
+        path, False, names, n_rows, parquet=pf, stored_names=dict(zip(names, stored, strict=True))
+    )
+
+
+def _parquet_error(e: Exception) -> str:
+    return f"cannot read Parquet: {str(e).splitlines()[0] if str(e) else type(e).__name__}"
 
 
 def _parser_error(msg: str) -> str:
@@ -93,7 +163,7 @@ def numeric_column(tab: TableFile, col: str) -> np.ndarray:
     non-numeric cell."""
     import pandas as pd
 
-    s = tab.df[col]
+    s = tab.column(col)
     if pd.api.types.is_bool_dtype(s.dtype):
         raise DataError(tab.path, f"column {col!r}: booleans, expected numbers")
     if pd.api.types.is_numeric_dtype(s.dtype):

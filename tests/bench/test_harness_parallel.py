@@ -133,6 +133,20 @@ def test_parallel_loading_keeps_the_order_and_the_drives(tmp_path):
         assert np.array_equal(a.gps.t, b.gps.t) and np.array_equal(a.gps.x, b.gps.x)
 
 
+def _loaded_where(index: int, drive: object) -> int:
+    return os.getpid()
+
+
+def test_a_single_recording_kept_is_loaded_in_a_child(tmp_path):
+    # a run's stored drives: even one recording is loaded (and kept) by a child process, so
+    # the run's own process never holds a drive's loading peak; without keep it comes back
+    _write_table(tmp_path / "a.csv", "a", 40)
+    (pid,) = iter_load_many([tmp_path / "a.csv"], workers=2, keep=_loaded_where)
+    assert pid != os.getpid()
+    (pid,) = iter_load_many([tmp_path / "a.csv"], workers=1, keep=_loaded_where)
+    assert pid == os.getpid()
+
+
 def test_parallel_loading_raises_the_loaders_error(tmp_path):
     _write_table(tmp_path / "a.csv", "a", 40)
     (tmp_path / "b.csv").write_text("stream,t,x\ngps,not-a-number,1\n")

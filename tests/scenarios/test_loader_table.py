@@ -201,6 +201,27 @@ def test_parquet_errors_name_rows(tmp_path: Path):
         load_table(p)
 
 
+def test_parquet_read_a_column_at_a_time_as_pandas_reads_it(tmp_path: Path):
+    # a stored pandas index is the frame's index, not a column; text in a numeric column
+    # is named; a Parquet file's drive equals the same table's as CSV
+    import pandas as pd
+
+    d = _synthetic()
+    csv, pq = tmp_path / "d.csv", tmp_path / "d.parquet"
+    write_table(d, csv)
+    frame = pd.read_csv(csv)
+    frame.index = pd.Index(np.arange(len(frame)) * 7, name="sample")
+    frame.to_parquet(pq)
+    back = load_table(pq)
+    assert back.meta.warnings == []  # no 'sample' column ignored
+    _same(load_table(csv), back)
+    frame["ax"] = frame["ax"].astype(str)  # a text column in the file
+    frame.loc[frame.index[3], "ax"] = "n/a"
+    frame.to_parquet(pq)
+    with pytest.raises(DataError, match=r"d\.parquet: row 4, column 'ax': not a number: 'n/a'"):
+        load_table(pq)
+
+
 def test_imu_only_file_has_no_fixes(tmp_path: Path):
     p = tmp_path / "imu.csv"
     p.write_text("stream,t,ax,ay\nimu,0,0.1,0.2\n")
