@@ -356,11 +356,29 @@ def _at_queries(
 ) -> np.ndarray:
     """``[F(d) P_k F(d)' + Q(d)]_00`` per query, vectorised (see the module docstring); a
     query across a gap (``q d^3 / 3`` above ``prior_vel_var`` [m^2/s^2]) at most
-    ``(sqrt(P_k,00) + sqrt(prior_vel_var) d)^2``."""
+    ``(sqrt(P_k,00) + sqrt(prior_vel_var) d)^2``. :data:`STEP_CHUNK` queries at a time, so
+    that the temporaries of hours of queries are never held at once."""
     tq = np.asarray(t_query, dtype=float)
     ti = tq if t_issue is None else np.broadcast_to(np.asarray(t_issue, dtype=float), tq.shape)
     if np.any(tq < ti):
         raise ValueError("t_query before t_issue: the bound is for predictions, not smoothing")
+    flat_q, flat_i = tq.reshape(-1), ti.reshape(-1)
+    out = np.empty(flat_q.size)
+    for lo in range(0, flat_q.size, STEP_CHUNK):
+        hi = lo + STEP_CHUNK
+        out[lo:hi] = _at_some_queries(times, upper, q, flat_q[lo:hi], flat_i[lo:hi], prior_vel_var)
+    return out.reshape(tq.shape)
+
+
+def _at_some_queries(
+    times: np.ndarray,
+    upper: np.ndarray,
+    q: JerkPsd,
+    tq: np.ndarray,
+    ti: np.ndarray,
+    prior_vel_var: float,
+) -> np.ndarray:
+    """:func:`_at_queries` of the queries at ``tq`` [s] issued at ``ti`` [s] (1-D)."""
     k = np.searchsorted(times, ti, side="right") - 1
     known = k >= 0
     p = upper[np.where(known, k, 0)]

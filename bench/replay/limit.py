@@ -220,7 +220,12 @@ def drive_limit(
     start = time.perf_counter()
     scored = ~queries["warmup"].to_numpy(dtype=bool)
     scored &= queries["x_ref"].notna().to_numpy() & queries["y_ref"].notna().to_numpy()
-    rows = queries.loc[scored]
+
+    def scored_column(name: str, dtype: Any = None) -> np.ndarray:
+        """One column of the scored queries (the table is not copied whole)."""
+        out: np.ndarray = queries[name].to_numpy(dtype=dtype)[scored]
+        return out
+
     noise = fix_noise(prep, cfg)
     q, q_profile = jerk_psd(prep)
     truth_ref = prep.reference == TRUTH
@@ -230,7 +235,7 @@ def drive_limit(
         good = np.isfinite(imu.ax) & np.isfinite(imu.ay)
         r_acc = imu_white_variance(imu.t, imu.ax, imu.ay)
         t_acc = imu.t[good] if math.isfinite(r_acc) else None
-    t_query = rows["t_query"].to_numpy(dtype=float)
+    t_query = scored_column("t_query", float)
     offsets = None
     slow_var = noise["slow_var_m2"]
     if noise["slow_drawn"]:
@@ -241,7 +246,7 @@ def drive_limit(
         prep.gps.t,
         noise["white_var_m2"],
         q_profile,
-        rows["t_issue"].to_numpy(dtype=float),
+        scored_column("t_issue", float),
         t_query,
         slow_var=noise["slow_var_m2"],
         slow_offset_m=offsets,
@@ -252,9 +257,9 @@ def drive_limit(
     )
     frame = pd.DataFrame(
         {
-            "kind": rows["kind"].to_numpy(),
-            "t_query": rows["t_query"].to_numpy(dtype=float),
-            "label": rows["label"].to_numpy(),
+            "kind": scored_column("kind"),
+            "t_query": t_query,
+            "label": scored_column("label"),
             "limit_m": bound,
             "limit_imu_m": bound_imu if bound_imu is not None else np.full(bound.size, np.nan),
         }
