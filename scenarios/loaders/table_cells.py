@@ -174,6 +174,8 @@ def stream_cells(tab: TableFile, keep: np.ndarray, rows: dict[str, np.ndarray]) 
         for s, r in rows.items():
             if c in USES[s]:
                 cells[(s, c)] = v[r]
+        if c != "t":  # the times are read again, by stream_times
+            tab.release(c)
     return cells
 
 

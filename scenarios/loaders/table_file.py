@@ -24,10 +24,10 @@ if TYPE_CHECKING:  # pandas is imported when a table is read
 
 
 class TableFile:
-    """A read table with its file and a way to name rows. A CSV is held whole (``df``, a pandas
-    DataFrame); a Parquet file is read one column at a time (:meth:`column`), so that a long
-    drive's table (millions of rows, most cells empty) is never held whole; ``df`` reads it
-    whole where a caller wants that."""
+    """A read table with its file and a way to name rows. A CSV is held as its columns (read in
+    chunks of rows); a Parquet file is read one column at a time (:meth:`column`), so that a
+    long drive's table (millions of rows, most cells empty) is never held whole; ``df`` is
+    the whole table where a caller wants that."""
 
     def __init__(
         self,
@@ -35,7 +35,7 @@ class TableFile:
         is_csv: bool,
         columns: list[str],
         n_rows: int,
-        frame: pd.DataFrame | None = None,
+        series: dict[str, pd.Series] | None = None,
         parquet: Any = None,
         stored_names: dict[str, str] | None = None,
     ) -> None:
@@ -43,7 +43,8 @@ class TableFile:
         self.is_csv = is_csv
         self.columns = columns  # stripped, lower-case
         self.n_rows = n_rows
-        self._frame = frame
+        self._series = series
+        self._frame: pd.DataFrame | None = None
         self._parquet = parquet  # a pyarrow.parquet.ParquetFile
         self._stored = stored_names or {}  # lower-case name -> the name in the file
 
@@ -53,6 +54,9 @@ class TableFile:
         if self._frame is None:
             import pandas as pd
 
+            if self._series is not None:
+                self._frame = pd.DataFrame(self._series)
+                return self._frame
             try:
                 df = pd.read_parquet(self.path)
             except Exception as e:  # pyarrow raises several types for damaged files
@@ -64,6 +68,8 @@ class TableFile:
     def column(self, name: str) -> pd.Series:
         """Column ``name`` (stripped, lower-case) as a pandas Series; a Parquet file's text
         columns as categoricals."""
+        if self._series is not None:
+            return self._series[name]
         if self._frame is not None or self._parquet is None:
             return self.df[name]
         try:
@@ -76,6 +82,11 @@ class TableFile:
 
         pa.default_memory_pool().release_unused()  # the column's buffers back to the system
         return out
+
+    def release(self, name: str) -> None:
+        """Let column ``name`` go where it is held (a CSV's): its reader is done with it."""
+        if self._series is not None and self._frame is None:
+            self._series.pop(name, None)
 
     def where(self, i: int) -> str:
         """Name data row ``i`` (0-based) as the user sees it."""
@@ -98,21 +109,95 @@ def read_table_file(path: Path, text_columns: tuple[str, ...] = ("stream",)) -> 
         tab = _open_parquet(path, text_columns)
     else:
         try:
-            header = pd.read_csv(path, nrows=0).columns  # text columns by any case or spacing
-            text = {c: str for c in header if str(c).strip().lower() in text_columns}
-            df = pd.read_csv(path, skip_blank_lines=False, dtype=text, low_memory=False)
+            names, series = _read_csv_columns(path, text_columns)
         except pd.errors.EmptyDataError:
             raise DataError(path, "empty file") from None
         except pd.errors.ParserError as e:
             raise DataError(path, _parser_error(str(e))) from None
         except UnicodeDecodeError as e:
             raise DataError(path, f"not a text CSV file: {e}") from None
-        df.columns = [str(c).strip().lower() for c in df.columns]
-        tab = TableFile(path, True, list(df.columns), len(df), frame=df)
+        n_rows = len(next(iter(series.values()))) if series else 0
+        tab = TableFile(path, True, names, n_rows, series=series)
     dup = sorted({c for c in tab.columns if tab.columns.count(c) > 1})
     if dup:
         raise DataError(path, f"duplicate columns: {', '.join(dup)}")
     return tab
+
+
+#: CSV rows parsed at a time: the parser's working memory is a chunk's, not the file's
+CSV_CHUNK_ROWS = 1 << 18
+
+
+def _read_csv_columns(
+    path: Path, text_columns: tuple[str, ...]
+) -> tuple[list[str], dict[str, pd.Series]]:
+    """A CSV file's column names (stripped, lower-case, in file order, duplicates kept) and its
+    columns as pandas infers them for the whole file, parsed :data:`CSV_CHUNK_ROWS` rows at a
+    time (``text_columns`` kept as text), each filled into an array sized for the file: the
+    file is held once, as its columns."""
+    import pandas as pd
+
+    header = pd.read_csv(path, nrows=0).columns  # text columns by any case or spacing
+    names = [str(c).strip().lower() for c in header]
+    if len(set(names)) < len(names):
+        return names, {}  # refused by the caller: duplicate columns
+    text = {c: str for c in header if str(c).strip().lower() in text_columns}
+    capacity = _line_count(path)
+    cols = {n: _Column(capacity) for n in names}
+    with pd.read_csv(path, skip_blank_lines=False, dtype=text, chunksize=CSV_CHUNK_ROWS) as rd:
+        for chunk in rd:
+            for stored, name in zip(chunk.columns, names, strict=True):
+                cols[name].add(chunk[stored])
+    return names, {n: cols.pop(n).series() for n in names}
+
+
+def _line_count(path: Path) -> int:
+    """The file's newlines, plus one: at least its data rows."""
+    n = 1
+    with path.open("rb") as f:
+        while buf := f.read(1 << 24):
+            n += buf.count(b"\n")
+    return n
+
+
+class _Column:
+    """One CSV column, chunk by chunk: numbers (and object cells) into one array sized for the
+    whole file, widened as pandas would widen the whole file's column (int and float to
+    float, booleans beside anything else to object); a text column as its pieces."""
+
+    def __init__(self, capacity: int) -> None:
+        self.capacity = capacity
+        self.arr: np.ndarray | None = None
+        self.n = 0
+        self.pieces: list[pd.Series] = []
+
+    def add(self, col: pd.Series) -> None:
+        import pandas as pd
+
+        if self.pieces or not isinstance(col.dtype, np.dtype):
+            if self.arr is not None:  # numbers so far, text from here: those as a piece
+                self.pieces.append(pd.Series(self.arr[: self.n]))
+                self.arr = None
+            self.pieces.append(col.reset_index(drop=True))
+            return
+        vals = col.to_numpy()
+        if self.arr is None:
+            self.arr = np.empty(self.capacity, dtype=vals.dtype)
+        elif vals.dtype != self.arr.dtype:
+            kinds = {vals.dtype.kind, self.arr.dtype.kind}
+            wide = object if "b" in kinds else np.result_type(self.arr.dtype, vals.dtype)
+            wider = np.empty(self.capacity, dtype=wide)
+            wider[: self.n] = self.arr[: self.n]
+            self.arr = wider
+        self.arr[self.n : self.n + vals.size] = vals
+        self.n += vals.size
+
+    def series(self) -> pd.Series:
+        import pandas as pd
+
+        if self.pieces:
+            return pd.concat(self.pieces, ignore_index=True)
+        return pd.Series(self.arr[: self.n] if self.arr is not None else np.empty(0), copy=False)
 
 
 def _open_parquet(path: Path, text_columns: tuple[str, ...]) -> TableFile:

@@ -222,6 +222,30 @@ def test_parquet_read_a_column_at_a_time_as_pandas_reads_it(tmp_path: Path):
         load_table(pq)
 
 
+def test_csv_read_in_chunks_as_pandas_reads_it_whole(tmp_path: Path, monkeypatch):
+    # a CSV is parsed a few rows at a time into columns sized for the file: the drive, the
+    # warnings and the first bad cell's line are those of the file read whole
+    from posbench.scenarios.loaders import table_file
+
+    p = tmp_path / "d.csv"
+    write_table(_synthetic(), p)
+    text = p.read_text().splitlines()
+    text.insert(7, "")  # a blank line, counted as a line
+    text[3] = text[3].replace("gps", " GPS ", 1)  # a stream named in other case and spacing
+    p.write_text("\n".join(text) + "\n")
+    whole = load_table(p)
+    monkeypatch.setattr(table_file, "CSV_CHUNK_ROWS", 3)
+    chunked = load_table(p)
+    assert chunked.meta.warnings == whole.meta.warnings != []
+    _same(whole, chunked)
+    # integers, then empty cells, then text in one numeric column: widened as pandas widens
+    rows = ["stream,t,x,y"] + [f"gps,{i},{i},0" for i in range(7)]
+    rows[5], rows[7] = "gps,4,,0", "gps,6,six,0"
+    p.write_text("\n".join(rows) + "\n")
+    with pytest.raises(DataError, match=r"line 8, column 'x': not a number: 'six'"):
+        load_table(p)
+
+
 def test_imu_only_file_has_no_fixes(tmp_path: Path):
     p = tmp_path / "imu.csv"
     p.write_text("stream,t,ax,ay\nimu,0,0.1,0.2\n")
