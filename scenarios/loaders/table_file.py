@@ -182,10 +182,14 @@ class _Column:
             return
         vals = col.to_numpy()
         if self.arr is None:
+            self.capacity = max(self.capacity, vals.size)
             self.arr = np.empty(self.capacity, dtype=vals.dtype)
-        elif vals.dtype != self.arr.dtype:
+        elif vals.dtype != self.arr.dtype or self.n + vals.size > self.capacity:
+            # wider, or longer than the newlines said (lines that end in a lone CR)
             kinds = {vals.dtype.kind, self.arr.dtype.kind}
-            wide = object if "b" in kinds else np.result_type(self.arr.dtype, vals.dtype)
+            wide = object if len(kinds) > 1 and "b" in kinds else np.result_type(self.arr, vals)
+            if self.n + vals.size > self.capacity:
+                self.capacity = max(2 * self.capacity, self.n + vals.size)
             wider = np.empty(self.capacity, dtype=wide)
             wider[: self.n] = self.arr[: self.n]
             self.arr = wider
