@@ -49,13 +49,8 @@ def stream_times(
     else:
         t = numeric_column(tab, col)
     missing = ~np.isfinite(t) & keep
-    if np.any(missing):
-        i = int(np.flatnonzero(missing)[0])
-        raise DataError(
-            tab.path,
-            f"{tab.where(i)}, column {col!r}: missing or non-finite value; "
-            f"{int(missing.sum())} such rows in all",
-        )
+    if np.any(missing):  # named as need_cells names them (the kept rows' index built only here)
+        need_cells(tab, np.flatnonzero(keep), missing[keep], col)
     t0 = float(t[keep].min())
     return {k: t[r] - t0 for k, r in rows.items()}, t0
 
@@ -174,7 +169,7 @@ def stream_cells(tab: TableFile, keep: np.ndarray, rows: dict[str, np.ndarray]) 
         for s, r in rows.items():
             if c in USES[s]:
                 cells[(s, c)] = v[r]
-        if c != "t":  # the times are read again, by stream_times
+        if c != "t":  # the times are read again by stream_times, not held across the others
             tab.release(c)
     return cells
 
