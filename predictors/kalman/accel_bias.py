@@ -15,12 +15,17 @@ Recursive least squares with exponential forgetting (time constant ``tau_s``) gi
 ``b = sum(lambda M' d) / sum(lambda (C^2 + S^2))``. Mount tilt, gravity leakage on a slope
 and offsets are such biases; the reference's velocity noise averages out over windows.
 Inputs are idempotent per time stamp, so filters of one bank can share an estimator.
+The IMU side, which runs at IMU rate, is one compiled call (numba) on the estimator's state
+array (:func:`observe_imu`), which the kf's IMU step makes inside its own call.
 """
 
 from __future__ import annotations
 
 import math
 
+import numpy as np
+
+from posbench.predictors._kernels import kernel
 from posbench.predictors.kalman import ca_rows as kb
 from posbench.predictors.kalman.copying import copy_attrs
 
@@ -28,6 +33,29 @@ from posbench.predictors.kalman.copying import copy_attrs
 REF_JERK_PSD = 4.0
 #: the reference's prior velocity / acceleration sigma at its first fix [m/s, m/s^2]
 REF_INIT_VEL_SIGMA, REF_INIT_ACC_SIGMA = 15.0, 3.0
+
+
+#: the state array: the newest IMU sample's time [s]; the window's start (a fix time) [s];
+#: the IMU's velocity change over the window [m/s, ENU]; the window's int cos h dt and
+#: int sin h dt [s]; whether the window is usable (1 / 0); the bias [m/s^2, vehicle frame]
+T_IMU, W0, DVX, DVY, C, S, VALID, BX, BY = range(9)
+
+
+@kernel
+def observe_imu(st: np.ndarray, t: float, ax: float, ay: float, heading: float) -> None:
+    """:meth:`AccelBiasEstimator.observe_imu` on the state array."""
+    dt = t - st[T_IMU]
+    st[T_IMU] = t
+    if not (dt > 0.0) or st[W0] != st[W0]:
+        return
+    if not (math.isfinite(heading) and math.isfinite(ax) and math.isfinite(ay)) or dt > 0.5:
+        st[VALID] = 0.0
+        return
+    c, s = math.cos(heading), math.sin(heading)
+    st[DVX] += (c * ax - s * ay) * dt
+    st[DVY] += (s * ax + c * ay) * dt
+    st[C] += c * dt
+    st[S] += s * dt
 
 
 class AccelBiasEstimator:
@@ -58,57 +86,48 @@ class AccelBiasEstimator:
         "_ref",
         "_ready",
         "_t_ref",
-        "_w0",
         "_v0",
-        "_dv",
-        "_c",
-        "_s",
-        "_valid",
-        "_t_imu",
         "_a",
         "_g",
-        "bias",
+        "_st",
     )
 
     def __deepcopy__(self, memo: dict) -> AccelBiasEstimator:
         new = copy_attrs(self, self._ATTRS)
         memo[id(self)] = new
         new._ref = self._ref.copy()
-        new._dv = list(self._dv)
+        new._st = self._st.copy()
         return new
 
     def reset(self) -> None:
         self._ready = False
         self._t_ref = math.nan  # time of the reference's state [s]
-        self._w0 = math.nan  # window start (a fix time) [s]
-        self._v0 = (0.0, 0.0)  # reference velocity there [m/s]
+        self._v0 = (0.0, 0.0)  # reference velocity at the window's start [m/s]
+        self._st = np.zeros(BY + 1)  # the IMU side and the bias (:data:`T_IMU`...)
         self._open(math.nan)
         self._a = 0.0  # sum lambda (C^2 + S^2) [s^2]
         self._g = (0.0, 0.0)  # sum lambda M' d [m/s * s]
-        self.bias = (0.0, 0.0)
+
+    @property
+    def bias(self) -> tuple[float, float]:
+        """The bias estimate (x forward, y left) [m/s^2]; (0, 0) before the first window."""
+        return self._st.item(BX), self._st.item(BY)
+
+    @property
+    def state(self) -> np.ndarray:
+        """The state array (:data:`T_IMU`...), for kernels that feed the IMU side."""
+        return self._st
 
     def _open(self, t: float) -> None:
-        self._w0 = t
-        self._dv = [0.0, 0.0]
-        self._c = self._s = 0.0
-        self._valid = True
-        self._t_imu = t
+        st = self._st
+        st[W0] = st[T_IMU] = t
+        st[DVX] = st[DVY] = st[C] = st[S] = 0.0
+        st[VALID] = 1.0
 
     def observe_imu(self, t: float, ax: float, ay: float, heading: float) -> None:
         """A raw IMU sample (x forward, y left) [m/s^2] at t [s] with the heading [rad, ENU]
         it is rotated by (NaN: unknown, the window is dropped)."""
-        dt = t - self._t_imu
-        self._t_imu = t
-        if not (dt > 0.0) or self._w0 != self._w0:
-            return
-        if not (math.isfinite(heading) and math.isfinite(ax) and math.isfinite(ay)) or dt > 0.5:
-            self._valid = False
-            return
-        c, s = math.cos(heading), math.sin(heading)
-        self._dv[0] += (c * ax - s * ay) * dt
-        self._dv[1] += (s * ax + c * ay) * dt
-        self._c += c * dt
-        self._s += s * dt
+        observe_imu(self._st, t, ax, ay, heading)
 
     def observe_fix(self, t: float, x: float, y: float, var: float) -> None:
         """A fix at (x, y) [m, ENU] with per-axis variance var [m^2]."""
@@ -121,18 +140,18 @@ class AccelBiasEstimator:
             return
         v = kb.fix_one(ref, 0, t, x, y, var, REF_JERK_PSD)  # predicts only forward
         self._t_ref = max(t, self._t_ref)
-        span = t - self._w0
-        if span == span and span < self.min_window_s and self._valid:
+        _, w0, dvx, dvy, C, S, valid, _, _ = self._st.tolist()
+        span = t - w0
+        if span == span and span < self.min_window_s and valid:
             return  # keep collecting
-        if span == span and self._valid and span <= self.max_window_s:
-            C, S = self._c, self._s
-            dx = self._dv[0] - (v[0] - self._v0[0])
-            dy = self._dv[1] - (v[1] - self._v0[1])
+        if span == span and valid and span <= self.max_window_s:
+            dx = dvx - (v[0] - self._v0[0])
+            dy = dvy - (v[1] - self._v0[1])
             lam = math.exp(-span / self.tau_s)
             self._a = lam * self._a + C * C + S * S
             gx, gy = self._g
             self._g = (lam * gx + C * dx + S * dy, lam * gy - S * dx + C * dy)
             if self._a > 0.0:
-                self.bias = (self._g[0] / self._a, self._g[1] / self._a)
+                self._st[BX], self._st[BY] = self._g[0] / self._a, self._g[1] / self._a
         self._open(t)
         self._v0 = v

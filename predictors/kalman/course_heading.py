@@ -155,6 +155,11 @@ class CourseHeading:
         self._st = st
 
     @property
+    def state(self) -> np.ndarray:
+        """The state array (:data:`H`...), for kernels that feed the tracker."""
+        return self._st
+
+    @property
     def h(self) -> float:
         """The heading [rad] at the newest input (NaN before the first usable chord)."""
         return float(self._st[H])

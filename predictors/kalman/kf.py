@@ -37,6 +37,7 @@ import numpy as np
 
 from posbench.metrics.ca_model import ca_noise_entries, ca_predict_block, ca_predict_cross
 from posbench.predictors._geometry import check_config
+from posbench.predictors.kalman import ca_imu
 from posbench.predictors.kalman import ca_rows as kb
 from posbench.predictors.kalman.accel_bias import AccelBiasEstimator
 from posbench.predictors.kalman.course_heading import CourseHeading
@@ -178,6 +179,11 @@ class KalmanBank(RowBank):
         self._course = CourseHeading() if heading.from_fixes else None
         tau = imu.bias_tau_s if imu is not None else 0.0
         self._bias = AccelBiasEstimator(tau) if tau > 0.0 else None
+        # the IMU sample's kernel (ca_imu.imu_sample): the trackers' options, and a state
+        # array that stands in for a tracker or estimator the bank does not have
+        c = self._course or CourseHeading()
+        self._course_options = (c.rate_psd, c.hold_psd, self._sigma_max)
+        self._no_state = np.zeros(0)
 
     def reset(self) -> None:
         rows = kb.new_rows(2 * self._n)
@@ -248,48 +254,38 @@ class KalmanBank(RowBank):
     def observe_imu(self, t: float, ax: float, ay: float, yaw: float, yaw_rate: float) -> None:
         if self._due:
             self._catch_up()
-        shadows = self._shadows_on
-        course = self._course
+        self._imu_yaw = math.isfinite(yaw)
+        course, shadows = self._course, self._shadows_on
+        if self._ready and self._has_imu:  # trackers, rows and bias: one compiled call
+            sc, sb = self._shadow_course, self._shadow_bias
+            bias = self._bias
+            cm = course.state if course is not None else self._no_state
+            bm = bias.state if bias is not None else self._no_state
+            ca_imu.imu_sample(
+                self._S,
+                self._rp,
+                self._cf,
+                self._n,
+                shadows,
+                t,
+                ax,
+                ay,
+                yaw,
+                yaw_rate,
+                course is not None,
+                (cm, sc.state if sc is not None else cm),
+                *self._course_options,
+                bias is not None,
+                (bm, sb.state if sb is not None else bm),
+            )
+            return
         if course is not None:
             course.observe_rate(t, yaw_rate)
             if shadows:
                 self._shadow_course.observe_rate(t, yaw_rate)  # type: ignore[union-attr]
-        yaw_known = math.isfinite(yaw)
-        self._imu_yaw = yaw_known
-        if not self._ready:
-            if yaw_known:
-                self._S[:, kb.YAW] = yaw
-                self._S[:, kb.YAW_T] = t
-            return
-        if not self._has_imu:
-            return
-        hm = hs = math.nan
-        if course is not None and not yaw_known:
-            hm = self._course_heading(course, t)
-            if shadows:
-                hs = self._course_heading(self._shadow_course, t)
-        bias, sbias = self._bias, self._shadow_bias
-        bxm, bym = bias.bias if bias is not None else (0.0, 0.0)
-        bxs, bys = sbias.bias if sbias is not None and shadows else (0.0, 0.0)
-        n = self._n
-        h_m, h_s = kb.imu_rows(
-            self._S,
-            self._rp,
-            self._cf,
-            2 * n if shadows else n,
-            n,
-            t,
-            ax,
-            ay,
-            yaw,
-            yaw_rate,
-            (hm, hs),
-            ((bxm, bym), (bxs, bys)),
-        )
-        if bias is not None:
-            bias.observe_imu(t, ax, ay, h_m)
-            if shadows:
-                sbias.observe_imu(t, ax, ay, h_s)  # type: ignore[union-attr]
+        if not self._ready and self._imu_yaw:
+            self._S[:, kb.YAW] = yaw
+            self._S[:, kb.YAW_T] = t
 
     def observe_speed(self, t: float, v: float) -> None:
         if self._due:
