@@ -58,8 +58,9 @@ from pathlib import Path
 import numpy as np
 
 from posbench.predictors.base import GpsCondition, ModelFileSeams, Predictor
+from posbench.predictors.hybrid import step_kernel
 from posbench.predictors.hybrid.core import HybridCore
-from posbench.predictors.hybrid.gate import EvidenceGate, envelope_arrays, inside_envelope
+from posbench.predictors.hybrid.gate import EvidenceGate, envelope_arrays
 from posbench.predictors.hybrid.model_info import (
     BUNDLED_TEXT,
     HORIZONS,
@@ -71,8 +72,10 @@ from posbench.predictors.hybrid.model_info import (
     load_model_info,
     prior_params,
 )
+from posbench.predictors.hybrid.step_kernel import NO_CORE, NOT_FINITE, OUTSIDE
 from posbench.predictors.kalman.kf import KalmanBank
 from posbench.predictors.lstm.core_net import has_core
+from posbench.predictors.lstm.features import N_FEATURES
 from posbench.predictors.lstm.fused import FusedStep
 from posbench.predictors.lstm.history import FIX_CAP, ImuHistory, RowBuffer, fit_fused_window
 from posbench.predictors.lstm.predictor import RESTART_GAP_S, STILL_SPEED_MPS
@@ -80,9 +83,8 @@ from posbench.predictors.lstm.resample import DT, GRID_OFFSETS
 from posbench.predictors.lstm.runtime import OnnxModel
 from posbench.scenarios.errors import DataError
 
-#: a log variance above this [log m^2] counts as not finite (exp would overflow)
-MAX_LOGVAR = 80.0
 _NAN2 = (math.nan, math.nan)
+H1, H2, H3, H4 = HORIZONS
 
 
 class HybridPredictor(ModelFileSeams, Predictor):
@@ -143,8 +145,11 @@ class HybridPredictor(ModelFileSeams, Predictor):
         g = self.info.get("gate") or {}
         shrink = g.get("shrink", [1.0] * N_H) if self.gate else [1.0] * N_H
         #: shrinkage per knot (index 0 = h 0, unused)
-        self._shrink = (0.0, *(float(a) for a in shrink))
+        self._shrink = np.array([0.0, *(float(a) for a in shrink)])
         self._box = envelope_arrays(g) if self.gate and "feature_min" in g else None
+        self._pos = np.zeros((N_H, 2))  # the prior's positions at the horizons [m, ENU]
+        self._knots = np.zeros((4, N_H + 1))  # network_step's answer
+        self._args = self._kernel_args()
         self.evidence = EvidenceGate()
         self.reset()
 
@@ -174,14 +179,14 @@ class HybridPredictor(ModelFileSeams, Predictor):
 
     # ------------------------------------------------------------------ state
     def warm_up(self) -> None:
-        """The prior's start-up work (its kernels) and the input box's kernel, before a
-        run's clock starts."""
+        """The prior's start-up work (its kernels, and its positions at four times) and the
+        network step's kernel, before a run's clock starts."""
         self.kf.warm_up()
+        probe = KalmanBank(**self.prior_params)
+        probe.observe_gps(0.0, 0.0, 0.0)
+        probe.positions_at(HORIZONS, self._pos)
         self._fused.warm_up()
-        if self.core is not None:
-            self.core.run(self.net.bufs[0][0], self.net.bufs[1][0].reshape(-1))
-        if self._box is not None:
-            inside_envelope(self.net.bufs[0][0], self.net.bufs[1][0], self._box)
+        self._network_step(0.0, 0.0, 1.0, 0.0)
 
     def reset(self) -> None:
         self.kf.reset()
@@ -200,8 +205,10 @@ class HybridPredictor(ModelFileSeams, Predictor):
         self._has = False
         self._t_fix = math.nan
         self._cs = (1.0, 0.0)
-        self._kx = self._ky = (0.0,) * (N_H + 1)  # world correction at the knots [m]
-        self._lva = self._lvc = (0.0,) * (N_H + 1)  # log variances at the knots (index 0 unused)
+        self._kx = [0.0] * (N_H + 1)  # world correction at the knots [m]: x
+        self._ky = [0.0] * (N_H + 1)  # and y
+        self._lva = [0.0] * (N_H + 1)  # log variances at the knots (index 0 unused): along
+        self._lvc = [0.0] * (N_H + 1)  # and across
 
     def observe_imu(self, t: float, ax: float, ay: float, yaw: float, yaw_rate: float) -> None:
         self.kf.observe_imu(t, ax, ay, yaw, yaw_rate)
@@ -248,46 +255,55 @@ class HybridPredictor(ModelFileSeams, Predictor):
         psi = f.psi
         c, s = math.cos(psi), math.sin(psi)
         gx, gy = f.pts[7].tolist()
-        rows = []
-        for px, py in self.kf.positions_at([t_end + h for h in HORIZONS]):
-            dx, dy = px - gx, py - gy
-            rows.append((c * dx + s * dy, c * dy - s * dx))
-        features, prior = self.net.bufs[0][0], self.net.bufs[1][0]
-        prior[...] = rows  # one cast into the float32 input
-        if self._box is not None and not inside_envelope(features, prior, self._box):
+        self.kf.positions_at((t_end + H1, t_end + H2, t_end + H3, t_end + H4), self._pos)
+        status = self._network_step(gx, gy, c, s)
+        if status == OUTSIDE:
             self.outside += 1
             return False
-        # (4, 4): dx, dy [m, heading frame], log var along/across
-        core = self.core
-        out = core.run(features, prior.reshape(-1)) if core is not None else self.net.run_buffer()
         self._gps_v = f.speed
-        (x1, y1, v1, w1), (x2, y2, v2, w2), (x3, y3, v3, w3), (x4, y4, v4, w4) = out.tolist()
-        # a sum of the 16 outputs is finite only where each is (or NaN / inf results)
-        total = x1 + y1 + v1 + w1 + x2 + y2 + v2 + w2 + x3 + y3 + v3 + w3 + x4 + y4 + v4 + w4
-        if not math.isfinite(total) or max(v1, w1, v2, w2, v3, w3, v4, w4) > MAX_LOGVAR:
+        if status == NO_CORE:  # the full graph through onnxruntime (a model without a core)
+            out = np.ascontiguousarray(self.net.run_buffer(), np.float32).reshape(-1)
+            if not step_kernel.output_knots(out, c, s, self._shrink, self._knots):
+                return False
+        elif status == NOT_FINITE:
             return False
-        a = self._shrink
-        self._kx = (
-            0.0,
-            a[1] * (c * x1 - s * y1),
-            a[2] * (c * x2 - s * y2),
-            a[3] * (c * x3 - s * y3),
-            a[4] * (c * x4 - s * y4),
-        )
-        self._ky = (
-            0.0,
-            a[1] * (s * x1 + c * y1),
-            a[2] * (s * x2 + c * y2),
-            a[3] * (s * x3 + c * y3),
-            a[4] * (s * x4 + c * y4),
-        )
-        self._lva = (0.0, v1, v2, v3, v4)
-        self._lvc = (0.0, w1, w2, w3, w4)
+        self._kx, self._ky, self._lva, self._lvc = self._knots.tolist()
         self._cs = (c, s)
         self._t_fix = t_end
         self._has = True
         self.steps += 1
         return True
+
+    def _network_step(self, gx: float, gy: float, c: float, s: float) -> int:
+        """:func:`~posbench.predictors.hybrid.step_kernel.network_step` on the prior's
+        positions at the horizons (``_pos``), the window's last grid point (gx, gy) [m] and
+        heading (cos, sin); the network's input buffers as they stand."""
+        bufs = self.net.bufs
+        pos, args = self._pos, self._args  # the module's kernel, compiled at its first call
+        return int(step_kernel.network_step(pos, gx, gy, c, s, bufs[0][0], bufs[1][0], *args))
+
+    def _kernel_args(self) -> tuple:
+        """:func:`~posbench.predictors.hybrid.step_kernel.network_step`'s arguments after
+        the network's inputs: the box (placeholders where there is none) and the core
+        (placeholders where the model has none), the shrinkage and the knots' buffer."""
+        box = self._box
+        if box is None:
+            f32 = np.float32
+            zf, zp = np.zeros(N_FEATURES, f32), np.zeros((N_H, 2), f32)
+            box = (zf, zf, zp, zp)
+        core = self.core.core if self.core is not None else None
+        if core is None:
+            weights = (np.zeros(0, np.float32), 0, 0.0, np.zeros(4 * N_H, np.float32))
+        else:
+            weights = (core.packed, core.dims.hidden, core.slope, core.output)
+        return (
+            self._box is not None,
+            *box,
+            core is not None,
+            *weights,
+            self._shrink,
+            self._knots,
+        )
 
     # ------------------------------------------------------------------ queries
     def _stationary(self) -> bool:

@@ -392,6 +392,18 @@ def speed_rows(
 
 
 @kernel
+def positions(S: np.ndarray, rows: tuple, times: tuple, out: np.ndarray) -> None:
+    """Row ``rows[k]``'s position at ``times[k]`` [s] into ``out[k]`` [m, ENU], for each k:
+    its constant-acceleration extrapolation (``KalmanBank.position_at``'s arithmetic)."""
+    for k in range(len(times)):
+        i = rows[k]
+        dt = times[k] - S[i, TS]
+        h = 0.5 * dt * dt
+        out[k, 0] = S[i, 0] + S[i, 1] * dt + S[i, 2] * h
+        out[k, 1] = S[i, 3] + S[i, 4] * dt + S[i, 5] * h
+
+
+@kernel
 def shadow_distances(S: np.ndarray, n: int, t: float, x: float, y: float, out: np.ndarray) -> bool:
     """Distances [m] of the shadows' (rows n..2n-1) answers for t [s] to (x, y) [m] into
     ``out``; whether every one is finite."""

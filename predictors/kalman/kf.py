@@ -322,22 +322,16 @@ class KalmanBank(RowBank):
         h = 0.5 * dt * dt
         return x + vx * dt + ax * h, y + vy * dt + ay * h
 
-    def positions_at(self, times: Sequence[float]) -> list[tuple[float, float]]:
-        """:meth:`position_at` of each of ``times`` [s] (the same numbers), each member's
-        state read once: the hybrid's prior at its four horizons in one call."""
+    def positions_at(self, times: tuple[float, ...], out: np.ndarray | None = None) -> np.ndarray:
+        """:meth:`position_at` of each of ``times`` [s] (the same numbers) as the rows of
+        ``out`` (len(times), 2) [m, ENU] (a new array where None), in one compiled call: the
+        hybrid's prior at its four horizons."""
+        if out is None:
+            out = np.empty((len(times), 2))
         if not self._ready:
-            return [NAN2] * len(times)
-        out = []
-        states: dict[int, list[float]] = {}
-        for t in times:
-            i = self.answering(t)
-            row = states.get(i)
-            if row is None:
-                row = states[i] = self._S[i, :6].tolist() + [self._S.item(i, kb.TS)]
-            x, vx, ax, y, vy, ay, ts = row
-            dt = t - ts
-            h = 0.5 * dt * dt
-            out.append((x + vx * dt + ax * h, y + vy * dt + ay * h))
+            out.fill(math.nan)
+            return out
+        kb.positions(self._S, tuple([self.answering(t) for t in times]), times, out)
         return out
 
     def covariance_at(self, t: float) -> np.ndarray | None:

@@ -302,7 +302,8 @@ class CompiledCore:
         self.slope = float(slope)
         self.dims = check_shapes(weights)
         self.packed = pack(weights)
-        self._out = output_buffer(self.dims)
+        #: the buffer :meth:`run` writes (n_out,) float32
+        self.output = output_buffer(self.dims)
         self._no_extra = np.zeros(0, np.float32)
 
     def run(self, z: np.ndarray, extra: np.ndarray | None = None) -> np.ndarray:
@@ -316,9 +317,9 @@ class CompiledCore:
             d.hidden,
             d.n_out,
             self.slope,
-            self._out,
+            self.output,
         )
-        return self._out
+        return self.output
 
     def reference(self, z: np.ndarray, extra: np.ndarray | None = None) -> np.ndarray:
         """:func:`core_forward_numpy` on windows ``z`` (B, 8, n_in), ``extra`` (B, n_extra)."""

@@ -108,7 +108,7 @@ def test_positions_at_answers_as_position_at() -> None:
     drive = generate_drive(seed=3, route="roundabout")
     evs = events(prepare_drive(drive, RunConfig(dropouts="outages", gps_profile="consumer")))
     kf = KalmanBank()
-    assert np.isnan(kf.positions_at([0.0, 1.0])).all()
+    assert np.isnan(kf.positions_at((0.0, 1.0))).all()
     offsets = (-0.1, 0.0, 0.2, 0.4, 0.6, 0.8, 1.7)
     checked = 0
 
@@ -117,8 +117,8 @@ def test_positions_at_answers_as_position_at() -> None:
         t = evs[i][1]
         if evs[i][0] != GPS:
             return
-        got = kf.positions_at([t + h for h in offsets])
-        assert got == [kf.position_at(t + h) for h in offsets]
+        got = kf.positions_at(tuple(t + h for h in offsets))
+        assert got.tolist() == [list(kf.position_at(t + h)) for h in offsets]
         checked += 1
 
     feed(kf, evs, 0.2, after=check)
