@@ -282,6 +282,12 @@ class HybridPredictor(ModelFileSeams, Predictor):
         pos, args = self._pos, self._args  # the module's kernel, compiled at its first call
         return int(step_kernel.network_step(pos, gx, gy, c, s, bufs[0][0], bufs[1][0], *args))
 
+    def __setstate__(self, state: dict) -> None:
+        """An unpickled hybrid's kernel arguments are its own copies' (its core packs its
+        weights again, aligned)."""
+        self.__dict__.update(state)
+        self._args = self._kernel_args()
+
     def _kernel_args(self) -> tuple:
         """:func:`~posbench.predictors.hybrid.step_kernel.network_step`'s arguments after
         the network's inputs: the box (placeholders where there is none) and the core

@@ -87,3 +87,23 @@ def test_write_core_folds_the_bundled_graph_into_the_committed_weights(tmp_path:
         assert sorted(new.files) == sorted(ref.files)
         for k in ref.files:
             np.testing.assert_array_equal(new[k], ref[k], err_msg=k)
+
+
+def test_the_cores_weights_are_aligned_also_in_a_pickled_copy() -> None:
+    """The lstm's and the hybrid's packed weights start on an ALIGN-byte boundary (their
+    kernel's speed depends on it), in a new predictor and in a pickled copy (a worker's,
+    whose arrays land wherever the allocator puts them), with the same values; the copied
+    hybrid's step kernel reads its own core's weights."""
+    import pickle
+
+    from posbench.predictors.lstm.core_kernel import ALIGN
+    from posbench.predictors.lstm.predictor import LstmPredictor
+
+    for p in (HybridPredictor(), LstmPredictor()):
+        assert p.core is not None
+        q = pickle.loads(pickle.dumps(p))
+        for core in (p.core.core, q.core.core):
+            assert core.packed.ctypes.data % ALIGN == 0
+        np.testing.assert_array_equal(q.core.core.packed, p.core.core.packed)
+        if isinstance(q, HybridPredictor):
+            assert any(a is q.core.core.packed for a in q._args)
