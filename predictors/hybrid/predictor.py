@@ -18,6 +18,10 @@ On each real GPS fix whose window holds >= 4 fixes spanning >= 2 s, one *network
    [1, 4, 4]: per horizon (dx, dy) [m, heading frame] to ADD to ``kf.position_at(t_fix +
    h)`` and (log var along the heading, log var across) [log m^2] of that residual.
 
+Steps 2 and 3, the input box below and the knots of the correction are one compiled call
+(:mod:`posbench.predictors.hybrid.step_kernel`), the prior's positions at the four horizons
+another (:meth:`KalmanBank.positions_at <posbench.predictors.kalman.kf.KalmanBank.positions_at>`).
+
 Answers, with h = t - t_fix of the newest network step:
 ``position_at(t) = kf.position_at(t) + g a(h) R(psi) corr(h)``, corr linearly
 interpolated over the knots h = 0 (correction 0), 0.2, 0.4, 0.6, 0.8 s and held at its

@@ -14,7 +14,9 @@ How a filter is composed (Stone Soup's split: a motion model, one update per sen
   :mod:`~posbench.predictors.kalman.course_heading` (heading from fix chords and the gyro),
   :mod:`~posbench.predictors.kalman.accel_bias` (the accelerometer's vehicle-frame bias);
 - **rows**, the compiled predict and per-sensor updates of every member at once:
-  :mod:`~posbench.predictors.kalman.ca_rows`, :mod:`~posbench.predictors.kalman.ctra_rows`;
+  :mod:`~posbench.predictors.kalman.ca_rows`, :mod:`~posbench.predictors.kalman.ctra_rows`
+  (the kf's IMU sample, with its heading trackers and bias estimators, in
+  :mod:`~posbench.predictors.kalman.ca_imu`);
 - **banks**, :mod:`~posbench.predictors.kalman.row_bank` (selection by the likelihood of
   each member's fix predictions, shadows scored at longer horizons for outages) under
   :class:`~posbench.predictors.kalman.kf.KalmanBank` and
