@@ -8,7 +8,8 @@ shown that it helps. Three factors, multiplied (each in [0, 1]):
    trained on): the least-squares factor ``a_h`` that scales the correction at horizon
    ``h``, clipped to [0, 1]. A network that over-corrects on held-out drives is scaled
    back; one whose correction does not help there is switched off.
-2. **The input envelope** (:func:`input_envelope`, :func:`inside_envelope`): the box of
+2. **The input envelope** (:func:`input_envelope`, :func:`inside_envelope`, which the hybrid's
+   step kernel calls): the box of
    the training inputs (each feature's and each prior entry's min and max over all
    training rows, raw units), widened by :data:`BOX_MARGIN` of its width on each side
    (windows at run time are not exactly the training rows: every fix, online features).
@@ -117,19 +118,8 @@ def envelope_arrays(env: dict) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.n
     )
 
 
-def inside_envelope(
-    features: np.ndarray,
-    prior: np.ndarray,
-    box: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray],
-) -> bool:
-    """Whether one window (features (8, F), prior (H, 2), raw units, float32) lies inside
-    ``box`` (:func:`envelope_arrays`); NaN counts as outside. Compiled (one call per
-    network step: numpy's comparisons cost ~5 us here, the kernel ~1 us)."""
-    return bool(_inside(features, prior, *box))
-
-
 @kernel
-def _inside(
+def inside_envelope(
     f: np.ndarray,
     p: np.ndarray,
     fmin: np.ndarray,
@@ -137,6 +127,9 @@ def _inside(
     pmin: np.ndarray,
     pmax: np.ndarray,
 ) -> bool:
+    """Whether one window (features ``f`` (8, F), prior ``p`` (H, 2), raw units, float32)
+    lies inside the box (:func:`envelope_arrays`); NaN counts as outside. Compiled: the
+    hybrid's step kernel (:mod:`posbench.predictors.hybrid.step_kernel`) calls it."""
     for i in range(f.shape[0]):
         for j in range(f.shape[1]):
             v = f[i, j]

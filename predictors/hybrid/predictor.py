@@ -286,6 +286,11 @@ class HybridPredictor(ModelFileSeams, Predictor):
         pos, args = self._pos, self._args  # the module's kernel, compiled at its first call
         return int(step_kernel.network_step(pos, gx, gy, c, s, bufs[0][0], bufs[1][0], *args))
 
+    def __getstate__(self) -> dict:
+        """Without the kernel's arguments: they are derived (:meth:`_kernel_args`), and
+        hold the core's packed weights, which the core does not pickle either."""
+        return {k: v for k, v in self.__dict__.items() if k != "_args"}
+
     def __setstate__(self, state: dict) -> None:
         """An unpickled hybrid's kernel arguments are its own copies' (its core packs its
         weights again, aligned)."""

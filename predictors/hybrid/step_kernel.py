@@ -22,7 +22,7 @@ import math
 import numpy as np
 
 from posbench.predictors._kernels import kernel
-from posbench.predictors.hybrid.gate import _inside
+from posbench.predictors.hybrid.gate import inside_envelope
 from posbench.predictors.lstm.core_kernel import core_forward
 
 #: a log variance above this [log m^2] counts as not finite (exp would overflow)
@@ -92,7 +92,7 @@ def network_step(
         dy = pos[k, 1] - gy
         prior[k, 0] = np.float32(c * dx + s * dy)
         prior[k, 1] = np.float32(c * dy - s * dx)
-    if box and not _inside(features, prior, fmin, fmax, pmin, pmax):
+    if box and not inside_envelope(features, prior, fmin, fmax, pmin, pmax):
         return OUTSIDE
     if not core:
         return NO_CORE

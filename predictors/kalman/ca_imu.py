@@ -21,11 +21,12 @@ from posbench.predictors.kalman.course_heading import heading_at, observe_rate
 
 
 @kernel
-def _course_heading(
+def course_heading(
     st: np.ndarray, t: float, rate_psd: float, hold_psd: float, sigma_max: float
 ) -> float:
-    """A course tracker's heading [rad] at t, NaN while its standard deviation [rad] is not
-    below ``sigma_max``."""
+    """A course tracker's heading [rad] at t (its state array ``st`` and options), NaN while
+    its standard deviation [rad] is not below ``sigma_max``: the rule of the IMU sample here
+    and of the bank's wheel-speed update (``KalmanBank._course_heading``)."""
     h, h_sd = heading_at(st, t, rate_psd, hold_psd)
     return h if h_sd < sigma_max else math.nan
 
@@ -62,9 +63,9 @@ def imu_sample(
             observe_rate(courses[1], t, yaw_rate, rate_psd, hold_psd)
     hm = hs = math.nan
     if course and not math.isfinite(yaw):
-        hm = _course_heading(courses[0], t, rate_psd, hold_psd, sigma_max)
+        hm = course_heading(courses[0], t, rate_psd, hold_psd, sigma_max)
         if shadows:
-            hs = _course_heading(courses[1], t, rate_psd, hold_psd, sigma_max)
+            hs = course_heading(courses[1], t, rate_psd, hold_psd, sigma_max)
     bm, bs = biases
     bxm = bym = bxs = bys = 0.0
     if bias:

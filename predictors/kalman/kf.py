@@ -248,8 +248,7 @@ class KalmanBank(RowBank):
         below ``heading_sigma_max`` (``LinearKalman._course_heading``)."""
         if course is None:
             return math.nan
-        h, h_sd = course.heading(t)
-        return h if h_sd < self._sigma_max else math.nan
+        return float(ca_imu.course_heading(course.state, t, *self._course_options))
 
     def observe_imu(self, t: float, ax: float, ay: float, yaw: float, yaw_rate: float) -> None:
         if self._due:
