@@ -45,7 +45,7 @@ from posbench.metrics.outages import (
 from posbench.scenarios.labels import LABELS
 from posbench.scoring.records import DriveRun
 from posbench.scoring.schema import KINDS
-from posbench.scoring.trace_parts import text_values
+from posbench.scoring.trace_parts import category_index, text_values
 from posbench.scoring.trace_set import TraceSet, as_trace_set
 
 #: the trace columns aggregation reads (positions are not needed once errors exist)
@@ -94,19 +94,6 @@ def kind_summaries(df: pd.DataFrame, stats: Statistics | None = None) -> dict[st
     needs the ``code`` column of :func:`with_codes`)."""
     every = _kind_groups(df, np.zeros(len(df), dtype=np.int8), ["all"], stats)
     return {k: every[k]["all"] for k in KINDS}
-
-
-def category_index(column: pd.Series, table: Sequence[str]) -> np.ndarray:
-    """Each row's value of text ``column`` as its index in ``table`` (-1: not in it, or
-    missing); int16. A categorical's codes are mapped through its categories: no string
-    per row."""
-    if isinstance(column.dtype, pd.CategoricalDtype):
-        cats = [str(c) for c in column.cat.categories]
-        mapping = np.array([*pd.Index(table).get_indexer(cats), -1], dtype=np.int16)
-        out: np.ndarray = mapping[column.cat.codes.to_numpy()]
-        return out
-    found: np.ndarray = pd.Index(table).get_indexer(text_values(column, as_str=True))
-    return found.astype(np.int16)
 
 
 def _kind_groups(

@@ -11,6 +11,8 @@ from the traces only. The README's table of ``traces.parquet`` is generated from
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import numpy as np
 import pandas as pd
 
@@ -28,14 +30,27 @@ DEFINITIONS = {
 }
 
 
+#: the columns :func:`scored_mask` reads
+SCORED_BY = ("x_ref", "y_ref", "warmup")
+
+
 def scored_mask(traces: pd.DataFrame) -> np.ndarray:
     """Rows that count in the headline figures: past the warm-up (see
     :func:`posbench.replay.queries.warmup_end_s`) and with a known reference position."""
     if traces.empty:
         return np.zeros(0, dtype=bool)
-    m: np.ndarray = traces["x_ref"].notna().to_numpy() & traces["y_ref"].notna().to_numpy()
-    if "warmup" in traces:
-        m &= ~traces["warmup"].to_numpy(dtype=bool)
+    return scored_of(lambda c: traces[c].to_numpy() if c in traces else None)
+
+
+def scored_of(column: Callable[[str], np.ndarray | None]) -> np.ndarray:
+    """:func:`scored_mask` of the rows whose columns ``column`` gives (name -> numpy array,
+    None where there is no such column): for a read that chooses its rows before they
+    become a frame (:func:`posbench.scoring.trace_parts.read_part`'s ``keep``)."""
+    x, y, warm = column("x_ref"), column("y_ref"), column("warmup")
+    assert x is not None and y is not None
+    m: np.ndarray = pd.notna(x) & pd.notna(y)
+    if warm is not None:
+        m &= ~warm.astype(bool)
     return m
 
 

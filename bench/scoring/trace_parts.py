@@ -8,16 +8,21 @@ in memory or in parts, is :class:`posbench.scoring.trace_set.TraceSet`.
 from __future__ import annotations
 
 import os
-from collections.abc import Iterable, Sequence
+from collections.abc import Callable, Iterable, Sequence
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 import pandas as pd
 
+from posbench.scoring.schema import SCORED_BY
+
 #: the text columns that aggregation and figures filter and group by, again and again: read
 #: as categoricals (dictionary-encoded), small codes instead of strings
 TEXT = ("dataset", "drive", "predictor")
+#: what a ``keep`` of :func:`read_part` may read beside the columns asked for (it chooses
+#: the scored rows: :func:`posbench.scoring.schema.scored_of`)
+KEEP_READS = SCORED_BY
 
 
 def write_part(folder: Path, traces: pd.DataFrame, name: str) -> Path:
@@ -65,9 +70,13 @@ def read_part(
     columns: Sequence[str] | None = None,
     predictor: str | None = None,
     drive: str | None = None,
+    keep: Callable[[Callable[[str], np.ndarray | None]], np.ndarray] | None = None,
 ) -> pd.DataFrame:
     """One part's rows (of ``predictor`` only, and of ``drive`` only, given them), its text
-    columns as categoricals.
+    columns as categoricals; given ``keep``, only the rows it keeps: called with a getter
+    of the part's columns as numpy arrays (those asked for and :data:`KEEP_READS`; None for
+    a column the part lacks), it returns the mask of the rows to keep, chosen before the
+    rows become a frame.
 
     The row groups are chosen by their statistics (a part has one row group per predictor)
     and read directly; only a row group that holds several values is read whole and its
@@ -79,22 +88,44 @@ def read_part(
     cols = None if columns is None else list(dict.fromkeys(columns))
     wanted = {c: v for c, v in (("predictor", predictor), ("drive", drive)) if v is not None}
     with pq.ParquetFile(path, read_dictionary=[c for c in TEXT if cols is None or c in cols]) as pf:
-        if not wanted:
+        if not wanted and keep is None:
             return pf.read(columns=cols, use_pandas_metadata=True).to_pandas()
         groups, exact = _row_groups_of(pf.metadata, wanted)
         extra = [] if cols is None else [c for c in wanted if c not in cols and not exact]
+        if keep is not None and cols is not None:
+            have = pf.schema_arrow.names
+            extra += [c for c in KEEP_READS if c in have and c not in cols]
         read = None if cols is None else [*cols, *extra]
         if not groups:  # no rows: the columns as the whole part types them (categories too)
             return pf.read(columns=cols, use_pandas_metadata=True).to_pandas().iloc[:0]
         table = pf.read_row_groups(groups, columns=read, use_pandas_metadata=True)
+    if exact and keep is not None:  # the rows chosen in Arrow: only they become a frame
+        chosen = table.filter(keep(_arrow_columns(table)))
+        del table
+        return (chosen if cols is None else chosen.select(cols)).to_pandas()
     df = table.to_pandas()
     del table
     if exact:
         return df
-    keep = np.ones(len(df), dtype=bool)
+    mask = np.ones(len(df), dtype=bool)
     for c, v in wanted.items():
-        keep &= (df[c] == v).to_numpy(dtype=bool)
-    return df.loc[keep, cols if cols is not None else df.columns].reset_index(drop=True)
+        mask &= (df[c] == v).to_numpy(dtype=bool)
+    if keep is not None:
+        mask &= keep(lambda c: df[c].to_numpy() if c in df else None)
+    return df.loc[mask, cols if cols is not None else df.columns].reset_index(drop=True)
+
+
+def _arrow_columns(table: Any) -> Callable[[str], np.ndarray | None]:
+    """A getter of an Arrow table's columns as numpy arrays (None: no such column)."""
+    names = set(table.column_names)
+
+    def column(name: str) -> np.ndarray | None:
+        if name not in names:
+            return None
+        out: np.ndarray = table.column(name).to_numpy(zero_copy_only=False)
+        return out
+
+    return column
 
 
 def _row_groups_of(meta: Any, wanted: dict[str, str]) -> tuple[list[int], bool]:
@@ -194,6 +225,19 @@ def text_values(column: pd.Series, as_str: bool = False) -> np.ndarray:
     table = np.array([*values, np.nan], dtype=object)
     taken: np.ndarray = table[column.cat.codes.to_numpy()]  # code -1 (missing): last entry
     return taken
+
+
+def category_index(column: pd.Series, table: Sequence[str]) -> np.ndarray:
+    """Each row's value of text ``column`` as its index in ``table`` (-1: not in it, or
+    missing); int16. A categorical's codes are mapped through its categories: no string
+    per row."""
+    if isinstance(column.dtype, pd.CategoricalDtype):
+        index = {v: i for i, v in enumerate(table)}  # a few names: no pandas Index to build
+        mapping = [index.get(str(c), -1) for c in column.cat.categories]
+        out: np.ndarray = np.array([*mapping, -1], dtype=np.int16)[column.cat.codes.to_numpy()]
+        return out
+    found: np.ndarray = pd.Index(table).get_indexer(text_values(column, as_str=True))
+    return found.astype(np.int16)
 
 
 def concat_parts(frames: list[pd.DataFrame]) -> pd.DataFrame:

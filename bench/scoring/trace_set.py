@@ -20,7 +20,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from posbench.scoring.schema import scored_mask
+from posbench.scoring.schema import SCORED_BY, scored_mask, scored_of
 from posbench.scoring.trace_parts import (
     TEXT,
     concat_parts,
@@ -31,7 +31,7 @@ from posbench.scoring.trace_parts import (
 )
 
 #: what :func:`posbench.scoring.schema.scored_mask` reads
-MASK_COLUMNS = ("x_ref", "y_ref", "warmup")
+MASK_COLUMNS = SCORED_BY
 #: on disk, a predictor with at most this many rows (~30 min of drives at 20 queries/s;
 #: ~25 bytes a row and column, ~10 MB) is read once, every column, and held for the reads
 #: of it that follow (aggregation reads a predictor's rows for each figure family): a small
@@ -273,12 +273,32 @@ class TraceSet:
             return
         cols = _present(columns, self.columns)
         for path in self.parts:
-            if scored:
-                rows = _scored_rows(read_part(path, [*cols, *MASK_COLUMNS], predictor), cols)
+            if scored:  # the scored rows chosen in Arrow, before they become a frame
+                rows = read_part(path, cols, predictor, keep=scored_of)
             else:
                 rows = read_part(path, cols, predictor)
             if len(rows):
                 yield rows.reset_index(drop=True)
+
+    def drive_pieces(self, predictor: str, columns: Sequence[str]) -> Iterator[pd.DataFrame]:
+        """:meth:`pieces` (scored rows) cut at every change of drive: one drive's rows a
+        piece, on disk and in memory alike (a frame in memory, or a predictor held, is one
+        piece of many drives), for figures summed per drive that must not depend on where
+        the traces are."""
+        cols = list(dict.fromkeys([*columns, "drive"]))
+        for rows in self.pieces(predictor, cols):
+            drive = rows["drive"]
+            codes = (
+                drive.cat.codes.to_numpy()
+                if isinstance(drive.dtype, pd.CategoricalDtype)
+                else pd.factorize(drive)[0]
+            )
+            cuts = np.flatnonzero(codes[1:] != codes[:-1]) + 1
+            if cuts.size == 0:
+                yield rows
+                continue
+            for a, b in zip([0, *cuts.tolist()], [*cuts.tolist(), len(rows)], strict=True):
+                yield rows.iloc[a:b]
 
     def per_predictor(
         self, predictors: Sequence[str], columns: Sequence[str], scored: bool = True

@@ -118,3 +118,27 @@ def test_pieces_that_do_not_fit_are_concatenated(parts):
         join_pieces(iter(changed), len(want)), concat_parts(changed), check_exact=True
     )
     assert join_pieces(iter([]), 10).empty
+
+
+@pytest.mark.parametrize("one_group", [False, True], ids=["row-group-a-predictor", "one-row-group"])
+def test_a_keep_chooses_the_scored_rows_before_the_frame(tmp_path, one_group):
+    """read_part's keep (the scored rows: scored_of) gives the rows and columns that
+    filtering the frame with scored_mask gives, whether the part's row groups each hold one
+    predictor (chosen in Arrow) or several (filtered as a frame)."""
+    from posbench.scoring.schema import scored_mask, scored_of
+
+    df = _traces(3, "d3", ("cv", "kf"), ["turn"])
+    rng = np.random.default_rng(3)
+    df["x_ref"] = np.where(rng.random(len(df)) < 0.2, np.nan, 1.0)
+    df["y_ref"] = 2.0
+    if one_group:
+        path = tmp_path / "one.parquet"
+        pq.write_table(pa.Table.from_pandas(df, preserve_index=False), path)
+    else:
+        path = write_part(tmp_path, df, "p")
+    cols = ["kind", "label", "error_m"]
+    got = read_part(path, cols, "kf", keep=scored_of)
+    mine = df[df["predictor"] == "kf"]
+    want = mine.loc[scored_mask(mine), cols].reset_index(drop=True)
+    assert 0 < len(got) < len(mine)
+    _same_values(got, want)
