@@ -137,7 +137,7 @@ def sharpness_of(ln_det: np.ndarray, p: float = 0.95) -> float:
     ld = ld[np.isfinite(ld)]
     if ld.size == 0:
         return math.nan
-    return float(math.pi * ellipse_r2(p) * np.median(np.exp(0.5 * ld)))
+    return sharpness_from_median(float(np.median(np.exp(0.5 * ld))), p)
 
 
 def log_likelihood(d2: np.ndarray, cov: np.ndarray) -> np.ndarray:
@@ -236,27 +236,53 @@ def calibration_of(
     ok = np.isfinite(d2)
     n = int(ok.sum())
     v = d2[ok]
-    covered = coverage(v)
-    nees = float(v.mean()) if n else math.nan
-    out: dict[str, Any] = {
-        "count": n,
-        "nees": nees,
-        "nees_ci95": None,
-        "nees_chi2_95": list(nees_interval(n)),
-        "coverage": {
-            f"{round(p * 100):d}": float(c) for p, c in zip(COVERAGE_LEVELS, covered, strict=True)
-        },
-        "sharpness_m2": sharpness_of(ld[ok]),
-        "loglik": float(np.mean(log_likelihood_of(v, ld[ok]))) if n else math.nan,
-    }
+    nees_ci = None
     if with_ci and n:
         from posbench.metrics.bootstrap import summary_ci
 
         cl = np.zeros(n, dtype=np.int64) if clusters is None else np.asarray(clusters)[ok]
         tt = None if times is None else np.asarray(times, dtype=float)[ok]
-        out["nees_ci95"] = list(summary_ci(v, cl, tt, quantiles=False)["mean_m"])
-    out["verdict"] = verdict(nees, float(covered[COVERAGE_LEVELS.index(0.95)]), n, out["nees_ci95"])
+        nees_ci = list(summary_ci(v, cl, tt, quantiles=False)["mean_m"])
+    return calibration_figures(
+        n,
+        float(v.mean()) if n else math.nan,
+        coverage(v),
+        sharpness_of(ld[ok]),
+        float(np.mean(log_likelihood_of(v, ld[ok]))) if n else math.nan,
+        nees_ci,
+    )
+
+
+def calibration_figures(
+    n: int,
+    nees: float,
+    covered: np.ndarray,
+    sharpness_m2: float,
+    loglik: float,
+    nees_ci: list[float] | None,
+) -> dict[str, Any]:
+    """:func:`calibration_of`'s figures from their parts: n queries with a finite d^2, the
+    mean NEES, the :func:`coverage` at :data:`COVERAGE_LEVELS`, the sharpness [m^2], the
+    mean log-likelihood [nats] and the NEES's interval (None: none); for a caller that
+    computes the parts from its queries one piece at a time."""
+    out: dict[str, Any] = {
+        "count": n,
+        "nees": nees,
+        "nees_ci95": nees_ci,
+        "nees_chi2_95": list(nees_interval(n)),
+        "coverage": {
+            f"{round(p * 100):d}": float(c) for p, c in zip(COVERAGE_LEVELS, covered, strict=True)
+        },
+        "sharpness_m2": sharpness_m2,
+        "loglik": loglik,
+    }
+    out["verdict"] = verdict(nees, float(covered[COVERAGE_LEVELS.index(0.95)]), n, nees_ci)
     return out
+
+
+def sharpness_from_median(median_area_factor: float, p: float = 0.95) -> float:
+    """:func:`sharpness_of` from the median of sqrt(det P) (NaN: none valid)."""
+    return float(math.pi * ellipse_r2(p) * median_area_factor)
 
 
 def since_fix_bin(

@@ -4,57 +4,117 @@ Per predictor and kind (and per scenario label), :func:`posbench.metrics.track_e
 of the scored queries' along-track and cross-track errors (trace columns ``along_m``,
 ``cross_m``) and of the cross-track error signed toward the inside of the turn
 (:func:`posbench.metrics.track_errors.inward_cross` of ``cross_m`` and ``yaw_rate_ref``).
+
+Computed from the traces one part (drive) at a time, never holding a predictor's rows: pass
+one adds each group's counts and sums and counts its values per bin; pass two keeps the values
+of the bins that hold the p95s (:mod:`posbench.metrics.two_pass_quantiles`). The figures are
+:func:`~posbench.metrics.track_errors.track_summary`'s: counts and p95s exactly, means to
+rounding (summed per drive, then exactly over the drives: the same to the bit from parts on
+disk as from a frame in memory).
 """
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+import math
+from collections.abc import Iterator, Sequence
 from typing import Any
 
 import numpy as np
 import pandas as pd
 
-from posbench.aggregation.row_columns import RowColumns
-from posbench.metrics.track_errors import inward_cross, track_summary
+from posbench.metrics.track_errors import inward_cross
+from posbench.metrics.two_pass_quantiles import BinCounts
 from posbench.scenarios.labels import LABELS
 from posbench.scoring.schema import KINDS
-from posbench.scoring.trace_parts import text_values
+from posbench.scoring.trace_parts import category_index
 from posbench.scoring.trace_set import TraceSet
 
-NEEDED = ("predictor", "kind", "label", "error_m", "along_m", "cross_m", "yaw_rate_ref")
+NEEDED = ("kind", "label", "error_m", "along_m", "cross_m", "yaw_rate_ref")
+#: what pass two reads: the values whose p95s are wanted, and their groups
+PASS_TWO = ("kind", "label", "along_m", "cross_m")
+#: the groups of each kind: every query of the kind, then each route type's
+GROUPS = ("all", *LABELS)
 
 
-def _track_columns(traces: TraceSet, name: str) -> tuple[dict[str, np.ndarray], dict[str, slice]]:
-    """Predictor ``name``'s scored rows as the four errors the summaries read (along, cross,
-    inward, Euclidean [m]) and the route type (index into :data:`LABELS`; -1: another),
-    read one part of the traces at a time and put in kind order (each kind's rows keep
-    theirs), with each kind of :data:`KINDS` -> its slice. About 33 bytes a query."""
-    columns = RowColumns(
-        {
-            "along": np.float64,
-            "cross": np.float64,
-            "inward": np.float64,
-            "error": np.float64,
-            "kind": np.int8,
-            "label": np.int8,
-        },
-        traces.row_bound(name),
-    )
-    kinds, labels = pd.Index(KINDS), pd.Index(LABELS)
-    for rows in traces.pieces(name, NEEDED):
+class _Group:
+    """One group's figures (a kind's queries, or its queries of one route type), added one
+    part of the traces at a time."""
+
+    def __init__(self) -> None:
+        self.count = self.standstill = self.turning = 0
+        self.sums: tuple[list[float], list[float], list[float]] = ([], [], [])
+        self.along, self.cross = BinCounts((95,)), BinCounts((95,))
+
+    def add(
+        self, along: np.ndarray, cross: np.ndarray, inward: np.ndarray, error: np.ndarray
+    ) -> None:
+        """Pass one: a part's rows of the group (errors [m])."""
+        ok = np.isfinite(along) & np.isfinite(cross)
+        ok_i = np.isfinite(inward)
+        self.count += int(ok.sum())
+        self.standstill += int((np.isfinite(error) & ~ok).sum())
+        self.turning += int(ok_i.sum())
+        av, cv = along[ok], cross[ok]
+        for sums, v in zip(self.sums, (av, cv, inward[ok_i]), strict=True):
+            sums.append(float(v.sum()))
+        self.along.add(np.abs(av))
+        self.cross.add(np.abs(cv))
+
+    def keep(self, along: np.ndarray, cross: np.ndarray) -> None:
+        """Pass two: the same part's rows of the group."""
+        ok = np.isfinite(along) & np.isfinite(cross)
+        self.along.keep(np.abs(along[ok]))
+        self.cross.keep(np.abs(cross[ok]))
+
+    def summary(self) -> dict[str, float | int]:
+        """:func:`~posbench.metrics.track_errors.track_summary` of the group."""
+        a, c, i = (math.fsum(s) for s in self.sums)
+        nan = float("nan")
+        return {
+            "count": self.count,
+            "standstill": self.standstill,
+            "along_mean_m": a / self.count if self.count else nan,
+            "along_p95_abs_m": self.along.quantiles()[0],
+            "cross_mean_m": c / self.count if self.count else nan,
+            "cross_p95_abs_m": self.cross.quantiles()[0],
+            "turning": self.turning,
+            "inward_mean_m": i / self.turning if self.turning else nan,
+        }
+
+
+def _group_rows(rows: pd.DataFrame) -> Iterator[tuple[str, str, np.ndarray]]:
+    """(kind, group, the rows' mask) of each group of :data:`GROUPS` with rows in ``rows``."""
+    kind, label = category_index(rows["kind"], KINDS), category_index(rows["label"], LABELS)
+    for i, k in enumerate(KINDS):
+        mine = kind == i
+        if not mine.any():
+            continue
+        yield k, "all", mine
+        for j, lab in enumerate(LABELS):
+            sel = mine & (label == j)
+            if sel.any():
+                yield k, lab, sel
+
+
+def _predictor_groups(traces: TraceSet, name: str) -> dict[tuple[str, str], _Group]:
+    """Predictor ``name``'s groups, after both passes over its scored rows."""
+    groups = {(k, g): _Group() for k in KINDS for g in GROUPS}
+    for rows in traces.drive_pieces(name, NEEDED):
         cross = rows["cross_m"].to_numpy(float)
-        columns.add(
-            along=rows["along_m"].to_numpy(float),
-            cross=cross,
-            inward=inward_cross(cross, rows["yaw_rate_ref"].to_numpy(float)),
-            error=rows["error_m"].to_numpy(float),
-            kind=kinds.get_indexer(text_values(rows["kind"])),
-            label=labels.get_indexer(text_values(rows["label"], as_str=True)),
+        cols = (
+            rows["along_m"].to_numpy(float),
+            cross,
+            inward_cross(cross, rows["yaw_rate_ref"].to_numpy(float)),
+            rows["error_m"].to_numpy(float),
         )
-    order, slices = columns.group_order("kind", len(KINDS))
-    rows_of = dict(zip(KINDS, slices, strict=True))
-    cols = {c: columns.take(c, order) for c in ("along", "cross", "inward", "error", "label")}
-    return cols, rows_of
+        for k, g, sel in _group_rows(rows):
+            groups[k, g].add(*(c[sel] for c in cols))
+    if any(g.count for g in groups.values()):
+        for rows in traces.drive_pieces(name, PASS_TWO):
+            along, cross = rows["along_m"].to_numpy(float), rows["cross_m"].to_numpy(float)
+            for k, g, sel in _group_rows(rows):
+                groups[k, g].keep(along[sel], cross[sel])
+    return groups
 
 
 def track_section(traces: TraceSet, predictors: Sequence[str]) -> dict[str, Any]:
@@ -66,16 +126,9 @@ def track_section(traces: TraceSet, predictors: Sequence[str]) -> dict[str, Any]
     if traces.empty or any(c not in traces for c in NEEDED):
         return out
     for name in predictors:
-        cols, rows_of = _track_columns(traces, name)
-        out["predictors"][name] = {}
-        out["by_label"][name] = {}
-        for k in KINDS:
-            mine = rows_of[k]  # a slice: the kind's rows are together
-            sub = [cols[c][mine] for c in ("along", "cross", "inward", "error")]
-            labels = cols["label"][mine]
-            out["predictors"][name][k] = track_summary(*sub)
-            out["by_label"][name][k] = {
-                lab: track_summary(*(v[labels == i] for v in sub)) for i, lab in enumerate(LABELS)
-            }
-        del cols
+        groups = _predictor_groups(traces, name)
+        out["predictors"][name] = {k: groups[k, "all"].summary() for k in KINDS}
+        out["by_label"][name] = {
+            k: {lab: groups[k, lab].summary() for lab in LABELS} for k in KINDS
+        }
     return out
