@@ -179,6 +179,13 @@ def outage_scores(
             query (-1 outside outages), from :func:`outage_ids`.
     """
     _, ade_a, fde_a, _ = per_outage(errors, t_query, ids)
+    return outage_figures_of(ade_a, fde_a, miss_threshold_m)
+
+
+def outage_figures_of(
+    ade_a: np.ndarray, fde_a: np.ndarray, miss_threshold_m: float = MISS_THRESHOLD_M
+) -> dict[str, float | int]:
+    """:func:`outage_scores` from each outage's ADE and FDE [m] (:func:`per_outage`)."""
     n = int(fde_a.size)
     return {
         "outages": n,

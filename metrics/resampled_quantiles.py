@@ -77,14 +77,34 @@ def resampled_quantiles(
     return resampled_quantiles_many([(sorted_values, units)], counts_matrix, qs)[0]
 
 
+def resampled_quantiles_within(
+    sorted_values: np.ndarray,
+    units: np.ndarray,
+    counts_matrix: np.ndarray,
+    qs: tuple[float, ...],
+    totals: np.ndarray,
+    below: np.ndarray,
+) -> np.ndarray:
+    """:func:`resampled_quantiles` of values of which only a slice is at hand: the sorted
+    values (and units) between two bounds, every order statistic the quantiles read lying
+    between them (:mod:`posbench.metrics.two_pass_quantiles`). ``totals``: each resample's
+    weighted count of all its values, ``below``: of those below the slice ((B,) each). The
+    same figures as :func:`resampled_quantiles` on all the values, to the bit."""
+    return resampled_quantiles_many([(sorted_values, units)], counts_matrix, qs, [(totals, below)])[
+        0
+    ]
+
+
 def resampled_quantiles_many(
     series: Sequence[tuple[np.ndarray, np.ndarray]],
     counts_matrix: np.ndarray,
     qs: tuple[float, ...] = (0.5, 0.95),
+    slices: Sequence[tuple[np.ndarray, np.ndarray]] | None = None,
 ) -> list[np.ndarray]:
     """:func:`resampled_quantiles` of several series (each: sorted values and their units)
     whose units share the resamples ``counts_matrix`` (e.g. each predictor's errors on the
-    same queries), in one pass: one matrix product and one search for all of them."""
+    same queries), in one pass: one matrix product and one search for all of them.
+    ``slices``: per series, (totals, below) of :func:`resampled_quantiles_within`."""
     w = np.asarray(counts_matrix)
     n_res, n_units = w.shape
     outs = [np.full((n_res, len(qs)), np.nan) for _ in series]
@@ -183,13 +203,17 @@ def resampled_quantiles_many(
             hi[spill] = values_at(tab2, at2)
         return lo, hi
 
+    offset = np.zeros(n_rows)
+    if slices is not None:  # ranks among all of each resample's values, found in the slice
+        total = np.concatenate([np.asarray(slices[i][0], dtype=np.float64) for i in live])
+        offset = np.concatenate([np.asarray(slices[i][1], dtype=np.float64) for i in live])
     ok = total > 0
     last = np.where(ok, total - 1.0, 0.0)
     res = np.full((n_rows, len(qs)), np.nan)
     for j, q in enumerate(qs):
         h = last * q
         r = np.floor(h)
-        lo, hi = value_pair(r.astype(ftype))
+        lo, hi = value_pair((r - offset).astype(ftype))
         hi = np.where(r + 1.0 <= last, hi, lo)
         res[:, j] = np.where(ok, lo + (h - r) * (hi - lo), np.nan)
     for j, i in enumerate(live):

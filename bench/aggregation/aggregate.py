@@ -17,10 +17,9 @@ from typing import Any
 
 import pandas as pd
 
+from posbench.aggregation.combining import Combining
 from posbench.aggregation.intervals import Statistics
 from posbench.aggregation.predictor_figures import (
-    AGGREGATED,
-    Combining,
     empty_kinds,
     limit_figures,
     predictor_figures,
@@ -64,10 +63,10 @@ def aggregate(
     answers scored from a file, whose models posbench cannot know).
 
     Headline figures use the scored rows only
-    (:func:`~posbench.scoring.schema.scored_mask`); the work goes one predictor at a time
-    over just the :data:`AGGREGATED` columns of its rows (the baseline's rows are kept for
-    the paired comparison); traces on disk are read that way, so a process holds one
-    predictor's columns (two with the baseline), never every answer of the run. With
+    (:func:`~posbench.scoring.schema.scored_mask`); the work goes one predictor at a time,
+    each figure family reading its rows one drive at a time and keeping per drive a few
+    numbers (:mod:`posbench.aggregation.error_figures` and its siblings), so a process
+    holds no predictor's rows, let alone every answer of the run. With
     ``workers`` > 1 each predictor's figures are computed in a forked child process
     (:func:`~posbench.scenarios.forked.forked_map`, that many at a time): this process never
     reads a predictor's rows, and what a predictor's figures allocated is returned to the
@@ -96,7 +95,6 @@ def aggregate(
     }
     res["training_drives"] = {n: m["train_drives"] for n, m in res["models"].items()}
     trained_on = {n for names in res["training_drives"].values() for n in names}
-    cols = [c for c in AGGREGATED if c in ts] if not ts.empty else list(AGGREGATED)
     # which drives were scored, and whether any query fell in an outage: one predictor at a
     # time (each in a child process given workers)
     drives_of: dict[str, set[str]] = {}
@@ -129,7 +127,7 @@ def aggregate(
     checked = REFERENCE in preds and not ts.empty
     res["sanity"] = {"reference": REFERENCE, "checked": checked, "losses": []}
     combining = Combining(
-        ts, runs, cols, stats, datasets, with_outages, trained_on, held_ds, held_all, checked
+        ts, runs, stats, datasets, with_outages, trained_on, held_ds, held_all, checked
     )
     figures = forked_map(functools.partial(predictor_figures, combining), preds, workers)
     for name, f in zip(preds, figures, strict=True):

@@ -167,7 +167,14 @@ def outage_cis(
     if stats is None:
         return None
     oid, ade, fde, t_end = per_outage(errors, t_query, ids)
-    drive = outage_drive(oid)
+    return outage_cis_of(ade, fde, t_end, outage_drive(oid), stats)
+
+
+def outage_cis_of(
+    ade: np.ndarray, fde: np.ndarray, t_end: np.ndarray, drive: np.ndarray, stats: Statistics
+) -> dict[str, Any]:
+    """:func:`outage_cis` from each outage's ADE and FDE [m], end time [s] and drive (an
+    integer per drive, in drive order)."""
     a = summary_ci(
         ade, drive, t_end, n_resamples=stats.resamples, seed=stats.seed, level=stats.level
     )

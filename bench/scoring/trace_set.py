@@ -280,13 +280,17 @@ class TraceSet:
             if len(rows):
                 yield rows.reset_index(drop=True)
 
-    def drive_pieces(self, predictor: str, columns: Sequence[str]) -> Iterator[pd.DataFrame]:
-        """:meth:`pieces` (scored rows) cut at every change of drive: one drive's rows a
-        piece, on disk and in memory alike (a frame in memory, or a predictor held, is one
-        piece of many drives), for figures summed per drive that must not depend on where
-        the traces are."""
+    def drive_pieces(
+        self, predictor: str, columns: Sequence[str], scored: bool = True
+    ) -> Iterator[pd.DataFrame]:
+        """:meth:`pieces` cut at every change of drive: one drive's rows a piece, on disk
+        and in memory alike (a frame in memory, or a predictor held, is one piece of many
+        drives), for figures summed per drive that must not depend on where the traces
+        are."""
         cols = list(dict.fromkeys([*columns, "drive"]))
-        for rows in self.pieces(predictor, cols):
+        for rows in self.pieces(predictor, cols, scored):
+            if rows.empty:
+                continue
             drive = rows["drive"]
             codes = (
                 drive.cat.codes.to_numpy()

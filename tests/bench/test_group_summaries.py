@@ -1,22 +1,20 @@
-"""The per-kind group figures (route types, speed bins, time since the last fix, outage
-scores) read one group's rows at a time; they equal the figures of each kind's rows copied
-out and grouped, as they were computed before."""
+"""The error figures (each kind's, by route type, speed bin, time since the last fix, the
+outage scores), computed one drive at a time in two passes, equal the figures of each kind's
+rows copied out and grouped: counts, quantiles and intervals to the bit, means and RMSE to
+rounding; the same from a frame in memory as from parts on disk."""
 
 from __future__ import annotations
 
 import json
+import math
 
 import numpy as np
 import pandas as pd
+import pytest
 
-from posbench.aggregation.intervals import Statistics, add_group_cis, outage_cis
-from posbench.aggregation.predictor_figures import (
-    _by_speed,
-    _outage_figures,
-    kind_summaries,
-    label_summaries,
-    with_codes,
-)
+from posbench.aggregation.combining import Combining
+from posbench.aggregation.error_figures import error_figures
+from posbench.aggregation.intervals import Statistics, add_group_cis, drive_codes, outage_cis
 from posbench.metrics.accuracy import (
     speed_bin_labels,
     speed_bin_order,
@@ -32,6 +30,8 @@ from posbench.metrics.outages import (
 )
 from posbench.scenarios.labels import LABELS
 from posbench.scoring.schema import KINDS
+from posbench.scoring.trace_parts import write_part
+from posbench.scoring.trace_set import TraceSet
 
 STATS = Statistics(resamples=300, seed=3)
 
@@ -57,7 +57,22 @@ def _rows(seed: int = 0, n: int = 3000) -> pd.DataFrame:
         }
     )
     df.loc[rng.random(n) < 0.02, "error_m"] = np.nan
-    return with_codes(df)
+    df = df.assign(predictor="p", x_ref=0.0, y_ref=0.0, warmup=False)
+    return df.assign(code=drive_codes(df))
+
+
+def _figures(df: pd.DataFrame, tmp_path=None) -> dict:
+    """error_figures of predictor "p" (``df``: its rows), from the frame or, given a folder,
+    from one part per drive."""
+    traces = df.drop(columns="code")
+    ts = TraceSet(traces)
+    if tmp_path is not None:
+        groups = traces.groupby("drive", sort=False)
+        ts = TraceSet(
+            parts=[write_part(tmp_path, g, f"{i:02d}") for i, (_, g) in enumerate(groups)]
+        )
+    c = Combining(ts, [], STATS, ["set"], True, set(), [], False, False)
+    return error_figures(c, "p")
 
 
 def _per_kind(df: pd.DataFrame, keys_of, order) -> dict:
@@ -74,16 +89,32 @@ def _per_kind(df: pd.DataFrame, keys_of, order) -> dict:
     return out
 
 
-def _same(a, b) -> None:
-    assert json.dumps(a, sort_keys=True) == json.dumps(b, sort_keys=True)
+def _same(a, b, path: str = "") -> None:
+    """Equal to the bit; a mean or RMSE (summed per drive, then exactly) to 1e-12."""
+    if isinstance(b, dict):
+        assert sorted(a) == sorted(b), path
+        for k in b:
+            _same(a[k], b[k], f"{path}/{k}")
+    elif isinstance(b, list):
+        assert len(a) == len(b), path
+        for i, (x, y) in enumerate(zip(a, b, strict=True)):
+            _same(x, y, f"{path}[{i}]")
+    elif isinstance(b, float) and path.rsplit("/", 1)[-1] in ("mean_m", "rmse_m"):
+        assert a == pytest.approx(b, rel=1e-12, nan_ok=True), path
+    elif isinstance(b, float) and math.isnan(b):
+        assert math.isnan(a), path
+    else:
+        assert json.dumps(a) == json.dumps(b), path
 
 
-def test_route_types_and_speed_bins_are_each_kinds_groups():
+@pytest.mark.parametrize("where", ["frame", "parts"])
+def test_route_types_and_speed_bins_are_each_kinds_groups(where, tmp_path):
     df = _rows()
+    got = _figures(df, tmp_path if where == "parts" else None)
     labels = lambda d: d["label"].astype(object).to_numpy()  # noqa: E731
-    _same(label_summaries(df, STATS), _per_kind(df, labels, list(LABELS)))
+    _same(got["by_label"]["set"], _per_kind(df, labels, list(LABELS)))
     speeds = lambda d: speed_bin_labels(d["speed_mps"].to_numpy())  # noqa: E731
-    _same(_by_speed(df, STATS), _per_kind(df, speeds, [*speed_bin_order(), "unknown"]))
+    _same(got["by_speed"], _per_kind(df, speeds, [*speed_bin_order(), "unknown"]))
 
 
 def test_the_outage_figures_are_those_of_every_now_query():
@@ -96,7 +127,7 @@ def test_the_outage_figures_are_those_of_every_now_query():
     ids = outage_keys(codes, df["outage"].to_numpy()[m])
     scores = outage_scores(e, t, ids)
     scores["ci95"] = outage_cis(e, t, ids, STATS)
-    got = _outage_figures(df, STATS)
+    got = _figures(df)["outages"]
     assert scores["outages"] > 0 and since_fix["1s"]["count"] > 0
     _same(got, {"since_fix": since_fix, "scores": scores})
 
@@ -123,5 +154,7 @@ def test_each_kinds_figures_are_its_rows_grouped():
         add_group_cis(
             want, e, kind, rows["code"].to_numpy(), rows["t_query"].to_numpy(float), STATS
         )
-        _same(kind_summaries(rows, STATS), want)
-    assert kind_summaries(one, STATS)["now"]["ci95"]["block_len"] is not None
+        got = _figures(rows)
+        _same({k: got["entry"][k] for k in KINDS}, want)
+        _same(got["by_dataset"]["set"], want)
+    assert _figures(one)["entry"]["now"]["ci95"]["block_len"] is not None
