@@ -31,7 +31,7 @@ from posbench.metrics.cluster_bootstrap import (
     ratio_ci,
 )
 from posbench.metrics.resampled_quantiles import resampled_quantiles_within
-from posbench.metrics.two_pass_quantiles import BinCounts, value_bins
+from posbench.metrics.two_pass_quantiles import BinCounts, count_bins, value_bins
 
 _NAN2 = [math.nan, math.nan]
 
@@ -73,8 +73,9 @@ class StreamedSummary:
         self.sums.append(float(v.sum()))
         self.squares.append(float((v * v).sum()))
         self.max = max(self.max, float(v.max()))
-        self.bins.append(np.unique(value_bins(v), return_counts=True))
-        self.pooled.add(v)
+        counted = count_bins(value_bins(v))
+        self.bins.append(counted)
+        self.pooled.add_counts(*counted)
 
     def _weights(self) -> np.ndarray:
         return cluster_weights(len(self.counts), self.resamples, self.seed)
@@ -114,13 +115,14 @@ class StreamedSummary:
         if v.size == 0:
             return
         self._drive += 1
-        self.pooled.keep(v)
         if len(self.counts) == 1:
+            self.pooled.keep(v)
             t = np.arange(v.size, dtype=float) if times is None else np.asarray(times)[ok]
             self._series.append((v, t))
             return
         assert self._ranges is not None, "keep() before wanted()"
         bins = value_bins(v)
+        self.pooled.keep(v, bins)
         for kept, (a, b, _, _) in zip(self._kept, self._ranges, strict=True):
             mine = v[(bins >= a) & (bins <= b)]
             if mine.size:

@@ -51,6 +51,18 @@ def _lerp(a: float, b: float, t: float) -> float:
     return b - d * (1.0 - t) if t >= 0.5 else a + d * t
 
 
+def count_bins(bins: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The distinct bins of some values' :func:`value_bins` (ascending) and how many of the
+    values each holds."""
+    lo = int(bins.min())
+    if int(bins.max()) - lo < _DENSE:  # a count per bin of the range: no sort
+        dense = np.bincount(bins - lo)
+        present = np.flatnonzero(dense)
+        return present + lo, dense[present]
+    found, counts = np.unique(bins, return_counts=True)
+    return found, counts
+
+
 class BinCounts:
     """How many values fell in each bin (:func:`value_bins`), added piece by piece; then the
     wanted order statistics' bins, and from their values the exact quantiles.
@@ -72,19 +84,15 @@ class BinCounts:
 
     def add(self, values: np.ndarray) -> None:
         """Count ``values`` (finite floats; pass one)."""
-        if values.size == 0:
+        if values.size:
+            self.add_counts(*count_bins(value_bins(values)))
+
+    def add_counts(self, bins: np.ndarray, counts: np.ndarray) -> None:
+        """Add :func:`count_bins`' counts of some values (pass one)."""
+        if bins.size == 0:
             return
-        b = value_bins(values)
-        lo = int(b.min())
-        if int(b.max()) - lo < _DENSE:  # a count per bin of the range: no sort
-            dense = np.bincount(b - lo)
-            bins = np.flatnonzero(dense)
-            counts = dense[bins]
-            bins += lo
-        else:
-            bins, counts = np.unique(b, return_counts=True)
         at = np.searchsorted(self.bins, bins)
-        if at.size and at[-1] < self.bins.size and np.array_equal(self.bins[at], bins):
+        if at[-1] < self.bins.size and np.array_equal(self.bins[at], bins):
             self.counts[at] += counts  # bins seen before: the usual case after a few pieces
             return
         both = np.concatenate([self.bins, bins])
@@ -113,12 +121,12 @@ class BinCounts:
             self._wanted = np.unique(self.bins[at])
         return self._wanted
 
-    def keep(self, values: np.ndarray) -> None:
-        """Keep those of ``values`` (the same values as pass one's, piece by piece) that fall
-        in a wanted bin (pass two)."""
+    def keep(self, values: np.ndarray, bins: np.ndarray | None = None) -> None:
+        """Keep those of ``values`` (the same values as pass one's, piece by piece; ``bins``:
+        their :func:`value_bins`, if known) that fall in a wanted bin (pass two)."""
         if values.size == 0:
             return
-        mine = values[np.isin(value_bins(values), self.wanted())]
+        mine = values[np.isin(value_bins(values) if bins is None else bins, self.wanted())]
         if mine.size:
             self._kept.append(mine)
 

@@ -3,10 +3,11 @@ speed, by data set and route type, held out, per drive, and the outage figures.
 
 Each figure is a :class:`~posbench.metrics.streamed_summary.StreamedSummary` of a group of
 queries (a kind's, of one route type, speed bin or time since the last fix) over a set of
-drives (every drive, one data set's, the held-out ones). Pass one reads the predictor's
-scored rows one drive at a time and adds each drive's errors to the groups it belongs to
-(and draws the drive's own figures, and its outages'); pass two reads them again and keeps
-the few errors that the quantiles and their intervals read. Nothing the size of a predictor's
+drives (every drive, one data set's, the held-out ones). Pass one
+(:mod:`posbench.aggregation.drive_passes`) hands over the predictor's scored rows one drive
+at a time, whose errors go to the groups the drive belongs to (and make the drive's own
+figures, and its outages'); pass two keeps the few errors that the quantiles and their
+intervals read. Nothing the size of a predictor's
 rows is held: per drive and group a few numbers and bin counts. The figures are those of the
 groups' rows taken whole (:func:`~posbench.metrics.accuracy.summarize` and
 :func:`~posbench.aggregation.intervals.ci_entry`): counts, quantiles, maxima and intervals to
@@ -22,6 +23,7 @@ import numpy as np
 import pandas as pd
 
 from posbench.aggregation.combining import Combining
+from posbench.aggregation.drive_passes import run_passes
 from posbench.aggregation.intervals import Statistics, one_drive_cis, outage_cis_of
 from posbench.metrics.accuracy import speed_bin_index, speed_bin_order, summarize
 from posbench.metrics.outages import (
@@ -67,8 +69,12 @@ def _entry(summary: dict[str, Any]) -> dict[str, Any]:
     return out
 
 
-class _Groups:
-    """Every group of one predictor's error figures, and the drives' own figures."""
+class ErrorFigures:
+    """Every group of one predictor's error figures, and the drives' own figures: a
+    :class:`~posbench.aggregation.drive_passes.Family` of the scored rows."""
+
+    columns: tuple[str, ...] = COLUMNS
+    scored: bool = True
 
     def __init__(self, c: Combining, name: str) -> None:
         self.c, self.name = c, name
@@ -138,7 +144,7 @@ class _Groups:
                     if sel.any():
                         yield ("all", k, "since", j), ek[sel], tk[sel]
 
-    def first_pass(self, rows: pd.DataFrame) -> None:
+    def first(self, rows: pd.DataFrame) -> None:
         """Pass one over one drive's rows: the groups' counts, the drive's own figures, its
         outages'."""
         for key, e, _ in self.slices(rows):
@@ -163,7 +169,13 @@ class _Groups:
                 self.outages.append((self.drives, ade, fde, t_end))
         self.drives += 1
 
-    def second_pass(self, rows: pd.DataFrame) -> None:
+    def between(self) -> bool:
+        """Each group's bins that pass two keeps; pass two is wanted when a drive was seen."""
+        for s in self.sums.values():
+            s.wanted()
+        return self.drives > 0
+
+    def second(self, rows: pd.DataFrame) -> None:
         """Pass two over the same drive's rows: the errors the quantiles read."""
         for key, e, t in self.slices(rows):
             self.sums[key].keep(e, t)
@@ -184,41 +196,38 @@ class _Groups:
         """Per kind, the summary of its queries over ``sets``' drives."""
         return {k: v["all"] for k, v in self.summaries(sets, "all", ["all"]).items()}
 
+    def result(self) -> dict[str, Any]:
+        """The figures: ``entry`` (per kind), ``by_speed``, ``outages``, ``by_dataset``,
+        ``by_label``, ``held_out`` (and ``held_out_all``) and ``per_drive`` (empty: no
+        scored row)."""
+        c = self.c
+        out: dict[str, Any] = {"entry": self.kinds("all")}
+        if self.drives:
+            out["by_speed"] = self.summaries("all", "speed", SPEEDS)
+        if c.with_outages:
+            since = self.summaries("all", "since", SINCE, ["now"])["now"]
+            out["outages"] = {"since_fix": since, "scores": _outage_scores(self, c.stats)}
+        out["by_dataset"], out["by_label"], out["held_out"] = {}, {}, {}
+        for ds in c.datasets:
+            out["by_dataset"][ds] = self.kinds(("ds", ds))
+            out["by_label"][ds] = self.summaries(("ds", ds), "label", LABELS)
+            if ds in c.held_ds:
+                held = ("held", ds)
+                out["held_out"][ds] = (self.kinds(held), self.summaries(held, "label", LABELS))
+        if c.held_all:
+            out["held_out_all"] = self.kinds("held_all")
+        out["per_drive"] = self.per_drive
+        return out
+
 
 def error_figures(c: Combining, name: str) -> dict[str, Any]:
-    """Predictor ``name``'s figures of the error column: ``entry`` (per kind), ``by_speed``,
-    ``outages``, ``by_dataset``, ``by_label``, ``held_out`` (and ``held_out_all``) and
-    ``per_drive`` (empty: no scored row)."""
-    groups = _Groups(c, name)
-    cols = [col for col in COLUMNS if col in c.ts] if not c.ts.empty else []
-    if cols:
-        for rows in c.ts.drive_pieces(name, cols):
-            groups.first_pass(rows)
-    for s in groups.sums.values():
-        s.wanted()
-    if groups.drives:
-        for rows in c.ts.drive_pieces(name, cols):
-            groups.second_pass(rows)
-    out: dict[str, Any] = {"entry": groups.kinds("all")}
-    if groups.drives:
-        out["by_speed"] = groups.summaries("all", "speed", SPEEDS)
-    if c.with_outages:
-        since = groups.summaries("all", "since", SINCE, ["now"])["now"]
-        out["outages"] = {"since_fix": since, "scores": _outage_scores(groups, c.stats)}
-    out["by_dataset"], out["by_label"], out["held_out"] = {}, {}, {}
-    for ds in c.datasets:
-        out["by_dataset"][ds] = groups.kinds(("ds", ds))
-        out["by_label"][ds] = groups.summaries(("ds", ds), "label", LABELS)
-        if ds in c.held_ds:
-            held = ("held", ds)
-            out["held_out"][ds] = (groups.kinds(held), groups.summaries(held, "label", LABELS))
-    if c.held_all:
-        out["held_out_all"] = groups.kinds("held_all")
-    out["per_drive"] = groups.per_drive
-    return out
+    """:meth:`ErrorFigures.result` of predictor ``name``, its rows read for it alone."""
+    figures = ErrorFigures(c, name)
+    run_passes(c.ts, name, [figures])
+    return figures.result()
 
 
-def _outage_scores(groups: _Groups, stats: Statistics) -> dict[str, Any]:
+def _outage_scores(groups: ErrorFigures, stats: Statistics) -> dict[str, Any]:
     """The outage scores with their intervals, from each drive's outages' ADE, FDE and end
     times (the drives numbered as they came)."""
     found = groups.outages

@@ -17,6 +17,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
+from posbench.aggregation.drive_passes import run_passes
 from posbench.aggregation.intervals import Statistics
 from posbench.metrics.streamed_summary import StreamedSummary
 from posbench.scoring.schema import KINDS
@@ -34,46 +35,64 @@ def _warm_rows(rows: pd.DataFrame) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     return no_ref, warm & ~no_ref, category_index(rows["kind"], KINDS)
 
 
-def _summaries(ts: TraceSet, name: str, stats: Statistics | None) -> dict[str, Any]:
-    """``excluded`` of predictor ``name``: per kind its warm-up queries' summaries, and
-    its queries without a reference, counted."""
-    cols = [c for c in COLUMNS if c in ts]
-    sums = {k: StreamedSummary(*_resampling(stats)) for k in KINDS}
-    no_reference = dict.fromkeys(KINDS, 0)
-    # a drive's warm-up is its first seconds: its queries are held for pass two, not read again
-    held: list[tuple[str, np.ndarray, np.ndarray]] = []
-    for rows in ts.drive_pieces(name, cols, scored=False):
+class ExcludedFigures:
+    """A predictor's warm-up summaries and queries without a reference, per kind: a
+    :class:`~posbench.aggregation.drive_passes.Family` of every row."""
+
+    columns: tuple[str, ...] = COLUMNS
+    scored: bool = False
+
+    def __init__(self, stats: Statistics | None) -> None:
+        self.stats = stats
+        self.sums = {k: StreamedSummary(*_resampling(stats)) for k in KINDS}
+        self.no_reference = dict.fromkeys(KINDS, 0)
+        # a drive's warm-up is its first seconds: its queries are held for the second
+        # pass, not read again
+        self.held: list[tuple[str, np.ndarray, np.ndarray]] = []
+
+    def first(self, rows: pd.DataFrame) -> None:
         no_ref, warm, kind = _warm_rows(rows)
         e, t = rows["error_m"].to_numpy(dtype=float), rows["t_query"].to_numpy(dtype=float)
         for i, k in enumerate(KINDS):
             mine = kind == i
-            no_reference[k] += int((no_ref & mine).sum())
+            self.no_reference[k] += int((no_ref & mine).sum())
             mine &= warm
-            sums[k].add(e[mine])
-            held.append((k, e[mine], t[mine]))
-    for s in sums.values():
-        s.wanted()
-    for k, e, t in held:
-        sums[k].keep(e, t)
-    warmup = {}
-    for k, s in sums.items():
-        summary = s.summary()
-        ci = summary.pop("ci")
-        if stats is not None:
-            summary["ci95"] = {
-                "mean_m": ci["mean_m"],
-                "median_m": ci["median_m"],
-                "p95_m": ci["p95_m"],
-                "drives": ci["clusters"],
-                "block_len": ci["block_len"],
-            }
-        warmup[k] = summary
-    return {"warmup": warmup, "no_reference": no_reference}
+            self.sums[k].add(e[mine])
+            self.held.append((k, e[mine], t[mine]))
+
+    def between(self) -> bool:
+        for s in self.sums.values():
+            s.wanted()
+        for k, e, t in self.held:
+            self.sums[k].keep(e, t)
+        self.held = []
+        return False
+
+    def second(self, rows: pd.DataFrame) -> None:
+        raise AssertionError("the warm-up figures need no second read")
+
+    def result(self) -> tuple[dict[str, Any], dict[str, int]]:
+        """Per kind the warm-up summary (with ``ci95`` given statistics), and the count of
+        queries without a reference."""
+        warmup = {}
+        for k, s in self.sums.items():
+            summary = s.summary()
+            ci = summary.pop("ci")
+            if self.stats is not None:
+                summary["ci95"] = {
+                    "mean_m": ci["mean_m"],
+                    "median_m": ci["median_m"],
+                    "p95_m": ci["p95_m"],
+                    "drives": ci["clusters"],
+                    "block_len": ci["block_len"],
+                }
+            warmup[k] = summary
+        return warmup, self.no_reference
 
 
 def _resampling(stats: Statistics | None) -> tuple[int, int, float]:
-    """The bootstrap's resamples, seed and level (those of the default without ``stats``:
-    then no interval is reported, and none is computed beyond the cheap ones)."""
+    """The bootstrap's resamples, seed and level (the default's without ``stats``, whose
+    intervals are then not reported)."""
     s = stats or Statistics()
     return s.resamples, s.seed, s.level
 
@@ -90,7 +109,7 @@ def excluded_summary(
     if ts.empty:
         return out
     for name in preds:
-        mine = _summaries(ts, name, stats)
-        out["warmup"][name] = mine["warmup"]
-        out["no_reference"][name] = mine["no_reference"]
+        figures = ExcludedFigures(stats)
+        run_passes(ts, name, [figures])
+        out["warmup"][name], out["no_reference"][name] = figures.result()
     return out

@@ -44,13 +44,29 @@ def empty_kinds(stats: Statistics | None = None) -> dict[str, Any]:
 
 
 def predictor_figures(c: Combining, name: str) -> dict[str, Any]:
-    """Every figure of predictor ``name``, from its scored rows (and the baseline's, for the
-    paired comparison): the pieces :func:`aggregate` puts in place. Reads and holds this
-    predictor's rows only (and the baseline's), one figure family at a time: each family
-    reads the columns it needs and lets them go before the next reads its own."""
-    from posbench.aggregation.error_figures import error_figures
+    """Every figure of predictor ``name``: the pieces :func:`aggregate` puts in place. Its
+    figure families read its rows together, one drive at a time
+    (:func:`~posbench.aggregation.drive_passes.run_passes`), and hold a few numbers per drive
+    and group; the paired comparison reads it beside the baseline the same way, one drive
+    at a time (:mod:`posbench.aggregation.paired_sums`)."""
+    from posbench.aggregation.drive_passes import run_passes
+    from posbench.aggregation.error_figures import ErrorFigures
+    from posbench.aggregation.excluded import ExcludedFigures
+    from posbench.aggregation.sanity import REFERENCE, sanity_section
+    from posbench.aggregation.track import TrackFigures, track_available
+    from posbench.aggregation.uncertainty import (
+        UncertaintyFigures,
+        add_predictor,
+        empty_section,
+        uncertainty_available,
+    )
 
-    out = error_figures(c, name)
+    errors, excluded = ErrorFigures(c, name), ExcludedFigures(c.stats)
+    track = TrackFigures() if track_available(c.ts) else None
+    uncertainty = UncertaintyFigures() if uncertainty_available(c.ts) else None
+    families = [f for f in (errors, excluded, track, uncertainty) if f is not None]
+    run_passes(c.ts, name, families)
+    out = errors.result()
     entry = out["entry"]
     steps, queries, covs = (durations(c.runs, call, name) for call in ("step", "query", "cov"))
     entry["latency_us"] = latency_summary(np.concatenate(steps or [np.empty(0)]))
@@ -58,17 +74,17 @@ def predictor_figures(c: Combining, name: str) -> dict[str, Any]:
     if covs:  # the covariance_at call, timed apart from the query
         entry["covariance_us"] = latency_summary(np.concatenate(covs))
     out.update(paired_figures(c, name, bool(out["per_drive"])))
-    trim_heap()
-    from posbench.aggregation.excluded import excluded_summary
-    from posbench.aggregation.sanity import REFERENCE, sanity_section
-    from posbench.aggregation.track import track_section
-    from posbench.aggregation.uncertainty import uncertainty_section
-
-    out["excluded"] = excluded_summary(c.ts, [name], c.stats)
-    trim_heap()
-    out["track_errors"] = track_section(c.ts, [name])
-    trim_heap()
-    out["uncertainty"] = uncertainty_section(c.ts, [name])
+    warmup, no_reference = excluded.result()
+    out["excluded"] = {"warmup": {name: warmup}, "no_reference": {name: no_reference}}
+    out["track_errors"] = {"predictors": {}, "by_label": {}}
+    if track is not None:
+        kinds, labels = track.result()
+        out["track_errors"] = {"predictors": {name: kinds}, "by_label": {name: labels}}
+    out["uncertainty"] = empty_section()
+    if uncertainty is None:
+        out["uncertainty"]["none"].append(name)
+    else:
+        add_predictor(out["uncertainty"], name, uncertainty)
     trim_heap()
     out["losses"] = (
         sanity_section(c.ts, [REFERENCE, name], c.datasets, c.stats)["losses"]
@@ -111,8 +127,15 @@ def limit_figures(
 
 def scored_drives(ts: TraceSet, name: str) -> tuple[list[tuple[str, str]], bool]:
     """The (dataset, drive) pairs with scored rows of predictor ``name``, and whether any
-    of them fell in an outage."""
-    df = ts.scored(name, ["dataset", "drive", "outage"])
-    pairs = df[["dataset", "drive"]].drop_duplicates()
-    found = list(zip(pairs["dataset"].astype(str), pairs["drive"].astype(str), strict=True))
-    return found, bool((df["outage"].to_numpy() >= 0).any())
+    of them fell in an outage: read one part at a time."""
+    found: dict[tuple[str, str], None] = {}
+    outages = False
+    for rows in ts.pieces(name, ["dataset", "drive", "outage"], plain=True):
+        pairs = rows[["dataset", "drive"]].drop_duplicates()
+        found.update(
+            dict.fromkeys(
+                zip(pairs["dataset"].astype(str), pairs["drive"].astype(str), strict=True)
+            )
+        )
+        outages = outages or bool((rows["outage"].to_numpy() >= 0).any())
+    return list(found), outages

@@ -22,6 +22,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
+from posbench.aggregation.drive_passes import run_passes
 from posbench.metrics.track_errors import inward_cross
 from posbench.metrics.two_pass_quantiles import BinCounts
 from posbench.scenarios.labels import LABELS
@@ -30,8 +31,6 @@ from posbench.scoring.trace_parts import category_index
 from posbench.scoring.trace_set import TraceSet
 
 NEEDED = ("kind", "label", "error_m", "along_m", "cross_m", "yaw_rate_ref")
-#: what pass two reads: the values whose p95s are wanted, and their groups
-PASS_TWO = ("kind", "label", "along_m", "cross_m")
 #: the groups of each kind: every query of the kind, then each route type's
 GROUPS = ("all", *LABELS)
 
@@ -96,10 +95,17 @@ def _group_rows(rows: pd.DataFrame) -> Iterator[tuple[str, str, np.ndarray]]:
                 yield k, lab, sel
 
 
-def _predictor_groups(traces: TraceSet, name: str) -> dict[tuple[str, str], _Group]:
-    """Predictor ``name``'s groups, after both passes over its scored rows."""
-    groups = {(k, g): _Group() for k in KINDS for g in GROUPS}
-    for rows in traces.drive_pieces(name, NEEDED):
+class TrackFigures:
+    """Predictor's track-error groups: a :class:`~posbench.aggregation.drive_passes.Family`
+    of the scored rows."""
+
+    columns: tuple[str, ...] = NEEDED
+    scored: bool = True
+
+    def __init__(self) -> None:
+        self.groups = {(k, g): _Group() for k in KINDS for g in GROUPS}
+
+    def first(self, rows: pd.DataFrame) -> None:
         cross = rows["cross_m"].to_numpy(float)
         cols = (
             rows["along_m"].to_numpy(float),
@@ -108,13 +114,29 @@ def _predictor_groups(traces: TraceSet, name: str) -> dict[tuple[str, str], _Gro
             rows["error_m"].to_numpy(float),
         )
         for k, g, sel in _group_rows(rows):
-            groups[k, g].add(*(c[sel] for c in cols))
-    if any(g.count for g in groups.values()):
-        for rows in traces.drive_pieces(name, PASS_TWO):
-            along, cross = rows["along_m"].to_numpy(float), rows["cross_m"].to_numpy(float)
-            for k, g, sel in _group_rows(rows):
-                groups[k, g].keep(along[sel], cross[sel])
-    return groups
+            self.groups[k, g].add(*(c[sel] for c in cols))
+
+    def between(self) -> bool:
+        return any(g.count for g in self.groups.values())
+
+    def second(self, rows: pd.DataFrame) -> None:
+        along, cross = rows["along_m"].to_numpy(float), rows["cross_m"].to_numpy(float)
+        for k, g, sel in _group_rows(rows):
+            self.groups[k, g].keep(along[sel], cross[sel])
+
+    def result(self) -> tuple[dict[str, Any], dict[str, Any]]:
+        """Per kind the summary, and per kind and route type."""
+        groups = self.groups
+        return (
+            {k: groups[k, "all"].summary() for k in KINDS},
+            {k: {lab: groups[k, lab].summary() for lab in LABELS} for k in KINDS},
+        )
+
+
+def track_available(traces: TraceSet) -> bool:
+    """Whether the traces have the along/cross-track columns (answers scored before they
+    existed have not)."""
+    return not traces.empty and all(c in traces for c in NEEDED)
 
 
 def track_section(traces: TraceSet, predictors: Sequence[str]) -> dict[str, Any]:
@@ -123,12 +145,10 @@ def track_section(traces: TraceSet, predictors: Sequence[str]) -> dict[str, Any]
     empty dicts when the traces have no along/cross-track columns (answers scored before
     they existed)."""
     out: dict[str, Any] = {"predictors": {}, "by_label": {}}
-    if traces.empty or any(c not in traces for c in NEEDED):
+    if not track_available(traces):
         return out
     for name in predictors:
-        groups = _predictor_groups(traces, name)
-        out["predictors"][name] = {k: groups[k, "all"].summary() for k in KINDS}
-        out["by_label"][name] = {
-            k: {lab: groups[k, lab].summary() for lab in LABELS} for k in KINDS
-        }
+        figures = TrackFigures()
+        run_passes(traces, name, [figures])
+        out["predictors"][name], out["by_label"][name] = figures.result()
     return out

@@ -28,6 +28,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
+from posbench.aggregation.drive_passes import run_passes
 from posbench.metrics.bootstrap import summary_ci
 from posbench.metrics.calibration import (
     COVERAGE_LEVELS,
@@ -195,26 +196,42 @@ def _drives(rows: pd.DataFrame) -> tuple[np.ndarray, list[tuple[Any, Any]]]:
     return pairs, names
 
 
-def _read(traces: TraceSet, name: str, second: dict[str, _Kind] | None) -> dict[str, _Kind] | None:
-    """Pass one over predictor ``name``'s scored rows (``second`` None: a new set of kinds,
-    None when no row reports a covariance), or pass two into ``second``."""
-    kinds = second if second is not None else {k: _Kind() for k in KINDS}
-    reported = False
-    for rows in traces.drive_pieces(name, NEEDED):
+class UncertaintyFigures:
+    """A predictor's calibration groups per kind: a
+    :class:`~posbench.aggregation.drive_passes.Family` of the scored rows."""
+
+    columns: tuple[str, ...] = NEEDED
+    scored: bool = True
+
+    def __init__(self) -> None:
+        self.kinds = {k: _Kind() for k in KINDS}
+        #: whether any row reports a covariance (else the predictor is listed under none)
+        self.reported = False
+
+    def first(self, rows: pd.DataFrame) -> None:
+        self._visit(rows, second=False)
+
+    def between(self) -> bool:
+        return self.reported
+
+    def second(self, rows: pd.DataFrame) -> None:
+        self._visit(rows, second=True)
+
+    def _visit(self, rows: pd.DataFrame, second: bool) -> None:
         cov = rows[COV].to_numpy(float)
-        reported = reported or bool(np.isfinite(cov[:, 0]).any())
+        self.reported = self.reported or bool(np.isfinite(cov[:, 0]).any())
         d2, ld = mahalanobis_sq(_errors(rows), cov), log_det(cov)
         del cov
         kind = category_index(rows["kind"], KINDS)
         groups = _grouped(rows)
-        if second is None:
-            pairs, first = _drives(rows)
+        pairs, first = _drives(rows) if not second else (None, [])
         for i, k in enumerate(KINDS):
             mine = kind == i
             if not mine.any():
                 continue
-            acc, sub_d2, sub_ld = kinds[k], d2[mine], ld[mine]
-            if second is None:
+            acc, sub_d2, sub_ld = self.kinds[k], d2[mine], ld[mine]
+            if not second:
+                assert pairs is not None
                 acc.all.add(sub_d2, sub_ld)
                 acc.add_drives(pairs[mine], first, sub_d2)
             else:
@@ -227,14 +244,49 @@ def _read(traces: TraceSet, name: str, second: dict[str, _Kind] | None) -> dict[
                 table = acc.groups[col]
                 for j in pd.unique(of[of >= 0]):
                     sel = of == j
-                    key = names[j]
-                    if second is None:
-                        table.setdefault(key, _Group()).add(sub_d2[sel], sub_ld[sel])
+                    if not second:
+                        table.setdefault(names[j], _Group()).add(sub_d2[sel], sub_ld[sel])
                     else:
-                        table[key].keep(sub_d2[sel], sub_ld[sel])
-    if second is None and not reported:
-        return None
-    return kinds
+                        table[names[j]].keep(sub_d2[sel], sub_ld[sel])
+
+    def result(self) -> dict[str, dict[str, Any]]:
+        """Per block (``predictors``, ``by_dataset``, ``by_label``, ``by_since_fix``,
+        ``curve``), per kind, the figures (call only when :attr:`reported`)."""
+        out: dict[str, dict[str, Any]] = {
+            b: {} for b in ("predictors", "by_dataset", "by_label", "by_since_fix", "curve")
+        }
+        for k, acc in self.kinds.items():
+            out["predictors"][k] = acc.all.figures(acc.nees_ci())
+            assert acc.all.curve is not None
+            shares = acc.all.shares(acc.all.curve)
+            curve = zip(CURVE_LEVELS, shares, strict=True)
+            out["curve"][k] = [[float(p), float(o)] for p, o in curve]
+            for block, col in (("by_dataset", "dataset"), ("by_label", "label")):
+                out[block][k] = {str(g): v.figures() for g, v in acc.groups[col].items()}
+            since = acc.groups["since"]
+            out["by_since_fix"][k] = {_BINS[b]: since[b].figures() for b in sorted(since)}
+        return out
+
+
+def uncertainty_available(traces: TraceSet) -> bool:
+    """Whether the traces have the covariance columns (older runs, answers without them
+    have not)."""
+    return not traces.empty and all(c in traces for c in NEEDED)
+
+
+def empty_section() -> dict[str, Any]:
+    """The section before any predictor is put in."""
+    blocks = ("predictors", "by_dataset", "by_label", "by_since_fix", "curve")
+    return {**{b: {} for b in blocks}, "none": []}
+
+
+def add_predictor(out: dict[str, Any], name: str, figures: UncertaintyFigures) -> None:
+    """Predictor ``name``'s figures into section ``out`` (under ``none`` without any)."""
+    if not figures.reported:
+        out["none"].append(name)
+        return
+    for block, value in figures.result().items():
+        out[block][name] = value
 
 
 def uncertainty_section(traces: TraceSet, predictors: Sequence[str]) -> dict[str, Any]:
@@ -243,33 +295,12 @@ def uncertainty_section(traces: TraceSet, predictors: Sequence[str]) -> dict[str
     {kind: [[expected, observed], ...]}}, "none": [names without covariance]}`` over the
     scored rows of ``traces`` (one predictor at a time). Traces without covariance columns
     (older runs, answers without them): every predictor under ``none``."""
-    out: dict[str, Any] = {
-        "predictors": {},
-        "by_dataset": {},
-        "by_label": {},
-        "by_since_fix": {},
-        "curve": {},
-        "none": [],
-    }
-    if traces.empty or any(c not in traces for c in NEEDED):
+    out = empty_section()
+    if not uncertainty_available(traces):
         out["none"] = list(predictors)
         return out
     for name in predictors:
-        kinds = _read(traces, name, None)
-        if kinds is None:
-            out["none"].append(name)
-            continue
-        _read(traces, name, kinds)
-        for block in ("predictors", "by_dataset", "by_label", "by_since_fix", "curve"):
-            out[block][name] = {}
-        for k, acc in kinds.items():
-            out["predictors"][name][k] = acc.all.figures(acc.nees_ci())
-            assert acc.all.curve is not None
-            shares = acc.all.shares(acc.all.curve)
-            curve = zip(CURVE_LEVELS, shares, strict=True)
-            out["curve"][name][k] = [[float(p), float(o)] for p, o in curve]
-            for block, col in (("by_dataset", "dataset"), ("by_label", "label")):
-                out[block][name][k] = {str(g): v.figures() for g, v in acc.groups[col].items()}
-            since = acc.groups["since"]
-            out["by_since_fix"][name][k] = {_BINS[b]: since[b].figures() for b in sorted(since)}
+        figures = UncertaintyFigures()
+        run_passes(traces, name, [figures])
+        add_predictor(out, name, figures)
     return out

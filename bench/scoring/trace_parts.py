@@ -71,12 +71,13 @@ def read_part(
     predictor: str | None = None,
     drive: str | None = None,
     keep: Callable[[Callable[[str], np.ndarray | None]], np.ndarray] | None = None,
+    plain: bool = False,
 ) -> pd.DataFrame:
     """One part's rows (of ``predictor`` only, and of ``drive`` only, given them), its text
     columns as categoricals; given ``keep``, only the rows it keeps: called with a getter
     of the part's columns as numpy arrays (those asked for and :data:`KEEP_READS`; None for
     a column the part lacks), it returns the mask of the rows to keep, chosen before the
-    rows become a frame.
+    rows become a frame; with ``plain`` as well, that frame is :func:`_plain_frame`'s.
 
     The row groups are chosen by their statistics (a part has one row group per predictor)
     and read directly; only a row group that holds several values is read whole and its
@@ -99,10 +100,11 @@ def read_part(
         if not groups:  # no rows: the columns as the whole part types them (categories too)
             return pf.read(columns=cols, use_pandas_metadata=True).to_pandas().iloc[:0]
         table = pf.read_row_groups(groups, columns=read, use_pandas_metadata=True)
-    if exact and keep is not None:  # the rows chosen in Arrow: only they become a frame
-        chosen = table.filter(keep(_arrow_columns(table)))
+    if exact and (keep is not None or plain):  # rows chosen in Arrow: only they become a frame
+        chosen = table.filter(keep(_arrow_columns(table))) if keep is not None else table
         del table
-        return (chosen if cols is None else chosen.select(cols)).to_pandas()
+        chosen = chosen if cols is None else chosen.select(cols)
+        return _plain_frame(chosen) if plain else chosen.to_pandas()
     df = table.to_pandas()
     del table
     if exact:
@@ -113,6 +115,26 @@ def read_part(
     if keep is not None:
         mask &= keep(lambda c: df[c].to_numpy() if c in df else None)
     return df.loc[mask, cols if cols is not None else df.columns].reset_index(drop=True)
+
+
+def _plain_frame(table: Any) -> pd.DataFrame:
+    """An Arrow table as a frame of numpy columns, its dictionary columns as categoricals of
+    plain ``str`` categories (``to_pandas`` builds each categorical's categories as a pandas
+    string index, ~0.5 ms a column and read: the figures that read a run one drive at a time
+    read thousands). Values the same; dtypes of text columns differ from ``to_pandas``'s."""
+    import pyarrow as pa
+    import pyarrow.compute as pc
+
+    out: dict[str, Any] = {}
+    for name, col in zip(table.column_names, table.columns, strict=True):
+        arr = col.combine_chunks() if col.num_chunks != 1 else col.chunk(0)
+        if pa.types.is_dictionary(arr.type):
+            codes = pc.fill_null(arr.indices, -1).to_numpy(zero_copy_only=False)
+            cats = pd.Index(arr.dictionary.to_pylist(), dtype=object)
+            out[name] = pd.Categorical.from_codes(codes, dtype=pd.CategoricalDtype(cats))
+        else:
+            out[name] = arr.to_numpy(zero_copy_only=False)
+    return pd.DataFrame(out, copy=False)
 
 
 def _arrow_columns(table: Any) -> Callable[[str], np.ndarray | None]:

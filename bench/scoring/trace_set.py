@@ -260,23 +260,25 @@ class TraceSet:
         return joined
 
     def pieces(
-        self, predictor: str, columns: Sequence[str], scored: bool = True
+        self, predictor: str, columns: Sequence[str], scored: bool = True, plain: bool = False
     ) -> Iterator[pd.DataFrame]:
         """``predictor``'s rows in pieces, in their order: its scored rows (:meth:`scored`),
         or with ``scored`` False every row (:meth:`frame`). On disk, one part's rows at a
         time (a predictor held in memory, and a frame in memory, as one piece; parts without
         a row of it yield none), for figures that reduce each piece to a little (a drawing's
         curve) and need never hold them all. Pieces may differ in a text column's
-        categories."""
+        categories; ``plain``: on disk, text columns as categoricals of plain ``str``
+        categories (:func:`~posbench.scoring.trace_parts.read_part`'s ``plain``: cheaper,
+        for figures that read the values only)."""
         if self._frame is not None or self._held_rows(predictor) is not None:
             yield self.scored(predictor, columns) if scored else self.frame(columns, predictor)
             return
         cols = _present(columns, self.columns)
         for path in self.parts:
             if scored:  # the scored rows chosen in Arrow, before they become a frame
-                rows = read_part(path, cols, predictor, keep=scored_of)
+                rows = read_part(path, cols, predictor, keep=scored_of, plain=plain)
             else:
-                rows = read_part(path, cols, predictor)
+                rows = read_part(path, cols, predictor, plain=plain)
             if len(rows):
                 yield rows.reset_index(drop=True)
 
@@ -288,7 +290,7 @@ class TraceSet:
         drives), for figures summed per drive that must not depend on where the traces
         are."""
         cols = list(dict.fromkeys([*columns, "drive"]))
-        for rows in self.pieces(predictor, cols, scored):
+        for rows in self.pieces(predictor, cols, scored, plain=True):
             if rows.empty:
                 continue
             drive = rows["drive"]

@@ -28,9 +28,7 @@ def _numpy(v: np.ndarray) -> list[float]:
 
 @settings(max_examples=300, deadline=None)
 @given(
-    values=st.lists(
-        st.floats(-1e300, 1e300, allow_nan=False, width=64), min_size=1, max_size=300
-    ),
+    values=st.lists(st.floats(-1e300, 1e300, allow_nan=False, width=64), min_size=1, max_size=300),
     cuts=st.lists(st.integers(0, 300), max_size=5),
 )
 def test_numpy_figures_to_the_bit_however_cut(values, cuts):
