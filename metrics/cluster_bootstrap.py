@@ -26,7 +26,7 @@ LEVEL = 0.95
 
 
 # ----------------------------------------------------------------- resamples
-@lru_cache(maxsize=64)
+@lru_cache(maxsize=4)  # B x D each (3 MB at 384 drives): a few, not one per drive count
 def _cluster_counts(n_clusters: int, n_resamples: int, seed: int) -> np.ndarray:
     rng = np.random.default_rng(seed)
     draws = rng.integers(0, n_clusters, size=(n_resamples, n_clusters))

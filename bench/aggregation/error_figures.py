@@ -94,6 +94,7 @@ class ErrorFigures:
                 self._new(("all", k, "speed", j))
         for j in range(len(SINCE)):
             self._new(("all", "now", "since", j))
+        self._done: dict[Key, dict[str, Any]] | None = None
         self.per_drive: dict[tuple[str, str], dict[str, Any]] = {}
         self.outages: list[tuple[int, np.ndarray, np.ndarray, np.ndarray]] = []
         self.drives = 0
@@ -170,8 +171,9 @@ class ErrorFigures:
         self.drives += 1
 
     def between(self) -> bool:
-        """Each group's bins that pass two keeps; pass two is wanted when a drive was seen."""
-        for s in self.sums.values():
+        """Each group's bins that pass two keeps; pass two is wanted when a drive was seen.
+        Groups of as many drives in a row: they share the resamples (a few are cached)."""
+        for s in sorted(self.sums.values(), key=lambda s: len(s.counts)):
             s.wanted()
         return self.drives > 0
 
@@ -184,13 +186,11 @@ class ErrorFigures:
         self, sets: Any, family: str, names: Sequence[str], kinds: Sequence[str] = KINDS
     ) -> dict[str, Any]:
         """Per kind, per name of the family's groups, the summary with its interval."""
-        out: dict[str, Any] = {}
-        for k in kinds:
-            out[k] = {
-                str(n): _entry(self.sums[(sets, k, family, j)].summary())
-                for j, n in enumerate(names)
-            }
-        return out
+        if self._done is None:  # groups of as many drives in a row (see between)
+            by_drives = sorted(self.sums.items(), key=lambda kv: len(kv[1].counts))
+            self._done = {key: _entry(s.summary()) for key, s in by_drives}
+        done = self._done
+        return {k: {str(n): done[(sets, k, family, j)] for j, n in enumerate(names)} for k in kinds}
 
     def kinds(self, sets: Any) -> dict[str, Any]:
         """Per kind, the summary of its queries over ``sets``' drives."""
