@@ -18,7 +18,7 @@ a few bins. Pure numpy.
 from __future__ import annotations
 
 import math
-from typing import Any
+from typing import Any, Literal
 
 import numpy as np
 
@@ -34,13 +34,25 @@ from posbench.metrics.resampled_quantiles import resampled_quantiles_within
 from posbench.metrics.two_pass_quantiles import BinCounts, count_bins, value_bins
 
 _NAN2 = [math.nan, math.nan]
+#: which intervals :meth:`StreamedSummary.summary` gives: every one, the mean's alone (the
+#: quantiles' NaN, as ``summary_ci(quantiles=False)``), or none (no ``ci`` key)
+Intervals = Literal["all", "mean", "none"]
 
 
 class StreamedSummary:
-    """One group of queries' error summary with its interval, one drive at a time."""
+    """One group of queries' error summary with its interval, one drive at a time.
+    ``intervals``: which intervals it gives (:data:`Intervals`); with fewer, it holds less
+    (no bins per drive; with none, no drive's series)."""
 
-    def __init__(self, n_resamples: int = DEFAULT_RESAMPLES, seed: int = 0, level: float = LEVEL):
+    def __init__(
+        self,
+        n_resamples: int = DEFAULT_RESAMPLES,
+        seed: int = 0,
+        level: float = LEVEL,
+        intervals: Intervals = "all",
+    ):
         self.resamples, self.seed, self.level = n_resamples, seed, level
+        self.intervals = intervals
         self.missing = 0
         self.max = -math.inf
         #: per drive with a finite error: its count, its sum in order (the intervals'), its
@@ -74,7 +86,8 @@ class StreamedSummary:
         self.squares.append(float((v * v).sum()))
         self.max = max(self.max, float(v.max()))
         counted = count_bins(value_bins(v))
-        self.bins.append(counted)
+        if self.intervals == "all":
+            self.bins.append(counted)
         self.pooled.add_counts(*counted)
 
     def _weights(self) -> np.ndarray:
@@ -86,7 +99,7 @@ class StreamedSummary:
         self._ranges = []
         self.pooled.wanted()
         d = len(self.counts)
-        if d < 2:
+        if d < 2 or self.intervals != "all":
             return
         every = np.unique(np.concatenate([b for b, _ in self.bins]))
         dense = np.zeros((d, every.size))
@@ -117,6 +130,8 @@ class StreamedSummary:
         self._drive += 1
         if len(self.counts) == 1:
             self.pooled.keep(v)
+            if self.intervals == "none":
+                return
             t = np.arange(v.size, dtype=float) if times is None else np.asarray(times)[ok]
             self._series.append((v, t))
             return
@@ -129,13 +144,16 @@ class StreamedSummary:
                 kept.append((mine, np.full(mine.size, self._drive, dtype=np.int32)))
 
     def summary(self) -> dict[str, Any]:
-        """:func:`~posbench.metrics.accuracy.summarize` with ``ci95`` (the entry of
-        :func:`~posbench.metrics.bootstrap.summary_ci`, key ``clusters``)."""
+        """:func:`~posbench.metrics.accuracy.summarize` with ``ci`` (the entry of
+        :func:`~posbench.metrics.bootstrap.summary_ci`, key ``clusters``; none with
+        ``intervals`` "none")."""
         n = self.count
         out: dict[str, Any] = {"count": n, "missing": self.missing}
         nan = float("nan")
         if n == 0:
             out.update(mean_m=nan, median_m=nan, rmse_m=nan, p95_m=nan, max_m=nan)
+            if self.intervals == "none":
+                return out
             none = {"mean_m": list(_NAN2), "median_m": list(_NAN2), "p95_m": list(_NAN2)}
             return {**out, "ci": {**none, "clusters": 0, "block_len": None}}
         median, p95 = self.pooled.quantiles()
@@ -146,11 +164,13 @@ class StreamedSummary:
             p95_m=p95,
             max_m=self.max,
         )
+        if self.intervals == "none":
+            return out
+        quantiles = self.intervals == "all"
         if len(self.counts) == 1:
             v, t = (np.concatenate(x) for x in zip(*self._series, strict=True))
-            one = summary_ci(
-                v, np.zeros(v.size, np.int64), t, self.resamples, self.seed, self.level
-            )
+            clusters = np.zeros(v.size, np.int64)
+            one = summary_ci(v, clusters, t, self.resamples, self.seed, self.level, quantiles)
             return {**out, "ci": one}
         w = self._weights()
         ci: dict[str, Any] = {
@@ -158,6 +178,8 @@ class StreamedSummary:
             "clusters": len(self.counts),
             "block_len": None,
         }
+        if not quantiles:
+            return {**out, "ci": {**ci, "median_m": list(_NAN2), "p95_m": list(_NAN2)}}
         assert self._ranges is not None
         for name, q, kept, (_, _, total, below) in zip(
             QUANTILES, QUANTILES.values(), self._kept, self._ranges, strict=True

@@ -12,26 +12,21 @@ likely reason: a predictor that reads the IMU (its class overrides ``observe_imu
 one that does not against the fixes-only bound. Where a drive's slow floor was measured on
 few independent samples (a receiver's own fixes against a truth,
 ``drives[].limit.slow_var_sd_m2``), the bound's interval is widened by what that leaves
-uncertain (:func:`floor_sd`), and a predictor is below only by more than that too. The bound
-is never a predictor: it is kept out of ``predictors``, the paired comparison, the sanity
-check and every gate.
+uncertain (:func:`~posbench.aggregation.bound_figures.floor_sd`), and a predictor is below
+only by more than that too. The bound is never a predictor: it is kept out of
+``predictors``, the paired comparison, the sanity check and every gate. The figures are
+combined one drive at a time (:mod:`posbench.aggregation.bound_figures`).
 """
 
 from __future__ import annotations
 
 import math
 from collections.abc import Mapping, Sequence
-from statistics import NormalDist
 from typing import Any
 
-import numpy as np
-import pandas as pd
-
+from posbench.aggregation.bound_figures import bound_figures, z_of
 from posbench.aggregation.intervals import Statistics
-from posbench.aggregation.limit_rows import BoundRows, bound_rows
-from posbench.metrics.accuracy import summarize, summarize_groups
-from posbench.metrics.limit import LIMIT_IMU_NAME, LIMIT_NAME, mean_ci
-from posbench.scenarios.labels import LABELS
+from posbench.metrics.limit import LIMIT_IMU_NAME, LIMIT_NAME
 from posbench.scoring.records import DriveRun
 from posbench.scoring.reference import KIND_FIXES
 from posbench.scoring.schema import KINDS
@@ -83,97 +78,6 @@ def imu_readers(
     return out
 
 
-def floor_sd(bound_m: np.ndarray, slow_sd_m2: np.ndarray, codes: np.ndarray) -> float:
-    """The standard deviation [m] of the mean of ``bound_m`` (per-query bounds [m]) that its
-    drives' measured slow floors leave (``slow_sd_m2`` [m^2] per query, its drive's;
-    ``codes`` the drives): a query's bound ``c sqrt(V)``, ``c^2 = pi/2``, moves by
-    ``pi / (4 b)`` per m^2 of slow variance; fully correlated within a drive (one floor),
-    independent across drives. 0 where no drive's floor was measured."""
-    b = np.asarray(bound_m, dtype=float)
-    sd = np.asarray(slow_sd_m2, dtype=float)
-    ok = np.isfinite(b) & (b > 0) & np.isfinite(sd)
-    if not ok.any() or not (sd[ok] > 0).any():
-        return 0.0
-    per_query = math.pi * sd[ok] / (4.0 * b[ok])
-    per_drive = np.bincount(np.asarray(codes)[ok], weights=per_query) / ok.sum()
-    return float(np.sqrt(np.sum(per_drive * per_drive)))
-
-
-def _kind_summaries(
-    rows: BoundRows,
-    where: np.ndarray | slice,
-    codes: np.ndarray,
-    column: str,
-    stats: Statistics | None,
-) -> dict[str, Any] | None:
-    """Per kind, :func:`summarize` of the bound in ``column`` over the rows ``where`` (their
-    drives ``codes``, numbered within them) with the ``ci95`` of its mean (drives resampled,
-    as a predictor's; its median and p95 are no bound: no interval), widened by
-    ``floor_sd_m`` (:func:`floor_sd`, in quadrature with the resampling's half-widths); None
-    when no query has one (e.g. no IMU)."""
-    e = getattr(rows, column)[where]
-    if not np.isfinite(e).any():
-        return None
-    kind = rows.kind[where]
-    slow_sd = rows.slow_sd_m2()[where]
-    masks = [kind == i for i in range(len(KINDS))]
-    sds = [floor_sd(e[m], slow_sd[m], codes[m]) for m in masks]
-    del slow_sd, kind
-    out: dict[str, dict[str, Any]] = {}
-    for k, m, sd in zip(KINDS, masks, sds, strict=True):
-        ek, ck = e[m], codes[m]
-        out[k] = dict(summarize(ek))
-        out[k]["floor_sd_m"] = sd
-        if stats is not None:
-            r = mean_ci(ek, ck, rows.t_query[where][m], stats.resamples, stats.seed, stats.level)
-            out[k]["ci95"] = {
-                "mean_m": _widened(r["mean_m"], out[k]["mean_m"], sd, stats.level),
-                "median_m": r["median_m"],
-                "p95_m": r["p95_m"],
-                "drives": r["clusters"],
-                "block_len": r["block_len"],
-            }
-    return out
-
-
-def _z(level: float) -> float:
-    """The standard normal quantile of a two-sided ``level`` interval (1.96 at 0.95)."""
-    return NormalDist().inv_cdf(0.5 + level / 2.0)
-
-
-def _widened(ci: Any, mean: float, sd: float, level: float) -> Any:
-    """``ci`` ([lo, hi] of a mean ``mean`` > 0) widened by the floor's uncertainty ``sd`` [m]
-    (:func:`floor_sd`), in quadrature on the log scale: each end's log-ratio to the mean and
-    ``z sd / mean`` combine as root sum of squares. A mean error stays positive however
-    uncertain its floor (added in metres, a floor measured on few samples gave intervals
-    below 0); to first order in the widths the same as adding ``z sd`` to each half-width.
-    As it is where ``sd`` is 0 or not finite."""
-    if not (sd > 0 and math.isfinite(sd)) or ci is None:
-        return ci
-    lo, hi = ci
-    if lo is None or hi is None or not (math.isfinite(lo) and math.isfinite(hi)):
-        return ci
-    if not (mean > 0 and lo > 0 and hi > 0):
-        return ci
-    extra = (_z(level) * sd / mean) ** 2
-    down = math.sqrt(math.log(mean / lo) ** 2 + extra) if lo < mean else math.sqrt(extra)
-    up = math.sqrt(math.log(hi / mean) ** 2 + extra) if hi > mean else math.sqrt(extra)
-    return [mean * math.exp(-down), mean * math.exp(up)]
-
-
-def _scope(rows: BoundRows, where: np.ndarray | slice, stats: Statistics | None) -> dict[str, Any]:
-    """The bound's figures over the rows ``where``: per kind fixes only, and ``imu``. Their
-    drives are numbered within them, in order of first appearance."""
-    if isinstance(where, slice) and where == slice(0, len(rows)):
-        codes = rows.drive  # all rows: numbered in order of first appearance already
-    else:
-        codes = pd.factorize(rows.drive[where])[0].astype(np.int32)
-    out = _kind_summaries(rows, where, codes, "limit_m", stats) or {
-        k: summarize(np.empty(0)) for k in KINDS
-    }
-    return {**out, "imu": _kind_summaries(rows, where, codes, "limit_imu_m", stats)}
-
-
 def _ratio(pred: Mapping[str, Any] | None, bound: Mapping[str, Any] | None) -> float | None:
     """A predictor's mean error / the bound's [-] (None where either has none)."""
     m = (pred or {}).get("mean_m")
@@ -187,7 +91,8 @@ def ratios(
     summaries: Mapping[str, Mapping[str, Any]], bound: Mapping[str, Any]
 ) -> dict[str, dict[str, float | None]]:
     """Per predictor of ``summaries`` (name -> kind -> summary), its ``x limit`` per kind
-    against ``bound`` (:func:`_scope`), and against the IMU variant (``KIND_imu``)."""
+    against ``bound`` (a scope of :class:`~posbench.aggregation.bound_figures.BoundFigures`),
+    and against the IMU variant (``KIND_imu``)."""
     imu = bound.get("imu") or {}
     return {
         name: {
@@ -264,7 +169,7 @@ def below_limit(
     ``limit_imu_m``, ``against`` (``"limit"`` or ``"limit with IMU"``), ``against_m`` (that
     bound's mean), ``floor_sd_m``, ``ratio`` (x that bound) and ``reason``."""
     out = []
-    z = _z(level)
+    z = z_of(level)
     for ds, preds in by_dataset.items():
         bound = limit_by_dataset.get(ds)
         if not bound:
@@ -309,24 +214,6 @@ def below_limit(
     return out
 
 
-def _drive_entry(r: DriveRun, rows: BoundRows, spans: list[slice]) -> dict[str, Any]:
-    """``drives[].limit``: what the drive's bound took, and its mean per kind, from its rows
-    (``spans`` of ``rows``)."""
-    info = {k: v for k, v in r.limit_info.items() if k != "cost_s"}  # timing: run-wide only
-    mine = np.r_[tuple(spans)] if len(spans) > 1 else spans[0]
-    kind = rows.kind[mine]
-    bound = rows.limit_m[mine]
-    imu = rows.limit_imu_m[mine]
-    codes = {k: KINDS.index(k) for k in KINDS}
-    return {
-        **info,
-        **{k: summarize(bound[kind == c]) for k, c in codes.items()},
-        "imu": {k: summarize(imu[kind == c]) for k, c in codes.items()}
-        if np.isfinite(imu).any()
-        else None,
-    }
-
-
 def limit_section(
     runs: Sequence[DriveRun],
     res: dict[str, Any],
@@ -349,31 +236,23 @@ def limit_section(
         (:func:`below_limit`). No timing: results.json's figures are the same on every
         run of the same inputs (``DriveRun.limit_info["cost_s"]`` keeps each drive's).
     """
-    rows = bound_rows(runs)
-    if rows is None:
+    figures = bound_figures(runs, list(res["by_dataset"]), stats)
+    if figures is None:
         return None
-    index = {key: code for code, key in enumerate(rows.drives)}
     for d, r in zip(res["drives"], runs, strict=True):
-        code = index.get((r.dataset, r.name))
-        if code is not None:
-            d["limit"] = _drive_entry(r, rows, rows.spans[code])
-    everything = slice(0, len(rows))
+        entry = figures.drives.get((r.dataset, r.name))
+        if entry is not None:
+            info = {k: v for k, v in r.limit_info.items() if k != "cost_s"}  # run-wide only
+            d["limit"] = {**info, **entry}
     section: dict[str, Any] = {
         "name": LIMIT_NAME,
         "name_imu": LIMIT_IMU_NAME,
         "assumptions": ASSUMPTIONS,
-        "overall": _scope(rows, everything, stats),
+        "overall": figures.overall,
         "by_dataset": {},
-        "by_label": {},
+        "by_label": figures.by_label,
     }
-    row_dataset = rows.drive_dataset[rows.drive]
-    single = len(rows.datasets) == 1
-    for ds in res["by_dataset"]:
-        if ds not in rows.datasets:
-            continue
-        where = row_dataset == rows.datasets.index(ds)
-        # one data set: its queries are all of them, the same figures
-        entry = dict(section["overall"]) if single else _scope(rows, where, stats)
+    for ds, entry in figures.by_dataset.items():
         mine = [r for r in runs if r.dataset == ds and r.has_limit and not r.skipped]
         conditions: dict[str, int] = {}
         for r in mine:
@@ -382,16 +261,6 @@ def limit_section(
         entry["gps_conditions"] = dict(sorted(conditions.items()))
         entry["slow_floor"] = {"added": added, "not_added": len(mine) - added}
         section["by_dataset"][ds] = entry
-        kind = rows.kind[where]
-        bound = rows.limit_m[where]
-        label = rows.label_text(where)
-        section["by_label"][ds] = {
-            k: summarize_groups(
-                bound[kind == KINDS.index(k)], label[kind == KINDS.index(k)], order=list(LABELS)
-            )
-            for k in KINDS
-        }
-        del where, kind, bound, label
     section["ratios"] = {
         "overall": ratios(res["predictors"], section["overall"]),
         "by_dataset": {

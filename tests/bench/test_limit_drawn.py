@@ -11,7 +11,8 @@ import warnings
 import numpy as np
 import pytest
 
-from posbench.aggregation.limit import below_limit, floor_sd, imu_readers
+from posbench.aggregation.bound_figures import floor_sd, widened
+from posbench.aggregation.limit import below_limit, imu_readers
 from posbench.config import RunConfig
 from posbench.metrics.limit import mean_error_offset
 from posbench.pipeline.results import build_results
@@ -219,6 +220,9 @@ def test_a_measured_slow_floor_widens_the_bound_by_its_few_samples():
     res = build_results(run([d], cfg, limit=True), cfg, [], "bench run", models={})
     fut = res["limit"]["by_dataset"]["synthetic"]["future"]
     assert fut["floor_sd_m"] > 0
+    future = (r.limit["kind"] == "future").to_numpy()  # summed one drive at a time: the same
+    sds = np.full(future.sum(), info["slow_var_sd_m2"])
+    assert fut["floor_sd_m"] == floor_sd(b[future], sds, codes[future])
     lo, hi = fut["ci95"]["mean_m"]
     assert hi - lo >= 2 * 1.959 * fut["floor_sd_m"]
     mean = fut["mean_m"]
@@ -233,15 +237,13 @@ def test_a_widened_limit_interval_stays_positive():
     """A slow floor measured on few samples widens the limit's interval a lot; the mean
     error's interval still never reaches 0 (added in metres it went to -0.036 m on the
     docs' two-drive example), and a small widening is the additive one to first order."""
-    from posbench.aggregation.limit import _widened
-
-    lo, hi = _widened([0.17, 0.18], 0.176, 0.064, 0.95)
+    lo, hi = widened([0.17, 0.18], 0.176, 0.064, 0.95)
     assert 0 < lo < 0.17 and hi > 0.18
-    small = _widened([0.17, 0.18], 0.176, 0.0001, 0.95)
+    small = widened([0.17, 0.18], 0.176, 0.0001, 0.95)
     z = 1.959963984540054
     add = [
         0.176 - ((0.006) ** 2 + (z * 1e-4) ** 2) ** 0.5,
         0.176 + (0.004**2 + (z * 1e-4) ** 2) ** 0.5,
     ]
     assert abs(small[0] - add[0]) < 2e-4 and abs(small[1] - add[1]) < 2e-4
-    assert _widened([0.17, 0.18], 0.176, 0.0, 0.95) == [0.17, 0.18]
+    assert widened([0.17, 0.18], 0.176, 0.0, 0.95) == [0.17, 0.18]

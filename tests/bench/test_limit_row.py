@@ -19,14 +19,15 @@ from helpers import bench
 
 from posbench.aggregation.intervals import Statistics, drive_codes
 from posbench.aggregation.limit import below_limit, limit_section
-from posbench.aggregation.limit_rows import bound_rows
 from posbench.config import RunConfig
-from posbench.metrics.limit import LIMIT_IMU_NAME, LIMIT_NAME
+from posbench.metrics.accuracy import summarize, summarize_groups
+from posbench.metrics.limit import LIMIT_IMU_NAME, LIMIT_NAME, mean_ci
 from posbench.pipeline.results import build_results
 from posbench.replay.runner import run, run_drive
 from posbench.report.markdown import render_markdown
 from posbench.report.table_files import report_tables
 from posbench.saved_run.run import SCHEMA_VERSION, Run, load_run, results_schema, save_run
+from posbench.scenarios.labels import LABELS
 from posbench.scenarios.synthetic import generate_drive
 from posbench.scoring.schema import scored_mask
 from posbench.tables.breakdown_tables import drives_table, label_table
@@ -78,33 +79,68 @@ def test_a_drive_split_by_predictor_gets_the_same_bound_once(drives):
     }
 
 
-def test_the_bound_rows_are_read_drive_by_drive_into_compact_columns(result, tmp_path):
-    """Held and spilled runs give the same compact columns as their frames joined: the
-    bound, times, kinds and route types row for row, drives numbered in order of first
-    appearance (as the bootstrap numbers them); and the section is the same from either."""
-    runs, res = result
-    spilled = [runs[0].spill(tmp_path, "a"), runs[1]]  # one from disk, one held
-    assert spilled[0].limit is None and spilled[0].limit_part
-    rows = bound_rows(spilled)
+def _whole_rows(runs, datasets, stats):
+    """The bound's figures from every drive's rows joined (the oracle of the per-drive
+    sums): per scope and kind the summary and the mean's interval, the route types'."""
     joined = pd.concat(
         [r.limit.assign(dataset=r.dataset, drive=r.name) for r in runs], ignore_index=True
     )
-    assert len(rows) == len(joined)
-    for column in ("limit_m", "limit_imu_m", "t_query"):
-        np.testing.assert_array_equal(getattr(rows, column), joined[column].to_numpy(float))
-    kinds = np.array(["future", "now"], dtype=object)[rows.kind]
-    assert (kinds == joined["kind"].astype(str).to_numpy()).all()
-    assert (rows.label_text(slice(None)) == joined["label"].to_numpy()).all()
-    np.testing.assert_array_equal(rows.drive, drive_codes(joined))
-    assert rows.drives == [(r.dataset, r.name) for r in runs]
-    assert rows.limit_m.dtype == float and rows.kind.itemsize == 1 and rows.drive.itemsize == 4
+    out = {}
+    for ds in [None, *datasets]:
+        rows = joined if ds is None else joined[joined["dataset"] == ds]
+        codes = drive_codes(rows)
+        for k in ("future", "now"):
+            m = (rows["kind"] == k).to_numpy()
+            b = rows["limit_m"].to_numpy(float)[m]
+            ci = mean_ci(b, codes[m], rows["t_query"].to_numpy(float)[m], stats.resamples)
+            out[(ds, k)] = (summarize(b), ci["mean_m"], ci["clusters"])
+            if ds is not None:
+                out[(ds, k, "label")] = summarize_groups(
+                    b, rows["label"].to_numpy()[m], order=list(LABELS)
+                )
+    return out
+
+
+def test_the_bound_figures_are_those_of_its_rows_joined(result, tmp_path):
+    """Summed one drive at a time, from held and spilled runs alike, over one data set and
+    two: counts, medians, p95s, maxima and the drives' numbers exact, means to rounding, the
+    mean's interval exact (no floor measured: not widened); each drive's own entry."""
+    runs, res = result
     stats = Statistics(resamples=200)
+    spilled = [runs[0].spill(tmp_path, "a"), runs[1]]  # one from disk, one held
+    assert spilled[0].limit is None and spilled[0].limit_part
     held, read = copy.deepcopy(res), copy.deepcopy(res)
     a, b = limit_section(runs, held, stats), limit_section(spilled, read, stats)
-    assert a is not None and a["overall"]["future"]["ci95"]["mean_m"][0] > 0
-    assert json.dumps(a) == json.dumps(b)  # NaN (no route of a type) written alike
+    assert a is not None and json.dumps(a) == json.dumps(b)  # NaN written alike
     assert json.dumps(held["drives"]) == json.dumps(read["drives"])
-    assert held["drives"][0]["limit"]["future"]["count"] > 0
+    two = [runs[0], replace(runs[1], dataset="other")]
+    res2 = copy.deepcopy(res)
+    res2["by_dataset"] = {"synthetic": res["by_dataset"]["synthetic"], "other": {}}
+    c = limit_section(two, res2, stats)
+    for section, mine, datasets in ((a, runs, ["synthetic"]), (c, two, ["synthetic", "other"])):
+        oracle = _whole_rows(mine, datasets, stats)
+        for ds in [None, *datasets]:
+            scope = section["overall"] if ds is None else section["by_dataset"][ds]
+            for k in ("future", "now"):
+                whole, ci, drives = oracle[(ds, k)]
+                got = scope[k]
+                for key in ("count", "missing", "median_m", "p95_m", "max_m"):
+                    assert got[key] == whole[key], (ds, k, key)
+                for key in ("mean_m", "rmse_m"):
+                    assert got[key] == pytest.approx(whole[key], rel=1e-12)
+                assert got["floor_sd_m"] == 0.0 and got["ci95"]["drives"] == drives
+                assert got["ci95"]["mean_m"] == pytest.approx(ci, rel=1e-12)
+                if ds is not None:
+                    labels = section["by_label"][ds][k]
+                    for name, s in oracle[(ds, k, "label")].items():
+                        assert labels[name]["count"] == s["count"]
+                        if s["count"]:
+                            assert labels[name]["median_m"] == s["median_m"]
+                            assert labels[name]["p95_m"] == s["p95_m"]
+    for d, r in zip(held["drives"], runs, strict=True):
+        future = r.limit["limit_m"][r.limit["kind"] == "future"].to_numpy(float)
+        assert d["limit"]["future"] == summarize(future)
+        assert d["limit"]["slow_added"] == r.limit_info["slow_added"]
 
 
 def test_results_carry_the_bound_beside_the_predictors_never_as_one(result):

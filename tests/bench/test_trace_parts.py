@@ -15,7 +15,6 @@ from helpers import without_timings
 
 import posbench.scoring.trace_set as trace_set_module
 from posbench.aggregation.aggregate import aggregate
-from posbench.aggregation.row_columns import RowColumns
 from posbench.config import RunConfig
 from posbench.replay.runner import run
 from posbench.scenarios.synthetic import generate_drive
@@ -230,31 +229,3 @@ def test_a_predictors_row_bound_comes_from_the_parts_metadata(both):
         assert on_disk.row_bound(name) == in_memory.row_bound(name) == n > 0
         assert len(on_disk.scored(name, ["kind"])) < n
     assert on_disk.row_bound("nobody") == 0
-
-
-@pytest.mark.parametrize("bound", [None, 0, 25], ids=["unknown", "exact", "loose"])
-def test_row_columns_are_the_pieces_joined(bound):
-    """RowColumns gives each column as np.concatenate of the pieces would (2-D columns and
-    an order too), whether the rows' bound is known, exact or loose; a piece past the bound
-    or without every column is refused."""
-    rng = np.random.default_rng(0)
-    pieces = [
-        (rng.normal(size=n), rng.integers(0, 9, n), rng.normal(size=(n, 2))) for n in (7, 0, 11)
-    ]
-    capacity = None if bound is None else 18 + bound
-    cols = RowColumns({"a": np.float64, "b": np.int16, "c": (np.float64, 2)}, capacity)
-    for a, b, c in pieces:
-        cols.add(a=a, b=b, c=c)
-    assert cols.rows == 18
-    order = np.argsort(np.concatenate([p[1] for p in pieces]), kind="stable")
-    np.testing.assert_array_equal(
-        cols.take("a", order), np.concatenate([p[0] for p in pieces])[order]
-    )
-    b = cols.take("b")
-    assert b.dtype == np.int16 and b.tolist() == np.concatenate([p[1] for p in pieces]).tolist()
-    np.testing.assert_array_equal(cols.take("c"), np.concatenate([p[2] for p in pieces]))
-    small = RowColumns({"a": np.float64}, 3)
-    with pytest.raises(ValueError, match="bound of 3"):
-        small.add(a=np.zeros(4))
-    with pytest.raises(ValueError, match="every column"):
-        small.add(b=np.zeros(1))
