@@ -25,7 +25,7 @@ import pandas as pd
 
 from posbench.aggregation.intervals import Statistics
 from posbench.metrics.accuracy import summarize
-from posbench.metrics.streamed_summary import StreamedSummary
+from posbench.metrics.streamed_summary import Intervals, StreamedSummary
 from posbench.scenarios.labels import LABELS
 from posbench.scoring.records import DriveRun
 from posbench.scoring.schema import KINDS
@@ -107,7 +107,8 @@ def _floor_terms(bound_m: np.ndarray, slow_sd_m2: np.ndarray) -> np.ndarray:
     """Per query with a bound and a floor, how far a m^2 of its slow variance moves its
     bound: ``pi sd / (4 b)`` [m] (a query's bound is ``c sqrt(V)``, ``c^2 = pi/2``)."""
     ok = np.isfinite(bound_m) & (bound_m > 0) & np.isfinite(slow_sd_m2)
-    return math.pi * slow_sd_m2[ok] / (4.0 * bound_m[ok])
+    terms: np.ndarray = math.pi * slow_sd_m2[ok] / (4.0 * bound_m[ok])
+    return terms
 
 
 def floor_of(per_drive: np.ndarray, count: int) -> float:
@@ -161,7 +162,7 @@ class _Scope:
     def __init__(self, stats: Statistics | None) -> None:
         self.stats = stats
         s = stats or Statistics()
-        how = "mean" if stats is not None else "none"
+        how: Intervals = "mean" if stats is not None else "none"
         self.sums = {
             (c, k): StreamedSummary(s.resamples, s.seed, s.level, how)
             for c in BOUND_COLUMNS
@@ -290,20 +291,24 @@ def bound_figures(
     labels = {ds: _Labels() for ds in wanted}
     drives: dict[tuple[str, str], dict[str, Any]] = {}
     seen: list[str] = []
+
+    def parts(ds: str) -> list[_Scope | _Labels]:
+        """What a drive of data set ``ds`` counts in."""
+        return [p for p in (overall, scopes.get(ds), labels.get(ds)) if p is not None]
+
     for (ds, name), d in drive_bounds(runs):
         seen.append(ds)
         drives[(ds, name)] = drive_entry(d)
-        for part in (overall, scopes.get(ds), labels.get(ds)):
-            if part is not None:
-                part.first(d)
+        for part in parts(ds):
+            part.first(d)
     if not drives:
         return None
-    for part in (overall, *scopes.values(), *labels.values()):
+    everything: list[_Scope | _Labels] = [overall, *scopes.values(), *labels.values()]
+    for part in everything:
         part.between()
     for (ds, _), d in drive_bounds(runs):
-        for part in (overall, scopes.get(ds), labels.get(ds)):
-            if part is not None:
-                part.second(d)
+        for part in parts(ds):
+            part.second(d)
     found = list(dict.fromkeys(seen))
     whole = overall.result()
     by_dataset = {
