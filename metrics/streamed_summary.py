@@ -85,10 +85,11 @@ class StreamedSummary:
         self.sums.append(float(v.sum()))
         self.squares.append(float((v * v).sum()))
         self.max = max(self.max, float(v.max()))
-        counted = count_bins(value_bins(v))
-        if self.intervals == "all":
-            self.bins.append(counted)
-        self.pooled.add_counts(*counted)
+        bins, counts = count_bins(value_bins(v))
+        self.pooled.add_counts(bins, counts)
+        if self.intervals == "all":  # the drive's own counts, 4 bytes each (half the bytes)
+            wide = np.int32 if v.size < 2**31 else np.int64
+            self.bins.append((bins.astype(np.int32), counts.astype(wide)))
 
     def _weights(self) -> np.ndarray:
         return cluster_weights(len(self.counts), self.resamples, self.seed)

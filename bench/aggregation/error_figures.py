@@ -16,6 +16,7 @@ the bit, means and RMSE summed per drive and then exactly (to rounding).
 
 from __future__ import annotations
 
+import copy
 from collections.abc import Iterator, Sequence
 from typing import Any
 
@@ -79,6 +80,12 @@ class ErrorFigures:
     def __init__(self, c: Combining, name: str) -> None:
         self.c, self.name = c, name
         self.sums: dict[Key, StreamedSummary] = {}
+        #: with one data set, its drives are every drive: its groups over all its queries
+        #: are those over every drive's (summed once, given twice)
+        self.same: dict[Key, Key] = {}
+        if len(c.datasets) == 1:
+            one = ("ds", c.datasets[0])
+            self.same = {(one, k, "all", 0): ("all", k, "all", 0) for k in KINDS}
         drive_sets: list[Any] = ["all", *(("ds", ds) for ds in c.datasets)]
         drive_sets += [("held", ds) for ds in c.held_ds]
         if c.held_all:
@@ -100,6 +107,8 @@ class ErrorFigures:
         self.drives = 0
 
     def _new(self, key: Key) -> None:
+        if key in self.same:
+            return
         s = self.c.stats
         self.sums[key] = StreamedSummary(s.resamples, s.seed, s.level)
 
@@ -125,7 +134,8 @@ class ErrorFigures:
                 continue
             ek, tk = e[mine], t[mine]
             for s in sets:
-                yield (s, k, "all", 0), ek, tk
+                if (s, k, "all", 0) not in self.same:
+                    yield (s, k, "all", 0), ek, tk
             lk = label[mine]
             for j in range(len(LABELS)):
                 sel = lk == j
@@ -189,8 +199,14 @@ class ErrorFigures:
         if self._done is None:  # groups of as many drives in a row (see between)
             by_drives = sorted(self.sums.items(), key=lambda kv: len(kv[1].counts))
             self._done = {key: _entry(s.summary()) for key, s in by_drives}
-        done = self._done
-        return {k: {str(n): done[(sets, k, family, j)] for j, n in enumerate(names)} for k in kinds}
+        done, same = self._done, self.same
+
+        def entry(key: Key) -> dict[str, Any]:
+            return copy.deepcopy(done[same[key]]) if key in same else done[key]
+
+        return {
+            k: {str(n): entry((sets, k, family, j)) for j, n in enumerate(names)} for k in kinds
+        }
 
     def kinds(self, sets: Any) -> dict[str, Any]:
         """Per kind, the summary of its queries over ``sets``' drives."""
