@@ -105,15 +105,24 @@ def nees_interval(n: int, level: float = 0.95) -> tuple[float, float]:
     )
 
 
-def coverage(d2: np.ndarray, levels: Sequence[float] = COVERAGE_LEVELS) -> np.ndarray:
-    """Observed share of the finite ``d2`` inside each level's ellipse (NaN with none)."""
+def coverage_counts(
+    d2: np.ndarray, levels: Sequence[float] = COVERAGE_LEVELS
+) -> tuple[np.ndarray, int]:
+    """How many of the finite ``d2`` fall inside each level's ellipse, and how many are
+    finite: counts that add over pieces (one drive at a time) to the whole's."""
     d = np.asarray(d2, dtype=float)
     d = d[np.isfinite(d)]
     r2 = np.asarray(ellipse_r2(np.asarray(levels, dtype=float)))  # typed float | array: an array
-    if d.size == 0:
-        return np.full(r2.shape, np.nan)
-    # a count per level, not an (N, levels) table: the same shares, a row's bytes once
-    share: np.ndarray = np.array([np.count_nonzero(d <= r) for r in r2], dtype=float) / d.size
+    # a count per level, not an (N, levels) table: a row's bytes once
+    return np.array([np.count_nonzero(d <= r) for r in r2], dtype=np.int64), int(d.size)
+
+
+def coverage(d2: np.ndarray, levels: Sequence[float] = COVERAGE_LEVELS) -> np.ndarray:
+    """Observed share of the finite ``d2`` inside each level's ellipse (NaN with none)."""
+    inside, n = coverage_counts(d2, levels)
+    if n == 0:
+        return np.full(inside.shape, np.nan)
+    share: np.ndarray = inside.astype(float) / n
     return share
 
 

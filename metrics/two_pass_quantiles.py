@@ -34,6 +34,15 @@ def value_bins(values: np.ndarray) -> np.ndarray:
     return out
 
 
+def bin_floor(bins: np.ndarray) -> np.ndarray:
+    """The smallest float of each bin of :func:`value_bins` (its inverse at a bin's start):
+    every value of bin ``b`` lies in ``[bin_floor(b), bin_floor(b + 1))``."""
+    ordered = np.asarray(bins, dtype=np.int64) << _SHIFT
+    bits = np.where(ordered < 0, ordered ^ _MAGNITUDE, ordered)
+    out: np.ndarray = bits.view(np.float64)
+    return out
+
+
 def quantile_ranks(n: int, q: float) -> tuple[int, int, float]:
     """The order statistics (0-based ranks, lower and upper) of ``n`` sorted values that
     ``np.percentile(values, q)`` (linear, ``q`` in [0, 100]) interpolates between, and the
@@ -76,6 +85,18 @@ class BinCounts:
         self.counts = np.empty(0, dtype=np.int64)
         self._wanted: np.ndarray | None = None
         self._kept: list[np.ndarray] = []
+
+    def cdf(self, low: float, high: float) -> tuple[np.ndarray, np.ndarray]:
+        """The empirical CDF of the values counted (their minimum ``low`` and maximum
+        ``high``, known apart) where it is exact from the counts alone: 0 at ``low``, at
+        each bin's end (the next bin's :func:`bin_floor`) the fraction of values below it,
+        1 at ``high``: a point per bin that holds a value; (values, fractions)."""
+        n = self.total
+        if n == 0:
+            return np.empty(0), np.empty(0)
+        ends = bin_floor(self.bins[:-1] + 1)
+        below = np.cumsum(self.counts[:-1]) / n
+        return np.r_[low, ends, high], np.r_[0.0, below, 1.0]
 
     @property
     def total(self) -> int:

@@ -1,10 +1,11 @@
 """The figures of error distributions over all drives: error CDFs, mean error by speed and by
 time since the last fix, and the calibration curve of reported uncertainty. Each reads the
 traces one predictor at a time (:mod:`posbench.figures.reading`), a few columns of its rows
-past the warm-up, and keeps only what it draws (a thinned CDF, a mean per bin, a curve)."""
+past the warm-up, and keeps only what it draws (a CDF's bin counts, a mean per bin, a curve)."""
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from typing import TYPE_CHECKING, Any
 
@@ -20,8 +21,9 @@ from posbench.figures.style import (
     log_values,
     warmup_mask,
 )
-from posbench.metrics.accuracy import error_cdf, speed_bin_labels, speed_bin_order, summarize_groups
+from posbench.metrics.accuracy import speed_bin_index, speed_bin_order
 from posbench.metrics.outages import SINCE_FIX_CURVE_EDGES_S, since_fix_bins
+from posbench.metrics.two_pass_quantiles import BinCounts
 from posbench.scoring.schema import COV_COLUMNS, KINDS
 from posbench.scoring.trace_parts import text_values
 from posbench.scoring.trace_set import TraceSet, as_trace_set
@@ -29,19 +31,25 @@ from posbench.scoring.trace_set import TraceSet, as_trace_set
 if TYPE_CHECKING:  # matplotlib is imported when a figure is drawn: importing this module is cheap
     from matplotlib.figure import Figure
 
-#: points drawn per CDF curve (evenly spaced in rank; the curve is exact at each)
-CDF_POINTS = 4000
 
+class _CdfCounts:
+    """A predictor's errors of one kind counted for its CDF, one part at a time: bin counts
+    (:class:`~posbench.metrics.two_pass_quantiles.BinCounts`), minimum and maximum; no
+    error held."""
 
-def _cdf_curve(errors: np.ndarray) -> tuple[np.ndarray, np.ndarray, int]:
-    """The error CDF of ``errors`` [m] as drawn: (errors, fractions) thinned to at most
-    :data:`CDF_POINTS` points evenly spaced in rank (exact at each), and the count."""
-    e, c = error_cdf(errors)
-    n = e.size
-    if n > CDF_POINTS:  # a drawn CDF needs no more points than pixels: thin evenly
-        pick = np.unique(np.linspace(0, n - 1, CDF_POINTS).astype(int))
-        e, c = e[pick], c[pick]
-    return e, c, n
+    def __init__(self) -> None:
+        self.bins = BinCounts(())
+        self.low, self.high = math.inf, -math.inf
+
+    def add(self, errors: np.ndarray) -> None:
+        self.bins.add(errors)
+        self.low, self.high = min(self.low, float(errors.min())), max(self.high, errors.max())
+
+    def curve(self) -> tuple[np.ndarray, np.ndarray, int]:
+        """(errors [m], fractions) of the CDF as drawn (exact at each point:
+        :meth:`~posbench.metrics.two_pass_quantiles.BinCounts.cdf`), and the count."""
+        e, c = self.bins.cdf(self.low, float(self.high))
+        return e, c, self.bins.total
 
 
 def plot_error_cdf(traces: TraceSet | pd.DataFrame, preds: Sequence[str]) -> Figure:
@@ -54,8 +62,8 @@ def plot_error_cdf(traces: TraceSet | pd.DataFrame, preds: Sequence[str]) -> Fig
     firsts: dict[str, dict[str, str]] = {k: {} for k in KINDS}
     warm = False
     for p in ts.predictors():
-        # one part of the traces at a time, each reduced to its finite errors per kind
-        errors: dict[str, list[np.ndarray]] = {k: [] for k in KINDS}
+        # one part of the traces at a time, its finite errors per kind counted in bins
+        counts = {k: _CdfCounts() for k in KINDS}
         for rows in ts.pieces(p, ["drive", "kind", "error_m", "warmup"], scored=False):
             w = warmup_mask(rows)
             warm |= bool(w.any())
@@ -65,11 +73,11 @@ def plot_error_cdf(traces: TraceSet | pd.DataFrame, preds: Sequence[str]) -> Fig
             for kind in KINDS:
                 m = keep & (kinds == kind)
                 if m.any():
-                    errors[kind].append(e[m])
+                    counts[kind].add(e[m])
                     firsts[kind].setdefault(p, str(rows["drive"].iloc[int(np.argmax(m))]))
         for kind in KINDS:
-            if errors[kind]:
-                curves[kind][p] = _cdf_curve(np.concatenate(errors[kind]))
+            if counts[kind].bins.total:
+                curves[kind][p] = counts[kind].curve()
     if not any(curves.values()):
         raise NothingToPlot("no query with a known error (no reference position)")
     colors = colors_for(preds)
@@ -81,7 +89,7 @@ def plot_error_cdf(traces: TraceSet | pd.DataFrame, preds: Sequence[str]) -> Fig
             e, c, n = curves[kind][p]
             v, low = log_values(e)
             clipped |= low
-            ax.step(v, c, where="post", label=f"{p} (n={n})", color=colors.get(p))
+            ax.plot(v, c, label=f"{p} (n={n})", color=colors.get(p))
         if not curves[kind]:
             ax.text(
                 0.5,
@@ -127,22 +135,25 @@ def plot_error_vs_speed(traces: TraceSet | pd.DataFrame, preds: Sequence[str]) -
     firsts: dict[str, str] = {}
     cols = ["drive", "kind", "error_m", "speed_mps", "warmup"]
     for p in ts.predictors():
-        # one part of the traces at a time, each reduced to its future rows' errors and speeds
-        errors: list[np.ndarray] = []
-        speeds: list[np.ndarray] = []
+        # one part of the traces at a time, each reduced to its future rows' count and sum
+        # of errors per speed bin
+        counts = np.zeros(len(order), dtype=np.int64)
+        sums = np.zeros(len(order))
         for rows in ts.pieces(p, cols, scored=False):
             e = rows["error_m"].to_numpy(dtype=float)
             speed = rows["speed_mps"].to_numpy(dtype=float)
             keep = ~warmup_mask(rows) & (text_values(rows["kind"]) == "future")
             keep &= np.isfinite(speed) & np.isfinite(e)
             if keep.any():
-                errors.append(e[keep])
-                speeds.append(speed[keep])
+                b = speed_bin_index(speed[keep])
+                counts += np.bincount(b, minlength=len(order))
+                sums += np.bincount(b, e[keep], minlength=len(order))
                 firsts.setdefault(p, str(rows["drive"].iloc[int(np.argmax(keep))]))
-        if errors:
-            found[p] = summarize_groups(
-                np.concatenate(errors), speed_bin_labels(np.concatenate(speeds)), order
-            )
+        if counts.any():
+            found[p] = {
+                b: {"count": int(n), "mean_m": sm / n if n else np.nan}
+                for b, n, sm in zip(order, counts, sums, strict=True)
+            }
     if not found:
         raise NothingToPlot("no query with a known speed")
     stats = {p: found[p] for p in first_seen(ts, firsts)}
@@ -155,10 +166,10 @@ def plot_error_vs_speed(traces: TraceSet | pd.DataFrame, preds: Sequence[str]) -
         ys, low = log_values(np.array([stats[p][b]["mean_m"] for b in bins], dtype=float))
         clipped |= low
         ax.plot(range(len(bins)), ys, marker="o", label=p, color=colors.get(p))
-    counts = [max(s[b]["count"] for s in stats.values()) for b in bins]
+    most = [max(s[b]["count"] for s in stats.values()) for b in bins]
     ax.set_xticks(
         range(len(bins)),
-        [f"{b.removesuffix(' m/s')}\nn={n}" for b, n in zip(bins, counts, strict=True)],
+        [f"{b.removesuffix(' m/s')}\nn={n}" for b, n in zip(bins, most, strict=True)],
     )
     ax.set_xlim(-0.5, len(bins) - 0.5)
     _mean_error_axes(
@@ -184,21 +195,24 @@ def plot_error_vs_since_fix(traces: TraceSet | pd.DataFrame, preds: Sequence[str
     outages = False
     cols = ["drive", "kind", "error_m", "since_fix_s", "outage", "warmup"]
     for p in ts.predictors():
-        # one part of the traces at a time, each reduced to its now-rows' bins and errors
-        bins: list[np.ndarray] = []
-        errors: list[np.ndarray] = []
+        # one part of the traces at a time, each reduced to its now-rows' count and sum of
+        # errors per bin
+        counts = np.zeros(edges.size - 1, dtype=np.int64)
+        sums = np.zeros(edges.size - 1)
         for rows in ts.pieces(p, cols, scored=False):
             now = rows[~warmup_mask(rows) & (text_values(rows["kind"]) == "now")]
             outages |= bool((now["outage"] >= 0).any())
             now = finite_errors(now[np.isfinite(now["since_fix_s"].to_numpy(dtype=float))])
-            if len(now):
-                since = now["since_fix_s"].to_numpy(dtype=float)
-                bins.append(since_fix_bins(since, edges, open_last=True))
-                errors.append(now["error_m"].to_numpy(dtype=float))
-                firsts.setdefault(p, str(now["drive"].iloc[0]))
-        if bins:
-            frame = pd.DataFrame({"b": np.concatenate(bins), "e": np.concatenate(errors)})
-            means[p] = frame.groupby("b", sort=True)["e"].mean()
+            b = since_fix_bins(now["since_fix_s"].to_numpy(dtype=float), edges, open_last=True)
+            mine = b >= 0
+            if mine.any():
+                counts += np.bincount(b[mine], minlength=counts.size)
+                e = now["error_m"].to_numpy(dtype=float)[mine]
+                sums += np.bincount(b[mine], e, minlength=counts.size)
+                firsts.setdefault(p, str(now["drive"].iloc[int(np.argmax(mine))]))
+        if counts.any():
+            used = np.flatnonzero(counts)
+            means[p] = pd.Series(sums[used] / counts[used], index=used)
     if not outages:
         raise NothingToPlot("no GPS outage in this run")
     if not means:
@@ -234,7 +248,7 @@ def plot_calibration(traces: TraceSet | pd.DataFrame, preds: Sequence[str]) -> F
     [m], cov_xx, cov_xy, cov_yy [m^2], warmup."""
     from matplotlib.figure import Figure
 
-    from posbench.metrics.calibration import calibration_curve, mahalanobis_sq
+    from posbench.metrics.calibration import CURVE_LEVELS, coverage_counts, mahalanobis_sq
 
     ts = as_trace_set(traces)
     cols = ["predictor", "kind", "x", "y", "x_ref", "y_ref", "error_m", *COV_COLUMNS]
@@ -244,9 +258,10 @@ def plot_calibration(traces: TraceSet | pd.DataFrame, preds: Sequence[str]) -> F
     reports = False
     for p in ts.predictors():
         # past the warm-up with a reference, a finite error and a reported covariance, one
-        # part of the traces at a time: each part reduced to its rows' Mahalanobis distances
-        # per kind (8 bytes a row), so a long run's columns are never held together
-        d2: dict[str, list[np.ndarray]] = {k: [] for k in KINDS}
+        # part of the traces at a time: each part reduced to how many of its rows fall in
+        # each level's ellipse, per kind (the shares of the whole from added counts)
+        inside = {k: np.zeros(len(CURVE_LEVELS), dtype=np.int64) for k in KINDS}
+        finite = dict.fromkeys(KINDS, 0)
         kept = False
         for rows in ts.pieces(p, cols[1:]):
             keep = np.isfinite(rows["error_m"].to_numpy(dtype=float))
@@ -261,13 +276,14 @@ def plot_calibration(traces: TraceSet | pd.DataFrame, preds: Sequence[str]) -> F
                     [rows[c].to_numpy(float)[m] - rows[f"{c}_ref"].to_numpy(float)[m] for c in "xy"]
                 )
                 cov = np.column_stack([rows[c].to_numpy(float)[m] for c in COV_COLUMNS])
-                d2[kind].append(mahalanobis_sq(err, cov))
+                counted, n = coverage_counts(mahalanobis_sq(err, cov), CURVE_LEVELS)
+                inside[kind] += counted
+                finite[kind] += n
         reports |= kept
         if kept and p in preds:
-            curves[p] = {
-                k: np.array(calibration_curve(np.concatenate(d2[k]) if d2[k] else np.empty(0)))
-                for k in KINDS
-            }
+            nan = np.full(len(CURVE_LEVELS), np.nan)  # a kind without such a row: no curve
+            shares = {k: inside[k] / finite[k] if finite[k] else nan for k in KINDS}
+            curves[p] = {k: np.column_stack([CURVE_LEVELS, shares[k]]) for k in KINDS}
     if not reports:
         raise NothingToPlot("no predictor reports uncertainty for an answer with a known error")
     colors = colors_for(preds)

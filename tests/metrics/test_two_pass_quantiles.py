@@ -67,3 +67,19 @@ def test_no_values_gives_nan_and_bins_follow_the_values():
     assert all(np.isnan(BinCounts(("median", 95)).quantiles()))
     v = np.sort(np.random.default_rng(1).normal(0.0, 1e3, 1000))
     assert np.all(np.diff(value_bins(v)) >= 0)
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_the_cdf_from_counts_is_exact_at_each_point(seed):
+    """At each point of BinCounts.cdf, the fraction of the values below it (1 at the
+    maximum, 0 at the minimum), however the values were cut; a point per bin."""
+    rng = np.random.default_rng(seed)
+    values = np.concatenate([rng.lognormal(-2, 1.5, 5000), [0.0, 0.0]])
+    counts = BinCounts(())
+    for piece in np.array_split(values, 7):
+        counts.add(piece)
+    x, f = counts.cdf(float(values.min()), float(values.max()))
+    below = np.searchsorted(np.sort(values), x[1:-1], side="left") / values.size
+    np.testing.assert_array_equal(f[1:-1], below)
+    assert (x[0], f[0], x[-1], f[-1]) == (values.min(), 0.0, values.max(), 1.0)
+    assert np.all(np.diff(x) > 0) and x.size == counts.bins.size + 1
