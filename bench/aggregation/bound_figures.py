@@ -23,7 +23,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from posbench.aggregation.intervals import Statistics
+from posbench.aggregation.intervals import Statistics, ci95_of
 from posbench.metrics.accuracy import summarize
 from posbench.metrics.streamed_summary import Intervals, StreamedSummary
 from posbench.scenarios.labels import LABELS
@@ -206,13 +206,10 @@ class _Scope:
             sd = self.floors[(column, k)].value()
             out[k] = {**summary, "floor_sd_m": sd}
             if self.stats is not None and ci is not None:
-                out[k]["ci95"] = {
-                    "mean_m": widened(ci["mean_m"], summary["mean_m"], sd, self.stats.level),
-                    "median_m": ci["median_m"],
-                    "p95_m": ci["p95_m"],
-                    "drives": ci["clusters"],
-                    "block_len": ci["block_len"],
-                }
+                out[k]["ci95"] = ci95_of(ci)
+                out[k]["ci95"]["mean_m"] = widened(
+                    ci["mean_m"], summary["mean_m"], sd, self.stats.level
+                )
         return out
 
     def result(self) -> dict[str, Any]:

@@ -25,7 +25,7 @@ import pandas as pd
 
 from posbench.aggregation.combining import Combining
 from posbench.aggregation.drive_passes import run_passes
-from posbench.aggregation.intervals import Statistics, one_drive_cis, outage_cis_of
+from posbench.aggregation.intervals import Statistics, ci95_of, one_drive_cis, outage_cis_of
 from posbench.metrics.accuracy import speed_bin_index, speed_bin_order, summarize
 from posbench.metrics.outages import (
     SINCE_FIX_CHECKPOINTS_S,
@@ -56,17 +56,10 @@ Key = tuple[Any, str, str, int]
 
 
 def _entry(summary: dict[str, Any]) -> dict[str, Any]:
-    """A :class:`StreamedSummary`'s summary as results.json has it: the interval as
-    :func:`~posbench.aggregation.intervals.ci_entry` writes it."""
+    """A :class:`StreamedSummary`'s summary as results.json has it: its interval as
+    ``ci95``."""
     out = dict(summary)
-    ci = out.pop("ci")
-    out["ci95"] = {
-        "mean_m": ci["mean_m"],
-        "median_m": ci["median_m"],
-        "p95_m": ci["p95_m"],
-        "drives": ci["clusters"],
-        "block_len": ci["block_len"],
-    }
+    out["ci95"] = ci95_of(out.pop("ci"))
     return out
 
 

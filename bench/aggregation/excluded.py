@@ -18,7 +18,7 @@ import numpy as np
 import pandas as pd
 
 from posbench.aggregation.drive_passes import run_passes
-from posbench.aggregation.intervals import Statistics
+from posbench.aggregation.intervals import Statistics, ci95_of
 from posbench.metrics.streamed_summary import StreamedSummary
 from posbench.scoring.schema import KINDS
 from posbench.scoring.trace_parts import category_index
@@ -79,13 +79,7 @@ class ExcludedFigures:
             summary = s.summary()
             ci = summary.pop("ci")
             if self.stats is not None:
-                summary["ci95"] = {
-                    "mean_m": ci["mean_m"],
-                    "median_m": ci["median_m"],
-                    "p95_m": ci["p95_m"],
-                    "drives": ci["clusters"],
-                    "block_len": ci["block_len"],
-                }
+                summary["ci95"] = ci95_of(ci)
             warmup[k] = summary
         return warmup, self.no_reference
 

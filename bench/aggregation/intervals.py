@@ -76,14 +76,16 @@ def ci_entry(
     errors: np.ndarray, codes: np.ndarray, times: np.ndarray | None, stats: Statistics
 ) -> dict[str, Any]:
     """The ``ci95`` dict of one summary from its queries' errors [m], drive codes, times [s]."""
-    return _entry(
+    return ci95_of(
         summary_ci(
             errors, codes, times, n_resamples=stats.resamples, seed=stats.seed, level=stats.level
         )
     )
 
 
-def _entry(r: Mapping[str, Any]) -> dict[str, Any]:
+def ci95_of(r: Mapping[str, Any]) -> dict[str, Any]:
+    """results.json's ``ci95`` of a summary from the intervals ``r`` of
+    :func:`~posbench.metrics.bootstrap.summary_ci` (its ``clusters`` as ``drives``)."""
     return {
         "mean_m": r["mean_m"],
         "median_m": r["median_m"],
@@ -103,7 +105,7 @@ def one_drive_cis(
     ``bench score``, give ``cv`` the same interval as a run of every predictor)."""
     out: dict[str, dict[str, Any]] = {}
     for name, (errors, times) in queries.items():
-        out[name] = _entry(
+        out[name] = ci95_of(
             summary_ci(
                 errors,
                 np.zeros(times.size, dtype=np.int64),
@@ -153,10 +155,10 @@ def add_group_cis(
         level=stats.level,
         only=set(wanted.values()),
     )
-    empty = _entry(summary_ci(np.empty(0), np.empty(0, dtype=np.int64)))
+    empty = ci95_of(summary_ci(np.empty(0), np.empty(0, dtype=np.int64)))
     for k, s in summaries.items():
         i = wanted.get(str(k))
-        s["ci95"] = _entry(cis[i]) if i is not None else dict(empty)
+        s["ci95"] = ci95_of(cis[i]) if i is not None else dict(empty)
 
 
 def outage_cis(
