@@ -43,12 +43,13 @@ class _CdfCounts:
 
     def add(self, errors: np.ndarray) -> None:
         self.bins.add(errors)
-        self.low, self.high = min(self.low, float(errors.min())), max(self.high, errors.max())
+        self.low = min(self.low, float(errors.min()))
+        self.high = max(self.high, float(errors.max()))
 
     def curve(self) -> tuple[np.ndarray, np.ndarray, int]:
         """(errors [m], fractions) of the CDF as drawn (exact at each point:
         :meth:`~posbench.metrics.two_pass_quantiles.BinCounts.cdf`), and the count."""
-        e, c = self.bins.cdf(self.low, float(self.high))
+        e, c = self.bins.cdf(self.low, self.high)
         return e, c, self.bins.total
 
 
