@@ -133,6 +133,12 @@ def test_runner_traces_are_the_scoring_of_its_answers():
 #: BLAS may differ in the last bits across CPUs, hence a relative tolerance
 GOLDEN_RTOL = 1e-6
 GOLDEN_ATOL_M = 1e-9
+#: the networks run in float32 (onnxruntime), whose kernels differ by CPU (AVX2, AVX-512):
+#: their answers, and the figures made of them, agree to float32's precision carried
+#: through the recurrence, not float64's (8.1e-6 at most measured on an AVX-512 machine
+#: against reports/synthetic, made on AVX2; a few hundred float32 ulps)
+GOLDEN_RTOL_FLOAT32 = 5e-5
+FLOAT32_PREDICTORS = {"lstm", "hybrid", "lstm-authors"}
 NOT_COMPARED = {"command", "versions", "git_commit", "outputs", "paper_figures", "schema_version"}
 
 
@@ -158,7 +164,9 @@ def _compare(a, b, path="", added_ok=False):
         for i, (x, y) in enumerate(zip(a, b, strict=False)):
             yield from _compare(x, y, f"{path}[{i}]", added_ok)
     elif isinstance(a, float) and isinstance(b, float):
-        if not math.isclose(a, b, rel_tol=GOLDEN_RTOL, abs_tol=GOLDEN_ATOL_M):
+        learned = not FLOAT32_PREDICTORS.isdisjoint(path.split("/"))
+        rtol = GOLDEN_RTOL_FLOAT32 if learned else GOLDEN_RTOL
+        if not math.isclose(a, b, rel_tol=rtol, abs_tol=GOLDEN_ATOL_M):
             yield f"{path}: {a!r} vs {b!r}"
     elif a != b:
         yield f"{path}: {a!r} vs {b!r}"
