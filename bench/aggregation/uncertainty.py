@@ -135,6 +135,7 @@ class _Kind:
         self.groups: dict[str, dict[Any, _Group]] = {"dataset": {}, "label": {}, "since": {}}
         self.drives: dict[tuple[Any, Any], list[float]] = {}
         self.series: list[tuple[np.ndarray, np.ndarray]] = []  # pass two, one drive only
+        self._one: bool | None = None  # one_drive(), settled between the passes
 
     def add_drives(self, pairs: np.ndarray, first: list[tuple[Any, Any]], d2: np.ndarray) -> None:
         """The drives of a part's queries of the kind (``pairs``: per query, its drive's
@@ -149,8 +150,16 @@ class _Kind:
 
     def one_drive(self) -> bool:
         """Whether the kind's finite d^2 come from one drive (then its interval is the
-        block bootstrap's, of that drive's queries in time order)."""
-        return sum(c > 0 for _, c in self.drives.values()) == 1
+        block bootstrap's, of that drive's queries in time order): counted over the drives
+        once pass one is over (:meth:`settle`), not once per drive of pass two."""
+        if self._one is None:
+            return sum(c > 0 for _, c in self.drives.values()) == 1
+        return self._one
+
+    def settle(self) -> None:
+        """After pass one: the drives are all seen."""
+        self._one = None
+        self._one = self.one_drive()
 
     def nees_ci(self) -> list[float] | None:
         """The NEES's interval (None: no query with a finite d^2)."""
@@ -212,6 +221,8 @@ class UncertaintyFigures:
         self._visit(rows, second=False)
 
     def between(self) -> bool:
+        for acc in self.kinds.values():
+            acc.settle()
         return self.reported
 
     def second(self, rows: pd.DataFrame) -> None:
