@@ -102,3 +102,43 @@ def test_uncertainty_figures_are_the_whole_rows_figures(traces, tmp_path):
             turn = (g.label == "turn").to_numpy()
             want = calibration_of(d2[turn], ld[turn], with_ci=False)
             _same(got["by_label"]["kf"][kind]["turn"], want, f"{source}/{kind}/turn")
+
+
+def test_seed_figures_are_those_of_the_rows_joined(traces, tmp_path):
+    """A seed's figures (bench run --seeds) read one drive at a time, from parts or a frame:
+    each predictor's summaries overall and per data set as summarize gives them on its
+    scored rows joined (means to rounding), and the paired difference as
+    paired_mean_difference gives it."""
+    from posbench.aggregation.seeds import seed_figures
+    from posbench.metrics.accuracy import summarize
+    from posbench.metrics.seeds import paired_mean_difference
+
+    scored = traces[scored_mask(traces)]
+    want: dict = {"predictors": {}, "paired": {"kf": {}}}
+    for name in ("cv", "kf"):
+        mine = scored[scored["predictor"] == name]
+        kind = mine["kind"].astype(str).to_numpy()
+        e = mine["error_m"].to_numpy(float)
+        want["predictors"][name] = {k: summarize(e[kind == k]) for k in ("future", "now")}
+    for k in ("future", "now"):
+        a, b = (
+            scored.loc[(scored["predictor"] == n) & (scored["kind"] == k), "error_m"].to_numpy()
+            for n in ("cv", "kf")
+        )
+        want["paired"]["kf"][k] = paired_mean_difference(a, b)
+
+    def same(got: dict, summary: dict) -> None:  # means and RMSE to rounding
+        assert list(got) == list(summary)
+        for key, value in summary.items():
+            close = key in ("mean_m", "rmse_m")
+            assert got[key] == (pytest.approx(value, rel=1e-12) if close else value), key
+
+    for source in _sources(traces, tmp_path).values():
+        got = seed_figures(source, ["cv", "kf"], "cv", 7)
+        assert got["seed"] == 7 and list(got["by_dataset"]) == ["synthetic"]
+        for name in ("cv", "kf"):
+            for k in ("future", "now"):
+                same(got["predictors"][name][k], want["predictors"][name][k])
+                same(got["by_dataset"]["synthetic"][name][k], want["predictors"][name][k])
+        for k in ("future", "now"):
+            assert got["paired"]["kf"][k] == pytest.approx(want["paired"]["kf"][k], rel=1e-9)
