@@ -265,14 +265,12 @@ def drive_entry(d: DriveBound) -> dict[str, Any]:
 class BoundFigures:
     """The bound's figures of a run: ``overall`` and per data set its scope's
     (:meth:`_Scope.result`), per data set its route types', and per drive (data set, name)
-    its :func:`drive_entry`; ``datasets``: those with bound rows, in order of first
-    appearance."""
+    its :func:`drive_entry`."""
 
     overall: dict[str, Any]
     by_dataset: dict[str, dict[str, Any]]
     by_label: dict[str, dict[str, Any]]
     drives: dict[tuple[str, str], dict[str, Any]]
-    datasets: list[str]
 
 
 def bound_figures(
@@ -306,10 +304,10 @@ def bound_figures(
     for (ds, _), d in drive_bounds(runs):
         for part in parts(ds):
             part.second(d)
-    found = list(dict.fromkeys(seen))
+    found = set(seen)  # the data sets with bound rows
     whole = overall.result()
     by_dataset = {
         ds: dict(whole) if len(found) == 1 else scopes[ds].result() for ds in wanted if ds in found
     }
     by_label = {ds: labels[ds].result() for ds in by_dataset}
-    return BoundFigures(whole, by_dataset, by_label, drives, found)
+    return BoundFigures(whole, by_dataset, by_label, drives)

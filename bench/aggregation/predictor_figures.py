@@ -38,15 +38,18 @@ def latency_of(runs: Sequence[DriveRun], call: str, name: str) -> dict[str, Any]
     (:func:`~posbench.metrics.latency.streamed_latency_summary`: at 64 drive hours the
     durations joined held 180 MB); None where no drive has them."""
 
+    seen = False
+
     def pieces() -> Iterator[np.ndarray]:
+        nonlocal seen
         for r in runs:
             found = r.call_ns(call, name)
             if found is not None:
+                seen = True
                 yield found
 
-    if next(pieces(), None) is None:
-        return None
-    return streamed_latency_summary(pieces)
+    summary = streamed_latency_summary(pieces)
+    return summary if seen else None
 
 
 def empty_kinds(stats: Statistics | None = None) -> dict[str, Any]:

@@ -135,7 +135,9 @@ class _Kind:
         self.groups: dict[str, dict[Any, _Group]] = {"dataset": {}, "label": {}, "since": {}}
         self.drives: dict[tuple[Any, Any], list[float]] = {}
         self.series: list[tuple[np.ndarray, np.ndarray]] = []  # pass two, one drive only
-        self._one: bool | None = None  # one_drive(), settled between the passes
+        #: whether the kind's finite d^2 come from one drive (then its interval is the block
+        #: bootstrap's, of that drive's queries in time order): settled after pass one
+        self.one_drive = False
 
     def add_drives(self, pairs: np.ndarray, first: list[tuple[Any, Any]], d2: np.ndarray) -> None:
         """The drives of a part's queries of the kind (``pairs``: per query, its drive's
@@ -148,24 +150,16 @@ class _Kind:
             acc[0] += s
             acc[1] += c
 
-    def one_drive(self) -> bool:
-        """Whether the kind's finite d^2 come from one drive (then its interval is the
-        block bootstrap's, of that drive's queries in time order): counted over the drives
-        once pass one is over (:meth:`settle`), not once per drive of pass two."""
-        if self._one is None:
-            return sum(c > 0 for _, c in self.drives.values()) == 1
-        return self._one
-
     def settle(self) -> None:
-        """After pass one: the drives are all seen."""
-        self._one = None
-        self._one = self.one_drive()
+        """After pass one, every drive seen: :attr:`one_drive`, counted once (not once per
+        drive of pass two)."""
+        self.one_drive = sum(c > 0 for _, c in self.drives.values()) == 1
 
     def nees_ci(self) -> list[float] | None:
         """The NEES's interval (None: no query with a finite d^2)."""
         if not self.all.n:
             return None
-        if self.one_drive():
+        if self.one_drive:
             d2 = np.concatenate([s for s, _ in self.series])
             t = np.concatenate([t for _, t in self.series])
             ci = summary_ci(d2, np.zeros(d2.size, dtype=np.int64), t, quantiles=False)
@@ -247,7 +241,7 @@ class UncertaintyFigures:
                 acc.add_drives(pairs[mine], first, sub_d2)
             else:
                 acc.all.keep(sub_d2, sub_ld)
-                if acc.one_drive():
+                if acc.one_drive:
                     ok = np.isfinite(sub_d2)
                     acc.series.append((sub_d2[ok], rows["t_query"].to_numpy(float)[mine][ok]))
             for col, (codes, names) in groups.items():
