@@ -66,6 +66,8 @@ from posbench.replay.reference import TRUTH, cubic_through_fixes, truth_at
 
 #: the columns of a drive's limit frame (``DriveRun.limit``): one row per scored query
 LIMIT_COLUMNS = ("kind", "t_query", "label", "limit_m", "limit_imu_m")
+#: the query columns :func:`drive_limit` reads (of :func:`posbench.replay.queries.query_frame`)
+LIMIT_QUERY_COLUMNS = ("kind", "t_issue", "t_query", "x_ref", "y_ref", "label", "warmup")
 
 
 #: the largest stated accuracy [m] the bound takes as it is (its square stays finite)

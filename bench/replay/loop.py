@@ -25,7 +25,7 @@ probe a predictor between events (:mod:`posbench.predictor_tools.contract`).
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from time import perf_counter_ns
 
@@ -68,29 +68,63 @@ def _store_cov(out: np.ndarray, i: int, c: object) -> None:
         out[i] = m[0, 0], 0.5 * (m[0, 1] + m[1, 0]), m[1, 1]
 
 
-def build_events(prep: PreparedDrive) -> tuple[np.ndarray, np.ndarray]:
-    """(kind, index) arrays of all events in replay order."""
+#: events converted to Python floats at a time (:func:`event_windows`): memory stays bounded
+#: by this window, not by the drive's length
+CHUNK_EVENTS = 1 << 16
+
+
+def _event_times(prep: PreparedDrive) -> list[np.ndarray]:
+    """Each event kind's times [s] (strictly increasing: :class:`~posbench.scenarios.drive.Drive`
+    checks it), indexed by kind; empty for a stream the drive lacks."""
     d = prep.drive
-    parts_t = [prep.gps.t]
-    parts_k = [np.full(len(prep.gps), GPS)]
-    if d.imu is not None:
-        parts_t.append(d.imu.t)
-        parts_k.append(np.full(len(d.imu), IMU))
-    if d.speed is not None:
-        parts_t.append(d.speed.t)
-        parts_k.append(np.full(len(d.speed), SPEED))
-    parts_t.append(prep.now.t_issue)
-    parts_k.append(np.full(prep.now.t_issue.size, QUERY))
-    t = np.concatenate(parts_t)
-    k = np.concatenate(parts_k)
-    idx = np.concatenate([np.arange(p.size) for p in parts_t])
+    none = np.empty(0)
+    return [
+        prep.gps.t,
+        d.imu.t if d.imu is not None else none,
+        d.speed.t if d.speed is not None else none,
+        prep.now.t_issue,
+    ]
+
+
+def _ordered(parts: list[tuple[int, np.ndarray, int]]) -> tuple[np.ndarray, np.ndarray]:
+    """(kind, index) of the events ``(kind, times, first index)``, by time and, at equal
+    times, by kind (a stable sort: a kind's events keep their order)."""
+    t = np.concatenate([p[1] for p in parts])
+    k = np.concatenate([np.full(p[1].size, p[0], dtype=np.int8) for p in parts])
+    idx = np.concatenate([np.arange(p[2], p[2] + p[1].size) for p in parts])
     order = np.lexsort((k, t))
     return k[order], idx[order]
 
 
-#: events converted to Python floats at a time: memory stays bounded by this window,
-#: not by the drive's length
-CHUNK_EVENTS = 1 << 16
+def build_events(prep: PreparedDrive) -> tuple[np.ndarray, np.ndarray]:
+    """(kind, index) arrays of all events in replay order."""
+    return _ordered([(kind, t, 0) for kind, t in enumerate(_event_times(prep))])
+
+
+def event_windows(
+    prep: PreparedDrive, events: int = 1 << 16
+) -> Iterator[tuple[np.ndarray, np.ndarray]]:
+    """:func:`build_events` in consecutive time windows of about ``events`` events each (as
+    many as the drive's mean event rate puts in the window's span): the same events in the
+    same order, without holding a long drive's event list. Every kind is cut at the same
+    instants, so events at equal times fall in one window and keep their order."""
+    times = _event_times(prep)
+    total = sum(t.size for t in times)
+    if total == 0:
+        return
+    first = min(float(t[0]) for t in times if t.size)
+    last = max(float(t[-1]) for t in times if t.size)
+    windows = max(1, -(-total // events))
+    cuts = np.linspace(first, last, windows + 1)[1:-1]
+    edges = [np.concatenate([[0], np.searchsorted(t, cuts, side="left"), [t.size]]) for t in times]
+    for w in range(windows):
+        parts = [
+            (kind, times[kind][e[w] : e[w + 1]], int(e[w]))
+            for kind, e in enumerate(edges)
+            if e[w + 1] > e[w]
+        ]
+        if parts:
+            yield _ordered(parts)
 
 
 def _columns(prep: PreparedDrive) -> dict[int, list[np.ndarray | None]]:
@@ -129,10 +163,9 @@ def fix_sigma(accuracy_m: float) -> float | None:
 def replay(predictor: Predictor, prep: PreparedDrive, horizon_s: float) -> ReplayResult:
     """Feed every event to ``predictor`` in order; collect its answers and timings.
 
-    Events are handled in windows of :data:`CHUNK_EVENTS`, converting only that window's
-    samples to Python floats (fast scalar access without holding a whole long drive as
-    Python objects)."""
-    kinds, idxs = build_events(prep)
+    Events are ordered and handled in time windows of about :data:`CHUNK_EVENTS`
+    (:func:`event_windows`), converting only that window's samples to Python floats (fast
+    scalar access without holding a whole long drive's events or its Python objects)."""
     cols = _columns(prep)
     n_fix, n_now = len(prep.gps), prep.now.t_query.size
     future = np.full((n_fix, 2), np.nan)
@@ -150,8 +183,7 @@ def replay(predictor: Predictor, prep: PreparedDrive, horizon_s: float) -> Repla
     observe_speed, position_at = predictor.observe_speed, predictor.position_at
     with_sigma = accepts_sigma(observe_gps)
     predictor.reset()
-    for c in range(0, kinds.size, CHUNK_EVENTS):
-        kc, ic = kinds[c : c + CHUNK_EVENTS], idxs[c : c + CHUNK_EVENTS]
+    for kc, ic in event_windows(prep, CHUNK_EVENTS):
         go, (gt, gx, gy, gs) = _window(cols[GPS], ic[kc == GPS])
         sigmas = [fix_sigma(a) for a in gs] if with_sigma else []
         qo, (qt,) = _window(cols[QUERY], ic[kc == QUERY])

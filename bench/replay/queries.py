@@ -4,6 +4,9 @@ and where its warm-up ends."""
 
 from __future__ import annotations
 
+from collections.abc import Callable, Sequence
+from typing import Any
+
 import numpy as np
 import pandas as pd
 
@@ -22,28 +25,37 @@ def warmup_end_s(prep: PreparedDrive) -> float:
     return float(prep.gps.t[1]) if len(prep.gps) >= 2 else float("inf")
 
 
-def query_frame(prep: PreparedDrive, kind: str) -> pd.DataFrame:
+def query_frame(
+    prep: PreparedDrive,
+    kind: str,
+    rows: slice = slice(None),
+    columns: Sequence[str] | None = None,
+) -> pd.DataFrame:
     """One drive's queries of one kind (``future`` or ``now``) with what they are scored
-    against: the :data:`QUERY_COLUMNS` of the traces."""
+    against: the :data:`QUERY_COLUMNS` of the traces (``columns`` only, given them), of the
+    queries ``rows`` (a slice of that kind's queries, in time order; default all)."""
     q: Queries = prep.future if kind == "future" else prep.now
-    return pd.DataFrame(
-        {
-            "dataset": prep.dataset,
-            "drive": prep.drive.name,
-            "kind": kind,
-            "t_issue": q.t_issue,
-            "t_query": q.t_query,
-            "x_ref": q.ref_xy[:, 0],
-            "y_ref": q.ref_xy[:, 1],
-            "label": pd.Categorical(q.label, categories=LABEL_CATEGORIES),
-            "speed_mps": q.speed_mps,
-            "since_fix_s": q.since_fix_s,
-            "outage": outage_ids(q.t_query, prep.outages),
-            "warmup": q.t_issue < warmup_end_s(prep),
-            "heading_ref": _or_nan(q.heading_rad, q.t_query.size),
-            "yaw_rate_ref": _or_nan(q.yaw_rate, q.t_query.size),
-        }
-    ).astype({"kind": KIND_DTYPE})
+    t_issue, t_query = q.t_issue[rows], q.t_query[rows]
+    n = t_query.size
+    make: dict[str, Callable[[], Any]] = {
+        "dataset": lambda: prep.dataset,
+        "drive": lambda: prep.drive.name,
+        "kind": lambda: kind,
+        "t_issue": lambda: t_issue,
+        "t_query": lambda: t_query,
+        "x_ref": lambda: q.ref_xy[rows, 0],
+        "y_ref": lambda: q.ref_xy[rows, 1],
+        "label": lambda: pd.Categorical(q.label[rows], categories=LABEL_CATEGORIES),
+        "speed_mps": lambda: q.speed_mps[rows],
+        "since_fix_s": lambda: q.since_fix_s[rows],
+        "outage": lambda: outage_ids(t_query, prep.outages),
+        "warmup": lambda: t_issue < warmup_end_s(prep),
+        "heading_ref": lambda: _or_nan(q.heading_rad, q.t_query.size)[rows],
+        "yaw_rate_ref": lambda: _or_nan(q.yaw_rate, q.t_query.size)[rows],
+    }
+    wanted = list(make) if columns is None else list(columns)
+    frame = pd.DataFrame({c: make[c]() for c in wanted}, index=pd.RangeIndex(n))
+    return frame.astype({"kind": KIND_DTYPE}) if "kind" in frame else frame
 
 
 def _or_nan(values: np.ndarray | None, n: int) -> np.ndarray:

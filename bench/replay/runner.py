@@ -5,7 +5,7 @@ number of workers."""
 from __future__ import annotations
 
 import os
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from concurrent.futures import as_completed
 from dataclasses import replace
 from pathlib import Path
@@ -17,7 +17,7 @@ import pandas as pd
 from posbench.config import RunConfig
 from posbench.predictors.registry import create
 from posbench.replay.gps_outliers import GatedPredictor
-from posbench.replay.loop import replay
+from posbench.replay.loop import ReplayResult, replay
 from posbench.replay.prepare import PreparedDrive, prepare_drive
 from posbench.replay.queries import query_frame
 from posbench.replay.reference import truth_source
@@ -27,6 +27,7 @@ from posbench.scenarios.stored_drive import DriveInfo, StoredDrive, as_drive
 from posbench.scenarios.truth_gaps import truth_gap_note
 from posbench.scoring.records import DriveRun, merge_predictor_runs
 from posbench.scoring.score import score_many
+from posbench.scoring.trace_parts import PartWriter
 
 
 def _fixes_frame(prep: PreparedDrive) -> pd.DataFrame:
@@ -117,6 +118,11 @@ def part_name(index: int, predictor: int | None = None) -> str:
     return f"drive-{index:06d}" + ("" if predictor is None else f"-{predictor:03d}")
 
 
+#: query rows scored at a time, per predictor and kind: what a worker holds of a drive's
+#: traces, whatever the drive's span
+TRACE_CHUNK_ROWS = 1 << 16
+
+
 def run_drive(
     drive: Drive | StoredDrive,
     cfg: RunConfig,
@@ -127,22 +133,54 @@ def run_drive(
     """Prepare one drive and replay it through every configured predictor; with ``limit``,
     also compute the bound on its scored queries (:func:`posbench.replay.limit.drive_limit`;
     ``bench run`` asks for it, once per drive). Given a folder ``parts``, its traces are
-    written there as part ``part`` and the record names the file instead of holding them
+    written there as part ``part`` while they are scored, :data:`TRACE_CHUNK_ROWS` queries at
+    a time, and the record names the file instead of holding them
     (:meth:`~posbench.scoring.records.DriveRun.spill`): what returns to the caller is small.
     A stored drive is read here (:func:`~posbench.scenarios.stored_drive.as_drive`), unless
     it is not scored."""
     described = drive.info if isinstance(drive, StoredDrive) else drive  # its meta: enough
     reason = skip_reason(described, cfg)
-    record = skipped_run(described, reason) if reason else _run_drive(as_drive(drive), cfg, limit)
-    return record.spill(parts, part) if parts is not None else record
+    if reason:
+        record = skipped_run(described, reason)
+        return record.spill(parts, part) if parts is not None else record
+    if parts is None:
+        return _run_drive(as_drive(drive), cfg, limit, None)
+    with PartWriter(parts, part) as writer:
+        record = _run_drive(as_drive(drive), cfg, limit, writer)
+        if writer.rows:
+            record = replace(record, trace_parts=[str(writer.close())], trace_rows=writer.rows)
+    return record.spill(parts, part)
 
 
-def _run_drive(drive: Drive, cfg: RunConfig, limit: bool) -> DriveRun:
+def _scored_pieces(prep: PreparedDrive, name: str, res: ReplayResult) -> Iterator[pd.DataFrame]:
+    """One predictor's traces on ``prep`` (its future rows, then its now rows) in pieces of
+    at most :data:`TRACE_CHUNK_ROWS` rows, from its replay ``res``."""
+    n_fix = len(prep.future.t_query)
+    for kind, xy, first in (("future", res.future_xy, 0), ("now", res.now_xy, n_fix)):
+        for lo in range(0, len(xy), TRACE_CHUNK_ROWS):
+            hi = min(lo + TRACE_CHUNK_ROWS, len(xy))
+            cov = None if res.cov is None else res.cov[first + lo : first + hi]
+            yield score_many(query_frame(prep, kind, slice(lo, hi)), [(name, xy[lo:hi], cov)])
+
+
+def _run_drive(drive: Drive, cfg: RunConfig, limit: bool, writer: PartWriter | None) -> DriveRun:
+    """``drive`` through every predictor of ``cfg``: each predictor's traces scored as soon as
+    it is replayed and given to ``writer`` piece by piece (None: kept in the record)."""
     prep = prepare_drive(drive, cfg)
-    answers, step_ns, query_ns, cov_ns, rejected = [], {}, {}, {}, {}
-    # one query table, future then now: each predictor's traces are its future rows, then
-    # its now rows (score_many tiles the table once per predictor)
-    queries = pd.concat([query_frame(prep, "future"), query_frame(prep, "now")], ignore_index=True)
+    step_ns, query_ns, cov_ns, rejected = {}, {}, {}, {}
+    bound: pd.DataFrame | None = None
+    bound_info: dict[str, Any] = {}
+    if limit:
+        from posbench.replay.limit import LIMIT_QUERY_COLUMNS, drive_limit
+
+        queries = pd.concat(
+            [query_frame(prep, k, columns=LIMIT_QUERY_COLUMNS) for k in ("future", "now")],
+            ignore_index=True,
+        )
+        bound, bound_info = drive_limit(prep, queries, cfg)
+        del queries
+    pieces: list[pd.DataFrame] = []
+    keep = pieces.append if writer is None else writer.write
     condition = prep.gps_condition if cfg.use_tuned else None
     for name in cfg.predictors:
         pred = create(
@@ -154,18 +192,18 @@ def _run_drive(drive: Drive, cfg: RunConfig, limit: bool) -> DriveRun:
         refuse_far_answers(name, drive.name, prep, res.future_xy, res.now_xy)
         if gated is not None:
             rejected[name] = gated.rejected
-        answers.append((name, np.concatenate([res.future_xy, res.now_xy]), res.cov))
         step_ns[name] = res.step_ns
         query_ns[name] = res.query_ns
         if res.cov_ns is not None:
             cov_ns[name] = res.cov_ns
-    traces = score_many(queries, answers)
-    bound: pd.DataFrame | None = None
-    bound_info: dict[str, Any] = {}
-    if limit:
-        from posbench.replay.limit import drive_limit
-
-        bound, bound_info = drive_limit(prep, queries, cfg)
+        for piece in _scored_pieces(prep, name, res):
+            keep(piece)
+        del res
+    if writer is None:
+        traces = pd.concat(pieces, ignore_index=True) if pieces else pd.DataFrame()
+    else:
+        traces = writer.empty if writer.empty is not None else pd.DataFrame()
+    del pieces
     gaps = truth_gap_note(drive.truth.t) if drive.truth is not None else ""
     return DriveRun(
         drive.name,

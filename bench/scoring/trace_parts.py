@@ -25,34 +25,70 @@ TEXT = ("dataset", "drive", "predictor")
 KEEP_READS = SCORED_BY
 
 
+class PartWriter:
+    """A traces part written piece by piece (:meth:`write`, in the order its rows are to be
+    read) as ``folder/name.parquet``: to a temporary name, renamed by :meth:`close`, so a part
+    that exists is whole (left unfinished, as when an error leaves the ``with`` block, it is
+    removed). Each piece is a row group of its own: pieces of one predictor each, so that
+    a read of one predictor skips the others (:func:`read_part`). Memory: one piece."""
+
+    def __init__(self, folder: Path, name: str) -> None:
+        folder.mkdir(parents=True, exist_ok=True)
+        self.path = folder / f"{name}.parquet"
+        self._tmp = folder / f".{name}.{os.getpid()}.tmp"
+        self._writer: Any = None
+        #: the rows written so far
+        self.rows = 0
+        #: the first piece's columns and types, no rows (None before any piece)
+        self.empty: pd.DataFrame | None = None
+
+    def write(self, piece: pd.DataFrame) -> None:
+        """Append ``piece`` (the columns and types of every piece the same)."""
+        import pyarrow as pa
+        import pyarrow.parquet as pq
+
+        if self.empty is None:
+            self.empty = piece.iloc[:0]
+        if piece.empty:
+            return
+        table = pa.Table.from_pandas(piece, preserve_index=False)
+        if self._writer is None:
+            self._writer = pq.ParquetWriter(self._tmp, table.schema)
+        self._writer.write_table(table)
+        self.rows += len(piece)
+
+    def close(self) -> Path:
+        """Finish the part (with no rows: the columns of the first piece) and name it."""
+        import pyarrow as pa
+        import pyarrow.parquet as pq
+
+        if self._writer is None:
+            empty = self.empty if self.empty is not None else pd.DataFrame()
+            pq.write_table(pa.Table.from_pandas(empty, preserve_index=False), self._tmp)
+        else:
+            self._writer.close()
+            self._writer = None
+        os.replace(self._tmp, self.path)
+        return self.path
+
+    def __enter__(self) -> PartWriter:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        if self._writer is not None:
+            self._writer.close()
+            self._writer = None
+        self._tmp.unlink(missing_ok=True)
+
+
 def write_part(folder: Path, traces: pd.DataFrame, name: str) -> Path:
     """``traces`` (one drive's, or one drive and predictor's) as ``folder/name.parquet``, one
-    row group per predictor so that a read of one predictor skips the others; written to a
-    temporary name and renamed, so a part that exists is whole. The path."""
-    import pyarrow as pa
-    import pyarrow.parquet as pq
-
-    folder.mkdir(parents=True, exist_ok=True)
-    path = folder / f"{name}.parquet"
-    tmp = folder / f".{name}.{os.getpid()}.tmp"
-    writer = None
-    try:
+    row group per predictor (:class:`PartWriter`). The path."""
+    with PartWriter(folder, name) as part:
+        part.write(traces.iloc[:0])
         for _, rows in traces.groupby("predictor", sort=False, observed=True):
-            table = pa.Table.from_pandas(rows, preserve_index=False)
-            if writer is None:
-                writer = pq.ParquetWriter(tmp, table.schema)
-            writer.write_table(table)
-        if writer is None:  # no rows: an empty part keeps the columns
-            pq.write_table(pa.Table.from_pandas(traces, preserve_index=False), tmp)
-        else:
-            writer.close()
-            writer = None
-        os.replace(tmp, path)
-    finally:
-        if writer is not None:
-            writer.close()
-        tmp.unlink(missing_ok=True)
-    return path
+            part.write(rows)
+        return part.close()
 
 
 def read_file(path: str | Path) -> pd.DataFrame:
@@ -84,6 +120,7 @@ def read_part(
     rows filtered. (``pyarrow.parquet.read_table`` with filters goes through the dataset
     API, which keeps about 0.5 MB per file read: over the 384 parts of 64 drive hours,
     190 MB the process never gets back.)"""
+    import pyarrow as pa
     import pyarrow.parquet as pq
 
     cols = None if columns is None else list(dict.fromkeys(columns))
@@ -99,10 +136,19 @@ def read_part(
         read = None if cols is None else [*cols, *extra]
         if not groups:  # no rows: the columns as the whole part types them (categories too)
             return pf.read(columns=cols, use_pandas_metadata=True).to_pandas().iloc[:0]
-        table = pf.read_row_groups(groups, columns=read, use_pandas_metadata=True)
-    if exact and (keep is not None or plain):  # rows chosen in Arrow: only they become a frame
-        chosen = table.filter(keep(_arrow_columns(table))) if keep is not None else table
-        del table
+        if exact and keep is not None:  # rows chosen in Arrow, one row group at a time
+            chosen = pa.concat_tables(
+                [
+                    _kept_rows(pf.read_row_group(g, columns=read, use_pandas_metadata=True), keep)
+                    for g in groups
+                ]
+            )
+        else:
+            table = pf.read_row_groups(groups, columns=read, use_pandas_metadata=True)
+    if exact and (keep is not None or plain):  # only the rows chosen become a frame
+        if keep is None:
+            chosen = table
+            del table
         chosen = chosen if cols is None else chosen.select(cols)
         return _plain_frame(chosen) if plain else chosen.to_pandas()
     df = table.to_pandas()
@@ -135,6 +181,11 @@ def _plain_frame(table: Any) -> pd.DataFrame:
         else:
             out[name] = arr.to_numpy(zero_copy_only=False)
     return pd.DataFrame(out, copy=False)
+
+
+def _kept_rows(table: Any, keep: Callable[[Callable[[str], np.ndarray | None]], np.ndarray]) -> Any:
+    """The rows of Arrow ``table`` that ``keep`` keeps."""
+    return table.filter(keep(_arrow_columns(table)))
 
 
 def _arrow_columns(table: Any) -> Callable[[str], np.ndarray | None]:

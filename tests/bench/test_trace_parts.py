@@ -229,3 +229,42 @@ def test_a_predictors_row_bound_comes_from_the_parts_metadata(both):
         assert on_disk.row_bound(name) == in_memory.row_bound(name) == n > 0
         assert len(on_disk.scored(name, ["kind"])) < n
     assert on_disk.row_bound("nobody") == 0
+
+
+def test_a_drive_scored_in_pieces_gives_the_rows_scored_at_once(drives, tmp_path, monkeypatch):
+    """A worker scores a drive's queries TRACE_CHUNK_ROWS at a time and writes each piece to
+    its part as it goes (what it holds does not grow with the drive's span): the rows, their
+    order and types are those of one piece per predictor, in memory and read back from the
+    part; a read of one predictor still skips the others' row groups."""
+    import pyarrow.parquet as pq
+
+    import posbench.replay.runner as runner
+    from posbench.scoring.trace_parts import read_file, read_part
+
+    drive = drives[0]
+    monkeypatch.setattr(runner, "TRACE_CHUNK_ROWS", 1 << 30)
+    whole = runner.run_drive(drive, CFG, limit=True)
+    monkeypatch.setattr(runner, "TRACE_CHUNK_ROWS", 97)
+    pieces = runner.run_drive(drive, CFG, limit=True)
+    pd.testing.assert_frame_equal(pieces.traces, whole.traces, check_exact=True)
+    pd.testing.assert_frame_equal(pieces.limit, whole.limit, check_exact=True)
+    written = runner.run_drive(drive, CFG, limit=True, parts=tmp_path, part="d")
+    assert written.traces.empty and list(written.traces.columns) == list(whole.traces.columns)
+    (path,) = written.trace_parts
+    assert written.trace_rows == len(whole.traces)
+    assert pq.ParquetFile(path).metadata.num_row_groups > 2 * len(CFG.predictors)
+    pd.testing.assert_frame_equal(read_file(path), whole.traces, check_exact=True)
+    kf = whole.traces[whole.traces["predictor"] == "kf"].reset_index(drop=True)
+    got = read_part(path, predictor="kf")
+    assert len(got) == len(kf)
+    np.testing.assert_array_equal(got["error_m"].to_numpy(), kf["error_m"].to_numpy())
+    assert not list(tmp_path.glob(".*.tmp"))
+
+
+def test_a_part_left_unfinished_by_an_error_is_not_left_behind(tmp_path):
+    from posbench.scoring.trace_parts import PartWriter
+
+    with pytest.raises(RuntimeError), PartWriter(tmp_path, "d") as part:
+        part.write(pd.DataFrame({"predictor": ["cv"], "error_m": [0.5]}))
+        raise RuntimeError("the predictor failed")
+    assert list(tmp_path.iterdir()) == []
