@@ -5,7 +5,7 @@ error. Each finds that drive reading a few columns one predictor at a time
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -25,7 +25,7 @@ from posbench.figures.style import (
     warmup_mask,
 )
 from posbench.scoring.trace_parts import text_values
-from posbench.scoring.trace_set import TraceSet, as_trace_set
+from posbench.scoring.trace_set import Keep, TraceSet, as_trace_set
 
 if TYPE_CHECKING:  # matplotlib is imported when a figure is drawn: importing this module is cheap
     from matplotlib.figure import Figure
@@ -77,10 +77,25 @@ def turning_drive(ts: TraceSet, known_error: bool) -> tuple[str, bool] | None:
     return min(firsts, key=order.index), False
 
 
-def drive_rows(ts: TraceSet, drive: str, columns: list[str]) -> pd.DataFrame:
-    """The rows of ``drive`` past the warm-up, ``columns`` of them, every predictor's, in
-    the traces' order."""
-    return headline(ts.frame([*columns, "warmup"], drive=drive), columns)
+def drive_rows(
+    ts: TraceSet,
+    drive: str,
+    columns: list[str],
+    predictor: str | None = None,
+    rows: Keep | None = None,
+) -> pd.DataFrame:
+    """The rows of ``drive`` past the warm-up, ``columns`` of them, every predictor's (or
+    ``predictor``'s), in the traces' order; ``rows``: only those it keeps, chosen as they
+    are read (:meth:`~posbench.scoring.trace_set.TraceSet.frame`: a long drive's figure
+    reads the rows it draws, not the drive)."""
+    return headline(ts.frame([*columns, "warmup"], predictor, drive, rows), columns)
+
+
+def _future(column: Callable[[str], np.ndarray | None]) -> np.ndarray:
+    """The future queries' rows (a ``rows`` of :func:`drive_rows`)."""
+    kind = column("kind")
+    assert kind is not None
+    return np.asarray(kind == "future")
 
 
 def plot_path(traces: TraceSet | pd.DataFrame, preds: Sequence[str]) -> Figure:
@@ -97,17 +112,22 @@ def plot_path(traces: TraceSet | pd.DataFrame, preds: Sequence[str]) -> Figure:
         raise NothingToPlot("no future query with a reference position")
     drive, has_turns = picked
     cols = ["drive", "predictor", "kind", "t_issue", "t_query", "x", "y", "x_ref", "y_ref"]
-    t = drive_rows(ts, drive, [*cols, "error_m", "label"])
-    dfd = t[(t.kind == "future") & np.isfinite(t["x_ref"].to_numpy(dtype=float))]
+    t = drive_rows(ts, drive, [*cols, "error_m", "label"], rows=_future)
+    dfd = t[np.isfinite(t["x_ref"].to_numpy(dtype=float))]
     med = (dfd.loc[dfd.label.isin(TURN_LABELS), "t_issue"] if has_turns else dfd.t_issue).median()
     tc = float(dfd.t_issue.iloc[int(np.argmin(np.abs(dfd.t_issue.to_numpy(float) - med)))])
     half = PATH_WINDOW_S / 2
     win = dfd[(dfd.t_issue > tc - half) & (dfd.t_issue < tc + half)]
-    ref_rows = t[
-        (t.predictor == win.predictor.iloc[0])
-        & (t.t_query > tc - half)
-        & (t.t_query < tc + half + 1)
-    ]
+
+    def in_window(column: Callable[[str], np.ndarray | None]) -> np.ndarray:
+        tq = column("t_query")
+        assert tq is not None
+        return np.asarray((tq > tc - half) & (tq < tc + half + 1))
+
+    # the reference under the window: the first predictor's rows of any kind there
+    ref_rows = drive_rows(
+        ts, drive, [*cols, "error_m", "label"], str(win.predictor.iloc[0]), in_window
+    )
     ref = ref_rows.dropna(subset=["x_ref"]).sort_values("t_query")
     moments = _worst_moments(win, ZOOMS, gap_s=3.0)
     colors = colors_for(preds)
@@ -208,12 +228,12 @@ def plot_trajectory_error(traces: TraceSet | pd.DataFrame, preds: Sequence[str])
     if picked is None:
         raise NothingToPlot("no future query with a known error")
     drive, _ = picked
-    t = drive_rows(
-        ts, drive, ["drive", "predictor", "kind", "t_query", "x_ref", "y_ref", "error_m"]
-    )
-    dfd = finite_errors(t[(t.kind == "future") & np.isfinite(t["x_ref"].to_numpy(dtype=float))])
+    cols = ["drive", "predictor", "kind", "t_query", "x_ref", "y_ref", "error_m"]
+    t = drive_rows(ts, drive, cols, rows=_future)
+    dfd = finite_errors(t[np.isfinite(t["x_ref"].to_numpy(dtype=float))])
     names = in_order(preds, dfd.predictor)
-    track = t[t.predictor == names[0]].dropna(subset=["x_ref"])
+    # the grey track: the first predictor's rows of every kind (its now queries too)
+    track = drive_rows(ts, drive, cols, names[0]).dropna(subset=["x_ref"])
     track = track.sort_values("t_query")
     e_all = dfd.error_m.to_numpy(dtype=float)
     lo, hi = np.percentile(e_all, [1, 99])

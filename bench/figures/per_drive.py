@@ -5,7 +5,7 @@ columns one predictor at a time; each figure reads its drive's rows alone."""
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -26,7 +26,7 @@ from posbench.figures.style import (
 )
 from posbench.naming import unique_file_safe
 from posbench.scoring.trace_parts import text_values
-from posbench.scoring.trace_set import TraceSet, as_trace_set
+from posbench.scoring.trace_set import Keep, TraceSet, as_trace_set
 
 #: at most this many per-drive error-over-time figures per run (the first drives in run
 #: order); the note of ``error_over_time`` says when drives were left out
@@ -45,6 +45,28 @@ def _runs(t: np.ndarray, values: np.ndarray) -> list[tuple[Any, float, float]]:
     starts = np.r_[0, change]
     ends = np.r_[change, t.size - 1]
     return [(values[s], float(t[s]), float(t[e])) for s, e in zip(starts, ends, strict=True)]
+
+
+def _drawn_rows(ts: TraceSet, drive: str) -> Keep:
+    """The rows of ``drive`` :func:`draw_error_over_time` reads: every predictor's future
+    queries, the first predictor's every query (the route types' bands, the time axis), and
+    the rows in an outage or the warm-up (their bands); a long drive's now queries of the
+    other predictors are not read."""
+    first = ts.frame(["predictor"], drive=drive)["predictor"]
+    name = str(first.iloc[0]) if len(first) else ""
+
+    def keep(column: Callable[[str], np.ndarray | None]) -> np.ndarray:
+        kind, predictor = column("kind"), column("predictor")
+        outage, warmup = column("outage"), column("warmup")
+        assert kind is not None and predictor is not None
+        mask = (kind == "future") | (predictor == name)
+        if outage is not None:
+            mask |= outage >= 0
+        if warmup is not None:
+            mask |= warmup.astype(bool)
+        return np.asarray(mask)
+
+    return keep
 
 
 def draw_error_over_time(
@@ -214,8 +236,8 @@ def write_error_over_time(
         if c in ts.columns
     ]
     stems = dict(zip(chosen, unique_file_safe(chosen), strict=True))  # two names, one file name
-    for drive in chosen:  # one drive's rows at a time
-        rows = ts.frame(used, drive=drive)
+    for drive in chosen:  # one drive's rows at a time: those it draws
+        rows = ts.frame(used, drive=drive, rows=_drawn_rows(ts, drive))
         ax.clear()
         if not draw_error_over_time(ax, rows, preds, colors):
             empty.append(drive)

@@ -14,7 +14,7 @@ same order: the figures do not depend on where the traces are.
 from __future__ import annotations
 
 import os
-from collections.abc import Iterable, Iterator, Sequence
+from collections.abc import Callable, Iterable, Iterator, Sequence
 from pathlib import Path
 
 import numpy as np
@@ -29,6 +29,10 @@ from posbench.scoring.trace_parts import (
     read_part,
     rows_per_value,
 )
+
+#: a choice of rows: called with a getter of columns (name -> numpy array, None where there
+#: is no such column), it returns the mask of the rows to keep
+Keep = Callable[[Callable[[str], np.ndarray | None]], np.ndarray]
 
 #: what :func:`posbench.scoring.schema.scored_mask` reads
 MASK_COLUMNS = SCORED_BY
@@ -118,10 +122,13 @@ class TraceSet:
         columns: Sequence[str] | None = None,
         predictor: str | None = None,
         drive: str | None = None,
+        rows: Keep | None = None,
     ) -> pd.DataFrame:
         """Rows (of ``predictor`` only, and of ``drive`` only, given them) with ``columns``
         (None: all), text columns as categoricals. On disk, this reads them: ask for what
-        you need (a drive's rows are read from the parts that hold it only)."""
+        you need (a drive's rows are read from the parts that hold it only). ``rows``: only
+        the rows it keeps, chosen before they become a frame (called with a getter of the
+        columns asked for as numpy arrays, text as ``str``; :func:`read_part`)."""
         if self._frame is not None:
             df = self._frame
             if df.empty and df.columns.empty:  # no traces at all: the columns asked for
@@ -137,10 +144,12 @@ class TraceSet:
                 df = df.loc[keep]
             if columns is not None:
                 df = df[_present(columns, df.columns)] if not df.empty else df
-            return lean_traces(df)
+            return lean_traces(df if rows is None else _kept(df, rows))
         if predictor is not None and drive is None:
             held = self._held_rows(predictor)
             if held is not None:  # a new frame: the caller may add columns to it
+                if rows is not None:
+                    held = _kept(held, rows)
                 if columns is None:
                     return held.copy(deep=False)
                 return held[_present(columns, held.columns)]
@@ -149,10 +158,10 @@ class TraceSet:
         if drive is not None:
             parts = self.parts_with(drive) or self.parts[:1]
         bound = self.row_bound(predictor) if predictor is not None and drive is None else None
-        read = (read_part(p, cols, predictor, drive) for p in parts)
+        read = (read_part(p, cols, predictor, drive, keep=rows) for p in parts)
         joined = join_pieces((f for f in read if len(f)), bound)
         if joined.columns.empty and parts:  # no rows: the first part's columns, empty
-            return read_part(parts[0], cols, predictor, drive).reset_index(drop=True)
+            return read_part(parts[0], cols, predictor, drive).reset_index(drop=True).iloc[:0]
         return joined
 
     def _held_rows(self, predictor: str) -> pd.DataFrame | None:
@@ -371,3 +380,9 @@ def lean_traces(traces: pd.DataFrame) -> pd.DataFrame:
         if c in traces.columns and not isinstance(traces[c].dtype, pd.CategoricalDtype)
     }
     return traces.astype(cols) if cols else traces
+
+
+def _kept(df: pd.DataFrame, rows: Keep) -> pd.DataFrame:
+    """The rows of ``df`` that ``rows`` keeps (its text columns given as ``str`` values)."""
+    mask = rows(lambda c: df[c].to_numpy() if c in df.columns else None)
+    return df.loc[np.asarray(mask, dtype=bool)]
