@@ -268,3 +268,26 @@ def test_a_part_left_unfinished_by_an_error_is_not_left_behind(tmp_path):
         part.write(pd.DataFrame({"predictor": ["cv"], "error_m": [0.5]}))
         raise RuntimeError("the predictor failed")
     assert list(tmp_path.iterdir()) == []
+
+
+def test_a_choice_of_rows_reads_the_same_rows_from_memory_and_from_parts(both):
+    """TraceSet.frame(rows=...): the rows a figure draws chosen as they are read, one row
+    group at a time on disk; the same rows and values as choosing them in a frame in memory."""
+    memory, spilled = both
+
+    def future_late(column):
+        return (column("kind") == "future") & (column("t_query") > 20.0)
+
+    cols = ["drive", "predictor", "kind", "t_query", "error_m"]
+    in_memory, on_disk = trace_set(memory), trace_set(spilled)
+    for drive in in_memory.drives():
+        a = in_memory.frame(cols, drive=drive, rows=future_late)
+        b = on_disk.frame(cols, drive=drive, rows=future_late)
+        whole = in_memory.frame(cols, drive=drive)
+        expected = whole[(whole["kind"] == "future") & (whole["t_query"] > 20.0)]
+        assert 0 < len(a) < len(whole)
+        for got in (a, b):
+            np.testing.assert_array_equal(got["error_m"].to_numpy(), expected["error_m"])
+            assert list(got["predictor"].astype(str)) == list(expected["predictor"].astype(str))
+    kf = on_disk.frame(cols, predictor="kf", rows=future_late)
+    assert set(kf["predictor"].astype(str)) == {"kf"} and set(kf["kind"].astype(str)) == {"future"}
