@@ -62,9 +62,9 @@ def test_figures_from_parts_are_the_bytes_of_figures_from_a_frame(tmp_path, monk
     reads: list[tuple[object, object, object]] = []
     frame = TraceSet.frame
 
-    def spy(self, columns=None, predictor=None, drive=None):
+    def spy(self, columns=None, predictor=None, drive=None, rows=None):
         reads.append((columns, predictor, drive))
-        return frame(self, columns, predictor, drive)
+        return frame(self, columns, predictor, drive, rows)
 
     monkeypatch.setattr(TraceSet, "frame", spy)
     for by in (["drive"], ["drive", "predictor"]):
