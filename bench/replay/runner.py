@@ -5,7 +5,7 @@ number of workers."""
 from __future__ import annotations
 
 import os
-from collections.abc import Callable, Iterator, Sequence
+from collections.abc import Callable, Sequence
 from concurrent.futures import as_completed
 from dataclasses import replace
 from pathlib import Path
@@ -17,7 +17,7 @@ import pandas as pd
 from posbench.config import RunConfig
 from posbench.predictors.registry import create
 from posbench.replay.gps_outliers import GatedPredictor
-from posbench.replay.loop import ReplayResult, replay
+from posbench.replay.loop import replay
 from posbench.replay.prepare import PreparedDrive, prepare_drive
 from posbench.replay.queries import query_frame
 from posbench.replay.reference import truth_source
@@ -118,7 +118,7 @@ def part_name(index: int, predictor: int | None = None) -> str:
     return f"drive-{index:06d}" + ("" if predictor is None else f"-{predictor:03d}")
 
 
-#: query rows scored at a time, per predictor and kind: what a worker holds of a drive's
+#: query rows scored at a time, per predictor: what a worker holds of a drive's
 #: traces, whatever the drive's span
 TRACE_CHUNK_ROWS = 1 << 16
 
@@ -152,15 +152,27 @@ def run_drive(
     return record.spill(parts, part)
 
 
-def _scored_pieces(prep: PreparedDrive, name: str, res: ReplayResult) -> Iterator[pd.DataFrame]:
-    """One predictor's traces on ``prep`` (its future rows, then its now rows) in pieces of
-    at most :data:`TRACE_CHUNK_ROWS` rows, from its replay ``res``."""
-    n_fix = len(prep.future.t_query)
-    for kind, xy, first in (("future", res.future_xy, 0), ("now", res.now_xy, n_fix)):
-        for lo in range(0, len(xy), TRACE_CHUNK_ROWS):
-            hi = min(lo + TRACE_CHUNK_ROWS, len(xy))
-            cov = None if res.cov is None else res.cov[first + lo : first + hi]
-            yield score_many(query_frame(prep, kind, slice(lo, hi)), [(name, xy[lo:hi], cov)])
+def _query_chunks(prep: PreparedDrive) -> list[tuple[slice, slice]]:
+    """The queries of ``prep`` (future then now) cut into pieces of at most
+    :data:`TRACE_CHUNK_ROWS`: per piece, its future rows and its now rows (at least one
+    piece, of no rows when the drive has no query)."""
+    n_future, total = prep.future.t_query.size, prep.future.t_query.size + prep.now.t_query.size
+    out = []
+    for lo in range(0, max(total, 1), TRACE_CHUNK_ROWS):
+        hi = min(lo + TRACE_CHUNK_ROWS, total)
+        out.append(
+            (
+                slice(min(lo, n_future), min(hi, n_future)),
+                slice(max(lo - n_future, 0), max(hi - n_future, 0)),
+            )
+        )
+    return out
+
+
+def _chunk_queries(prep: PreparedDrive, future: slice, now: slice) -> pd.DataFrame:
+    """The query table of one piece: its future rows, then its now rows."""
+    frames = [query_frame(prep, "future", future), query_frame(prep, "now", now)]
+    return pd.concat(frames, ignore_index=True)
 
 
 def _run_drive(drive: Drive, cfg: RunConfig, limit: bool, writer: PartWriter | None) -> DriveRun:
@@ -170,13 +182,18 @@ def _run_drive(drive: Drive, cfg: RunConfig, limit: bool, writer: PartWriter | N
     step_ns, query_ns, cov_ns, rejected = {}, {}, {}, {}
     bound: pd.DataFrame | None = None
     bound_info: dict[str, Any] = {}
+    chunks = _query_chunks(prep)
+    # a drive of one piece (most): its query table made once for every predictor
+    held = _chunk_queries(prep, *chunks[0]) if len(chunks) == 1 else None
     if limit:
         from posbench.replay.limit import LIMIT_QUERY_COLUMNS, drive_limit
 
-        queries = pd.concat(
-            [query_frame(prep, k, columns=LIMIT_QUERY_COLUMNS) for k in ("future", "now")],
-            ignore_index=True,
-        )
+        queries = held
+        if queries is None:  # a long drive: the columns the bound reads, no more
+            queries = pd.concat(
+                [query_frame(prep, k, columns=LIMIT_QUERY_COLUMNS) for k in ("future", "now")],
+                ignore_index=True,
+            )
         bound, bound_info = drive_limit(prep, queries, cfg)
         del queries
     pieces: list[pd.DataFrame] = []
@@ -196,9 +213,15 @@ def _run_drive(drive: Drive, cfg: RunConfig, limit: bool, writer: PartWriter | N
         query_ns[name] = res.query_ns
         if res.cov_ns is not None:
             cov_ns[name] = res.cov_ns
-        for piece in _scored_pieces(prep, name, res):
-            keep(piece)
-        del res
+        xy = np.concatenate([res.future_xy, res.now_xy])
+        lo = 0
+        for future, now in chunks:  # each piece scored and handed on: future, then now rows
+            queries = held if held is not None else _chunk_queries(prep, future, now)
+            hi = lo + len(queries)
+            cov = None if res.cov is None else res.cov[lo:hi]
+            keep(score_many(queries, [(name, xy[lo:hi], cov)]))
+            lo = hi
+        del res, xy
     if writer is None:
         traces = pd.concat(pieces, ignore_index=True) if pieces else pd.DataFrame()
     else:

@@ -25,18 +25,27 @@ TEXT = ("dataset", "drive", "predictor")
 KEEP_READS = SCORED_BY
 
 
+#: the most rows of a part's row group that :class:`PartWriter` gathers from pieces
+GROUP_ROWS = 1 << 16
+
+
 class PartWriter:
     """A traces part written piece by piece (:meth:`write`, in the order its rows are to be
     read) as ``folder/name.parquet``: to a temporary name, renamed by :meth:`close`, so a part
     that exists is whole (left unfinished, as when an error leaves the ``with`` block, it is
-    removed). Each piece is a row group of its own: pieces of one predictor each, so that
-    a read of one predictor skips the others (:func:`read_part`). Memory: one piece."""
+    removed). Consecutive pieces of one predictor are gathered into row groups of up to
+    :data:`GROUP_ROWS` rows (a piece larger than that is a group of its own); a row group
+    holds one predictor's rows, so that a read of one predictor skips the others
+    (:func:`read_part`). Memory: one row group."""
 
     def __init__(self, folder: Path, name: str) -> None:
         folder.mkdir(parents=True, exist_ok=True)
         self.path = folder / f"{name}.parquet"
         self._tmp = folder / f".{name}.{os.getpid()}.tmp"
         self._writer: Any = None
+        self._pending: list[Any] = []  # Arrow tables of one predictor, not yet written
+        self._pending_rows = 0
+        self._pending_of: object = None
         #: the rows written so far
         self.rows = 0
         #: the first piece's columns and types, no rows (None before any piece)
@@ -45,23 +54,40 @@ class PartWriter:
     def write(self, piece: pd.DataFrame) -> None:
         """Append ``piece`` (the columns and types of every piece the same)."""
         import pyarrow as pa
-        import pyarrow.parquet as pq
 
         if self.empty is None:
             self.empty = piece.iloc[:0]
         if piece.empty:
             return
-        table = pa.Table.from_pandas(piece, preserve_index=False)
+        of = piece["predictor"].iloc[0] if "predictor" in piece.columns else None
+        if self._pending and (
+            of != self._pending_of or self._pending_rows + len(piece) > GROUP_ROWS
+        ):
+            self._flush()
+        self._pending.append(pa.Table.from_pandas(piece, preserve_index=False))
+        self._pending_rows += len(piece)
+        self._pending_of = of
+        self.rows += len(piece)
+
+    def _flush(self) -> None:
+        """The pieces gathered, written as one row group."""
+        import pyarrow as pa
+        import pyarrow.parquet as pq
+
+        if not self._pending:
+            return
+        table = pa.concat_tables(self._pending)
+        self._pending, self._pending_rows = [], 0
         if self._writer is None:
             self._writer = pq.ParquetWriter(self._tmp, table.schema)
         self._writer.write_table(table)
-        self.rows += len(piece)
 
     def close(self) -> Path:
         """Finish the part (with no rows: the columns of the first piece) and name it."""
         import pyarrow as pa
         import pyarrow.parquet as pq
 
+        self._flush()
         if self._writer is None:
             empty = self.empty if self.empty is not None else pd.DataFrame()
             pq.write_table(pa.Table.from_pandas(empty, preserve_index=False), self._tmp)

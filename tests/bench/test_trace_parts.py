@@ -239,12 +239,14 @@ def test_a_drive_scored_in_pieces_gives_the_rows_scored_at_once(drives, tmp_path
     import pyarrow.parquet as pq
 
     import posbench.replay.runner as runner
+    import posbench.scoring.trace_parts as trace_parts
     from posbench.scoring.trace_parts import read_file, read_part
 
     drive = drives[0]
     monkeypatch.setattr(runner, "TRACE_CHUNK_ROWS", 1 << 30)
     whole = runner.run_drive(drive, CFG, limit=True)
     monkeypatch.setattr(runner, "TRACE_CHUNK_ROWS", 97)
+    monkeypatch.setattr(trace_parts, "GROUP_ROWS", 300)  # row groups gather a few pieces
     pieces = runner.run_drive(drive, CFG, limit=True)
     pd.testing.assert_frame_equal(pieces.traces, whole.traces, check_exact=True)
     pd.testing.assert_frame_equal(pieces.limit, whole.limit, check_exact=True)
@@ -252,7 +254,9 @@ def test_a_drive_scored_in_pieces_gives_the_rows_scored_at_once(drives, tmp_path
     assert written.traces.empty and list(written.traces.columns) == list(whole.traces.columns)
     (path,) = written.trace_parts
     assert written.trace_rows == len(whole.traces)
-    assert pq.ParquetFile(path).metadata.num_row_groups > 2 * len(CFG.predictors)
+    meta = pq.ParquetFile(path).metadata
+    sizes = [meta.row_group(i).num_rows for i in range(meta.num_row_groups)]
+    assert len(sizes) > 2 * len(CFG.predictors) and max(sizes) <= 300
     pd.testing.assert_frame_equal(read_file(path), whole.traces, check_exact=True)
     kf = whole.traces[whole.traces["predictor"] == "kf"].reset_index(drop=True)
     got = read_part(path, predictor="kf")
