@@ -47,13 +47,20 @@ def _runs(t: np.ndarray, values: np.ndarray) -> list[tuple[Any, float, float]]:
     return [(values[s], float(t[s]), float(t[e])) for s, e in zip(starts, ends, strict=True)]
 
 
-def _drawn_rows(ts: TraceSet, drive: str) -> Keep:
+#: a drive with more rows than this has only the rows it draws read (:func:`_drawn_rows`)
+CHOSEN_ABOVE_ROWS = 1 << 18
+
+
+def _drawn_rows(ts: TraceSet, drive: str) -> Keep | None:
     """The rows of ``drive`` :func:`draw_error_over_time` reads: every predictor's future
     queries, the first predictor's every query (the route types' bands, the time axis), and
     the rows in an outage or the warm-up (their bands); a long drive's now queries of the
-    other predictors are not read."""
+    other predictors are not read. None (all rows) for a drive of at most
+    :data:`CHOSEN_ABOVE_ROWS` rows: choosing would cost more than it spares."""
     first = ts.frame(["predictor"], drive=drive)["predictor"]
-    name = str(first.iloc[0]) if len(first) else ""
+    if len(first) <= CHOSEN_ABOVE_ROWS:
+        return None
+    name = str(first.iloc[0])
 
     def keep(column: Callable[[str], np.ndarray | None]) -> np.ndarray:
         kind, predictor = column("kind"), column("predictor")

@@ -162,7 +162,9 @@ def read_part(
         read = None if cols is None else [*cols, *extra]
         if not groups:  # no rows: the columns as the whole part types them (categories too)
             return pf.read(columns=cols, use_pandas_metadata=True).to_pandas().iloc[:0]
-        if exact and keep is not None:  # rows chosen in Arrow, one row group at a time
+        rows = sum(pf.metadata.row_group(g).num_rows for g in groups)
+        one_at_a_time = exact and keep is not None and len(groups) > 1 and rows > GROUP_ROWS
+        if one_at_a_time:  # many rows: chosen a row group at a time
             chosen = pa.concat_tables(
                 [
                     _kept_rows(pf.read_row_group(g, columns=read, use_pandas_metadata=True), keep)
@@ -172,8 +174,8 @@ def read_part(
         else:
             table = pf.read_row_groups(groups, columns=read, use_pandas_metadata=True)
     if exact and (keep is not None or plain):  # only the rows chosen become a frame
-        if keep is None:
-            chosen = table
+        if not one_at_a_time:
+            chosen = table if keep is None else _kept_rows(table, keep)
             del table
         chosen = chosen if cols is None else chosen.select(cols)
         return _plain_frame(chosen) if plain else chosen.to_pandas()

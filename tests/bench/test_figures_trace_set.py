@@ -102,3 +102,33 @@ def test_recording_from_a_trace_set_is_the_recording_from_the_runs(tmp_path):
         }
 
     assert rr is not None and values(tmp_path / "set.rrd") == values(tmp_path / "own.rrd")
+
+
+@pytest.mark.slow
+def test_figures_reading_only_the_rows_they_draw_are_the_same_bytes(tmp_path, monkeypatch):
+    """The maps and the per-drive plots read only the rows they draw (a long drive's now
+    queries of every predictor are not read), a row group at a time: the same files as the
+    figures drawn from the whole frame. Thresholds lowered so that these small drives take
+    the long drive's path."""
+    import posbench.figures.per_drive as per_drive
+    import posbench.scoring.trace_parts as trace_parts
+
+    tr = _traces()
+    res = res_for(tr)
+    here = write_plots(tr, res, tmp_path / "frame", drive_plots=2)
+    monkeypatch.setattr(per_drive, "CHOSEN_ABOVE_ROWS", 0)
+    monkeypatch.setattr(trace_parts, "GROUP_ROWS", 1)
+    chosen: list[str] = []
+    drawn_rows = per_drive._drawn_rows
+
+    def spy(ts, drive):
+        keep = drawn_rows(ts, drive)
+        assert keep is not None
+        chosen.append(drive)
+        return keep
+
+    monkeypatch.setattr(per_drive, "_drawn_rows", spy)
+    out = tmp_path / "parts-out"
+    w = write_plots(_parts(tmp_path / "parts", tr, ["drive"]), res, out, drive_plots=2)
+    assert w.notes == here.notes and len(chosen) == 2
+    assert _files(out) == _files(tmp_path / "frame")
