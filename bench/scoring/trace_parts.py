@@ -163,8 +163,8 @@ def read_part(
         if not groups:  # no rows: the columns as the whole part types them (categories too)
             return pf.read(columns=cols, use_pandas_metadata=True).to_pandas().iloc[:0]
         rows = sum(pf.metadata.row_group(g).num_rows for g in groups)
-        one_at_a_time = exact and keep is not None and len(groups) > 1 and rows > GROUP_ROWS
-        if one_at_a_time:  # many rows: chosen a row group at a time
+        one_at_a_time = exact and len(groups) > 1 and rows > GROUP_ROWS
+        if one_at_a_time and keep is not None:  # many rows: chosen a row group at a time
             chosen = pa.concat_tables(
                 [
                     _kept_rows(pf.read_row_group(g, columns=read, use_pandas_metadata=True), keep)
@@ -174,7 +174,7 @@ def read_part(
         else:
             table = pf.read_row_groups(groups, columns=read, use_pandas_metadata=True)
     if exact and (keep is not None or plain):  # only the rows chosen become a frame
-        if not one_at_a_time:
+        if not (one_at_a_time and keep is not None):
             chosen = table if keep is None else _kept_rows(table, keep)
             del table
         chosen = chosen if cols is None else chosen.select(cols)
