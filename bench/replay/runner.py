@@ -198,6 +198,9 @@ def _run_drive(drive: Drive, cfg: RunConfig, limit: bool, writer: PartWriter | N
         del queries
     pieces: list[pd.DataFrame] = []
     keep = pieces.append if writer is None else writer.write
+    # a drive of one piece: every predictor's answers scored together once all are replayed
+    # (one table, as small as the drive); a longer one: each predictor's as soon as it is
+    answers: list[tuple[str, np.ndarray, np.ndarray | None]] = []
     condition = prep.gps_condition if cfg.use_tuned else None
     for name in cfg.predictors:
         pred = create(
@@ -214,16 +217,31 @@ def _run_drive(drive: Drive, cfg: RunConfig, limit: bool, writer: PartWriter | N
         if res.cov_ns is not None:
             cov_ns[name] = res.cov_ns
         xy = np.concatenate([res.future_xy, res.now_xy])
+        if held is not None:
+            answers.append((name, xy, res.cov))
+            continue
         lo = 0
         for future, now in chunks:  # each piece scored and handed on: future, then now rows
-            queries = held if held is not None else _chunk_queries(prep, future, now)
+            queries = _chunk_queries(prep, future, now)
             hi = lo + len(queries)
             cov = None if res.cov is None else res.cov[lo:hi]
             keep(score_many(queries, [(name, xy[lo:hi], cov)]))
             lo = hi
         del res, xy
+    if held is not None and answers:
+        scored = score_many(held, answers)
+        del answers
+        if writer is None:
+            pieces.append(scored)
+        else:
+            for _, rows in scored.groupby("predictor", sort=False, observed=True):
+                writer.write(rows)
+        del scored
     if writer is None:
-        traces = pd.concat(pieces, ignore_index=True) if pieces else pd.DataFrame()
+        if len(pieces) == 1:
+            traces = pieces[0]
+        else:
+            traces = pd.concat(pieces, ignore_index=True) if pieces else pd.DataFrame()
     else:
         traces = writer.empty if writer.empty is not None else pd.DataFrame()
     del pieces
