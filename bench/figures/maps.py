@@ -24,8 +24,8 @@ from posbench.figures.style import (
     tally_turns,
     warmup_mask,
 )
-from posbench.scoring.trace_parts import text_values
-from posbench.scoring.trace_set import Keep, TraceSet, as_trace_set
+from posbench.scoring.trace_parts import Keep, text_values
+from posbench.scoring.trace_set import TraceSet, as_trace_set
 
 if TYPE_CHECKING:  # matplotlib is imported when a figure is drawn: importing this module is cheap
     from matplotlib.figure import Figure

@@ -25,8 +25,8 @@ from posbench.figures.style import (
     warmup_mask,
 )
 from posbench.naming import unique_file_safe
-from posbench.scoring.trace_parts import text_values
-from posbench.scoring.trace_set import Keep, TraceSet, as_trace_set
+from posbench.scoring.trace_parts import Keep, text_values
+from posbench.scoring.trace_set import TraceSet, as_trace_set
 
 #: at most this many per-drive error-over-time figures per run (the first drives in run
 #: order); the note of ``error_over_time`` says when drives were left out

@@ -1,7 +1,7 @@
 """Where a run keeps what its processes hand each other on disk while it runs: the drives as
 their loading processes wrote them (``drives/``, :mod:`posbench.scenarios.stored_drive`) and
 the drives' traces as the workers wrote them, a folder of Parquet parts
-(:func:`posbench.scoring.trace_parts.write_part`) per seed (``seed-N/``).
+(:func:`posbench.scoring.part_writer.write_part`) per seed (``seed-N/``).
 
 With an output folder it lies inside it (``OUT/.parts-XXXX``), so that on a cluster the
 workers write where the driver reads (``--out`` on a shared file system); without one, in

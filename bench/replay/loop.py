@@ -102,7 +102,7 @@ def build_events(prep: PreparedDrive) -> tuple[np.ndarray, np.ndarray]:
 
 
 def event_windows(
-    prep: PreparedDrive, events: int = 1 << 16
+    prep: PreparedDrive, events: int = CHUNK_EVENTS
 ) -> Iterator[tuple[np.ndarray, np.ndarray]]:
     """:func:`build_events` in consecutive time windows of about ``events`` events each (as
     many as the drive's mean event rate puts in the window's span): the same events in the

@@ -50,8 +50,8 @@ def query_frame(
         "since_fix_s": lambda: q.since_fix_s[rows],
         "outage": lambda: outage_ids(t_query, prep.outages),
         "warmup": lambda: t_issue < warmup_end_s(prep),
-        "heading_ref": lambda: _or_nan(q.heading_rad, q.t_query.size)[rows],
-        "yaw_rate_ref": lambda: _or_nan(q.yaw_rate, q.t_query.size)[rows],
+        "heading_ref": lambda: _or_nan(None if q.heading_rad is None else q.heading_rad[rows], n),
+        "yaw_rate_ref": lambda: _or_nan(None if q.yaw_rate is None else q.yaw_rate[rows], n),
     }
     wanted = list(make) if columns is None else list(columns)
     frame = pd.DataFrame({c: make[c]() for c in wanted}, index=pd.RangeIndex(n))

@@ -25,9 +25,9 @@ from posbench.scenarios.child_processes import WorkerPool
 from posbench.scenarios.drive import Drive
 from posbench.scenarios.stored_drive import DriveInfo, StoredDrive, as_drive
 from posbench.scenarios.truth_gaps import truth_gap_note
+from posbench.scoring.part_writer import PartWriter
 from posbench.scoring.records import DriveRun, merge_predictor_runs
 from posbench.scoring.score import score_many
-from posbench.scoring.trace_parts import PartWriter
 
 
 def _fixes_frame(prep: PreparedDrive) -> pd.DataFrame:
@@ -234,8 +234,7 @@ def _run_drive(drive: Drive, cfg: RunConfig, limit: bool, writer: PartWriter | N
         if writer is None:
             pieces.append(scored)
         else:
-            for _, rows in scored.groupby("predictor", sort=False, observed=True):
-                writer.write(rows)
+            writer.write_by_predictor(scored)
         del scored
     if writer is None:
         if len(pieces) == 1:

@@ -12,7 +12,8 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from posbench.scoring.trace_parts import read_file, write_part
+from posbench.scoring.part_writer import write_part
+from posbench.scoring.trace_parts import read_file
 from posbench.scoring.trace_set import TraceSet
 
 
@@ -56,7 +57,7 @@ class DriveRun:
     #: "" where none
     reference_gaps: str = ""
     #: where its traces are when the worker wrote them to disk
-    #: (:func:`posbench.scoring.trace_parts.write_part`, one part per task, in predictor
+    #: (:func:`posbench.scoring.part_writer.write_part`, one part per task, in predictor
     #: order): ``traces`` is then empty and these hold its ``trace_rows`` rows
     trace_parts: list[str] = field(default_factory=list)
     trace_rows: int = 0
@@ -124,7 +125,7 @@ class DriveRun:
 
     def spill(self, folder: Path, name: str) -> DriveRun:
         """This record with what grows with the drive's span - its traces
-        (:func:`~posbench.scoring.trace_parts.write_part`), call durations, bound's rows,
+        (:func:`~posbench.scoring.part_writer.write_part`), call durations, bound's rows,
         fixes and reference track - written to ``folder`` under ``name`` and dropped from
         memory: what remains is small and the same for a drive of any length, but for its
         notes."""

@@ -1,13 +1,13 @@
-"""A run's trace parts on disk: one Parquet file per drive task (:func:`write_part`, one row
-group per predictor), read one predictor or drive at a time (:func:`read_part`), what a part
-holds told by its row groups' statistics (:func:`part_values`, :func:`rows_per_value`), and
-frames read from several parts joined (:func:`concat_parts`). The view over a run's traces,
-in memory or in parts, is :class:`posbench.scoring.trace_set.TraceSet`.
+"""A run's trace parts on disk, read: one Parquet file per drive task, in row groups of one
+predictor each (written by :mod:`posbench.scoring.part_writer`), read one predictor or drive
+at a time (:func:`read_part`), what a part holds told by its row groups' statistics
+(:func:`part_values`, :func:`rows_per_value`), and frames read from several parts joined
+(:func:`concat_parts`). The view over a run's traces, in memory or in parts, is
+:class:`posbench.scoring.trace_set.TraceSet`.
 """
 
 from __future__ import annotations
 
-import os
 from collections.abc import Callable, Iterable, Sequence
 from pathlib import Path
 from typing import Any
@@ -25,96 +25,12 @@ TEXT = ("dataset", "drive", "predictor")
 KEEP_READS = SCORED_BY
 
 
-#: the most rows of a part's row group that :class:`PartWriter` gathers from pieces
-GROUP_ROWS = 1 << 16
-
-
-class PartWriter:
-    """A traces part written piece by piece (:meth:`write`, in the order its rows are to be
-    read) as ``folder/name.parquet``: to a temporary name, renamed by :meth:`close`, so a part
-    that exists is whole (left unfinished, as when an error leaves the ``with`` block, it is
-    removed). Consecutive pieces of one predictor are gathered into row groups of up to
-    :data:`GROUP_ROWS` rows (a piece larger than that is a group of its own); a row group
-    holds one predictor's rows, so that a read of one predictor skips the others
-    (:func:`read_part`). Memory: one row group."""
-
-    def __init__(self, folder: Path, name: str) -> None:
-        folder.mkdir(parents=True, exist_ok=True)
-        self.path = folder / f"{name}.parquet"
-        self._tmp = folder / f".{name}.{os.getpid()}.tmp"
-        self._writer: Any = None
-        self._pending: list[Any] = []  # Arrow tables of one predictor, not yet written
-        self._pending_rows = 0
-        self._pending_of: object = None
-        #: the rows written so far
-        self.rows = 0
-        #: the first piece's columns and types, no rows (None before any piece)
-        self.empty: pd.DataFrame | None = None
-
-    def write(self, piece: pd.DataFrame) -> None:
-        """Append ``piece`` (the columns and types of every piece the same)."""
-        import pyarrow as pa
-
-        if self.empty is None:
-            self.empty = piece.iloc[:0]
-        if piece.empty:
-            return
-        of = piece["predictor"].iloc[0] if "predictor" in piece.columns else None
-        if self._pending and (
-            of != self._pending_of or self._pending_rows + len(piece) > GROUP_ROWS
-        ):
-            self._flush()
-        self._pending.append(pa.Table.from_pandas(piece, preserve_index=False))
-        self._pending_rows += len(piece)
-        self._pending_of = of
-        self.rows += len(piece)
-
-    def _flush(self) -> None:
-        """The pieces gathered, written as one row group."""
-        import pyarrow as pa
-        import pyarrow.parquet as pq
-
-        if not self._pending:
-            return
-        table = pa.concat_tables(self._pending)
-        self._pending, self._pending_rows = [], 0
-        if self._writer is None:
-            self._writer = pq.ParquetWriter(self._tmp, table.schema)
-        self._writer.write_table(table)
-
-    def close(self) -> Path:
-        """Finish the part (with no rows: the columns of the first piece) and name it."""
-        import pyarrow as pa
-        import pyarrow.parquet as pq
-
-        self._flush()
-        if self._writer is None:
-            empty = self.empty if self.empty is not None else pd.DataFrame()
-            pq.write_table(pa.Table.from_pandas(empty, preserve_index=False), self._tmp)
-        else:
-            self._writer.close()
-            self._writer = None
-        os.replace(self._tmp, self.path)
-        return self.path
-
-    def __enter__(self) -> PartWriter:
-        return self
-
-    def __exit__(self, *exc: object) -> None:
-        if self._writer is not None:
-            self._writer.close()
-            self._writer = None
-        self._tmp.unlink(missing_ok=True)
-
-
-def write_part(folder: Path, traces: pd.DataFrame, name: str) -> Path:
-    """``traces`` (one drive's, or one drive and predictor's) as ``folder/name.parquet``, one
-    row group per predictor (:class:`PartWriter`). The path."""
-    with PartWriter(folder, name) as part:
-        part.write(traces.iloc[:0])
-        for _, rows in traces.groupby("predictor", sort=False, observed=True):
-            part.write(rows)
-        return part.close()
+#: a choice of rows (:func:`read_part`'s ``keep``): called with a getter of columns (name ->
+#: numpy array, None where there is no such column), it returns the mask of the rows to keep
+Keep = Callable[[Callable[[str], np.ndarray | None]], np.ndarray]
+#: a read of more rows than this in several row groups makes its choice of rows a row group
+#: at a time (:func:`read_part`): what is held is one group's rows, not all of them
+CHOOSE_BY_GROUP_ABOVE_ROWS = 1 << 16
 
 
 def read_file(path: str | Path) -> pd.DataFrame:
@@ -132,7 +48,7 @@ def read_part(
     columns: Sequence[str] | None = None,
     predictor: str | None = None,
     drive: str | None = None,
-    keep: Callable[[Callable[[str], np.ndarray | None]], np.ndarray] | None = None,
+    keep: Keep | None = None,
     plain: bool = False,
 ) -> pd.DataFrame:
     """One part's rows (of ``predictor`` only, and of ``drive`` only, given them), its text
@@ -162,9 +78,10 @@ def read_part(
         read = None if cols is None else [*cols, *extra]
         if not groups:  # no rows: the columns as the whole part types them (categories too)
             return pf.read(columns=cols, use_pandas_metadata=True).to_pandas().iloc[:0]
-        rows = sum(pf.metadata.row_group(g).num_rows for g in groups)
-        one_at_a_time = exact and len(groups) > 1 and rows > GROUP_ROWS
-        if one_at_a_time and keep is not None:  # many rows: chosen a row group at a time
+        table: Any = None
+        chosen: Any = None
+        many = len(groups) > 1 and _rows_in(pf.metadata, groups) > CHOOSE_BY_GROUP_ABOVE_ROWS
+        if exact and keep is not None and many:  # many rows: chosen a row group at a time
             chosen = pa.concat_tables(
                 [
                     _kept_rows(pf.read_row_group(g, columns=read, use_pandas_metadata=True), keep)
@@ -174,7 +91,7 @@ def read_part(
         else:
             table = pf.read_row_groups(groups, columns=read, use_pandas_metadata=True)
     if exact and (keep is not None or plain):  # only the rows chosen become a frame
-        if not (one_at_a_time and keep is not None):
+        if chosen is None:
             chosen = table if keep is None else _kept_rows(table, keep)
             del table
         chosen = chosen if cols is None else chosen.select(cols)
@@ -187,7 +104,7 @@ def read_part(
     for c, v in wanted.items():
         mask &= (df[c] == v).to_numpy(dtype=bool)
     if keep is not None:
-        mask &= keep(lambda c: df[c].to_numpy() if c in df else None)
+        mask &= keep(frame_columns(df))
     return df.loc[mask, cols if cols is not None else df.columns].reset_index(drop=True)
 
 
@@ -211,9 +128,20 @@ def _plain_frame(table: Any) -> pd.DataFrame:
     return pd.DataFrame(out, copy=False)
 
 
-def _kept_rows(table: Any, keep: Callable[[Callable[[str], np.ndarray | None]], np.ndarray]) -> Any:
+def _rows_in(meta: Any, groups: Sequence[int]) -> int:
+    """How many rows the row ``groups`` of a part (its metadata) hold."""
+    return sum(meta.row_group(g).num_rows for g in groups)
+
+
+def _kept_rows(table: Any, keep: Keep) -> Any:
     """The rows of Arrow ``table`` that ``keep`` keeps."""
     return table.filter(keep(_arrow_columns(table)))
+
+
+def frame_columns(df: pd.DataFrame) -> Callable[[str], np.ndarray | None]:
+    """A getter of a frame's columns as numpy arrays (None: no such column), as a
+    :data:`Keep` reads them."""
+    return lambda c: df[c].to_numpy() if c in df.columns else None
 
 
 def _arrow_columns(table: Any) -> Callable[[str], np.ndarray | None]:

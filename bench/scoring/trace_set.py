@@ -14,7 +14,7 @@ same order: the figures do not depend on where the traces are.
 from __future__ import annotations
 
 import os
-from collections.abc import Callable, Iterable, Iterator, Sequence
+from collections.abc import Iterable, Iterator, Sequence
 from pathlib import Path
 
 import numpy as np
@@ -23,16 +23,14 @@ import pandas as pd
 from posbench.scoring.schema import SCORED_BY, scored_mask, scored_of
 from posbench.scoring.trace_parts import (
     TEXT,
+    Keep,
     concat_parts,
+    frame_columns,
     join_pieces,
     part_values,
     read_part,
     rows_per_value,
 )
-
-#: a choice of rows: called with a getter of columns (name -> numpy array, None where there
-#: is no such column), it returns the mask of the rows to keep
-Keep = Callable[[Callable[[str], np.ndarray | None]], np.ndarray]
 
 #: what :func:`posbench.scoring.schema.scored_mask` reads
 MASK_COLUMNS = SCORED_BY
@@ -384,5 +382,4 @@ def lean_traces(traces: pd.DataFrame) -> pd.DataFrame:
 
 def _kept(df: pd.DataFrame, rows: Keep) -> pd.DataFrame:
     """The rows of ``df`` that ``rows`` keeps (its text columns given as ``str`` values)."""
-    mask = rows(lambda c: df[c].to_numpy() if c in df.columns else None)
-    return df.loc[np.asarray(mask, dtype=bool)]
+    return df.loc[np.asarray(rows(frame_columns(df)), dtype=bool)]

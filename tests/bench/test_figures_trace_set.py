@@ -13,7 +13,7 @@ import pytest
 from test_plots import make_traces, res_for
 
 from posbench.figures.writer import write_plots
-from posbench.scoring.trace_parts import write_part
+from posbench.scoring.part_writer import write_part
 from posbench.scoring.trace_set import TraceSet
 
 
@@ -117,7 +117,7 @@ def test_figures_reading_only_the_rows_they_draw_are_the_same_bytes(tmp_path, mo
     res = res_for(tr)
     here = write_plots(tr, res, tmp_path / "frame", drive_plots=2)
     monkeypatch.setattr(per_drive, "CHOSEN_ABOVE_ROWS", 0)
-    monkeypatch.setattr(trace_parts, "GROUP_ROWS", 1)
+    monkeypatch.setattr(trace_parts, "CHOOSE_BY_GROUP_ABOVE_ROWS", 1)
     chosen: list[str] = []
     drawn_rows = per_drive._drawn_rows
 

@@ -29,8 +29,8 @@ from posbench.metrics.outages import (
     since_fix_checkpoint,
 )
 from posbench.scenarios.labels import LABELS
+from posbench.scoring.part_writer import write_part
 from posbench.scoring.schema import KINDS
-from posbench.scoring.trace_parts import write_part
 from posbench.scoring.trace_set import TraceSet
 
 STATS = Statistics(resamples=300, seed=3)

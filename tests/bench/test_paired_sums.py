@@ -19,8 +19,8 @@ from posbench.aggregation.paired_sums import (
 )
 from posbench.metrics.bootstrap import paired_summary
 from posbench.scenarios.labels import LABELS
+from posbench.scoring.part_writer import write_part
 from posbench.scoring.schema import KINDS
-from posbench.scoring.trace_parts import write_part
 from posbench.scoring.trace_set import TraceSet
 
 STATS = Statistics(resamples=300, seed=2)

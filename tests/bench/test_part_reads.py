@@ -9,7 +9,8 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 import pytest
 
-from posbench.scoring.trace_parts import concat_parts, join_pieces, read_part, write_part
+from posbench.scoring.part_writer import write_part
+from posbench.scoring.trace_parts import concat_parts, join_pieces, read_part
 
 
 def _traces(seed: int, drive: str, predictors: tuple[str, ...], labels: list[str]) -> pd.DataFrame:

@@ -17,9 +17,9 @@ from posbench.metrics.calibration import calibration_of, log_det, mahalanobis_sq
 from posbench.metrics.track_errors import inward_cross, track_summary
 from posbench.replay.runner import run
 from posbench.scenarios.synthetic import generate_drive
+from posbench.scoring.part_writer import write_part
 from posbench.scoring.records import all_traces
 from posbench.scoring.schema import COV_COLUMNS, scored_mask
-from posbench.scoring.trace_parts import write_part
 from posbench.scoring.trace_set import TraceSet
 
 MEANS = ("mean", "nees", "loglik")

@@ -239,14 +239,14 @@ def test_a_drive_scored_in_pieces_gives_the_rows_scored_at_once(drives, tmp_path
     import pyarrow.parquet as pq
 
     import posbench.replay.runner as runner
-    import posbench.scoring.trace_parts as trace_parts
+    import posbench.scoring.part_writer as part_writer
     from posbench.scoring.trace_parts import read_file, read_part
 
     drive = drives[0]
     monkeypatch.setattr(runner, "TRACE_CHUNK_ROWS", 1 << 30)
     whole = runner.run_drive(drive, CFG, limit=True)
     monkeypatch.setattr(runner, "TRACE_CHUNK_ROWS", 97)
-    monkeypatch.setattr(trace_parts, "GROUP_ROWS", 300)  # row groups gather a few pieces
+    monkeypatch.setattr(part_writer, "GROUP_ROWS", 300)  # row groups gather a few pieces
     pieces = runner.run_drive(drive, CFG, limit=True)
     pd.testing.assert_frame_equal(pieces.traces, whole.traces, check_exact=True)
     pd.testing.assert_frame_equal(pieces.limit, whole.limit, check_exact=True)
@@ -266,7 +266,7 @@ def test_a_drive_scored_in_pieces_gives_the_rows_scored_at_once(drives, tmp_path
 
 
 def test_a_part_left_unfinished_by_an_error_is_not_left_behind(tmp_path):
-    from posbench.scoring.trace_parts import PartWriter
+    from posbench.scoring.part_writer import PartWriter
 
     with pytest.raises(RuntimeError), PartWriter(tmp_path, "d") as part:
         part.write(pd.DataFrame({"predictor": ["cv"], "error_m": [0.5]}))
