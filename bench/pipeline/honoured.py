@@ -7,14 +7,12 @@ delays drawn fixes only. ``--gps-profile native`` on a drive with no fixes of it
 ``rtk`` fixes from its truth. When an option applies to none of the drives the run stops with
 one line (:class:`~posbench.errors.UsageError`); when it applies to some, each drive it
 misses is named in one note, and results.json's ``gps_conditions`` counts the drives by the
-condition actually fed and scored (:func:`scored_conditions`).
+condition actually fed and scored (:func:`posbench.pipeline.results.scored_conditions`).
 """
 
 from __future__ import annotations
 
-from collections import Counter
 from collections.abc import Sequence
-from typing import Any
 
 from posbench.config import AUTO_PROFILE, RunConfig, gps_condition
 from posbench.errors import UsageError
@@ -88,12 +86,3 @@ def unhonoured(loaded: Sequence[Drive | StoredDrive], cfg: RunConfig) -> list[st
                 f"({_names(own)}) without the latency"
             )
     return notes
-
-
-def scored_conditions(drives: Sequence[dict[str, Any]]) -> dict[str, int]:
-    """results.json's ``gps_conditions``: the GPS condition actually fed and scored ->
-    number of scored drives (``drives``: results.json's per-drive records)."""
-    counts = Counter(
-        str(d["gps_condition"]) for d in drives if not d.get("skipped") and d.get("gps_condition")
-    )
-    return dict(sorted(counts.items()))

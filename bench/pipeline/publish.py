@@ -104,6 +104,12 @@ class OutputWriter:
         )
         self._traces = Job(ts.write, self.out / TRACES)
 
+    def paper_figures(self) -> list[tuple[str, str]]:
+        """The paper's figures drawn since :meth:`start`, as (file name, caption) pairs, once
+        their process is done (none without :meth:`start`): results.json's
+        ``paper_figures`` (:func:`posbench.pipeline.results.build_results`)."""
+        return self._jobs.paper() if self._jobs is not None else []
+
     def write(self, run: Run) -> tuple[list[Path], list[Path]]:
         """``run``'s files, results.json last: the files written, and those of an earlier
         run removed first."""
@@ -114,9 +120,8 @@ class OutputWriter:
         out, jobs = self.out, self._jobs
         out.mkdir(parents=True, exist_ok=True)
         removed = self._removed if self._removed is not None else remove_previous_outputs(out)
-        drawn = jobs.paper() if jobs is not None else []
-        run.results["paper_figures"] = [{"file": f, "caption": c} for f, c in drawn]
-        written = [(out / f).with_suffix("." + fmt) for f, _ in drawn for fmt in self.plot_formats]
+        drawn = [f["file"] for f in run.results.get("paper_figures") or []]
+        written = [(out / f).with_suffix("." + fmt) for f in drawn for fmt in self.plot_formats]
         written += write_report(
             run,
             out,
@@ -171,8 +176,6 @@ def publish(
 
         with marked_if_unfinished(run, out=writer.out):
             written, removed = writer.write(run)
-    else:
-        run.results["paper_figures"] = []
     skipped = [r for r in runs if r.skipped]
     if skipped:
         reporter.line(

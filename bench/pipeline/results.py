@@ -3,7 +3,8 @@
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+from collections import Counter
+from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -26,6 +27,8 @@ def build_results(
     models: Mapping[str, Mapping[str, Any]] | None = None,
     statistics: Statistics | None = None,
     workers: int = 1,
+    sections: Mapping[str, Any] | None = None,
+    paper_figures: Callable[[], Sequence[tuple[str, str]]] | None = None,
 ) -> dict[str, Any]:
     """``results.json`` of ``runs`` replayed under ``cfg``: its provenance (``command``, the
     config, package versions, the git commit, ``data``: the data block,
@@ -33,7 +36,16 @@ def build_results(
     :func:`posbench.aggregation.aggregate.aggregate`. ``models``: the learned models behind
     the predictors; None builds each learned predictor of ``cfg`` once to ask
     (:func:`posbench.replay.predictor_setup.learned_models`), ``{}`` for none.
-    ``workers``: child processes computing the predictors' figures at a time (``aggregate``)."""
+    ``workers``: child processes computing the predictors' figures at a time (``aggregate``).
+
+    The dict is built here once, complete, and never edited afterwards (its ``status`` aside,
+    which says whether the files were written, :func:`posbench.saved_run.run.mark_unfinished`):
+    after the figures come ``gps_conditions`` (drives per GPS condition scored), then
+    ``sections``, what the run knows of itself beside its figures (``consistency``,
+    ``unhonoured``, ``data_duplicates``, ``seeds``, a scored file's ``answers``), in their
+    order, then ``paper_figures``: the (file, caption) pairs ``paper_figures()`` returns,
+    called once the figures are combined (the paper's figures are drawn in another process
+    meanwhile); none without it."""
     if models is None:
         from posbench.replay.predictor_setup import learned_models
 
@@ -59,12 +71,26 @@ def build_results(
         "data": data,
         "tuning": tuning,
     }
+    figures = aggregate(
+        runs, cfg, traces=traces, models=models, statistics=statistics, workers=workers
+    )
+    drawn = paper_figures() if paper_figures is not None else []
     return {
         **head,
-        **aggregate(
-            runs, cfg, traces=traces, models=models, statistics=statistics, workers=workers
-        ),
+        **figures,
+        "gps_conditions": scored_conditions(figures["drives"]),
+        **(sections or {}),
+        "paper_figures": [{"file": f, "caption": c} for f, c in drawn],
     }
+
+
+def scored_conditions(drives: Sequence[Mapping[str, Any]]) -> dict[str, int]:
+    """How many drives were scored under each GPS condition (``drives``: results.json's
+    ``drives``; a skipped drive has none)."""
+    counts = Counter(
+        str(d["gps_condition"]) for d in drives if not d.get("skipped") and d.get("gps_condition")
+    )
+    return dict(sorted(counts.items()))
 
 
 def tuning_provenance(cfg: RunConfig, runs: Sequence[DriveRun]) -> dict[str, dict[str, Any]]:

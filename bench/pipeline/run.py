@@ -26,8 +26,10 @@ from posbench.scenarios.drive import Drive
 
 if TYPE_CHECKING:
     from posbench.pipeline.parts import PartsFolder
+    from posbench.pipeline.publish import OutputWriter
     from posbench.scenarios.stored_drive import StoredDrive
     from posbench.scoring.records import DriveRun
+    from posbench.scoring.trace_set import TraceSet
 
 
 @dataclass(frozen=True)
@@ -255,9 +257,26 @@ def plan_run(options: RunOptions, given: Mapping[tuple[str, str], str] | None = 
 
 def execute_run(plan: RunPlan, command: str, reporter: Reporter = SILENT) -> Published:
     """Run a plan: load the drives (or make the built-in ones), check their data, replay them
-    through every predictor (over every seed of ``plan.seeds``), aggregate, and publish:
-    into ``plan.options.out`` when given, with the rerun recording when asked.
-    ``command`` is recorded in results.json as what made the run.
+    through every predictor (over every seed of ``plan.seeds``), combine, and publish: into
+    ``plan.options.out`` when given, with the rerun recording when asked. ``command`` is
+    recorded in results.json as what made the run.
+
+    The data path is six stages, each handing the next what it needs (:func:`plan_run` is
+    the first, the command's summary the last):
+
+    1. plan: the options checked and parsed, each predictor built once (:class:`RunPlan`);
+    2. drives: loaded or made in child processes, each written to the parts folder; this
+       process holds their descriptions (:func:`~posbench.pipeline.drives.stored_drives`);
+    3. checks: the options no drive can take, and the data check (results.json's
+       ``unhonoured`` and ``consistency``), before any replay;
+    4. per-drive results: a worker replays a drive through every predictor, scores it, takes
+       its bound, writes its traces to the parts folder and returns a small
+       :class:`~posbench.scoring.records.DriveRun` (:func:`replay_drives`; once per seed);
+    5. combined results: results.json's dict, built once from the per-drive results and the
+       traces on disk (:func:`~posbench.pipeline.results.build_results`);
+    6. outputs: figures, traces.parquet, report.md, table files, results.json and the rerun
+       recording (:class:`~posbench.pipeline.publish.OutputWriter`; the figures are drawn
+       from the traces on disk in other processes from the end of stage 4).
 
     Raises:
         DataError: a recording that cannot be read; with ``strict``, a failing data check.
@@ -346,8 +365,8 @@ def _replay_and_publish(
     parts: PartsFolder,
     unhonoured: Sequence[str] = (),
 ) -> Published:
-    from posbench.aggregation.seeds import seed_figures, seeds_section
-    from posbench.pipeline.honoured import scored_conditions
+    """Stages 4 to 6 of :func:`execute_run`: the per-drive results of every seed, the
+    combined results built once from them, and the outputs."""
     from posbench.pipeline.jobs import Job
     from posbench.pipeline.preload import Preload
     from posbench.pipeline.publish import publish
@@ -357,7 +376,6 @@ def _replay_and_publish(
     from posbench.scoring.records import trace_set
 
     cfg, o, seeds = plan.config, plan.options, plan.seeds
-    out = o.out
     first = f"seed {cfg.seed} (1/{len(seeds)}): " if seeds else ""
     recordings = distinct_recordings(data) if data else None  # as loaded: each counted once
     sources = recordings.sources if recordings is not None else None
@@ -366,20 +384,19 @@ def _replay_and_publish(
     runs = replay_drives(drives, cfg, o, reporter, first, preload, limit=True, parts=parts.seed(0))
     preload.join()  # before forking the figure children
     traces = trace_set(runs)  # on disk: read one predictor or drive at a time from here on
-    writer = None
-    if out is not None:
-        # the figures need only the traces: other processes draw them (and write
-        # traces.parquet) while this one aggregates
-        from posbench.pipeline.publish import OutputWriter
-        from posbench.predictor_tools.paper_figures import paper_figures
-
-        fmts = plan.plot_formats
-        writer = OutputWriter(out, fmts, plan.drive_plots, plan.table_formats)
-        writer.start(
-            traces,
-            cfg.predictors,
-            paper=lambda: paper_figures(drives, cfg, traces, out, runs, formats=fmts),
-        )
+    # the figures need only the traces: other processes draw them (and write traces.parquet)
+    # while this one replays the other seeds and combines
+    writer = _start_outputs(plan, drives, traces, runs)
+    sections: dict[str, Any] = {"consistency": consistency}
+    if unhonoured:
+        sections["unhonoured"] = list(unhonoured)
+    if recordings is not None and recordings.duplicates:
+        sections["data_duplicates"] = [
+            {"path": str(d.path), "same_as": str(d.kept), "same_file": d.same_file}
+            for d in recordings.duplicates
+        ]
+    if seeds:
+        sections["seeds"] = _seeds_section(drives, plan, traces, reporter, parts)
     res = build_results(
         runs,
         cfg,
@@ -389,32 +406,9 @@ def _replay_and_publish(
         models=plan.models,
         statistics=plan.statistics,
         workers=o.workers,
+        sections=sections,
+        paper_figures=writer.paper_figures if writer is not None else None,
     )
-    res["consistency"] = consistency
-    res["gps_conditions"] = scored_conditions(res["drives"])
-    if unhonoured:
-        res["unhonoured"] = list(unhonoured)
-    if recordings is not None and recordings.duplicates:
-        res["data_duplicates"] = [
-            {"path": str(d.path), "same_as": str(d.kept), "same_file": d.same_file}
-            for d in recordings.duplicates
-        ]
-    if seeds:
-        base = res["paired"]["baseline"]
-        figures = [seed_figures(traces, cfg.predictors, base, cfg.seed)]
-        for i, s in enumerate(seeds[1:], start=2):
-            runs_s = replay_drives(
-                drives,
-                replace(cfg, seed=s),
-                o,
-                reporter,
-                f"seed {s} ({i}/{len(seeds)}): ",
-                parts=parts.seed(i - 1),
-            )
-            figures.append(seed_figures(trace_set(runs_s), cfg.predictors, base, s))
-            parts.drop(i - 1)
-            del runs_s
-        res["seeds"] = seeds_section(seeds, figures)
     published = publish(res, traces, runs, writer, reporter)
     parts.drop_drives()  # replayed and drawn
     if o.rerun is not None:
@@ -425,6 +419,62 @@ def _replay_and_publish(
         published.recording = o.rerun
     parts.keep_for(published.run)  # without an output folder, the run reads them later
     return published
+
+
+def _start_outputs(
+    plan: RunPlan,
+    drives: Sequence[StoredDrive],
+    traces: TraceSet,
+    runs: Sequence[DriveRun],
+) -> OutputWriter | None:
+    """The output folder's writer, started: an earlier run's files removed, the figures (the
+    run's and the paper's) drawn and traces.parquet written in other processes; None without
+    an output folder."""
+    out = plan.options.out
+    if out is None:
+        return None
+    from posbench.pipeline.publish import OutputWriter
+    from posbench.predictor_tools.paper_figures import paper_figures
+
+    cfg, fmts = plan.config, plan.plot_formats
+    writer = OutputWriter(out, fmts, plan.drive_plots, plan.table_formats)
+    writer.start(
+        traces,
+        cfg.predictors,
+        paper=lambda: paper_figures(drives, cfg, traces, out, runs, formats=fmts),
+    )
+    return writer
+
+
+def _seeds_section(
+    drives: Sequence[StoredDrive],
+    plan: RunPlan,
+    traces: TraceSet,
+    reporter: Reporter,
+    parts: PartsFolder,
+) -> dict[str, Any]:
+    """results.json's ``seeds``: the run's figures under its first seed (``traces``) and under
+    each other seed of ``plan.seeds``, replayed here one seed at a time (each seed's traces
+    dropped once its figures are taken), with their spread across seeds."""
+    from posbench.aggregation.seeds import seed_figures, seeds_section
+    from posbench.scoring.records import trace_set
+
+    cfg, seeds = plan.config, plan.seeds or ()
+    base = plan.statistics.baseline
+    figures = [seed_figures(traces, cfg.predictors, base, cfg.seed)]
+    for i, s in enumerate(seeds[1:], start=2):
+        runs_s = replay_drives(
+            drives,
+            replace(cfg, seed=s),
+            plan.options,
+            reporter,
+            f"seed {s} ({i}/{len(seeds)}): ",
+            parts=parts.seed(i - 1),
+        )
+        figures.append(seed_figures(trace_set(runs_s), cfg.predictors, base, s))
+        parts.drop(i - 1)
+        del runs_s
+    return seeds_section(seeds, figures)
 
 
 def _write_rerun(

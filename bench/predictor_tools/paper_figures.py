@@ -31,8 +31,8 @@ from posbench.figures.style import (
     shown_format,
     tally_turns,
 )
-from posbench.predictors.registry import create
 from posbench.replay.loop import replay
+from posbench.replay.predictor_setup import build_predictor
 from posbench.replay.prepare import PreparedDrive, prepare_drive
 from posbench.scenarios.drive import Drive
 from posbench.scenarios.stored_drive import StoredDrive, as_drive
@@ -168,8 +168,8 @@ def paper_figures(
     # the predictors replay the run's fixes up to the fix shown; references use a wider window
     prep = _prepared_window(drive, fixes_fed, t_fix - 30.0, t_fix)
     around = drive.window(t_fix - 30.0, t_fix + 5.0)
-    cond = gps_condition(cfg, drive) if cfg.use_tuned else None
-    lstm = create("lstm", cond, **cfg.predictor_options.get("lstm", {}))
+    cond = gps_condition(cfg, drive)
+    lstm = build_predictor(cfg, "lstm", cond)
     replay(lstm, prep, cfg.horizon_s)
     # LstmPredictor's seam; a predictor registered as "lstm" in its place may lack it
     last_step: Callable[[], LstmStep | None] | None = getattr(lstm, "last_step", None)
@@ -256,7 +256,7 @@ def paper_figures(
     )
 
     if "kf-paper" in cfg.predictors:
-        kfp = create("kf-paper", cond, **cfg.predictor_options.get("kf-paper", {}))
+        kfp = build_predictor(cfg, "kf-paper", cond)
         replay(kfp, prep, cfg.horizon_s)
         kp = np.asarray(kfp.position_at(t_fix + cfg.horizon_s))
         fig, ax = new(

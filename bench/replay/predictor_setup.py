@@ -23,6 +23,23 @@ from posbench.scenarios.text import quoted
 
 
 # -------------------------------------------------------------- predictors
+def build_predictor(cfg: RunConfig, name: str, condition: str | None) -> Predictor:
+    """Predictor ``name`` as run ``cfg`` builds it for a drive replayed under GPS
+    ``condition`` (:func:`posbench.config.gps_condition`): its defaults, then its tuned
+    parameters for that condition where the run uses them (``cfg.tuning`` over the
+    package's), then ``cfg.predictor_options``. The one factory of the replay workers, the
+    paper figures and the learned-model record, so each builds the predictor the run scores
+    (the checks at plan time build it option by option, to name the one to blame)."""
+    from posbench.predictors.registry import create
+
+    return create(
+        name,
+        condition if cfg.use_tuned else None,
+        tuning_file=cfg.tuning,
+        **cfg.predictor_options.get(name, {}),
+    )
+
+
 def _first_line(exc: BaseException) -> str:
     text = str(exc).strip().splitlines()
     return text[0][:300] if text else type(exc).__name__
@@ -258,13 +275,13 @@ def learned_models(cfg: RunConfig) -> dict[str, dict[str, Any]]:
     trained on (:meth:`~posbench.predictors.base.Predictor.training_drives`), so results on those
     drives can be told apart. Each predictor is created with the run's options for it
     (:func:`plan_predictors` asks the instances it built for its checks instead)."""
-    from posbench.predictors.registry import create, predictor_class
+    from posbench.predictors.registry import predictor_class
 
     out: dict[str, dict[str, Any]] = {}
     for name in cfg.predictors:
         if not _declares_model(predictor_class(name)):
             continue  # no learned model: not worth building (an ONNX session, ...)
-        model = _learned_model(create(name, None, **cfg.predictor_options.get(name, {})))
+        model = _learned_model(build_predictor(cfg, name, None))
         if model is not None:
             out[name] = model
     return out

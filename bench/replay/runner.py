@@ -15,9 +15,9 @@ import numpy as np
 import pandas as pd
 
 from posbench.config import RunConfig
-from posbench.predictors.registry import create
 from posbench.replay.gps_outliers import GatedPredictor
 from posbench.replay.loop import replay
+from posbench.replay.predictor_setup import build_predictor
 from posbench.replay.prepare import PreparedDrive, prepare_drive
 from posbench.replay.queries import query_frame
 from posbench.replay.reference import truth_source
@@ -201,11 +201,8 @@ def _run_drive(drive: Drive, cfg: RunConfig, limit: bool, writer: PartWriter | N
     # a drive of one piece: every predictor's answers scored together once all are replayed
     # (one table, as small as the drive); a longer one: each predictor's as soon as it is
     answers: list[tuple[str, np.ndarray, np.ndarray | None]] = []
-    condition = prep.gps_condition if cfg.use_tuned else None
     for name in cfg.predictors:
-        pred = create(
-            name, condition, tuning_file=cfg.tuning, **cfg.predictor_options.get(name, {})
-        )
+        pred = build_predictor(cfg, name, prep.gps_condition)
         pred.warm_up()  # one-time start-up work (compiled kernels) off the clock
         gated = GatedPredictor(pred) if cfg.gate else None
         res = replay(pred if gated is None else gated, prep, cfg.horizon_s)
