@@ -10,6 +10,7 @@ from __future__ import annotations
 from typing import TYPE_CHECKING
 
 import numpy as np
+import pandas as pd
 
 from posbench.recording.layout import (
     RECEIVED_RGB,
@@ -22,9 +23,10 @@ from posbench.recording.layout import (
 )
 from posbench.recording.sender import Sender
 
-if TYPE_CHECKING:
-    import pandas as pd
+#: the 'now' queries whose around view is computed and logged at once
+AROUND_ROWS = 1 << 13
 
+if TYPE_CHECKING:
     from posbench.scoring.records import DriveRun
 
 
@@ -52,40 +54,47 @@ def around_view(
     t, ref = t[ok], ref[ok]
     if t.size == 0:
         return
-    if received is not None and received[0].size:
-        fix_t, fix_xy = received
-        idx, lengths = last_fixes(t, fix_t)
-        rel = fix_xy[idx] - np.repeat(ref, lengths, axis=0)
+    fix_t, fix_xy = received if received is not None else (np.empty(0), np.empty((0, 2)))
+    fixes = fix_t.size > 0
+    track = run.track if run.track is not None else pd.DataFrame({"t": [], "x": [], "y": []})
+    tt = track["t"].to_numpy(np.float64)
+    txy = track[["x", "y"]].to_numpy(np.float64)
+    road = bool(np.all(np.isfinite(txy), axis=1).sum() >= 2)
+    if fixes:
         rec.log(
             f"{root}/around/fixes",
             rr.Points2D.from_fields(colors=[RECEIVED_RGB], radii=[0.1]),
             static=True,
         )
-        rr.send_columns(
-            f"{root}/around/fixes",
-            indexes=[out.time_column(t)],
-            columns=rr.Points2D.columns(positions=screen(rel)).partition(lengths),
-            recording=rec,
+    if road:
+        rec.log(
+            f"{root}/around/road",
+            rr.LineStrips2D.from_fields(colors=[TRUTH_RGB], radii=[0.05]),
+            static=True,
         )
-    if run.track is not None and len(run.track) >= 2:
-        tt = run.track["t"].to_numpy(np.float64)
-        txy = run.track[["x", "y"]].to_numpy(np.float64)
-        if np.all(np.isfinite(txy), axis=1).sum() >= 2:
-            road = road_around(t, tt, txy) - ref[:, None, :]
-            k, m, _ = road.shape
-            rec.log(
-                f"{root}/around/road",
-                rr.LineStrips2D.from_fields(colors=[TRUTH_RGB], radii=[0.05]),
-                static=True,
+    for a in range(0, t.size, AROUND_ROWS):  # a slice of the queries at a time
+        ts, refs = t[a : a + AROUND_ROWS], ref[a : a + AROUND_ROWS]
+        if fixes:
+            idx, lengths = last_fixes(ts, fix_t)
+            rel = fix_xy[idx] - np.repeat(refs, lengths, axis=0)
+            rr.send_columns(
+                f"{root}/around/fixes",
+                indexes=[out.time_column(ts)],
+                columns=rr.Points2D.columns(positions=screen(rel)).partition(lengths),
+                recording=rec,
             )
+        if road:
+            strips = road_around(ts, tt, txy) - refs[:, None, :]
+            k, m, _ = strips.shape
             rr.send_columns(
                 f"{root}/around/road",
-                indexes=[out.time_column(t)],
+                indexes=[out.time_column(ts)],
                 columns=rr.LineStrips2D.columns(
-                    strips=screen(road.reshape(-1, 2)).reshape(k, m, 2)
+                    strips=screen(strips.reshape(-1, 2)).reshape(k, m, 2)
                 ).partition(np.ones(k, dtype=np.int64)),
                 recording=rec,
             )
+        rec.flush()
 
 
 def track_colours(

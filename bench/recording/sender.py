@@ -25,6 +25,14 @@ class Sender:
 
     def __init__(self, rr: Any, rec: Any) -> None:
         self.rr, self.rec = rr, rec
+        self._styled: set[str] = set()
+
+    def style(self, path: str, archetype: Any) -> None:
+        """Log ``path``'s static style (colours, radii, names) once, however many pieces
+        its rows are sent in."""
+        if path not in self._styled:
+            self._styled.add(path)
+            self.rec.log(path, archetype, static=True)
 
     def time_column(self, t: np.ndarray) -> Any:
         """The timeline column of times ``t`` [s]."""
@@ -35,7 +43,7 @@ class Sender:
         position are left out."""
         rr = self.rr
         ok = np.isfinite(t) & np.all(np.isfinite(xy), axis=1)
-        self.rec.log(path, rr.Points2D.from_fields(colors=[color], radii=[radius]), static=True)
+        self.style(path, rr.Points2D.from_fields(colors=[color], radii=[radius]))
         if ok.any():
             rr.send_columns(
                 path,
@@ -50,19 +58,18 @@ class Sender:
         """The 95 % ellipse of each answer (centre ``xy`` [m, ENU], covariance ``cov`` (N, 3)
         (xx, xy, yy) [m^2]) as a closed line strip at its time, in screen coordinates; a
         row without a valid covariance or position holds no strip (the previous ellipse is
-        cleared). Nothing is logged when no row has one (a predictor without uncertainty)."""
+        cleared). Nothing is logged while no row has had one (a predictor without
+        uncertainty; the rows of a drive are sent in pieces)."""
         rr = self.rr
         keep = np.isfinite(t)
         t, xy, cov = t[keep], xy[keep], cov[keep]
         outline = ellipse_outlines(cov)
         has = np.all(np.isfinite(xy), axis=1) & np.all(np.isfinite(outline), axis=(1, 2))
-        if not has.any():
-            return
+        if not has.any() and path not in self._styled:
+            return  # none yet (a piece sent later clears the last ellipse where it has none)
         pts = outline[has] + xy[has, None, :]
         k, m, _ = pts.shape
-        self.rec.log(
-            path, rr.LineStrips2D.from_fields(colors=[color], radii=[ELLIPSE_RADIUS]), static=True
-        )
+        self.style(path, rr.LineStrips2D.from_fields(colors=[color], radii=[ELLIPSE_RADIUS]))
         rr.send_columns(
             path,
             indexes=[self.time_column(t)],
@@ -92,17 +99,15 @@ class Sender:
             if kind == "now"
             else rr.SeriesPoints(colors=[color], names=[name], marker_sizes=[2.0])
         )
-        self.rec.log(path, style, static=True)
+        self.style(path, style)
         self.scalars(path, t, v)
 
     def arrows(self, path: str, t: np.ndarray, rel: np.ndarray, color: Rgb) -> None:
         """Arrows from (0, 0) (the reference) to each relative answer, at their times."""
         rr = self.rr
         ok = np.isfinite(t) & np.all(np.isfinite(rel), axis=1)
-        self.rec.log(
-            path,
-            rr.Arrows2D.from_fields(colors=[color], radii=[0.03], origins=[[0.0, 0.0]]),
-            static=True,
+        self.style(
+            path, rr.Arrows2D.from_fields(colors=[color], radii=[0.03], origins=[[0.0, 0.0]])
         )
         if ok.any():
             rr.send_columns(

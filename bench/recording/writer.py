@@ -48,8 +48,11 @@ Layout, per drive under ``drives/<drive>/`` (names sanitised to ``[A-Za-z0-9_.-]
   an outage).
 
 Rows whose position is NaN are not logged in the 2-D views; error series are logged for
-every query, NaN (not scorable) included. The traces are read one drive at a time
-(:func:`posbench.recording.traces.drive_traces`).
+every query, NaN (not scorable) included. The traces are read one drive and predictor at a
+time, in pieces of at most :data:`~posbench.recording.traces.PIECE_ROWS` rows, each logged and
+flushed to the file before the next is read (:mod:`posbench.recording.traces`); what the
+drive-wide views need (the reference at the 'now' queries, the colouring errors, the labels)
+is gathered meanwhile, a few columns.
 """
 
 from __future__ import annotations
@@ -82,7 +85,7 @@ from posbench.recording.layout import (
 )
 from posbench.recording.reference_views import around_view, track_colours
 from posbench.recording.sender import Sender
-from posbench.recording.traces import drive_traces
+from posbench.recording.traces import PIECE_ROWS, drive_source, predictor_pieces
 from posbench.scoring.schema import COV_COLUMNS
 
 if TYPE_CHECKING:
@@ -92,16 +95,76 @@ if TYPE_CHECKING:
     from posbench.scoring.trace_set import TraceSet
 
 
-#: a drive's traces per (predictor, kind), sorted by query time
-_Groups = dict[tuple[str, str], "pd.DataFrame"]
-
 VIZ_HINT = "rerun recordings need the viz extra: pip install 'posbench-harness[viz]'"
+
+
+class _Gathered:
+    """What the drive-wide views need of a drive's traces, gathered from the pieces as they
+    are logged: the 'now' queries' times [s], reference positions [m] and labels of the
+    first predictor that has any (the queries and labels are the same for all; a drive
+    without 'now' rows: the first predictor's rows), the colouring predictor's 'now' times
+    and errors [m], and the span of the query times [s]."""
+
+    def __init__(self, color_by: str | None) -> None:
+        self.color_by = color_by
+        self.ref_of: str | None = None  # the predictor whose 'now' rows give the reference
+        self.ref: list[pd.DataFrame] = []
+        self.first_rows: list[pd.DataFrame] = []  # the first predictor's rows, for labels
+        self.first: str | None = None
+        self.colour: list[pd.DataFrame] = []
+        self.t0, self.t1 = np.inf, -np.inf
+
+    def add(self, pred: str, piece: pd.DataFrame, now: pd.DataFrame | None) -> None:
+        t = piece["t_query"].to_numpy(np.float64)
+        t = t[np.isfinite(t)]
+        if t.size:
+            self.t0, self.t1 = min(self.t0, float(t.min())), max(self.t1, float(t.max()))
+        if self.first in (None, pred):
+            self.first = pred
+            self.first_rows.append(piece[["t_query", "label"]])
+        if now is None or now.empty:
+            return
+        if self.ref_of in (None, pred):
+            self.ref_of = pred
+            self.ref.append(now[["t_query", "x_ref", "y_ref", "label"]])
+        if pred == self.color_by:
+            self.colour.append(now[["t_query", "error_m"]])
+
+    def now_reference(self) -> tuple[np.ndarray, np.ndarray] | None:
+        """Times [s] and reference positions [m] of the 'now' queries (None: none)."""
+        if not self.ref:
+            return None
+        g = _in_time_order(self.ref)
+        return g["t_query"].to_numpy(np.float64), g[["x_ref", "y_ref"]].to_numpy(np.float64)
+
+    def labels(self) -> pd.DataFrame | None:
+        """Query times [s] and labels, in time order: of the 'now' queries, else of the
+        first predictor's rows (None: no rows)."""
+        rows = self.ref or self.first_rows
+        return _in_time_order(rows) if rows else None
+
+    def colour_rows(self) -> pd.DataFrame | None:
+        """The colouring predictor's 'now' times [s] and errors [m] (None: none)."""
+        return _in_time_order(self.colour) if self.colour else None
+
+
+def _in_time_order(pieces: list[pd.DataFrame]) -> pd.DataFrame:
+    import pandas as pd
+
+    rows = pd.concat(pieces, ignore_index=True) if len(pieces) > 1 else pieces[0]
+    return rows.sort_values("t_query", kind="stable")
 
 
 class _Writer(Sender):
     """Sends one drive to a recording stream."""
 
-    def __init__(self, rr: Any, rec: Any, predictors: Sequence[str], color_by: str | None) -> None:
+    def __init__(
+        self,
+        rr: Any,
+        rec: Any,
+        predictors: Sequence[str],
+        color_by: str | None,
+    ) -> None:
         super().__init__(rr, rec)
         self.predictors = list(predictors)
         self.pred_parts = [sanitise(p) for p in predictors]
@@ -109,8 +172,10 @@ class _Writer(Sender):
             color_by if color_by is not None else (self.predictors[0] if self.predictors else None)
         )
 
-    def drive(self, root: str, run: DriveRun, tr: pd.DataFrame | None) -> None:
-        """Send drive ``run`` under ``root``; ``tr``: its traces (None or empty: none)."""
+    def drive(self, root: str, run: DriveRun, source: TraceSet | None) -> None:
+        """Send drive ``run`` under ``root``; ``source``: the traces it reads its rows from,
+        one predictor and piece at a time (:func:`~posbench.recording.traces.drive_source`;
+        None: none)."""
         rr, rec = self.rr, self.rec
         info = [
             f"drive: {run.name}",
@@ -142,21 +207,26 @@ class _Writer(Sender):
             self.points(f"{root}/map/fixes/received", t[rcv], xy[rcv], RECEIVED_RGB, 0.35)
             self.points(f"{root}/map/fixes/dropped", t[~rcv], xy[~rcv], DROPPED_RGB, 0.5)
             received = t[rcv], xy[rcv]
-
-        if tr is None or tr.empty:
+        if source is None:
             return
-        groups: _Groups = {
-            key: g.sort_values("t_query", kind="stable")
-            for key, g in tr.groupby(["predictor", "kind"], sort=False, observed=True)
-        }
-        around_view(self, root, run, self._now_reference(groups), received)
-        track_colours(
-            self,
-            root,
-            run,
-            groups.get((self.color_by, "now")) if self.color_by else None,
-            self.color_by,
-        )
+        gathered = _Gathered(self.color_by)
+        for i, (pred, part) in enumerate(zip(self.predictors, self.pred_parts, strict=True)):
+            color = predictor_color(i)
+            for piece in predictor_pieces(run, source, pred, PIECE_ROWS):
+                kinds = {
+                    kind: g.sort_values("t_query", kind="stable")
+                    for kind, g in piece.groupby("kind", sort=False, observed=True)
+                }
+                for kind, radius in (("future", 0.4), ("now", 0.25)):
+                    g = kinds.get(kind)
+                    if g is not None and not g.empty:
+                        self._answers(f"{root}", pred, part, kind, radius, color, g)
+                gathered.add(pred, piece, kinds.get("now"))
+                rec.flush()  # the piece written out before the next is read
+        if gathered.first is None:
+            return  # no traces
+        around_view(self, root, run, gathered.now_reference(), received)
+        track_colours(self, root, run, gathered.colour_rows(), self.color_by)
         rec.log(
             f"{root}/vehicle_frame/axes",
             rr.LineStrips2D(
@@ -167,90 +237,83 @@ class _Writer(Sender):
             ),
             static=True,
         )
-        for i, (pred, part) in enumerate(zip(self.predictors, self.pred_parts, strict=True)):
-            color = predictor_color(i)
-            for kind, radius in (("future", 0.4), ("now", 0.25)):
-                g = groups.get((pred, kind))
-                if g is None or g.empty:
-                    continue
-                t = g["t_query"].to_numpy(np.float64)
-                xy = g[["x", "y"]].to_numpy(np.float64)
-                ref = g[["x_ref", "y_ref"]].to_numpy(np.float64)
-                self.points(f"{root}/map/{part}/{kind}", t, xy, color, radius)
-                if all(c in g for c in COV_COLUMNS):
-                    self.ellipses(
-                        f"{root}/map/{part}/ellipse_{kind}",
-                        t,
-                        xy,
-                        g[list(COV_COLUMNS)].to_numpy(np.float64),
-                        color,
-                    )
-                self.series(
-                    f"{root}/errors/{part}/{kind}",
+        self._labels(root, gathered.labels())
+        self._outages(root, run, gathered.t0, gathered.t1)
+
+    def _answers(
+        self,
+        root: str,
+        pred: str,
+        part: str,
+        kind: str,
+        radius: float,
+        color: tuple[int, int, int],
+        g: pd.DataFrame,
+    ) -> None:
+        """One piece of ``pred``'s answers to the ``kind`` queries (``g``, in time order):
+        on the map, as error series, about the reference and in the vehicle frame."""
+        t = g["t_query"].to_numpy(np.float64)
+        xy = g[["x", "y"]].to_numpy(np.float64)
+        ref = g[["x_ref", "y_ref"]].to_numpy(np.float64)
+        self.points(f"{root}/map/{part}/{kind}", t, xy, color, radius)
+        if all(c in g for c in COV_COLUMNS):
+            self.ellipses(
+                f"{root}/map/{part}/ellipse_{kind}",
+                t,
+                xy,
+                g[list(COV_COLUMNS)].to_numpy(np.float64),
+                color,
+            )
+        self.series(
+            f"{root}/errors/{part}/{kind}",
+            t,
+            g["error_m"].to_numpy(np.float64),
+            f"{pred} {kind}",
+            color,
+            kind,
+        )
+        if kind == "future":  # the current answer is the tip of its error arrow
+            self.points(f"{root}/around/{part}/future", t, xy - ref, color, 0.09)
+        if "along_m" in g and "cross_m" in g:
+            along = g["along_m"].to_numpy(np.float64)
+            cross = g["cross_m"].to_numpy(np.float64)
+            self.series(
+                f"{root}/along/{part}/{kind}", t, along, f"{pred} {kind} along", color, kind
+            )
+            self.series(
+                f"{root}/cross/{part}/{kind}", t, cross, f"{pred} {kind} cross", color, kind
+            )
+            if kind == "now":
+                self.points(
+                    f"{root}/vehicle_frame/{part}",
                     t,
-                    g["error_m"].to_numpy(np.float64),
-                    f"{pred} {kind}",
+                    np.column_stack([along, cross]),
                     color,
-                    kind,
+                    0.02,
                 )
-                if kind == "future":  # the current answer is the tip of its error arrow
-                    self.points(f"{root}/around/{part}/future", t, xy - ref, color, 0.09)
-                if "along_m" in g and "cross_m" in g:
-                    along = g["along_m"].to_numpy(np.float64)
-                    cross = g["cross_m"].to_numpy(np.float64)
-                    self.series(
-                        f"{root}/along/{part}/{kind}", t, along, f"{pred} {kind} along", color, kind
-                    )
-                    self.series(
-                        f"{root}/cross/{part}/{kind}", t, cross, f"{pred} {kind} cross", color, kind
-                    )
-                    if kind == "now":
-                        self.points(
-                            f"{root}/vehicle_frame/{part}",
-                            t,
-                            np.column_stack([along, cross]),
-                            color,
-                            0.02,
-                        )
-                if kind == "now":
-                    self.arrows(f"{root}/around/{part}/error", t, xy - ref, color)
-        self._labels(root, tr)
-        self._outages(root, run, tr)
+        if kind == "now":
+            self.arrows(f"{root}/around/{part}/error", t, xy - ref, color)
 
-    def _now_reference(self, groups: _Groups) -> tuple[np.ndarray, np.ndarray] | None:
-        """Times [s] and reference positions [m] of the 'now' queries (any predictor's rows:
-        the queries are the same for all)."""
-        for pred in self.predictors:
-            g = groups.get((pred, "now"))
-            if g is not None and not g.empty:
-                return (
-                    g["t_query"].to_numpy(np.float64),
-                    g[["x_ref", "y_ref"]].to_numpy(np.float64),
-                )
-        return None
-
-    def _labels(self, root: str, tr: pd.DataFrame) -> None:
-        """Label changes along the 'now' queries of one predictor (labels depend only on time)."""
+    def _labels(self, root: str, rows: pd.DataFrame | None) -> None:
+        """Label changes along the query times of ``rows`` (:meth:`_Gathered.labels`;
+        labels depend only on time)."""
+        if rows is None or rows.empty:
+            return
         rr = self.rr
-        now = tr[tr["kind"] == "now"]
-        if now.empty:
-            now = tr
-        now = now[now["predictor"] == now["predictor"].iloc[0]].sort_values("t_query")
-        lab = now["label"].astype(str).to_numpy()
+        lab = rows["label"].astype(str).to_numpy()
         idx = change_points(lab)
         if idx.size:
             rr.send_columns(
                 f"{root}/labels",
-                indexes=[self.time_column(now["t_query"].to_numpy(np.float64)[idx])],
+                indexes=[self.time_column(rows["t_query"].to_numpy(np.float64)[idx])],
                 columns=rr.TextLog.columns(text=lab[idx], level=["INFO"] * idx.size),
                 recording=self.rec,
             )
 
-    def _outages(self, root: str, run: DriveRun, tr: pd.DataFrame) -> None:
+    def _outages(self, root: str, run: DriveRun, t0: float, t1: float) -> None:
+        """The outage step series over the query times ``t0``-``t1`` [s] and the outages."""
         rr = self.rr
-        span = np.concatenate(
-            [tr["t_query"].to_numpy(np.float64), np.asarray(run.outages, dtype=float).ravel()]
-        )
+        span = np.concatenate([[t0, t1], np.asarray(run.outages, dtype=float).ravel()])
         span = span[np.isfinite(span)]
         if span.size == 0:
             return
@@ -309,8 +372,9 @@ def write_recording(
             drive's traces are left out of that drive.
         color_by: the predictor whose current-position error colours the overview map's
             track (default: the first of ``predictors``).
-        traces: the run's traces, read one drive at a time (:func:`drive_traces`); None:
-            each run's own (``DriveRun.traces``).
+        traces: the run's traces, read one drive and predictor at a time, in pieces
+            (:func:`~posbench.recording.traces.predictor_pieces`); None: each run's own
+            (held, or in its parts).
 
     Raises:
         ImportError: rerun-sdk (the ``viz`` extra) is not installed.
@@ -329,7 +393,7 @@ def write_recording(
             rec = rr.RecordingStream(application_id(rid), recording_id=rid)
             rec.save(part, default_blueprint=blueprint(rrb, root))
             rec.send_recording_name(rid)
-            _Writer(rr, rec, predictors, color_by).drive(root, run, drive_traces(run, traces))
+            _Writer(rr, rec, predictors, color_by).drive(root, run, drive_source(run, traces))
             rec.flush()
             rec.disconnect()
             parts.append(part)

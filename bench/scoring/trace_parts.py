@@ -1,14 +1,15 @@
 """A run's trace parts on disk, read: one Parquet file per drive task, in row groups of one
 predictor each (written by :mod:`posbench.scoring.part_writer`), read one predictor or drive
-at a time (:func:`read_part`), what a part holds told by its row groups' statistics
-(:func:`part_values`, :func:`rows_per_value`), and frames read from several parts joined
-(:func:`concat_parts`). The view over a run's traces, in memory or in parts, is
+at a time (:func:`read_part`) or a row group at a time (:func:`read_part_groups`), what a
+part holds told by its row groups' statistics (:func:`part_values`,
+:func:`rows_per_value`), and frames read from several parts joined (:func:`concat_parts`).
+The view over a run's traces, in memory or in parts, is
 :class:`posbench.scoring.trace_set.TraceSet`.
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable, Iterable, Sequence
+from collections.abc import Callable, Iterable, Iterator, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -106,6 +107,27 @@ def read_part(
     if keep is not None:
         mask &= keep(frame_columns(df))
     return df.loc[mask, cols if cols is not None else df.columns].reset_index(drop=True)
+
+
+def read_part_groups(
+    path: str | Path, columns: Sequence[str], predictor: str, drive: str
+) -> Iterator[pd.DataFrame]:
+    """One part's rows of ``predictor`` and ``drive`` a row group at a time, in order, text
+    columns as categoricals: a part written by
+    :class:`~posbench.scoring.part_writer.PartWriter` has row groups of one predictor of at
+    most :data:`~posbench.scoring.part_writer.GROUP_ROWS` rows, so a drawing that sends each
+    piece on holds no more than that. Where a row group holds other rows too, the part's
+    rows at once (:func:`read_part`)."""
+    import pyarrow.parquet as pq
+
+    cols = list(dict.fromkeys(columns))
+    with pq.ParquetFile(path, read_dictionary=[c for c in TEXT if c in cols]) as pf:
+        groups, exact = _row_groups_of(pf.metadata, {"predictor": predictor, "drive": drive})
+        if exact:
+            for g in groups:
+                yield pf.read_row_group(g, columns=cols, use_pandas_metadata=True).to_pandas()
+            return
+    yield read_part(path, cols, predictor, drive)
 
 
 def _plain_frame(table: Any) -> pd.DataFrame:

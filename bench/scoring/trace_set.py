@@ -29,6 +29,7 @@ from posbench.scoring.trace_parts import (
     join_pieces,
     part_values,
     read_part,
+    read_part_groups,
     rows_per_value,
 )
 
@@ -313,13 +314,21 @@ class TraceSet:
             for a, b in zip([0, *cuts.tolist()], [*cuts.tolist(), len(rows)], strict=True):
                 yield rows.iloc[a:b]
 
-    def per_predictor(
-        self, predictors: Sequence[str], columns: Sequence[str], scored: bool = True
-    ) -> Iterator[tuple[str, pd.DataFrame]]:
-        """``(name, rows)`` per predictor, one at a time (:meth:`scored`, or every row with
-        ``scored`` False)."""
-        for name in predictors:
-            yield name, self.scored(name, columns) if scored else self.frame(columns, name)
+    def drive_rows(
+        self, drive: str, predictor: str, columns: Sequence[str]
+    ) -> Iterator[pd.DataFrame]:
+        """``predictor``'s rows of ``drive`` in pieces, in their order: on disk a row group
+        at a time (:func:`~posbench.scoring.trace_parts.read_part_groups`), in memory one
+        piece; for drawings that send each piece on and need never hold a long drive's
+        rows."""
+        if self._frame is not None:
+            yield self.frame(columns, predictor, drive)
+            return
+        cols = _present(columns, self.columns)
+        for path in self.parts_with(drive):
+            for rows in read_part_groups(path, cols, predictor, drive):
+                if len(rows):
+                    yield rows
 
     def materialize(self) -> pd.DataFrame:
         """Every row and column in one frame (text columns as written): for small runs and

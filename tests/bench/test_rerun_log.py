@@ -550,3 +550,59 @@ def test_ellipses_keep_the_recording_small(tmp_path):
     )
     assert n > 5000
     assert 150 < per < 300, per
+
+
+def _content(ents: dict) -> tuple[dict, dict]:
+    """A recording's content however it was chunked: per entity its static values (the last
+    of each column) and its temporal rows (time and components) in a canonical order; row
+    ids left out."""
+    static, temporal = {}, {}
+    for path, e in ents.items():
+        for rb in e["static"]:
+            for name in rb.schema.names:
+                if "RowId" not in name:
+                    static[(path, name)] = rb.column(name).to_pylist()[-1]
+        rows = []
+        for rb in e["temporal"]:
+            cols = {n: rb.column(n).to_pylist() for n in rb.schema.names if "RowId" not in n}
+            for i in range(rb.num_rows):
+                rows.append(repr(sorted((n, v[i]) for n, v in cols.items() if v[i] is not None)))
+        temporal[path] = sorted(rows)
+    return static, temporal
+
+
+def test_a_drive_logged_in_pieces_is_the_drive_logged_at_once(tmp_path, monkeypatch):
+    """A long drive's traces are read one predictor at a time and logged in pieces (read a
+    row group at a time from its part on disk): the recording holds the same rows, and the
+    ellipses, labels, outages, around view and coloured track of the drive at once."""
+    import posbench.recording.reference_views as views
+    import posbench.recording.writer as writer
+    from posbench.scoring import part_writer
+    from posbench.scoring.part_writer import PartWriter
+    from posbench.scoring.trace_set import TraceSet
+
+    r = fake_run("pieces", preds=("cv", "kf-paper"), dur=60.0, cov=("kf-paper",))
+    tr = r.traces
+    gap = (tr.predictor == "kf-paper") & (tr.t_query >= 20) & (tr.t_query < 30)
+    tr.loc[gap.to_numpy(), list(COV_COLUMNS)] = np.nan  # pieces without an ellipse
+    preds = ["cv", "kf-paper"]
+    whole = tmp_path / "whole.rrd"
+    write_recording(whole, [r], preds, color_by="kf-paper")
+    expected = _content(read_back(whole)[0])
+
+    monkeypatch.setattr(writer, "PIECE_ROWS", 97)
+    monkeypatch.setattr(views, "AROUND_ROWS", 50)
+    in_memory = tmp_path / "pieces.rrd"
+    write_recording(in_memory, [r], preds, color_by="kf-paper")
+    assert _content(read_back(in_memory)[0]) == expected
+
+    monkeypatch.setattr(part_writer, "GROUP_ROWS", 300)
+    with PartWriter(tmp_path / "parts", "pieces") as part:
+        for _, rows in r.traces.groupby("predictor", sort=False):
+            for a in range(0, len(rows), 120):  # pieces gathered into row groups of 300
+                part.write(rows.iloc[a : a + 120])
+        traces = TraceSet(parts=[part.close()])
+    assert len(list(traces.drive_rows("pieces", "cv", ["t_query"]))) > 1
+    on_disk = tmp_path / "parts.rrd"
+    write_recording(on_disk, [r], preds, color_by="kf-paper", traces=traces)
+    assert _content(read_back(on_disk)[0]) == expected
