@@ -340,8 +340,11 @@ class TraceSet:
         return concat_parts([pq.read_table(p).to_pandas() for p in self.parts])
 
     def write(self, path: Path) -> Path | None:
-        """Every row into one Parquet file ``path`` (one row group per part, a part at a time:
-        memory bounded by the largest part); None when there are no rows."""
+        """Every row into one Parquet file ``path``; None when there are no rows. From parts,
+        their row groups as they are, one at a time (one drive's rows of one predictor
+        each, at most :data:`~posbench.scoring.part_writer.GROUP_ROWS` rows: memory bounded
+        by a row group, and a saved run's reads of one predictor or drive choose its row
+        groups by their statistics)."""
         if self.empty:
             return None
         if self._frame is not None:
@@ -354,9 +357,11 @@ class TraceSet:
         try:
             with pq.ParquetWriter(tmp, schema) as writer:
                 for p in self.parts:
-                    table = pq.read_table(p)
-                    if table.num_rows:
-                        writer.write_table(table.cast(schema))
+                    with pq.ParquetFile(p) as part:
+                        for g in range(part.num_row_groups):
+                            table = part.read_row_group(g)
+                            if table.num_rows:
+                                writer.write_table(table.cast(schema))
             os.replace(tmp, path)
         finally:
             tmp.unlink(missing_ok=True)

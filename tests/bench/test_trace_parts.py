@@ -295,3 +295,32 @@ def test_a_choice_of_rows_reads_the_same_rows_from_memory_and_from_parts(both):
             assert list(got["predictor"].astype(str)) == list(expected["predictor"].astype(str))
     kf = on_disk.frame(cols, predictor="kf", rows=future_late)
     assert set(kf["predictor"].astype(str)) == {"kf"} and set(kf["kind"].astype(str)) == {"future"}
+
+
+def test_traces_parquet_keeps_a_row_group_per_drive_and_predictor(drives, tmp_path):
+    """traces.parquet copies the parts' row groups: each holds one drive's rows of one
+    predictor (a part here holds a drive's every predictor), so that a saved run read one
+    predictor or drive at a time skips the others; the rows are those of the parts, in
+    their order."""
+    import pyarrow.parquet as pq
+
+    from posbench.scoring.trace_parts import single_value
+
+    runs = run(drives, CFG, workers=1, parts=tmp_path / "parts")
+    assert all(len(r.trace_parts) == 1 for r in runs)
+    ts = trace_set(runs)
+    path = ts.write(tmp_path / "traces.parquet")
+    meta = pq.ParquetFile(path).metadata
+    names = meta.schema.names
+    held = set()
+    for g in range(meta.num_row_groups):
+        group = meta.row_group(g)
+        one = [
+            single_value(group.column(names.index(c)).statistics) for c in ("drive", "predictor")
+        ]
+        assert None not in one
+        held.add(tuple(one))
+    assert len(held) == len(drives) * len(CFG.predictors)
+    pd.testing.assert_frame_equal(
+        pd.read_parquet(path), ts.materialize(), check_categorical=False, check_dtype=False
+    )
