@@ -9,40 +9,35 @@ the report; written in each requested format of :data:`posbench.figures.style.FO
 4. The Kalman filter's prediction (``kf-paper``, the paper's baseline) at the same fix.
 
 The moment shown is the fix with the largest heading change over the next second on
-the drive with the most turn / roundabout queries, so the figures show a turn. Of the traces
-the figures read lstm's rows alone (:data:`COLUMNS`).
+the drive with the most turn / roundabout queries, so the figures show a turn. Nothing is
+replayed again: each drive's moment was chosen, and lstm's step there recorded, while the run
+replayed it (:mod:`posbench.replay.paper_moment`, ``DriveRun.paper_moment``); kf-paper's
+answer and lstm's path are the run's traces (lstm's rows of the drive shown, :data:`COLUMNS`
+of them; kf-paper's future answer at the fix).
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable, Iterable, Sequence
+from collections.abc import Iterable, Sequence
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 import pandas as pd
 
-from posbench.config import RunConfig, gps_condition
+from posbench.config import RunConfig
 from posbench.figures.style import (
     check_formats,
     most_turning,
-    most_turning_drive,
     save_figure,
     shown_format,
-    tally_turns,
 )
-from posbench.replay.loop import replay
-from posbench.replay.predictor_setup import build_predictor
-from posbench.replay.prepare import PreparedDrive, prepare_drive
+from posbench.replay.paper_moment import PAPER_PREDICTOR
+from posbench.replay.prepare import prepare_drive
 from posbench.scenarios.drive import Drive
 from posbench.scenarios.stored_drive import StoredDrive, as_drive
 from posbench.scoring.records import DriveRun
-from posbench.scoring.trace_parts import text_values
 from posbench.scoring.trace_set import TraceSet, as_trace_set
-
-if TYPE_CHECKING:
-    from posbench.predictors.lstm.stages import LstmStep
-
 
 #: the trace columns the figures read, of lstm's rows
 COLUMNS = (
@@ -61,62 +56,27 @@ COLUMNS = (
 )
 
 
-def turning_drive(ts: TraceSet, predictor: str) -> str | None:
-    """The drive :func:`pick_moment` picks among ``predictor``'s rows (the most turning, by
-    :func:`~posbench.figures.style.most_turning_drive`), found one part of the traces at a
-    time, each reduced to its drives' turn counts; None without a future query."""
-    parts = ts.pieces(predictor, ["drive", "kind", "label"], scored=False)
-    turns, first = tally_turns(rows[text_values(rows["kind"]) == "future"] for rows in parts)
-    if first is None:
+def shown_moment(runs: Sequence[DriveRun]) -> DriveRun | None:
+    """The run whose recorded moment the figures show: of the drives with turn or roundabout
+    queries the one with the most (the first by name among equals,
+    :func:`~posbench.figures.style.most_turning`), else the first drive with a record; None
+    when no drive has a record (no lstm) or lstm made no network step at that drive's
+    moment."""
+    recorded = [r for r in runs if not r.skipped and r.paper_moment]
+    if not recorded:
         return None
-    return most_turning(turns) if turns else first
+    turns = {r.name: int(r.paper_moment["turns"]) for r in recorded if r.paper_moment["turns"]}
+    name = most_turning(turns) if turns else recorded[0].name
+    run = next(r for r in recorded if r.name == name)
+    return run if "t_fix" in run.paper_moment else None
 
 
-def pick_moment(traces: pd.DataFrame, predictor: str) -> tuple[str, float] | None:
-    """(drive, fix time) in a turn: the drive with most turn queries, the fix whose
-    reference course changes most over the following second (above 2 m/s).
-
-    The course is the direction between neighbouring future-query reference points (a fix
-    apart), not the traces' instantaneous ``heading_ref`` (0.1 s either side of the query):
-    a course over a fix interval is what picks the moment of every reference report, and
-    the instantaneous heading picks other moments on all eight."""
-    fut = traces[(traces.kind == "future") & (traces.predictor == predictor)]
-    if fut.empty:
-        return None
-    drive, _ = most_turning_drive(fut)
-    f = fut[(fut.drive == drive)].dropna(subset=["x_ref"]).sort_values("t_issue")
-    if len(f) < 20:
-        return None
-    hd = np.unwrap(np.arctan2(np.gradient(f.y_ref.to_numpy()), np.gradient(f.x_ref.to_numpy())))
-    n = 5
-    change = np.abs(hd[n:] - hd[:-n])
-    speed = f.speed_mps.to_numpy()[:-n]
-    change[~(speed > 2)] = 0
-    i = int(np.argmax(change)) + n // 2
-    return str(drive), float(f.t_issue.iloc[i])
-
-
-def _prepared_window(drive: Drive, fixes: pd.DataFrame, t0: float, t1: float) -> PreparedDrive:
-    """The run's own received fixes and the drive's other streams within [t0, t1] [s], ready
-    to replay (no queries): the figures show exactly what the predictors saw in the run."""
-    from posbench.replay.prepare import Queries
-    from posbench.replay.reference import FIX_CUBIC, TRUTH
-    from posbench.scenarios.drive import GpsStream
-
-    sub = drive.window(t0, t1)
-    f = fixes[fixes.received & (fixes.t >= t0) & (fixes.t <= t1)]
-    gps = GpsStream(f.t.to_numpy(), f.x.to_numpy(), f.y.to_numpy())
-    e = np.empty(0)
-    none = Queries(e, e, np.empty((0, 2)), e, np.empty(0, dtype=str), e)
-    return PreparedDrive(
-        sub,
-        drive.meta.format,
-        gps,
-        gps,
-        TRUTH if drive.truth is not None else FIX_CUBIC,
-        none,
-        none,
-    )
+def _future_answer(held: TraceSet, predictor: str, drive: str, t_fix: float) -> np.ndarray:
+    """``predictor``'s future answer (x, y) [m] to the query issued at ``t_fix`` on
+    ``drive`` (NaN where it has none)."""
+    rows = held.frame(["kind", "t_issue", "x", "y"], predictor, drive=drive)
+    hit = rows[(rows["kind"] == "future").to_numpy() & (rows["t_issue"] == t_fix).to_numpy()]
+    return hit[["x", "y"]].to_numpy(float)[0] if len(hit) else np.full(2, np.nan)
 
 
 def paper_figures(
@@ -130,60 +90,42 @@ def paper_figures(
     """Write the figures, each in every one of ``formats`` (png, svg, pdf); return
     (file name, caption) pairs, the file in the format a report shows
     (:func:`posbench.figures.style.shown_format`: png, else svg, else pdf). Needs ``lstm`` in
-    the run. With ``runs`` (the run's DriveRuns) the replay uses the run's own fixes over a
-    40 s window, so long drives cost no more than short ones. ``traces``: where they are (a
-    frame is wrapped in a :class:`TraceSet`); lstm's rows are read, :data:`COLUMNS` of them.
+    the run and ``runs``, the run's DriveRuns, whose recorded moments the figures draw
+    (:func:`shown_moment`; none without them). ``traces``: where they are (a frame is
+    wrapped in a :class:`TraceSet`); lstm's rows of the drive shown are read, :data:`COLUMNS`
+    of them, and kf-paper's answer at the fix.
 
     Raises:
         ValueError: an unknown format.
     """
     fmts = check_formats(formats)
     held = as_trace_set(traces)
-    if "lstm" not in cfg.predictors or held.empty or not fmts:  # not: --plot-format none
+    if PAPER_PREDICTOR not in cfg.predictors or held.empty or not fmts:  # --plot-format none
         return []
-    drawn = turning_drive(held, "lstm")
-    if drawn is None:
-        return []
-    # all the figures draw of the traces: the drawn drive's rows (pick_moment picks this
-    # drive again among them), never the predictor's rows over every drive
-    lstm_rows = held.frame(COLUMNS, "lstm", drive=drawn)
-    moment = pick_moment(lstm_rows, "lstm")
-    if moment is None:
+    run = shown_moment(runs or [])
+    if run is None:
         return []
     from matplotlib.figure import Figure
 
-    name, t_fix = moment
-    drive = as_drive(next(d for d in drives if d.name == name))  # the one drawn, read here
-    fixes_fed = next(  # the fixes the run fed (read back when its worker wrote them to disk)
-        (
-            f
-            for r in runs or []
-            if r.name == name and (f := r.with_fixes_and_track().fixes) is not None
-        ),
-        None,
-    )
-    if fixes_fed is None:
-        g = prepare_drive(drive, cfg).gps
-        fixes_fed = pd.DataFrame({"t": g.t, "x": g.x, "y": g.y, "received": True})
-    # the predictors replay the run's fixes up to the fix shown; references use a wider window
-    prep = _prepared_window(drive, fixes_fed, t_fix - 30.0, t_fix)
-    around = drive.window(t_fix - 30.0, t_fix + 5.0)
-    cond = gps_condition(cfg, drive)
-    lstm = build_predictor(cfg, "lstm", cond)
-    replay(lstm, prep, cfg.horizon_s)
-    # LstmPredictor's seam; a predictor registered as "lstm" in its place may lack it
-    last_step: Callable[[], LstmStep | None] | None = getattr(lstm, "last_step", None)
-    step = last_step() if last_step is not None else None
-    if step is None:
-        return []  # too few fixes before the moment for a model prediction (or no seam)
-    grid, pred = step.grid, step.pred
-    ts = np.linspace(t_fix, t_fix + cfg.horizon_s, 5)
-    now = np.array([lstm.position_at(t) for t in ts])
     from posbench.replay.reference import reference_at
 
+    m: dict[str, Any] = run.paper_moment
+    name, t_fix = run.name, float(m["t_fix"])
+    grid, pred, now = m["grid"], m["pred"], m["now_xy"]
+    ts = m["now_t"]
+    lstm_rows = held.frame(COLUMNS, PAPER_PREDICTOR, drive=name)
+    drive = as_drive(next(d for d in drives if d.name == name))  # the one drawn, read here
+    fed = run.with_fixes_and_track().fixes  # the fixes the run fed (read back from disk)
+    if fed is None:
+        g = prepare_drive(drive, cfg).gps
+        fed = pd.DataFrame({"t": g.t, "x": g.x, "y": g.y, "received": True})
+    shown = fed[
+        fed.received.to_numpy(bool) & (fed.t > t_fix - 2.5).to_numpy() & (fed.t <= t_fix).to_numpy()
+    ]
+    fix_x, fix_y = shown.x.to_numpy(float), shown.y.to_numpy(float)
+    around = drive.window(t_fix - 30.0, t_fix + 5.0)
     ref_now = reference_at(around, ts)
     ref_path = reference_at(around, np.arange(t_fix - 2.0, t_fix + 1.0, 0.05))
-    fixes = prep.gps.t > t_fix - 2.5
     figs: list[tuple[str, str]] = []
 
     def new(title: str) -> tuple[Figure, Any]:
@@ -209,7 +151,7 @@ def paper_figures(
         f"Model prediction: lstm, {cfg.horizon_s:g} s ahead of the fix at t = {t_fix:.2f} s"
     )
     ax.plot(ref_path[:, 0], ref_path[:, 1], "k-", lw=0.8, label="reference path")
-    ax.plot(prep.gps.x[fixes], prep.gps.y[fixes], "rx", label="GPS fixes received")
+    ax.plot(fix_x, fix_y, "rx", label="GPS fixes received")
     ax.plot(grid[:, 0], grid[:, 1], "o", color="tab:green", label="resampled input (8 x 200 ms)")
     ax.plot(*pred, "X", color="gold", ms=12, mec="k", label="lstm prediction (+0.2 s)")
     ax.plot(*ref_now[-1], "*", color="k", ms=14, label="reference at +0.2 s")
@@ -255,15 +197,13 @@ def paper_figures(
         f"{t_fix + 20:.0f} s, lstm future points (mean error {100 * r.error_m.mean():.1f} cm).",
     )
 
-    if "kf-paper" in cfg.predictors:
-        kfp = build_predictor(cfg, "kf-paper", cond)
-        replay(kfp, prep, cfg.horizon_s)
-        kp = np.asarray(kfp.position_at(t_fix + cfg.horizon_s))
+    kp = _future_answer(held, "kf-paper", name, t_fix) if "kf-paper" in cfg.predictors else None
+    if kp is not None and np.isfinite(kp).all():
         fig, ax = new(
             f"The paper's Kalman filter (kf-paper), {cfg.horizon_s:g} s ahead of the same fix"
         )
         ax.plot(ref_path[:, 0], ref_path[:, 1], "k-", lw=0.8, label="reference path")
-        ax.plot(prep.gps.x[fixes], prep.gps.y[fixes], "rx", label="known points (fixes)")
+        ax.plot(fix_x, fix_y, "rx", label="known points (fixes)")
         ax.plot(*kp, "X", color="gold", ms=12, mec="k", label="kf-paper prediction")
         ax.plot(*ref_now[-1], "*", color="k", ms=14, label="reference at +0.2 s")
         save(

@@ -160,12 +160,19 @@ def fix_sigma(accuracy_m: float) -> float | None:
     return min(accuracy_m, MAX_SIGMA_M) if 0.0 < accuracy_m < math.inf else None
 
 
-def replay(predictor: Predictor, prep: PreparedDrive, horizon_s: float) -> ReplayResult:
+def replay(
+    predictor: Predictor,
+    prep: PreparedDrive,
+    horizon_s: float,
+    probe: tuple[int, Callable[[], None]] | None = None,
+) -> ReplayResult:
     """Feed every event to ``predictor`` in order; collect its answers and timings.
 
     Events are ordered and handled in time windows of about :data:`CHUNK_EVENTS`
     (:func:`event_windows`), converting only that window's samples to Python floats (fast
-    scalar access without holding a whole long drive's events or its Python objects)."""
+    scalar access without holding a whole long drive's events or its Python objects).
+    ``probe``: (fix index, call): the call is made right after that fix's future answer (and
+    its covariance), off the clock, to look into the predictor's state then."""
     cols = _columns(prep)
     n_fix, n_now = len(prep.gps), prep.now.t_query.size
     future = np.full((n_fix, 2), np.nan)
@@ -183,6 +190,7 @@ def replay(predictor: Predictor, prep: PreparedDrive, horizon_s: float) -> Repla
     observe_speed, position_at = predictor.observe_speed, predictor.position_at
     with_sigma = accepts_sigma(observe_gps)
     predictor.reset()
+    probe_at, probe_call = probe if probe is not None else (-1, None)
     for kc, ic in event_windows(prep, CHUNK_EVENTS):
         go, (gt, gx, gy, gs) = _window(cols[GPS], ic[kc == GPS])
         sigmas = [fix_sigma(a) for a in gs] if with_sigma else []
@@ -211,6 +219,8 @@ def replay(predictor: Predictor, prep: PreparedDrive, horizon_s: float) -> Repla
                     answer_cov = covariance_at(t + horizon_s)
                     cov_ns[i] = clock() - c0
                     _store_cov(cov, i, answer_cov)
+                if i == probe_at:
+                    probe_call()  # type: ignore[misc]
             elif k == SPEED:
                 j = i - so
                 observe_speed(st[j], sv[j])

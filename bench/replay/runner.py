@@ -17,6 +17,7 @@ import pandas as pd
 from posbench.config import RunConfig
 from posbench.replay.gps_outliers import GatedPredictor
 from posbench.replay.loop import replay
+from posbench.replay.paper_moment import PAPER_PREDICTOR, moment_probe
 from posbench.replay.predictor_setup import build_predictor
 from posbench.replay.prepare import PreparedDrive, prepare_drive
 from posbench.replay.queries import query_frame
@@ -201,11 +202,15 @@ def _run_drive(drive: Drive, cfg: RunConfig, limit: bool, writer: PartWriter | N
     # a drive of one piece: every predictor's answers scored together once all are replayed
     # (one table, as small as the drive); a longer one: each predictor's as soon as it is
     answers: list[tuple[str, np.ndarray, np.ndarray | None]] = []
+    paper_moment: dict[str, Any] = {}
     for name in cfg.predictors:
         pred = build_predictor(cfg, name, prep.gps_condition)
         pred.warm_up()  # one-time start-up work (compiled kernels) off the clock
         gated = GatedPredictor(pred) if cfg.gate else None
-        res = replay(pred if gated is None else gated, prep, cfg.horizon_s)
+        probe = None
+        if name == PAPER_PREDICTOR:  # its step at the paper figures' moment, recorded
+            probe, paper_moment = moment_probe(pred, prep.future, cfg.horizon_s)
+        res = replay(pred if gated is None else gated, prep, cfg.horizon_s, probe)
         refuse_far_answers(name, drive.name, prep, res.future_xy, res.now_xy)
         if gated is not None:
             rejected[name] = gated.rejected
@@ -264,6 +269,7 @@ def _run_drive(drive: Drive, cfg: RunConfig, limit: bool, writer: PartWriter | N
         limit=bound,
         limit_info=bound_info,
         reference_gaps=gaps,
+        paper_moment=paper_moment,
     )
 
 

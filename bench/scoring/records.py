@@ -70,6 +70,11 @@ class DriveRun:
     #: ``track/COLUMN``); ``fixes`` and ``track`` are then None
     #: (:meth:`with_fixes_and_track` reads them back)
     track_part: str = ""
+    #: the moment the paper's figures show, recorded while its ``lstm`` was replayed
+    #: (:func:`posbench.replay.paper_moment.moment_probe`: ``turns``, and where lstm stepped
+    #: on the moment's fix ``t_fix``, ``grid``, ``pred``, ``now_t``, ``now_xy``); empty
+    #: without lstm
+    paper_moment: dict[str, Any] = field(default_factory=dict)
 
     @property
     def has_traces(self) -> bool:
