@@ -11,18 +11,15 @@ quantiles and intervals to the bit, mean and RMSE to rounding.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
 import pandas as pd
 
-from posbench.aggregation.drive_passes import run_passes
 from posbench.aggregation.intervals import Statistics, ci95_of
 from posbench.metrics.streamed_summary import StreamedSummary
 from posbench.scoring.schema import KINDS
 from posbench.scoring.trace_parts import category_index
-from posbench.scoring.trace_set import TraceSet, as_trace_set
 
 COLUMNS = ("kind", "t_query", "error_m", "x_ref", "y_ref", "warmup")
 
@@ -89,21 +86,3 @@ def _resampling(stats: Statistics | None) -> tuple[int, int, float]:
     intervals are then not reported)."""
     s = stats or Statistics()
     return s.resamples, s.seed, s.level
-
-
-def excluded_summary(
-    traces: TraceSet | pd.DataFrame, preds: Sequence[str], stats: Statistics | None = None
-) -> dict[str, Any]:
-    """What the headline figures leave out, per predictor and kind: warm-up queries (with
-    their error summaries, and intervals given ``stats``) and queries without a reference
-    (beyond the truth's or the fixes' span: nothing to score against). One predictor's
-    rows at a time, one drive at a time."""
-    out: dict[str, Any] = {"warmup": {}, "no_reference": {}}
-    ts = as_trace_set(traces)
-    if ts.empty:
-        return out
-    for name in preds:
-        figures = ExcludedFigures(stats)
-        run_passes(ts, name, [figures])
-        out["warmup"][name], out["no_reference"][name] = figures.result()
-    return out

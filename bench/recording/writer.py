@@ -158,13 +158,7 @@ def _in_time_order(pieces: list[pd.DataFrame]) -> pd.DataFrame:
 class _Writer(Sender):
     """Sends one drive to a recording stream."""
 
-    def __init__(
-        self,
-        rr: Any,
-        rec: Any,
-        predictors: Sequence[str],
-        color_by: str | None,
-    ) -> None:
+    def __init__(self, rr: Any, rec: Any, predictors: Sequence[str], color_by: str | None) -> None:
         super().__init__(rr, rec)
         self.predictors = list(predictors)
         self.pred_parts = [sanitise(p) for p in predictors]

@@ -17,8 +17,6 @@ windows at once (training); the tests check they equal the single-window path.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-
 import numpy as np
 
 N_STEPS = 8
@@ -152,32 +150,6 @@ def window_starts(t: np.ndarray, ends: np.ndarray, min_span: float = MIN_SPAN_S)
     """Vectorised :func:`window_start` for many window ends."""
     j = np.searchsorted(t, t[ends] - min_span, side="right") - 1
     return np.maximum(j, 0)
-
-
-@dataclass(frozen=True)
-class Resampled:
-    """One window on the grid: positions (8, 2) [m], the position fit, IMU channels.
-
-    ``coef`` is the position cubic (4, 2) in s = (t - t_end) / scale; ``ax``, ``ay``
-    [m/s^2, vehicle frame] and ``yaw`` [rad, unwrapped] are (8,) or ``None`` without IMU.
-    """
-
-    t_end: float
-    scale: float
-    pos: np.ndarray
-    coef: np.ndarray
-    ax: np.ndarray | None
-    ay: np.ndarray | None
-    yaw: np.ndarray | None
-
-    def heading(self) -> np.ndarray:
-        """Heading [rad, ENU] of the fitted GPS curve at the 8 grid times."""
-        d = deriv_poly(self.coef, GRID_OFFSETS / self.scale)
-        return np.arctan2(d[:, 1], d[:, 0])
-
-    def speed(self) -> float:
-        """Speed [m/s] of the fitted GPS curve at the newest fix."""
-        return float(np.hypot(self.coef[1, 0], self.coef[1, 1]) / self.scale)
 
 
 def resample_positions(

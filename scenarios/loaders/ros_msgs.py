@@ -176,11 +176,6 @@ def twist_xy(m: Any) -> tuple[float, float]:
     return float(lin.x), float(lin.y)
 
 
-def twist_v(m: Any) -> float:
-    """Horizontal speed [m/s] |(linear.x, linear.y)| of a message's twist (:func:`twist_xy`)."""
-    return math.hypot(*twist_xy(m))
-
-
 def _speeds(items: list, topic: str, path: Path) -> np.ndarray:
     """|(linear.x, linear.y)| [m/s] of each message's twist; non-finite ones refused."""
     lin = np.asarray([twist_xy(m) for _, m in items], dtype=float).reshape(-1, 2)
@@ -189,8 +184,8 @@ def _speeds(items: list, topic: str, path: Path) -> np.ndarray:
 
 
 def speed_fields(items: list, topic: str, path: Path) -> dict[str, Any]:
-    """A twist topic as speed: t [ns] and v [m/s] (:func:`twist_v`); a non-finite twist is
-    refused (:func:`refuse_nonfinite`)."""
+    """A twist topic as speed: t [ns] and v [m/s] (|(linear.x, linear.y)|,
+    :func:`twist_xy`); a non-finite twist is refused (:func:`refuse_nonfinite`)."""
     t, src = item_times(items)
     return {"t": t, "v": _speeds(items, topic, path), "src": src}
 
