@@ -83,7 +83,7 @@ def run(
             ``module:Class``; None: ``bench run``'s default set.
         out: the output folder; None: nothing is written.
         progress: show progress bars and the data check's lines (as the command does).
-        **options: any other option of :class:`posbench.pipeline.run.RunOptions`, e.g.
+        **options: any other option of :class:`posbench.pipeline.plan.RunOptions`, e.g.
             ``horizon_s=0.2``, ``gps_profile="consumer"``, ``dropouts="outages"``,
             ``seeds=5``, ``models={"lstm@mine": "model-dir"}``,
             ``options={"kf": {"jerk_psd": 4.0}}``, ``workers=2``.
@@ -99,7 +99,8 @@ def run(
     from dataclasses import fields
 
     from posbench.config import DEFAULT_PREDICTORS
-    from posbench.pipeline.run import RunOptions, execute_run, plan_run
+    from posbench.pipeline.plan import RunOptions, plan_run
+    from posbench.pipeline.run import execute_run
     from posbench.scenarios.text import quoted
 
     known = {f.name for f in fields(RunOptions)}

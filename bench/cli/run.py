@@ -1,5 +1,6 @@
 """``bench run``: replay drives through predictors and write the report
-(:mod:`posbench.pipeline.run` does the work; this module reads the command line)."""
+(:mod:`posbench.pipeline.plan` and :mod:`posbench.pipeline.run` do the work; this module
+reads the command line)."""
 
 from __future__ import annotations
 
@@ -163,7 +164,8 @@ def run(
     from posbench.cli.config_file import to_toml
     from posbench.cli.summary import print_run_summary
     from posbench.cli.terminal import reporter
-    from posbench.pipeline.run import RunOptions, execute_run, plan_run
+    from posbench.pipeline.plan import RunOptions, plan_run
+    from posbench.pipeline.run import execute_run
     from posbench.replay.predictor_options import parse_set
 
     if old_format is not None:

@@ -18,7 +18,8 @@ from posbench.config import RunConfig, gps_condition
 from posbench.pipeline.data_check import check_drives, to_results
 from posbench.pipeline.drives import load_drives, stored_drives
 from posbench.pipeline.honoured import unhonoured
-from posbench.pipeline.run import RunOptions, execute_run, plan_run
+from posbench.pipeline.plan import RunOptions, plan_run
+from posbench.pipeline.run import execute_run
 from posbench.replay.runner import replay_cost
 from posbench.scenarios.consistency import check_drive
 from posbench.scenarios.drive import Drive

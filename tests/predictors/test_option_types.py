@@ -56,7 +56,7 @@ def test_every_built_in_yes_no_option_is_found():
 def test_bench_run_set_no_false_0_off_mean_off_and_maybe_is_refused(name, option):
     """`bench run --set NAME.OPTION=VALUE` as the command line gives it (a bare word is
     text): the plan resolves no/false/0/off to False, 'maybe' to one error line."""
-    from posbench.pipeline.run import RunOptions, plan_run
+    from posbench.pipeline.plan import RunOptions, plan_run
     from posbench.replay.predictor_options import parse_set
 
     for word in OFF:
