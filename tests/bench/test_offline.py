@@ -88,6 +88,8 @@ def assert_same_figures(run_dir: Path, scored_dir: Path, p: str) -> None:
     for part in ("warmup", "no_reference"):
         assert rb["excluded"][part][p] == ra["excluded"][part][p]
     assert len(rb["drives"]) == len(ra["drives"])
+    # counted in build_results for a scored file as for a replay: the same conditions
+    assert rb["gps_conditions"] == ra["gps_conditions"] and rb["gps_conditions"]
     for da, db in zip(ra["drives"], rb["drives"], strict=True):
         assert db["predictors"] == ({p: da["predictors"][p]} if da["predictors"] else {})
         for k in (
