@@ -12,13 +12,13 @@ The moment shown is the fix with the largest heading change over the next second
 the drive with the most turn / roundabout queries, so the figures show a turn. Nothing is
 replayed again: each drive's moment was chosen, and lstm's step there recorded, while the run
 replayed it (:mod:`posbench.replay.paper_moment`, ``DriveRun.paper_moment``); kf-paper's
-answer and lstm's path are the run's traces (lstm's rows of the drive shown, :data:`COLUMNS`
-of them; kf-paper's future answer at the fix).
+answer and lstm's path are the run's traces (lstm's future answers within 20 s of the fix,
+:data:`COLUMNS` of them, and kf-paper's at the fix, each chosen as it is read).
 """
 
 from __future__ import annotations
 
-from collections.abc import Iterable, Sequence
+from collections.abc import Callable, Iterable, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -37,23 +37,11 @@ from posbench.replay.prepare import prepare_drive
 from posbench.scenarios.drive import Drive
 from posbench.scenarios.stored_drive import StoredDrive, as_drive
 from posbench.scoring.records import DriveRun
+from posbench.scoring.trace_parts import Keep
 from posbench.scoring.trace_set import TraceSet, as_trace_set
 
-#: the trace columns the figures read, of lstm's rows
-COLUMNS = (
-    "drive",
-    "predictor",
-    "kind",
-    "t_issue",
-    "t_query",
-    "x",
-    "y",
-    "x_ref",
-    "y_ref",
-    "error_m",
-    "label",
-    "speed_mps",
-)
+#: the trace columns the path figure reads, of lstm's future answers near the fix
+COLUMNS = ("kind", "t_issue", "t_query", "x", "y", "x_ref", "y_ref", "error_m")
 
 
 def shown_moment(runs: Sequence[DriveRun]) -> DriveRun | None:
@@ -71,12 +59,25 @@ def shown_moment(runs: Sequence[DriveRun]) -> DriveRun | None:
     return run if "t_fix" in run.paper_moment else None
 
 
+def _future_issued(when: Callable[[np.ndarray], np.ndarray]) -> Keep:
+    """The future queries whose issue time [s] ``when`` accepts (a choice of rows made as
+    they are read, :meth:`~posbench.scoring.trace_set.TraceSet.frame`'s ``rows``: of a long
+    drive, the figures read the rows they draw)."""
+
+    def keep(column: Callable[[str], np.ndarray | None]) -> np.ndarray:
+        kind, t = column("kind"), column("t_issue")
+        assert kind is not None and t is not None
+        return np.asarray((kind == "future") & when(t))
+
+    return keep
+
+
 def _future_answer(held: TraceSet, predictor: str, drive: str, t_fix: float) -> np.ndarray:
     """``predictor``'s future answer (x, y) [m] to the query issued at ``t_fix`` on
     ``drive`` (NaN where it has none)."""
-    rows = held.frame(["kind", "t_issue", "x", "y"], predictor, drive=drive)
-    hit = rows[(rows["kind"] == "future").to_numpy() & (rows["t_issue"] == t_fix).to_numpy()]
-    return hit[["x", "y"]].to_numpy(float)[0] if len(hit) else np.full(2, np.nan)
+    at_fix = _future_issued(lambda t: t == t_fix)
+    rows = held.frame(["kind", "t_issue", "x", "y"], predictor, drive, at_fix)
+    return rows[["x", "y"]].to_numpy(float)[0] if len(rows) else np.full(2, np.nan)
 
 
 def paper_figures(
@@ -92,8 +93,8 @@ def paper_figures(
     (:func:`posbench.figures.style.shown_format`: png, else svg, else pdf). Needs ``lstm`` in
     the run and ``runs``, the run's DriveRuns, whose recorded moments the figures draw
     (:func:`shown_moment`; none without them). ``traces``: where they are (a frame is
-    wrapped in a :class:`TraceSet`); lstm's rows of the drive shown are read, :data:`COLUMNS`
-    of them, and kf-paper's answer at the fix.
+    wrapped in a :class:`TraceSet`); of them, lstm's future answers near the fix are read,
+    :data:`COLUMNS` of them, and kf-paper's answer at the fix.
 
     Raises:
         ValueError: an unknown format.
@@ -113,7 +114,9 @@ def paper_figures(
     name, t_fix = run.name, float(m["t_fix"])
     grid, pred, now = m["grid"], m["pred"], m["now_xy"]
     ts = m["now_t"]
-    lstm_rows = held.frame(COLUMNS, PAPER_PREDICTOR, drive=name)
+    # the path figure's rows: lstm's future answers within 20 s of the fix
+    near = _future_issued(lambda t: (t > t_fix - 20) & (t < t_fix + 20))
+    path_rows = held.frame(COLUMNS, PAPER_PREDICTOR, name, near)
     drive = as_drive(next(d for d in drives if d.name == name))  # the one drawn, read here
     fed = run.with_fixes_and_track().fixes  # the fixes the run fed (read back from disk)
     if fed is None:
@@ -178,16 +181,10 @@ def paper_figures(
         f"errors {', '.join(f'{100 * e:.1f}' for e in e_now)} cm.",
     )
 
-    f = lstm_rows[
-        (lstm_rows.drive == name)
-        & (lstm_rows.kind == "future")
-        & (lstm_rows.t_issue > t_fix - 20)
-        & (lstm_rows.t_issue < t_fix + 20)
-    ]
     fig = Figure(figsize=(7, 7), layout="constrained")
     ax = fig.add_subplot()
     ax.set_title(f"Predicted path against the reference: lstm, {name}", fontsize=11)
-    r = f[f.predictor == "lstm"].sort_values("t_query")
+    r = path_rows.sort_values("t_query")
     ax.plot(r.x_ref, r.y_ref, "k-", lw=1, label="reference")
     ax.plot(r.x, r.y, ".", ms=4, color="tab:orange", label="lstm future points")
     save(
