@@ -10,7 +10,6 @@ from __future__ import annotations
 from typing import TYPE_CHECKING
 
 import numpy as np
-import pandas as pd
 
 from posbench.recording.layout import (
     RECEIVED_RGB,
@@ -27,6 +26,8 @@ from posbench.recording.sender import Sender
 AROUND_ROWS = 1 << 13
 
 if TYPE_CHECKING:
+    import pandas as pd
+
     from posbench.scoring.records import DriveRun
 
 
@@ -56,21 +57,17 @@ def around_view(
         return
     fix_t, fix_xy = received if received is not None else (np.empty(0), np.empty((0, 2)))
     fixes = fix_t.size > 0
-    track = run.track if run.track is not None else pd.DataFrame({"t": [], "x": [], "y": []})
-    tt = track["t"].to_numpy(np.float64)
-    txy = track[["x", "y"]].to_numpy(np.float64)
+    track = run.track
+    tt = track["t"].to_numpy(np.float64) if track is not None else np.empty(0)
+    txy = track[["x", "y"]].to_numpy(np.float64) if track is not None else np.empty((0, 2))
     road = bool(np.all(np.isfinite(txy), axis=1).sum() >= 2)
     if fixes:
-        rec.log(
-            f"{root}/around/fixes",
-            rr.Points2D.from_fields(colors=[RECEIVED_RGB], radii=[0.1]),
-            static=True,
+        out.style(
+            f"{root}/around/fixes", rr.Points2D.from_fields(colors=[RECEIVED_RGB], radii=[0.1])
         )
     if road:
-        rec.log(
-            f"{root}/around/road",
-            rr.LineStrips2D.from_fields(colors=[TRUTH_RGB], radii=[0.05]),
-            static=True,
+        out.style(
+            f"{root}/around/road", rr.LineStrips2D.from_fields(colors=[TRUTH_RGB], radii=[0.05])
         )
     for a in range(0, t.size, AROUND_ROWS):  # a slice of the queries at a time
         ts, refs = t[a : a + AROUND_ROWS], ref[a : a + AROUND_ROWS]
