@@ -214,7 +214,7 @@ class _Writer(Sender):
                 for kind, radius in (("future", 0.4), ("now", 0.25)):
                     g = kinds.get(kind)
                     if g is not None and not g.empty:
-                        self._answers(f"{root}", pred, part, kind, radius, color, g)
+                        self._answers(root, pred, part, kind, radius, color, g)
                 gathered.add(pred, piece, kinds.get("now"))
                 rec.flush()  # the piece written out before the next is read
         if gathered.first is None:
